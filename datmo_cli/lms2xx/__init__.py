@@ -1,0 +1,1 @@
+"""LMS2xx serial protocol, driver and emulator."""

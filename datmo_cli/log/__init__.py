@@ -1,0 +1,1 @@
+"""Reading and writing datmo logs (MCAP), message codecs and importers."""

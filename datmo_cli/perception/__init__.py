@@ -1,0 +1,1 @@
+"""Segmentation, Hough line and circle extraction, feature decision and landmarks."""

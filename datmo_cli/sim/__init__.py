@@ -1,0 +1,1 @@
+"""Scene simulation: ray casting, walking model, scenes and ground truth."""

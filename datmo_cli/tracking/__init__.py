@@ -1,0 +1,1 @@
+"""Kalman tracking, association, track life cycle and classification."""
