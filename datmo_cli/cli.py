@@ -29,6 +29,21 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+_ARGS: list[str] = []
+
+
+def invocation(command: str) -> str:
+    """The command line that started this run, as `datmo ARGS...` (for provenance metadata)."""
+    import shlex
+
+    args = _ARGS or [command]
+    return "datmo " + " ".join(shlex.quote(a) for a in args)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+    click.echo(f"datmo: warning: {message}", err=True)
+
+
 class CleanError(click.ClickException):
     """A DatmoError as Click shows it: one line on stderr, no traceback."""
 
@@ -43,11 +58,20 @@ class CleanError(click.ClickException):
 class LazyGroup(click.Group):
     """A group whose commands are imported on first use; DatmoError becomes a clean message."""
 
+    def main(self, args=None, *rest, **kwargs):  # noqa: ANN001, ANN201 - Click's signature
+        _ARGS[:] = list(sys.argv[1:] if args is None else args)
+        return super().main(args, *rest, **kwargs)
+
     def invoke(self, ctx: click.Context):  # noqa: ANN201 - Click's signature
+        import warnings
+
         from .errors import DatmoError
 
         try:
-            return super().invoke(ctx)
+            with warnings.catch_warnings():
+                warnings.simplefilter("always", UserWarning)
+                warnings.showwarning = _show_warning
+                return super().invoke(ctx)
         except DatmoError as exc:
             raise CleanError(str(exc), exc.exit_code) from None
 
@@ -63,7 +87,7 @@ class LazyGroup(click.Group):
         if name not in COMMANDS or not self._available(name):
             return None
         module = importlib.import_module(f"datmo_cli.commands.{COMMANDS[name][0]}")
-        return getattr(module, "command")
+        return module.command
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = [(name, COMMANDS[name][1]) for name in self.list_commands(ctx)]

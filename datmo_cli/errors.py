@@ -25,3 +25,7 @@ class ConfigError(DatmoError):
 
 class DeviceError(DatmoError):
     """A serial device is missing, silent or talks garbage."""
+
+
+class GeometryError(InputError):
+    """A log's scan geometry changes mid-run."""

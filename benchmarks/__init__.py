@@ -1,0 +1,1 @@
+"""Benchmarks and accuracy reports run by `make bench` and `make accuracy`."""

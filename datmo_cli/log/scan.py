@@ -1,0 +1,235 @@
+"""Scans as arrays, and the LaserScan CDR codec that moves whole runs without per-beam Python.
+
+A run is N scans of one geometry: stamps (int64 ns), ranges (N x B float32, metres, sensor frame,
+beam i at angle_min + i * angle_increment radians, counter-clockwise from the sensor's x axis),
+intensities (N x B float32, or N x 0 when the sensor gives none).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .cdr import CDR_HEADER
+
+
+@dataclass(frozen=True)
+class ScanGeometry:
+    """The beam layout of a run. Angles in radians, ranges in metres, times in seconds."""
+
+    angle_min: float
+    angle_increment: float
+    n_beams: int
+    range_min: float
+    range_max: float
+    time_increment: float = 0.0
+    scan_time: float = 0.0
+    frame_id: str = "laser"
+
+    @property
+    def angle_max(self) -> float:
+        """Angle of the last beam, radians (float32 arithmetic, as LaserScan stores it)."""
+        return float(np.float32(self.angle_min) + np.float32(self.angle_increment) * np.float32(self.n_beams - 1))
+
+    def angles(self) -> np.ndarray:
+        """Beam angles, radians, float64, shape (n_beams,)."""
+        return self.angle_min + self.angle_increment * np.arange(self.n_beams, dtype=np.float64)
+
+    def same_beams(self, other: ScanGeometry) -> bool:
+        """True when both put the same beams at the same angles with the same range limits."""
+        f = np.float32
+        return (self.n_beams == other.n_beams and f(self.angle_min) == f(other.angle_min)
+                and f(self.angle_increment) == f(other.angle_increment)
+                and f(self.range_min) == f(other.range_min) and f(self.range_max) == f(other.range_max)
+                and self.frame_id == other.frame_id)
+
+    def describe(self) -> str:
+        return (f"{self.n_beams} beams from {np.degrees(self.angle_min):.2f}° by "
+                f"{np.degrees(self.angle_increment):.3f}°, {self.range_min:g}-{self.range_max:g} m, "
+                f"frame '{self.frame_id}'")
+
+
+@dataclass
+class ScanRun:
+    """A whole run of scans as arrays (see the module docstring for units and frames)."""
+
+    stamps: np.ndarray                      # (N,) int64, nanoseconds
+    ranges: np.ndarray                      # (N, B) float32, metres
+    geometry: ScanGeometry
+    intensities: np.ndarray = field(default=None)  # (N, B) or (N, 0) float32
+
+    def __post_init__(self) -> None:
+        self.stamps = np.ascontiguousarray(self.stamps, dtype=np.int64)
+        self.ranges = np.ascontiguousarray(self.ranges, dtype=np.float32)
+        if self.ranges.ndim != 2 or self.ranges.shape != (len(self.stamps), self.geometry.n_beams):
+            raise ValueError(f"ranges must be ({len(self.stamps)}, {self.geometry.n_beams}), "
+                             f"got {self.ranges.shape}")
+        if self.intensities is None:
+            self.intensities = np.zeros((len(self.stamps), 0), np.float32)
+        self.intensities = np.ascontiguousarray(self.intensities, dtype=np.float32)
+        if self.intensities.shape[0] != len(self.stamps) or self.intensities.shape[1] not in (0, self.geometry.n_beams):
+            raise ValueError(f"intensities must be (N, B) or (N, 0), got {self.intensities.shape}")
+
+    def __len__(self) -> int:
+        return len(self.stamps)
+
+    def slice(self, start: int, stop: int) -> ScanRun:
+        return ScanRun(self.stamps[start:stop], self.ranges[start:stop], self.geometry,
+                       self.intensities[start:stop])
+
+
+@dataclass
+class Odometry:
+    """Poses of the sensor's base in the world (odom) frame: x, y in metres, theta in radians."""
+
+    stamps: np.ndarray   # (M,) int64 ns
+    x: np.ndarray        # (M,) float64
+    y: np.ndarray
+    theta: np.ndarray
+    frame_id: str = "odom"
+    child_frame_id: str = "base_link"
+
+    def __len__(self) -> int:
+        return len(self.stamps)
+
+    def at(self, stamps: np.ndarray) -> np.ndarray:
+        """Poses (K x 3: x, y, theta) interpolated at `stamps` (ns); held constant past the ends."""
+        t = np.asarray(stamps, np.int64)
+        rel = (self.stamps - self.stamps[0]).astype(np.float64)
+        q = (t - self.stamps[0]).astype(np.float64)
+        x = np.interp(q, rel, self.x)
+        y = np.interp(q, rel, self.y)
+        th = np.interp(q, rel, np.unwrap(self.theta))
+        return np.stack([x, y, np.arctan2(np.sin(th), np.cos(th))], axis=1)
+
+
+def _row_dtype(frame_len: int, n_beams: int, n_intens: int) -> np.dtype:
+    """One LaserScan CDR payload (after the 4-byte encapsulation header) as a packed record."""
+    pad = (-(12 + frame_len)) % 4
+    fields = [("sec", "<i4"), ("nanosec", "<u4"), ("frame_len", "<u4"), ("frame", f"V{frame_len + pad}"),
+              ("angle_min", "<f4"), ("angle_max", "<f4"), ("angle_increment", "<f4"),
+              ("time_increment", "<f4"), ("scan_time", "<f4"), ("range_min", "<f4"), ("range_max", "<f4"),
+              ("n_ranges", "<u4"), ("ranges", "<f4", (n_beams,)), ("n_intens", "<u4")]
+    if n_intens:
+        fields.append(("intensities", "<f4", (n_intens,)))
+    return np.dtype([("cdr", "V4")] + fields)
+
+
+def encode_scans(run: ScanRun) -> list[bytes]:
+    """CDR payloads of sensor_msgs/msg/LaserScan for every scan of `run` (bytes equal rosbags')."""
+    g = run.geometry
+    frame = g.frame_id.encode() + b"\x00"
+    n_int = run.intensities.shape[1]
+    dt = _row_dtype(len(frame), g.n_beams, n_int)
+    rows = np.zeros(len(run), dt)
+    rows["cdr"] = np.void(CDR_HEADER)
+    rows["sec"] = run.stamps // 1_000_000_000
+    rows["nanosec"] = run.stamps % 1_000_000_000
+    rows["frame_len"] = len(frame)
+    rows["frame"] = np.void(frame + b"\x00" * (dt["frame"].itemsize - len(frame)))
+    for name in ("angle_min", "angle_increment", "time_increment", "scan_time", "range_min", "range_max"):
+        rows[name] = getattr(g, name)
+    rows["angle_max"] = g.angle_max
+    rows["n_ranges"] = g.n_beams
+    rows["ranges"] = run.ranges
+    rows["n_intens"] = n_int
+    if n_int:
+        rows["intensities"] = run.intensities
+    raw = rows.tobytes()
+    size = dt.itemsize
+    return [raw[i:i + size] for i in range(0, len(raw), size)]
+
+
+def encode_scan(stamp_ns: int, ranges: np.ndarray, geometry: ScanGeometry,
+                intensities: np.ndarray | None = None) -> bytes:
+    """CDR payload of one LaserScan."""
+    inten = None if intensities is None else np.asarray(intensities, np.float32)[None]
+    run = ScanRun(np.array([stamp_ns]), np.asarray(ranges, np.float32)[None], geometry, inten)
+    return encode_scans(run)[0]
+
+
+def _geometry_of(rec: np.void | np.ndarray, frame_id: str, n_beams: int) -> ScanGeometry:
+    return ScanGeometry(angle_min=float(rec["angle_min"]), angle_increment=float(rec["angle_increment"]),
+                        n_beams=n_beams, range_min=float(rec["range_min"]), range_max=float(rec["range_max"]),
+                        time_increment=float(rec["time_increment"]), scan_time=float(rec["scan_time"]),
+                        frame_id=frame_id)
+
+
+def decode_scan(data: bytes | memoryview) -> tuple[int, np.ndarray, np.ndarray, ScanGeometry]:
+    """(stamp_ns, ranges, intensities, geometry) of one LaserScan CDR payload."""
+    buf = memoryview(data)
+    if bytes(buf[:2]) != CDR_HEADER[:2]:
+        raise ValueError("not little-endian CDR data")
+    frame_len = int.from_bytes(buf[12:16], "little")
+    p0 = 4 + 12 + frame_len
+    p0 += (-(p0 - 4)) % 4
+    n = int.from_bytes(buf[p0 + 28:p0 + 32], "little")
+    pi = p0 + 32 + 4 * n
+    ni = int.from_bytes(buf[pi:pi + 4], "little")
+    dt = _row_dtype(frame_len, n, ni)
+    if len(buf) != dt.itemsize:
+        raise ValueError(f"LaserScan payload of {len(buf)} bytes, expected {dt.itemsize}")
+    rec = np.frombuffer(buf, dt, 1)[0]
+    frame_id = bytes(buf[16:16 + max(frame_len - 1, 0)]).decode(errors="replace")
+    stamp = int(rec["sec"]) * 1_000_000_000 + int(rec["nanosec"])
+    inten = rec["intensities"].copy() if ni else np.zeros(0, np.float32)
+    return stamp, rec["ranges"].copy(), inten, _geometry_of(rec, frame_id, n)
+
+
+class GeometryChangeError(ValueError):
+    """Scans of one topic change geometry mid-run."""
+
+
+def decode_scans(payloads: list[bytes]) -> ScanRun:
+    """Decode many LaserScan payloads into one ScanRun.
+
+    Fast path: when every payload has the same length (same frame id, beam and intensity counts),
+    the payloads are joined and viewed as one record array. Raises GeometryChangeError when the
+    beam layout changes from one scan to the next.
+    """
+    if not payloads:
+        raise ValueError("no scans")
+    first = payloads[0]
+    _, _, _, g0 = decode_scan(first)
+    size = len(first)
+    if all(len(p) == size for p in payloads):
+        frame_len = int.from_bytes(first[12:16], "little")
+        n_int = len(decode_scan(first)[2])
+        dt = _row_dtype(frame_len, g0.n_beams, n_int)
+        rows = np.frombuffer(b"".join(payloads), dt)
+        _check_constant(rows, g0)
+        stamps = rows["sec"].astype(np.int64) * 1_000_000_000 + rows["nanosec"]
+        inten = rows["intensities"] if n_int else np.zeros((len(rows), 0), np.float32)
+        return ScanRun(stamps, rows["ranges"], g0, inten)
+    stamps, ranges, intens = [], [], []
+    for i, p in enumerate(payloads):
+        s, r, it, g = decode_scan(p)
+        if not g.same_beams(g0):
+            raise GeometryChangeError(f"scan geometry changes at scan {i}: {g0.describe()} -> {g.describe()}")
+        stamps.append(s)
+        ranges.append(r)
+        intens.append(it)
+    n_int = {len(it) for it in intens}
+    if n_int == {g0.n_beams}:
+        inten = np.stack(intens)
+    elif n_int == {0}:
+        inten = np.zeros((len(stamps), 0), np.float32)
+    else:  # some scans carry intensities, some do not: NaN where missing
+        inten = np.full((len(stamps), g0.n_beams), np.nan, np.float32)
+        for i, it in enumerate(intens):
+            if len(it) == g0.n_beams:
+                inten[i] = it
+    return ScanRun(np.array(stamps, np.int64), np.stack(ranges), g0, inten)
+
+
+def _check_constant(rows: np.ndarray, g0: ScanGeometry) -> None:
+    for name in ("frame_len", "frame", "angle_min", "angle_increment", "range_min", "range_max", "n_ranges"):
+        col = rows[name]
+        bad = np.flatnonzero(col != col[0])
+        if len(bad):
+            i = int(bad[0])
+            frame_len = int(rows["frame_len"][i])
+            frame_id = bytes(rows["frame"][i])[:max(frame_len - 1, 0)].decode(errors="replace")
+            gi = _geometry_of(rows[i], frame_id, int(rows["n_ranges"][i]))
+            raise GeometryChangeError(f"scan geometry changes at scan {i}: {g0.describe()} -> {gi.describe()}")
