@@ -7,6 +7,7 @@ run, so `datmo --help` stays instant (no numpy, numba or mcap import).
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import sys
 
 import click

@@ -111,7 +111,11 @@ def command(log: Path, as_json: bool) -> None:
 
     Example: datmo info sample_logs/hall.mcap --json
     """
+    import warnings
+
     info = describe(log)
+    if info["scan"] is None:
+        warnings.warn(f"{log}: no scans on /scan (it holds {len(info['channels'])} other channel(s))", stacklevel=1)
     if as_json:
         click.echo(json.dumps(info, indent=2))
     else:
