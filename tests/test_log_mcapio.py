@@ -200,3 +200,23 @@ def test_geometry_change_mid_run_is_refused(tmp_path):
         w.write_scans(ScanRun(make_run(2).stamps + 10**10, np.ones((2, 181)), other))
     with pytest.raises(GeometryError, match="geometry changes at scan 3: 361 beams .* -> 181 beams"):
         mcapio.read_run(path)
+
+
+def test_rosbags_reads_datmo_logs_as_ros2_bags(tmp_path):
+    """rosbags' ROS 2 reader (what ROS tooling does) opens a datmo log and decodes every channel."""
+    from rosbags.highlevel import AnyReader
+
+    path = tmp_path / "ros2.mcap"
+    run = make_run(4)
+    with mcapio.LogWriter(path) as w:
+        w.write_scans(run)
+        w.write_odometry(Odometry(run.stamps, np.ones(4), np.zeros(4), np.zeros(4)))
+        w.write(mcapio.TOPIC_TRACKS, types.TRACKS, int(run.stamps[0]),
+                cdr.encode(types.TRACKS, {"stamp_ns": int(run.stamps[0]), "frame_id": "laser",
+                                          "tracks": np.zeros(2, cdr.element_dtype(types.TRACK))}))
+    with AnyReader([path], default_typestore=types.typestore()) as reader:
+        assert {c.msgtype for c in reader.connections} == {types.LASERSCAN, types.ODOMETRY, types.TRACKS}
+        decoded = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()]
+    assert len(decoded) == 9
+    scans = [m for m in decoded if hasattr(m, "ranges")]
+    np.testing.assert_array_equal(scans[2].ranges, run.ranges[2])
