@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import pytest
-
 import conftest
+import pytest
 
 
 def test_absent_shared_data_skips_for_users(monkeypatch, tmp_path):

@@ -1,0 +1,85 @@
+"""`datmo import`: a real log (CARMEN, g2o, ROS 1/2 bag, MCAP) converted to a datmo scan log."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command(name="import")
+@click.argument("src", type=click.Path(path_type=Path))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="The log to write (MCAP with /scan and, when the source has poses, /odom).")
+@click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
+@click.option("--topic", default=None,
+              help="The scan stream to take when there are several: a LaserScan topic of a bag or MCAP, "
+                   "or a CARMEN message name (FLASER, RLASER, RAWLASER1-4, ROBOTLASER1).")
+@click.option("--odom-topic", default=None,
+              help="The nav_msgs/Odometry topic of a bag or MCAP [default: the only one, if any].")
+@click.option("--max-scans", type=click.IntRange(min=1), default=None,
+              help="Keep only the first N scans (and the poses up to the last of them).")
+def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic: str | None,
+            max_scans: int | None) -> None:
+    """Convert a CARMEN log, g2o file, ROS 1/2 bag or MCAP file to a datmo scan log.
+
+    SRC is a CARMEN text log (FLASER, RLASER, RAWLASER1-4, ROBOTLASER1; plain or gzipped), a g2o file with
+    ROBOTLASER1 lines, a ROS 1 .bag, a ROS 2 bag folder or an MCAP file with sensor_msgs/LaserScan. The
+    kind is found from the content. Scans go to /scan (ranges in metres; "no return" readings as +inf)
+    and poses, when the source has them, to /odom. Malformed CARMEN lines are skipped with a warning.
+    The output is written beside OUTPUT under a temporary name and renamed when complete; SRC is only read.
+
+    \b
+    Example: datmo import ../shared/data/carmen/csail-corrected.log.gz -o csail.mcap
+    """
+    from ..errors import InputError
+    from ..log import mcapio
+
+    if output.exists() and not force:  # before reading a big input
+        from ..errors import OutputExistsError
+
+        raise OutputExistsError(f"{output}: exists; use --force to overwrite it")
+    if src.exists() and output.exists() and src.resolve() == output.resolve():
+        raise InputError(f"{output}: the output would overwrite the input")
+    result = _import(src, topic, odom_topic, max_scans)
+    for w in result.warnings:
+        click.echo(f"datmo: warning: {w}", err=True)
+    run = result.run
+    if len(run) == 0:
+        raise InputError(f"{src}: no scans to write")
+    params = {"topic": result.topic, "odom_topic": result.odom_topic, "max_scans": max_scans,
+              "kind": result.kind}
+    provenance = mcapio.Provenance("import", params, [src] if src.is_file() else [])
+    with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
+        writer.add_metadata("datmo.import", _facts(result))
+        writer.write_scans(run)
+        if result.odometry is not None and len(result.odometry):
+            writer.write_odometry(result.odometry)
+    odom = f", {len(result.odometry)} poses on /odom" if result.odometry is not None else ""
+    click.echo(f"{output}: {len(run)} scans of {run.geometry.describe()} from {result.kind} "
+               f"{result.topic}{odom}", err=True)
+
+
+def _import(src: Path, topic, odom_topic, max_scans):  # noqa: ANN001, ANN202
+    """import_log with a progress bar on stderr for inputs over 20 MB."""
+    from ..log.importers import import_log
+
+    size = src.stat().st_size if src.is_file() else 0
+    if size < 20_000_000:
+        return import_log(src, topic, odom_topic=odom_topic, max_scans=max_scans)
+    from rich.console import Console
+    from rich.progress import Progress
+
+    with Progress(console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task(f"reading {src.name}", total=None)
+        return import_log(src, topic, odom_topic=odom_topic, max_scans=max_scans,
+                          progress=lambda done, total: bar.update(task, completed=done, total=total or None))
+
+
+def _facts(result) -> dict[str, str]:  # noqa: ANN001
+    import json
+
+    out = {"kind": result.kind, "topic": str(result.topic), "odom_topic": str(result.odom_topic or ""),
+           "source": str(result.source), "warnings": json.dumps(result.warnings)}
+    out.update({k: json.dumps(v, default=str) for k, v in result.facts.items()})
+    return out
