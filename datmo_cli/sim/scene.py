@@ -1,0 +1,415 @@
+"""Scenes: readable TOML files (built-in ones in `datmo_cli/sim/scenes/`) validated into plain dataclasses.
+
+World frame, metres and seconds; angles in scene files are degrees (keys end in `_deg`), radians here.
+Every problem raises ConfigError naming the file and the table and key (or the TOML line).
+
+Scene file format (points are [x, y]; every table is optional; unknown keys are errors):
+
+    name, description, duration (s, default 60)
+    [sensor]      pose = [x, y, heading_deg]  (a still scanner), or a path (a moving one, with /odom)
+                  and turn_rate_deg (90: it turns on the spot where its path bends)
+    [[wall]]      points = [[x, y], ...], closed = false
+    [[column]]    center, radius
+    [[bench]]     supports = [[x, y], [x, y]], support_radius = 0.1, seat_width = 0.35 (0: no seat)
+    [[box]]       size = [length, width], and center + orientation_deg (static) or a path (moving)
+    [[platform]]  radius = 0.25, and center (static), a path (driven) or pulled_by = "person name"
+                  with wire = 2.0 (towed; starts `wire` behind the person, or at center)
+    [[person]]    name, a path (walking) or position + heading_deg (standing), and the gait:
+                  shoulder_width = 0.3, leg_radius = 0.1, leg_length = 0.9, swing_angle_deg = 22,
+                  step_length (instead of 2 l sin(theta)), double_support = 0.15
+    [crowd]       people = 6, area = [[x0, y0], [x1, y1]], speed = [0.8, 1.4], pause_probability = 0.2,
+                  max_pause = 3.0
+
+A path is: path = [[x, y], ...] (two or more waypoints), speed (m/s, default 1), loop = false,
+start_time (s), pauses = [[waypoint index, seconds], ...].
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError, InputError
+from .paths import PathSpec
+from .walking import Gait
+
+PATH_KEYS = {"path", "speed", "pauses", "start_time", "loop"}
+GAIT_KEYS = {"shoulder_width", "leg_radius", "leg_length", "swing_angle_deg", "step_length", "double_support"}
+
+
+@dataclass(frozen=True)
+class Wall:
+    points: np.ndarray          # (K, 2) polyline vertices
+    closed: bool = False
+
+
+@dataclass(frozen=True)
+class Column:
+    center: np.ndarray
+    radius: float
+
+
+@dataclass(frozen=True)
+class Bench:
+    """Two circular supports with a rectangular seat between their centres."""
+
+    supports: np.ndarray        # (2, 2)
+    support_radius: float = 0.1
+    seat_width: float = 0.35
+
+
+@dataclass(frozen=True)
+class Box:
+    """A rectangle (box, robot): `length` along its heading; static at `center` or moving along `path`."""
+
+    length: float
+    width: float
+    center: np.ndarray | None = None
+    orientation: float = 0.0
+    path: PathSpec | None = None
+
+
+@dataclass(frozen=True)
+class Platform:
+    """A circular mobile platform: static, driven along a path, or pulled by a person on a wire."""
+
+    radius: float
+    center: np.ndarray | None = None
+    path: PathSpec | None = None
+    pulled_by: str | None = None
+    wire: float = 2.0
+
+
+@dataclass(frozen=True)
+class Person:
+    name: str
+    gait: Gait
+    path: PathSpec | None = None
+    position: np.ndarray | None = None  # standing still when there is no path
+    heading: float = 0.0
+
+
+@dataclass(frozen=True)
+class Crowd:
+    """`people` walkers on random waypoint paths inside `area` ((x0, y0), (x1, y1))."""
+
+    people: int
+    area: np.ndarray
+    speed: tuple[float, float] = (0.8, 1.4)
+    pause_probability: float = 0.2
+    max_pause: float = 3.0
+
+
+@dataclass(frozen=True)
+class SensorPlacement:
+    """A still scanner at `pose` (x, y in m, heading in rad), or one driving along `path`, facing its way and
+    turning on the spot at `turn_rate` (rad/s) where the path bends."""
+
+    pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    path: PathSpec | None = None
+    turn_rate: float = float(np.pi / 2)
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    source: str
+    text: str
+    description: str = ""
+    duration: float = 60.0
+    sensor: SensorPlacement = field(default_factory=SensorPlacement)
+    walls: tuple[Wall, ...] = ()
+    columns: tuple[Column, ...] = ()
+    benches: tuple[Bench, ...] = ()
+    boxes: tuple[Box, ...] = ()
+    platforms: tuple[Platform, ...] = ()
+    people: tuple[Person, ...] = ()
+    crowd: Crowd | None = None
+
+
+def builtin_scenes() -> dict[str, str]:
+    """Name -> first description line of every shipped scene."""
+    out = {}
+    for entry in sorted((resources.files("datmo_cli.sim") / "scenes").iterdir(), key=lambda e: e.name):
+        if entry.name.endswith(".toml"):
+            lines = str(tomllib.loads(entry.read_text(encoding="utf-8")).get("description", "")).strip().splitlines()
+            out[entry.name[:-5]] = lines[0] if lines else ""
+    return out
+
+
+def load_scene(scene: str | Path) -> Scene:
+    """A built-in scene by name, or a scene file (a Path, or a name ending in .toml or holding a "/")."""
+    text_path = str(scene)
+    if isinstance(scene, Path) or text_path.endswith(".toml") or "/" in text_path:
+        path = Path(scene)
+        if not path.is_file():
+            raise InputError(f"{path}: scene file not found")
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"{path}: cannot read the scene file ({exc})") from None
+        return parse_scene(text, str(path), default_name=path.stem)
+    names = builtin_scenes()
+    if text_path not in names:
+        raise ConfigError(f"unknown scene '{text_path}' (built-in: {', '.join(names)}; "
+                          "or give the path of a .toml scene file)")
+    text = (resources.files("datmo_cli.sim") / "scenes" / f"{text_path}.toml").read_text(encoding="utf-8")
+    return parse_scene(text, f"{text_path}.toml", default_name=text_path)
+
+
+def parse_scene(text: str, source: str = "<scene>", default_name: str = "scene") -> Scene:
+    """Validate TOML text into a Scene; `source` names the file in error messages."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: invalid TOML: {exc}") from None
+    v = _Validator(source)
+    v.keys(data, "top level", {"name", "description", "duration", "sensor", "wall", "column", "bench", "box",
+                               "platform", "person", "crowd"})
+    kw: dict = {
+        "name": v.string(data, "top level", "name", default_name),
+        "description": v.string(data, "top level", "description", ""),
+        "duration": v.number(data, "top level", "duration", 60.0, positive=True),
+    }
+    if "sensor" in data:
+        t = v.table(data, "sensor", "[sensor]")
+        v.keys(t, "[sensor]", {"pose", "turn_rate_deg"} | PATH_KEYS)
+        if "pose" in t and "path" in t:
+            raise ConfigError(f"{source}: [sensor]: give 'pose' (a still scanner) or 'path' (a moving one), not both")
+        pose = v.vector(t, "[sensor]", "pose", 3, default=[0.0, 0.0, 0.0])
+        pose[2] = np.radians(pose[2])
+        turn = np.radians(v.number(t, "[sensor]", "turn_rate_deg", 90.0, positive=True))
+        kw["sensor"] = SensorPlacement(pose=pose, path=v.path(t, "[sensor]", required=False), turn_rate=float(turn))
+    kw["walls"] = tuple(_wall(v, t, w) for t, w in v.tables(data, "wall"))
+    kw["columns"] = tuple(_column(v, t, w) for t, w in v.tables(data, "column"))
+    kw["benches"] = tuple(_bench(v, t, w) for t, w in v.tables(data, "bench"))
+    kw["boxes"] = tuple(_box(v, t, w) for t, w in v.tables(data, "box"))
+    kw["people"] = tuple(_person(v, t, w, i) for i, (t, w) in enumerate(v.tables(data, "person"), 1))
+    kw["platforms"] = tuple(_platform(v, t, w) for t, w in v.tables(data, "platform"))
+    names = [p.name for p in kw["people"]]
+    for i, (_, w) in enumerate(v.tables(data, "platform")):
+        pulled = kw["platforms"][i].pulled_by
+        if pulled is not None and pulled not in names:
+            raise ConfigError(f"{source}: {w}, key 'pulled_by': no person is named '{pulled}'")
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise ConfigError(f"{source}: [[person]] names must be unique; '{sorted(dup)[0]}' is used twice")
+    if "crowd" in data:
+        kw["crowd"] = _crowd(v, v.table(data, "crowd", "[crowd]"))
+    return Scene(source=source, text=text, **kw)
+
+
+def _wall(v: _Validator, t: dict, where: str) -> Wall:
+    v.keys(t, where, {"points", "closed"})
+    pts = v.points(t, where, "points", minimum=2)
+    closed = v.boolean(t, where, "closed", False)
+    if closed and len(pts) < 3:
+        raise ConfigError(f"{v.source}: {where}, key 'points': a closed wall needs 3 or more points")
+    if np.any(np.all(np.diff(np.vstack([pts, pts[:1]]) if closed else pts, axis=0) == 0, axis=1)):
+        raise ConfigError(f"{v.source}: {where}, key 'points': two consecutive points are equal")
+    return Wall(pts, closed)
+
+
+def _column(v: _Validator, t: dict, where: str) -> Column:
+    v.keys(t, where, {"center", "radius"})
+    return Column(v.vector(t, where, "center", 2), v.number(t, where, "radius", positive=True))
+
+
+def _bench(v: _Validator, t: dict, where: str) -> Bench:
+    v.keys(t, where, {"supports", "support_radius", "seat_width"})
+    sup = v.points(t, where, "supports", minimum=2)
+    if len(sup) != 2 or np.all(sup[0] == sup[1]):
+        raise ConfigError(f"{v.source}: {where}, key 'supports': give two different points")
+    return Bench(sup, v.number(t, where, "support_radius", 0.1, positive=True),
+                 v.number(t, where, "seat_width", 0.35, nonnegative=True))
+
+
+def _box(v: _Validator, t: dict, where: str) -> Box:
+    v.keys(t, where, {"center", "size", "orientation_deg"} | PATH_KEYS)
+    size = v.vector(t, where, "size", 2)
+    if np.any(size <= 0):
+        raise ConfigError(f"{v.source}: {where}, key 'size': length and width must be > 0")
+    path = v.path(t, where, required=False)
+    center = v.vector(t, where, "center", 2, default=None)
+    if (path is None) == (center is None):
+        raise ConfigError(f"{v.source}: {where}: give either 'center' (static) or 'path' (moving)")
+    return Box(float(size[0]), float(size[1]), center,
+               float(np.radians(v.number(t, where, "orientation_deg", 0.0))), path)
+
+
+def _platform(v: _Validator, t: dict, where: str) -> Platform:
+    v.keys(t, where, {"radius", "center", "pulled_by", "wire"} | PATH_KEYS)
+    radius = v.number(t, where, "radius", 0.25, positive=True)
+    path = v.path(t, where, required=False)
+    pulled = v.string(t, where, "pulled_by", None)
+    center = v.vector(t, where, "center", 2, default=None)
+    if sum(x is not None for x in (path, pulled)) > 1 or (center is None and path is None and pulled is None):
+        raise ConfigError(f"{v.source}: {where}: give 'center' (static), 'path' (driven) or "
+                          "'pulled_by' (towed, starting at 'center' if given)")
+    if path is not None and center is not None:
+        raise ConfigError(f"{v.source}: {where}: a driven platform starts at its path's first point; drop 'center'")
+    return Platform(radius, center, path, pulled, v.number(t, where, "wire", 2.0, positive=True))
+
+
+def _person(v: _Validator, t: dict, where: str, index: int) -> Person:
+    v.keys(t, where, {"name", "position", "heading_deg"} | PATH_KEYS | GAIT_KEYS)
+    g = Gait()
+    step = v.number(t, where, "step_length", None, positive=True)
+    gait = Gait(leg_length=v.number(t, where, "leg_length", g.leg_length, positive=True),
+                swing_angle=float(np.radians(v.number(t, where, "swing_angle_deg", np.degrees(g.swing_angle),
+                                                      positive=True))),
+                shoulder_width=v.number(t, where, "shoulder_width", g.shoulder_width, positive=True),
+                leg_radius=v.number(t, where, "leg_radius", g.leg_radius, positive=True),
+                double_support=v.number(t, where, "double_support", g.double_support, nonnegative=True),
+                step=step)
+    if gait.double_support >= 1:
+        raise ConfigError(f"{v.source}: {where}, key 'double_support': must be below 1")
+    if gait.step_length <= 0:
+        raise ConfigError(f"{v.source}: {where}: the step length 2 l sin(theta) must be > 0")
+    path = v.path(t, where, required=False)
+    position = v.vector(t, where, "position", 2, default=None)
+    if (path is None) == (position is None):
+        raise ConfigError(f"{v.source}: {where}: give either 'path' (walking) or 'position' (standing)")
+    return Person(v.string(t, where, "name", f"person{index}"), gait, path, position,
+                  float(np.radians(v.number(t, where, "heading_deg", 0.0))))
+
+
+def _crowd(v: _Validator, t: dict) -> Crowd:
+    where = "[crowd]"
+    v.keys(t, where, {"people", "area", "speed", "pause_probability", "max_pause"})
+    people = v.integer(t, where, "people", 6)
+    area = v.points(t, where, "area", minimum=2)
+    if len(area) != 2 or np.any(area[1] <= area[0]):
+        raise ConfigError(f"{v.source}: {where}, key 'area': give [[x0, y0], [x1, y1]] with x0 < x1 and y0 < y1")
+    speed = v.vector(t, where, "speed", 2, default=[0.8, 1.4])
+    if not 0 < speed[0] <= speed[1]:
+        raise ConfigError(f"{v.source}: {where}, key 'speed': give [low, high] with 0 < low <= high")
+    prob = v.number(t, where, "pause_probability", 0.2, nonnegative=True)
+    if prob > 1:
+        raise ConfigError(f"{v.source}: {where}, key 'pause_probability': must be in [0, 1]")
+    return Crowd(people, area, (float(speed[0]), float(speed[1])), prob,
+                 v.number(t, where, "max_pause", 3.0, nonnegative=True))
+
+
+_REQUIRED = object()
+
+
+class _Validator:
+    """Typed getters that raise ConfigError naming the file, table and key."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, where: str, key: str, msg: str):
+        raise ConfigError(f"{self.source}: {where}, key '{key}': {msg}")
+
+    def keys(self, t: dict, where: str, allowed: set[str]) -> None:
+        for k in t:
+            if k not in allowed:
+                raise ConfigError(f"{self.source}: {where}: unknown key '{k}' (allowed: {', '.join(sorted(allowed))})")
+
+    def _get(self, t: dict, where: str, key: str, default):
+        if key not in t:
+            if default is _REQUIRED:
+                raise ConfigError(f"{self.source}: {where}: missing key '{key}'")
+            return _REQUIRED
+        return t[key]
+
+    def table(self, data: dict, key: str, where: str) -> dict:
+        t = data[key]
+        if not isinstance(t, dict):
+            raise ConfigError(f"{self.source}: '{key}' must be a table ({where})")
+        return t
+
+    def tables(self, data: dict, key: str) -> list[tuple[dict, str]]:
+        items = data.get(key, [])
+        if not isinstance(items, list) or not all(isinstance(x, dict) for x in items):
+            raise ConfigError(f"{self.source}: '{key}' must be an array of tables ([[{key}]])")
+        return [(t, f"[[{key}]] {i}") for i, t in enumerate(items, 1)]
+
+    def string(self, t: dict, where: str, key: str, default=_REQUIRED):
+        x = self._get(t, where, key, default)
+        if x is _REQUIRED:
+            return default
+        if not isinstance(x, str):
+            self.fail(where, key, f"must be a string, got {x!r}")
+        return x
+
+    def boolean(self, t: dict, where: str, key: str, default=_REQUIRED) -> bool:
+        x = self._get(t, where, key, default)
+        if x is _REQUIRED:
+            return default
+        if not isinstance(x, bool):
+            self.fail(where, key, f"must be true or false, got {x!r}")
+        return x
+
+    def integer(self, t: dict, where: str, key: str, default=_REQUIRED) -> int:
+        x = self._get(t, where, key, default)
+        if x is _REQUIRED:
+            return default
+        if isinstance(x, bool) or not isinstance(x, int) or x < 0:
+            self.fail(where, key, f"must be a whole number >= 0, got {x!r}")
+        return x
+
+    def number(self, t: dict, where: str, key: str, default=_REQUIRED, *, positive: bool = False,
+               nonnegative: bool = False):
+        x = self._get(t, where, key, default)
+        if x is _REQUIRED:
+            return default
+        if isinstance(x, bool) or not isinstance(x, int | float) or not np.isfinite(x):
+            self.fail(where, key, f"must be a number, got {x!r}")
+        if positive and x <= 0:
+            self.fail(where, key, f"must be > 0, got {x!r}")
+        if nonnegative and x < 0:
+            self.fail(where, key, f"must be >= 0, got {x!r}")
+        return float(x)
+
+    def vector(self, t: dict, where: str, key: str, n: int, default=_REQUIRED):
+        x = self._get(t, where, key, default)
+        if x is _REQUIRED:
+            return None if default is None else np.array(default, np.float64)
+        if (not isinstance(x, list) or len(x) != n
+                or not all(isinstance(c, int | float) and not isinstance(c, bool) and np.isfinite(c) for c in x)):
+            self.fail(where, key, f"must be a list of {n} numbers, got {x!r}")
+        return np.array(x, np.float64)
+
+    def points(self, t: dict, where: str, key: str, minimum: int = 1) -> np.ndarray:
+        x = self._get(t, where, key, _REQUIRED)
+        ok = isinstance(x, list) and len(x) >= minimum and all(
+            isinstance(p, list) and len(p) == 2
+            and all(isinstance(c, int | float) and not isinstance(c, bool) and np.isfinite(c) for c in p)
+            for p in x)
+        if not ok:
+            self.fail(where, key, f"must be a list of {minimum} or more [x, y] points, got {x!r}")
+        return np.array(x, np.float64)
+
+    def path(self, t: dict, where: str, required: bool = True) -> PathSpec | None:
+        if "path" not in t:
+            if required:
+                raise ConfigError(f"{self.source}: {where}: missing key 'path'")
+            for k in PATH_KEYS - {"path"}:
+                if k in t:
+                    self.fail(where, k, "only applies with a 'path'")
+            return None
+        pts = self.points(t, where, "path", minimum=2)
+        loop = self.boolean(t, where, "loop", False)
+        seq = np.vstack([pts, pts[:1]]) if loop else pts
+        if np.any(np.all(np.diff(seq, axis=0) == 0, axis=1)):
+            self.fail(where, "path", "two consecutive waypoints are equal")
+        pauses_raw = t.get("pauses", [])
+        pauses: dict[int, float] = {}
+        if not isinstance(pauses_raw, list):
+            self.fail(where, "pauses", "must be a list of [waypoint index, seconds] pairs")
+        for p in pauses_raw:
+            if (not isinstance(p, list) or len(p) != 2 or isinstance(p[0], bool) or not isinstance(p[0], int)
+                    or not 0 <= p[0] < len(pts) or isinstance(p[1], bool) or not isinstance(p[1], int | float)
+                    or p[1] < 0):
+                self.fail(where, "pauses", f"each pause is [waypoint index 0..{len(pts) - 1}, seconds >= 0], "
+                                           f"got {p!r}")
+            pauses[int(p[0])] = float(p[1])
+        return PathSpec(pts, self.number(t, where, "speed", 1.0, positive=True), pauses,
+                        self.number(t, where, "start_time", 0.0, nonnegative=True), loop)
