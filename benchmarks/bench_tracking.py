@@ -1,0 +1,96 @@
+"""Tracking speed (make bench): tracking and classification alone (target >= 10,000 scans/s) and
+`datmo track` from a raw log (read, segment, features, track, write; target >= 5,000 scans/s), on the hall
+log (361 beams), one core."""
+
+from __future__ import annotations
+
+import importlib.util
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.common import Row, best_of, print_lines, print_table
+from datmo_cli.log import mcapio, types
+from datmo_cli.report import decode_channel
+from datmo_cli.tracking import accuracy as acc
+from datmo_cli.tracking.measurements import measurements
+from datmo_cli.tracking.params import TrackingParams
+from datmo_cli.tracking.pipeline import TrackedRun, run_features, track_run
+
+HALL = Path(__file__).resolve().parent.parent / "sample_logs" / "hall.mcap"
+REPEAT = 4   # the 60 s hall log is 300 scans; repeat it (later copies shifted in time) for steadier figures
+
+
+def _repeat(run, feats):  # noqa: ANN001, ANN202
+    from datmo_cli.log.scan import ScanRun
+
+    span = int(run.stamps[-1] - run.stamps[0]) + 200_000_000
+    stamps = np.concatenate([run.stamps + i * span for i in range(REPEAT)])
+    return ScanRun(stamps, np.tile(run.ranges, (REPEAT, 1)), run.geometry), feats * REPEAT
+
+
+def main() -> None:
+    log = mcapio.read_log(HALL, topics=None)
+    run = mcapio.run_from_log(log)
+    truth = decode_channel(types.GROUND_TRUTH, log.messages[mcapio.TOPIC_GROUND_TRUTH][1])
+    params = TrackingParams()
+    rows, notes = [], []
+    sources = {"ideal features": acc.ideal_features(truth.offsets["objects"], truth.items["objects"],
+                                                   np.random.default_rng(0))}
+    perception = importlib.util.find_spec("datmo_cli.perception.features") is not None
+    if perception:
+        sources["datmo features"] = run_features(run)
+    for name, feats in sources.items():
+        big, bfeats = _repeat(run, feats)
+        track_run(big, bfeats, params=params, markers=False)   # warm-up: numba cache load
+        n = len(big)
+        t_meas = best_of(lambda: [measurements(f, params) for f in bfeats])  # noqa: B023
+        t_track = best_of(lambda: track_run(big, bfeats, params=params, markers=False))  # noqa: B023
+        t_mark = best_of(lambda: track_run(big, bfeats, params=params, markers=True))  # noqa: B023
+        tracked: TrackedRun = track_run(big, bfeats, params=params, markers=True)
+        t_enc = best_of(tracked.track_payloads)
+        mean = np.mean([len(t) for t in tracked.tracks])
+        rows += [Row(f"tracking + classification ({name})", n, t_track, f"{mean:.1f} live tracks per scan"),
+                 Row("  of which features -> measurements", n, t_meas, "leg pairing included"),
+                 Row("  + track markers", n, t_mark, "MarkerArray CDR"),
+                 Row("  Tracks CDR encoding", n, t_enc, "")]
+        if name == "ideal features":
+            notes.append(f"tracking and classification alone: {n / t_track:,.0f} scans/s (target >= 10,000)")
+    from datmo_cli.commands.track import track_file
+    from datmo_cli.log import cdr
+
+    big, bfeats = _repeat(run, sources["ideal features"])
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / "features.mcap"
+        with mcapio.LogWriter(src) as w:
+            w.write_scans(big)
+            w.write_many(mcapio.TOPIC_FEATURES, types.FEATURES, big.stamps,
+                         [cdr.encode(types.FEATURES, {"stamp_ns": int(t), "frame_id": "laser", "lines": f.lines,
+                                                      "circles": f.circles, "blobs": f.blobs})
+                          for t, f in zip(big.stamps, bfeats, strict=True)])
+        out = Path(tmp) / "out.mcap"
+        t_feat_log = best_of(lambda: track_file(src, out, force=True), repeat=2)
+    rows.append(Row("datmo track on a log that has /datmo/features (read, track, markers, write)", len(big),
+                    t_feat_log, "ideal features"))
+    if perception:
+
+        with tempfile.TemporaryDirectory() as tmp:
+            src = Path(tmp) / "raw.mcap"
+            with mcapio.LogWriter(src) as w:
+                w.write_scans(_repeat(run, [])[0])
+            out = Path(tmp) / "out.mcap"
+            t_all = best_of(lambda: track_file(src, out, force=True), repeat=2)
+            t_read = best_of(lambda: mcapio.read_run(src))
+        n = len(run) * REPEAT
+        rows += [Row("datmo track from a raw log (read, segment, features, track, write)", n, t_all, ""),
+                 Row("  bare MCAP read of the same log", n, t_read, "")]
+        notes.append(f"datmo track end to end: {n / t_all:,.0f} scans/s (target >= 5,000)")
+    else:
+        notes.append("datmo track end to end: skipped, datmo_cli.perception.features is absent")
+    print_table("Tracking, hall log (361 beams)", rows)
+    print_lines("Tracking targets", notes)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,536 @@
+"""numba kernels of the tracker's per-scan arithmetic (wrapped by measurements.py, kalman.py, tracker.py).
+
+Kernels take contiguous arrays and scalars; frames and units are their wrappers'.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def pair_legs(x, y, stride_max):  # noqa: ANN001, ANN201
+    """Greedy nearest-first pairing; returns (a, b, n_pairs, single, n_single)."""
+    n = len(x)
+    a = np.empty(n // 2 + 1, np.int64)
+    b = np.empty(n // 2 + 1, np.int64)
+    used = np.zeros(n, np.bool_)
+    m = 0
+    while True:
+        best, bi, bj = stride_max, -1, -1
+        for i in range(n):
+            if used[i]:
+                continue
+            for j in range(i + 1, n):
+                if used[j]:
+                    continue
+                d = np.hypot(x[i] - x[j], y[i] - y[j])
+                if d <= best and (bi < 0 or d < best):
+                    best, bi, bj = d, i, j
+        if bi < 0:
+            break
+        used[bi] = used[bj] = True
+        a[m], b[m] = bi, bj
+        m += 1
+    single = np.empty(n, np.int64)
+    s = 0
+    for i in range(n):
+        if not used[i]:
+            single[s] = i
+            s += 1
+    return a[:m], b[:m], single[:s]
+
+
+@njit(cache=True)
+def legs_to_measurements(lx, ly, ls, stride_max):  # noqa: ANN001, ANN201
+    """Person measurements (kind 0) at the centre of paired legs and single legs (kind 1): x, y, size,
+    kind, legs (M, 4)."""
+    a, b, single = pair_legs(lx, ly, stride_max)
+    n = len(a) + len(single)
+    x = np.empty(n)
+    y = np.empty(n)
+    size = np.empty(n)
+    kind = np.empty(n, np.int64)
+    legs = np.full((n, 4), np.nan)
+    m = 0
+    for k in range(len(a)):
+        i, j = a[k], b[k]
+        x[m], y[m] = 0.5 * (lx[i] + lx[j]), 0.5 * (ly[i] + ly[j])
+        size[m] = np.hypot(lx[i] - lx[j], ly[i] - ly[j]) + 0.5 * (ls[i] + ls[j])
+        kind[m] = 0
+        legs[m, 0], legs[m, 1], legs[m, 2], legs[m, 3] = lx[i], ly[i], lx[j], ly[j]
+        m += 1
+    for i in single:
+        x[m], y[m], size[m], kind[m] = lx[i], ly[i], ls[i], 1
+        m += 1
+    return x, y, size, kind, legs
+
+
+@njit(cache=True)
+def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
+                 leg_radius_max, leg_blob_max, stride_max, d_max):  # noqa: ANN001, ANN201
+    """Measurements of one scan (see measurements.py): x, y, size, kind, legs (M, 4), and the leg
+    candidates lx, ly, ls (L,)."""
+    nc, nb, nl = len(cx), len(bx), len(lseg)
+    # rectangular objects: the bounding box of each segment's lines
+    ox = np.empty(nl)
+    oy = np.empty(nl)
+    osize = np.empty(nl)
+    no = 0
+    if nl:
+        order = np.argsort(lseg, kind="mergesort")
+        k = 0
+        while k < nl:
+            seg = lseg[order[k]]
+            x0 = y0 = np.inf
+            x1 = y1 = -np.inf
+            while k < nl and lseg[order[k]] == seg:
+                i = order[k]
+                x0 = min(x0, lx0[i], lx1[i])
+                x1 = max(x1, lx0[i], lx1[i])
+                y0 = min(y0, ly0[i], ly1[i])
+                y1 = max(y1, ly0[i], ly1[i])
+                k += 1
+            ox[no], oy[no], osize[no] = 0.5 * (x0 + x1), 0.5 * (y0 + y1), np.hypot(x1 - x0, y1 - y0)
+            no += 1
+    # leg candidates: small circles, small blobs, and lines as short as a leg is wide
+    lx = np.empty(nc + nb + no)
+    ly = np.empty(nc + nb + no)
+    ls = np.empty(nc + nb + no)
+    nleg = 0
+    for i in range(nc):
+        if cr[i] <= leg_radius_max:
+            lx[nleg], ly[nleg], ls[nleg] = cx[i], cy[i], 2.0 * cr[i]
+            nleg += 1
+    for i in range(nb):
+        if bsize[i] <= leg_blob_max and bkind[i] == 0:
+            lx[nleg], ly[nleg], ls[nleg] = bx[i], by[i], bsize[i]
+            nleg += 1
+    for i in range(no):
+        if osize[i] <= leg_blob_max:
+            lx[nleg], ly[nleg], ls[nleg] = ox[i], oy[i], osize[i]
+            nleg += 1
+    lx, ly, ls = lx[:nleg], ly[:nleg], ls[:nleg]
+    px, py, psize, pkind, plegs = legs_to_measurements(lx, ly, ls, stride_max)
+    np_ = len(px)
+    cap = np_ + nc + nb + no
+    x = np.empty(cap)
+    y = np.empty(cap)
+    size = np.empty(cap)
+    kind = np.empty(cap, np.int64)
+    legs = np.full((cap, 4), np.nan)
+    x[:np_], y[:np_], size[:np_], kind[:np_], legs[:np_] = px, py, psize, pkind, plegs
+    m = np_
+    for i in range(nc):
+        if cr[i] > leg_radius_max:
+            x[m], y[m], size[m], kind[m] = cx[i], cy[i], 2.0 * cr[i], 2
+            m += 1
+    for i in range(nb):
+        if not (bsize[i] <= leg_blob_max and bkind[i] == 0):
+            x[m], y[m], size[m], kind[m] = bx[i], by[i], bsize[i], 4
+            m += 1
+    for i in range(no):
+        if osize[i] > leg_blob_max:
+            x[m], y[m], size[m], kind[m] = ox[i], oy[i], osize[i], 3
+            m += 1
+    keep = 0
+    for i in range(m):
+        if size[i] <= d_max:
+            x[keep], y[keep], size[keep], kind[keep] = x[i], y[i], size[i], kind[i]
+            legs[keep] = legs[i]
+            keep += 1
+    return x[:keep], y[:keep], size[:keep], kind[:keep], legs[:keep], lx, ly, ls
+
+
+@njit(cache=True)
+def mahalanobis2(x, P, zx, zy, sigma):  # noqa: ANN001, ANN201
+    """(K, M) squared Mahalanobis distances and (K, M) Euclidean distances of measurements (zx, zy) with
+    per-measurement sigma from the K tracks' predicted positions."""
+    K, M = len(x), len(zx)
+    d2 = np.empty((K, M))
+    dist = np.empty((K, M))
+    for k in range(K):
+        for j in range(M):
+            v = sigma[j] * sigma[j]
+            a, b, c = P[k, 0, 0] + v, P[k, 0, 1], P[k, 1, 1] + v
+            det = a * c - b * b
+            dx, dy = zx[j] - x[k, 0], zy[j] - x[k, 1]
+            d2[k, j] = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / det
+            dist[k, j] = np.hypot(dx, dy)
+    return d2, dist
+
+
+@njit(cache=True)
+def update(x, P, rows, zx, zy, sigma):  # noqa: ANN001, ANN201
+    """Kalman update of tracks `rows` with measurements (zx, zy) and sigmas, in place, Joseph form:
+    P = (I - KH) P (I - KH)^T + K R K^T, as filterpy computes it."""
+    I_KH = np.empty((4, 4))
+    G = np.empty((4, 2))
+    T = np.empty((4, 4))
+    for n in range(len(rows)):
+        k = rows[n]
+        v = sigma[n] * sigma[n]
+        a, b, c = P[k, 0, 0] + v, P[k, 0, 1], P[k, 1, 1] + v
+        det = a * c - b * b
+        i00, i01, i11 = c / det, -b / det, a / det
+        for r in range(4):
+            G[r, 0] = P[k, r, 0] * i00 + P[k, r, 1] * i01
+            G[r, 1] = P[k, r, 0] * i01 + P[k, r, 1] * i11
+        dx, dy = zx[n] - x[k, 0], zy[n] - x[k, 1]
+        for r in range(4):
+            x[k, r] += G[r, 0] * dx + G[r, 1] * dy
+            for s in range(4):
+                I_KH[r, s] = (1.0 if r == s else 0.0) - (G[r, s] if s < 2 else 0.0)
+        for r in range(4):
+            for s in range(4):
+                acc = 0.0
+                for u in range(4):
+                    acc += I_KH[r, u] * P[k, u, s]
+                T[r, s] = acc
+        for r in range(4):
+            for s in range(4):
+                acc = 0.0
+                for u in range(4):
+                    acc += T[r, u] * I_KH[s, u]
+                P[k, r, s] = acc + v * (G[r, 0] * G[s, 0] + G[r, 1] * G[s, 1])
+
+
+@njit(cache=True)
+def predict(x, P, dt, q):  # noqa: ANN001, ANN201
+    """Constant-velocity prediction of every track dt seconds ahead, in place (Q of white-noise
+    acceleration q[k] for track k)."""
+    for k in range(len(x)):
+        qa, qb, qc = 0.25 * dt**4 * q[k], 0.5 * dt**3 * q[k], dt**2 * q[k]
+        x[k, 0] += dt * x[k, 2]
+        x[k, 1] += dt * x[k, 3]
+        for s in range(4):
+            P[k, 0, s] += dt * P[k, 2, s]
+            P[k, 1, s] += dt * P[k, 3, s]
+        for r in range(4):
+            P[k, r, 0] += dt * P[k, r, 2]
+            P[k, r, 1] += dt * P[k, r, 3]
+        P[k, 0, 0] += qa
+        P[k, 1, 1] += qa
+        P[k, 0, 2] += qb
+        P[k, 2, 0] += qb
+        P[k, 1, 3] += qb
+        P[k, 3, 1] += qb
+        P[k, 2, 2] += qc
+        P[k, 3, 3] += qc
+
+
+@njit(cache=True)
+def classify(votes, walking, previous, age_s, size, displacement, speed, confirmed, person_votes, d_max,
+             undefined_window, moving_distance, moving_speed):  # noqa: ANN001, ANN201
+    """Class and mobility of every track: the rules of classification.py, fused into one pass."""
+    K = len(votes)
+    cls = np.empty(K, np.uint8)
+    mob = np.empty(K, np.uint8)
+    for k in range(K):
+        dynamic = previous[k] == 1 or (confirmed[k] and displacement[k] > moving_distance
+                                       and speed[k] > moving_speed)
+        if dynamic:
+            mob[k] = 1
+        elif size[k] > d_max or age_s[k] >= undefined_window:
+            mob[k] = 0
+        else:
+            mob[k] = 2
+        person, leg, circle, rect, blob = votes[k, 0], votes[k, 1], votes[k, 2], votes[k, 3], votes[k, 4]
+        total = person + leg + circle + rect + blob
+        if person + leg >= person_votes * max(total, 1):
+            if walking[k] and person > 0:
+                cls[k] = 1
+            elif person == 0 and not dynamic:
+                cls[k] = 2
+            else:
+                cls[k] = 0
+        elif circle + rect + blob == 0:
+            cls[k] = 0
+        elif circle >= rect and circle >= blob:
+            cls[k] = 2
+        elif rect >= blob:
+            cls[k] = 3
+        else:
+            cls[k] = 0
+    return cls, mob
+
+
+@njit(cache=True)
+def leg_stage(tx, ty, lx, ly, ls, reach, stride_max):  # noqa: ANN001, ANN201
+    """Leg candidates (lx, ly, ls) to tracks predicted at (tx, ty), nearest pairs first: each leg to at
+    most one track, each track at most two legs: the first within `reach`, the second within `stride_max`
+    of the track and of the first leg (a lagging prediction sits by one leg, a stride from the other).
+    Returns (owner, x, y, size, kind, legs, taken): one measurement per track that took legs (the centre
+    of two legs, kind 0, or one leg, kind 1) with the owner's index, and which legs were taken."""
+    T, L = len(tx), len(lx)
+    d = np.empty((T, L))
+    for k in range(T):
+        for j in range(L):
+            d[k, j] = np.hypot(lx[j] - tx[k], ly[j] - ty[k])
+    first = np.full(T, -1, np.int64)
+    second = np.full(T, -1, np.int64)
+    taken = np.zeros(L, np.bool_)
+    while True:
+        best, bk, bj = np.inf, -1, -1
+        for k in range(T):
+            if second[k] >= 0:
+                continue
+            f = first[k]
+            limit = reach if f < 0 else stride_max   # a second leg: anywhere within a stride of the first
+            for j in range(L):
+                if taken[j] or d[k, j] > limit or d[k, j] >= best:
+                    continue
+                if f >= 0 and np.hypot(lx[j] - lx[f], ly[j] - ly[f]) > stride_max:
+                    continue
+                best, bk, bj = d[k, j], k, j
+        if bk < 0:
+            break
+        taken[bj] = True
+        if first[bk] < 0:
+            first[bk] = bj
+        else:
+            second[bk] = bj
+    n = 0
+    for k in range(T):
+        if first[k] >= 0:
+            n += 1
+    owner = np.empty(n, np.int64)
+    x = np.empty(n)
+    y = np.empty(n)
+    size = np.empty(n)
+    kind = np.empty(n, np.int64)
+    legs = np.full((n, 4), np.nan)
+    m = 0
+    for k in range(T):
+        i, j = first[k], second[k]
+        if i < 0:
+            continue
+        owner[m] = k
+        if j >= 0:
+            x[m], y[m] = 0.5 * (lx[i] + lx[j]), 0.5 * (ly[i] + ly[j])
+            size[m] = np.hypot(lx[i] - lx[j], ly[i] - ly[j]) + 0.5 * (ls[i] + ls[j])
+            kind[m] = 0
+            legs[m, 0], legs[m, 1], legs[m, 2], legs[m, 3] = lx[i], ly[i], lx[j], ly[j]
+        else:
+            x[m], y[m], size[m], kind[m] = lx[i], ly[i], ls[i], 1
+        m += 1
+    return owner, x, y, size, kind, legs, taken
+
+
+@njit(cache=True)
+def duplicates(x, y, vx, vy, candidate, confirmed, rank, merge_distance, merge_speed):  # noqa: ANN001, ANN201
+    """Which candidate tracks lie within merge_distance of a candidate of higher rank (ties: lower index),
+    when one of the two is tentative or their velocities differ by less than merge_speed (two confirmed
+    people passing each other close are not one)."""
+    K = len(x)
+    dup = np.zeros(K, np.bool_)
+    for i in range(K):
+        if not candidate[i]:
+            continue
+        for j in range(K):
+            if j == i or not candidate[j]:
+                continue
+            if rank[j] > rank[i] or (rank[j] == rank[i] and j < i):
+                if np.hypot(x[i] - x[j], y[i] - y[j]) < merge_distance and (
+                        not (confirmed[i] and confirmed[j]) or np.hypot(vx[i] - vx[j], vy[i] - vy[j]) < merge_speed):
+                    dup[i] = True
+                    break
+    return dup
+
+
+@njit(cache=True)
+def leg_stage_measurements(tx, ty, lx, ly, ls, reach, stride_max, mx, my, msize, mkind, mlegs):  # noqa: ANN001, ANN201
+    """leg_stage, then the scan's measurements rebuilt: first one per track that took legs (owner gives
+    the track), then the free legs paired (legs_to_measurements), then the measurements of other kinds
+    (mkind not 0 or 1). Returns (owner, x, y, size, kind, legs)."""
+    owner, ox, oy, osize, okind, olegs, taken = leg_stage(tx, ty, lx, ly, ls, reach, stride_max)
+    free = ~taken
+    rx, ry, rsize, rkind, rlegs = legs_to_measurements(lx[free], ly[free], ls[free], stride_max)
+    n_other = 0
+    for i in range(len(mx)):
+        if mkind[i] > 1:
+            n_other += 1
+    n = len(ox) + len(rx) + n_other
+    x = np.empty(n)
+    y = np.empty(n)
+    size = np.empty(n)
+    kind = np.empty(n, np.int64)
+    legs = np.full((n, 4), np.nan)
+    a, b = len(ox), len(ox) + len(rx)
+    x[:a], y[:a], size[:a], kind[:a], legs[:a] = ox, oy, osize, okind, olegs
+    x[a:b], y[a:b], size[a:b], kind[a:b], legs[a:b] = rx, ry, rsize, rkind, rlegs
+    m = b
+    for i in range(len(mx)):
+        if mkind[i] > 1:
+            x[m], y[m], size[m], kind[m] = mx[i], my[i], msize[i], mkind[i]
+            m += 1
+    return owner, x, y, size, kind, legs
+
+
+@njit(cache=True)
+def apply_updates(x, P, last, hit, votes, size, lead_left, lead_right, moving, rows, zx, zy, zkind, zsize,
+                  zlegs, sigma, sigma_leg, moving_speed, step_min, step_max):  # noqa: ANN001, ANN201
+    """Kalman-update tracks `rows` with measurements (zx, zy) of kinds zkind, and record the hit: last
+    position, kind votes, largest size, and for people that have been `moving` which leg leads along the
+    velocity (the walking pattern; noise on a still pair of posts would fake it)."""
+    hit[:] = False
+    sig = np.empty(len(rows))
+    for n in range(len(rows)):
+        sig[n] = sigma_leg if zkind[n] == 1 else sigma
+    update(x, P, rows, zx, zy, sig)
+    for n in range(len(rows)):
+        k = rows[n]
+        last[k, 0], last[k, 1] = x[k, 0], x[k, 1]
+        hit[k] = True
+        votes[k, zkind[n]] += 1
+        size[k] = max(size[k], zsize[n])
+        if zkind[n] == 0 and moving[k]:
+            vx, vy = x[k, 2], x[k, 3]
+            speed = np.hypot(vx, vy)
+            if speed > moving_speed:
+                ux, uy = vx / speed, vy / speed
+                dx, dy = zlegs[n, 0] - zlegs[n, 2], zlegs[n, 1] - zlegs[n, 3]
+                along = dx * ux + dy * uy
+                lead = along if (ux * dy - uy * dx) > 0 else -along   # left leg minus right leg
+                if abs(lead) <= step_max:
+                    if lead > step_min:
+                        lead_left[k] = True
+                    elif lead < -step_min:
+                        lead_right[k] = True
+
+
+@njit(cache=True)
+def life_cycle(hit, age, hits, misses, last_hit_ns, history, confirmed, occluded, stamp_ns, mask, popcount,
+               confirm_hits, delete_after, delete_after_occluded, tentative_delete_after):  # noqa: ANN001, ANN201
+    """Count the scan for every track (age, hits, misses, hit history, confirmation) and return which
+    tracks are past their deletion timeout (s since the last hit: tentative, seen, occluded)."""
+    K = len(hit)
+    dead = np.zeros(K, np.bool_)
+    for k in range(K):
+        age[k] += 1
+        if hit[k]:
+            hits[k] += 1
+            misses[k] = 0
+            last_hit_ns[k] = stamp_ns
+        else:
+            misses[k] += 1
+        history[k] = ((history[k] << 1) | (1 if hit[k] else 0)) & mask
+        if popcount[history[k]] >= confirm_hits:
+            confirmed[k] = True
+        since = (stamp_ns - last_hit_ns[k]) * 1e-9
+        if confirmed[k]:
+            limit = delete_after_occluded if occluded[k] else delete_after
+        else:
+            limit = tentative_delete_after
+        dead[k] = since > limit + 1e-9
+    return dead
+
+
+@njit(cache=True)
+def marker_points(px, py, vx, vy, cls, shown, alpha, color_table, tail, tail_count):  # noqa: ANN001, ANN201
+    """Points and colours of the track markers (markers.py): per shape list (people, circle objects,
+    others) points (n, 3) and colours (n, 4); velocity arrows and trajectory tails of `shown` tracks as
+    LINE_LIST points (2 per segment). Tentative tracks get colour alpha `alpha`."""
+    K = len(px)
+    T = tail.shape[1]
+    counts = np.zeros(3, np.int64)
+    group = np.empty(K, np.int64)
+    n_shown = 0
+    n_seg = 0
+    for k in range(K):
+        g = 0 if cls[k] == 1 else (1 if cls[k] == 2 else 2)
+        group[k] = g
+        counts[g] += 1
+        if shown[k]:
+            n_shown += 1
+            n_seg += max(min(tail_count[k], T) - 1, 0)
+    pts = [np.zeros((counts[g], 3)) for g in range(3)]
+    cols = [np.empty((counts[g], 4), np.float32) for g in range(3)]
+    arrows = np.zeros((2 * n_shown, 3))
+    tails = np.zeros((2 * n_seg, 3))
+    fill = np.zeros(3, np.int64)
+    a = 0
+    s = 0
+    for k in range(K):
+        g = group[k]
+        i = fill[g]
+        pts[g][i, 0], pts[g][i, 1] = px[k], py[k]
+        c = min(cls[k], 3)
+        for j in range(4):
+            cols[g][i, j] = color_table[c, j]
+        if not shown[k]:
+            cols[g][i, 3] = alpha
+        fill[g] += 1
+        if shown[k]:
+            arrows[a, 0], arrows[a, 1] = px[k], py[k]
+            arrows[a + 1, 0], arrows[a + 1, 1] = px[k] + vx[k], py[k] + vy[k]
+            a += 2
+            n = min(tail_count[k], T)
+            for j in range(n - 1):
+                p0 = (tail_count[k] - n + j) % T
+                p1 = (p0 + 1) % T
+                tails[s, 0], tails[s, 1] = tail[k, p0, 0], tail[k, p0, 1]
+                tails[s + 1, 0], tails[s + 1, 1] = tail[k, p1, 0], tail[k, p1, 1]
+                s += 2
+    return pts[0], cols[0], pts[1], cols[1], pts[2], cols[2], arrows, tails
+
+
+@njit(cache=True)
+def kind_groups(votes, mobility):  # noqa: ANN001, ANN201
+    """The kind group that fed each track most: 0 legs or people, 1 circles, 2 lines, 3 blobs, 5 a lone
+    leg never paired that is not dynamic (ties: the lower group)."""
+    K = len(votes)
+    g = np.empty(K, np.int64)
+    for k in range(K):
+        legs = votes[k, 0] + votes[k, 1]
+        best, arg = legs, 0
+        for j, v in ((1, votes[k, 2]), (2, votes[k, 3]), (3, votes[k, 4])):
+            if v > best:
+                best, arg = v, j
+        if arg == 0 and votes[k, 0] == 0 and mobility[k] != 1:
+            arg = 5
+        g[k] = arg
+    return g
+
+
+@njit(cache=True)
+def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, margin):  # noqa: ANN001, ANN201
+    """Which missed tracks (sensor-frame centres sx, sy and extents, m) are hidden: outside the field of
+    view or range, or behind a return at least `margin` m nearer within their angular extent."""
+    K, B = len(sx), len(ranges)
+    occ = np.zeros(K, np.bool_)
+    for k in range(K):
+        if not missed[k]:
+            continue
+        rng = np.hypot(sx[k], sy[k])
+        beam = int(np.rint((np.arctan2(sy[k], sx[k]) - angle_min) / increment))
+        if beam < 0 or beam >= B or rng >= range_max:
+            occ[k] = True
+            continue
+        half = int(np.ceil(np.arctan2(max(size[k], 0.2) / 2, max(rng, 0.1)) / abs(increment)))
+        for j in range(max(beam - half, 0), min(beam + half + 1, B)):
+            if ranges[j] < rng - margin:
+                occ[k] = True
+                break
+    return occ
+
+
+@njit(cache=True)
+def gated_distances(x, P, zx, zy, zkind, sigma, sigma_leg, gate, max_distance, compat, compat_row):  # noqa: ANN001, ANN201
+    """Squared Mahalanobis distances (K, M) of measurements from the tracks' predictions (measurement sigma
+    by kind: sigma_leg for single legs) and which pairs pass the gate, the distance bound and the kind
+    compatibility compat[compat_row[k], zkind[j]]."""
+    K, M = len(x), len(zx)
+    d2 = np.empty((K, M))
+    ok = np.zeros((K, M), np.bool_)
+    for k in range(K):
+        row = compat_row[k]
+        for j in range(M):
+            s = sigma_leg if zkind[j] == 1 else sigma
+            v = s * s
+            a, b, c = P[k, 0, 0] + v, P[k, 0, 1], P[k, 1, 1] + v
+            dx, dy = zx[j] - x[k, 0], zy[j] - x[k, 1]
+            d2[k, j] = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / (a * c - b * b)
+            ok[k, j] = compat[row, zkind[j]] and d2[k, j] <= gate and np.hypot(dx, dy) <= max_distance
+    return d2, ok

@@ -1,0 +1,138 @@
+"""Tracking over a whole run: features in, one Tracks message and one MarkerArray per scan out.
+
+Features come either from a log's /datmo/features channel or from `datmo_cli.perception.features.
+extract_run` (a RunFeatures of flat arrays with per-scan offsets). With odometry, tracking runs in the
+world frame and every track also carries its world position.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..log import cdr, types
+from ..log.scan import Odometry, ScanRun
+from .markers import track_markers
+from .measurements import ScanFeatures, measurements
+from .params import TrackingParams
+from .tracker import TRACK_DTYPE, Tracker
+
+LINE_DTYPE = cdr.element_dtype(types.LINE)
+CIRCLE_DTYPE = cdr.element_dtype(types.CIRCLE)
+BLOB_DTYPE = cdr.element_dtype(types.BLOB)
+
+
+def iter_run_features(features) -> Iterator[ScanFeatures]:  # noqa: ANN001 - perception's RunFeatures
+    """Scan by scan views of a RunFeatures (lines/circles/blobs with line_/circle_/blob_offsets)."""
+    lo, co, bo = (np.asarray(features.line_offsets), np.asarray(features.circle_offsets),
+                  np.asarray(features.blob_offsets))
+    lines, circles, blobs = features.lines, features.circles, features.blobs
+    for i in range(len(lo) - 1):
+        yield ScanFeatures(lines[lo[i]:lo[i + 1]], circles[co[i]:co[i + 1]], blobs[bo[i]:bo[i + 1]])
+
+
+def decode_features(payloads: list[bytes]) -> list[ScanFeatures]:
+    """ScanFeatures of datmo_msgs/msg/Features CDR payloads (a log's /datmo/features channel)."""
+    out = []
+    for p in payloads:
+        msg = cdr.decode(types.FEATURES, p)
+        out.append(ScanFeatures(msg["lines"], msg["circles"], msg["blobs"]))
+    return out
+
+
+def features_from_lists(scans: list[dict]) -> list[ScanFeatures]:
+    """ScanFeatures from plain lists, for tests and scripts: each scan a dict with optional "circles"
+    [(x, y, radius)], "lines" [(x_ini, y_ini, x_end, y_end)] (each its own segment) and "blobs" [(x, y, size)]."""
+    out = []
+    for s in scans:
+        c = np.zeros(len(s.get("circles", ())), CIRCLE_DTYPE)
+        for k, (x, y, r) in enumerate(s.get("circles", ())):
+            c[k]["x"], c[k]["y"], c[k]["radius"], c[k]["segment"] = x, y, r, k
+        li = np.zeros(len(s.get("lines", ())), LINE_DTYPE)
+        for k, (x0, y0, x1, y1) in enumerate(s.get("lines", ())):
+            li[k]["x_ini"], li[k]["y_ini"], li[k]["x_end"], li[k]["y_end"] = x0, y0, x1, y1
+            li[k]["length"], li[k]["segment"] = np.hypot(x1 - x0, y1 - y0), 100 + k
+        b = np.zeros(len(s.get("blobs", ())), BLOB_DTYPE)
+        for k, (x, y, size) in enumerate(s.get("blobs", ())):
+            b[k]["x"], b[k]["y"], b[k]["size"], b[k]["segment"] = x, y, size, 200 + k
+        out.append(ScanFeatures(li, c, b))
+    return out
+
+
+@dataclass
+class TrackedRun:
+    """What tracking a run gave: per scan, the live tracks (Track elements) and the markers payload."""
+
+    stamps: np.ndarray                    # (N,) int64 ns
+    frame_id: str                         # the scans' sensor frame
+    world: bool                           # tracks carry world positions (the log had odometry)
+    tracks: list[np.ndarray] = field(default_factory=list)
+    markers: list[bytes] = field(default_factory=list)
+
+    def track_payloads(self) -> list[bytes]:
+        """datmo_msgs/msg/Tracks CDR payloads, one per scan."""
+        return [cdr.encode(types.TRACKS, {"stamp_ns": int(s), "frame_id": self.frame_id, "tracks": t})
+                for s, t in zip(self.stamps.tolist(), self.tracks, strict=True)]
+
+    def all_tracks(self) -> tuple[np.ndarray, np.ndarray]:
+        """(offsets (N+1,), every scan's tracks concatenated), as evaluate.track_frames takes them."""
+        counts = [len(t) for t in self.tracks]
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        items = np.concatenate(self.tracks) if self.tracks else np.zeros(0, TRACK_DTYPE)
+        return offsets, items
+
+
+def track_run(run: ScanRun, features: list[ScanFeatures] | Iterator[ScanFeatures], *,
+              odometry: Odometry | None = None, params: TrackingParams | None = None, markers: bool = True,
+              progress: Callable[[int, int], None] | None = None) -> TrackedRun:
+    """Track every scan of `run` given its features (one ScanFeatures per scan, sensor frame)."""
+    params = params or TrackingParams()
+    tracker = Tracker(params, run.geometry)
+    poses = odometry.at(run.stamps) if odometry is not None and len(odometry) else None
+    frame = run.geometry.frame_id
+    marker_frame = (odometry.frame_id if poses is not None else frame)
+    out = TrackedRun(run.stamps, frame, poses is not None)
+    ranges = run.ranges
+    n = len(run)
+    step = max(n // 100, 1)
+    for i, (stamp, feats) in enumerate(zip(run.stamps.tolist(), features, strict=False)):
+        meas = measurements(feats, params)
+        tracks = tracker.step(stamp, meas, ranges[i], None if poses is None else poses[i])
+        out.tracks.append(tracks)
+        if markers:
+            t = tracker.tracks
+            out.markers.append(track_markers(stamp, marker_frame, tracks, t.tail, t.tail_count,
+                                             world=poses is not None))
+        if progress is not None and (i % step == 0 or i == n - 1):
+            progress(i + 1, n)
+    if len(out.tracks) != n:
+        raise ValueError(f"features for {len(out.tracks)} scans, the run has {n}")
+    return out
+
+
+def run_features(run: ScanRun, odometry: Odometry | None = None) -> list[ScanFeatures]:
+    """Segment `run` and extract its features with datmo_cli.perception (default parameters)."""
+    import importlib.util
+
+    if importlib.util.find_spec("datmo_cli.perception.features") is None:
+        from ..errors import MissingChannelError
+
+        raise MissingChannelError("the log has no /datmo/features and this build has no feature extraction "
+                                  "(datmo_cli.perception.features); run datmo features first")
+    from ..perception.features import extract_run
+
+    return list(iter_run_features(extract_run(run, odometry=odometry)))
+
+
+def derive_tracks(run: ScanRun, features: list[ScanFeatures], *, odometry: Odometry | None = None,
+                  params: TrackingParams | None = None,
+                  progress: Callable[[int, int], None] | None = None) -> dict[str, tuple[str, np.ndarray, list]]:
+    """The channels `datmo track` adds: {topic: (msgtype, stamps, payloads)} for /datmo/tracks and
+    /datmo/markers/tracks (topic names from mcapio)."""
+    from ..log import mcapio
+
+    tracked = track_run(run, features, odometry=odometry, params=params, progress=progress)
+    return {mcapio.TOPIC_TRACKS: (types.TRACKS, tracked.stamps, tracked.track_payloads()),
+            mcapio.TOPIC_MARKERS_TRACKS: (types.MARKER_ARRAY, tracked.stamps, tracked.markers)}

@@ -1,0 +1,352 @@
+"""The multi-object tracker: one `step` per scan composes predict, associate, update, life cycle and
+classification (method.md §6; association, occlusion and life cycle are datmo's additions).
+
+Tracking frame: the sensor frame of a still scanner, or the world (odometry) frame when each step is given
+the sensor's pose. Time comes from the scan stamps (ns), so uneven rates and dropped scans are handled.
+Life cycle: a track starts tentative; it is confirmed after `confirm_hits` hits in the last
+`confirm_window` scans (never from one scan); a confirmed track that misses is coasting; a track is deleted
+after `delete_after` s without a hit while it should have been seen, or `delete_after_occluded` s while
+a nearer return covers its bearing or it is out of the field of view.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from ..log import cdr, types
+from ..log.scan import ScanGeometry
+from . import _kernels, kalman
+from .association import gnn
+from .classification import (
+    CLASS_PERSON,
+)
+from .measurements import (
+    KIND_BLOB,
+    KIND_CIRCLE,
+    KIND_LEG,
+    KIND_PERSON,
+    KIND_RECT,
+    N_KINDS,
+    Measurements,
+)
+from .params import TrackingParams
+
+STATUS_TENTATIVE, STATUS_CONFIRMED, STATUS_COASTING = 0, 1, 2
+TRACK_DTYPE = cdr.element_dtype(types.TRACK)
+# which measurement kinds (columns) a confirmed track may take, by the kind group that fed it most (rows:
+# legs, circles, lines, blobs, -, a lone leg; see _kernels.kind_groups); tentative tracks (row 4) take any
+_COMPAT = np.ones((6, N_KINDS), bool)
+_COMPAT[0, [KIND_CIRCLE, KIND_RECT]] = False
+_COMPAT[1, [KIND_PERSON, KIND_LEG, KIND_RECT]] = False
+_COMPAT[2, [KIND_PERSON, KIND_LEG, KIND_CIRCLE]] = False
+_ANY, _LONE_LEG = 4, 5
+_COMPAT[_LONE_LEG, [KIND_PERSON, KIND_CIRCLE, KIND_RECT]] = False
+
+
+@dataclass
+class TrackArrays:
+    """The state of K tracks as arrays (tracking frame, m, m/s, ns)."""
+
+    id: np.ndarray          # (K,) int64
+    x: np.ndarray           # (K, 4) float64: x, y, vx, vy
+    P: np.ndarray           # (K, 4, 4)
+    born_ns: np.ndarray     # (K,) int64
+    last_hit_ns: np.ndarray
+    age: np.ndarray         # (K,) int64, scans
+    hits: np.ndarray
+    misses: np.ndarray
+    history: np.ndarray     # (K,) int64 bit mask of hits in the last confirm_window scans
+    votes: np.ndarray       # (K, N_KINDS) int64
+    lead_left: np.ndarray   # (K,) bool: the left leg was seen leading
+    lead_right: np.ndarray
+    moving_time: np.ndarray  # (K,) float64, s of consecutive hits with a speed above moving_speed
+    size: np.ndarray        # (K,) float64, largest extent seen, m
+    first: np.ndarray       # (K, 2) position when created
+    last: np.ndarray        # (K, 2) position after the last hit
+    confirmed: np.ndarray   # (K,) bool
+    occluded: np.ndarray
+    hit: np.ndarray         # (K,) bool: matched in the last step
+    cls: np.ndarray         # (K,) uint8
+    mobility: np.ndarray    # (K,) uint8
+    tail: np.ndarray        # (K, T, 2) ring buffer of positions
+    tail_count: np.ndarray  # (K,) int64, positions written so far
+
+    @classmethod
+    def empty(cls, tail_length: int) -> TrackArrays:
+        return cls(np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0, np.int64),
+                   np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                   np.zeros(0, np.int64), np.zeros((0, N_KINDS), np.int64), np.zeros(0, bool), np.zeros(0, bool),
+                   np.zeros(0),
+                   np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, bool), np.zeros(0, bool),
+                   np.zeros(0, bool),
+                   np.zeros(0, np.uint8), np.zeros(0, np.uint8), np.zeros((0, max(tail_length, 1), 2)),
+                   np.zeros(0, np.int64))
+
+    def __len__(self) -> int:
+        return len(self.id)
+
+    def take(self, keep: np.ndarray) -> TrackArrays:
+        return TrackArrays(*(getattr(self, f.name)[keep] for f in fields(self)))
+
+    def extend(self, other: TrackArrays) -> TrackArrays:
+        return TrackArrays(*(np.concatenate([getattr(self, f.name), getattr(other, f.name)]) for f in fields(self)))
+
+    @property
+    def walking(self) -> np.ndarray:
+        return self.lead_left & self.lead_right
+
+
+class Tracker:
+    """Tracks and classifies objects scan by scan. `step` takes one scan's measurements (sensor frame)
+    and returns the live tracks as Track elements (element_dtype(types.TRACK))."""
+
+    def __init__(self, params: TrackingParams | None = None, geometry: ScanGeometry | None = None) -> None:
+        self.params = params or TrackingParams()
+        self.geometry = geometry
+        self.tracks = TrackArrays.empty(self.params.tail_length)
+        self.stamp_ns: int | None = None
+        self._dt = 0.0
+        self.next_id = 1
+        self.pose: np.ndarray | None = None
+        self._compat_row = np.zeros(0, np.int64)
+        w = self.params.confirm_window
+        self._mask = (1 << w) - 1
+        self._popcount = np.array([bin(i).count("1") for i in range(1 << w)], np.int64)
+        if geometry is not None:
+            self._angle_min, self._inc, self._n = geometry.angle_min, geometry.angle_increment, geometry.n_beams
+
+    # ---------------------------------------------------------------------------------------- step
+    def step(self, stamp_ns: int, meas: Measurements, ranges: np.ndarray | None = None,
+             pose: np.ndarray | None = None) -> np.ndarray:
+        """Advance to the scan at `stamp_ns` (ns) with its measurements `meas` (sensor frame), its ranges
+        (m, for the occlusion test; None: no missed track counts as occluded) and the sensor's world pose
+        (x, y in m, theta in rad) when tracking in the world frame. Returns the live tracks."""
+        p = self.params
+        dt = 0.0 if self.stamp_ns is None else max((stamp_ns - self.stamp_ns) * 1e-9, 0.0)
+        self._dt = dt
+        self.stamp_ns = stamp_ns
+        self.pose = None if pose is None else np.asarray(pose, np.float64)
+        t = self.tracks
+        group = _kernels.kind_groups(t.votes, t.mobility)
+        self._compat_row = np.where(t.confirmed, group, _ANY)
+        kalman.predict(t.x, t.P, dt, np.where((group == 0) | (group == _LONE_LEG), p.person_process_noise,
+                                              p.process_noise))
+        m = meas.moved(self.pose)
+        m, rows0 = self._legs(t, m)
+        rows, cols = self._associate(t, m, rows0)
+        self._update(t, m, rows, cols)
+        rows2, cols2 = self._reacquire(t, m, cols, stamp_ns)
+        if len(rows2):
+            rows, cols = np.concatenate([rows, rows2]), np.concatenate([cols, cols2])
+        self._occlusion(t, ranges)
+        self._life_cycle(t, stamp_ns)
+        self._spawn(m, rows, cols, stamp_ns)
+        self._classify()
+        self._push_tail()
+        return self.output()
+
+    def _legs(self, t: TrackArrays, m: Measurements) -> tuple[Measurements, np.ndarray]:
+        """Let tracks that are legs or people take up to two leg candidates each near their prediction
+        (nearest pairs first, so two people walking side by side keep their own legs), before the
+        remaining legs are paired by distance alone. Returns the scan's measurements rebuilt, the first
+        len(rows) of them formed for tracks `rows` from their legs."""
+        p = self.params
+        none = np.zeros(0, np.int64)
+        raw = m.raw_legs
+        if not len(t) or not len(raw):
+            return m, none
+        legs_votes = t.votes[:, KIND_PERSON] + t.votes[:, KIND_LEG]
+        leggy = np.flatnonzero((legs_votes >= p.person_votes * np.maximum(t.votes.sum(axis=1), 1))
+                               & (legs_votes > 0) & (t.cls <= CLASS_PERSON) & t.confirmed)
+        if not len(leggy):
+            return m, none
+        owner, x, y, size, kind, legs = _kernels.leg_stage_measurements(
+            t.x[leggy, 0], t.x[leggy, 1], raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(),
+            p.leg_reach, p.stride_max, m.x, m.y, m.size, m.kind, m.legs)
+        if not len(owner):
+            return m, none
+        return Measurements(x, y, size, kind, legs, raw), leggy[owner]
+
+    def _associate(self, t: TrackArrays, m: Measurements, rows0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Tracks `rows0` own measurements 0..len(rows0)-1; the others are gated and assigned by GNN."""
+        p = self.params
+        n0 = len(rows0)
+        cols0 = np.arange(n0, dtype=np.int64)
+        if not len(t) or len(m) == n0:
+            return rows0, cols0
+        d2, allowed = _kernels.gated_distances(t.x, t.P, m.x, m.y, m.kind, p.measurement_noise,
+                                               p.leg_measurement_noise, p.gate, p.max_gate_distance, _COMPAT,
+                                               self._compat_row)
+        if n0:
+            allowed[rows0, :] = False
+            allowed[:, :n0] = False
+        rows, cols = gnn(d2, allowed)
+        return np.concatenate([rows0, rows]), np.concatenate([cols0, cols])
+
+    def _update(self, t: TrackArrays, m: Measurements, rows: np.ndarray, cols: np.ndarray) -> None:
+        p = self.params
+        moving = t.moving_time >= p.walking_after
+        _kernels.apply_updates(t.x, t.P, t.last, t.hit, t.votes, t.size, t.lead_left, t.lead_right, moving, rows,
+                               m.x[cols], m.y[cols], m.kind[cols], m.size[cols], m.legs[cols], p.measurement_noise,
+                               p.leg_measurement_noise, p.moving_speed, p.step_min, p.step_max)
+
+    def _reacquire(self, t: TrackArrays, m: Measurements, taken: np.ndarray,
+                   stamp_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        """Give a confirmed track lost while occluded or out of view the nearest free measurement it could
+        have reached since its last hit (at `reacquire_speed`), restarting its filter there; a prediction at
+        constant velocity does not follow someone who turned while hidden."""
+        p = self.params
+        lost = np.flatnonzero(~t.hit & t.confirmed & t.occluded)
+        if not len(lost) or not len(m):
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        free = m.kind != KIND_LEG   # a lone leg may be someone else's second leg: reacquire on pairs
+        free[taken] = False
+        near = t.hit[:, None] & (np.hypot(m.x[None, :] - t.x[:, 0:1], m.y[None, :] - t.x[:, 1:2])
+                                 <= p.leg_beside)
+        free &= ~near.any(axis=0)
+        cand = np.flatnonzero(free)
+        if not len(cand):
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        dist = np.hypot(m.x[cand][None, :] - t.last[lost, 0:1], m.y[cand][None, :] - t.last[lost, 1:2])
+        reach = np.minimum(p.reacquire_speed * (stamp_ns - t.last_hit_ns[lost]) * 1e-9 + p.max_gate_distance,
+                           p.reacquire_distance)
+        allowed = (dist <= reach[:, None]) & _COMPAT[self._compat_row[lost]][:, m.kind[cand]]
+        r, c = gnn(dist, allowed)
+        if not len(r):
+            return r, c
+        rows, cols = lost[r], cand[c]
+        kind = m.kind[cols]
+        sigma = np.where(kind == KIND_LEG, p.leg_measurement_noise, p.measurement_noise)
+        t.x[rows] = 0.0
+        t.x[rows, 0], t.x[rows, 1] = m.x[cols], m.y[cols]
+        t.P[rows] = 0.0
+        t.P[rows, 0, 0] = t.P[rows, 1, 1] = sigma**2
+        t.P[rows, 2, 2] = t.P[rows, 3, 3] = p.initial_speed_sigma**2
+        t.last[rows] = t.x[rows, 0:2]
+        t.hit[rows] = True
+        t.votes[rows, kind] += 1
+        return rows, cols
+
+    def _occlusion(self, t: TrackArrays, ranges: np.ndarray | None) -> None:
+        """Mark each missed track occluded when a return nearer than it covers its bearing, or when it is
+        outside the field of view or the range limit."""
+        t.occluded[:] = False
+        if ranges is None or self.geometry is None or t.hit.all():
+            return
+        sx, sy = self._to_sensor(t.x[:, 0], t.x[:, 1])
+        t.occluded = _kernels.occlusion(np.ascontiguousarray(sx), np.ascontiguousarray(sy), t.size, ~t.hit,
+                                        np.ascontiguousarray(ranges, np.float32), self._angle_min, self._inc,
+                                        self.geometry.range_max, self.params.occlusion_margin)
+
+    def _life_cycle(self, t: TrackArrays, stamp_ns: int) -> None:
+        p = self.params
+        dead = _kernels.life_cycle(t.hit, t.age, t.hits, t.misses, t.last_hit_ns, t.history, t.confirmed,
+                                   t.occluded, stamp_ns, self._mask, self._popcount, p.confirm_hits, p.delete_after,
+                                   p.delete_after_occluded, p.tentative_delete_after)
+        dead |= self._duplicates(t)
+        if dead.any():
+            self.tracks = t.take(~dead)
+
+    def _duplicates(self, t: TrackArrays) -> np.ndarray:
+        """Tracks of legs or people closer than `merge_distance` to an older such track (more hits), unless
+        both are confirmed and move differently: one person's two legs must not keep two tracks alive."""
+        legs = t.votes[:, KIND_PERSON] + t.votes[:, KIND_LEG]
+        candidate = (legs > 0) & (t.cls <= CLASS_PERSON)
+        x = np.ascontiguousarray(t.x.T)
+        return _kernels.duplicates(x[0], x[1], x[2], x[3], candidate, t.confirmed, t.hits * 2 + t.confirmed,
+                                   self.params.merge_distance, self.params.merge_speed)
+
+    def _spawn(self, m: Measurements, rows: np.ndarray, cols: np.ndarray, stamp_ns: int) -> None:
+        """Start tentative tracks on measurements no track took, except legs beside a track that took a
+        leg or a person (the other leg of someone tracked) and measurements on top of an existing track."""
+        p = self.params
+        free = np.ones(len(m), bool)
+        free[cols] = False
+        if not free.any():
+            return
+        idx = np.flatnonzero(free)
+        t = self.tracks
+        if len(t):
+            d = np.hypot(m.x[idx, None] - t.x[None, :, 0], m.y[idx, None] - t.x[None, :, 1])
+            legged = t.hit & ((t.votes[:, KIND_PERSON] + t.votes[:, KIND_LEG]) > 0)
+            small = (m.kind[idx] == KIND_LEG) | (m.kind[idx] == KIND_BLOB)
+            beside = small & (d[:, legged] <= p.leg_beside).any(axis=1)
+            on_top = (d <= p.spawn_clearance).any(axis=1)
+            idx = idx[~(beside | on_top)]
+        n = len(idx)
+        if not n:
+            return
+        T = self.tracks.tail.shape[1]
+        x = np.zeros((n, 4))
+        x[:, 0], x[:, 1] = m.x[idx], m.y[idx]
+        P = np.zeros((n, 4, 4))
+        r = np.where(m.kind[idx] == KIND_LEG, p.leg_measurement_noise, p.measurement_noise)
+        P[:, 0, 0] = P[:, 1, 1] = r**2
+        P[:, 2, 2] = P[:, 3, 3] = p.initial_speed_sigma**2
+        votes = np.zeros((n, N_KINDS), np.int64)
+        votes[np.arange(n), m.kind[idx]] = 1
+        ones, zeros = np.ones(n, np.int64), np.zeros(n, np.int64)
+        new = TrackArrays(np.arange(self.next_id, self.next_id + n, dtype=np.int64), x, P,
+                          np.full(n, stamp_ns, np.int64), np.full(n, stamp_ns, np.int64), ones, ones, zeros, ones,
+                          votes, np.zeros(n, bool), np.zeros(n, bool), np.zeros(n), m.size[idx].astype(np.float64),
+                          x[:, :2].copy(), x[:, :2].copy(), np.zeros(n, bool), np.zeros(n, bool), np.ones(n, bool),
+                          np.zeros(n, np.uint8), np.full(n, 2, np.uint8), np.zeros((n, T, 2)), zeros)
+        self.next_id += n
+        self.tracks = self.tracks.extend(new)
+
+    def _classify(self) -> None:
+        t, p = self.tracks, self.params
+        if not len(t):
+            return
+        speed = np.hypot(t.x[:, 2], t.x[:, 3])
+        # motion must be sustained: segment ends that come and go make a static object's centre jump
+        t.moving_time = np.where(t.hit & (speed > p.moving_speed), t.moving_time + self._dt, 0.0)
+        speed = np.where(t.moving_time >= p.moving_time, speed, 0.0)
+        moved = np.hypot(t.x[:, 0] - t.first[:, 0], t.x[:, 1] - t.first[:, 1])
+        age_s = (self.stamp_ns - t.born_ns) * 1e-9
+        t.cls, t.mobility = _kernels.classify(t.votes, t.lead_left & t.lead_right, t.mobility, age_s, t.size, moved,
+                                              speed, t.confirmed, p.person_votes, p.d_max, p.undefined_window,
+                                              p.moving_distance, p.moving_speed)
+
+    def _push_tail(self) -> None:
+        t = self.tracks
+        if not len(t):
+            return
+        T = t.tail.shape[1]
+        t.tail[np.arange(len(t)), t.tail_count % T] = t.x[:, :2]
+        t.tail_count += 1
+
+    # -------------------------------------------------------------------------------------- output
+    def _to_sensor(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.pose is None:
+            return x, y
+        c, s = np.cos(self.pose[2]), np.sin(self.pose[2])
+        dx, dy = x - self.pose[0], y - self.pose[1]
+        return c * dx + s * dy, -s * dx + c * dy
+
+    def output(self) -> np.ndarray:
+        """The live tracks as Track elements: positions in the sensor frame and, with a pose, the world."""
+        t = self.tracks
+        out = np.zeros(len(t), TRACK_DTYPE)
+        if not len(t):
+            return out
+        out["id"], out["age"], out["hits"], out["misses"] = t.id, t.age, t.hits, t.misses
+        sx, sy = self._to_sensor(t.x[:, 0], t.x[:, 1])
+        out["x"], out["y"] = sx, sy
+        if self.pose is None:
+            out["vx"], out["vy"] = t.x[:, 2], t.x[:, 3]
+            for name in ("world_x", "world_y", "world_vx", "world_vy"):
+                out[name] = np.nan
+        else:
+            c, s = np.cos(self.pose[2]), np.sin(self.pose[2])
+            out["vx"], out["vy"] = c * t.x[:, 2] + s * t.x[:, 3], -s * t.x[:, 2] + c * t.x[:, 3]
+            out["world_x"], out["world_y"], out["world_vx"], out["world_vy"] = t.x.T
+        out["covariance"] = t.P.reshape(len(t), 16)
+        out["size"] = t.size
+        out["classification"] = t.cls
+        out["mobility"] = t.mobility
+        out["status"] = np.where(t.confirmed, np.where(t.hit, STATUS_CONFIRMED, STATUS_COASTING), STATUS_TENTATIVE)
+        out["occluded"] = t.occluded
+        return out

@@ -1,0 +1,148 @@
+"""`datmo track` end to end on a small log that already has /datmo/features, and its errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from test_tracking_people import legs_as_circles, walker_legs
+
+from datmo_cli.cli import cli
+from datmo_cli.log import cdr, mcapio, types
+from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
+from datmo_cli.tracking.pipeline import features_from_lists
+
+GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0, 0.0, 0.2, "laser")
+N = 30
+STAMPS = 1_700_000_000_000_000_000 + np.arange(N, dtype=np.int64) * 200_000_000
+
+
+def make_log(path, odometry: bool = False) -> None:  # noqa: ANN001
+    run = ScanRun(STAMPS, np.full((N, 361), 7.5, np.float32), GEOM)
+    scans = [{"circles": legs_as_circles(walker_legs(0.2 * k, (1, -3), (0.3, 1.0))) + [(5.0, 2.0, 0.25)]}
+             for k in range(N)]
+    feats = features_from_lists(scans)
+    payloads = [cdr.encode(types.FEATURES, {"stamp_ns": int(s), "frame_id": "laser", "lines": f.lines,
+                                            "circles": f.circles, "blobs": f.blobs})
+                for s, f in zip(STAMPS, feats, strict=True)]
+    with mcapio.LogWriter(path) as w:
+        w.write_scans(run)
+        w.write_many(mcapio.TOPIC_FEATURES, types.FEATURES, STAMPS, payloads)
+        if odometry:
+            w.write_odometry(Odometry(STAMPS, np.full(N, 2.0), np.zeros(N), np.zeros(N)))
+
+
+def _tracks(path) -> list[dict]:  # noqa: ANN001
+    _, payloads = mcapio.read_messages(path, mcapio.TOPIC_TRACKS)
+    return [cdr.decode(types.TRACKS, p) for p in payloads]
+
+
+@pytest.mark.parametrize("odometry", [False, True])
+def test_track_writes_tracks_and_markers_every_scan(tmp_path, odometry):
+    src, out = tmp_path / "in.mcap", tmp_path / "out.mcap"
+    make_log(src, odometry)
+    result = CliRunner().invoke(cli, ["track", str(src), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    log = mcapio.read_log(out, topics=None)
+    assert log.has(mcapio.TOPIC_SCAN) and log.has(mcapio.TOPIC_FEATURES)
+    msgs = _tracks(out)
+    assert len(msgs) == N
+    assert [m["stamp_ns"] for m in msgs] == STAMPS.tolist() and msgs[0]["frame_id"] == "laser"
+    last = msgs[-1]["tracks"]
+    confirmed = last[last["status"] != 0]
+    assert sorted(confirmed["classification"].tolist()) == [1, 2]
+    column = confirmed[confirmed["classification"] == 2][0]
+    assert np.allclose([column["x"], column["y"]], [5.0, 2.0], atol=0.05)
+    if odometry:
+        assert np.allclose([column["world_x"], column["world_y"]], [7.0, 2.0], atol=0.05)
+    else:
+        assert np.isnan(column["world_x"])
+    _, markers = mcapio.read_messages(out, mcapio.TOPIC_MARKERS_TRACKS)
+    assert len(markers) == N
+    types.typestore().deserialize_cdr(markers[-1], types.MARKER_ARRAY)
+    assert log.metadata["datmo"]["command"] == "track"
+
+
+def test_track_options_and_config(tmp_path):
+    src, out = tmp_path / "in.mcap", tmp_path / "out.mcap"
+    make_log(src)
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[track]\nconfirm_hits = 4\nconfirm_window = 4\n")
+    result = CliRunner().invoke(cli, ["track", str(src), "-o", str(out), "--config", str(cfg), "--gate", "9.2"])
+    assert result.exit_code == 0, result.output
+    msgs = _tracks(out)
+    assert all((m["tracks"]["status"] == 0).all() for m in msgs[:3])   # 4 hits needed
+    assert mcapio.summary(out).metadata["datmo.params"]["confirm_hits"] == "4"
+
+
+def test_track_errors(tmp_path):
+    runner = CliRunner()
+    src, out = tmp_path / "in.mcap", tmp_path / "out.mcap"
+    r = runner.invoke(cli, ["track", str(tmp_path / "missing.mcap"), "-o", str(out)])
+    assert r.exit_code == 1 and "missing.mcap: no such file" in r.output
+    make_log(src)
+    out.write_bytes(b"x")
+    r = runner.invoke(cli, ["track", str(src), "-o", str(out)])
+    assert r.exit_code == 1 and "exists; use --force" in r.output
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[track]\nwhat = 1\n")
+    r = runner.invoke(cli, ["track", str(src), "-o", str(out), "--force", "--config", str(bad)])
+    assert r.exit_code == 1 and "track.what: unknown parameter" in r.output
+    assert "Traceback" not in r.output
+
+
+def test_help_ends_in_an_example():
+    r = CliRunner().invoke(cli, ["track", "--help"])
+    assert r.exit_code == 0
+    assert "Example: datmo track" in r.output
+
+
+def test_raw_log_without_feature_extraction_is_a_clean_error(tmp_path, monkeypatch):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "datmo_cli.perception.features" else real(name, *a))
+    src = tmp_path / "raw.mcap"
+    with mcapio.LogWriter(src) as w:
+        w.write_scans(ScanRun(STAMPS, np.full((N, 361), 7.5, np.float32), GEOM))
+    r = CliRunner().invoke(cli, ["track", str(src), "-o", str(tmp_path / "o.mcap")])
+    assert r.exit_code == 1 and "run datmo features first" in r.output
+
+
+def test_raw_log_runs_feature_extraction_through_the_contract(tmp_path, monkeypatch):
+    """Without /datmo/features, track calls perception's extract_run(run, odometry=...) and reads its
+    RunFeatures (flat arrays with per-scan offsets); a stand-in module checks that contract."""
+    import sys
+    import types as pytypes
+
+    feats = features_from_lists([{"circles": legs_as_circles(walker_legs(0.2 * k, (1, -3), (0.3, 1.0)))}
+                                 for k in range(N)])
+    calls = []
+
+    def extract_run(run, params=None, odometry=None):  # noqa: ANN001, ANN202
+        calls.append(len(run))
+        offsets = {name: np.concatenate([[0], np.cumsum([len(getattr(f, name)) for f in feats])]).astype(np.int64)
+                   for name in ("lines", "circles", "blobs")}
+        return pytypes.SimpleNamespace(
+            lines=np.concatenate([f.lines for f in feats]), line_offsets=offsets["lines"],
+            circles=np.concatenate([f.circles for f in feats]), circle_offsets=offsets["circles"],
+            blobs=np.concatenate([f.blobs for f in feats]), blob_offsets=offsets["blobs"])
+
+    fake = pytypes.ModuleType("datmo_cli.perception.features")
+    fake.extract_run = extract_run
+    fake.__spec__ = pytypes.SimpleNamespace(name="datmo_cli.perception.features")
+    monkeypatch.setitem(sys.modules, "datmo_cli.perception.features", fake)
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: fake.__spec__ if name == "datmo_cli.perception.features" else real(name, *a))
+    src, out = tmp_path / "raw.mcap", tmp_path / "out.mcap"
+    with mcapio.LogWriter(src) as w:
+        w.write_scans(ScanRun(STAMPS, np.full((N, 361), 7.5, np.float32), GEOM))
+    r = CliRunner().invoke(cli, ["track", str(src), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert calls == [N] and "segmented and extracted features first" in r.output
+    last = _tracks(out)[-1]["tracks"]
+    assert (last[last["status"] != 0]["classification"] == 1).all()
