@@ -1,0 +1,272 @@
+"""Scoring tracks against ground truth: CLEAR-MOT (MOTA, MOTP), IDF1 and their counts, with py-motmetrics.
+
+What is scored (pure functions over arrays; positions in the sensor frame, metres):
+- Targets: ground-truth objects of a mover class (person, circle object, rectangular object:
+  GroundTruthObject.CLASS_* 1-3) that move at some time in the run, in the scans where at least one beam
+  hits them (`visible`). `include_occluded=True` scores them in every scan, hidden or not.
+- Don't-care regions: every other ground-truth object, i.e. scene structure (columns, benches, wall
+  corners, walls), movers that never move (a parked platform, a person standing all along) and, by
+  default, hidden targets. A track within the match radius of one of them (its extent: an oriented
+  length x width rectangle, a segment for walls, a point for corners) and not within the match radius of a
+  target is ignored: neither a match nor a false positive (like MOTChallenge's distractors).
+- Hypotheses: confirmed tracks (STATUS_CONFIRMED), and coasting ones too with `include_occluded`;
+  `exclude_static=True` drops tracks the tracker classifies static.
+- Matching: a hypothesis may match a target within `match_radius` metres (Euclidean, sensor frame of the
+  scan); motmetrics solves each frame's assignment and keeps previous matches. MOTP is the mean distance
+  of matched pairs, metres (lower is better).
+- Frames: every ground-truth message (or CSV stamp) is a frame; tracks come from the Tracks message with
+  the same stamp (or the nearest within `stamp_tolerance_ns`).
+- Per class: targets of class c against hypotheses whose track class is c (Track and GroundTruthObject
+  class codes coincide: 1 person, 2 circle object, 3 rectangular object). Tracks of class unknown count
+  only in the overall figures.
+CSV ground truth (annotated real logs) has targets only: every annotated object, no don't-care regions.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+
+MOVER_CLASSES = {1: "person", 2: "circle object", 3: "rectangular object"}
+CLASS_BY_NAME = {"person": 1, "people": 1, "circle": 2, "circle object": 2, "circle_object": 2,
+                 "rectangular": 3, "rectangular object": 3, "rectangular_object": 3}
+TRACK_STATIC, STATUS_CONFIRMED, STATUS_COASTING = 0, 1, 2
+METRICS = ["num_frames", "num_objects", "num_unique_objects", "num_predictions", "num_matches",
+           "num_false_positives", "num_misses", "num_switches", "num_fragmentations", "mota", "motp", "idf1",
+           "idp", "idr", "precision", "recall", "mostly_tracked", "partially_tracked", "mostly_lost"]
+# Figures whose fall means a worse tracker (the rest: a rise is worse); used by the regression check.
+HIGHER_IS_BETTER = {"mota", "idf1", "idp", "idr", "precision", "recall", "mostly_tracked", "num_matches"}
+
+
+@dataclass
+class Frames:
+    """Positions per frame: frame k's objects are rows offsets[k]:offsets[k + 1] of ids, x, y, cls."""
+
+    stamps: np.ndarray    # (N,) int64 ns
+    offsets: np.ndarray   # (N + 1,) int64
+    ids: np.ndarray       # (M,) int64
+    x: np.ndarray         # (M,) float64, m, sensor frame
+    y: np.ndarray
+    cls: np.ndarray       # (M,) int64 class code; 0 when unknown
+
+    def select(self, keep: np.ndarray) -> Frames:
+        """The same frames with only the rows where `keep` is true."""
+        frame = np.repeat(np.arange(len(self.stamps)), np.diff(self.offsets))
+        counts = np.bincount(frame[keep], minlength=len(self.stamps))
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        return Frames(self.stamps, offsets, self.ids[keep], self.x[keep], self.y[keep], self.cls[keep])
+
+
+@dataclass
+class Regions:
+    """Don't-care regions per frame (oriented rectangles, sensor frame, m): frame k's are rows
+    offsets[k]:offsets[k + 1]."""
+
+    offsets: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    angle: np.ndarray          # rad, of the rectangle's length axis
+    half_length: np.ndarray
+    half_width: np.ndarray
+
+    def near(self, k: int, px: np.ndarray, py: np.ndarray, radius: float) -> np.ndarray:
+        """Which points (px, py) are within `radius` of a region of frame k."""
+        r = slice(self.offsets[k], self.offsets[k + 1])
+        if not len(px) or self.offsets[k] == self.offsets[k + 1]:
+            return np.zeros(len(px), bool)
+        c, s = np.cos(self.angle[r])[:, None], np.sin(self.angle[r])[:, None]
+        dx, dy = px[None, :] - self.x[r][:, None], py[None, :] - self.y[r][:, None]
+        u = np.maximum(np.abs(c * dx + s * dy) - self.half_length[r][:, None], 0)
+        v = np.maximum(np.abs(-s * dx + c * dy) - self.half_width[r][:, None], 0)
+        return (np.hypot(u, v) <= radius).any(axis=0)
+
+
+def _frames(stamps: np.ndarray, offsets: np.ndarray, items: np.ndarray, cls_field: str) -> Frames:
+    return Frames(np.asarray(stamps, np.int64), np.asarray(offsets, np.int64), items["id"].astype(np.int64),
+                  items["x"].astype(np.float64), items["y"].astype(np.float64), items[cls_field].astype(np.int64))
+
+
+def ground_truth_frames(stamps: np.ndarray, offsets: np.ndarray, objects: np.ndarray,
+                        sensor_theta: np.ndarray | None = None, *,
+                        include_occluded: bool = False) -> tuple[Frames, Regions]:
+    """Targets and don't-care regions of GroundTruth messages (see the module docstring): `objects` are
+    GroundTruthObject elements, message k's at offsets[k]:offsets[k + 1]; sensor_theta (rad, per message)
+    turns the objects' world orientations into the sensor frame (zero when None)."""
+    f = _frames(stamps, offsets, objects, "classification")
+    mover = np.isin(f.cls, list(MOVER_CLASSES))
+    moved_ids = np.unique(f.ids[mover & objects["moving"].astype(bool)])
+    target = mover & np.isin(f.ids, moved_ids)
+    if not include_occluded:
+        target &= objects["visible"].astype(bool)
+    theta = np.zeros(len(stamps)) if sensor_theta is None else np.asarray(sensor_theta, np.float64)
+    frame = np.repeat(np.arange(len(stamps)), np.diff(f.offsets))
+    other = ~target
+    counts = np.bincount(frame[other], minlength=len(stamps))
+    regions = Regions(np.concatenate([[0], np.cumsum(counts)]).astype(np.int64), f.x[other], f.y[other],
+                      objects["orientation"][other].astype(np.float64) - theta[frame[other]],
+                      objects["length"][other].astype(np.float64) / 2, objects["width"][other].astype(np.float64) / 2)
+    return f.select(target), regions
+
+
+def track_frames(stamps: np.ndarray, offsets: np.ndarray, tracks: np.ndarray, *, include_coasting: bool = False,
+                 exclude_static: bool = False) -> Frames:
+    """Frames of the hypotheses in Tracks messages (see the module docstring for which tracks count)."""
+    f = _frames(stamps, offsets, tracks, "classification")
+    status = tracks["status"]
+    keep = (status == STATUS_CONFIRMED) | ((status == STATUS_COASTING) if include_coasting else False)
+    if exclude_static:
+        keep &= tracks["mobility"] != TRACK_STATIC
+    return f.select(np.asarray(keep, bool))
+
+
+def parse_ground_truth_csv(text: str, name: str = "ground truth") -> Frames:
+    """Ground truth from CSV text with a header `stamp_ns,id,x,y` (sensor frame, m) and an optional
+    `class` column (person, circle, rectangular or 1-3). A row with an empty id marks an annotated scan
+    with no objects in it. Frames are the distinct stamps, in ascending order."""
+    reader = csv.DictReader(io.StringIO(text))
+    cols = {c.strip().lower(): c for c in reader.fieldnames or []}
+    missing = [c for c in ("stamp_ns", "id", "x", "y") if c not in cols]
+    if missing:
+        raise InputError(f"{name}: CSV needs the columns stamp_ns,id,x,y; missing {','.join(missing)}")
+    stamps, ids, xs, ys, cls, empty = [], [], [], [], [], []
+    for line, row in enumerate(reader, start=2):
+        try:
+            stamp = int(row[cols["stamp_ns"]])
+            raw_id = (row[cols["id"]] or "").strip()
+            if not raw_id:
+                empty.append(stamp)
+                continue
+            ids.append(int(raw_id))
+            xs.append(float(row[cols["x"]]))
+            ys.append(float(row[cols["y"]]))
+            stamps.append(stamp)
+            c = (row.get(cols.get("class", ""), "") or "").strip().lower()
+            cls.append(int(c) if c.isdigit() else CLASS_BY_NAME.get(c, 0) if c else 0)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{name}: line {line}: {exc}") from None
+    if not stamps and not empty:
+        raise InputError(f"{name}: no ground-truth rows")
+    st = np.array(stamps, np.int64)
+    order = np.argsort(st, kind="stable")
+    frames = np.unique(np.concatenate([st, np.array(empty, np.int64)]))
+    offsets = np.searchsorted(st[order], frames, side="left")
+    offsets = np.append(offsets, len(st)).astype(np.int64)
+    return Frames(frames, offsets, np.array(ids, np.int64)[order], np.array(xs)[order], np.array(ys)[order],
+                  np.array(cls, np.int64)[order])
+
+
+def align(gt: Frames, hyps: Frames, tolerance_ns: int = 0) -> np.ndarray:
+    """For each ground-truth frame, the index of the hypothesis frame with the nearest stamp within
+    `tolerance_ns`, or -1 when there is none."""
+    if not len(hyps.stamps):
+        return np.full(len(gt.stamps), -1, np.int64)
+    order = np.argsort(hyps.stamps, kind="stable")
+    hs = hyps.stamps[order]
+    pos = np.clip(np.searchsorted(hs, gt.stamps), 1, max(len(hs) - 1, 1))
+    left = np.clip(pos - 1, 0, len(hs) - 1)
+    right = np.clip(pos, 0, len(hs) - 1)
+    pick = np.where(np.abs(hs[left] - gt.stamps) <= np.abs(hs[right] - gt.stamps), left, right)
+    ok = np.abs(hs[pick] - gt.stamps) <= tolerance_ns
+    return np.where(ok, order[pick], -1)
+
+
+def aligned_hypotheses(gt: Frames, hyps: Frames, *, regions: Regions | None = None, match_radius: float = 0.5,
+                       stamp_tolerance_ns: int = 0) -> tuple[Frames, int]:
+    """The hypotheses as one frame per ground-truth frame (empty where no Tracks message has its stamp),
+    without those in don't-care regions that the frame's optimal assignment leaves unmatched; and how
+    many were ignored."""
+    from scipy.optimize import linear_sum_assignment
+
+    match = align(gt, hyps, stamp_tolerance_ns)
+    rows, counts, ignored = [], np.zeros(len(gt.stamps), np.int64), 0
+    for k, j in enumerate(match.tolist()):
+        if j < 0:
+            continue
+        idx = np.arange(hyps.offsets[j], hyps.offsets[j + 1])
+        if regions is not None and len(idx):
+            g = slice(gt.offsets[k], gt.offsets[k + 1])
+            hx, hy = hyps.x[idx], hyps.y[idx]
+            drop = regions.near(k, hx, hy, match_radius)
+            if drop.any() and gt.offsets[k + 1] > gt.offsets[k]:
+                # a hypothesis that the frame's best assignment gives a target is kept even in a region
+                d = np.hypot(hx[:, None] - gt.x[g][None, :], hy[:, None] - gt.y[g][None, :])
+                cost = np.where(d <= match_radius, d, 1e9)
+                r, c = linear_sum_assignment(cost)
+                drop[r[cost[r, c] < 1e9]] = False
+            ignored += int(drop.sum())
+            idx = idx[~drop]
+        rows.append(idx)
+        counts[k] = len(idx)
+    idx = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return Frames(gt.stamps, offsets, hyps.ids[idx], hyps.x[idx], hyps.y[idx], hyps.cls[idx]), ignored
+
+
+def _accumulate(gt: Frames, hyps: Frames, radius: float, cls: int | None):  # noqa: ANN202 - mm.MOTAccumulator
+    """A motmetrics accumulator over frames aligned one to one (hyps from aligned_hypotheses)."""
+    import motmetrics as mm
+
+    acc = mm.MOTAccumulator(auto_id=False)
+    for k in range(len(gt.stamps)):
+        g = slice(gt.offsets[k], gt.offsets[k + 1])
+        h = slice(hyps.offsets[k], hyps.offsets[k + 1])
+        gsel = slice(None) if cls is None else gt.cls[g] == cls
+        hsel = slice(None) if cls is None else hyps.cls[h] == cls
+        gx, gy, gid = gt.x[g][gsel], gt.y[g][gsel], gt.ids[g][gsel]
+        hx, hy, hid = hyps.x[h][hsel], hyps.y[h][hsel], hyps.ids[h][hsel]
+        d = np.hypot(gx[:, None] - hx[None, :], gy[:, None] - hy[None, :])
+        d[d > radius] = np.nan
+        acc.update(gid.tolist(), hid.tolist(), d, frameid=k)
+    return acc
+
+
+def evaluate(gt: Frames, hyps: Frames, *, regions: Regions | None = None, match_radius: float = 0.5,
+             stamp_tolerance_ns: int = 0) -> dict:
+    """CLEAR-MOT and identity figures, overall ("all") and per mover class present among the targets or
+    the hypotheses. Returns {name: {metric: value}} with the metrics in METRICS (counts as ints, MOTP in
+    metres, ratios in [0, 1] except MOTA, which can be negative; None where undefined); "all" also has
+    `ignored_hypotheses` (in don't-care regions) and `frames_without_tracks`."""
+    import motmetrics as mm
+
+    if not match_radius > 0:
+        raise ValueError(f"match radius must be > 0 m, got {match_radius}")
+    missing = int(np.sum(align(gt, hyps, stamp_tolerance_ns) < 0))
+    hy, ignored = aligned_hypotheses(gt, hyps, regions=regions, match_radius=match_radius,
+                                     stamp_tolerance_ns=stamp_tolerance_ns)
+    names, accs = ["all"], [_accumulate(gt, hy, match_radius, None)]
+    present = set(gt.cls.tolist()) | set(hy.cls.tolist())
+    for code, name in MOVER_CLASSES.items():
+        if code in present:
+            names.append(name)
+            accs.append(_accumulate(gt, hy, match_radius, code))
+    df = mm.metrics.create().compute_many(accs, metrics=METRICS, names=names, generate_overall=False)
+    out = {}
+    for name in names:
+        row = {}
+        for m in METRICS:
+            v = df.loc[name, m]
+            if m.startswith("num_") or m in ("mostly_tracked", "partially_tracked", "mostly_lost"):
+                row[m] = int(v)
+            else:
+                row[m] = float(v) if np.isfinite(v) else None
+        out[name] = row
+    out["all"]["ignored_hypotheses"] = ignored
+    out["all"]["frames_without_tracks"] = missing
+    return out
+
+
+def frames_from_channels(gt_stamps: np.ndarray, gt_offsets: np.ndarray, gt_objects: np.ndarray,
+                         gt_sensor_theta: np.ndarray | None, tr_stamps: np.ndarray, tr_offsets: np.ndarray,
+                         tr_items: np.ndarray, *, include_occluded: bool = False,
+                         exclude_static: bool = False) -> tuple[Frames, Regions, Frames]:
+    """Targets, don't-care regions and hypotheses from decoded GroundTruth and Tracks messages."""
+    gt, regions = ground_truth_frames(gt_stamps, gt_offsets, gt_objects, gt_sensor_theta,
+                                      include_occluded=include_occluded)
+    hy = track_frames(tr_stamps, tr_offsets, tr_items, include_coasting=include_occluded,
+                      exclude_static=exclude_static)
+    return gt, regions, hy
