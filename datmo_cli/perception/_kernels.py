@@ -1,0 +1,627 @@
+"""numba kernels of segmentation and Hough feature extraction (method.md sections 4 and 5).
+
+Sensor frame: x forward, y left, metres; angles in radians. Every kernel is checked against the plain
+Python reference in tests/naive_perception.py. Parameters arrive as one float64 vector (see
+FeatureParams.kernel_vector) whose positions are the P_* constants below.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+(P_C0, P_MIN_POINTS, P_THETA_RES, P_RHO_RES, P_WINDOW, P_LINE_MIN_POINTS, P_LINE_MIN_RACC, P_LINE_MIN_LENGTH,
+ P_PERP_TOL, P_R_MIN, P_R_MAX, P_R_STEP, P_CELL, P_CWINDOW, P_CTOL, P_CIRCLE_MIN_POINTS, P_SMALL) = range(17)
+
+# columns of the line rows
+L_SCAN, L_SEG, L_FIRST, L_LAST, L_N, L_X0, L_Y0, L_X1, L_Y1, L_RHO, L_THETA, L_LEN, L_RACC = range(13)
+# columns of circle rows: scan, segment, first, last, n, x, y, radius, r_acc
+C_SCAN, C_SEG, C_FIRST, C_LAST, C_N, C_X, C_Y, C_R, C_RACC = range(9)
+# columns of blob rows: scan, segment, first, last, n, x, y, size, kind
+B_SCAN, B_SEG, B_FIRST, B_LAST, B_N, B_X, B_Y, B_SIZE, B_KIND = range(9)
+MAX_SUB = 256   # line candidates per segment
+
+
+@njit(cache=True)
+def valid_return(r: float, range_min: float, range_max: float) -> bool:
+    """A return that counts: finite and strictly between the scan's range limits."""
+    return np.isfinite(r) and r > range_min and r < range_max
+
+
+@njit(cache=True)
+def segment_scan(r, cos_inc, c0, c1, range_min, range_max, min_points, starts, ends) -> int:
+    """Segments of one scan (ranges r, m) into starts/ends ([start, end) beam indices); returns the count.
+
+    P_i+1 joins P_i's segment when d(P_i, P_i+1) <= c0 + c1 * min(r_i, r_i+1) (law of cosines with the
+    scan's angle step); invalid returns break segments; segments under min_points are dropped.
+    """
+    n = 0
+    start = -1
+    B = r.shape[0]
+    for i in range(B + 1):
+        ok = i < B and valid_return(r[i], range_min, range_max)
+        if ok and start >= 0:
+            a = r[i - 1]
+            b = r[i]
+            d2 = a * a + b * b - 2.0 * a * b * cos_inc
+            d = np.sqrt(max(d2, 0.0))
+            if d > c0 + c1 * min(a, b):
+                if i - start >= min_points:
+                    starts[n] = start
+                    ends[n] = i
+                    n += 1
+                start = i
+        elif ok:
+            start = i
+        elif start >= 0:
+            if i - start >= min_points:
+                starts[n] = start
+                ends[n] = i
+                n += 1
+            start = -1
+    return n
+
+
+@njit(cache=True)
+def normal_cells(x, y, s, e, nt, cell) -> None:
+    """cell[i]: the theta cell (of nt over [0, pi)) of the local normal at each point i of [s, e), from the
+    chord through neighbours at least 20 cm apart (at least 3 beams either side, at most 10)."""
+    for i in range(s, e):
+        a = max(s, i - 3)
+        b = min(e - 1, i + 3)
+        while (x[b] - x[a]) ** 2 + (y[b] - y[a]) ** 2 < 0.04 and (a > max(s, i - 10) or b < min(e - 1, i + 10)):
+            a = max(s, a - 1)
+            b = min(e - 1, b + 1)
+        phi = (np.arctan2(y[b] - y[a], x[b] - x[a]) + np.pi / 2) % np.pi
+        cell[i] = min(int(phi * nt / np.pi), nt - 1)
+
+
+@njit(cache=True)
+def _vote(x, y, i, acc, lo, cos_t, sin_t, inv_res, width, c, k, best, touched, delta):
+    """Point i votes along its sinusoid: theta cells c - k .. c + k (wrapping; all of them when 2k + 1 >= nt)
+    around its local normal's cell c. best = [votes, theta cell, rho cell] of the peak is updated; touched
+    marks the theta rows used; delta -1 takes the votes back."""
+    nt = cos_t.shape[0]
+    if 2 * k + 1 >= nt:
+        t_from = 0
+        t_to = nt
+    else:
+        t_from = c - k
+        t_to = c + k + 1
+    xi = x[i]
+    yi = y[i]
+    for tt in range(t_from, t_to):
+        t = tt
+        if t < 0:
+            t += nt
+        elif t >= nt:
+            t -= nt
+        ri = int((xi * cos_t[t] + yi * sin_t[t] - lo[t]) * inv_res)
+        if ri < 0:
+            ri = 0
+        elif ri >= width:
+            ri = width - 1
+        v = acc[t, ri] + delta
+        acc[t, ri] = v
+        touched[t] = True
+        if v > best[0]:
+            best[0] = v
+            best[1] = t
+            best[2] = ri
+
+
+@njit(cache=True)
+def _clear(acc, touched, width) -> None:
+    """Zero the rows voted in (only the first `width` cells can hold votes)."""
+    for t in range(acc.shape[0]):
+        if touched[t]:
+            acc[t, :width] = 0
+            touched[t] = False
+
+
+@njit(cache=True)
+def _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, max_width) -> int:
+    """lo[t]: the smallest rho the bounding box of points [s, e) gives at theta cell t; returns the number of
+    rho cells the box can produce (the accumulator adapted to the segment)."""
+    xmin = x[s]
+    xmax = x[s]
+    ymin = y[s]
+    ymax = y[s]
+    for i in range(s, e):
+        xmin = min(xmin, x[i])
+        xmax = max(xmax, x[i])
+        ymin = min(ymin, y[i])
+        ymax = max(ymax, y[i])
+    for t in range(cos_t.shape[0]):
+        lo[t] = min(xmin * cos_t[t], xmax * cos_t[t]) + min(ymin * sin_t[t], ymax * sin_t[t])
+    return min(int(np.hypot(xmax - xmin, ymax - ymin) / rho_res) + 2, max_width)
+
+
+@njit(cache=True)
+def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touched, sub_s, sub_e, peaks) -> int:
+    """Split points [s, e) into runs that each hold one line: the accumulator peak is followed as points are
+    added in scan order, and when more than three consecutive new points lie off the peak's line (farther
+    than a rho cell), a new line starts at the first of them. Returns the number of runs in sub_s/sub_e;
+    peaks[k] = (votes, theta cell, rho cell) of run k's accumulator peak (lo: see _offsets_for; cell: see
+    normal_cells; k: theta cells voted either side of the normal)."""
+    width = _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, acc.shape[1])
+    inv = 1.0 / rho_res
+    best = np.zeros(3, np.int64)
+    hist = np.zeros((e - s, 3), np.int64)   # the peak after each point: a run's peak without re-voting
+    n = 0
+    start = s
+    off = 0
+    for i in range(s, e):
+        _vote(x, y, i, acc, lo, cos_t, sin_t, inv, width, cell[i], k, best, touched, 1)
+        hist[i - s, 0] = best[0]
+        hist[i - s, 1] = best[1]
+        hist[i - s, 2] = best[2]
+        if i - start >= 4:
+            t = best[1]
+            rho_p = lo[t] + (best[2] + 0.5) * rho_res
+            if abs(x[i] * cos_t[t] + y[i] * sin_t[t] - rho_p) > rho_res:
+                off += 1
+            else:
+                off = 0
+            if off > 3 and n < sub_s.shape[0] - 1:
+                cut = i - off + 1
+                sub_s[n] = start
+                sub_e[n] = cut
+                peaks[n, 0] = hist[cut - 1 - s, 0]
+                peaks[n, 1] = hist[cut - 1 - s, 1]
+                peaks[n, 2] = hist[cut - 1 - s, 2]
+                n += 1
+                # the peak of the points kept (cut .. i) is found by voting them again from zero
+                _clear(acc, touched, width)
+                best[:] = 0
+                for j in range(cut, i + 1):
+                    _vote(x, y, j, acc, lo, cos_t, sin_t, inv, width, cell[j], k, best, touched, 1)
+                    hist[j - s, 0] = best[0]
+                    hist[j - s, 1] = best[1]
+                    hist[j - s, 2] = best[2]
+                start = cut
+                off = 0
+    sub_s[n] = start
+    sub_e[n] = e
+    peaks[n, 0] = best[0]
+    peaks[n, 1] = best[1]
+    peaks[n, 2] = best[2]
+    n += 1
+    _clear(acc, touched, width)
+    return n
+
+
+@njit(cache=True)
+def fit_line(x, y, idx, m):
+    """Total least squares line through points idx[:m]: (theta in [0, pi), rho) of x cos + y sin = rho."""
+    cx = 0.0
+    cy = 0.0
+    for k in range(m):
+        cx += x[idx[k]]
+        cy += y[idx[k]]
+    cx /= m
+    cy /= m
+    sxx = 0.0
+    syy = 0.0
+    sxy = 0.0
+    for k in range(m):
+        dx = x[idx[k]] - cx
+        dy = y[idx[k]] - cy
+        sxx += dx * dx
+        syy += dy * dy
+        sxy += dx * dy
+    # direction of largest spread; the normal is perpendicular to it
+    phi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    theta = (phi + np.pi / 2) % np.pi
+    rho = cx * np.cos(theta) + cy * np.sin(theta)
+    return theta, rho
+
+
+@njit(cache=True)
+def line_of_run(x, y, s, e, theta_t, rho_p, votes, rho_res, idx, out) -> None:
+    """The line of points [s, e) whose HTL peak is the cell (theta_t, rho_p) with `votes` votes: r_acc, then
+    least squares over the points within a rho cell of the peak line.
+    out = [n_points, first, last, x0, y0, x1, y1, rho, theta, length, r_acc]."""
+    c = np.cos(theta_t)
+    sn = np.sin(theta_t)
+    m = 0
+    for i in range(s, e):
+        if abs(x[i] * c + y[i] * sn - rho_p) <= rho_res:
+            idx[m] = i
+            m += 1
+    out[0] = m
+    out[10] = votes / (e - s)
+    if m < 2:
+        out[1:10] = 0.0
+        return
+    theta, rho = fit_line(x, y, idx, m)
+    c = np.cos(theta)
+    sn = np.sin(theta)
+    i0 = idx[0]
+    i1 = idx[m - 1]
+    # P_ini and P_end projected on the fitted line
+    d0 = x[i0] * c + y[i0] * sn - rho
+    d1 = x[i1] * c + y[i1] * sn - rho
+    out[1] = i0
+    out[2] = i1
+    out[3] = x[i0] - d0 * c
+    out[4] = y[i0] - d0 * sn
+    out[5] = x[i1] - d1 * c
+    out[6] = y[i1] - d1 * sn
+    out[7] = rho
+    out[8] = theta
+    out[9] = np.hypot(out[5] - out[3], out[6] - out[4])
+
+
+@njit(cache=True)
+def fit_circle(x, y, idx, m, a, b, r):
+    """Geometric least-squares circle through points idx[:m] (Gauss-Newton from (a, b, r)); returns
+    (a, b, r, ok)."""
+    for _ in range(20):
+        # normal equations of residuals d_k - r, d_k = |p_k - c|
+        j00 = j01 = j02 = j11 = j12 = j22 = 0.0
+        g0 = g1 = g2 = 0.0
+        for k in range(m):
+            dx = x[idx[k]] - a
+            dy = y[idx[k]] - b
+            d = np.hypot(dx, dy)
+            if d < 1e-12:
+                return a, b, r, False
+            u = -dx / d
+            v = -dy / d
+            res = d - r
+            j00 += u * u
+            j01 += u * v
+            j02 += -u
+            j11 += v * v
+            j12 += -v
+            j22 += 1.0
+            g0 += u * res
+            g1 += v * res
+            g2 += -res
+        # solve the symmetric 3x3 system by Cramer's rule (no allocation in the loop)
+        det = (j00 * (j11 * j22 - j12 * j12) - j01 * (j01 * j22 - j12 * j02) + j02 * (j01 * j12 - j11 * j02))
+        if abs(det) < 1e-18:
+            return a, b, r, False
+        s0 = (g0 * (j11 * j22 - j12 * j12) - j01 * (g1 * j22 - j12 * g2) + j02 * (g1 * j12 - j11 * g2)) / det
+        s1 = (j00 * (g1 * j22 - j12 * g2) - g0 * (j01 * j22 - j12 * j02) + j02 * (j01 * g2 - g1 * j02)) / det
+        s2 = (j00 * (j11 * g2 - g1 * j12) - j01 * (j01 * g2 - g1 * j02) + g0 * (j01 * j12 - j11 * j02)) / det
+        a -= s0
+        b -= s1
+        r -= s2
+        if abs(s0) + abs(s1) + abs(s2) < 1e-7:
+            break
+    return a, b, r, np.isfinite(a) and np.isfinite(b) and np.isfinite(r) and r > 0
+
+
+@njit(cache=True)
+def circle_of_run(x, y, s, e, p, cacc, idx, out) -> None:
+    """HTC on points [s, e): centre estimated from P_ini, P_near (nearest the scanner) and P_end, votes over
+    (a, b) in a window around it for each radius the arc allows, peak, then a least-squares fit over the
+    points within the tolerance. out = [n_points, x, y, radius, r_acc]; r_acc 0 when no circle fits."""
+    out[0] = 0.0
+    out[4] = 0.0
+    n = e - s
+    if n < 3:
+        return
+    cell = p[P_CELL]
+    w = int(round(p[P_CWINDOW] / cell))
+    tol = p[P_CTOL]
+    near = s
+    for i in range(s, e):
+        if x[i] * x[i] + y[i] * y[i] < x[near] * x[near] + y[near] * y[near]:
+            near = i
+    x0 = x[s]
+    y0 = y[s]
+    x1 = x[e - 1]
+    y1 = y[e - 1]
+    chord = np.hypot(x1 - x0, y1 - y0)
+    if chord < 1e-6:
+        return
+    mx = 0.5 * (x0 + x1)
+    my = 0.5 * (y0 + y1)
+    nx = (y1 - y0) / chord
+    ny = -(x1 - x0) / chord
+    if nx * mx + ny * my < 0:   # the normal of the chord pointing away from the scanner
+        nx = -nx
+        ny = -ny
+    sag = -((x[near] - mx) * nx + (y[near] - my) * ny)   # P_near's bulge towards the scanner
+    half = 0.5 * chord
+    r_lo = max(p[P_R_MIN], half - tol)
+    r_hi = p[P_R_MAX]
+    if sag > tol:
+        r_hi = min(r_hi, ((sag - tol) ** 2 + half * half) / (2.0 * (sag - tol)) + tol)
+    s2 = max(sag, 0.0) + tol
+    r_lo = max(r_lo, (s2 * s2 + half * half) / (2.0 * s2) - tol)
+    if r_lo > r_hi:
+        return
+    step = p[P_R_STEP]
+    k0 = int(np.ceil((r_lo - p[P_R_MIN]) / step - 1e-9))
+    k1 = int(np.floor((r_hi - p[P_R_MIN]) / step + 1e-9))
+    if k1 < k0:
+        k0 = k1 = int(round((0.5 * (r_lo + r_hi) - p[P_R_MIN]) / step))
+    size = 2 * w + 1
+    best = 0
+    bdc = 0
+    ba = 0.0
+    bb = 0.0
+    br = -1.0
+    for k in range(k0, k1 + 1):
+        r = p[P_R_MIN] + k * step
+        h = np.sqrt(max(r * r - half * half, 0.0))
+        ca = mx + nx * h
+        cb = my + ny * h
+        for ia in range(size):
+            for ib in range(size):
+                cacc[ia, ib] = 0
+        lo2 = max(r - tol, 0.0) ** 2
+        hi2 = (r + tol) ** 2
+        for i in range(s, e):
+            for ia in range(size):
+                dx = x[i] - (ca + (ia - w) * cell)
+                dx2 = dx * dx
+                if dx2 > hi2:
+                    continue
+                for ib in range(size):
+                    dy = y[i] - (cb + (ib - w) * cell)
+                    d2 = dx2 + dy * dy
+                    if lo2 <= d2 <= hi2:
+                        cacc[ia, ib] += 1
+        for ia in range(size):
+            for ib in range(size):
+                v = cacc[ia, ib]
+                # ties go to the cell nearest the estimate, then to the smaller radius
+                dc = (ia - w) ** 2 + (ib - w) ** 2
+                if v > best or (v == best and v > 0 and br == r and dc < bdc):
+                    best = v
+                    bdc = dc
+                    ba = ca + (ia - w) * cell
+                    bb = cb + (ib - w) * cell
+                    br = r
+    if best == 0:
+        return
+    m = 0
+    for i in range(s, e):
+        if abs(np.hypot(x[i] - ba, y[i] - bb) - br) <= tol:
+            idx[m] = i
+            m += 1
+    a, b, r = ba, bb, br
+    if m >= 3:
+        fa, fb, fr, ok = fit_circle(x, y, idx, m, ba, bb, br)
+        # keep the fit when it stays a circle of the allowed size near the Hough estimate
+        if ok and p[P_R_MIN] * 0.8 <= fr <= p[P_R_MAX] * 1.2 and np.hypot(fa - ba, fb - bb) <= 2 * p[P_CWINDOW]:
+            a, b, r = fa, fb, fr
+    out[0] = m
+    out[1] = a
+    out[2] = b
+    out[3] = r
+    out[4] = best / n
+
+
+@njit(cache=True)
+def _perpendicular(t1: float, t2: float, tol: float) -> bool:
+    d = abs(t1 - t2) % np.pi
+    return abs(d - np.pi / 2) <= tol
+
+
+@njit(cache=True)
+def _convex(ax, ay, jx, jy, bx, by) -> bool:
+    """Junction J bulges towards the scanner (origin) from the chord A-B."""
+    ex = bx - ax
+    ey = by - ay
+    cj = ex * (jy - ay) - ey * (jx - ax)
+    co = ex * (0.0 - ay) - ey * (0.0 - ax)
+    return cj * co > 0
+
+
+@njit(cache=True)
+def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx, sub_s, sub_e,
+                 lines, nl, circles, nc, blobs, nb):
+    """Features of one scan's segments (points x, y, m, sensor frame): HTL on every segment, then the
+    decision rule of method.md section 5.2. Appends rows to lines/circles/blobs from nl/nc/nb; returns the
+    new counts."""
+    rho_res = p[P_RHO_RES]
+    window = p[P_WINDOW]
+    min_pts = p[P_LINE_MIN_POINTS]
+    min_racc = p[P_LINE_MIN_RACC]
+    min_len = p[P_LINE_MIN_LENGTH]
+    lo = np.empty(11)
+    nt = cos_t.shape[0]
+    toff = np.empty(nt)
+    cell = np.empty(x.shape[0], np.int64)
+    touched = np.zeros(nt, np.bool_)
+    kwin = int(window / (np.pi / nt))
+    peaks = np.empty((MAX_SUB, 3), np.int64)
+    tstep = np.pi / cos_t.shape[0]
+    cand = np.empty((MAX_SUB, 11))
+    kept = np.empty(MAX_SUB, np.int64)
+    cidx = np.empty(MAX_SUB, np.int64)
+    cout = np.empty(5)
+    for g in range(nseg):
+        s = starts[g]
+        e = ends[g]
+        normal_cells(x, y, s, e, nt, cell)
+        nsub = line_subsegments(x, y, s, e, acc, toff, cos_t, sin_t, rho_res, kwin, cell, touched, sub_s, sub_e,
+                                peaks)
+        nkept = 0
+        ncand = 0
+        votes = 0.0
+        for k in range(nsub):
+            t = peaks[k, 1]
+            line_of_run(x, y, sub_s[k], sub_e[k], t * tstep, toff[t] + (peaks[k, 2] + 0.5) * rho_res, peaks[k, 0],
+                        rho_res, idx, lo)
+            cand[k, :] = lo
+            if lo[0] >= min_pts:   # an HTL line (more than 3 points) for the decision rule
+                cidx[ncand] = k
+                ncand += 1
+                votes += peaks[k, 0]
+            if lo[0] >= min_pts and lo[10] > min_racc and lo[9] > min_len:
+                kept[nkept] = k
+                nkept += 1
+        htl_racc = votes / (e - s)   # r_acc of the segment's lines together
+        # merge consecutive kept lines that are one line split by noise
+        if nkept > 1:
+            m = 1
+            for q in range(1, nkept):
+                a = cand[kept[m - 1]]
+                b = cand[kept[q]]
+                dt = abs(a[8] - b[8])
+                dt = min(dt, np.pi - dt)
+                same_side = abs(a[7] - b[7]) if abs(a[8] - b[8]) < np.pi / 2 else abs(a[7] + b[7])
+                if dt < 3.0 * np.pi / 180 and same_side < 2 * rho_res and kept[q] == kept[m - 1] + 1:
+                    na = sub_e[kept[m - 1]] - sub_s[kept[m - 1]]
+                    nb = sub_e[kept[q]] - sub_s[kept[q]]
+                    merged = a[10] * na + b[10] * nb
+                    line_of_run(x, y, sub_s[kept[m - 1]], sub_e[kept[q]], a[8], a[7], merged, rho_res, idx, lo)
+                    sub_e[kept[m - 1]] = sub_e[kept[q]]
+                    cand[kept[m - 1], :] = lo
+                else:
+                    kept[m] = kept[q]
+                    m += 1
+            nkept = m
+        # section 5.2: HTC for segments whose lines look like an arc; only segments small enough to be a
+        # circle of the allowed radii (a long wall with a deflection stays lines)
+        ext = np.hypot(x[e - 1] - x[s], y[e - 1] - y[s])
+        try_circle = False
+        if ext <= 2.0 * p[P_R_MAX] + 2.0 * p[P_CTOL]:
+            if ncand == 0:
+                try_circle = True
+            elif ncand == 1:
+                # datmo: a single line over a segment smaller than a leg's width is tested as a circle too
+                # (a leg a few metres away is a shallow arc that HTL takes for a short line)
+                try_circle = cand[cidx[0], 10] < min_racc or ext <= p[P_SMALL]
+            elif ncand == 2:
+                try_circle = not _perpendicular(cand[cidx[0], 8], cand[cidx[1], 8], p[P_PERP_TOL])
+            else:
+                convex = 0
+                for q in range(ncand - 1):
+                    a = cand[cidx[q]]
+                    b = cand[cidx[q + 1]]
+                    if _convex(a[3], a[4], a[5], a[6], b[5], b[6]):
+                        convex += 1
+                try_circle = convex >= 2
+        if try_circle:
+            if e - s >= p[P_CIRCLE_MIN_POINTS]:
+                circle_of_run(x, y, s, e, p, cacc, idx, cout)
+            else:
+                cout[4] = 0.0
+            if cout[4] > htl_racc and cout[0] >= p[P_CIRCLE_MIN_POINTS]:
+                row = circles[nc]
+                row[C_SCAN] = scan
+                row[C_SEG] = g
+                row[C_FIRST] = s
+                row[C_LAST] = e - 1
+                row[C_N] = cout[0]
+                row[C_X] = cout[1]
+                row[C_Y] = cout[2]
+                row[C_R] = cout[3]
+                row[C_RACC] = cout[4]
+                nc += 1
+                continue
+            nkept = 0
+        if nkept > 0:
+            for q in range(nkept):
+                c = cand[kept[q]]
+                row = lines[nl]
+                row[L_SCAN] = scan
+                row[L_SEG] = g
+                row[L_FIRST] = c[1]
+                row[L_LAST] = c[2]
+                row[L_N] = c[0]
+                row[L_X0] = c[3]
+                row[L_Y0] = c[4]
+                row[L_X1] = c[5]
+                row[L_Y1] = c[6]
+                row[L_RHO] = c[7]
+                row[L_THETA] = c[8]
+                row[L_LEN] = c[9]
+                row[L_RACC] = c[10]
+                nl += 1
+            continue
+        # a blob (or a point): centroid and largest extent
+        sx = 0.0
+        sy = 0.0
+        for i in range(s, e):
+            sx += x[i]
+            sy += y[i]
+        far = s
+        dmax = 0.0
+        for i in range(s, e):
+            d = (x[i] - x[s]) ** 2 + (y[i] - y[s]) ** 2
+            if d > dmax:
+                dmax = d
+                far = i
+        for i in range(s, e):   # two sweeps: exact for convex outlines, within a few % otherwise
+            d = (x[i] - x[far]) ** 2 + (y[i] - y[far]) ** 2
+            if d > dmax:
+                dmax = d
+        row = blobs[nb]
+        row[B_SCAN] = scan
+        row[B_SEG] = g
+        row[B_FIRST] = s
+        row[B_LAST] = e - 1
+        row[B_N] = e - s
+        row[B_X] = sx / (e - s)
+        row[B_Y] = sy / (e - s)
+        row[B_SIZE] = np.sqrt(dmax)
+        row[B_KIND] = 1.0 if e - s < 3 else 0.0
+        nb += 1
+    return nl, nc, nb
+
+
+@njit(cache=True)
+def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, cos_t, sin_t, seg_out, seg_count,
+                  lines, circles, blobs, counts):
+    """Segment and extract features of every scan of a block (ranges (N, B), m). seg_out (N * B, 2) receives
+    every scan's segments in order, seg_count (N,) how many each scan has; counts = [lines, circles, blobs]."""
+    N, B = ranges.shape
+    x = np.empty(B)
+    y = np.empty(B)
+    starts = np.empty(B, np.int64)
+    ends = np.empty(B, np.int64)
+    idx = np.empty(B, np.int64)
+    sub_s = np.empty(MAX_SUB, np.int64)
+    sub_e = np.empty(MAX_SUB, np.int64)
+    diag = 2.0 * min(range_max, 100.0)
+    acc = np.zeros((cos_t.shape[0], int(diag / p[P_RHO_RES]) + 3), np.int32)
+    w = int(round(p[P_CWINDOW] / p[P_CELL]))
+    cacc = np.zeros((2 * w + 1, 2 * w + 1), np.int32)
+    nl = 0
+    nc = 0
+    nb = 0
+    ns = 0
+    min_points = int(p[P_MIN_POINTS])
+    for k in range(N):
+        r = ranges[k]
+        nseg = segment_scan(r, cos_inc, p[P_C0], c1, range_min, range_max, min_points, starts, ends)
+        for g in range(nseg):
+            seg_out[ns + g, 0] = starts[g]
+            seg_out[ns + g, 1] = ends[g]
+        ns += nseg
+        seg_count[k] = nseg
+        for i in range(B):
+            ri = r[i]
+            x[i] = ri * cos_a[i]
+            y[i] = ri * sin_a[i]
+        nl, nc, nb = extract_scan(x, y, starts, ends, nseg, k, p, acc, cacc, cos_t, sin_t, idx, sub_s, sub_e,
+                                  lines, nl, circles, nc, blobs, nb)
+    counts[0] = nl
+    counts[1] = nc
+    counts[2] = nb
+
+
+@njit(cache=True)
+def segment_block(ranges, cos_inc, c0, c1, range_min, range_max, min_points, seg_out, seg_count) -> int:
+    """Segments of every scan of a block: seg_out rows [start, end), seg_count per scan; returns the total."""
+    N, B = ranges.shape
+    starts = np.empty(B, np.int64)
+    ends = np.empty(B, np.int64)
+    ns = 0
+    for k in range(N):
+        nseg = segment_scan(ranges[k], cos_inc, c0, c1, range_min, range_max, min_points, starts, ends)
+        for g in range(nseg):
+            seg_out[ns + g, 0] = starts[g]
+            seg_out[ns + g, 1] = ends[g]
+        ns += nseg
+        seg_count[k] = nseg
+    return ns

@@ -1,0 +1,242 @@
+"""Segmentation and features of a whole run: the functions behind `datmo segment`, `datmo features` and
+the one pass of `datmo run`.
+
+`segment_run` and `extract_run` validate the run and call the numba kernels block by block; results are
+flat arrays with per-scan offsets (RunFeatures). `derive_segments` / `derive_features` turn them into the
+channels the commands write: /datmo/segments, /datmo/features, /datmo/landmarks and
+/datmo/markers/features. Sensor frame of each scan (x forward, y left), metres and radians; landmarks in
+the odometry (world) frame when the run has odometry.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..log import cdr, types
+from ..log.scan import Odometry, ScanRun
+from . import _kernels as K
+from .landmarks import (
+    LandmarkDatabase,
+    circle_detections,
+    junction_detections,
+    line_end_detections,
+    to_world,
+)
+from .params import FeatureParams
+
+LINE_DTYPE = cdr.element_dtype(types.LINE)
+CIRCLE_DTYPE = cdr.element_dtype(types.CIRCLE)
+BLOB_DTYPE = cdr.element_dtype(types.BLOB)
+BLOCK = 256   # scans per kernel call: bounds the scratch memory and paces progress reports
+
+
+@dataclass
+class RunFeatures:
+    """Segments and features of every scan, as flat arrays with per-scan offsets (N + 1 each).
+
+    Scan k's segments are seg_start/seg_end[seg_offsets[k]:seg_offsets[k + 1]] (beam index ranges
+    [start, end)); its lines are lines[line_offsets[k]:line_offsets[k + 1]] (element_dtype(LINE)), and so
+    on for circles and blobs. `landmarks` is the run's landmark database (None when not computed).
+    """
+
+    stamps: np.ndarray
+    frame_id: str
+    seg_start: np.ndarray
+    seg_end: np.ndarray
+    seg_offsets: np.ndarray
+    lines: np.ndarray
+    line_offsets: np.ndarray
+    circles: np.ndarray
+    circle_offsets: np.ndarray
+    blobs: np.ndarray
+    blob_offsets: np.ndarray
+    landmarks: LandmarkDatabase | None = None
+    landmark_frame: str = ""
+
+    def __len__(self) -> int:
+        return len(self.stamps)
+
+    def counts(self) -> dict[str, float]:
+        """Mean segments, lines, circles and blobs per scan."""
+        n = max(len(self), 1)
+        return {"segments": len(self.seg_start) / n, "lines": len(self.lines) / n,
+                "circles": len(self.circles) / n, "blobs": len(self.blobs) / n}
+
+
+def _check(run: ScanRun) -> None:
+    g = run.geometry
+    if not np.isfinite(g.angle_increment) or g.angle_increment == 0:
+        raise InputError(f"scan geometry has an unusable angle increment ({g.angle_increment!r} rad)")
+
+
+def _c1(run: ScanRun) -> float:
+    """C1 = sqrt(2 (1 - cos delta_alpha)): the chord of the scan's angle step at unit range."""
+    return float(np.sqrt(2.0 * (1.0 - np.cos(run.geometry.angle_increment))))
+
+
+def _range_limits(run: ScanRun) -> tuple[float, float]:
+    g = run.geometry
+    lo = float(g.range_min) if np.isfinite(g.range_min) else 0.0
+    hi = float(g.range_max) if np.isfinite(g.range_max) and g.range_max > lo else np.inf
+    return lo, hi
+
+
+def _offsets(counts: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
+def segment_run(run: ScanRun, params: FeatureParams | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Segments of every scan: (start, end, offsets); scan k's are start/end[offsets[k]:offsets[k + 1]]."""
+    p = params or FeatureParams()
+    _check(run)
+    lo, hi = _range_limits(run)
+    ranges = np.ascontiguousarray(run.ranges, np.float32)
+    N, B = ranges.shape if ranges.ndim == 2 else (0, 0)
+    seg = np.empty((max(N * ((B + 1) // 2 + 1), 1), 2), np.int64)
+    count = np.zeros(N, np.int64)
+    if N and B:
+        n = K.segment_block(ranges, float(np.cos(run.geometry.angle_increment)), p.c0, _c1(run), lo, hi,
+                            p.min_points, seg, count)
+        seg = seg[:n]
+    else:
+        seg = seg[:0]
+    return seg[:, 0].astype(np.uint32), seg[:, 1].astype(np.uint32), _offsets(count)
+
+
+def _rows_to(dtype: np.dtype, rows: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
+    out = np.zeros(len(rows), dtype)
+    for col, name in enumerate(names, start=1):
+        if name:
+            out[name] = rows[:, col]
+    return out
+
+
+_LINE_NAMES = ("segment", "first", "last", "n_points", "x_ini", "y_ini", "x_end", "y_end", "rho", "theta",
+               "length", "r_acc")
+_CIRCLE_NAMES = ("segment", "first", "last", "n_points", "x", "y", "radius", "r_acc")
+_BLOB_NAMES = ("segment", "first", "last", "n_points", "x", "y", "size", "kind")
+
+
+def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odometry | None = None, *,
+                landmarks: bool = True, progress: Callable[[int, int], None] | None = None) -> RunFeatures:
+    """Segment every scan and extract its lines, circles and blobs (HTL, HTC and the section 5.2 rule);
+    with `landmarks`, also build the landmark database (world frame when `odometry` is given).
+    `progress(done, total)` is called after each block of scans."""
+    p = params or FeatureParams()
+    _check(run)
+    lo, hi = _range_limits(run)
+    ranges = np.ascontiguousarray(run.ranges, np.float32)
+    N, B = ranges.shape if ranges.ndim == 2 else (0, 0)
+    angles = run.geometry.angles().astype(np.float64) if B else np.zeros(0)
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    nt = max(int(round(180.0 / p.theta_resolution)), 1)
+    theta = np.arange(nt) * (np.pi / nt)
+    cos_t, sin_t = np.cos(theta), np.sin(theta)
+    vec = p.kernel_vector()
+    cos_inc, c1 = float(np.cos(run.geometry.angle_increment)), _c1(run)
+    segs, seg_counts, parts = [], [], {"l": [], "c": [], "b": []}
+    for a in range(0, N, BLOCK):
+        block = ranges[a:a + BLOCK]
+        n = len(block)
+        cap = n * B + 1
+        seg = np.empty((cap, 2), np.int64)   # empty, not zeros: only the rows the kernel fills are read
+        count = np.zeros(n, np.int64)
+        lines = np.empty((cap, 13))
+        circles = np.empty((n * (B // 2 + 1) + 1, 9))
+        blobs = np.empty((n * (B // 2 + 1) + 1, 9))
+        got = np.zeros(3, np.int64)
+        if B:
+            K.extract_block(block, cos_a, sin_a, cos_inc, c1, lo, hi, vec, cos_t, sin_t, seg, count, lines,
+                            circles, blobs, got)
+        segs.append(seg[:int(count.sum())])
+        seg_counts.append(count)
+        for key, arr, m in (("l", lines, got[0]), ("c", circles, got[1]), ("b", blobs, got[2])):
+            rows = arr[:m].copy()
+            rows[:, 0] += a
+            parts[key].append(rows)
+        if progress is not None:
+            progress(a + n, N)
+    seg = np.concatenate(segs) if segs else np.zeros((0, 2), np.int64)
+    count = np.concatenate(seg_counts) if seg_counts else np.zeros(0, np.int64)
+    rows = {k: (np.concatenate(v) if v else np.zeros((0, 13 if k == "l" else 9))) for k, v in parts.items()}
+    out = RunFeatures(
+        stamps=run.stamps, frame_id=run.geometry.frame_id,
+        seg_start=seg[:, 0].astype(np.uint32), seg_end=seg[:, 1].astype(np.uint32), seg_offsets=_offsets(count),
+        lines=_rows_to(LINE_DTYPE, rows["l"], _LINE_NAMES),
+        line_offsets=_offsets(np.bincount(rows["l"][:, 0].astype(np.int64), minlength=N)),
+        circles=_rows_to(CIRCLE_DTYPE, rows["c"], _CIRCLE_NAMES),
+        circle_offsets=_offsets(np.bincount(rows["c"][:, 0].astype(np.int64), minlength=N)),
+        blobs=_rows_to(BLOB_DTYPE, rows["b"], _BLOB_NAMES),
+        blob_offsets=_offsets(np.bincount(rows["b"][:, 0].astype(np.int64), minlength=N)))
+    if landmarks:
+        line_scan = rows["l"][:, 0].astype(np.int64)
+        det = np.concatenate([
+            junction_detections(out.lines, line_scan, p),
+            line_end_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, p),
+            circle_detections(out.circles, rows["c"][:, 0].astype(np.int64), out.lines, line_scan,
+                              out.line_offsets, p)])
+        world = odometry is not None and len(odometry) > 0
+        poses = odometry.at(run.stamps) if world else None
+        out.landmarks = LandmarkDatabase(to_world(det, poses), run.stamps, p)
+        out.landmark_frame = odometry.frame_id if world else run.geometry.frame_id
+    return out
+
+
+def segment_payloads(run: ScanRun, seg_start: np.ndarray, seg_end: np.ndarray, offsets: np.ndarray) -> list[bytes]:
+    """datmo_msgs/msg/Segments CDR payloads, one per scan."""
+    frame = run.geometry.frame_id
+    return [cdr.encode(types.SEGMENTS, {"stamp_ns": s, "frame_id": frame, "start": seg_start[a:b],
+                                         "end": seg_end[a:b]})
+            for s, a, b in zip(run.stamps.tolist(), offsets[:-1].tolist(), offsets[1:].tolist(), strict=True)]
+
+
+def feature_payloads(f: RunFeatures) -> list[bytes]:
+    """datmo_msgs/msg/Features CDR payloads, one per scan."""
+    lo, co, bo = f.line_offsets.tolist(), f.circle_offsets.tolist(), f.blob_offsets.tolist()
+    return [cdr.encode(types.FEATURES, {"stamp_ns": s, "frame_id": f.frame_id, "lines": f.lines[lo[k]:lo[k + 1]],
+                                         "circles": f.circles[co[k]:co[k + 1]], "blobs": f.blobs[bo[k]:bo[k + 1]]})
+            for k, s in enumerate(f.stamps.tolist())]
+
+
+def landmark_payloads(f: RunFeatures) -> list[bytes]:
+    """datmo_msgs/msg/Landmarks CDR payloads: the database after each scan."""
+    db = f.landmarks
+    elems = db.all_snapshots(f.stamps)
+    off = db.snap_offsets.tolist()
+    return [cdr.encode(types.LANDMARKS, {"stamp_ns": s, "frame_id": f.landmark_frame,
+                                         "landmarks": elems[off[k]:off[k + 1]]})
+            for k, s in enumerate(np.asarray(f.stamps, np.int64).tolist())]
+
+
+def derive_segments(run: ScanRun, params: FeatureParams | None = None) -> dict[str, tuple]:
+    """The channel `datmo segment` adds: {topic: (msgtype, stamps, payloads)}."""
+    from ..log import mcapio
+
+    start, end, offsets = segment_run(run, params)
+    return {mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, run.stamps, segment_payloads(run, start, end, offsets))}
+
+
+def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: FeatureParams | dict | None = None,
+                    progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], RunFeatures]:
+    """The channels `datmo features` adds ({topic: (msgtype, stamps, payloads)}: segments, features,
+    landmarks and feature markers) and the RunFeatures they came from."""
+    from ..log import mcapio
+    from .markers import feature_markers
+
+    if isinstance(params, dict):
+        from .params import from_dict
+
+        params = from_dict(params)
+    f = extract_run(run, params, odometry, progress=progress)
+    stamps = run.stamps
+    channels = {
+        mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, stamps, segment_payloads(run, f.seg_start, f.seg_end, f.seg_offsets)),
+        mcapio.TOPIC_FEATURES: (types.FEATURES, stamps, feature_payloads(f)),
+        mcapio.TOPIC_LANDMARKS: (types.LANDMARKS, stamps, landmark_payloads(f)),
+        mcapio.TOPIC_MARKERS_FEATURES: (types.MARKER_ARRAY, stamps, feature_markers(run, f, odometry)),
+    }
+    return channels, f

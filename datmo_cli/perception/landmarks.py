@@ -1,0 +1,323 @@
+"""Static landmarks (method.md section 6.2): per-scan detections and the run's landmark database.
+
+Detections come from one scan's features in the sensor frame: corners (two perpendicular lines of a
+segment meeting), convex and concave wall deflections (two lines turning by more than `deflection_min`
+and less than a corner), undefined line ends (a wall line ending where its segment ends and nothing nearer
+hides what lies beyond), column candidates (circles too large for legs) and benches (two support circles
+with a line between them). The database accumulates them over the run in the world frame (with odometry)
+or the sensor frame: a detection within `landmark_match` of a landmark of the same type is that landmark
+(count, last seen, running mean position); a landmark enters the database after `landmark_min_count`
+scans, and a column candidate that drifts more than `column_max_drift` (a moving circle object) never does.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..log import cdr, types
+from .params import FeatureParams
+
+CORNER, CONVEX_DEFLECTION, CONCAVE_DEFLECTION, LINE_END, COLUMN, BENCH = range(6)
+TYPE_NAMES = ("corner", "convex_deflection", "concave_deflection", "line_end", "column", "bench")
+LANDMARK_DTYPE = cdr.element_dtype(types.LANDMARK)
+# a detection: scan index, type, x, y, orientation (rad), size (m)
+DET_SCAN, DET_TYPE, DET_X, DET_Y, DET_ORIENT, DET_SIZE = range(6)
+
+
+def _pairs_in_segment(lines: np.ndarray, scan: np.ndarray) -> np.ndarray:
+    """Indices i where lines i and i + 1 are consecutive lines of the same segment of the same scan."""
+    if len(lines) < 2:
+        return np.zeros(0, np.int64)
+    same = (scan[1:] == scan[:-1]) & (lines["segment"][1:] == lines["segment"][:-1])
+    return np.flatnonzero(same)
+
+
+def junction_detections(lines: np.ndarray, scan: np.ndarray, p: FeatureParams) -> np.ndarray:
+    """Corners and deflections where consecutive lines of a segment meet (rows as DET_*), sensor frame."""
+    i = _pairs_in_segment(lines, scan)
+    if not len(i):
+        return np.zeros((0, 6))
+    a, b = lines[i], lines[i + 1]
+    ta, tb = a["theta"].astype(np.float64), b["theta"].astype(np.float64)
+    ra, rb = a["rho"].astype(np.float64), b["rho"].astype(np.float64)
+    det = np.cos(ta) * np.sin(tb) - np.sin(ta) * np.cos(tb)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        jx = (ra * np.sin(tb) - rb * np.sin(ta)) / det
+        jy = (rb * np.cos(ta) - ra * np.cos(tb)) / det
+    turn = np.abs(ta - tb) % np.pi
+    turn = np.minimum(turn, np.pi - turn)                       # angle between the lines, 0 .. pi/2
+    gap = np.maximum(np.hypot(jx - a["x_end"], jy - a["y_end"]), np.hypot(jx - b["x_ini"], jy - b["y_ini"]))
+    ok = np.isfinite(jx) & (gap <= p.corner_gap) & (np.minimum(a["length"], b["length"]) >= 2 * p.line_min_length)
+    corner = ok & (np.abs(turn - np.pi / 2) <= np.radians(p.perpendicular_tolerance))
+    deflection = ok & ~corner & (turn >= np.radians(p.deflection_min))
+    # bisector of the two walls seen from the junction, and whether it bulges towards the scanner
+    ux, uy = a["x_ini"] - jx, a["y_ini"] - jy
+    vx, vy = b["x_end"] - jx, b["y_end"] - jy
+    nu, nv = np.hypot(ux, uy), np.hypot(vx, vy)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        orient = np.arctan2(uy / nu + vy / nv, ux / nu + vx / nv)
+    ex, ey = b["x_end"] - a["x_ini"], b["y_end"] - a["y_ini"]
+    convex = (ex * (jy - a["y_ini"]) - ey * (jx - a["x_ini"])) * (ex * -a["y_ini"] - ey * -a["x_ini"]) > 0
+    kind = np.where(corner, CORNER, np.where(convex, CONVEX_DEFLECTION, CONCAVE_DEFLECTION))
+    keep = corner | deflection
+    out = np.zeros((int(keep.sum()), 6))
+    out[:, DET_SCAN] = scan[i][keep]
+    out[:, DET_TYPE] = kind[keep]
+    out[:, DET_X], out[:, DET_Y], out[:, DET_ORIENT] = jx[keep], jy[keep], orient[keep]
+    return out
+
+
+def line_end_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray,
+                        seg_offsets: np.ndarray, ranges: np.ndarray, p: FeatureParams) -> np.ndarray:
+    """Ends of wall lines (longer than d_max) that end their segment where the neighbouring beam is not
+    nearer (so the end is seen, not hidden): undefined line ends, sensor frame."""
+    k = np.flatnonzero(lines["length"] > p.d_max)
+    if not len(k):
+        return np.zeros((0, 6))
+    ln, s = lines[k], scan[k]
+    g = seg_offsets[s] + ln["segment"].astype(np.int64)
+    B = ranges.shape[1]
+    out = []
+    for beam, at_end, nb, ex, ey, fx, fy in (
+            (ln["first"].astype(np.int64), seg_start[g], -1, ln["x_ini"], ln["y_ini"], ln["x_end"], ln["y_end"]),
+            (ln["last"].astype(np.int64), seg_end[g].astype(np.int64) - 1, 1, ln["x_end"], ln["y_end"], ln["x_ini"],
+             ln["y_ini"])):
+        nbeam = beam + nb
+        inside = (nbeam >= 0) & (nbeam < B)
+        here = ranges[s, beam]
+        there = np.where(inside, ranges[s, np.clip(nbeam, 0, B - 1)], np.inf)
+        hidden = np.isfinite(there) & (there < here - p.c0)
+        keep = (beam == at_end) & ~hidden
+        rows = np.zeros((int(keep.sum()), 6))
+        rows[:, DET_SCAN], rows[:, DET_TYPE] = s[keep], LINE_END
+        rows[:, DET_X], rows[:, DET_Y] = ex[keep], ey[keep]
+        rows[:, DET_ORIENT] = np.arctan2(fy[keep] - ey[keep], fx[keep] - ex[keep])
+        out.append(rows)
+    return np.concatenate(out)
+
+
+def circle_detections(circles: np.ndarray, scan: np.ndarray, lines: np.ndarray, line_scan: np.ndarray,
+                      line_offsets: np.ndarray, p: FeatureParams) -> np.ndarray:
+    """Column candidates (circles larger than a leg) and benches (two such supports with a line between
+    them, near their axis and along it), sensor frame."""
+    big = np.flatnonzero(circles["radius"] > p.leg_radius_max)
+    c = circles[big]
+    cols = np.zeros((len(big), 6))
+    cols[:, DET_SCAN], cols[:, DET_TYPE] = scan[big], COLUMN
+    cols[:, DET_X], cols[:, DET_Y], cols[:, DET_SIZE] = c["x"], c["y"], c["radius"]
+    benches = np.zeros((len(big), 6))
+    nb = _benches(scan[big].astype(np.int64), c["x"].astype(np.float64), c["y"].astype(np.float64),
+                  c["radius"].astype(np.float64), lines["x_ini"].astype(np.float64), lines["y_ini"].astype(np.float64),
+                  lines["x_end"].astype(np.float64), lines["y_end"].astype(np.float64),
+                  np.asarray(line_offsets, np.int64), p.bench_min_length, p.bench_max_length, benches)
+    return np.concatenate([cols, benches[:nb]])
+
+
+@njit(cache=True)
+def _benches(cs, cx, cy, cr, x0, y0, x1, y1, line_offsets, dmin, dmax, out) -> int:
+    """Bench detections (rows DET_*) from support circles sorted by scan cs: pairs of one scan dmin..dmax
+    apart with a line whose middle lies between them within 0.4 m of their axis and that runs along it."""
+    n = 0
+    m = cs.shape[0]
+    for u in range(m):
+        for v in range(u + 1, m):
+            if cs[v] != cs[u]:
+                break
+            d = np.hypot(cx[v] - cx[u], cy[v] - cy[u])
+            if d < dmin or d > dmax or n >= out.shape[0]:
+                continue
+            ux = (cx[v] - cx[u]) / d
+            uy = (cy[v] - cy[u]) / d
+            k = cs[u]
+            for q in range(line_offsets[k], line_offsets[k + 1]):
+                mx = 0.5 * (x0[q] + x1[q]) - cx[u]
+                my = 0.5 * (y0[q] + y1[q]) - cy[u]
+                along = mx * ux + my * uy
+                across = abs(-mx * uy + my * ux)
+                dx = x1[q] - x0[q]
+                dy = y1[q] - y0[q]
+                if 0 < along < d and across < 0.4 and abs(dx * ux + dy * uy) >= 0.9 * np.hypot(dx, dy):
+                    out[n, 0] = k
+                    out[n, 1] = BENCH
+                    out[n, 2] = 0.5 * (cx[u] + cx[v])
+                    out[n, 3] = 0.5 * (cy[u] + cy[v])
+                    out[n, 4] = np.arctan2(uy, ux)
+                    out[n, 5] = d + cr[u] + cr[v]
+                    n += 1
+                    break
+    return n
+
+
+def to_world(det: np.ndarray, poses: np.ndarray | None) -> np.ndarray:
+    """Detections moved to the world frame by the sensor pose (x, y, theta) of each one's scan."""
+    if poses is None or not len(det):
+        return det
+    out = det.copy()
+    pose = poses[det[:, DET_SCAN].astype(np.int64)]
+    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    out[:, DET_X] = c * det[:, DET_X] - s * det[:, DET_Y] + pose[:, 0]
+    out[:, DET_Y] = s * det[:, DET_X] + c * det[:, DET_Y] + pose[:, 1]
+    out[:, DET_ORIENT] = np.arctan2(np.sin(det[:, DET_ORIENT] + pose[:, 2]), np.cos(det[:, DET_ORIENT] + pose[:, 2]))
+    return out
+
+
+@njit(cache=True)
+def accumulate(det, n_scans, match, min_count, max_drift, forget, db, snap_idx, snap_vals, snap_count):
+    """Fold detections (rows DET_*, sorted by scan) into the database `db` (rows: type, x, y, orientation,
+    size, count, first scan, last scan, x0, y0, moved); after each scan k, the landmarks in the database
+    (count >= min_count, not moved) are appended to snap_idx (row index) and snap_vals (x, y, orientation,
+    size, count, last scan: their state then), and their number stored in snap_count[k]. A candidate seen
+    fewer than min_count times and not for `forget` scans is forgotten. Returns (rows used, snapshot
+    entries wanted)."""
+    nd = det.shape[0]
+    n = 0
+    ns = 0
+    j = 0
+    live = np.empty(db.shape[0], np.int64)   # rows still matched against: confirmed ones and recent candidates
+    nlive = 0
+    confirmed = np.empty(db.shape[0], np.int64)
+    nconf = 0
+    for k in range(n_scans):
+        while j < nd and det[j, 0] == k:
+            t = det[j, 1]
+            x = det[j, 2]
+            y = det[j, 3]
+            best = -1
+            bd = match
+            for u in range(nlive):
+                q = live[u]
+                if db[q, 0] == t:
+                    d = np.hypot(db[q, 1] - x, db[q, 2] - y)
+                    if d <= bd and db[q, 7] != k:
+                        bd = d
+                        best = q
+            if best < 0 and n < db.shape[0]:
+                best = n
+                db[n, 0] = t
+                db[n, 1] = x
+                db[n, 2] = y
+                db[n, 3] = det[j, 4]
+                db[n, 4] = det[j, 5]
+                db[n, 5] = 1.0
+                db[n, 6] = k
+                db[n, 7] = k
+                db[n, 8] = x
+                db[n, 9] = y
+                db[n, 10] = 0.0
+                live[nlive] = n
+                nlive += 1
+                n += 1
+                if min_count <= 1:
+                    confirmed[nconf] = best
+                    nconf += 1
+            elif best >= 0:
+                c = db[best, 5] + 1.0
+                db[best, 1] += (x - db[best, 1]) / c
+                db[best, 2] += (y - db[best, 2]) / c
+                db[best, 3] = det[j, 4]
+                db[best, 4] += (det[j, 5] - db[best, 4]) / c
+                db[best, 5] = c
+                db[best, 7] = k
+                if t == 4.0 and np.hypot(x - db[best, 8], y - db[best, 9]) > max_drift:
+                    db[best, 10] = 1.0
+                if c == min_count:
+                    confirmed[nconf] = best
+                    nconf += 1
+            j += 1
+        u = 0
+        while u < nlive:   # forget stale candidates and moved columns
+            q = live[u]
+            if (db[q, 5] < min_count and k - db[q, 7] > forget) or db[q, 10] != 0.0:
+                nlive -= 1
+                live[u] = live[nlive]
+            else:
+                u += 1
+        count = 0
+        for u in range(nconf):
+            q = confirmed[u]
+            if db[q, 10] == 0.0:
+                if ns < snap_idx.shape[0]:
+                    snap_idx[ns] = q
+                    for c in range(6):
+                        snap_vals[ns, c] = db[q, 1 + c] if c < 5 else db[q, 7]
+                ns += 1
+                count += 1
+        snap_count[k] = count
+    return n, ns
+
+
+class LandmarkDatabase:
+    """The landmark database of a run: `rows` (type, x, y, orientation, size, count, first scan, last scan,
+    x0, y0, moved) and, per scan, the indices of the landmarks in it after that scan."""
+
+    def __init__(self, detections: np.ndarray, stamps: np.ndarray, p: FeatureParams) -> None:
+        self._stamps = np.asarray(stamps, np.int64)
+        n_scans = len(self._stamps)
+        order = np.argsort(detections[:, DET_SCAN], kind="stable")
+        det = np.ascontiguousarray(detections[order])
+        cap = max(len(det), 1)
+        snap_cap = 4096
+        while True:
+            self.rows = np.zeros((cap, 11))
+            self.snap_idx = np.zeros(snap_cap, np.int64)
+            self.snap_vals = np.zeros((snap_cap, 6))
+            snap_count = np.zeros(n_scans, np.int64)
+            n, ns = accumulate(det, n_scans, p.landmark_match, p.landmark_min_count, p.column_max_drift, 10,
+                               self.rows, self.snap_idx, self.snap_vals, snap_count)
+            if ns <= snap_cap:
+                break
+            snap_cap = ns
+        self.rows = self.rows[:n]
+        self.snap_idx = self.snap_idx[:ns]
+        self.snap_vals = self.snap_vals[:ns]
+        self.snap_offsets = np.concatenate([[0], np.cumsum(snap_count)]).astype(np.int64)
+        self._drop_bench_supports(p)
+
+    def _drop_bench_supports(self, p: FeatureParams) -> None:
+        """A column candidate at a bench's support is part of the bench, not a column."""
+        rows = self.rows
+        if not len(rows):
+            return
+        benches = rows[(rows[:, 0] == BENCH) & (rows[:, 5] >= p.landmark_min_count)]
+        for b in benches:
+            half = 0.5 * (b[4] - 2 * p.leg_radius_max)
+            for sgn in (-1.0, 1.0):
+                sx = b[1] + sgn * half * np.cos(b[3])
+                sy = b[2] + sgn * half * np.sin(b[3])
+                near = (rows[:, 0] == COLUMN) & (np.hypot(rows[:, 1] - sx, rows[:, 2] - sy) < 0.5)
+                rows[near, 10] = 1.0
+        keep = rows[self.snap_idx, 10] == 0.0
+        scan_of = np.repeat(np.arange(len(self.snap_offsets) - 1), np.diff(self.snap_offsets))
+        counts = np.bincount(scan_of[keep], minlength=len(self.snap_offsets) - 1)
+        self.snap_idx = self.snap_idx[keep]
+        self.snap_vals = self.snap_vals[keep]
+        self.snap_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+    def final(self) -> np.ndarray:
+        """Landmark elements of the database after the last scan (see `snapshot`)."""
+        return self.snapshot(len(self.snap_offsets) - 2) if len(self.snap_offsets) > 1 else np.zeros(0, LANDMARK_DTYPE)
+
+    def all_snapshots(self, stamps: np.ndarray) -> np.ndarray:
+        """Landmark message elements of every snapshot entry (slice with snap_offsets); first and last
+        seen from the scans' `stamps` (ns)."""
+        stamps = np.asarray(stamps, np.int64)
+        r = self.rows[self.snap_idx]
+        v = self.snap_vals
+        out = np.zeros(len(v), LANDMARK_DTYPE)
+        out["id"] = self.snap_idx + 1
+        out["count"] = v[:, 4]
+        for key, col in (("first_seen", r[:, 6]), ("last_seen", v[:, 5])):
+            ns = stamps[col.astype(np.int64)] if len(stamps) else np.zeros(len(v), np.int64)
+            out[key]["sec"] = ns // 1_000_000_000
+            out[key]["nanosec"] = ns % 1_000_000_000
+        out["x"], out["y"], out["orientation"], out["size"] = v[:, 0], v[:, 1], v[:, 2], v[:, 3]
+        out["type"] = r[:, 0]
+        return out
+
+    def snapshot(self, k: int, stamps: np.ndarray | None = None) -> np.ndarray:
+        """Landmark elements of the database after scan k (stamps: the run's, for first/last seen)."""
+        a, b = self.snap_offsets[k], self.snap_offsets[k + 1]
+        sub = LandmarkDatabase.__new__(LandmarkDatabase)
+        sub.rows, sub.snap_idx, sub.snap_vals = self.rows, self.snap_idx[a:b], self.snap_vals[a:b]
+        return sub.all_snapshots(self._stamps if stamps is None else stamps)

@@ -1,0 +1,117 @@
+"""Parameters of `datmo segment` and `datmo features` (the `[features]` table of a config file).
+
+Defaults follow Castro, Nunes and Ruano (2004) as restated in method.md where the paper gives a value
+(minimum segment size 5, line kept with more than 3 points, r_acc > 0.5 and length > 10 cm, legs of
+radius 10 cm, d_max 150 cm); the rest were tuned on the simulator's logs (`make accuracy`).
+Units: metres and degrees.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError
+
+
+@dataclass(frozen=True)
+class FeatureParams:
+    # segmentation (method.md section 4)
+    c0: float = 0.08                 # m; threshold C0 + C1 * min(r_i, r_i+1), C1 from the scan's angle step
+    min_points: int = 5              # segments with fewer points are dropped (paper: 5)
+    # lines, HTL (section 5.1)
+    theta_resolution: float = 1.0    # degrees per theta cell
+    rho_resolution: float = 0.02     # m per rho cell
+    vote_window: float = 12.0        # degrees either side of a point's local normal that it votes for (90: all)
+    line_min_points: int = 4         # a line has more than 3 points
+    line_min_racc: float = 0.5       # and r_acc above this
+    line_min_length: float = 0.10    # and is longer than this, m
+    perpendicular_tolerance: float = 15.0   # degrees from 90 within which two lines are perpendicular
+    # circles, HTC (section 5.1)
+    circle_radius_min: float = 0.05  # m
+    circle_radius_max: float = 0.40  # m
+    circle_radius_step: float = 0.03  # m; radii voted for (the fit refines)
+    circle_cell: float = 0.01        # m; (a, b) cell size
+    circle_window: float = 0.04      # m; votes within this of the P_ini/P_near/P_end estimate
+    circle_tolerance: float = 0.02   # m; a point votes for a centre when | |p - c| - r | <= this
+    circle_min_points: int = 4
+    circle_check_extent: float = 0.35   # m; a one-line segment shorter than this also gets HTC (legs)
+    # landmarks (section 6.2)
+    d_max: float = 1.5               # m; lines longer than this are static (walls)
+    corner_gap: float = 0.3          # m; two wall lines meet when their ends are this close to the junction
+    deflection_min: float = 10.0     # degrees; smaller turns between wall lines are not deflections
+    leg_radius_max: float = 0.13     # m; circles larger than this cannot be legs (column candidates)
+    bench_min_length: float = 0.6    # m; between a bench's two supports
+    bench_max_length: float = 2.5    # m
+    landmark_match: float = 0.3      # m; a detection within this of a landmark is the same landmark
+    landmark_min_count: int = 3      # scans a landmark is seen in before it enters the database
+    column_max_drift: float = 0.1    # m; a column candidate that moves more than this is not a column
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def replace(self, **changes) -> FeatureParams:
+        """A copy with `changes` (keys checked; None values ignored)."""
+        changes = {k: v for k, v in changes.items() if v is not None}
+        return from_dict({**self.to_dict(), **changes})
+
+    def kernel_vector(self) -> np.ndarray:
+        """The parameters in the order `_kernels` reads them (radians where the kernels need them)."""
+        return np.array([self.c0, self.min_points, np.radians(self.theta_resolution), self.rho_resolution,
+                         np.radians(self.vote_window), self.line_min_points, self.line_min_racc,
+                         self.line_min_length, np.radians(self.perpendicular_tolerance), self.circle_radius_min,
+                         self.circle_radius_max, self.circle_radius_step, self.circle_cell, self.circle_window,
+                         self.circle_tolerance, self.circle_min_points, self.circle_check_extent], np.float64)
+
+
+_POSITIVE_INT = {"min_points", "line_min_points", "circle_min_points", "landmark_min_count"}
+_RANGES = {"line_min_racc": (0.0, 1.0), "vote_window": (1.0, 90.0), "perpendicular_tolerance": (0.0, 45.0),
+           "theta_resolution": (0.05, 10.0), "deflection_min": (0.0, 90.0)}
+
+
+def from_dict(values: dict, where: str = "features") -> FeatureParams:
+    """FeatureParams from a mapping, checking names, types and ranges; ConfigError names the key."""
+    known = {f.name: f for f in fields(FeatureParams)}
+    out = {}
+    for key, value in values.items():
+        if key not in known:
+            raise ConfigError(f"{where}.{key}: unknown parameter (known: {', '.join(sorted(known))})")
+        if key in _POSITIVE_INT:
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"{where}.{key}: must be a positive integer, got {value!r}")
+        else:
+            if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
+                raise ConfigError(f"{where}.{key}: must be a number, got {value!r}")
+            value = float(value)
+            lo, hi = _RANGES.get(key, (0.0, np.inf))
+            if not (lo <= value <= hi) or (value == 0.0 and key not in ("c0", "deflection_min",
+                                                                       "perpendicular_tolerance")):
+                raise ConfigError(f"{where}.{key}: {value:g} is out of range ({lo:g} to {hi:g}, not 0)")
+        out[key] = value
+    params = FeatureParams(**{**asdict(FeatureParams()), **out})
+    if params.circle_radius_min >= params.circle_radius_max:
+        raise ConfigError(f"{where}: circle_radius_min must be below circle_radius_max")
+    if params.bench_min_length >= params.bench_max_length:
+        raise ConfigError(f"{where}: bench_min_length must be below bench_max_length")
+    return params
+
+
+def load_toml(path: str | Path) -> FeatureParams:
+    """Parameters from the `[features]` table of a TOML file (or its top level when it has no such table)."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    table = data.get("features", data)
+    if not isinstance(table, dict):
+        raise ConfigError(f"{path}: features must be a table")
+    table = {k: v for k, v in table.items() if not isinstance(v, dict)}   # other commands' tables
+    return from_dict(table, where=f"{path}: features")
