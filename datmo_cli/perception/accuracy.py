@@ -116,12 +116,47 @@ class LandmarkScore:
         return self.spurious / self.defined if self.defined else 0.0
 
 
+def corner_observed(run, truth: np.ndarray, truth_offsets: np.ndarray, sensor_theta: np.ndarray,  # noqa: ANN001
+                    reach: float = 0.5, near: float = 0.03, min_points: int = 3) -> dict[int, int]:
+    """For each true wall corner id, the number of scans in which it can be seen as a corner: at least
+    `min_points` scan points lie on each of its two walls (within `near` of the wall line) within `reach` of
+    the vertex. Sensor frame."""
+    angles = run.geometry.angles()
+    out: dict[int, int] = {}
+    for k in range(len(run)):
+        objs = truth[truth_offsets[k]:truth_offsets[k + 1]]
+        corners = objs[objs["classification"] == CLASS_WALL_CORNER]
+        walls = objs[objs["classification"] == CLASS_WALL]
+        if not len(corners):
+            continue
+        r = run.ranges[k].astype(np.float64)
+        ok = np.isfinite(r)
+        px, py = (r * np.cos(angles))[ok], (r * np.sin(angles))[ok]
+        d = walls["orientation"].astype(np.float64) - sensor_theta[k]
+        ux, uy = np.cos(d), np.sin(d)
+        h = walls["length"] / 2
+        ends = np.stack([walls["x"] - ux * h, walls["y"] - uy * h, walls["x"] + ux * h, walls["y"] + uy * h], 1)
+        for c in corners:
+            cx, cy = float(c["x"]), float(c["y"])
+            touching = np.flatnonzero((np.hypot(ends[:, 0] - cx, ends[:, 1] - cy) < 0.02)
+                                      | (np.hypot(ends[:, 2] - cx, ends[:, 3] - cy) < 0.02))
+            close = np.hypot(px - cx, py - cy) <= reach
+            seen = 0
+            for w in touching[:2].tolist():
+                off = np.abs(-(px - cx) * uy[w] + (py - cy) * ux[w])
+                seen += int(np.count_nonzero(close & (off <= near)) >= min_points)
+            if len(touching) >= 2 and seen == 2:
+                out[int(c["id"])] = out.get(int(c["id"]), 0) + 1
+    return out
+
+
 def landmark_score(f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray, match: float = 0.2,
-                   min_scans: int = 10) -> LandmarkScore:
-    """Score the database after the last scan. A true landmark counts when hit by at least 3 beams in at
-    least `min_scans` scans; it is found when a landmark of a fitting type lies within `match` (a wall corner
-    may be found as a corner, a deflection or a line end). Positions compared in the database's frame
-    (world with odometry, else the sensor frame)."""
+                   min_scans: int = 10, corner_scans: dict[int, int] | None = None) -> LandmarkScore:
+    """Score the database after the last scan. A column or bench counts when hit by at least 3 beams in at
+    least `min_scans` scans; a wall corner when it can be seen as a corner (both walls, see corner_observed)
+    in at least `min_scans` scans. It is found when a landmark of a fitting type lies within `match` (a wall
+    corner may be found as a corner, a deflection or a line end). Positions compared in the database's
+    frame (world with odometry, else the sensor frame)."""
     db = f.landmarks.final()
     world = f.landmark_frame != f.frame_id
     kx, ky = ("world_x", "world_y") if world else ("x", "y")
@@ -137,6 +172,8 @@ def landmark_score(f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray,
             rows = truth[sel & (truth["id"] == i)]
             true_xy.append((float(rows[kx][-1]), float(rows[ky][-1])))
             seen = len(np.unique(scans[np.flatnonzero(sel & (truth["id"] == i))][rows["n_beams"] >= 3]))
+            if cls == CLASS_WALL_CORNER and corner_scans is not None:
+                seen = corner_scans.get(i, 0)
             if seen < min_scans:
                 continue
             nv += 1

@@ -24,6 +24,7 @@ from .landmarks import (
     circle_detections,
     junction_detections,
     line_end_detections,
+    seat_detections,
     to_world,
 )
 from .params import FeatureParams
@@ -178,7 +179,8 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
             junction_detections(out.lines, line_scan, p),
             line_end_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, p),
             circle_detections(out.circles, rows["c"][:, 0].astype(np.int64), out.lines, line_scan,
-                              out.line_offsets, p)])
+                              out.line_offsets, out.seg_start, out.seg_end, out.seg_offsets, ranges, p),
+            seat_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, p)])
         world = odometry is not None and len(odometry) > 0
         poses = odometry.at(run.stamps) if world else None
         out.landmarks = LandmarkDatabase(to_world(det, poses), run.stamps, p)

@@ -25,11 +25,13 @@ LANDMARK_DTYPE = cdr.element_dtype(types.LANDMARK)
 DET_SCAN, DET_TYPE, DET_X, DET_Y, DET_ORIENT, DET_SIZE = range(6)
 
 
-def _pairs_in_segment(lines: np.ndarray, scan: np.ndarray) -> np.ndarray:
-    """Indices i where lines i and i + 1 are consecutive lines of the same segment of the same scan."""
+def _pairs_in_segment(lines: np.ndarray, scan: np.ndarray, max_gap: int = 3) -> np.ndarray:
+    """Indices i where lines i and i + 1 are consecutive lines of one scan: in the same segment, or in
+    neighbouring segments at most `max_gap` beams apart (a corner whose vertex split the segment)."""
     if len(lines) < 2:
         return np.zeros(0, np.int64)
-    same = (scan[1:] == scan[:-1]) & (lines["segment"][1:] == lines["segment"][:-1])
+    gap = lines["first"][1:].astype(np.int64) - lines["last"][:-1].astype(np.int64)
+    same = (scan[1:] == scan[:-1]) & ((lines["segment"][1:] == lines["segment"][:-1]) | (gap <= max_gap))
     return np.flatnonzero(same)
 
 
@@ -98,10 +100,13 @@ def line_end_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarr
 
 
 def circle_detections(circles: np.ndarray, scan: np.ndarray, lines: np.ndarray, line_scan: np.ndarray,
-                      line_offsets: np.ndarray, p: FeatureParams) -> np.ndarray:
-    """Column candidates (circles larger than a leg) and benches (two such supports with a line between
-    them, near their axis and along it), sensor frame."""
+                      line_offsets: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray, seg_offsets: np.ndarray,
+                      ranges: np.ndarray, p: FeatureParams) -> np.ndarray:
+    """Column candidates (free-standing circles larger than a leg) and benches (two such supports with a
+    line between them, near their axis and along it), sensor frame."""
     big = np.flatnonzero(circles["radius"] > p.leg_radius_max)
+    g = seg_offsets[scan[big]] + circles["segment"][big].astype(np.int64)
+    big = big[free_standing(scan[big], seg_start[g].astype(np.int64), seg_end[g].astype(np.int64), ranges, p.c0)]
     c = circles[big]
     cols = np.zeros((len(big), 6))
     cols[:, DET_SCAN], cols[:, DET_TYPE] = scan[big], COLUMN
@@ -112,6 +117,53 @@ def circle_detections(circles: np.ndarray, scan: np.ndarray, lines: np.ndarray, 
                   lines["x_end"].astype(np.float64), lines["y_end"].astype(np.float64),
                   np.asarray(line_offsets, np.int64), p.bench_min_length, p.bench_max_length, benches)
     return np.concatenate([cols, benches[:nb]])
+
+
+def free_standing(scan: np.ndarray, a: np.ndarray, b: np.ndarray, ranges: np.ndarray, c0: float) -> np.ndarray:
+    """Whether segments [a, b) of scans `scan` stand free: beyond each end the next beam returns nothing or
+    returns at least 0.5 m farther (open space behind), or nearer (an occluder), and at least one end is
+    open. The scan's own edges are neither. A wall seen at a grazing angle breaks into pieces whose
+    neighbours are only a little farther, and a structure attached to a wall continues at its range."""
+    B = ranges.shape[1]
+    n_open = np.zeros(len(scan), np.int64)
+    closed = np.zeros(len(scan), bool)
+    for inside, beyond in ((a, a - 1), (b - 1, b)):
+        valid = (beyond >= 0) & (beyond < B)
+        there = ranges[scan, np.clip(beyond, 0, B - 1)]
+        here = ranges[scan, np.clip(inside, 0, B - 1)]
+        is_open = valid & (~np.isfinite(there) | (there > here + 0.5))
+        occluded = valid & (there < here - c0)
+        n_open += is_open
+        closed |= valid & ~is_open & ~occluded
+    return (n_open >= 1) & ~closed
+
+
+def seat_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray,
+                    seg_offsets: np.ndarray, ranges: np.ndarray, p: FeatureParams) -> np.ndarray:
+    """Benches whose supports the scan cannot resolve as circles: a free-standing line of a bench's length,
+    sensor frame. It spans its segment but for a support's arc at either end (8 beams), and beyond each end
+    of the segment the next beam returns nothing, or returns 0.5 m farther (open space behind the bench), or
+    nearer (an occluder); at least one end must be open. A wall seen at a grazing angle breaks into pieces
+    whose neighbours are only a little farther, so it is not taken for a bench. A static one accumulates
+    into a bench landmark; a moving one never does."""
+    ln = lines
+    ok = (ln["length"] >= p.bench_min_length) & (ln["length"] <= p.bench_max_length)
+    k = np.flatnonzero(ok)
+    if not len(k):
+        return np.zeros((0, 6))
+    ln, s = lines[k], scan[k]
+    g = seg_offsets[s] + ln["segment"].astype(np.int64)
+    a, b = seg_start[g].astype(np.int64), seg_end[g].astype(np.int64)
+    spans = (ln["first"].astype(np.int64) - a <= 8) & (b - 1 - ln["last"].astype(np.int64) <= 8)
+    free = spans & free_standing(s, a, b, ranges, p.c0)
+    ln, s = ln[free], s[free]
+    out = np.zeros((len(ln), 6))
+    out[:, DET_SCAN], out[:, DET_TYPE] = s, BENCH
+    out[:, DET_X] = 0.5 * (ln["x_ini"] + ln["x_end"])
+    out[:, DET_Y] = 0.5 * (ln["y_ini"] + ln["y_end"])
+    out[:, DET_ORIENT] = np.arctan2(ln["y_end"] - ln["y_ini"], ln["x_end"] - ln["x_ini"])
+    out[:, DET_SIZE] = ln["length"]
+    return out
 
 
 @njit(cache=True)
@@ -184,12 +236,14 @@ def accumulate(det, n_scans, match, min_count, max_drift, forget, db, snap_idx, 
             x = det[j, 2]
             y = det[j, 3]
             best = -1
-            bd = match
+            bd = 2 * match
+            # a column does not move: a tight gate; a bench's visible middle moves with what hides its ends
+            gate = max_drift if t == 4.0 else (2 * match if t == 5.0 else match)
             for u in range(nlive):
                 q = live[u]
                 if db[q, 0] == t:
                     d = np.hypot(db[q, 1] - x, db[q, 2] - y)
-                    if d <= bd and db[q, 7] != k:
+                    if d <= min(bd, gate) and db[q, 7] != k:
                         bd = d
                         best = q
             if best < 0 and n < db.shape[0]:
@@ -219,7 +273,9 @@ def accumulate(det, n_scans, match, min_count, max_drift, forget, db, snap_idx, 
                 db[best, 4] += (det[j, 5] - db[best, 4]) / c
                 db[best, 5] = c
                 db[best, 7] = k
-                if t == 4.0 and np.hypot(x - db[best, 8], y - db[best, 9]) > max_drift:
+                # columns and benches that drift from where they were first seen are movers, not landmarks
+                if (t == 4.0 and np.hypot(x - db[best, 8], y - db[best, 9]) > max_drift) or \
+                        (t == 5.0 and np.hypot(x - db[best, 8], y - db[best, 9]) > 2 * match):
                     db[best, 10] = 1.0
                 if c == min_count:
                     confirmed[nconf] = best
