@@ -120,39 +120,29 @@ def _job(i: int, args: tuple, report: Callable[[int, int, int], None] | None) ->
     return JobResult(src, out, scans, time.perf_counter() - t0)
 
 
-PERCEPTION = "datmo_cli.perception.features"
-
-
 def derive(run, odometry, params: dict | None = None,  # noqa: ANN001 - ScanRun, Odometry | None
            progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], dict]:
     """Every derived channel of a run, {topic: (msgtype, stamps, payloads)}, and the effective parameters.
 
-    `params` may hold "track" (a TrackingParams) and "features" (perception's parameters, passed through).
-    `progress(done, total)` follows the scans through tracking.
+    `params` may hold "track" (a TrackingParams) and "features" (a FeatureParams). `progress(done, total)`
+    follows the scans through feature extraction and then tracking (each half of the total).
     """
-    import importlib
-    import importlib.util
-
+    from .perception.features import derive_features
+    from .perception.params import FeatureParams
     from .tracking.params import TrackingParams
     from .tracking.pipeline import derive_tracks, iter_run_features
 
     params = params or {}
-    if importlib.util.find_spec(PERCEPTION) is None:
-        raise DatmoError(f"datmo run needs segmentation and feature extraction ({PERCEPTION}), which this "
-                         "build does not have yet")
-    perception = importlib.import_module(PERCEPTION)
-    if not hasattr(perception, "derive_features"):
-        raise DatmoError(f"datmo run needs {PERCEPTION}.derive_features (the channels of datmo segment and "
-                         "datmo features), which this build does not have yet")
     track_params = params.get("track") or TrackingParams()
+    feature_params = params.get("features") or FeatureParams()
+    n = len(run)
     if progress:
-        progress(0, len(run))
-    channels, features = perception.derive_features(run, odometry=odometry, params=params.get("features"))
+        progress(0, 2 * n)
+    channels, features = derive_features(run, odometry=odometry, params=feature_params,
+                                         progress=(lambda d, t: progress(d, 2 * n)) if progress else None)
     tracks = derive_tracks(run, list(iter_run_features(features)), odometry=odometry, params=track_params,
-                           progress=progress)
-    effective = {"track": track_params.to_dict()}
-    if params.get("features") is not None:
-        effective["features"] = params["features"]
+                           progress=(lambda d, t: progress(n + d, 2 * n)) if progress else None)
+    effective = {"features": feature_params.to_dict(), "track": track_params.to_dict()}
     return {**channels, **tracks}, effective
 
 

@@ -34,7 +34,8 @@ def _progress_bar():  # noqa: ANN202 - rich.progress.Progress, imported lazily
               help="Inputs processed at once, in separate processes [default: all cores].")
 @click.option("--force", is_flag=True, help="Overwrite existing outputs (and plots).")
 @click.option("--config", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="TOML file of parameters: its [track] table as for datmo track.")
+              help="TOML file of parameters: its [features] table as for datmo features, its [track] table as "
+                   "for datmo track.")
 @click.option("--plot", is_flag=True, help="Also draw each run from above into OUT_DIR/NAME.png.")
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default="rich", show_default=True,
               help="Format of the report printed at the end (see datmo report).")
@@ -61,9 +62,10 @@ def command(inputs: tuple[Path, ...], out_dir: Path, jobs: int | None, force: bo
     inputs = list(inputs)
     params = None
     if config is not None:
-        from ..tracking.params import load_toml
+        from ..perception.params import load_toml as load_features
+        from ..tracking.params import load_toml as load_track
 
-        params = {"track": load_toml(config)}
+        params = {"features": load_features(config), "track": load_track(config)}
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"{out_dir}: exists and is not a folder")
     out_dir.mkdir(parents=True, exist_ok=True)

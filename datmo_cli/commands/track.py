@@ -11,31 +11,40 @@ from ..tracking.params import TrackingParams
 
 D = TrackingParams()
 
-def track_file(src: Path, out: Path, *, force: bool = False, params=None,  # noqa: ANN001 - TrackingParams
+def track_file(src: Path, out: Path, *, force: bool = False, params=None, feature_params=None,  # noqa: ANN001
                progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
     """Track `src` into `out` (its channels copied, /datmo/tracks and /datmo/markers/tracks added).
-    Features come from src's /datmo/features when present, else segmentation and features run here.
-    Returns (scans, whether features were computed here)."""
+    Features come from src's /datmo/features when present; else segmentation and features run here and
+    their channels are written too, as datmo run writes them. Returns (scans, whether features were
+    computed here)."""
+    from ..cli import invocation
     from ..errors import InputError
     from ..log import mcapio
+    from ..perception.features import derive_features
+    from ..perception.params import FeatureParams
     from ..tracking.params import TrackingParams
-    from ..tracking.pipeline import decode_features, derive_tracks, run_features
+    from ..tracking.pipeline import decode_features, derive_tracks, iter_run_features
 
     params = params or TrackingParams()
     log = mcapio.read_log(src, topics=None)
     run = mcapio.run_from_log(log)
     odometry = mcapio.odometry_from_log(log)
     computed = not log.has(mcapio.TOPIC_FEATURES)
+    derived: dict = {}
+    effective: dict = {"track": params.to_dict()}
     if computed:
-        features = run_features(run, odometry)
+        feature_params = feature_params or FeatureParams()
+        derived, run_features = derive_features(run, odometry=odometry, params=feature_params)
+        features = list(iter_run_features(run_features))
+        effective["features"] = feature_params.to_dict()
     else:
         stamps, payloads = log.messages[mcapio.TOPIC_FEATURES]
         if len(payloads) != len(run):
             raise InputError(f"{src}: {len(payloads)} messages on {mcapio.TOPIC_FEATURES} for {len(run)} scans; "
                              "run datmo features again")
         features = decode_features(payloads)
-    derived = derive_tracks(run, features, odometry=odometry, params=params, progress=progress)
-    provenance = mcapio.Provenance("track", params.to_dict(), [src])
+    derived |= derive_tracks(run, features, odometry=odometry, params=params, progress=progress)
+    provenance = mcapio.Provenance("track", effective, [src], invocation("track"))
     with mcapio.LogWriter(out, force=force, provenance=provenance) as writer:
         writer.copy_from(log, exclude=list(derived))
         for topic, (msgtype, stamps, payloads) in derived.items():
@@ -49,7 +58,8 @@ def track_file(src: Path, out: Path, *, force: bool = False, params=None,  # noq
               help="The log to write (MCAP): the input's channels plus /datmo/tracks and /datmo/markers/tracks.")
 @click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
 @click.option("--config", "config", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="TOML file with a [track] table of parameters (names as in the options below and more).")
+              help="TOML file with a [track] table of parameters (names as in the options below and more), and "
+                   "a [features] table used when the input has no features.")
 @click.option("--process-noise", type=click.FloatRange(min=0, min_open=True), default=None,
               help=f"White-noise acceleration variance q, (m/s²)² per Hz [default: {D.process_noise:g}].")
 @click.option("--measurement-noise", type=click.FloatRange(min=0, min_open=True), default=None,
@@ -78,9 +88,12 @@ def command(input: Path, output: Path, force: bool, config: Path | None, process
 
     Example: datmo track sample_logs/hall.mcap -o hall-tracks.mcap
     """
+    from ..perception.params import FeatureParams
+    from ..perception.params import load_toml as load_features
     from ..tracking.params import load_toml
 
     params = load_toml(config) if config is not None else TrackingParams()
+    feature_params = load_features(config) if config is not None else FeatureParams()
     hits, window = confirm if confirm is not None else (None, None)
     params = params.replace(process_noise=process_noise, measurement_noise=measurement_noise, gate=gate,
                             confirm_hits=hits, confirm_window=window, delete_after=delete_after,
@@ -91,7 +104,7 @@ def command(input: Path, output: Path, force: bool, config: Path | None, process
     with Progress(TextColumn("tracking"), BarColumn(), MofNCompleteColumn(), console=Console(stderr=True),
                   transient=True) as bar:
         task = bar.add_task("tracking", total=None)
-        scans, computed = track_file(input, output, force=force, params=params,
+        scans, computed = track_file(input, output, force=force, params=params, feature_params=feature_params,
                                      progress=lambda done, total: bar.update(task, completed=done, total=total))
     how = " (segmented and extracted features first)" if computed else ""
     click.echo(f"{output}: tracks for {scans:,} scans{how}", err=True)

@@ -11,7 +11,8 @@ import numpy as np
 from numba import njit
 
 (P_C0, P_MIN_POINTS, P_THETA_RES, P_RHO_RES, P_WINDOW, P_LINE_MIN_POINTS, P_LINE_MIN_RACC, P_LINE_MIN_LENGTH,
- P_PERP_TOL, P_R_MIN, P_R_MAX, P_R_STEP, P_CELL, P_CWINDOW, P_CTOL, P_CIRCLE_MIN_POINTS, P_SMALL) = range(17)
+ P_PERP_TOL, P_R_MIN, P_R_MAX, P_R_STEP, P_CELL, P_CWINDOW, P_CTOL, P_CIRCLE_MIN_POINTS, P_SMALL,
+ P_MIN_SAG) = range(18)
 
 # columns of the line rows
 L_SCAN, L_SEG, L_FIRST, L_LAST, L_N, L_X0, L_Y0, L_X1, L_Y1, L_RHO, L_THETA, L_LEN, L_RACC = range(13)
@@ -326,6 +327,8 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out) -> None:
         nx = -nx
         ny = -ny
     sag = -((x[near] - mx) * nx + (y[near] - my) * ny)   # P_near's bulge towards the scanner
+    if sag < p[P_MIN_SAG]:
+        return   # flat within the noise: a line or a blob, not an arc
     half = 0.5 * chord
     r_lo = max(p[P_R_MIN], half - tol)
     r_hi = p[P_R_MAX]
@@ -571,14 +574,16 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
 
 @njit(cache=True)
 def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, cos_t, sin_t, seg_out, seg_count,
-                  lines, circles, blobs, counts):
+                  lines, circles, blobs, counts, given, given_offsets):
     """Segment and extract features of every scan of a block (ranges (N, B), m). seg_out (N * B, 2) receives
-    every scan's segments in order, seg_count (N,) how many each scan has; counts = [lines, circles, blobs]."""
+    every scan's segments in order, seg_count (N,) how many each scan has; counts = [lines, circles, blobs].
+    With given_offsets of length N + 1, the segments are not computed but taken from `given` (rows
+    [start, end), scan k's at given_offsets[k]:given_offsets[k + 1])."""
     N, B = ranges.shape
     x = np.empty(B)
     y = np.empty(B)
-    starts = np.empty(B, np.int64)
-    ends = np.empty(B, np.int64)
+    starts = np.empty(B + 1, np.int64)
+    ends = np.empty(B + 1, np.int64)
     idx = np.empty(B, np.int64)
     sub_s = np.empty(MAX_SUB, np.int64)
     sub_e = np.empty(MAX_SUB, np.int64)
@@ -591,9 +596,20 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
     nb = 0
     ns = 0
     min_points = int(p[P_MIN_POINTS])
+    use_given = given_offsets.shape[0] == N + 1
     for k in range(N):
         r = ranges[k]
-        nseg = segment_scan(r, cos_inc, p[P_C0], c1, range_min, range_max, min_points, starts, ends)
+        if use_given:
+            nseg = 0
+            for q in range(given_offsets[k], given_offsets[k + 1]):
+                a = min(max(given[q, 0], 0), B)
+                b = min(max(given[q, 1], a), B)
+                if b > a and nseg < B + 1:
+                    starts[nseg] = a
+                    ends[nseg] = b
+                    nseg += 1
+        else:
+            nseg = segment_scan(r, cos_inc, p[P_C0], c1, range_min, range_max, min_points, starts, ends)
         for g in range(nseg):
             seg_out[ns + g, 0] = starts[g]
             seg_out[ns + g, 1] = ends[g]
@@ -601,6 +617,8 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
         seg_count[k] = nseg
         for i in range(B):
             ri = r[i]
+            if not valid_return(ri, range_min, range_max):
+                ri = 0.0   # only reachable through given segments: an invalid return is a point at the scanner
             x[i] = ri * cos_a[i]
             y[i] = ri * sin_a[i]
         nl, nc, nb = extract_scan(x, y, starts, ends, nseg, k, p, acc, cacc, cos_t, sin_t, idx, sub_s, sub_e,

@@ -123,10 +123,12 @@ _BLOB_NAMES = ("segment", "first", "last", "n_points", "x", "y", "size", "kind")
 
 
 def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odometry | None = None, *,
-                landmarks: bool = True, progress: Callable[[int, int], None] | None = None) -> RunFeatures:
+                landmarks: bool = True, segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                progress: Callable[[int, int], None] | None = None) -> RunFeatures:
     """Segment every scan and extract its lines, circles and blobs (HTL, HTC and the section 5.2 rule);
     with `landmarks`, also build the landmark database (world frame when `odometry` is given).
-    `progress(done, total)` is called after each block of scans."""
+    `segments` (start, end, offsets as segment_run gives them, e.g. a log's /datmo/segments) are used
+    instead of segmenting. `progress(done, total)` is called after each block of scans."""
     p = params or FeatureParams()
     _check(run)
     lo, hi = _range_limits(run)
@@ -139,6 +141,11 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
     cos_t, sin_t = np.cos(theta), np.sin(theta)
     vec = p.kernel_vector()
     cos_inc, c1 = float(np.cos(run.geometry.angle_increment)), _c1(run)
+    if segments is not None:
+        g_start, g_end, g_off = (np.asarray(v, np.int64) for v in segments)
+        if len(g_off) != N + 1:
+            raise InputError(f"segments for {len(g_off) - 1} scans, the run has {N}")
+        given = np.stack([g_start, g_end], axis=1) if len(g_start) else np.zeros((0, 2), np.int64)
     segs, seg_counts, parts = [], [], {"l": [], "c": [], "b": []}
     for a in range(0, N, BLOCK):
         block = ranges[a:a + BLOCK]
@@ -150,9 +157,14 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
         circles = np.empty((n * (B // 2 + 1) + 1, 9))
         blobs = np.empty((n * (B // 2 + 1) + 1, 9))
         got = np.zeros(3, np.int64)
+        if segments is not None:
+            sub_off = g_off[a:a + n + 1]
+            block_given, block_off = given[sub_off[0]:sub_off[-1]], sub_off - sub_off[0]
+        else:
+            block_given, block_off = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
         if B:
             K.extract_block(block, cos_a, sin_a, cos_inc, c1, lo, hi, vec, cos_t, sin_t, seg, count, lines,
-                            circles, blobs, got)
+                            circles, blobs, got, block_given, block_off)
         segs.append(seg[:int(count.sum())])
         seg_counts.append(count)
         for key, arr, m in (("l", lines, got[0]), ("c", circles, got[1]), ("b", blobs, got[2])):
@@ -222,10 +234,22 @@ def derive_segments(run: ScanRun, params: FeatureParams | None = None) -> dict[s
     return {mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, run.stamps, segment_payloads(run, start, end, offsets))}
 
 
+def decode_segments(payloads: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(start, end, offsets) of datmo_msgs/msg/Segments payloads (a log's /datmo/segments)."""
+    msgs = [cdr.decode(types.SEGMENTS, p) for p in payloads]
+    starts = [np.asarray(m["start"], np.int64) for m in msgs]
+    ends = [np.asarray(m["end"], np.int64) for m in msgs]
+    offsets = _offsets(np.array([len(s) for s in starts], np.int64))
+    empty = np.zeros(0, np.int64)
+    return (np.concatenate(starts) if starts else empty), (np.concatenate(ends) if ends else empty), offsets
+
+
 def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: FeatureParams | dict | None = None,
+                    segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
                     progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], RunFeatures]:
     """The channels `datmo features` adds ({topic: (msgtype, stamps, payloads)}: segments, features,
-    landmarks and feature markers) and the RunFeatures they came from."""
+    landmarks and feature markers) and the RunFeatures they came from. Given `segments` (a log's own),
+    they are used and /datmo/segments is not among the channels returned."""
     from ..log import mcapio
     from .markers import feature_markers
 
@@ -233,10 +257,11 @@ def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: F
         from .params import from_dict
 
         params = from_dict(params)
-    f = extract_run(run, params, odometry, progress=progress)
+    f = extract_run(run, params, odometry, segments=segments, progress=progress)
     stamps = run.stamps
-    channels = {
-        mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, stamps, segment_payloads(run, f.seg_start, f.seg_end, f.seg_offsets)),
+    channels = {} if segments is not None else {
+        mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, stamps, segment_payloads(run, f.seg_start, f.seg_end, f.seg_offsets))}
+    channels |= {
         mcapio.TOPIC_FEATURES: (types.FEATURES, stamps, feature_payloads(f)),
         mcapio.TOPIC_LANDMARKS: (types.LANDMARKS, stamps, landmark_payloads(f)),
         mcapio.TOPIC_MARKERS_FEATURES: (types.MARKER_ARRAY, stamps, feature_markers(run, f, odometry)),

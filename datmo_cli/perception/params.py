@@ -39,6 +39,7 @@ class FeatureParams:
     circle_tolerance: float = 0.02   # m; a point votes for a centre when | |p - c| - r | <= this
     circle_min_points: int = 4
     circle_check_extent: float = 0.35   # m; a one-line segment shorter than this also gets HTC (legs)
+    circle_min_sagitta: float = 0.02    # m; an arc must bulge this much towards the scanner (P_near vs chord)
     # landmarks (section 6.2)
     d_max: float = 1.5               # m; lines longer than this are static (walls)
     corner_gap: float = 0.3          # m; two wall lines meet when their ends are this close to the junction
@@ -64,7 +65,8 @@ class FeatureParams:
                          np.radians(self.vote_window), self.line_min_points, self.line_min_racc,
                          self.line_min_length, np.radians(self.perpendicular_tolerance), self.circle_radius_min,
                          self.circle_radius_max, self.circle_radius_step, self.circle_cell, self.circle_window,
-                         self.circle_tolerance, self.circle_min_points, self.circle_check_extent], np.float64)
+                         self.circle_tolerance, self.circle_min_points, self.circle_check_extent,
+                         self.circle_min_sagitta], np.float64)
 
 
 _POSITIVE_INT = {"min_points", "line_min_points", "circle_min_points", "landmark_min_count"}

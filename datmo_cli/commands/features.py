@@ -1,0 +1,81 @@
+"""`datmo features`: Hough lines and circles, blobs and landmarks of every scan (method.md sections 5, 6.2)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ..perception.params import FeatureParams
+from .segment import feature_params, write_derived
+
+D = FeatureParams()
+
+
+@click.command(name="features")
+@click.argument("input", type=click.Path(path_type=Path))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="The log to write (MCAP): the input's channels plus /datmo/features, /datmo/landmarks and "
+                   "/datmo/markers/features (and /datmo/segments when the input has none).")
+@click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
+@click.option("--config", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="TOML file with a [features] table: any parameter of datmo_cli/perception/params.py.")
+@click.option("--resegment", is_flag=True, help="Segment again even when the input has /datmo/segments.")
+@click.option("--c0", type=click.FloatRange(min=0), default=None,
+              help=f"Segmentation threshold C0, m [default: {D.c0:g}].")
+@click.option("--min-points", type=click.IntRange(min=1), default=None,
+              help=f"Drop segments with fewer points [default: {D.min_points}; the paper's is 5].")
+@click.option("--theta-resolution", type=click.FloatRange(min=0.05, max=10), default=None,
+              help=f"HTL theta cell, degrees [default: {D.theta_resolution:g}].")
+@click.option("--rho-resolution", type=click.FloatRange(min=0, min_open=True), default=None,
+              help=f"HTL rho cell, m [default: {D.rho_resolution:g}].")
+@click.option("--circle-radius", "circle_radius", type=(float, float), default=None, metavar="MIN MAX",
+              help=f"HTC radius range, m [default: {D.circle_radius_min:g} {D.circle_radius_max:g}].")
+@click.option("--d-max", type=click.FloatRange(min=0, min_open=True), default=None,
+              help=f"Lines longer than this are walls (static), m [default: {D.d_max:g}].")
+def command(input: Path, output: Path, force: bool, config: Path | None, resegment: bool, c0: float | None,
+            min_points: int | None, theta_resolution: float | None, rho_resolution: float | None,
+            circle_radius: tuple[float, float] | None, d_max: float | None) -> None:
+    """Extract the features of every scan: lines by the Hough transform for lines (accumulators adapted to
+    each segment, several lines per segment by following the peak, refined by least squares), circles by
+    the Hough transform for circles (centre from P_ini, P_near, P_end; refined by least squares), the
+    paper's rule choosing between them, blobs, and landmarks (corners, wall deflections, line ends,
+    columns, benches) accumulated into a database (in the odom frame when the log has /odom).
+
+    Writes /datmo/features, /datmo/landmarks and /datmo/markers/features (for Foxglove), segmenting first
+    when the input has no /datmo/segments. Options override the config file, which overrides the defaults;
+    the effective parameters go into the output's metadata.
+
+    Example: datmo features sample_logs/hall.mcap -o hall-features.mcap
+    """
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    from ..log import mcapio
+    from ..perception.features import decode_segments, derive_features
+
+    rmin, rmax = circle_radius if circle_radius is not None else (None, None)
+    params = feature_params(config, c0=c0, min_points=min_points, theta_resolution=theta_resolution,
+                            rho_resolution=rho_resolution, circle_radius_min=rmin, circle_radius_max=rmax,
+                            d_max=d_max)
+    log = mcapio.read_log(input, topics=None)
+    run = mcapio.run_from_log(log)
+    odometry = mcapio.odometry_from_log(log)
+    segments = None
+    if log.has(mcapio.TOPIC_SEGMENTS) and not resegment:
+        segments = decode_segments(log.messages[mcapio.TOPIC_SEGMENTS][1])
+        if len(segments[2]) - 1 != len(run):
+            from ..errors import InputError
+
+            raise InputError(f"{input}: {len(segments[2]) - 1} messages on {mcapio.TOPIC_SEGMENTS} for {len(run)} "
+                             "scans; run datmo segment again or pass --resegment")
+    with Progress(TextColumn("features"), BarColumn(), MofNCompleteColumn(), console=Console(stderr=True),
+                  transient=True) as bar:
+        task = bar.add_task("features", total=len(run))
+        derived, f = derive_features(run, odometry=odometry, params=params, segments=segments,
+                                     progress=lambda done, total: bar.update(task, completed=done, total=total))
+    write_derived(input, output, "features", derived, {"features": params.to_dict()}, log, force)
+    c = f.counts()
+    n_lm = len(f.landmarks.final()) if f.landmarks is not None else 0
+    click.echo(f"{output}: {len(run):,} scans; per scan {c['lines']:.1f} lines, {c['circles']:.1f} circles, "
+               f"{c['blobs']:.1f} blobs; {n_lm} landmarks", err=True)
