@@ -14,8 +14,8 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP) ## create .venv and install datmo (editable) with the dev extras
 
-demo: install ## process the hall sample log and print its report
-	$(BIN)/datmo info $(DEMO_LOG)
+demo: install ## process the hall sample log: segment, features, track; print the report and draw out/hall.png
+	$(BIN)/datmo run $(DEMO_LOG) -o out --force --plot
 
 test: install ## the whole test suite (what CI runs)
 	$(BIN)/pytest -q
@@ -32,8 +32,14 @@ bench: install ## speed figures: scans/s and µs/scan per stage beside plain MCA
 accuracy: install ## accuracy figures on simulated logs (ground truth) and real data
 	$(BIN)/python -m benchmarks accuracy
 
+regress: install ## datmo run + evaluate on every sample log, compared with tests/regress_baseline.json
+	$(BIN)/python -m benchmarks.regress
+
+regress-update: install ## rewrite tests/regress_baseline.json from the current figures (review the diff)
+	$(BIN)/python -m benchmarks.regress --update
+
 sample-logs: install ## regenerate sample_logs/ bit for bit
 	PATH="$(CURDIR)/$(BIN):$$PATH" bash sample_logs/make.sh
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache
+	rm -rf out $(VENV) build *.egg-info .pytest_cache .ruff_cache

@@ -74,8 +74,9 @@ def plot_run(data: RunData, out: str | Path, *, title: str | None = None, max_po
         for typ in sorted(set(db["type"].tolist())):
             sel = db[db["type"] == typ]
             m = LANDMARK_MARKERS.get(typ, "*")
-            ax.scatter(sel["x"], sel["y"], marker=m, s=70, facecolors="none" if m in "os^v<" else "black",
-                       edgecolors="black", linewidths=1.3, zorder=4)
+            hollow = m in "os^v<D"
+            style = {"facecolors": "none", "edgecolors": "black"} if hollow else {"c": "black"}
+            ax.scatter(sel["x"], sel["y"], marker=m, s=70, linewidths=1.3, zorder=4, **style)
             handles.append(Line2D([], [], marker=m, ls="", mfc="none", mec="black",
                                   label=LANDMARK_NAMES.get(typ, str(typ))))
 
