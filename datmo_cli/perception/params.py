@@ -25,7 +25,7 @@ class FeatureParams:
     # lines, HTL (section 5.1)
     theta_resolution: float = 1.0    # degrees per theta cell
     rho_resolution: float = 0.02     # m per rho cell
-    vote_window: float = 12.0        # degrees either side of a point's local normal that it votes for (90: all)
+    vote_window: float = 10.0        # degrees either side of a point's local normal that it votes for (90: all)
     line_min_points: int = 4         # a line has more than 3 points
     line_min_racc: float = 0.5       # and r_acc above this
     line_min_length: float = 0.10    # and is longer than this, m
