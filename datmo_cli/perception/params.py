@@ -8,7 +8,6 @@ Units: metres and degrees.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -103,17 +102,6 @@ def from_dict(values: dict, where: str = "features") -> FeatureParams:
 
 def load_toml(path: str | Path) -> FeatureParams:
     """Parameters from the `[features]` table of a TOML file (or its top level when it has no such table)."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: {exc}") from None
-    table = data.get("features", data)
-    if not isinstance(table, dict):
-        raise ConfigError(f"{path}: features must be a table")
-    table = {k: v for k, v in table.items() if not isinstance(v, dict)}   # other commands' tables
-    return from_dict(table, where=f"{path}: features")
+    from ..config import read_table
+
+    return from_dict(read_table(path, "features"), where=f"{path}: features")
