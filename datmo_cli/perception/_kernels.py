@@ -12,7 +12,7 @@ from numba import njit
 
 (P_C0, P_MIN_POINTS, P_THETA_RES, P_RHO_RES, P_WINDOW, P_LINE_MIN_POINTS, P_LINE_MIN_RACC, P_LINE_MIN_LENGTH,
  P_PERP_TOL, P_R_MIN, P_R_MAX, P_R_STEP, P_CELL, P_CWINDOW, P_CTOL, P_CIRCLE_MIN_POINTS, P_SMALL,
- P_MIN_SAG) = range(18)
+ P_MIN_SAG, P_LEG_R) = range(19)
 
 # columns of the line rows
 L_SCAN, L_SEG, L_FIRST, L_LAST, L_N, L_X0, L_Y0, L_X1, L_Y1, L_RHO, L_THETA, L_LEN, L_RACC = range(13)
@@ -506,13 +506,16 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
         # circle of the allowed radii (a long wall with a deflection stays lines)
         ext = np.hypot(x[e - 1] - x[s], y[e - 1] - y[s])
         try_circle = False
+        leg_only = False   # tested as a circle only for a leg: accepted only with a leg's radius
         if ext <= 2.0 * p[P_R_MAX] + 2.0 * p[P_CTOL]:
             if ncand == 0:
                 try_circle = True
             elif ncand == 1:
                 # datmo: a single line over a segment smaller than a leg's width is tested as a circle too
                 # (a leg a few metres away is a shallow arc that HTL takes for a short line)
-                try_circle = cand[cidx[0], 10] < min_racc or ext <= p[P_SMALL]
+                try_circle = cand[cidx[0], 10] < min_racc
+                leg_only = not try_circle and ext <= p[P_SMALL]
+                try_circle = try_circle or leg_only
             elif ncand == 2:
                 try_circle = not _perpendicular(cand[cidx[0], 8], cand[cidx[1], 8], p[P_PERP_TOL])
             else:
@@ -528,7 +531,8 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                 circle_of_run(x, y, s, e, p, cacc, idx, cout)
             else:
                 cout[4] = 0.0
-            if cout[4] > htl_racc and cout[0] >= p[P_CIRCLE_MIN_POINTS]:
+            if cout[4] > htl_racc and cout[0] >= p[P_CIRCLE_MIN_POINTS] and \
+                    (not leg_only or cout[3] <= p[P_LEG_R]):
                 row = circles[nc]
                 row[C_SCAN] = scan
                 row[C_SEG] = g

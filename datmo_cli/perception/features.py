@@ -189,7 +189,7 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
         line_scan = rows["l"][:, 0].astype(np.int64)
         det = np.concatenate([
             junction_detections(out.lines, line_scan, p),
-            line_end_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, p),
+            line_end_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, hi, p),
             circle_detections(out.circles, rows["c"][:, 0].astype(np.int64), out.lines, line_scan,
                               out.line_offsets, out.seg_start, out.seg_end, out.seg_offsets, ranges, p),
             seat_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, p)])

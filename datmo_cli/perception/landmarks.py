@@ -52,7 +52,8 @@ def junction_detections(lines: np.ndarray, scan: np.ndarray, p: FeatureParams) -
     gap = np.maximum(np.hypot(jx - a["x_end"], jy - a["y_end"]), np.hypot(jx - b["x_ini"], jy - b["y_ini"]))
     ok = np.isfinite(jx) & (gap <= p.corner_gap) & (np.minimum(a["length"], b["length"]) >= 2 * p.line_min_length)
     corner = ok & (np.abs(turn - np.pi / 2) <= np.radians(p.perpendicular_tolerance))
-    deflection = ok & ~corner & (turn >= np.radians(p.deflection_min))
+    walls = np.minimum(a["length"], b["length"]) >= 0.5   # a deflection is of a wall, not of a small object
+    deflection = ok & ~corner & walls & (turn >= np.radians(p.deflection_min))
     # bisector of the two walls seen from the junction, and whether it bulges towards the scanner
     ux, uy = a["x_ini"] - jx, a["y_ini"] - jy
     vx, vy = b["x_end"] - jx, b["y_end"] - jy
@@ -71,9 +72,11 @@ def junction_detections(lines: np.ndarray, scan: np.ndarray, p: FeatureParams) -
 
 
 def line_end_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray,
-                        seg_offsets: np.ndarray, ranges: np.ndarray, p: FeatureParams) -> np.ndarray:
-    """Ends of wall lines (longer than d_max) that end their segment where the neighbouring beam is not
-    nearer (so the end is seen, not hidden): undefined line ends, sensor frame."""
+                        seg_offsets: np.ndarray, ranges: np.ndarray, range_max: float, p: FeatureParams) -> np.ndarray:
+    """Undefined line ends, sensor frame: ends of wall lines (longer than d_max) that end their segment
+    where the neighbouring beam returns nothing or returns at least 0.5 m farther (so the end is seen: not
+    hidden by something nearer, and not just a wall at a grazing angle breaking into pieces), and that lie
+    well within the range limit (a wall running out of range has no end there)."""
     k = np.flatnonzero(lines["length"] > p.d_max)
     if not len(k):
         return np.zeros((0, 6))
@@ -89,8 +92,8 @@ def line_end_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarr
         inside = (nbeam >= 0) & (nbeam < B)
         here = ranges[s, beam]
         there = np.where(inside, ranges[s, np.clip(nbeam, 0, B - 1)], np.inf)
-        hidden = np.isfinite(there) & (there < here - p.c0)
-        keep = (beam == at_end) & ~hidden
+        seen = (~np.isfinite(there) | (there > here + 0.5)) & (here < 0.9 * range_max)
+        keep = (beam == at_end) & seen
         rows = np.zeros((int(keep.sum()), 6))
         rows[:, DET_SCAN], rows[:, DET_TYPE] = s[keep], LINE_END
         rows[:, DET_X], rows[:, DET_Y] = ex[keep], ey[keep]
@@ -215,13 +218,15 @@ def to_world(det: np.ndarray, poses: np.ndarray | None) -> np.ndarray:
 
 
 @njit(cache=True)
-def accumulate(det, n_scans, match, min_count, max_drift, forget, db, snap_idx, snap_vals, snap_count):
+def accumulate(det, stamps, match, min_count, max_drift, column_time, forget, db, snap_idx, snap_vals, snap_count):
     """Fold detections (rows DET_*, sorted by scan) into the database `db` (rows: type, x, y, orientation,
     size, count, first scan, last scan, x0, y0, moved); after each scan k, the landmarks in the database
     (count >= min_count, not moved) are appended to snap_idx (row index) and snap_vals (x, y, orientation,
     size, count, last scan: their state then), and their number stored in snap_count[k]. A candidate seen
-    fewer than min_count times and not for `forget` scans is forgotten. Returns (rows used, snapshot
-    entries wanted)."""
+    fewer than min_count times and not for `forget` scans is forgotten; a column enters the database only
+    once seen over `column_time` ns (a circle object that stops for a moment is not a column). Returns
+    (rows used, snapshot entries wanted)."""
+    n_scans = stamps.shape[0]
     nd = det.shape[0]
     n = 0
     ns = 0
@@ -259,10 +264,12 @@ def accumulate(det, n_scans, match, min_count, max_drift, forget, db, snap_idx, 
                 db[n, 8] = x
                 db[n, 9] = y
                 db[n, 10] = 0.0
+                db[n, 11] = 0.0
                 live[nlive] = n
                 nlive += 1
                 n += 1
-                if min_count <= 1:
+                if min_count <= 1 and (t != 4.0 or column_time <= 0):
+                    db[n - 1, 11] = 1.0
                     confirmed[nconf] = best
                     nconf += 1
             elif best >= 0:
@@ -277,14 +284,16 @@ def accumulate(det, n_scans, match, min_count, max_drift, forget, db, snap_idx, 
                 if (t == 4.0 and np.hypot(x - db[best, 8], y - db[best, 9]) > max_drift) or \
                         (t == 5.0 and np.hypot(x - db[best, 8], y - db[best, 9]) > 2 * match):
                     db[best, 10] = 1.0
-                if c == min_count:
+                if db[best, 11] == 0.0 and c >= min_count and \
+                        (t != 4.0 or stamps[k] - stamps[int(db[best, 6])] >= column_time):
+                    db[best, 11] = 1.0
                     confirmed[nconf] = best
                     nconf += 1
             j += 1
         u = 0
         while u < nlive:   # forget stale candidates and moved columns
             q = live[u]
-            if (db[q, 5] < min_count and k - db[q, 7] > forget) or db[q, 10] != 0.0:
+            if (db[q, 11] == 0.0 and k - db[q, 7] > forget) or db[q, 10] != 0.0:
                 nlive -= 1
                 live[u] = live[nlive]
             else:
@@ -315,12 +324,12 @@ class LandmarkDatabase:
         cap = max(len(det), 1)
         snap_cap = 4096
         while True:
-            self.rows = np.zeros((cap, 11))
+            self.rows = np.zeros((cap, 12))
             self.snap_idx = np.zeros(snap_cap, np.int64)
             self.snap_vals = np.zeros((snap_cap, 6))
             snap_count = np.zeros(n_scans, np.int64)
-            n, ns = accumulate(det, n_scans, p.landmark_match, p.landmark_min_count, p.column_max_drift, 10,
-                               self.rows, self.snap_idx, self.snap_vals, snap_count)
+            n, ns = accumulate(det, self._stamps, p.landmark_match, p.landmark_min_count, p.column_max_drift,
+                               p.column_min_time * 1e9, 10, self.rows, self.snap_idx, self.snap_vals, snap_count)
             if ns <= snap_cap:
                 break
             snap_cap = ns

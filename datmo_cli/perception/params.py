@@ -37,7 +37,8 @@ class FeatureParams:
     circle_window: float = 0.04      # m; votes within this of the P_ini/P_near/P_end estimate
     circle_tolerance: float = 0.02   # m; a point votes for a centre when | |p - c| - r | <= this
     circle_min_points: int = 4
-    circle_check_extent: float = 0.35   # m; a one-line segment shorter than this also gets HTC (legs)
+    circle_check_extent: float = 0.35   # m; a one-line segment shorter than this also gets HTC (legs) ...
+    circle_check_radius: float = 0.15   # m; ... and is a circle only with a radius up to this
     circle_min_sagitta: float = 0.02    # m; an arc must bulge this much towards the scanner (P_near vs chord)
     # landmarks (section 6.2)
     d_max: float = 1.5               # m; lines longer than this are static (walls)
@@ -49,6 +50,7 @@ class FeatureParams:
     landmark_match: float = 0.3      # m; a detection within this of a landmark is the same landmark
     landmark_min_count: int = 3      # scans a landmark is seen in before it enters the database
     column_max_drift: float = 0.1    # m; a column candidate that moves more than this is not a column
+    column_min_time: float = 3.0     # s; a column is seen in place at least this long
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -65,7 +67,7 @@ class FeatureParams:
                          self.line_min_length, np.radians(self.perpendicular_tolerance), self.circle_radius_min,
                          self.circle_radius_max, self.circle_radius_step, self.circle_cell, self.circle_window,
                          self.circle_tolerance, self.circle_min_points, self.circle_check_extent,
-                         self.circle_min_sagitta], np.float64)
+                         self.circle_min_sagitta, self.circle_check_radius], np.float64)
 
 
 _POSITIVE_INT = {"min_points", "line_min_points", "circle_min_points", "landmark_min_count"}
