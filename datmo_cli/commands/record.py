@@ -1,0 +1,223 @@
+"""`datmo record`: stream a SICK LMS200 over a serial port into a log, safely.
+
+The log is written in streaming mode and flushed at least twice a second, so a power cut loses at most
+about half a second (the reader recovers every complete chunk of the temporary file). Ctrl-C and SIGTERM
+stop the scanner's output and finish the file; a disconnect finishes it up to the last good scan.
+"""
+
+from __future__ import annotations
+
+import signal
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import click
+
+FLUSH_EVERY_S = 0.5
+TELEGRAM_TYPE = "std_msgs/msg/UInt8MultiArray"
+
+
+def telegram_payload(raw: bytes) -> bytes:
+    """CDR of std_msgs/msg/UInt8MultiArray holding `raw` (empty layout)."""
+    return b"\x00\x01\x00\x00" + struct.pack("<III", 0, 0, len(raw)) + raw
+
+
+@dataclass
+class RecordResult:
+    """What a recording did: scans written, why it ended, the driver's counts."""
+
+    path: Path
+    scans: int = 0
+    seconds: float = 0.0
+    reason: str = ""
+    stats: dict = field(default_factory=dict)
+    disconnect: str | None = None
+
+
+def _panel(scans: int, elapsed: float, stats, port: str, baud: int):  # noqa: ANN001, ANN202
+    from rich.table import Table
+
+    t = Table.grid(padding=(0, 2))
+    rate = scans / elapsed if elapsed > 0 else 0.0
+    t.add_row("[bold]recording[/]", f"{port} at {baud} Bd", f"{elapsed:6.1f} s")
+    t.add_row("scans", f"{scans:,}", f"{rate:6.2f} Hz")
+    t.add_row("crc errors", f"{stats.crc_errors:,}", f"length errors {stats.length_errors:,}")
+    t.add_row("resyncs", f"{stats.resyncs:,}", f"dropped scans {stats.dropped:,}")
+    return t
+
+
+def record(driver, writer, *, duration: float | None = None, max_scans: int | None = None,  # noqa: ANN001
+           raw: bool = False, stop: threading.Event | None = None, display: bool = True) -> RecordResult:
+    """Connect `driver` (an LMS2xx), stream scans into `writer` (a streaming LogWriter) until `duration`
+    seconds, `max_scans`, `stop` or a disconnect; stop the scanner and close the writer (also after a
+    disconnect). Other errors abort the writer and propagate."""
+    from ..lms2xx.driver import DeviceDisconnected
+    from ..log import mcapio
+
+    stop = stop or threading.Event()
+    result = RecordResult(writer.path)
+    if raw:
+        def on_telegram(frame, stamp: int) -> None:  # noqa: ANN001
+            writer.write(mcapio.TOPIC_TELEGRAM, TELEGRAM_TYPE, stamp, telegram_payload(frame.raw))
+
+        driver.on_telegram = on_telegram
+    try:
+        status = driver.connect()
+        meta = status.as_metadata()
+        meta.update(port=str(driver.name), recorded_baud=str(driver.baud),
+                    config_hex=driver.config.raw.hex() if driver.config else "",
+                    indices=str(bool(driver.config and driver.config.indices)))
+        writer.add_metadata("lms2xx.status", meta)
+        geometry = driver.geometry()
+        driver.start()
+    except BaseException:
+        writer.abort()
+        driver.close()
+        raise
+    t0 = time.monotonic()
+    last_flush = t0
+    live = None
+    if display:
+        from rich.console import Console
+        from rich.live import Live
+
+        console = Console(stderr=True)
+        if console.is_terminal:
+            live = Live(_panel(0, 0.0, driver.stats, driver.name, driver.baud), console=console,
+                        refresh_per_second=4, transient=True)
+            live.start()
+    last_view = t0
+    try:
+        while True:
+            now = time.monotonic()
+            if stop.is_set():
+                result.reason = "interrupted"
+                break
+            if duration is not None and now - t0 >= duration:
+                result.reason = "duration"
+                break
+            if max_scans is not None and result.scans >= max_scans:
+                result.reason = "scans"
+                break
+            try:
+                scan = driver.read_scan(timeout=0.1)
+            except DeviceDisconnected as exc:
+                result.disconnect = str(exc)
+                result.reason = "disconnected"
+                break
+            if scan is not None:
+                writer.write_scan(scan.stamp_ns, scan.ranges, geometry)
+                result.scans += 1
+            now = time.monotonic()
+            if now - last_flush >= FLUSH_EVERY_S:
+                writer.flush()
+                last_flush = now
+            if live is not None and now - last_view >= 0.25:
+                live.update(_panel(result.scans, now - t0, driver.stats, driver.name, driver.baud))
+                last_view = now
+        result.seconds = time.monotonic() - t0
+        if result.disconnect is None:
+            try:
+                driver.stop()
+            except Exception as exc:  # noqa: BLE001 - finish the file whatever the device does now
+                import warnings
+
+                warnings.warn(f"{driver.name}: could not stop the scanner cleanly ({exc})", stacklevel=2)
+        result.stats = driver.stats.as_dict()
+        writer.add_metadata("lms2xx.stats", result.stats)
+        writer.close()
+    except BaseException:
+        writer.abort()
+        raise
+    finally:
+        if live is not None:
+            live.stop()
+        driver.close()
+    return result
+
+
+class _Signals:
+    """Turn SIGINT and SIGTERM into a stop request while recording (main thread only)."""
+
+    def __init__(self, stop: threading.Event) -> None:
+        self.stop = stop
+        self.old: dict[int, object] = {}
+
+    def _handler(self, signum, frame) -> None:  # noqa: ANN001
+        if self.stop.is_set():  # a second Ctrl-C: give up at once
+            raise KeyboardInterrupt
+        self.stop.set()
+
+    def __enter__(self) -> _Signals:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self.old[sig] = signal.signal(sig, self._handler)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, old in self.old.items():
+            signal.signal(sig, old)
+
+
+@click.command(name="record")
+@click.option("--port", required=True, metavar="PORT",
+              help="Serial device of the LMS200 (e.g. /dev/ttyUSB0, or the path `datmo emulate` prints).")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="The log to write (MCAP).")
+@click.option("--baud", type=click.Choice(["9600", "19200", "38400", "500000"]), default="38400", show_default=True,
+              help="Baud to record at; the device's current baud is found automatically. 500000 needs RS-422.")
+@click.option("--angle", type=click.Choice(["180", "100"]), default="180", show_default=True,
+              help="Field of view, degrees.")
+@click.option("--resolution", type=click.Choice(["1", "0.5", "0.25"]), default="0.5", show_default=True,
+              help="Angular resolution, degrees (0.25 only with --angle 100).")
+@click.option("--units", type=click.Choice(["mm", "cm"]), default="mm", show_default=True,
+              help="Distance units the device reports (changed in its EEPROM only when different).")
+@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Stop after this many seconds.")
+@click.option("--scans", "max_scans", type=click.IntRange(min=1), default=None, help="Stop after this many scans.")
+@click.option("--indices", is_flag=True,
+              help="Have the device send real-time scan indices (exact dropped-scan counts; one EEPROM write "
+                   "if it does not send them yet).")
+@click.option("--interlaced", is_flag=True,
+              help="Interlaced output (20 2A): partial scans merged into complete ones by the host.")
+@click.option("--raw", is_flag=True, help="Also store every telegram's bytes on /lms2xx/telegram.")
+@click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
+def command(port: str, output: Path, baud: str, angle: str, resolution: str, units: str, duration: float | None,
+            max_scans: int | None, indices: bool, interlaced: bool, raw: bool, force: bool) -> None:
+    """Record a SICK LMS200 over a serial port into a log.
+
+    Finds the scanner's baud, switches to --baud, sets the variant and units only when they differ,
+    and streams scans to /scan (sensor_msgs/LaserScan, stamped with the host time of each telegram's
+    first byte) until --duration, --scans, Ctrl-C or SIGTERM; the scanner's output is then stopped and
+    the file finished. Data reaches the disk at least twice a second. The device status goes into the
+    log's metadata (lms2xx.status), with the counts of CRC errors, resyncs and dropped scans (lms2xx.stats).
+
+    Example: datmo record --port /dev/ttyUSB0 -o run.mcap
+    """
+    from ..errors import DeviceError
+    from ..lms2xx.driver import LMS2xx
+    from ..log import mcapio
+
+    if angle == "180" and resolution == "0.25":
+        raise click.BadParameter("0.25° is available only with --angle 100", param_hint="--resolution")
+    params = {"port": port, "baud": int(baud), "angle": int(angle), "resolution": float(resolution), "units": units,
+              "duration": duration, "scans": max_scans, "indices": indices, "interlaced": interlaced, "raw": raw}
+    writer = mcapio.LogWriter(output, force=force, provenance=mcapio.Provenance("record", params, []),
+                              streaming=True)
+    driver = LMS2xx(port, baud=int(baud), angle=int(angle), resolution=float(resolution), units=units,
+                    indices=indices, interlaced=interlaced)
+    stop = threading.Event()
+    with _Signals(stop):
+        result = record(driver, writer, duration=duration, max_scans=max_scans, raw=raw, stop=stop)
+    s = result.stats
+    rate = result.scans / result.seconds if result.seconds > 0 else 0.0
+    click.echo(f"{output}: {result.scans} scans in {result.seconds:.1f} s ({rate:.2f} Hz); "
+               f"crc errors {s.get('crc_errors', 0)}, length errors {s.get('length_errors', 0)}, "
+               f"resyncs {s.get('resyncs', 0)}, dropped scans {s.get('dropped', 0)}"
+               + (" (interrupted)" if result.reason == "interrupted" else ""), err=True)
+    if result.disconnect is not None:
+        raise DeviceError(f"{result.disconnect}; {output} is complete up to the last good scan "
+                          f"({result.scans} scans)")
