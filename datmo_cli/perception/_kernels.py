@@ -492,9 +492,9 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                 dt = min(dt, np.pi - dt)
                 same_side = abs(a[7] - b[7]) if abs(a[8] - b[8]) < np.pi / 2 else abs(a[7] + b[7])
                 if dt < 3.0 * np.pi / 180 and same_side < 2 * rho_res and kept[q] == kept[m - 1] + 1:
-                    na = sub_e[kept[m - 1]] - sub_s[kept[m - 1]]
-                    nb = sub_e[kept[q]] - sub_s[kept[q]]
-                    merged = a[10] * na + b[10] * nb
+                    len_a = sub_e[kept[m - 1]] - sub_s[kept[m - 1]]
+                    len_b = sub_e[kept[q]] - sub_s[kept[q]]
+                    merged = a[10] * len_a + b[10] * len_b
                     line_of_run(x, y, sub_s[kept[m - 1]], sub_e[kept[q]], a[8], a[7], merged, rho_res, idx, lo)
                     sub_e[kept[m - 1]] = sub_e[kept[q]]
                     cand[kept[m - 1], :] = lo
