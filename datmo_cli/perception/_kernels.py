@@ -159,16 +159,16 @@ def _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, max_width) -> int:
 
 
 @njit(cache=True)
-def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touched, sub_s, sub_e, peaks) -> int:
+def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touched, sub_s, sub_e, peaks, hist) -> int:
     """Split points [s, e) into runs that each hold one line: the accumulator peak is followed as points are
     added in scan order, and when more than three consecutive new points lie off the peak's line (farther
     than a rho cell), a new line starts at the first of them. Returns the number of runs in sub_s/sub_e;
     peaks[k] = (votes, theta cell, rho cell) of run k's accumulator peak (lo: see _offsets_for; cell: see
-    normal_cells; k: theta cells voted either side of the normal)."""
+    normal_cells; k: theta cells voted either side of the normal; hist: scratch of at least e - s rows)."""
     width = _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, acc.shape[1])
     inv = 1.0 / rho_res
     best = np.zeros(3, np.int64)
-    hist = np.zeros((e - s, 3), np.int64)   # the peak after each point: a run's peak without re-voting
+    # hist[i - s]: the peak after point i, so a run's peak needs no re-voting
     n = 0
     start = s
     off = 0
@@ -278,7 +278,7 @@ def line_of_run(x, y, s, e, theta_t, rho_p, votes, rho_res, idx, out) -> None:
 def fit_circle(x, y, idx, m, a, b, r):
     """Geometric least-squares circle through points idx[:m] (Gauss-Newton from (a, b, r)); returns
     (a, b, r, ok)."""
-    for _ in range(10):
+    for _ in range(8):
         # normal equations of residuals d_k - r, d_k = |p_k - c|
         j00 = j01 = j02 = j11 = j12 = j22 = 0.0
         g0 = g1 = g2 = 0.0
@@ -310,16 +310,17 @@ def fit_circle(x, y, idx, m, a, b, r):
         a -= s0
         b -= s1
         r -= s2
-        if abs(s0) + abs(s1) + abs(s2) < 1e-6:
+        if abs(s0) + abs(s1) + abs(s2) < 1e-5:
             break
     return a, b, r, np.isfinite(a) and np.isfinite(b) and np.isfinite(r) and r > 0
 
 
 @njit(cache=True)
-def circle_of_run(x, y, s, e, p, cacc, idx, out) -> None:
+def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     """HTC on points [s, e): centre estimated from P_ini, P_near (nearest the scanner) and P_end, votes over
     (a, b) in a window around it for each radius the arc allows, peak, then a least-squares fit over the
-    points within the tolerance. out = [n_points, x, y, radius, r_acc]; r_acc 0 when no circle fits."""
+    points within the tolerance. out = [n_points, x, y, radius, r_acc]; r_acc 0 when no circle fits. A
+    peak whose r_acc is not above `beat` is not refined (out[0] = 0: it would not be kept anyway)."""
     out[0] = 0.0
     out[4] = 0.0
     n = e - s
@@ -403,6 +404,9 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out) -> None:
                     br = r
     if best == 0:
         return
+    if best / n <= beat:
+        out[4] = best / n
+        return
     m = 0
     for i in range(s, e):
         if abs(np.hypot(x[i] - ba, y[i] - bb) - br) <= tol:
@@ -439,33 +443,25 @@ def _convex(ax, ay, jx, jy, bx, by) -> bool:
 
 @njit(cache=True)
 def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx, sub_s, sub_e,
-                 lines, nl, circles, nc, blobs, nb):
+                 lines, nl, circles, nc, blobs, nb, work):
     """Features of one scan's segments (points x, y, m, sensor frame): HTL on every segment, then the
     decision rule of method.md section 5.2. Appends rows to lines/circles/blobs from nl/nc/nb; returns the
-    new counts."""
+    new counts. `work`: see scratch()."""
     rho_res = p[P_RHO_RES]
     window = p[P_WINDOW]
     min_pts = p[P_LINE_MIN_POINTS]
     min_racc = p[P_LINE_MIN_RACC]
     min_len = p[P_LINE_MIN_LENGTH]
-    lo = np.empty(11)
+    lo, toff, cell, touched, peaks, cand, kept, cidx, cout, hist = work
     nt = cos_t.shape[0]
-    toff = np.empty(nt)
-    cell = np.empty(x.shape[0], np.int64)
-    touched = np.zeros(nt, np.bool_)
     kwin = int(window / (np.pi / nt))
-    peaks = np.empty((MAX_SUB, 3), np.int64)
-    tstep = np.pi / cos_t.shape[0]
-    cand = np.empty((MAX_SUB, 11))
-    kept = np.empty(MAX_SUB, np.int64)
-    cidx = np.empty(MAX_SUB, np.int64)
-    cout = np.empty(5)
+    tstep = np.pi / nt
     for g in range(nseg):
         s = starts[g]
         e = ends[g]
         normal_cells(x, y, s, e, nt, cell)
         nsub = line_subsegments(x, y, s, e, acc, toff, cos_t, sin_t, rho_res, kwin, cell, touched, sub_s, sub_e,
-                                peaks)
+                                peaks, hist)
         nkept = 0
         ncand = 0
         votes = 0.0
@@ -528,7 +524,7 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                 try_circle = convex >= 2
         if try_circle:
             if e - s >= p[P_CIRCLE_MIN_POINTS]:
-                circle_of_run(x, y, s, e, p, cacc, idx, cout)
+                circle_of_run(x, y, s, e, p, cacc, idx, cout, htl_racc)
             else:
                 cout[4] = 0.0
             if cout[4] > htl_racc and cout[0] >= p[P_CIRCLE_MIN_POINTS] and \
@@ -621,6 +617,10 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
     ns = 0
     min_points = int(p[P_MIN_POINTS])
     use_given = given_offsets.shape[0] == N + 1
+    nt = cos_t.shape[0]
+    work = (np.empty(11), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
+            np.empty((MAX_SUB, 3), np.int64), np.empty((MAX_SUB, 11)), np.empty(MAX_SUB, np.int64),
+            np.empty(MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64))
     for k in range(N):
         r = ranges[k]
         if use_given:
@@ -646,7 +646,7 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
             x[i] = ri * cos_a[i]
             y[i] = ri * sin_a[i]
         nl, nc, nb = extract_scan(x, y, starts, ends, nseg, k, p, acc, cacc, cos_t, sin_t, idx, sub_s, sub_e,
-                                  lines, nl, circles, nc, blobs, nb)
+                                  lines, nl, circles, nc, blobs, nb, work)
     counts[0] = nl
     counts[1] = nc
     counts[2] = nb

@@ -22,7 +22,7 @@ class FeatureParams:
     c0: float = 0.08                 # m; threshold C0 + C1 * min(r_i, r_i+1), C1 from the scan's angle step
     min_points: int = 5              # segments with fewer points are dropped (paper: 5)
     # lines, HTL (section 5.1)
-    theta_resolution: float = 1.0    # degrees per theta cell
+    theta_resolution: float = 1.5    # degrees per theta cell (the least-squares fit refines the angle)
     rho_resolution: float = 0.02     # m per rho cell
     vote_window: float = 10.0        # degrees either side of a point's local normal that it votes for (90: all)
     line_min_points: int = 4         # a line has more than 3 points
