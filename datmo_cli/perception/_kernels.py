@@ -42,8 +42,8 @@ def segment_scan(r, cos_inc, c0, c1, range_min, range_max, min_points, starts, e
     for i in range(B + 1):
         ok = i < B and valid_return(r[i], range_min, range_max)
         if ok and start >= 0:
-            a = r[i - 1]
-            b = r[i]
+            a = np.float64(r[i - 1])   # float64 arithmetic whatever the ranges' type
+            b = np.float64(r[i])
             d2 = a * a + b * b - 2.0 * a * b * cos_inc
             d = np.sqrt(max(d2, 0.0))
             if d > c0 + c1 * min(a, b):
@@ -159,10 +159,38 @@ def _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, max_width) -> int:
 
 
 @njit(cache=True)
+def _one_line(x, y, a, b, tol) -> bool:
+    """Whether the total-least-squares line of points [a, b) lies within `tol` of 90 % of them."""
+    n = b - a
+    cx = 0.0
+    cy = 0.0
+    for i in range(a, b):
+        cx += x[i]
+        cy += y[i]
+    cx /= n
+    cy /= n
+    sxx = 0.0
+    syy = 0.0
+    sxy = 0.0
+    for i in range(a, b):
+        sxx += (x[i] - cx) ** 2
+        syy += (y[i] - cy) ** 2
+        sxy += (x[i] - cx) * (y[i] - cy)
+    phi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy) + np.pi / 2
+    c = np.cos(phi)
+    s = np.sin(phi)
+    on = 0
+    for i in range(a, b):
+        if abs((x[i] - cx) * c + (y[i] - cy) * s) <= tol:
+            on += 1
+    return on >= 0.9 * n
+
+
+@njit(cache=True)
 def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touched, sub_s, sub_e, peaks, hist) -> int:
     """Split points [s, e) into runs that each hold one line: the accumulator peak is followed as points are
     added in scan order, and when more than three consecutive new points lie off the peak's line (farther
-    than a rho cell), a new line starts at the first of them. Returns the number of runs in sub_s/sub_e;
+    than two rho cells), a new line starts at the first of them. Returns the number of runs in sub_s/sub_e;
     peaks[k] = (votes, theta cell, rho cell) of run k's accumulator peak (lo: see _offsets_for; cell: see
     normal_cells; k: theta cells voted either side of the normal; hist: scratch of at least e - s rows)."""
     width = _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, acc.shape[1])
@@ -180,9 +208,14 @@ def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touche
         if i - start >= 4:
             t = best[1]
             rho_p = lo[t] + (best[2] + 0.5) * rho_res
-            if abs(x[i] * cos_t[t] + y[i] * sin_t[t] - rho_p) > rho_res:
+            # off the peak's line by more than two cells (one cell either way of the cell's quantisation)
+            if abs(x[i] * cos_t[t] + y[i] * sin_t[t] - rho_p) > 2.0 * rho_res:
                 off += 1
             else:
+                off = 0
+            if off > 3 and _one_line(x, y, start, i + 1, 2.0 * rho_res):
+                # early in a run, clustered points leave the peak's angle loose; when one straight line
+                # still holds the whole run, it is one line
                 off = 0
             if off > 3 and n < sub_s.shape[0] - 1:
                 cut = i - off + 1
@@ -240,9 +273,10 @@ def fit_line(x, y, idx, m):
 
 @njit(cache=True)
 def line_of_run(x, y, s, e, theta_t, rho_p, votes, rho_res, idx, out) -> None:
-    """The line of points [s, e) whose HTL peak is the cell (theta_t, rho_p) with `votes` votes: r_acc, then
-    least squares over the points within a rho cell of the peak line.
-    out = [n_points, first, last, x0, y0, x1, y1, rho, theta, length, r_acc]."""
+    """The line of points [s, e) whose HTL peak is the cell (theta_t, rho_p) with `votes` votes: least squares
+    over the points within a rho cell of the peak line, then again over those within a rho cell of that fit;
+    r_acc from the peak cell, or from a cell-wide band on the fitted line where that holds more points.
+    out = [n_points, first, last, x0, y0, x1, y1, rho, theta, length, r_acc, r_acc of the peak cell alone]."""
     c = np.cos(theta_t)
     sn = np.sin(theta_t)
     m = 0
@@ -252,12 +286,33 @@ def line_of_run(x, y, s, e, theta_t, rho_p, votes, rho_res, idx, out) -> None:
             m += 1
     out[0] = m
     out[10] = votes / (e - s)
+    out[11] = votes / (e - s)
     if m < 2:
         out[1:10] = 0.0
         return
     theta, rho = fit_line(x, y, idx, m)
     c = np.cos(theta)
     sn = np.sin(theta)
+    # the points within a rho cell of the fitted line, fitted again: on a long line the theta cell's
+    # quantisation leaves the far ends outside the peak cell, though they lie on the line
+    m2 = 0
+    for i in range(s, e):
+        if abs(x[i] * c + y[i] * sn - rho) <= rho_res:
+            idx[m2] = i
+            m2 += 1
+    if m2 > m:
+        m = m2
+        theta, rho = fit_line(x, y, idx, m)
+        c = np.cos(theta)
+        sn = np.sin(theta)
+    # r_acc: the peak cell's votes, or the points in a cell-wide band centred on the fitted line if more
+    on = 0
+    for k in range(m):
+        if abs(x[idx[k]] * c + y[idx[k]] * sn - rho) <= 0.5 * rho_res:
+            on += 1
+    out[0] = m
+    out[10] = max(votes, on) / (e - s)
+    out[11] = votes / (e - s)
     i0 = idx[0]
     i1 = idx[m - 1]
     # P_ini and P_end projected on the fitted line
@@ -473,7 +528,7 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
             if lo[0] >= min_pts:   # an HTL line (more than 3 points) for the decision rule
                 cidx[ncand] = k
                 ncand += 1
-                votes += peaks[k, 0]
+                votes += lo[10] * (sub_e[k] - sub_s[k])   # the refined line's r_acc, in points
             if lo[0] >= min_pts and lo[10] > min_racc and lo[9] > min_len:
                 kept[nkept] = k
                 nkept += 1
@@ -502,18 +557,21 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
         # circle of the allowed radii (a long wall with a deflection stays lines)
         ext = np.hypot(x[e - 1] - x[s], y[e - 1] - y[s])
         try_circle = False
-        leg_only = False   # tested as a circle only for a leg: accepted only with a leg's radius
+        leg_only = False   # tested as a circle beyond the paper's rule: if it fails, the lines stay
         if ext <= 2.0 * p[P_R_MAX] + 2.0 * p[P_CTOL]:
             if ncand == 0:
                 try_circle = True
             elif ncand == 1:
-                # datmo: a single line over a segment smaller than a leg's width is tested as a circle too
-                # (a leg a few metres away is a shallow arc that HTL takes for a short line)
-                try_circle = cand[cidx[0], 10] < min_racc
-                leg_only = not try_circle and ext <= p[P_SMALL]
-                try_circle = try_circle or leg_only
+                # the paper tests a single line as a circle when its r_acc < 0.5; datmo tests every single
+                # line of a segment small enough to be a circle, and keeps the better fit (a leg a few metres
+                # away, or a column's arc, is a shallow arc that HTL can take for a line with r_acc > 0.5)
+                try_circle = True
+                leg_only = cand[cidx[0], 11] >= min_racc   # not the paper's case: no circle keeps the line
             elif ncand == 2:
-                try_circle = not _perpendicular(cand[cidx[0], 8], cand[cidx[1], 8], p[P_PERP_TOL])
+                # two non-perpendicular lines: the paper's case; two perpendicular ones may be a box's corner
+                # or an arc cut in two halves (a column seen whole): the better fit decides, lines on a tie
+                try_circle = True
+                leg_only = _perpendicular(cand[cidx[0], 8], cand[cidx[1], 8], p[P_PERP_TOL])
             else:
                 convex = 0
                 for q in range(ncand - 1):
@@ -524,11 +582,11 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                 try_circle = convex >= 2
         if try_circle:
             if e - s >= p[P_CIRCLE_MIN_POINTS]:
-                circle_of_run(x, y, s, e, p, cacc, idx, cout, htl_racc)
+                circle_of_run(x, y, s, e, p, cacc, idx, cout, max(htl_racc, min_racc))
             else:
                 cout[4] = 0.0
-            if cout[4] > htl_racc and cout[0] >= p[P_CIRCLE_MIN_POINTS] and \
-                    (not leg_only or cout[3] <= p[P_LEG_R]):
+            # a circle beats the lines, and holds like a line must (r_acc above line_min_racc)
+            if cout[4] > max(htl_racc, min_racc) and cout[0] >= p[P_CIRCLE_MIN_POINTS]:
                 row = circles[nc]
                 row[C_SCAN] = scan
                 row[C_SEG] = g
@@ -541,7 +599,8 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                 row[C_RACC] = cout[4]
                 nc += 1
                 continue
-            nkept = 0
+            if not leg_only:
+                nkept = 0
         if nkept > 0:
             for q in range(nkept):
                 c = cand[kept[q]]
@@ -618,8 +677,8 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
     min_points = int(p[P_MIN_POINTS])
     use_given = given_offsets.shape[0] == N + 1
     nt = cos_t.shape[0]
-    work = (np.empty(11), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
-            np.empty((MAX_SUB, 3), np.int64), np.empty((MAX_SUB, 11)), np.empty(MAX_SUB, np.int64),
+    work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
+            np.empty((MAX_SUB, 3), np.int64), np.empty((MAX_SUB, 12)), np.empty(MAX_SUB, np.int64),
             np.empty(MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64))
     for k in range(N):
         r = ranges[k]
