@@ -248,6 +248,14 @@ def accumulate(det, stamps, match, min_count, max_drift, column_time, forget, db
                 q = live[u]
                 if db[q, 0] == t:
                     d = np.hypot(db[q, 1] - x, db[q, 2] - y)
+                    if t == 5.0:
+                        # a bench is seen whole or in parts (people and columns hide its ends): a detection
+                        # belongs to it when it lies on the bench's axis within its length
+                        ux = np.cos(db[q, 3])
+                        uy = np.sin(db[q, 3])
+                        along = abs((x - db[q, 1]) * ux + (y - db[q, 2]) * uy)
+                        across = abs(-(x - db[q, 1]) * uy + (y - db[q, 2]) * ux)
+                        d = across + max(0.0, along - 0.5 * db[q, 4])
                     if d <= min(bd, gate) and db[q, 7] != k:
                         bd = d
                         best = q
@@ -274,15 +282,21 @@ def accumulate(det, stamps, match, min_count, max_drift, column_time, forget, db
                     nconf += 1
             elif best >= 0:
                 c = db[best, 5] + 1.0
-                db[best, 1] += (x - db[best, 1]) / c
-                db[best, 2] += (y - db[best, 2]) / c
-                db[best, 3] = det[j, 4]
-                db[best, 4] += (det[j, 5] - db[best, 4]) / c
+                if t == 5.0:
+                    if det[j, 5] > db[best, 4]:   # the most complete view of a bench stands for it
+                        db[best, 1] = x
+                        db[best, 2] = y
+                        db[best, 3] = det[j, 4]
+                        db[best, 4] = det[j, 5]
+                else:
+                    db[best, 1] += (x - db[best, 1]) / c
+                    db[best, 2] += (y - db[best, 2]) / c
+                    db[best, 3] = det[j, 4]
+                    db[best, 4] += (det[j, 5] - db[best, 4]) / c
                 db[best, 5] = c
                 db[best, 7] = k
-                # columns and benches that drift from where they were first seen are movers, not landmarks
-                if (t == 4.0 and np.hypot(x - db[best, 8], y - db[best, 9]) > max_drift) or \
-                        (t == 5.0 and np.hypot(x - db[best, 8], y - db[best, 9]) > 2 * match):
+                # a column that drifts from where it was first seen is a mover, not a landmark
+                if t == 4.0 and np.hypot(x - db[best, 8], y - db[best, 9]) > max_drift:
                     db[best, 10] = 1.0
                 if db[best, 11] == 0.0 and c >= min_count and \
                         (t != 4.0 or stamps[k] - stamps[int(db[best, 6])] >= column_time):
