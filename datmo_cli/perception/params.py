@@ -32,7 +32,7 @@ class FeatureParams:
     # circles, HTC (section 5.1)
     circle_radius_min: float = 0.05  # m
     circle_radius_max: float = 0.40  # m
-    circle_radius_step: float = 0.03  # m; radii voted for (the fit refines)
+    circle_radius_step: float = 0.04  # m; radii voted for, 2 tolerances apart (the fit refines)
     circle_cell: float = 0.01        # m; (a, b) cell size
     circle_window: float = 0.04      # m; votes within this of the P_ini/P_near/P_end estimate
     circle_tolerance: float = 0.02   # m; a point votes for a centre when | |p - c| - r | <= this
