@@ -38,15 +38,16 @@ def load_sim(name: str):  # noqa: ANN201
     return run, mcapio.odometry_from_log(log), truth
 
 
-def score_sim(name: str, source: str) -> dict:
-    """Scores of one simulated log with features from `source` ("datmo", "ideal" or "degraded")."""
+def score_sim(name: str, source: str, feature_params: dict | None = None) -> dict:
+    """Scores of one simulated log with features from `source` ("datmo", "ideal" or "degraded");
+    `feature_params`: FeatureParams overrides for "datmo" (None: perception's defaults)."""
     run, odom, truth = load_sim(name)
     gt_off, gt = truth.offsets["objects"], truth.items["objects"]
     if source in ("ideal", "degraded"):
         feats = acc.ideal_features(gt_off, gt, np.random.default_rng(0), noise=0.01 if source == "ideal" else 0.02,
                                    degraded=source == "degraded")
     else:
-        feats = run_features(run, odom)
+        feats = run_features(run, odom, feature_params)
     t0 = time.perf_counter()
     tracked = track_run(run, feats, odometry=odom, markers=False)
     seconds = time.perf_counter() - t0
@@ -72,13 +73,13 @@ def _fmt(v: object) -> str:
     return "n/a" if v is None else f"{v:.3f}" if isinstance(v, float) else str(v)
 
 
-def sim_lines(source: str) -> list[str]:
+def sim_lines(source: str, feature_params: dict | None = None) -> list[str]:
     lines = []
     for name in ("hall", "crowd6", "corridor", "patrol", "static"):
         if not (LOGS / f"{name}.mcap").exists():
             lines.append(f"{name}: log missing")
             continue
-        r = score_sim(name, source)
+        r = score_sim(name, source, feature_params)
         s = r["scores"]
         people = s.get("person", {})
         line = (f"{name:9s} people MOTA {_fmt(people.get('mota'))} IDF1 {_fmt(people.get('idf1'))} "
@@ -136,11 +137,11 @@ def read_leg_labels(path: Path, scan_log_times: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def demo_figures(path: Path) -> dict:
+def demo_figures(path: Path, feature_params: dict | None = None) -> dict:
     """On the still-scanner demo bag: scans, confirmed person tracks, and confirmed person or dynamic
     tracks that stay on the background (the per-beam median range: walls) and within 0.5 m all along."""
     run, _ = read_ros1_scans(path, "/scan")
-    feats = run_features(run)
+    feats = run_features(run, None, feature_params)
     tracked = track_run(run, feats, markers=False)
     off, items = tracked.all_tracks()
     conf = items[items["status"] == 1]
@@ -161,21 +162,21 @@ def demo_figures(path: Path) -> dict:
     return {"scans": len(run), "people": len(people), "on_walls": len(wall_dynamic)}
 
 
-def demo_lines() -> list[str]:
+def demo_lines(feature_params: dict | None = None) -> list[str]:
     path = LEGTRACKER / "demo_stationary_simple_environment.bag"
     if not path.exists():
         return [f"{path}: absent"]
-    f = demo_figures(path)
+    f = demo_figures(path, feature_params)
     return [f"demo_stationary: {f['scans']} scans, {f['people']} person tracks confirmed, "
             f"{f['on_walls']} confirmed person/dynamic tracks on the walls"]
 
 
-def positive_lines() -> list[str]:
+def positive_lines(feature_params: dict | None = None) -> list[str]:
     out, hit_all, total_all = [], 0, 0
     for path in sorted(LEGTRACKER.glob("positive_*_extracted.bag")):
         run, log_times = read_ros1_scans(path, "/training_scan")
         legs = read_leg_labels(path, log_times)
-        feats = run_features(run)
+        feats = run_features(run, None, feature_params)
         tracked = track_run(run, feats, markers=False)
         hit, total = acc.leg_coverage(legs, [f.circles for f in feats], tracked.tracks)
         hit_all, total_all = hit_all + hit, total_all + total
@@ -193,10 +194,16 @@ def main() -> None:
     if not have_perception():
         print_lines("Tracking accuracy with datmo features", ["skipped: datmo_cli.perception.features is absent"])
         return
-    print_lines("Tracking accuracy with datmo features (targets: hall people MOTA >= 0.90, IDF1 >= 0.85; "
-                "crowd6 MOTA >= 0.75; class right >= 0.95; static: no confirmed dynamic track)", sim_lines("datmo"))
+    targets = ("targets: hall people MOTA >= 0.90, IDF1 >= 0.85; crowd6 MOTA >= 0.75; class right >= 0.95; "
+               "static: no confirmed dynamic track")
+    print_lines(f"Tracking accuracy with datmo features, perception defaults ({targets})", sim_lines("datmo"))
+    tuned = acc.TRACKING_FEATURE_PARAMS
+    print_lines(f"... with datmo features, FeatureParams overrides {tuned} (recommended defaults)",
+                sim_lines("datmo", tuned))
     if LEGTRACKER.exists():
-        print_lines("Real data: legtracker bags", demo_lines() + positive_lines())
+        print_lines("Real data: legtracker bags, perception defaults", demo_lines() + positive_lines())
+        print_lines(f"Real data: legtracker bags, FeatureParams overrides {tuned}",
+                    demo_lines(tuned) + positive_lines(tuned))
 
 
 if __name__ == "__main__":

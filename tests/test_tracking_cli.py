@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -72,7 +74,10 @@ def test_track_options_and_config(tmp_path):
     assert result.exit_code == 0, result.output
     msgs = _tracks(out)
     assert all((m["tracks"]["status"] == 0).all() for m in msgs[:3])   # 4 hits needed
-    assert mcapio.summary(out).metadata["datmo.params"]["confirm_hits"] == "4"
+    params = mcapio.summary(out).metadata["datmo.params"]
+    assert json.loads(params["track"])["confirm_hits"] == 4
+    assert json.loads(params["track"])["gate"] == 9.2
+    assert "features" not in params   # the log had /datmo/features: no feature extraction ran
 
 
 def test_track_errors(tmp_path):
@@ -97,52 +102,42 @@ def test_help_ends_in_an_example():
     assert "Example: datmo track" in r.output
 
 
-def test_raw_log_without_feature_extraction_is_a_clean_error(tmp_path, monkeypatch):
-    import importlib.util
+def _raycast_circles(ranges: np.ndarray, circles: list[tuple[float, float, float]]) -> np.ndarray:
+    """The ranges of GEOM's beams with circles (x, y, radius, m) in front of a background at `ranges`."""
+    a = GEOM.angle_min + GEOM.angle_increment * np.arange(GEOM.n_beams)
+    ux, uy = np.cos(a), np.sin(a)
+    out = ranges.astype(np.float64)
+    for cx, cy, r in circles:
+        along = ux * cx + uy * cy
+        across2 = cx * cx + cy * cy - along * along
+        hit = (across2 < r * r) & (along > 0)
+        out = np.where(hit, np.minimum(out, along - np.sqrt(np.maximum(r * r - across2, 0.0))), out)
+    return out.astype(np.float32)
 
-    real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec",
-                        lambda name, *a: None if name == "datmo_cli.perception.features" else real(name, *a))
-    src = tmp_path / "raw.mcap"
-    with mcapio.LogWriter(src) as w:
-        w.write_scans(ScanRun(STAMPS, np.full((N, 361), 7.5, np.float32), GEOM))
-    r = CliRunner().invoke(cli, ["track", str(src), "-o", str(tmp_path / "o.mcap")])
-    assert r.exit_code == 1 and "run datmo features first" in r.output
 
-
-def test_raw_log_runs_feature_extraction_through_the_contract(tmp_path, monkeypatch):
-    """Without /datmo/features, track calls perception's extract_run(run, odometry=...) and reads its
-    RunFeatures (flat arrays with per-scan offsets); a stand-in module checks that contract."""
-    import sys
-    import types as pytypes
-
-    feats = features_from_lists([{"circles": legs_as_circles(walker_legs(0.2 * k, (1, -3), (0.3, 1.0)))}
-                                 for k in range(N)])
-    calls = []
-
-    def extract_run(run, params=None, odometry=None):  # noqa: ANN001, ANN202
-        calls.append(len(run))
-        offsets = {name: np.concatenate([[0], np.cumsum([len(getattr(f, name)) for f in feats])]).astype(np.int64)
-                   for name in ("lines", "circles", "blobs")}
-        return pytypes.SimpleNamespace(
-            lines=np.concatenate([f.lines for f in feats]), line_offsets=offsets["lines"],
-            circles=np.concatenate([f.circles for f in feats]), circle_offsets=offsets["circles"],
-            blobs=np.concatenate([f.blobs for f in feats]), blob_offsets=offsets["blobs"])
-
-    fake = pytypes.ModuleType("datmo_cli.perception.features")
-    fake.extract_run = extract_run
-    fake.__spec__ = pytypes.SimpleNamespace(name="datmo_cli.perception.features")
-    monkeypatch.setitem(sys.modules, "datmo_cli.perception.features", fake)
-    import importlib.util
-
-    real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec",
-                        lambda name, *a: fake.__spec__ if name == "datmo_cli.perception.features" else real(name, *a))
+def test_raw_log_is_segmented_and_tracked(tmp_path):
+    """Without /datmo/features, track runs segmentation and features itself and writes their channels too;
+    its provenance records both parameter sets."""
+    ranges = np.full((N, 361), 7.5, np.float32)
+    for k in range(N):
+        circles = legs_as_circles(walker_legs(0.2 * k, (1, -3), (0.3, 1.0))) + [(5.0, 2.0, 0.25)]
+        ranges[k] = _raycast_circles(ranges[k], circles)
     src, out = tmp_path / "raw.mcap", tmp_path / "out.mcap"
     with mcapio.LogWriter(src) as w:
-        w.write_scans(ScanRun(STAMPS, np.full((N, 361), 7.5, np.float32), GEOM))
+        w.write_scans(ScanRun(STAMPS, ranges, GEOM))
     r = CliRunner().invoke(cli, ["track", str(src), "-o", str(out)])
     assert r.exit_code == 0, r.output
-    assert calls == [N] and "segmented and extracted features first" in r.output
-    last = _tracks(out)[-1]["tracks"]
-    assert (last[last["status"] != 0]["classification"] == 1).all()
+    assert "segmented and extracted features first" in r.output
+    log = mcapio.read_log(out, topics=None)
+    assert log.has(mcapio.TOPIC_FEATURES) and log.has(mcapio.TOPIC_TRACKS)
+    assert len(log.messages[mcapio.TOPIC_FEATURES][1]) == N
+    msgs = _tracks(out)
+    assert len(msgs) == N
+    last = msgs[-1]["tracks"]
+    confirmed = last[last["status"] != 0]
+    column = confirmed[np.hypot(confirmed["x"] - 5.0, confirmed["y"] - 2.0) < 0.1]
+    assert len(column) == 1 and column["classification"][0] == 2
+    assert (confirmed["classification"] == 1).sum() == 1   # the walker
+    params = log.metadata["datmo.params"]
+    assert set(params) == {"track", "features"}
+    assert json.loads(params["track"])["confirm_hits"] == 3 and "min_points" in json.loads(params["features"])

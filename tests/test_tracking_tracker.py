@@ -167,3 +167,53 @@ def test_duplicate_leg_tracks_merge_into_the_older():
     for k in range(7, 12):
         out = tracker.step(k * 200_000_000, meas((3.0, 0.0, 0.1), (3.0, 0.3, 0.1)), free_ranges())
     assert len(out) == 1
+
+
+def test_a_lost_person_takes_back_a_tentative_track_started_on_them():
+    """Someone coming back into view shows one leg first: a tentative track starts on it and then takes
+    the pair of legs; the person's own lost track must take them back, keeping its id."""
+    tracker = Tracker(P, GEOM)
+    t = 0.0
+    for _ in range(15):        # walking -x at y = 2 towards the edge of view (x = 0)
+        x = 2.5 - 0.8 * t
+        out = tracker.step(int(t * 1e9), meas((x, 1.85, 0.1), (x - 0.3 * np.cos(6 * t), 2.15, 0.1)), free_ranges())
+        t += 0.2
+    first = out[out["status"] != STATUS_TENTATIVE]
+    assert len(first) == 1 and first["mobility"][0] == 1
+    for _ in range(10):        # 2 s out of view
+        out = tracker.step(int(t * 1e9), NONE, free_ranges())
+        t += 0.2
+    out = tracker.step(int(t * 1e9), meas((0.3, 1.0, 0.1)), free_ranges())   # one leg: a tentative track
+    t += 0.2
+    assert len(out) == 2
+    for k in range(5):         # then both legs, walking +x
+        x = 0.35 + 0.16 * k
+        out = tracker.step(int(t * 1e9), meas((x, 0.85, 0.1), (x + 0.2, 1.15, 0.1)), free_ranges())
+        t += 0.2
+    assert [int(i) for i in out["id"]] == [int(first["id"][0])]
+
+
+def test_background_grid_marks_long_hit_places_and_forgets_places_seen_through():
+    """A place hit for longer than background_time is background; once a beam passes beyond it, it is not."""
+    from datmo_cli.tracking import _kernels
+
+    n, cell = 100, 0.1
+    score, mark = np.zeros(n * n), np.full(n * n, -1, np.int64)
+    active = np.zeros(1000, np.int64)
+    angles = np.radians([-1.0, 0.0, 1.0])
+    wall = np.array([3.0, 3.0, 3.0], np.float32)
+    count = 0
+    for scan in range(1, 21):   # 4 s at 5 Hz
+        count = _kernels.background_update(score, mark, active, count, scan, wall, np.cos(angles), np.sin(angles),
+                                           angles[0], angles[1] - angles[0], 0.0, 8.0, 0.0, 0.0, 1.0, 0.0, 0.2,
+                                           -5.0, -5.0, cell, n, 0.3, 6.0)
+    on = _kernels.on_background(score, np.array([3.0]), np.array([0.0]), np.array([0.0]), 0.0, 0.0, -5.0, -5.0,
+                                cell, n, 3.0)
+    assert on[0]
+    gone = np.array([6.0, 6.0, 6.0], np.float32)   # the object left: the beams now reach 6 m
+    count = _kernels.background_update(score, mark, active, count, 21, gone, np.cos(angles), np.sin(angles),
+                                       angles[0], angles[1] - angles[0], 0.0, 8.0, 0.0, 0.0, 1.0, 0.0, 0.2,
+                                       -5.0, -5.0, cell, n, 0.3, 6.0)
+    on = _kernels.on_background(score, np.array([3.0]), np.array([0.0]), np.array([0.0]), 0.0, 0.0, -5.0, -5.0,
+                                cell, n, 3.0)
+    assert not on[0]

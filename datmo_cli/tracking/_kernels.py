@@ -534,3 +534,119 @@ def gated_distances(x, P, zx, zy, zkind, sigma, sigma_leg, gate, max_distance, c
             d2[k, j] = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / (a * c - b * b)
             ok[k, j] = compat[row, zkind[j]] and d2[k, j] <= gate and np.hypot(dx, dy) <= max_distance
     return d2, ok
+
+
+
+@njit(cache=True)
+def background_update(score, mark, active, n_active, scan, ranges, cos_a, sin_a, angle_min, increment, range_min,
+                      range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled):  # noqa: ANN001, ANN201
+    """Update the background grid with one scan; returns the new number of active cells.
+
+    score (n * n,): per cell, for how long (s) it has been hit without being seen through since; a cell is seen
+    through when the beam at its bearing returns more than `margin` beyond it (or nothing within range).
+    mark (n * n,) int64: the last scan (number `scan`) that hit the cell, or -1 when the cell is not active.
+    active[:n_active]: the cells with a score (only those are tested for being seen through).
+    The sensor is at (px, py) with heading cos/sin (pc, ps); cell (0, 0) has its corner at (x0, y0).
+    Cells hit for `settled` s or more (walls) are tested every fourth scan only, which saves time."""
+    B = len(ranges)
+    keep = 0
+    for a in range(n_active):
+        c = active[a]
+        if score[c] >= settled and (c + scan) % 4 != 0:
+            active[keep] = c
+            keep += 1
+            continue
+        wx, wy = x0 + (c // n + 0.5) * cell - px, y0 + (c % n + 0.5) * cell - py
+        sx, sy = pc * wx + ps * wy, -ps * wx + pc * wy
+        r = np.hypot(sx, sy)
+        j = int(np.rint((np.arctan2(sy, sx) - angle_min) / increment))
+        if 0 <= j < B and r < range_max:
+            rj = ranges[j]
+            if (rj > r + margin and rj > range_min) or rj >= range_max:
+                score[c] = 0.0
+                mark[c] = -1
+                continue
+        active[keep] = c
+        keep += 1
+    for j in range(B):
+        r = ranges[j]
+        if not (r > range_min and r < range_max):
+            continue
+        sx, sy = r * cos_a[j], r * sin_a[j]
+        i = int(np.floor((pc * sx - ps * sy + px - x0) / cell))
+        k = int(np.floor((ps * sx + pc * sy + py - y0) / cell))
+        if i < 0 or k < 0 or i >= n or k >= n:
+            continue
+        c = i * n + k
+        if mark[c] == scan:
+            continue
+        if mark[c] < 0:
+            if keep >= len(active):
+                continue
+            active[keep] = c
+            keep += 1
+        mark[c] = scan
+        score[c] += dt
+    return keep
+
+
+@njit(cache=True)
+def on_background(score, lx, ly, ls, px, py, x0, y0, cell, n, threshold):  # noqa: ANN001, ANN201
+    """Which leg candidates (lx, ly, extent ls; tracking frame) lie on the background: a cell around the
+    candidate's side facing the sensor at (px, py) has been occupied for at least `threshold` s."""
+    out = np.zeros(len(lx), np.bool_)
+    for m in range(len(lx)):
+        dx, dy = lx[m] - px, ly[m] - py
+        d = max(np.hypot(dx, dy), 1e-6)
+        fx, fy = lx[m] - 0.5 * ls[m] * dx / d, ly[m] - 0.5 * ls[m] * dy / d
+        ci = int(np.floor((fx - x0) / cell))
+        ck = int(np.floor((fy - y0) / cell))
+        for i in range(max(ci - 1, 0), min(ci + 2, n)):
+            for k in range(max(ck - 1, 0), min(ck + 2, n)):
+                if score[i * n + k] >= threshold:
+                    out[m] = True
+    return out
+
+
+@njit(cache=True)
+def gated_costs(x, P, zx, zy, zkind, sigma, sigma_leg, gate, max_distance, compat, compat_row):  # noqa: ANN001, ANN201
+    """gated_distances, with the association cost d2 + ln det S (twice the negative log-likelihood up to a
+    constant) instead of d2: a track coasting for long, with a wide covariance, would otherwise win every
+    measurement it can reach over the well-tracked object the measurement belongs to."""
+    K, M = len(x), len(zx)
+    cost = np.empty((K, M))
+    ok = np.zeros((K, M), np.bool_)
+    for k in range(K):
+        row = compat_row[k]
+        for j in range(M):
+            s = sigma_leg if zkind[j] == 1 else sigma
+            v = s * s
+            a, b, c = P[k, 0, 0] + v, P[k, 0, 1], P[k, 1, 1] + v
+            dx, dy = zx[j] - x[k, 0], zy[j] - x[k, 1]
+            det = a * c - b * b
+            d2 = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / det
+            cost[k, j] = d2 + np.log(det)
+            ok[k, j] = compat[row, zkind[j]] and d2 <= gate and np.hypot(dx, dy) <= max_distance
+    return cost, ok
+
+
+@njit(cache=True)
+def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, py, x0, y0, cell, n,
+                         threshold):  # noqa: ANN001, ANN201
+    """Which of n_tracks tracks took (rows, cols) a measurement on the background (see on_background; legs and
+    circles are tested on their side facing the sensor, other kinds at their centre)."""
+    out = np.zeros(n_tracks, np.bool_)
+    if not len(rows):
+        return out
+    x = np.empty(len(cols))
+    y = np.empty(len(cols))
+    front = np.zeros(len(cols))
+    for q in range(len(cols)):
+        j = cols[q]
+        x[q], y[q] = mx[j], my[j]
+        if mkind[j] == 1 or mkind[j] == 2:
+            front[q] = msize[j]
+    bg = on_background(score, x, y, front, px, py, x0, y0, cell, n, threshold)
+    for q in range(len(rows)):
+        out[rows[q]] = bg[q]
+    return out

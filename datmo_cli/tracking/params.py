@@ -53,6 +53,11 @@ class TrackingParams:
     merge_distance: float = 0.55        # two leg or person tracks nearer than this are one, m ...
     merge_speed: float = 0.5            # ... when one is tentative or their velocities differ less, m/s
     person_votes: float = 0.5           # share of a track's hits that were leg measurements for a person
+    # background: a grid of how long each place was hit by a return (tracking frame); a leg candidate on a place
+    # occupied for long (a wall, a bench, a column) is not a leg (real perception finds leg-sized pieces there)
+    background_time: float = 3.0        # s a place must have been hit, never seen through, to be background; 0: off
+    background_cell: float = 0.1        # m, grid cell
+    background_extent: float = 40.0     # m, the grid spans this much either side of the first sensor pose
     # output
     tail_length: int = 20               # trajectory points in each track's marker tail
 
@@ -63,6 +68,9 @@ class TrackingParams:
         """A copy with `changes` (keys checked; None values ignored)."""
         changes = {k: v for k, v in changes.items() if v is not None}
         return from_dict({**self.to_dict(), **changes})
+
+
+_POSITIVE = ("confirm_hits", "confirm_window", "gate", "d_max", "background_cell", "background_extent")
 
 
 def from_dict(values: dict, where: str = "track") -> TrackingParams:
@@ -76,7 +84,7 @@ def from_dict(values: dict, where: str = "track") -> TrackingParams:
         bad_int = want is int and not isinstance(value, int)
         if isinstance(value, bool) or not isinstance(value, int | float) or bad_int:
             raise ConfigError(f"{where}.{key}: expected {want.__name__}, got {value!r}")
-        if value < 0 or (key in ("confirm_hits", "confirm_window", "gate", "d_max") and value <= 0):
+        if value < 0 or (key in _POSITIVE and value <= 0):
             raise ConfigError(f"{where}.{key}: must be positive, got {value!r}")
         out[key] = want(value)
     params = TrackingParams(**out)

@@ -112,18 +112,15 @@ def track_run(run: ScanRun, features: list[ScanFeatures] | Iterator[ScanFeatures
     return out
 
 
-def run_features(run: ScanRun, odometry: Odometry | None = None) -> list[ScanFeatures]:
-    """Segment `run` and extract its features with datmo_cli.perception (default parameters)."""
-    import importlib.util
-
-    if importlib.util.find_spec("datmo_cli.perception.features") is None:
-        from ..errors import MissingChannelError
-
-        raise MissingChannelError("the log has no /datmo/features and this build has no feature extraction "
-                                  "(datmo_cli.perception.features); run datmo features first")
+def run_features(run: ScanRun, odometry: Odometry | None = None, params=None) -> list[ScanFeatures]:  # noqa: ANN001
+    """Segment `run` and extract its features with datmo_cli.perception (`params`: a FeatureParams, a dict
+    of overrides of its defaults, or None for the defaults)."""
     from ..perception.features import extract_run
+    from ..perception.params import FeatureParams
 
-    return list(iter_run_features(extract_run(run, odometry=odometry)))
+    if isinstance(params, dict):
+        params = FeatureParams().replace(**params)
+    return list(iter_run_features(extract_run(run, params=params, odometry=odometry)))
 
 
 def derive_tracks(run: ScanRun, features: list[ScanFeatures], *, odometry: Odometry | None = None,

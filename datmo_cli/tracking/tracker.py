@@ -19,9 +19,7 @@ from ..log import cdr, types
 from ..log.scan import ScanGeometry
 from . import _kernels, kalman
 from .association import gnn
-from .classification import (
-    CLASS_PERSON,
-)
+from .classification import CLASS_PERSON, MOBILITY_DYNAMIC
 from .measurements import (
     KIND_BLOB,
     KIND_CIRCLE,
@@ -39,10 +37,15 @@ TRACK_DTYPE = cdr.element_dtype(types.TRACK)
 # legs, circles, lines, blobs, -, a lone leg; see _kernels.kind_groups); tentative tracks (row 4) take any
 _COMPAT = np.ones((6, N_KINDS), bool)
 _COMPAT[0, [KIND_CIRCLE, KIND_RECT]] = False
-_COMPAT[1, [KIND_PERSON, KIND_LEG, KIND_RECT]] = False
+_COMPAT[1, [KIND_PERSON, KIND_RECT]] = False   # a circle partly seen may pass for a leg
 _COMPAT[2, [KIND_PERSON, KIND_LEG, KIND_CIRCLE]] = False
 _ANY, _LONE_LEG = 4, 5
 _COMPAT[_LONE_LEG, [KIND_PERSON, KIND_CIRCLE, KIND_RECT]] = False
+# which kinds a lost track may be reacquired on (rows as _COMPAT's): only its own, since with real perception
+# the clutter around (pieces of walls and benches as blobs, short lines and small circles) is near everywhere
+_REACQUIRE = np.zeros((6, N_KINDS), bool)
+_REACQUIRE[0, KIND_PERSON] = _REACQUIRE[1, KIND_CIRCLE] = _REACQUIRE[2, KIND_RECT] = True
+_REACQUIRE[3, KIND_BLOB] = _REACQUIRE[_ANY] = _REACQUIRE[_LONE_LEG, KIND_LEG] = True
 
 
 @dataclass
@@ -111,11 +114,17 @@ class Tracker:
         self.next_id = 1
         self.pose: np.ndarray | None = None
         self._compat_row = np.zeros(0, np.int64)
+        self._superseded = np.zeros(0, np.int64)
         w = self.params.confirm_window
         self._mask = (1 << w) - 1
         self._popcount = np.array([bin(i).count("1") for i in range(1 << w)], np.int64)
         if geometry is not None:
             self._angle_min, self._inc, self._n = geometry.angle_min, geometry.angle_increment, geometry.n_beams
+            angles = geometry.angle_min + geometry.angle_increment * np.arange(geometry.n_beams)
+            self._cos, self._sin = np.cos(angles), np.sin(angles)
+        self._bg_score: np.ndarray | None = None   # background grid (see _background), made at the first scan
+        self._bg_origin = (0.0, 0.0)
+        self._on_bg = np.zeros(0, bool)
 
     # ---------------------------------------------------------------------------------------- step
     def step(self, stamp_ns: int, meas: Measurements, ranges: np.ndarray | None = None,
@@ -133,19 +142,90 @@ class Tracker:
         self._compat_row = np.where(t.confirmed, group, _ANY)
         kalman.predict(t.x, t.P, dt, np.where((group == 0) | (group == _LONE_LEG), p.person_process_noise,
                                               p.process_noise))
-        m = meas.moved(self.pose)
+        m = self._off_background(meas.moved(self.pose))
         m, rows0 = self._legs(t, m)
         rows, cols = self._associate(t, m, rows0)
+        self._hit_background(t, m, rows, cols)
         self._update(t, m, rows, cols)
-        rows2, cols2 = self._reacquire(t, m, cols, stamp_ns)
+        rows2, cols2 = self._reacquire(t, m, rows, cols, stamp_ns)
         if len(rows2):
-            rows, cols = np.concatenate([rows, rows2]), np.concatenate([cols, cols2])
+            keep = ~np.isin(cols, cols2)   # measurements a lost track took back from tentative tracks
+            self._superseded = rows[~keep]  # those tentative tracks were started on it: they go
+            rows, cols = np.concatenate([rows[keep], rows2]), np.concatenate([cols[keep], cols2])
         self._occlusion(t, ranges)
         self._life_cycle(t, stamp_ns)
         self._spawn(m, rows, cols, stamp_ns)
         self._classify()
         self._push_tail()
+        self._background(ranges)
         return self.output()
+
+    def _sensor(self) -> tuple[float, float, float, float]:
+        """The sensor's position and heading (cos, sin) in the tracking frame."""
+        if self.pose is None:
+            return 0.0, 0.0, 1.0, 0.0
+        return float(self.pose[0]), float(self.pose[1]), float(np.cos(self.pose[2])), float(np.sin(self.pose[2]))
+
+    def _background(self, ranges: np.ndarray | None) -> None:
+        """Add the scan's returns to the background grid: per cell, how long it has been hit without being
+        seen through (see _kernels.background_update)."""
+        p = self.params
+        if ranges is None or self.geometry is None or p.background_time <= 0 or len(ranges) != self._n:
+            return
+        px, py, pc, ps = self._sensor()
+        if self._bg_score is None:
+            n = int(np.ceil(2 * p.background_extent / p.background_cell))
+            self._bg_n = n
+            self._bg_score = np.zeros(n * n)
+            self._bg_mark = np.full(n * n, -1, np.int64)
+            self._bg_active = np.zeros(65536, np.int64)
+            self._bg_count = 0
+            self._bg_scan = 0
+            self._bg_origin = (px - p.background_extent, py - p.background_extent)
+            g = self.geometry
+            self._bg_lo = float(g.range_min) if np.isfinite(g.range_min) else 0.0
+            self._bg_hi = float(g.range_max) if np.isfinite(g.range_max) and g.range_max > self._bg_lo else np.inf
+        self._bg_scan += 1
+        self._bg_count = _kernels.background_update(
+            self._bg_score, self._bg_mark, self._bg_active, self._bg_count, self._bg_scan,
+            np.ascontiguousarray(ranges, np.float32), self._cos, self._sin, self._angle_min, self._inc, self._bg_lo,
+            self._bg_hi, px, py, pc, ps, max(self._dt, 0.0), self._bg_origin[0], self._bg_origin[1],
+            p.background_cell, self._bg_n, p.occlusion_margin, np.inf)
+
+    def _hit_background(self, t: TrackArrays, m: Measurements, rows: np.ndarray, cols: np.ndarray) -> None:
+        """Which tracks take a measurement on the background this scan (their motion does not count: the
+        centre of a piece of wall jumps as its ends come and go)."""
+        if self._bg_score is None:
+            self._on_bg = np.zeros(len(t), bool)
+            return
+        p = self.params
+        px, py, _, _ = self._sensor()
+        self._on_bg = _kernels.tracks_on_background(self._bg_score, m.x, m.y, m.size, m.kind, rows, cols, len(t), px,
+                                                    py, self._bg_origin[0], self._bg_origin[1], p.background_cell,
+                                                    self._bg_n, p.background_time)
+
+    def _off_background(self, m: Measurements) -> Measurements:
+        """The measurements with leg candidates on the background (a place hit for a long time: a wall, a
+        bench, a column) taken out of the legs: each becomes a blob, and the other legs are paired again."""
+        p = self.params
+        raw = m.raw_legs
+        if self._bg_score is None or not len(raw):
+            return m
+        px, py, _, _ = self._sensor()
+        bg = _kernels.on_background(self._bg_score, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), px, py,
+                                    self._bg_origin[0], self._bg_origin[1], p.background_cell, self._bg_n,
+                                    p.background_time)
+        if not bg.any():
+            return m
+        keep = raw[~bg]
+        lx, ly, ls, kind, legs = _kernels.legs_to_measurements(keep[:, 0].copy(), keep[:, 1].copy(),
+                                                               keep[:, 2].copy(), p.stride_max)
+        other = m.kind > KIND_LEG
+        n_bg = int(bg.sum())
+        return Measurements(np.concatenate([lx, raw[bg, 0], m.x[other]]), np.concatenate([ly, raw[bg, 1], m.y[other]]),
+                            np.concatenate([ls, raw[bg, 2], m.size[other]]),
+                            np.concatenate([kind, np.full(n_bg, KIND_BLOB, np.int64), m.kind[other]]),
+                            np.concatenate([legs, np.full((n_bg, 4), np.nan), m.legs[other]]), keep)
 
     def _legs(self, t: TrackArrays, m: Measurements) -> tuple[Measurements, np.ndarray]:
         """Let tracks that are legs or people take up to two leg candidates each near their prediction
@@ -176,7 +256,7 @@ class Tracker:
         cols0 = np.arange(n0, dtype=np.int64)
         if not len(t) or len(m) == n0:
             return rows0, cols0
-        d2, allowed = _kernels.gated_distances(t.x, t.P, m.x, m.y, m.kind, p.measurement_noise,
+        d2, allowed = _kernels.gated_costs(t.x, t.P, m.x, m.y, m.kind, p.measurement_noise,
                                                p.leg_measurement_noise, p.gate, p.max_gate_distance, _COMPAT,
                                                self._compat_row)
         if n0:
@@ -192,7 +272,7 @@ class Tracker:
                                m.x[cols], m.y[cols], m.kind[cols], m.size[cols], m.legs[cols], p.measurement_noise,
                                p.leg_measurement_noise, p.moving_speed, p.step_min, p.step_max)
 
-    def _reacquire(self, t: TrackArrays, m: Measurements, taken: np.ndarray,
+    def _reacquire(self, t: TrackArrays, m: Measurements, taken_by: np.ndarray, taken: np.ndarray,
                    stamp_ns: int) -> tuple[np.ndarray, np.ndarray]:
         """Give a confirmed track lost while occluded or out of view the nearest free measurement it could
         have reached since its last hit (at `reacquire_speed`), restarting its filter there; a prediction at
@@ -203,16 +283,21 @@ class Tracker:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         free = m.kind != KIND_LEG   # a lone leg may be someone else's second leg: reacquire on pairs
         free[taken] = False
-        near = t.hit[:, None] & (np.hypot(m.x[None, :] - t.x[:, 0:1], m.y[None, :] - t.x[:, 1:2])
+        # a tentative track started on someone coming back into view does not keep them from their old track
+        # (a mover's: a static object's track does not jump onto a new one)
+        tentative = np.zeros(len(m), bool)
+        tentative[taken[~t.confirmed[taken_by]]] = True
+        near = (t.hit & t.confirmed)[:, None] & (np.hypot(m.x[None, :] - t.x[:, 0:1], m.y[None, :] - t.x[:, 1:2])
                                  <= p.leg_beside)
         free &= ~near.any(axis=0)
-        cand = np.flatnonzero(free)
+        cand = np.flatnonzero(free | (tentative & ~near.any(axis=0)))
         if not len(cand):
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         dist = np.hypot(m.x[cand][None, :] - t.last[lost, 0:1], m.y[cand][None, :] - t.last[lost, 1:2])
         reach = np.minimum(p.reacquire_speed * (stamp_ns - t.last_hit_ns[lost]) * 1e-9 + p.max_gate_distance,
                            p.reacquire_distance)
-        allowed = (dist <= reach[:, None]) & _COMPAT[self._compat_row[lost]][:, m.kind[cand]]
+        allowed = (dist <= reach[:, None]) & _REACQUIRE[self._compat_row[lost]][:, m.kind[cand]]
+        allowed &= free[cand][None, :] | (t.mobility[lost] == MOBILITY_DYNAMIC)[:, None]
         r, c = gnn(dist, allowed)
         if not len(r):
             return r, c
@@ -246,8 +331,13 @@ class Tracker:
                                    t.occluded, stamp_ns, self._mask, self._popcount, p.confirm_hits, p.delete_after,
                                    p.delete_after_occluded, p.tentative_delete_after)
         dead |= self._duplicates(t)
+        if len(self._superseded):
+            dead[self._superseded] = True
+            self._superseded = np.zeros(0, np.int64)
         if dead.any():
             self.tracks = t.take(~dead)
+            if len(self._on_bg) == len(dead):
+                self._on_bg = self._on_bg[~dead]
 
     def _duplicates(self, t: TrackArrays) -> np.ndarray:
         """Tracks of legs or people closer than `merge_distance` to an older such track (more hits), unless
@@ -302,7 +392,9 @@ class Tracker:
             return
         speed = np.hypot(t.x[:, 2], t.x[:, 3])
         # motion must be sustained: segment ends that come and go make a static object's centre jump
-        t.moving_time = np.where(t.hit & (speed > p.moving_speed), t.moving_time + self._dt, 0.0)
+        on_bg = np.zeros(len(t), bool)
+        on_bg[:len(self._on_bg)] = self._on_bg   # tracks spawned this scan come after
+        t.moving_time = np.where(t.hit & ~on_bg & (speed > p.moving_speed), t.moving_time + self._dt, 0.0)
         speed = np.where(t.moving_time >= p.moving_time, speed, 0.0)
         moved = np.hypot(t.x[:, 0] - t.first[:, 0], t.x[:, 1] - t.first[:, 1])
         age_s = (self.stamp_ns - t.born_ns) * 1e-9
