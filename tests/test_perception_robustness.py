@@ -234,8 +234,6 @@ def test_min_points_two_fills_the_segment_buffer_safely():
     assert res.returncode == 0 and res.stdout.strip() == "OK", res.stderr[-2000:]
 
 
-@pytest.mark.xfail(strict=True, reason="features.py segment_run sizes seg for N * ((B + 1) // 2 + 1) segments; "
-                   "with min_points=1 a scan can have B (one per beam): segment_block writes past the buffer")
 def test_min_points_one_segment_run_one_segment_per_beam():
     res = run_isolated("""
         r = np.tile(np.array([1.0, 5.0], np.float32), 5)[None]     # every beam its own segment
@@ -248,9 +246,6 @@ def test_min_points_one_segment_run_one_segment_per_beam():
     assert res.returncode == 0 and res.stdout.strip() == "OK", res.stderr[-2000:]
 
 
-@pytest.mark.xfail(strict=True, reason="features.py extract_run sizes blobs for n * (B // 2 + 1) + 1 rows; with "
-                   "min_points=1 a scan can have B one-point blobs: extract_scan writes past the buffer (heap "
-                   "corruption, 'corrupted size vs. prev_size' abort)")
 def test_min_points_one_extract_run_one_blob_per_beam():
     res = run_isolated("""
         r = np.tile(np.array([1.0, 5.0], np.float32), 5)[None]
@@ -263,20 +258,25 @@ def test_min_points_one_extract_run_one_blob_per_beam():
     assert res.returncode == 0 and res.stdout.strip() == "OK", res.stderr[-2000:]
 
 
-@pytest.mark.xfail(strict=True, reason="features.py extract_run trusts the number of given segments: extract_block "
-                   "accepts up to B + 1 per scan, but seg holds n * B + 1 rows and blobs n * (B // 2 + 1) + 1, so "
-                   "repeated segments from a log overflow both buffers")
-def test_repeated_given_segments_do_not_overflow():
+def test_overlapping_given_segments_are_a_clean_error_not_an_overflow():
+    """More segments than beams (here the whole scan B + 1 times) would overflow the kernel's buffers:
+    given segments must be disjoint and in scan order, else an InputError names the scan."""
     res = run_isolated("""
+        from datmo_cli.errors import InputError
         B = 6
         r = np.full((2, B), 2.0, np.float32)
         run = ScanRun(np.arange(2, dtype=np.int64), r, ScanGeometry(0.0, math.radians(0.5), B, 0.0, 8.0))
         start = np.zeros(2 * (B + 1), np.int64)
         end = np.full(2 * (B + 1), B, np.int64)
         off = np.array([0, B + 1, 2 * (B + 1)])
-        f = extract_run(run, segments=(start, end, off))
-        assert f.seg_offsets[-1] == len(f.seg_start), (f.seg_offsets, len(f.seg_start))
-        assert f.blob_offsets[-1] == len(f.blobs) == 2 * (B + 1), (f.blob_offsets, len(f.blobs))
+        try:
+            extract_run(run, segments=(start, end, off))
+        except InputError as exc:
+            assert "scan 0" in str(exc) and "overlaps" in str(exc), exc
+        else:
+            raise AssertionError("no error")
+        f = extract_run(run, segments=(np.array([0, 3, 0]), np.array([3, 6, 6]), np.array([0, 2, 3])))
+        assert f.seg_offsets.tolist() == [0, 2, 3] and f.seg_start.tolist() == [0, 3, 0]
         print("OK")
     """)
     assert res.returncode == 0 and res.stdout.strip() == "OK", res.stderr[-2000:]

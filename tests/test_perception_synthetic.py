@@ -90,8 +90,6 @@ def test_two_perpendicular_walls_give_two_lines_meeting_at_the_corner():
     assert hits >= 0.9 * N_SCANS
 
 
-@pytest.mark.xfail(strict=True, reason="line_subsegments' _one_line() reset absorbs a box's short side (0.3 m, ~10 "
-                   "points) seen after a 2 m side into one line: no second line, its points are lost")
 def test_a_box_with_a_short_side_gives_two_lines():
     corner = (2.5, 0.0)
     long_side = ref.ray_segment(ANGLES, corner, (2.5 - 2.0 * math.cos(math.pi / 4), -2.0 * math.sin(math.pi / 4)))

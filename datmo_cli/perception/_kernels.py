@@ -159,8 +159,9 @@ def _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, max_width) -> int:
 
 
 @njit(cache=True)
-def _one_line(x, y, a, b, tol) -> bool:
-    """Whether the total-least-squares line of points [a, b) lies within `tol` of 90 % of them."""
+def _one_line(x, y, a, b, tol, tail) -> bool:
+    """Whether the total-least-squares line of points [a, b) lies within `tol` of 90 % of them and of each
+    of the last `tail` points."""
     n = b - a
     cx = 0.0
     cy = 0.0
@@ -183,6 +184,8 @@ def _one_line(x, y, a, b, tol) -> bool:
     for i in range(a, b):
         if abs((x[i] - cx) * c + (y[i] - cy) * s) <= tol:
             on += 1
+        elif i >= b - tail:
+            return False
     return on >= 0.9 * n
 
 
@@ -213,9 +216,9 @@ def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touche
                 off += 1
             else:
                 off = 0
-            if off > 3 and _one_line(x, y, start, i + 1, 2.0 * rho_res):
+            if off > 3 and _one_line(x, y, start, i + 1, 2.0 * rho_res, off):
                 # early in a run, clustered points leave the peak's angle loose; when one straight line
-                # still holds the whole run, it is one line
+                # still holds the whole run, the off points included, it is one line
                 off = 0
             if off > 3 and n < sub_s.shape[0] - 1:
                 cut = i - off + 1
@@ -298,10 +301,13 @@ def line_of_run(x, y, s, e, theta_t, rho_p, votes, rho_res, idx, out) -> None:
     m2 = 0
     for i in range(s, e):
         if abs(x[i] * c + y[i] * sn - rho) <= rho_res:
-            idx[m2] = i
             m2 += 1
     if m2 > m:
-        m = m2
+        m = 0
+        for i in range(s, e):
+            if abs(x[i] * c + y[i] * sn - rho) <= rho_res:
+                idx[m] = i
+                m += 1
         theta, rho = fit_line(x, y, idx, m)
         c = np.cos(theta)
         sn = np.sin(theta)
@@ -687,7 +693,7 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
             for q in range(given_offsets[k], given_offsets[k + 1]):
                 a = min(max(given[q, 0], 0), B)
                 b = min(max(given[q, 1], a), B)
-                if b > a and nseg < B + 1:
+                if b > a and nseg < B:
                     starts[nseg] = a
                     ends[nseg] = b
                     nseg += 1

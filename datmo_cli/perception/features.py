@@ -97,7 +97,8 @@ def segment_run(run: ScanRun, params: FeatureParams | None = None) -> tuple[np.n
     lo, hi = _range_limits(run)
     ranges = np.ascontiguousarray(run.ranges, np.float32)
     N, B = ranges.shape if ranges.ndim == 2 else (0, 0)
-    seg = np.empty((max(N * ((B + 1) // 2 + 1), 1), 2), np.int64)
+    # a scan has at most B // min_points segments (each of at least min_points beams)
+    seg = np.empty((max(N * (B // max(p.min_points, 1) + 1), 1), 2), np.int64)
     count = np.zeros(N, np.int64)
     if N and B:
         n = K.segment_block(ranges, float(np.cos(run.geometry.angle_increment)), p.c0, _c1(run), lo, hi,
@@ -120,6 +121,24 @@ _LINE_NAMES = ("segment", "first", "last", "n_points", "x_ini", "y_ini", "x_end"
                "length", "r_acc")
 _CIRCLE_NAMES = ("segment", "first", "last", "n_points", "x", "y", "radius", "r_acc")
 _BLOB_NAMES = ("segment", "first", "last", "n_points", "x", "y", "size", "kind")
+
+
+def _check_segments(start: np.ndarray, end: np.ndarray, offsets: np.ndarray, beams: int) -> None:
+    """Given segments, beam ranges [start, end) clipped to the scan (empty ones are skipped), must be disjoint
+    and in scan order: more segments than beams would not fit the kernels' buffers."""
+    if len(offsets) and (offsets[0] != 0 or offsets[-1] != len(start) or np.any(np.diff(offsets) < 0)):
+        raise InputError("segment offsets do not index the segment arrays")
+    start = np.clip(start, 0, beams)
+    end = np.clip(end, start, beams)
+    bad = np.zeros(len(start), bool)
+    first = np.zeros(len(start), bool)
+    first[offsets[:-1][offsets[:-1] < len(start)]] = True
+    bad[1:] |= ~first[1:] & (start[1:] < end[:-1])
+    if bad.any():
+        i = int(np.argmax(bad))
+        scan = int(np.searchsorted(offsets, i, side="right") - 1)
+        raise InputError(f"segment [{start[i]}, {end[i]}) of scan {scan} overlaps the one before: "
+                         "segments must be disjoint and in scan order")
 
 
 def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odometry | None = None, *,
@@ -145,6 +164,7 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
         g_start, g_end, g_off = (np.asarray(v, np.int64) for v in segments)
         if len(g_off) != N + 1:
             raise InputError(f"segments for {len(g_off) - 1} scans, the run has {N}")
+        _check_segments(g_start, g_end, g_off, B)
         given = np.stack([g_start, g_end], axis=1) if len(g_start) else np.zeros((0, 2), np.int64)
     segs, seg_counts, parts = [], [], {"l": [], "c": [], "b": []}
     for a in range(0, N, BLOCK):
@@ -154,8 +174,9 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
         seg = np.empty((cap, 2), np.int64)   # empty, not zeros: only the rows the kernel fills are read
         count = np.zeros(n, np.int64)
         lines = np.empty((cap, 13))
-        circles = np.empty((n * (B // 2 + 1) + 1, 9))
-        blobs = np.empty((n * (B // 2 + 1) + 1, 9))
+        # disjoint segments: at most B per scan, each with at most one circle or blob
+        circles = np.empty((cap, 9))
+        blobs = np.empty((cap, 9))
         got = np.zeros(3, np.int64)
         if segments is not None:
             sub_off = g_off[a:a + n + 1]
