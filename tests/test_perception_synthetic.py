@@ -13,7 +13,7 @@ import pytest
 
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.perception.features import extract_run
-from datmo_cli.perception.landmarks import COLUMN
+from datmo_cli.perception.landmarks import BENCH, COLUMN, LINE_END
 
 INC = math.radians(0.5)
 ANGLE_MIN = -math.pi / 2
@@ -245,3 +245,17 @@ def test_a_circle_moving_20_cm_per_scan_is_no_landmark():
     assert not np.any(f.landmarks.rows[:, 0] == COLUMN) or np.all(
         (f.landmarks.rows[f.landmarks.rows[:, 0] == COLUMN, 5] < 3)
         | (f.landmarks.rows[f.landmarks.rows[:, 0] == COLUMN, 10] != 0))
+
+
+@pytest.mark.parametrize("dropouts", [[150], [140, 141], [175, 176, 177, 210]])
+def test_dropouts_on_a_wall_make_no_line_ends_benches_or_columns(dropouts):
+    """Beams that return nothing in the middle of a wall (a dark patch, a glass pane) break it into pieces of
+    a bench's length, but the wall continues beyond them at its range: no piece stands free, no end is seen."""
+    clean = ref.ray_wall(ANGLES, 3.0, 0.0)
+    scans = noisy_scans(clean, n=20)
+    scans[:, dropouts] = np.nan
+    scans[:, 195] = 0.0                       # an invalid return of another kind (below range_min)
+    f = extract_run(run_of(scans))
+    assert len(f.lines) >= 3 * 20             # the pieces are seen as lines
+    types = f.landmarks.final()["type"]
+    assert not np.isin(types, [LINE_END, BENCH, COLUMN]).any(), types

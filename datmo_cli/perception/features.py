@@ -210,10 +210,11 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
         line_scan = rows["l"][:, 0].astype(np.int64)
         det = np.concatenate([
             junction_detections(out.lines, line_scan, p),
-            line_end_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, hi, p),
+            line_end_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, (lo, hi), p),
             circle_detections(out.circles, rows["c"][:, 0].astype(np.int64), out.lines, line_scan,
-                              out.line_offsets, out.seg_start, out.seg_end, out.seg_offsets, ranges, p),
-            seat_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, p)])
+                              out.line_offsets, out.seg_start, out.seg_end, out.seg_offsets, ranges, (lo, hi), p),
+            seat_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, (lo, hi),
+                            p)])
         world = odometry is not None and len(odometry) > 0
         poses = odometry.at(run.stamps) if world else None
         out.landmarks = LandmarkDatabase(to_world(det, poses), run.stamps, p)

@@ -72,27 +72,26 @@ def junction_detections(lines: np.ndarray, scan: np.ndarray, p: FeatureParams) -
 
 
 def line_end_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray,
-                        seg_offsets: np.ndarray, ranges: np.ndarray, range_max: float, p: FeatureParams) -> np.ndarray:
+                        seg_offsets: np.ndarray, ranges: np.ndarray, limits: tuple[float, float],
+                        p: FeatureParams) -> np.ndarray:
     """Undefined line ends, sensor frame: ends of wall lines (longer than d_max) that end their segment
-    where the neighbouring beam returns nothing or returns at least 0.5 m farther (so the end is seen: not
-    hidden by something nearer, and not just a wall at a grazing angle breaking into pieces), and that lie
-    well within the range limit (a wall running out of range has no end there)."""
+    where the next return beyond (past a dropout of a few invalid beams) is absent or at least 0.5 m farther
+    (so the end is seen: not hidden by something nearer, not a dropout on the wall, and not just a wall at a
+    grazing angle breaking into pieces), not at the scan's own edge, and well within the range limit (a wall
+    running out of range has no end there). `limits`: the scan's (range_min, range_max), metres."""
     k = np.flatnonzero(lines["length"] > p.d_max)
     if not len(k):
         return np.zeros((0, 6))
     ln, s = lines[k], scan[k]
     g = seg_offsets[s] + ln["segment"].astype(np.int64)
-    B = ranges.shape[1]
     out = []
     for beam, at_end, nb, ex, ey, fx, fy in (
             (ln["first"].astype(np.int64), seg_start[g], -1, ln["x_ini"], ln["y_ini"], ln["x_end"], ln["y_end"]),
             (ln["last"].astype(np.int64), seg_end[g].astype(np.int64) - 1, 1, ln["x_end"], ln["y_end"], ln["x_ini"],
              ln["y_ini"])):
-        nbeam = beam + nb
-        inside = (nbeam >= 0) & (nbeam < B)
+        there, exists = return_beyond(ranges, s, beam, nb, limits)
         here = ranges[s, beam]
-        there = np.where(inside, ranges[s, np.clip(nbeam, 0, B - 1)], np.inf)
-        seen = (~np.isfinite(there) | (there > here + 0.5)) & (here < 0.9 * range_max)
+        seen = exists & (there > here + 0.5) & (here < 0.9 * limits[1])
         keep = (beam == at_end) & seen
         rows = np.zeros((int(keep.sum()), 6))
         rows[:, DET_SCAN], rows[:, DET_TYPE] = s[keep], LINE_END
@@ -104,12 +103,13 @@ def line_end_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarr
 
 def circle_detections(circles: np.ndarray, scan: np.ndarray, lines: np.ndarray, line_scan: np.ndarray,
                       line_offsets: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray, seg_offsets: np.ndarray,
-                      ranges: np.ndarray, p: FeatureParams) -> np.ndarray:
+                      ranges: np.ndarray, limits: tuple[float, float], p: FeatureParams) -> np.ndarray:
     """Column candidates (free-standing circles larger than a leg) and benches (two such supports with a
     line between them, near their axis and along it), sensor frame."""
     big = np.flatnonzero(circles["radius"] > p.leg_radius_max)
     g = seg_offsets[scan[big]] + circles["segment"][big].astype(np.int64)
-    big = big[free_standing(scan[big], seg_start[g].astype(np.int64), seg_end[g].astype(np.int64), ranges, p.c0)]
+    big = big[free_standing(scan[big], seg_start[g].astype(np.int64), seg_end[g].astype(np.int64), ranges, p.c0,
+                                   limits)]
     c = circles[big]
     cols = np.zeros((len(big), 6))
     cols[:, DET_SCAN], cols[:, DET_TYPE] = scan[big], COLUMN
@@ -122,27 +122,54 @@ def circle_detections(circles: np.ndarray, scan: np.ndarray, lines: np.ndarray, 
     return np.concatenate([cols, benches[:nb]])
 
 
-def free_standing(scan: np.ndarray, a: np.ndarray, b: np.ndarray, ranges: np.ndarray, c0: float) -> np.ndarray:
-    """Whether segments [a, b) of scans `scan` stand free: beyond each end the next beam returns nothing or
-    returns at least 0.5 m farther (open space behind), or nearer (an occluder), and at least one end is
-    open. The scan's own edges are neither. A wall seen at a grazing angle breaks into pieces whose
-    neighbours are only a little farther, and a structure attached to a wall continues at its range."""
+DROPOUT_BEAMS = 3   # invalid beams a surface may drop out for and still continue beyond them
+
+
+def return_beyond(ranges: np.ndarray, scan: np.ndarray, beam: np.ndarray, step: int,
+                  limits: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The range (metres) of the first valid return beyond `beam` in direction `step` (+1 or -1), looking
+    past up to DROPOUT_BEAMS invalid beams (a dropout on a surface); inf where there is none that near (open
+    space). Also whether the next beam exists at all (False at the scan's own edge)."""
+    lo, hi = limits
     B = ranges.shape[1]
+    exists = (beam + step >= 0) & (beam + step < B)
+    out = np.full(len(beam), np.inf)
+    found = np.zeros(len(beam), bool)
+    for j in range(1, DROPOUT_BEAMS + 2):
+        nb = beam + step * j
+        inside = (nb >= 0) & (nb < B)
+        r = ranges[scan, np.clip(nb, 0, B - 1)].astype(np.float64)
+        valid = inside & ~found & np.isfinite(r) & (r > lo) & (r < hi)
+        out[valid] = r[valid]
+        found |= valid
+    return out, exists
+
+
+def free_standing(scan: np.ndarray, a: np.ndarray, b: np.ndarray, ranges: np.ndarray, c0: float,
+                  limits: tuple[float, float]) -> np.ndarray:
+    """Whether segments [a, b) of scans `scan` stand free: beyond each end the next return (past a dropout of
+    a few invalid beams) is absent or at least 0.5 m farther (open space behind), or nearer (an occluder), and
+    at least one end is open; no return beyond is open space only well within the range limit. The scan's
+    own edges are neither. A wall seen at a grazing angle breaks into
+    pieces whose neighbours are only a little farther, a structure attached to a wall continues at its range,
+    and a wall with a dropout continues beyond it."""
     n_open = np.zeros(len(scan), np.int64)
     closed = np.zeros(len(scan), bool)
-    for inside, beyond in ((a, a - 1), (b - 1, b)):
-        valid = (beyond >= 0) & (beyond < B)
-        there = ranges[scan, np.clip(beyond, 0, B - 1)]
-        here = ranges[scan, np.clip(inside, 0, B - 1)]
-        is_open = valid & (~np.isfinite(there) | (there > here + 0.5))
-        occluded = valid & (there < here - c0)
+    for inside, step in ((a, -1), (b - 1, 1)):
+        there, exists = return_beyond(ranges, scan, inside, step, limits)
+        here = ranges[scan, np.clip(inside, 0, ranges.shape[1] - 1)]
+        # no return beyond is open space unless the end is within 25 cm of the range limit, where it may be
+        # the same surface running out of range (a wall seen at a grazing angle)
+        is_open = exists & np.where(np.isfinite(there), there > here + 0.5, here < limits[1] - 0.25)
+        occluded = exists & (there < here - c0)
         n_open += is_open
-        closed |= valid & ~is_open & ~occluded
+        closed |= exists & ~is_open & ~occluded
     return (n_open >= 1) & ~closed
 
 
 def seat_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray,
-                    seg_offsets: np.ndarray, ranges: np.ndarray, p: FeatureParams) -> np.ndarray:
+                    seg_offsets: np.ndarray, ranges: np.ndarray, limits: tuple[float, float],
+                    p: FeatureParams) -> np.ndarray:
     """Benches whose supports the scan cannot resolve as circles: a free-standing line of a bench's length,
     sensor frame. It spans its segment but for a support's arc at either end (8 beams), and beyond each end
     of the segment the next beam returns nothing, or returns 0.5 m farther (open space behind the bench), or
@@ -158,7 +185,7 @@ def seat_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarray, 
     g = seg_offsets[s] + ln["segment"].astype(np.int64)
     a, b = seg_start[g].astype(np.int64), seg_end[g].astype(np.int64)
     spans = (ln["first"].astype(np.int64) - a <= 8) & (b - 1 - ln["last"].astype(np.int64) <= 8)
-    free = spans & free_standing(s, a, b, ranges, p.c0)
+    free = spans & free_standing(s, a, b, ranges, p.c0, limits)
     ln, s = ln[free], s[free]
     out = np.zeros((len(ln), 6))
     out[:, DET_SCAN], out[:, DET_TYPE] = s, BENCH
