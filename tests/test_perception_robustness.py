@@ -147,10 +147,11 @@ def test_scans_without_a_valid_return_have_nothing(value, beams):
 @pytest.mark.parametrize("step_deg", [1.0, 0.5, 0.25])
 def test_all_beams_equal_is_one_arc_segment(beams, step_deg):
     """Every beam at 3 m: one segment (an arc about the scanner, concave: never a circle object)."""
-    f = extract_run(run_of(np.full((2, beams), 3.0, np.float32), math.radians(step_deg)))
-    want = 1 if beams >= 5 else 0
+    p = FeatureParams()
+    f = extract_run(run_of(np.full((2, beams), 3.0, np.float32), math.radians(step_deg)), p)
+    want = 1 if beams >= p.min_points else 0
     assert np.diff(f.seg_offsets).tolist() == [want, want]
-    check_invariants(f, 2, beams, 5)
+    check_invariants(f, 2, beams, p.min_points)
     assert len(f.circles) == 0
 
 
@@ -158,7 +159,7 @@ def test_huge_range_limit_and_huge_ranges():
     r = np.full((2, 361), 1e6, np.float32)
     r[:, 100:200] = 3.0
     f = extract_run(run_of(r, math.radians(0.5), range_max=math.inf))
-    check_invariants(f, 2, 361, 5)
+    check_invariants(f, 2, 361, FeatureParams().min_points)
     assert np.diff(f.seg_offsets).tolist() == [3, 3]   # 1e6 m returns are valid without a range limit
 
 
@@ -191,7 +192,7 @@ def test_a_negative_step_sees_the_same_scene():
     g_neg = ScanGeometry(angles[-1], -inc, 361, 0.0, 8.0)
     f = extract_run(ScanRun(np.zeros(1, np.int64), r, g_pos), landmarks=False)
     h = extract_run(ScanRun(np.zeros(1, np.int64), r[:, ::-1], g_neg), landmarks=False)
-    check_invariants(h, 1, 361, 5)
+    check_invariants(h, 1, 361, FeatureParams().min_points)
     assert sorted(zip(f.seg_start.tolist(), f.seg_end.tolist(), strict=True)) == sorted(
         zip((361 - h.seg_end).tolist(), (361 - h.seg_start).tolist(), strict=True))
     assert len(h.circles) == len(f.circles) == 2

@@ -1,8 +1,10 @@
 """Parameters of `datmo segment` and `datmo features` (the `[features]` table of a config file).
 
 Defaults follow Castro, Nunes and Ruano (2004) as restated in method.md where the paper gives a value
-(minimum segment size 5, line kept with more than 3 points, r_acc > 0.5 and length > 10 cm, legs of
-radius 10 cm, d_max 150 cm); the rest were tuned on the simulator's logs (`make accuracy`).
+(line kept with more than 3 points, r_acc > 0.5 and length > 10 cm, legs of radius 10 cm, d_max 150 cm),
+except the minimum segment size: 3, not the paper's 5, so that legs 4-6 m away (3-5 beams of a 0.5°
+scan) are still segments and circles (tracking people MOTA on the hall log rises from 0.2 to 0.7 with it);
+the rest were tuned on the simulator's logs (`make accuracy`).
 Units: metres and degrees.
 """
 
@@ -20,7 +22,7 @@ from ..errors import ConfigError
 class FeatureParams:
     # segmentation (method.md section 4)
     c0: float = 0.08                 # m; threshold C0 + C1 * min(r_i, r_i+1), C1 from the scan's angle step
-    min_points: int = 5              # segments with fewer points are dropped (paper: 5)
+    min_points: int = 3              # segments with fewer points are dropped (paper: 5; 3 keeps legs to 6 m)
     # lines, HTL (section 5.1)
     theta_resolution: float = 1.5    # degrees per theta cell (the least-squares fit refines the angle)
     rho_resolution: float = 0.02     # m per rho cell
@@ -36,7 +38,7 @@ class FeatureParams:
     circle_cell: float = 0.01        # m; (a, b) cell size
     circle_window: float = 0.04      # m; votes within this of the P_ini/P_near/P_end estimate
     circle_tolerance: float = 0.02   # m; a point votes for a centre when | |p - c| - r | <= this
-    circle_min_points: int = 4
+    circle_min_points: int = 3
     circle_check_extent: float = 0.35   # m; a one-line segment shorter than this also gets HTC (legs) ...
     circle_check_radius: float = 0.15   # m; ... and is a circle only with a radius up to this
     circle_min_sagitta: float = 0.02    # m; an arc must bulge this much towards the scanner (P_near vs chord)
