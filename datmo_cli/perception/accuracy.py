@@ -117,11 +117,15 @@ class LandmarkScore:
 
 
 def corner_observed(run, truth: np.ndarray, truth_offsets: np.ndarray, sensor_theta: np.ndarray,  # noqa: ANN001
-                    reach: float = 0.5, near: float = 0.03, min_points: int = 3) -> dict[int, int]:
-    """For each true wall corner id, the number of scans in which it can be seen as a corner: at least
-    `min_points` scan points lie on each of its two walls (within `near` of the wall line) within `reach` of
-    the vertex. Sensor frame."""
+                    reach: float = 0.5, near: float = 0.03, min_points: int = 4, c0: float = 0.08) -> dict[int, int]:
+    """For each true wall corner id, the number of scans in which the method can see it as a corner: each of
+    its two walls has at least `min_points` scan points (the paper keeps a line of more than 3 points) within
+    `near` of the wall line, within `reach` of the vertex and not on the other wall, and these points with
+    the vertex's are one segment's worth: no gap between successive points is wider than the segmentation
+    threshold c0 + c1 * r (a wall seen at a grazing angle, its returns farther apart than that, breaks into
+    single points, which no line can be made of). Sensor frame."""
     angles = run.geometry.angles()
+    c1 = float(np.sqrt(2.0 * (1.0 - np.cos(run.geometry.angle_increment))))
     out: dict[int, int] = {}
     for k in range(len(run)):
         objs = truth[truth_offsets[k]:truth_offsets[k + 1]]
@@ -131,6 +135,7 @@ def corner_observed(run, truth: np.ndarray, truth_offsets: np.ndarray, sensor_th
             continue
         r = run.ranges[k].astype(np.float64)
         ok = np.isfinite(r)
+        pr = r[ok]
         px, py = (r * np.cos(angles))[ok], (r * np.sin(angles))[ok]
         d = walls["orientation"].astype(np.float64) - sensor_theta[k]
         ux, uy = np.cos(d), np.sin(d)
@@ -139,13 +144,17 @@ def corner_observed(run, truth: np.ndarray, truth_offsets: np.ndarray, sensor_th
         for c in corners:
             cx, cy = float(c["x"]), float(c["y"])
             touching = np.flatnonzero((np.hypot(ends[:, 0] - cx, ends[:, 1] - cy) < 0.02)
-                                      | (np.hypot(ends[:, 2] - cx, ends[:, 3] - cy) < 0.02))
+                                      | (np.hypot(ends[:, 2] - cx, ends[:, 3] - cy) < 0.02))[:2]
+            if len(touching) < 2:
+                continue
             close = np.hypot(px - cx, py - cy) <= reach
-            seen = 0
-            for w in touching[:2].tolist():
-                off = np.abs(-(px - cx) * uy[w] + (py - cy) * ux[w])
-                seen += int(np.count_nonzero(close & (off <= near)) >= min_points)
-            if len(touching) >= 2 and seen == 2:
+            on = [close & (np.abs(-(px - cx) * uy[w] + (py - cy) * ux[w]) <= near) for w in touching.tolist()]
+            sides = [on[0] & ~on[1], on[1] & ~on[0]]
+            if min(int(np.count_nonzero(side)) for side in sides) < min_points:
+                continue
+            chain = np.flatnonzero(on[0] | on[1])     # in beam order: both walls and the vertex's points
+            gap = np.hypot(np.diff(px[chain]), np.diff(py[chain]))
+            if np.all(gap <= c0 + c1 * np.minimum(pr[chain][:-1], pr[chain][1:])):
                 out[int(c["id"])] = out.get(int(c["id"]), 0) + 1
     return out
 

@@ -214,7 +214,7 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
             circle_detections(out.circles, rows["c"][:, 0].astype(np.int64), out.lines, line_scan,
                               out.line_offsets, out.seg_start, out.seg_end, out.seg_offsets, ranges, (lo, hi), p),
             seat_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, (lo, hi),
-                            p)])
+                            angles, p)])
         world = odometry is not None and len(odometry) > 0
         poses = odometry.at(run.stamps) if world else None
         out.landmarks = LandmarkDatabase(to_world(det, poses), run.stamps, p)

@@ -50,7 +50,7 @@ def junction_detections(lines: np.ndarray, scan: np.ndarray, p: FeatureParams) -
     turn = np.abs(ta - tb) % np.pi
     turn = np.minimum(turn, np.pi - turn)                       # angle between the lines, 0 .. pi/2
     gap = np.maximum(np.hypot(jx - a["x_end"], jy - a["y_end"]), np.hypot(jx - b["x_ini"], jy - b["y_ini"]))
-    ok = np.isfinite(jx) & (gap <= p.corner_gap) & (np.minimum(a["length"], b["length"]) >= 2 * p.line_min_length)
+    ok = np.isfinite(jx) & (gap <= p.corner_gap) & (np.minimum(a["length"], b["length"]) >= p.line_min_length)
     corner = ok & (np.abs(turn - np.pi / 2) <= np.radians(p.perpendicular_tolerance))
     walls = np.minimum(a["length"], b["length"]) >= 0.5   # a deflection is of a wall, not of a small object
     deflection = ok & ~corner & walls & (turn >= np.radians(p.deflection_min))
@@ -89,7 +89,7 @@ def line_end_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarr
             (ln["first"].astype(np.int64), seg_start[g], -1, ln["x_ini"], ln["y_ini"], ln["x_end"], ln["y_end"]),
             (ln["last"].astype(np.int64), seg_end[g].astype(np.int64) - 1, 1, ln["x_end"], ln["y_end"], ln["x_ini"],
              ln["y_ini"])):
-        there, exists = return_beyond(ranges, s, beam, nb, limits)
+        there, _, exists = return_beyond(ranges, s, beam, nb, limits)
         here = ranges[s, beam]
         seen = exists & (there > here + 0.5) & (here < 0.9 * limits[1])
         keep = (beam == at_end) & seen
@@ -126,14 +126,16 @@ DROPOUT_BEAMS = 3   # invalid beams a surface may drop out for and still continu
 
 
 def return_beyond(ranges: np.ndarray, scan: np.ndarray, beam: np.ndarray, step: int,
-                  limits: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+                  limits: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The range (metres) of the first valid return beyond `beam` in direction `step` (+1 or -1), looking
     past up to DROPOUT_BEAMS invalid beams (a dropout on a surface); inf where there is none that near (open
-    space). Also whether the next beam exists at all (False at the scan's own edge)."""
+    space). Also its beam (-1 where none), and whether the next beam exists at all (False at the scan's own
+    edge)."""
     lo, hi = limits
     B = ranges.shape[1]
     exists = (beam + step >= 0) & (beam + step < B)
     out = np.full(len(beam), np.inf)
+    where = np.full(len(beam), -1, np.int64)
     found = np.zeros(len(beam), bool)
     for j in range(1, DROPOUT_BEAMS + 2):
         nb = beam + step * j
@@ -141,26 +143,35 @@ def return_beyond(ranges: np.ndarray, scan: np.ndarray, beam: np.ndarray, step: 
         r = ranges[scan, np.clip(nb, 0, B - 1)].astype(np.float64)
         valid = inside & ~found & np.isfinite(r) & (r > lo) & (r < hi)
         out[valid] = r[valid]
+        where[valid] = nb[valid]
         found |= valid
-    return out, exists
+    return out, where, exists
 
 
 def free_standing(scan: np.ndarray, a: np.ndarray, b: np.ndarray, ranges: np.ndarray, c0: float,
-                  limits: tuple[float, float]) -> np.ndarray:
+                  limits: tuple[float, float], line: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                  behind: float = 0.3) -> np.ndarray:
     """Whether segments [a, b) of scans `scan` stand free: beyond each end the next return (past a dropout of
     a few invalid beams) is absent or at least 0.5 m farther (open space behind), or nearer (an occluder), and
     at least one end is open; no return beyond is open space only well within the range limit. The scan's
-    own edges are neither. A wall seen at a grazing angle breaks into
-    pieces whose neighbours are only a little farther, a structure attached to a wall continues at its range,
-    and a wall with a dropout continues beyond it."""
+    own edges are neither. A wall seen at a grazing angle breaks into pieces whose neighbours are only a
+    little farther, a structure attached to a wall continues at its range, and a wall with a dropout
+    continues beyond it. With `line` = (theta, rho, beam angles) of each segment's line (sensor frame,
+    radians and metres), an open end's return must also lie `behind` metres or more off that line: the back
+    of a shallow recess in a wall seen at a grazing angle is far in range but close to the wall's line."""
     n_open = np.zeros(len(scan), np.int64)
     closed = np.zeros(len(scan), bool)
     for inside, step in ((a, -1), (b - 1, 1)):
-        there, exists = return_beyond(ranges, scan, inside, step, limits)
+        there, beam, exists = return_beyond(ranges, scan, inside, step, limits)
         here = ranges[scan, np.clip(inside, 0, ranges.shape[1] - 1)]
         # no return beyond is open space unless the end is within 25 cm of the range limit, where it may be
         # the same surface running out of range (a wall seen at a grazing angle)
         is_open = exists & np.where(np.isfinite(there), there > here + 0.5, here < limits[1] - 0.25)
+        if line is not None:
+            theta, rho, angles = line
+            t = angles[np.maximum(beam, 0)]
+            off = np.abs(there * np.cos(t - theta) - rho)
+            is_open &= ~np.isfinite(there) | (off >= behind)
         occluded = exists & (there < here - c0)
         n_open += is_open
         closed |= exists & ~is_open & ~occluded
@@ -168,12 +179,13 @@ def free_standing(scan: np.ndarray, a: np.ndarray, b: np.ndarray, ranges: np.nda
 
 
 def seat_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray,
-                    seg_offsets: np.ndarray, ranges: np.ndarray, limits: tuple[float, float],
+                    seg_offsets: np.ndarray, ranges: np.ndarray, limits: tuple[float, float], angles: np.ndarray,
                     p: FeatureParams) -> np.ndarray:
     """Benches whose supports the scan cannot resolve as circles: a free-standing line of a bench's length,
     sensor frame. It spans its segment but for a support's arc at either end (8 beams), and beyond each end
-    of the segment the next beam returns nothing, or returns 0.5 m farther (open space behind the bench), or
-    nearer (an occluder); at least one end must be open. A wall seen at a grazing angle breaks into pieces
+    of the segment the next beam returns nothing, or returns 0.5 m farther and 0.3 m or more behind the line
+    (open space behind the bench), or nearer (an occluder); at least one end must be open (`angles`: the
+    beams' angles, radians). A wall seen at a grazing angle breaks into pieces
     whose neighbours are only a little farther, so it is not taken for a bench. A static one accumulates
     into a bench landmark; a moving one never does."""
     ln = lines
@@ -185,7 +197,8 @@ def seat_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarray, 
     g = seg_offsets[s] + ln["segment"].astype(np.int64)
     a, b = seg_start[g].astype(np.int64), seg_end[g].astype(np.int64)
     spans = (ln["first"].astype(np.int64) - a <= 8) & (b - 1 - ln["last"].astype(np.int64) <= 8)
-    free = spans & free_standing(s, a, b, ranges, p.c0, limits)
+    line = (ln["theta"].astype(np.float64), ln["rho"].astype(np.float64), angles)
+    free = spans & free_standing(s, a, b, ranges, p.c0, limits, line)
     ln, s = ln[free], s[free]
     out = np.zeros((len(ln), 6))
     out[:, DET_SCAN], out[:, DET_TYPE] = s, BENCH
