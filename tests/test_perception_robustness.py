@@ -259,6 +259,13 @@ def test_min_points_one_extract_run_one_blob_per_beam():
     assert res.returncode == 0 and res.stdout.strip() == "OK", res.stderr[-2000:]
 
 
+def test_given_segments_out_of_range_are_clipped_not_trusted():
+    run = run_of(np.full((1, 50), 2.0, np.float32), math.radians(0.5))
+    f = extract_run(run, segments=(np.array([-5, 40]), np.array([30, 500]), np.array([0, 2])))
+    check_invariants(f, 1, 50, 1)
+    assert f.seg_start.tolist() == [0, 40] and f.seg_end.tolist() == [30, 50]
+
+
 def test_overlapping_given_segments_are_a_clean_error_not_an_overflow():
     """More segments than beams (here the whole scan B + 1 times) would overflow the kernel's buffers:
     given segments must be disjoint and in scan order, else an InputError names the scan."""
