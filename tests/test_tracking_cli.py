@@ -141,3 +141,24 @@ def test_raw_log_is_segmented_and_tracked(tmp_path):
     params = log.metadata["datmo.params"]
     assert set(params) == {"track", "features"}
     assert json.loads(params["track"])["confirm_hits"] == 3 and "min_points" in json.loads(params["features"])
+
+
+def test_config_tables_are_read_per_stage(tmp_path):
+    """One datmo.toml serves every command: [track] for tracking, [features] ignored by it, and a file with
+    no tables at all is read as the stage's own table."""
+    from datmo_cli.errors import ConfigError
+    from datmo_cli.tracking.params import TrackingParams, load_toml
+
+    both = tmp_path / "both.toml"
+    both.write_text("[features]\nmin_points = 4\n\n[track]\ngate = 9.0\n")
+    assert load_toml(both).gate == 9.0
+    only_features = tmp_path / "features.toml"
+    only_features.write_text("[features]\nmin_points = 4\n")
+    assert load_toml(only_features) == TrackingParams()
+    flat = tmp_path / "flat.toml"
+    flat.write_text("gate = 7.5\n")
+    assert load_toml(flat).gate == 7.5
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[track]\ngaet = 7.5\n")
+    with pytest.raises(ConfigError, match="gaet"):
+        load_toml(bad)

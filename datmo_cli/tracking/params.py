@@ -5,7 +5,6 @@ Units: metres, seconds, m/s. Every constant of the tracker is here, none is a li
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -99,16 +98,6 @@ def from_dict(values: dict, where: str = "track") -> TrackingParams:
 
 def load_toml(path: str | Path) -> TrackingParams:
     """Parameters from the `[track]` table of a TOML file (or its top level when it has no such table)."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: {exc}") from None
-    table = data.get("track", data)
-    if not isinstance(table, dict):
-        raise ConfigError(f"{path}: track must be a table")
-    return from_dict(table, where=f"{path}: track")
+    from ..config import read_table
+
+    return from_dict(read_table(path, "track"), where=f"{path}: track")
