@@ -65,8 +65,7 @@ def test_stated_tolerances_can_be_tightened():
 
 def test_committed_baseline_is_well_formed():
     path = Path(regress.BASELINE)
-    if not path.exists():
-        pytest.skip(f"{path} is not made yet: make regress-update writes it once datmo run works end to end")
+    assert path.exists(), f"{path} is missing: make regress-update writes it"
     data = json.loads(path.read_text())
     assert set(data["tolerance"]) == set(regress.DEFAULT_TOLERANCE)
     names = {p.stem for p in regress.sample_logs()}
@@ -74,3 +73,12 @@ def test_committed_baseline_is_well_formed():
     for name, fig in data["logs"].items():
         if fig.get("ground_truth") is not False:
             assert set(regress.FIGURES) <= set(fig), name
+
+
+@pytest.mark.slow
+def test_sample_logs_hold_the_committed_baseline(capsys):
+    """make regress, in the suite: datmo run and datmo evaluate on every sample log, compared with the
+    committed baseline; a figure worse than its tolerance fails here."""
+    code = regress.main([])
+    out = capsys.readouterr()
+    assert code == 0, out.out + out.err
