@@ -64,3 +64,22 @@ def test_cli_run_in_parallel_then_evaluate(tmp_path, hall_log):
     ev = CliRunner().invoke(cli, ["evaluate", str(out / "hall.mcap"), "--format", "json"])
     assert ev.exit_code == 0, ev.output
     assert '"mota"' in ev.stdout
+
+
+@pytest.mark.slow
+def test_first_parallel_run_with_an_empty_numba_cache(tmp_path, hall_log):
+    """After an install or upgrade the numba cache is empty: the kernels are compiled once, before the worker
+    processes start, not by every worker at once."""
+    import os
+    import subprocess
+    import sys
+
+    other = tmp_path / "copy.mcap"
+    other.write_bytes(hall_log.read_bytes())
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    done = subprocess.run([sys.executable, "-m", "datmo_cli", "run", str(hall_log), str(other), "-o",
+                           str(tmp_path / "out"), "--jobs", "2", "--no-report"],
+                          env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert (tmp_path / "out" / "hall.mcap").exists() and (tmp_path / "out" / "copy.mcap").exists()
+    assert any((tmp_path / "numba-cache").rglob("*.nbi"))

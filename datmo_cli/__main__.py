@@ -1,0 +1,5 @@
+"""`python -m datmo_cli`: the same as the `datmo` command."""
+
+from .cli import main
+
+main()
