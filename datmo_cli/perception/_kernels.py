@@ -520,9 +520,12 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
     for g in range(nseg):
         s = starts[g]
         e = ends[g]
-        normal_cells(x, y, s, e, nt, cell)
-        nsub = line_subsegments(x, y, s, e, acc, toff, cos_t, sin_t, rho_res, kwin, cell, touched, sub_s, sub_e,
-                                peaks, hist)
+        if e - s >= min_pts:
+            normal_cells(x, y, s, e, nt, cell)
+            nsub = line_subsegments(x, y, s, e, acc, toff, cos_t, sin_t, rho_res, kwin, cell, touched, sub_s,
+                                    sub_e, peaks, hist)
+        else:
+            nsub = 0   # too few points for a line of more than three: no HTL
         nkept = 0
         ncand = 0
         votes = 0.0

@@ -131,21 +131,28 @@ def return_beyond(ranges: np.ndarray, scan: np.ndarray, beam: np.ndarray, step: 
     past up to DROPOUT_BEAMS invalid beams (a dropout on a surface); inf where there is none that near (open
     space). Also its beam (-1 where none), and whether the next beam exists at all (False at the scan's own
     edge)."""
-    lo, hi = limits
-    B = ranges.shape[1]
-    exists = (beam + step >= 0) & (beam + step < B)
+    beam = np.asarray(beam, np.int64)
     out = np.full(len(beam), np.inf)
     where = np.full(len(beam), -1, np.int64)
-    found = np.zeros(len(beam), bool)
-    for j in range(1, DROPOUT_BEAMS + 2):
-        nb = beam + step * j
-        inside = (nb >= 0) & (nb < B)
-        r = ranges[scan, np.clip(nb, 0, B - 1)].astype(np.float64)
-        valid = inside & ~found & np.isfinite(r) & (r > lo) & (r < hi)
-        out[valid] = r[valid]
-        where[valid] = nb[valid]
-        found |= valid
-    return out, where, exists
+    _beyond(ranges, np.asarray(scan, np.int64), beam, step, float(limits[0]), float(limits[1]), DROPOUT_BEAMS,
+            out, where)
+    B = ranges.shape[1]
+    return out, where, (beam + step >= 0) & (beam + step < B)
+
+
+@njit(cache=True)
+def _beyond(ranges, scan, beam, step, lo, hi, dropout, out, where) -> None:  # noqa: ANN001
+    B = ranges.shape[1]
+    for i in range(len(beam)):
+        for j in range(1, dropout + 2):
+            nb = beam[i] + step * j
+            if nb < 0 or nb >= B:
+                break
+            r = np.float64(ranges[scan[i], nb])
+            if np.isfinite(r) and r > lo and r < hi:
+                out[i] = r
+                where[i] = nb
+                break
 
 
 def free_standing(scan: np.ndarray, a: np.ndarray, b: np.ndarray, ranges: np.ndarray, c0: float,
