@@ -197,13 +197,8 @@ def main() -> None:
     targets = ("targets: hall people MOTA >= 0.90, IDF1 >= 0.85; crowd6 MOTA >= 0.75; class right >= 0.95; "
                "static: no confirmed dynamic track")
     print_lines(f"Tracking accuracy with datmo features, perception defaults ({targets})", sim_lines("datmo"))
-    tuned = acc.TRACKING_FEATURE_PARAMS
-    print_lines(f"... with datmo features, FeatureParams overrides {tuned} (recommended defaults)",
-                sim_lines("datmo", tuned))
     if LEGTRACKER.exists():
         print_lines("Real data: legtracker bags, perception defaults", demo_lines() + positive_lines())
-        print_lines(f"Real data: legtracker bags, FeatureParams overrides {tuned}",
-                    demo_lines(tuned) + positive_lines(tuned))
 
 
 if __name__ == "__main__":

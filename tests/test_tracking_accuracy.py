@@ -1,10 +1,9 @@
 """Tracking accuracy on the simulated sample logs (bounds looser than make accuracy's targets).
 
 With ideal features built from the ground truth these check the tracker alone (degraded: with hidden and
-merged legs and missed detections); with datmo's own features (segmentation + Hough) the whole pipeline:
-"datmo" with perception's default FeatureParams, "tuned" with acc.TRACKING_FEATURE_PARAMS. The datmo bounds
-sit a little below what the pipeline reaches now (far below make accuracy's targets, which it does not meet
-yet): they guard against regressions.
+merged legs and missed detections); with datmo's own features (segmentation + Hough, perception's default
+FeatureParams) the whole pipeline, "datmo". The datmo bounds sit a little below what the pipeline reaches
+now (far below make accuracy's targets, which it does not meet yet): they guard against regressions.
 """
 
 from __future__ import annotations
@@ -24,8 +23,8 @@ def _score(sample_logs, name: str, source: str) -> dict:  # noqa: ANN001
     run, odom = mcapio.run_from_log(log), mcapio.odometry_from_log(log)
     truth = decode_channel(types.GROUND_TRUTH, log.messages[mcapio.TOPIC_GROUND_TRUTH][1])
     off, gt = truth.offsets["objects"], truth.items["objects"]
-    if source in ("datmo", "tuned"):
-        feats = run_features(run, odom, acc.TRACKING_FEATURE_PARAMS if source == "tuned" else None)
+    if source == "datmo":
+        feats = run_features(run, odom)
     else:
         feats = acc.ideal_features(off, gt, np.random.default_rng(0), noise=0.01 if source == "ideal" else 0.02,
                                    degraded=source == "degraded")
@@ -40,13 +39,13 @@ def _score(sample_logs, name: str, source: str) -> dict:  # noqa: ANN001
             "dynamic": len(np.unique(items["id"][(items["status"] == 1) & (items["mobility"] == 1)]))}
 
 
-SOURCES = ["ideal", "degraded", "datmo", "tuned"]
+SOURCES = ["ideal", "degraded", "datmo"]
 # (people MOTA, people IDF1, class right, platform id switches, circle object switches) bounds per source:
 # the tracker alone must do better
 HALL = {"ideal": (0.90, 0.90, 0.95, 0, 0), "degraded": (0.85, 0.85, 0.93, 0, 0),
-        "datmo": (0.15, 0.12, 0.70, 5, 8), "tuned": (0.65, 0.48, 0.86, 4, 4)}   # now 0.22/0.18, 0.73/0.56
-CROWD = {"ideal": 0.85, "degraded": 0.80, "datmo": 0.37, "tuned": 0.82}   # now 0.40 and 0.87 with datmo's features
-STATIC_DYNAMIC = {"ideal": 0, "degraded": 0, "datmo": 0, "tuned": 0}   # confirmed dynamic tracks, at most
+        "datmo": (0.65, 0.48, 0.86, 4, 4)}   # datmo now 0.73/0.56, class 0.91, platform 2 switches
+CROWD = {"ideal": 0.85, "degraded": 0.80, "datmo": 0.82}   # datmo now 0.87
+STATIC_DYNAMIC = {"ideal": 0, "degraded": 0, "datmo": 0}   # confirmed dynamic tracks, at most
 
 
 @pytest.mark.slow

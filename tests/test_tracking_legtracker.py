@@ -8,8 +8,6 @@ import importlib.util
 import pytest
 from conftest import ROOT, shared_path
 
-from datmo_cli.tracking import accuracy as acc
-
 pytestmark = [pytest.mark.slow, pytest.mark.shared]
 
 
@@ -24,16 +22,15 @@ def _accuracy_module():  # noqa: ANN202
     return module
 
 
-@pytest.mark.parametrize("feature_params", [None, acc.TRACKING_FEATURE_PARAMS], ids=["defaults", "tuned"])
-def test_demo_bag_people_and_no_walls(feature_params):
+def test_demo_bag_people_and_no_walls():
     path = shared_path("legtracker", "demo_stationary_simple_environment.bag")
-    figures = _accuracy_module().demo_figures(path, feature_params)
-    assert figures["people"] >= 4     # 9 with perception's defaults, 4 tuned
+    figures = _accuracy_module().demo_figures(path)
+    assert figures["people"] >= 3     # 4 now
     assert figures["on_walls"] == 0
 
 
 def test_positive_bags_legs_mostly_covered():
-    lines = _accuracy_module().positive_lines(acc.TRACKING_FEATURE_PARAMS)
+    lines = _accuracy_module().positive_lines()
     if not lines:
         pytest.skip("no positive_*_extracted.bag")
     share = float(lines[-1].split(": ")[1].split(" of ")[0])

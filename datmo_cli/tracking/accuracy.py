@@ -13,10 +13,6 @@ import numpy as np
 from .pipeline import ScanFeatures, features_from_lists
 
 PERSON, CIRCLE_OBJECT, RECTANGULAR_OBJECT, COLUMN, BENCH = 1, 2, 3, 4, 5
-# FeatureParams overrides the tracker does best with (make accuracy compares them with perception's defaults):
-# legs beyond ~5 m span 3-4 beams at 0.5 deg, so segments of 3 points must survive, and a 3-point arc may be
-# a circle
-TRACKING_FEATURE_PARAMS = {"min_points": 3, "circle_min_points": 3}
 
 
 def ideal_features(offsets: np.ndarray, objects: np.ndarray, rng: np.random.Generator, noise: float = 0.01,
