@@ -186,11 +186,12 @@ class Tracker:
             self._bg_lo = float(g.range_min) if np.isfinite(g.range_min) else 0.0
             self._bg_hi = float(g.range_max) if np.isfinite(g.range_max) and g.range_max > self._bg_lo else np.inf
         self._bg_scan += 1
+        # cells hit for four background times are walls: seen-through tests on them every fourth scan suffice
         self._bg_count = _kernels.background_update(
             self._bg_score, self._bg_mark, self._bg_active, self._bg_count, self._bg_scan,
             np.ascontiguousarray(ranges, np.float32), self._cos, self._sin, self._angle_min, self._inc, self._bg_lo,
             self._bg_hi, px, py, pc, ps, max(self._dt, 0.0), self._bg_origin[0], self._bg_origin[1],
-            p.background_cell, self._bg_n, p.occlusion_margin, np.inf)
+            p.background_cell, self._bg_n, p.occlusion_margin, 4.0 * p.background_time)
 
     def _hit_background(self, t: TrackArrays, m: Measurements, rows: np.ndarray, cols: np.ndarray) -> None:
         """Which tracks take a measurement on the background this scan (their motion does not count: the
