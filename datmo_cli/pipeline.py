@@ -91,30 +91,16 @@ def run_many(inputs: list[Path], out_dir: Path, *, jobs: int | None = None, forc
 
 
 def warm_up() -> None:
-    """Compile every numba kernel of the pipeline in this process (or load it from numba's cache) on a
-    small made-up run, with and without odometry, before worker processes start: they then inherit the
+    """Compile every numba kernel of the pipeline in this process (or load it from numba's cache) on short
+    simulated runs of the hall (people, a platform, columns, benches, occlusions) and of the patrol scene
+    (odometry), before any input's clock starts and before worker processes start: they then inherit the
     compiled kernels (fork) or find the cache complete (spawn), and never compile one kernel at once (a
-    first run after an upgrade would otherwise have every worker writing the same cache files)."""
-    import numpy as np
+    first run after an install would otherwise have every worker writing the same cache files)."""
+    from .sim.simulate import simulate_scene
 
-    from .log.scan import Odometry, ScanGeometry, ScanRun
-
-    g = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0, 0.0, 0.2, "laser")
-    a = g.angles()
-    n = 6
-    ranges = np.empty((n, len(a)), np.float32)
-    for k in range(n):   # a wall 3 m ahead and a column walking across it
-        wall = 3.0 / np.maximum(np.cos(a), 1e-3)
-        cx, cy = 2.0, -1.0 + 0.2 * k
-        b = np.cos(a) * cx + np.sin(a) * cy
-        disc = b * b - (cx * cx + cy * cy - 0.04)
-        hit = np.where(disc > 0, b - np.sqrt(np.maximum(disc, 0.0)), np.inf)
-        ranges[k] = np.minimum(np.minimum(wall, hit), 7.9)
-    stamps = np.arange(n, dtype=np.int64) * 200_000_000
-    run = ScanRun(stamps, ranges, g)
-    odometry = Odometry(stamps, 0.1 * np.arange(n, dtype=np.float64), np.zeros(n), np.zeros(n))
-    for odom in (None, odometry):
-        derive(run, odom)
+    for scene in ("hall", "patrol"):
+        sim = simulate_scene(scene, duration=8.0)
+        derive(sim.run, sim.odometry)
 
 
 def _drain(queue, progress) -> None:  # noqa: ANN001
