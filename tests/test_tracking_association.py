@@ -69,7 +69,9 @@ def test_fused_gating_kernel_matches_the_reference():
     zx, zy, kind = rng.normal(0, 2, 9), rng.normal(0, 2, 9), rng.integers(0, 5, 9)
     compat = rng.random((6, 5)) < 0.7
     row = rng.integers(0, 6, 6)
-    d2, ok = _kernels.gated_distances(x, P, zx, zy, kind, 0.05, 0.2, 13.8, 1.5, compat, row)
-    ref_d2, dist = kalman.distances(x, P, zx, zy, np.where(kind == 1, 0.2, 0.05))
-    assert np.allclose(d2, ref_d2)
+    cost, ok = _kernels.gated_costs(x, P, zx, zy, kind, 0.05, 0.2, 13.8, 1.5, compat, row)
+    sigma = np.where(kind == 1, 0.2, 0.05)
+    ref_d2, dist = kalman.distances(x, P, zx, zy, sigma)
+    S = P[:, None, :2, :2] + (sigma**2)[None, :, None, None] * np.eye(2)
+    assert np.allclose(cost, ref_d2 + np.log(np.linalg.det(S)))
     assert np.array_equal(ok, gate(ref_d2, dist, 13.8, 1.5) & compat[row][:, kind])

@@ -517,27 +517,6 @@ def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, mar
 
 
 @njit(cache=True)
-def gated_distances(x, P, zx, zy, zkind, sigma, sigma_leg, gate, max_distance, compat, compat_row):  # noqa: ANN001, ANN201
-    """Squared Mahalanobis distances (K, M) of measurements from the tracks' predictions (measurement sigma
-    by kind: sigma_leg for single legs) and which pairs pass the gate, the distance bound and the kind
-    compatibility compat[compat_row[k], zkind[j]]."""
-    K, M = len(x), len(zx)
-    d2 = np.empty((K, M))
-    ok = np.zeros((K, M), np.bool_)
-    for k in range(K):
-        row = compat_row[k]
-        for j in range(M):
-            s = sigma_leg if zkind[j] == 1 else sigma
-            v = s * s
-            a, b, c = P[k, 0, 0] + v, P[k, 0, 1], P[k, 1, 1] + v
-            dx, dy = zx[j] - x[k, 0], zy[j] - x[k, 1]
-            d2[k, j] = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / (a * c - b * b)
-            ok[k, j] = compat[row, zkind[j]] and d2[k, j] <= gate and np.hypot(dx, dy) <= max_distance
-    return d2, ok
-
-
-
-@njit(cache=True)
 def background_update(score, mark, active, n_active, scan, ranges, cos_a, sin_a, angle_min, increment, range_min,
                       range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled):  # noqa: ANN001, ANN201
     """Update the background grid with one scan; returns the new number of active cells.
@@ -610,9 +589,12 @@ def on_background(score, lx, ly, ls, px, py, x0, y0, cell, n, threshold):  # noq
 
 @njit(cache=True)
 def gated_costs(x, P, zx, zy, zkind, sigma, sigma_leg, gate, max_distance, compat, compat_row):  # noqa: ANN001, ANN201
-    """gated_distances, with the association cost d2 + ln det S (twice the negative log-likelihood up to a
-    constant) instead of d2: a track coasting for long, with a wide covariance, would otherwise win every
-    measurement it can reach over the well-tracked object the measurement belongs to."""
+    """Association costs (K, M) of measurements from the tracks' predictions, and which pairs pass the gate
+    (squared Mahalanobis distance d2 <= gate; measurement sigma by kind: sigma_leg for single legs), the
+    distance bound and the kind compatibility compat[compat_row[k], zkind[j]]. The cost is d2 + ln det S
+    (twice the negative log-likelihood up to a constant), not d2: a track coasting for long, with a wide
+    covariance, would otherwise win every measurement it can reach over the well-tracked object the
+    measurement belongs to."""
     K, M = len(x), len(zx)
     cost = np.empty((K, M))
     ok = np.zeros((K, M), np.bool_)
