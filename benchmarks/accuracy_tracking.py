@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib.util
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -147,7 +148,10 @@ def demo_figures(path: Path, feature_params: dict | None = None) -> dict:
     conf = items[items["status"] == 1]
     people = np.unique(conf["id"][conf["classification"] == acc.PERSON])
     # walls: with a still scanner, the per-beam median range over the run is the background
-    background = np.nanmedian(np.where(np.isfinite(run.ranges), run.ranges, np.nan), axis=0)
+    # beams that never return have no background (NaN: nothing is near it)
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        background = np.nanmedian(np.where(np.isfinite(run.ranges), run.ranges, np.nan), axis=0)
     rng = np.hypot(conf["x"], conf["y"])
     beam = np.clip(np.rint((np.arctan2(conf["y"], conf["x"]) - run.geometry.angle_min)
                            / run.geometry.angle_increment).astype(int), 0, run.geometry.n_beams - 1)
