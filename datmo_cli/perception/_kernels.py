@@ -98,10 +98,10 @@ def normal_cells(x, y, s, e, nt, cell) -> None:
 
 
 @njit(cache=True)
-def _vote(x, y, i, acc, lo, cos_t, sin_t, inv_res, width, c, k, best, touched, delta):
+def _vote(x, y, i, acc, lo, cos_t, sin_t, inv_res, width, c, k, bv, bt, br, touched):
     """Point i votes along its sinusoid: theta cells c - k .. c + k (wrapping; all of them when 2k + 1 >= nt)
-    around its local normal's cell c. best = [votes, theta cell, rho cell] of the peak is updated; touched
-    marks the theta rows used; delta -1 takes the votes back."""
+    around its local normal's cell c, and marks those theta rows in `touched`. Returns the peak (votes, theta
+    cell, rho cell) updated from (bv, bt, br)."""
     nt = cos_t.shape[0]
     if 2 * k + 1 >= nt:
         t_from = 0
@@ -122,13 +122,14 @@ def _vote(x, y, i, acc, lo, cos_t, sin_t, inv_res, width, c, k, best, touched, d
             ri = 0
         elif ri >= width:
             ri = width - 1
-        v = acc[t, ri] + delta
+        v = acc[t, ri] + 1
         acc[t, ri] = v
         touched[t] = True
-        if v > best[0]:
-            best[0] = v
-            best[1] = t
-            best[2] = ri
+        if v > bv:
+            bv = v
+            bt = t
+            br = ri
+    return bv, bt, br
 
 
 @njit(cache=True)
@@ -198,19 +199,21 @@ def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touche
     normal_cells; k: theta cells voted either side of the normal; hist: scratch of at least e - s rows)."""
     width = _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, acc.shape[1])
     inv = 1.0 / rho_res
-    best = np.zeros(3, np.int64)
+    bv = 0
+    bt = 0
+    br = 0
     # hist[i - s]: the peak after point i, so a run's peak needs no re-voting
     n = 0
     start = s
     off = 0
     for i in range(s, e):
-        _vote(x, y, i, acc, lo, cos_t, sin_t, inv, width, cell[i], k, best, touched, 1)
-        hist[i - s, 0] = best[0]
-        hist[i - s, 1] = best[1]
-        hist[i - s, 2] = best[2]
+        bv, bt, br = _vote(x, y, i, acc, lo, cos_t, sin_t, inv, width, cell[i], k, bv, bt, br, touched)
+        hist[i - s, 0] = bv
+        hist[i - s, 1] = bt
+        hist[i - s, 2] = br
         if i - start >= 4:
-            t = best[1]
-            rho_p = lo[t] + (best[2] + 0.5) * rho_res
+            t = bt
+            rho_p = lo[t] + (br + 0.5) * rho_res
             # off the peak's line by more than two cells (one cell either way of the cell's quantisation)
             if abs(x[i] * cos_t[t] + y[i] * sin_t[t] - rho_p) > 2.0 * rho_res:
                 off += 1
@@ -230,19 +233,21 @@ def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touche
                 n += 1
                 # the peak of the points kept (cut .. i) is found by voting them again from zero
                 _clear(acc, touched, width)
-                best[:] = 0
+                bv = 0
+                bt = 0
+                br = 0
                 for j in range(cut, i + 1):
-                    _vote(x, y, j, acc, lo, cos_t, sin_t, inv, width, cell[j], k, best, touched, 1)
-                    hist[j - s, 0] = best[0]
-                    hist[j - s, 1] = best[1]
-                    hist[j - s, 2] = best[2]
+                    bv, bt, br = _vote(x, y, j, acc, lo, cos_t, sin_t, inv, width, cell[j], k, bv, bt, br, touched)
+                    hist[j - s, 0] = bv
+                    hist[j - s, 1] = bt
+                    hist[j - s, 2] = br
                 start = cut
                 off = 0
     sub_s[n] = start
     sub_e[n] = e
-    peaks[n, 0] = best[0]
-    peaks[n, 1] = best[1]
-    peaks[n, 2] = best[2]
+    peaks[n, 0] = bv
+    peaks[n, 1] = bt
+    peaks[n, 2] = br
     n += 1
     _clear(acc, touched, width)
     return n
