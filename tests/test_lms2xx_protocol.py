@@ -225,3 +225,14 @@ def test_parser_recovers_every_frame_from_any_chunking(frames, garbage, cuts):
     one = P.FrameParser()
     assert [f.raw for f in one.feed(stream) if isinstance(f, P.Frame)] == frames
     assert one.stats == parser.stats                  # counts do not depend on the chunking
+
+
+def test_parser_says_how_many_bytes_a_started_frame_still_needs():
+    frame = P.reply_frame(P.encode_b0(np.arange(361, dtype=np.uint16)))
+    parser = P.FrameParser(replies=True)
+    assert parser.needed == 0
+    parser.feed(b"\x11" + frame[:3])          # garbage, then too little of a header to read its length
+    assert parser.needed == 0
+    parser.feed(frame[3:100])
+    assert parser.needed == len(frame) - 100
+    assert len(parser.feed(frame[100:])) == 1 and parser.needed == 0

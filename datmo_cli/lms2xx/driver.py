@@ -27,6 +27,7 @@ DETECT_ORDER = (9600, 38400, 19200, 500000)
 READ_TIMEOUT_S = 0.02          # port timeout: how long one read waits for a first byte
 MODE_TIMEOUT_S = 3.5           # a mode change (20h) can take up to 3 s (TL §4.3)
 REPLY_TIMEOUT_S = 0.3
+MIN_WAIT_S, MAX_WAIT_S = 0.001, 0.02   # waits for the rest of a telegram: shorter ones are not worth a sleep
 PACE_S = 60e-6                 # gap between host bytes at 500 kBd (>= 55 us, TL §4.3)
 
 
@@ -185,8 +186,17 @@ class LMS2xx:
     def _poll(self) -> int:
         """Read what has arrived (waiting up to the port timeout for a first byte); parse it.
         Returns the number of bytes read."""
+        want = 1
+        if self.streaming:
+            # the rest of a telegram whose start has arrived comes at the line's byte rate: wait for it
+            # rather than waking for every few bytes the port delivers (the start's stamp is already taken)
+            need = self._parser.needed
+            wait = need * self._byte_ns() * 1e-9
+            if wait > MIN_WAIT_S:
+                time.sleep(min(wait, MAX_WAIT_S))
+                want = need
         try:
-            data = self.port.read(1)
+            data = self.port.read(want)
             if data:
                 more = getattr(self.port, "in_waiting", 0) or 0
                 if more:
@@ -213,11 +223,12 @@ class LMS2xx:
         return len(data)
 
     def _time_of(self, offset: int, end: int, t: int) -> int:
-        """Host time (ns) at which the byte at stream `offset` arrived."""
-        for c_end, c_t in self._chunks:
-            if c_end > offset:
-                end, t = c_end, c_t
+        """Host time (ns) at which the byte at stream `offset` arrived: extrapolated back, at the line's byte
+        time, from the end of the first chunk read that held it."""
+        for c_end, c_t in reversed(self._chunks):   # the chunks that end past `offset` are the newest
+            if c_end <= offset:
                 break
+            end, t = c_end, c_t
         return int(t - (end - 1 - offset) * self._byte_ns())
 
     def _transact(self, frame: bytes, expect: int, *, timeout: float = REPLY_TIMEOUT_S, retries: int = 3,

@@ -482,6 +482,18 @@ class FrameParser:
         """Bytes held back waiting for the rest of a frame."""
         return len(self._buf)
 
+    @property
+    def needed(self) -> int:
+        """Bytes still to come for the frame whose start the parser holds (0 when it holds none, or too
+        little of one to read its length)."""
+        buf = self._buf
+        if len(buf) < 4 or buf[0] != STX:
+            return 0
+        length = buf[2] | (buf[3] << 8)
+        if not 1 <= length <= MAX_FRAME_LENGTH:
+            return 0
+        return max(length + 6 - len(buf), 0)
+
     def reset(self) -> None:
         """Drop any partial frame (after the host flushed its input)."""
         self._base += len(self._buf)
