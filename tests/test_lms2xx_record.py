@@ -34,6 +34,15 @@ def run_record(emu, path, *, baud=500000, scans=None, duration=None, stop=None, 
     return result, driver
 
 
+def settled(condition, seconds: float = 2.0) -> bool:  # noqa: ANN001
+    """Whether `condition()` holds within `seconds`: the emulator applies a baud change only after its reply
+    has left, in its own thread, so the host can see the reply first."""
+    deadline = time.monotonic() + seconds
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return condition()
+
+
 def bits(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, np.float32).view(np.uint32)
 
@@ -53,7 +62,7 @@ def test_record_is_bit_exact(tmp_path, baud, n):
     with Emulator(scene(), seed=1) as emu:
         result, driver = run_record(emu, tmp_path / "run.mcap", baud=baud, scans=n, raw=True)
         sent = emu.good_scans()
-        assert emu.baud == 9600                           # record switched back on exit
+        assert settled(lambda: emu.baud == 9600)          # record switched back on exit
         assert emu.stats.variant_changes == 0 and emu.stats.config_writes == 0
     assert result.scans == n and result.reason == "scans"
     run = mcapio.read_run(tmp_path / "run.mcap")
@@ -231,7 +240,7 @@ def test_signal_stops_the_stream_and_finishes_the_file(tmp_path, sig):
         finally:
             if proc.poll() is None:
                 proc.kill()
-        assert emu.mode == P.MODE_STOP and emu.baud == 9600      # stream stopped, baud restored
+        assert settled(lambda: emu.mode == P.MODE_STOP and emu.baud == 9600)   # stream stopped, baud restored
         sent = emu.good_scans()
     assert proc.returncode == 0, err
     assert "(interrupted)" in err

@@ -9,7 +9,7 @@ import math
 import naive_perception as ref
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
@@ -170,6 +170,9 @@ def test_fit_line_of_exact_points_is_the_line():
 @given(st.floats(0.05, 0.4), st.floats(0.7, 5.0), st.floats(-1.5, 1.5), st.floats(0.6, 1.5), st.integers(6, 40),
        st.integers(0, 2**31))
 def test_fit_circle_equals_the_geometric_fit(radius, dist, bearing, half_arc, n, seed):
+    # well posed only where the arc bulges well beyond the noise (3 mm) over its points: a flatter arc has
+    # no distinct best circle, and the kernel (which then says not ok) and the reference stop anywhere
+    assume(radius * (1 - math.cos(half_arc)) * math.sqrt(n) > 0.05)
     rng = np.random.default_rng(seed)
     cx, cy = dist * math.cos(bearing), dist * math.sin(bearing)
     a = np.linspace(bearing + math.pi - half_arc, bearing + math.pi + half_arc, n)

@@ -529,7 +529,10 @@ class Emulator:
         interlaced = self.mode == P.MODE_INTERLACED and self.res != 100
         offsets = P.partial_offsets(self.res) if interlaced else (0,)
         lost = P.LOST_PER_SENT[100 if interlaced else self.res][self.baud]
+        hang_up_after = self.faults.disconnect
         while self._rotation < due and self.mode in (P.MODE_STREAM, P.MODE_INTERLACED):
+            if hang_up_after is not None and self._scan_telegrams >= hang_up_after:
+                return                      # the last telegram before the hang-up is on its way
             k = self._rotation
             self._rotation += 1
             self.stats.scans_measured += 1
