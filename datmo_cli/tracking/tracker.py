@@ -341,12 +341,16 @@ class Tracker:
                 self._on_bg = self._on_bg[~dead]
 
     def _duplicates(self, t: TrackArrays) -> np.ndarray:
-        """Tracks of legs or people closer than `merge_distance` to an older such track (more hits), unless
-        both are confirmed and move differently: one person's two legs must not keep two tracks alive."""
+        """Tracks of legs or people closer than `merge_distance` to a higher-ranked such track, unless both
+        are confirmed and move differently: one person's two legs must not keep two tracks alive. Rank: a
+        person before anything else, then a dynamic track, then more hits (a person walking past a bench
+        keeps its track; the track on the bench's pieces its passing uncovers goes)."""
         legs = t.votes[:, KIND_PERSON] + t.votes[:, KIND_LEG]
         candidate = (legs > 0) & (t.cls <= CLASS_PERSON)
         x = np.ascontiguousarray(t.x.T)
-        return _kernels.duplicates(x[0], x[1], x[2], x[3], candidate, t.confirmed, t.hits * 2 + t.confirmed,
+        rank = (t.hits.astype(np.int64) * 2 + t.confirmed + (t.mobility == MOBILITY_DYNAMIC) * (1 << 40)
+                + (t.cls == CLASS_PERSON) * (1 << 41))
+        return _kernels.duplicates(x[0], x[1], x[2], x[3], candidate, t.confirmed, rank,
                                    self.params.merge_distance, self.params.merge_speed)
 
     def _spawn(self, m: Measurements, rows: np.ndarray, cols: np.ndarray, stamp_ns: int) -> None:
