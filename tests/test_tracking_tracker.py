@@ -217,3 +217,33 @@ def test_background_grid_marks_long_hit_places_and_forgets_places_seen_through()
     on = _kernels.on_background(score, np.array([3.0]), np.array([0.0]), np.array([0.0]), 0.0, 0.0, -5.0, -5.0,
                                 cell, n, 3.0)
     assert not on[0]
+
+
+def test_a_duplicate_yields_to_the_person_whatever_its_hits():
+    """Two confirmed leg/person tracks moving alike within merge_distance are one: the one that goes is
+    not the person, even when the other (e.g. a track on a bench's pieces uncovered by the person walking
+    past) has more hits; between two unknowns, the one with fewer hits goes."""
+    from datmo_cli.tracking.classification import CLASS_PERSON, CLASS_UNKNOWN, MOBILITY_DYNAMIC, MOBILITY_STATIC
+    from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
+    from datmo_cli.tracking.tracker import TrackArrays
+
+    def tracks(cls, mobility, hits):  # noqa: ANN001, ANN202
+        e = TrackArrays.empty(P.tail_length)
+        t = TrackArrays(*(np.zeros((len(cls),) + getattr(e, f).shape[1:], getattr(e, f).dtype)
+                          for f in e.__dataclass_fields__))
+        t.x[:] = [[2.0, 1.0, 0.8, 0.0], [2.0, 1.0 + 0.5 * P.merge_distance, 0.8, 0.0]]
+        t.votes[:, KIND_PERSON] = 5
+        t.votes[:, KIND_LEG] = 5
+        t.confirmed[:] = True
+        t.cls[:] = cls
+        t.mobility[:] = mobility
+        t.hits[:] = hits
+        return t
+
+    tracker = Tracker(P, GEOM)
+    person_fewer_hits = tracks([CLASS_PERSON, CLASS_UNKNOWN], [MOBILITY_DYNAMIC, MOBILITY_STATIC], [40, 80])
+    assert tracker._duplicates(person_fewer_hits).tolist() == [False, True]
+    unknowns = tracks([CLASS_UNKNOWN, CLASS_UNKNOWN], [MOBILITY_STATIC, MOBILITY_STATIC], [40, 80])
+    assert tracker._duplicates(unknowns).tolist() == [True, False]
+    dynamic_first = tracks([CLASS_UNKNOWN, CLASS_UNKNOWN], [MOBILITY_DYNAMIC, MOBILITY_STATIC], [40, 80])
+    assert tracker._duplicates(dynamic_first).tolist() == [False, True]
