@@ -25,7 +25,7 @@ def _accuracy_module():  # noqa: ANN202
 def test_demo_bag_people_and_no_walls():
     path = shared_path("legtracker", "demo_stationary_simple_environment.bag")
     figures = _accuracy_module().demo_figures(path)
-    assert figures["people"] >= 3     # 4 now
+    assert figures["people"] >= 3     # 5 now
     assert figures["on_walls"] == 0
 
 
@@ -34,6 +34,7 @@ def test_positive_bags_legs_mostly_covered():
     if not lines:
         pytest.skip("no positive_*_extracted.bag")
     share = float(lines[-1].split(": ")[1].split(" of ")[0])
-    # 0.756 now; it moves with small perception changes: on positive_4 one person track either lives on
-    # (0.95 of its legs covered) or is lost (0.66), e.g. with the corner split of line_subsegments
+    # 0.752 now; it moves with small perception and tracking changes: on positive_4 one person track either
+    # lives on (0.95 of its legs covered) or is lost (0.58-0.66), e.g. with the corner split of
+    # line_subsegments or which of two duplicate tracks is kept
     assert share >= 0.72
