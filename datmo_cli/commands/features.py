@@ -69,11 +69,13 @@ def command(input: Path, output: Path, force: bool, config: Path | None, resegme
 
             raise InputError(f"{input}: {len(segments[2]) - 1} messages on {mcapio.TOPIC_SEGMENTS} for {len(run)} "
                              "scans; run datmo segment again or pass --resegment")
-    with Progress(TextColumn("features"), BarColumn(), MofNCompleteColumn(), console=Console(stderr=True),
+    from .compiling import first_report_notice
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), console=Console(stderr=True),
                   transient=True) as bar:
         task = bar.add_task("features", total=len(run))
-        derived, f = derive_features(run, odometry=odometry, params=params, segments=segments,
-                                     progress=lambda done, total: bar.update(task, completed=done, total=total))
+        with first_report_notice(bar, task, "features") as report:
+            derived, f = derive_features(run, odometry=odometry, params=params, segments=segments, progress=report)
     write_derived(input, output, "features", derived, {"features": params.to_dict()}, log, force)
     c = f.counts()
     n_lm = len(f.landmarks.final()) if f.landmarks is not None else 0
