@@ -1,37 +1,57 @@
-"""The notice that numba is compiling: shown only when a command's first progress report is late."""
+"""The notice that numba is compiling: shown only while a stage's first progress report is late."""
 
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
 
-from datmo_cli.commands.compiling import NOTICE, first_report_notice
+from datmo_cli.commands.compiling import NOTICE, compile_notice
 
 
 class FakeBar:
-    def __init__(self) -> None:
-        self.updates: list[dict] = []
+    """What compile_notice uses of rich's Progress: update() and tasks."""
 
-    def update(self, task, **kw) -> None:  # noqa: ANN001
-        self.updates.append(kw)
+    def __init__(self, description: str) -> None:
+        self.task = SimpleNamespace(id=0, description=description)
+        self.tasks = [self.task]
+        self.descriptions: list[str] = []
+        self.completed: list[int] = []
 
-
-def descriptions(bar: FakeBar) -> list[str]:
-    return [u["description"] for u in bar.updates if "description" in u]
+    def update(self, task, description=None, completed=None, total=None) -> None:  # noqa: ANN001
+        if description is not None:
+            self.task.description = description
+            self.descriptions.append(description)
+        if completed is not None:
+            self.completed.append(completed)
 
 
 def test_a_late_first_report_says_the_kernels_compile_then_the_label_returns():
-    bar = FakeBar()
-    with first_report_notice(bar, 0, "features", delay=0.05) as report:
+    bar = FakeBar("features")
+    with compile_notice(bar, 0, delay=0.05) as report:
         time.sleep(0.3)
         report(256, 300)
         report(300, 300)
-    assert descriptions(bar) == [f"features: {NOTICE}", "features"]
-    assert {"completed": 300, "total": 300} in bar.updates
+    assert bar.descriptions == [f"features: {NOTICE}", "features"]
+    assert bar.completed == [256, 300]
 
 
 def test_a_prompt_first_report_says_nothing():
-    bar = FakeBar()
-    with first_report_notice(bar, 0, "features", delay=0.2) as report:
+    bar = FakeBar("features")
+    with compile_notice(bar, 0, delay=0.2) as report:
         report(1, 2)
     time.sleep(0.4)
-    assert descriptions(bar) == ["features"]
+    assert bar.descriptions == []
+
+
+def test_each_stage_started_with_zero_done_is_watched():
+    bar = FakeBar("reading")
+    with compile_notice(bar, 0, delay=0.05, armed=False) as report:
+        time.sleep(0.15)                  # not armed: reading the input says nothing
+        bar.update(0, description="features")
+        report(0, 10)
+        report(10, 10)                    # prompt: nothing
+        bar.update(0, description="tracking")
+        report(0, 10)
+        time.sleep(0.3)                   # late: compiling
+        report(1, 10)
+    assert bar.descriptions == ["features", "tracking", f"tracking: {NOTICE}", "tracking"]

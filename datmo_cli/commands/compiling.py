@@ -1,5 +1,5 @@
 """Saying that numba is compiling: the first run after an install compiles the kernels (tens of seconds)
-before a command's first progress report, which otherwise comes within milliseconds."""
+before a stage's first progress report, which otherwise comes within milliseconds."""
 
 from __future__ import annotations
 
@@ -11,27 +11,47 @@ NOTICE = "compiling the numba kernels (once after an install, up to a minute)"
 
 
 @contextmanager
-def first_report_notice(bar, task, label: str, delay: float = 2.0) -> Iterator[Callable[[int, int], None]]:  # noqa: ANN001
-    """A progress callback (done, total) for `task` of the rich Progress `bar`: when its first call is
-    more than `delay` s away, the task's description (`label`) says that the kernels are compiling."""
-    first = threading.Event()
+def compile_notice(bar, task, delay: float = 2.0, *, armed: bool = True) -> Iterator[Callable[[int, int], None]]:  # noqa: ANN001
+    """A progress callback (done, total) for `task` of the rich Progress `bar`. A report of 0 done starts a
+    stage (and `armed` starts one at entry); when the stage's next report is more than `delay` s away,
+    the task's description gets NOTICE appended until that report comes."""
+    lock = threading.Lock()
+    state = {"timer": None, "label": None}
 
     def late() -> None:
-        if not first.is_set():
+        with lock:
+            if state["timer"] is None:
+                return
+            label = next((t.description for t in bar.tasks if t.id == task), "")
+            state["label"] = label
             bar.update(task, description=f"{label}: {NOTICE}")
 
-    timer = threading.Timer(delay, late)
-    timer.daemon = True
+    def arm() -> None:
+        timer = threading.Timer(delay, late)
+        timer.daemon = True
+        state["timer"] = timer
+        timer.start()
+
+    def disarm() -> None:
+        timer = state["timer"]
+        if timer is not None:
+            timer.cancel()
+            state["timer"] = None
+        if state["label"] is not None:
+            bar.update(task, description=state["label"])
+            state["label"] = None
 
     def report(done: int, total: int) -> None:
-        if not first.is_set():
-            first.set()
-            timer.cancel()
-            bar.update(task, description=label)
-        bar.update(task, completed=done, total=total)
+        with lock:
+            disarm()
+            bar.update(task, completed=done, total=total)
+            if done == 0:
+                arm()
 
-    timer.start()
+    if armed:
+        arm()
     try:
         yield report
     finally:
-        timer.cancel()
+        with lock:
+            disarm()

@@ -69,12 +69,12 @@ def command(input: Path, output: Path, force: bool, config: Path | None, resegme
 
             raise InputError(f"{input}: {len(segments[2]) - 1} messages on {mcapio.TOPIC_SEGMENTS} for {len(run)} "
                              "scans; run datmo segment again or pass --resegment")
-    from .compiling import first_report_notice
+    from .compiling import compile_notice
 
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), console=Console(stderr=True),
                   transient=True) as bar:
         task = bar.add_task("features", total=len(run))
-        with first_report_notice(bar, task, "features") as report:
+        with compile_notice(bar, task) as report:
             derived, f = derive_features(run, odometry=odometry, params=params, segments=segments, progress=report)
     write_derived(input, output, "features", derived, {"features": params.to_dict()}, log, force)
     c = f.counts()

@@ -12,11 +12,13 @@ from ..tracking.params import TrackingParams
 D = TrackingParams()
 
 def track_file(src: Path, out: Path, *, force: bool = False, params=None, feature_params=None,  # noqa: ANN001
-               progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
+               progress: Callable[[int, int], None] | None = None,
+               feature_progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
     """Track `src` into `out` (its channels copied, /datmo/tracks and /datmo/markers/tracks added).
     Features come from src's /datmo/features when present; else segmentation and features run here and
-    their channels are written too, as datmo run writes them. Returns (scans, whether features were
-    computed here)."""
+    their channels are written too, as datmo run writes them. `progress` and `feature_progress` are
+    called with (scans done, total) as tracking and feature extraction go. Returns (scans, whether
+    features were computed here)."""
     from ..cli import invocation
     from ..errors import InputError
     from ..log import mcapio
@@ -34,7 +36,10 @@ def track_file(src: Path, out: Path, *, force: bool = False, params=None, featur
     effective: dict = {"track": params.to_dict()}
     if computed:
         feature_params = feature_params or FeatureParams()
-        derived, run_features = derive_features(run, odometry=odometry, params=feature_params)
+        if feature_progress is not None:
+            feature_progress(0, len(run))
+        derived, run_features = derive_features(run, odometry=odometry, params=feature_params,
+                                                progress=feature_progress)
         features = list(iter_run_features(run_features))
         effective["features"] = feature_params.to_dict()
     else:
@@ -43,6 +48,8 @@ def track_file(src: Path, out: Path, *, force: bool = False, params=None, featur
             raise InputError(f"{src}: {len(payloads)} messages on {mcapio.TOPIC_FEATURES} for {len(run)} scans; "
                              "run datmo features again")
         features = decode_features(payloads)
+    if progress is not None:
+        progress(0, len(run))
     derived |= derive_tracks(run, features, odometry=odometry, params=params, progress=progress)
     provenance = mcapio.Provenance("track", effective, [src], invocation("track"))
     with mcapio.LogWriter(out, force=force, provenance=provenance) as writer:
@@ -101,10 +108,20 @@ def command(input: Path, output: Path, force: bool, config: Path | None, process
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
-    with Progress(TextColumn("tracking"), BarColumn(), MofNCompleteColumn(), console=Console(stderr=True),
+    from .compiling import compile_notice
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), console=Console(stderr=True),
                   transient=True) as bar:
-        task = bar.add_task("tracking", total=None)
-        scans, computed = track_file(input, output, force=force, params=params, feature_params=feature_params,
-                                     progress=lambda done, total: bar.update(task, completed=done, total=total))
+        task = bar.add_task("reading", total=None)
+        with compile_notice(bar, task, armed=False) as report:
+            def stage(label: str) -> Callable[[int, int], None]:
+                def start_or_report(done: int, total: int) -> None:
+                    if done == 0:
+                        bar.update(task, description=label)
+                    report(done, total)
+                return start_or_report
+
+            scans, computed = track_file(input, output, force=force, params=params, feature_params=feature_params,
+                                         progress=stage("tracking"), feature_progress=stage("features"))
     how = " (segmented and extracted features first)" if computed else ""
     click.echo(f"{output}: tracks for {scans:,} scans{how}", err=True)
