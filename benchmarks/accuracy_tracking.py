@@ -149,7 +149,7 @@ def demo_figures(path: Path, feature_params: dict | None = None) -> dict:
     people = np.unique(conf["id"][conf["classification"] == acc.PERSON])
     # walls: with a still scanner, the per-beam median range over the run is the background
     # beams that never return have no background (NaN: nothing is near it)
-    with np.errstate(all="ignore"), warnings.catch_warnings():
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         background = np.nanmedian(np.where(np.isfinite(run.ranges), run.ranges, np.nan), axis=0)
     rng = np.hypot(conf["x"], conf["y"])

@@ -55,3 +55,14 @@ def test_each_stage_started_with_zero_done_is_watched():
         time.sleep(0.3)                   # late: compiling
         report(1, 10)
     assert bar.descriptions == ["features", "tracking", f"tracking: {NOTICE}", "tracking"]
+
+
+def test_a_slow_block_is_said_once_on_stderr(capsys):
+    from datmo_cli.commands.compiling import said_if_slow
+
+    with said_if_slow(delay=0.05):
+        time.sleep(0.3)
+    with said_if_slow(delay=0.5):
+        pass
+    time.sleep(0.6)
+    assert capsys.readouterr().err == f"{NOTICE}...\n"

@@ -10,6 +10,26 @@ from contextlib import contextmanager
 NOTICE = "compiling the numba kernels (once after an install, up to a minute)"
 
 
+def _timer(delay: float, action: Callable[[], None]) -> threading.Timer:
+    timer = threading.Timer(delay, action)
+    timer.daemon = True
+    timer.start()
+    return timer
+
+
+@contextmanager
+def said_if_slow(delay: float = 2.0) -> Iterator[None]:
+    """Print NOTICE on stderr when the block is still running after `delay` s (a cache hit loads the kernels
+    in about a second; only a compilation takes longer)."""
+    import click
+
+    timer = _timer(delay, lambda: click.echo(f"{NOTICE}...", err=True))
+    try:
+        yield
+    finally:
+        timer.cancel()
+
+
 @contextmanager
 def compile_notice(bar, task, delay: float = 2.0, *, armed: bool = True) -> Iterator[Callable[[int, int], None]]:  # noqa: ANN001
     """A progress callback (done, total) for `task` of the rich Progress `bar`. A report of 0 done starts a
@@ -27,10 +47,7 @@ def compile_notice(bar, task, delay: float = 2.0, *, armed: bool = True) -> Iter
             bar.update(task, description=f"{label}: {NOTICE}")
 
     def arm() -> None:
-        timer = threading.Timer(delay, late)
-        timer.daemon = True
-        state["timer"] = timer
-        timer.start()
+        state["timer"] = _timer(delay, late)
 
     def disarm() -> None:
         timer = state["timer"]

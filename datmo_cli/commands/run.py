@@ -104,21 +104,14 @@ def command(inputs: tuple[Path, ...], out_dir: Path, jobs: int | None, force: bo
 def _warm_up() -> None:
     """Load the numba kernels before the clock of any input starts; the first run after an install
     compiles them (tens of seconds, then cached), which is said rather than counted in the inputs' speed."""
-    import threading
     import time
 
     from ..pipeline import warm_up
+    from .compiling import said_if_slow
 
     t0 = time.perf_counter()
-    # a cache hit takes about a second; say what is happening only when it is a compilation
-    notice = threading.Timer(2.0, lambda: click.echo("compiling the numba kernels (the first run after an install; "
-                                                     "this takes up to a minute, once)...", err=True))
-    notice.daemon = True
-    notice.start()
-    try:
+    with said_if_slow():
         warm_up()
-    finally:
-        notice.cancel()
     seconds = time.perf_counter() - t0
     if seconds > 2.0:
         click.echo(f"compiled the numba kernels in {seconds:.0f} s (first run after an install; cached for the next "
