@@ -1,0 +1,311 @@
+"""A learned leg detector: geometric features of each scan segment and a tree ensemble's leg probability.
+
+The features are those of Arras, Mozos and Burgard (2007) and Leigh et al. (2015, leg_tracker), computed by
+numba kernels (_leg_kernels.py) over the points of each segment, sensor frame (x forward, y left), metres and
+radians. The ensemble (a random forest / extra trees or gradient boosting, trained offline with scikit-learn)
+is shipped as plain node arrays in one .npz (LegModel) and evaluated by a numba kernel, so run time needs
+neither scikit-learn nor pickles.
+
+Candidate rule (`candidate_mask`): a segment of fewer than CANDIDATE_MIN_POINTS points or wider than
+CANDIDATE_MAX_WIDTH (first to last point) cannot be a leg; `leg_probabilities` gives it 0 without evaluating
+the ensemble. Train on candidates only (apply `candidate_mask` to the training rows), so the model never
+has to learn what the rule already decides.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+FEATURE_NAMES: tuple[str, ...] = (
+    "n_points",               # valid returns in the segment
+    "width",                  # m, first to last point
+    "linearity",              # m, RMS orthogonal residual of the total-least-squares line
+    "circularity",            # m, RMS radial residual of the algebraic (Kasa) circle; = linearity if collinear
+    "radius",                 # m, that circle's radius, clipped to RADIUS_CLIP (also when collinear)
+    "std",                    # m, sqrt(sum |p - centroid|^2 / (n - 1))
+    "median_deviation",       # m, mean |p - median point| (component-wise median)
+    "boundary_length",        # m, sum of consecutive point distances
+    "boundary_regularity",    # m, standard deviation of consecutive point distances
+    "mean_curvature",         # 1/m, mean over interior triples of 1/circumradius, + when bulging toward the sensor
+    "mean_inscribed_angle",   # rad, mean angle at interior points between the first and last point (pi: a line)
+    "inscribed_angle_std",    # rad, standard deviation of those angles
+    "distance",               # m, range of the centroid
+    "subtended_angle",        # rad, |angle of last point's beam - angle of first point's beam|
+    "occluded_start",         # 1.0 when the beam before the first point is a valid return nearer by > margin
+    "occluded_end",           # 1.0 when the beam after the last point is a valid return nearer by > margin
+)
+RADIUS_CLIP = 1.0             # m: the radius feature's bound (degenerate or nearly straight segments)
+OCCLUSION_MARGIN = 0.1        # m
+CANDIDATE_MAX_WIDTH = 0.8     # m
+CANDIDATE_MIN_POINTS = 3
+FORMAT_VERSION = 1
+KINDS = ("forest", "boosting")
+DEFAULT_MODEL_PATH = Path(__file__).resolve().parent / "models" / "legs.npz"
+
+
+def candidate_mask(features: np.ndarray) -> np.ndarray:
+    """Rows of features (M, len(FEATURE_NAMES)) that may be legs: n_points >= CANDIDATE_MIN_POINTS and
+    width <= CANDIDATE_MAX_WIDTH (m). Other rows get probability 0 in leg_probabilities; train on these only."""
+    f = np.asarray(features, np.float64).reshape(-1, len(FEATURE_NAMES))
+    return (f[:, 0] >= CANDIDATE_MIN_POINTS) & (f[:, 1] <= CANDIDATE_MAX_WIDTH)
+
+
+def _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets):
+    ranges = np.ascontiguousarray(ranges, np.float32)
+    if ranges.ndim != 2:
+        raise ValueError(f"ranges must be (N, B), got shape {ranges.shape}")
+    N, B = ranges.shape
+    angles = np.ascontiguousarray(angles, np.float64)
+    if angles.shape != (B,):
+        raise ValueError(f"angles must have shape ({B},), got {angles.shape}")
+    start = np.ascontiguousarray(seg_start, np.int64)
+    end = np.ascontiguousarray(seg_end, np.int64)
+    offsets = np.ascontiguousarray(seg_offsets, np.int64)
+    M = len(start)
+    if start.shape != (M,) or end.shape != (M,):
+        raise ValueError("seg_start and seg_end must be 1-D arrays of the same length")
+    if offsets.shape != (N + 1,) or offsets[0] != 0 or offsets[-1] != M or np.any(offsets[1:] < offsets[:-1]):
+        raise ValueError(f"seg_offsets must be N + 1 = {N + 1} non-decreasing indices from 0 to {M}")
+    if M and (start.min() < 0 or end.max() > B or np.any(end < start)):
+        raise ValueError(f"segments must be beam ranges [start, end) within 0..{B}")
+    return ranges, angles, start, end, offsets
+
+
+def _limits(range_min: float, range_max: float) -> tuple[float, float]:
+    lo = float(range_min) if np.isfinite(range_min) else 0.0
+    hi = float(range_max) if np.isfinite(range_max) and range_max > lo else np.inf
+    return lo, hi
+
+
+def cluster_features(ranges, angles, seg_start, seg_end, seg_offsets, range_min: float,
+                     range_max: float) -> np.ndarray:
+    """Features of every segment, shape (M, len(FEATURE_NAMES)) float64, in the order of seg_start.
+
+    ranges (N, B) metres; angles (B,) radians, sensor frame (x forward, y left), beam i at angles[i]. Scan k's
+    segments are seg_start/seg_end[seg_offsets[k]:seg_offsets[k + 1]], beam ranges [start, end) (as
+    features.segment_run gives them). Returns count when finite and strictly between range_min and
+    range_max; other beams inside a segment are skipped, and a segment with no valid return gets zeros.
+    """
+    from . import _leg_kernels as LK
+
+    ranges, angles, start, end, offsets = _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets)
+    lo, hi = _limits(range_min, range_max)
+    out = np.zeros((len(start), LK.N_FEATURES), np.float64)
+    if len(start):
+        LK.block_features(ranges, angles, np.cos(angles), np.sin(angles), start, end, offsets, lo, hi,
+                          RADIUS_CLIP, OCCLUSION_MARGIN, out)
+    return out
+
+
+@dataclass
+class LegModel:
+    """A binary tree ensemble as flat node arrays (all trees concatenated; children are global indices).
+
+    Per node: feature (-1 at leaves), threshold (x goes left when float32(x[feature]) <= threshold), left,
+    right, value (leaf value). roots: each tree's root node. kind "forest": probability = mean over trees of
+    the leaf's positive-class fraction; "boosting": sigmoid(base + scale * sum of leaf values). threshold_p
+    is the decision threshold shipped with the model; provenance a JSON-able dict (data, parameters, scores).
+    """
+
+    feature: np.ndarray
+    threshold: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    value: np.ndarray
+    roots: np.ndarray
+    kind: str = "forest"
+    base: float = 0.0
+    scale: float = 1.0
+    threshold_p: float = 0.5
+    feature_names: tuple[str, ...] = FEATURE_NAMES
+    provenance: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.feature = np.ascontiguousarray(self.feature, np.int64)
+        self.threshold = np.ascontiguousarray(self.threshold, np.float64)
+        self.left = np.ascontiguousarray(self.left, np.int64)
+        self.right = np.ascontiguousarray(self.right, np.int64)
+        self.value = np.ascontiguousarray(self.value, np.float64)
+        self.roots = np.ascontiguousarray(self.roots, np.int64)
+        self.feature_names = tuple(str(n) for n in self.feature_names)
+        self.base = float(self.base)
+        self.scale = float(self.scale)
+        self.threshold_p = float(self.threshold_p)
+        problem = self._problem()
+        if problem:
+            raise ValueError(f"invalid leg model: {problem}")
+
+    def _problem(self) -> str:
+        n = len(self.feature)
+        if self.kind not in KINDS:
+            return f"kind {self.kind!r} is not one of {KINDS}"
+        if any(a.ndim != 1 or len(a) != n for a in (self.threshold, self.left, self.right, self.value)):
+            return "node arrays differ in length"
+        if self.roots.ndim != 1 or len(self.roots) == 0:
+            return "no trees"
+        if self.roots.min() < 0 or self.roots.max() >= n:
+            return "a root is not a node"
+        inner = self.feature >= 0
+        idx = np.arange(n)
+        if np.any(self.feature[inner] >= len(self.feature_names)):
+            return "a node splits on a feature the model does not name"
+        # children after their parent (scikit-learn's depth-first numbering) so every descent ends at a leaf
+        for child in (self.left, self.right):
+            if np.any(child[inner] <= idx[inner]) or np.any(child[inner] >= n):
+                return "a node's child is not a later node"
+        if not (np.all(np.isfinite(self.value)) and np.isfinite(self.base) and np.isfinite(self.scale)):
+            return "non-finite leaf values"
+        if not 0.0 <= self.threshold_p <= 1.0:
+            return f"threshold_p {self.threshold_p} is outside [0, 1]"
+        return ""
+
+    @property
+    def n_trees(self) -> int:
+        return len(self.roots)
+
+    def _kernel_args(self) -> tuple:
+        from . import _leg_kernels as LK
+
+        kind = LK.KIND_FOREST if self.kind == "forest" else LK.KIND_BOOSTING
+        return (self.feature, self.threshold, self.left, self.right, self.value, self.roots, kind, self.base,
+                self.scale)
+
+    def probabilities(self, features: np.ndarray) -> np.ndarray:
+        """Leg probability (M,) float64 of each row of features (M, len(feature_names)); rows outside
+        candidate_mask get 0."""
+        from . import _leg_kernels as LK
+
+        f = np.ascontiguousarray(features, np.float64)
+        if f.ndim != 2 or f.shape[1] != len(self.feature_names):
+            raise ValueError(f"features must be (M, {len(self.feature_names)}), got shape {f.shape}")
+        out = np.empty(len(f), np.float64)
+        LK.ensemble(f, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, *self._kernel_args(), out)
+        return out
+
+    def save(self, path: str | Path) -> None:
+        """Write the model to one .npz at `path` (exactly that name; via a temporary file renamed)."""
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "wb") as f:
+            np.savez_compressed(
+                f, format_version=np.int64(FORMAT_VERSION), feature=self.feature, threshold=self.threshold,
+                left=self.left, right=self.right, value=self.value, roots=self.roots, kind=np.str_(self.kind),
+                base=np.float64(self.base), scale=np.float64(self.scale),
+                threshold_p=np.float64(self.threshold_p), feature_names=np.array(self.feature_names, np.str_),
+                provenance=np.str_(json.dumps(self.provenance, sort_keys=True)))
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> LegModel:
+        """Read a model written by save. InputError naming the file when it is missing, corrupt or made for
+        other features than FEATURE_NAMES."""
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"{path}: no such leg model file")
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, io.UnsupportedOperation) as exc:
+            raise InputError(f"{path}: not a leg model file ({exc})") from None
+        missing = [k for k in ("format_version", "feature", "threshold", "left", "right", "value", "roots", "kind",
+                               "base", "scale", "threshold_p", "feature_names", "provenance") if k not in data]
+        if missing:
+            raise InputError(f"{path}: not a leg model file (missing {', '.join(missing)})")
+        if int(data["format_version"]) != FORMAT_VERSION:
+            raise InputError(f"{path}: leg model format {int(data['format_version'])}, this datmo reads "
+                             f"{FORMAT_VERSION}")
+        names = tuple(str(n) for n in data["feature_names"].tolist())
+        if names != FEATURE_NAMES:
+            raise InputError(f"{path}: the leg model was trained on other features ({', '.join(names)}) than "
+                             f"this datmo computes ({', '.join(FEATURE_NAMES)}); retrain it")
+        try:
+            provenance = json.loads(str(data["provenance"]))
+            return cls(data["feature"], data["threshold"], data["left"], data["right"], data["value"],
+                       data["roots"], kind=str(data["kind"]), base=float(data["base"]), scale=float(data["scale"]),
+                       threshold_p=float(data["threshold_p"]), feature_names=names, provenance=provenance)
+        except (ValueError, TypeError) as exc:
+            raise InputError(f"{path}: corrupt leg model ({exc})") from None
+
+
+def _flatten_trees(trees, leaf_value) -> tuple[list[np.ndarray], np.ndarray]:
+    parts = {k: [] for k in ("feature", "threshold", "left", "right", "value")}
+    roots = []
+    offset = 0
+    for tree in trees:
+        t = tree.tree_
+        inner = t.children_left >= 0
+        roots.append(offset)
+        parts["feature"].append(np.where(inner, t.feature, -1))
+        parts["threshold"].append(np.where(inner, t.threshold, 0.0))
+        parts["left"].append(np.where(inner, t.children_left + offset, -1))
+        parts["right"].append(np.where(inner, t.children_right + offset, -1))
+        parts["value"].append(np.where(inner, 0.0, leaf_value(t.value)))
+        offset += t.node_count
+    arrays = [np.concatenate(parts[k]) for k in ("feature", "threshold", "left", "right", "value")]
+    return arrays, np.array(roots, np.int64)
+
+
+def from_sklearn(estimator, threshold_p: float, provenance: dict) -> LegModel:
+    """A LegModel from a fitted binary scikit-learn RandomForestClassifier, ExtraTreesClassifier or
+    GradientBoostingClassifier, trained on FEATURE_NAMES' columns in order (class 1 = leg)."""
+    from sklearn.ensemble import ExtraTreesClassifier, GradientBoostingClassifier, RandomForestClassifier
+
+    if getattr(estimator, "n_features_in_", None) != len(FEATURE_NAMES):
+        raise ValueError(f"the estimator must be fitted on the {len(FEATURE_NAMES)} columns of FEATURE_NAMES")
+    if len(getattr(estimator, "classes_", ())) != 2:
+        raise ValueError("the estimator must be a binary classifier")
+    if isinstance(estimator, RandomForestClassifier | ExtraTreesClassifier):
+        # leaf value: the positive class's (weighted) fraction, whether sklearn stores counts or fractions
+        def fraction(v):
+            return v[:, 0, 1] / np.maximum(v[:, 0].sum(axis=1), np.finfo(float).tiny)
+
+        arrays, roots = _flatten_trees(estimator.estimators_, fraction)
+        return LegModel(*arrays, roots, kind="forest", threshold_p=threshold_p, provenance=dict(provenance))
+    if isinstance(estimator, GradientBoostingClassifier):
+        trees = estimator.estimators_[:, 0]
+        arrays, roots = _flatten_trees(trees, lambda v: v[:, 0, 0])
+        # the initial raw score (log-odds of the prior, or 0): the decision function minus the trees' part
+        x0 = np.zeros((1, len(FEATURE_NAMES)), np.float32)
+        scale = float(estimator.learning_rate)
+        base = float(estimator.decision_function(x0)[0]) - scale * sum(float(t.predict(x0)[0]) for t in trees)
+        return LegModel(*arrays, roots, kind="boosting", base=base, scale=scale, threshold_p=threshold_p,
+                        provenance=dict(provenance))
+    raise ValueError(f"unsupported estimator {type(estimator).__name__}: use RandomForestClassifier, "
+                     "ExtraTreesClassifier or GradientBoostingClassifier")
+
+
+def load_leg_model(spec: str) -> LegModel | None:
+    """'default': the packaged model; 'paper': None (the paper's circle rule, no learned model); otherwise the
+    path of a model file (InputError when absent or bad)."""
+    if spec == "paper":
+        return None
+    if spec == "default":
+        return LegModel.load(DEFAULT_MODEL_PATH)
+    return LegModel.load(spec)
+
+
+def leg_probabilities(ranges, angles, seg_start, seg_end, seg_offsets, range_min: float, range_max: float,
+                      model: LegModel) -> np.ndarray:
+    """Leg probability (M,) float64 of every segment (inputs as in cluster_features): features and ensemble in
+    one compiled call. Segments outside candidate_mask get 0."""
+    from . import _leg_kernels as LK
+
+    ranges, angles, start, end, offsets = _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets)
+    lo, hi = _limits(range_min, range_max)
+    M = len(start)
+    out = np.zeros(M, np.float64)
+    if M:
+        feats = np.empty((M, LK.N_FEATURES), np.float64)
+        LK.block_probabilities(ranges, angles, np.cos(angles), np.sin(angles), start, end, offsets, lo, hi,
+                               RADIUS_CLIP, OCCLUSION_MARGIN, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS,
+                               *model._kernel_args(), feats, out)
+    return out
