@@ -28,6 +28,11 @@ LOGS = ROOT / "sample_logs"
 LEGTRACKER = ROOT.parent / "shared" / "data" / "legtracker"
 
 
+def learned_legs(feature_params: dict | None) -> bool:
+    """Whether features made with these FeatureParams overrides come with a leg detector's legs."""
+    return (feature_params or {}).get("leg_model", "default") != "paper"
+
+
 def have_perception() -> bool:
     return importlib.util.find_spec("datmo_cli.perception.features") is not None
 
@@ -50,7 +55,8 @@ def score_sim(name: str, source: str, feature_params: dict | None = None) -> dic
     else:
         feats = run_features(run, odom, feature_params)
     t0 = time.perf_counter()
-    tracked = track_run(run, feats, odometry=odom, markers=False)
+    tracked = track_run(run, feats, odometry=odom, markers=False,
+                        learned=source == "datmo" and learned_legs(feature_params))
     seconds = time.perf_counter() - t0
     off, items = tracked.all_tracks()
     g, regions, hy = ev.frames_from_channels(truth.stamps, gt_off, gt, truth.scalars.get("sensor_theta"),
@@ -143,7 +149,7 @@ def demo_figures(path: Path, feature_params: dict | None = None) -> dict:
     tracks that stay on the background (the per-beam median range: walls) and within 0.5 m all along."""
     run, _ = read_ros1_scans(path, "/scan")
     feats = run_features(run, None, feature_params)
-    tracked = track_run(run, feats, markers=False)
+    tracked = track_run(run, feats, markers=False, learned=learned_legs(feature_params))
     off, items = tracked.all_tracks()
     conf = items[items["status"] == 1]
     people = np.unique(conf["id"][conf["classification"] == acc.PERSON])
@@ -181,7 +187,7 @@ def positive_lines(feature_params: dict | None = None) -> list[str]:
         run, log_times = read_ros1_scans(path, "/training_scan")
         legs = read_leg_labels(path, log_times)
         feats = run_features(run, None, feature_params)
-        tracked = track_run(run, feats, markers=False)
+        tracked = track_run(run, feats, markers=False, learned=learned_legs(feature_params))
         hit, total = acc.leg_coverage(legs, [f.circles for f in feats], tracked.tracks)
         hit_all, total_all = hit_all + hit, total_all + total
         out.append(f"{path.name}: {hit}/{total} labelled legs in a leg circle or person track "

@@ -155,8 +155,12 @@ def derive(run, odometry, params: dict | None = None,  # noqa: ANN001 - ScanRun,
     channels, features = derive_features(run, odometry=odometry, params=feature_params,
                                          progress=(lambda d, t: progress(d, 2 * n)) if progress else None)
     tracks = derive_tracks(run, list(iter_run_features(features)), odometry=odometry, params=track_params,
+                           learned=feature_params.leg_model != "paper",
                            progress=(lambda d, t: progress(n + d, 2 * n)) if progress else None)
-    effective = {"features": feature_params.to_dict(), "track": track_params.to_dict()}
+    from .perception.features import leg_model_provenance
+
+    effective = {"features": feature_params.to_dict(), "track": track_params.to_dict(),
+                 "leg_model": leg_model_provenance(feature_params.leg_model)}
     return {**channels, **tracks}, effective
 
 

@@ -139,8 +139,10 @@ def test_raw_log_is_segmented_and_tracked(tmp_path):
     assert len(column) == 1 and column["classification"][0] == 2
     assert (confirmed["classification"] == 1).sum() == 1   # the walker
     params = log.metadata["datmo.params"]
-    assert set(params) == {"track", "features"}
+    assert set(params) == {"track", "features", "leg_model"}
     assert json.loads(params["track"])["confirm_hits"] == 3 and "min_points" in json.loads(params["features"])
+    model = json.loads(params["leg_model"])   # the detector that found the legs, with its file's hash
+    assert model["model"] == "default" and len(model["sha256"]) == 64 and 0 < model["threshold"] < 1
 
 
 def test_config_tables_are_read_per_stage(tmp_path):

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from ..perception.params import FeatureParams
-from .segment import feature_params, write_derived
+from .segment import effective_features, feature_params, write_derived
 
 D = FeatureParams()
 
@@ -31,11 +31,14 @@ D = FeatureParams()
               help=f"HTL rho cell, m [default: {D.rho_resolution:g}].")
 @click.option("--circle-radius", "circle_radius", type=(float, float), default=None, metavar="MIN MAX",
               help=f"HTC radius range, m [default: {D.circle_radius_min:g} {D.circle_radius_max:g}].")
+@click.option("--leg-model", default=None, metavar="MODEL",
+              help="Leg detector: 'default' (the model shipped with datmo), a model file from datmo train-legs, "
+                   "or 'paper' (no detector: legs by the paper's circle rule) [default: default].")
 @click.option("--d-max", type=click.FloatRange(min=0, min_open=True), default=None,
               help=f"Lines longer than this are walls (static), m [default: {D.d_max:g}].")
 def command(input: Path, output: Path, force: bool, config: Path | None, resegment: bool, c0: float | None,
             min_points: int | None, theta_resolution: float | None, rho_resolution: float | None,
-            circle_radius: tuple[float, float] | None, d_max: float | None) -> None:
+            circle_radius: tuple[float, float] | None, leg_model: str | None, d_max: float | None) -> None:
     """Extract the features of every scan: lines by the Hough transform for lines (accumulators adapted to
     each segment, several lines per segment by following the peak, refined by least squares), circles by
     the Hough transform for circles (centre from P_ini, P_near, P_end; refined by least squares), the
@@ -57,7 +60,7 @@ def command(input: Path, output: Path, force: bool, config: Path | None, resegme
     rmin, rmax = circle_radius if circle_radius is not None else (None, None)
     params = feature_params(config, c0=c0, min_points=min_points, theta_resolution=theta_resolution,
                             rho_resolution=rho_resolution, circle_radius_min=rmin, circle_radius_max=rmax,
-                            d_max=d_max)
+                            leg_model=leg_model, d_max=d_max)
     log = mcapio.read_log(input, topics=None)
     run = mcapio.run_from_log(log)
     odometry = mcapio.odometry_from_log(log)
@@ -76,7 +79,7 @@ def command(input: Path, output: Path, force: bool, config: Path | None, resegme
         task = bar.add_task("features", total=len(run))
         with compile_notice(bar, task) as report:
             derived, f = derive_features(run, odometry=odometry, params=params, segments=segments, progress=report)
-    write_derived(input, output, "features", derived, {"features": params.to_dict()}, log, force)
+    write_derived(input, output, "features", derived, effective_features(params), log, force)
     c = f.counts()
     n_lm = len(f.landmarks.final()) if f.landmarks is not None else 0
     click.echo(f"{output}: {len(run):,} scans; per scan {c['lines']:.1f} lines, {c['circles']:.1f} circles, "

@@ -43,9 +43,11 @@ def _progress_bar():  # noqa: ANN202 - rich.progress.Progress, imported lazily
 @click.option("--sort", type=click.Choice(SORT_KEYS), default="lifetime", show_default=True,
               help="Order of the report's track table.")
 @click.option("--no-report", is_flag=True, help="Do not print the report.")
+@click.option("--leg-model", default=None, metavar="MODEL",
+              help="Leg detector: 'default' (the model shipped with datmo), a model file from datmo train-legs, "
+                   "or 'paper' (the paper's circle rule and walking pattern) [default: default].")
 def command(inputs: tuple[Path, ...], out_dir: Path, jobs: int | None, force: bool, config: Path | None, plot: bool,
-            fmt: str,
-            top: int | None, sort: str, no_report: bool) -> None:
+            fmt: str, top: int | None, sort: str, no_report: bool, leg_model: str | None) -> None:
     """Segment, extract features and track each input in one pass, then print the report.
 
     Each output holds the input's channels and /datmo/segments, /datmo/features, /datmo/landmarks,
@@ -59,13 +61,18 @@ def command(inputs: tuple[Path, ...], out_dir: Path, jobs: int | None, force: bo
     from ..errors import DatmoError, InputError
     from ..pipeline import output_paths, run_many
 
-    inputs = list(inputs)
-    params = None
-    if config is not None:
-        from ..perception.params import load_toml as load_features
-        from ..tracking.params import load_toml as load_track
+    from ..perception.params import FeatureParams
+    from ..perception.params import load_toml as load_features
+    from ..tracking.params import TrackingParams
+    from ..tracking.params import load_toml as load_track
 
-        params = {"features": load_features(config), "track": load_track(config)}
+    inputs = list(inputs)
+    params = {"features": load_features(config) if config is not None else FeatureParams(),
+              "track": load_track(config) if config is not None else TrackingParams()}
+    params["features"] = params["features"].replace(leg_model=leg_model)
+    from ..perception.legs import load_leg_model
+
+    load_leg_model(params["features"].leg_model)   # a bad model is one error here, not one per input
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"{out_dir}: exists and is not a folder")
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -19,6 +19,14 @@ def feature_params(config: Path | None, **options) -> FeatureParams:  # noqa: AN
     return params.replace(**options)
 
 
+def effective_features(params: FeatureParams) -> dict:
+    """The provenance entries of feature extraction: its parameters and the leg detector in use (its file's
+    SHA-256, threshold and training summary), so every output says which model found its legs."""
+    from ..perception.features import leg_model_provenance
+
+    return {"features": params.to_dict(), "leg_model": leg_model_provenance(params.leg_model)}
+
+
 def write_derived(src: Path, out: Path, command: str, derived: dict, params: dict, log, force: bool) -> None:  # noqa: ANN001
     """Write `log`'s channels (those in `derived` replaced) plus the derived ones to `out`, with provenance."""
     from ..cli import invocation

@@ -11,18 +11,34 @@ from ..tracking.params import TrackingParams
 
 D = TrackingParams()
 
+def features_leg_model(log) -> str:  # noqa: ANN001 - mcapio.Log
+    """The leg detector a log's /datmo/features were made with, from its provenance ("paper" for features
+    made before datmo had a detector, whose legs are the paper's circles)."""
+    import json
+
+    for name in ("datmo.params", "input/datmo.params"):
+        raw = log.metadata.get(name, {}).get("features")
+        if raw:
+            try:
+                return str(json.loads(raw).get("leg_model", "paper"))
+            except (ValueError, AttributeError):
+                return "paper"
+    return "paper"
+
+
 def track_file(src: Path, out: Path, *, force: bool = False, params=None, feature_params=None,  # noqa: ANN001
-               progress: Callable[[int, int], None] | None = None,
+               leg_model: str | None = None, progress: Callable[[int, int], None] | None = None,
                feature_progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
     """Track `src` into `out` (its channels copied, /datmo/tracks and /datmo/markers/tracks added).
-    Features come from src's /datmo/features when present; else segmentation and features run here and
-    their channels are written too, as datmo run writes them. `progress` and `feature_progress` are
-    called with (scans done, total) as tracking and feature extraction go. Returns (scans, whether
-    features were computed here)."""
+    Features come from src's /datmo/features when present (people then by the rule of the leg detector
+    they were made with; `leg_model`, when given, must be that one); else segmentation and features run
+    here (with `leg_model` when given) and their channels are written too, as datmo run writes them.
+    `progress` and `feature_progress` are called with (scans done, total) as tracking and feature
+    extraction go. Returns (scans, whether features were computed here)."""
     from ..cli import invocation
     from ..errors import InputError
     from ..log import mcapio
-    from ..perception.features import derive_features
+    from ..perception.features import derive_features, leg_model_provenance
     from ..perception.params import FeatureParams
     from ..tracking.params import TrackingParams
     from ..tracking.pipeline import decode_features, derive_tracks, iter_run_features
@@ -35,7 +51,8 @@ def track_file(src: Path, out: Path, *, force: bool = False, params=None, featur
     derived: dict = {}
     effective: dict = {"track": params.to_dict()}
     if computed:
-        feature_params = feature_params or FeatureParams()
+        feature_params = (feature_params or FeatureParams()).replace(leg_model=leg_model)
+        used = feature_params.leg_model
         if feature_progress is not None:
             feature_progress(0, len(run))
         derived, run_features = derive_features(run, odometry=odometry, params=feature_params,
@@ -43,6 +60,10 @@ def track_file(src: Path, out: Path, *, force: bool = False, params=None, featur
         features = list(iter_run_features(run_features))
         effective["features"] = feature_params.to_dict()
     else:
+        used = features_leg_model(log)
+        if leg_model is not None and leg_model != used:
+            raise InputError(f"{src}: its features were made with leg model {used!r}, not {leg_model!r}; run "
+                             f"datmo features --leg-model {leg_model} on it first, or drop --leg-model")
         stamps, payloads = log.messages[mcapio.TOPIC_FEATURES]
         if len(payloads) != len(run):
             raise InputError(f"{src}: {len(payloads)} messages on {mcapio.TOPIC_FEATURES} for {len(run)} scans; "
@@ -50,7 +71,9 @@ def track_file(src: Path, out: Path, *, force: bool = False, params=None, featur
         features = decode_features(payloads)
     if progress is not None:
         progress(0, len(run))
-    derived |= derive_tracks(run, features, odometry=odometry, params=params, progress=progress)
+    effective["leg_model"] = leg_model_provenance(used) if used == "paper" or computed else {"model": used}
+    derived |= derive_tracks(run, features, odometry=odometry, params=params, learned=used != "paper",
+                             progress=progress)
     provenance = mcapio.Provenance("track", effective, [src], invocation("track"))
     with mcapio.LogWriter(out, force=force, provenance=provenance) as writer:
         writer.copy_from(log, exclude=list(derived))
@@ -82,9 +105,13 @@ def track_file(src: Path, out: Path, *, force: bool = False, params=None, featur
                    f"[default: {D.delete_after_occluded:g}].")
 @click.option("--d-max", type=click.FloatRange(min=0, min_open=True), default=None,
               help=f"Objects larger than this are static, m [default: {D.d_max:g}].")
+@click.option("--leg-model", default=None, metavar="MODEL",
+              help="Leg detector for inputs without features: 'default' (shipped), a file from datmo train-legs, "
+                   "or 'paper' (the paper's circle rule and walking pattern). Inputs with features keep theirs.")
 def command(input: Path, output: Path, force: bool, config: Path | None, process_noise: float | None,
             measurement_noise: float | None, gate: float | None, confirm: tuple[int, int] | None,
-            delete_after: float | None, delete_after_occluded: float | None, d_max: float | None) -> None:
+            delete_after: float | None, delete_after_occluded: float | None, d_max: float | None,
+            leg_model: str | None) -> None:
     """Track and classify the objects of a log: Kalman filter, gating and global nearest-neighbour
     association, occlusion-aware track life cycle, people from paired legs and their walking pattern.
 
@@ -122,6 +149,7 @@ def command(input: Path, output: Path, force: bool, config: Path | None, process
                 return start_or_report
 
             scans, computed = track_file(input, output, force=force, params=params, feature_params=feature_params,
-                                         progress=stage("tracking"), feature_progress=stage("features"))
+                                         leg_model=leg_model, progress=stage("tracking"),
+                                         feature_progress=stage("features"))
     how = " (segmented and extracted features first)" if computed else ""
     click.echo(f"{output}: tracks for {scans:,} scans{how}", err=True)

@@ -32,6 +32,7 @@ from .params import FeatureParams
 LINE_DTYPE = cdr.element_dtype(types.LINE)
 CIRCLE_DTYPE = cdr.element_dtype(types.CIRCLE)
 BLOB_DTYPE = cdr.element_dtype(types.BLOB)
+LEG_DTYPE = cdr.element_dtype(types.LEG)
 BLOCK = 256   # scans per kernel call: bounds the scratch memory and paces progress reports
 
 
@@ -41,7 +42,8 @@ class RunFeatures:
 
     Scan k's segments are seg_start/seg_end[seg_offsets[k]:seg_offsets[k + 1]] (beam index ranges
     [start, end)); its lines are lines[line_offsets[k]:line_offsets[k + 1]] (element_dtype(LINE)), and so
-    on for circles and blobs. `landmarks` is the run's landmark database (None when not computed).
+    on for circles, blobs and legs (the segments the leg detector takes for legs; none with the paper's
+    rule). `landmarks` is the run's landmark database (None when not computed).
     """
 
     stamps: np.ndarray
@@ -57,6 +59,13 @@ class RunFeatures:
     blob_offsets: np.ndarray
     landmarks: LandmarkDatabase | None = None
     landmark_frame: str = ""
+    legs: np.ndarray | None = None
+    leg_offsets: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.legs is None:
+            self.legs = np.zeros(0, LEG_DTYPE)
+            self.leg_offsets = np.zeros(len(self.stamps) + 1, np.int64)
 
     def __len__(self) -> int:
         return len(self.stamps)
@@ -65,7 +74,7 @@ class RunFeatures:
         """Mean segments, lines, circles and blobs per scan."""
         n = max(len(self), 1)
         return {"segments": len(self.seg_start) / n, "lines": len(self.lines) / n,
-                "circles": len(self.circles) / n, "blobs": len(self.blobs) / n}
+                "circles": len(self.circles) / n, "blobs": len(self.blobs) / n, "legs": len(self.legs) / n}
 
 
 def _check(run: ScanRun) -> None:
@@ -121,6 +130,7 @@ _LINE_NAMES = ("segment", "first", "last", "n_points", "x_ini", "y_ini", "x_end"
                "length", "r_acc")
 _CIRCLE_NAMES = ("segment", "first", "last", "n_points", "x", "y", "radius", "r_acc")
 _BLOB_NAMES = ("segment", "first", "last", "n_points", "x", "y", "size", "kind")
+_LEG_NAMES = ("segment", "first", "last", "n_points", "x", "y", "width", "probability")
 
 
 def _check_segments(start: np.ndarray, end: np.ndarray, offsets: np.ndarray, beams: int) -> None:
@@ -141,14 +151,49 @@ def _check_segments(start: np.ndarray, end: np.ndarray, offsets: np.ndarray, bea
                          "segments must be disjoint and in scan order")
 
 
+def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.ndarray, count: np.ndarray,
+              lo: float, hi: float, angles: np.ndarray, model) -> np.ndarray:  # noqa: ANN001 - legs.LegModel
+    """Rows (scan in block, segment in scan, first, last, n, x, y, width, probability) of the block's
+    segments whose leg probability reaches the model's threshold; x, y the centroid (sensor frame, m)."""
+    from .legs import leg_probabilities
+
+    off = _offsets(count)
+    start, end = seg[:off[-1], 0], seg[:off[-1], 1]
+    prob = leg_probabilities(block, angles, start, end, off, lo, hi, model)
+    hit = np.flatnonzero(prob >= model.threshold_p)
+    rows = np.zeros((len(hit), 9))
+    if not len(hit):
+        return rows
+    scan = np.searchsorted(off, hit, side="right") - 1
+    s, e = start[hit].astype(np.int64), end[hit].astype(np.int64)
+    B = block.shape[1]
+    r = np.where(np.isfinite(block), block, 0.0).astype(np.float64)   # segments hold valid returns only
+    px, py = r * cos_a, r * sin_a
+    # sums over [s, e) of each hit: segments are disjoint and in scan order, so the bounds interleave sorted
+    bounds = np.empty(2 * len(hit), np.int64)
+    bounds[0::2], bounds[1::2] = scan * B + s, scan * B + e
+    n = (e - s).astype(np.float64)
+    sx = np.add.reduceat(np.append(px.ravel(), 0.0), bounds)[0::2]
+    sy = np.add.reduceat(np.append(py.ravel(), 0.0), bounds)[0::2]
+    x0, y0, x1, y1 = px[scan, s], py[scan, s], px[scan, e - 1], py[scan, e - 1]
+    rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 4] = scan, hit - off[scan], s, e - 1, n
+    rows[:, 5], rows[:, 6] = sx / n, sy / n
+    rows[:, 7], rows[:, 8] = np.hypot(x1 - x0, y1 - y0), prob[hit]
+    return rows
+
+
 def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odometry | None = None, *,
                 landmarks: bool = True, segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
                 progress: Callable[[int, int], None] | None = None) -> RunFeatures:
     """Segment every scan and extract its lines, circles and blobs (HTL, HTC and the section 5.2 rule);
     with `landmarks`, also build the landmark database (world frame when `odometry` is given).
     `segments` (start, end, offsets as segment_run gives them, e.g. a log's /datmo/segments) are used
-    instead of segmenting. `progress(done, total)` is called after each block of scans."""
+    instead of segmenting. The leg detector `params.leg_model` names (see perception.legs) marks the
+    segments it takes for legs. `progress(done, total)` is called after each block of scans."""
+    from .legs import load_leg_model
+
     p = params or FeatureParams()
+    model = load_leg_model(p.leg_model)
     _check(run)
     lo, hi = _range_limits(run)
     ranges = np.ascontiguousarray(run.ranges, np.float32)
@@ -166,7 +211,7 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
             raise InputError(f"segments for {len(g_off) - 1} scans, the run has {N}")
         _check_segments(g_start, g_end, g_off, B)
         given = np.stack([g_start, g_end], axis=1) if len(g_start) else np.zeros((0, 2), np.int64)
-    segs, seg_counts, parts = [], [], {"l": [], "c": [], "b": []}
+    segs, seg_counts, parts = [], [], {"l": [], "c": [], "b": [], "g": []}
     for a in range(0, N, BLOCK):
         block = ranges[a:a + BLOCK]
         n = len(block)
@@ -188,15 +233,20 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
                             circles, blobs, got, block_given, block_off)
         segs.append(seg[:int(count.sum())])
         seg_counts.append(count)
+        legs = _leg_rows(block, cos_a, sin_a, seg, count, lo, hi, angles, model) if model is not None and B else None
         for key, arr, m in (("l", lines, got[0]), ("c", circles, got[1]), ("b", blobs, got[2])):
             rows = arr[:m].copy()
             rows[:, 0] += a
             parts[key].append(rows)
+        if legs is not None:
+            legs[:, 0] += a
+            parts["g"].append(legs)
         if progress is not None:
             progress(a + n, N)
     seg = np.concatenate(segs) if segs else np.zeros((0, 2), np.int64)
     count = np.concatenate(seg_counts) if seg_counts else np.zeros(0, np.int64)
     rows = {k: (np.concatenate(v) if v else np.zeros((0, 13 if k == "l" else 9))) for k, v in parts.items()}
+    leg_scan = rows["g"][:, 0].astype(np.int64)
     out = RunFeatures(
         stamps=run.stamps, frame_id=run.geometry.frame_id,
         seg_start=seg[:, 0].astype(np.uint32), seg_end=seg[:, 1].astype(np.uint32), seg_offsets=_offsets(count),
@@ -205,7 +255,8 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
         circles=_rows_to(CIRCLE_DTYPE, rows["c"], _CIRCLE_NAMES),
         circle_offsets=_offsets(np.bincount(rows["c"][:, 0].astype(np.int64), minlength=N)),
         blobs=_rows_to(BLOB_DTYPE, rows["b"], _BLOB_NAMES),
-        blob_offsets=_offsets(np.bincount(rows["b"][:, 0].astype(np.int64), minlength=N)))
+        blob_offsets=_offsets(np.bincount(rows["b"][:, 0].astype(np.int64), minlength=N)),
+        legs=_rows_to(LEG_DTYPE, rows["g"], _LEG_NAMES), leg_offsets=_offsets(np.bincount(leg_scan, minlength=N)))
     if landmarks:
         line_scan = rows["l"][:, 0].astype(np.int64)
         det = np.concatenate([
@@ -222,6 +273,24 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
     return out
 
 
+def leg_model_provenance(spec: str) -> dict:
+    """What an output records of the leg detector `spec` names: the rule, or the model file with its
+    SHA-256, decision threshold and what it was trained on (held-out figures included)."""
+    from pathlib import Path
+
+    from ..log.mcapio import sha256_of
+    from .legs import DEFAULT_MODEL_PATH, load_leg_model
+
+    model = load_leg_model(spec)
+    if model is None:
+        return {"model": "paper", "rule": "legs are circles of leg radius; a person needs the walking pattern"}
+    path = Path(DEFAULT_MODEL_PATH) if spec == "default" else Path(spec)
+    trained = {k: model.provenance[k] for k in ("estimator", "held_out", "trained_on", "created")
+               if k in model.provenance}
+    return {"model": spec, "path": str(path), "sha256": sha256_of(path), "threshold": model.threshold_p,
+            "features": list(model.feature_names), "trained": trained}
+
+
 def segment_payloads(run: ScanRun, seg_start: np.ndarray, seg_end: np.ndarray, offsets: np.ndarray) -> list[bytes]:
     """datmo_msgs/msg/Segments CDR payloads, one per scan."""
     frame = run.geometry.frame_id
@@ -233,8 +302,10 @@ def segment_payloads(run: ScanRun, seg_start: np.ndarray, seg_end: np.ndarray, o
 def feature_payloads(f: RunFeatures) -> list[bytes]:
     """datmo_msgs/msg/Features CDR payloads, one per scan."""
     lo, co, bo = f.line_offsets.tolist(), f.circle_offsets.tolist(), f.blob_offsets.tolist()
+    go = f.leg_offsets.tolist()
     return [cdr.encode(types.FEATURES, {"stamp_ns": s, "frame_id": f.frame_id, "lines": f.lines[lo[k]:lo[k + 1]],
-                                         "circles": f.circles[co[k]:co[k + 1]], "blobs": f.blobs[bo[k]:bo[k + 1]]})
+                                         "circles": f.circles[co[k]:co[k + 1]], "blobs": f.blobs[bo[k]:bo[k + 1]],
+                                         "legs": f.legs[go[k]:go[k + 1]]})
             for k, s in enumerate(f.stamps.tolist())]
 
 

@@ -42,6 +42,11 @@ class FeatureParams:
     circle_check_extent: float = 0.35   # m; a one-line segment shorter than this also gets HTC (legs) ...
     circle_check_radius: float = 0.15   # m; ... and is a circle only with a radius up to this
     circle_min_sagitta: float = 0.02    # m; an arc must bulge this much towards the scanner (P_near vs chord)
+    # a circle must be a well-posed arc (0 turns a test off):
+    circle_min_coverage: float = 0.6    # points >= this share of the beams its near side spans, 2 asin(r/d)/step
+    circle_residual_ratio: float = 0.8  # circle fit's rms residual <= this times the line fit's, same points
+    circle_radius_margin: float = 0.01  # m; radius more than this inside [radius_min, radius_max] (not pinned)
+    circle_lines_ratio: float = 1.0     # and <= this times the segment's HTL lines' (two or more: a corner)
     # landmarks (section 6.2)
     d_max: float = 1.5               # m; lines longer than this are static (walls)
     corner_gap: float = 0.3          # m; two wall lines meet when their ends are this close to the junction
@@ -53,6 +58,9 @@ class FeatureParams:
     landmark_min_count: int = 3      # scans a landmark is seen in before it enters the database
     column_max_drift: float = 0.1    # m; a column candidate that moves more than this is not a column
     column_min_time: float = 3.0     # s; a column is seen in place at least this long
+    # legs: the learned leg detector ("default": the model shipped in the package), a model file from
+    # `datmo train-legs`, or "paper": no detector, legs by the paper's circle rule in tracking
+    leg_model: str = "default"
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -69,10 +77,14 @@ class FeatureParams:
                          self.line_min_length, np.radians(self.perpendicular_tolerance), self.circle_radius_min,
                          self.circle_radius_max, self.circle_radius_step, self.circle_cell, self.circle_window,
                          self.circle_tolerance, self.circle_min_points, self.circle_check_extent,
-                         self.circle_min_sagitta, self.circle_check_radius], np.float64)
+                         self.circle_min_sagitta, self.circle_check_radius, self.circle_min_coverage,
+                         self.circle_residual_ratio, self.circle_radius_margin, self.circle_lines_ratio], np.float64)
 
 
 _POSITIVE_INT = {"min_points", "line_min_points", "circle_min_points", "landmark_min_count"}
+_STRINGS = {"leg_model"}
+_ZERO_OK = {"c0", "deflection_min", "perpendicular_tolerance", "circle_min_coverage", "circle_residual_ratio",
+            "circle_radius_margin", "circle_lines_ratio"}
 _RANGES = {"line_min_racc": (0.0, 1.0), "vote_window": (1.0, 90.0), "perpendicular_tolerance": (0.0, 45.0),
            "theta_resolution": (0.05, 10.0), "deflection_min": (0.0, 90.0)}
 
@@ -84,7 +96,10 @@ def from_dict(values: dict, where: str = "features") -> FeatureParams:
     for key, value in values.items():
         if key not in known:
             raise ConfigError(f"{where}.{key}: unknown parameter (known: {', '.join(sorted(known))})")
-        if key in _POSITIVE_INT:
+        if key in _STRINGS:
+            if not isinstance(value, str) or not value.strip():
+                raise ConfigError(f"{where}.{key}: must be a non-empty string, got {value!r}")
+        elif key in _POSITIVE_INT:
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"{where}.{key}: must be a positive integer, got {value!r}")
         else:
@@ -92,8 +107,7 @@ def from_dict(values: dict, where: str = "features") -> FeatureParams:
                 raise ConfigError(f"{where}.{key}: must be a number, got {value!r}")
             value = float(value)
             lo, hi = _RANGES.get(key, (0.0, np.inf))
-            if not (lo <= value <= hi) or (value == 0.0 and key not in ("c0", "deflection_min",
-                                                                       "perpendicular_tolerance")):
+            if not (lo <= value <= hi) or (value == 0.0 and key not in _ZERO_OK):
                 raise ConfigError(f"{where}.{key}: {value:g} is out of range ({lo:g} to {hi:g}, not 0)")
         out[key] = value
     params = FeatureParams(**{**asdict(FeatureParams()), **out})

@@ -144,6 +144,65 @@ def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
 
 
 @njit(cache=True)
+def learned_measurements(cseg, cx, cy, cr, bseg, bx, by, bsize, lseg, lx0, ly0, lx1, ly1, gseg, gx, gy, gw,
+                         stride_max, d_max):  # noqa: ANN001, ANN201
+    """Measurements of one scan when a leg detector ran (see measurements.py): its legs (segments gseg at
+    gx, gy, width gw) paired into people or single, then every other segment as what it is: a circle
+    (kind 2), the bounding box of its lines (kind 3) or a blob (kind 4), whatever its size up to d_max.
+    Returns x, y, size, kind, legs (M, 4)."""
+    nc, nb, nl, ng = len(cx), len(bx), len(lseg), len(gseg)
+    top = 0
+    for arr in (cseg, bseg, lseg, gseg):
+        for v in arr:
+            top = max(top, v + 1)
+    is_leg = np.zeros(top, np.bool_)
+    for i in range(ng):
+        is_leg[gseg[i]] = True
+    px, py, psize, pkind, plegs = legs_to_measurements(gx, gy, gw, stride_max)
+    np_ = len(px)
+    cap = np_ + nc + nb + nl
+    x = np.empty(cap)
+    y = np.empty(cap)
+    size = np.empty(cap)
+    kind = np.empty(cap, np.int64)
+    legs = np.full((cap, 4), np.nan)
+    x[:np_], y[:np_], size[:np_], kind[:np_], legs[:np_] = px, py, psize, pkind, plegs
+    m = np_
+    for i in range(nc):
+        if not is_leg[cseg[i]]:
+            x[m], y[m], size[m], kind[m] = cx[i], cy[i], 2.0 * cr[i], 2
+            m += 1
+    for i in range(nb):
+        if not is_leg[bseg[i]]:
+            x[m], y[m], size[m], kind[m] = bx[i], by[i], bsize[i], 4
+            m += 1
+    if nl:
+        order = np.argsort(lseg, kind="mergesort")
+        k = 0
+        while k < nl:
+            seg = lseg[order[k]]
+            x0 = y0 = np.inf
+            x1 = y1 = -np.inf
+            while k < nl and lseg[order[k]] == seg:
+                i = order[k]
+                x0 = min(x0, lx0[i], lx1[i])
+                x1 = max(x1, lx0[i], lx1[i])
+                y0 = min(y0, ly0[i], ly1[i])
+                y1 = max(y1, ly0[i], ly1[i])
+                k += 1
+            if not is_leg[seg]:
+                x[m], y[m], size[m], kind[m] = 0.5 * (x0 + x1), 0.5 * (y0 + y1), np.hypot(x1 - x0, y1 - y0), 3
+                m += 1
+    keep = 0
+    for i in range(m):
+        if size[i] <= d_max:
+            x[keep], y[keep], size[keep], kind[keep] = x[i], y[i], size[i], kind[i]
+            legs[keep] = legs[i]
+            keep += 1
+    return x[:keep], y[:keep], size[:keep], kind[:keep], legs[:keep]
+
+
+@njit(cache=True)
 def mahalanobis2(x, P, zx, zy, sigma):  # noqa: ANN001, ANN201
     """(K, M) squared Mahalanobis distances and (K, M) Euclidean distances of measurements (zx, zy) with
     per-measurement sigma from the K tracks' predicted positions."""

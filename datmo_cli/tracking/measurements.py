@@ -12,8 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..log import cdr, types
 from . import _kernels
 from .params import TrackingParams
+
+_LEG_DTYPE = cdr.element_dtype(types.LEG)
 
 KIND_PERSON, KIND_LEG, KIND_CIRCLE, KIND_RECT, KIND_BLOB = 0, 1, 2, 3, 4
 N_KINDS = 5
@@ -21,11 +24,13 @@ N_KINDS = 5
 
 @dataclass
 class ScanFeatures:
-    """The features of one scan (structured arrays of element_dtype(LINE/CIRCLE/BLOB)), sensor frame."""
+    """The features of one scan (structured arrays of element_dtype(LINE/CIRCLE/BLOB/LEG)), sensor frame.
+    `legs` are the segments the learned leg detector took for legs (None: no detector ran)."""
 
     lines: np.ndarray
     circles: np.ndarray
     blobs: np.ndarray
+    legs: np.ndarray | None = None
 
 
 @dataclass
@@ -83,10 +88,22 @@ def from_legs(lx: np.ndarray, ly: np.ndarray, ls: np.ndarray, params: TrackingPa
     return Measurements(x, y, size, kind, legs)
 
 
-def measurements(features: ScanFeatures, params: TrackingParams) -> Measurements:
-    """The measurements of one scan's features (see the module docstring)."""
+def measurements(features: ScanFeatures, params: TrackingParams, learned: bool = False) -> Measurements:
+    """The measurements of one scan's features (see the module docstring). `learned`: legs are the leg
+    detector's (features.legs) and nothing else; the other segments are circles, rectangles or blobs
+    whatever their size. Otherwise the paper's rule: small circles, blobs and short lines are legs."""
     c, b, li = features.circles, features.blobs, features.lines
     f8 = np.float64
+    if learned:
+        g = features.legs if features.legs is not None else np.zeros(0, _LEG_DTYPE)
+        x, y, size, kind, legs = _kernels.learned_measurements(
+            c["segment"].astype(np.int64), c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8),
+            b["segment"].astype(np.int64), b["x"].astype(f8), b["y"].astype(f8), b["size"].astype(f8),
+            li["segment"].astype(np.int64), li["x_ini"].astype(f8), li["y_ini"].astype(f8), li["x_end"].astype(f8),
+            li["y_end"].astype(f8), g["segment"].astype(np.int64), g["x"].astype(f8), g["y"].astype(f8),
+            g["width"].astype(f8), params.stride_max, params.d_max)
+        raw = np.stack([g["x"].astype(f8), g["y"].astype(f8), g["width"].astype(f8)], axis=1).reshape(-1, 3)
+        return Measurements(x, y, size, kind, legs, raw)
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
         c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8), b["x"].astype(f8), b["y"].astype(f8),
         b["size"].astype(f8), b["kind"].astype(np.int64), li["segment"].astype(np.int64), li["x_ini"].astype(f8),

@@ -22,15 +22,17 @@ from .tracker import TRACK_DTYPE, Tracker
 LINE_DTYPE = cdr.element_dtype(types.LINE)
 CIRCLE_DTYPE = cdr.element_dtype(types.CIRCLE)
 BLOB_DTYPE = cdr.element_dtype(types.BLOB)
+LEG_DTYPE = cdr.element_dtype(types.LEG)
 
 
 def iter_run_features(features) -> Iterator[ScanFeatures]:  # noqa: ANN001 - perception's RunFeatures
     """Scan by scan views of a RunFeatures (lines/circles/blobs with line_/circle_/blob_offsets)."""
-    lo, co, bo = (np.asarray(features.line_offsets), np.asarray(features.circle_offsets),
-                  np.asarray(features.blob_offsets))
-    lines, circles, blobs = features.lines, features.circles, features.blobs
+    lo, co, bo, go = (np.asarray(features.line_offsets), np.asarray(features.circle_offsets),
+                      np.asarray(features.blob_offsets), np.asarray(features.leg_offsets))
+    lines, circles, blobs, legs = features.lines, features.circles, features.blobs, features.legs
     for i in range(len(lo) - 1):
-        yield ScanFeatures(lines[lo[i]:lo[i + 1]], circles[co[i]:co[i + 1]], blobs[bo[i]:bo[i + 1]])
+        yield ScanFeatures(lines[lo[i]:lo[i + 1]], circles[co[i]:co[i + 1]], blobs[bo[i]:bo[i + 1]],
+                           legs[go[i]:go[i + 1]])
 
 
 def decode_features(payloads: list[bytes]) -> list[ScanFeatures]:
@@ -38,13 +40,14 @@ def decode_features(payloads: list[bytes]) -> list[ScanFeatures]:
     out = []
     for p in payloads:
         msg = cdr.decode(types.FEATURES, p)
-        out.append(ScanFeatures(msg["lines"], msg["circles"], msg["blobs"]))
+        out.append(ScanFeatures(msg["lines"], msg["circles"], msg["blobs"], msg["legs"]))
     return out
 
 
 def features_from_lists(scans: list[dict]) -> list[ScanFeatures]:
     """ScanFeatures from plain lists, for tests and scripts: each scan a dict with optional "circles"
-    [(x, y, radius)], "lines" [(x_ini, y_ini, x_end, y_end)] (each its own segment) and "blobs" [(x, y, size)]."""
+    [(x, y, radius)], "lines" [(x_ini, y_ini, x_end, y_end)] (each its own segment), "blobs" [(x, y, size)]
+    and "legs" [(x, y, width)] (a leg detector's legs, each its own segment)."""
     out = []
     for s in scans:
         c = np.zeros(len(s.get("circles", ())), CIRCLE_DTYPE)
@@ -57,7 +60,10 @@ def features_from_lists(scans: list[dict]) -> list[ScanFeatures]:
         b = np.zeros(len(s.get("blobs", ())), BLOB_DTYPE)
         for k, (x, y, size) in enumerate(s.get("blobs", ())):
             b[k]["x"], b[k]["y"], b[k]["size"], b[k]["segment"] = x, y, size, 200 + k
-        out.append(ScanFeatures(li, c, b))
+        g = np.zeros(len(s.get("legs", ())), LEG_DTYPE)
+        for k, (x, y, width) in enumerate(s.get("legs", ())):
+            g[k]["x"], g[k]["y"], g[k]["width"], g[k]["segment"], g[k]["probability"] = x, y, width, 300 + k, 1.0
+        out.append(ScanFeatures(li, c, b, g))
     return out
 
 
@@ -86,10 +92,11 @@ class TrackedRun:
 
 def track_run(run: ScanRun, features: list[ScanFeatures] | Iterator[ScanFeatures], *,
               odometry: Odometry | None = None, params: TrackingParams | None = None, markers: bool = True,
-              progress: Callable[[int, int], None] | None = None) -> TrackedRun:
-    """Track every scan of `run` given its features (one ScanFeatures per scan, sensor frame)."""
+              learned: bool = False, progress: Callable[[int, int], None] | None = None) -> TrackedRun:
+    """Track every scan of `run` given its features (one ScanFeatures per scan, sensor frame). `learned`:
+    the features' legs come from a leg detector (else people by the paper's rule, see Tracker)."""
     params = params or TrackingParams()
-    tracker = Tracker(params, run.geometry)
+    tracker = Tracker(params, run.geometry, learned=learned)
     poses = odometry.at(run.stamps) if odometry is not None and len(odometry) else None
     frame = run.geometry.frame_id
     marker_frame = (odometry.frame_id if poses is not None else frame)
@@ -98,7 +105,7 @@ def track_run(run: ScanRun, features: list[ScanFeatures] | Iterator[ScanFeatures
     n = len(run)
     step = max(n // 100, 1)
     for i, (stamp, feats) in enumerate(zip(run.stamps.tolist(), features, strict=False)):
-        meas = measurements(feats, params)
+        meas = measurements(feats, params, learned)
         tracks = tracker.step(stamp, meas, ranges[i], None if poses is None else poses[i])
         out.tracks.append(tracks)
         if markers:
@@ -124,12 +131,12 @@ def run_features(run: ScanRun, odometry: Odometry | None = None, params=None) ->
 
 
 def derive_tracks(run: ScanRun, features: list[ScanFeatures], *, odometry: Odometry | None = None,
-                  params: TrackingParams | None = None,
+                  params: TrackingParams | None = None, learned: bool = False,
                   progress: Callable[[int, int], None] | None = None) -> dict[str, tuple[str, np.ndarray, list]]:
     """The channels `datmo track` adds: {topic: (msgtype, stamps, payloads)} for /datmo/tracks and
-    /datmo/markers/tracks (topic names from mcapio)."""
+    /datmo/markers/tracks (topic names from mcapio). `learned`: the features' legs are a leg detector's."""
     from ..log import mcapio
 
-    tracked = track_run(run, features, odometry=odometry, params=params, progress=progress)
+    tracked = track_run(run, features, odometry=odometry, params=params, learned=learned, progress=progress)
     return {mcapio.TOPIC_TRACKS: (types.TRACKS, tracked.stamps, tracked.track_payloads()),
             mcapio.TOPIC_MARKERS_TRACKS: (types.MARKER_ARRAY, tracked.stamps, tracked.markers)}

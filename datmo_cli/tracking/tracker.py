@@ -19,7 +19,13 @@ from ..log import cdr, types
 from ..log.scan import ScanGeometry
 from . import _kernels, kalman
 from .association import gnn
-from .classification import CLASS_PERSON, MOBILITY_DYNAMIC
+from .classification import (
+    CLASS_CIRCLE_OBJECT,
+    CLASS_PERSON,
+    CLASS_RECTANGULAR_OBJECT,
+    CLASS_UNKNOWN,
+    MOBILITY_DYNAMIC,
+)
 from .measurements import (
     KIND_BLOB,
     KIND_CIRCLE,
@@ -75,6 +81,7 @@ class TrackArrays:
     mobility: np.ndarray    # (K,) uint8
     tail: np.ndarray        # (K, T, 2) ring buffer of positions
     tail_count: np.ndarray  # (K,) int64, positions written so far
+    leg_score: np.ndarray   # (K,) float64: running share of recent hits that were the leg detector's legs
 
     @classmethod
     def empty(cls, tail_length: int) -> TrackArrays:
@@ -85,7 +92,7 @@ class TrackArrays:
                    np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, bool), np.zeros(0, bool),
                    np.zeros(0, bool),
                    np.zeros(0, np.uint8), np.zeros(0, np.uint8), np.zeros((0, max(tail_length, 1), 2)),
-                   np.zeros(0, np.int64))
+                   np.zeros(0, np.int64), np.zeros(0))
 
     def __len__(self) -> int:
         return len(self.id)
@@ -103,10 +110,17 @@ class TrackArrays:
 
 class Tracker:
     """Tracks and classifies objects scan by scan. `step` takes one scan's measurements (sensor frame)
-    and returns the live tracks as Track elements (element_dtype(types.TRACK))."""
+    and returns the live tracks as Track elements (element_dtype(types.TRACK)).
 
-    def __init__(self, params: TrackingParams | None = None, geometry: ScanGeometry | None = None) -> None:
+    People, with a leg detector (`learned`): a track is a person while most of its recent hits were the
+    detector's legs (two legs paired, one leg whose partner is hidden, or both legs in one cluster: see
+    `_classify`), whether it walks, stands or is followed; with the paper's rule, a person needs paired legs
+    and the walking pattern (legs leading in turn)."""
+
+    def __init__(self, params: TrackingParams | None = None, geometry: ScanGeometry | None = None,
+                 learned: bool = False) -> None:
         self.params = params or TrackingParams()
+        self.learned = learned
         self.geometry = geometry
         self.tracks = TrackArrays.empty(self.params.tail_length)
         self.stamp_ns: int | None = None
@@ -152,6 +166,9 @@ class Tracker:
             keep = ~np.isin(cols, cols2)   # measurements a lost track took back from tentative tracks
             self._superseded = rows[~keep]  # those tentative tracks were started on it: they go
             rows, cols = np.concatenate([rows[keep], rows2]), np.concatenate([cols[keep], cols2])
+        if len(rows):
+            a = p.leg_evidence_rate
+            t.leg_score[rows] = (1.0 - a) * t.leg_score[rows] + a * (m.kind[cols] <= KIND_LEG)
         self._occlusion(t, ranges)
         self._life_cycle(t, stamp_ns)
         self._spawn(m, rows, cols, stamp_ns)
@@ -387,7 +404,8 @@ class Tracker:
                           np.full(n, stamp_ns, np.int64), np.full(n, stamp_ns, np.int64), ones, ones, zeros, ones,
                           votes, np.zeros(n, bool), np.zeros(n, bool), np.zeros(n), m.size[idx].astype(np.float64),
                           x[:, :2].copy(), x[:, :2].copy(), np.zeros(n, bool), np.zeros(n, bool), np.ones(n, bool),
-                          np.zeros(n, np.uint8), np.full(n, 2, np.uint8), np.zeros((n, T, 2)), zeros)
+                          np.zeros(n, np.uint8), np.full(n, 2, np.uint8), np.zeros((n, T, 2)), zeros,
+                          (m.kind[idx] <= KIND_LEG).astype(np.float64))
         self.next_id += n
         self.tracks = self.tracks.extend(new)
 
@@ -406,6 +424,13 @@ class Tracker:
         t.cls, t.mobility = _kernels.classify(t.votes, t.lead_left & t.lead_right, t.mobility, age_s, t.size, moved,
                                               speed, t.confirmed, p.person_votes, p.d_max, p.undefined_window,
                                               p.moving_distance, p.moving_speed)
+        if self.learned:
+            # a person is what the leg detector keeps seeing, walking or not; the rest by the shape of its hits
+            shape = t.votes[:, [KIND_CIRCLE, KIND_RECT, KIND_BLOB]]
+            by_shape = np.array([CLASS_CIRCLE_OBJECT, CLASS_RECTANGULAR_OBJECT, CLASS_UNKNOWN],
+                                np.uint8)[np.argmax(shape, axis=1)]
+            by_shape[shape.sum(axis=1) == 0] = CLASS_UNKNOWN
+            t.cls = np.where(t.leg_score >= p.person_evidence, np.uint8(CLASS_PERSON), by_shape).astype(np.uint8)
 
     def _push_tail(self) -> None:
         t = self.tracks

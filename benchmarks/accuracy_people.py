@@ -1,0 +1,128 @@
+"""People over time on real scans (make accuracy): `datmo track`'s people on the legtracker bags, with the
+learned leg detector and with the paper's rule beside it.
+
+- negative_2 (rooms without people; each of its three scanners a log): the longest time any confirmed
+  track stays a person (target: none over 2 s).
+- positive_*_extracted (labelled legs): the share of labelled legs within 0.5 m of a confirmed person track,
+  counting a leg once its person has been in view for 1 s (target: at least 0.85).
+- demo_stationary_simple_environment: person tracks confirmed, and confirmed person or dynamic tracks
+  that stay on a wall (target: 0).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.accuracy_tracking import LEGTRACKER, demo_figures, learned_legs, read_leg_labels, read_ros1_scans
+from benchmarks.common import print_lines
+from datmo_cli.tracking import accuracy as acc
+from datmo_cli.tracking.pipeline import run_features, track_run
+
+NEGATIVE_TOPICS = ("/left_scan", "/right_scan", "/rear_scan")
+PERSON_RADIUS = 0.5     # m, a labelled leg this near a confirmed person track is covered
+CONFIRM_TIME = 1.0      # s a person is in view before their legs count
+LINK = 0.6              # m, a label this near one of the scan before (within LINK_GAP s) is the same person's
+LINK_GAP = 0.5          # s
+
+
+def tracked(run, leg_model: str):  # noqa: ANN001, ANN201 - ScanRun -> TrackedRun
+    params = {"leg_model": leg_model}
+    return track_run(run, run_features(run, None, params), markers=False, learned=learned_legs(params))
+
+
+def longest_person(stamps: np.ndarray, tracks: list[np.ndarray]) -> tuple[float, int]:
+    """(longest time, s, from the first to the last scan in which one track is a confirmed person; number of
+    tracks that are confirmed people for longer than 2 s)."""
+    first: dict[int, int] = {}
+    last: dict[int, int] = {}
+    for s, t in zip(stamps.tolist(), tracks, strict=True):
+        for i in t["id"][(t["status"] != 0) & (t["classification"] == acc.PERSON)].tolist():
+            first.setdefault(i, s)
+            last[i] = s
+    spans = np.array([(last[i] - first[i]) * 1e-9 for i in first])
+    return (float(spans.max()) if len(spans) else 0.0), int((spans > 2.0).sum())
+
+
+def established(stamps: np.ndarray, labels: list[np.ndarray]) -> list[np.ndarray]:
+    """Per scan, which labelled legs belong to a person in view for at least CONFIRM_TIME s: labels are
+    chained from scan to scan (nearest within LINK m, scans at most LINK_GAP s apart)."""
+    out, prev, prev_first, prev_t = [], np.zeros((0, 2)), np.zeros(0), None
+    for t, lab in zip((stamps * 1e-9).tolist(), labels, strict=True):
+        lab = np.asarray(lab, np.float64).reshape(-1, 2)
+        first = np.full(len(lab), t)
+        if prev_t is not None and t - prev_t <= LINK_GAP and len(prev) and len(lab):
+            d = np.hypot(lab[:, 0:1] - prev[None, :, 0], lab[:, 1:2] - prev[None, :, 1])
+            j = np.argmin(d, axis=1)
+            near = d[np.arange(len(lab)), j] <= LINK
+            first[near] = prev_first[j[near]]
+        out.append(t - first >= CONFIRM_TIME)
+        prev, prev_first, prev_t = lab, first, t
+    return out
+
+
+def covered(labels: list[np.ndarray], ready: list[np.ndarray], tracks: list[np.ndarray]) -> tuple[int, int]:
+    """(established labelled legs within PERSON_RADIUS of a confirmed person track, established legs)."""
+    hit = total = 0
+    for lab, ok, t in zip(labels, ready, tracks, strict=True):
+        lab = np.asarray(lab, np.float64).reshape(-1, 2)[ok]
+        if not len(lab):
+            continue
+        total += len(lab)
+        p = t[(t["status"] != 0) & (t["classification"] == acc.PERSON)]
+        if len(p):
+            d = np.hypot(lab[:, 0:1] - p["x"][None, :], lab[:, 1:2] - p["y"][None, :])
+            hit += int((d <= PERSON_RADIUS).any(axis=1).sum())
+    return hit, total
+
+
+def negative_figures(leg_model: str) -> dict[str, tuple[float, int]]:
+    out = {}
+    for topic in NEGATIVE_TOPICS:
+        run, _ = read_ros1_scans(LEGTRACKER / "negative_2.bag", topic)
+        out[topic] = longest_person(run.stamps, tracked(run, leg_model).tracks)
+    return out
+
+
+def positive_figures(leg_model: str) -> dict[str, tuple[int, int]]:
+    out = {}
+    for path in sorted(LEGTRACKER.glob("positive_*_extracted.bag")):
+        run, log_times = read_ros1_scans(path, "/training_scan")
+        labels = read_leg_labels(path, log_times)
+        out[path.name] = covered(labels, established(run.stamps, labels), tracked(run, leg_model).tracks)
+    return out
+
+
+def lines() -> list[str]:
+    out = []
+    models = ("default", "paper")
+    neg = {m: negative_figures(m) for m in models}
+    for topic in NEGATIVE_TOPICS:
+        cells = [f"{m}: longest person {neg[m][topic][0]:.1f} s, {neg[m][topic][1]} over 2 s" for m in models]
+        out.append(f"negative_2 {topic:11s} " + " | ".join(cells))
+    pos = {m: positive_figures(m) for m in models}
+    for name in pos["default"]:
+        cells = [f"{m}: {pos[m][name][0]}/{pos[m][name][1]} ({pos[m][name][0] / max(pos[m][name][1], 1):.3f})"
+                 for m in models]
+        out.append(f"{name:27s} legs covered " + " | ".join(cells))
+    totals = {m: np.sum(list(pos[m].values()), axis=0) for m in models}
+    out.append("all positive bags: " + " | ".join(f"{m}: {totals[m][0] / max(totals[m][1], 1):.3f} of {totals[m][1]}"
+                                                 for m in models))
+    demo = LEGTRACKER / "demo_stationary_simple_environment.bag"
+    for m in models:
+        f = demo_figures(demo, {"leg_model": m})
+        out.append(f"demo_stationary ({m}): {f['people']} person tracks, {f['on_walls']} person/dynamic tracks on walls")
+    return out
+
+
+def main() -> None:
+    if not Path(LEGTRACKER).exists():
+        print_lines("People over time on real scans", [f"{LEGTRACKER}: absent"])
+        return
+    print_lines("People over time on real scans (targets: empty rooms no person over 2 s; >= 0.85 of labelled legs "
+                "covered 1 s after the person appears; no person on a wall)", lines())
+
+
+if __name__ == "__main__":
+    main()
