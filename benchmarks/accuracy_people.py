@@ -112,7 +112,8 @@ def lines() -> list[str]:
     demo = LEGTRACKER / "demo_stationary_simple_environment.bag"
     for m in models:
         f = demo_figures(demo, {"leg_model": m})
-        out.append(f"demo_stationary ({m}): {f['people']} person tracks, {f['on_walls']} person/dynamic tracks on walls")
+        out.append(f"demo_stationary ({m}): {f['people']} person tracks, "
+                   f"{f['on_walls']} person/dynamic tracks on walls")
     return out
 
 

@@ -59,10 +59,9 @@ def command(inputs: tuple[Path, ...], out_dir: Path, jobs: int | None, force: bo
     """
     from ..cli import invocation
     from ..errors import DatmoError, InputError
-    from ..pipeline import output_paths, run_many
-
     from ..perception.params import FeatureParams
     from ..perception.params import load_toml as load_features
+    from ..pipeline import output_paths, run_many
     from ..tracking.params import TrackingParams
     from ..tracking.params import load_toml as load_track
 
