@@ -259,3 +259,43 @@ def points(ranges, angles) -> tuple[np.ndarray, np.ndarray]:
     r = np.asarray(ranges, np.float64)
     a = np.asarray(angles, np.float64)
     return r * np.cos(a), r * np.sin(a)
+
+
+# ----------------------------------------------------------------------------------------------- well-posed arcs
+
+
+def circle_well_posed(x, y, circle: tuple[float, float, float], params, angle_step: float,
+                      lines: list[tuple[float, float]] | None = None) -> bool:
+    """Whether the circle (a, b, r) fitted to the points is a well-posed arc (FeatureParams `params`; a test
+    whose parameter is 0 is off): at least 3 points, and
+    - a radius more than circle_radius_margin inside [circle_radius_min, circle_radius_max];
+    - at least circle_min_coverage of the beams (angle step `angle_step`) that the circle's near side spans
+      seen from the scanner: 2 asin(r / |c|) / angle_step (pi when the scanner is inside it);
+    - a circle residual (root sum of squares) at most circle_residual_ratio times the total-least-squares
+      line's, and at most circle_lines_ratio times that of the points to the segment's HTL `lines` (theta, rho),
+      each point to the nearest (when there are such lines)."""
+    a, b, r = circle
+    m = len(x)
+    if m < 3:
+        return False
+    margin = params.circle_radius_margin
+    if margin > 0 and not (params.circle_radius_min + margin <= r <= params.circle_radius_max - margin):
+        return False
+    if params.circle_min_coverage > 0 and angle_step > 0:
+        d = math.hypot(a, b)
+        span = math.pi if r >= d else 2.0 * math.asin(r / d)
+        if m < params.circle_min_coverage * span / angle_step:
+            return False
+    if params.circle_residual_ratio > 0:
+        circle_rss = sum((math.hypot(px - a, py - b) - r) ** 2 for px, py in zip(x, y, strict=True))
+        theta, rho = fit_line(x, y)
+        line_rss = sum((px * math.cos(theta) + py * math.sin(theta) - rho) ** 2 for px, py in zip(x, y, strict=True))
+        if math.sqrt(circle_rss) > params.circle_residual_ratio * math.sqrt(line_rss):
+            return False
+    if params.circle_lines_ratio > 0 and lines:
+        circle_rss = sum((math.hypot(px - a, py - b) - r) ** 2 for px, py in zip(x, y, strict=True))
+        lines_rss = sum(min(abs(px * math.cos(t) + py * math.sin(t) - rho) for t, rho in lines) ** 2
+                        for px, py in zip(x, y, strict=True))
+        if math.sqrt(circle_rss) > params.circle_lines_ratio * math.sqrt(lines_rss):
+            return False
+    return True

@@ -12,7 +12,8 @@ from numba import njit
 
 (P_C0, P_MIN_POINTS, P_THETA_RES, P_RHO_RES, P_WINDOW, P_LINE_MIN_POINTS, P_LINE_MIN_RACC, P_LINE_MIN_LENGTH,
  P_PERP_TOL, P_R_MIN, P_R_MAX, P_R_STEP, P_CELL, P_CWINDOW, P_CTOL, P_CIRCLE_MIN_POINTS, P_SMALL,
- P_MIN_SAG, P_LEG_R) = range(19)
+ P_MIN_SAG, P_LEG_R, P_MIN_COVER, P_RES_RATIO, P_R_MARGIN,
+ P_LINES_RATIO) = range(23)
 
 # columns of the line rows
 L_SCAN, L_SEG, L_FIRST, L_LAST, L_N, L_X0, L_Y0, L_X1, L_Y1, L_RHO, L_THETA, L_LEN, L_RACC = range(13)
@@ -492,6 +493,60 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
 
 
 @njit(cache=True)
+def circle_posed(x, y, idx, m, a, b, r, p, dalpha, lines_rss=-1.0) -> bool:
+    """Whether the circle (a, b, r) fitted to the points idx[:m] is a well-posed arc (each test off at 0):
+    - a radius not pinned at a bound: more than P_R_MARGIN inside [circle_radius_min, circle_radius_max];
+    - enough points for its size: at least P_MIN_COVER of the beams (angle step `dalpha`) that the circle's
+      near side spans seen from the scanner, 2 asin(r / |c|) / dalpha;
+    - a fit clearly better than a line's: the circle's residual (root sum of squares) at most P_RES_RATIO
+      times that of the total-least-squares line of the same points;
+    - and better than the segment's HTL lines (a corner): at most P_LINES_RATIO times sqrt(`lines_rss`), the
+      sum of squared distances of the same points to those lines, each to the nearest (< 0: no lines)."""
+    if m < 3:
+        return False
+    margin = p[P_R_MARGIN]
+    if margin > 0.0 and (r < p[P_R_MIN] + margin or r > p[P_R_MAX] - margin):
+        return False
+    cover = p[P_MIN_COVER]
+    if cover > 0.0 and dalpha > 0.0:
+        d = np.hypot(a, b)
+        span = np.pi if r >= d else 2.0 * np.arcsin(r / d)
+        if m < cover * span / dalpha:
+            return False
+    ratio = p[P_RES_RATIO]
+    if ratio > 0.0:
+        cx = 0.0
+        cy = 0.0
+        for k in range(m):
+            cx += x[idx[k]]
+            cy += y[idx[k]]
+        cx /= m
+        cy /= m
+        sxx = 0.0
+        syy = 0.0
+        sxy = 0.0
+        rc = 0.0
+        for k in range(m):
+            dx = x[idx[k]] - cx
+            dy = y[idx[k]] - cy
+            sxx += dx * dx
+            syy += dy * dy
+            sxy += dx * dy
+            rc += (np.hypot(x[idx[k]] - a, y[idx[k]] - b) - r) ** 2
+        # the smallest eigenvalue of the scatter matrix: the line's sum of squared residuals
+        rl = 0.5 * (sxx + syy) - np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
+        if np.sqrt(rc) > ratio * np.sqrt(max(rl, 0.0)):
+            return False
+    if p[P_LINES_RATIO] > 0.0 and lines_rss >= 0.0:
+        rc = 0.0
+        for k in range(m):
+            rc += (np.hypot(x[idx[k]] - a, y[idx[k]] - b) - r) ** 2
+        if np.sqrt(rc) > p[P_LINES_RATIO] * np.sqrt(lines_rss):
+            return False
+    return True
+
+
+@njit(cache=True)
 def _perpendicular(t1: float, t2: float, tol: float) -> bool:
     d = abs(t1 - t2) % np.pi
     return abs(d - np.pi / 2) <= tol
@@ -509,10 +564,11 @@ def _convex(ax, ay, jx, jy, bx, by) -> bool:
 
 @njit(cache=True)
 def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx, sub_s, sub_e,
-                 lines, nl, circles, nc, blobs, nb, work):
+                 lines, nl, circles, nc, blobs, nb, work, dalpha=0.0):
     """Features of one scan's segments (points x, y, m, sensor frame): HTL on every segment, then the
-    decision rule of method.md section 5.2. Appends rows to lines/circles/blobs from nl/nc/nb; returns the
-    new counts. `work`: see scratch()."""
+    decision rule of method.md section 5.2, a circle kept only when well posed (circle_posed; `dalpha`: the
+    scan's angle step, rad). Appends rows to lines/circles/blobs from nl/nc/nb; returns the new counts.
+    `work`: see scratch()."""
     rho_res = p[P_RHO_RES]
     window = p[P_WINDOW]
     min_pts = p[P_LINE_MIN_POINTS]
@@ -599,8 +655,20 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                 circle_of_run(x, y, s, e, p, cacc, idx, cout, max(htl_racc, min_racc))
             else:
                 cout[4] = 0.0
+            lines_rss = -1.0   # the circle's points to the segment's HTL lines (two or more: a corner?)
+            if ncand >= 2 and cout[0] >= 3:
+                lines_rss = 0.0
+                for q in range(int(cout[0])):
+                    i = idx[q]
+                    dmin = np.inf
+                    for j in range(ncand):
+                        c = cand[cidx[j]]
+                        dmin = min(dmin, abs(x[i] * np.cos(c[8]) + y[i] * np.sin(c[8]) - c[7]))
+                    lines_rss += dmin * dmin
             # a circle beats the lines, and holds like a line must (r_acc above line_min_racc)
-            if cout[4] > max(htl_racc, min_racc) and cout[0] >= p[P_CIRCLE_MIN_POINTS]:
+            # and is a well-posed arc (idx[:n] still holds the points circle_of_run fitted)
+            if (cout[4] > max(htl_racc, min_racc) and cout[0] >= p[P_CIRCLE_MIN_POINTS]
+                    and circle_posed(x, y, idx, int(cout[0]), cout[1], cout[2], cout[3], p, dalpha, lines_rss)):
                 row = circles[nc]
                 row[C_SCAN] = scan
                 row[C_SEG] = g
@@ -690,6 +758,7 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
     ns = 0
     min_points = int(p[P_MIN_POINTS])
     use_given = given_offsets.shape[0] == N + 1
+    dalpha = np.arccos(min(max(cos_inc, -1.0), 1.0))   # the angle step, for circle_posed
     nt = cos_t.shape[0]
     work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
             np.empty((MAX_SUB, 3), np.int64), np.empty((MAX_SUB, 12)), np.empty(MAX_SUB, np.int64),
@@ -719,7 +788,7 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
             x[i] = ri * cos_a[i]
             y[i] = ri * sin_a[i]
         nl, nc, nb = extract_scan(x, y, starts, ends, nseg, k, p, acc, cacc, cos_t, sin_t, idx, sub_s, sub_e,
-                                  lines, nl, circles, nc, blobs, nb, work)
+                                  lines, nl, circles, nc, blobs, nb, work, dalpha)
     counts[0] = nl
     counts[1] = nc
     counts[2] = nb
