@@ -19,6 +19,7 @@ from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.perception import accuracy as acc
 from datmo_cli.perception.features import RunFeatures, extract_run
 from datmo_cli.perception.landmarks import TYPE_NAMES
+from datmo_cli.perception.params import FeatureParams
 from datmo_cli.report import decode_channel
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -203,6 +204,38 @@ def real(path: Path, topic: str | None) -> str:
             f"({kinds or 'none'}) in the {f.landmark_frame} frame")
 
 
+# the circle rule before the well-posedness tests (issue point 6): all four off
+BEFORE_CIRCLES = {"circle_min_coverage": 0, "circle_residual_ratio": 0, "circle_radius_margin": 0,
+                  "circle_lines_ratio": 0}
+BOUND = 0.005   # m; a radius within this of circle_radius_min or circle_radius_max (or beyond) is at a bound
+
+
+def circle_figures(f: RunFeatures, p: FeatureParams) -> str:
+    """Circles per scan, the most in one scan, the share at a radius bound and the share of 3-point circles."""
+    c = f.circles
+    per = np.diff(f.circle_offsets)
+    if not len(c):
+        return "0.00/scan"
+    bound = (c["radius"] <= p.circle_radius_min + BOUND) | (c["radius"] >= p.circle_radius_max - BOUND)
+    return (f"{len(c) / max(len(f), 1):.2f}/scan, max {int(per.max())}, {np.mean(bound):.0%} at a radius bound, "
+            f"{np.mean(c['n_points'] == 3):.0%} of 3 points")
+
+
+def carmen_circles() -> list[str]:
+    """Circles on the CARMEN office logs before (the old rule: the well-posedness tests off) and after."""
+    from datmo_cli.log.importers import import_log
+
+    before, after = FeatureParams().replace(**BEFORE_CIRCLES), FeatureParams()
+    out = [f"before: {', '.join(f'{k} 0' for k in BEFORE_CIRCLES)}; after: the defaults "
+           f"({', '.join(f'{k} {getattr(after, k):g}' for k in BEFORE_CIRCLES)}); at a bound: radius within "
+           f"{BOUND * 100:g} cm of circle_radius_min/max"]
+    for path in sorted((SHARED / "carmen").glob("*.log.gz")):
+        run = import_log(path, None).run
+        b, a = (circle_figures(extract_run(run, p, landmarks=False), p) for p in (before, after))
+        out.append(f"{path.name.removesuffix('-corrected.log.gz')}: before {b}; after {a}")
+    return out
+
+
 def main() -> None:
     for name in SIMULATED:
         print_lines(f"Perception against ground truth: {name}", simulated(name))
@@ -222,6 +255,7 @@ def main() -> None:
             lines.append(f"{label}: FAILED: {type(exc).__name__}: {exc} ({last.filename}:{last.lineno})")
     lines.append(f"{len(lines) - failed} of {len(lines)} logs ran without error")
     print_lines(f"Perception on real logs ({SHARED})", lines)
+    print_lines("Circles on the CARMEN logs, before and after the well-posed arc rule", carmen_circles())
 
 
 if __name__ == "__main__":
