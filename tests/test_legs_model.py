@@ -151,3 +151,12 @@ def test_packaged_model_loads_and_gives_probabilities(sample_logs):
     np.testing.assert_array_equal(p, model.probabilities(feats))
     assert np.all(p[~candidate_mask(feats)] == 0)
     assert (p > model.threshold_p).any()
+
+
+def test_kind_codes_match_the_kernel():
+    from datmo_cli.perception import _leg_kernels as LK
+
+    X, y = random_features(100, 8)
+    forest = from_sklearn(RandomForestClassifier(n_estimators=2, random_state=0).fit(X, y), 0.5, {})
+    boost = from_sklearn(GradientBoostingClassifier(n_estimators=2).fit(X, y), 0.5, {})
+    assert (forest._kernel_args()[3], boost._kernel_args()[3]) == (LK.KIND_FOREST, LK.KIND_BOOSTING)

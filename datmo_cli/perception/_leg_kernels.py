@@ -21,56 +21,31 @@ KIND_FOREST, KIND_BOOSTING = 0, 1
 
 
 @njit(cache=True)
-def _circle(x, y, n, mx, my, radius_clip, linearity):
-    """Algebraic (Kasa) least-squares circle of points 0..n-1: (radius, RMS radial residual), metres.
-
-    Solved in centred coordinates; collinear or fewer than 3 points: (radius_clip, linearity)."""
-    suu = 0.0
-    suv = 0.0
-    svv = 0.0
-    bu = 0.0
-    bv = 0.0
-    for i in range(n):
-        u = x[i] - mx
-        v = y[i] - my
-        q = u * u + v * v
-        suu += u * u
-        suv += u * v
-        svv += v * v
-        bu += u * q
-        bv += v * q
-    det = suu * svv - suv * suv
-    tr = suu + svv
-    if n < 3 or det <= DEGENERATE * tr * tr:
-        return radius_clip, linearity
-    bu *= 0.5
-    bv *= 0.5
-    a = (svv * bu - suv * bv) / det
-    b = (suu * bv - suv * bu) / det
-    r = np.sqrt(a * a + b * b + tr / n)
-    cx = mx + a
-    cy = my + b
-    s = 0.0
-    for i in range(n):
-        d = np.sqrt((x[i] - cx) ** 2 + (y[i] - cy) ** 2) - r
-        s += d * d
-    return min(r, radius_clip), np.sqrt(s / n)
-
-
-@njit(cache=True)
 def _median(v, n, work) -> float:
-    for i in range(n):
-        work[i] = v[i]
+    """Median of v[0:n], sorting a copy in work."""
     w = work[:n]
-    w.sort()
+    if n <= 64:
+        # insertion sort: numba's general sort costs more than the whole of a leg's other features
+        for i in range(n):
+            t = v[i]
+            j = i
+            while j > 0 and w[j - 1] > t:
+                w[j] = w[j - 1]
+                j -= 1
+            w[j] = t
+    else:
+        for i in range(n):
+            w[i] = v[i]
+        w.sort()
     h = n // 2
     return w[h] if n % 2 else 0.5 * (w[h - 1] + w[h])
 
 
 @njit(cache=True)
-def segment_features(x, y, n, radius_clip, work, out) -> None:
+def segment_features(x, y, n, radius_clip, work, step, out) -> None:
     """The shape features of points (x, y)[0:n] (scan order, sensor frame, m) into out; the scan-context
-    columns (subtended angle, occlusion) are left to the caller. n == 0 gives zeros."""
+    columns (subtended angle, occlusion) are left to the caller. n == 0 gives zeros. work and step are
+    scratch arrays of at least n elements."""
     for f in range(out.shape[0]):
         out[f] = 0.0
     if n == 0:
@@ -86,22 +61,45 @@ def segment_features(x, y, n, radius_clip, work, out) -> None:
     out[F_DISTANCE] = np.sqrt(mx * mx + my * my)
     out[F_WIDTH] = np.sqrt((x[n - 1] - x[0]) ** 2 + (y[n - 1] - y[0]) ** 2)
 
+    # centred second and third moments: the best line and the algebraic (Kasa) circle
     suu = 0.0
     suv = 0.0
     svv = 0.0
+    bu = 0.0
+    bv = 0.0
     for i in range(n):
         u = x[i] - mx
         v = y[i] - my
+        q = u * u + v * v
         suu += u * u
         suv += u * v
         svv += v * v
+        bu += u * q
+        bv += v * q
     # smallest eigenvalue of the scatter matrix = sum of squared orthogonal residuals of the best line
     h = 0.5 * (suu - svv)
-    lam = 0.5 * (suu + svv) - np.sqrt(h * h + suv * suv)
-    out[F_LINEARITY] = np.sqrt(max(lam, 0.0) / n)
-    out[F_RADIUS], out[F_CIRCULARITY] = _circle(x, y, n, mx, my, radius_clip, out[F_LINEARITY])
+    tr = suu + svv
+    lam = 0.5 * tr - np.sqrt(h * h + suv * suv)
+    linearity = np.sqrt(max(lam, 0.0) / n)
+    out[F_LINEARITY] = linearity
+    det = suu * svv - suv * suv
+    if n < 3 or det <= DEGENERATE * tr * tr:
+        out[F_RADIUS] = radius_clip
+        out[F_CIRCULARITY] = linearity
+    else:
+        a = 0.5 * (svv * bu - suv * bv) / det
+        b = 0.5 * (suu * bv - suv * bu) / det
+        r = np.sqrt(a * a + b * b + tr / n)
+        cx = mx + a
+        cy = my + b
+        s = 0.0
+        for i in range(n):
+            d = np.sqrt((x[i] - cx) ** 2 + (y[i] - cy) ** 2) - r
+            s += d * d
+        out[F_RADIUS] = min(r, radius_clip)
+        out[F_CIRCULARITY] = np.sqrt(s / n)
     if n > 1:
-        out[F_STD] = np.sqrt((suu + svv) / (n - 1))
+        out[F_STD] = np.sqrt(tr / (n - 1))
 
     xm = _median(x, n, work)
     ym = _median(y, n, work)
@@ -113,68 +111,68 @@ def segment_features(x, y, n, radius_clip, work, out) -> None:
     if n > 1:
         length = 0.0
         for i in range(n - 1):
-            length += np.sqrt((x[i + 1] - x[i]) ** 2 + (y[i + 1] - y[i]) ** 2)
+            step[i] = np.sqrt((x[i + 1] - x[i]) ** 2 + (y[i + 1] - y[i]) ** 2)
+            length += step[i]
         mean = length / (n - 1)
         s = 0.0
         for i in range(n - 1):
-            d = np.sqrt((x[i + 1] - x[i]) ** 2 + (y[i + 1] - y[i]) ** 2) - mean
-            s += d * d
+            s += (step[i] - mean) ** 2
         out[F_BOUNDARY_LENGTH] = length
         out[F_BOUNDARY_REGULARITY] = np.sqrt(s / (n - 1))
 
     if n > 2:
         curv = 0.0
         ang = 0.0
+        ex = x[n - 1]
+        ey = y[n - 1]
         for i in range(1, n - 1):
             ax = x[i] - x[i - 1]
             ay = y[i] - y[i - 1]
             cx = x[i + 1] - x[i - 1]
             cy = y[i + 1] - y[i - 1]
             cross = cx * ay - cy * ax             # side of p_i relative to the chord p_i-1 -> p_i+1
-            abc = np.sqrt(ax * ax + ay * ay) * np.sqrt((x[i + 1] - x[i]) ** 2 + (y[i + 1] - y[i]) ** 2) \
-                * np.sqrt(cx * cx + cy * cy)
+            abc = step[i - 1] * step[i] * np.sqrt(cx * cx + cy * cy)
             if abc > 0.0 and cross != 0.0:
                 k = 2.0 * abs(cross) / abc          # 1 / circumradius
-                origin = cx * (-y[i - 1]) - cy * (-x[i - 1])
+                origin = cy * x[i - 1] - cx * y[i - 1]
                 curv += k if cross * origin > 0.0 else -k
-            ang += _inscribed(x, y, n, i)
+            # inscribed angle at p_i between the first and the last point, in [0, pi]
+            ux = x[0] - x[i]
+            uy = y[0] - y[i]
+            vx = ex - x[i]
+            vy = ey - y[i]
+            work[i] = np.arctan2(abs(ux * vy - uy * vx), ux * vx + uy * vy)
+            ang += work[i]
         m = n - 2
         out[F_MEAN_CURVATURE] = curv / m
         mean = ang / m
         s = 0.0
         for i in range(1, n - 1):
-            d = _inscribed(x, y, n, i) - mean
-            s += d * d
+            s += (work[i] - mean) ** 2
         out[F_INSCRIBED_ANGLE] = mean
         out[F_INSCRIBED_ANGLE_STD] = np.sqrt(s / m)
 
 
 @njit(cache=True)
-def _inscribed(x, y, n, i) -> float:
-    """Angle at p_i between p_0 and p_n-1, radians in [0, pi]."""
-    ux = x[0] - x[i]
-    uy = y[0] - y[i]
-    vx = x[n - 1] - x[i]
-    vy = y[n - 1] - y[i]
-    return np.arctan2(abs(ux * vy - uy * vx), ux * vx + uy * vy)
-
-
-@njit(cache=True)
-def block_features(ranges, angles, cos_a, sin_a, seg_start, seg_end, seg_offsets, range_min, range_max,
-                   radius_clip, margin, out) -> None:
+def block_features(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min, range_max,
+                   radius_clip, margin, max_width, min_points, out) -> None:
     """Features of every segment of a block of scans into out (M, N_FEATURES).
 
     Scan k's segments are seg_start/seg_end[seg_offsets[k]:seg_offsets[k + 1]], beam ranges [start, end)
     within the scan; invalid returns inside a segment are skipped. A side is occluded when the beam next to
     the segment's first (last) point is a valid return nearer than that point by more than `margin` (m).
+    Segments that are not candidates (see is_candidate; max_width < 0: none excluded) get only n_points and
+    width, the rest zero: the hot path skips what the ensemble will not look at.
     """
     N, B = ranges.shape
     x = np.empty(B, np.float64)
     y = np.empty(B, np.float64)
     work = np.empty(B, np.float64)
+    step = np.empty(B, np.float64)
     for k in range(N):
         r = ranges[k]
         for g in range(seg_offsets[k], seg_offsets[k + 1]):
+            o = out[g]
             n = 0
             first = -1
             last = -1
@@ -187,8 +185,15 @@ def block_features(ranges, angles, cos_a, sin_a, seg_start, seg_end, seg_offsets
                     if first < 0:
                         first = i
                     last = i
-            o = out[g]
-            segment_features(x, y, n, radius_clip, work, o)
+            if max_width >= 0.0 and n > 0:
+                width = np.sqrt((x[n - 1] - x[0]) ** 2 + (y[n - 1] - y[0]) ** 2)
+                if n < min_points or width > max_width:
+                    for f in range(o.shape[0]):
+                        o[f] = 0.0
+                    o[F_N] = n
+                    o[F_WIDTH] = width
+                    continue
+            segment_features(x, y, n, radius_clip, work, step, o)
             if n == 0:
                 continue
             o[F_SUBTENDED_ANGLE] = abs(angles[last] - angles[first])
@@ -201,46 +206,107 @@ def block_features(ranges, angles, cos_a, sin_a, seg_start, seg_end, seg_offsets
 
 
 @njit(cache=True)
+def check_segments(seg_start, seg_end, seg_offsets, B) -> int:
+    """0 when the offsets index the segments (non-decreasing, 0 to M) and every segment is a beam range
+    [start, end) within 0..B; 1 for bad offsets, 2 for a bad segment."""
+    M = seg_start.shape[0]
+    N = seg_offsets.shape[0] - 1
+    if N < 0 or seg_offsets[0] != 0 or seg_offsets[N] != M:
+        return 1
+    for k in range(N):
+        if seg_offsets[k + 1] < seg_offsets[k]:
+            return 1
+    for g in range(M):
+        if seg_start[g] < 0 or seg_end[g] < seg_start[g] or seg_end[g] > B:
+            return 2
+    return 0
+
+
+@njit(cache=True)
 def is_candidate(row, max_width, min_points) -> bool:
     """A segment that may be a leg: at least min_points points and at most max_width (m) wide."""
     return row[F_N] >= min_points and row[F_WIDTH] <= max_width
 
 
 @njit(cache=True)
-def ensemble(features, max_width, min_points, feature, threshold, left, right, value, roots, kind, base, scale,
-             out) -> None:
-    """Leg probability of each row of features (M, F) into out (M,); non-candidates get 0.
-
-    Trees as flat node arrays (feature -1 at leaves; children global indices). Like scikit-learn, a node
-    sends x left when float32(x[feature]) <= threshold. kind KIND_FOREST: mean over trees of the leaf values
-    (positive-class fractions); KIND_BOOSTING: sigmoid(base + scale * sum of leaf values)."""
-    T = roots.shape[0]
-    for m in range(features.shape[0]):
-        row = features[m]
-        if T == 0 or not is_candidate(row, max_width, min_points):
-            out[m] = 0.0
-            continue
-        acc = 0.0
-        for t in range(T):
-            node = roots[t]
-            while feature[node] >= 0:
-                if np.float64(np.float32(row[feature[node]])) <= threshold[node]:
-                    node = left[node]
-                else:
-                    node = right[node]
-            acc += value[node]
-        if kind == KIND_FOREST:
-            out[m] = acc / T
-        else:
-            out[m] = 1.0 / (1.0 + np.exp(-(base + scale * acc)))
+def _leaf(nodes, split, row, node) -> int:
+    """The leaf a row reaches from node (x goes left when float32(x[feature]) <= threshold, as in sklearn)."""
+    f = nodes[node, 0]
+    while f >= 0:
+        # an index rather than a branch: which way a row goes is unpredictable
+        node = nodes[node, 1 + np.int64(not np.float64(np.float32(row[f])) <= split[node])]
+        f = nodes[node, 0]
+    return node
 
 
 @njit(cache=True)
-def block_probabilities(ranges, angles, cos_a, sin_a, seg_start, seg_end, seg_offsets, range_min, range_max,
-                        radius_clip, margin, max_width, min_points, feature, threshold, left, right, value, roots,
-                        kind, base, scale, features, out) -> None:
-    """block_features then ensemble in one compiled call (the per-scan hot path)."""
-    block_features(ranges, angles, cos_a, sin_a, seg_start, seg_end, seg_offsets, range_min, range_max,
-                   radius_clip, margin, features)
-    ensemble(features, max_width, min_points, feature, threshold, left, right, value, roots, kind, base, scale,
-             out)
+def _leaves4(nodes, split, r0, r1, r2, r3, root):
+    """_leaf of four rows walked together: their chains of dependent loads overlap."""
+    n0 = root
+    n1 = root
+    n2 = root
+    n3 = root
+    while True:
+        f0 = nodes[n0, 0]
+        f1 = nodes[n1, 0]
+        f2 = nodes[n2, 0]
+        f3 = nodes[n3, 0]
+        if f0 < 0 and f1 < 0 and f2 < 0 and f3 < 0:
+            return n0, n1, n2, n3
+        if f0 >= 0:
+            n0 = nodes[n0, 1 + np.int64(not np.float64(np.float32(r0[f0])) <= split[n0])]
+        if f1 >= 0:
+            n1 = nodes[n1, 1 + np.int64(not np.float64(np.float32(r1[f1])) <= split[n1])]
+        if f2 >= 0:
+            n2 = nodes[n2, 1 + np.int64(not np.float64(np.float32(r2[f2])) <= split[n2])]
+        if f3 >= 0:
+            n3 = nodes[n3, 1 + np.int64(not np.float64(np.float32(r3[f3])) <= split[n3])]
+
+
+@njit(cache=True)
+def ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, out) -> None:
+    """Leg probability of each row of features (M, F) into out (M,); non-candidates get 0.
+
+    Trees as flat node arrays: nodes[i] = (feature, left, right) with feature -1 at leaves and children as
+    global indices; split[i] = the threshold of an inner node, the value of a leaf. Like scikit-learn, a node
+    sends x left when float32(x[feature]) <= threshold. kind KIND_FOREST: mean over trees of the leaf values
+    (positive-class fractions); KIND_BOOSTING: sigmoid(base + scale * sum of leaf values)."""
+    M = features.shape[0]
+    T = roots.shape[0]
+    rows = np.empty(M, np.int64)
+    c = 0
+    for m in range(M):
+        out[m] = 0.0
+        if T > 0 and is_candidate(features[m], max_width, min_points):
+            rows[c] = m
+            c += 1
+    acc = np.zeros(c, np.float64)
+    for t in range(T):      # tree by tree, in sklearn's order (the same sums), four rows at a time
+        root = roots[t]
+        i = 0
+        while i + 4 <= c:
+            l0, l1, l2, l3 = _leaves4(nodes, split, features[rows[i]], features[rows[i + 1]],
+                                      features[rows[i + 2]], features[rows[i + 3]], root)
+            acc[i] += split[l0]
+            acc[i + 1] += split[l1]
+            acc[i + 2] += split[l2]
+            acc[i + 3] += split[l3]
+            i += 4
+        while i < c:
+            acc[i] += split[_leaf(nodes, split, features[rows[i]], root)]
+            i += 1
+    for i in range(c):
+        if kind == KIND_FOREST:
+            out[rows[i]] = acc[i] / T
+        else:
+            out[rows[i]] = 1.0 / (1.0 + np.exp(-(base + scale * acc[i])))
+
+
+@njit(cache=True)
+def block_probabilities(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min, range_max,
+                        radius_clip, margin, max_width, min_points, nodes, split, roots, kind, base, scale,
+                        features, out) -> None:
+    """block_features (candidates only) then ensemble, in one compiled call: the per-scan hot path."""
+    block_features(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min, range_max,
+                   radius_clip, margin, max_width, min_points, features)
+    ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, out)

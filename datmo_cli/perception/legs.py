@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import os
 import zipfile
 from dataclasses import dataclass, field
@@ -60,6 +61,8 @@ def candidate_mask(features: np.ndarray) -> np.ndarray:
 
 
 def _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets):
+    from . import _leg_kernels as LK
+
     ranges = np.ascontiguousarray(ranges, np.float32)
     if ranges.ndim != 2:
         raise ValueError(f"ranges must be (N, B), got shape {ranges.shape}")
@@ -70,19 +73,36 @@ def _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets):
     start = np.ascontiguousarray(seg_start, np.int64)
     end = np.ascontiguousarray(seg_end, np.int64)
     offsets = np.ascontiguousarray(seg_offsets, np.int64)
-    M = len(start)
-    if start.shape != (M,) or end.shape != (M,):
+    if start.ndim != 1 or end.shape != start.shape:
         raise ValueError("seg_start and seg_end must be 1-D arrays of the same length")
-    if offsets.shape != (N + 1,) or offsets[0] != 0 or offsets[-1] != M or np.any(offsets[1:] < offsets[:-1]):
-        raise ValueError(f"seg_offsets must be N + 1 = {N + 1} non-decreasing indices from 0 to {M}")
-    if M and (start.min() < 0 or end.max() > B or np.any(end < start)):
+    if offsets.shape != (N + 1,):
+        raise ValueError(f"seg_offsets must be N + 1 = {N + 1} non-decreasing indices from 0 to {len(start)}")
+    problem = LK.check_segments(start, end, offsets, B)
+    if problem == 1:
+        raise ValueError(f"seg_offsets must be N + 1 = {N + 1} non-decreasing indices from 0 to {len(start)}")
+    if problem == 2:
         raise ValueError(f"segments must be beam ranges [start, end) within 0..{B}")
-    return ranges, angles, start, end, offsets
+    cos_a, sin_a = _trig(angles)
+    return ranges, angles, cos_a, sin_a, start, end, offsets
+
+
+_TRIG: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _trig(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin of the beam angles, computed once per scan geometry (a few kept)."""
+    key = angles.tobytes()
+    hit = _TRIG.get(key)
+    if hit is None:
+        if len(_TRIG) >= 8:
+            _TRIG.clear()
+        hit = _TRIG[key] = (np.cos(angles), np.sin(angles))
+    return hit
 
 
 def _limits(range_min: float, range_max: float) -> tuple[float, float]:
-    lo = float(range_min) if np.isfinite(range_min) else 0.0
-    hi = float(range_max) if np.isfinite(range_max) and range_max > lo else np.inf
+    lo = float(range_min) if math.isfinite(range_min) else 0.0
+    hi = float(range_max) if math.isfinite(range_max) and range_max > lo else math.inf
     return lo, hi
 
 
@@ -97,12 +117,12 @@ def cluster_features(ranges, angles, seg_start, seg_end, seg_offsets, range_min:
     """
     from . import _leg_kernels as LK
 
-    ranges, angles, start, end, offsets = _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets)
+    ranges, angles, cos_a, sin_a, start, end, offsets = _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets)
     lo, hi = _limits(range_min, range_max)
     out = np.zeros((len(start), LK.N_FEATURES), np.float64)
     if len(start):
-        LK.block_features(ranges, angles, np.cos(angles), np.sin(angles), start, end, offsets, lo, hi,
-                          RADIUS_CLIP, OCCLUSION_MARGIN, out)
+        LK.block_features(ranges, cos_a, sin_a, angles, start, end, offsets, lo, hi, RADIUS_CLIP, OCCLUSION_MARGIN,
+                          -1.0, 0, out)
     return out
 
 
@@ -143,6 +163,14 @@ class LegModel:
         problem = self._problem()
         if problem:
             raise ValueError(f"invalid leg model: {problem}")
+        # what the kernel walks: (feature, left, right) side by side, and one float per node (threshold of an
+        # inner node, value of a leaf): two cache lines per visited node instead of five
+        inner = self.feature >= 0
+        self._nodes = np.ascontiguousarray(np.column_stack([np.where(inner, self.feature, -1), self.left,
+                                                            self.right]), np.int64)
+        self._split = np.where(inner, self.threshold, self.value)
+        kind = 0 if self.kind == "forest" else 1   # _leg_kernels.KIND_FOREST / KIND_BOOSTING
+        self._args = (self._nodes, self._split, self.roots, kind, self.base, self.scale)
 
     def _problem(self) -> str:
         n = len(self.feature)
@@ -173,11 +201,8 @@ class LegModel:
         return len(self.roots)
 
     def _kernel_args(self) -> tuple:
-        from . import _leg_kernels as LK
-
-        kind = LK.KIND_FOREST if self.kind == "forest" else LK.KIND_BOOSTING
-        return (self.feature, self.threshold, self.left, self.right, self.value, self.roots, kind, self.base,
-                self.scale)
+        """What the ensemble kernel takes after the features: nodes, split, roots, kind, base, scale."""
+        return self._args
 
     def probabilities(self, features: np.ndarray) -> np.ndarray:
         """Leg probability (M,) float64 of each row of features (M, len(feature_names)); rows outside
@@ -299,13 +324,13 @@ def leg_probabilities(ranges, angles, seg_start, seg_end, seg_offsets, range_min
     one compiled call. Segments outside candidate_mask get 0."""
     from . import _leg_kernels as LK
 
-    ranges, angles, start, end, offsets = _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets)
+    ranges, angles, cos_a, sin_a, start, end, offsets = _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets)
     lo, hi = _limits(range_min, range_max)
     M = len(start)
     out = np.zeros(M, np.float64)
     if M:
         feats = np.empty((M, LK.N_FEATURES), np.float64)
-        LK.block_probabilities(ranges, angles, np.cos(angles), np.sin(angles), start, end, offsets, lo, hi,
-                               RADIUS_CLIP, OCCLUSION_MARGIN, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS,
-                               *model._kernel_args(), feats, out)
+        LK.block_probabilities(ranges, cos_a, sin_a, angles, start, end, offsets, lo, hi, RADIUS_CLIP,
+                               OCCLUSION_MARGIN, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, *model._kernel_args(),
+                               feats, out)
     return out
