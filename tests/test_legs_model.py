@@ -160,3 +160,21 @@ def test_kind_codes_match_the_kernel():
     forest = from_sklearn(RandomForestClassifier(n_estimators=2, random_state=0).fit(X, y), 0.5, {})
     boost = from_sklearn(GradientBoostingClassifier(n_estimators=2).fit(X, y), 0.5, {})
     assert (forest._kernel_args()[3], boost._kernel_args()[3]) == (LK.KIND_FOREST, LK.KIND_BOOSTING)
+
+
+def test_leg_probabilities_equal_the_model_on_all_features():
+    """The hot path computes features for candidates only: its probabilities must not change for that."""
+    model = load_leg_model("default")
+    rng = np.random.default_rng(9)
+    angles = np.radians(np.linspace(-90.0, 90.0, 181))
+    for _ in range(20):
+        ranges = rng.uniform(0.5, 4.0, (3, 181)).astype(np.float32)
+        ranges = np.where(rng.random((3, 181)) < 0.8, np.repeat(ranges[:, ::6], 6, axis=1)[:, :181], ranges)
+        ranges[rng.random((3, 181)) < 0.05] = np.inf
+        cuts = [np.unique(rng.integers(0, 182, 12)) for _ in range(3)]
+        start = np.concatenate([c[:-1] for c in cuts])
+        end = np.concatenate([c[1:] for c in cuts])
+        offsets = np.concatenate([[0], np.cumsum([len(c) - 1 for c in cuts])])
+        feats = cluster_features(ranges, angles, start, end, offsets, 0.1, 5.0)
+        p = leg_probabilities(ranges, angles, start, end, offsets, 0.1, 5.0, model)
+        np.testing.assert_array_equal(p, model.probabilities(feats))

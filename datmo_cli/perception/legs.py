@@ -19,6 +19,7 @@ import json
 import math
 import os
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -134,6 +135,7 @@ class LegModel:
     right, value (leaf value). roots: each tree's root node. kind "forest": probability = mean over trees of
     the leaf's positive-class fraction; "boosting": sigmoid(base + scale * sum of leaf values). threshold_p
     is the decision threshold shipped with the model; provenance a JSON-able dict (data, parameters, scores).
+    Treat a model as read-only: the kernel's packed arrays are derived once, at construction.
     """
 
     feature: np.ndarray
@@ -220,14 +222,20 @@ class LegModel:
         """Write the model to one .npz at `path` (exactly that name; via a temporary file renamed)."""
         path = Path(path)
         tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "wb") as f:
-            np.savez_compressed(
-                f, format_version=np.int64(FORMAT_VERSION), feature=self.feature, threshold=self.threshold,
-                left=self.left, right=self.right, value=self.value, roots=self.roots, kind=np.str_(self.kind),
-                base=np.float64(self.base), scale=np.float64(self.scale),
-                threshold_p=np.float64(self.threshold_p), feature_names=np.array(self.feature_names, np.str_),
-                provenance=np.str_(json.dumps(self.provenance, sort_keys=True)))
-        os.replace(tmp, path)
+        try:
+            with open(tmp, "wb") as f:
+                self._write(f)
+            os.replace(tmp, path)
+        finally:
+            tmp.unlink(missing_ok=True)
+
+    def _write(self, f) -> None:
+        np.savez_compressed(
+            f, format_version=np.int64(FORMAT_VERSION), feature=self.feature, threshold=self.threshold,
+            left=self.left, right=self.right, value=self.value, roots=self.roots, kind=np.str_(self.kind),
+            base=np.float64(self.base), scale=np.float64(self.scale), threshold_p=np.float64(self.threshold_p),
+            feature_names=np.array(self.feature_names, np.str_),
+            provenance=np.str_(json.dumps(self.provenance, sort_keys=True)))
 
     @classmethod
     def load(cls, path: str | Path) -> LegModel:
@@ -239,7 +247,7 @@ class LegModel:
         try:
             with np.load(path, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile, io.UnsupportedOperation) as exc:
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, io.UnsupportedOperation) as exc:
             raise InputError(f"{path}: not a leg model file ({exc})") from None
         missing = [k for k in ("format_version", "feature", "threshold", "left", "right", "value", "roots", "kind",
                                "base", "scale", "threshold_p", "feature_names", "provenance") if k not in data]
