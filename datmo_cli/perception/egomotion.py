@@ -1,0 +1,206 @@
+"""Ego-motion from the scans themselves: the sensor's pose at every scan of a run without odometry.
+
+Method: scan-to-local-map ICP. Each scan is thinned to at most `max_points` sensor-frame points and matched
+with point-to-line residuals (point-to-point where the map has no line, at corners and posts) against a map
+of the last few keyframe scans, held in a hashed grid; Huber weights and a shrinking correspondence gate
+keep moving people and other changes from pulling the fit. Each scan starts from the constant-velocity
+prediction; when few points fit, ICP is retried from the previous pose turned by a few angles. Matching
+against keyframes rather than the previous scan means a still scanner estimates exactly its first pose and
+a slow one drifts only when the keyframe changes. Kernels are in _egomotion_kernels.py.
+
+Frames and units: scans in the sensor frame (x forward, y left); poses (x, y in metres, theta in radians)
+in the "scan_odom" frame, whose origin is the first scan's sensor pose (x along its forward axis).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..log.scan import Odometry, ScanGeometry, ScanRun
+
+FRAME_ID = "scan_odom"
+DEFAULT_RECOVERY_ANGLES = tuple(math.radians(a) for a in (0.0, -12.0, 12.0, -25.0, 25.0, -40.0, 40.0))
+
+
+@dataclass
+class EgoMotion:
+    """Poses estimated from the scans and how well each scan matched.
+
+    odometry: the sensor's pose at every scan stamp (frame FRAME_ID, child the scan's frame id);
+    residual (N,): mean |point-to-line residual| of the matched points, m (0 for the first scan and failures);
+    inlier_share (N,): share of the scan's points with a residual <= inlier_tol; matched (N,): points with
+    a map point within the final gate; points (N,): points used; keyframe, recovered (a retry from turned
+    guesses won), failed (too few matches: the constant-velocity prediction kept) (N,) bool; iterations (N,):
+    Gauss-Newton iterations spent, retries included.
+    """
+
+    odometry: Odometry
+    residual: np.ndarray
+    inlier_share: np.ndarray
+    matched: np.ndarray
+    points: np.ndarray
+    keyframe: np.ndarray
+    recovered: np.ndarray
+    failed: np.ndarray
+    iterations: np.ndarray
+
+    @property
+    def poses(self) -> np.ndarray:
+        """(N, 3) x, y (m), theta (rad) in FRAME_ID."""
+        o = self.odometry
+        return np.stack([o.x, o.y, o.theta], axis=1)
+
+
+def _beam_trig(geometry: ScanGeometry) -> tuple[np.ndarray, np.ndarray]:
+    a = geometry.angles()
+    return np.ascontiguousarray(np.cos(a)), np.ascontiguousarray(np.sin(a))
+
+
+def _max_window(geometry: ScanGeometry) -> int:
+    """Beams either side searched for a normal's neighbours: about 10 degrees, 3 to 40 beams."""
+    step = abs(geometry.angle_increment) or math.radians(1.0)
+    return int(min(40, max(3, math.ceil(math.radians(10.0) / step))))
+
+
+@dataclass(frozen=True)
+class IcpParams:
+    """Settings of the scan matcher. Distances in metres, angles in radians.
+
+    max_points: points per scan matched (thinned to source_spacing apart along the scan, then strided);
+    map_spacing: spacing of keyframe points in the map; normal_radius, max_gap, planarity: a map point gets
+    a line normal when its beam neighbours (about normal_radius each side, in steps of at most max_gap) are
+    line-like (minor / major spread <= planarity); max_dist0 -> max_dist: the correspondence gate, halved
+    each iteration (max_dist is also the grid's cell size); robust_scale: residual scale of the Huber, then
+    Geman-McClure, weights; inlier_tol: residual that counts as an inlier; max_iter: Gauss-Newton iterations
+    per match; prior_weight: pull toward the prediction (in points' worth), for directions the scene leaves
+    free; keyframe_dist / keyframe_angle / keyframe_share: when a scan becomes a keyframe (that far from the
+    newest, or that few inliers); n_keyframes: keyframes in the local map; min_inlier_share: below it, retry
+    from the previous pose turned by each of recovery_angles.
+    """
+
+    max_points: int = 300
+    source_spacing: float = 0.05
+    map_spacing: float = 0.03
+    normal_radius: float = 0.1
+    max_gap: float = 0.5
+    planarity: float = 0.3
+    max_dist0: float = 0.5
+    max_dist: float = 0.25
+    robust_scale: float = 0.05
+    inlier_tol: float = 0.05
+    max_iter: int = 30
+    prior_weight: float = 1.0
+    keyframe_dist: float = 0.3
+    keyframe_angle: float = math.radians(10.0)
+    keyframe_share: float = 0.5
+    n_keyframes: int = 3
+    min_inlier_share: float = 0.3
+    recovery_angles: tuple[float, ...] = DEFAULT_RECOVERY_ANGLES
+
+    def __post_init__(self) -> None:
+        if self.max_points < 16:
+            raise ValueError(f"max_points must be at least 16, got {self.max_points}")
+        if not (0 < self.max_dist <= self.max_dist0):
+            raise ValueError(f"need 0 < max_dist <= max_dist0, got {self.max_dist} and {self.max_dist0}")
+        if self.n_keyframes < 1:
+            raise ValueError(f"n_keyframes must be at least 1, got {self.n_keyframes}")
+        if not (self.source_spacing >= 0 and self.map_spacing >= 0 and self.robust_scale > 0 and self.max_iter >= 1):
+            raise ValueError("source_spacing and map_spacing must be >= 0, robust_scale > 0, max_iter >= 1")
+
+
+def estimate_egomotion(run: ScanRun, **params) -> EgoMotion:
+    """The sensor's motion over `run`, estimated from its scans alone (see the module docstring); keyword
+    parameters are the fields of IcpParams. Invalid returns (inf, NaN, <= range_min, >= range_max) are
+    ignored."""
+    p = IcpParams(**params)
+    if len(run) == 0:
+        raise ValueError("no scans")
+    from . import _egomotion_kernels as K
+
+    g = run.geometry
+    cos_a, sin_a = _beam_trig(g)
+    dt = np.zeros(len(run))
+    dt[1:] = np.diff(run.stamps) * 1e-9
+    poses = np.zeros((len(run), 3))
+    stats = np.zeros((len(run), K.N_STATS))
+    K.odometry_run(run.ranges, dt, cos_a, sin_a, float(g.range_min), float(g.range_max), int(p.max_points),
+                   float(p.source_spacing), float(p.map_spacing), float(p.normal_radius), float(p.max_gap),
+                   _max_window(g), float(p.planarity), float(p.max_dist0), float(p.max_dist),
+                   float(p.robust_scale), float(p.inlier_tol), int(p.max_iter), float(p.prior_weight),
+                   float(p.keyframe_dist), float(p.keyframe_angle), float(p.keyframe_share), int(p.n_keyframes),
+                   float(p.min_inlier_share), np.asarray(p.recovery_angles, np.float64).reshape(-1), poses, stats)
+    odom = Odometry(run.stamps.copy(), poses[:, 0].copy(), poses[:, 1].copy(), poses[:, 2].copy(),
+                    frame_id=FRAME_ID, child_frame_id=g.frame_id)
+    flags = stats[:, K.S_FLAGS].astype(np.int64)
+    return EgoMotion(odom, stats[:, K.S_RESIDUAL].copy(), stats[:, K.S_INLIER_SHARE].copy(),
+                     stats[:, K.S_MATCHED].astype(np.int64), stats[:, K.S_POINTS].astype(np.int64),
+                     (flags & K.FLAG_KEYFRAME) != 0, (flags & K.FLAG_RECOVERED) != 0, (flags & K.FLAG_FAILED) != 0,
+                     stats[:, K.S_ITERATIONS].astype(np.int64))
+
+
+def estimate_odometry(run: ScanRun, *, max_points: int = IcpParams.max_points, **params) -> Odometry:
+    """The sensor's pose at every scan of `run`, estimated from the scans (no wheel odometry): frame
+    "scan_odom" (FRAME_ID), origin at the first scan's sensor pose, x, y in metres, theta in radians, child
+    frame the scan's frame id. Keyword parameters are the fields of IcpParams."""
+    return estimate_egomotion(run, max_points=max_points, **params).odometry
+
+
+def align_scans(reference: np.ndarray, ranges: np.ndarray, geometry: ScanGeometry,
+                init: tuple[float, float, float] = (0.0, 0.0, 0.0), **params) -> tuple[np.ndarray, dict]:
+    """Pose (x, y m, theta rad) of the scan `ranges` in the sensor frame of the scan `reference` (both of
+    `geometry`, (B,) ranges in m), by one ICP from init; and its figures: matched, residual (mean |r|, m),
+    inlier_share, iterations. Keyword parameters are the fields of IcpParams (the keyframe and recovery
+    ones unused)."""
+    p = IcpParams(**params)
+    from . import _egomotion_kernels as K
+
+    g = geometry
+    cos_a, sin_a = _beam_trig(g)
+    lo, hi, b = float(g.range_min), float(g.range_max), g.n_beams
+    ref = np.ascontiguousarray(reference, np.float32)
+    cur = np.ascontiguousarray(ranges, np.float32)
+    if ref.shape != (b,) or cur.shape != (b,):
+        raise ValueError(f"scans must have {b} beams, got {ref.shape} and {cur.shape}")
+    px, py, beams = np.zeros(b), np.zeros(b), np.zeros(b, np.int64)
+    m = K.scan_points(ref, cos_a, sin_a, lo, hi, p.map_spacing, b, px, py, beams)
+    nx, ny = np.zeros(b), np.zeros(b)
+    K.scan_normals(ref, cos_a, sin_a, lo, hi, beams, m, p.normal_radius, p.max_gap, _max_window(g), p.planarity,
+                   nx, ny)
+    mx, my, mnx, mny = (np.zeros(b) for _ in range(4))
+    nxt = np.full(b, K.EMPTY, np.int64)
+    head = np.full(1 << max(4, int(2 * b - 1).bit_length()), K.EMPTY, np.int64)
+    K.add_to_map(px, py, nx, ny, m, 0.0, 0.0, 0.0, 0.0, p.max_dist, head, nxt, mx, my, mnx, mny, 0)
+    sx, sy = np.zeros(b), np.zeros(b)
+    n = K.scan_points(cur, cos_a, sin_a, lo, hi, p.source_spacing, p.max_points, sx, sy, beams)
+    pose = np.zeros(3)
+    matched, residual, inliers, iters = K.icp_align(
+        sx, sy, n, float(init[0]), float(init[1]), float(init[2]), mx, my, mnx, mny, p.max_dist, head, nxt,
+        p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight, pose)
+    return pose, {"matched": int(matched), "residual": float(residual), "inlier_share": inliers / max(n, 1),
+                  "iterations": int(iters)}
+
+
+def path_length(odometry: Odometry) -> float:
+    """Distance travelled along the poses, metres."""
+    return float(np.hypot(np.diff(odometry.x), np.diff(odometry.y)).sum())
+
+
+def total_turn(odometry: Odometry) -> float:
+    """Sum of |heading change| between consecutive poses, radians."""
+    d = np.diff(odometry.theta)
+    return float(np.abs(np.arctan2(np.sin(d), np.cos(d))).sum())
+
+
+def is_moving(odometry: Odometry, min_path: float = 0.3, min_turn: float = math.radians(20.0)) -> bool:
+    """Whether the scanner really moves: its farthest excursion from the first pose is over min_path (m) or
+    its heading strays over min_turn (rad) from the first. Excursions, not summed path, so jitter of a still
+    scanner's estimate does not add up over a long log."""
+    if len(odometry) < 2:
+        return False
+    reach = float(np.hypot(odometry.x - odometry.x[0], odometry.y - odometry.y[0]).max())
+    d = odometry.theta - odometry.theta[0]
+    turn = float(np.abs(np.arctan2(np.sin(d), np.cos(d))).max())
+    return reach > min_path or turn > min_turn
