@@ -409,14 +409,15 @@ def rebuild_map(kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose, newest, n_kf, map_spaci
 def odometry_run(ranges, dt, cos_a, sin_a, range_min, range_max, max_points, source_spacing,
                  map_spacing, normal_radius, max_gap, max_window, planarity, max_dist0, max_dist, scale, inlier_tol,
                  max_iter, prior_weight, keyframe_dist, keyframe_angle, keyframe_share, n_keyframes,
-                 min_inlier_share, recovery_angles, poses, stats) -> None:
+                 min_inlier_share, recovery_moves, poses, stats) -> None:
     """Sensor poses (N x 3, scan_odom frame) of every scan of ranges (N x B, m) by scan-to-local-map ICP.
 
     dt (N,): seconds since the previous scan (dt[0] unused). The prediction is the previous pose plus the
     previous motion scaled by the time ratio (constant velocity). The map holds the last n_keyframes
     keyframes; a scan becomes one when it is keyframe_dist (m) or keyframe_angle (rad) from the newest, or
     its inlier share is under keyframe_share. When the share is under min_inlier_share, ICP is retried from
-    the previous pose turned by each of recovery_angles (rad) and the best share kept. stats (N x N_STATS).
+    the previous pose moved by each row of recovery_moves (K x 3: x, y (m), theta (rad) in the previous scan's
+    frame) and the best share kept. stats (N x N_STATS).
     """
     n_scans, n_beams = ranges.shape
     k_slots = max(1, n_keyframes)
@@ -463,11 +464,11 @@ def odometry_run(ranges, dt, cos_a, sin_a, range_min, range_max, max_points, sou
                                                       prior_weight, pose)
             share = inliers / max(n_src, 1)
             if share < min_inlier_share:
-                for a in range(recovery_angles.shape[0]):
-                    m2, r2, i2, i3 = icp_align(sx, sy, n_src, poses[k - 1, 0], poses[k - 1, 1],
-                                              poses[k - 1, 2] + recovery_angles[a], mx, my, mnx, mny, cell, head,
-                                              nxt, max_dist0, max_dist, scale, inlier_tol, max_iter, prior_weight,
-                                              trial)
+                for a in range(recovery_moves.shape[0]):
+                    gx, gy, gt = compose(poses[k - 1, 0], poses[k - 1, 1], poses[k - 1, 2], recovery_moves[a, 0],
+                                         recovery_moves[a, 1], recovery_moves[a, 2])
+                    m2, r2, i2, i3 = icp_align(sx, sy, n_src, gx, gy, gt, mx, my, mnx, mny, cell, head, nxt,
+                                              max_dist0, max_dist, scale, inlier_tol, max_iter, prior_weight, trial)
                     iters += i3
                     if m2 >= MIN_MATCHES and i2 / max(n_src, 1) > share:
                         share = i2 / max(n_src, 1)

@@ -2,11 +2,12 @@
 
 Method: scan-to-local-map ICP. Each scan is thinned to at most `max_points` sensor-frame points and matched
 with point-to-line residuals (point-to-point where the map has no line, at corners and posts) against a map
-of the last few keyframe scans, held in a hashed grid; Huber weights and a shrinking correspondence gate
-keep moving people and other changes from pulling the fit. Each scan starts from the constant-velocity
-prediction; when few points fit, ICP is retried from the previous pose turned by a few angles. Matching
-against keyframes rather than the previous scan means a still scanner estimates exactly its first pose and
-a slow one drifts only when the keyframe changes. Kernels are in _egomotion_kernels.py.
+of the last few keyframe scans, held in a hashed grid; a shrinking correspondence gate under Huber weights,
+then Geman-McClure weights, keep moving people and other changes from pulling the fit. Each scan starts
+from the constant-velocity prediction; when few points fit, ICP is retried from the previous pose turned
+or driven on by a few set moves. Matching against keyframes rather than the previous scan means a still
+scanner estimates its first pose up to noise that never accumulates, and a slow one drifts only when the
+keyframe changes. Kernels are in _egomotion_kernels.py.
 
 Frames and units: scans in the sensor frame (x forward, y left); poses (x, y in metres, theta in radians)
 in the "scan_odom" frame, whose origin is the first scan's sensor pose (x along its forward axis).
@@ -22,7 +23,10 @@ import numpy as np
 from ..log.scan import Odometry, ScanGeometry, ScanRun
 
 FRAME_ID = "scan_odom"
-DEFAULT_RECOVERY_ANGLES = tuple(math.radians(a) for a in (0.0, -12.0, 12.0, -25.0, 25.0, -40.0, 40.0))
+#: retries' starting moves from the previous pose (x, y m, theta rad, in its sensor frame): standing still,
+#: turning on the spot, driving on (a robot starting to turn or drive breaks the constant-velocity guess)
+DEFAULT_RECOVERY_MOVES = tuple((0.0, 0.0, math.radians(a)) for a in (0.0, -12.0, 12.0, -25.0, 25.0, -40.0, 40.0)) \
+    + ((0.4, 0.0, 0.0), (0.8, 0.0, 0.0), (-0.4, 0.0, 0.0))
 
 
 @dataclass
@@ -78,7 +82,7 @@ class IcpParams:
     per match; prior_weight: pull toward the prediction (in points' worth), for directions the scene leaves
     free; keyframe_dist / keyframe_angle / keyframe_share: when a scan becomes a keyframe (that far from the
     newest, or that few inliers); n_keyframes: keyframes in the local map; min_inlier_share: below it, retry
-    from the previous pose turned by each of recovery_angles.
+    from the previous pose moved by each of recovery_moves ((x, y, theta) in its sensor frame).
     """
 
     max_points: int = 300
@@ -98,7 +102,7 @@ class IcpParams:
     keyframe_share: float = 0.5
     n_keyframes: int = 3
     min_inlier_share: float = 0.3
-    recovery_angles: tuple[float, ...] = DEFAULT_RECOVERY_ANGLES
+    recovery_moves: tuple[tuple[float, float, float], ...] = DEFAULT_RECOVERY_MOVES
 
     def __post_init__(self) -> None:
         if self.max_points < 16:
@@ -131,7 +135,7 @@ def estimate_egomotion(run: ScanRun, **params) -> EgoMotion:
                    _max_window(g), float(p.planarity), float(p.max_dist0), float(p.max_dist),
                    float(p.robust_scale), float(p.inlier_tol), int(p.max_iter), float(p.prior_weight),
                    float(p.keyframe_dist), float(p.keyframe_angle), float(p.keyframe_share), int(p.n_keyframes),
-                   float(p.min_inlier_share), np.asarray(p.recovery_angles, np.float64).reshape(-1), poses, stats)
+                   float(p.min_inlier_share), np.asarray(p.recovery_moves, np.float64).reshape(-1, 3), poses, stats)
     odom = Odometry(run.stamps.copy(), poses[:, 0].copy(), poses[:, 1].copy(), poses[:, 2].copy(),
                     frame_id=FRAME_ID, child_frame_id=g.frame_id)
     flags = stats[:, K.S_FLAGS].astype(np.int64)
@@ -184,7 +188,8 @@ def align_scans(reference: np.ndarray, ranges: np.ndarray, geometry: ScanGeometr
 
 
 def path_length(odometry: Odometry) -> float:
-    """Distance travelled along the poses, metres."""
+    """Distance travelled along the poses, metres (on a still scanner this sums the estimate's jitter, a few
+    mm a scan)."""
     return float(np.hypot(np.diff(odometry.x), np.diff(odometry.y)).sum())
 
 
