@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("run", "Segment, extract features and track in one pass; then report."),
     "report": ("report", "Summarise what a processed run saw."),
     "evaluate": ("evaluate", "Score tracks against ground truth (CLEAR-MOT, IDF1)."),
+    "train-legs": ("train_legs", "Train the learned leg detector on labelled scans; print held-out figures."),
 }
 
 
