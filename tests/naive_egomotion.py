@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 MIN_MATCHES = 12
+CONVERGED_STEP, CONVERGED_TURN = 2e-4, 5e-5   # m, rad
 
 
 def is_valid(r: float, range_min: float, range_max: float) -> bool:
@@ -140,7 +141,7 @@ def icp_align(src, init, map_xy, map_n, max_dist0, max_dist, scale, inlier_tol, 
         g = g + prior_weight * (pose - init)
         step = np.linalg.solve(H, g)
         pose = pose - step
-        small = abs(step[0]) < 1e-4 and abs(step[1]) < 1e-4 and abs(step[2]) < 1e-5
+        small = max(abs(step[0]), abs(step[1])) < CONVERGED_STEP and abs(step[2]) < CONVERGED_TURN
         if gate > max_dist:
             gate = max(max_dist, 0.5 * gate)
         elif small:

@@ -21,6 +21,8 @@ N_STATS = 6
 # flag bits in stats[:, S_FLAGS]
 FLAG_KEYFRAME, FLAG_RECOVERED, FLAG_FAILED = 1, 2, 4
 MIN_MATCHES = 12           # correspondences below which a match is refused (the prediction is kept)
+CONVERGED_STEP = 2e-4      # m: a Gauss-Newton step this small in x and y ...
+CONVERGED_TURN = 5e-5      # rad: ... and in theta ends the iterations once the gate is final
 EMPTY = -1
 
 
@@ -143,17 +145,21 @@ def scan_normals(r, cos_a, sin_a, range_min, range_max, beams, n, normal_radius,
 
 
 @njit(cache=True)
-def cell_hash(x, y, cell, mask) -> int:
-    """Bucket of the grid cell holding (x, y) (m): a spatial hash of the integer cell coordinates."""
-    ix = np.int64(np.floor(x / cell))
-    iy = np.int64(np.floor(y / cell))
+def cell_of(x, cell) -> int:
+    """Integer grid coordinate of x (m)."""
+    return np.int64(np.floor(x / cell))
+
+
+@njit(cache=True)
+def cell_hash(ix, iy, mask) -> int:
+    """Bucket of the grid cell (ix, iy): a spatial hash of the integer cell coordinates."""
     return np.int64(((ix * 73856093) ^ (iy * 19349663)) & mask)
 
 
 @njit(cache=True)
 def grid_insert(x, y, i, cell, head, nxt) -> None:
     """Put point i at (x, y) at the front of its bucket's list."""
-    h = cell_hash(x, y, cell, head.shape[0] - 1)
+    h = cell_hash(cell_of(x, cell), cell_of(y, cell), head.shape[0] - 1)
     nxt[i] = head[h]
     head[h] = i
 
@@ -165,12 +171,13 @@ def grid_nearest(qx, qy, mx, my, cell, head, nxt, max_dist) -> int:
     harmlessly."""
     mask = head.shape[0] - 1
     reach = max(1, np.int64(np.ceil(max_dist / cell - 1e-9)))
+    ix = cell_of(qx, cell)
+    iy = cell_of(qy, cell)
     best = EMPTY
     best_d2 = max_dist * max_dist
     for dx in range(-reach, reach + 1):
         for dy in range(-reach, reach + 1):
-            h = cell_hash(qx + dx * cell, qy + dy * cell, cell, mask)
-            j = head[h]
+            j = head[cell_hash(ix + dx, iy + dy, mask)]
             while j != EMPTY:
                 d2 = (mx[j] - qx) ** 2 + (my[j] - qy) ** 2
                 # ties go to the lower index so the result does not depend on bucket order
@@ -317,8 +324,8 @@ def icp_align(sx, sy, n, init_x, init_y, init_t, mx, my, mnx, mny, cell, head, n
     """Pose of the source scan (sensor points (sx, sy)[0:n]) against the map by Gauss-Newton ICP from init.
 
     The correspondence gate halves from max_dist0 down to max_dist (m) under Huber weights, then iterations
-    continue under Geman-McClure weights (moving people drop out) until the step is below 0.1 mm and 1e-5
-    rad, or max_iter. A prior of prior_weight (per m^2, and per rad^2 at 1 m)
+    continue under Geman-McClure weights (moving people drop out) until the step is below CONVERGED_STEP and
+    CONVERGED_TURN, or max_iter. A prior of prior_weight (per m^2, and per rad^2 at 1 m)
     pulls toward init, so directions the scene leaves free (a bare corridor) keep the prediction.
     Writes the pose into pose_out and returns (matched, mean |residual| (m), inliers, iterations); a match
     with fewer than MIN_MATCHES correspondences or a singular system leaves pose_out at init.
@@ -352,7 +359,7 @@ def icp_align(sx, sy, n, init_x, init_y, init_t, mx, my, mnx, mny, cell, head, n
         x -= step[0]
         y -= step[1]
         t -= step[2]
-        small = abs(step[0]) < 1e-4 and abs(step[1]) < 1e-4 and abs(step[2]) < 1e-5
+        small = abs(step[0]) < CONVERGED_STEP and abs(step[1]) < CONVERGED_STEP and abs(step[2]) < CONVERGED_TURN
         if gate > max_dist:
             gate = max(max_dist, 0.5 * gate)
         elif small:
@@ -415,7 +422,8 @@ def odometry_run(ranges, dt, cos_a, sin_a, range_min, range_max, max_points, sou
     dt (N,): seconds since the previous scan (dt[0] unused). The prediction is the previous pose plus the
     previous motion scaled by the time ratio (constant velocity). The map holds the last n_keyframes
     keyframes; a scan becomes one when it is keyframe_dist (m) or keyframe_angle (rad) from the newest, or
-    its inlier share is under keyframe_share. When the share is under min_inlier_share, ICP is retried from
+    its inlier share is under keyframe_share. When the share is under min_inlier_share, or ICP did not
+    converge within max_iter, it is retried from
     the previous pose moved by each row of recovery_moves (K x 3: x, y (m), theta (rad) in the previous scan's
     frame) and the best share kept. stats (N x N_STATS).
     """
@@ -463,7 +471,7 @@ def odometry_run(ranges, dt, cos_a, sin_a, range_min, range_max, max_points, sou
                                                       max_dist0, max_dist, scale, inlier_tol, max_iter,
                                                       prior_weight, pose)
             share = inliers / max(n_src, 1)
-            if share < min_inlier_share:
+            if share < min_inlier_share or iters >= max_iter:
                 for a in range(recovery_moves.shape[0]):
                     gx, gy, gt = compose(poses[k - 1, 0], poses[k - 1, 1], poses[k - 1, 2], recovery_moves[a, 0],
                                          recovery_moves[a, 1], recovery_moves[a, 2])

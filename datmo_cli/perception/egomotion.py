@@ -4,10 +4,10 @@ Method: scan-to-local-map ICP. Each scan is thinned to at most `max_points` sens
 with point-to-line residuals (point-to-point where the map has no line, at corners and posts) against a map
 of the last few keyframe scans, held in a hashed grid; a shrinking correspondence gate under Huber weights,
 then Geman-McClure weights, keep moving people and other changes from pulling the fit. Each scan starts
-from the constant-velocity prediction; when few points fit, ICP is retried from the previous pose turned
-or driven on by a few set moves. Matching against keyframes rather than the previous scan means a still
-scanner estimates its first pose up to noise that never accumulates, and a slow one drifts only when the
-keyframe changes. Kernels are in _egomotion_kernels.py.
+from the constant-velocity prediction; when few points fit or ICP does not converge, it is retried from
+the previous pose turned or driven on by a few set moves, and the best fit kept. Matching against keyframes
+rather than the previous scan means a still scanner estimates its first pose up to noise that never
+accumulates, and a slow one drifts only when the keyframe changes. Kernels are in _egomotion_kernels.py.
 
 Frames and units: scans in the sensor frame (x forward, y left); poses (x, y in metres, theta in radians)
 in the "scan_odom" frame, whose origin is the first scan's sensor pose (x along its forward axis).
@@ -81,8 +81,9 @@ class IcpParams:
     Geman-McClure, weights; inlier_tol: residual that counts as an inlier; max_iter: Gauss-Newton iterations
     per match; prior_weight: pull toward the prediction (in points' worth), for directions the scene leaves
     free; keyframe_dist / keyframe_angle / keyframe_share: when a scan becomes a keyframe (that far from the
-    newest, or that few inliers); n_keyframes: keyframes in the local map; min_inlier_share: below it, retry
-    from the previous pose moved by each of recovery_moves ((x, y, theta) in its sensor frame).
+    newest, or that few inliers); n_keyframes: keyframes in the local map; min_inlier_share: below it (or
+    when ICP does not converge), retry from the previous pose moved by each of recovery_moves ((x, y, theta)
+    in its sensor frame) and keep the best share.
     """
 
     max_points: int = 300
@@ -101,7 +102,7 @@ class IcpParams:
     keyframe_angle: float = math.radians(10.0)
     keyframe_share: float = 0.5
     n_keyframes: int = 3
-    min_inlier_share: float = 0.3
+    min_inlier_share: float = 0.5
     recovery_moves: tuple[tuple[float, float, float], ...] = DEFAULT_RECOVERY_MOVES
 
     def __post_init__(self) -> None:
