@@ -396,3 +396,31 @@ def test_hall_still_scanner_with_walking_people_stays_put():
     assert np.median(np.hypot(np.diff(odom.x), np.diff(odom.y))) < 0.005
     assert np.abs(odom.theta).max() < math.radians(0.2)
     assert not is_moving(odom)
+
+
+# --- real logs (../shared/data) ----------------------------------------------------------------------------------
+
+@pytest.mark.shared
+def test_negative_2_three_scanners_agree():
+    """leg_tracker's negative_2: a robot driving through rooms (no odometry), three rigidly mounted Hokuyos
+    (768 beams, 270 degrees, 7.5 Hz). No ground truth, but the track must be smooth (no step over 0.3 m
+    between scans), most points must fit, and the three scanners must turn alike (they share one body:
+    at this commit they part by under 8 degrees over some 1000 degrees of turning)."""
+    from conftest import shared_path
+
+    from datmo_cli.log.importers import import_log
+
+    path = shared_path("legtracker", "negative_2.bag")
+    headings = []
+    for topic in ("/left_scan", "/right_scan", "/rear_scan"):
+        e = estimate_egomotion(import_log(path, topic).run)
+        p = e.poses
+        step = np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))
+        assert step.max() < 0.3
+        assert e.inlier_share[1:].mean() > 0.75 and e.residual[1:].mean() < 0.03
+        assert not e.failed.any() and is_moving(e.odometry)
+        headings.append(np.unwrap(p[:, 2]))
+    n = min(len(h) for h in headings)
+    assert np.degrees(np.abs(headings[0][-1])) > 90    # it turns well beyond jitter
+    for h in headings[1:]:
+        assert np.degrees(np.abs(h[:n] - headings[0][:n]).max()) < 15

@@ -23,10 +23,11 @@ import numpy as np
 from ..log.scan import Odometry, ScanGeometry, ScanRun
 
 FRAME_ID = "scan_odom"
-#: retries' starting moves from the previous pose (x, y m, theta rad, in its sensor frame): standing still,
-#: turning on the spot, driving on (a robot starting to turn or drive breaks the constant-velocity guess)
-DEFAULT_RECOVERY_MOVES = tuple((0.0, 0.0, math.radians(a)) for a in (0.0, -12.0, 12.0, -25.0, 25.0, -40.0, 40.0)) \
-    + ((0.4, 0.0, 0.0), (0.8, 0.0, 0.0), (-0.4, 0.0, 0.0))
+#: retries' starting moves from the previous pose (x, y m, theta rad, in its sensor frame): standing or driving
+#: on 0.5 or 1 m, each turning 0, 15, 30 or 45 degrees either way (a robot that starts to turn or drive breaks
+#: the constant-velocity guess; thinned logs such as CARMEN's corrected ones jump that far between scans)
+DEFAULT_RECOVERY_MOVES = tuple((x, 0.0, math.radians(a)) for x in (0.0, 0.5, 1.0)
+                               for a in (0.0, -15.0, 15.0, -30.0, 30.0, -45.0, 45.0))
 
 
 @dataclass
