@@ -314,6 +314,19 @@ def test_invalid_returns_are_ignored():
     check_follows(run, truth, 0.04, 0.6)
 
 
+def test_blank_scans_are_bridged():
+    """Three scans with no return at all (a covered sensor): the constant-velocity guess carries the pose over
+    them, they never become keyframes, and matching resumes after them."""
+    truth = drive(40)
+    run = room_run(geometry(361, 180.0), truth)
+    run.ranges[15:18] = np.inf
+    e = estimate_egomotion(run)
+    assert e.failed[15:18].all() and not e.keyframe[15:18].any() and not e.failed[18:].any()
+    want = np.array([relative(truth[0], p) for p in truth])
+    err = np.hypot(*(e.poses[:, :2] - want[:, :2]).T)
+    assert err[18:].max() < 0.03
+
+
 def test_a_still_scanner_stays_at_the_origin():
     run = room_run(geometry(361, 180.0), [START] * 50)
     odom = estimate_odometry(run)

@@ -487,7 +487,7 @@ def odometry_run(ranges, dt, cos_a, sin_a, range_min, range_max, max_points, sou
                 flags |= FLAG_FAILED
         poses[k] = pose
         new_kf = n_kf == 0
-        if not new_kf:
+        if not new_kf and n_src >= MIN_MATCHES:     # a scan with (almost) no returns would only empty the map
             dx, dy, dth = between(kf_pose[newest, 0], kf_pose[newest, 1], kf_pose[newest, 2], pose[0], pose[1],
                                   pose[2])
             new_kf = dx * dx + dy * dy > keyframe_dist * keyframe_dist or abs(dth) > keyframe_angle \
