@@ -17,6 +17,7 @@ import numpy as np
 
 from benchmarks.accuracy_tracking import LEGTRACKER, demo_figures, learned_legs, read_leg_labels, read_ros1_scans
 from benchmarks.common import print_lines
+from datmo_cli.perception.egomotion import odometry_for
 from datmo_cli.tracking import accuracy as acc
 from datmo_cli.tracking.pipeline import run_features, track_run
 
@@ -28,8 +29,11 @@ LINK_GAP = 0.5          # s
 
 
 def tracked(run, leg_model: str):  # noqa: ANN001, ANN201 - ScanRun -> TrackedRun
+    """`datmo track` as it runs on a log without odometry (poses from scan matching when the scanner moves)."""
     params = {"leg_model": leg_model}
-    return track_run(run, run_features(run, None, params), markers=False, learned=learned_legs(params))
+    odometry, _ = odometry_for(run, None, "auto")
+    return track_run(run, run_features(run, odometry, params), odometry=odometry, markers=False,
+                     learned=learned_legs(params))
 
 
 def longest_person(stamps: np.ndarray, tracks: list[np.ndarray]) -> tuple[float, int]:

@@ -134,6 +134,19 @@ def _job(i: int, args: tuple, report: Callable[[int, int, int], None] | None) ->
     return JobResult(src, out, scans, time.perf_counter() - t0)
 
 
+def estimated_odometry(run, odometry, mode: str) -> tuple:  # noqa: ANN001 - ScanRun, Odometry | None
+    """(odometry to track in, {"/odom": channel} when it was estimated from the scans here, else {}): a log
+    without odometry whose scanner moves is tracked in poses from scan matching (see perception.egomotion),
+    written to /odom (frame scan_odom) so the output holds the frame its world positions are in."""
+    from .log import types
+    from .perception.egomotion import odometry_for
+
+    odometry, estimated = odometry_for(run, odometry, mode)
+    if not estimated:
+        return odometry, {}
+    return odometry, {mcapio.TOPIC_ODOM: (types.ODOMETRY, odometry.stamps, mcapio.encode_odometry(odometry))}
+
+
 def derive(run, odometry, params: dict | None = None,  # noqa: ANN001 - ScanRun, Odometry | None
            progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], dict]:
     """Every derived channel of a run, {topic: (msgtype, stamps, payloads)}, and the effective parameters.
@@ -149,6 +162,7 @@ def derive(run, odometry, params: dict | None = None,  # noqa: ANN001 - ScanRun,
     params = params or {}
     track_params = params.get("track") or TrackingParams()
     feature_params = params.get("features") or FeatureParams()
+    odometry, odom_channel = estimated_odometry(run, odometry, track_params.ego_motion)
     n = len(run)
     if progress:
         progress(0, 2 * n)
@@ -161,7 +175,7 @@ def derive(run, odometry, params: dict | None = None,  # noqa: ANN001 - ScanRun,
 
     effective = {"features": feature_params.to_dict(), "track": track_params.to_dict(),
                  "leg_model": leg_model_provenance(feature_params.leg_model)}
-    return {**channels, **tracks}, effective
+    return {**odom_channel, **channels, **tracks}, effective
 
 
 def process_file(src: str | Path, out: str | Path, *, force: bool = False, params: dict | None = None,

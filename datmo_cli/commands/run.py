@@ -43,11 +43,15 @@ def _progress_bar():  # noqa: ANN202 - rich.progress.Progress, imported lazily
 @click.option("--sort", type=click.Choice(SORT_KEYS), default="lifetime", show_default=True,
               help="Order of the report's track table.")
 @click.option("--no-report", is_flag=True, help="Do not print the report.")
+@click.option("--ego-motion", type=click.Choice(["auto", "on", "off"]), default=None,
+              help="For logs without /odom: track in poses estimated by scan matching (written to /odom, frame "
+                   "scan_odom) when the scanner moves ('auto'), always ('on') or never ('off') [default: auto].")
 @click.option("--leg-model", default=None, metavar="MODEL",
               help="Leg detector: 'default' (the model shipped with datmo), a model file from datmo train-legs, "
                    "or 'paper' (the paper's circle rule and walking pattern) [default: default].")
 def command(inputs: tuple[Path, ...], out_dir: Path, jobs: int | None, force: bool, config: Path | None, plot: bool,
-            fmt: str, top: int | None, sort: str, no_report: bool, leg_model: str | None) -> None:
+            fmt: str, top: int | None, sort: str, no_report: bool, ego_motion: str | None,
+            leg_model: str | None) -> None:
     """Segment, extract features and track each input in one pass, then print the report.
 
     Each output holds the input's channels and /datmo/segments, /datmo/features, /datmo/landmarks,
@@ -69,6 +73,7 @@ def command(inputs: tuple[Path, ...], out_dir: Path, jobs: int | None, force: bo
     params = {"features": load_features(config) if config is not None else FeatureParams(),
               "track": load_track(config) if config is not None else TrackingParams()}
     params["features"] = params["features"].replace(leg_model=leg_model)
+    params["track"] = params["track"].replace(ego_motion=ego_motion)
     from ..perception.legs import load_leg_model
 
     load_leg_model(params["features"].leg_model)   # a bad model is one error here, not one per input

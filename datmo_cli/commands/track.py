@@ -40,6 +40,7 @@ def track_file(src: Path, out: Path, *, force: bool = False, params=None, featur
     from ..log import mcapio
     from ..perception.features import derive_features, leg_model_provenance
     from ..perception.params import FeatureParams
+    from ..pipeline import estimated_odometry
     from ..tracking.params import TrackingParams
     from ..tracking.pipeline import decode_features, derive_tracks, iter_run_features
 
@@ -48,15 +49,16 @@ def track_file(src: Path, out: Path, *, force: bool = False, params=None, featur
     run = mcapio.run_from_log(log)
     odometry = mcapio.odometry_from_log(log)
     computed = not log.has(mcapio.TOPIC_FEATURES)
-    derived: dict = {}
+    odometry, derived = estimated_odometry(run, odometry, params.ego_motion)
     effective: dict = {"track": params.to_dict()}
     if computed:
         feature_params = (feature_params or FeatureParams()).replace(leg_model=leg_model)
         used = feature_params.leg_model
         if feature_progress is not None:
             feature_progress(0, len(run))
-        derived, run_features = derive_features(run, odometry=odometry, params=feature_params,
-                                                progress=feature_progress)
+        channels, run_features = derive_features(run, odometry=odometry, params=feature_params,
+                                                 progress=feature_progress)
+        derived |= channels
         features = list(iter_run_features(run_features))
         effective["features"] = feature_params.to_dict()
     else:
@@ -105,13 +107,16 @@ def track_file(src: Path, out: Path, *, force: bool = False, params=None, featur
                    f"[default: {D.delete_after_occluded:g}].")
 @click.option("--d-max", type=click.FloatRange(min=0, min_open=True), default=None,
               help=f"Objects larger than this are static, m [default: {D.d_max:g}].")
+@click.option("--ego-motion", type=click.Choice(["auto", "on", "off"]), default=None,
+              help="For a log without /odom: track in poses estimated by scan matching (written to /odom, frame "
+                   "scan_odom) when the scanner moves ('auto'), always ('on') or never ('off') [default: auto].")
 @click.option("--leg-model", default=None, metavar="MODEL",
               help="Leg detector for inputs without features: 'default' (shipped), a file from datmo train-legs, "
                    "or 'paper' (the paper's circle rule and walking pattern). Inputs with features keep theirs.")
 def command(input: Path, output: Path, force: bool, config: Path | None, process_noise: float | None,
             measurement_noise: float | None, gate: float | None, confirm: tuple[int, int] | None,
             delete_after: float | None, delete_after_occluded: float | None, d_max: float | None,
-            leg_model: str | None) -> None:
+            ego_motion: str | None, leg_model: str | None) -> None:
     """Track and classify the objects of a log: Kalman filter, gating and global nearest-neighbour
     association, occlusion-aware track life cycle, people from paired legs and their walking pattern.
 
@@ -131,7 +136,7 @@ def command(input: Path, output: Path, force: bool, config: Path | None, process
     hits, window = confirm if confirm is not None else (None, None)
     params = params.replace(process_noise=process_noise, measurement_noise=measurement_noise, gate=gate,
                             confirm_hits=hits, confirm_window=window, delete_after=delete_after,
-                            delete_after_occluded=delete_after_occluded, d_max=d_max)
+                            delete_after_occluded=delete_after_occluded, d_max=d_max, ego_motion=ego_motion)
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 

@@ -60,6 +60,8 @@ class TrackingParams:
     background_time: float = 3.0        # s a place must have been hit, never seen through, to be background; 0: off
     background_cell: float = 0.1        # m, grid cell
     background_extent: float = 40.0     # m, the grid spans this much either side of the first sensor pose
+    # a log without odometry whose scanner moves: track in poses estimated from the scans (scan matching)
+    ego_motion: str = "auto"            # "auto": when the scenery changes and the estimate moves; "on"; "off"
     # output
     tail_length: int = 20               # trajectory points in each track's marker tail
 
@@ -82,6 +84,11 @@ def from_dict(values: dict, where: str = "track") -> TrackingParams:
     for key, value in values.items():
         if key not in known:
             raise ConfigError(f"{where}.{key}: unknown parameter (known: {', '.join(sorted(known))})")
+        if key == "ego_motion":
+            if value not in ("auto", "on", "off"):
+                raise ConfigError(f"{where}.{key}: one of auto, on, off; got {value!r}")
+            out[key] = value
+            continue
         want = int if known[key].type in ("int", int) else float
         bad_int = want is int and not isinstance(value, int)
         if isinstance(value, bool) or not isinstance(value, int | float) or bad_int:
