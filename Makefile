@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 DEMO_LOG := sample_logs/hall.mcap
 
-.PHONY: install demo test test-fast lint bench accuracy sample-logs regress regress-update clean
+.PHONY: install demo test test-fast lint bench accuracy sample-logs regress regress-update clean legs-model
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -37,6 +37,10 @@ regress: install ## datmo run + evaluate on every sample log, compared with test
 
 regress-update: install ## rewrite tests/regress_baseline.json from the current figures (review the diff)
 	$(BIN)/python -m benchmarks.regress --update
+
+legs-model: install ## retrain the packaged leg model (datmo_cli/perception/models/legs.npz) from ../shared/data/legtracker
+	$(BIN)/datmo train-legs --positive $(sort $(wildcard ../shared/data/legtracker/positive_*_extracted.bag)) \
+		--negative ../shared/data/legtracker/negative_2.bag -o datmo_cli/perception/models/legs.npz --force
 
 sample-logs: install ## regenerate sample_logs/ bit for bit
 	PATH="$(CURDIR)/$(BIN):$$PATH" bash sample_logs/make.sh

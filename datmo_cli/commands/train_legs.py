@@ -123,7 +123,8 @@ def command(positives: tuple[Path, ...], negatives: tuple[Path, ...], topic: str
 
         result = T.train_leg_model(labelled, empty, progress=progress, labels_topic=labels_topic)
     if result.held_out:
-        print_figures(result.held_out, result.mean, Console())
+        out = Console()
+        print_figures(result.held_out, result.mean, out if out.is_terminal else Console(width=150))
     else:
         click.echo("datmo: no held-out figures: they need two or more --positive files (one is held out while "
                    "the others train)", err=True)

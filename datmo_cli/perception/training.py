@@ -34,7 +34,7 @@ METRIC_RANGE_M = 5.0       # figures count clusters whose centroid is at most th
 CIRCLE_LEG_RADIUS_M = 0.13  # the paper's rule: a circle of at most this radius is a leg
 DEFAULT_LABELS_TOPIC = "/leg_cluster_positions"
 POSE_ARRAY_TYPES = ("geometry_msgs/msg/PoseArray", "geometry_msgs/PoseArray")
-EMPTY_FALSE_BUDGET = 0.25  # false legs per empty scan allowed when choosing the threshold (target: 0.5)
+EMPTY_FALSE_BUDGET = 0.5   # false legs per empty scan allowed when choosing the threshold (the target)
 
 #: progress(description, done, total)
 Progress = Callable[[str, int, int], None]
@@ -479,19 +479,23 @@ class EstimatorSpec:
     kind: "extra_trees", "random_forest" or "gradient_boosting". Training rows: candidate segments
     (legs.candidate_mask) of the training recordings within train_range_m of the scanner (None: all);
     the unlabelled clusters of labelled recordings are negatives too (people outside the labelling box
-    among them, the price of more hard negatives); empty_weight multiplies the weight of empty recordings'
-    rows; class_weight "balanced" weighs legs and non-legs equally in total."""
+    among them, the price of more hard negatives) with weight unlabelled_weight; empty_weight multiplies the
+    weight of empty recordings' rows; class_weight "balanced" weighs legs and non-legs equally in total;
+    ignore_features: FEATURE_NAMES columns held constant in training, so no tree uses them; negative_fraction:
+    the share of non-leg rows kept (at random, weighted up by its inverse) to train faster."""
 
-    kind: str = "extra_trees"
-    n_estimators: int = 100
-    max_depth: int | None = 12
-    min_samples_leaf: int = 2
-    max_features: float | str | None = "sqrt"
+    kind: str = "random_forest"
+    n_estimators: int = 50
+    max_depth: int | None = 16
+    min_samples_leaf: int = 3
+    max_features: float | str | None = 0.5
     learning_rate: float = 0.1
     class_weight: str | None = "balanced"
     train_range_m: float | None = None
     empty_weight: float = 1.0
     unlabelled_weight: float = 1.0
+    ignore_features: tuple[str, ...] = ("n_points",)
+    negative_fraction: float = 0.3
     seed: int = 0
 
     def build(self):  # noqa: ANN201 - a scikit-learn estimator
@@ -508,8 +512,20 @@ class EstimatorSpec:
         return cls(n_estimators=self.n_estimators, max_depth=self.max_depth, min_samples_leaf=self.min_samples_leaf,
                    max_features=self.max_features, random_state=self.seed, n_jobs=1)
 
+    def for_threshold(self) -> EstimatorSpec:
+        """The spec of the inner models that only score recordings for choosing the threshold: a forest of a
+        quarter of the trees (at least 10; a forest's probabilities keep their expectation with fewer trees,
+        and the inner folds are most of the fitting time); boosting unchanged (its scores depend on the count)."""
+        import dataclasses
+
+        if self.kind == "gradient_boosting":
+            return self
+        return dataclasses.replace(self, n_estimators=max(10, self.n_estimators // 4))
+
     def to_dict(self) -> dict:
-        return asdict(self)
+        out = asdict(self)
+        out["ignore_features"] = list(self.ignore_features)
+        return out
 
 
 def training_rows(tables: Sequence[SegmentTable], spec: EstimatorSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -528,7 +544,16 @@ def training_rows(tables: Sequence[SegmentTable], spec: EstimatorSpec) -> tuple[
     X = np.concatenate(xs) if xs else np.zeros((0, 0))
     y = np.concatenate(ys) if ys else np.zeros(0, bool)
     w = np.concatenate(ws) if ws else np.zeros(0)
+    if spec.negative_fraction < 1.0:   # a random share of the non-legs, weighted up to stand for the rest
+        rng = np.random.default_rng(spec.seed)
+        drop = ~y & (rng.random(len(y)) >= spec.negative_fraction)
+        w = np.where(drop, 0.0, np.where(y, w, w / spec.negative_fraction))
     X, y, w = X[w > 0], y[w > 0], w[w > 0]
+    if spec.ignore_features:
+        from .legs import FEATURE_NAMES
+
+        X = X.copy()
+        X[:, [FEATURE_NAMES.index(n) for n in spec.ignore_features]] = 0.0   # constant: no tree splits on it
     if spec.class_weight == "balanced" and y.any() and (~y).any():
         w = w * np.where(y, 0.5 * w.sum() / w[y].sum(), 0.5 * w.sum() / w[~y].sum())
     return X, y.astype(np.int64), w
@@ -621,8 +646,8 @@ def tuned_threshold(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], sp
                     step: Callable[[], None] = lambda: None, budget: float = EMPTY_FALSE_BUDGET) -> float:
     """The threshold for a model trained on (lab, emp), chosen on those recordings alone: each is scored by a
     model trained without it (inner leave-one-out, as leave_one_out_folds), and choose_threshold picks on
-    the pooled out-of-fold scores of clusters within METRIC_RANGE_M. With one labelled recording there is
-    no inner fold: the model's own training scores are used (optimistic: a higher threshold)."""
+    the pooled out-of-fold scores of clusters within METRIC_RANGE_M (inner models: spec.for_threshold()). With
+    one labelled recording there is no inner fold: the model's own training scores are used (optimistic)."""
     folds = leave_one_out_folds(len(lab), len(emp))
     ys, ss, es, scans = [], [], [], 0
     if not folds:
@@ -631,8 +656,9 @@ def tuned_threshold(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], sp
         folds_scored = [(t, scores(model, t)) for t in list(lab) + list(emp)]
     else:
         folds_scored = []
+        inner = spec.for_threshold()
         for f in folds:
-            model = to_model(fit([lab[i] for i in f.train_labelled] + [emp[j] for j in f.train_empty], spec))
+            model = to_model(fit([lab[i] for i in f.train_labelled] + [emp[j] for j in f.train_empty], inner))
             step()
             folds_scored.append((lab[f.test_labelled], scores(model, lab[f.test_labelled])))
             if f.test_empty is not None:
