@@ -72,7 +72,7 @@ def figure_lines() -> list[str]:
           L["false_per_scan"] <= TARGETS["false_per_scan"])
     lines.append(f"targets: mean AP >= {TARGETS['ap']:.2f} ({'met' if ok[0] else 'NOT met'}: {L['ap']:.3f}), "
                  f">= {TARGETS['ap_vs_circle']:g}x the circle rule's ({'met' if ok[1] else 'NOT met'}: "
-                 f"{ratio:.1f}x), <= {TARGETS['false_per_scan']:g} false legs per empty scan "
+                 f"{ratio:.2f}x), <= {TARGETS['false_per_scan']:g} false legs per empty scan "
                  f"({'met' if ok[2] else 'NOT met'}: {L['false_per_scan']:.2f})")
     if model is not None:
         shipped = model.provenance.get("held_out", {}).get("mean", {}).get("learned", {})
