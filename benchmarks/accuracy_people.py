@@ -1,8 +1,9 @@
 """People over time on real scans (make accuracy): `datmo track`'s people on the legtracker bags, with the
 learned leg detector and with the paper's rule beside it.
 
-- negative_2 (rooms without people; each of its three scanners a log): the longest time any confirmed
-  track stays a person (target: none over 2 s).
+- negative_2 (rooms without people; each of its three scanners a log; a moving robot without odometry, so
+  tracked in poses from scan matching): the longest time a track stays a confirmed person from scan to
+  scan (target: none over 2 s).
 - positive_*_extracted (labelled legs): the share of labelled legs within 0.5 m of a confirmed person track,
   counting a leg once its person has been in view for 1 s (target: at least 0.85).
 - demo_stationary_simple_environment: person tracks confirmed, and confirmed person or dynamic tracks
@@ -37,15 +38,16 @@ def tracked(run, leg_model: str):  # noqa: ANN001, ANN201 - ScanRun -> TrackedRu
 
 
 def longest_person(stamps: np.ndarray, tracks: list[np.ndarray]) -> tuple[float, int]:
-    """(longest time, s, from the first to the last scan in which one track is a confirmed person; number of
-    tracks that are confirmed people for longer than 2 s)."""
-    first: dict[int, int] = {}
-    last: dict[int, int] = {}
+    """(longest time, s, that one track stays a confirmed person from scan to scan; number of tracks that
+    do so for longer than 2 s). A scan in which the track is not a confirmed person ends the stretch."""
+    since: dict[int, int] = {}
+    longest: dict[int, float] = {}
     for s, t in zip(stamps.tolist(), tracks, strict=True):
-        for i in t["id"][(t["status"] != 0) & (t["classification"] == acc.PERSON)].tolist():
-            first.setdefault(i, s)
-            last[i] = s
-    spans = np.array([(last[i] - first[i]) * 1e-9 for i in first])
+        now = set(t["id"][(t["status"] != 0) & (t["classification"] == acc.PERSON)].tolist())
+        since = {i: since.get(i, s) for i in now}
+        for i, s0 in since.items():
+            longest[i] = max(longest.get(i, 0.0), (s - s0) * 1e-9)
+    spans = np.array(list(longest.values()))
     return (float(spans.max()) if len(spans) else 0.0), int((spans > 2.0).sum())
 
 

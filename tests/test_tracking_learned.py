@@ -19,9 +19,11 @@ from datmo_cli.tracking.pipeline import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
 
 
-def reference_measurements(circles, blobs, lines, legs, stride_max, d_max):  # noqa: ANN001, ANN201
+def reference_measurements(circles, blobs, lines, legs, stride_max, d_max, weak=None):  # noqa: ANN001, ANN201
     """Plain Python: legs paired (nearest pairs first, within the stride) or single; every other segment as
-    its circle, its lines' bounding box or its blob; nothing larger than d_max. Rows (kind, x, y, size)."""
+    its circle, its lines' bounding box or its blob, with its leg probability from `weak` ({segment: p}, else
+    0); nothing larger than d_max. Rows (kind, x, y, size, probability; 0 for legs)."""
+    weak = weak or {}
     rows = []
     free = list(range(len(legs)))
     pairs = sorted((np.hypot(legs[i][1] - legs[j][1], legs[i][2] - legs[j][2]), i, j)
@@ -31,23 +33,23 @@ def reference_measurements(circles, blobs, lines, legs, stride_max, d_max):  # n
         if d <= stride_max and i not in used and j not in used:
             used |= {i, j}
             rows.append((KIND_PERSON, 0.5 * (legs[i][1] + legs[j][1]), 0.5 * (legs[i][2] + legs[j][2]),
-                         d + 0.5 * (legs[i][3] + legs[j][3])))
+                         d + 0.5 * (legs[i][3] + legs[j][3]), 0.0))
     for i in free:
         if i not in used:
-            rows.append((KIND_LEG, legs[i][1], legs[i][2], legs[i][3]))
+            rows.append((KIND_LEG, legs[i][1], legs[i][2], legs[i][3], 0.0))
     leg_segments = {g[0] for g in legs}
     for seg, x, y, r in circles:
         if seg not in leg_segments:
-            rows.append((KIND_CIRCLE, x, y, 2 * r))
+            rows.append((KIND_CIRCLE, x, y, 2 * r, weak.get(seg, 0.0)))
     for seg, x, y, size in blobs:
         if seg not in leg_segments:
-            rows.append((KIND_BLOB, x, y, size))
+            rows.append((KIND_BLOB, x, y, size, weak.get(seg, 0.0)))
     for seg in sorted({li[0] for li in lines} - leg_segments):
         pts = np.array([[li[1], li[2]] for li in lines if li[0] == seg] + [[li[3], li[4]] for li in lines
                                                                             if li[0] == seg])
         lo, hi = pts.min(axis=0), pts.max(axis=0)
-        rows.append((KIND_RECT, *(0.5 * (lo + hi)), float(np.hypot(*(hi - lo)))))
-    return sorted((k, round(x, 9), round(y, 9), round(s, 9)) for k, x, y, s in rows if s <= d_max)
+        rows.append((KIND_RECT, *(0.5 * (lo + hi)), float(np.hypot(*(hi - lo))), weak.get(seg, 0.0)))
+    return sorted((k, round(x, 9), round(y, 9), round(s, 9), round(p, 9)) for k, x, y, s, p in rows if s <= d_max)
 
 
 def test_learned_measurements_match_the_reference():
@@ -70,6 +72,8 @@ def test_learned_measurements_match_the_reference():
                 circles.append((seg, x, y, 0.08))
                 legs.append((seg, x, y, rng.uniform(0.05, 0.2)))
         f8, i8 = np.float64, np.int64
+        others = sorted(set(segs.tolist()) - {g[0] for g in legs})
+        weak = {seg: float(rng.uniform(0.05, 0.5)) for seg in others if rng.random() < 0.5}
 
         def col(rows, k, t=f8):  # noqa: ANN001, ANN202
             return np.array([r[k] for r in rows], t)
@@ -78,11 +82,12 @@ def test_learned_measurements_match_the_reference():
             col(circles, 0, i8), col(circles, 1), col(circles, 2), col(circles, 3),
             col(blobs, 0, i8), col(blobs, 1), col(blobs, 2), col(blobs, 3),
             col(lines, 0, i8), col(lines, 1), col(lines, 2), col(lines, 3), col(lines, 4),
-            col(legs, 0, i8), col(legs, 1), col(legs, 2), col(legs, 3), 0.9, 1.5)
-        x, y, size, kind, _ = got
-        rows = sorted((int(k), round(float(a), 9), round(float(b), 9), round(float(s), 9))
-                      for k, a, b, s in zip(kind, x, y, size, strict=True))
-        assert rows == reference_measurements(circles, blobs, lines, legs, 0.9, 1.5)
+            col(legs, 0, i8), col(legs, 1), col(legs, 2), col(legs, 3), np.array(list(weak), i8),
+            np.array(list(weak.values()), f8), 0.9, 1.5)
+        x, y, size, kind, _, prob = got
+        rows = sorted((int(k), round(float(a), 9), round(float(b), 9), round(float(s), 9), round(float(p), 9))
+                      for k, a, b, s, p in zip(kind, x, y, size, prob, strict=True))
+        assert rows == reference_measurements(circles, blobs, lines, legs, 0.9, 1.5, weak)
 
 
 def _run(scans: list[dict], learned: bool, dt: float = 0.1) -> list[np.ndarray]:

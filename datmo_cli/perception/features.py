@@ -152,15 +152,16 @@ def _check_segments(start: np.ndarray, end: np.ndarray, offsets: np.ndarray, bea
 
 
 def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.ndarray, count: np.ndarray,
-              lo: float, hi: float, angles: np.ndarray, model) -> np.ndarray:  # noqa: ANN001 - legs.LegModel
+              lo: float, hi: float, angles: np.ndarray, model, floor: float) -> np.ndarray:  # noqa: ANN001
     """Rows (scan in block, segment in scan, first, last, n, x, y, width, probability) of the block's
-    segments whose leg probability reaches the model's threshold; x, y the centroid (sensor frame, m)."""
+    segments whose leg probability (legs.LegModel `model`) is at least `floor`; x, y the centroid (sensor
+    frame, m)."""
     from .legs import leg_probabilities
 
     off = _offsets(count)
     start, end = seg[:off[-1], 0], seg[:off[-1], 1]
     prob = leg_probabilities(block, angles, start, end, off, lo, hi, model)
-    hit = np.flatnonzero(prob >= model.threshold_p)
+    hit = np.flatnonzero(prob >= floor)
     rows = np.zeros((len(hit), 9))
     if not len(hit):
         return rows
@@ -233,7 +234,8 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
                             circles, blobs, got, block_given, block_off)
         segs.append(seg[:int(count.sum())])
         seg_counts.append(count)
-        legs = _leg_rows(block, cos_a, sin_a, seg, count, lo, hi, angles, model) if model is not None and B else None
+        legs = (_leg_rows(block, cos_a, sin_a, seg, count, lo, hi, angles, model, p.leg_min_probability)
+                if model is not None and B else None)
         for key, arr, m in (("l", lines, got[0]), ("c", circles, got[1]), ("b", blobs, got[2])):
             rows = arr[:m].copy()
             rows[:, 0] += a

@@ -65,6 +65,7 @@ class FeatureParams:
     # legs: the learned leg detector ("default": the model shipped in the package), a model file from
     # `datmo train-legs`, or "paper": no detector, legs by the paper's circle rule in tracking
     leg_model: str = "default"
+    leg_min_probability: float = 0.2   # segments with at least this leg probability are listed as legs
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -89,7 +90,8 @@ _POSITIVE_INT = {"min_points", "line_min_points", "circle_min_points", "landmark
 _STRINGS = {"leg_model"}
 _ZERO_OK = {"c0", "deflection_min", "perpendicular_tolerance", "circle_min_coverage", "circle_residual_ratio",
             "circle_radius_margin", "circle_lines_ratio"}
-_RANGES = {"line_min_racc": (0.0, 1.0), "vote_window": (1.0, 90.0), "perpendicular_tolerance": (0.0, 45.0),
+_RANGES = {"leg_min_probability": (0.0, 1.0),
+           "line_min_racc": (0.0, 1.0), "vote_window": (1.0, 90.0), "perpendicular_tolerance": (0.0, 45.0),
            "theta_resolution": (0.05, 10.0), "deflection_min": (0.0, 90.0)}
 
 

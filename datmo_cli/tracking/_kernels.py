@@ -145,19 +145,24 @@ def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
 
 @njit(cache=True)
 def learned_measurements(cseg, cx, cy, cr, bseg, bx, by, bsize, lseg, lx0, ly0, lx1, ly1, gseg, gx, gy, gw,
-                         stride_max, d_max):  # noqa: ANN001, ANN201
+                         wseg, wp, stride_max, d_max):  # noqa: ANN001, ANN201
     """Measurements of one scan when a leg detector ran (see measurements.py): its legs (segments gseg at
     gx, gy, width gw) paired into people or single, then every other segment as what it is: a circle
     (kind 2), the bounding box of its lines (kind 3) or a blob (kind 4), whatever its size up to d_max.
-    Returns x, y, size, kind, legs (M, 4)."""
+    Segments wseg are ones the detector gave a lower leg probability wp: theirs is their measurement's.
+    Returns x, y, size, kind, legs (M, 4), prob (M,: 0 for the legs, filled by the caller, and for
+    segments the detector gave no probability)."""
     nc, nb, nl, ng = len(cx), len(bx), len(lseg), len(gseg)
     top = 0
-    for arr in (cseg, bseg, lseg, gseg):
+    for arr in (cseg, bseg, lseg, gseg, wseg):
         for v in arr:
             top = max(top, v + 1)
     is_leg = np.zeros(top, np.bool_)
     for i in range(ng):
         is_leg[gseg[i]] = True
+    seg_p = np.zeros(top)
+    for i in range(len(wseg)):
+        seg_p[wseg[i]] = wp[i]
     px, py, psize, pkind, plegs = legs_to_measurements(gx, gy, gw, stride_max)
     np_ = len(px)
     cap = np_ + nc + nb + nl
@@ -166,15 +171,16 @@ def learned_measurements(cseg, cx, cy, cr, bseg, bx, by, bsize, lseg, lx0, ly0, 
     size = np.empty(cap)
     kind = np.empty(cap, np.int64)
     legs = np.full((cap, 4), np.nan)
+    prob = np.zeros(cap)
     x[:np_], y[:np_], size[:np_], kind[:np_], legs[:np_] = px, py, psize, pkind, plegs
     m = np_
     for i in range(nc):
         if not is_leg[cseg[i]]:
-            x[m], y[m], size[m], kind[m] = cx[i], cy[i], 2.0 * cr[i], 2
+            x[m], y[m], size[m], kind[m], prob[m] = cx[i], cy[i], 2.0 * cr[i], 2, seg_p[cseg[i]]
             m += 1
     for i in range(nb):
         if not is_leg[bseg[i]]:
-            x[m], y[m], size[m], kind[m] = bx[i], by[i], bsize[i], 4
+            x[m], y[m], size[m], kind[m], prob[m] = bx[i], by[i], bsize[i], 4, seg_p[bseg[i]]
             m += 1
     if nl:
         order = np.argsort(lseg, kind="mergesort")
@@ -192,14 +198,15 @@ def learned_measurements(cseg, cx, cy, cr, bseg, bx, by, bsize, lseg, lx0, ly0, 
                 k += 1
             if not is_leg[seg]:
                 x[m], y[m], size[m], kind[m] = 0.5 * (x0 + x1), 0.5 * (y0 + y1), np.hypot(x1 - x0, y1 - y0), 3
+                prob[m] = seg_p[seg]
                 m += 1
     keep = 0
     for i in range(m):
         if size[i] <= d_max:
-            x[keep], y[keep], size[keep], kind[keep] = x[i], y[i], size[i], kind[i]
+            x[keep], y[keep], size[keep], kind[keep], prob[keep] = x[i], y[i], size[i], kind[i], prob[i]
             legs[keep] = legs[i]
             keep += 1
-    return x[:keep], y[:keep], size[:keep], kind[:keep], legs[:keep]
+    return x[:keep], y[:keep], size[:keep], kind[:keep], legs[:keep], prob[:keep]
 
 
 @njit(cache=True)

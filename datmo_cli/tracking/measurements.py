@@ -43,11 +43,15 @@ class Measurements:
     size: np.ndarray
     kind: np.ndarray
     legs: np.ndarray   # (M, 4): ax, ay, bx, by
-    raw_legs: np.ndarray = None   # (L, 3): x, y, size of every leg candidate, paired or not
+    raw_legs: np.ndarray = None   # (L, 3): x, y, size of every leg candidate, paired or not (a 4th column:
+    #                               the leg detector's probability, when it ran)
+    prob: np.ndarray = None       # (M,) the leg detector's probability of the segment measured (0: none)
 
     def __post_init__(self) -> None:
         if self.raw_legs is None:
             self.raw_legs = np.zeros((0, 3))
+        if self.prob is None:
+            self.prob = np.zeros(len(self.x))
 
     def __len__(self) -> int:
         return len(self.x)
@@ -66,18 +70,19 @@ class Measurements:
         raw = self.raw_legs.copy()
         raw[:, 0] = c * self.raw_legs[:, 0] - s * self.raw_legs[:, 1] + pose[0]
         raw[:, 1] = s * self.raw_legs[:, 0] + c * self.raw_legs[:, 1] + pose[1]
-        return Measurements(x, y, self.size, self.kind, legs, raw)
+        return Measurements(x, y, self.size, self.kind, legs, raw, self.prob)
 
     def take(self, keep: np.ndarray) -> Measurements:
         """The measurements selected by `keep` (mask or indices), leg candidates unchanged."""
         return Measurements(self.x[keep], self.y[keep], self.size[keep], self.kind[keep], self.legs[keep],
-                            self.raw_legs)
+                            self.raw_legs, self.prob[keep])
 
     def extend(self, other: Measurements) -> Measurements:
         """These measurements followed by `other`'s (leg candidates: these)."""
         return Measurements(np.concatenate([self.x, other.x]), np.concatenate([self.y, other.y]),
                             np.concatenate([self.size, other.size]), np.concatenate([self.kind, other.kind]),
-                            np.concatenate([self.legs, other.legs]), self.raw_legs)
+                            np.concatenate([self.legs, other.legs]), self.raw_legs,
+                            np.concatenate([self.prob, other.prob]))
 
 
 def from_legs(lx: np.ndarray, ly: np.ndarray, ls: np.ndarray, params: TrackingParams) -> Measurements:
@@ -89,21 +94,26 @@ def from_legs(lx: np.ndarray, ly: np.ndarray, ls: np.ndarray, params: TrackingPa
 
 
 def measurements(features: ScanFeatures, params: TrackingParams, learned: bool = False) -> Measurements:
-    """The measurements of one scan's features (see the module docstring). `learned`: legs are the leg
-    detector's (features.legs) and nothing else; the other segments are circles, rectangles or blobs
-    whatever their size. Otherwise the paper's rule: small circles, blobs and short lines are legs."""
+    """The measurements of one scan's features (see the module docstring). `learned`: legs are the segments
+    the leg detector gives at least params.leg_probability (features.legs) and nothing else; the other
+    segments are circles, rectangles or blobs whatever their size, each with its segment's leg probability.
+    Otherwise the paper's rule: small circles, blobs and short lines are legs."""
     c, b, li = features.circles, features.blobs, features.lines
     f8 = np.float64
     if learned:
         g = features.legs if features.legs is not None else np.zeros(0, _LEG_DTYPE)
-        x, y, size, kind, legs = _kernels.learned_measurements(
+        weak = g[g["probability"] < params.leg_probability]
+        g = g[g["probability"] >= params.leg_probability]
+        x, y, size, kind, legs, prob = _kernels.learned_measurements(
             c["segment"].astype(np.int64), c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8),
             b["segment"].astype(np.int64), b["x"].astype(f8), b["y"].astype(f8), b["size"].astype(f8),
             li["segment"].astype(np.int64), li["x_ini"].astype(f8), li["y_ini"].astype(f8), li["x_end"].astype(f8),
             li["y_end"].astype(f8), g["segment"].astype(np.int64), g["x"].astype(f8), g["y"].astype(f8),
-            g["width"].astype(f8), params.stride_max, params.d_max)
-        raw = np.stack([g["x"].astype(f8), g["y"].astype(f8), g["width"].astype(f8)], axis=1).reshape(-1, 3)
-        return Measurements(x, y, size, kind, legs, raw)
+            g["width"].astype(f8), weak["segment"].astype(np.int64), weak["probability"].astype(f8),
+            params.stride_max, params.d_max)
+        raw = np.stack([g["x"].astype(f8), g["y"].astype(f8), g["width"].astype(f8), g["probability"].astype(f8)],
+                       axis=1).reshape(-1, 4)
+        return Measurements(x, y, size, kind, legs, raw, prob)
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
         c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8), b["x"].astype(f8), b["y"].astype(f8),
         b["size"].astype(f8), b["kind"].astype(np.int64), li["segment"].astype(np.int64), li["x_ini"].astype(f8),

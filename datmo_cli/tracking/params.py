@@ -52,9 +52,10 @@ class TrackingParams:
     merge_distance: float = 0.55        # two leg or person tracks nearer than this are one, m ...
     merge_speed: float = 0.5            # ... when one is tentative or their velocities differ less, m/s
     person_votes: float = 0.5           # share of a track's hits that were leg measurements for a person
-    # people with a leg detector: leg_score follows the share of recent hits that were detected legs
-    leg_evidence_rate: float = 0.25     # weight of each new hit in the running share (about 1/rate hits remembered)
-    person_evidence: float = 0.5        # a track is a person while its running share of leg hits is at least this
+    # people with a leg detector: leg_score follows the leg probability of a track's recent hits
+    leg_probability: float = 0.5        # segments the detector gives at least this are legs (paired into people)
+    leg_evidence_rate: float = 0.25     # weight of each new hit in the running mean (about 1/rate hits remembered)
+    person_evidence: float = 0.6        # a track is a person while that running leg probability is at least this
     # background: a grid of how long each place was hit by a return (tracking frame); a leg candidate on a place
     # occupied for long (a wall, a bench, a column) is not a leg (real perception finds leg-sized pieces there)
     background_time: float = 3.0        # s a place must have been hit, never seen through, to be background; 0: off
@@ -97,7 +98,7 @@ def from_dict(values: dict, where: str = "track") -> TrackingParams:
             raise ConfigError(f"{where}.{key}: must be positive, got {value!r}")
         out[key] = want(value)
     params = TrackingParams(**out)
-    for key in ("leg_evidence_rate", "person_evidence"):
+    for key in ("leg_evidence_rate", "person_evidence", "leg_probability"):
         value = getattr(params, key)
         if value > 1 or (key == "leg_evidence_rate" and value == 0):
             raise ConfigError(f"{where}.{key}: a share, in (0, 1], got {value!r}")

@@ -47,6 +47,9 @@ _COMPAT[1, [KIND_PERSON, KIND_RECT]] = False   # a circle partly seen may pass f
 _COMPAT[2, [KIND_PERSON, KIND_LEG, KIND_CIRCLE]] = False
 _ANY, _LONE_LEG = 4, 5
 _COMPAT[_LONE_LEG, [KIND_PERSON, KIND_CIRCLE, KIND_RECT]] = False
+# with a leg detector, a leg it was less sure of is a small circle or blob: people may take those too
+_COMPAT_LEARNED = _COMPAT.copy()
+_COMPAT_LEARNED[[0, _LONE_LEG], KIND_CIRCLE] = True
 # which kinds a lost track may be reacquired on (rows as _COMPAT's): only its own, since with real perception
 # the clutter around (pieces of walls and benches as blobs, short lines and small circles) is near everywhere
 _REACQUIRE = np.zeros((6, N_KINDS), bool)
@@ -106,6 +109,30 @@ class TrackArrays:
     @property
     def walking(self) -> np.ndarray:
         return self.lead_left & self.lead_right
+
+
+def _leg_probability(m: Measurements, cols: np.ndarray) -> np.ndarray:
+    """The leg detector's probability of measurements `cols`: a single leg's own, the mean of a pair's two,
+    the segment's for the rest (1 for legs without a probability: the paper's rule)."""
+    out = np.asarray(m.prob, np.float64)[cols].copy()
+    legs = np.flatnonzero(m.kind[cols] <= KIND_LEG)
+    raw = m.raw_legs
+    if not len(legs):
+        return out
+    if raw.shape[1] < 4 or not len(raw):
+        out[legs] = 1.0
+        return out
+    c = cols[legs]
+    pair = m.kind[c] == KIND_PERSON
+    # each leg's own point: a pair's two legs, a single leg's centre (the raw candidates they were made of)
+    ax = np.where(pair, m.legs[c, 0], m.x[c])
+    ay = np.where(pair, m.legs[c, 1], m.y[c])
+    bx = np.where(pair, m.legs[c, 2], m.x[c])
+    by = np.where(pair, m.legs[c, 3], m.y[c])
+    pa = raw[np.argmin(np.hypot(ax[:, None] - raw[None, :, 0], ay[:, None] - raw[None, :, 1]), axis=1), 3]
+    pb = raw[np.argmin(np.hypot(bx[:, None] - raw[None, :, 0], by[:, None] - raw[None, :, 1]), axis=1), 3]
+    out[legs] = 0.5 * (pa + pb)
+    return out
 
 
 class Tracker:
@@ -168,7 +195,7 @@ class Tracker:
             rows, cols = np.concatenate([rows[keep], rows2]), np.concatenate([cols[keep], cols2])
         if len(rows):
             a = p.leg_evidence_rate
-            t.leg_score[rows] = (1.0 - a) * t.leg_score[rows] + a * (m.kind[cols] <= KIND_LEG)
+            t.leg_score[rows] = (1.0 - a) * t.leg_score[rows] + a * _leg_probability(m, cols)
         self._occlusion(t, ranges)
         self._life_cycle(t, stamp_ns)
         self._spawn(m, rows, cols, stamp_ns)
@@ -243,7 +270,8 @@ class Tracker:
         return Measurements(np.concatenate([lx, raw[bg, 0], m.x[other]]), np.concatenate([ly, raw[bg, 1], m.y[other]]),
                             np.concatenate([ls, raw[bg, 2], m.size[other]]),
                             np.concatenate([kind, np.full(n_bg, KIND_BLOB, np.int64), m.kind[other]]),
-                            np.concatenate([legs, np.full((n_bg, 4), np.nan), m.legs[other]]), keep)
+                            np.concatenate([legs, np.full((n_bg, 4), np.nan), m.legs[other]]), keep,
+                            np.concatenate([np.zeros(len(lx) + n_bg), m.prob[other]]))
 
     def _legs(self, t: TrackArrays, m: Measurements) -> tuple[Measurements, np.ndarray]:
         """Let tracks that are legs or people take up to two leg candidates each near their prediction
@@ -265,7 +293,11 @@ class Tracker:
             p.leg_reach, p.stride_max, m.x, m.y, m.size, m.kind, m.legs)
         if not len(owner):
             return m, none
-        return Measurements(x, y, size, kind, legs, raw), leggy[owner]
+        prob = np.zeros(len(x))
+        other = m.kind > KIND_LEG
+        if other.any():
+            prob[len(x) - int(other.sum()):] = m.prob[other]
+        return Measurements(x, y, size, kind, legs, raw, prob), leggy[owner]
 
     def _associate(self, t: TrackArrays, m: Measurements, rows0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Tracks `rows0` own measurements 0..len(rows0)-1; the others are gated and assigned by GNN."""
@@ -275,8 +307,8 @@ class Tracker:
         if not len(t) or len(m) == n0:
             return rows0, cols0
         d2, allowed = _kernels.gated_costs(t.x, t.P, m.x, m.y, m.kind, p.measurement_noise,
-                                               p.leg_measurement_noise, p.gate, p.max_gate_distance, _COMPAT,
-                                               self._compat_row)
+                                               p.leg_measurement_noise, p.gate, p.max_gate_distance,
+                                               _COMPAT_LEARNED if self.learned else _COMPAT, self._compat_row)
         if n0:
             allowed[rows0, :] = False
             allowed[:, :n0] = False
@@ -405,7 +437,7 @@ class Tracker:
                           votes, np.zeros(n, bool), np.zeros(n, bool), np.zeros(n), m.size[idx].astype(np.float64),
                           x[:, :2].copy(), x[:, :2].copy(), np.zeros(n, bool), np.zeros(n, bool), np.ones(n, bool),
                           np.zeros(n, np.uint8), np.full(n, 2, np.uint8), np.zeros((n, T, 2)), zeros,
-                          (m.kind[idx] <= KIND_LEG).astype(np.float64))
+                          _leg_probability(m, idx))
         self.next_id += n
         self.tracks = self.tracks.extend(new)
 
