@@ -1,6 +1,7 @@
 """Leg detector accuracy (make accuracy; alone: python -m benchmarks accuracy legs): the leave-one-bag-out
 figures of the learned detector on the legtracker bags, rerun from scratch with the shipped model's estimator
-settings, beside the paper's circle rule on the same clusters.
+settings and clusters (datmo's segments or leg_tracker's gap clusters, its provenance), beside the paper's
+circle rule on the same clusters.
 
 Each positive bag is held out in turn with one of negative_2's three scanners (cycling); the model is trained
 on the other bags and scanners, its threshold tuned on them alone (the rule the shipped model's threshold
@@ -50,10 +51,13 @@ def figure_lines() -> list[str]:
     t0 = time.perf_counter()
     labelled = [T.read_labelled(p) for p in positives]
     empty = T.read_empty(negative)
-    lab, emp = T.tables_of(labelled), T.tables_of(empty)
+    clusters = T.DEFAULT_CLUSTERS if model is None else model.provenance.get("clusters", T.SEGMENT_CLUSTERS)
+    lab, emp = T.tables_of(labelled, clusters=clusters), T.tables_of(empty, clusters=clusters)
     held_out = T.cross_validate(lab, emp, spec)
     seconds = time.perf_counter() - t0
-    lines = [f"estimator {spec.kind}, {spec.n_estimators} trees, depth {spec.max_depth}; "
+    how = ("datmo's segments" if clusters.get("method") == "segments" else
+           f"gap clusters ({clusters.get('gap')} m, >= {clusters.get('min_points')} points)")
+    lines = [f"estimator {spec.kind}, {spec.n_estimators} trees, depth {spec.max_depth}; clusters: {how}; "
              f"threshold rule: {T.THRESHOLD_RULE}",
              f"{'held out':26s} {'empty scanner':27s} thr   | precision     recall        AP            "
              f"false/scan   (learned | circle rule)"]

@@ -10,7 +10,16 @@ import math
 
 import numpy as np
 
-from datmo_cli.perception.legs import FEATURE_NAMES, OCCLUSION_MARGIN, RADIUS_CLIP
+from datmo_cli.perception.legs import (
+    CANDIDATE_MAX_WIDTH,
+    CANDIDATE_MIN_POINTS,
+    DENSITY_CLIP,
+    FEATURE_NAMES,
+    JUMP_CLIP,
+    NEIGHBOUR_CLIP,
+    OCCLUSION_MARGIN,
+    RADIUS_CLIP,
+)
 
 
 def is_valid(r: float, range_min: float, range_max: float) -> bool:
@@ -101,15 +110,45 @@ def segment_features(r: np.ndarray, angles: np.ndarray, start: int, end: int, ra
                                 and float(r[before]) < float(r[first]) - OCCLUSION_MARGIN)
     f["occluded_end"] = float(after < len(r) and is_valid(float(r[after]), range_min, range_max)
                               and float(r[after]) < float(r[last]) - OCCLUSION_MARGIN)
+    f["jump_start"] = jump(r, first, -1, range_min, range_max)
+    f["jump_end"] = jump(r, last, +1, range_min, range_max)
+    step = abs(float(angles[-1]) - float(angles[0])) / (len(angles) - 1) if len(angles) > 1 else 0.0
+    f["density"] = min(n * step * f["distance"] / f["width"], DENSITY_CLIP) if f["width"] > 0 else DENSITY_CLIP
+    f["relative_curvature"] = f["mean_curvature"] * f["width"]
     return np.array([f[k] for k in FEATURE_NAMES], np.float64)
+
+
+def jump(r: np.ndarray, i: int, direction: int, range_min: float, range_max: float) -> float:
+    """The nearest valid return beyond beam i (towards direction) minus r[i], clipped; +JUMP_CLIP if none."""
+    j = i + direction
+    while 0 <= j < len(r):
+        if is_valid(float(r[j]), range_min, range_max):
+            return float(np.clip(float(r[j]) - float(r[i]), -JUMP_CLIP, JUMP_CLIP))
+        j += direction
+    return JUMP_CLIP
+
+
+def centroid(r: np.ndarray, angles: np.ndarray, start: int, end: int, range_min: float, range_max: float):
+    beams = [i for i in range(start, end) if is_valid(float(r[i]), range_min, range_max)]
+    rr = np.array([float(r[i]) for i in beams])
+    return np.column_stack([rr * np.cos(angles[beams]), rr * np.sin(angles[beams])]).mean(axis=0)
 
 
 def cluster_features(ranges, angles, seg_start, seg_end, seg_offsets, range_min, range_max) -> np.ndarray:
     rows = []
     for k in range(len(ranges)):
-        for g in range(seg_offsets[k], seg_offsets[k + 1]):
-            rows.append(segment_features(ranges[k], angles, int(seg_start[g]), int(seg_end[g]), range_min,
-                                         range_max))
+        scan = [segment_features(ranges[k], angles, int(seg_start[g]), int(seg_end[g]), range_min, range_max)
+                for g in range(seg_offsets[k], seg_offsets[k + 1])]
+        # the neighbour distance: to the nearest other candidate (>= 3 points, <= 0.8 m wide) of the scan
+        cand = [f[0] >= CANDIDATE_MIN_POINTS and f[1] <= CANDIDATE_MAX_WIDTH for f in scan]
+        cents = [centroid(ranges[k], angles, int(seg_start[g]), int(seg_end[g]), range_min, range_max)
+                 if f[0] > 0 else None for g, f in zip(range(seg_offsets[k], seg_offsets[k + 1]), scan, strict=True)]
+        for a, f in enumerate(scan):
+            if f[0] == 0:
+                continue
+            d = [np.linalg.norm(cents[a] - cents[b]) for b in range(len(scan)) if cand[b] and b != a]
+            f[FEATURE_NAMES.index("neighbour_distance")] = min([NEIGHBOUR_CLIP, *d])
+        rows.extend(scan)
     return np.array(rows).reshape(-1, len(FEATURE_NAMES))
 
 
@@ -119,3 +158,29 @@ def tree_leaf(model, root: int, x: np.ndarray) -> int:
     while model.feature[node] >= 0:
         node = model.left[node] if np.float32(x[model.feature[node]]) <= model.threshold[node] else model.right[node]
     return node
+
+
+def gap_clusters(ranges, angles, range_min, range_max, gap, min_points):
+    """leg_tracker's clustering, one beam at a time: (start, end, offsets) as legs.gap_clusters."""
+    start, end, offsets = [], [], [0]
+    for r in ranges:
+        runs, cur = [], []
+        prev = None
+        for i in range(len(r)):
+            if not is_valid(float(r[i]), range_min, range_max):
+                runs.append(cur)
+                cur, prev = [], None
+                continue
+            p = np.array([float(r[i]) * math.cos(angles[i]), float(r[i]) * math.sin(angles[i])])
+            if prev is not None and np.linalg.norm(p - prev) > gap:
+                runs.append(cur)
+                cur = []
+            cur.append(i)
+            prev = p
+        runs.append(cur)
+        for c in runs:
+            if len(c) >= min_points:
+                start.append(c[0])
+                end.append(c[-1] + 1)
+        offsets.append(len(start))
+    return np.array(start, np.int64), np.array(end, np.int64), np.array(offsets, np.int64)

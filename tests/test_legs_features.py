@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from datmo_cli.perception import legs
 from datmo_cli.perception.features import segment_run
 from datmo_cli.perception.legs import FEATURE_NAMES, RADIUS_CLIP, candidate_mask, cluster_features
 
@@ -160,3 +161,99 @@ def test_sample_log_matches_naive(sample_logs):
     start, end, offsets = segment_run(type(run)(run.stamps[:5], sub, run.geometry))
     g = run.geometry
     assert_matches_naive(sub, g.angles(), start, end, offsets, g.range_min, g.range_max)
+
+
+def test_kernel_constants_match_the_documented_ones():
+    from datmo_cli.perception import _leg_kernels as LK
+
+    assert LK.N_FEATURES == len(FEATURE_NAMES)
+    assert (LK.JUMP_CLIP, LK.NEIGHBOUR_CLIP, LK.DENSITY_CLIP) == (legs.JUMP_CLIP, legs.NEIGHBOUR_CLIP,
+                                                                  legs.DENSITY_CLIP)
+
+
+def test_range_jumps_skip_invalid_returns():
+    r = np.full(20, 3.0, np.float32)
+    r[4] = np.inf
+    r[3] = 4.5       # the nearest valid return before the segment: 1.5 m behind it
+    r[15] = 1.0      # after it: 2 m in front
+    f = features_of(r, [(5, 15)])[0]
+    assert f[COL["jump_start"]] == pytest.approx(1.5)
+    assert f[COL["jump_end"]] == pytest.approx(-2.0)
+    r[15:] = np.nan  # no valid return beyond the end
+    r[0] = 9.0       # far behind: clipped
+    r[1:5] = np.inf
+    f = features_of(r, [(5, 15)])[0]
+    assert (f[COL["jump_start"]], f[COL["jump_end"]]) == (legs.JUMP_CLIP, legs.JUMP_CLIP)
+
+
+def test_neighbour_distance_and_density():
+    angles = np.radians(np.linspace(-30.0, 30.0, 121))
+    r = np.full(121, 4.0, np.float32)
+    segs = [(10, 15), (17, 22), (100, 105), (40, 95)]   # two close blobs, a lone one, a wide wall (not a candidate)
+    f = features_of(r, segs, angles)
+    x = 4.0 * np.cos(angles)
+    y = 4.0 * np.sin(angles)
+    cent = [np.array([x[a:b].mean(), y[a:b].mean()]) for a, b in segs]
+    d01 = np.linalg.norm(cent[0] - cent[1])
+    assert f[0, COL["neighbour_distance"]] == pytest.approx(d01)
+    assert f[1, COL["neighbour_distance"]] == pytest.approx(d01)
+    assert f[2, COL["neighbour_distance"]] == legs.NEIGHBOUR_CLIP          # the wall is no candidate
+    assert not candidate_mask(f)[3]
+    assert f[3, COL["neighbour_distance"]] == pytest.approx(min(np.linalg.norm(cent[3] - c) for c in cent[:3]))
+    # an arc of the circle around the sensor: n points span (n - 1) steps, so the density is n / (n - 1)
+    assert f[0, COL["density"]] == pytest.approx(5 / 4, rel=1e-3)
+    # a coarser scanner sees the same surface with fewer points and the same density
+    g = features_of(r[::2].copy(), [(5, 8)], angles[::2].copy())[0]
+    assert g[COL["density"]] == pytest.approx(3 / 2, rel=1e-3)
+
+
+def test_relative_curvature_is_scale_free():
+    for radius, dist in ((0.06, 1.0), (0.6, 10.0)):
+        r = circle_ranges(ANGLES_361, dist, 0.0, radius)
+        hit = np.flatnonzero(np.isfinite(r))
+        f = features_of(r, [(hit[0], hit[-1] + 1)], hi=50.0)[0]
+        assert f[COL["relative_curvature"]] == pytest.approx(f[COL["mean_curvature"]] * f[COL["width"]])
+        assert 1.5 < f[COL["relative_curvature"]] < 2.2
+
+
+def test_gap_clusters_known_scan():
+    angles = np.radians(np.linspace(-10.0, 10.0, 21))
+    r = np.full(21, 2.0, np.float32)
+    r[5] = 3.0           # a jump of 1 m: ends the first cluster (beams 0..4), beam 5 alone is dropped
+    r[12] = np.inf       # an invalid return ends the cluster of beams 6..11
+    r[19] = 0.01         # below range_min; 13..18 form one cluster, beam 20 alone is dropped
+    start, end, offsets = legs.gap_clusters(r[None, :], angles, 0.05, 30.0)
+    assert start.tolist() == [0, 6, 13] and end.tolist() == [5, 12, 19] and offsets.tolist() == [0, 3]
+    start, end, offsets = legs.gap_clusters(np.zeros((2, 21), np.float32), angles, 0.05, 30.0)
+    assert len(start) == 0 and offsets.tolist() == [0, 0, 0]
+
+
+@settings(max_examples=50, deadline=None)
+@given(scans(), st.sampled_from([0.05, 0.13, 0.5]), st.integers(1, 4))
+def test_gap_clusters_match_naive(case, gap, min_points):
+    ranges, angles, *_, lo, hi = case
+    got = legs.gap_clusters(ranges, angles, lo, hi, gap, min_points)
+    want = naive_legs.gap_clusters(ranges, angles, lo, hi, gap, min_points)
+    for a, b in zip(got, want, strict=True):
+        assert a.tolist() == b.tolist()
+    assert_matches_naive(ranges, angles, *got, lo, hi)
+
+
+def test_model_clusters_follow_the_provenance():
+    r = np.full((1, 21), 2.0, np.float32)
+    r[0, 10] = 3.0
+    angles = np.radians(np.linspace(-10.0, 10.0, 21))
+    segs = (np.array([0]), np.array([21]), np.array([0, 1]))
+
+    def model(prov):
+        return legs.LegModel(np.array([-1]), np.zeros(1), np.array([-1]), np.array([-1]), np.ones(1),
+                             np.array([0]), provenance=prov)
+
+    for m in (None, model({}), model({"clusters": {"method": "segments"}})):
+        got = legs.model_clusters(r, angles, 0.0, 30.0, m, *segs)
+        assert [a.tolist() for a in got] == [[0], [21], [0, 1]]
+    got = legs.model_clusters(r, angles, 0.0, 30.0, model({"clusters": {"method": "gap", "gap": 0.13,
+                                                                        "min_points": 3}}), *segs)
+    assert [a.tolist() for a in got] == [[0, 11], [10, 21], [0, 2]]
+    with pytest.raises(ValueError, match="cluster method"):
+        legs.model_clusters(r, angles, 0.0, 30.0, model({"clusters": {"method": "dbscan"}}), *segs)

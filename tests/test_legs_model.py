@@ -18,6 +18,7 @@ from datmo_cli.perception.legs import (
     from_sklearn,
     leg_probabilities,
     load_leg_model,
+    model_clusters,
 )
 
 F = len(FEATURE_NAMES)
@@ -144,7 +145,8 @@ def test_packaged_model_loads_and_gives_probabilities(sample_logs):
 
     run = run_from_log(read_log(sample_logs / "hall.mcap", topics=["/scan"]))
     g = run.geometry
-    start, end, offsets = segment_run(run)
+    start, end, offsets = model_clusters(run.ranges, g.angles(), g.range_min, g.range_max, model, *segment_run(run))
+    assert model.provenance["clusters"] == {"method": "gap", "gap": 0.13, "min_points": 3}
     p = leg_probabilities(run.ranges, g.angles(), start, end, offsets, g.range_min, g.range_max, model)
     feats = cluster_features(run.ranges, g.angles(), start, end, offsets, g.range_min, g.range_max)
     assert p.shape == (len(start),) and np.all((p >= 0) & (p <= 1))

@@ -11,6 +11,7 @@ import pytest
 
 from datmo_cli.errors import InputError
 from datmo_cli.perception import training as T
+from datmo_cli.perception.legs import FEATURE_NAMES
 from tests.conftest import shared_path
 from tests.synthetic_legs import scene, write_bag, write_mcap
 
@@ -65,7 +66,7 @@ def test_one_labelled_recording_gives_no_folds():
 def _table(name: str, labelled: bool, label, score=None, n_scans: int = 2, rng_m=None, circle=None) -> T.SegmentTable:
     label = np.asarray(label, bool)
     m = len(label)
-    feats = np.zeros((m, 16))
+    feats = np.zeros((m, len(FEATURE_NAMES)))
     feats[:, 0] = 5 if score is None else np.asarray(score) * 10 + 3   # a feature that orders the segments
     r = np.full(m, 1.0) if rng_m is None else np.asarray(rng_m, float)
     circle = np.zeros(m, bool) if circle is None else np.asarray(circle, bool)
@@ -201,7 +202,29 @@ def test_a_model_trained_on_synthetic_legs_finds_held_out_legs(tmp_path):
     prov = result.model.provenance
     assert [d["file"] for d in prov["data"]] == ["p0.bag", "p1.bag", "p2.bag", "n.bag"]
     assert prov["threshold"]["value"] == result.model.threshold_p == result.threshold
+    assert prov["clusters"] == T.DEFAULT_CLUSTERS
     json.dumps(prov)
+
+
+@pytest.mark.parametrize("clusters", [T.SEGMENT_CLUSTERS, T.GAP_CLUSTERS])
+def test_tables_tabulate_the_clusters_asked_for(tmp_path, clusters):
+    from datmo_cli.perception.features import _range_limits, segment_run
+    from datmo_cli.perception.legs import cluster_features, gap_clusters
+
+    rec = T.read_labelled(write_bag(tmp_path / "p.bag", *scene(6, seed=3)))
+    run = rec.run
+    lo, hi = _range_limits(run)
+    if clusters["method"] == "gap":
+        start, end, offsets = gap_clusters(run.ranges, run.geometry.angles(), lo, hi, 0.13, 3)
+    else:
+        start, end, offsets = segment_run(run)
+    table = T.segment_table(rec, clusters=clusters)
+    assert len(table) == len(start) and table.scan.tolist() == np.repeat(np.arange(6), np.diff(offsets)).tolist()
+    np.testing.assert_array_equal(table.features, cluster_features(run.ranges, run.geometry.angles(), start, end,
+                                                                   offsets, lo, hi))
+    assert table.label.any()
+    with pytest.raises(ValueError, match="cluster method"):
+        T.recording_clusters(run, clusters={"method": "dbscan"})
 
 
 def test_packaged_model_provenance_lists_every_shared_bag_with_its_sha256():
@@ -217,5 +240,6 @@ def test_packaged_model_provenance_lists_every_shared_bag_with_its_sha256():
         assert data[bag.name]["sha256"] == sha256_of(bag), bag.name
     assert data["negative_2.bag"]["topics"] == ["/left_scan", "/rear_scan", "/right_scan"]
     assert model.provenance["feature_names"] == list(FEATURE_NAMES)
+    assert model.provenance["clusters"] == T.DEFAULT_CLUSTERS
     assert model.provenance["threshold"]["value"] == model.threshold_p
     assert len(model.provenance["held_out"]["folds"]) == 6

@@ -14,8 +14,12 @@ from ._kernels import valid_return
 
 (F_N, F_WIDTH, F_LINEARITY, F_CIRCULARITY, F_RADIUS, F_STD, F_MEDIAN_DEV, F_BOUNDARY_LENGTH,
  F_BOUNDARY_REGULARITY, F_MEAN_CURVATURE, F_INSCRIBED_ANGLE, F_INSCRIBED_ANGLE_STD, F_DISTANCE,
- F_SUBTENDED_ANGLE, F_OCCLUDED_START, F_OCCLUDED_END) = range(16)
-N_FEATURES = 16
+ F_SUBTENDED_ANGLE, F_OCCLUDED_START, F_OCCLUDED_END, F_JUMP_START, F_JUMP_END, F_NEIGHBOUR, F_DENSITY,
+ F_RELATIVE_CURVATURE) = range(21)
+N_FEATURES = 21
+JUMP_CLIP = 3.0       # m: bound of the range jumps; the jump when no valid return lies beyond an end
+NEIGHBOUR_CLIP = 2.0  # m: bound of the distance to the nearest other candidate (also when there is none)
+DENSITY_CLIP = 10.0   # bound of the angle-step-free point density (also for a segment of zero width)
 DEGENERATE = 1e-12   # circle fit refused when det(scatter) <= DEGENERATE * trace(scatter)**2 (collinear points)
 KIND_FOREST, KIND_BOOSTING = 0, 1
 
@@ -154,40 +158,70 @@ def segment_features(x, y, n, radius_clip, work, step, out) -> None:
 
 
 @njit(cache=True)
+def _jump(r, i, d, B, range_min, range_max) -> float:
+    """Range of the nearest valid return beyond beam i in direction d (+1 / -1) minus r[i], clipped to
+    +-JUMP_CLIP; +JUMP_CLIP when there is none."""
+    j = i + d
+    while 0 <= j < B:
+        if valid_return(r[j], range_min, range_max):
+            return min(max(np.float64(r[j]) - np.float64(r[i]), -JUMP_CLIP), JUMP_CLIP)
+        j += d
+    return JUMP_CLIP
+
+
+@njit(cache=True)
 def block_features(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min, range_max,
-                   radius_clip, margin, max_width, min_points, out) -> None:
+                   radius_clip, margin, max_width, min_points, skip, angle_step, out) -> None:
     """Features of every segment of a block of scans into out (M, N_FEATURES).
 
     Scan k's segments are seg_start/seg_end[seg_offsets[k]:seg_offsets[k + 1]], beam ranges [start, end)
     within the scan; invalid returns inside a segment are skipped. A side is occluded when the beam next to
-    the segment's first (last) point is a valid return nearer than that point by more than `margin` (m).
-    Segments that are not candidates (see is_candidate; max_width < 0: none excluded) get only n_points and
-    width, the rest zero: the hot path skips what the ensemble will not look at.
+    the segment's first (last) point is a valid return nearer than that point by more than `margin` (m); the
+    jump of a side is the range of the nearest valid return beyond it minus the end point's range. Candidates
+    (is_candidate with max_width, min_points) give the neighbour distance: from a segment's centroid to the
+    nearest other candidate's centroid in the same scan. angle_step (rad) is the scan's beam spacing, for the
+    density n_points * angle_step * distance / width. With skip, segments that are not candidates get only
+    n_points and width, the rest zero: the hot path skips what the ensemble will not look at.
     """
     N, B = ranges.shape
     x = np.empty(B, np.float64)
     y = np.empty(B, np.float64)
     work = np.empty(B, np.float64)
     step = np.empty(B, np.float64)
+    most = 0
+    for k in range(N):
+        most = max(most, seg_offsets[k + 1] - seg_offsets[k])
+    cx = np.empty(most, np.float64)
+    cy = np.empty(most, np.float64)
+    cand = np.zeros(most, np.bool_)
     for k in range(N):
         r = ranges[k]
-        for g in range(seg_offsets[k], seg_offsets[k + 1]):
+        g0 = seg_offsets[k]
+        for g in range(g0, seg_offsets[k + 1]):
             o = out[g]
             n = 0
             first = -1
             last = -1
+            sx = 0.0
+            sy = 0.0
             for i in range(seg_start[g], seg_end[g]):
                 if valid_return(r[i], range_min, range_max):
                     ri = np.float64(r[i])
                     x[n] = ri * cos_a[i]
                     y[n] = ri * sin_a[i]
+                    sx += x[n]
+                    sy += y[n]
                     n += 1
                     if first < 0:
                         first = i
                     last = i
-            if max_width >= 0.0 and n > 0:
+            cand[g - g0] = False
+            if n > 0:
                 width = np.sqrt((x[n - 1] - x[0]) ** 2 + (y[n - 1] - y[0]) ** 2)
-                if n < min_points or width > max_width:
+                cand[g - g0] = n >= min_points and width <= max_width
+                cx[g - g0] = sx / n
+                cy[g - g0] = sy / n
+                if skip and not cand[g - g0]:
                     for f in range(o.shape[0]):
                         o[f] = 0.0
                     o[F_N] = n
@@ -203,6 +237,28 @@ def block_features(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets
             j = last + 1
             if j < B and valid_return(r[j], range_min, range_max) and r[j] < np.float64(r[last]) - margin:
                 o[F_OCCLUDED_END] = 1.0
+            o[F_JUMP_START] = _jump(r, first, -1, B, range_min, range_max)
+            o[F_JUMP_END] = _jump(r, last, 1, B, range_min, range_max)
+            w = o[F_WIDTH]
+            dens = DENSITY_CLIP
+            if w > 0.0:
+                dens = min(n * angle_step * o[F_DISTANCE] / w, DENSITY_CLIP)
+            o[F_DENSITY] = dens
+            o[F_RELATIVE_CURVATURE] = o[F_MEAN_CURVATURE] * w
+        # the nearest other candidate of each segment with features
+        for g in range(g0, seg_offsets[k + 1]):
+            o = out[g]
+            if o[F_N] == 0 or (skip and not cand[g - g0]):
+                continue
+            best = NEIGHBOUR_CLIP * NEIGHBOUR_CLIP
+            ax = cx[g - g0]
+            ay = cy[g - g0]
+            for h in range(seg_offsets[k + 1] - g0):
+                if cand[h] and h != g - g0:
+                    d2 = (cx[h] - ax) ** 2 + (cy[h] - ay) ** 2
+                    if d2 < best:
+                        best = d2
+            o[F_NEIGHBOUR] = np.sqrt(best)
 
 
 @njit(cache=True)
@@ -304,9 +360,55 @@ def ensemble(features, max_width, min_points, nodes, split, roots, kind, base, s
 
 @njit(cache=True)
 def block_probabilities(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min, range_max,
-                        radius_clip, margin, max_width, min_points, nodes, split, roots, kind, base, scale,
-                        features, out) -> None:
+                        radius_clip, margin, max_width, min_points, angle_step, nodes, split, roots, kind, base,
+                        scale, features, out) -> None:
     """block_features (candidates only) then ensemble, in one compiled call: the per-scan hot path."""
     block_features(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min, range_max,
-                   radius_clip, margin, max_width, min_points, features)
+                   radius_clip, margin, max_width, min_points, True, angle_step, features)
     ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, out)
+
+
+@njit(cache=True)
+def _gap_pass(ranges, cos_a, sin_a, range_min, range_max, gap, min_points, start, end, counts) -> None:
+    """Gap clusters of every scan: counts[k] clusters of scan k; written to start/end (from the running
+    total) when those are not empty."""
+    N, B = ranges.shape
+    fill = start.shape[0] > 0
+    g2 = gap * gap
+    m = 0
+    for k in range(N):
+        r = ranges[k]
+        c = 0
+        first = -1      # first beam of the open cluster (-1: none)
+        last = -1
+        n = 0
+        px = 0.0
+        py = 0.0
+        qx = 0.0
+        qy = 0.0
+        for i in range(B + 1):
+            ok = i < B and valid_return(r[i], range_min, range_max)
+            close = not ok
+            if ok:
+                ri = np.float64(r[i])
+                qx = ri * cos_a[i]
+                qy = ri * sin_a[i]
+                if first >= 0 and (qx - px) ** 2 + (qy - py) ** 2 > g2:
+                    close = True
+            if close and first >= 0:
+                if n >= min_points:
+                    if fill:
+                        start[m] = first
+                        end[m] = last + 1
+                    m += 1
+                    c += 1
+                first = -1
+                n = 0
+            if ok:
+                if first < 0:
+                    first = i
+                last = i
+                n += 1
+                px = qx
+                py = qy
+        counts[k] = c

@@ -10,6 +10,10 @@ Candidate rule (`candidate_mask`): a segment of fewer than CANDIDATE_MIN_POINTS 
 CANDIDATE_MAX_WIDTH (first to last point) cannot be a leg; `leg_probabilities` gives it 0 without evaluating
 the ensemble. Train on candidates only (apply `candidate_mask` to the training rows), so the model never
 has to learn what the rule already decides.
+
+Clusters: a model scores the clusters it was trained on, named by its provenance["clusters"]: datmo's segments
+({"method": "segments"}, also models without the key) or leg_tracker's gap clusters (`gap_clusters`, {"method":
+"gap", "gap": 0.13, "min_points": 3}); `model_clusters` gives them for a scan block.
 """
 
 from __future__ import annotations
@@ -44,8 +48,20 @@ FEATURE_NAMES: tuple[str, ...] = (
     "subtended_angle",        # rad, |angle of last point's beam - angle of first point's beam|
     "occluded_start",         # 1.0 when the beam before the first point is a valid return nearer by > margin
     "occluded_end",           # 1.0 when the beam after the last point is a valid return nearer by > margin
+    "jump_start",             # m, range of the nearest valid return before the first point minus the first
+                              # point's (+ when that return lies behind), clipped to +-JUMP_CLIP; +JUMP_CLIP: none
+    "jump_end",               # m, the same beyond the last point
+    "neighbour_distance",     # m, centroid to the nearest other candidate's centroid in the scan, <= NEIGHBOUR_CLIP
+    "density",                # n_points * angle step * distance / width (~1 for a surface facing the sensor),
+                              # <= DENSITY_CLIP (also for zero width): independent of the scanner's resolution
+    "relative_curvature",     # mean_curvature * width: scale-free (2 for a half circle)
 )
 RADIUS_CLIP = 1.0             # m: the radius feature's bound (degenerate or nearly straight segments)
+JUMP_CLIP = 3.0               # m (the kernels' constants, repeated here for readers)
+NEIGHBOUR_CLIP = 2.0          # m
+DENSITY_CLIP = 10.0
+GAP_M = 0.13                  # m: leg_tracker's cluster gap (gap_clusters)
+GAP_MIN_POINTS = 3
 OCCLUSION_MARGIN = 0.1        # m
 CANDIDATE_MAX_WIDTH = 0.8     # m
 CANDIDATE_MIN_POINTS = 3
@@ -107,6 +123,55 @@ def _limits(range_min: float, range_max: float) -> tuple[float, float]:
     return lo, hi
 
 
+def _angle_step(angles: np.ndarray) -> float:
+    """The scan's beam spacing (rad, positive): first to last beam over the gaps between them."""
+    return abs(float(angles[-1]) - float(angles[0])) / (len(angles) - 1) if len(angles) > 1 else 0.0
+
+
+def gap_clusters(ranges, angles, range_min: float, range_max: float, gap: float = GAP_M,
+                 min_points: int = GAP_MIN_POINTS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """leg_tracker's clusters of every scan: consecutive valid returns (finite, strictly between range_min and
+    range_max) more than `gap` metres apart start a new cluster, an invalid return ends one, and clusters of
+    fewer than `min_points` returns are dropped. ranges (N, B) metres, angles (B,) radians. Returns (start,
+    end, offsets) int64 as features.segment_run does: scan k's clusters are beam ranges [start, end) of
+    start/end[offsets[k]:offsets[k + 1]], in beam order (every beam inside a cluster is a valid return)."""
+    from . import _leg_kernels as LK
+
+    ranges = np.ascontiguousarray(ranges, np.float32)
+    if ranges.ndim != 2:
+        raise ValueError(f"ranges must be (N, B), got shape {ranges.shape}")
+    N, B = ranges.shape
+    angles = np.ascontiguousarray(angles, np.float64)
+    if angles.shape != (B,):
+        raise ValueError(f"angles must have shape ({B},), got {angles.shape}")
+    cos_a, sin_a = _trig(angles)
+    lo, hi = _limits(range_min, range_max)
+    counts = np.zeros(N, np.int64)
+    none = np.zeros(0, np.int64)
+    LK._gap_pass(ranges, cos_a, sin_a, lo, hi, float(gap), int(min_points), none, none, counts)
+    offsets = np.zeros(N + 1, np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    start = np.empty(offsets[-1], np.int64)
+    end = np.empty(offsets[-1], np.int64)
+    if len(start):
+        LK._gap_pass(ranges, cos_a, sin_a, lo, hi, float(gap), int(min_points), start, end, counts)
+    return start, end, offsets
+
+
+def model_clusters(ranges, angles, range_min: float, range_max: float, model: LegModel | None, seg_start,
+                   seg_end, seg_offsets) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The clusters `model` scores (its provenance["clusters"]): gap_clusters of the scans for a model trained
+    on them ({"method": "gap", "gap": m, "min_points": n}), else (method "segments", no such key, or no model)
+    the given segments (seg_start, seg_end, seg_offsets as int64 arrays). Inputs as in cluster_features."""
+    spec = (model.provenance.get("clusters") if model is not None else None) or {"method": "segments"}
+    if spec.get("method") == "gap":
+        return gap_clusters(ranges, angles, range_min, range_max, float(spec.get("gap", GAP_M)),
+                            int(spec.get("min_points", GAP_MIN_POINTS)))
+    if spec.get("method") != "segments":
+        raise ValueError(f"unknown cluster method {spec.get('method')!r} in the leg model's provenance")
+    return (np.asarray(seg_start, np.int64), np.asarray(seg_end, np.int64), np.asarray(seg_offsets, np.int64))
+
+
 def cluster_features(ranges, angles, seg_start, seg_end, seg_offsets, range_min: float,
                      range_max: float) -> np.ndarray:
     """Features of every segment, shape (M, len(FEATURE_NAMES)) float64, in the order of seg_start.
@@ -123,7 +188,7 @@ def cluster_features(ranges, angles, seg_start, seg_end, seg_offsets, range_min:
     out = np.zeros((len(start), LK.N_FEATURES), np.float64)
     if len(start):
         LK.block_features(ranges, cos_a, sin_a, angles, start, end, offsets, lo, hi, RADIUS_CLIP, OCCLUSION_MARGIN,
-                          -1.0, 0, out)
+                          CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, False, _angle_step(angles), out)
     return out
 
 
@@ -339,6 +404,7 @@ def leg_probabilities(ranges, angles, seg_start, seg_end, seg_offsets, range_min
     if M:
         feats = np.empty((M, LK.N_FEATURES), np.float64)
         LK.block_probabilities(ranges, cos_a, sin_a, angles, start, end, offsets, lo, hi, RADIUS_CLIP,
-                               OCCLUSION_MARGIN, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, *model._kernel_args(),
+                               OCCLUSION_MARGIN, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, _angle_step(angles),
+                               *model._kernel_args(),
                                feats, out)
     return out

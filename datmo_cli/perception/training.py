@@ -2,9 +2,11 @@
 
 Data: labelled recordings (scans with the positions of the legs seen in each: leg_tracker's positive bags,
 a geometry_msgs/PoseArray per scan in the laser frame, matched to scans by log time) and empty recordings
-(scans with no people: every segment is a negative). Each scan is segmented with datmo's own segmentation
-(`features.segment_run`); each segment gets the features of `legs.cluster_features` and a label: a leg when
-a labelled leg lies within `MATCH_RADIUS_M` of the segment's centroid.
+(scans with no people: every segment is a negative). Each scan is cut into clusters, by default as leg_tracker
+does (`legs.gap_clusters`: a gap of more than 0.13 m between consecutive returns; the labels are the centroids of
+exactly such clusters) or by datmo's own segmentation (`features.segment_run`); the choice is recorded in the
+model's provenance["clusters"] (see `legs.model_clusters`). Each cluster gets the features of
+`legs.cluster_features` and a label: a leg when a labelled leg lies within `MATCH_RADIUS_M` of its centroid.
 
 Evaluation is leave-one-recording-out: each labelled recording is held out in turn together with one empty
 recording (cycling through them), the model is trained on the others only, and its decision threshold is
@@ -35,6 +37,9 @@ CIRCLE_LEG_RADIUS_M = 0.13  # the paper's rule: a circle of at most this radius 
 DEFAULT_LABELS_TOPIC = "/leg_cluster_positions"
 POSE_ARRAY_TYPES = ("geometry_msgs/msg/PoseArray", "geometry_msgs/PoseArray")
 EMPTY_FALSE_BUDGET = 0.5   # false legs per empty scan allowed when choosing the threshold (the target)
+SEGMENT_CLUSTERS = {"method": "segments"}                       # datmo's own segments (features.segment_run)
+GAP_CLUSTERS = {"method": "gap", "gap": 0.13, "min_points": 3}  # leg_tracker's clusters (legs.gap_clusters)
+DEFAULT_CLUSTERS = GAP_CLUSTERS
 
 #: progress(description, done, total)
 Progress = Callable[[str, int, int], None]
@@ -334,14 +339,34 @@ def _paper_rule(p: FeatureParams) -> FeatureParams:
     return dataclasses.replace(p, leg_model="paper") if "leg_model" in names else p
 
 
-def segment_table(rec: Recording, params: FeatureParams | None = None, radius: float = MATCH_RADIUS_M) -> SegmentTable:
-    """Segment a recording with datmo's segmentation and tabulate its segments (see SegmentTable)."""
+def recording_clusters(run: ScanRun, params: FeatureParams | None = None,
+                       clusters: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(start, end, offsets) of the clusters of every scan of `run`: datmo's segments (features.segment_run with
+    params) for clusters {"method": "segments"}, leg_tracker's gap clusters (legs.gap_clusters) for
+    {"method": "gap", "gap": m, "min_points": n}; None: DEFAULT_CLUSTERS."""
     from . import legs
-    from .features import _range_limits, extract_run, segment_run
+    from .features import _range_limits, segment_run
+
+    c = DEFAULT_CLUSTERS if clusters is None else clusters
+    if c.get("method") == "segments":
+        return segment_run(run, params or FeatureParams())
+    if c.get("method") == "gap":
+        lo, hi = _range_limits(run)
+        return legs.gap_clusters(run.ranges, run.geometry.angles(), lo, hi, float(c.get("gap", legs.GAP_M)),
+                                 int(c.get("min_points", legs.GAP_MIN_POINTS)))
+    raise ValueError(f"unknown cluster method {c.get('method')!r}: 'segments' or 'gap'")
+
+
+def segment_table(rec: Recording, params: FeatureParams | None = None, radius: float = MATCH_RADIUS_M,
+                  clusters: dict | None = None) -> SegmentTable:
+    """Cluster a recording (recording_clusters: datmo's segments or gap clusters) and tabulate its clusters
+    (see SegmentTable); the circle rule runs on the same clusters."""
+    from . import legs
+    from .features import _range_limits, extract_run
 
     p = params or FeatureParams()
     run = rec.run
-    start, end, offsets = segment_run(run, p)
+    start, end, offsets = recording_clusters(run, p, clusters)
     lo, hi = _range_limits(run)
     angles = run.geometry.angles()
     feats = np.asarray(legs.cluster_features(run.ranges, angles, start, end, offsets, lo, hi), np.float64)
@@ -364,13 +389,13 @@ def segment_table(rec: Recording, params: FeatureParams | None = None, radius: f
 
 
 def tables_of(recordings: Sequence[Recording], params: FeatureParams | None = None, radius: float = MATCH_RADIUS_M,
-              progress: Progress | None = None) -> list[SegmentTable]:
+              progress: Progress | None = None, clusters: dict | None = None) -> list[SegmentTable]:
     """segment_table of each recording, reporting progress("segments", done, total)."""
     out = []
     for i, rec in enumerate(recordings):
         if progress is not None:
             progress("segments", i, len(recordings))
-        out.append(segment_table(rec, params, radius))
+        out.append(segment_table(rec, params, radius, clusters))
     if progress is not None:
         progress("segments", len(recordings), len(recordings))
     return out
@@ -484,9 +509,9 @@ class EstimatorSpec:
     ignore_features: FEATURE_NAMES columns held constant in training, so no tree uses them; negative_fraction:
     the share of non-leg rows kept (at random, weighted up by its inverse) to train faster."""
 
-    kind: str = "random_forest"
-    n_estimators: int = 50
-    max_depth: int | None = 16
+    kind: str = "gradient_boosting"
+    n_estimators: int = 200
+    max_depth: int | None = 5
     min_samples_leaf: int = 3
     max_features: float | str | None = 0.5
     learning_rate: float = 0.1
@@ -643,22 +668,25 @@ def _near(t: SegmentTable) -> np.ndarray:
 
 
 def tuned_threshold(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], spec: EstimatorSpec,
-                    step: Callable[[], None] = lambda: None, budget: float = EMPTY_FALSE_BUDGET) -> float:
+                    step: Callable[[], None] = lambda: None, budget: float = EMPTY_FALSE_BUDGET,
+                    extra: Sequence[SegmentTable] = ()) -> float:
     """The threshold for a model trained on (lab, emp), chosen on those recordings alone: each is scored by a
     model trained without it (inner leave-one-out, as leave_one_out_folds), and choose_threshold picks on
     the pooled out-of-fold scores of clusters within METRIC_RANGE_M (inner models: spec.for_threshold()). With
-    one labelled recording there is no inner fold: the model's own training scores are used (optimistic)."""
+    one labelled recording there is no inner fold: the model's own training scores are used (optimistic).
+    `extra` recordings (simulated ones) are in every training set and never scored."""
     folds = leave_one_out_folds(len(lab), len(emp))
     ys, ss, es, scans = [], [], [], 0
     if not folds:
-        model = to_model(fit(list(lab) + list(emp), spec))
+        model = to_model(fit(list(lab) + list(emp) + list(extra), spec))
         step()
         folds_scored = [(t, scores(model, t)) for t in list(lab) + list(emp)]
     else:
         folds_scored = []
         inner = spec.for_threshold()
         for f in folds:
-            model = to_model(fit([lab[i] for i in f.train_labelled] + [emp[j] for j in f.train_empty], inner))
+            model = to_model(fit([lab[i] for i in f.train_labelled] + [emp[j] for j in f.train_empty]
+                                 + list(extra), inner))
             step()
             folds_scored.append((lab[f.test_labelled], scores(model, lab[f.test_labelled])))
             if f.test_empty is not None:
@@ -681,10 +709,11 @@ def _fits(n_lab: int, n_emp: int) -> int:
 
 
 def cross_validate(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], spec: EstimatorSpec,
-                   progress: Progress | None = None, *, step: Callable[[], None] | None = None) -> list[HeldOut]:
+                   progress: Progress | None = None, *, step: Callable[[], None] | None = None,
+                   extra: Sequence[SegmentTable] = ()) -> list[HeldOut]:
     """Leave-one-recording-out figures (see leave_one_out_folds): for each fold a model trained on the other
-    recordings, its threshold tuned on them alone, scored on the held-out pair beside the circle rule.
-    Empty list with fewer than two labelled recordings."""
+    recordings (and `extra`, always), its threshold tuned on them alone, scored on the held-out pair beside
+    the circle rule. Empty list with fewer than two labelled recordings."""
     folds = leave_one_out_folds(len(lab), len(emp))
     if step is None:
         step = _step(progress, cv_fits(len(lab), len(emp)))
@@ -692,8 +721,8 @@ def cross_validate(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], spe
     for f in folds:
         tr_lab = [lab[i] for i in f.train_labelled]
         tr_emp = [emp[j] for j in f.train_empty]
-        threshold = tuned_threshold(tr_lab, tr_emp, spec, step)
-        model = to_model(fit(tr_lab + tr_emp, spec))
+        threshold = tuned_threshold(tr_lab, tr_emp, spec, step, extra=extra)
+        model = to_model(fit(tr_lab + tr_emp + list(extra), spec))
         step()
         test = lab[f.test_labelled]
         empty = emp[f.test_empty] if f.test_empty is not None else None
@@ -702,6 +731,20 @@ def cross_validate(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], spe
         out.append(HeldOut(test.name, None if empty is None else empty.name, threshold, learned,
                            circle_figures(test, empty)))
     return out
+
+
+def fold_model(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], fold: Fold,
+               spec: EstimatorSpec | None = None, extra: Sequence[SegmentTable] = (),
+               clusters: dict | None = None):  # noqa: ANN201 - legs.LegModel
+    """The model cross_validate scores for `fold` (trained without its held-out recordings, threshold tuned
+    on the rest), as a LegModel run time can use (its provenance names the clusters it scores)."""
+    spec = spec or EstimatorSpec()
+    tr_lab = [lab[i] for i in fold.train_labelled]
+    tr_emp = [emp[j] for j in fold.train_empty]
+    threshold = tuned_threshold(tr_lab, tr_emp, spec, extra=extra)
+    c = dict(DEFAULT_CLUSTERS if clusters is None else clusters)
+    return to_model(fit(tr_lab + tr_emp + list(extra), spec), threshold,
+                    {"clusters": c, "note": f"fold model: {lab[fold.test_labelled].name} held out"})
 
 
 def cv_fits(n_lab: int, n_emp: int) -> int:
@@ -766,10 +809,13 @@ def _sources(recordings: Sequence[Recording]) -> list[dict]:
 
 def train_leg_model(labelled: Sequence[Recording], empty: Sequence[Recording], spec: EstimatorSpec | None = None,
                     params: FeatureParams | None = None, progress: Progress | None = None,
-                    labels_topic: str = DEFAULT_LABELS_TOPIC) -> TrainingResult:
+                    labels_topic: str = DEFAULT_LABELS_TOPIC, clusters: dict | None = None,
+                    extra: Sequence[Recording] = ()) -> TrainingResult:
     """Cross-validate (see cross_validate), then train on every recording with the threshold tuned on them
     all (see tuned_threshold); the model's provenance holds the data files and their SHA-256, the features,
-    the estimator, the threshold and its rule, the held-out figures, scikit-learn's version and the date."""
+    the estimator, the threshold and its rule, the held-out figures, scikit-learn's version, the date and the
+    clusters the model scores (clusters, default DEFAULT_CLUSTERS; see legs.model_clusters). `extra`
+    labelled recordings (simulated ones: sim_legs) are in every training set, never held out or scored."""
     require_sklearn()
     import sklearn
 
@@ -780,15 +826,17 @@ def train_leg_model(labelled: Sequence[Recording], empty: Sequence[Recording], s
         raise InputError("no labelled recording: give at least one file with leg labels")
     spec = spec or EstimatorSpec()
     p = params or FeatureParams()
-    tables = tables_of(list(labelled) + list(empty), p, progress=progress)
-    lab, emp = tables[:len(labelled)], tables[len(labelled):]
+    clusters = dict(DEFAULT_CLUSTERS if clusters is None else clusters)
+    tables = tables_of(list(labelled) + list(empty) + list(extra), p, progress=progress, clusters=clusters)
+    lab, emp = tables[:len(labelled)], tables[len(labelled):len(labelled) + len(empty)]
+    more = tables[len(labelled) + len(empty):]
     if not any(t.label.any() for t in lab):
         raise InputError(f"no segment lies within {MATCH_RADIUS_M:g} m of a labelled leg: are the labels in the "
                          "scans' frame?")
     step = _step(progress, total_fits(len(lab), len(emp)))
-    held_out = cross_validate(lab, emp, spec, step=step)
-    threshold = tuned_threshold(lab, emp, spec, step)
-    estimator = fit(lab + emp, spec)
+    held_out = cross_validate(lab, emp, spec, step=step, extra=more)
+    threshold = tuned_threshold(lab, emp, spec, step, extra=more)
+    estimator = fit(lab + emp + more, spec)
     step()
     mean = mean_figures(held_out)
     provenance = {
@@ -796,10 +844,13 @@ def train_leg_model(labelled: Sequence[Recording], empty: Sequence[Recording], s
         "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "sklearn_version": sklearn.__version__,
         "data": _sources(list(labelled) + list(empty)),
+        "simulated": [{"name": r.name, "scans": len(r.run), "legs": int(sum(len(g) for g in r.legs))}
+                      for r in extra],
         "feature_names": list(FEATURE_NAMES),
         "candidate_rule": {"min_points": CANDIDATE_MIN_POINTS, "max_width_m": CANDIDATE_MAX_WIDTH},
         "estimator": {"class": type(estimator).__name__, **spec.to_dict()},
         "segmentation": {"c0": p.c0, "min_points": p.min_points},
+        "clusters": clusters,
         "labels": {"topic": labels_topic, "match_radius_m": MATCH_RADIUS_M,
                    "window_ms": LABEL_WINDOW_NS / 1e6},
         "threshold": {"value": threshold, "rule": THRESHOLD_RULE},
