@@ -40,7 +40,8 @@ regress-update: install ## rewrite tests/regress_baseline.json from the current 
 
 legs-model: install ## retrain the packaged leg model (datmo_cli/perception/models/legs.npz) from ../shared/data/legtracker
 	$(BIN)/datmo train-legs --positive $(sort $(wildcard ../shared/data/legtracker/positive_*_extracted.bag)) \
-		--negative ../shared/data/legtracker/negative_2.bag -o datmo_cli/perception/models/legs.npz --force
+		--negative ../shared/data/legtracker/negative_2.bag --with-simulated \
+		-o datmo_cli/perception/models/legs.npz --force
 
 sample-logs: install ## regenerate sample_logs/ bit for bit
 	PATH="$(CURDIR)/$(BIN):$$PATH" bash sample_logs/make.sh

@@ -1,5 +1,7 @@
 """People over time on real scans (make accuracy): `datmo track`'s people on the legtracker bags, with the
-learned leg detector and with the paper's rule beside it.
+learned leg detector and with the paper's rule beside it. Held out by recording: each positive bag and
+each empty-room scanner is tracked with a model trained without it (the folds of `datmo train-legs`: the
+shipped model has seen them all); the demo bag, in no training set, with the shipped model.
 
 - negative_2 (rooms without people; each of its three scanners a log; a moving robot without odometry, so
   tracked in poses from scan matching): the longest time a track stays a confirmed person from scan to
@@ -27,6 +29,28 @@ PERSON_RADIUS = 0.5     # m, a labelled leg this near a confirmed person track i
 CONFIRM_TIME = 1.0      # s a person is in view before their legs count
 LINK = 0.6              # m, a label this near one of the scan before (within LINK_GAP s) is the same person's
 LINK_GAP = 0.5          # s
+
+
+def fold_models(folder: Path) -> tuple[dict[str, str], dict[str, str]]:
+    """Models trained as `datmo train-legs` trains the shipped one, each without one positive bag and one
+    empty-room scanner (training.leave_one_out_folds), saved in `folder`: ({positive bag name: model path},
+    {negative_2 topic: model path}; a topic held out by several folds takes the first)."""
+    from datmo_cli.perception import training as T
+    from datmo_cli.perception.sim_legs import simulated_recordings
+
+    positives = sorted(LEGTRACKER.glob("positive_*_extracted.bag"))
+    lab = T.tables_of([T.read_labelled(p) for p in positives])
+    empty = T.read_empty(LEGTRACKER / "negative_2.bag")
+    emp = T.tables_of(empty)
+    extra = T.tables_of(simulated_recordings())
+    by_bag, by_topic = {}, {}
+    for i, fold in enumerate(T.leave_one_out_folds(len(lab), len(emp))):
+        model = T.fold_model(lab, emp, fold, extra=extra)
+        path = folder / f"fold{i}.npz"
+        model.save(path)
+        by_bag[positives[fold.test_labelled].name] = str(path)
+        by_topic.setdefault(empty[fold.test_empty].topic, str(path))
+    return by_bag, by_topic
 
 
 def tracked(run, leg_model: str):  # noqa: ANN001, ANN201 - ScanRun -> TrackedRun
@@ -83,43 +107,58 @@ def covered(labels: list[np.ndarray], ready: list[np.ndarray], tracks: list[np.n
     return hit, total
 
 
-def negative_figures(leg_model: str) -> dict[str, tuple[float, int]]:
+def negative_figures(leg_model: str | dict[str, str]) -> dict[str, tuple[float, int]]:
+    """Per negative_2 topic, longest_person with `leg_model` (or {topic: model})."""
     out = {}
     for topic in NEGATIVE_TOPICS:
         run, _ = read_ros1_scans(LEGTRACKER / "negative_2.bag", topic)
-        out[topic] = longest_person(run.stamps, tracked(run, leg_model).tracks)
+        model = leg_model[topic] if isinstance(leg_model, dict) else leg_model
+        out[topic] = longest_person(run.stamps, tracked(run, model).tracks)
     return out
 
 
-def positive_figures(leg_model: str) -> dict[str, tuple[int, int]]:
+def positive_figures(leg_model: str | dict[str, str]) -> dict[str, tuple[int, int]]:
+    """Per positive bag, `covered` with `leg_model` (or {bag name: model})."""
     out = {}
     for path in sorted(LEGTRACKER.glob("positive_*_extracted.bag")):
         run, log_times = read_ros1_scans(path, "/training_scan")
         labels = read_leg_labels(path, log_times)
-        out[path.name] = covered(labels, established(run.stamps, labels), tracked(run, leg_model).tracks)
+        model = leg_model[path.name] if isinstance(leg_model, dict) else leg_model
+        out[path.name] = covered(labels, established(run.stamps, labels), tracked(run, model).tracks)
     return out
 
 
+def figures(folder: Path) -> dict:
+    """Every figure of this module: {"negative"|"positive": {"held out"|"paper": ...}, "demo": {...}}."""
+    by_bag, by_topic = fold_models(folder)
+    demo = LEGTRACKER / "demo_stationary_simple_environment.bag"
+    return {"negative": {"held out": negative_figures(by_topic), "paper": negative_figures("paper")},
+            "positive": {"held out": positive_figures(by_bag), "paper": positive_figures("paper")},
+            "demo": {m: demo_figures(demo, {"leg_model": m}) for m in ("default", "paper")}}
+
+
 def lines() -> list[str]:
+    import tempfile
+
     out = []
-    models = ("default", "paper")
-    neg = {m: negative_figures(m) for m in models}
+    models = ("held out", "paper")
+    with tempfile.TemporaryDirectory() as tmp:
+        f = figures(Path(tmp))
+    neg = f["negative"]
     for topic in NEGATIVE_TOPICS:
         cells = [f"{m}: longest person {neg[m][topic][0]:.1f} s, {neg[m][topic][1]} over 2 s" for m in models]
         out.append(f"negative_2 {topic:11s} " + " | ".join(cells))
-    pos = {m: positive_figures(m) for m in models}
-    for name in pos["default"]:
+    pos = f["positive"]
+    for name in pos["held out"]:
         cells = [f"{m}: {pos[m][name][0]}/{pos[m][name][1]} ({pos[m][name][0] / max(pos[m][name][1], 1):.3f})"
                  for m in models]
         out.append(f"{name:27s} legs covered " + " | ".join(cells))
     totals = {m: np.sum(list(pos[m].values()), axis=0) for m in models}
     out.append("all positive bags: " + " | ".join(f"{m}: {totals[m][0] / max(totals[m][1], 1):.3f} of {totals[m][1]}"
                                                  for m in models))
-    demo = LEGTRACKER / "demo_stationary_simple_environment.bag"
-    for m in models:
-        f = demo_figures(demo, {"leg_model": m})
-        out.append(f"demo_stationary ({m}): {f['people']} person tracks, "
-                   f"{f['on_walls']} person/dynamic tracks on walls")
+    for m, d in f["demo"].items():
+        out.append(f"demo_stationary ({m}): {d['people']} person tracks, "
+                   f"{d['on_walls']} person/dynamic tracks on walls")
     return out
 
 

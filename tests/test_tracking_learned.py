@@ -78,11 +78,15 @@ def test_learned_measurements_match_the_reference():
         def col(rows, k, t=f8):  # noqa: ANN001, ANN202
             return np.array([r[k] for r in rows], t)
 
+        def beams(rows, width=5):  # noqa: ANN001, ANN202 - segment s covers beams 10 s .. 10 s + width
+            return col(rows, 0, i8) * 10, col(rows, 0, i8) * 10 + width
+
+        ws = np.array(list(weak), i8)
         got = _kernels.learned_measurements(
-            col(circles, 0, i8), col(circles, 1), col(circles, 2), col(circles, 3),
-            col(blobs, 0, i8), col(blobs, 1), col(blobs, 2), col(blobs, 3),
-            col(lines, 0, i8), col(lines, 1), col(lines, 2), col(lines, 3), col(lines, 4),
-            col(legs, 0, i8), col(legs, 1), col(legs, 2), col(legs, 3), np.array(list(weak), i8),
+            *beams(circles), col(circles, 1), col(circles, 2), col(circles, 3),
+            *beams(blobs), col(blobs, 1), col(blobs, 2), col(blobs, 3),
+            col(lines, 0, i8), *beams(lines, 2), col(lines, 1), col(lines, 2), col(lines, 3), col(lines, 4),
+            *beams(legs), col(legs, 1), col(legs, 2), col(legs, 3), ws * 10, ws * 10 + 5,
             np.array(list(weak.values()), f8), 0.9, 1.5)
         x, y, size, kind, _, prob = got
         rows = sorted((int(k), round(float(a), 9), round(float(b), 9), round(float(s), 9), round(float(p), 9))

@@ -33,6 +33,7 @@ LINE_DTYPE = cdr.element_dtype(types.LINE)
 CIRCLE_DTYPE = cdr.element_dtype(types.CIRCLE)
 BLOB_DTYPE = cdr.element_dtype(types.BLOB)
 LEG_DTYPE = cdr.element_dtype(types.LEG)
+NO_SEGMENT = 0xFFFFFFFF   # Leg.segment of a leg cluster no segment holds the middle of
 BLOCK = 256   # scans per kernel call: bounds the scratch memory and paces progress reports
 
 
@@ -154,12 +155,14 @@ def _check_segments(start: np.ndarray, end: np.ndarray, offsets: np.ndarray, bea
 def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.ndarray, count: np.ndarray,
               lo: float, hi: float, angles: np.ndarray, model, floor: float) -> np.ndarray:  # noqa: ANN001
     """Rows (scan in block, segment in scan, first, last, n, x, y, width, probability) of the block's
-    segments whose leg probability (legs.LegModel `model`) is at least `floor`; x, y the centroid (sensor
-    frame, m)."""
-    from .legs import leg_probabilities
+    clusters (those legs.LegModel `model` scores: the segments, or leg_tracker's gap clusters) whose leg
+    probability is at least `floor`; x, y the centroid (sensor frame, m); segment: the segment holding the
+    cluster's middle beam (NO_SEGMENT when none does)."""
+    from .legs import leg_probabilities, model_clusters
 
-    off = _offsets(count)
-    start, end = seg[:off[-1], 0], seg[:off[-1], 1]
+    seg_off = _offsets(count)
+    seg_start, seg_end = seg[:seg_off[-1], 0], seg[:seg_off[-1], 1]
+    start, end, off = model_clusters(block, angles, lo, hi, model, seg_start, seg_end, seg_off)
     prob = leg_probabilities(block, angles, start, end, off, lo, hi, model)
     hit = np.flatnonzero(prob >= floor)
     rows = np.zeros((len(hit), 9))
@@ -168,6 +171,13 @@ def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.n
     scan = np.searchsorted(off, hit, side="right") - 1
     s, e = start[hit].astype(np.int64), end[hit].astype(np.int64)
     B = block.shape[1]
+    # the segment under each cluster's middle beam (segments are in scan order: global beam indices sort)
+    seg_scan = np.searchsorted(seg_off, np.arange(len(seg_start)), side="right") - 1
+    g0, g1 = seg_scan * B + seg_start, seg_scan * B + seg_end
+    mid = scan * B + (s + e - 1) // 2
+    j = np.searchsorted(g0, mid, side="right") - 1
+    inside = (j >= 0) & (mid < g1[np.maximum(j, 0)])
+    segment = np.where(inside, j - seg_off[seg_scan[np.maximum(j, 0)]], NO_SEGMENT)
     r = np.where(np.isfinite(block), block, 0.0).astype(np.float64)   # segments hold valid returns only
     px, py = r * cos_a, r * sin_a
     # sums over [s, e) of each hit: segments are disjoint and in scan order, so the bounds interleave sorted
@@ -177,7 +187,7 @@ def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.n
     sx = np.add.reduceat(np.append(px.ravel(), 0.0), bounds)[0::2]
     sy = np.add.reduceat(np.append(py.ravel(), 0.0), bounds)[0::2]
     x0, y0, x1, y1 = px[scan, s], py[scan, s], px[scan, e - 1], py[scan, e - 1]
-    rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 4] = scan, hit - off[scan], s, e - 1, n
+    rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 4] = scan, segment, s, e - 1, n
     rows[:, 5], rows[:, 6] = sx / n, sy / n
     rows[:, 7], rows[:, 8] = np.hypot(x1 - x0, y1 - y0), prob[hit]
     return rows

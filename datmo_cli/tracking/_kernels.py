@@ -144,25 +144,40 @@ def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
 
 
 @njit(cache=True)
-def learned_measurements(cseg, cx, cy, cr, bseg, bx, by, bsize, lseg, lx0, ly0, lx1, ly1, gseg, gx, gy, gw,
-                         wseg, wp, stride_max, d_max):  # noqa: ANN001, ANN201
-    """Measurements of one scan when a leg detector ran (see measurements.py): its legs (segments gseg at
-    gx, gy, width gw) paired into people or single, then every other segment as what it is: a circle
-    (kind 2), the bounding box of its lines (kind 3) or a blob (kind 4), whatever its size up to d_max.
-    Segments wseg are ones the detector gave a lower leg probability wp: theirs is their measurement's.
-    Returns x, y, size, kind, legs (M, 4), prob (M,: 0 for the legs, filled by the caller, and for
-    segments the detector gave no probability)."""
-    nc, nb, nl, ng = len(cx), len(bx), len(lseg), len(gseg)
-    top = 0
-    for arr in (cseg, bseg, lseg, gseg, wseg):
+def _beam_marks(first, last, value, top):  # noqa: ANN001, ANN201
+    """Per beam 0..top-1, the largest `value` of the intervals [first, last] (beam indices) covering it."""
+    out = np.zeros(top)
+    for i in range(len(first)):
+        for j in range(first[i], last[i] + 1):
+            out[j] = max(out[j], value[i])
+    return out
+
+
+@njit(cache=True)
+def _span_max(marks, a, b):  # noqa: ANN001, ANN201
+    v = 0.0
+    for j in range(a, b + 1):
+        v = max(v, marks[j])
+    return v
+
+
+@njit(cache=True)
+def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0,
+                         lx1, ly1, gfirst, glast, gx, gy, gw, wfirst, wlast, wp, stride_max, d_max):  # noqa: ANN001, ANN201
+    """Measurements of one scan when a leg detector ran (see measurements.py): its legs (beams gfirst..glast
+    at gx, gy, width gw) paired into people or single, then everything else as what it is: a circle
+    (kind 2), the bounding box of a segment's lines (kind 3) or a blob (kind 4), whatever its size up to
+    d_max; circles, blobs and lines on a leg's beams are that leg. Beams wfirst..wlast are clusters the
+    detector gave a lower leg probability wp: a measurement on them takes it (the largest it covers).
+    Beam ranges are inclusive. Returns x, y, size, kind, legs (M, 4), prob (M,: 0 for the legs, whose
+    probabilities the caller has, and for what the detector gave none)."""
+    nc, nb, nl, ng = len(cx), len(bx), len(lseg), len(gx)
+    top = 1
+    for arr in (clast, blast, llast, glast, wlast):
         for v in arr:
             top = max(top, v + 1)
-    is_leg = np.zeros(top, np.bool_)
-    for i in range(ng):
-        is_leg[gseg[i]] = True
-    seg_p = np.zeros(top)
-    for i in range(len(wseg)):
-        seg_p[wseg[i]] = wp[i]
+    is_leg = _beam_marks(gfirst, glast, np.ones(ng), top)
+    weak = _beam_marks(wfirst, wlast, wp, top)
     px, py, psize, pkind, plegs = legs_to_measurements(gx, gy, gw, stride_max)
     np_ = len(px)
     cap = np_ + nc + nb + nl
@@ -175,12 +190,14 @@ def learned_measurements(cseg, cx, cy, cr, bseg, bx, by, bsize, lseg, lx0, ly0, 
     x[:np_], y[:np_], size[:np_], kind[:np_], legs[:np_] = px, py, psize, pkind, plegs
     m = np_
     for i in range(nc):
-        if not is_leg[cseg[i]]:
-            x[m], y[m], size[m], kind[m], prob[m] = cx[i], cy[i], 2.0 * cr[i], 2, seg_p[cseg[i]]
+        if _span_max(is_leg, cfirst[i], clast[i]) == 0.0:
+            x[m], y[m], size[m], kind[m] = cx[i], cy[i], 2.0 * cr[i], 2
+            prob[m] = _span_max(weak, cfirst[i], clast[i])
             m += 1
     for i in range(nb):
-        if not is_leg[bseg[i]]:
-            x[m], y[m], size[m], kind[m], prob[m] = bx[i], by[i], bsize[i], 4, seg_p[bseg[i]]
+        if _span_max(is_leg, bfirst[i], blast[i]) == 0.0:
+            x[m], y[m], size[m], kind[m] = bx[i], by[i], bsize[i], 4
+            prob[m] = _span_max(weak, bfirst[i], blast[i])
             m += 1
     if nl:
         order = np.argsort(lseg, kind="mergesort")
@@ -189,16 +206,18 @@ def learned_measurements(cseg, cx, cy, cr, bseg, bx, by, bsize, lseg, lx0, ly0, 
             seg = lseg[order[k]]
             x0 = y0 = np.inf
             x1 = y1 = -np.inf
+            f, e = top, 0
             while k < nl and lseg[order[k]] == seg:
                 i = order[k]
                 x0 = min(x0, lx0[i], lx1[i])
                 x1 = max(x1, lx0[i], lx1[i])
                 y0 = min(y0, ly0[i], ly1[i])
                 y1 = max(y1, ly0[i], ly1[i])
+                f, e = min(f, lfirst[i]), max(e, llast[i])
                 k += 1
-            if not is_leg[seg]:
+            if _span_max(is_leg, f, e) == 0.0:
                 x[m], y[m], size[m], kind[m] = 0.5 * (x0 + x1), 0.5 * (y0 + y1), np.hypot(x1 - x0, y1 - y0), 3
-                prob[m] = seg_p[seg]
+                prob[m] = _span_max(weak, f, e)
                 m += 1
     keep = 0
     for i in range(m):

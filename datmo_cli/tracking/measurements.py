@@ -104,13 +104,15 @@ def measurements(features: ScanFeatures, params: TrackingParams, learned: bool =
         g = features.legs if features.legs is not None else np.zeros(0, _LEG_DTYPE)
         weak = g[g["probability"] < params.leg_probability]
         g = g[g["probability"] >= params.leg_probability]
+        i8 = np.int64
         x, y, size, kind, legs, prob = _kernels.learned_measurements(
-            c["segment"].astype(np.int64), c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8),
-            b["segment"].astype(np.int64), b["x"].astype(f8), b["y"].astype(f8), b["size"].astype(f8),
-            li["segment"].astype(np.int64), li["x_ini"].astype(f8), li["y_ini"].astype(f8), li["x_end"].astype(f8),
-            li["y_end"].astype(f8), g["segment"].astype(np.int64), g["x"].astype(f8), g["y"].astype(f8),
-            g["width"].astype(f8), weak["segment"].astype(np.int64), weak["probability"].astype(f8),
-            params.stride_max, params.d_max)
+            c["first"].astype(i8), c["last"].astype(i8), c["x"].astype(f8), c["y"].astype(f8),
+            c["radius"].astype(f8), b["first"].astype(i8), b["last"].astype(i8), b["x"].astype(f8),
+            b["y"].astype(f8), b["size"].astype(f8), li["segment"].astype(i8), li["first"].astype(i8),
+            li["last"].astype(i8), li["x_ini"].astype(f8), li["y_ini"].astype(f8), li["x_end"].astype(f8),
+            li["y_end"].astype(f8), g["first"].astype(i8), g["last"].astype(i8), g["x"].astype(f8),
+            g["y"].astype(f8), g["width"].astype(f8), weak["first"].astype(i8), weak["last"].astype(i8),
+            weak["probability"].astype(f8), params.stride_max, params.d_max)
         raw = np.stack([g["x"].astype(f8), g["y"].astype(f8), g["width"].astype(f8), g["probability"].astype(f8)],
                        axis=1).reshape(-1, 4)
         return Measurements(x, y, size, kind, legs, raw, prob)
