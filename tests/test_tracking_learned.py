@@ -52,6 +52,9 @@ def reference_measurements(circles, blobs, lines, legs, stride_max, d_max, weak=
     return sorted((k, round(x, 9), round(y, 9), round(s, 9), round(p, 9)) for k, x, y, s, p in rows if s <= d_max)
 
 
+f8, i8 = np.float64, np.int64
+
+
 def test_learned_measurements_match_the_reference():
     rng = np.random.default_rng(3)
     for _ in range(40):
@@ -71,7 +74,6 @@ def test_learned_measurements_match_the_reference():
             else:
                 circles.append((seg, x, y, 0.08))
                 legs.append((seg, x, y, rng.uniform(0.05, 0.2)))
-        f8, i8 = np.float64, np.int64
         others = sorted(set(segs.tolist()) - {g[0] for g in legs})
         weak = {seg: float(rng.uniform(0.05, 0.5)) for seg in others if rng.random() < 0.5}
 
