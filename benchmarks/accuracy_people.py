@@ -31,10 +31,13 @@ LINK = 0.6              # m, a label this near one of the scan before (within LI
 LINK_GAP = 0.5          # s
 
 
-def fold_models(folder: Path) -> tuple[dict[str, str], dict[str, str]]:
+def fold_models(folder: Path, quick: bool = False) -> tuple[dict[str, str], dict[str, str]]:
     """Models trained as `datmo train-legs` trains the shipped one, each without one positive bag and one
     empty-room scanner (training.leave_one_out_folds), saved in `folder`: ({positive bag name: model path},
-    {negative_2 topic: model path}; a topic held out by several folds takes the first)."""
+    {negative_2 topic: model path}; a topic held out by several folds takes the first). `quick`: ensembles of
+    a quarter of the trees, for tests."""
+    import dataclasses
+
     from datmo_cli.perception import training as T
     from datmo_cli.perception.sim_legs import simulated_recordings
 
@@ -45,7 +48,10 @@ def fold_models(folder: Path) -> tuple[dict[str, str], dict[str, str]]:
     extra = T.tables_of(simulated_recordings())
     by_bag, by_topic = {}, {}
     for i, fold in enumerate(T.leave_one_out_folds(len(lab), len(emp))):
-        model = T.fold_model(lab, emp, fold, extra=extra)
+        spec = T.EstimatorSpec()
+        if quick:
+            spec = dataclasses.replace(spec, n_estimators=max(10, spec.n_estimators // 4))
+        model = T.fold_model(lab, emp, fold, spec, extra=extra)
         path = folder / f"fold{i}.npz"
         model.save(path)
         by_bag[positives[fold.test_labelled].name] = str(path)
@@ -128,9 +134,9 @@ def positive_figures(leg_model: str | dict[str, str]) -> dict[str, tuple[int, in
     return out
 
 
-def figures(folder: Path) -> dict:
+def figures(folder: Path, quick: bool = False) -> dict:
     """Every figure of this module: {"negative"|"positive": {"held out"|"paper": ...}, "demo": {...}}."""
-    by_bag, by_topic = fold_models(folder)
+    by_bag, by_topic = fold_models(folder, quick)
     demo = LEGTRACKER / "demo_stationary_simple_environment.bag"
     return {"negative": {"held out": negative_figures(by_topic), "paper": negative_figures("paper")},
             "positive": {"held out": positive_figures(by_bag), "paper": positive_figures("paper")},

@@ -122,9 +122,26 @@ def test_a_person_standing_still_is_a_static_person_with_a_detector():
 
 
 def test_one_leg_whose_partner_is_hidden_is_a_person():
-    scans = [{"legs": [(3.0, 1.0 + 0.01 * (k % 2), 0.12)]} for k in range(30)]
-    out = _final(_run(scans, learned=True))
+    both = [{"legs": [(3.0, 1.15, 0.12), (3.0, 0.85, 0.12)]} for _ in range(10)]
+    one = [{"legs": [(3.0, 1.15 + 0.01 * (k % 2), 0.12)]} for k in range(20)]
+    out = _final(_run(both + one, learned=True))
     assert len(out) == 1 and out["classification"][0] == CLASS_PERSON
+
+
+def test_a_lone_still_leg_never_seen_with_its_partner_is_not_a_person():
+    # a table leg or a door frame the detector likes: standing people show two legs now and then
+    out = _final(_run([{"legs": [(3.0, 1.0 + 0.01 * (k % 2), 0.12)]} for k in range(30)], learned=True))
+    assert len(out) == 1 and out["classification"][0] != CLASS_PERSON
+
+
+def test_something_the_moving_scanner_carries_is_not_a_person():
+    # a part of the robot seen by its own scanner: fixed in the sensor frame while the robot drives 3 m
+    params = TrackingParams()
+    tracker = Tracker(params, learned=True)
+    feats = features_from_lists([{"legs": [(0.6, 0.15, 0.12), (0.6, -0.15, 0.12)]}] * 30)
+    for k, f in enumerate(feats):
+        out = tracker.step(int(k * 1e8), measurements(f, params, True), pose=np.array([0.1 * k, 0.0, 0.0]))
+    assert len(out) == 1 and out["classification"][0] != CLASS_PERSON
 
 
 def test_a_walking_person_is_a_dynamic_person():
@@ -144,7 +161,7 @@ def test_small_circles_the_detector_rejects_are_not_people():
 
 
 def test_person_evidence_fades_when_the_detector_stops_seeing_legs():
-    legs = [{"legs": [(2.0, 0.0, 0.12)]} for _ in range(20)]
+    legs = [{"legs": [(2.0, 0.15, 0.12), (2.0, -0.15, 0.12)]} for _ in range(20)]
     blobs = [{"blobs": [(2.0, 0.0, 0.12)]} for _ in range(20)]
     outs = _run(legs + blobs, learned=True)
     first = outs[19][outs[19]["status"] != 0]

@@ -735,13 +735,15 @@ def cross_validate(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], spe
 
 def fold_model(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], fold: Fold,
                spec: EstimatorSpec | None = None, extra: Sequence[SegmentTable] = (),
-               clusters: dict | None = None):  # noqa: ANN201 - legs.LegModel
-    """The model cross_validate scores for `fold` (trained without its held-out recordings, threshold tuned
-    on the rest), as a LegModel run time can use (its provenance names the clusters it scores)."""
+               clusters: dict | None = None, tune: bool = False):  # noqa: ANN201 - legs.LegModel
+    """A model trained as the shipped one without `fold`'s held-out recordings, as a LegModel run time can use
+    (its provenance names the clusters it scores), to track the held-out recordings with. Its threshold is
+    tuned on the rest only with `tune` (tracking does not use it: it takes legs by TrackingParams.leg_probability);
+    else 0.5."""
     spec = spec or EstimatorSpec()
     tr_lab = [lab[i] for i in fold.train_labelled]
     tr_emp = [emp[j] for j in fold.train_empty]
-    threshold = tuned_threshold(tr_lab, tr_emp, spec, extra=extra)
+    threshold = tuned_threshold(tr_lab, tr_emp, spec, extra=extra) if tune else 0.5
     c = dict(DEFAULT_CLUSTERS if clusters is None else clusters)
     return to_model(fit(tr_lab + tr_emp + list(extra), spec), threshold,
                     {"clusters": c, "note": f"fold model: {lab[fold.test_labelled].name} held out"})

@@ -1,5 +1,9 @@
 """Classification (method.md §6): class from the kinds of measurement a track was fed, and mobility.
 
+These are the paper's rules (`--leg-model paper`). With the learned leg detector (the default), the person
+rule is the leg detector's evidence over a track's recent hits instead, walking not required: see
+tracker.Tracker and the README's "People" section. Mobility is the same in both.
+
 Classes (Track.msg): person (leg measurements and the walking pattern), circle object, rectangular object,
 unknown. Mobility: 0 static, 1 dynamic, X (2) undefined:
 - static when its extent is larger than d_max, or when the tracker sees it not moving after the

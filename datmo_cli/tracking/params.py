@@ -56,6 +56,11 @@ class TrackingParams:
     leg_probability: float = 0.5        # segments the detector gives at least this are legs (paired into people)
     leg_evidence_rate: float = 0.25     # weight of each new hit in the running mean (about 1/rate hits remembered)
     person_evidence: float = 0.6        # a track is a person while that running leg probability is at least this
+    moving_person_evidence: float = 0.35  # ... or this, once it is dynamic (clutter that passes for legs stays put)
+    person_pairs: int = 3               # a person not dynamic has been seen with two legs this many times
+    moving_person_pairs: int = 1        # ... and a dynamic one
+    carried_travel: float = 1.0         # m; a track the sensor has carried this far ...
+    carried_radius: float = 0.1         # m; ... moving in the sensor frame less than this (running mean) is no person
     # background: a grid of how long each place was hit by a return (tracking frame); a leg candidate on a place
     # occupied for long (a wall, a bench, a column) is not a leg (real perception finds leg-sized pieces there)
     background_time: float = 3.0        # s a place must have been hit, never seen through, to be background; 0: off
@@ -98,7 +103,7 @@ def from_dict(values: dict, where: str = "track") -> TrackingParams:
             raise ConfigError(f"{where}.{key}: must be positive, got {value!r}")
         out[key] = want(value)
     params = TrackingParams(**out)
-    for key in ("leg_evidence_rate", "person_evidence", "leg_probability"):
+    for key in ("leg_evidence_rate", "person_evidence", "moving_person_evidence", "leg_probability"):
         value = getattr(params, key)
         if value > 1 or (key == "leg_evidence_rate" and value == 0):
             raise ConfigError(f"{where}.{key}: a share, in (0, 1], got {value!r}")

@@ -84,7 +84,10 @@ class TrackArrays:
     mobility: np.ndarray    # (K,) uint8
     tail: np.ndarray        # (K, T, 2) ring buffer of positions
     tail_count: np.ndarray  # (K,) int64, positions written so far
-    leg_score: np.ndarray   # (K,) float64: running share of recent hits that were the leg detector's legs
+    leg_score: np.ndarray   # (K,) float64: running mean of the leg detector's probability of its recent hits
+    sensor_ref: np.ndarray  # (K, 2) running mean of its position in the sensor frame, m
+    pose_first: np.ndarray  # (K, 2) the sensor's position (tracking frame) when created
+    sensor_dev: np.ndarray  # (K,) running mean of its distance from sensor_ref at its hits, m
 
     @classmethod
     def empty(cls, tail_length: int) -> TrackArrays:
@@ -95,7 +98,7 @@ class TrackArrays:
                    np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, bool), np.zeros(0, bool),
                    np.zeros(0, bool),
                    np.zeros(0, np.uint8), np.zeros(0, np.uint8), np.zeros((0, max(tail_length, 1), 2)),
-                   np.zeros(0, np.int64), np.zeros(0))
+                   np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
 
     def __len__(self) -> int:
         return len(self.id)
@@ -139,10 +142,14 @@ class Tracker:
     """Tracks and classifies objects scan by scan. `step` takes one scan's measurements (sensor frame)
     and returns the live tracks as Track elements (element_dtype(types.TRACK)).
 
-    People, with a leg detector (`learned`): a track is a person while most of its recent hits were the
-    detector's legs (two legs paired, one leg whose partner is hidden, or both legs in one cluster: see
-    `_classify`), whether it walks, stands or is followed; with the paper's rule, a person needs paired legs
-    and the walking pattern (legs leading in turn)."""
+    People, with a leg detector (`learned`): a track is a person while the running mean of the leg
+    probability of its recent hits (two legs paired, one leg whose partner is hidden, or both legs in one
+    cluster) is at least person_evidence (moving_person_evidence once it is dynamic: clutter the detector
+    likes stays put), it has been seen with two legs person_pairs times (moving_person_pairs when dynamic:
+    a table leg is seen alone), and it is not something the moving scanner carries (a part of the robot:
+    still in the sensor frame over carried_travel). Walking is not required: a person standing, or
+    followed by a robot without odometry, is a person; class and mobility are decided apart. With the
+    paper's rule, a person needs paired legs and the walking pattern (legs leading in turn)."""
 
     def __init__(self, params: TrackingParams | None = None, geometry: ScanGeometry | None = None,
                  learned: bool = False) -> None:
@@ -437,7 +444,8 @@ class Tracker:
                           votes, np.zeros(n, bool), np.zeros(n, bool), np.zeros(n), m.size[idx].astype(np.float64),
                           x[:, :2].copy(), x[:, :2].copy(), np.zeros(n, bool), np.zeros(n, bool), np.ones(n, bool),
                           np.zeros(n, np.uint8), np.full(n, 2, np.uint8), np.zeros((n, T, 2)), zeros,
-                          _leg_probability(m, idx))
+                          _leg_probability(m, idx), np.stack(self._to_sensor(x[:, 0], x[:, 1]), axis=1),
+                          np.tile(np.array(self._sensor()[:2]), (n, 1)), np.zeros(n))
         self.next_id += n
         self.tracks = self.tracks.extend(new)
 
@@ -462,7 +470,21 @@ class Tracker:
             by_shape = np.array([CLASS_CIRCLE_OBJECT, CLASS_RECTANGULAR_OBJECT, CLASS_UNKNOWN],
                                 np.uint8)[np.argmax(shape, axis=1)]
             by_shape[shape.sum(axis=1) == 0] = CLASS_UNKNOWN
-            t.cls = np.where(t.leg_score >= p.person_evidence, np.uint8(CLASS_PERSON), by_shape).astype(np.uint8)
+            # a thing the scanner carries (a part of the robot) keeps its place in the sensor frame as it drives
+            sx, sy = self._to_sensor(t.x[:, 0], t.x[:, 1])
+            a = np.where(t.hit, p.leg_evidence_rate, 0.0)
+            dev = np.hypot(sx - t.sensor_ref[:, 0], sy - t.sensor_ref[:, 1])
+            t.sensor_dev = (1.0 - a) * t.sensor_dev + a * dev
+            t.sensor_ref[:, 0] = (1.0 - a) * t.sensor_ref[:, 0] + a * sx
+            t.sensor_ref[:, 1] = (1.0 - a) * t.sensor_ref[:, 1] + a * sy
+            px, py, _, _ = self._sensor()
+            travel = np.hypot(px - t.pose_first[:, 0], py - t.pose_first[:, 1])
+            carried = (travel >= p.carried_travel) & (t.sensor_dev <= p.carried_radius)
+            dynamic = t.mobility == MOBILITY_DYNAMIC
+            need = np.where(dynamic, p.moving_person_evidence, p.person_evidence)
+            pairs = np.where(dynamic, p.moving_person_pairs, p.person_pairs)
+            person = (t.leg_score >= need) & (t.votes[:, KIND_PERSON] >= pairs) & ~carried
+            t.cls = np.where(person, np.uint8(CLASS_PERSON), by_shape).astype(np.uint8)
 
     def _push_tail(self) -> None:
         t = self.tracks
