@@ -53,7 +53,12 @@ def figure_lines() -> list[str]:
     empty = T.read_empty(negative)
     clusters = T.DEFAULT_CLUSTERS if model is None else model.provenance.get("clusters", T.SEGMENT_CLUSTERS)
     lab, emp = T.tables_of(labelled, clusters=clusters), T.tables_of(empty, clusters=clusters)
-    held_out = T.cross_validate(lab, emp, spec)
+    extra = []
+    if model is not None and model.provenance.get("simulated"):   # trained with --with-simulated: so here
+        from datmo_cli.perception.sim_legs import simulated_recordings
+
+        extra = T.tables_of(simulated_recordings(), clusters=clusters)
+    held_out = T.cross_validate(lab, emp, spec, extra=extra)
     seconds = time.perf_counter() - t0
     how = ("datmo's segments" if clusters.get("method") == "segments" else
            f"gap clusters ({clusters.get('gap')} m, >= {clusters.get('min_points')} points)")
