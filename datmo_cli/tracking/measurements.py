@@ -94,16 +94,20 @@ def from_legs(lx: np.ndarray, ly: np.ndarray, ls: np.ndarray, params: TrackingPa
 
 
 def measurements(features: ScanFeatures, params: TrackingParams, learned: bool = False) -> Measurements:
-    """The measurements of one scan's features (see the module docstring). `learned`: legs are the segments
-    the leg detector gives at least params.leg_probability (features.legs) and nothing else; the other
-    segments are circles, rectangles or blobs whatever their size, each with its segment's leg probability.
+    """The measurements of one scan's features (see the module docstring). `learned`: legs are the clusters
+    the leg detector gives at least params.leg_probability (features.legs), except on a circle wider than
+    params.leg_radius_max, and nothing else; the other segments are circles, rectangles or blobs whatever
+    their size, each with the leg probability of the cluster on its beams.
     Otherwise the paper's rule: small circles, blobs and short lines are legs."""
     c, b, li = features.circles, features.blobs, features.lines
     f8 = np.float64
     if learned:
         g = features.legs if features.legs is not None else np.zeros(0, _LEG_DTYPE)
-        weak = g[g["probability"] < params.leg_probability]
-        g = g[g["probability"] >= params.leg_probability]
+        strong = g["probability"] >= params.leg_probability
+        big = c[c["radius"] > params.leg_radius_max]   # a leg is no wider than this: that is a column's arc
+        for f, e in zip(big["first"].tolist(), big["last"].tolist(), strict=True):
+            strong &= (g["last"] < f) | (g["first"] > e)
+        weak, g = g[~strong], g[strong]
         i8 = np.int64
         x, y, size, kind, legs, prob = _kernels.learned_measurements(
             c["first"].astype(i8), c["last"].astype(i8), c["x"].astype(f8), c["y"].astype(f8),
