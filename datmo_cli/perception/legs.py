@@ -77,16 +77,22 @@ def candidate_mask(features: np.ndarray) -> np.ndarray:
     return (f[:, 0] >= CANDIDATE_MIN_POINTS) & (f[:, 1] <= CANDIDATE_MAX_WIDTH)
 
 
-def _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets):
-    from . import _leg_kernels as LK
-
+def _scan_arrays(ranges, angles) -> tuple[np.ndarray, np.ndarray]:
+    """ranges (N, B) as contiguous float32 and angles (B,) as contiguous float64, or ValueError."""
     ranges = np.ascontiguousarray(ranges, np.float32)
     if ranges.ndim != 2:
         raise ValueError(f"ranges must be (N, B), got shape {ranges.shape}")
-    N, B = ranges.shape
     angles = np.ascontiguousarray(angles, np.float64)
-    if angles.shape != (B,):
-        raise ValueError(f"angles must have shape ({B},), got {angles.shape}")
+    if angles.shape != (ranges.shape[1],):
+        raise ValueError(f"angles must have shape ({ranges.shape[1]},), got {angles.shape}")
+    return ranges, angles
+
+
+def _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets):
+    from . import _leg_kernels as LK
+
+    ranges, angles = _scan_arrays(ranges, angles)
+    N, B = ranges.shape
     start = np.ascontiguousarray(seg_start, np.int64)
     end = np.ascontiguousarray(seg_end, np.int64)
     offsets = np.ascontiguousarray(seg_offsets, np.int64)
@@ -137,13 +143,8 @@ def gap_clusters(ranges, angles, range_min: float, range_max: float, gap: float 
     start/end[offsets[k]:offsets[k + 1]], in beam order (every beam inside a cluster is a valid return)."""
     from . import _leg_kernels as LK
 
-    ranges = np.ascontiguousarray(ranges, np.float32)
-    if ranges.ndim != 2:
-        raise ValueError(f"ranges must be (N, B), got shape {ranges.shape}")
+    ranges, angles = _scan_arrays(ranges, angles)
     N, B = ranges.shape
-    angles = np.ascontiguousarray(angles, np.float64)
-    if angles.shape != (B,):
-        raise ValueError(f"angles must have shape ({B},), got {angles.shape}")
     cos_a, sin_a = _trig(angles)
     lo, hi = _limits(range_min, range_max)
     counts = np.zeros(N, np.int64)
