@@ -83,3 +83,20 @@ def test_without_scikit_learn_the_error_says_how_to_install_it(tmp_path, monkeyp
     good = write_bag(tmp_path / "p.bag", *scene(5))
     monkeypatch.setitem(sys.modules, "sklearn", None)     # import sklearn raises ImportError
     _one_line_error(_run("--positive", str(good), "-o", str(tmp_path / "m.npz")), "pip install 'datmo[train]'")
+
+
+def test_with_simulated_recordings_always_in_training(tmp_path, monkeypatch):
+    """--with-simulated adds simulated LMS200 recordings (exact legs) to every training set, never held out."""
+    from datmo_cli.perception import sim_legs
+    from datmo_cli.perception.legs import LegModel
+
+    monkeypatch.setattr(sim_legs, "SIMULATED", (("crowd", 21, 3, 0.5, 4.0),))   # a short one, for speed
+    positives = [str(write_bag(tmp_path / "p0.bag", *scene(20, seed=0))),
+                 str(write_bag(tmp_path / "p1.bag", *scene(20, seed=1)))]
+    out = tmp_path / "legs.npz"
+    result = _run("--positive", *positives, "-o", str(out), "--with-simulated")
+    assert result.exit_code == 0, result.output
+    prov = LegModel.load(out).provenance
+    assert [s["name"] for s in prov["simulated"]] == ["simulated crowd seed 21 3 people 0.5°"]
+    assert prov["simulated"][0]["legs"] > 0
+    assert [f["labelled"] for f in prov["held_out"]["folds"]] == ["p0.bag", "p1.bag"]   # real ones only
