@@ -255,8 +255,8 @@ def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touche
 
 
 @njit(cache=True)
-def fit_line(x, y, idx, m):
-    """Total least squares line through points idx[:m]: (theta in [0, pi), rho) of x cos + y sin = rho."""
+def scatter(x, y, idx, m):
+    """Centroid and scatter of points idx[:m]: (cx, cy, sxx, syy, sxy), sums of centred squares and product."""
     cx = 0.0
     cy = 0.0
     for k in range(m):
@@ -273,6 +273,13 @@ def fit_line(x, y, idx, m):
         sxx += dx * dx
         syy += dy * dy
         sxy += dx * dy
+    return cx, cy, sxx, syy, sxy
+
+
+@njit(cache=True)
+def fit_line(x, y, idx, m):
+    """Total least squares line through points idx[:m]: (theta in [0, pi), rho) of x cos + y sin = rho."""
+    cx, cy, sxx, syy, sxy = scatter(x, y, idx, m)
     # direction of largest spread; the normal is perpendicular to it
     phi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
     theta = (phi + np.pi / 2) % np.pi
@@ -515,23 +522,9 @@ def circle_posed(x, y, idx, m, a, b, r, p, dalpha, lines_rss=-1.0) -> bool:
             return False
     ratio = p[P_RES_RATIO]
     if ratio > 0.0:
-        cx = 0.0
-        cy = 0.0
-        for k in range(m):
-            cx += x[idx[k]]
-            cy += y[idx[k]]
-        cx /= m
-        cy /= m
-        sxx = 0.0
-        syy = 0.0
-        sxy = 0.0
+        cx, cy, sxx, syy, sxy = scatter(x, y, idx, m)
         rc = 0.0
         for k in range(m):
-            dx = x[idx[k]] - cx
-            dy = y[idx[k]] - cy
-            sxx += dx * dx
-            syy += dy * dy
-            sxy += dx * dy
             rc += (np.hypot(x[idx[k]] - a, y[idx[k]] - b) - r) ** 2
         # the smallest eigenvalue of the scatter matrix: the line's sum of squared residuals
         rl = 0.5 * (sxx + syy) - np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)

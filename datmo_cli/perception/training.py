@@ -85,16 +85,6 @@ class _Raw:
     poses: tuple[np.ndarray, list[np.ndarray]] | None = None
 
 
-def _geometry(msg) -> ScanGeometry:  # noqa: ANN001 - a deserialised LaserScan
-    return ScanGeometry(float(msg.angle_min), float(msg.angle_increment), len(msg.ranges), float(msg.range_min),
-                        float(msg.range_max), float(msg.time_increment), float(msg.scan_time), msg.header.frame_id)
-
-
-def _stamp(msg, log_time: int) -> int:  # noqa: ANN001
-    ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-    return ns or int(log_time)
-
-
 def _poses_xy(msg) -> np.ndarray:  # noqa: ANN001 - a deserialised PoseArray
     return np.array([[p.position.x, p.position.y] for p in msg.poses], np.float64).reshape(-1, 2)
 
@@ -112,19 +102,11 @@ def _run_of(label: str, topic: str, stamps: list[int], ranges: list[np.ndarray],
 
 def _read_bag(path: Path, scan_topics: Callable[[dict], list[str]], pose_topic: str | None) -> _Raw:
     """Scans and poses of a ROS 1 bag or ROS 2 bag folder (rosbags' AnyReader)."""
-    from rosbags.highlevel import AnyReader
+    from ..log.importers.rosbag import open_bag, scan_geometry, scan_stamp
 
     label = str(path)
+    reader, topics = open_bag(path)
     try:
-        reader = AnyReader([path])
-        reader.open()
-    except Exception as exc:  # rosbags raises several unrelated types for corrupt bags
-        raise InputError(f"{label}: cannot read bag ({type(exc).__name__}: {exc})") from None
-    try:
-        topics: dict[str, tuple[str, int]] = {}
-        for c in reader.connections:
-            m, n = topics.get(c.topic, (c.msgtype, 0))
-            topics[c.topic] = (m, n + c.msgcount)
         out = _Raw(topics)
         wanted = scan_topics(topics)
         want_poses = pose_topic is not None and topics.get(pose_topic, ("", 0))[0] in POSE_ARRAY_TYPES
@@ -135,9 +117,9 @@ def _read_bag(path: Path, scan_topics: Callable[[dict], list[str]], pose_topic: 
             msg = reader.deserialize(raw, conn.msgtype)
             if conn.topic in scans:
                 s = scans[conn.topic]
-                s[0].append(_stamp(msg, log_time))
+                s[0].append(scan_stamp(msg, log_time))
                 s[1].append(np.asarray(msg.ranges, np.float32))
-                s[2].append(_geometry(msg))
+                s[2].append(scan_geometry(msg))
                 s[3].append(log_time)
             else:
                 pose_t.append(log_time)

@@ -68,6 +68,22 @@ def legs_to_measurements(lx, ly, ls, stride_max):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
+def _people_first(lx, ly, ls, stride_max, n_more):  # noqa: ANN001, ANN201
+    """Measurement buffers (x, y, size, kind, legs) with room for n_more after the people and single legs
+    made of leg candidates lx, ly, ls (legs_to_measurements), which fill them first; and how many those are."""
+    px, py, psize, pkind, plegs = legs_to_measurements(lx, ly, ls, stride_max)
+    n = len(px)
+    cap = n + n_more
+    x = np.empty(cap)
+    y = np.empty(cap)
+    size = np.empty(cap)
+    kind = np.empty(cap, np.int64)
+    legs = np.full((cap, 4), np.nan)
+    x[:n], y[:n], size[:n], kind[:n], legs[:n] = px, py, psize, pkind, plegs
+    return x, y, size, kind, legs, n
+
+
+@njit(cache=True)
 def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
                  leg_radius_max, leg_blob_max, stride_max, d_max):  # noqa: ANN001, ANN201
     """Measurements of one scan (see measurements.py): x, y, size, kind, legs (M, 4), and the leg
@@ -112,16 +128,7 @@ def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
             lx[nleg], ly[nleg], ls[nleg] = ox[i], oy[i], osize[i]
             nleg += 1
     lx, ly, ls = lx[:nleg], ly[:nleg], ls[:nleg]
-    px, py, psize, pkind, plegs = legs_to_measurements(lx, ly, ls, stride_max)
-    np_ = len(px)
-    cap = np_ + nc + nb + no
-    x = np.empty(cap)
-    y = np.empty(cap)
-    size = np.empty(cap)
-    kind = np.empty(cap, np.int64)
-    legs = np.full((cap, 4), np.nan)
-    x[:np_], y[:np_], size[:np_], kind[:np_], legs[:np_] = px, py, psize, pkind, plegs
-    m = np_
+    x, y, size, kind, legs, m = _people_first(lx, ly, ls, stride_max, nc + nb + no)
     for i in range(nc):
         if cr[i] > leg_radius_max:
             x[m], y[m], size[m], kind[m] = cx[i], cy[i], 2.0 * cr[i], 2
@@ -178,17 +185,8 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
             top = max(top, v + 1)
     is_leg = _beam_marks(gfirst, glast, np.ones(ng), top)
     weak = _beam_marks(wfirst, wlast, wp, top)
-    px, py, psize, pkind, plegs = legs_to_measurements(gx, gy, gw, stride_max)
-    np_ = len(px)
-    cap = np_ + nc + nb + nl
-    x = np.empty(cap)
-    y = np.empty(cap)
-    size = np.empty(cap)
-    kind = np.empty(cap, np.int64)
-    legs = np.full((cap, 4), np.nan)
-    prob = np.zeros(cap)
-    x[:np_], y[:np_], size[:np_], kind[:np_], legs[:np_] = px, py, psize, pkind, plegs
-    m = np_
+    x, y, size, kind, legs, m = _people_first(gx, gy, gw, stride_max, nc + nb + nl)
+    prob = np.zeros(len(x))
     for i in range(nc):
         if _span_max(is_leg, cfirst[i], clast[i]) == 0.0:
             x[m], y[m], size[m], kind[m] = cx[i], cy[i], 2.0 * cr[i], 2

@@ -58,25 +58,45 @@ def _stamp(header, log_time: int) -> int:  # noqa: ANN001
     return ns if ns else int(log_time)
 
 
+def scan_geometry(msg) -> ScanGeometry:  # noqa: ANN001 - a deserialised LaserScan
+    """The ScanGeometry of a deserialised sensor_msgs/LaserScan."""
+    return ScanGeometry(angle_min=float(msg.angle_min), angle_increment=float(msg.angle_increment),
+                        n_beams=len(msg.ranges), range_min=float(msg.range_min), range_max=float(msg.range_max),
+                        time_increment=float(msg.time_increment), scan_time=float(msg.scan_time),
+                        frame_id=msg.header.frame_id)
+
+
+def scan_stamp(msg, log_time: int) -> int:  # noqa: ANN001 - a deserialised message with a header
+    """The header stamp of a message (ns), or its log time when the stamp is zero."""
+    return _stamp(msg.header, log_time)
+
+
+def open_bag(path: str | Path):  # noqa: ANN201 - (rosbags AnyReader, {topic: (msgtype, count)})
+    """An opened rosbags AnyReader on a ROS 1 bag or ROS 2 bag folder, and its topics with their types and
+    message counts; InputError naming the file when it cannot be read. The caller closes the reader."""
+    from rosbags.highlevel import AnyReader
+
+    try:
+        reader = AnyReader([Path(path)])
+        reader.open()
+    except Exception as exc:  # rosbags raises several unrelated types for corrupt bags
+        raise InputError(f"{path}: cannot read bag ({type(exc).__name__}: {exc})") from None
+    topics: dict[str, tuple[str, int]] = {}
+    for c in reader.connections:
+        m, n = topics.get(c.topic, (c.msgtype, 0))
+        topics[c.topic] = (m, n + c.msgcount)
+    return reader, topics
+
+
 def read_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
              max_scans: int | None = None, progress=None):  # noqa: ANN001, ANN201
     """ImportResult of a ROS 1 bag or ROS 2 bag folder."""
-    from rosbags.highlevel import AnyReader
-
     from . import ImportResult
 
     path = Path(path)
     label = str(path)
+    reader, topics = open_bag(path)
     try:
-        reader = AnyReader([path])
-        reader.open()
-    except Exception as exc:  # rosbags raises several unrelated types for corrupt bags
-        raise InputError(f"{label}: cannot read bag ({type(exc).__name__}: {exc})") from None
-    try:
-        topics: dict[str, tuple[str, int]] = {}
-        for c in reader.connections:
-            m, n = topics.get(c.topic, (c.msgtype, 0))
-            topics[c.topic] = (m, n + c.msgcount)
         scan_topic = choose_topic(label, topics, topic, LASERSCAN_TYPES, "sensor_msgs/LaserScan", "--topic")
         o_topic = choose_topic(label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic",
                                required=False)
@@ -104,10 +124,7 @@ def _scans(reader, label: str, topic: str, total: int, max_scans: int | None, pr
             break
         msg = reader.deserialize(raw, conn.msgtype)
         r = np.asarray(msg.ranges, np.float32)
-        g = ScanGeometry(angle_min=float(msg.angle_min), angle_increment=float(msg.angle_increment),
-                         n_beams=len(r), range_min=float(msg.range_min), range_max=float(msg.range_max),
-                         time_increment=float(msg.time_increment), scan_time=float(msg.scan_time),
-                         frame_id=msg.header.frame_id)
+        g = scan_geometry(msg)
         if g0 is None:
             g0 = g
         elif not g.same_beams(g0):
