@@ -43,12 +43,13 @@ def main() -> None:
         sources["datmo features"] = run_features(run)
     for name, feats in sources.items():
         big, bfeats = _repeat(run, feats)
-        track_run(big, bfeats, params=params, markers=False)   # warm-up: numba cache load
+        learned = name == "datmo features"   # with the leg detector's legs, as datmo track runs them
+        track_run(big, bfeats, params=params, markers=False, learned=learned)   # warm-up: numba cache load
         n = len(big)
-        t_meas = best_of(lambda: [measurements(f, params) for f in bfeats])  # noqa: B023
-        t_track = best_of(lambda: track_run(big, bfeats, params=params, markers=False))  # noqa: B023
-        t_mark = best_of(lambda: track_run(big, bfeats, params=params, markers=True))  # noqa: B023
-        tracked: TrackedRun = track_run(big, bfeats, params=params, markers=True)
+        t_meas = best_of(lambda: [measurements(f, params, learned) for f in bfeats])  # noqa: B023
+        t_track = best_of(lambda: track_run(big, bfeats, params=params, markers=False, learned=learned))  # noqa: B023
+        t_mark = best_of(lambda: track_run(big, bfeats, params=params, markers=True, learned=learned))  # noqa: B023
+        tracked: TrackedRun = track_run(big, bfeats, params=params, markers=True, learned=learned)
         t_enc = best_of(tracked.track_payloads)
         mean = np.mean([len(t) for t in tracked.tracks])
         rows += [Row(f"tracking + classification ({name})", n, t_track, f"{mean:.1f} live tracks per scan"),
