@@ -83,3 +83,17 @@ def test_a_model_file_is_used_and_recorded(crowd, tmp_path):
     assert r.exit_code == 0, r.output
     m = _model(out / "crowd.mcap")
     assert m["model"] == str(DEFAULT_MODEL_PATH) and m["threshold"] > 0
+
+
+def test_a_leg_cluster_where_no_segment_is_kept():
+    """The shipped model scores leg_tracker's clusters: one may stand where segmentation kept no segment (here
+    3 points and min_points 4); its leg has no segment (found by a random example)."""
+    from datmo_cli.log.scan import ScanGeometry, ScanRun
+    from datmo_cli.perception.features import NO_SEGMENT, extract_run
+    from datmo_cli.perception.params import FeatureParams
+
+    g = ScanGeometry(-np.radians(1.0), np.radians(1.0), 3, 0.0, 8.0, 0.0, 0.2, "laser")
+    f = extract_run(ScanRun(np.zeros(1, np.int64), np.ones((1, 3), np.float32), g),
+                    FeatureParams(min_points=4, leg_min_probability=1e-9))
+    assert len(f.seg_start) == 0
+    assert len(f.legs) == 1 and f.legs["segment"][0] == NO_SEGMENT

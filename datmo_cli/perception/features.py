@@ -172,12 +172,14 @@ def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.n
     s, e = start[hit].astype(np.int64), end[hit].astype(np.int64)
     B = block.shape[1]
     # the segment under each cluster's middle beam (segments are in scan order: global beam indices sort)
-    seg_scan = np.searchsorted(seg_off, np.arange(len(seg_start)), side="right") - 1
-    g0, g1 = seg_scan * B + seg_start, seg_scan * B + seg_end
-    mid = scan * B + (s + e - 1) // 2
-    j = np.searchsorted(g0, mid, side="right") - 1
-    inside = (j >= 0) & (mid < g1[np.maximum(j, 0)])
-    segment = np.where(inside, j - seg_off[seg_scan[np.maximum(j, 0)]], NO_SEGMENT)
+    segment = np.full(len(hit), NO_SEGMENT, np.int64)   # a cluster may stand where no segment is kept
+    if len(seg_start):
+        seg_scan = np.searchsorted(seg_off, np.arange(len(seg_start)), side="right") - 1
+        g0, g1 = seg_scan * B + seg_start, seg_scan * B + seg_end
+        mid = scan * B + (s + e - 1) // 2
+        j = np.maximum(np.searchsorted(g0, mid, side="right") - 1, 0)
+        inside = (g0[j] <= mid) & (mid < g1[j])
+        segment = np.where(inside, j - seg_off[seg_scan[j]], NO_SEGMENT)
     r = np.where(np.isfinite(block), block, 0.0).astype(np.float64)   # segments hold valid returns only
     px, py = r * cos_a, r * sin_a
     # sums over [s, e) of each hit: segments are disjoint and in scan order, so the bounds interleave sorted
