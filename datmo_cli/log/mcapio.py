@@ -13,7 +13,7 @@ import mmap
 import os
 import struct
 import warnings
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -149,9 +149,27 @@ def read_log(path: str | Path, topics: Iterable[str] = ()) -> LogContents:
     Raises InputError for files that are not MCAP; warns TruncatedLogWarning (and returns every
     complete chunk) for a file cut short.
     """
+    out = LogContents(path=Path(path))
+    messages = out.messages
+    for topic, stamp, payload in _walk_file(path, topics, out):
+        stamps, payloads = messages[topic]
+        stamps.append(stamp)
+        payloads.append(payload)
+    return out
+
+
+def iter_messages(path: str | Path, topics: Iterable[str] | None = None,
+                  contents: LogContents | None = None) -> Iterator[tuple[str, int, bytes]]:
+    """(topic, log time ns, payload) of every message on `topics` (all when None), in file order, one chunk
+    in memory at a time: how commands stream a log of any length. `contents`, when given, is filled with
+    the channels and metadata met on the way (as read_log fills them). Errors and warnings as read_log."""
+    yield from _walk_file(path, topics, contents if contents is not None else LogContents(path=Path(path)))
+
+
+def _walk_file(path: str | Path, topics: Iterable[str] | None, out: LogContents) -> Iterator[tuple[str, int, bytes]]:
     path = _check_input(Path(path))
+    out.path, out.size = path, path.stat().st_size
     want = None if topics is None else set(topics)
-    out = LogContents(path=path, size=path.stat().st_size)
     schemas: dict[int, tuple[str, str, bytes]] = {}
     wanted_ids: set[int] = set()
     with open(path, "rb") as f:
@@ -163,7 +181,7 @@ def read_log(path: str | Path, topics: Iterable[str] = ()) -> LogContents:
             if buf[:8] != MAGIC:
                 raise InputError(f"{path}: not an MCAP file (bad magic bytes)")
             try:
-                _scan(buf, 8, len(buf), out, schemas, want, wanted_ids, top=True)
+                yield from _scan(buf, 8, len(buf), out, schemas, want, wanted_ids, top=True)
                 out.truncated = buf[-8:] != MAGIC or len(buf) < 16  # no footer: cut after the data
             except _Truncated:
                 out.truncated = True
@@ -171,8 +189,7 @@ def read_log(path: str | Path, topics: Iterable[str] = ()) -> LogContents:
                 raise InputError(f"{path}: corrupt MCAP data ({exc})") from None
     if out.truncated:
         warnings.warn(f"{path}: truncated MCAP file; read the {out.chunks} complete chunk(s) before the cut",
-                      TruncatedLogWarning, stacklevel=2)
-    return out
+                      TruncatedLogWarning, stacklevel=3)
 
 
 class _Truncated(Exception):
@@ -180,12 +197,12 @@ class _Truncated(Exception):
 
 
 def _scan(buf, pos: int, end: int, out: LogContents, schemas: dict, want: set[str] | None,
-          wanted_ids: set[int], top: bool) -> None:
-    """Walk the records in buf[pos:end], filling `out`."""
+          wanted_ids: set[int], top: bool) -> Iterator[tuple[str, int, bytes]]:
+    """Walk the records in buf[pos:end], filling `out`'s channels and metadata and yielding (topic, log
+    time, payload) of the wanted channels' messages."""
     import zstandard
 
     channels = out.channels
-    messages = out.messages
     while pos < end:
         if pos + 9 > end:
             raise _Truncated
@@ -205,9 +222,7 @@ def _scan(buf, pos: int, end: int, out: LogContents, schemas: dict, want: set[st
             ch.count += 1
             ch.last_ns = log_time
             if cid in wanted_ids:
-                stamps, payloads = messages[ch.topic]
-                stamps.append(log_time)
-                payloads.append(bytes(buf[body + 22:pos]))
+                yield ch.topic, log_time, bytes(buf[body + 22:pos])
         elif op == _OP_CHUNK:
             cpos = body + 8 * 3 + 4
             compression, cpos = _string(buf, cpos)
@@ -224,7 +239,7 @@ def _scan(buf, pos: int, end: int, out: LogContents, schemas: dict, want: set[st
                 raise ValueError(f"unsupported chunk compression {compression!r}")
             else:
                 data = bytes(data)
-            _scan(memoryview(data), 0, len(data), out, schemas, want, wanted_ids, top=False)
+            yield from _scan(memoryview(data), 0, len(data), out, schemas, want, wanted_ids, top=False)
             out.chunks += 1
         elif op == _OP_SCHEMA:
             sid = _U16.unpack_from(buf, body)[0]
@@ -242,7 +257,7 @@ def _scan(buf, pos: int, end: int, out: LogContents, schemas: dict, want: set[st
                 channels[cid] = Channel(cid, topic, name, enc, senc, sdata, meta)
                 if want is None or topic in want:
                     wanted_ids.add(cid)
-                    messages.setdefault(topic, ([], []))
+                    out.messages.setdefault(topic, ([], []))
         elif op == _OP_METADATA:
             name, p = _string(buf, body)
             meta, _ = _map(buf, p)
@@ -481,19 +496,48 @@ class LogWriter:
         metadata is kept under names prefixed "input/".
         """
         log = src if isinstance(src, LogContents) else read_log(src, topics=None)
+        for topic, cid in self.copy_channels(log, exclude).items():
+            stamps, payloads = log.messages.get(topic, ([], []))
+            if payloads:
+                self._add(cid, stamps, payloads)
+
+    def copy_channels(self, log: LogContents, exclude: Iterable[str] = ()) -> dict[str, int]:
+        """Register `log`'s channels that hold messages (except `exclude`d topics) as they are in `log`, and
+        keep its metadata under names prefixed "input/"; returns {topic: channel id} for write_ids. How a
+        streaming copy starts: the messages follow block by block."""
         skip = set(exclude)
+        ids = {}
         for ch in sorted(log.channels.values(), key=lambda c: c.id):
-            if ch.topic in skip or ch.topic not in log.messages:
+            if ch.topic in skip or not ch.count or ch.topic in ids:
                 continue
-            stamps, payloads = log.messages[ch.topic]
-            if not payloads:
-                continue
-            cid = self.channel(ch.topic, ch.msgtype, schema_text=ch.schema_data.decode("utf-8", "replace"),
-                               schema_encoding=ch.schema_encoding, message_encoding=ch.message_encoding,
-                               metadata=ch.metadata)
-            self._add(cid, stamps, payloads)
+            ids[ch.topic] = self.channel(ch.topic, ch.msgtype, schema_text=ch.schema_data.decode("utf-8", "replace"),
+                                         schema_encoding=ch.schema_encoding, message_encoding=ch.message_encoding,
+                                         metadata=ch.metadata)
         for name, data in log.metadata.items():
             self._writer.add_metadata(name if name.startswith("input/") else f"input/{name}", data)
+        return ids
+
+    def write_ids(self, cid: int, stamps_ns, payloads: list[bytes]) -> None:
+        """Messages on a channel registered before (channel or copy_channels)."""
+        self._add(cid, stamps_ns, payloads)
+
+    def drain(self) -> None:
+        """Write the messages added so far, in log-time order (then channel order: a scan before what was
+        derived from it), and forget them: a streaming command drains after each block, so memory holds one
+        block whatever the log's length."""
+        if not self._buffer:
+            return
+        stamps = np.concatenate([b[0] for b in self._buffer])
+        cids = np.concatenate([np.full(len(b[0]), b[1], np.int64) for b in self._buffer])
+        payloads = [p for b in self._buffer for p in b[2]]
+        self._buffer.clear()
+        order = np.lexsort((cids, stamps))
+        add = self._writer.add_message
+        seq = self._seq
+        for i, t, c in zip(order.tolist(), stamps[order].tolist(), cids[order].tolist(), strict=True):
+            add(c, t, payloads[i], t, seq)
+            seq += 1
+        self._seq = seq
 
     # -- finishing
     def flush(self) -> None:
@@ -506,16 +550,7 @@ class LogWriter:
         """Write buffered messages in time order, finish the file and rename it to `path`."""
         if self._closed:
             return self.path
-        if self._buffer:
-            stamps = np.concatenate([b[0] for b in self._buffer])
-            cids = np.concatenate([np.full(len(b[0]), b[1], np.int64) for b in self._buffer])
-            payloads = [p for b in self._buffer for p in b[2]]
-            order = np.lexsort((cids, stamps))  # by stamp, then channel (scan before derived data)
-            add = self._writer.add_message
-            st, ci = stamps[order].tolist(), cids[order].tolist()
-            for seq, (i, t, c) in enumerate(zip(order.tolist(), st, ci, strict=True)):
-                add(c, t, payloads[i], t, seq)
-            self._buffer.clear()
+        self.drain()
         self._writer.finish()
         self._file.close()
         self._closed = True

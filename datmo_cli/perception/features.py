@@ -21,6 +21,7 @@ from ..log.scan import Odometry, ScanRun
 from . import _kernels as K
 from .landmarks import (
     LandmarkDatabase,
+    LandmarkStream,
     circle_detections,
     junction_detections,
     line_end_detections,
@@ -62,6 +63,8 @@ class RunFeatures:
     landmark_frame: str = ""
     legs: np.ndarray | None = None
     leg_offsets: np.ndarray | None = None
+    range_limits: tuple[float, float] = (0.0, np.inf)   # valid returns (m): range_min and range_max
+    angles: np.ndarray | None = None                     # (B,) beam angles, rad
 
     def __post_init__(self) -> None:
         if self.legs is None:
@@ -270,21 +273,64 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
         circle_offsets=_offsets(np.bincount(rows["c"][:, 0].astype(np.int64), minlength=N)),
         blobs=_rows_to(BLOB_DTYPE, rows["b"], _BLOB_NAMES),
         blob_offsets=_offsets(np.bincount(rows["b"][:, 0].astype(np.int64), minlength=N)),
-        legs=_rows_to(LEG_DTYPE, rows["g"], _LEG_NAMES), leg_offsets=_offsets(np.bincount(leg_scan, minlength=N)))
+        legs=_rows_to(LEG_DTYPE, rows["g"], _LEG_NAMES), leg_offsets=_offsets(np.bincount(leg_scan, minlength=N)),
+        range_limits=(lo, hi), angles=angles)
     if landmarks:
-        line_scan = rows["l"][:, 0].astype(np.int64)
-        det = np.concatenate([
-            junction_detections(out.lines, line_scan, p),
-            line_end_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, (lo, hi), p),
-            circle_detections(out.circles, rows["c"][:, 0].astype(np.int64), out.lines, line_scan,
-                              out.line_offsets, out.seg_start, out.seg_end, out.seg_offsets, ranges, (lo, hi), p),
-            seat_detections(out.lines, line_scan, out.seg_start, out.seg_end, out.seg_offsets, ranges, (lo, hi),
-                            angles, p)])
-        world = odometry is not None and len(odometry) > 0
-        poses = odometry.at(run.stamps) if world else None
-        out.landmarks = LandmarkDatabase(to_world(det, poses), run.stamps, p)
-        out.landmark_frame = odometry.frame_id if world else run.geometry.frame_id
+        out.landmarks, out.landmark_frame = LandmarkDatabase(*_world_detections(out, ranges, odometry, p), p), (
+            odometry.frame_id if odometry is not None and len(odometry) else run.geometry.frame_id)
     return out
+
+
+def _world_detections(f: RunFeatures, ranges: np.ndarray, odometry: Odometry | None,
+                      p: FeatureParams) -> tuple[np.ndarray, np.ndarray]:
+    """(landmark detections of `f`'s scans (rows DET_*, scans counted from f's first), in the odometry frame
+    when there is odometry, else the sensor frame; f's stamps)."""
+    n = len(f)
+    lo, hi = f.range_limits
+    line_scan = np.repeat(np.arange(n), np.diff(f.line_offsets))
+    circle_scan = np.repeat(np.arange(n), np.diff(f.circle_offsets))
+    det = np.concatenate([
+        junction_detections(f.lines, line_scan, p),
+        line_end_detections(f.lines, line_scan, f.seg_start, f.seg_end, f.seg_offsets, ranges, (lo, hi), p),
+        circle_detections(f.circles, circle_scan, f.lines, line_scan, f.line_offsets, f.seg_start, f.seg_end,
+                          f.seg_offsets, ranges, (lo, hi), p),
+        seat_detections(f.lines, line_scan, f.seg_start, f.seg_end, f.seg_offsets, ranges, (lo, hi), f.angles, p)])
+    poses = odometry.at(f.stamps) if odometry is not None and len(odometry) else None
+    return to_world(det, poses), f.stamps
+
+
+class FeatureStream:
+    """Segmentation, features and the landmark database of a log, block by block: `block(run)` gives the
+    channels of the next block of scans as datmo features writes them ({topic: (msgtype, stamps, payloads)})
+    and its RunFeatures; the landmark database carries over from block to block, so the channels are those of
+    the whole run at once. `segments` given with a block are used instead of segmenting (a log's own; the
+    segments channel is then not among the channels returned)."""
+
+    def __init__(self, params: FeatureParams | None = None, odometry: Odometry | None = None) -> None:
+        self.params = params or FeatureParams()
+        self.odometry = odometry
+        self.landmarks = LandmarkStream(self.params)
+
+    def block(self, run: ScanRun, segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+              progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], RunFeatures]:
+        from ..log import mcapio
+        from .markers import feature_markers
+
+        f = extract_run(run, self.params, self.odometry, landmarks=False, segments=segments, progress=progress)
+        ranges = np.ascontiguousarray(run.ranges, np.float32)
+        det, stamps = _world_detections(f, ranges, self.odometry, self.params)
+        f.landmarks = LandmarkDatabase(det, stamps, self.params, stream=self.landmarks)
+        world = self.odometry is not None and len(self.odometry) > 0
+        f.landmark_frame = self.odometry.frame_id if world else run.geometry.frame_id
+        channels = {} if segments is not None else {
+            mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, stamps, segment_payloads(run, f.seg_start, f.seg_end,
+                                                                             f.seg_offsets))}
+        channels |= {
+            mcapio.TOPIC_FEATURES: (types.FEATURES, stamps, feature_payloads(f)),
+            mcapio.TOPIC_LANDMARKS: (types.LANDMARKS, stamps, landmark_payloads(f)),
+            mcapio.TOPIC_MARKERS_FEATURES: (types.MARKER_ARRAY, stamps, feature_markers(run, f, self.odometry)),
+        }
+        return channels, f
 
 
 def leg_model_provenance(spec: str) -> dict:
@@ -357,20 +403,8 @@ def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: F
     """The channels `datmo features` adds ({topic: (msgtype, stamps, payloads)}: segments, features,
     landmarks and feature markers) and the RunFeatures they came from. Given `segments` (a log's own),
     they are used and /datmo/segments is not among the channels returned."""
-    from ..log import mcapio
-    from .markers import feature_markers
-
     if isinstance(params, dict):
         from .params import from_dict
 
         params = from_dict(params)
-    f = extract_run(run, params, odometry, segments=segments, progress=progress)
-    stamps = run.stamps
-    channels = {} if segments is not None else {
-        mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, stamps, segment_payloads(run, f.seg_start, f.seg_end, f.seg_offsets))}
-    channels |= {
-        mcapio.TOPIC_FEATURES: (types.FEATURES, stamps, feature_payloads(f)),
-        mcapio.TOPIC_LANDMARKS: (types.LANDMARKS, stamps, landmark_payloads(f)),
-        mcapio.TOPIC_MARKERS_FEATURES: (types.MARKER_ARRAY, stamps, feature_markers(run, f, odometry)),
-    }
-    return channels, f
+    return FeatureStream(params, odometry).block(run, segments, progress)

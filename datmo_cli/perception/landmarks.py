@@ -264,25 +264,37 @@ def to_world(det: np.ndarray, poses: np.ndarray | None) -> np.ndarray:
     return out
 
 
+# columns of the database rows: type, x, y, orientation, size, count, first scan, last scan, x0, y0, moved,
+# confirmed, hidden (a column candidate at a bench's support: part of the bench, never listed)
+DB_COLUMNS = 13
+DB_MOVED, DB_CONFIRMED, DB_HIDDEN = 10, 11, 12
+# counters of a database carried from block to block: rows used, live rows, confirmed rows
+C_ROWS, C_LIVE, C_CONFIRMED = 0, 1, 2
+
+
 @njit(cache=True)
-def accumulate(det, stamps, match, min_count, max_drift, column_time, forget, db, snap_idx, snap_vals, snap_count):
-    """Fold detections (rows DET_*, sorted by scan) into the database `db` (rows: type, x, y, orientation,
-    size, count, first scan, last scan, x0, y0, moved); after each scan k, the landmarks in the database
-    (count >= min_count, not moved) are appended to snap_idx (row index) and snap_vals (x, y, orientation,
-    size, count, last scan: their state then), and their number stored in snap_count[k]. A candidate seen
-    fewer than min_count times and not for `forget` scans is forgotten; a column enters the database only
-    once seen over `column_time` ns (a circle object that stops for a moment is not a column). Returns
-    (rows used, snapshot entries wanted)."""
+def accumulate(det, stamps, k0, match, min_count, max_drift, column_time, forget, leg_radius_max, db, first_ns,
+               last_ns, live, confirmed, counters, snap_idx, snap_vals, snap_last, snap_count):
+    """Fold one block of scans' detections (rows DET_*, sorted by scan; scans k0 .. k0 + len(stamps) - 1,
+    stamped `stamps` ns) into the database `db` (rows as DB_COLUMNS; first_ns/last_ns: the stamps its row was
+    first and last seen), carrying `live`, `confirmed` and `counters` (C_*) from the blocks before. After
+    each scan k, the landmarks in the database (confirmed, not moved, not hidden) are appended to snap_idx
+    (row index), snap_vals (x, y, orientation, size, count, last scan: their state then) and snap_last (last
+    seen, ns), and their number stored in snap_count[k - k0]. A candidate seen fewer than min_count times and
+    not for `forget` scans is forgotten; a column enters the database only once seen over `column_time` ns (a
+    circle object that stops for a moment is not a column); a column candidate by a confirmed bench's support
+    (its end, leg_radius_max in) is hidden. Capacities: db rows >= counters[C_ROWS] + len(det), snapshot
+    entries >= len(stamps) * (counters[C_CONFIRMED] + len(det)). Returns the snapshot entries written."""
     n_scans = stamps.shape[0]
     nd = det.shape[0]
-    n = 0
+    n = counters[C_ROWS]
+    nlive = counters[C_LIVE]
+    nconf = counters[C_CONFIRMED]
     ns = 0
     j = 0
-    live = np.empty(db.shape[0], np.int64)   # rows still matched against: confirmed ones and recent candidates
-    nlive = 0
-    confirmed = np.empty(db.shape[0], np.int64)
-    nconf = 0
-    for k in range(n_scans):
+    for kk in range(n_scans):
+        k = k0 + kk
+        stamp = stamps[kk]
         while j < nd and det[j, 0] == k:
             t = det[j, 1]
             x = det[j, 2]
@@ -308,6 +320,8 @@ def accumulate(det, stamps, match, min_count, max_drift, column_time, forget, db
                         best = q
             if best < 0 and n < db.shape[0]:
                 best = n
+                for c in range(DB_COLUMNS):
+                    db[n, c] = 0.0
                 db[n, 0] = t
                 db[n, 1] = x
                 db[n, 2] = y
@@ -318,13 +332,13 @@ def accumulate(det, stamps, match, min_count, max_drift, column_time, forget, db
                 db[n, 7] = k
                 db[n, 8] = x
                 db[n, 9] = y
-                db[n, 10] = 0.0
-                db[n, 11] = 0.0
+                first_ns[n] = stamp
+                last_ns[n] = stamp
                 live[nlive] = n
                 nlive += 1
                 n += 1
                 if min_count <= 1 and (t != 4.0 or column_time <= 0):
-                    db[n - 1, 11] = 1.0
+                    db[n - 1, DB_CONFIRMED] = 1.0
                     confirmed[nconf] = best
                     nconf += 1
             elif best >= 0:
@@ -342,108 +356,159 @@ def accumulate(det, stamps, match, min_count, max_drift, column_time, forget, db
                     db[best, 4] += (det[j, 5] - db[best, 4]) / c
                 db[best, 5] = c
                 db[best, 7] = k
+                last_ns[best] = stamp
                 # a column that drifts from where it was first seen is a mover, not a landmark
                 if t == 4.0 and np.hypot(x - db[best, 8], y - db[best, 9]) > max_drift:
-                    db[best, 10] = 1.0
-                if db[best, 11] == 0.0 and c >= min_count and \
-                        (t != 4.0 or stamps[k] - stamps[int(db[best, 6])] >= column_time):
-                    db[best, 11] = 1.0
+                    db[best, DB_MOVED] = 1.0
+                if db[best, DB_CONFIRMED] == 0.0 and c >= min_count and \
+                        (t != 4.0 or stamp - first_ns[best] >= column_time):
+                    db[best, DB_CONFIRMED] = 1.0
                     confirmed[nconf] = best
                     nconf += 1
             j += 1
         u = 0
         while u < nlive:   # forget stale candidates and moved columns
             q = live[u]
-            if (db[q, 11] == 0.0 and k - db[q, 7] > forget) or db[q, 10] != 0.0:
+            if (db[q, DB_CONFIRMED] == 0.0 and k - db[q, 7] > forget) or db[q, DB_MOVED] != 0.0:
                 nlive -= 1
                 live[u] = live[nlive]
             else:
                 u += 1
+        _hide_bench_supports(db, confirmed, nconf, min_count, leg_radius_max)
         count = 0
         for u in range(nconf):
             q = confirmed[u]
-            if db[q, 10] == 0.0:
+            if db[q, DB_MOVED] == 0.0 and db[q, DB_HIDDEN] == 0.0:
                 if ns < snap_idx.shape[0]:
                     snap_idx[ns] = q
                     for c in range(6):
                         snap_vals[ns, c] = db[q, 1 + c] if c < 5 else db[q, 7]
+                    snap_last[ns] = last_ns[q]
                 ns += 1
                 count += 1
-        snap_count[k] = count
-    return n, ns
+        snap_count[kk] = count
+    counters[C_ROWS] = n
+    counters[C_LIVE] = nlive
+    counters[C_CONFIRMED] = nconf
+    return ns
+
+
+@njit(cache=True)
+def _hide_bench_supports(db, confirmed, nconf, min_count, leg_radius_max):
+    """Hide each confirmed column within 0.5 m of a support of a confirmed bench (its ends, leg_radius_max
+    in): it is part of the bench, not a column."""
+    for u in range(nconf):
+        q = confirmed[u]
+        if db[q, 0] != 4.0 or db[q, DB_HIDDEN] != 0.0:
+            continue
+        for v in range(nconf):
+            b = confirmed[v]
+            if db[b, 0] != 5.0 or db[b, 5] < min_count:
+                continue
+            half = 0.5 * (db[b, 4] - 2 * leg_radius_max)
+            for sgn in (-1.0, 1.0):
+                sx = db[b, 1] + sgn * half * np.cos(db[b, 3])
+                sy = db[b, 2] + sgn * half * np.sin(db[b, 3])
+                if np.hypot(db[q, 1] - sx, db[q, 2] - sy) < 0.5:
+                    db[q, DB_HIDDEN] = 1.0
+
+
+def landmark_elements(db: np.ndarray, first_ns: np.ndarray, snap_idx: np.ndarray, snap_vals: np.ndarray,
+                      snap_last: np.ndarray) -> np.ndarray:
+    """Landmark message elements of snapshot entries (see accumulate)."""
+    out = np.zeros(len(snap_vals), LANDMARK_DTYPE)
+    out["id"] = snap_idx + 1
+    out["count"] = snap_vals[:, 4]
+    for key, ns in (("first_seen", first_ns[snap_idx]), ("last_seen", snap_last)):
+        out[key]["sec"] = ns // 1_000_000_000
+        out[key]["nanosec"] = ns % 1_000_000_000
+    out["x"], out["y"], out["orientation"], out["size"] = snap_vals[:, 0], snap_vals[:, 1], snap_vals[:, 2], \
+        snap_vals[:, 3]
+    out["type"] = db[snap_idx, 0]
+    return out
+
+
+class LandmarkStream:
+    """The landmark database built block by block: `add` folds one block of scans' detections in and returns
+    the database after each of its scans. Memory: one row per landmark candidate ever seen (13 floats and two
+    stamps), nothing per scan."""
+
+    def __init__(self, p: FeatureParams) -> None:
+        self.p = p
+        self.db = np.zeros((64, DB_COLUMNS))
+        self.first_ns = np.zeros(64, np.int64)
+        self.last_ns = np.zeros(64, np.int64)
+        self.live = np.zeros(64, np.int64)
+        self.confirmed = np.zeros(64, np.int64)
+        self.counters = np.zeros(3, np.int64)
+        self.scans = 0
+        self._last = np.zeros(0, LANDMARK_DTYPE)
+
+    def _reserve(self, rows: int) -> None:
+        cap = len(self.db)
+        if rows <= cap:
+            return
+        new = max(rows, 2 * cap)
+        for name in ("db", "first_ns", "last_ns", "live", "confirmed"):
+            old = getattr(self, name)
+            grown = np.zeros((new, *old.shape[1:]), old.dtype)
+            grown[:cap] = old
+            setattr(self, name, grown)
+
+    @property
+    def rows(self) -> np.ndarray:
+        """The database rows used so far (DB_COLUMNS)."""
+        return self.db[:self.counters[C_ROWS]]
+
+    def add(self, detections: np.ndarray, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Fold in the detections (rows DET_*, DET_SCAN counted from this block's first scan, world or sensor
+        frame as the database's) of the next len(stamps) scans, stamped `stamps` (ns). Returns (elements,
+        offsets (len(stamps) + 1,)): the Landmark elements in the database after each of these scans."""
+        p = self.p
+        stamps = np.ascontiguousarray(stamps, np.int64)
+        nb = len(stamps)
+        det = np.ascontiguousarray(detections[np.argsort(detections[:, DET_SCAN], kind="stable")])
+        det[:, DET_SCAN] += self.scans
+        self._reserve(int(self.counters[C_ROWS]) + len(det) + 1)
+        cap = nb * (int(self.counters[C_CONFIRMED]) + len(det)) + 1
+        snap_idx, snap_vals = np.zeros(cap, np.int64), np.zeros((cap, 6))
+        snap_last, snap_count = np.zeros(cap, np.int64), np.zeros(nb, np.int64)
+        ns = accumulate(det, stamps, self.scans, p.landmark_match, p.landmark_min_count, p.column_max_drift,
+                        p.column_min_time * 1e9, 10, p.leg_radius_max, self.db, self.first_ns, self.last_ns,
+                        self.live, self.confirmed, self.counters, snap_idx, snap_vals, snap_last, snap_count)
+        self.scans += nb
+        elems = landmark_elements(self.db, self.first_ns, snap_idx[:ns], snap_vals[:ns], snap_last[:ns])
+        offsets = np.concatenate([[0], np.cumsum(snap_count)]).astype(np.int64)
+        if nb:
+            self._last = elems[offsets[-2]:offsets[-1]]
+        return elems, offsets
+
+    def final(self) -> np.ndarray:
+        """Landmark elements of the database after the last scan added."""
+        return self._last
 
 
 class LandmarkDatabase:
-    """The landmark database of a run: `rows` (type, x, y, orientation, size, count, first scan, last scan,
-    x0, y0, moved) and, per scan, the indices of the landmarks in it after that scan."""
+    """The landmark database after each scan of a run or of a block of one: `rows` (DB_COLUMNS, the whole
+    database) and, per scan, the Landmark elements in it after that scan (`all_snapshots`, sliced by
+    snap_offsets). Built at once from a whole run's detections, or by `LandmarkStream.add` for a block."""
 
-    def __init__(self, detections: np.ndarray, stamps: np.ndarray, p: FeatureParams) -> None:
-        self._stamps = np.asarray(stamps, np.int64)
-        n_scans = len(self._stamps)
-        order = np.argsort(detections[:, DET_SCAN], kind="stable")
-        det = np.ascontiguousarray(detections[order])
-        cap = max(len(det), 1)
-        snap_cap = 4096
-        while True:
-            self.rows = np.zeros((cap, 12))
-            self.snap_idx = np.zeros(snap_cap, np.int64)
-            self.snap_vals = np.zeros((snap_cap, 6))
-            snap_count = np.zeros(n_scans, np.int64)
-            n, ns = accumulate(det, self._stamps, p.landmark_match, p.landmark_min_count, p.column_max_drift,
-                               p.column_min_time * 1e9, 10, self.rows, self.snap_idx, self.snap_vals, snap_count)
-            if ns <= snap_cap:
-                break
-            snap_cap = ns
-        self.rows = self.rows[:n]
-        self.snap_idx = self.snap_idx[:ns]
-        self.snap_vals = self.snap_vals[:ns]
-        self.snap_offsets = np.concatenate([[0], np.cumsum(snap_count)]).astype(np.int64)
-        self._drop_bench_supports(p)
-
-    def _drop_bench_supports(self, p: FeatureParams) -> None:
-        """A column candidate at a bench's support is part of the bench, not a column."""
-        rows = self.rows
-        if not len(rows):
-            return
-        benches = rows[(rows[:, 0] == BENCH) & (rows[:, 5] >= p.landmark_min_count)]
-        for b in benches:
-            half = 0.5 * (b[4] - 2 * p.leg_radius_max)
-            for sgn in (-1.0, 1.0):
-                sx = b[1] + sgn * half * np.cos(b[3])
-                sy = b[2] + sgn * half * np.sin(b[3])
-                near = (rows[:, 0] == COLUMN) & (np.hypot(rows[:, 1] - sx, rows[:, 2] - sy) < 0.5)
-                rows[near, 10] = 1.0
-        keep = rows[self.snap_idx, 10] == 0.0
-        scan_of = np.repeat(np.arange(len(self.snap_offsets) - 1), np.diff(self.snap_offsets))
-        counts = np.bincount(scan_of[keep], minlength=len(self.snap_offsets) - 1)
-        self.snap_idx = self.snap_idx[keep]
-        self.snap_vals = self.snap_vals[keep]
-        self.snap_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    def __init__(self, detections: np.ndarray, stamps: np.ndarray, p: FeatureParams,
+                 stream: LandmarkStream | None = None) -> None:
+        stream = stream if stream is not None else LandmarkStream(p)
+        self._elems, self.snap_offsets = stream.add(detections, stamps)
+        self.rows = stream.rows
+        self.snap_idx = self._elems["id"].astype(np.int64) - 1
+        self._final = stream.final()
 
     def final(self) -> np.ndarray:
-        """Landmark elements of the database after the last scan (see `snapshot`)."""
-        return self.snapshot(len(self.snap_offsets) - 2) if len(self.snap_offsets) > 1 else np.zeros(0, LANDMARK_DTYPE)
+        """Landmark elements of the database after the last scan."""
+        return self._final
 
-    def all_snapshots(self, stamps: np.ndarray) -> np.ndarray:
-        """Landmark message elements of every snapshot entry (slice with snap_offsets); first and last
-        seen from the scans' `stamps` (ns)."""
-        stamps = np.asarray(stamps, np.int64)
-        r = self.rows[self.snap_idx]
-        v = self.snap_vals
-        out = np.zeros(len(v), LANDMARK_DTYPE)
-        out["id"] = self.snap_idx + 1
-        out["count"] = v[:, 4]
-        for key, col in (("first_seen", r[:, 6]), ("last_seen", v[:, 5])):
-            ns = stamps[col.astype(np.int64)] if len(stamps) else np.zeros(len(v), np.int64)
-            out[key]["sec"] = ns // 1_000_000_000
-            out[key]["nanosec"] = ns % 1_000_000_000
-        out["x"], out["y"], out["orientation"], out["size"] = v[:, 0], v[:, 1], v[:, 2], v[:, 3]
-        out["type"] = r[:, 0]
-        return out
+    def all_snapshots(self, stamps: np.ndarray | None = None) -> np.ndarray:
+        """Landmark message elements of every snapshot entry (slice with snap_offsets)."""
+        return self._elems
 
     def snapshot(self, k: int, stamps: np.ndarray | None = None) -> np.ndarray:
-        """Landmark elements of the database after scan k (stamps: the run's, for first/last seen)."""
-        a, b = self.snap_offsets[k], self.snap_offsets[k + 1]
-        sub = LandmarkDatabase.__new__(LandmarkDatabase)
-        sub.rows, sub.snap_idx, sub.snap_vals = self.rows, self.snap_idx[a:b], self.snap_vals[a:b]
-        return sub.all_snapshots(self._stamps if stamps is None else stamps)
+        """Landmark elements of the database after scan k."""
+        return self._elems[self.snap_offsets[k]:self.snap_offsets[k + 1]]

@@ -94,33 +94,65 @@ class TrackedRun:
         return offsets, items
 
 
+class TrackStream:
+    """Tracking of a log block by block, in order: `block(run, features)` tracks the next scans (one
+    ScanFeatures each, sensor frame) and returns their TrackedRun; the tracker's state carries over, so the
+    blocks' results are those of the whole run at once. `learned`: the features' legs come from a leg
+    detector (else people by the paper's rule, see Tracker); odometry, when given, puts tracking in its
+    world frame."""
+
+    def __init__(self, geometry, *, odometry: Odometry | None = None,  # noqa: ANN001 - ScanGeometry
+                 params: TrackingParams | None = None, markers: bool = True, learned: bool = False) -> None:
+        self.params = params or TrackingParams()
+        self.tracker = Tracker(self.params, geometry, learned=learned)
+        self.odometry = odometry if odometry is not None and len(odometry) else None
+        self.learned = learned
+        self.markers = markers
+        self.frame = geometry.frame_id
+        self.marker_frame = self.odometry.frame_id if self.odometry is not None else self.frame
+
+    def block(self, run: ScanRun, features: list[ScanFeatures] | Iterator[ScanFeatures], *,
+              progress: Callable[[int], None] | None = None) -> TrackedRun:
+        """Track the scans of `run` (the next block of the log) given their features. `progress(i)` is
+        called now and then with the scans of this block done."""
+        params, tracker, learned = self.params, self.tracker, self.learned
+        poses = self.odometry.at(run.stamps) if self.odometry is not None else None
+        out = TrackedRun(run.stamps, self.frame, poses is not None)
+        ranges = run.ranges
+        n = len(run)
+        step = max(n // 20, 1)
+        for i, (stamp, feats) in enumerate(zip(run.stamps.tolist(), features, strict=False)):
+            meas = measurements(feats, params, learned)
+            tracks = tracker.step(stamp, meas, ranges[i], None if poses is None else poses[i])
+            out.tracks.append(tracks)
+            if self.markers:
+                t = tracker.tracks
+                out.markers.append(track_markers(stamp, self.marker_frame, tracks, t.tail, t.tail_count,
+                                                 world=poses is not None))
+            if progress is not None and (i % step == 0 or i == n - 1):
+                progress(i + 1)
+        if len(out.tracks) != n:
+            raise ValueError(f"features for {len(out.tracks)} scans, the run has {n}")
+        return out
+
+    def channels(self, tracked: TrackedRun) -> dict[str, tuple[str, np.ndarray, list]]:
+        """The channels `datmo track` adds for a TrackedRun: {topic: (msgtype, stamps, payloads)}."""
+        from ..log import mcapio
+
+        out = {mcapio.TOPIC_TRACKS: (types.TRACKS, tracked.stamps, tracked.track_payloads())}
+        if self.markers:
+            out[mcapio.TOPIC_MARKERS_TRACKS] = (types.MARKER_ARRAY, tracked.stamps, tracked.markers)
+        return out
+
+
 def track_run(run: ScanRun, features: list[ScanFeatures] | Iterator[ScanFeatures], *,
               odometry: Odometry | None = None, params: TrackingParams | None = None, markers: bool = True,
               learned: bool = False, progress: Callable[[int, int], None] | None = None) -> TrackedRun:
     """Track every scan of `run` given its features (one ScanFeatures per scan, sensor frame). `learned`:
     the features' legs come from a leg detector (else people by the paper's rule, see Tracker)."""
-    params = params or TrackingParams()
-    tracker = Tracker(params, run.geometry, learned=learned)
-    poses = odometry.at(run.stamps) if odometry is not None and len(odometry) else None
-    frame = run.geometry.frame_id
-    marker_frame = (odometry.frame_id if poses is not None else frame)
-    out = TrackedRun(run.stamps, frame, poses is not None)
-    ranges = run.ranges
+    stream = TrackStream(run.geometry, odometry=odometry, params=params, markers=markers, learned=learned)
     n = len(run)
-    step = max(n // 100, 1)
-    for i, (stamp, feats) in enumerate(zip(run.stamps.tolist(), features, strict=False)):
-        meas = measurements(feats, params, learned)
-        tracks = tracker.step(stamp, meas, ranges[i], None if poses is None else poses[i])
-        out.tracks.append(tracks)
-        if markers:
-            t = tracker.tracks
-            out.markers.append(track_markers(stamp, marker_frame, tracks, t.tail, t.tail_count,
-                                             world=poses is not None))
-        if progress is not None and (i % step == 0 or i == n - 1):
-            progress(i + 1, n)
-    if len(out.tracks) != n:
-        raise ValueError(f"features for {len(out.tracks)} scans, the run has {n}")
-    return out
+    return stream.block(run, features, progress=(lambda d: progress(d, n)) if progress is not None else None)
 
 
 def run_features(run: ScanRun, odometry: Odometry | None = None, params=None) -> list[ScanFeatures]:  # noqa: ANN001
@@ -139,8 +171,6 @@ def derive_tracks(run: ScanRun, features: list[ScanFeatures], *, odometry: Odome
                   progress: Callable[[int, int], None] | None = None) -> dict[str, tuple[str, np.ndarray, list]]:
     """The channels `datmo track` adds: {topic: (msgtype, stamps, payloads)} for /datmo/tracks and
     /datmo/markers/tracks (topic names from mcapio). `learned`: the features' legs are a leg detector's."""
-    from ..log import mcapio
-
-    tracked = track_run(run, features, odometry=odometry, params=params, learned=learned, progress=progress)
-    return {mcapio.TOPIC_TRACKS: (types.TRACKS, tracked.stamps, tracked.track_payloads()),
-            mcapio.TOPIC_MARKERS_TRACKS: (types.MARKER_ARRAY, tracked.stamps, tracked.markers)}
+    stream = TrackStream(run.geometry, odometry=odometry, params=params, learned=learned)
+    n = len(run)
+    return stream.channels(stream.block(run, features, progress=(lambda d: progress(d, n)) if progress else None))
