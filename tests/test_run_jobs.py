@@ -81,6 +81,9 @@ def test_cli_single_input_prints_its_report_and_plot(tmp_path, inputs):
     assert "Confirmed tracks by class" in result.stdout
     assert (out / "a.png").stat().st_size > 10_000
     again = CliRunner().invoke(cli, ["run", str(inputs[0]), "-o", str(out), "--plot"])
+    assert again.exit_code == 0 and "0 done, 1 skipped" in again.stderr   # the manifest says it is done
+    (out / "manifest.jsonl").unlink()
+    again = CliRunner().invoke(cli, ["run", str(inputs[0]), "-o", str(out), "--plot"])
     assert again.exit_code == 1 and "a.png: exists; use --force" in again.stderr
     forced = CliRunner().invoke(cli, ["run", str(inputs[0]), "-o", str(out), "--plot", "--force", "--no-report"])
     assert forced.exit_code == 0 and forced.stdout == ""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import click
@@ -9,30 +10,68 @@ import click
 from ..report import FORMATS, SORT_KEYS
 
 
-def _progress_bar():  # noqa: ANN202 - rich.progress.Progress, imported lazily
-    from rich.console import Console
-    from rich.progress import BarColumn, Progress, ProgressColumn, TextColumn, TimeRemainingColumn
-    from rich.text import Text
+class _BatchProgress:
+    """One progress bar over the batch on stderr: inputs done of all, scans and scans/s (across every worker:
+    scans of finished inputs, and of running ones where the executor follows them), failures, time left."""
 
-    class Scans(ProgressColumn):
-        """Scans done of the total, and the recent rate in scans/s."""
+    def __init__(self, batch) -> None:  # noqa: ANN001 - batch.Batch
+        import time
 
-        def render(self, task) -> Text:  # noqa: ANN001 - rich's signature
-            total = f"{task.total:,.0f}" if task.total is not None else "?"
-            rate = f"{task.speed:,.0f} scans/s" if task.speed else "- scans/s"
-            return Text(f"{task.completed:,.0f}/{total} scans  {rate}", style="progress.data.speed")
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    return Progress(TextColumn("{task.description}"), BarColumn(), Scans(), TimeRemainingColumn(),
-                    console=Console(stderr=True), transient=True)
+        self.t0 = time.perf_counter()
+        self.running: dict[int, int] = {}
+        self.index = {t.input: t.index for t in batch.tasks}
+        self.scans = self.failed = 0
+        self.bar = Progress(TextColumn("batch"), BarColumn(), MofNCompleteColumn(), TextColumn("inputs"),
+                            TextColumn("{task.fields[info]}", style="progress.data.speed"), TimeRemainingColumn(),
+                            console=Console(stderr=True), transient=True)
+        self.task = self.bar.add_task("batch", total=batch.total, info="")
+
+    def __enter__(self) -> _BatchProgress:
+        self.bar.__enter__()
+        return self
+
+    def __exit__(self, *exc) -> None:  # noqa: ANN002
+        self.bar.__exit__(*exc)
+
+    def _show(self, advance: int = 0) -> None:
+        import time
+
+        scans = self.scans + sum(self.running.values())
+        rate = scans / max(time.perf_counter() - self.t0, 1e-9)
+        info = f"{scans:,} scans  {rate:,.0f} scans/s" + (f"  {self.failed} failed" if self.failed else "")
+        self.bar.update(self.task, advance=advance, info=info)
+
+    def record(self, rec: dict) -> None:
+        from ..batch import DONE, FAILED
+
+        self.running.pop(self.index.get(rec["input"], -1), None)
+        if rec["status"] == DONE:
+            self.scans += rec["scans"]
+        self.failed += rec["status"] == FAILED
+        self._show(advance=1)
+
+    def progress(self, index: int, done: int, total: int) -> None:
+        self.running[index] = done // 2   # process_file counts each scan twice (features, then tracking)
+        self._show()
 
 
 @click.command(name="run")
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("-o", "--output-dir", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Folder for the outputs, one OUT_DIR/NAME.mcap per input (created if missing).")
+@click.argument("inputs", nargs=-1, required=True)
+@click.option("-o", "--output-dir", "out_dir", required=True,
+              help="Folder (or fsspec URL) for the outputs: OUT_DIR/NAME.mcap per input file, the relative path "
+                   "for logs found in a folder; and OUT_DIR/manifest.jsonl, the batch's ledger (created if missing).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
-              help="Inputs processed at once, in separate processes [default: all cores].")
-@click.option("--force", is_flag=True, help="Overwrite existing outputs (and plots).")
+              help="Inputs processed at once, in separate processes on this machine [default: all cores].")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="Run one task per input on a running Dask scheduler (tcp://host:8786), or on a local cluster of N "
+                   "worker processes started for the run (local[:N]). Needs pip install 'datmo[dask]'.")
+@click.option("--retries", type=click.IntRange(min=0), default=2, show_default=True,
+              help="With --scheduler: times a task is retried after an unexpected error or the death of its worker.")
+@click.option("--force", is_flag=True, help="Redo every input and overwrite existing outputs (and plots); without it "
+              "inputs the manifest lists as done with the same input and parameters are skipped.")
 @click.option("--config", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="TOML file of parameters: its [features] table as for datmo features, its [track] table as "
                    "for datmo track.")
@@ -49,67 +88,121 @@ def _progress_bar():  # noqa: ANN202 - rich.progress.Progress, imported lazily
 @click.option("--leg-model", default=None, metavar="MODEL",
               help="Leg detector: 'default' (the model shipped with datmo), a model file from datmo train-legs, "
                    "or 'paper' (the paper's circle rule and walking pattern) [default: default].")
-def command(inputs: tuple[Path, ...], out_dir: Path, jobs: int | None, force: bool, config: Path | None, plot: bool,
-            fmt: str, top: int | None, sort: str, no_report: bool, ego_motion: str | None,
-            leg_model: str | None) -> None:
+def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: str | None, retries: int,
+            force: bool, config: Path | None, plot: bool, fmt: str, top: int | None, sort: str, no_report: bool,
+            ego_motion: str | None, leg_model: str | None) -> None:
     """Segment, extract features and track each input in one pass, then print the report.
 
     Each output holds the input's channels and /datmo/segments, /datmo/features, /datmo/landmarks,
     /datmo/tracks and markers, with the same messages as datmo segment, datmo features and datmo track
-    run one after another. Several inputs run in parallel; a failing input is reported and the others'
-    outputs are kept (the exit status is then 1).
+    run one after another. INPUTS are files, folders (searched recursively for .mcap logs) and globs, or
+    fsspec URLs. Inputs run in parallel in local processes (--jobs) or on a Dask cluster (--scheduler);
+    a failing input is reported and the others' outputs are kept (the exit status is then 1).
+
+    OUT_DIR/manifest.jsonl gets one line per input as it finishes (input SHA-256, output, status, scans,
+    tracks by class, parameters' hash). Running the same command again skips the inputs already done with
+    the same input and parameters and does the rest (after a failure or Ctrl-C); --force redoes all.
 
     Example: datmo run sample_logs/hall.mcap sample_logs/corridor.mcap -o out --plot
+
+    Example: datmo run 'logs/**/*.mcap' -o out --scheduler tcp://10.0.0.5:8786
     """
+    from ..batch import DONE, FAILED, SKIPPED, LocalExecutor, prepare, remote
+    from ..batch import run as run_batch
     from ..cli import invocation
-    from ..errors import DatmoError, InputError
-    from ..perception.params import FeatureParams
-    from ..perception.params import load_toml as load_features
-    from ..pipeline import output_paths, run_many
-    from ..tracking.params import TrackingParams
-    from ..tracking.params import load_toml as load_track
+    from ..errors import DatmoError
 
-    inputs = list(inputs)
-    params = {"features": load_features(config) if config is not None else FeatureParams(),
-              "track": load_track(config) if config is not None else TrackingParams()}
-    params["features"] = params["features"].replace(leg_model=leg_model)
-    params["track"] = params["track"].replace(ego_motion=ego_motion)
-    from ..perception.legs import load_leg_model
-
-    load_leg_model(params["features"].leg_model)   # a bad model is one error here, not one per input
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(f"{out_dir}: exists and is not a folder")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    outs = output_paths(inputs, out_dir)
-    plots = [o.with_suffix(".png") for o in outs] if plot else []
+    if scheduler is not None and jobs is not None:
+        raise DatmoError("--jobs is for local runs; with --scheduler the cluster's workers run the inputs")
+    if plot and remote(out_dir):
+        raise DatmoError(f"{out_dir}: --plot needs a local output folder")
+    params = _params(config, leg_model, ego_motion)
+    batch = prepare(list(inputs), out_dir, params=params, force=force, command_line=invocation("run"))
+    plots = [Path(t.output).with_suffix(".png") for t in batch.tasks] if plot else []
     if plots:
         from .report import check_plot_outputs
 
         check_plot_outputs(plots, force)
+    if scheduler is not None and batch.tasks:
+        from ..cluster import DaskExecutor
 
-    _warm_up()
-    with _progress_bar() as bar:
-        tasks = [bar.add_task(p.name, total=None) for p in inputs]
-        results = run_many(inputs, out_dir, jobs=jobs, force=force, params=params, command_line=invocation("run"),
-                           progress=lambda i, done, total: bar.update(tasks[i], completed=done, total=total))
-    ok = [r for r in results if r.error is None]
-    for r in results:
-        if r.error is None:
-            rate = r.scans / r.seconds if r.seconds > 0 else float("inf")
-            click.echo(f"{r.input} -> {r.output}: {r.scans:,} scans in {r.seconds:.1f} s ({rate:,.0f} scans/s)",
-                       err=True)
-        else:
-            click.echo(f"datmo: error: {r.error}", err=True)
-    if ok and (not no_report or plots):
-        ok_plots = [p for p, r in zip(plots, results, strict=True) if r.error is None] if plots else []
-        _report([r.output for r in ok], ok_plots, None if no_report else fmt, top, sort)
-    failed = len(results) - len(ok)
-    if failed == len(results) and failed > 1:
+        executor = DaskExecutor(scheduler, retries=retries)
+    else:
+        executor = LocalExecutor(jobs)
+        if batch.tasks:
+            _warm_up()
+    import time
+
+    t0 = time.perf_counter()
+    try:
+        with _BatchProgress(batch) as bar:
+            records = run_batch(batch, executor, on_record=bar.record, on_scans=bar.progress)
+    finally:
+        executor.close()
+    _final_table(records, time.perf_counter() - t0, executor.where)
+    for r in records:
+        if r["status"] == FAILED:
+            click.echo(f"datmo: error: {r['error']}", err=True)
+    ok = [r for r in records if r["status"] in (DONE, SKIPPED)]
+    if ok and (not no_report or plots) and not remote(out_dir):
+        made = {Path(r["output"]) for r in ok if r["status"] == DONE}
+        _report([Path(r["output"]) for r in ok], [p for p in plots if p.with_suffix(".mcap") in made],
+                None if no_report else fmt, top, sort)
+    failed = len(records) - len(ok)
+    if failed == len(records) and failed > 1:
         raise DatmoError(f"all {failed} inputs failed")
-    if failed and len(results) > 1:
-        raise DatmoError(f"{failed} of {len(results)} inputs failed; the other outputs are complete")
+    if failed and len(records) > 1:
+        raise DatmoError(f"{failed} of {len(records)} inputs failed; the other outputs are complete")
     if failed:
         raise SystemExit(1)  # the one error is printed above
+
+
+def _params(config: Path | None, leg_model: str | None, ego_motion: str | None) -> dict:
+    """The features and track parameters of a run: TOML file, then options; a bad leg model is one error."""
+    from ..perception.legs import load_leg_model
+    from ..perception.params import FeatureParams
+    from ..perception.params import load_toml as load_features
+    from ..tracking.params import TrackingParams
+    from ..tracking.params import load_toml as load_track
+
+    params = {"features": load_features(config) if config is not None else FeatureParams(),
+              "track": load_track(config) if config is not None else TrackingParams()}
+    params["features"] = params["features"].replace(leg_model=leg_model)
+    params["track"] = params["track"].replace(ego_motion=ego_motion)
+    load_leg_model(params["features"].leg_model)
+    return params
+
+
+FINAL_ROWS = 50
+
+
+def _final_table(records: list[dict], seconds: float, where: str) -> None:
+    """The batch's table on stderr (every input up to FINAL_ROWS, then only failures) and its totals line."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from ..batch import DONE, FAILED, SKIPPED
+
+    done = [r for r in records if r["status"] == DONE]
+    scans = sum(r["scans"] for r in done)
+    shown = records if len(records) <= FINAL_ROWS else [r for r in records if r["status"] == FAILED][:FINAL_ROWS]
+    if shown:
+        table = Table(title_justify="left")
+        for col in ("input", "status", "scans", "scans/s", "tracks", "people", "output or error"):
+            table.add_column(col, justify="right" if col in ("scans", "scans/s", "tracks", "people") else "left",
+                             overflow="fold")
+        for r in shown:
+            t = r.get("tracks") or {}
+            table.add_row(Path(r["input"]).name, r["status"], f"{r['scans']:,}" if r["status"] != FAILED else "",
+                          f"{r['scans_per_s']:,.0f}" if r["status"] == DONE else "",
+                          str(t.get("confirmed", "")), str(t.get("person", "")),
+                          r["error"] if r["status"] == FAILED else r["output"])
+        Console(stderr=True, width=None if sys.stderr.isatty() else 140).print(table)
+    counts = {s: sum(r["status"] == s for r in records) for s in (DONE, SKIPPED, FAILED)}
+    rate = scans / seconds if seconds > 0 else 0.0
+    click.echo(f"{len(records)} input{'s' if len(records) != 1 else ''}: {counts[DONE]} done, {counts[SKIPPED]} "
+               f"skipped (already in the manifest), {counts[FAILED]} failed; {scans:,} scans in {seconds:.1f} s on "
+               f"{where} ({rate:,.0f} scans/s)", err=True)
 
 
 def _warm_up() -> None:

@@ -1,0 +1,624 @@
+"""Batches of `datmo run`: input discovery, output names, the manifest (the batch's ledger), resume, and
+the one task every executor runs per input.
+
+A batch turns INPUTS (files, folders searched recursively for .mcap logs, globs; local paths or fsspec
+URLs) into one output per input under the output folder, and appends one JSON line per input to
+OUT_DIR/manifest.jsonl as it finishes. Rerunning the same command skips the inputs whose latest line
+says done with the same input SHA-256 and the same parameters' hash, and redoes the rest. The executor
+(local processes here, Dask in `cluster.py`) only runs `run_task` on `Task`s and hands back records.
+
+Paths: local inputs and outputs are absolute (the workers share the filesystem); `file://` URLs are
+local paths; other fsspec URLs (`s3://...`) are staged through a local temporary folder on the worker.
+"""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import json
+import os
+import socket
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+from . import __version__
+from .errors import DatmoError, InputError, OutputExistsError
+
+MANIFEST = "manifest.jsonl"
+LOG_SUFFIXES = (".mcap",)
+DONE, FAILED, SKIPPED, CANCELLED = "done", "failed", "skipped", "cancelled"
+TRACK_CLASSES = ("person", "circle_object", "rectangular_object", "unknown")
+
+
+class Cancelled(BaseException):  # noqa: N818 - like KeyboardInterrupt: no `except Exception` may swallow it
+    """The batch was cancelled while this task ran; its partial output is dropped."""
+
+
+class BatchInterrupted(DatmoError):
+    """Ctrl-C: the batch stopped; finished outputs and their manifest lines are kept."""
+
+    exit_code = 130
+
+
+# ------------------------------------------------------------------------------------- paths and URLs
+
+
+def remote(url: str) -> bool:
+    """True for an fsspec URL that is not a local path (`s3://b/k`; not `file://` nor a plain path)."""
+    return "://" in url and not url.startswith("file://")
+
+
+def local(path: str) -> str:
+    """A plain path for a local path or file:// URL."""
+    return path[len("file://"):] if path.startswith("file://") else path
+
+
+def _fs(url: str):  # noqa: ANN202 - (fsspec filesystem, path), fsspec imported lazily
+    try:
+        import fsspec
+    except ImportError:
+        raise DatmoError(f"{url}: URLs need fsspec: pip install 'datmo[dask]'") from None
+    try:
+        return fsspec.core.url_to_fs(url)
+    except (ImportError, ValueError) as exc:
+        raise InputError(f"{url}: no fsspec driver for this URL ({exc})") from None
+
+
+def join(folder: str, name: str) -> str:
+    return f"{folder.rstrip('/')}/{name}" if remote(folder) else str(Path(local(folder)) / name)
+
+
+def exists(path: str) -> bool:
+    if remote(path):
+        fs, p = _fs(path)
+        return fs.exists(p)
+    return os.path.exists(local(path))
+
+
+def _is_log(name: str) -> bool:
+    base = os.path.basename(name)
+    return base.lower().endswith(LOG_SUFFIXES) and not base.startswith(".")
+
+
+def discover(specs: list[str], out_dir: str) -> list[tuple[str, str]]:
+    """(input, output) for every log that `specs` name, in order, without repeats.
+
+    A file is taken as it is (its output is OUT_DIR/STEM.mcap); a folder is searched recursively for .mcap
+    logs (hidden files and the output folder itself left out) and its logs keep their relative paths under
+    OUT_DIR; a glob (`*`, `?`, `[`, `**`) takes the logs it matches. A glob or folder without logs, or two
+    inputs with the same output, is an InputError naming them.
+    """
+    out_root = None if remote(out_dir) else os.path.abspath(local(out_dir))
+    pairs: list[tuple[str, str]] = []
+    for spec in specs:
+        for src, rel in _expand(spec, out_root):
+            pairs.append((src, join(out_dir, str(Path(rel).with_suffix(".mcap")))))
+    seen_in: set[str] = set()
+    seen_out: dict[str, str] = {}
+    out: list[tuple[str, str]] = []
+    for src, dst in pairs:
+        if src in seen_in:
+            continue
+        seen_in.add(src)
+        if dst in seen_out:
+            raise InputError(f"{src}: same output name as {seen_out[dst]} ({dst}); rename one of them")
+        seen_out[dst] = src
+        out.append((src, dst))
+    return out
+
+
+def _expand(spec: str, out_root: str | None) -> list[tuple[str, str]]:
+    """(input, output path relative to OUT_DIR) for one INPUTS item."""
+    magic = glob.has_magic(spec.split("://", 1)[-1])
+    if remote(spec):
+        fs, path = _fs(spec)
+        if magic:
+            found = [p for p in sorted(fs.glob(path)) if _is_log(p) and fs.isfile(p)]
+            if not found:
+                raise InputError(f"{spec}: no .mcap log matches")
+            return [(fs.unstrip_protocol(p), os.path.basename(p)) for p in found]
+        if fs.isdir(path):
+            found = [p for p in sorted(fs.find(path)) if _is_log(p)]
+            if not found:
+                raise InputError(f"{spec}: no .mcap logs in this folder")
+            return [(fs.unstrip_protocol(p), os.path.relpath(p, path)) for p in found]
+        return [(spec, os.path.basename(path))]
+    path = local(spec)
+    if magic:
+        found = [os.path.abspath(p) for p in sorted(glob.glob(path, recursive=True)) if os.path.isfile(p)]
+        found = [p for p in found if _is_log(p) and not _inside(p, out_root)]
+        if not found:
+            raise InputError(f"{spec}: no .mcap log matches")
+        return [(p, os.path.basename(p)) for p in found]
+    if os.path.isdir(path):
+        root = os.path.abspath(path)
+        found = []
+        for folder, dirs, files in os.walk(root):
+            dirs[:] = sorted(d for d in dirs if not d.startswith(".") and not _inside(os.path.join(folder, d),
+                                                                                      out_root))
+            found += [os.path.join(folder, f) for f in sorted(files) if _is_log(f)]
+        if not found:
+            raise InputError(f"{spec}: no .mcap logs in this folder")
+        return [(p, os.path.relpath(p, root)) for p in found]
+    return [(os.path.abspath(path), os.path.basename(path))]   # a missing file fails as its own input
+
+
+def _inside(path: str, folder: str | None) -> bool:
+    return folder is not None and (path == folder or path.startswith(folder.rstrip(os.sep) + os.sep))
+
+
+def tmp_pattern(output: str) -> str:
+    """The glob of the temporary files a writer of `output` leaves beside it (LogWriter and remote uploads)."""
+    name = os.path.basename(output.rstrip("/"))
+    return join(os.path.dirname(output.rstrip("/")) if remote(output) else str(Path(local(output)).parent),
+                f".{glob.escape(name)}.*tmp")
+
+
+def remove_partial(outputs: list[str]) -> int:
+    """Remove the temporary files of unfinished writes of `outputs`; returns how many."""
+    n = 0
+    for out in outputs:
+        pattern = tmp_pattern(out)
+        try:
+            if remote(pattern):
+                fs, p = _fs(pattern)
+                for f in fs.glob(p):
+                    fs.rm(f)
+                    n += 1
+            else:
+                for f in glob.glob(pattern):
+                    os.unlink(f)
+                    n += 1
+        except OSError:
+            pass
+    return n
+
+
+# ------------------------------------------------------------------------------------------ parameters
+
+
+def params_hash(params: dict | None) -> str:
+    """SHA-256 (first 16 hex digits) of the effective parameters: features and track tables and the leg
+    model's SHA-256, so the same settings hash alike wherever they were given (defaults, TOML, options)."""
+    from .perception.features import leg_model_provenance
+    from .perception.params import FeatureParams
+    from .tracking.params import TrackingParams
+
+    params = params or {}
+    features = params.get("features") or FeatureParams()
+    track = params.get("track") or TrackingParams()
+    model = leg_model_provenance(features.leg_model)
+    doc = {"features": features.to_dict(), "track": track.to_dict(),
+           "leg_model": model.get("sha256", model.get("model"))}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+# -------------------------------------------------------------------------------------------- manifest
+
+
+class Manifest:
+    """OUT_DIR/manifest.jsonl: one JSON object per line, one line per input each time a batch finishes it;
+    the latest line of an input is its state. Lines are appended and flushed (fsync) one at a time, so a
+    crash leaves at most a torn last line, which reading skips. On an fsspec URL that cannot append (object
+    stores) the whole file is rewritten, at most every few seconds and at the end."""
+
+    def __init__(self, out_dir: str) -> None:
+        self.path = join(out_dir, MANIFEST)
+        self._remote = remote(self.path)
+        self._lines: list[str] = []          # remote: every line, rewritten whole
+        self._last_put = 0.0
+        self._lock = threading.Lock()
+
+    def read(self) -> list[dict]:
+        """Every intact line, oldest first (a torn or foreign line is skipped)."""
+        if self._remote:
+            fs, p = _fs(self.path)
+            text = fs.cat_file(p).decode("utf-8", "replace") if fs.exists(p) else ""
+        else:
+            p = local(self.path)
+            text = Path(p).read_text("utf-8", "replace") if os.path.exists(p) else ""
+        records = []
+        for line in text.splitlines():
+            try:
+                rec = json.loads(line)
+            except ValueError:
+                continue
+            if isinstance(rec, dict) and "input" in rec and "status" in rec:
+                records.append(rec)
+        return records
+
+    def latest(self) -> dict[str, dict]:
+        """The latest line of each input."""
+        return {r["input"]: r for r in self.read()}
+
+    def compact(self, keep: dict[str, dict] | None = None) -> None:
+        """Rewrite the file with one line per input (its latest), atomically; drops torn lines."""
+        latest = self.latest() if keep is None else keep
+        lines = [json.dumps(r, sort_keys=True) + "\n" for r in latest.values()]
+        if self._remote:
+            self._lines = lines
+            self._put(force=True)
+            return
+        p = Path(local(self.path))
+        if not lines and not p.exists():
+            return
+        tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.writelines(lines)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, p)
+
+    def append(self, record: dict) -> None:
+        line = json.dumps(record, sort_keys=True) + "\n"
+        with self._lock:
+            if self._remote:
+                self._lines.append(line)
+                self._put()
+                return
+            with open(local(self.path), "a", encoding="utf-8") as f:
+                f.write(line)
+                f.flush()
+                os.fsync(f.fileno())
+
+    def close(self) -> None:
+        if self._remote:
+            self._put(force=True)
+
+    def _put(self, force: bool = False) -> None:
+        if force or time.monotonic() - self._last_put > 5.0:
+            fs, p = _fs(self.path)
+            fs.pipe_file(p, "".join(self._lines).encode())
+            self._last_put = time.monotonic()
+
+
+# ----------------------------------------------------------------------------------------------- tasks
+
+
+@dataclass
+class Task:
+    """One input of a batch, as an executor ships it to a worker."""
+
+    index: int
+    input: str
+    output: str
+    force: bool
+    params: dict | None
+    params_hash: str
+    command_line: str | None
+
+
+def record(task: Task, status: str, **fields) -> dict:
+    """A manifest line for `task` (figures default to nothing done)."""
+    rec = {"input": task.input, "input_sha256": None, "input_size": None, "input_mtime_ns": None,
+           "output": task.output, "status": status, "error": None, "scans": 0, "seconds": 0.0, "scans_per_s": 0.0,
+           "tracks": None, "datmo_version": __version__, "params_hash": task.params_hash,
+           "finished": datetime.now(UTC).isoformat(timespec="seconds"),
+           "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    rec.update(fields)
+    return rec
+
+
+def failed(task: Task, error: str) -> dict:
+    text = error if error.startswith(task.input) else f"{task.input}: {error}"
+    return record(task, FAILED, error=text.splitlines()[0] if text else text)
+
+
+def input_stat(path: str) -> tuple[int | None, int | None]:
+    """(size, mtime in ns) of an input, (None, None) when it cannot be seen."""
+    try:
+        if remote(path):
+            fs, p = _fs(path)
+            return int(fs.info(p)["size"]), None
+        st = os.stat(local(path))
+        return st.st_size, st.st_mtime_ns
+    except (OSError, KeyError, ValueError, DatmoError):
+        return None, None
+
+
+def input_sha256(path: str) -> str:
+    if not remote(path):
+        from .log.mcapio import sha256_of
+
+        return sha256_of(local(path))
+    fs, p = _fs(path)
+    h = hashlib.sha256()
+    with fs.open(p, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def headline(path: str) -> dict:
+    """The run's headline figures from its output: confirmed tracks, by class, and dynamic ones."""
+    from .log import mcapio
+    from .report import RunData, summarise
+
+    data = RunData.from_log(mcapio.read_log(path, topics=(mcapio.TOPIC_SCAN, mcapio.TOPIC_TRACKS)))
+    row = summarise(data).file_row()
+    return {"confirmed": row["tracks"], **{c: row[c] for c in TRACK_CLASSES}, "dynamic": row["dynamic"]}
+
+
+_WARM = False
+
+
+def ensure_warm() -> None:
+    """warm_up() once per process (a worker's first task, or the worker plugin): numba kernels loaded."""
+    global _WARM
+    if not _WARM:
+        from .pipeline import warm_up
+
+        warm_up()
+        _WARM = True
+
+
+def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
+             scans: Callable[[int, int], None] | None = None, raise_unexpected: bool = False) -> dict:
+    """Process one input into its output and return its manifest line.
+
+    A DatmoError (bad input, refused overwrite) gives a failed line with the one-line error; any other
+    exception too, unless `raise_unexpected` (Dask then retries the task). `cancelled()` is polled as the
+    scans go by; when it says so the task stops, drops its partial output and returns a "cancelled" line.
+    `scans(done, total)` follows the scans of this input.
+    """
+    from . import pipeline
+
+    t0 = time.perf_counter()
+
+    def progress(done: int, total: int) -> None:
+        if cancelled is not None and cancelled():
+            raise Cancelled()
+        if scans is not None:
+            scans(done, total)
+
+    try:
+        if cancelled is not None and cancelled():
+            raise Cancelled()
+        size, mtime = input_stat(task.input)
+        with _staged_input(task.input) as src, _staged_output(task.output, task.force) as out:
+            sha = input_sha256(src)
+            n = pipeline.process_file(src, out, force=task.force, params=task.params,
+                                      command_line=task.command_line, progress=progress)
+            figures = headline(out)
+        seconds = time.perf_counter() - t0
+        return record(task, DONE, input_sha256=sha, input_size=size, input_mtime_ns=mtime, scans=n,
+                      seconds=round(seconds, 3), scans_per_s=round(n / seconds, 1) if seconds > 0 else 0.0,
+                      tracks=figures)
+    except Cancelled:
+        return record(task, CANCELLED)
+    except DatmoError as exc:
+        return failed(task, str(exc))
+    except Exception as exc:
+        if raise_unexpected:
+            raise
+        return failed(task, f"failed: {type(exc).__name__}: {exc}")
+
+
+@contextmanager
+def _staged_input(path: str) -> Iterator[str]:
+    """A local path of the input: itself, or a copy of a remote one in a temporary folder."""
+    if not remote(path):
+        yield local(path)
+        return
+    fs, p = _fs(path)
+    if not fs.exists(p):
+        raise InputError(f"{path}: no such file")
+    with tempfile.TemporaryDirectory(prefix="datmo-in-") as tmp:
+        dst = os.path.join(tmp, os.path.basename(p))
+        fs.get_file(p, dst)
+        yield dst
+
+
+@contextmanager
+def _staged_output(path: str, force: bool) -> Iterator[str]:
+    """Where to write the output: itself (LogWriter renames a temporary file into place; its folder is
+    made when missing), or a local temporary file uploaded to a temporary name beside a remote output and
+    moved into place when complete."""
+    if not remote(path):
+        os.makedirs(os.path.dirname(local(path)) or ".", exist_ok=True)
+        yield local(path)
+        return
+    fs, p = _fs(path)
+    if fs.exists(p) and not force:
+        raise OutputExistsError(f"{path}: exists; use --force to overwrite it")
+    with tempfile.TemporaryDirectory(prefix="datmo-out-") as tmp:
+        out = os.path.join(tmp, os.path.basename(p))
+        yield out
+        parent, name = p.rsplit("/", 1) if "/" in p else ("", p)
+        part = f"{parent}/.{name}.{os.getpid()}.{time.monotonic_ns()}.tmp" if parent else f".{name}.tmp"
+        fs.put_file(out, part)
+        fs.mv(part, p)
+
+
+# --------------------------------------------------------------------------------------------- batches
+
+
+@dataclass
+class Batch:
+    """A batch ready to run: its tasks, the manifest lines of the inputs it skips, and its ledger."""
+
+    out_dir: str
+    tasks: list[Task]
+    skipped: list[dict]
+    manifest: Manifest
+    outputs: list[str] = field(default_factory=list)
+    records: dict[str, dict] = field(default_factory=dict)   # input -> this batch's line
+
+    @property
+    def total(self) -> int:
+        return len(self.tasks) + len(self.skipped)
+
+
+def prepare(specs: list[str], out_dir: str, *, params: dict | None = None, force: bool = False,
+            command_line: str | None = None) -> Batch:
+    """Find the inputs, read the manifest and decide what to redo.
+
+    An input is skipped when its latest manifest line is done (or skipped) with the same parameters' hash
+    and the same input SHA-256 (not rehashed when size and mtime are unchanged) and its output exists;
+    `force` redoes everything. An output that exists may be overwritten without `force` only when the
+    manifest lists it for this input or it is the leftover of an interrupted batch (its provenance says
+    `datmo run` of this input); any other existing output fails as its input with "use --force".
+    """
+    if not remote(out_dir):
+        d = Path(local(out_dir))
+        if d.exists() and not d.is_dir():
+            raise InputError(f"{out_dir}: exists and is not a folder")
+        d.mkdir(parents=True, exist_ok=True)
+        out_dir = str(d.resolve())
+    pairs = discover(specs, out_dir)
+    manifest = Manifest(out_dir)
+    ledger = manifest.latest()
+    phash = params_hash(params)
+    tasks, skipped = [], []
+    for i, (src, dst) in enumerate(pairs):
+        last = ledger.get(src)
+        owned = last is not None and last.get("output") == dst and last.get("status") in (DONE, SKIPPED)
+        if not force and owned and last.get("params_hash") == phash and exists(dst) and _same_input(src, last):
+            skipped.append({**last, "status": SKIPPED, "error": None,
+                            "finished": datetime.now(UTC).isoformat(timespec="seconds")})
+            continue
+        overwrite = force or (exists(dst) and (owned or _leftover(dst, src)))
+        tasks.append(Task(i, src, dst, overwrite, params, phash, command_line))
+    if ledger:
+        manifest.compact(ledger)   # one line per input before this batch appends its own
+    return Batch(out_dir, tasks, skipped, manifest, [d for _, d in pairs])
+
+
+def _same_input(src: str, last: dict) -> bool:
+    size, mtime = input_stat(src)
+    if size is None:
+        return False
+    if mtime is not None and size == last.get("input_size") and mtime == last.get("input_mtime_ns"):
+        return True
+    try:
+        return input_sha256(src) == last.get("input_sha256")
+    except OSError:
+        return False
+
+
+def _leftover(dst: str, src: str) -> bool:
+    """True when `dst` is a datmo run output of `src` (a batch stopped before recording it)."""
+    if remote(dst):
+        return False
+    from .log import mcapio
+
+    try:
+        meta = mcapio.summary(local(dst)).metadata
+    except (DatmoError, OSError):
+        return False
+    return meta.get("datmo", {}).get("command") == "run" and src in meta.get("datmo.inputs", {})
+
+
+class Executor:
+    """Runs tasks somewhere; `run` calls `on_record(record)` in this process as each task finishes (in any
+    order) and `on_scans(task_index, done, total)` when it can follow scans; Ctrl-C stops the workers'
+    tasks (their partial outputs dropped) and is raised again."""
+
+    workers: int = 1
+    where: str = "local"
+
+    def run(self, tasks: list[Task], on_record: Callable[[dict], None],
+            on_scans: Callable[[int, int, int], None] | None = None) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        pass
+
+
+class LocalExecutor(Executor):
+    """`--jobs N`: one process per job on this machine (forked after warm_up, so kernels are loaded)."""
+
+    def __init__(self, jobs: int | None = None) -> None:
+        self.workers = jobs or os.cpu_count() or 1
+        self.where = f"{self.workers} local process{'es' if self.workers > 1 else ''}"
+
+    def run(self, tasks, on_record, on_scans=None) -> None:  # noqa: ANN001 - see Executor
+        if not tasks:
+            return
+        if min(self.workers, len(tasks)) <= 1:
+            for t in tasks:
+                on_record(run_task(t, scans=(lambda d, n, i=t.index: on_scans(i, d, n)) if on_scans else None))
+            return
+        self._pool(tasks, on_record, on_scans)
+
+    def _pool(self, tasks, on_record, on_scans) -> None:  # noqa: ANN001
+        import multiprocessing
+        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+        from concurrent.futures.process import BrokenProcessPool
+
+        ensure_warm()
+        ctx = multiprocessing.get_context("fork") if hasattr(os, "fork") else None
+        with multiprocessing.Manager() as manager:
+            queue = manager.Queue()
+            pool = ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)), mp_context=ctx)
+            try:
+                futures = {pool.submit(_queued_task, t, queue): t for t in tasks}
+                pending = set(futures)
+                while pending:
+                    done, pending = wait(pending, timeout=0.1, return_when=FIRST_COMPLETED)
+                    _drain(queue, on_scans)
+                    for fut in done:
+                        t = futures[fut]
+                        try:
+                            on_record(fut.result())
+                        except BrokenProcessPool as exc:
+                            on_record(failed(t, f"worker died ({exc})"))
+                _drain(queue, on_scans)
+            except BaseException:
+                for p in list(getattr(pool, "_processes", {}).values()):
+                    p.terminate()     # a task still running must not finish an output after the batch stopped
+                pool.shutdown(wait=True, cancel_futures=True)
+                raise
+            pool.shutdown(wait=True)
+
+
+def _queued_task(task: Task, queue) -> dict:  # noqa: ANN001 - a Manager queue proxy
+    return run_task(task, scans=lambda d, n: queue.put((task.index, d, n)))
+
+
+def _drain(queue, on_scans) -> None:  # noqa: ANN001
+    import queue as queue_mod
+
+    while True:
+        try:
+            i, d, n = queue.get_nowait()
+        except queue_mod.Empty:
+            return
+        if on_scans:
+            on_scans(i, d, n)
+
+
+def run(batch: Batch, executor: Executor, *, on_record: Callable[[dict], None] | None = None,
+        on_scans: Callable[[int, int, int], None] | None = None) -> list[dict]:
+    """Run a prepared batch: skipped inputs' lines first, then each task's line as it finishes, all
+    appended to the manifest. Returns this batch's lines in input order. Ctrl-C: the executor stops its
+    tasks, partial files are removed and BatchInterrupted says what is kept."""
+
+    def finished(rec: dict) -> None:
+        if rec["status"] == CANCELLED:
+            return
+        batch.manifest.append(rec)
+        batch.records[rec["input"]] = rec
+        if on_record:
+            on_record(rec)
+
+    for rec in batch.skipped:
+        finished(rec)
+    try:
+        executor.run(batch.tasks, finished, on_scans)
+    except KeyboardInterrupt:
+        remove_partial([t.output for t in batch.tasks if t.input not in batch.records])
+        batch.manifest.close()
+        done = sum(r["status"] != FAILED for r in batch.records.values())
+        raise BatchInterrupted(f"interrupted: {done} of {batch.total} inputs done and in {batch.manifest.path}; "
+                               "run the same command again to do the rest") from None
+    remove_partial([t.output for t in batch.tasks])   # left by workers that died mid-write
+    batch.manifest.close()
+    index = {out: i for i, out in enumerate(batch.outputs)}
+    return sorted(batch.records.values(), key=lambda r: index.get(r["output"], len(index)))

@@ -1,0 +1,166 @@
+"""`datmo run --scheduler`: a batch's tasks on a Dask distributed cluster.
+
+One task per input (`batch.run_task` on a worker; the input and output paths are resolved for a shared
+filesystem or are fsspec URLs). Each worker process loads datmo's numba kernels once (a worker plugin
+calls `batch.ensure_warm`), not per task. A task that raises an unexpected error is retried by Dask
+(`retries`); a task whose worker dies is rescheduled on another worker by the scheduler, and resubmitted
+by the client up to `retries` times if the scheduler gives it up (KilledWorker). Ctrl-C sets a cluster-
+wide Event that running tasks poll as their scans go by: they stop, drop their partial output and return.
+At most `window` tasks are in the scheduler at a time, so a batch of a million inputs does not hold a
+million futures.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import uuid
+from collections import deque
+from collections.abc import Callable
+
+from .batch import CANCELLED, Executor, Task, ensure_warm, failed, run_task
+from .errors import DatmoError
+
+INSTALL_HINT = "pip install 'datmo[dask]'"
+CANCEL_POLL_S = 0.5
+CANCEL_GRACE_S = 10.0
+
+
+def _distributed():  # noqa: ANN202 - the distributed module
+    try:
+        import distributed
+    except ImportError:
+        raise DatmoError(f"--scheduler needs Dask's distributed scheduler, which is not installed: {INSTALL_HINT}") \
+            from None
+    return distributed
+
+
+def parse_local(address: str) -> int | None:
+    """N for `local[:N]` (default: the cores here), None for a scheduler address."""
+    if address != "local" and not address.startswith("local:"):
+        return None
+    n = address.partition(":")[2]
+    if not n:
+        return os.cpu_count() or 1
+    if not n.isdigit() or int(n) < 1:
+        raise DatmoError(f"--scheduler {address}: expected local or local:N with N >= 1 workers")
+    return int(n)
+
+
+def _worker_task(task: Task, cancel_event: str) -> dict:
+    """What a worker runs for one input: warm (once per process), then run_task polling the cancel Event."""
+    from distributed import Event
+
+    ensure_warm()
+    event = Event(cancel_event)
+    last = [0.0, False]
+
+    def cancelled() -> bool:
+        now = time.monotonic()
+        if not last[1] and now - last[0] >= CANCEL_POLL_S:
+            last[0], last[1] = now, bool(event.is_set())
+        return last[1]
+
+    return run_task(task, cancelled=cancelled, raise_unexpected=True)
+
+
+class DaskExecutor(Executor):
+    """A batch's tasks on a running Dask scheduler (`tcp://host:8786`) or on a local cluster (`local[:N]`,
+    N worker processes of one thread started for the run)."""
+
+    def __init__(self, address: str, *, retries: int = 2, window: int | None = None) -> None:
+        distributed = _distributed()
+        import dask
+
+        self.address = address
+        self.retries = retries
+        self.cluster = None
+        n = parse_local(address)
+        try:
+            if n is not None:
+                import logging
+
+                with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
+                    self.cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                            dashboard_address=None, silence_logs=logging.ERROR)
+                self.client = distributed.Client(self.cluster)
+            else:
+                self.client = distributed.Client(address, timeout="15s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            self.close()
+            raise DatmoError(f"--scheduler {address}: cannot reach the Dask scheduler ({exc})") from None
+        from ._dask_plugin import WarmUp
+
+        self.client.register_plugin(WarmUp(), name=WarmUp.name)  # returns once every worker has loaded them
+        threads = sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values())
+        self.workers = max(threads, 1)
+        self.where = (f"a local Dask cluster of {n} worker{'s' if n > 1 else ''}" if n is not None
+                      else f"the Dask scheduler {address} ({self.workers} worker threads)")
+        self.window = window or max(64, 4 * self.workers)
+
+    def run(self, tasks: list[Task], on_record: Callable[[dict], None],
+            on_scans: Callable[[int, int, int], None] | None = None) -> None:
+        from distributed import Event, KilledWorker, as_completed
+
+        if not tasks:
+            return
+        token = uuid.uuid4().hex[:12]
+        cancel_event = f"datmo-cancel-{token}"
+        queue = deque(tasks)
+        live: dict[str, tuple] = {}          # key -> (future, task)
+        attempts: dict[int, int] = {}
+        stream = as_completed()
+
+        def submit(t: Task) -> None:
+            attempts[t.index] = attempts.get(t.index, 0) + 1
+            key = f"datmo-run-{token}-{t.index}-{attempts[t.index]}"
+            fut = self.client.submit(_worker_task, t, cancel_event, key=key, retries=self.retries, pure=False)
+            live[fut.key] = (fut, t)
+            stream.add(fut)
+
+        def collect(fut) -> None:  # noqa: ANN001 - distributed.Future
+            t = live.pop(fut.key)[1]
+            try:
+                rec = fut.result()
+            except KilledWorker as exc:
+                if attempts[t.index] <= self.retries:
+                    submit(t)
+                    return
+                rec = failed(t, f"worker died {attempts[t.index]} times running it ({exc})")
+            except Exception as exc:  # noqa: BLE001 - Dask retried it `retries` times
+                rec = failed(t, f"failed: {type(exc).__name__}: {exc}")
+            fut.release()
+            on_record(rec)
+
+        for _ in range(min(self.window, len(queue))):
+            submit(queue.popleft())
+        try:
+            for fut in stream:
+                collect(fut)
+                while queue and len(live) < self.window:
+                    submit(queue.popleft())
+        except KeyboardInterrupt:
+            queue.clear()
+            try:
+                Event(cancel_event, client=self.client).set()
+                deadline = time.monotonic() + CANCEL_GRACE_S
+                for fut, _ in list(live.values()):   # running tasks stop at their next poll
+                    try:
+                        rec = fut.result(timeout=max(0.1, deadline - time.monotonic()))
+                    except BaseException:  # noqa: BLE001 - failed, retried elsewhere or still running: dropped
+                        continue
+                    if rec.get("status") != CANCELLED:
+                        on_record(rec)     # it finished: its output is complete, so it is in the manifest
+                self.client.cancel([f for f, _ in live.values()], force=True)
+            finally:
+                self.close()
+            raise
+
+    def close(self) -> None:
+        for thing in (getattr(self, "client", None), self.cluster):
+            if thing is not None:
+                try:
+                    thing.close()
+                except Exception:  # noqa: BLE001, S110 - closing after a failure
+                    pass
+        self.cluster = None
