@@ -223,27 +223,27 @@ def test_a_duplicate_yields_to_the_person_whatever_its_hits():
     """Two confirmed leg/person tracks moving alike within merge_distance are one: the one that goes is
     not the person, even when the other (e.g. a track on a bench's pieces uncovered by the person walking
     past) has more hits; between two unknowns, the one with fewer hits goes."""
+    from datmo_cli.tracking import _step, state
     from datmo_cli.tracking.classification import CLASS_PERSON, CLASS_UNKNOWN, MOBILITY_DYNAMIC, MOBILITY_STATIC
     from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
-    from datmo_cli.tracking.tracker import TrackArrays
 
     def tracks(cls, mobility, hits):  # noqa: ANN001, ANN202
-        e = TrackArrays.empty(P.tail_length)
-        t = TrackArrays(*(np.zeros((len(cls),) + getattr(e, f).shape[1:], getattr(e, f).dtype)
-                          for f in e.__dataclass_fields__))
-        t.x[:] = [[2.0, 1.0, 0.8, 0.0], [2.0, 1.0 + 0.5 * P.merge_distance, 0.8, 0.0]]
-        t.votes[:, KIND_PERSON] = 5
-        t.votes[:, KIND_LEG] = 5
-        t.confirmed[:] = True
-        t.cls[:] = cls
-        t.mobility[:] = mobility
-        t.hits[:] = hits
-        return t
+        t = state.TrackTable(P.tail_length, capacity=2)
+        t.n = 2
+        tab = t.table
+        tab[:, state.X:state.X + 4] = [[2.0, 1.0, 0.8, 0.0], [2.0, 1.0 + 0.5 * P.merge_distance, 0.8, 0.0]]
+        tab[:, state.VOTES + KIND_PERSON] = 5
+        tab[:, state.VOTES + KIND_LEG] = 5
+        tab[:, state.CONFIRMED] = 1
+        tab[:, state.CLS] = cls
+        tab[:, state.MOBILITY] = mobility
+        tab[:, state.HITS] = hits
+        return tab
 
-    tracker = Tracker(P, GEOM)
+    prm = state.param_vector(P)
     person_fewer_hits = tracks([CLASS_PERSON, CLASS_UNKNOWN], [MOBILITY_DYNAMIC, MOBILITY_STATIC], [40, 80])
-    assert tracker._duplicates(person_fewer_hits).tolist() == [False, True]
+    assert _step.duplicates(person_fewer_hits, 2, prm).tolist() == [False, True]
     unknowns = tracks([CLASS_UNKNOWN, CLASS_UNKNOWN], [MOBILITY_STATIC, MOBILITY_STATIC], [40, 80])
-    assert tracker._duplicates(unknowns).tolist() == [True, False]
+    assert _step.duplicates(unknowns, 2, prm).tolist() == [True, False]
     dynamic_first = tracks([CLASS_UNKNOWN, CLASS_UNKNOWN], [MOBILITY_DYNAMIC, MOBILITY_STATIC], [40, 80])
-    assert tracker._duplicates(dynamic_first).tolist() == [False, True]
+    assert _step.duplicates(dynamic_first, 2, prm).tolist() == [False, True]

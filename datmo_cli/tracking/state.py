@@ -1,0 +1,134 @@
+"""The tracker's state as numbers: a fixed-capacity track table, a parameter vector and a few scalars.
+
+Track table: one C-contiguous float64 array (capacity, N_COLUMNS), one row per track, live tracks in rows
+0..n-1 in creation order; the columns are named by the constants below. Counters, flags, classes and ids
+are stored as float64 (exact for integers below 2**53). Times are ns since the tracker's first scan, so
+they are exact too. Positions and velocities are in the tracking frame (the sensor frame of a still
+scanner, or the world frame when the steps are given poses), m and m/s; P is the 4x4 covariance of
+(x, y, vx, vy), row-major. The last 2 * tail_length columns are a ring buffer of recent positions (m).
+When a scan spawns more tracks than the table holds, the compiled step returns a table of twice the
+capacity (growth policy: doubling; rows are never dropped).
+
+Parameters: TrackingParams as one float64 vector (`param_vector`), indexed by the P_* constants.
+Context: the tracker's scalars between scans (last stamp, next id, background grid bookkeeping), one
+float64 vector indexed by the C_* constants.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .params import TrackingParams
+
+# ------------------------------------------------------------------------------------------ track table
+ID = 0
+X, Y, VX, VY = 1, 2, 3, 4          # state (tracking frame), m and m/s
+P0 = 5                             # P[r, s] at column P0 + 4 r + s
+BORN = 21                          # ns since the tracker's first scan
+LAST_HIT = 22                      # ns of the last hit, same origin
+AGE, HITS, MISSES = 23, 24, 25     # scans
+HISTORY = 26                       # bit mask of hits in the last confirm_window scans
+VOTES = 27                         # hits per measurement kind: columns VOTES + KIND_* (5 columns)
+LEAD_LEFT, LEAD_RIGHT = 32, 33     # 0/1: the left (right) leg was seen leading
+MOVING_TIME = 34                   # s of consecutive hits with a speed above moving_speed
+SIZE = 35                          # largest extent seen, m
+FIRST_X, FIRST_Y = 36, 37          # position when created, m
+LAST_X, LAST_Y = 38, 39            # position after the last hit, m
+CONFIRMED, OCCLUDED, HIT = 40, 41, 42   # 0/1
+CLS, MOBILITY = 43, 44             # class and mobility (classification.CLASS_*, MOBILITY_*)
+TAIL_COUNT = 45                    # positions written to the tail so far
+LEG_SCORE = 46                     # running mean of the leg detector's probability of its hits
+SENSOR_REF_X, SENSOR_REF_Y = 47, 48   # running mean of its sensor-frame position, m
+POSE_FIRST_X, POSE_FIRST_Y = 49, 50   # the sensor's position (tracking frame) when created, m
+SENSOR_DEV = 51                    # running mean of its distance from the sensor-frame reference, m
+ON_BG = 52                         # 0/1: took a measurement on the background this scan
+TAIL = 53                          # tail point i at columns TAIL + 2 i (x), TAIL + 2 i + 1 (y)
+N_FIXED = TAIL
+
+# ------------------------------------------------------------------------------------- parameter vector
+(P_PROCESS_NOISE, P_PERSON_PROCESS_NOISE, P_MEASUREMENT_NOISE, P_LEG_MEASUREMENT_NOISE, P_INITIAL_SPEED_SIGMA,
+ P_GATE, P_MAX_GATE_DISTANCE, P_CONFIRM_HITS, P_CONFIRM_WINDOW, P_DELETE_AFTER, P_DELETE_AFTER_OCCLUDED,
+ P_REACQUIRE_SPEED, P_REACQUIRE_DISTANCE, P_OCCLUSION_MARGIN, P_TENTATIVE_DELETE_AFTER, P_D_MAX,
+ P_UNDEFINED_WINDOW, P_MOVING_DISTANCE, P_MOVING_SPEED, P_MOVING_TIME, P_LEG_RADIUS_MAX, P_LEG_BLOB_MAX,
+ P_STRIDE_MAX, P_LEG_REACH, P_LEG_BESIDE, P_SPAWN_CLEARANCE, P_STEP_MIN, P_WALKING_AFTER, P_STEP_MAX,
+ P_MERGE_DISTANCE, P_MERGE_SPEED, P_PERSON_VOTES, P_LEG_PROBABILITY, P_LEG_EVIDENCE_RATE, P_PERSON_EVIDENCE,
+ P_MOVING_PERSON_EVIDENCE, P_PERSON_PAIRS, P_MOVING_PERSON_PAIRS, P_CARRIED_TRAVEL, P_CARRIED_RADIUS,
+ P_BACKGROUND_TIME, P_BACKGROUND_CELL, P_BACKGROUND_EXTENT, P_TAIL_LENGTH) = range(44)
+N_PARAMS = 44
+_PARAM_NAMES = ("process_noise", "person_process_noise", "measurement_noise", "leg_measurement_noise",
+                "initial_speed_sigma", "gate", "max_gate_distance", "confirm_hits", "confirm_window",
+                "delete_after", "delete_after_occluded", "reacquire_speed", "reacquire_distance",
+                "occlusion_margin", "tentative_delete_after", "d_max", "undefined_window", "moving_distance",
+                "moving_speed", "moving_time", "leg_radius_max", "leg_blob_max", "stride_max", "leg_reach",
+                "leg_beside", "spawn_clearance", "step_min", "walking_after", "step_max", "merge_distance",
+                "merge_speed", "person_votes", "leg_probability", "leg_evidence_rate", "person_evidence",
+                "moving_person_evidence", "person_pairs", "moving_person_pairs", "carried_travel",
+                "carried_radius", "background_time", "background_cell", "background_extent", "tail_length")
+
+# ------------------------------------------------------------------------------------------- context
+(C_HAS_STAMP, C_STAMP, C_NEXT_ID, C_BG_READY, C_BG_COUNT, C_BG_SCAN, C_BG_X0, C_BG_Y0, C_BG_LO, C_BG_HI,
+ C_N_TRACKS) = range(11)
+N_CONTEXT = 11
+
+
+def param_vector(params: TrackingParams) -> np.ndarray:
+    """The float64 parameter vector of `params` (P_* indices; units as TrackingParams's)."""
+    out = np.array([float(getattr(params, name)) for name in _PARAM_NAMES], np.float64)
+    out[P_TAIL_LENGTH] = max(params.tail_length, 1)
+    return out
+
+
+def n_columns(tail_length: int) -> int:
+    """Columns of a track table whose tails hold `tail_length` positions (at least one)."""
+    return N_FIXED + 2 * max(tail_length, 1)
+
+
+def new_context() -> np.ndarray:
+    """The context of a tracker that has seen no scan (next id 1, no background grid yet)."""
+    ctx = np.zeros(N_CONTEXT)
+    ctx[C_NEXT_ID] = 1.0
+    return ctx
+
+
+class TrackTable:
+    """The live tracks of a tracker: `table[:n]` (see the module docstring) with named views."""
+
+    def __init__(self, tail_length: int, capacity: int = 64) -> None:
+        self.tail_length = max(tail_length, 1)
+        self.table = np.zeros((capacity, n_columns(tail_length)))
+        self.n = 0
+
+    def __len__(self) -> int:
+        return self.n
+
+    def column(self, c: int) -> np.ndarray:
+        """Column `c` of the live tracks (a view)."""
+        return self.table[:self.n, c]
+
+    @property
+    def id(self) -> np.ndarray:
+        return self.table[:self.n, ID].astype(np.int64)
+
+    @property
+    def x(self) -> np.ndarray:
+        """(n, 4) x, y, vx, vy (a view), tracking frame."""
+        return self.table[:self.n, X:X + 4]
+
+    @property
+    def P(self) -> np.ndarray:
+        """(n, 4, 4) covariances (a copy)."""
+        return self.table[:self.n, P0:P0 + 16].reshape(self.n, 4, 4)
+
+    @property
+    def votes(self) -> np.ndarray:
+        return self.table[:self.n, VOTES:VOTES + 5].astype(np.int64)
+
+    @property
+    def tail(self) -> np.ndarray:
+        """(n, T, 2) ring buffers of recent positions (tracking frame, m; a view)."""
+        return self.table[:self.n, TAIL:TAIL + 2 * self.tail_length].reshape(self.n, self.tail_length, 2)
+
+    @property
+    def tail_count(self) -> np.ndarray:
+        """(n,) int64 positions written to each tail so far."""
+        return self.table[:self.n, TAIL_COUNT].astype(np.int64)
