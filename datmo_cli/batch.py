@@ -622,3 +622,30 @@ def run(batch: Batch, executor: Executor, *, on_record: Callable[[dict], None] |
     batch.manifest.close()
     index = {out: i for i, out in enumerate(batch.outputs)}
     return sorted(batch.records.values(), key=lambda r: index.get(r["output"], len(index)))
+
+
+# --------------------------------------------------------------------------------------------- reports
+
+
+def summary(records: list[dict]) -> dict:
+    """A batch's figures from its manifest's latest lines: inputs by status, scans, task time, tracks by
+    class, the datmo versions and parameters' hashes in use, and done inputs whose output is missing."""
+    ok = [r for r in records if r["status"] in (DONE, SKIPPED)]
+    seconds = sum(r.get("seconds") or 0.0 for r in ok)
+    scans = sum(r.get("scans") or 0 for r in ok)
+    tracks = {k: sum((r.get("tracks") or {}).get(k, 0) for r in ok) for k in ("confirmed", *TRACK_CLASSES, "dynamic")}
+    return {"inputs": len(records), "done": len(ok), "failed": sum(r["status"] == FAILED for r in records),
+            "scans": scans, "task_seconds": round(seconds, 3),
+            "scans_per_task_second": round(scans / seconds, 1) if seconds > 0 else None, "tracks": tracks,
+            "versions": sorted({r.get("datmo_version") or "?" for r in records}),
+            "params_hashes": sorted({r.get("params_hash") or "?" for r in records}),
+            "missing_outputs": [r["output"] for r in ok if not exists(r["output"])],
+            "failures": [{"input": r["input"], "error": r.get("error")} for r in records if r["status"] == FAILED]}
+
+
+def read_batch(folder: str) -> list[dict]:
+    """The latest manifest line of every input of the batch in `folder`; InputError when it has none."""
+    manifest = Manifest(folder)
+    if not exists(manifest.path):
+        raise InputError(f"{folder}: no {MANIFEST} (a batch folder is the -o folder of datmo run)")
+    return list(manifest.latest().values())
