@@ -404,6 +404,9 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
 def _staged_input(path: str) -> Iterator[str]:
     """A local path of the input: itself, or a copy of a remote one in a temporary folder."""
     if not remote(path):
+        if not os.path.isfile(local(path)):
+            why = "is a directory, not an MCAP log" if os.path.isdir(local(path)) else "no such file"
+            raise InputError(f"{path}: {why}")
         yield local(path)
         return
     fs, p = _fs(path)

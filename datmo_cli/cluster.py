@@ -24,6 +24,7 @@ from .errors import DatmoError
 INSTALL_HINT = "pip install 'datmo[dask]'"
 CANCEL_POLL_S = 0.5
 CANCEL_GRACE_S = 10.0
+CONNECT_TIMEOUT = "15s"
 
 
 def _distributed():  # noqa: ANN202 - the distributed module
@@ -85,7 +86,7 @@ class DaskExecutor(Executor):
                                                             dashboard_address=None, silence_logs=logging.ERROR)
                 self.client = distributed.Client(self.cluster)
             else:
-                self.client = distributed.Client(address, timeout="15s")
+                self.client = distributed.Client(address, timeout=CONNECT_TIMEOUT)
         except (OSError, TimeoutError, ValueError) as exc:
             self.close()
             raise DatmoError(f"--scheduler {address}: cannot reach the Dask scheduler ({exc})") from None
