@@ -81,6 +81,8 @@ class DaskExecutor(Executor):
             if n is not None:
                 import logging
 
+                ensure_warm()   # compile (or load) the kernels here once, so N workers do not compile them at once
+
                 with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
                     self.cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                                             dashboard_address=None, silence_logs=logging.ERROR)
