@@ -271,12 +271,13 @@ def predict(tab, n, dt, prm):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def kalman_update(tab, k, zx, zy, sigma):  # noqa: ANN001, ANN201
-    """Kalman update of track k with a position measurement (zx, zy) of sigma m, Joseph form (_kernels.update)."""
+def kalman_update(tab, k, zx, zy, sigma, scratch):  # noqa: ANN001, ANN201
+    """Kalman update of track k with a position measurement (zx, zy) of sigma m, Joseph form (_kernels.update);
+    scratch: (3, 4, 4) work space."""
     P = tab[k, P0:P0 + 16].reshape((4, 4))
-    I_KH = np.empty((4, 4))
-    G = np.empty((4, 2))
-    T = np.empty((4, 4))
+    I_KH = scratch[0]
+    G = scratch[1]
+    T = scratch[2]
     v = sigma * sigma
     a, b, c = P[0, 0] + v, P[0, 1], P[1, 1] + v
     det = a * c - b * b
@@ -410,7 +411,7 @@ def legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm):  # noqa: A
 @njit(cache=True)
 def gated_costs(tab, n, mx, my, mkind, compat, crow, prm):  # noqa: ANN001, ANN201
     """Costs (n, M) d2 + ln det S and which pairs pass the gate, the distance bound and kind compatibility
-    (_kernels.gated_costs on the table)."""
+    (_kernels.gated_costs on the table; the cost of a pair that does not pass is inf, not computed)."""
     M = len(mx)
     cost = np.empty((n, M))
     ok = np.zeros((n, M), np.bool_)
@@ -423,8 +424,9 @@ def gated_costs(tab, n, mx, my, mkind, compat, crow, prm):  # noqa: ANN001, ANN2
             dx, dy = mx[j] - tab[k, X], my[j] - tab[k, Y]
             det = a * c - b * b
             d2 = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / det
-            cost[k, j] = d2 + np.log(det)
             ok[k, j] = compat[row, mkind[j]] and d2 <= prm[P_GATE] and np.hypot(dx, dy) <= prm[P_MAX_GATE_DISTANCE]
+            # the GNN prices a pair outside the gate INFEASIBLE whatever its cost: its log is not needed
+            cost[k, j] = d2 + np.log(det) if ok[k, j] else np.inf
     return cost, ok
 
 
@@ -445,15 +447,31 @@ def associate(tab, n, mx, my, mkind, rows0, compat, crow, prm):  # noqa: ANN001,
 
 
 @njit(cache=True)
+def hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg_score, ctx, px, py, prm):  # noqa: ANN001, ANN201
+    """Mark (column ON_BG) the tracks that take (rows, cols) a measurement on the background this scan: their
+    motion does not count (tracker._hit_background)."""
+    for k in range(n):
+        tab[k, ON_BG] = 0.0
+    if ctx[C_BG_READY] == 0:
+        return
+    nbg = int(np.sqrt(len(bg_score)) + 0.5)
+    on_bg = _kernels.tracks_on_background(bg_score, mx, my, msize, mkind, rows, cols, n, px, py, ctx[C_BG_X0],
+                                          ctx[C_BG_Y0], prm[P_BACKGROUND_CELL], nbg, prm[P_BACKGROUND_TIME])
+    for k in range(n):
+        tab[k, ON_BG] = 1.0 if on_bg[k] else 0.0
+
+
+@njit(cache=True)
 def update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm):  # noqa: ANN001, ANN201
     """Kalman-update tracks rows with measurements cols and record the hits (_kernels.apply_updates)."""
     for k in range(n):
         tab[k, HIT] = 0.0
+    scratch = np.empty((3, 4, 4))
     for q in range(len(rows)):
         k, j = rows[q], cols[q]
         moving = tab[k, MOVING_TIME] >= prm[P_WALKING_AFTER]
         kalman_update(tab, k, mx[j], my[j], prm[P_LEG_MEASUREMENT_NOISE] if mkind[j] == K_LEG
-                      else prm[P_MEASUREMENT_NOISE])
+                      else prm[P_MEASUREMENT_NOISE], scratch)
         tab[k, LAST_X], tab[k, LAST_Y] = tab[k, X], tab[k, Y]
         tab[k, HIT] = 1.0
         tab[k, VOTES + mkind[j]] += 1
@@ -535,6 +553,30 @@ def reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm):  # no
         tab[k, HIT] = 1.0
         tab[k, VOTES + mkind[j]] += 1
     return rows2, cols2
+
+
+@njit(cache=True)
+def merge_reacquired(rows, cols, rows2, cols2):  # noqa: ANN001, ANN201
+    """The association with the reacquisitions (rows2, cols2) in: pairs whose measurement a lost track took
+    back leave it, and their tracks (tentative, started on it) are superseded. (rows, cols, superseded)."""
+    if len(rows2) == 0:
+        return rows, cols, np.zeros(0, np.int64)
+    keep = np.ones(len(cols), np.bool_)
+    for q in range(len(cols)):
+        for b in range(len(cols2)):
+            if cols[q] == cols2[b]:
+                keep[q] = False
+    return np.concatenate((rows[keep], rows2)), np.concatenate((cols[keep], cols2)), rows[~keep]
+
+
+@njit(cache=True)
+def leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, prm):  # noqa: ANN001, ANN201
+    """Fold the leg probability of each hit (rows took cols) into the tracks' running mean LEG_SCORE."""
+    a = prm[P_LEG_EVIDENCE_RATE]
+    for q in range(len(rows)):
+        k = rows[q]
+        tab[k, LEG_SCORE] = (1.0 - a) * tab[k, LEG_SCORE] + a * leg_probability(mx, my, mkind, mlegs, mprob, raw,
+                                                                               has_prob, cols[q])
 
 
 @njit(cache=True)
@@ -826,32 +868,11 @@ def track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, ha
                                                              px, py, prm)
     mx, my, msize, mkind, mlegs, mprob, rows0 = legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm)
     rows, cols = associate(tab, n, mx, my, mkind, rows0, compat, crow, prm)
-    # which tracks take a measurement on the background (their motion does not count)
-    nbg = int(np.sqrt(len(bg_score)) + 0.5)
-    for k in range(n):
-        tab[k, ON_BG] = 0.0
-    if ctx[C_BG_READY] != 0:
-        on_bg = _kernels.tracks_on_background(bg_score, mx, my, msize, mkind, rows, cols, n, px, py, ctx[C_BG_X0],
-                                              ctx[C_BG_Y0], prm[P_BACKGROUND_CELL], nbg, prm[P_BACKGROUND_TIME])
-        for k in range(n):
-            tab[k, ON_BG] = 1.0 if on_bg[k] else 0.0
+    hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg_score, ctx, px, py, prm)
     update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm)
     rows2, cols2 = reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm)
-    superseded = np.zeros(0, np.int64)
-    if len(rows2):
-        keep = np.ones(len(cols), np.bool_)
-        for q in range(len(cols)):
-            for b in range(len(cols2)):
-                if cols[q] == cols2[b]:
-                    keep[q] = False
-        superseded = rows[~keep]
-        rows = np.concatenate((rows[keep], rows2))
-        cols = np.concatenate((cols[keep], cols2))
-    a = prm[P_LEG_EVIDENCE_RATE]
-    for q in range(len(rows)):
-        k = rows[q]
-        tab[k, LEG_SCORE] = (1.0 - a) * tab[k, LEG_SCORE] + a * leg_probability(mx, my, mkind, mlegs, mprob, raw,
-                                                                               has_prob, cols[q])
+    rows, cols, superseded = merge_reacquired(rows, cols, rows2, cols2)
+    leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, prm)
     occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm)
     n = life_cycle(tab, n, stamp, superseded, prm)
     tab, n = spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp, has_pose, pose, px, py,

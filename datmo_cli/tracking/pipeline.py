@@ -15,7 +15,7 @@ import numpy as np
 from ..log import cdr, types
 from ..log.scan import Odometry, ScanRun
 from .markers import track_markers
-from .measurements import ScanFeatures, measurements
+from .measurements import ScanFeatures
 from .params import TrackingParams
 from .tracker import TRACK_DTYPE, Tracker
 
@@ -94,6 +94,9 @@ class TrackedRun:
         return offsets, items
 
 
+_CHUNK = 64   # fewest scans per compiled tracking call (progress is reported between calls)
+
+
 class TrackStream:
     """Tracking of a log block by block, in order: `block(run, features)` tracks the next scans (one
     ScanFeatures each, sensor frame) and returns their TrackedRun; the tracker's state carries over, so the
@@ -115,24 +118,29 @@ class TrackStream:
               progress: Callable[[int], None] | None = None) -> TrackedRun:
         """Track the scans of `run` (the next block of the log) given their features. `progress(i)` is
         called now and then with the scans of this block done."""
-        params, tracker, learned = self.params, self.tracker, self.learned
+        tracker = self.tracker
         poses = self.odometry.at(run.stamps) if self.odometry is not None else None
         out = TrackedRun(run.stamps, self.frame, poses is not None)
-        ranges = run.ranges
         n = len(run)
-        step = max(n // 20, 1)
-        for i, (stamp, feats) in enumerate(zip(run.stamps.tolist(), features, strict=False)):
-            meas = measurements(feats, params, learned)
-            tracks = tracker.step(stamp, meas, ranges[i], None if poses is None else poses[i])
-            out.tracks.append(tracks)
-            if self.markers:
-                t = tracker.tracks
-                out.markers.append(track_markers(stamp, self.marker_frame, tracks, t.tail, t.tail_count,
-                                                 world=poses is not None))
-            if progress is not None and (i % step == 0 or i == n - 1):
-                progress(i + 1)
-        if len(out.tracks) != n:
-            raise ValueError(f"features for {len(out.tracks)} scans, the run has {n}")
+        feats = list(features)[:n]
+        if len(feats) != n:
+            raise ValueError(f"features for {len(feats)} scans, the run has {n}")
+        stamps = run.stamps.tolist()
+        step = max(n // 20, _CHUNK)
+        for a in range(0, n, step):   # one compiled call per chunk of scans (Tracker.track_block)
+            b = min(a + step, n)
+            block = tracker.track_block(run.stamps[a:b], feats[a:b], run.ranges[a:b],
+                                        None if poses is None else poses[a:b])
+            o = block.offsets.tolist()
+            for i in range(b - a):
+                tracks = block.items[o[i]:o[i + 1]]
+                out.tracks.append(tracks)
+                if self.markers:
+                    out.markers.append(track_markers(stamps[a + i], self.marker_frame, tracks,
+                                                     block.tail[o[i]:o[i + 1]], block.tail_count[o[i]:o[i + 1]],
+                                                     world=poses is not None))
+            if progress is not None:
+                progress(b)
         return out
 
     def channels(self, tracked: TrackedRun) -> dict[str, tuple[str, np.ndarray, list]]:

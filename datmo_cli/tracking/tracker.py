@@ -73,11 +73,23 @@ def _flat(features: list[ScanFeatures]) -> tuple[tuple, tuple, tuple, tuple]:
     f8, i8 = np.float64, np.int64
 
     def join(name: str, dtype: np.dtype) -> tuple[np.ndarray, np.ndarray]:
-        parts = [getattr(f, name) if getattr(f, name) is not None else np.zeros(0, dtype) for f in features]
-        counts = np.fromiter((len(a) for a in parts), np.int64, len(parts))
+        # the scans' structured arrays joined as bytes: np.concatenate of structured arrays costs ~20 µs each
+        parts = [getattr(f, name) for f in features]
+        counts = np.fromiter((0 if a is None else len(a) for a in parts), np.int64, len(parts))
         offsets = np.zeros(len(parts) + 1, np.int64)
         np.cumsum(counts, out=offsets[1:])
-        return offsets, (np.concatenate(parts) if parts else np.zeros(0, dtype))
+        same = {id(dtype)}   # dtypes found equal to `dtype` (comparing structured dtypes costs ~1 µs)
+        chunks = []
+        for a in parts:
+            if a is None:
+                continue
+            if id(a.dtype) not in same:
+                if a.dtype != dtype:
+                    a = np.asarray(a).astype(dtype)
+                else:
+                    same.add(id(a.dtype))
+            chunks.append(a.tobytes())
+        return offsets, np.frombuffer(b"".join(chunks), dtype)
 
     co, c = join("circles", _CIRCLE_DTYPE)
     bo, b = join("blobs", _BLOB_DTYPE)
