@@ -58,8 +58,8 @@ def main() -> None:
                  Row("  Tracks CDR encoding", n, t_enc, "")]
         if name == "ideal features":
             notes.append(f"tracking and classification alone: {n / t_track:,.0f} scans/s (target >= 10,000)")
-    from datmo_cli.commands.track import track_file
     from datmo_cli.log import cdr
+    from datmo_cli.pipeline import track_file
 
     big, bfeats = _repeat(run, sources["ideal features"])
     with tempfile.TemporaryDirectory() as tmp:

@@ -149,48 +149,257 @@ def estimated_odometry(run, odometry, mode: str) -> tuple:  # noqa: ANN001 - Sca
     return odometry, {mcapio.TOPIC_ODOM: (types.ODOMETRY, odometry.stamps, mcapio.encode_odometry(odometry))}
 
 
+def odometry_channel(odometry, block) -> tuple:  # noqa: ANN001 - Odometry estimated at every scan, Block
+    """The /odom channel (msgtype, stamps, payloads) of a block's scans from odometry estimated at every scan."""
+    from .log import types
+
+    o, a, b = odometry, block.first, block.first + len(block.run)
+    part = type(o)(o.stamps[a:b], o.x[a:b], o.y[a:b], o.theta[a:b], o.frame_id, o.child_frame_id)
+    return types.ODOMETRY, part.stamps, mcapio.encode_odometry(part)
+
+
+class RunStages:
+    """Segmentation, features and tracking of one log, block by block (the stages of `datmo run`): call it
+    with each Block in order; it returns the block's derived channels. `estimated`: the odometry was
+    estimated from the scans, and its poses are written to /odom block by block."""
+
+    def __init__(self, odometry, params: dict | None = None, estimated: bool = False,  # noqa: ANN001
+                 markers: bool = True) -> None:
+        from .perception.features import FeatureStream
+        from .perception.params import FeatureParams
+        from .tracking.params import TrackingParams
+
+        params = params or {}
+        self.track_params = params.get("track") or TrackingParams()
+        self.feature_params = params.get("features") or FeatureParams()
+        self.odometry = odometry
+        self.estimated = estimated
+        self.markers = markers
+        self.features = FeatureStream(self.feature_params, odometry)
+        self.tracking = None
+
+    def derived(self) -> dict[str, str]:
+        """{topic: message type} of the channels the stages write, in writing order."""
+        from .log import types
+
+        out = {mcapio.TOPIC_ODOM: types.ODOMETRY} if self.estimated else {}
+        out |= {mcapio.TOPIC_SEGMENTS: types.SEGMENTS, mcapio.TOPIC_FEATURES: types.FEATURES,
+                mcapio.TOPIC_LANDMARKS: types.LANDMARKS}
+        if self.markers:
+            out[mcapio.TOPIC_MARKERS_FEATURES] = types.MARKER_ARRAY
+        out[mcapio.TOPIC_TRACKS] = types.TRACKS
+        if self.markers:
+            out[mcapio.TOPIC_MARKERS_TRACKS] = types.MARKER_ARRAY
+        return out
+
+    def effective(self) -> dict:
+        """The effective parameters, as provenance records them."""
+        from .perception.features import leg_model_provenance
+
+        return {"features": self.feature_params.to_dict(), "track": self.track_params.to_dict(),
+                "leg_model": leg_model_provenance(self.feature_params.leg_model)}
+
+    def __call__(self, block) -> dict[str, tuple]:  # noqa: ANN001 - streaming.Block
+        from .tracking.pipeline import TrackStream, iter_run_features
+
+        run = block.run
+        out = {}
+        if self.estimated:
+            out[mcapio.TOPIC_ODOM] = odometry_channel(self.odometry, block)
+        channels, features = self.features.block(run)
+        if not self.markers:
+            channels.pop(mcapio.TOPIC_MARKERS_FEATURES)
+        out |= channels
+        if self.tracking is None:
+            self.tracking = TrackStream(run.geometry, odometry=self.odometry, params=self.track_params,
+                                        markers=self.markers, learned=self.feature_params.leg_model != "paper")
+        out |= self.tracking.channels(self.tracking.block(run, iter_run_features(features)))
+        return out
+
+
 def derive(run, odometry, params: dict | None = None,  # noqa: ANN001 - ScanRun, Odometry | None
            progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], dict]:
-    """Every derived channel of a run, {topic: (msgtype, stamps, payloads)}, and the effective parameters.
+    """Every derived channel of a run held in memory, {topic: (msgtype, stamps, payloads)}, and the effective
+    parameters (`params` may hold "track" (a TrackingParams) and "features" (a FeatureParams)). The same
+    stages as process_file, on one block."""
+    from .streaming import Block
 
-    `params` may hold "track" (a TrackingParams) and "features" (a FeatureParams). `progress(done, total)`
-    follows the scans through feature extraction and then tracking (each half of the total).
-    """
-    from .perception.features import derive_features
-    from .perception.params import FeatureParams
-    from .tracking.params import TrackingParams
-    from .tracking.pipeline import derive_tracks, iter_run_features
-
-    params = params or {}
-    track_params = params.get("track") or TrackingParams()
-    feature_params = params.get("features") or FeatureParams()
-    odometry, odom_channel = estimated_odometry(run, odometry, track_params.ego_motion)
-    n = len(run)
+    stages = RunStages(odometry, params)
+    odometry, odom_channel = estimated_odometry(run, odometry, stages.track_params.ego_motion)
+    stages = RunStages(odometry, params, estimated=bool(odom_channel))
     if progress:
-        progress(0, 2 * n)
-    channels, features = derive_features(run, odometry=odometry, params=feature_params,
-                                         progress=(lambda d, t: progress(d, 2 * n)) if progress else None)
-    tracks = derive_tracks(run, list(iter_run_features(features)), odometry=odometry, params=track_params,
-                           learned=feature_params.leg_model != "paper",
-                           progress=(lambda d, t: progress(n + d, 2 * n)) if progress else None)
-    from .perception.features import leg_model_provenance
-
-    effective = {"features": feature_params.to_dict(), "track": track_params.to_dict(),
-                 "leg_model": leg_model_provenance(feature_params.leg_model)}
-    return {**odom_channel, **channels, **tracks}, effective
+        progress(0, len(run))
+    derived = stages(Block(0, run))
+    if progress:
+        progress(len(run), len(run))
+    return derived, stages.effective()
 
 
 def process_file(src: str | Path, out: str | Path, *, force: bool = False, params: dict | None = None,
-                 command_line: str | None = None, progress: Callable[[int, int], None] | None = None) -> int:
-    """Segment, extract features and track `src` in one pass into `out` (see module docstring); returns
-    the number of scans. `progress(done, total)` is called as scans are processed."""
-    log = mcapio.read_log(src, topics=None)
-    run = mcapio.run_from_log(log)
-    odometry = mcapio.odometry_from_log(log)
-    derived, effective = derive(run, odometry, params, progress)
-    provenance = mcapio.Provenance("run", effective, [src], command_line)
-    with mcapio.LogWriter(out, force=force, provenance=provenance) as writer:
-        writer.copy_from(log, exclude=list(derived))
-        for topic, (msgtype, stamps, payloads) in derived.items():
-            writer.write_many(topic, msgtype, stamps, payloads)
-    return len(run)
+                 command_line: str | None = None, progress: Callable[[int, int], None] | None = None,
+                 markers: bool = True, block_scans: int | None = None) -> int:
+    """Segment, extract features and track `src` in one streaming pass into `out` (see module docstring and
+    streaming); returns the number of scans. `progress(done, total)` is called as scans are processed;
+    `markers`: also write the Foxglove markers."""
+    from .streaming import BLOCK_SCANS, LogStream, stream_log, stream_odometry
+
+    stream = src if isinstance(src, LogStream) else LogStream(src)
+    src = stream.path
+    probe = RunStages(None, params)
+    odometry, estimated = stream_odometry(stream, probe.track_params.ego_motion, block_scans or BLOCK_SCANS)
+    stages = RunStages(odometry, params, estimated=estimated, markers=markers)
+    return stream_log(stream, out, command="run", params=stages.effective(), derived=stages.derived(), stage=stages,
+                      force=force, command_line=command_line, block_scans=block_scans or BLOCK_SCANS,
+                      progress=progress)
+
+
+def features_leg_model(log) -> str:  # noqa: ANN001 - mcapio.LogContents
+    """The leg detector a log's /datmo/features were made with, from its provenance ("paper" for features
+    made before datmo had a detector, whose legs are the paper's circles)."""
+    import json
+
+    for name in ("datmo.params", "input/datmo.params"):
+        raw = log.metadata.get(name, {}).get("features")
+        if raw:
+            try:
+                return str(json.loads(raw).get("leg_model", "paper"))
+            except (ValueError, AttributeError):
+                return "paper"
+    return "paper"
+
+
+def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=None,  # noqa: ANN001
+               feature_params=None, leg_model: str | None = None, command_line: str | None = None,  # noqa: ANN001
+               markers: bool = True, block_scans: int | None = None,
+               progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
+    """Track `src` into `out` in one streaming pass (its channels copied, /datmo/tracks and
+    /datmo/markers/tracks added). Features come from src's /datmo/features when present (people then by
+    the rule of the leg detector they were made with; `leg_model`, when given, must be that one); else
+    segmentation and features run here (with `leg_model` when given) and their channels are written too,
+    as datmo run writes them. Returns (scans, whether features were computed here)."""
+    from .log import types
+    from .perception.features import leg_model_provenance
+    from .perception.params import FeatureParams
+    from .streaming import BLOCK_SCANS, LogStream, stream_log, stream_odometry
+    from .tracking.params import TrackingParams
+    from .tracking.pipeline import TrackStream, decode_features
+
+    params = params or TrackingParams()
+    stream = src if isinstance(src, LogStream) else LogStream(src)
+    src = stream.path
+    computed = not stream.has(mcapio.TOPIC_FEATURES)
+    if not computed:
+        used = features_leg_model(stream.log)
+        if leg_model is not None and leg_model != used:
+            raise InputError(f"{src}: its features were made with leg model {used!r}, not {leg_model!r}; run "
+                             f"datmo features --leg-model {leg_model} on it first, or drop --leg-model")
+        if stream.count(mcapio.TOPIC_FEATURES) != stream.n_scans:
+            raise InputError(f"{src}: {stream.count(mcapio.TOPIC_FEATURES)} messages on {mcapio.TOPIC_FEATURES} "
+                             f"for {stream.n_scans} scans; run datmo features again")
+    odometry, estimated = stream_odometry(stream, params.ego_motion, block_scans or BLOCK_SCANS)
+    if computed:
+        feature_params = (feature_params or FeatureParams()).replace(leg_model=leg_model)
+        stages = RunStages(odometry, {"track": params, "features": feature_params}, estimated, markers)
+        derived, stage, effective = stages.derived(), stages, stages.effective()
+    else:
+        state: dict = {}
+        derived = {mcapio.TOPIC_ODOM: types.ODOMETRY} if estimated else {}
+        derived[mcapio.TOPIC_TRACKS] = types.TRACKS
+        if markers:
+            derived[mcapio.TOPIC_MARKERS_TRACKS] = types.MARKER_ARRAY
+        effective = {"track": params.to_dict(),
+                     "leg_model": leg_model_provenance(used) if used == "paper" else {"model": used}}
+
+        def stage(block) -> dict:  # noqa: ANN001 - streaming.Block
+            run, out = block.run, {}
+            if estimated:
+                out[mcapio.TOPIC_ODOM] = odometry_channel(odometry, block)
+            if "tracking" not in state:
+                state["tracking"] = TrackStream(run.geometry, odometry=odometry, params=params, markers=markers,
+                                                learned=used != "paper")
+            tracking = state["tracking"]
+            return out | tracking.channels(tracking.block(run, decode_features(block.aligned[mcapio.TOPIC_FEATURES])))
+
+    scans = stream_log(stream, out, command="track", params=effective, derived=derived, stage=stage, force=force,
+                       command_line=command_line, aligned=() if computed else (mcapio.TOPIC_FEATURES,),
+                       block_scans=block_scans or BLOCK_SCANS, progress=progress)
+    return scans, computed
+
+
+@dataclass
+class FeatureCounts:
+    """What `features_file` found: scans, and lines, circles, blobs and legs in all; landmarks at the end."""
+
+    scans: int = 0
+    lines: int = 0
+    circles: int = 0
+    blobs: int = 0
+    legs: int = 0
+    landmarks: int = 0
+
+    def per_scan(self, name: str) -> float:
+        return getattr(self, name) / max(self.scans, 1)
+
+
+def features_file(src: str | Path, out: str | Path, params=None, *, resegment: bool = False,  # noqa: ANN001
+                  force: bool = False, command_line: str | None = None, markers: bool = True,
+                  block_scans: int | None = None, progress: Callable[[int, int], None] | None = None) -> FeatureCounts:
+    """Extract the features of `src` into `out` in one streaming pass: /datmo/features, /datmo/landmarks and
+    /datmo/markers/features, and /datmo/segments unless the input has its own (used unless `resegment`).
+    `params`: a FeatureParams (None: the defaults)."""
+    from .log import types
+    from .perception.features import FeatureStream, decode_segments
+    from .perception.params import FeatureParams
+    from .streaming import BLOCK_SCANS, LogStream, stream_log
+
+    params = params or FeatureParams()
+    stream = src if isinstance(src, LogStream) else LogStream(src)
+    src = stream.path
+    given = stream.has(mcapio.TOPIC_SEGMENTS) and not resegment
+    if given and stream.count(mcapio.TOPIC_SEGMENTS) != stream.n_scans:
+        raise InputError(f"{src}: {stream.count(mcapio.TOPIC_SEGMENTS)} messages on {mcapio.TOPIC_SEGMENTS} for "
+                         f"{stream.n_scans} scans; run datmo segment again or pass --resegment")
+    features = FeatureStream(params, stream.odometry)
+    counts = FeatureCounts()
+    derived = {} if given else {mcapio.TOPIC_SEGMENTS: types.SEGMENTS}
+    derived |= {mcapio.TOPIC_FEATURES: types.FEATURES, mcapio.TOPIC_LANDMARKS: types.LANDMARKS}
+    if markers:
+        derived[mcapio.TOPIC_MARKERS_FEATURES] = types.MARKER_ARRAY
+
+    def stage(block) -> dict:  # noqa: ANN001 - streaming.Block
+        segments = decode_segments(block.aligned[mcapio.TOPIC_SEGMENTS]) if given else None
+        channels, f = features.block(block.run, segments)
+        counts.scans += len(f)
+        counts.lines, counts.circles = counts.lines + len(f.lines), counts.circles + len(f.circles)
+        counts.blobs, counts.legs = counts.blobs + len(f.blobs), counts.legs + len(f.legs)
+        counts.landmarks = len(f.landmarks.final())
+        if not markers:
+            channels.pop(mcapio.TOPIC_MARKERS_FEATURES)
+        return channels
+
+    from .perception.features import leg_model_provenance
+
+    effective = {"features": params.to_dict(), "leg_model": leg_model_provenance(params.leg_model)}
+    stream_log(stream, out, command="features", params=effective, derived=derived, stage=stage, force=force,
+               command_line=command_line, aligned=(mcapio.TOPIC_SEGMENTS,) if given else (),
+               block_scans=block_scans or BLOCK_SCANS, progress=progress)
+    return counts
+
+
+def segment_file(src: str | Path, out: str | Path, params=None, *, force: bool = False,  # noqa: ANN001
+                 command_line: str | None = None, block_scans: int | None = None,
+                 progress: Callable[[int, int], None] | None = None) -> int:
+    """Segment every scan of `src` into `out` (its channels plus /datmo/segments) in one streaming pass;
+    returns the number of scans. `params`: a FeatureParams (c0, min_points; None: the defaults)."""
+    from .log import types
+    from .perception.features import derive_segments
+    from .perception.params import FeatureParams
+    from .streaming import BLOCK_SCANS, LogStream, stream_log
+
+    params = params or FeatureParams()
+    stream = src if isinstance(src, LogStream) else LogStream(src)
+    src = stream.path
+    return stream_log(stream, out, command="segment", params={"features": params.to_dict()},
+                      derived={mcapio.TOPIC_SEGMENTS: types.SEGMENTS},
+                      stage=lambda block: derive_segments(block.run, params), force=force, command_line=command_line,
+                      block_scans=block_scans or BLOCK_SCANS, progress=progress)

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from ..perception.params import FeatureParams
-from .segment import effective_features, feature_params, write_derived
+from .segment import feature_params
 
 D = FeatureParams()
 
@@ -54,33 +54,21 @@ def command(input: Path, output: Path, force: bool, config: Path | None, resegme
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
-    from ..log import mcapio
-    from ..perception.features import decode_segments, derive_features
+    from ..cli import invocation
+    from ..pipeline import features_file
+    from ..streaming import LogStream
+    from .compiling import compile_notice
 
     rmin, rmax = circle_radius if circle_radius is not None else (None, None)
     params = feature_params(config, c0=c0, min_points=min_points, theta_resolution=theta_resolution,
                             rho_resolution=rho_resolution, circle_radius_min=rmin, circle_radius_max=rmax,
                             leg_model=leg_model, d_max=d_max)
-    log = mcapio.read_log(input, topics=None)
-    run = mcapio.run_from_log(log)
-    odometry = mcapio.odometry_from_log(log)
-    segments = None
-    if log.has(mcapio.TOPIC_SEGMENTS) and not resegment:
-        segments = decode_segments(log.messages[mcapio.TOPIC_SEGMENTS][1])
-        if len(segments[2]) - 1 != len(run):
-            from ..errors import InputError
-
-            raise InputError(f"{input}: {len(segments[2]) - 1} messages on {mcapio.TOPIC_SEGMENTS} for {len(run)} "
-                             "scans; run datmo segment again or pass --resegment")
-    from .compiling import compile_notice
-
+    stream = LogStream(input)   # a bad input is said before the progress bar starts
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), console=Console(stderr=True),
                   transient=True) as bar:
-        task = bar.add_task("features", total=len(run))
+        task = bar.add_task("features", total=None)
         with compile_notice(bar, task) as report:
-            derived, f = derive_features(run, odometry=odometry, params=params, segments=segments, progress=report)
-    write_derived(input, output, "features", derived, effective_features(params), log, force)
-    c = f.counts()
-    n_lm = len(f.landmarks.final()) if f.landmarks is not None else 0
-    click.echo(f"{output}: {len(run):,} scans; per scan {c['lines']:.1f} lines, {c['circles']:.1f} circles, "
-               f"{c['blobs']:.1f} blobs; {n_lm} landmarks", err=True)
+            c = features_file(stream, output, params, resegment=resegment, force=force,
+                              command_line=invocation("features"), progress=report)
+    click.echo(f"{output}: {c.scans:,} scans; per scan {c.per_scan('lines'):.1f} lines, {c.per_scan('circles'):.1f} "
+               f"circles, {c.per_scan('blobs'):.1f} blobs; {c.landmarks} landmarks", err=True)

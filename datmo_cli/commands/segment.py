@@ -19,26 +19,6 @@ def feature_params(config: Path | None, **options) -> FeatureParams:  # noqa: AN
     return params.replace(**options)
 
 
-def effective_features(params: FeatureParams) -> dict:
-    """The provenance entries of feature extraction: its parameters and the leg detector in use (its file's
-    SHA-256, threshold and training summary), so every output says which model found its legs."""
-    from ..perception.features import leg_model_provenance
-
-    return {"features": params.to_dict(), "leg_model": leg_model_provenance(params.leg_model)}
-
-
-def write_derived(src: Path, out: Path, command: str, derived: dict, params: dict, log, force: bool) -> None:  # noqa: ANN001
-    """Write `log`'s channels (those in `derived` replaced) plus the derived ones to `out`, with provenance."""
-    from ..cli import invocation
-    from ..log import mcapio
-
-    provenance = mcapio.Provenance(command, params, [src], invocation(command))
-    with mcapio.LogWriter(out, force=force, provenance=provenance) as writer:
-        writer.copy_from(log, exclude=list(derived))
-        for topic, (msgtype, stamps, payloads) in derived.items():
-            writer.write_many(topic, msgtype, stamps, payloads)
-
-
 @click.command(name="segment")
 @click.argument("input", type=click.Path(path_type=Path))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
@@ -59,12 +39,9 @@ def command(input: Path, output: Path, force: bool, config: Path | None, c0: flo
 
     Example: datmo segment sample_logs/hall.mcap -o hall-segments.mcap
     """
-    from ..log import mcapio
-    from ..perception.features import derive_segments
+    from ..cli import invocation
+    from ..pipeline import segment_file
 
     params = feature_params(config, c0=c0, min_points=min_points)
-    log = mcapio.read_log(input, topics=None)
-    run = mcapio.run_from_log(log)
-    derived = derive_segments(run, params)
-    write_derived(input, output, "segment", derived, {"features": params.to_dict()}, log, force)
-    click.echo(f"{output}: segments of {len(run):,} scans", err=True)
+    scans = segment_file(input, output, params, force=force, command_line=invocation("segment"))
+    click.echo(f"{output}: segments of {scans:,} scans", err=True)

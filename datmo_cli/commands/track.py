@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 
 import click
@@ -10,78 +9,6 @@ import click
 from ..tracking.params import TrackingParams
 
 D = TrackingParams()
-
-def features_leg_model(log) -> str:  # noqa: ANN001 - mcapio.Log
-    """The leg detector a log's /datmo/features were made with, from its provenance ("paper" for features
-    made before datmo had a detector, whose legs are the paper's circles)."""
-    import json
-
-    for name in ("datmo.params", "input/datmo.params"):
-        raw = log.metadata.get(name, {}).get("features")
-        if raw:
-            try:
-                return str(json.loads(raw).get("leg_model", "paper"))
-            except (ValueError, AttributeError):
-                return "paper"
-    return "paper"
-
-
-def track_file(src: Path, out: Path, *, force: bool = False, params=None, feature_params=None,  # noqa: ANN001
-               leg_model: str | None = None, progress: Callable[[int, int], None] | None = None,
-               feature_progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
-    """Track `src` into `out` (its channels copied, /datmo/tracks and /datmo/markers/tracks added).
-    Features come from src's /datmo/features when present (people then by the rule of the leg detector
-    they were made with; `leg_model`, when given, must be that one); else segmentation and features run
-    here (with `leg_model` when given) and their channels are written too, as datmo run writes them.
-    `progress` and `feature_progress` are called with (scans done, total) as tracking and feature
-    extraction go. Returns (scans, whether features were computed here)."""
-    from ..cli import invocation
-    from ..errors import InputError
-    from ..log import mcapio
-    from ..perception.features import derive_features, leg_model_provenance
-    from ..perception.params import FeatureParams
-    from ..pipeline import estimated_odometry
-    from ..tracking.params import TrackingParams
-    from ..tracking.pipeline import decode_features, derive_tracks, iter_run_features
-
-    params = params or TrackingParams()
-    log = mcapio.read_log(src, topics=None)
-    run = mcapio.run_from_log(log)
-    odometry = mcapio.odometry_from_log(log)
-    computed = not log.has(mcapio.TOPIC_FEATURES)
-    odometry, derived = estimated_odometry(run, odometry, params.ego_motion)
-    effective: dict = {"track": params.to_dict()}
-    if computed:
-        feature_params = (feature_params or FeatureParams()).replace(leg_model=leg_model)
-        used = feature_params.leg_model
-        if feature_progress is not None:
-            feature_progress(0, len(run))
-        channels, run_features = derive_features(run, odometry=odometry, params=feature_params,
-                                                 progress=feature_progress)
-        derived |= channels
-        features = list(iter_run_features(run_features))
-        effective["features"] = feature_params.to_dict()
-    else:
-        used = features_leg_model(log)
-        if leg_model is not None and leg_model != used:
-            raise InputError(f"{src}: its features were made with leg model {used!r}, not {leg_model!r}; run "
-                             f"datmo features --leg-model {leg_model} on it first, or drop --leg-model")
-        stamps, payloads = log.messages[mcapio.TOPIC_FEATURES]
-        if len(payloads) != len(run):
-            raise InputError(f"{src}: {len(payloads)} messages on {mcapio.TOPIC_FEATURES} for {len(run)} scans; "
-                             "run datmo features again")
-        features = decode_features(payloads)
-    if progress is not None:
-        progress(0, len(run))
-    effective["leg_model"] = leg_model_provenance(used) if used == "paper" or computed else {"model": used}
-    derived |= derive_tracks(run, features, odometry=odometry, params=params, learned=used != "paper",
-                             progress=progress)
-    provenance = mcapio.Provenance("track", effective, [src], invocation("track"))
-    with mcapio.LogWriter(out, force=force, provenance=provenance) as writer:
-        writer.copy_from(log, exclude=list(derived))
-        for topic, (msgtype, stamps, payloads) in derived.items():
-            writer.write_many(topic, msgtype, stamps, payloads)
-    return len(run), computed
 
 
 @click.command(name="track")
@@ -140,21 +67,17 @@ def command(input: Path, output: Path, force: bool, config: Path | None, process
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+    from ..cli import invocation
+    from ..pipeline import track_file
+    from ..streaming import LogStream
     from .compiling import compile_notice
 
+    stream = LogStream(input)   # a bad input is said before the progress bar starts
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), console=Console(stderr=True),
                   transient=True) as bar:
-        task = bar.add_task("reading", total=None)
-        with compile_notice(bar, task, armed=False) as report:
-            def stage(label: str) -> Callable[[int, int], None]:
-                def start_or_report(done: int, total: int) -> None:
-                    if done == 0:
-                        bar.update(task, description=label)
-                    report(done, total)
-                return start_or_report
-
-            scans, computed = track_file(input, output, force=force, params=params, feature_params=feature_params,
-                                         leg_model=leg_model, progress=stage("tracking"),
-                                         feature_progress=stage("features"))
+        task = bar.add_task("tracking", total=None)
+        with compile_notice(bar, task) as report:
+            scans, computed = track_file(stream, output, force=force, params=params, feature_params=feature_params,
+                                         leg_model=leg_model, command_line=invocation("track"), progress=report)
     how = " (segmented and extracted features first)" if computed else ""
     click.echo(f"{output}: tracks for {scans:,} scans{how}", err=True)

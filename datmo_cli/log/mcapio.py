@@ -158,15 +158,18 @@ def read_log(path: str | Path, topics: Iterable[str] = ()) -> LogContents:
     return out
 
 
-def iter_messages(path: str | Path, topics: Iterable[str] | None = None,
-                  contents: LogContents | None = None) -> Iterator[tuple[str, int, bytes]]:
+def iter_messages(path: str | Path, topics: Iterable[str] | None = None, contents: LogContents | None = None, *,
+                  warn: bool = True) -> Iterator[tuple[str, int, bytes]]:
     """(topic, log time ns, payload) of every message on `topics` (all when None), in file order, one chunk
     in memory at a time: how commands stream a log of any length. `contents`, when given, is filled with
-    the channels and metadata met on the way (as read_log fills them). Errors and warnings as read_log."""
-    yield from _walk_file(path, topics, contents if contents is not None else LogContents(path=Path(path)))
+    the channels and metadata met on the way (as read_log fills them). Errors as read_log; the warning of
+    a truncated file only with `warn` (a second pass over a file need not say it again)."""
+    out = contents if contents is not None else LogContents(path=Path(path))
+    yield from _walk_file(path, topics, out, warn)
 
 
-def _walk_file(path: str | Path, topics: Iterable[str] | None, out: LogContents) -> Iterator[tuple[str, int, bytes]]:
+def _walk_file(path: str | Path, topics: Iterable[str] | None, out: LogContents,
+               warn: bool = True) -> Iterator[tuple[str, int, bytes]]:
     path = _check_input(Path(path))
     out.path, out.size = path, path.stat().st_size
     want = None if topics is None else set(topics)
@@ -187,7 +190,7 @@ def _walk_file(path: str | Path, topics: Iterable[str] | None, out: LogContents)
                 out.truncated = True
             except (struct.error, UnicodeDecodeError, ValueError) as exc:
                 raise InputError(f"{path}: corrupt MCAP data ({exc})") from None
-    if out.truncated:
+    if out.truncated and warn:
         warnings.warn(f"{path}: truncated MCAP file; read the {out.chunks} complete chunk(s) before the cut",
                       TruncatedLogWarning, stacklevel=3)
 
@@ -289,13 +292,40 @@ def _messages_of(log: LogContents, topic: str, required: bool = True) -> tuple[n
     return np.array(stamps, np.int64), payloads
 
 
-def run_from_log(log: LogContents, topic: str = TOPIC_SCAN) -> ScanRun:
-    """The ScanRun of `topic` in an already-read log (see read_run)."""
+def check_scan_channel(log: LogContents, topic: str = TOPIC_SCAN) -> int:
+    """The number of scans on `topic` (read or not); raises when it holds none or not CDR LaserScans."""
     ch = log.topics().get(topic)
     if ch is not None and ch.count and ch.msgtype not in (types.LASERSCAN, "sensor_msgs/LaserScan"):
         raise InputError(f"{log.path}: {topic} holds {ch.msgtype}, not sensor_msgs/msg/LaserScan")
     if ch is not None and ch.count and ch.message_encoding != "cdr":
         raise InputError(f"{log.path}: {topic} is {ch.message_encoding}-encoded; convert it with datmo import")
+    if ch is None or not ch.count:
+        hint = f"; run {PRODUCER[topic]} first" if topic in PRODUCER else ""
+        raise MissingChannelError(f"{log.path}: no messages on {topic}{hint}")
+    return ch.count
+
+
+def decode_scan_block(path: Path, payloads: list[bytes], first: int = 0, geometry: ScanGeometry | None = None,
+                      topic: str = TOPIC_SCAN) -> ScanRun:
+    """The ScanRun of a block of LaserScan payloads, scans first.. of the log at `path`; refuses a geometry
+    that changes within the block or from `geometry` (the blocks' before)."""
+    try:
+        run = decode_scans(payloads)
+    except GeometryChangeError as exc:
+        raise GeometryError(f"{path}: {exc}; split the log before processing it") from None
+    except ValueError as exc:
+        raise InputError(f"{path}: bad LaserScan message on {topic}: {exc}") from None
+    if geometry is not None and not run.geometry.same_beams(geometry):
+        raise GeometryError(f"{path}: scan geometry changes at scan {first}: {geometry.describe()} -> "
+                            f"{run.geometry.describe()}; split the log before processing it")
+    return run
+
+
+def run_from_log(log: LogContents, topic: str = TOPIC_SCAN) -> ScanRun:
+    """The ScanRun of `topic` in an already-read log (see read_run)."""
+    ch = log.topics().get(topic)
+    if ch is not None and ch.count:
+        check_scan_channel(log, topic)
     _, payloads = _messages_of(log, topic)
     try:
         return decode_scans(payloads)

@@ -222,14 +222,32 @@ def scans_move(run: ScanRun, samples: int = 100, min_step: float = 0.05, min_tur
     are aligned by one ICP each (align_scans); it moves when at least `share` of them (and 3) are over min_step
     (m) or min_turn (rad) apart. A still scanner's pairs agree within about 1 cm, people walking by included
     (simulated and real still logs: 90 % of pairs within 3 cm); a robot at walking pace moves 8-13 cm a scan."""
-    n = len(run)
+    if len(run) < 2:
+        return False
+    picks = pair_picks(len(run), samples)
+    order = np.stack([picks, picks + 1], axis=1).ravel()
+    pairs = ScanRun(run.stamps[order], run.ranges[order], run.geometry)
+    return pairs_move(pairs, len(run), samples, min_step, min_turn, share)
+
+
+def pair_picks(n: int, samples: int = 100) -> np.ndarray:
+    """The first scans k of the pairs (k, k + 1) scans_move aligns in a log of n scans."""
+    if n < 2:
+        return np.zeros(0, np.int64)
+    return np.unique(np.linspace(0, n - 2, min(samples, n - 1)).astype(np.int64))
+
+
+def pairs_move(pairs: ScanRun, n: int, samples: int = 100, min_step: float = 0.05,
+               min_turn: float = math.radians(1.5), share: float = 0.1) -> bool:
+    """scans_move's decision on its pairs already gathered (rows 2i and 2i + 1 of `pairs`, from a log of n
+    scans; see pair_picks)."""
     if n < 2:
         return False
-    picks = np.unique(np.linspace(0, n - 2, min(samples, n - 1)).astype(np.int64)).tolist()
-    need = max(3, int(np.ceil(share * len(picks))))
+    m = len(pairs) // 2
+    need = max(3, int(np.ceil(share * len(pair_picks(n, samples)))))
     moved = 0
-    for k in picks:
-        pose, _ = align_scans(run.ranges[k], run.ranges[k + 1], run.geometry)
+    for i in range(m):
+        pose, _ = align_scans(pairs.ranges[2 * i], pairs.ranges[2 * i + 1], pairs.geometry)
         if np.hypot(pose[0], pose[1]) > min_step or abs(pose[2]) > min_turn:
             moved += 1
             if moved >= need:
