@@ -196,6 +196,8 @@ def params_hash(params: dict | None) -> str:
     model = leg_model_provenance(features.leg_model)
     doc = {"features": features.to_dict(), "track": track.to_dict(),
            "leg_model": model.get("sha256", model.get("model"))}
+    if params.get("markers") is False:   # --no-markers: other outputs (the hash of a default run is unchanged)
+        doc["markers"] = False
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 

@@ -174,7 +174,7 @@ class RunStages:
         self.feature_params = params.get("features") or FeatureParams()
         self.odometry = odometry
         self.estimated = estimated
-        self.markers = markers
+        self.markers = markers and params.get("markers", True)   # params["markers"]: False for --no-markers
         self.features = FeatureStream(self.feature_params, odometry)
         self.tracking = None
 
@@ -240,7 +240,7 @@ def process_file(src: str | Path, out: str | Path, *, force: bool = False, param
                  markers: bool = True, block_scans: int | None = None) -> int:
     """Segment, extract features and track `src` in one streaming pass into `out` (see module docstring and
     streaming); returns the number of scans. `progress(done, total)` is called as scans are processed;
-    `markers`: also write the Foxglove markers."""
+    `markers` (and params["markers"], default True): also write the Foxglove markers."""
     from .streaming import BLOCK_SCANS, LogStream, stream_log, stream_odometry
 
     stream = src if isinstance(src, LogStream) else LogStream(src)

@@ -129,3 +129,24 @@ def test_blocks_end_before_the_scan_that_would_overflow_them(tmp_path: Path) -> 
     assert sizes == [4, 4, 2]
     firsts = [b.first for b in stream.blocks(4)]
     assert firsts == [0, 4, 8]
+
+
+def test_no_markers_leaves_out_the_drawings_and_nothing_else(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from datmo_cli.cli import cli
+
+    src = SAMPLES / "corridor.mcap"
+    runner = CliRunner()
+    done = runner.invoke(cli, ["run", str(src), "-o", str(tmp_path / "a"), "--no-report", "--no-markers", "-j", "1"])
+    assert done.exit_code == 0, done.output
+    process_file(src, tmp_path / "full.mcap")
+    lean, full = channels(tmp_path / "a" / "corridor.mcap"), channels(tmp_path / "full.mcap")
+    markers = {mcapio.TOPIC_MARKERS_FEATURES, mcapio.TOPIC_MARKERS_TRACKS}
+    assert markers <= full.keys() and not markers & lean.keys()
+    assert {t: full[t] for t in full if t not in markers} == lean
+    for command in ("features", "track"):
+        out = tmp_path / f"{command}.mcap"
+        done = runner.invoke(cli, [command, str(src), "-o", str(out), "--no-markers"])
+        assert done.exit_code == 0, done.output
+        assert not markers & channels(out).keys() and mcapio.TOPIC_FEATURES in channels(out)

@@ -21,6 +21,7 @@ D = FeatureParams()
 @click.option("--config", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="TOML file with a [features] table: any parameter of datmo_cli/perception/params.py.")
 @click.option("--resegment", is_flag=True, help="Segment again even when the input has /datmo/segments.")
+@click.option("--no-markers", is_flag=True, help="Do not write /datmo/markers/features (Foxglove drawings).")
 @click.option("--c0", type=click.FloatRange(min=0), default=None,
               help=f"Segmentation threshold C0, m [default: {D.c0:g}].")
 @click.option("--min-points", type=click.IntRange(min=1), default=None,
@@ -36,7 +37,8 @@ D = FeatureParams()
                    "or 'paper' (no detector: legs by the paper's circle rule) [default: default].")
 @click.option("--d-max", type=click.FloatRange(min=0, min_open=True), default=None,
               help=f"Lines longer than this are walls (static), m [default: {D.d_max:g}].")
-def command(input: Path, output: Path, force: bool, config: Path | None, resegment: bool, c0: float | None,
+def command(input: Path, output: Path, force: bool, config: Path | None, resegment: bool, no_markers: bool,
+            c0: float | None,
             min_points: int | None, theta_resolution: float | None, rho_resolution: float | None,
             circle_radius: tuple[float, float] | None, leg_model: str | None, d_max: float | None) -> None:
     """Extract the features of every scan: lines by the Hough transform for lines (accumulators adapted to
@@ -68,7 +70,7 @@ def command(input: Path, output: Path, force: bool, config: Path | None, resegme
                   transient=True) as bar:
         task = bar.add_task("features", total=None)
         with compile_notice(bar, task) as report:
-            c = features_file(stream, output, params, resegment=resegment, force=force,
+            c = features_file(stream, output, params, resegment=resegment, force=force, markers=not no_markers,
                               command_line=invocation("features"), progress=report)
     click.echo(f"{output}: {c.scans:,} scans; per scan {c.per_scan('lines'):.1f} lines, {c.per_scan('circles'):.1f} "
                f"circles, {c.per_scan('blobs'):.1f} blobs; {c.landmarks} landmarks", err=True)

@@ -82,6 +82,8 @@ class _BatchProgress:
 @click.option("--sort", type=click.Choice(SORT_KEYS), default="lifetime", show_default=True,
               help="Order of the report's track table.")
 @click.option("--no-report", is_flag=True, help="Do not print the report.")
+@click.option("--no-markers", is_flag=True,
+              help="Do not write /datmo/markers/* (Foxglove drawings): smaller outputs for batches never viewed.")
 @click.option("--ego-motion", type=click.Choice(["auto", "on", "off"]), default=None,
               help="For logs without /odom: track in poses estimated by scan matching (written to /odom, frame "
                    "scan_odom) when the scanner moves ('auto'), always ('on') or never ('off') [default: auto].")
@@ -90,7 +92,7 @@ class _BatchProgress:
                    "or 'paper' (the paper's circle rule and walking pattern) [default: default].")
 def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: str | None, retries: int,
             force: bool, config: Path | None, plot: bool, fmt: str, top: int | None, sort: str, no_report: bool,
-            ego_motion: str | None, leg_model: str | None) -> None:
+            no_markers: bool, ego_motion: str | None, leg_model: str | None) -> None:
     """Segment, extract features and track each input in one pass, then print the report.
 
     Each output holds the input's channels and /datmo/segments, /datmo/features, /datmo/landmarks,
@@ -117,6 +119,8 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     if plot and remote(out_dir):
         raise DatmoError(f"{out_dir}: --plot needs a local output folder")
     params = _params(config, leg_model, ego_motion)
+    if no_markers:
+        params["markers"] = False
     batch = prepare(list(inputs), out_dir, params=params, force=force, command_line=invocation("run"))
     plots = [Path(t.output).with_suffix(".png") for t in batch.tasks] if plot else []
     if plots:

@@ -16,6 +16,7 @@ D = TrackingParams()
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="The log to write (MCAP): the input's channels plus /datmo/tracks and /datmo/markers/tracks.")
 @click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
+@click.option("--no-markers", is_flag=True, help="Do not write /datmo/markers/* (Foxglove drawings).")
 @click.option("--config", "config", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="TOML file with a [track] table of parameters (names as in the options below and more), and "
                    "a [features] table used when the input has no features.")
@@ -40,7 +41,8 @@ D = TrackingParams()
 @click.option("--leg-model", default=None, metavar="MODEL",
               help="Leg detector for inputs without features: 'default' (shipped), a file from datmo train-legs, "
                    "or 'paper' (the paper's circle rule and walking pattern). Inputs with features keep theirs.")
-def command(input: Path, output: Path, force: bool, config: Path | None, process_noise: float | None,
+def command(input: Path, output: Path, force: bool, no_markers: bool, config: Path | None,
+            process_noise: float | None,
             measurement_noise: float | None, gate: float | None, confirm: tuple[int, int] | None,
             delete_after: float | None, delete_after_occluded: float | None, d_max: float | None,
             ego_motion: str | None, leg_model: str | None) -> None:
@@ -78,6 +80,7 @@ def command(input: Path, output: Path, force: bool, config: Path | None, process
         task = bar.add_task("tracking", total=None)
         with compile_notice(bar, task) as report:
             scans, computed = track_file(stream, output, force=force, params=params, feature_params=feature_params,
-                                         leg_model=leg_model, command_line=invocation("track"), progress=report)
+                                         leg_model=leg_model, command_line=invocation("track"),
+                                         markers=not no_markers, progress=report)
     how = " (segmented and extracted features first)" if computed else ""
     click.echo(f"{output}: tracks for {scans:,} scans{how}", err=True)

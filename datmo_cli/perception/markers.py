@@ -1,6 +1,6 @@
 """Foxglove / RViz markers for features: one visualization_msgs/msg/MarkerArray per scan.
 
-Per scan: DELETEALL, a LINE_LIST of the lines (green), a LINE_LIST drawing every circle as a 16-sided
+Per scan: DELETEALL, a LINE_LIST of the lines (green), a LINE_LIST drawing every circle as an 8-sided
 polygon (red), a SPHERE_LIST of blob centroids (orange), in the scan's sensor frame; and the landmark
 database after the scan as a CUBE_LIST coloured by type, in the landmarks' frame (odom with odometry).
 Bytes are written by tracking.markers' CDR writer (checked against rosbags in the tests).
@@ -20,7 +20,7 @@ NS = "datmo/features"
 LANDMARK_COLORS = np.array([   # by landmark type: corner, convex, concave, line end, column, bench
     (0.0, 0.9, 0.9, 1.0), (0.6, 0.3, 0.9, 1.0), (0.9, 0.3, 0.6, 1.0), (0.7, 0.7, 0.7, 1.0),
     (1.0, 1.0, 0.0, 1.0), (0.6, 0.4, 0.2, 1.0)], np.float32)
-_POLY = 16
+_POLY = 8   # sides of a circle drawn as a polygon: round enough at leg and column radii
 _ANG = np.linspace(0.0, 2 * np.pi, _POLY + 1)
 
 

@@ -3,8 +3,10 @@
 Serialising a MarkerArray through rosbags costs far more than tracking a scan, so this module writes the
 CDR bytes itself (tests check them against rosbags). A scan's array holds few markers whatever the number of
 tracks: DELETEALL, one SPHERE_LIST each for people and circle objects, one CUBE_LIST for rectangular and
-unknown objects, one LINE_LIST of velocity arrows (1 s ahead), one LINE_LIST of trajectory tails, and one
-TEXT_VIEW_FACING id label per confirmed track. Positions in the tracking frame named by `frame_id`.
+unknown objects (tentative tracks faded), and for the confirmed tracks that move or are people (what a
+viewer follows; most tracks are static clutter, drawn as dots only): one LINE_LIST of velocity arrows (1 s
+ahead), one LINE_LIST of trajectory tails, and a TEXT_VIEW_FACING id label each. Positions in the tracking
+frame named by `frame_id`.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ NS = "datmo/tracks"
 COLORS = {  # by class code, RGBA
     0: (0.6, 0.6, 0.6, 0.8), 1: (0.1, 0.8, 0.2, 0.9), 2: (0.9, 0.2, 0.2, 0.9), 3: (0.2, 0.4, 0.9, 0.9)}
 WHITE = (1.0, 1.0, 1.0, 1.0)
+CLASS_PERSON, MOBILITY_DYNAMIC = 1, 1   # Track.msg's codes
 _I3 = struct.Struct("<iii")
 _POSE_SCALE = struct.Struct("<10d")
 _COLOR_LIFE = struct.Struct("<4fiIB")
@@ -174,13 +177,20 @@ def track_markers(stamp_ns: int, frame_id: str, tracks: np.ndarray, tail: np.nda
     vx = tracks["world_vx" if world else "vx"].astype(f8)
     vy = tracks["world_vy" if world else "vy"].astype(f8)
     shown = tracks["status"] != 0
-    if tail is None:
-        tail, tail_count = np.zeros((len(tracks), 1, 2)), np.zeros(len(tracks), np.int64)
-    pp, pc, cp, cc, op, oc, arrows, tails = _kernels.marker_points(
-        px, py, vx, vy, tracks["classification"].astype(np.int64), shown, 0.3, _COLOR_TABLE, tail,
-        np.asarray(tail_count, np.int64))
+    # what moves gets a velocity arrow, a tail and an id label; what stays put is a dot (clutter is most tracks)
+    lively = shown & ((tracks["mobility"] == MOBILITY_DYNAMIC) | (tracks["classification"] == CLASS_PERSON))
+    none = np.zeros(len(tracks), np.int64)
+    pp, pc, cp, cc, op, oc, _, _ = _kernels.marker_points(
+        px, py, vx, vy, tracks["classification"].astype(np.int64), shown, 0.3, _COLOR_TABLE,
+        np.zeros((len(tracks), 1, 2)), none)
+    k = np.flatnonzero(lively)
+    arrows = np.zeros((2 * len(k), 3))
+    arrows[0::2, 0], arrows[0::2, 1] = px[k], py[k]
+    arrows[1::2, 0], arrows[1::2, 1] = px[k] + vx[k], py[k] + vy[k]
+    tails = (tail_segments(tail[k], np.asarray(tail_count, np.int64)[k]) if tail is not None
+             else np.zeros((0, 3)))
     ids = tracks["id"].tolist()
-    labels = [k for k, s in enumerate(shown.tolist()) if s]
+    labels = k.tolist()
     w = _Writer(6 + len(labels), head)
     w.marker(0, ARROW, DELETEALL)
     w.marker(1, SPHERE_LIST, ADD, scale=(0.5, 0.5, 0.5), points=pp, colors=pc)
@@ -189,6 +199,6 @@ def track_markers(stamp_ns: int, frame_id: str, tracks: np.ndarray, tail: np.nda
     w.marker(4, LINE_LIST, ADD, scale=(0.03, 0.0, 0.0), color=(1.0, 0.8, 0.0, 1.0), points=arrows)
     w.marker(5, LINE_LIST, ADD, scale=(0.02, 0.0, 0.0), color=(0.8, 0.8, 0.8, 0.7), points=tails)
     xs, ys = px.tolist(), py.tolist()
-    for k in labels:
-        w.label(ids[k], xs[k], ys[k])
+    for j in labels:
+        w.label(ids[j], xs[j], ys[j])
     return w.bytes()
