@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MissingChannelError
+from .errors import InputError, MissingChannelError
 from .log import cdr, mcapio, types
 
 CLASS_NAMES = {0: "unknown", 1: "person", 2: "circle object", 3: "rectangular object"}
@@ -137,8 +137,9 @@ class TrackHistory:
 
 
 def track_history(tracks: Decoded, *, world: bool = True) -> TrackHistory:
-    """Group the states of a /datmo/tracks channel by track id; positions in the world frame when `world`
-    and every state has finite world coordinates, else in the sensor frame."""
+    """Group the states of a /datmo/tracks channel by track id (for the plot, which draws every state);
+    positions in the world frame when `world` and every state has finite world coordinates, else in the
+    sensor frame."""
     t = tracks.items.get("tracks", np.zeros(0, cdr.element_dtype(types.TRACK)))
     stamps = tracks.stamps[tracks.message_index("tracks")] if len(t) else np.zeros(0, np.int64)
     order = np.lexsort((stamps, t["id"]))
@@ -148,34 +149,6 @@ def track_history(tracks: Decoded, *, world: bool = True) -> TrackHistory:
     ids, starts = np.unique(t["id"], return_index=True)
     return TrackHistory(ids, np.append(starts, len(t)).astype(np.int64), stamps, t[px].astype(np.float64),
                         t[py].astype(np.float64), np.hypot(t[vx], t[vy]).astype(np.float64), t, world)
-
-
-def track_rows(h: TrackHistory, t0_ns: int) -> list[dict]:
-    """One dict per track: class and mobility (its last state's); first, last and lifetime (s from t0, over
-    every reported state); and over its confirmed states only (coasting predictions and tentative states
-    are not observations): distance travelled (m, sum of steps between consecutive confirmed positions),
-    mean and max filter speed (m/s); occlusions (episodes of consecutive occluded scans) and whether it
-    was ever confirmed."""
-    rows = []
-    for g, tid in enumerate(h.ids.tolist()):
-        a, b = int(h.starts[g]), int(h.starts[g + 1])
-        st = h.states[a:b]
-        conf = st["status"] == STATUS_CONFIRMED
-        x, y, speed = h.x[a:b][conf], h.y[a:b][conf], h.speed[a:b][conf]
-        occ = st["occluded"].astype(bool)
-        t_first, t_last = (h.stamps[a] - t0_ns) / 1e9, (h.stamps[b - 1] - t0_ns) / 1e9
-        rows.append({
-            "id": tid, "class": CLASS_NAMES.get(int(st["classification"][-1]), "unknown"),
-            "mobility": MOBILITY_NAMES.get(int(st["mobility"][-1]), "undefined"),
-            "first_s": round(float(t_first), 3), "last_s": round(float(t_last), 3),
-            "lifetime_s": round(float(t_last - t_first), 3), "scans": b - a,
-            "distance_m": round(float(np.hypot(np.diff(x), np.diff(y)).sum()), 3),
-            "mean_speed_mps": round(float(speed.mean()), 3) if len(speed) else 0.0,
-            "max_speed_mps": round(float(speed.max()), 3) if len(speed) else 0.0,
-            "occlusions": int(occ[0]) + int(np.sum(occ[1:] & ~occ[:-1])), "occluded_scans": int(occ.sum()),
-            "confirmed": bool(conf.any()),
-        })
-    return rows
 
 
 def class_rows(tracks: list[dict]) -> list[dict]:
@@ -196,58 +169,6 @@ def class_rows(tracks: list[dict]) -> list[dict]:
                     "max_speed_mps": round(float(max(r["max_speed_mps"] for r in rs)), 3),
                     "occlusions": int(sum(r["occlusions"] for r in rs))})
     return out
-
-
-def run_facts(data: RunData) -> dict:
-    """Duration (s), scans, rate (Hz, from the median period), beams, dropped scans (missing periods in
-    the stamps' gaps), and the tool version, command and parameters of the file's provenance metadata."""
-    st = data.scan_stamps
-    dt = np.diff(st) / 1e9
-    period = float(np.median(dt)) if len(dt) else 0.0
-    dropped = int(np.sum(np.maximum(np.round(dt / period) - 1, 0))) if period > 0 else 0
-    meta = data.metadata.get("datmo", {})
-    params = {}
-    for k, v in data.metadata.get("datmo.params", {}).items():
-        try:
-            params[k] = json.loads(v)
-        except ValueError:
-            params[k] = v
-    return {"file": data.name, "duration_s": round(float((st[-1] - st[0]) / 1e9), 3) if len(st) else 0.0,
-            "scans": int(len(st)), "rate_hz": round(1 / period, 3) if period > 0 else None,
-            "beams": int(data.n_beams), "dropped_scans": dropped, "start_ns": int(st[0]) if len(st) else 0,
-            "version": meta.get("version"), "command": meta.get("command_line") or meta.get("command"),
-            "parameters": params}
-
-
-def feature_facts(features: Decoded | None) -> dict | None:
-    """Lines, circles and blobs: totals, mean and max per scan; None when the log has no features."""
-    if features is None:
-        return None
-    out = {"scans": len(features)}
-    for name in ("lines", "circles", "blobs"):
-        c = features.counts(name) if name in features.offsets else np.zeros(len(features), np.int64)
-        out[name] = {"total": int(c.sum()), "per_scan": round(float(c.mean()), 3) if len(c) else 0.0,
-                     "max_per_scan": int(c.max()) if len(c) else 0}
-    return out
-
-
-def landmark_rows(landmarks: Decoded | None, t0_ns: int) -> list[dict] | None:
-    """The landmark database after the last scan: id, type, position (m, in the channel's frame), first
-    and last seen (s from t0), scans seen; None when the log has no landmarks channel."""
-    if landmarks is None:
-        return None
-    if not len(landmarks) or "landmarks" not in landmarks.items:
-        return []
-    off = landmarks.offsets["landmarks"]
-    db = landmarks.items["landmarks"][off[-2]:off[-1]]
-
-    def secs(t: np.ndarray) -> float:
-        return round((int(t["sec"]) * 1_000_000_000 + int(t["nanosec"]) - t0_ns) / 1e9, 3)
-
-    return [{"id": int(lm["id"]), "type": LANDMARK_NAMES.get(int(lm["type"]), str(int(lm["type"]))),
-             "x_m": round(float(lm["x"]), 3), "y_m": round(float(lm["y"]), 3), "size_m": round(float(lm["size"]), 3),
-             "first_seen_s": secs(lm["first_seen"]), "last_seen_s": secs(lm["last_seen"]), "scans": int(lm["count"]),
-             "frame": landmarks.frame_id} for lm in db]
 
 
 @dataclass
@@ -287,14 +208,369 @@ class RunSummary:
         return row
 
 
+FRAMES = (("x", "y", "vx", "vy"), ("world_x", "world_y", "world_vx", "world_vy"))   # sensor, world
+_I64_MIN, _I64_MAX = np.iinfo(np.int64).min, np.iinfo(np.int64).max
+
+
+class TrackStats:
+    """What the report says of each track, accumulated from its states block by block: O(1) numbers per
+    track (arrays indexed by slot, slots in ascending track id), nothing per state or per scan.
+
+    Per track: first and last header stamp (ns; min and max over its states) and the class and mobility of
+    the state at the last stamp (the later in the file on a tie); states; occluded states and occlusion
+    episodes (runs of consecutive occluded states); confirmed states; and in both frames (row 0 sensor,
+    row 1 world; m, m/s) the distance over consecutive confirmed positions, the sum and max of the filter
+    speed |v| over confirmed states and the last confirmed position (NaN before the first). Sums are added
+    state by state in file order (np.add.at), so they do not depend on how the states are split in blocks.
+    Occlusions and distances follow the file order of each track's states: its stamp order in every log
+    datmo writes (a track's stamps only grow).
+    """
+
+    def __init__(self) -> None:
+        self.ids = np.zeros(0, np.int64)
+        self.first_ns = np.zeros(0, np.int64)
+        self.last_ns = np.zeros(0, np.int64)
+        self.classification = np.zeros(0, np.uint8)
+        self.mobility = np.zeros(0, np.uint8)
+        self.states = np.zeros(0, np.int64)
+        self.occluded = np.zeros(0, np.int64)
+        self.occlusions = np.zeros(0, np.int64)
+        self.last_occluded = np.zeros(0, bool)
+        self.confirmed = np.zeros(0, np.int64)
+        self.distance = np.zeros((2, 0))
+        self.speed_sum = np.zeros((2, 0))
+        self.speed_max = np.zeros((2, 0))
+        self.last_x = np.zeros((2, 0))
+        self.last_y = np.zeros((2, 0))
+        self.n_states = 0               # every state of every track
+        self.world_finite = True        # every state so far has finite world_x, world_y
+
+    _FILL = {"first_ns": _I64_MAX, "last_ns": _I64_MIN, "speed_max": -np.inf, "last_x": np.nan, "last_y": np.nan}
+    _PER_TRACK = ("ids", "first_ns", "last_ns", "classification", "mobility", "states", "occluded", "occlusions",
+                  "last_occluded", "confirmed", "distance", "speed_sum", "speed_max", "last_x", "last_y")
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def _slots(self, ids: np.ndarray) -> np.ndarray:
+        """The slot of each track id, new ids given slots (every per-track array grows by one per new id)."""
+        new = np.setdiff1d(ids, self.ids)
+        if len(new):
+            merged = np.union1d(self.ids, new)
+            old = np.searchsorted(merged, self.ids)
+            for name in self._PER_TRACK:
+                a = getattr(self, name)
+                grown = np.full(a.shape[:-1] + (len(merged),), self._FILL.get(name, 0), a.dtype)
+                grown[..., old] = a
+                setattr(self, name, grown)
+            self.ids = merged
+        return np.searchsorted(self.ids, ids)
+
+    def add(self, stamps: np.ndarray, states: np.ndarray) -> None:
+        """Add track states (Track elements, file order) with the header stamp (ns) of their message."""
+        if not len(states):
+            return
+        self.n_states += len(states)
+        self.world_finite = self.world_finite and bool(np.isfinite(states["world_x"]).all()
+                                                       and np.isfinite(states["world_y"]).all())
+        slot = self._slots(states["id"].astype(np.int64))
+        n = len(self.ids)
+        self.states += np.bincount(slot, minlength=n)
+        np.minimum.at(self.first_ns, slot, stamps)
+        # class and mobility of each track's state at its last stamp (the later in the file on a tie)
+        by_stamp = np.lexsort((np.arange(len(slot)), stamps, slot))
+        ends = by_stamp[np.r_[slot[by_stamp][1:] != slot[by_stamp][:-1], True]]
+        later = stamps[ends] >= self.last_ns[slot[ends]]
+        ends = ends[later]
+        self.last_ns[slot[ends]] = stamps[ends]
+        self.classification[slot[ends]] = states["classification"][ends]
+        self.mobility[slot[ends]] = states["mobility"][ends]
+        # each track's states in file order: occlusion episodes, then distances and speeds of confirmed states
+        order = np.argsort(slot, kind="stable")
+        s, st = slot[order], states[order]
+        occ = st["occluded"].astype(bool)
+        prev = np.r_[False, occ[:-1]]
+        first = np.r_[True, s[1:] != s[:-1]]
+        prev[first] = self.last_occluded[s[first]]
+        self.occluded += np.bincount(s, weights=occ, minlength=n).astype(np.int64)
+        self.occlusions += np.bincount(s, weights=occ & ~prev, minlength=n).astype(np.int64)
+        last = np.r_[s[1:] != s[:-1], True]
+        self.last_occluded[s[last]] = occ[last]
+        conf = st["status"] == STATUS_CONFIRMED
+        s, st = s[conf], st[conf]
+        if not len(s):
+            return
+        first = np.r_[True, s[1:] != s[:-1]]
+        last = np.r_[s[1:] != s[:-1], True]
+        step = ~first                                   # a step from the track's previous confirmed position
+        step[first] = self.confirmed[s[first]] > 0
+        self.confirmed += np.bincount(s, minlength=n)
+        for f, (px, py, vx, vy) in enumerate(FRAMES):
+            x, y = st[px].astype(np.float64), st[py].astype(np.float64)
+            x0, y0 = np.r_[np.nan, x[:-1]], np.r_[np.nan, y[:-1]]
+            x0[first], y0[first] = self.last_x[f, s[first]], self.last_y[f, s[first]]
+            speed = np.hypot(st[vx], st[vy]).astype(np.float64)
+            with np.errstate(invalid="ignore"):         # NaN world states of a log without odometry
+                np.add.at(self.distance[f], s[step], np.hypot(x[step] - x0[step], y[step] - y0[step]))
+                np.add.at(self.speed_sum[f], s, speed)
+                np.maximum.at(self.speed_max[f], s, speed)
+            self.last_x[f, s[last]], self.last_y[f, s[last]] = x[last], y[last]
+
+    @property
+    def world(self) -> bool:
+        """Whether positions are reported in the world frame: every state has finite world coordinates."""
+        return bool(self.n_states) and self.world_finite
+
+    def rows(self, t0_ns: int) -> list[dict]:
+        """One dict per track, in id order: class and mobility (its last state's); first, last and lifetime
+        (s from t0, over every reported state); and over its confirmed states only (coasting predictions and
+        tentative states are not observations): distance travelled (m, sum of steps between consecutive
+        confirmed positions), mean and max filter speed (m/s), in the world frame when `world` else the
+        sensor frame; occlusions (episodes of consecutive occluded scans) and whether it was ever confirmed."""
+        f = int(self.world)
+        rows = []
+        for g, tid in enumerate(self.ids.tolist()):
+            t_first, t_last = (self.first_ns[g] - t0_ns) / 1e9, (self.last_ns[g] - t0_ns) / 1e9
+            n_conf = int(self.confirmed[g])
+            rows.append({
+                "id": tid, "class": CLASS_NAMES.get(int(self.classification[g]), "unknown"),
+                "mobility": MOBILITY_NAMES.get(int(self.mobility[g]), "undefined"),
+                "first_s": round(float(t_first), 3), "last_s": round(float(t_last), 3),
+                "lifetime_s": round(float(t_last - t_first), 3), "scans": int(self.states[g]),
+                "distance_m": round(float(self.distance[f, g]), 3),
+                "mean_speed_mps": round(float(self.speed_sum[f, g] / n_conf), 3) if n_conf else 0.0,
+                "max_speed_mps": round(float(self.speed_max[f, g]), 3) if n_conf else 0.0,
+                "occlusions": int(self.occlusions[g]), "occluded_scans": int(self.occluded[g]),
+                "confirmed": bool(n_conf),
+            })
+        return rows
+
+
+class ScanStats:
+    """Scan count, first and last header stamps (ns), beams, and the histogram of the periods between
+    consecutive stamps (file order; distinct periods in ns and their counts), from which the median period
+    and the dropped scans come exactly. Memory: one entry per distinct period, a handful for a scanner's
+    regular clock (stamps jittered to the nanosecond can make it one per scan, 16 bytes each)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.first_ns = self.last_ns = 0
+        self.n_beams = 0
+        self.periods = np.zeros(0, np.int64)       # distinct stamp differences, ns, ascending
+        self.period_counts = np.zeros(0, np.int64)
+
+    def add(self, stamps: np.ndarray, n_beams: int) -> None:
+        """Add the header stamps (ns, int64, file order) of a block of scans with `n_beams` beams."""
+        if not len(stamps):
+            return
+        stamps = np.asarray(stamps, np.int64)
+        if not self.count:
+            self.first_ns, self.n_beams = int(stamps[0]), int(n_beams)
+            diffs = np.diff(stamps)
+        else:
+            diffs = np.diff(np.r_[np.int64(self.last_ns), stamps])
+        self.count += len(stamps)
+        self.last_ns = int(stamps[-1])
+        values, inverse = np.unique(np.r_[self.periods, diffs], return_inverse=True)
+        counts = np.zeros(len(values), np.int64)
+        np.add.at(counts, inverse, np.r_[self.period_counts, np.ones(len(diffs), np.int64)])
+        self.periods, self.period_counts = values, counts
+
+    def facts(self) -> dict:
+        """Duration (s), scans, rate (Hz, from the median period), beams, dropped scans (missing periods in
+        the stamps' gaps) and the first stamp (ns)."""
+        n = int(self.period_counts.sum())
+        dt = self.periods / 1e9
+        period = 0.0
+        if n:
+            ends = np.cumsum(self.period_counts)
+            middle = [(n - 1) // 2] if n % 2 else [n // 2 - 1, n // 2]
+            period = float(np.mean(dt[np.searchsorted(ends, middle, side="right")]))
+        dropped = int(np.sum(self.period_counts * np.maximum(np.round(dt / period) - 1, 0))) if period > 0 else 0
+        duration = (np.int64(self.last_ns) - np.int64(self.first_ns)) / 1e9
+        return {"duration_s": round(float(duration), 3) if self.count else 0.0, "scans": self.count,
+                "rate_hz": round(1 / period, 3) if period > 0 else None, "beams": self.n_beams,
+                "dropped_scans": dropped, "start_ns": self.first_ns if self.count else 0}
+
+
+FEATURE_KINDS = ("lines", "circles", "blobs")
+
+
+class RunAccumulator:
+    """The report of one run, accumulated from its decoded messages block by block (`add_scans`,
+    `add_features`, `add_landmarks`, `add_tracks`; any split in blocks gives the same summary), then
+    `summary()`. Holds O(1) numbers per track (TrackStats), per distinct scan period (ScanStats) and per
+    feature kind, and the landmark database of the last /datmo/landmarks message; nothing per scan.
+    `summarise` feeds it a whole RunData, `summarise_file` a log streamed a block of messages at a time."""
+
+    def __init__(self, name: str, metadata: dict[str, dict[str, str]] | None = None) -> None:
+        self.name = name
+        self.metadata = metadata or {}
+        self.scans = ScanStats()
+        self.tracks = TrackStats()
+        self.feature_scans: int | None = None          # None: no /datmo/features message
+        self.feature_total = dict.fromkeys(FEATURE_KINDS, 0)
+        self.feature_max = dict.fromkeys(FEATURE_KINDS, 0)
+        self.landmark_frame: str | None = None         # frame of the first /datmo/landmarks message
+        self.landmarks: np.ndarray | None = None       # the database of the last one (Landmark elements)
+        self.peak_messages = 0                         # most messages held at once (stream_run)
+
+    def add_scans(self, stamps: np.ndarray, n_beams: int) -> None:
+        """Scan header stamps (ns, file order) and the scans' beam count."""
+        self.scans.add(stamps, n_beams)
+
+    def add_features(self, n: int, counts: dict[str, np.ndarray]) -> None:
+        """`n` consecutive /datmo/features messages: their per-message counts ({kind: (n,) int} for lines,
+        circles, blobs; a kind absent counts 0)."""
+        if not n:
+            return
+        self.feature_scans = (self.feature_scans or 0) + n
+        for kind in FEATURE_KINDS:
+            c = counts.get(kind)
+            if c is not None and len(c):
+                self.feature_total[kind] += int(np.sum(c))
+                self.feature_max[kind] = max(self.feature_max[kind], int(np.max(c)))
+
+    def add_landmarks(self, frame_id: str, last: np.ndarray) -> None:
+        """A block of /datmo/landmarks messages: the frame of its first message, the database of its last."""
+        if self.landmark_frame is None:
+            self.landmark_frame = frame_id
+        self.landmarks = last
+
+    def add_tracks(self, stamps: np.ndarray, states: np.ndarray) -> None:
+        """Track states (Track elements, file order) with the header stamp (ns) of their /datmo/tracks message."""
+        self.tracks.add(stamps, states)
+
+    def run_facts(self) -> dict:
+        """Duration (s), scans, rate (Hz, from the median period), beams, dropped scans (missing periods in
+        the stamps' gaps), and the tool version, command and parameters of the file's provenance metadata."""
+        meta = self.metadata.get("datmo", {})
+        params = {}
+        for k, v in self.metadata.get("datmo.params", {}).items():
+            try:
+                params[k] = json.loads(v)
+            except ValueError:
+                params[k] = v
+        return {"file": self.name, **self.scans.facts(), "version": meta.get("version"),
+                "command": meta.get("command_line") or meta.get("command"), "parameters": params}
+
+    def feature_facts(self) -> dict | None:
+        """Lines, circles and blobs: totals, mean and max per scan; None when the log has no features."""
+        n = self.feature_scans
+        if n is None:
+            return None
+        return {"scans": n, **{k: {"total": self.feature_total[k], "per_scan": round(self.feature_total[k] / n, 3),
+                                   "max_per_scan": self.feature_max[k]} for k in FEATURE_KINDS}}
+
+    def landmark_rows(self, t0_ns: int) -> list[dict] | None:
+        """The landmark database after the last scan: id, type, position (m, in the channel's frame), first
+        and last seen (s from t0), scans seen; None when the log has no landmarks channel."""
+        if self.landmarks is None:
+            return None
+
+        def secs(t: np.ndarray) -> float:
+            return round((int(t["sec"]) * 1_000_000_000 + int(t["nanosec"]) - t0_ns) / 1e9, 3)
+
+        return [{"id": int(lm["id"]), "type": LANDMARK_NAMES.get(int(lm["type"]), str(int(lm["type"]))),
+                 "x_m": round(float(lm["x"]), 3), "y_m": round(float(lm["y"]), 3),
+                 "size_m": round(float(lm["size"]), 3), "first_seen_s": secs(lm["first_seen"]),
+                 "last_seen_s": secs(lm["last_seen"]), "scans": int(lm["count"]), "frame": self.landmark_frame}
+                for lm in self.landmarks]
+
+    def summary(self) -> RunSummary:
+        """The report of what was added."""
+        facts = self.run_facts()
+        t0 = facts["start_ns"]
+        tracks = self.tracks.rows(t0)
+        return RunSummary(facts, self.feature_facts(), self.landmark_rows(t0), class_rows(tracks), tracks,
+                          "world" if self.tracks.world else "sensor")
+
+
 def summarise(data: RunData) -> RunSummary:
-    """The report of one run."""
-    facts = run_facts(data)
-    t0 = facts["start_ns"]
-    hist = track_history(data.tracks)
-    tracks = track_rows(hist, t0)
-    return RunSummary(facts, feature_facts(data.features), landmark_rows(data.landmarks, t0), class_rows(tracks),
-                      tracks, "world" if hist.world else "sensor")
+    """The report of one decoded run: the same RunSummary as `summarise_file` of its log."""
+    acc = RunAccumulator(data.name, data.metadata)
+    acc.add_scans(data.scan_stamps, data.n_beams)
+    f = data.features
+    if f is not None:
+        acc.add_features(len(f), {k: f.counts(k) for k in FEATURE_KINDS if k in f.offsets})
+    lm = data.landmarks
+    if lm is not None:
+        off = lm.offsets.get("landmarks")
+        acc.add_landmarks(lm.frame_id, lm.items["landmarks"][off[-2]:off[-1]] if off is not None and len(lm)
+                          else np.zeros(0, cdr.element_dtype(types.LANDMARK)))
+    t = data.tracks.items.get("tracks")
+    if t is not None and len(t):
+        acc.add_tracks(data.tracks.stamps[data.tracks.message_index("tracks")], t)
+    return acc.summary()
+
+
+BLOCK_MESSAGES = 1000      # messages decoded at once by summarise_file
+SUMMARY_TOPICS = (mcapio.TOPIC_SCAN, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS, mcapio.TOPIC_TRACKS)
+
+
+def summarise_file(path: str | Path, *, block: int = BLOCK_MESSAGES) -> RunSummary:
+    """The report of the processed log at `path`, read in one streaming pass (see `stream_run`): the same
+    RunSummary as `summarise(RunData.from_log(...))`, in memory that does not grow with the log's length.
+
+    Raises as RunData.from_log: MissingChannelError naming the command to run first when /scan or
+    /datmo/tracks is absent, InputError for a /scan channel that is not LaserScans or whose geometry changes.
+    """
+    return stream_run(path, block=block).summary()
+
+
+def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES) -> RunAccumulator:
+    """Walk the log at `path` once (mcapio.iter_messages, file order) and feed a RunAccumulator its /scan,
+    /datmo/features, /datmo/landmarks and /datmo/tracks messages, `block` messages at a time: it holds at
+    most `block` payloads and their decoded forms at once (`peak_messages` says how many it held), so
+    memory does not depend on the log's length. Scans are decoded block by block for their header stamps
+    and geometry (a change of geometry is refused as RunData.from_log refuses it)."""
+    contents = mcapio.LogContents(path=Path(path))
+    acc = RunAccumulator(str(Path(path)))
+    pending: dict[str, list[bytes]] = {t: [] for t in SUMMARY_TOPICS}
+    state: dict = {"geometry": None, "first": 0, "error": None}
+
+    def flush() -> None:
+        acc.peak_messages = max(acc.peak_messages, sum(len(p) for p in pending.values()))
+        scans = pending[mcapio.TOPIC_SCAN]
+        if scans and state["error"] is None:
+            try:
+                mcapio.check_scan_channel(contents)
+                run = mcapio.decode_scan_block(contents.path, scans, state["first"], state["geometry"])
+            except InputError as exc:      # raised after the channel checks, as RunData.from_log orders them
+                state["error"] = exc
+            else:
+                state["geometry"] = run.geometry
+                acc.add_scans(run.stamps, run.geometry.n_beams)
+        state["first"] += len(scans)
+        if pending[mcapio.TOPIC_FEATURES]:
+            decoded = [cdr.decode(types.FEATURES, p) for p in pending[mcapio.TOPIC_FEATURES]]
+            acc.add_features(len(decoded), {k: np.array([len(d[k]) for d in decoded], np.int64)
+                                            for k in FEATURE_KINDS if k in decoded[0]})
+        landmarks = pending[mcapio.TOPIC_LANDMARKS]
+        if landmarks:
+            frame = cdr.decode(types.LANDMARKS, landmarks[0])["frame_id"] if acc.landmark_frame is None else ""
+            acc.add_landmarks(frame, cdr.decode(types.LANDMARKS, landmarks[-1])["landmarks"])
+        if pending[mcapio.TOPIC_TRACKS]:
+            tracks = decode_channel(types.TRACKS, pending[mcapio.TOPIC_TRACKS])
+            if "tracks" in tracks.items:
+                acc.add_tracks(tracks.stamps[tracks.message_index("tracks")], tracks.items["tracks"])
+        for payloads in pending.values():
+            payloads.clear()
+
+    held = 0
+    for topic, _, payload in mcapio.iter_messages(path, SUMMARY_TOPICS, contents):
+        pending[topic].append(payload)
+        held += 1
+        if held == block:
+            flush()
+            held = 0
+    flush()
+    require(contents, mcapio.TOPIC_SCAN)
+    require(contents, mcapio.TOPIC_TRACKS)
+    if state["error"] is not None:
+        raise state["error"]
+    acc.metadata = contents.metadata
+    return acc
 
 
 def sort_tracks(rows: list[dict], key: str) -> list[dict]:

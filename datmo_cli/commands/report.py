@@ -57,7 +57,7 @@ def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, plot:
     Example: datmo report out/hall.mcap --plot out/hall.png
     """
     from ..pipeline import read_run_data
-    from ..report import render, summarise
+    from ..report import render, summarise, summarise_file
 
     files, batches = _batches(list(files))
     if batches and fmt == "csv":
@@ -67,12 +67,14 @@ def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, plot:
     check_plot_outputs(plots, force)
     summaries = []
     for i, path in enumerate(files):
-        data = read_run_data(path, keep_scans=bool(plot))
-        summaries.append(summarise(data))
-        if plot:
-            from ..plot import plot_run
+        if not plot:   # one streaming pass; the plot draws every scan and state, so it decodes the whole run
+            summaries.append(summarise_file(path))
+            continue
+        from ..plot import plot_run
 
-            plot_run(data, plots[i])
+        data = read_run_data(path, keep_scans=True)
+        summaries.append(summarise(data))
+        plot_run(data, plots[i])
     if fmt == "rich":
         from ..report import console, render_rich
 

@@ -229,17 +229,20 @@ def _warm_up() -> None:
 def _report(outputs: list[Path], plots: list[Path], fmt: str | None, top: int | None, sort: str) -> None:
     """Draw the plots, and print the report of `outputs` in `fmt` (None: no report)."""
     from ..pipeline import read_run_data
-    from ..report import console, render, summarise
+    from ..report import console, render, summarise, summarise_file
 
     summaries = []
     for i, out in enumerate(outputs):
-        data = read_run_data(out, keep_scans=bool(plots))
-        summaries.append(summarise(data))
-        if plots:
-            from ..plot import plot_run
+        if not plots:   # one streaming pass; a plot draws every scan and state, so it decodes the whole run
+            if fmt:
+                summaries.append(summarise_file(out))
+            continue
+        from ..plot import plot_run
 
-            plot_run(data, plots[i])
-            click.echo(f"{plots[i]}: plot written", err=True)
+        data = read_run_data(out, keep_scans=True)
+        summaries.append(summarise(data))
+        plot_run(data, plots[i])
+        click.echo(f"{plots[i]}: plot written", err=True)
     if fmt == "rich":
         render(summaries, fmt, top=top, sort=sort, console=console())
     elif fmt:
