@@ -83,7 +83,13 @@ class DaskExecutor(Executor):
 
                 ensure_warm()   # compile (or load) the kernels here once, so N workers do not compile them at once
 
-                with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
+                # the workers' statistical profiler samples every thread's stack 100 times a second: off for a
+                # run's own cluster (pipeline code holds the GIL between kernels)
+                # run's own cluster (pipeline code holds the GIL between kernels); and one numba thread per worker
+                # process, as there is one worker per core
+                with dask.config.set({"distributed.scheduler.allowed-failures": retries,
+                                      "distributed.worker.profile.enabled": False,
+                                      "distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1}):
                     self.cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                                             dashboard_address=None, silence_logs=logging.ERROR)
                 self.client = distributed.Client(self.cluster)
