@@ -1,9 +1,14 @@
 """The per-run report: what a processed log saw, summarised from its decoded channels, and its formats.
 
-Pure: `RunData.from_log` decodes an already-read log (no file access); `summarise` turns a RunData into a
-RunSummary of plain dicts; `tables`, `render_rich`, `render_markdown`, `render_csv` and `to_json` format
-summaries. Times in the report are seconds from the first scan; positions and distances in metres, in the
-world (odometry) frame when the log has odometry, else in the sensor frame; speeds in m/s.
+A RunAccumulator gathers the report from decoded messages fed block by block (O(1) numbers per track, per
+distinct scan period and per feature kind; nothing per scan), then gives a RunSummary of plain dicts.
+`summarise_file` (and `stream_run`) walk a log once, BLOCK_MESSAGES messages at a time, so the report of a
+log of any length fits in bounded memory: the one place here that reads a file. `RunData.from_log` decodes
+an already-read log whole (for the plot and evaluate) and `summarise` feeds it to the same accumulator,
+so both give the same summary. `tables`, `render_rich`, `render_markdown`, `render_csv` and `to_json`
+format summaries. Times in the report are seconds from the first scan; positions and distances in metres,
+in the world (odometry) frame when every track state has finite world coordinates, else in the sensor
+frame; speeds in m/s.
 """
 
 from __future__ import annotations
