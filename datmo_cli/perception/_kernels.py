@@ -8,7 +8,7 @@ FeatureParams.kernel_vector) whose positions are the P_* constants below.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 (P_C0, P_MIN_POINTS, P_THETA_RES, P_RHO_RES, P_WINDOW, P_LINE_MIN_POINTS, P_LINE_MIN_RACC, P_LINE_MIN_LENGTH,
  P_PERP_TOL, P_R_MIN, P_R_MAX, P_R_STEP, P_CELL, P_CWINDOW, P_CTOL, P_CIRCLE_MIN_POINTS, P_SMALL,
@@ -85,6 +85,18 @@ def _atan2(y: float, x: float) -> float:
 
 
 @njit(cache=True)
+def _wrap_pi(a: float) -> float:
+    """a % pi (Python's float modulo) for a in [-pi, 2 pi) without numba's call to fmod, to the same bits:
+    fmod is exact, a - pi is exact for a in [pi, 2 pi) and a + pi is what the modulo adds to a negative a
+    (a tiny negative a gives pi, as the modulo does; -0.0 stays -0.0 where the modulo gives 0.0)."""
+    if a >= np.pi:
+        return a - np.pi
+    if a < 0.0:
+        return a + np.pi
+    return a
+
+
+@njit(cache=True)
 def normal_cells(x, y, s, e, nt, cell) -> None:
     """cell[i]: the theta cell (of nt over [0, pi)) of the local normal at each point i of [s, e), from the
     chord through neighbours at least 20 cm apart (at least 3 beams either side, at most 10)."""
@@ -94,15 +106,17 @@ def normal_cells(x, y, s, e, nt, cell) -> None:
         while (x[b] - x[a]) ** 2 + (y[b] - y[a]) ** 2 < 0.04 and (a > max(s, i - 10) or b < min(e - 1, i + 10)):
             a = max(s, a - 1)
             b = min(e - 1, b + 1)
-        phi = (_atan2(y[b] - y[a], x[b] - x[a]) + np.pi / 2) % np.pi
+        phi = _wrap_pi(_atan2(y[b] - y[a], x[b] - x[a]) + np.pi / 2)
         cell[i] = min(int(phi * nt / np.pi), nt - 1)
 
 
 @njit(cache=True)
-def _vote(x, y, i, acc, lo, cos_t, sin_t, inv_res, width, c, k, bv, bt, br, touched):
+def _vote(x, y, i, acc, lo, cos_t, sin_t, inv_res, width, c, k, bv, bt, br, touched, box):
     """Point i votes along its sinusoid: theta cells c - k .. c + k (wrapping; all of them when 2k + 1 >= nt)
     around its local normal's cell c, and marks those theta rows in `touched`. Returns the peak (votes, theta
-    cell, rho cell) updated from (bv, bt, br)."""
+    cell, rho cell) updated from (bv, bt, br). acc: the accumulator as one flat array, theta row t at
+    [t * width, (t + 1) * width) (rows `width` apart keep a segment's votes in a few cache lines); lo[t] is
+    computed from the segment's bounding box (xmin, xmax, ymin, ymax) when row t is first voted in."""
     nt = cos_t.shape[0]
     if 2 * k + 1 >= nt:
         t_from = 0
@@ -118,14 +132,17 @@ def _vote(x, y, i, acc, lo, cos_t, sin_t, inv_res, width, c, k, bv, bt, br, touc
             t += nt
         elif t >= nt:
             t -= nt
+        if not touched[t]:
+            touched[t] = True
+            lo[t] = _row_offset(box, cos_t[t], sin_t[t])
         ri = int((xi * cos_t[t] + yi * sin_t[t] - lo[t]) * inv_res)
         if ri < 0:
             ri = 0
         elif ri >= width:
             ri = width - 1
-        v = acc[t, ri] + 1
-        acc[t, ri] = v
-        touched[t] = True
+        j = t * width + ri
+        v = acc[j] + 1
+        acc[j] = v
         if v > bv:
             bv = v
             bt = t
@@ -135,17 +152,23 @@ def _vote(x, y, i, acc, lo, cos_t, sin_t, inv_res, width, c, k, bv, bt, br, touc
 
 @njit(cache=True)
 def _clear(acc, touched, width) -> None:
-    """Zero the rows voted in (only the first `width` cells can hold votes)."""
-    for t in range(acc.shape[0]):
+    """Zero the rows voted in (flat rows of `width` cells, see _vote)."""
+    for t in range(touched.shape[0]):
         if touched[t]:
-            acc[t, :width] = 0
+            acc[t * width:(t + 1) * width] = 0
             touched[t] = False
 
 
 @njit(cache=True)
-def _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, max_width) -> int:
-    """lo[t]: the smallest rho the bounding box of points [s, e) gives at theta cell t; returns the number of
-    rho cells the box can produce (the accumulator adapted to the segment)."""
+def _row_offset(box, c, sn) -> float:
+    """The smallest rho x cos + y sin (c, sn) over the bounding box (xmin, xmax, ymin, ymax)."""
+    return min(box[0] * c, box[1] * c) + min(box[2] * sn, box[3] * sn)
+
+
+@njit(cache=True)
+def _bounding_box(x, y, s, e, rho_res, max_width, box) -> int:
+    """box = (xmin, xmax, ymin, ymax) of points [s, e); returns the number of rho cells the box can produce
+    (the accumulator adapted to the segment), at most max_width."""
     xmin = x[s]
     xmax = x[s]
     ymin = y[s]
@@ -155,9 +178,22 @@ def _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, max_width) -> int:
         xmax = max(xmax, x[i])
         ymin = min(ymin, y[i])
         ymax = max(ymax, y[i])
-    for t in range(cos_t.shape[0]):
-        lo[t] = min(xmin * cos_t[t], xmax * cos_t[t]) + min(ymin * sin_t[t], ymax * sin_t[t])
+    box[0] = xmin
+    box[1] = xmax
+    box[2] = ymin
+    box[3] = ymax
     return min(int(np.hypot(xmax - xmin, ymax - ymin) / rho_res) + 2, max_width)
+
+
+@njit(cache=True)
+def _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, max_width) -> int:
+    """lo[t]: the smallest rho the bounding box of points [s, e) gives at theta cell t; returns the number of
+    rho cells the box can produce (the accumulator adapted to the segment)."""
+    box = np.empty(4)
+    width = _bounding_box(x, y, s, e, rho_res, max_width, box)
+    for t in range(cos_t.shape[0]):
+        lo[t] = _row_offset(box, cos_t[t], sin_t[t])
+    return width
 
 
 @njit(cache=True)
@@ -197,8 +233,12 @@ def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touche
     added in scan order, and when more than three consecutive new points lie off the peak's line (farther
     than two rho cells), a new line starts at the first of them. Returns the number of runs in sub_s/sub_e;
     peaks[k] = (votes, theta cell, rho cell) of run k's accumulator peak (lo: see _offsets_for; cell: see
-    normal_cells; k: theta cells voted either side of the normal; hist: scratch of at least e - s rows)."""
-    width = _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, acc.shape[1])
+    normal_cells; k: theta cells voted either side of the normal; hist: scratch of at least e - s rows). Only
+    the rows voted in get their lo (a peak's row always is); acc (nt, width_max) is used as one flat array of
+    rows as wide as the segment needs and is left all zero, as `touched` is left all False."""
+    box = np.empty(4)
+    width = _bounding_box(x, y, s, e, rho_res, acc.shape[1], box)
+    acc = acc.reshape(-1)
     inv = 1.0 / rho_res
     bv = 0
     bt = 0
@@ -208,7 +248,7 @@ def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touche
     start = s
     off = 0
     for i in range(s, e):
-        bv, bt, br = _vote(x, y, i, acc, lo, cos_t, sin_t, inv, width, cell[i], k, bv, bt, br, touched)
+        bv, bt, br = _vote(x, y, i, acc, lo, cos_t, sin_t, inv, width, cell[i], k, bv, bt, br, touched, box)
         hist[i - s, 0] = bv
         hist[i - s, 1] = bt
         hist[i - s, 2] = br
@@ -238,7 +278,7 @@ def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touche
                 bt = 0
                 br = 0
                 for j in range(cut, i + 1):
-                    bv, bt, br = _vote(x, y, j, acc, lo, cos_t, sin_t, inv, width, cell[j], k, bv, bt, br, touched)
+                    bv, bt, br = _vote(x, y, j, acc, lo, cos_t, sin_t, inv, width, cell[j], k, bv, bt, br, touched, box)
                     hist[j - s, 0] = bv
                     hist[j - s, 1] = bt
                     hist[j - s, 2] = br
@@ -394,11 +434,13 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     """HTC on points [s, e): centre estimated from P_ini, P_near (nearest the scanner) and P_end, votes over
     (a, b) in a window around it for each radius the arc allows, peak, then a least-squares fit over the
     points within the tolerance. out = [n_points, x, y, radius, r_acc]; r_acc 0 when no circle fits. A
-    peak whose r_acc is not above `beat` is not refined (out[0] = 0: it would not be kept anyway)."""
+    peak whose r_acc is not above `beat` is not refined (out[0] = 0: it would not be kept anyway); nor is a
+    radius voted for that cannot give more votes than the peak so far, or than `beat` allows (the points
+    near enough to the ring of some cell of its window, counted first): its peak could not be the circle."""
     out[0] = 0.0
     out[4] = 0.0
     n = e - s
-    if n < 3:
+    if n < 3 or beat >= 1.0:   # r_acc is at most 1: nothing can beat `beat`
         return
     cell = p[P_CELL]
     w = int(round(p[P_CWINDOW] / cell))
@@ -444,11 +486,21 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     ba = 0.0
     bb = 0.0
     br = -1.0
+    reach = w * cell * np.sqrt(2.0) + 1e-9   # window centre to its farthest cell centre (and rounding)
     for k in range(k0, k1 + 1):
         r = p[P_R_MIN] + k * step
         h = np.sqrt(max(r * r - half * half, 0.0))
         ca = mx + nx * h
         cb = my + ny * h
+        # at most `most` votes in any cell of this window: a point votes only within [r - tol, r + tol] of a
+        # cell centre, and the cell centres lie within `reach` of (ca, cb)
+        most = 0
+        for i in range(s, e):
+            dc = np.hypot(x[i] - ca, y[i] - cb)
+            if r - tol - reach <= dc <= r + tol + reach:
+                most += 1
+        if most <= best or most / n <= beat:
+            continue   # this radius can neither take the peak (ties go to the earlier radius) nor be kept
         for ia in range(size):
             for ib in range(size):
                 cacc[ia, ib] = 0
@@ -727,12 +779,14 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
 
 
 @njit(cache=True)
-def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, cos_t, sin_t, seg_out, seg_count,
-                  lines, circles, blobs, counts, given, given_offsets):
-    """Segment and extract features of every scan of a block (ranges (N, B), m). seg_out (N * B, 2) receives
-    every scan's segments in order, seg_count (N,) how many each scan has; counts = [lines, circles, blobs].
-    With given_offsets of length N + 1, the segments are not computed but taken from `given` (rows
-    [start, end), scan k's at given_offsets[k]:given_offsets[k + 1])."""
+def extract_scans(ranges, k0, k1, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, cos_t, sin_t, seg_out, lines,
+                  circles, blobs, counts, given, given_offsets):
+    """Segment and extract features of scans k0 .. k1 - 1 of a block (ranges (N, B), m): scan k's segments
+    (rows [start, end)), lines, circles and blobs go to rows [k * B, k * B + counts[k, j]) of seg_out, lines,
+    circles and blobs (j = 0, 1, 2, 3), each (N * B, columns) (a scan has at most B of each). With
+    given_offsets of length N + 1, the segments are not computed but taken from `given` (rows [start, end),
+    scan k's at given_offsets[k]:given_offsets[k + 1]). Scans are independent: any split of a block into
+    calls gives the same rows, so extract_parallel runs disjoint ranges of scans at once."""
     N, B = ranges.shape
     x = np.empty(B)
     y = np.empty(B)
@@ -745,10 +799,6 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
     acc = np.zeros((cos_t.shape[0], int(diag / p[P_RHO_RES]) + 3), np.int32)
     w = int(round(p[P_CWINDOW] / p[P_CELL]))
     cacc = np.zeros((2 * w + 1, 2 * w + 1), np.int32)
-    nl = 0
-    nc = 0
-    nb = 0
-    ns = 0
     min_points = int(p[P_MIN_POINTS])
     use_given = given_offsets.shape[0] == N + 1
     dalpha = np.arccos(min(max(cos_inc, -1.0), 1.0))   # the angle step, for circle_posed
@@ -756,7 +806,7 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
     work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
             np.empty((MAX_SUB, 3), np.int64), np.empty((MAX_SUB, 12)), np.empty(MAX_SUB, np.int64),
             np.empty(MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64))
-    for k in range(N):
+    for k in range(k0, k1):
         r = ranges[k]
         if use_given:
             nseg = 0
@@ -769,11 +819,11 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
                     nseg += 1
         else:
             nseg = segment_scan(r, cos_inc, p[P_C0], c1, range_min, range_max, min_points, starts, ends)
+        base = k * B
         for g in range(nseg):
-            seg_out[ns + g, 0] = starts[g]
-            seg_out[ns + g, 1] = ends[g]
-        ns += nseg
-        seg_count[k] = nseg
+            seg_out[base + g, 0] = starts[g]
+            seg_out[base + g, 1] = ends[g]
+        counts[k, 0] = nseg
         for i in range(B):
             ri = r[i]
             if not valid_return(ri, range_min, range_max):
@@ -781,10 +831,21 @@ def extract_block(ranges, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, co
             x[i] = ri * cos_a[i]
             y[i] = ri * sin_a[i]
         nl, nc, nb = extract_scan(x, y, starts, ends, nseg, k, p, acc, cacc, cos_t, sin_t, idx, sub_s, sub_e,
-                                  lines, nl, circles, nc, blobs, nb, work, dalpha)
-    counts[0] = nl
-    counts[1] = nc
-    counts[2] = nb
+                                  lines, base, circles, base, blobs, base, work, dalpha)
+        counts[k, 1] = nl - base
+        counts[k, 2] = nc - base
+        counts[k, 3] = nb - base
+
+
+@njit(cache=True, parallel=True)
+def extract_parallel(ranges, parts, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, cos_t, sin_t, seg_out,
+                     lines, circles, blobs, counts, given, given_offsets):
+    """extract_scans over all N scans of the block, split into `parts` ranges of consecutive scans run on
+    numba's threads (numba.set_num_threads); the same rows as one extract_scans(ranges, 0, N, ...)."""
+    N = ranges.shape[0]
+    for j in prange(parts):
+        extract_scans(ranges, j * N // parts, (j + 1) * N // parts, cos_a, sin_a, cos_inc, c1, range_min, range_max,
+                      p, cos_t, sin_t, seg_out, lines, circles, blobs, counts, given, given_offsets)
 
 
 @njit(cache=True)

@@ -198,14 +198,41 @@ def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.n
     return rows
 
 
+def _extract_block(block: np.ndarray, args: tuple, given: np.ndarray, given_off: np.ndarray,
+                   threads: int) -> tuple[np.ndarray, ...]:
+    """The perception kernels on one block of scans (ranges (n, B), m; `args` the kernels' geometry and
+    parameters: cos_a, sin_a, cos_inc, c1, range_min, range_max, params vector, cos_t, sin_t) on `threads`
+    threads (a threads.resolve()d count): (segments (S, 2) beam ranges [start, end), segments per scan (n,),
+    line rows (L, 13), circle rows (C, 9), blob rows (Cb, 9)) in scan order, column 0 the scan in the block.
+    Each scan's rows are written to its own stretch of B rows, so the result is the same for any `threads`."""
+    from . import threads as T
+
+    n, B = block.shape
+    rows = n * B   # a scan has at most B segments, lines, circles and blobs (disjoint beam ranges)
+    # empty, not zeros: only the rows the kernel fills are read
+    seg, lines, circles, blobs = (np.empty((rows, c), np.int64 if c == 2 else np.float64) for c in (2, 13, 9, 9))
+    counts = np.zeros((n, 4), np.int64)
+    if threads > 1 and n > 1:
+        with T.numba_threads(threads):
+            K.extract_parallel(block, min(n, 4 * threads), *args, seg, lines, circles, blobs, counts, given, given_off)
+    else:
+        K.extract_scans(block, 0, n, *args, seg, lines, circles, blobs, counts, given, given_off)
+    used = np.arange(B) < counts[:, :, None]   # (n, 4, B): row j of scan k's stretch holds a result
+    return (seg[used[:, 0].ravel()], counts[:, 0].copy(), lines[used[:, 1].ravel()], circles[used[:, 2].ravel()],
+            blobs[used[:, 3].ravel()])
+
+
 def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odometry | None = None, *,
                 landmarks: bool = True, segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                progress: Callable[[int, int], None] | None = None) -> RunFeatures:
+                progress: Callable[[int, int], None] | None = None, threads: int | None = None) -> RunFeatures:
     """Segment every scan and extract its lines, circles and blobs (HTL, HTC and the section 5.2 rule);
     with `landmarks`, also build the landmark database (world frame when `odometry` is given).
     `segments` (start, end, offsets as segment_run gives them, e.g. a log's /datmo/segments) are used
     instead of segmenting. The leg detector `params.leg_model` names (see perception.legs) marks the
-    segments it takes for legs. `progress(done, total)` is called after each block of scans."""
+    segments it takes for legs. `progress(done, total)` is called after each block of scans. `threads`: how
+    many threads the per-scan work runs on (None: the process's default, all cores unless `--threads` set
+    it; 0: all cores; see perception.threads); the results are the same for any count."""
+    from . import threads as T
     from .legs import load_leg_model
 
     p = params or FeatureParams()
@@ -228,31 +255,26 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
         _check_segments(g_start, g_end, g_off, B)
         given = np.stack([g_start, g_end], axis=1) if len(g_start) else np.zeros((0, 2), np.int64)
     segs, seg_counts, parts = [], [], {"l": [], "c": [], "b": [], "g": []}
+    n_threads = T.resolve(threads)
+    args = (cos_a, sin_a, cos_inc, c1, lo, hi, vec, cos_t, sin_t)
     for a in range(0, N, BLOCK):
         block = ranges[a:a + BLOCK]
         n = len(block)
-        cap = n * B + 1
-        seg = np.empty((cap, 2), np.int64)   # empty, not zeros: only the rows the kernel fills are read
-        count = np.zeros(n, np.int64)
-        lines = np.empty((cap, 13))
-        # disjoint segments: at most B per scan, each with at most one circle or blob
-        circles = np.empty((cap, 9))
-        blobs = np.empty((cap, 9))
-        got = np.zeros(3, np.int64)
         if segments is not None:
             sub_off = g_off[a:a + n + 1]
             block_given, block_off = given[sub_off[0]:sub_off[-1]], sub_off - sub_off[0]
         else:
             block_given, block_off = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
         if B:
-            K.extract_block(block, cos_a, sin_a, cos_inc, c1, lo, hi, vec, cos_t, sin_t, seg, count, lines,
-                            circles, blobs, got, block_given, block_off)
-        segs.append(seg[:int(count.sum())])
+            seg, count, lines, circles, blobs = _extract_block(block, args, block_given, block_off, n_threads)
+        else:
+            seg, count = np.zeros((0, 2), np.int64), np.zeros(n, np.int64)
+            lines, circles, blobs = np.zeros((0, 13)), np.zeros((0, 9)), np.zeros((0, 9))
+        segs.append(seg)
         seg_counts.append(count)
         legs = (_leg_rows(block, cos_a, sin_a, seg, count, lo, hi, angles, model, p.leg_min_probability)
                 if model is not None and B else None)
-        for key, arr, m in (("l", lines, got[0]), ("c", circles, got[1]), ("b", blobs, got[2])):
-            rows = arr[:m].copy()
+        for key, rows in (("l", lines), ("c", circles), ("b", blobs)):
             rows[:, 0] += a
             parts[key].append(rows)
         if legs is not None:
