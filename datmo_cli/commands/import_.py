@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import click
@@ -34,6 +35,7 @@ def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic:
     """
     from ..errors import InputError
     from ..log import mcapio
+    from ..log.importers import open_import, write_import
 
     if output.exists() and not force:  # before reading a big input
         from ..errors import OutputExistsError
@@ -41,45 +43,32 @@ def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic:
         raise OutputExistsError(f"{output}: exists; use --force to overwrite it")
     if src.exists() and output.exists() and src.resolve() == output.resolve():
         raise InputError(f"{output}: the output would overwrite the input")
-    result = _import(src, topic, odom_topic, max_scans)
-    for w in result.warnings:
-        click.echo(f"datmo: warning: {w}", err=True)
-    run = result.run
-    if len(run) == 0:
-        raise InputError(f"{src}: no scans to write")
-    params = {"topic": result.topic, "odom_topic": result.odom_topic, "max_scans": max_scans,
-              "kind": result.kind}
-    provenance = mcapio.Provenance("import", params, [src] if src.is_file() else [])
-    with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
-        writer.add_metadata("datmo.import", _facts(result))
-        writer.write_scans(run)
-        if result.odometry is not None and len(result.odometry):
-            writer.write_odometry(result.odometry)
-    odom = f", {len(result.odometry)} poses on /odom" if result.odometry is not None else ""
-    click.echo(f"{output}: {len(run)} scans of {run.geometry.describe()} from {result.kind} "
-               f"{result.topic}{odom}", err=True)
+    with _progress(src) as progress:
+        stream = open_import(src, topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress,
+                             spool_dir=output.parent if output.parent.is_dir() else None)
+        params = {"topic": stream.topic, "odom_topic": stream.odom_topic, "max_scans": max_scans,
+                  "kind": stream.kind}
+        provenance = mcapio.Provenance("import", params, [src] if src.is_file() else [])
+        try:
+            stats = write_import(stream, output, force=force, provenance=provenance)
+        finally:
+            for w in stream.warnings:
+                click.echo(f"datmo: warning: {w}", err=True)
+    odom = f", {stats.poses} poses on /odom" if stats.poses else ""
+    click.echo(f"{output}: {stats.scans} scans of {stats.geometry.describe()} from {stream.kind} "
+               f"{stream.topic}{odom}", err=True)
 
 
-def _import(src: Path, topic, odom_topic, max_scans):  # noqa: ANN001, ANN202
-    """import_log with a progress bar on stderr for inputs over 20 MB."""
-    from ..log.importers import import_log
-
+@contextlib.contextmanager
+def _progress(src: Path):  # noqa: ANN202
+    """A progress callback drawing a bar on stderr for inputs over 20 MB, else None."""
     size = src.stat().st_size if src.is_file() else 0
     if size < 20_000_000:
-        return import_log(src, topic, odom_topic=odom_topic, max_scans=max_scans)
+        yield None
+        return
     from rich.console import Console
     from rich.progress import Progress
 
     with Progress(console=Console(stderr=True), transient=True) as bar:
         task = bar.add_task(f"reading {src.name}", total=None)
-        return import_log(src, topic, odom_topic=odom_topic, max_scans=max_scans,
-                          progress=lambda done, total: bar.update(task, completed=done, total=total or None))
-
-
-def _facts(result) -> dict[str, str]:  # noqa: ANN001
-    import json
-
-    out = {"kind": result.kind, "topic": str(result.topic), "odom_topic": str(result.odom_topic or ""),
-           "source": str(result.source), "warnings": json.dumps(result.warnings)}
-    out.update({k: json.dumps(v, default=str) for k, v in result.facts.items()})
-    return out
+        yield lambda done, total: bar.update(task, completed=done, total=total or None)

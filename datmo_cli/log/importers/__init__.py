@@ -7,24 +7,28 @@ Supported kinds (see `detect_kind`):
 - ``ros1``: ROS 1 bags, ``ros2``: ROS 2 bag folders (sqlite3 or mcap storage), both via rosbags,
 - ``mcap``: a single MCAP file with CDR sensor_msgs/msg/LaserScan (ROS 2 style, datmo's own included).
 
-Every importer returns an ImportResult; bad input raises datmo_cli.errors.InputError with a one-line
-message naming the file and the problem.
+Every importer opens an ImportStream: what is known of the source up front, then its scans and poses in
+blocks of about IMPORT_BLOCK scans, in time order; `write_import` writes them block by block (through
+log.ordered.OrderedSink), so `datmo import` holds one block whatever the log's length, and `import_log`
+collects them into an ImportResult (the whole run, for tests and tools that want arrays). Bad input
+raises datmo_cli.errors.InputError with a one-line message naming the file and the problem.
 """
 
 from __future__ import annotations
 
 import gzip
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ...errors import InputError
-from ..scan import Odometry, ScanRun
+from ..scan import Odometry, ScanGeometry, ScanRun
 
 #: progress(done, total): bytes of a text log, or messages of a bag, read so far (total 0 when unknown).
 Progress = Callable[[int, int], None]
 
+IMPORT_BLOCK = 1024   # scans per block
 KINDS = ("carmen", "g2o", "ros1", "ros2", "mcap")
 _ROSBAG1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP"
@@ -100,36 +104,185 @@ def detect_kind(path: str | Path) -> str:
     return kind
 
 
-def import_log(path: str | Path, topic: str | None = None, *, odom_topic: str | None = None,
-               max_scans: int | None = None, progress: Progress | None = None) -> ImportResult:
-    """Read the log at `path` into arrays.
+def open_import(path: str | Path, topic: str | None = None, *, odom_topic: str | None = None,
+                max_scans: int | None = None, progress: Progress | None = None,
+                spool_dir: str | Path | None = None, block_scans: int | None = None) -> ImportStream:
+    """Open the log at `path` for importing block by block (see ImportStream).
 
     topic: which scan stream to take when there are several (a ROS topic, or for CARMEN a message name
     such as FLASER or ROBOTLASER1); odom_topic: the nav_msgs/Odometry topic of a bag (default: the only
-    one, if any); max_scans: keep only the first N scans (and the poses up to the last one kept).
+    one, if any); max_scans: keep only the first N scans (and the poses up to the last one kept);
+    spool_dir: where a text log's parsed scans wait for the whole-log checks (the system's temporary
+    folder when None; `datmo import` gives the output's folder); block_scans: scans per block (IMPORT_BLOCK).
     """
     path = Path(path)
+    block_scans = block_scans or IMPORT_BLOCK
     kind = detect_kind(path)
     if max_scans is not None and max_scans < 1:
         raise InputError(f"{path}: --max-scans must be at least 1")
-    try:
+    with _compressed_errors(path):
         if kind in ("carmen", "g2o"):
-            from .carmen import read_carmen
+            from .carmen import stream_carmen
 
-            result = read_carmen(path, topic=topic, max_scans=max_scans, progress=progress)
+            stream = stream_carmen(path, topic=topic, max_scans=max_scans, progress=progress, spool_dir=spool_dir,
+                                   block_scans=block_scans)
         elif kind == "mcap":
-            from .rosbag import read_mcap
+            from .rosbag import stream_mcap
 
-            result = read_mcap(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans)
+            stream = stream_mcap(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans,
+                                 block_scans=block_scans)
         else:
-            from .rosbag import read_bag
+            from .rosbag import stream_bag
 
-            result = read_bag(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress)
-    except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
-        raise InputError(f"{path}: corrupt or truncated compressed data ({exc})") from None
-    result.kind = kind
-    result.source = path
-    return result
+            stream = stream_bag(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress,
+                                block_scans=block_scans)
+    stream.kind = kind
+    stream.source = path
+    return stream
 
 
-__all__ = ["KINDS", "ImportResult", "detect_kind", "import_log"]
+class _compressed_errors:  # noqa: N801 - used as a statement
+    """Corrupt or truncated compressed data as a one-line InputError naming the file."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, exc_type, exc, tb) -> None:  # noqa: ANN001
+        if exc_type is not None and issubclass(exc_type, (EOFError, gzip.BadGzipFile, zlib.error)):
+            raise InputError(f"{self.path}: corrupt or truncated compressed data ({exc})") from None
+
+
+def import_log(path: str | Path, topic: str | None = None, *, odom_topic: str | None = None,
+               max_scans: int | None = None, progress: Progress | None = None) -> ImportResult:
+    """Read the log at `path` into arrays: open_import's blocks collected (arguments as there)."""
+    return open_import(path, topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress).collect()
+
+
+@dataclass
+class ImportStream:
+    """An opened source: kind, topic, odometry source, warnings and facts as known up front, then `blocks()`:
+    (scans, poses) pieces (either may be None) in time order, about `block_scans` scans at a time. Warnings
+    and facts are complete once the blocks are done. `peak_scans`: the most scans a piece held."""
+
+    pieces: Iterator[tuple[ScanRun | None, Odometry | None]]
+    warnings: list[str] = field(default_factory=list)
+    kind: str = ""
+    topic: str = ""
+    odom_topic: str | None = None
+    source: Path | None = None
+    facts: dict = field(default_factory=dict)
+    geometry: ScanGeometry | None = None
+    sort_odometry: bool = False      # collect() sorts the poses by stamp (what the whole-run bag import did)
+    closer: Callable[[], None] | None = None   # releases what the source holds open, when blocks() is not run
+    peak_scans: int = 0
+
+    def blocks(self) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
+        with _compressed_errors(self.source or Path("?")):
+            for scans, odom in self.pieces:
+                if scans is not None:
+                    self.peak_scans = max(self.peak_scans, len(scans))
+                yield scans, odom
+
+    def close(self) -> None:
+        """Stop early (temporary files removed, readers closed)."""
+        close = getattr(self.pieces, "close", None)
+        if close is not None:
+            close()
+        if self.closer is not None:
+            self.closer()
+
+    def collect(self) -> ImportResult:
+        """The whole run as one ImportResult."""
+        import numpy as np
+
+        runs, poses = [], []
+        for scans, odom in self.blocks():
+            if scans is not None and len(scans):
+                runs.append(scans)
+            if odom is not None and len(odom):
+                poses.append(odom)
+        if runs:
+            g = runs[0].geometry
+            run = ScanRun(np.concatenate([r.stamps for r in runs]), np.concatenate([r.ranges for r in runs]), g,
+                          np.concatenate([r.intensities for r in runs]))
+        else:
+            g = self.geometry or ScanGeometry(0.0, 0.0, 0, 0.0, 0.0)
+            run = ScanRun(np.zeros(0, np.int64), np.zeros((0, g.n_beams), np.float32), g)
+        odometry = None
+        if poses:
+            cols = [np.concatenate([getattr(o, f) for o in poses]) for f in ("stamps", "x", "y", "theta")]
+            if self.sort_odometry:
+                order = np.argsort(cols[0], kind="stable")
+                cols = [c[order] for c in cols]
+            odometry = Odometry(*cols, poses[-1].frame_id, poses[-1].child_frame_id)
+        return ImportResult(run=run, odometry=odometry, warnings=self.warnings, kind=self.kind, topic=self.topic,
+                            odom_topic=self.odom_topic, source=self.source, facts=self.facts)
+
+
+@dataclass
+class ImportStats:
+    """What write_import wrote, and the most it held: scans in a block, messages in its time-order window."""
+
+    scans: int
+    poses: int
+    geometry: ScanGeometry | None
+    late: int
+    peak_scans: int
+    peak_messages: int
+
+
+def write_import(stream: ImportStream, output: str | Path, *, force: bool = False, provenance=None,  # noqa: ANN001
+                 window: int | None = None) -> ImportStats:
+    """Write `stream`'s scans to /scan and poses to /odom of `output` (atomically, LogWriter), block by block
+    in time order (OrderedSink over `window` messages), then its facts as metadata "datmo.import". Raises
+    InputError when there are no scans. A message more than the window late is written out of order
+    with a warning added to stream.warnings."""
+    from .. import mcapio, types
+    from ..ordered import WINDOW, OrderedSink
+
+    window = window or WINDOW
+    src = stream.source
+    scans = poses = 0
+    geometry = None
+    try:
+        with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
+            sink = OrderedSink(writer, window)
+            scan_cid, odom_cid = writer.channel(mcapio.TOPIC_SCAN, types.LASERSCAN), None
+            for run, odom in stream.blocks():
+                if run is not None and len(run):
+                    geometry = geometry or run.geometry
+                    sink.add(scan_cid, run.stamps, mcapio.encode_scans(run))
+                    scans += len(run)
+                if odom is not None and len(odom):
+                    if odom_cid is None:
+                        odom_cid = writer.channel(mcapio.TOPIC_ODOM, types.ODOMETRY)
+                    sink.add(odom_cid, odom.stamps, mcapio.encode_odometry(odom))
+                    poses += len(odom)
+                sink.flush()
+            if scans == 0:
+                raise InputError(f"{src}: no scans to write")
+            sink.close()
+            if sink.late:
+                stream.warnings.append(f"{src}: {sink.late} message{'s' if sink.late != 1 else ''} came after later "
+                                       f"ones beyond a window of {window}; written out of time order")
+            writer.add_metadata("datmo.import", import_facts(stream))
+    finally:
+        stream.close()
+    return ImportStats(scans, poses, geometry, sink.late, stream.peak_scans, sink.peak)
+
+
+def import_facts(stream: ImportStream) -> dict[str, str]:
+    """The "datmo.import" metadata of an import."""
+    import json
+
+    out = {"kind": stream.kind, "topic": str(stream.topic), "odom_topic": str(stream.odom_topic or ""),
+           "source": str(stream.source), "warnings": json.dumps(stream.warnings)}
+    out.update({k: json.dumps(v, default=str) for k, v in stream.facts.items()})
+    return out
+
+
+__all__ = ["IMPORT_BLOCK", "KINDS", "ImportResult", "ImportStats", "ImportStream", "detect_kind", "import_facts",
+           "import_log", "open_import", "write_import"]

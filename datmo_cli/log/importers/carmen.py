@@ -30,13 +30,18 @@ Conventions (stated in the README):
 - Stamps: ipc_timestamp seconds -> int64 ns. When up to 5 % of them go backwards or repeat (intel), each
   such stamp is set 1 ms after the one before; when more do (several logs print them with 6 significant
   digits, or as 0), all are synthesised at 1 s per scan from the first stamp (0 when negative). Both warn.
+
+Streaming (`stream_carmen`): those rules need the whole log (its largest reading, its stamps, which laser
+messages it holds), so one pass parses every line and spools the parsed scans to a temporary file, keeping
+counts and a few numbers (StampCheck); the scans are then read back and written a block at a time, the
+ODOM poses merged in time order. Memory does not grow with the log; the spool takes 8 bytes a reading.
 """
 
 from __future__ import annotations
 
 import gzip
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -75,31 +80,138 @@ def sniff_text(head: bytes) -> str | None:
     return None
 
 
-@dataclass
 class _Stream:
-    """The scans of one laser message, as parsed (before geometry and stamps are settled)."""
+    """The scans of one laser message, as parsed (before geometry and stamps are settled): counts and
+    whole-log figures, and the scans themselves either in lists (`parse_lines`) or spooled to a file
+    (`spool` given: `read_carmen`, so memory holds no scan after it is parsed)."""
 
-    name: str
-    ranges: list = field(default_factory=list)        # arrays (n,), metres
-    remissions: list = field(default_factory=list)    # arrays (n,) or (0,)
-    stamps_s: list = field(default_factory=list)      # ipc_timestamp, seconds
-    poses: list = field(default_factory=list)         # (x, y, theta) of the laser, world frame
-    geometry: tuple | None = None                     # (start, resolution, max_range) or None (FLASER)
-    n_beams: int = 0
-    first_line: int = 0
+    def __init__(self, name: str, first_line: int = 0, spool: Path | None = None) -> None:
+        self.name = name
+        self.first_line = first_line
+        self.geometry: tuple | None = None     # (start, resolution, max_range) or None (FLASER)
+        self.n_beams = 0
+        self.count = 0
+        self.top = np.nan                      # largest reading (NaN ignored), for FLASER's no-return limit
+        self.all_remissions = True             # every scan has one remission per beam
+        self.posed = 0                         # scans with a laser pose
+        self.stamps = StampCheck()
+        self.ranges: list = []                 # (in memory) arrays (n,), metres
+        self.remissions: list = []             # (in memory) arrays (n,) or (0,)
+        self.stamps_s: list = []               # (in memory) ipc_timestamp, seconds
+        self.poses: list = []                  # (in memory) (x, y, theta) of the laser, world frame
+        self._files = None
+        if spool is not None:
+            self._paths = tuple(spool / f"{name}.{part}" for part in ("ranges", "remissions", "meta"))
+            self._files = tuple(open(p, "wb") for p in self._paths)
+
+    def add(self, ranges: np.ndarray, rem: np.ndarray, ipc: float, pose: tuple | None) -> None:
+        n = len(ranges)
+        self.count += 1
+        if not np.all(np.isnan(ranges)):
+            self.top = np.fmax(self.top, float(np.nanmax(ranges)))
+        self.stamps.add(ipc)
+        if pose is not None:
+            self.posed += 1
+        if self._files is None:
+            self.ranges.append(ranges)
+            self.remissions.append(rem if len(rem) == n else np.zeros(0))
+            self.stamps_s.append(ipc)
+            if pose is not None:
+                self.poses.append(pose)
+        else:
+            f_ranges, f_rem, f_meta = self._files
+            f_ranges.write(np.ascontiguousarray(ranges, np.float64).tobytes())
+            if self.all_remissions and len(rem) == n:
+                f_rem.write(np.ascontiguousarray(rem, np.float64).tobytes())
+            f_meta.write(np.array((ipc,) + (tuple(pose) if pose is not None else (np.nan,) * 3), np.float64).tobytes())
+        if len(rem) != n:
+            self.all_remissions = False
+
+    def close(self) -> None:
+        if self._files is not None:
+            for f in self._files:
+                f.close()
+
+    def blocks(self, size: int) -> Iterator[tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]]:
+        """(ranges (k, n) float64, remissions (k, n) or None, ipc stamps (k,) s, laser poses (k, 3)) of the
+        scans in order, `size` at a time."""
+        n = self.n_beams
+        if self._files is None:
+            for a in range(0, self.count, size):
+                b = min(self.count, a + size)
+                rem = np.stack(self.remissions[a:b]) if self.all_remissions else None
+                poses = np.array(self.poses[a:b], np.float64).reshape(-1, 3) if self.posed else np.zeros((0, 3))
+                stamps = np.array(self.stamps_s[a:b], np.float64)
+                yield np.stack(self.ranges[a:b]).astype(np.float64), rem, stamps, poses
+            return
+        with open(self._paths[0], "rb") as fr, open(self._paths[1], "rb") as fm, open(self._paths[2], "rb") as fp:
+            for a in range(0, self.count, size):
+                k = min(self.count, a + size) - a
+                ranges = np.fromfile(fr, np.float64, k * n).reshape(k, n)
+                rem = np.fromfile(fm, np.float64, k * n).reshape(k, n) if self.all_remissions else None
+                meta = np.fromfile(fp, np.float64, k * 4).reshape(k, 4)
+                yield ranges, rem, meta[:, 0].copy(), meta[:, 1:].copy()
+
+    def all_stamps(self) -> np.ndarray:
+        """Every ipc stamp (s) of the stream; only for the warning of a log whose stamps are synthesised."""
+        if self._files is None:
+            return np.array(self.stamps_s, np.float64)
+        return np.fromfile(self._paths[2], np.float64).reshape(-1, 4)[:, 0]
+
+
+class _Odom:
+    """ODOM poses (stamp_s, x, y, theta): in a list (`parse_lines`) or spooled to a file."""
+
+    def __init__(self, spool: Path | None = None) -> None:
+        self.rows: list = []
+        self.count = 0
+        self.stamps = StampCheck()
+        self._path = spool / "ODOM" if spool is not None else None
+        self._file = open(self._path, "wb") if self._path is not None else None
+
+    def append(self, row: tuple) -> None:
+        self.count += 1
+        self.stamps.add(row[0])
+        if self._file is None:
+            self.rows.append(row)
+        else:
+            self._file.write(np.array(row, np.float64).tobytes())
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+
+    def __len__(self) -> int:
+        return self.count
+
+    def blocks(self, size: int) -> Iterator[np.ndarray]:
+        """Rows (k, 4) in order, `size` at a time."""
+        if self._file is None:
+            for a in range(0, self.count, size):
+                yield np.array(self.rows[a:a + size], np.float64).reshape(-1, 4)
+            return
+        with open(self._path, "rb") as f:
+            for a in range(0, self.count, size):
+                yield np.fromfile(f, np.float64, 4 * (min(self.count, a + size) - a)).reshape(-1, 4)
 
 
 @dataclass
 class CarmenParse:
-    """Everything `parse_lines` kept: laser streams by message name, ODOM poses, PARAMs, malformed lines."""
+    """Everything the parse kept: laser streams by message name, ODOM poses, PARAMs, malformed lines."""
 
     streams: dict[str, _Stream] = field(default_factory=dict)
-    odom: list = field(default_factory=list)          # (stamp_s, x, y, theta)
+    odom: _Odom = field(default_factory=_Odom)
     params: dict[str, str] = field(default_factory=dict)
     malformed: int = 0
     malformed_lines: list[int] = field(default_factory=list)
     lines: int = 0
     counts: dict[str, int] = field(default_factory=dict)
+    spool: Path | None = None       # where the scans are spooled (None: in memory)
+
+    def close(self) -> None:
+        for s in self.streams.values():
+            s.close()
+        self.odom.close()
 
 
 class _Malformed(ValueError):
@@ -132,12 +244,22 @@ def _flaser_fields(tok: list[str]) -> tuple[np.ndarray, float, tuple]:
     return vals[:n], float(vals[n + 6]), tuple(vals[n:n + 3])
 
 
-def parse_lines(lines: Iterable[str], *, topic: str | None = None, max_scans: int | None = None) -> CarmenParse:
-    """Parse CARMEN text lines (pure: no files). Keeps at most `max_scans` scans per laser message and
-    stops early once `topic`'s scans are complete. Raises GeometryError (without a file name) when a
-    laser message changes its beam layout."""
-    out = CarmenParse()
+def parse_lines(lines: Iterable[str], *, topic: str | None = None, max_scans: int | None = None,
+                spool: Path | None = None) -> CarmenParse:
+    """Parse CARMEN text lines (pure: no files unless `spool`, a folder to spool the scans to). Keeps at
+    most `max_scans` scans per laser message and stops early once `topic`'s scans are complete. Raises
+    GeometryError (without a file name) when a laser message changes its beam layout."""
+    out = CarmenParse(odom=_Odom(spool), spool=spool)
     streams = out.streams
+    try:
+        _parse(lines, out, streams, topic, max_scans)
+    finally:
+        out.close()
+    return out
+
+
+def _parse(lines: Iterable[str], out: CarmenParse, streams: dict[str, _Stream], topic: str | None,
+           max_scans: int | None) -> None:
     for lineno, line in enumerate(lines, 1):
         out.lines = lineno
         tok = line.split()
@@ -152,8 +274,8 @@ def parse_lines(lines: Iterable[str], *, topic: str | None = None, max_scans: in
             if name in LASER_MESSAGES:
                 s = streams.get(name)
                 if s is None:
-                    s = streams[name] = _Stream(name, first_line=lineno)
-                if max_scans is not None and len(s.ranges) >= max_scans:
+                    s = streams[name] = _Stream(name, first_line=lineno, spool=out.spool)
+                if max_scans is not None and s.count >= max_scans:
                     if topic == name:
                         break
                     continue
@@ -173,7 +295,6 @@ def parse_lines(lines: Iterable[str], *, topic: str | None = None, max_scans: in
         except (_Malformed, ValueError, IndexError):
             out.counts[name] -= 1
             _bad(out, lineno)
-    return out
 
 
 def _bad(out: CarmenParse, lineno: int) -> None:
@@ -184,18 +305,14 @@ def _bad(out: CarmenParse, lineno: int) -> None:
 
 def _add_scan(s: _Stream, lineno: int, ranges, rem, ipc, pose, geom) -> None:
     n = len(ranges)
-    if not s.ranges:
+    if not s.count:
         s.n_beams, s.geometry = n, geom
     elif n != s.n_beams or geom != s.geometry:
         was = f"{s.n_beams} beams" + (f", start/resolution/max {s.geometry}" if s.geometry else "")
         now = f"{n} beams" + (f", start/resolution/max {geom}" if geom else "")
-        raise GeometryError(f"{s.name} geometry changes at scan {len(s.ranges)} (line {lineno}): "
+        raise GeometryError(f"{s.name} geometry changes at scan {s.count} (line {lineno}): "
                             f"{was} -> {now}; datmo does not split runs, cut the log at that line")
-    s.ranges.append(ranges)
-    s.remissions.append(rem if len(rem) == n else np.zeros(0))
-    s.stamps_s.append(ipc)
-    if pose is not None:
-        s.poses.append(pose)
+    s.add(ranges, rem, ipc, pose)
 
 
 def flaser_angles(n_beams: int) -> tuple[float, float]:
@@ -209,9 +326,14 @@ def flaser_angles(n_beams: int) -> tuple[float, float]:
 
 def no_return_limit(ranges: np.ndarray, stated_max: float | None = None) -> float:
     """The range (m) at or above which a reading means "no return" (see the module docstring)."""
+    top = float(np.nanmax(ranges)) if ranges.size else 0.0
+    return _limit(top, stated_max)
+
+
+def _limit(top: float, stated_max: float | None) -> float:
+    """no_return_limit from the largest reading (`top`, NaN when there is none)."""
     if stated_max is not None and stated_max > 0:
         return float(stated_max)
-    top = float(np.nanmax(ranges)) if ranges.size else 0.0
     if top >= SICK_CODE_M - 1e-6:
         return SICK_CODE_M
     if top >= CARMEN_CAP_M:
@@ -228,26 +350,84 @@ def stamps_ns(stamps_s: np.ndarray) -> tuple[np.ndarray, str | None]:
     set 1 ms after the one before ("repaired"); otherwise all are synthesised at 1 s per scan from the
     first stamp (0 when negative or not finite).
     """
-    t = np.asarray(stamps_s, np.float64)
-    ok = len(t) > 0 and bool(np.all(np.isfinite(t))) and t[0] >= 0
-    bad = int(np.sum(np.diff(t) <= 0)) if ok else len(t)
-    if ok and bad == 0:
-        return np.round(t * 1e9).astype(np.int64), None
-    if ok and bad <= 0.05 * len(t):
-        ns = np.round(t * 1e9).astype(np.int64)
-        for i in range(1, len(ns)):  # per scan, a few thousand at most
-            if ns[i] <= ns[i - 1]:
-                ns[i] = ns[i - 1] + 1_000_000
-        return ns, f"{bad} stamps go backwards or repeat; each set 1 ms after the one before"
-    t0 = float(t[0]) if len(t) and np.isfinite(t[0]) and t[0] >= 0 else 0.0
-    synth = int(round(t0 * 1e9)) + np.arange(len(t), dtype=np.int64) * SYNTH_PERIOD_NS
-    distinct = len(np.unique(t))
-    return synth, f"not increasing ({distinct} distinct of {len(t)}); synthesised at 1 s per scan"
+    check = StampCheck()
+    for t in np.asarray(stamps_s, np.float64).tolist():
+        check.add(t)
+    note = check.note(lambda: np.asarray(stamps_s, np.float64))
+    return check.apply(np.asarray(stamps_s, np.float64)), note
+
+
+class StampCheck:
+    """`stamps_ns` over stamps that come one at a time: `add` each (seconds), then `note` what is done to
+    them, then `apply` it to the same stamps block by block, in order. Holds a few numbers."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.ok = True         # every stamp finite and the first >= 0
+        self.bad = 0           # steps that go backwards or repeat
+        self._prev = 0.0
+        self.t0 = 0.0
+        self._done = 0         # stamps applied so far
+        self._last_ns = 0
+
+    def add(self, t: float) -> None:
+        if self.n == 0:
+            self.t0 = t
+            self.ok = bool(np.isfinite(t)) and t >= 0
+        elif not np.isfinite(t):
+            self.ok = False
+        elif t - self._prev <= 0:
+            self.bad += 1
+        self._prev = t
+        self.n += 1
+
+    @property
+    def mode(self) -> str:
+        """"keep", "repair" or "synthesise"."""
+        if self.n and self.ok and self.bad == 0:
+            return "keep"
+        if self.n and self.ok and self.bad <= 0.05 * self.n:
+            return "repair"
+        return "synthesise"
+
+    def note(self, stamps: Callable[[], np.ndarray]) -> str | None:
+        """What is done to the stamps (None: kept); `stamps()` gives them all, for the count of distinct
+        stamps of the synthesised case only."""
+        mode = self.mode
+        if mode == "keep":
+            return None
+        if mode == "repair":
+            return f"{self.bad} stamps go backwards or repeat; each set 1 ms after the one before"
+        distinct = len(np.unique(stamps()))
+        return f"not increasing ({distinct} distinct of {self.n}); synthesised at 1 s per scan"
+
+    def rewind(self) -> None:
+        """Apply from the first stamp again."""
+        self._done, self._last_ns = 0, 0
+
+    def apply(self, t: np.ndarray) -> np.ndarray:
+        """ns stamps of the next stamps `t` (s), carrying on from the block before."""
+        t = np.asarray(t, np.float64)
+        first, mode = self._done, self.mode
+        self._done += len(t)
+        if mode == "keep":
+            return np.round(t * 1e9).astype(np.int64)
+        if mode == "repair":
+            ns = np.round(t * 1e9).astype(np.int64)
+            last = self._last_ns
+            for i in range(len(ns)):  # per scan, a few thousand at most
+                if (first or i) and ns[i] <= last:
+                    ns[i] = last + 1_000_000
+                last = int(ns[i])
+            self._last_ns = last
+            return ns
+        t0 = float(self.t0) if self.n and np.isfinite(self.t0) and self.t0 >= 0 else 0.0
+        return int(round(t0 * 1e9)) + np.arange(first, first + len(t), dtype=np.int64) * SYNTH_PERIOD_NS
 
 
 def pick_stream(parse: CarmenParse, topic: str | None, label: str) -> _Stream:
     """The laser stream to import: `topic`, or the only one. Raises InputError naming the choices."""
-    names = [n for n in LASER_MESSAGES if n in parse.streams and parse.streams[n].ranges]
+    names = [n for n in LASER_MESSAGES if n in parse.streams and parse.streams[n].count]
     listing = ", ".join(f"{n} ({parse.counts.get(n, 0)} scans)" for n in names)
     if topic is not None:
         if topic not in names:
@@ -263,59 +443,160 @@ def pick_stream(parse: CarmenParse, topic: str | None, label: str) -> _Stream:
     return parse.streams[names[0]]
 
 
-def build(parse: CarmenParse, topic: str | None = None, label: str = "<text>"):  # noqa: ANN201
-    """(ScanRun, Odometry | None, warnings, facts) of a parsed log (pure)."""
+@dataclass
+class _Plan:
+    """How a parsed log's stream becomes scans and poses (what `build` settles from the whole log)."""
+
+    stream: _Stream
+    geometry: ScanGeometry
+    limit: float
+    flip: bool
+    stamps_note: str | None
+    odometry_source: str | None      # the laser message (its poses), "ODOM", or None
+    warnings: list[str]
+    facts: dict
+
+
+def plan(parse: CarmenParse, topic: str | None = None, label: str = "<text>") -> _Plan:
+    """Settle geometry, no-return limit, stamps and odometry of a parsed log (pure). Its facts'
+    "no_return_readings" is counted as `blocks` gives the scans."""
     s = pick_stream(parse, topic, label)
     warnings: list[str] = []
-    ranges = np.stack(s.ranges).astype(np.float64)
     n = s.n_beams
+    flip = False
     if s.geometry is None:
         angle_min, inc = flaser_angles(n)
-        limit = no_return_limit(ranges)
+        limit = _limit(s.top, None)
         if n not in (180, 181, 360, 361):
             warnings.append(f"{label}: {s.name} has {n} beams; assumed they span -90°..+90° inclusive")
-        if parse.params.get("laser_front_laser_flipped", "off").lower() in ("1", "on", "yes", "true"):
-            ranges = ranges[:, ::-1]
+        flip = parse.params.get("laser_front_laser_flipped", "off").lower() in ("1", "on", "yes", "true")
     else:
         angle_min, inc, stated = s.geometry
-        limit = no_return_limit(ranges, stated)
-    no_return = ranges >= limit
-    ranges[no_return] = np.inf
-    rem = None
-    if all(len(r) == n for r in s.remissions):
-        rem = np.stack(s.remissions)
-    stamps, fixed = stamps_ns(np.array(s.stamps_s))
+        limit = _limit(s.top, stated)
+    fixed = s.stamps.note(s.all_stamps)
     synthesised = fixed is not None and fixed.endswith("per scan")
     if fixed:
         warnings.append(f"{label}: {s.name} timestamps: {fixed}")
     frame = "rear_laser" if s.name == "RLASER" else "laser"
     geometry = ScanGeometry(angle_min=float(angle_min), angle_increment=float(inc), n_beams=n,
                             range_min=0.0, range_max=float(limit), frame_id=frame)
-    run = ScanRun(stamps, ranges.astype(np.float32), geometry, rem)
-    odom, odom_source = _odometry(parse, s, stamps, synthesised, frame, label, warnings)
+    if s.posed == s.count:
+        odom_source = s.name
+    elif not len(parse.odom):
+        odom_source = None
+    elif synthesised or parse.odom.stamps.mode != "keep":
+        warnings.append(f"{label}: ODOM poses not written: their stamps cannot be matched to the scans")
+        odom_source = None
+    else:
+        odom_source = "ODOM"
     if parse.malformed:
         where = ", ".join(str(i) for i in parse.malformed_lines)
         warnings.insert(0, f"{label}: skipped {parse.malformed} malformed line{'s' if parse.malformed != 1 else ''}"
                            f" (first at line {where})")
-    facts = {"message": s.name, "scans": len(run), "beams": n, "no_return_at_m": float(limit),
-             "no_return_readings": int(no_return.sum()), "stamps": fixed or "ipc_timestamp",
+    facts = {"message": s.name, "scans": s.count, "beams": n, "no_return_at_m": float(limit),
+             "no_return_readings": 0, "stamps": fixed or "ipc_timestamp",
              "malformed_lines": parse.malformed, "odometry_source": odom_source}
-    return run, odom, warnings, facts
+    return _Plan(s, geometry, limit, flip, fixed, odom_source, warnings, facts)
 
 
-def _odometry(parse: CarmenParse, s: _Stream, stamps: np.ndarray, synthesised: bool, frame: str, label: str,
-              warnings: list[str]) -> tuple[Odometry | None, str | None]:
-    if len(s.poses) == len(stamps):
-        p = np.array(s.poses, np.float64)
-        return Odometry(stamps.copy(), p[:, 0], p[:, 1], p[:, 2], frame_id="odom", child_frame_id=frame), s.name
-    if not parse.odom:
-        return None, None
-    o = np.array(parse.odom, np.float64)
-    o_ns, o_fixed = stamps_ns(o[:, 0])
-    if synthesised or o_fixed:
-        warnings.append(f"{label}: ODOM poses not written: their stamps cannot be matched to the scans")
-        return None, None
-    return Odometry(o_ns, o[:, 1], o[:, 2], o[:, 3]), "ODOM"
+def blocks(parse: CarmenParse, p: _Plan, size: int) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
+    """The planned stream's scans and poses, `size` scans at a time, in time order (scans before poses of
+    the same stamp): (scans, their laser poses) or, for ODOM poses, (scans, None) and (None, poses) pieces."""
+    s = p.stream
+    s.stamps.rewind()
+
+    def scans() -> Iterator[tuple[ScanRun, Odometry | None]]:
+        for ranges, rem, ipc, poses in s.blocks(size):
+            if p.flip:
+                ranges = ranges[:, ::-1]
+            no_return = ranges >= p.limit
+            ranges[no_return] = np.inf
+            p.facts["no_return_readings"] += int(no_return.sum())
+            stamps = s.stamps.apply(ipc)
+            run = ScanRun(stamps, ranges.astype(np.float32), p.geometry, rem)
+            odom = None
+            if p.odometry_source == s.name:
+                odom = Odometry(stamps.copy(), poses[:, 0].copy(), poses[:, 1].copy(), poses[:, 2].copy(),
+                                frame_id="odom", child_frame_id=p.geometry.frame_id)
+            yield run, odom
+
+    if p.odometry_source != "ODOM":
+        yield from scans()
+        return
+    check = parse.odom.stamps
+    check.rewind()
+
+    def poses() -> Iterator[Odometry]:
+        for rows in parse.odom.blocks(size):
+            yield Odometry(check.apply(rows[:, 0]), rows[:, 1].copy(), rows[:, 2].copy(), rows[:, 3].copy())
+
+    yield from merge((run for run, _ in scans()), poses())
+
+
+def merge(runs: Iterable[ScanRun], odoms: Iterable[Odometry]) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
+    """Scans and poses, each in time order, as pieces in one time order (a pose after scans of its stamp)."""
+    odoms = iter(odoms)
+    pending: list[Odometry] = []
+    more = True
+    for run in runs:
+        last = int(run.stamps[-1])
+        while more and (not pending or int(pending[-1].stamps[-1]) <= last):
+            nxt = next(odoms, None)
+            if nxt is None:
+                more = False
+            elif len(nxt):
+                pending.append(nxt)
+        if not pending:
+            yield run, None
+            continue
+        o = _cat(pending)
+        m = int(np.searchsorted(o.stamps, last, side="right"))
+        now, rest = _cut(o, 0, m), _cut(o, m, len(o))
+        pending = [rest] if len(rest) else []
+        pos = np.searchsorted(run.stamps, now.stamps, side="right")
+        a = j = 0
+        while j < len(now):
+            p = int(pos[j])
+            k = int(np.searchsorted(pos, p, side="right"))
+            if p > a:
+                yield run.slice(a, p), None
+                a = p
+            yield None, _cut(now, j, k)
+            j = k
+        if a < len(run):
+            yield run.slice(a, len(run)), None
+    for o in pending:
+        yield None, o
+    for o in odoms:
+        if len(o):
+            yield None, o
+
+
+def _cut(o: Odometry, a: int, b: int) -> Odometry:
+    return Odometry(o.stamps[a:b], o.x[a:b], o.y[a:b], o.theta[a:b], o.frame_id, o.child_frame_id)
+
+
+def _cat(parts: list[Odometry]) -> Odometry:
+    if len(parts) == 1:
+        return parts[0]
+    o = parts[0]
+    return Odometry(*(np.concatenate([getattr(q, f) for q in parts]) for f in ("stamps", "x", "y", "theta")),
+                    o.frame_id, o.child_frame_id)
+
+
+def build(parse: CarmenParse, topic: str | None = None, label: str = "<text>"):  # noqa: ANN201
+    """(ScanRun, Odometry | None, warnings, facts) of a parsed log, whole (pure)."""
+    p = plan(parse, topic, label)
+    runs, poses = [], []
+    for run, odom in blocks(parse, p, max(p.stream.count, 1)):
+        if run is not None:
+            runs.append(run)
+        if odom is not None:
+            poses.append(odom)
+    run = runs[0] if len(runs) == 1 else ScanRun(np.concatenate([r.stamps for r in runs]),
+                                                  np.concatenate([r.ranges for r in runs]), p.geometry,
+                                                  np.concatenate([r.intensities for r in runs]))
+    return run, _cat(poses) if poses else None, p.warnings, p.facts
 
 
 def _lines(f, progress, raw, total: int, label: str, warnings: list[str]):  # noqa: ANN001, ANN202
@@ -332,32 +613,57 @@ def _lines(f, progress, raw, total: int, label: str, warnings: list[str]):  # no
         warnings.append(f"{label}: gzip stream ends early (truncated file); read {step} lines before the cut")
 
 
-def read_carmen(path: str | Path, *, topic: str | None = None, max_scans: int | None = None,
-                progress=None):  # noqa: ANN001, ANN201
-    """ImportResult of a CARMEN (or g2o ROBOTLASER1) text log, plain or gzipped."""
-    from . import ImportResult
+def stream_carmen(path: str | Path, *, topic: str | None = None, max_scans: int | None = None, progress=None,
+                  spool_dir: str | Path | None = None, block_scans: int = 1024):  # noqa: ANN001, ANN201
+    """ImportStream of a CARMEN (or g2o ROBOTLASER1) text log, plain or gzipped.
+
+    One pass parses the text and spools the scans to a temporary folder in `spool_dir` (the system's
+    when None), keeping only counts and whole-log figures (no-return limit, stamp checks); the stream's
+    blocks then read the spool `block_scans` scans at a time. Memory holds one block whatever the log's
+    length (and, for a log whose stamps are synthesised, its stamps while counting the distinct ones).
+    """
+    import io
+    import tempfile
+
+    from . import ImportStream
 
     path = Path(path)
     label = str(path)
     total = path.stat().st_size
     io_warnings: list[str] = []
-    with open(path, "rb") as raw:
-        gz = raw.read(2) == b"\x1f\x8b"
-        raw.seek(0)
-        binary = gzip.GzipFile(fileobj=raw) if gz else raw
-        import io
+    spool = tempfile.TemporaryDirectory(prefix=".datmo-import-", dir=spool_dir)
+    try:
+        with open(path, "rb") as raw:
+            gz = raw.read(2) == b"\x1f\x8b"
+            raw.seek(0)
+            binary = gzip.GzipFile(fileobj=raw) if gz else raw
+            text = io.TextIOWrapper(binary, encoding="utf-8", errors="replace", newline=None)
+            try:
+                parse = parse_lines(_lines(text, progress, raw, total, label, io_warnings), topic=topic,
+                                    max_scans=max_scans, spool=Path(spool.name))
+            except GeometryError as exc:
+                raise GeometryError(f"{label}: {exc}") from None
+        if progress is not None:
+            progress(total, total)
+        if parse.lines == 0:
+            raise InputError(f"{label}: empty file (no lines)")
+        p = plan(parse, topic, label)
+    except BaseException:
+        spool.cleanup()
+        raise
+    p.facts["params"] = {k: v for k, v in parse.params.items() if k.startswith(("laser_", "robot_front_laser"))}
 
-        text = io.TextIOWrapper(binary, encoding="utf-8", errors="replace", newline=None)
+    def pieces() -> Iterator[tuple[ScanRun | None, Odometry | None]]:
         try:
-            parse = parse_lines(_lines(text, progress, raw, total, label, io_warnings), topic=topic,
-                                max_scans=max_scans)
-        except GeometryError as exc:
-            raise GeometryError(f"{label}: {exc}") from None
-    if progress is not None:
-        progress(total, total)
-    if parse.lines == 0:
-        raise InputError(f"{label}: empty file (no lines)")
-    run, odom, warnings, facts = build(parse, topic, label)
-    facts["params"] = {k: v for k, v in parse.params.items() if k.startswith(("laser_", "robot_front_laser"))}
-    return ImportResult(run=run, odometry=odom, warnings=io_warnings + warnings, topic=facts["message"],
-                        odom_topic=facts["odometry_source"], facts=facts)
+            yield from blocks(parse, p, block_scans)
+        finally:
+            spool.cleanup()
+
+    return ImportStream(pieces(), warnings=io_warnings + p.warnings, topic=p.stream.name,
+                        odom_topic=p.odometry_source, facts=p.facts, geometry=p.geometry, closer=spool.cleanup)
+
+
+def read_carmen(path: str | Path, *, topic: str | None = None, max_scans: int | None = None,
+                progress=None):  # noqa: ANN001, ANN201
+    """ImportResult of a CARMEN (or g2o ROBOTLASER1) text log, plain or gzipped (the whole run)."""
+    return stream_carmen(path, topic=topic, max_scans=max_scans, progress=progress).collect()

@@ -9,7 +9,10 @@ x, y in metres and yaw from the quaternion, in the message's frame.
 
 from __future__ import annotations
 
+import struct
 import warnings as _warnings
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -90,94 +93,181 @@ def open_bag(path: str | Path):  # noqa: ANN201 - (rosbags AnyReader, {topic: (m
 
 def read_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
              max_scans: int | None = None, progress=None):  # noqa: ANN001, ANN201
-    """ImportResult of a ROS 1 bag or ROS 2 bag folder."""
-    from . import ImportResult
+    """ImportResult of a ROS 1 bag or ROS 2 bag folder (the whole run)."""
+    return stream_bag(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress).collect()
+
+
+def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
+               max_scans: int | None = None, progress=None, block_scans: int = 1024):  # noqa: ANN001, ANN201
+    """ImportStream of a ROS 1 bag or ROS 2 bag folder.
+
+    A first pass over the scans settles what concerns the whole run (their geometry, which must not
+    change; whether intensities are kept; the last scan stamp, after which one more pose is read); the
+    blocks then come from one pass over scans and poses in the bag's time order. Memory holds a block.
+    Each pose keeps its own message's frame ids (the whole-run import gave all poses the last ones; the
+    same for a bag whose frames do not change)."""
+    from . import ImportStream
 
     path = Path(path)
     label = str(path)
     reader, topics = open_bag(path)
+    closed = False
+
+    def close() -> None:
+        nonlocal closed
+        if not closed:
+            closed = True
+            reader.close()
+
     try:
         scan_topic = choose_topic(label, topics, topic, LASERSCAN_TYPES, "sensor_msgs/LaserScan", "--topic")
         o_topic = choose_topic(label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic",
                                required=False)
-        run = _scans(reader, label, scan_topic, topics[scan_topic][1], max_scans, progress)
-        odom = _odometry(reader, o_topic, run) if o_topic else None
+        total = topics[scan_topic][1]
+        survey = _survey(reader, label, scan_topic, total, max_scans, progress)
     except (InputError, GeometryError):
+        close()
         raise
     except Exception as exc:  # corrupt chunks, unknown message definitions
+        close()
         raise InputError(f"{label}: cannot read bag ({type(exc).__name__}: {exc})") from None
-    finally:
-        reader.close()
     warns = []
     if odom_topic is None and o_topic is None and sum(m in ODOMETRY_TYPES for m, _ in topics.values()) > 1:
         warns.append(f"{label}: several nav_msgs/Odometry topics; none written (choose one with --odom-topic)")
-    return ImportResult(run=run, odometry=odom, warnings=warns, topic=scan_topic, odom_topic=o_topic,
-                        facts={"topics": {t: m for t, (m, _) in topics.items()}})
+
+    def pieces() -> Iterator[tuple[ScanRun | None, Odometry | None]]:
+        try:
+            yield from _bag_blocks(reader, scan_topic, o_topic, survey, block_scans, progress, total)
+        except (InputError, GeometryError):
+            raise
+        except Exception as exc:  # corrupt chunks, unknown message definitions
+            raise InputError(f"{label}: cannot read bag ({type(exc).__name__}: {exc})") from None
+        finally:
+            close()
+
+    return ImportStream(pieces(), warnings=warns, topic=scan_topic, odom_topic=o_topic,
+                        facts={"topics": {t: m for t, (m, _) in topics.items()}}, geometry=survey.geometry,
+                        sort_odometry=True, closer=close)
 
 
-def _scans(reader, label: str, topic: str, total: int, max_scans: int | None, progress) -> ScanRun:  # noqa: ANN001
+@dataclass
+class _Survey:
+    """What a first pass over a bag's scans found: geometry, count, intensity lengths, last stamp."""
+
+    geometry: ScanGeometry
+    count: int
+    intensities: str          # "all" (one per beam in every scan), "none", or "fill" (NaN where missing)
+    last: int                 # the largest scan stamp, ns
+
+
+def _survey(reader, label: str, topic: str, total: int, max_scans: int | None, progress) -> _Survey:  # noqa: ANN001
     conns = [c for c in reader.connections if c.topic == topic]
-    stamps, ranges, intens = [], [], []
-    g0 = None
+    g0, sizes, count, last = None, set(), 0, None
     for i, (conn, log_time, raw) in enumerate(reader.messages(connections=conns)):
         if max_scans is not None and i >= max_scans:
             break
         msg = reader.deserialize(raw, conn.msgtype)
-        r = np.asarray(msg.ranges, np.float32)
         g = scan_geometry(msg)
         if g0 is None:
             g0 = g
         elif not g.same_beams(g0):
             raise GeometryError(f"{label}: {topic} geometry changes at scan {i}: {g0.describe()} -> "
                                 f"{g.describe()}; datmo does not split runs, cut the bag there first")
-        stamps.append(_stamp(msg.header, log_time))
-        ranges.append(r)
-        intens.append(np.asarray(msg.intensities, np.float32))
+        t = _stamp(msg.header, log_time)
+        last = t if last is None else max(last, t)
+        sizes.add(len(msg.intensities))
+        count += 1
         if progress is not None and i % 500 == 0:
-            progress(i, total)
+            progress(i, 2 * total)
     if g0 is None:
         raise InputError(f"{label}: {topic} has no messages")
-    return ScanRun(np.array(stamps, np.int64), np.stack(ranges), g0, _intensities(intens, g0.n_beams))
+    n = g0.n_beams
+    mode = "all" if sizes == {n} else "none" if sizes <= {0} or 0 not in sizes and n not in sizes else "fill"
+    return _Survey(g0, count, mode, last)
 
 
-def _intensities(intens: list[np.ndarray], n: int) -> np.ndarray | None:
-    sizes = {len(it) for it in intens}
-    if sizes == {n}:
-        return np.stack(intens)
-    if sizes <= {0} or 0 not in sizes and n not in sizes:
-        return None
-    out = np.full((len(intens), n), np.nan, np.float32)  # some scans carry intensities: NaN where missing
-    for i, it in enumerate(intens):
-        if len(it) == n:
-            out[i] = it
-    return out
+def _bag_blocks(reader, topic: str, o_topic: str | None, survey: _Survey, size: int, progress,  # noqa: ANN001
+                total: int) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
+    """Scans (and poses up to the first after the last scan) in the bag's order, `size` scans a block."""
+    conns = [c for c in reader.connections if c.topic in (topic, o_topic)]
+    g0, n = survey.geometry, survey.geometry.n_beams
+    stamps, ranges, intens = [], [], []
+    rows: list[tuple] = []
+    frames = ("odom", "base_link")
+    odo_frames = frames
+    scans = 0
+    odom_done = o_topic is None
 
+    def scan_block() -> ScanRun:
+        inten = None
+        if survey.intensities == "all":
+            inten = np.stack(intens)
+        elif survey.intensities == "fill":
+            inten = np.full((len(intens), n), np.nan, np.float32)
+            for i, it in enumerate(intens):
+                if len(it) == n:
+                    inten[i] = it
+        return ScanRun(np.array(stamps, np.int64), np.stack(ranges), g0, inten)
 
-def _odometry(reader, topic: str, run: ScanRun) -> Odometry | None:  # noqa: ANN001
-    conns = [c for c in reader.connections if c.topic == topic]
-    rows, frame, child = [], "odom", "base_link"
-    last = int(run.stamps.max()) if len(run) else 0
+    def poses() -> Odometry | None:
+        if not rows:
+            return None
+        a = np.array(rows, np.float64)
+        return Odometry(a[:, 0].astype(np.int64), a[:, 1], a[:, 2], a[:, 3], frame_id=odo_frames[0],
+                        child_frame_id=odo_frames[1])
+
     for conn, log_time, raw in reader.messages(connections=conns):
-        msg = reader.deserialize(raw, conn.msgtype)
-        t = _stamp(msg.header, log_time)
-        p, q = msg.pose.pose.position, msg.pose.pose.orientation
-        rows.append((t, p.x, p.y, _yaw(q.x, q.y, q.z, q.w)))
-        frame, child = msg.header.frame_id or frame, msg.child_frame_id or child
-        if t > last:
-            break
-    if not rows:
-        return None
-    a = np.array(rows, np.float64)
-    order = np.argsort(a[:, 0], kind="stable")
-    a = a[order]
-    return Odometry(a[:, 0].astype(np.int64), a[:, 1], a[:, 2], a[:, 3], frame_id=frame, child_frame_id=child)
+        if conn.topic == topic:
+            if scans >= survey.count:
+                if odom_done:
+                    break
+                continue
+            msg = reader.deserialize(raw, conn.msgtype)
+            stamps.append(_stamp(msg.header, log_time))
+            ranges.append(np.asarray(msg.ranges, np.float32))
+            intens.append(np.asarray(msg.intensities, np.float32))
+            scans += 1
+            if progress is not None and scans % 500 == 0:
+                progress(total + scans, 2 * total)
+            if len(stamps) == size:
+                yield scan_block(), poses()
+                stamps, ranges, intens, rows = [], [], [], []
+        elif not odom_done:
+            msg = reader.deserialize(raw, conn.msgtype)
+            t = _stamp(msg.header, log_time)
+            p, q = msg.pose.pose.position, msg.pose.pose.orientation
+            now = (msg.header.frame_id or frames[0], msg.child_frame_id or frames[1])
+            if now != frames and rows:
+                yield None, poses()
+                rows = []
+            frames = odo_frames = now
+            rows.append((t, p.x, p.y, _yaw(q.x, q.y, q.z, q.w)))
+            odom_done = t > survey.last
+            if odom_done and scans >= survey.count:
+                break
+    if stamps:
+        yield scan_block(), poses()
+    elif rows:
+        yield None, poses()
 
 
 def read_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
               max_scans: int | None = None):  # noqa: ANN201
-    """ImportResult of a single MCAP file holding CDR sensor_msgs/msg/LaserScan (ROS 2 style)."""
+    """ImportResult of a single MCAP file holding CDR sensor_msgs/msg/LaserScan (the whole run)."""
+    return stream_mcap(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans).collect()
+
+
+def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
+                max_scans: int | None = None, block_scans: int = 1024):  # noqa: ANN201
+    """ImportStream of a single MCAP file holding CDR sensor_msgs/msg/LaserScan (ROS 2 style).
+
+    A first pass over the scan payloads (header stamps and intensity counts only) settles the intensities
+    and, with `max_scans`, the last stamp kept; the blocks come from a second pass in file order. With
+    `max_scans`, the scans stop there (the whole-run import also checked the geometry of the scans after
+    them) and the poses at the first one stamped after the last scan kept. Each block of poses keeps its
+    own frame ids (the whole-run import gave all poses the last ones)."""
     from .. import mcapio
-    from . import ImportResult
+    from . import ImportStream
 
     path = Path(path)
     label = str(path)
@@ -189,28 +279,128 @@ def read_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str | N
         scan_topic = choose_topic(label, topics, topic, LASERSCAN_TYPES, "sensor_msgs/LaserScan", "--topic")
         o_topic = choose_topic(label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic",
                                required=False)
-        log = mcapio.read_log(path, topics=[scan_topic] + ([o_topic] if o_topic else []))
+        if head.topics()[scan_topic].count:
+            mcapio.check_scan_channel(head, scan_topic)
+        count, inten_mode, last, n_beams = _mcap_survey(path, label, scan_topic, max_scans)
     warns += [f"{w.message}" for w in caught]
-    log_times, _ = log.messages[scan_topic]
-    try:
-        run = mcapio.run_from_log(log, scan_topic)
-    except GeometryChangeError as exc:
-        raise GeometryError(f"{label}: {exc}") from None
-    zero = run.stamps == 0
-    if zero.any():
-        run.stamps[zero] = np.asarray(log_times, np.int64)[zero]
-    if max_scans is not None:
-        run = run.slice(0, max_scans)
-    odom = None
-    if o_topic:
-        try:
-            odom = mcapio.odometry_from_log(log, o_topic)
-        except Exception as exc:  # a message the ROS 2 type store cannot decode
-            raise InputError(f"{label}: bad nav_msgs/Odometry message on {o_topic}: {exc}") from None
-        if odom is not None and max_scans is not None and len(run):
-            keep = odom.stamps <= run.stamps.max()
-            keep[0] = True
-            odom = Odometry(odom.stamps[keep], odom.x[keep], odom.y[keep], odom.theta[keep], odom.frame_id,
-                            odom.child_frame_id)
-    return ImportResult(run=run, odometry=odom, warnings=warns, topic=scan_topic, odom_topic=o_topic,
+
+    def pieces() -> Iterator[tuple[ScanRun | None, Odometry | None]]:
+        payloads: list[bytes] = []
+        log_times: list[int] = []
+        o_stamps: list[int] = []
+        o_payloads: list[bytes] = []
+        first, g0, first_pose = 0, None, True
+        scans_done, odom_done = False, o_topic is None
+
+        def scan_block() -> ScanRun:
+            nonlocal g0
+            run = _decode_block(label, scan_topic, payloads, first, g0)
+            g0 = g0 or run.geometry
+            zero = run.stamps == 0
+            if zero.any():
+                run.stamps[zero] = np.asarray(log_times, np.int64)[zero]
+            inten = run.intensities
+            if inten_mode == "fill" and inten.shape[1] == 0:
+                inten = np.full((len(run), n_beams), np.nan, np.float32)
+            return ScanRun(run.stamps, run.ranges, g0, inten)
+
+        def poses() -> Odometry | None:
+            nonlocal first_pose
+            if not o_payloads:
+                return None
+            log = mcapio.LogContents(path=path, messages={o_topic: (o_stamps, o_payloads)})
+            try:
+                odom = mcapio.odometry_from_log(log, o_topic)
+            except Exception as exc:  # a message the ROS 2 type store cannot decode
+                raise InputError(f"{label}: bad nav_msgs/Odometry message on {o_topic}: {exc}") from None
+            if max_scans is not None:
+                keep = odom.stamps <= last
+                keep[0] |= first_pose
+                odom = Odometry(odom.stamps[keep], odom.x[keep], odom.y[keep], odom.theta[keep], odom.frame_id,
+                                odom.child_frame_id)
+            first_pose = False
+            return odom
+
+        for t, stamp, payload in mcapio.iter_messages(path, [scan_topic] + ([o_topic] if o_topic else []),
+                                                      warn=False):
+            if t == scan_topic:
+                if scans_done:
+                    if odom_done:
+                        break
+                    continue
+                payloads.append(payload)
+                log_times.append(stamp)
+                if first + len(payloads) == count:
+                    scans_done = True
+                if len(payloads) == block_scans or scans_done:
+                    yield scan_block(), poses()
+                    first += len(payloads)
+                    payloads, log_times, o_stamps, o_payloads = [], [], [], []
+            elif not odom_done:
+                o_stamps.append(stamp)
+                o_payloads.append(payload)
+                if scans_done and max_scans is not None and stamp > last:   # the poses after: none kept
+                    odom_done = True
+                    break
+        if payloads:
+            yield scan_block(), poses()
+        elif o_payloads:
+            yield None, poses()
+
+    return ImportStream(pieces(), warnings=warns, topic=scan_topic, odom_topic=o_topic,
                         facts={"topics": {t: m for t, (m, _) in topics.items()}})
+
+
+def _mcap_survey(path: Path, label: str, topic: str, max_scans: int | None) -> tuple[int, str, int, int]:
+    """(scans to import, intensities mode as in decode_scans, their largest stamp, beams) of an MCAP's
+    scan topic, from the payloads' headers."""
+    from .. import mcapio
+    from ..scan import decode_scan
+
+    count, sizes, last, n_beams = 0, {}, None, 0
+    for _, log_time, payload in mcapio.iter_messages(path, [topic]):
+        if max_scans is not None and count >= max_scans:
+            break
+        if len(payload) not in sizes:
+            try:
+                _, ranges, inten, _ = decode_scan(payload)
+            except ValueError as exc:
+                raise InputError(f"{label}: bad LaserScan message on {topic}: {exc}") from None
+            sizes[len(payload)] = len(inten)
+            n_beams = n_beams or len(ranges)
+        stamp = _cdr_stamp(payload) or log_time
+        last = stamp if last is None else max(last, stamp)
+        count += 1
+    if not count:
+        raise InputError(f"{label}: no messages on {topic}")
+    counts = set(sizes.values())
+    mode = "all" if counts == {n_beams} else "none" if counts == {0} else "fill"
+    return count, mode, int(last), n_beams
+
+
+def _cdr_stamp(payload: bytes) -> int:
+    """The header stamp (ns) of a CDR message with a std_msgs/Header first."""
+    sec, nanosec = struct.unpack_from("<iI", payload, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+def _decode_block(label: str, topic: str, payloads: list[bytes], first: int, g0: ScanGeometry | None) -> ScanRun:
+    """The ScanRun of scans first.. of the log; the whole-run import's errors for a geometry that changes
+    (scans numbered from the log's first) or a bad message."""
+    from ..scan import decode_scan, decode_scans
+
+    try:
+        run = decode_scans(payloads)
+        if g0 is None or run.geometry.same_beams(g0):
+            return run
+    except GeometryChangeError:
+        pass
+    except ValueError as exc:
+        raise InputError(f"{label}: bad LaserScan message on {topic}: {exc}") from None
+    g0 = g0 or decode_scan(payloads[0])[3]
+    for i, p in enumerate(payloads):
+        g = decode_scan(p)[3]
+        if not g.same_beams(g0):
+            raise GeometryError(f"{label}: scan geometry changes at scan {first + i}: {g0.describe()} -> "
+                                f"{g.describe()}; split the log before processing it")
+    raise AssertionError("decode_scans refused scans of one geometry")
