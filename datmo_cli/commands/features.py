@@ -37,10 +37,14 @@ D = FeatureParams()
                    "or 'paper' (no detector: legs by the paper's circle rule) [default: default].")
 @click.option("--d-max", type=click.FloatRange(min=0, min_open=True), default=None,
               help=f"Lines longer than this are walls (static), m [default: {D.d_max:g}].")
+@click.option("--threads", type=click.IntRange(min=1), default=None,
+              help="Threads for the per-scan perception (segmentation, features, leg detector) [default: all "
+                   "cores]; the results are the same for any number.")
 def command(input: Path, output: Path, force: bool, config: Path | None, resegment: bool, no_markers: bool,
             c0: float | None,
             min_points: int | None, theta_resolution: float | None, rho_resolution: float | None,
-            circle_radius: tuple[float, float] | None, leg_model: str | None, d_max: float | None) -> None:
+            circle_radius: tuple[float, float] | None, leg_model: str | None, d_max: float | None,
+            threads: int | None) -> None:
     """Extract the features of every scan: lines by the Hough transform for lines (accumulators adapted to
     each segment, several lines per segment by following the peak, refined by least squares), circles by
     the Hough transform for circles (centre from P_ini, P_near, P_end; refined by least squares), the
@@ -57,9 +61,12 @@ def command(input: Path, output: Path, force: bool, config: Path | None, resegme
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     from ..cli import invocation
+    from ..perception.threads import set_default
     from ..pipeline import features_file
     from ..streaming import LogStream
     from .compiling import compile_notice
+
+    set_default(threads)
 
     rmin, rmax = circle_radius if circle_radius is not None else (None, None)
     params = feature_params(config, c0=c0, min_points=min_points, theta_resolution=theta_resolution,

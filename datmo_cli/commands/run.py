@@ -90,9 +90,12 @@ class _BatchProgress:
 @click.option("--leg-model", default=None, metavar="MODEL",
               help="Leg detector: 'default' (the model shipped with datmo), a model file from datmo train-legs, "
                    "or 'paper' (the paper's circle rule and walking pattern) [default: default].")
+@click.option("--threads", type=click.IntRange(min=1), default=None,
+              help="Threads for each input's per-scan perception (segmentation, features, leg detector) [default: "
+                   "all cores; one in each of several local jobs at once]; the results are the same for any number.")
 def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: str | None, retries: int,
             force: bool, config: Path | None, plot: bool, fmt: str, top: int | None, sort: str, no_report: bool,
-            no_markers: bool, ego_motion: str | None, leg_model: str | None) -> None:
+            no_markers: bool, ego_motion: str | None, leg_model: str | None, threads: int | None) -> None:
     """Segment, extract features and track each input in one pass, then print the report.
 
     Each output holds the input's channels and /datmo/segments, /datmo/features, /datmo/landmarks,
@@ -113,7 +116,9 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     from ..batch import run as run_batch
     from ..cli import invocation
     from ..errors import DatmoError
+    from ..perception.threads import set_default
 
+    set_default(threads)   # a run-time setting: not among the parameters (the outputs do not depend on it)
     if scheduler is not None and jobs is not None:
         raise DatmoError("--jobs is for local runs; with --scheduler the cluster's workers run the inputs")
     if plot and remote(out_dir):
