@@ -52,7 +52,7 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
 
     Example: datmo simulate --scene hall --duration 60 -o hall.mcap
     """
-    from ..log import mcapio, types
+    from ..log import mcapio
     from ..sim.scene import load_scene
 
     if units is None:
@@ -64,31 +64,48 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     user_file = scene.endswith(".toml") or "/" in scene
     provenance = mcapio.Provenance("simulate", params, [scene] if user_file else [])
     with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
-        result = _run(loaded, seed, duration, rate, int(angle), float(resolution), int(range_m), units, noise,
-                      people)
-        writer.add_metadata("datmo.scene", {"name": loaded.name, "source": Path(loaded.source).name,
-                                            "toml": loaded.text})
-        writer.write_scans(result.run)
-        if result.odometry is not None:
-            writer.write_odometry(result.odometry)
-        writer.write_many(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH, result.run.stamps,
-                          result.ground_truth_payloads())
-    click.echo(f"{output}: {len(result.run)} scans of {result.run.geometry.describe()}, "
-               f"{len(result.objects)} ground-truth objects", err=True)
+        n, n_objects, geometry = _write(writer, loaded, seed, duration, rate, int(angle), float(resolution),
+                                        int(range_m), units, noise, people)
+    click.echo(f"{output}: {n} scans of {geometry.describe()}, {n_objects} ground-truth objects", err=True)
 
 
-def _run(scene, seed, duration, rate, angle, resolution, range_m, units, noise, people):  # noqa: ANN001, ANN202
-    from rich.progress import Progress
+def _write(writer, scene, seed, duration, rate, angle, resolution, range_m, units, noise, people):  # noqa: ANN001, ANN202
+    """Simulate block by block into `writer` (/scan, /odom for a moving sensor, ground truth), each block
+    written and forgotten before the next is cast: memory holds one block whatever the duration.
+    Returns (scans, ground-truth objects, scan geometry)."""
+    import contextlib
+    from pathlib import Path
 
-    from ..sim.simulate import simulate_scene
+    from ..log import mcapio, types
+    from ..log.scan import Odometry, ScanRun
+    from ..sim.simulate import Simulation, ground_truth_payloads
 
-    kwargs = dict(seed=seed, duration=duration, rate=rate, fov_deg=angle, resolution_deg=resolution,
-                  range_mode_m=range_m, units=units, noise_sigma=noise, people=people)
-    total = (duration if duration is not None else scene.duration) * rate
-    if total < 5000:
-        return simulate_scene(scene, **kwargs)
-    from rich.console import Console
+    sim = Simulation(scene, seed=seed, duration=duration, rate=rate, fov_deg=angle, resolution_deg=resolution,
+                     range_mode_m=range_m, units=units, noise_sigma=noise, people=people)
+    writer.add_metadata("datmo.scene", {"name": scene.name, "source": Path(scene.source).name, "toml": scene.text})
+    scan_cid = writer.channel(mcapio.TOPIC_SCAN, types.LASERSCAN)
+    odom_cid = writer.channel(mcapio.TOPIC_ODOM, types.ODOMETRY) if sim.sensor_moves else None
+    truth_cid = writer.channel(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH)
+    total = len(sim)
+    with contextlib.ExitStack() as stack:
+        progress = None
+        if total >= 5000:
+            from rich.console import Console
+            from rich.progress import Progress
 
-    with Progress(console=Console(stderr=True), transient=True) as bar:
-        task = bar.add_task("simulating", total=None)
-        return simulate_scene(scene, progress=lambda done, n: bar.update(task, completed=done, total=n), **kwargs)
+            bar = stack.enter_context(Progress(console=Console(stderr=True), transient=True))
+            task = bar.add_task("simulating", total=total)
+            progress = lambda done: bar.update(task, completed=done)  # noqa: E731
+        for c in sim.chunks():
+            run = ScanRun(c.stamps, c.ranges, sim.geometry)
+            writer.write_ids(scan_cid, c.stamps, mcapio.encode_scans(run))
+            if odom_cid is not None:
+                p = c.sensor_poses
+                odom = Odometry(c.stamps.copy(), p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy())
+                writer.write_ids(odom_cid, c.stamps, mcapio.encode_odometry(odom))
+            writer.write_ids(truth_cid, c.stamps, ground_truth_payloads(c.stamps, c.sensor_poses, c.truth,
+                                                                        sim.geometry.frame_id))
+            writer.drain()
+            if progress is not None:
+                progress(c.start + len(c.stamps))
+    return total, len(sim.objects), sim.geometry

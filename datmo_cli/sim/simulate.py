@@ -55,11 +55,18 @@ class SimResult:
 
     def ground_truth_payloads(self) -> list[bytes]:
         """CDR payloads of datmo_msgs/msg/GroundTruth, one per scan, stamped like the scans."""
-        frame = self.run.geometry.frame_id
-        return [cdr.encode(types.GROUND_TRUTH, {
-            "stamp_ns": int(s), "frame_id": frame, "sensor_x": float(p[0]), "sensor_y": float(p[1]),
-            "sensor_theta": float(p[2]), "objects": self.truth_at(k)})
-            for k, (s, p) in enumerate(zip(self.run.stamps, self.sensor_poses, strict=True))]
+        truth = self.truth.reshape(len(self.run), -1)
+        return ground_truth_payloads(self.run.stamps, self.sensor_poses, truth, self.run.geometry.frame_id)
+
+
+def ground_truth_payloads(stamps: np.ndarray, sensor_poses: np.ndarray, truth: np.ndarray,
+                          frame_id: str) -> list[bytes]:
+    """CDR payloads of datmo_msgs/msg/GroundTruth of scans with these stamps, sensor poses (n, 3) and
+    ground-truth records (n, n_objects), as SimResult and SimChunk hold them."""
+    return [cdr.encode(types.GROUND_TRUTH, {
+        "stamp_ns": int(s), "frame_id": frame_id, "sensor_x": float(p[0]), "sensor_y": float(p[1]),
+        "sensor_theta": float(p[2]), "objects": truth[k]})
+        for k, (s, p) in enumerate(zip(stamps, sensor_poses, strict=True))]
 
 
 @dataclass
@@ -77,8 +84,9 @@ class SimChunk:
 class Simulation:
     """A run prepared but not yet cast: scans are produced block by block by `chunks()`, in one pass.
 
-    For streaming consumers (the LMS emulator); `simulate_scene` collects the whole run. Arguments as
-    for `simulate_scene`.
+    For streaming consumers (`datmo simulate`, which writes each block as it comes, and the LMS emulator);
+    `simulate_scene` collects the whole run. Arguments as for `simulate_scene`. The world model (paths,
+    crowds) is laid out for the whole duration up front; the scans and ground truth come block by block.
     """
 
     def __init__(self, scene: str | Path | Scene, *, seed: int = 0, duration: float | None = None,
