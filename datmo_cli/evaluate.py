@@ -20,6 +20,14 @@ What is scored (pure functions over arrays; positions in the sensor frame, metre
   class codes coincide: 1 person, 2 circle object, 3 rectangular object). Tracks of class unknown count
   only in the overall figures.
 CSV ground truth (annotated real logs) has targets only: every annotated object, no don't-care regions.
+
+Memory: scoring holds the whole run, and does not stream like the other commands. py-motmetrics'
+MOTAccumulator keeps every frame's events (a DataFrame row per match, miss, false positive and switch)
+and computes the figures from all of them at the end; IDF1 in particular is one assignment of ground-truth
+ids to track ids over the whole run. Feeding the accumulator block by block would save only the decoded
+messages (a few numbers per object and frame, next to the accumulator's rows), and which targets count
+(`moved_ids`: movers that move at some time) is itself a whole-run fact. Bounding it would mean computing
+CLEAR-MOT and IDF1 here from per-id counts instead of motmetrics' events; not done.
 """
 
 from __future__ import annotations
