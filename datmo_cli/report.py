@@ -70,8 +70,8 @@ def decode_channel(msgtype: str, payloads: list[bytes]) -> Decoded:
         if name in ("stamp_ns", "frame_id") or isinstance(value, str):
             continue
         if isinstance(value, np.ndarray) and value.dtype.names:
-            parts = [d[name] for d in decoded]
-            out.items[name] = np.concatenate(parts) if parts else np.zeros(0, value.dtype)
+            parts = [d[name] for d in decoded]   # joined as bytes: np.concatenate promotes the dtype per part
+            out.items[name] = np.frombuffer(b"".join([p.tobytes() for p in parts]), value.dtype).copy()
             out.offsets[name] = np.concatenate([[0], np.cumsum([len(p) for p in parts])]).astype(np.int64)
         elif not isinstance(value, np.ndarray):
             out.scalars[name] = np.array([d[name] for d in decoded])
