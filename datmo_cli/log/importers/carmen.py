@@ -534,7 +534,9 @@ def blocks(parse: CarmenParse, p: _Plan, size: int) -> Iterator[tuple[ScanRun | 
 
 
 def merge(runs: Iterable[ScanRun], odoms: Iterable[Odometry]) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
-    """Scans and poses, each in time order, as pieces in one time order (a pose after scans of its stamp)."""
+    """Blocks of scans and of poses, each in time order, paired: each block of scans with the poses stamped
+    up to its last scan, so every message of a pair comes before every message of the next (the writer
+    orders a pair's messages)."""
     odoms = iter(odoms)
     pending: list[Odometry] = []
     more = True
@@ -551,20 +553,8 @@ def merge(runs: Iterable[ScanRun], odoms: Iterable[Odometry]) -> Iterator[tuple[
             continue
         o = _cat(pending)
         m = int(np.searchsorted(o.stamps, last, side="right"))
-        now, rest = _cut(o, 0, m), _cut(o, m, len(o))
-        pending = [rest] if len(rest) else []
-        pos = np.searchsorted(run.stamps, now.stamps, side="right")
-        a = j = 0
-        while j < len(now):
-            p = int(pos[j])
-            k = int(np.searchsorted(pos, p, side="right"))
-            if p > a:
-                yield run.slice(a, p), None
-                a = p
-            yield None, _cut(now, j, k)
-            j = k
-        if a < len(run):
-            yield run.slice(a, len(run)), None
+        pending = [_cut(o, m, len(o))] if m < len(o) else []
+        yield run, (_cut(o, 0, m) if m else None)
     for o in pending:
         yield None, o
     for o in odoms:
