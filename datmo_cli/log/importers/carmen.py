@@ -40,7 +40,9 @@ ODOM poses merged in time order. Memory does not grow with the log; the spool ta
 from __future__ import annotations
 
 import gzip
+import math
 import re
+import struct
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,6 +63,7 @@ SICK_CODE_M = 81.83        # SICK LMS cm mode: 8183..8191 are error / no-return 
 CARMEN_CAP_M = 50.0        # CARMEN logs cap no-return readings at (or just above) 50 m
 MM_CODE_M = 32.767         # 0x7FFF mm
 SYNTH_PERIOD_NS = 1_000_000_000
+_META = struct.Struct("<4d")   # spooled per scan: ipc stamp, laser pose (NaN when none); per ODOM line: a row
 
 
 def sniff_text(head: bytes) -> str | None:
@@ -102,13 +105,14 @@ class _Stream:
         self._files = None
         if spool is not None:
             self._paths = tuple(spool / f"{name}.{part}" for part in ("ranges", "remissions", "meta"))
-            self._files = tuple(open(p, "wb") for p in self._paths)
+            self._files = tuple(open(p, "wb", buffering=1 << 20) for p in self._paths)
 
     def add(self, ranges: np.ndarray, rem: np.ndarray, ipc: float, pose: tuple | None) -> None:
         n = len(ranges)
         self.count += 1
-        if not np.all(np.isnan(ranges)):
-            self.top = np.fmax(self.top, float(np.nanmax(ranges)))
+        top = float(np.fmax.reduce(ranges))   # NaN readings ignored, as np.nanmax
+        if top > self.top or self.top != self.top:
+            self.top = top
         self.stamps.add(ipc)
         if pose is not None:
             self.posed += 1
@@ -123,7 +127,7 @@ class _Stream:
             f_ranges.write(np.ascontiguousarray(ranges, np.float64).tobytes())
             if self.all_remissions and len(rem) == n:
                 f_rem.write(np.ascontiguousarray(rem, np.float64).tobytes())
-            f_meta.write(np.array((ipc,) + (tuple(pose) if pose is not None else (np.nan,) * 3), np.float64).tobytes())
+            f_meta.write(_META.pack(ipc, *(pose if pose is not None else (np.nan,) * 3)))
         if len(rem) != n:
             self.all_remissions = False
 
@@ -167,7 +171,7 @@ class _Odom:
         self.count = 0
         self.stamps = StampCheck()
         self._path = spool / "ODOM" if spool is not None else None
-        self._file = open(self._path, "wb") if self._path is not None else None
+        self._file = open(self._path, "wb", buffering=1 << 20) if self._path is not None else None
 
     def append(self, row: tuple) -> None:
         self.count += 1
@@ -175,7 +179,7 @@ class _Odom:
         if self._file is None:
             self.rows.append(row)
         else:
-            self._file.write(np.array(row, np.float64).tobytes())
+            self._file.write(_META.pack(*row))
 
     def close(self) -> None:
         if self._file is not None:
@@ -373,8 +377,8 @@ class StampCheck:
     def add(self, t: float) -> None:
         if self.n == 0:
             self.t0 = t
-            self.ok = bool(np.isfinite(t)) and t >= 0
-        elif not np.isfinite(t):
+            self.ok = math.isfinite(t) and t >= 0
+        elif not math.isfinite(t):
             self.ok = False
         elif t - self._prev <= 0:
             self.bad += 1
