@@ -225,10 +225,12 @@ class TrackStats:
     the state at the last stamp (the later in the file on a tie); states; occluded states and occlusion
     episodes (runs of consecutive occluded states); confirmed states; and in both frames (row 0 sensor,
     row 1 world; m, m/s) the distance over consecutive confirmed positions, the sum and max of the filter
-    speed |v| over confirmed states and the last confirmed position (NaN before the first). Sums are added
-    state by state in file order (np.add.at), so they do not depend on how the states are split in blocks.
-    Occlusions and distances follow the file order of each track's states: its stamp order in every log
-    datmo writes (a track's stamps only grow).
+    speed |v| over confirmed states and the last confirmed position (NaN before the first).
+
+    Each block's states are taken in each track's stamp order (the file order on a tie) and sums are added
+    state by state (np.add.at), so the figures do not depend on how the states are split in blocks, as long
+    as no state comes in a later block than a state of its track with a later stamp: `late` counts those
+    (never in a log datmo writes, whose messages are in stamp order); they are taken in file order.
     """
 
     def __init__(self) -> None:
@@ -248,6 +250,7 @@ class TrackStats:
         self.last_x = np.zeros((2, 0))
         self.last_y = np.zeros((2, 0))
         self.n_states = 0               # every state of every track
+        self.late = 0                   # states added after a later-stamped state of their track's (a block before)
         self.world_finite = True        # every state so far has finite world_x, world_y
 
     _FILL = {"first_ns": _I64_MAX, "last_ns": _I64_MIN, "speed_max": -np.inf, "last_x": np.nan, "last_y": np.nan}
@@ -272,7 +275,7 @@ class TrackStats:
         return np.searchsorted(self.ids, ids)
 
     def add(self, stamps: np.ndarray, states: np.ndarray) -> None:
-        """Add track states (Track elements, file order) with the header stamp (ns) of their message."""
+        """Add a block of track states (Track elements, file order) with the header stamp (ns) of their message."""
         if not len(states):
             return
         self.n_states += len(states)
@@ -282,17 +285,18 @@ class TrackStats:
         n = len(self.ids)
         self.states += np.bincount(slot, minlength=n)
         np.minimum.at(self.first_ns, slot, stamps)
-        # class and mobility of each track's state at its last stamp (the later in the file on a tie)
-        by_stamp = np.lexsort((np.arange(len(slot)), stamps, slot))
-        ends = by_stamp[np.r_[slot[by_stamp][1:] != slot[by_stamp][:-1], True]]
+        self.late += int(np.count_nonzero(stamps < self.last_ns[slot]))
+        # each track's states in stamp order (file order on a tie); its last: class and mobility
+        order = np.lexsort((np.arange(len(slot)), stamps, slot))
+        s = slot[order]
+        ends = order[np.r_[s[1:] != s[:-1], True]]
         later = stamps[ends] >= self.last_ns[slot[ends]]
         ends = ends[later]
         self.last_ns[slot[ends]] = stamps[ends]
         self.classification[slot[ends]] = states["classification"][ends]
         self.mobility[slot[ends]] = states["mobility"][ends]
-        # each track's states in file order: occlusion episodes, then distances and speeds of confirmed states
-        order = np.argsort(slot, kind="stable")
-        s, st = slot[order], states[order]
+        # occlusion episodes, then distances and speeds of confirmed states
+        st = states[order]
         occ = st["occluded"].astype(bool)
         prev = np.r_[False, occ[:-1]]
         first = np.r_[True, s[1:] != s[:-1]]
@@ -574,6 +578,12 @@ def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES) -> RunAccumulat
     require(contents, mcapio.TOPIC_TRACKS)
     if state["error"] is not None:
         raise state["error"]
+    if acc.tracks.late:
+        import warnings
+
+        warnings.warn(f"{contents.path}: {acc.tracks.late} track state(s) come in the file after a later-stamped "
+                      "state of their track, blocks before; the report takes them in file order (occlusions, "
+                      "distances)", UserWarning, stacklevel=2)
     acc.metadata = contents.metadata
     return acc
 
