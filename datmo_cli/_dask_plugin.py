@@ -16,3 +16,18 @@ class WarmUp(WorkerPlugin):
 
     def setup(self, worker) -> None:  # noqa: ANN001 - distributed.Worker
         ensure_warm()
+
+
+class IgnoreInterrupt(WorkerPlugin):
+    """For the worker processes of a run's own local cluster: a terminal's Ctrl-C reaches every process of its
+    group, and the batch (the client) stops their tasks itself, through its cancel Event."""
+
+    name = "datmo-ignore-interrupt"
+    idempotent = True
+
+    def setup(self, worker) -> None:  # noqa: ANN001 - distributed.Worker
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.SIG_IGN)

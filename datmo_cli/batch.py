@@ -599,6 +599,37 @@ def _drain(queue, on_scans) -> None:  # noqa: ANN001
             on_scans(i, d, n)
 
 
+_DEFERRING: list[int] = []   # SIGINTs caught while a deferring block runs (the outermost block owns it)
+
+
+@contextmanager
+def _interrupt_deferred() -> Iterator[None]:
+    """Hold a Ctrl-C (SIGINT) that arrives inside the block until the end of the outermost such block (main
+    thread only)."""
+    import signal
+
+    global _DEFERRING
+    if threading.current_thread() is not threading.main_thread() or _DEFERRING is not _NOT_DEFERRING:
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda sig, frame: caught.append(sig))
+    _DEFERRING = caught
+    try:
+        yield
+    finally:
+        _DEFERRING = _NOT_DEFERRING
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        if callable(previous) and previous is not signal.default_int_handler:
+            previous(signal.SIGINT, None)     # an executor's own Ctrl-C handler (see cluster._interrupt_flag)
+        else:
+            raise KeyboardInterrupt
+
+
+_NOT_DEFERRING = _DEFERRING
+
+
 def run(batch: Batch, executor: Executor, *, on_record: Callable[[dict], None] | None = None,
         on_scans: Callable[[int, int, int], None] | None = None) -> list[dict]:
     """Run a prepared batch: skipped inputs' lines first, then each task's line as it finishes, all
@@ -608,8 +639,9 @@ def run(batch: Batch, executor: Executor, *, on_record: Callable[[dict], None] |
     def finished(rec: dict) -> None:
         if rec["status"] == CANCELLED:
             return
-        batch.manifest.append(rec)
-        batch.records[rec["input"]] = rec
+        with _interrupt_deferred():      # a line is written and counted whole, or not at all
+            batch.manifest.append(rec)
+            batch.records[rec["input"]] = rec
         if on_record:
             on_record(rec)
 

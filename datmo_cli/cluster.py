@@ -16,7 +16,8 @@ import os
 import time
 import uuid
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 from .batch import CANCELLED, Executor, Task, ensure_warm, failed, run_task
 from .errors import DatmoError
@@ -98,8 +99,10 @@ class DaskExecutor(Executor):
         except (OSError, TimeoutError, ValueError) as exc:
             self.close()
             raise DatmoError(f"--scheduler {address}: cannot reach the Dask scheduler ({exc})") from None
-        from ._dask_plugin import WarmUp
+        from ._dask_plugin import IgnoreInterrupt, WarmUp
 
+        if self.cluster is not None:
+            self.client.register_plugin(IgnoreInterrupt(), name=IgnoreInterrupt.name)
         self.client.register_plugin(WarmUp(), name=WarmUp.name)  # returns once every worker has loaded them
         threads = sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values())
         self.workers = max(threads, 1)
@@ -109,7 +112,7 @@ class DaskExecutor(Executor):
 
     def run(self, tasks: list[Task], on_record: Callable[[dict], None],
             on_scans: Callable[[int, int, int], None] | None = None) -> None:
-        from distributed import Event, KilledWorker, as_completed
+        from distributed import KilledWorker, as_completed
 
         if not tasks:
             return
@@ -143,27 +146,37 @@ class DaskExecutor(Executor):
 
         for _ in range(min(self.window, len(queue))):
             submit(queue.popleft())
+        with _interrupt_flag() as stop:     # Ctrl-C sets a flag: no KeyboardInterrupt inside distributed's calls
+            while live and not stop:
+                done = stream.next_batch(block=False)
+                if not done:
+                    time.sleep(0.02)
+                for fut in done:
+                    collect(fut)
+                    while queue and len(live) < self.window:
+                        submit(queue.popleft())
+            if stop:
+                self._cancel(cancel_event, live, on_record)
+                raise KeyboardInterrupt
+
+    def _cancel(self, cancel_event: str, live: dict[str, tuple], on_record: Callable[[dict], None]) -> None:
+        """Ctrl-C: set the Event the running tasks poll; record those that finish within CANCEL_GRACE_S (their
+        outputs are complete), drop the others, and close the client (and the run's own cluster)."""
+        from distributed import Event
+
         try:
-            for fut in stream:
-                collect(fut)
-                while queue and len(live) < self.window:
-                    submit(queue.popleft())
-        except KeyboardInterrupt:
-            queue.clear()
-            try:
-                Event(cancel_event, client=self.client).set()
-                deadline = time.monotonic() + CANCEL_GRACE_S
-                for fut, _ in list(live.values()):   # running tasks stop at their next poll
-                    try:
-                        rec = fut.result(timeout=max(0.1, deadline - time.monotonic()))
-                    except BaseException:  # noqa: BLE001 - failed, retried elsewhere or still running: dropped
-                        continue
-                    if rec.get("status") != CANCELLED:
-                        on_record(rec)     # it finished: its output is complete, so it is in the manifest
-                self.client.cancel([f for f, _ in live.values()], force=True)
-            finally:
-                self.close()
-            raise
+            Event(cancel_event, client=self.client).set()
+            deadline = time.monotonic() + CANCEL_GRACE_S
+            for fut, _ in list(live.values()):
+                try:
+                    rec = fut.result(timeout=max(0.1, deadline - time.monotonic()))
+                except Exception:  # noqa: BLE001, S112 - failed, retried elsewhere or still running: dropped
+                    continue
+                if rec.get("status") != CANCELLED:
+                    on_record(rec)
+            self.client.cancel([f for f, _ in live.values()], force=True)
+        finally:
+            self.close()
 
     def close(self) -> None:
         for thing in (getattr(self, "client", None), self.cluster):
@@ -173,3 +186,21 @@ class DaskExecutor(Executor):
                 except Exception:  # noqa: BLE001, S110 - closing after a failure
                     pass
         self.cluster = None
+
+
+@contextmanager
+def _interrupt_flag() -> Iterator[list[int]]:
+    """A list that gets an item when Ctrl-C (SIGINT) arrives inside the block (main thread only), instead of
+    a KeyboardInterrupt."""
+    import signal
+    import threading
+
+    stop: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+    previous = signal.signal(signal.SIGINT, lambda sig, frame: stop.append(sig))
+    try:
+        yield stop
+    finally:
+        signal.signal(signal.SIGINT, previous)

@@ -58,7 +58,7 @@ class Cluster:
     def connect(self, workers: int) -> None:
         if self.client is None:
             self.client = distributed.Client(self.address, timeout="60s")
-        self.client.wait_for_workers(workers, timeout=180)
+        self.client.wait_for_workers(workers, timeout=300)   # a worker loads (or compiles) the kernels first
 
     def address_of(self, name: str) -> str:
         return next(a for a, w in self.client.scheduler_info()["workers"].items() if w.get("name") == name)
