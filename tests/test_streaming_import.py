@@ -292,3 +292,11 @@ def test_stamp_check_block_by_block_equals_the_whole_run_rule(steps, start, bloc
     want_ns, want_note = _stamps_ns_whole(t)
     assert note == want_note
     np.testing.assert_array_equal(ns, want_ns)
+
+
+def test_a_spool_that_cannot_be_made_is_a_one_line_error(tmp_path):
+    from datmo_cli.errors import DatmoError
+
+    src = write(tmp_path, "a.log", [flaser([1.0] * 10, 1.0 + i) for i in range(5)])
+    with pytest.raises(DatmoError, match="cannot make a temporary folder for the parsed scans"):
+        open_import(src, spool_dir=src)   # a file, not a folder

@@ -49,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import GeometryError, InputError
+from ...errors import DatmoError, GeometryError, InputError
 from ..scan import Odometry, ScanGeometry, ScanRun
 
 FLASER_LIKE = ("FLASER", "RLASER")
@@ -625,7 +625,11 @@ def stream_carmen(path: str | Path, *, topic: str | None = None, max_scans: int 
     label = str(path)
     total = path.stat().st_size
     io_warnings: list[str] = []
-    spool = tempfile.TemporaryDirectory(prefix=".datmo-import-", dir=spool_dir)
+    try:
+        spool = tempfile.TemporaryDirectory(prefix=".datmo-import-", dir=spool_dir)
+    except OSError as exc:
+        raise DatmoError(f"{spool_dir or tempfile.gettempdir()}: cannot make a temporary folder for the parsed "
+                         f"scans ({exc.strerror or exc})") from None
     try:
         with open(path, "rb") as raw:
             gz = raw.read(2) == b"\x1f\x8b"
@@ -642,6 +646,10 @@ def stream_carmen(path: str | Path, *, topic: str | None = None, max_scans: int 
         if parse.lines == 0:
             raise InputError(f"{label}: empty file (no lines)")
         p = plan(parse, topic, label)
+    except OSError as exc:  # the disk full while spooling, or the input unreadable
+        spool.cleanup()
+        raise DatmoError(f"{label}: {exc.strerror or exc} (reading it, or spooling its scans to "
+                         f"{Path(spool.name).parent})") from None
     except BaseException:
         spool.cleanup()
         raise
