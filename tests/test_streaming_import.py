@@ -148,6 +148,23 @@ def test_carmen_import_holds_one_block_whatever_the_length(tmp_path):
     assert not list(tmp_path.glob(".datmo-import-*"))
 
 
+def test_carmen_import_memory_does_not_grow_with_the_log(tmp_path):
+    """Python's traced allocations, not just what the importer counts: the same peak for 4x the lines."""
+    import tracemalloc
+
+    peaks = []
+    for lines in (4_000, 16_000):
+        src = _carmen_log(tmp_path, lines)
+        open_import(src, spool_dir=tmp_path).close()   # modules imported, caches filled
+        tracemalloc.start()
+        try:
+            _held(src, tmp_path / f"{lines}.mcap")
+            peaks.append(tracemalloc.get_traced_memory()[1])
+        finally:
+            tracemalloc.stop()
+    assert peaks[1] < 1.25 * peaks[0], peaks
+
+
 def test_carmen_parse_spools_every_scan(tmp_path):
     from datmo_cli.log.importers.carmen import parse_lines
 

@@ -103,7 +103,8 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
 
     A first pass over the scans settles what concerns the whole run (their geometry, which must not
     change; whether intensities are kept; the last scan stamp, after which one more pose is read); the
-    blocks then come from one pass over scans and poses in the bag's time order. Memory holds a block.
+    blocks then come from one pass over scans and poses in the bag's time order. Memory holds a block of
+    scans, and rosbags' reader holds the bag's index (about 200 bytes a message, as the bag stores it).
     Each pose keeps its own message's frame ids (the whole-run import gave all poses the last ones; the
     same for a bag whose frames do not change)."""
     from . import ImportStream
