@@ -164,6 +164,20 @@ def test_report_command_streams_without_a_plot(outputs, monkeypatch):
     assert json.loads(want)["run"]["scans"] == 300
 
 
+def test_run_final_report_streams_without_plots(outputs, monkeypatch, capsys):
+    from datmo_cli.commands import run as run_command
+
+    path = outputs["patrol"]
+    want = report.render([reference(pipeline.read_run_data(path))], "json", top=None, sort="lifetime")
+
+    def whole(*args, **kwargs):
+        raise AssertionError("datmo run's report decoded the whole run")
+
+    monkeypatch.setattr(pipeline, "read_run_data", whole)
+    run_command._report([path], [], "json", None, "lifetime")
+    assert capsys.readouterr().out == want
+
+
 # ------------------------------------------------------------------------------------------------------ edge cases
 
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 180, 181, 0.0, 8.0, 0.0, 0.2, "laser")
