@@ -23,7 +23,8 @@ REPORT_TOPICS = (mcapio.TOPIC_SCAN, mcapio.TOPIC_ODOM, mcapio.TOPIC_FEATURES, mc
 
 
 def read_run_data(path: str | Path, *, keep_scans: bool = False, ground_truth: bool = False) -> RunData:
-    """The channels of a processed log that `datmo report` needs, decoded.
+    """The channels of a processed log that the plot of `datmo report` and `datmo run` needs, decoded whole
+    (memory grows with the log; the report alone streams: report.summarise_file).
 
     Raises MissingChannelError naming the command to run first when /scan or /datmo/tracks is missing.
     """
