@@ -518,9 +518,9 @@ SUMMARY_TOPICS = (mcapio.TOPIC_SCAN, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMAR
 
 
 def summarise_file(path: str | Path, *, block: int = BLOCK_MESSAGES) -> RunSummary:
-    """The report of the processed log at `path`, read in one streaming pass (see `stream_run`): the same
-    RunSummary as `summarise(RunData.from_log(...))`, in memory that does not grow with the log's length
-    (unless a track's header stamps go back across blocks, never in a log datmo writes: see TrackStats).
+    """The report of the processed log at `path`, read in one streaming pass (see `stream_run`) in memory
+    that does not grow with the log's length: the same RunSummary as `summarise(RunData.from_log(...))`
+    (but where a track's header stamps go back across blocks, never in a log datmo writes: see TrackStats).
 
     Raises as RunData.from_log: MissingChannelError naming the command to run first when /scan or
     /datmo/tracks is absent, InputError for a /scan channel that is not LaserScans or whose geometry changes.
