@@ -1,5 +1,6 @@
 """The numba assignment solver (datmo_cli/tracking/_assign.py) against scipy.optimize.linear_sum_assignment,
-its reference, and the numba GNN against the reference GNN on random gated matrices, ties included."""
+its reference (the same assignment, ties included), and the numba GNN against the reference GNN on random
+gated matrices."""
 
 from __future__ import annotations
 
@@ -28,15 +29,24 @@ def test_lsap_is_scipys_assignment(seed: int, R: int, C: int, integer: bool):
 @given(seed=st.integers(0, 2**32 - 1), K=st.integers(0, 10), M=st.integers(0, 10),
        share=st.floats(0.0, 1.0), integer=st.booleans())
 def test_gnn_is_the_reference_gnn_on_gated_matrices(seed: int, K: int, M: int, share: float, integer: bool):
+    """The reference's pairs; with exact ties (integer costs) an assignment as good: as many pairs, the same
+    summed cost (which of the tied ones is taken may differ: gnn solves the rows and columns that have an
+    allowed pair, scipy the whole matrix)."""
     rng = np.random.default_rng(seed)
     # gated costs as the tracker makes them: d2 + ln det S, some of them negative; pairs outside the gate
     cost = rng.integers(-2, 3, (K, M)).astype(np.float64) if integer else rng.uniform(-8, 14, (K, M))
     allowed = rng.uniform(0, 1, (K, M)) < share
     rows, cols = _assign.gnn(cost, allowed)
     want_r, want_c = reference_gnn(cost, allowed)
-    np.testing.assert_array_equal(rows, want_r)
-    np.testing.assert_array_equal(cols, want_c)
     assert all(allowed[i, j] for i, j in zip(rows, cols, strict=True))
+    assert len(set(rows.tolist())) == len(rows) and len(set(cols.tolist())) == len(cols)
+    assert (np.diff(rows) > 0).all()
+    if integer:
+        assert len(rows) == len(want_r)
+        assert cost[rows, cols].sum() == cost[want_r, want_c].sum()
+    else:
+        np.testing.assert_array_equal(rows, want_r)
+        np.testing.assert_array_equal(cols, want_c)
 
 
 def test_gnn_takes_the_global_optimum_and_the_most_pairs():

@@ -23,9 +23,14 @@ from . import _assign, _kernels
 from .state import (
     AGE,
     BORN,
+    C_BG_CACHED,
     C_BG_COUNT,
     C_BG_HI,
     C_BG_LO,
+    C_BG_PC,
+    C_BG_PS,
+    C_BG_PX,
+    C_BG_PY,
     C_BG_READY,
     C_BG_SCAN,
     C_BG_X0,
@@ -795,8 +800,62 @@ def push_tail(tab, n, prm):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def background(bg_score, bg_mark, bg_active, ctx, ranges, has_ranges, cos_a, sin_a, geo, px, py, pc, ps, dt,
-               prm):  # noqa: ANN001, ANN201
+def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a, sin_a, angle_min, increment,
+                      range_min, range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled, fresh):  # noqa: ANN001, ANN201
+    """_kernels.background_update with each active cell's range and beam kept beside it (cache[a] = r, beam
+    for active[a], beam -2: not yet computed), valid while the sensor pose does not change (`fresh`: it
+    changed, compute them all again). The same arithmetic on the same numbers: the same grid."""
+    B = len(ranges)
+    keep = 0
+    for a in range(n_active):
+        c = active[a]
+        r, jf = cache[a, 0], cache[a, 1]
+        if score[c] >= settled and (c + scan) % 4 != 0:
+            active[keep] = c
+            cache[keep, 0], cache[keep, 1] = r, -2.0 if fresh else jf   # not tested: computed when it is
+            keep += 1
+            continue
+        if fresh or jf == -2.0:
+            wx, wy = x0 + (c // n + 0.5) * cell - px, y0 + (c % n + 0.5) * cell - py
+            sx, sy = pc * wx + ps * wy, -ps * wx + pc * wy
+            r = np.hypot(sx, sy)
+            jf = float(int(np.rint((np.arctan2(sy, sx) - angle_min) / increment)))
+        j = int(jf)
+        if 0 <= j < B and r < range_max:
+            rj = ranges[j]
+            if (rj > r + margin and rj > range_min) or rj >= range_max:
+                score[c] = 0.0
+                mark[c] = -1
+                continue
+        active[keep] = c
+        cache[keep, 0], cache[keep, 1] = r, jf
+        keep += 1
+    for j in range(B):
+        r = ranges[j]
+        if not (r > range_min and r < range_max):
+            continue
+        sx, sy = r * cos_a[j], r * sin_a[j]
+        i = int(np.floor((pc * sx - ps * sy + px - x0) / cell))
+        k = int(np.floor((ps * sx + pc * sy + py - y0) / cell))
+        if i < 0 or k < 0 or i >= n or k >= n:
+            continue
+        c = i * n + k
+        if mark[c] == scan:
+            continue
+        if mark[c] < 0:
+            if keep >= len(active):
+                continue
+            active[keep] = c
+            cache[keep, 1] = -2.0
+            keep += 1
+        mark[c] = scan
+        score[c] += dt
+    return keep
+
+
+@njit(cache=True)
+def background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, cos_a, sin_a, geo, px, py, pc, ps,
+               dt, prm):  # noqa: ANN001, ANN201
     """Add the scan's returns to the background grid (tracker._background; geo: angle_min, increment,
     range_max, has geometry, range_min)."""
     if (not has_ranges or geo[3] == 0 or prm[P_BACKGROUND_TIME] <= 0 or len(ranges) != len(cos_a)
@@ -810,11 +869,14 @@ def background(bg_score, bg_mark, bg_active, ctx, ranges, has_ranges, cos_a, sin
         ctx[C_BG_LO] = lo
         ctx[C_BG_HI] = geo[2] if np.isfinite(geo[2]) and geo[2] > lo else np.inf
     ctx[C_BG_SCAN] += 1
+    fresh = not (ctx[C_BG_CACHED] != 0 and ctx[C_BG_PX] == px and ctx[C_BG_PY] == py and ctx[C_BG_PC] == pc
+                 and ctx[C_BG_PS] == ps)
+    ctx[C_BG_CACHED], ctx[C_BG_PX], ctx[C_BG_PY], ctx[C_BG_PC], ctx[C_BG_PS] = 1.0, px, py, pc, ps
     nbg = int(np.sqrt(len(bg_score)) + 0.5)
-    ctx[C_BG_COUNT] = _kernels.background_update(
-        bg_score, bg_mark, bg_active, int(ctx[C_BG_COUNT]), int(ctx[C_BG_SCAN]), ranges, cos_a, sin_a, geo[0],
-        geo[1], ctx[C_BG_LO], ctx[C_BG_HI], px, py, pc, ps, max(dt, 0.0), ctx[C_BG_X0], ctx[C_BG_Y0],
-        prm[P_BACKGROUND_CELL], nbg, prm[P_OCCLUSION_MARGIN], 4.0 * prm[P_BACKGROUND_TIME])
+    ctx[C_BG_COUNT] = background_update(
+        bg_score, bg_mark, bg_active, bg_cache, int(ctx[C_BG_COUNT]), int(ctx[C_BG_SCAN]), ranges, cos_a, sin_a,
+        geo[0], geo[1], ctx[C_BG_LO], ctx[C_BG_HI], px, py, pc, ps, max(dt, 0.0), ctx[C_BG_X0], ctx[C_BG_Y0],
+        prm[P_BACKGROUND_CELL], nbg, prm[P_OCCLUSION_MARGIN], 4.0 * prm[P_BACKGROUND_TIME], fresh)
 
 
 @njit(cache=True)
@@ -849,7 +911,7 @@ def write_tracks(out, o, tab, n, has_pose, pose):  # noqa: ANN001, ANN201
 # -------------------------------------------------------------------------------------------- the step
 @njit(cache=True)
 def track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
-               has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, learned, compat, reacq):  # noqa: ANN001, ANN201
+               has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, learned, compat, reacq):  # noqa: ANN001, ANN201
     """One scan (measurements in the sensor frame, stamp in ns since the first scan) through every phase;
     returns the table (a new one when it grew). ctx[C_N_TRACKS] holds the number of live tracks."""
     n = int(ctx[C_N_TRACKS])
@@ -879,19 +941,20 @@ def track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, ha
                    ctx, prm)
     classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm)
     push_tail(tab, n, prm)
-    background(bg_score, bg_mark, bg_active, ctx, ranges, has_ranges, cos_a, sin_a, geo, px, py, pc, ps, dt, prm)
+    background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, cos_a, sin_a, geo, px, py, pc, ps, dt,
+               prm)
     ctx[C_N_TRACKS] = n
     return tab
 
 
 @njit(cache=True)
 def step_measurements(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
-                      has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, learned, compat, reacq,
+                      has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, learned, compat, reacq,
                       out):  # noqa: ANN001, ANN201
     """track_scan on one scan's measurements, then its live tracks as Track elements in `out` (a new, larger
     array when it is too small). Returns (table, out)."""
     tab = track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
-                     has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, learned, compat, reacq)
+                     has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, learned, compat, reacq)
     n = int(ctx[C_N_TRACKS])
     if n > len(out):
         out = np.empty(2 * n, out.dtype)
@@ -901,7 +964,7 @@ def step_measurements(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mp
 
 @njit(cache=True)
 def track_block(tab, ctx, prm, stamps, circles, blobs, lines, legs, learned, ranges, has_ranges, poses,
-                has_pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, compat, reacq, out, out_tail,
+                has_pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, compat, reacq, out, out_tail,
                 out_tail_count, offsets):  # noqa: ANN001, ANN201
     """Track scans 0..len(stamps)-1 of a block of features (flat per kind, with per-scan offsets) in one call.
 
@@ -928,8 +991,8 @@ def track_block(tab, ctx, prm, stamps, circles, blobs, lines, legs, learned, ran
                 cx[a0:a1], cy[a0:a1], cr[a0:a1], bx[b0:b1], by[b0:b1], bs[b0:b1], bk[b0:b1], ls[l0:l1], lx0[l0:l1],
                 ly0[l0:l1], lx1[l0:l1], ly1[l0:l1], prm)
         tab = track_scan(tab, ctx, prm, stamps[i], mx, my, msize, mkind, mlegs, raw, mprob, learned, ranges[i],
-                         has_ranges, has_pose, poses[i], geo, cos_a, sin_a, bg_score, bg_mark, bg_active, learned,
-                         compat, reacq)
+                         has_ranges, has_pose, poses[i], geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache,
+                         learned, compat, reacq)
         n = int(ctx[C_N_TRACKS])
         o = offsets[i]
         if o + n > len(out):

@@ -67,8 +67,10 @@ _PARAM_NAMES = ("process_noise", "person_process_noise", "measurement_noise", "l
 
 # ------------------------------------------------------------------------------------------- context
 (C_HAS_STAMP, C_STAMP, C_NEXT_ID, C_BG_READY, C_BG_COUNT, C_BG_SCAN, C_BG_X0, C_BG_Y0, C_BG_LO, C_BG_HI,
- C_N_TRACKS) = range(11)
-N_CONTEXT = 11
+ C_N_TRACKS, C_BG_CACHED, C_BG_PX, C_BG_PY, C_BG_PC, C_BG_PS) = range(16)
+N_CONTEXT = 16
+# C_BG_CACHED: the background's active cells carry their range and beam as seen from the sensor pose
+# (C_BG_PX, C_BG_PY, heading cos/sin C_BG_PC, C_BG_PS); a still sensor need not compute them again
 
 
 def param_vector(params: TrackingParams) -> np.ndarray:

@@ -148,11 +148,12 @@ class Tracker:
             self._cos = self._sin = np.zeros(0)
             self._geo = np.array([0.0, 1.0, np.inf, 0.0, 0.0])
         if geometry is not None and p.background_time > 0:
-            # background grid (see _kernels.background_update): score and mark per cell, the active cells
+            # background grid (see _step.background_update): score and mark per cell, the active cells and their
+            # range and beam
             n = int(np.ceil(2 * p.background_extent / p.background_cell))
-            self._bg = (np.zeros(n * n), np.full(n * n, -1, np.int64), np.zeros(65536, np.int64))
+            self._bg = (np.zeros(n * n), np.full(n * n, -1, np.int64), np.zeros(65536, np.int64), np.zeros((65536, 2)))
         else:
-            self._bg = (np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64))
+            self._bg = (np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
 
     @property
     def next_id(self) -> int:
