@@ -200,7 +200,10 @@ def test_fsspec_urls_for_inputs_and_outputs(logs, tmp_path):
         assert not [p for p in mem.find("/datmo-test/out") if p.endswith(".tmp")]
         lines = [json.loads(x) for x in mem.cat("/datmo-test/out/manifest.jsonl").decode().splitlines()]
         assert {x["status"] for x in lines} == {"done"} and len(lines) == 3
-        assert lines[0]["input"] == "memory://datmo-test/in/sub/y.mcap" or lines[0]["input"].startswith("memory://")
+        inputs = sorted(x["input"] for x in lines)
+        assert inputs[0] == str(logs / "a.mcap")                               # file:// is a local path
+        assert [i.startswith("memory://") and i.endswith(n) for i, n in zip(inputs[1:], ("sub/y.mcap", "x.mcap"),
+                                                                             strict=True)] == [True, True]
         again = run("memory://datmo-test/in", "-o", "memory://datmo-test/out", "--jobs", "1")
         assert again.exit_code == 0 and "2 skipped" in again.stderr
     finally:
