@@ -8,7 +8,7 @@ tests/naive_legs.py. Feature columns are the F_* constants below, in the order o
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ._kernels import valid_return
 
@@ -366,6 +366,24 @@ def block_probabilities(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_of
     block_features(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min, range_max,
                    radius_clip, margin, max_width, min_points, True, angle_step, features)
     ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, out)
+
+
+@njit(cache=True, parallel=True)
+def block_probabilities_parallel(ranges, parts, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min,
+                                 range_max, radius_clip, margin, max_width, min_points, angle_step, nodes, split,
+                                 roots, kind, base, scale, features, out) -> None:
+    """block_probabilities on numba's threads: the block's scans split into `parts` ranges of consecutive scans,
+    each range's segments (rows seg_offsets[k0]:seg_offsets[k1] of features and out) done at once. Every row's
+    features and probability depend on its own scan only: the same out as block_probabilities."""
+    N = ranges.shape[0]
+    for j in prange(parts):
+        k0 = j * N // parts
+        k1 = (j + 1) * N // parts
+        g0 = seg_offsets[k0]
+        g1 = seg_offsets[k1]
+        block_features(ranges[k0:k1], cos_a, sin_a, angles, seg_start, seg_end, seg_offsets[k0:k1 + 1], range_min,
+                       range_max, radius_clip, margin, max_width, min_points, True, angle_step, features)
+        ensemble(features[g0:g1], max_width, min_points, nodes, split, roots, kind, base, scale, out[g0:g1])
 
 
 @njit(cache=True)

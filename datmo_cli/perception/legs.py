@@ -393,10 +393,12 @@ def load_leg_model(spec: str) -> LegModel | None:
 
 
 def leg_probabilities(ranges, angles, seg_start, seg_end, seg_offsets, range_min: float, range_max: float,
-                      model: LegModel) -> np.ndarray:
+                      model: LegModel, threads: int = 1) -> np.ndarray:
     """Leg probability (M,) float64 of every segment (inputs as in cluster_features): features and ensemble in
-    one compiled call. Segments outside candidate_mask get 0."""
+    one compiled call, on `threads` threads (a perception.threads.resolve()d count; the same result for any).
+    Segments outside candidate_mask get 0."""
     from . import _leg_kernels as LK
+    from . import threads as T
 
     ranges, angles, cos_a, sin_a, start, end, offsets = _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets)
     lo, hi = _limits(range_min, range_max)
@@ -404,8 +406,12 @@ def leg_probabilities(ranges, angles, seg_start, seg_end, seg_offsets, range_min
     out = np.zeros(M, np.float64)
     if M:
         feats = np.empty((M, LK.N_FEATURES), np.float64)
-        LK.block_probabilities(ranges, cos_a, sin_a, angles, start, end, offsets, lo, hi, RADIUS_CLIP,
-                               OCCLUSION_MARGIN, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, _angle_step(angles),
-                               *model._kernel_args(),
-                               feats, out)
+        args = (cos_a, sin_a, angles, start, end, offsets, lo, hi, RADIUS_CLIP, OCCLUSION_MARGIN, CANDIDATE_MAX_WIDTH,
+                CANDIDATE_MIN_POINTS, _angle_step(angles), *model._kernel_args(), feats, out)
+        N = len(ranges)
+        if threads > 1 and N > 1:
+            with T.numba_threads(threads):
+                LK.block_probabilities_parallel(ranges, min(N, 4 * threads), *args)
+        else:
+            LK.block_probabilities(ranges, *args)
     return out
