@@ -138,8 +138,8 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         executor = DaskExecutor(scheduler, retries=retries)
     else:
         executor = LocalExecutor(jobs)
-        if batch.tasks:
-            _warm_up()
+        if min(executor.workers, len(batch.tasks)) > 1:
+            _warm_up()   # only for a pool: one process loads just the kernels its input uses, as it goes
     import time
 
     t0 = time.perf_counter()
@@ -219,12 +219,12 @@ def _warm_up() -> None:
     compiles them (tens of seconds, then cached), which is said rather than counted in the inputs' speed."""
     import time
 
-    from ..pipeline import warm_up
+    from ..batch import ensure_warm
     from .compiling import said_if_slow
 
     t0 = time.perf_counter()
     with said_if_slow():
-        warm_up()
+        ensure_warm()   # once per process: the --jobs pool forks after it
     seconds = time.perf_counter() - t0
     if seconds > 2.0:
         click.echo(f"compiled the numba kernels in {seconds:.0f} s (first run after an install; cached for the next "
