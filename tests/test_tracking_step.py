@@ -207,16 +207,17 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
     _step.push_tail(tab, n, PRM)
     same_tracks(ref, t0, tab, n, "tail")
     if ref._bg_score is not None:
-        before = (ref._bg_score.copy(), ref._bg_mark.copy(), ref._bg_active.copy(), np.zeros((65536, 2)))
+        before = (ref._bg_score.copy(), np.maximum(ref._bg_mark, 0), ref._bg_active.copy(), np.zeros((65536, 2)))
         ctx = context(ref)
     ref._background(ranges)
     if ref._bg_score is not None:
         if ctx[state.C_BG_READY] == 0:   # the grid was made this scan
-            before = (np.zeros_like(ref._bg_score), np.full_like(ref._bg_mark, -1), np.zeros_like(ref._bg_active),
+            before = (np.zeros_like(ref._bg_score), np.zeros_like(ref._bg_mark), np.zeros_like(ref._bg_active),
                       np.zeros((65536, 2)))
         cos_a, sin_a = ref._cos, ref._sin
         _step.background(*before, ctx, rng, ranges is not None, cos_a, sin_a, geo, px, py, pc, ps, dt, PRM)
-        for got, want in zip(before[:3], (ref._bg_score, ref._bg_mark, ref._bg_active), strict=True):
+        # inactive cells: mark -1 in the reference, 0 in the compiled grid
+        for got, want in zip(before[:3], (ref._bg_score, np.maximum(ref._bg_mark, 0), ref._bg_active), strict=True):
             np.testing.assert_array_equal(got, want)
         assert ctx[state.C_BG_COUNT] == ref._bg_count and ctx[state.C_BG_SCAN] == ref._bg_scan
         assert (ctx[state.C_BG_X0], ctx[state.C_BG_Y0]) == ref._bg_origin

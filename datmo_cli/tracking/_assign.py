@@ -9,11 +9,12 @@ assignment, ties included (tests/test_tracking_assign.py checks that on random g
 `gnn` is association.gnn's rule: the pairs of `allowed` minimising the summed cost, disallowed pairs priced
 INFEASIBLE (so the most allowed pairs are made first) and dropped from the answer. Costs are unitless
 (squared Mahalanobis distance plus log det S, or metres); rows are tracks, columns measurements. It solves
-only the rows and columns that have an allowed pair (most tracks and measurements of a scan have none),
-which gives the same assignment as scipy on the whole matrix except where two assignments' costs tie
-within the resolution of sums of INFEASIBLE (about 1e-4 per pair priced INFEASIBLE): there scipy's choice
-is decided by rounding and this one by the exact costs. On the sample logs the two never differ
-(tests/test_tracking_step.py compares whole runs).
+each connected component of the allowed pairs apart (most tracks and measurements of a scan have one
+candidate or none), which gives the same assignment as scipy on the whole matrix except where two
+assignments' costs tie, exactly or within the resolution of sums of INFEASIBLE (about 1e-4 per pair priced
+INFEASIBLE): there scipy's choice is decided by its scan order and rounding, this one by the component's
+and the exact costs. On the sample logs the two never differ (tests/test_tracking_step.py compares whole
+runs byte for byte).
 """
 
 from __future__ import annotations
@@ -109,11 +110,45 @@ def lsap(cost):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
+def _components(allowed, rows_in, cols_in, nr, nc):  # noqa: ANN001, ANN201
+    """Connected components of the allowed pairs among rows rows_in[:nr] and columns cols_in[:nc]: a label per
+    row and per column (0, 1, ...), and the number of components."""
+    crow = np.full(nr, -1, np.int64)
+    ccol = np.full(nc, -1, np.int64)
+    stack = np.empty(nr + nc, np.int64)   # rows as a, columns as nr + b
+    n_comp = 0
+    for start in range(nr):
+        if crow[start] >= 0:
+            continue
+        crow[start] = n_comp
+        top = 0
+        stack[top] = start
+        top += 1
+        while top:
+            top -= 1
+            v = stack[top]
+            if v < nr:
+                for b in range(nc):
+                    if ccol[b] < 0 and allowed[rows_in[v], cols_in[b]]:
+                        ccol[b] = n_comp
+                        stack[top] = nr + b
+                        top += 1
+            else:
+                for a in range(nr):
+                    if crow[a] < 0 and allowed[rows_in[a], cols_in[v - nr]]:
+                        crow[a] = n_comp
+                        stack[top] = a
+                        top += 1
+        n_comp += 1
+    return crow, ccol, n_comp
+
+
+@njit(cache=True)
 def gnn(cost, allowed):  # noqa: ANN001, ANN201
     """The allowed pairs (rows, cols) int64 of least summed cost, each row and column at most once, rows
-    ascending (see the module docstring). Rows and columns without an allowed pair are left out before
-    solving (they could only be paired at INFEASIBLE); one row or column left: its cheapest allowed pair
-    (the first in row-major order)."""
+    ascending (see the module docstring). Solved per connected component of the allowed pairs (a pair
+    outside them could only be made at INFEASIBLE): a component of one row or one column takes its cheapest
+    allowed pair (the first in row-major order), a larger one is solved by lsap."""
     K, M = cost.shape
     rows_in = np.empty(K, np.int64)
     cols_in = np.empty(M, np.int64)
@@ -133,28 +168,49 @@ def gnn(cost, allowed):  # noqa: ANN001, ANN201
         if col_used[j]:
             cols_in[nc] = j
             nc += 1
-    if nr == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    if nr == 1 or nc == 1:
-        best, bk, bj = np.inf, -1, -1
+    pair_col = np.full(K, -1, np.int64)   # the column each row takes
+    crow, ccol, n_comp = _components(allowed, rows_in, cols_in, nr, nc)
+    for comp in range(n_comp):
+        rr = np.empty(nr, np.int64)
+        cc = np.empty(nc, np.int64)
+        a_n = 0
         for a in range(nr):
-            for b in range(nc):
-                k, j = rows_in[a], cols_in[b]
-                if allowed[k, j] and (bk < 0 or cost[k, j] < best):
-                    best, bk, bj = cost[k, j], k, j
-        return np.array([bk], np.int64), np.array([bj], np.int64)
-    c = np.empty((nr, nc))
-    for a in range(nr):
+            if crow[a] == comp:
+                rr[a_n] = rows_in[a]
+                a_n += 1
+        b_n = 0
         for b in range(nc):
-            k, j = rows_in[a], cols_in[b]
-            c[a, b] = cost[k, j] if allowed[k, j] else INFEASIBLE
-    r, q = lsap(c)
-    rows = np.empty(len(r), np.int64)
-    cols = np.empty(len(r), np.int64)
+            if ccol[b] == comp:
+                cc[b_n] = cols_in[b]
+                b_n += 1
+        if a_n == 1 or b_n == 1:
+            best, bk, bj = np.inf, -1, -1
+            for a in range(a_n):
+                for b in range(b_n):
+                    k, j = rr[a], cc[b]
+                    if allowed[k, j] and (bk < 0 or cost[k, j] < best):
+                        best, bk, bj = cost[k, j], k, j
+            pair_col[bk] = bj
+            continue
+        c = np.empty((a_n, b_n))
+        for a in range(a_n):
+            for b in range(b_n):
+                k, j = rr[a], cc[b]
+                c[a, b] = cost[k, j] if allowed[k, j] else INFEASIBLE
+        r, q = lsap(c)
+        for i in range(len(r)):
+            k, j = rr[r[i]], cc[q[i]]
+            if allowed[k, j]:
+                pair_col[k] = j
     n = 0
-    for i in range(len(r)):
-        k, j = rows_in[r[i]], cols_in[q[i]]
-        if allowed[k, j]:
-            rows[n], cols[n] = k, j
+    for k in range(K):
+        if pair_col[k] >= 0:
             n += 1
-    return rows[:n], cols[:n]
+    rows = np.empty(n, np.int64)
+    cols = np.empty(n, np.int64)
+    n = 0
+    for k in range(K):
+        if pair_col[k] >= 0:
+            rows[n], cols[n] = k, pair_col[k]
+            n += 1
+    return rows, cols

@@ -804,7 +804,8 @@ def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a,
                       range_min, range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled, fresh):  # noqa: ANN001, ANN201
     """_kernels.background_update with each active cell's range and beam kept beside it (cache[a] = r, beam
     for active[a], beam -2: not yet computed), valid while the sensor pose does not change (`fresh`: it
-    changed, compute them all again). The same arithmetic on the same numbers: the same grid."""
+    changed, compute them all again). The same arithmetic on the same numbers: the same grid. An inactive
+    cell's mark is 0 here, not -1 (scans count from 1), so a new grid is all zeros (no 5 MB to fill)."""
     B = len(ranges)
     keep = 0
     for a in range(n_active):
@@ -825,7 +826,7 @@ def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a,
             rj = ranges[j]
             if (rj > r + margin and rj > range_min) or rj >= range_max:
                 score[c] = 0.0
-                mark[c] = -1
+                mark[c] = 0
                 continue
         active[keep] = c
         cache[keep, 0], cache[keep, 1] = r, jf
@@ -842,7 +843,7 @@ def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a,
         c = i * n + k
         if mark[c] == scan:
             continue
-        if mark[c] < 0:
+        if mark[c] == 0:
             if keep >= len(active):
                 continue
             active[keep] = c
@@ -964,15 +965,16 @@ def step_measurements(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mp
 
 @njit(cache=True)
 def track_block(tab, ctx, prm, stamps, circles, blobs, lines, legs, learned, ranges, has_ranges, poses,
-                has_pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, compat, reacq, out, out_tail,
-                out_tail_count, offsets):  # noqa: ANN001, ANN201
+                has_pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, compat, reacq, out, tails,
+                out_tail, out_tail_count, offsets):  # noqa: ANN001, ANN201
     """Track scans 0..len(stamps)-1 of a block of features (flat per kind, with per-scan offsets) in one call.
 
     circles: (offsets, first, last, x, y, radius); blobs: (offsets, first, last, x, y, size, kind); lines:
     (offsets, segment, first, last, x_ini, y_ini, x_end, y_end); legs: (offsets, first, last, x, y, width,
     probability); sensor frame, m; beam indices inclusive. ranges (N, B) float32 m; poses (N, 3). Writes the
-    live tracks of scan i to out[offsets[i]:offsets[i + 1]], their tails (tracking frame) to out_tail and
-    tail counts to out_tail_count (each grown when full). Returns (table, out, out_tail, out_tail_count)."""
+    live tracks of scan i to out[offsets[i]:offsets[i + 1]] and, when `tails`, their tails (tracking frame) to
+    out_tail and tail counts to out_tail_count (each grown when full). Returns (table, out, out_tail,
+    out_tail_count)."""
     T = int(prm[P_TAIL_LENGTH])
     co, cf, cl, cx, cy, cr = circles
     bo, bf, bl, bx, by, bs, bk = blobs
@@ -1000,17 +1002,19 @@ def track_block(tab, ctx, prm, stamps, circles, blobs, lines, legs, learned, ran
             grown = np.empty(size, out.dtype)
             grown[:o] = out[:o]
             out = grown
-            gt = np.empty((size, T, 2))
-            gt[:o] = out_tail[:o]
-            out_tail = gt
-            gc = np.empty(size, np.int64)
-            gc[:o] = out_tail_count[:o]
-            out_tail_count = gc
+            if tails:
+                gt = np.empty((size, T, 2))
+                gt[:o] = out_tail[:o]
+                out_tail = gt
+                gc = np.empty(size, np.int64)
+                gc[:o] = out_tail_count[:o]
+                out_tail_count = gc
         write_tracks(out, o, tab, n, has_pose, poses[i])
-        for k in range(n):
-            for t in range(T):
-                out_tail[o + k, t, 0] = tab[k, TAIL + 2 * t]
-                out_tail[o + k, t, 1] = tab[k, TAIL + 2 * t + 1]
-            out_tail_count[o + k] = np.int64(tab[k, TAIL_COUNT])
+        if tails:
+            for k in range(n):
+                for t in range(T):
+                    out_tail[o + k, t, 0] = tab[k, TAIL + 2 * t]
+                    out_tail[o + k, t, 1] = tab[k, TAIL + 2 * t + 1]
+                out_tail_count[o + k] = np.int64(tab[k, TAIL_COUNT])
         offsets[i + 1] = o + n
     return tab, out, out_tail, out_tail_count

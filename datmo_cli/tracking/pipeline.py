@@ -130,7 +130,7 @@ class TrackStream:
         for a in range(0, n, step):   # one compiled call per chunk of scans (Tracker.track_block)
             b = min(a + step, n)
             block = tracker.track_block(run.stamps[a:b], feats[a:b], run.ranges[a:b],
-                                        None if poses is None else poses[a:b])
+                                        None if poses is None else poses[a:b], tails=self.markers)
             o = block.offsets.tolist()
             for i in range(b - a):
                 tracks = block.items[o[i]:o[i + 1]]

@@ -151,7 +151,7 @@ class Tracker:
             # background grid (see _step.background_update): score and mark per cell, the active cells and their
             # range and beam
             n = int(np.ceil(2 * p.background_extent / p.background_cell))
-            self._bg = (np.zeros(n * n), np.full(n * n, -1, np.int64), np.zeros(65536, np.int64), np.zeros((65536, 2)))
+            self._bg = (np.zeros(n * n), np.zeros(n * n, np.int64), np.zeros(65536, np.int64), np.zeros((65536, 2)))
         else:
             self._bg = (np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
 
@@ -198,10 +198,11 @@ class Tracker:
         return self._out[:n].copy()
 
     def track_block(self, stamps: np.ndarray, features: list[ScanFeatures], ranges: np.ndarray | None = None,
-                    poses: np.ndarray | None = None) -> TrackBlock:
+                    poses: np.ndarray | None = None, tails: bool = True) -> TrackBlock:
         """Track N scans in one compiled call: stamps (N,) ns, their features (sensor frame), ranges (N, B)
         m or None, the sensor's world poses (N, 3: x, y m, theta rad) or None (track in the sensor frame).
-        Features become measurements as measurements.measurements makes them (learned or the paper's rule)."""
+        Features become measurements as measurements.measurements makes them (learned or the paper's rule).
+        `tails`: give every track's tail at every scan too (for the markers; else TrackBlock.tail is empty)."""
         from . import _step
 
         N = len(stamps)
@@ -223,12 +224,12 @@ class Tracker:
         tab, out, tail, count = _step.track_block(
             self.tracks.table, self._ctx, self._prm, rel, *_flat(features), self.learned, ranges_arg,
             ranges is not None, poses_arg, poses is not None, self._geo, self._cos, self._sin, *self._bg,
-            self._compat, _REACQUIRE, np.zeros(cap, TRACK_DTYPE), np.zeros((cap, T, 2)), np.zeros(cap, np.int64),
-            offsets)
+            self._compat, _REACQUIRE, np.zeros(cap, TRACK_DTYPE), tails, np.zeros((cap if tails else 0, T, 2)),
+            np.zeros(cap if tails else 0, np.int64), offsets)
         self.tracks.table = tab
         self.tracks.n = int(self._ctx[state.C_N_TRACKS])
-        end = offsets[-1]
-        return TrackBlock(offsets, out[:end], tail[:end], count[:end])
+        end = offsets[-1] if tails else 0
+        return TrackBlock(offsets, out[:offsets[-1]], tail[:end], count[:end])
 
     def output(self) -> np.ndarray:
         """The live tracks as Track elements: positions in the sensor frame and, with a pose, the world."""
