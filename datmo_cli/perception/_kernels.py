@@ -849,6 +849,17 @@ def extract_parallel(ranges, parts, cos_a, sin_a, cos_inc, c1, range_min, range_
 
 
 @njit(cache=True)
+def gather_rows(rows, counts, j, B, out) -> None:
+    """out (sum of counts[:, j], columns): the first counts[k, j] rows of each scan k's stretch of B rows of
+    `rows` (see extract_scans), in scan order."""
+    m = 0
+    for k in range(counts.shape[0]):
+        for q in range(counts[k, j]):
+            out[m] = rows[k * B + q]
+            m += 1
+
+
+@njit(cache=True)
 def segment_block(ranges, cos_inc, c0, c1, range_min, range_max, min_points, seg_out, seg_count) -> int:
     """Segments of every scan of a block: seg_out rows [start, end), seg_count per scan; returns the total."""
     N, B = ranges.shape

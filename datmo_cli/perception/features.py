@@ -219,9 +219,12 @@ def _extract_block(block: np.ndarray, args: tuple, given: np.ndarray, given_off:
             K.extract_parallel(block, min(n, 4 * threads), *args, seg, lines, circles, blobs, counts, given, given_off)
     else:
         K.extract_scans(block, 0, n, *args, seg, lines, circles, blobs, counts, given, given_off)
-    used = np.arange(B) < counts[:, :, None]   # (n, 4, B): row j of scan k's stretch holds a result
-    return (seg[used[:, 0].ravel()], counts[:, 0].copy(), lines[used[:, 1].ravel()], circles[used[:, 2].ravel()],
-            blobs[used[:, 3].ravel()])
+    out = []
+    for j, rows in enumerate((seg, lines, circles, blobs)):
+        kept = np.empty((int(counts[:, j].sum()), rows.shape[1]), rows.dtype)
+        K.gather_rows(rows, counts, j, B, kept)
+        out.append(kept)
+    return out[0], counts[:, 0].copy(), out[1], out[2], out[3]
 
 
 def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odometry | None = None, *,
