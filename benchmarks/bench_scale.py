@@ -1,0 +1,145 @@
+"""Scale (make bench): `datmo run` and `datmo features` on long raw logs, in bounded memory.
+
+The 361-beam hall log's scans (/scan only) tiled to 20,000 and 80,000 scans. Printed beside the plain
+MCAP read speed of the same file: peak RSS of a whole `datmo run` process on each (targets: within 10 % of
+each other, both under 400 MB); `datmo run` and `datmo features` speed on one core with a warm cache (targets:
+run >= 5,000 scans/s and >= 3x the code of cd981b7 measured in the same run, features >= 10,000 scans/s); and
+output bytes per scan with and without markers (targets: at most 2x the input with markers, 1.2x without).
+Logs are made once and kept in the system's temporary folder.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchmarks.bench_perception import HALL, mcap_iterate, tiled
+from benchmarks.common import Row, best_of, print_lines, print_table
+from datmo_cli.log import mcapio
+
+ROOT = Path(__file__).resolve().parent.parent
+CACHE = Path(tempfile.gettempdir()) / "datmo-bench"
+SIZES = (20_000, 80_000)
+RSS_TARGET_MB, RSS_SPREAD = 400.0, 0.10
+RUN_TARGET, RUN_GAIN, FEATURES_TARGET = 5_000, 3.0, 10_000
+BASELINE = "cd981b7"   # the code before the speed issue, for `datmo run`'s gain measured in the same run
+
+# peak RSS of a child process: the largest resident set of any child waited for, so one child per wrapper
+RSS_WRAPPER = """
+import resource, subprocess, sys
+done = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+if done.returncode:
+    sys.exit(done.stderr[-2000:])
+print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)
+"""
+
+
+def long_log(n: int) -> Path:
+    """The hall's /scan tiled to n scans, written once into CACHE."""
+    path = CACHE / f"hall-{n}.mcap"
+    if not path.exists():
+        CACHE.mkdir(parents=True, exist_ok=True)
+        run = tiled(mcapio.read_run(HALL), n)
+        with mcapio.LogWriter(path, force=True) as w:
+            w.write_scans(run)
+    return path
+
+
+def datmo(*args: str) -> list[str]:
+    return [sys.executable, "-c", "from datmo_cli.cli import main; main()", *args]
+
+
+def peak_rss_mb(command: list[str], env: dict | None = None) -> float:
+    """Peak resident memory of `command`'s process, MB."""
+    done = subprocess.run([sys.executable, "-c", RSS_WRAPPER, *command], capture_output=True, text=True, env=env)
+    if done.returncode:
+        raise RuntimeError(done.stderr.strip().splitlines()[-1] if done.stderr.strip() else "failed")
+    return float(done.stdout.strip())
+
+
+def baseline_tree() -> Path | None:
+    """A git worktree of BASELINE beside the bench logs (made once), or None without git."""
+    tree = CACHE / f"datmo-{BASELINE}"
+    if (tree / "datmo_cli").exists():
+        return tree
+    done = subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-f", str(tree), BASELINE],
+                          capture_output=True, text=True)
+    return tree if done.returncode == 0 else None
+
+
+def baseline_run_seconds(src: Path, out: Path) -> float | None:
+    """Wall time of BASELINE's whole-run `process_file` on `src` (after a warm-up that compiles or loads its
+    kernels), in a fresh process with its tree first on the path; None when it cannot run here."""
+    tree = baseline_tree()
+    if tree is None:
+        return None
+    code = ("import sys, time\nfrom datmo_cli.pipeline import process_file, warm_up\nwarm_up()\n"
+            "t0 = time.perf_counter()\nprocess_file(sys.argv[1], sys.argv[2], force=True)\n"
+            "print(time.perf_counter() - t0)\n")
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    done = subprocess.run([sys.executable, "-c", code, str(src), str(out)], capture_output=True, text=True, env=env,
+                          cwd=tree)
+    return float(done.stdout.strip().splitlines()[-1]) if done.returncode == 0 else None
+
+
+def main() -> None:
+    from datmo_cli.pipeline import features_file, process_file, warm_up
+
+    logs = {n: long_log(n) for n in SIZES}
+    small = logs[SIZES[0]]
+    n = SIZES[0]
+    warm_up()
+    lines = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        t_read = best_of(lambda: mcap_iterate(small), repeat=3)
+        t_read_datmo = best_of(lambda: sum(1 for _ in mcapio.iter_messages(small, [mcapio.TOPIC_SCAN])), repeat=3)
+        t_run = best_of(lambda: process_file(small, tmp / "run.mcap", force=True), repeat=2)
+        t_lean = best_of(lambda: process_file(small, tmp / "lean.mcap", force=True, markers=False), repeat=1)
+        t_feat = best_of(lambda: features_file(small, tmp / "features.mcap", force=True), repeat=2)
+        rows = [Row("plain MCAP read (mcap's reader, /scan)", n, t_read, "the floor: reading the input"),
+                Row("datmo's streaming reader (iter_messages, /scan)", n, t_read_datmo, ""),
+                Row("datmo run: segment, features, track, markers, write", n, t_run,
+                    f"target >= {RUN_TARGET:,} scans/s"),
+                Row("datmo run --no-markers", n, t_lean, ""),
+                Row("datmo features: segment, features, landmarks, markers, write", n, t_feat,
+                    f"target >= {FEATURES_TARGET:,} scans/s")]
+        old = baseline_run_seconds(small, tmp / "old.mcap")
+        if old is not None:
+            rows.append(Row(f"datmo run at {BASELINE} (the code before the speed issue)", n, old, "same run"))
+        print_table(f"datmo run and features on the hall tiled to {n:,} scans (361 beams), one core, warm cache", rows)
+        if old is not None:
+            gain = old / t_run
+            lines.append(f"datmo run: {n / t_run:,.0f} scans/s, {gain:.2f}x {BASELINE}'s {n / old:,.0f} scans/s "
+                         f"(targets >= {RUN_TARGET:,} scans/s and >= {RUN_GAIN:g}x): "
+                         f"{'met' if n / t_run >= RUN_TARGET and gain >= RUN_GAIN else 'NOT met'}")
+        lines.append(f"datmo features: {n / t_feat:,.0f} scans/s (target >= {FEATURES_TARGET:,}): "
+                     f"{'met' if n / t_feat >= FEATURES_TARGET else 'NOT met'}")
+        size_in = small.stat().st_size
+        for name, path, target in (("with markers", tmp / "run.mcap", 2.0), ("--no-markers", tmp / "lean.mcap", 1.2)):
+            size = path.stat().st_size
+            verdict = "met" if size <= target * size_in else "NOT met"
+            lines.append(f"output {name}: {size / n:,.0f} bytes/scan, {size / size_in:.2f}x the input's "
+                         f"{size_in / n:,.0f} (target <= {target:g}x): {verdict}")
+        rss = {}
+        for k, path in logs.items():
+            rss[k] = peak_rss_mb(datmo("run", str(path), "-o", str(tmp / f"rss{k}"), "--force", "--format", "json",
+                                       "-j", "1"))
+            lines.append(f"datmo run on {k:,} scans: peak RSS {rss[k]:,.0f} MB (target < {RSS_TARGET_MB:,.0f} MB)")
+        a, b = rss[SIZES[0]], rss[SIZES[1]]
+        spread = abs(b - a) / a
+        ok = spread <= RSS_SPREAD and max(a, b) < RSS_TARGET_MB
+        lines.append(f"peak RSS {SIZES[1]:,} vs {SIZES[0]:,} scans: {100 * spread:+.1f} % (target within "
+                     f"{100 * RSS_SPREAD:.0f} %, both under {RSS_TARGET_MB:,.0f} MB): {'met' if ok else 'NOT met'}")
+    print_lines("Scale: speed, output size and memory against the issue's targets", lines)
+    print(json.dumps({"rss_mb": rss, "run_scans_per_s": n / t_run, "features_scans_per_s": n / t_feat,
+                      "read_scans_per_s": n / t_read, "time": time.strftime("%Y-%m-%d %H:%M")}))
+
+
+if __name__ == "__main__":
+    main()
