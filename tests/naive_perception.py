@@ -212,6 +212,49 @@ def htc_window(x, y, ca: float, cb: float, radius: float, w: int, cell: float,
     return votes, best
 
 
+def htc_peak(x, y, r_min: float, r_max: float, r_step: float, w: int, cell: float, tol: float,
+             min_sagitta: float) -> int:
+    """HTC over every radius the arc allows, each voted in full (htc_window): the peak's votes (0: no radius).
+    The radii are r_min + k r_step within [r_lo, r_hi]: no smaller than half the chord (less tol), than the
+    circle through the chord's ends and P_near (the point nearest the scanner) pushed tol further out, no larger
+    than that circle with P_near pulled tol in; the nearest step to their middle when no step lies inside. Each
+    radius's window is centred on the circle of that radius through the chord's ends, on the far side from the
+    scanner. A later radius takes the peak only with more votes; no arc (sagitta under min_sagitta): 0."""
+    n = len(x)
+    if n < 3:
+        return 0
+    near = min(range(n), key=lambda i: (x[i] * x[i] + y[i] * y[i], i))
+    chord = math.hypot(x[-1] - x[0], y[-1] - y[0])
+    if chord < 1e-6:
+        return 0
+    mx, my = 0.5 * (x[0] + x[-1]), 0.5 * (y[0] + y[-1])
+    nx, ny = (y[-1] - y[0]) / chord, -(x[-1] - x[0]) / chord
+    if nx * mx + ny * my < 0:
+        nx, ny = -nx, -ny
+    sag = -((x[near] - mx) * nx + (y[near] - my) * ny)
+    if sag < min_sagitta:
+        return 0
+    half = 0.5 * chord
+    r_lo, r_hi = max(r_min, half - tol), r_max
+    if sag > tol:
+        r_hi = min(r_hi, ((sag - tol) ** 2 + half * half) / (2.0 * (sag - tol)) + tol)
+    s2 = max(sag, 0.0) + tol
+    r_lo = max(r_lo, (s2 * s2 + half * half) / (2.0 * s2) - tol)
+    if r_lo > r_hi:
+        return 0
+    k0 = math.ceil((r_lo - r_min) / r_step - 1e-9)
+    k1 = math.floor((r_hi - r_min) / r_step + 1e-9)
+    if k1 < k0:
+        k0 = k1 = round((0.5 * (r_lo + r_hi) - r_min) / r_step)
+    best = 0
+    for k in range(k0, k1 + 1):
+        r = r_min + k * r_step
+        h = math.sqrt(max(r * r - half * half, 0.0))
+        _, (votes, _, _) = htc_window(x, y, mx + nx * h, my + ny * h, r, w, cell, tol)
+        best = max(best, votes)
+    return best
+
+
 # ----------------------------------------------------------------------------------------------- scenes
 
 
