@@ -53,6 +53,22 @@ def local_batch(inputs: list[str], tmp: Path) -> tuple[float, int]:
     return seconds, scans
 
 
+def _nothing(i: int) -> int:
+    return i
+
+
+def noop_round_trip(executor, n: int = 50) -> float:  # noqa: ANN001 - cluster.DaskExecutor
+    """Median seconds from submitting an empty task to holding its result, one task at a time."""
+    import statistics
+
+    times = []
+    for i in range(n):
+        t0 = time.perf_counter()
+        executor.client.submit(_nothing, i, pure=False).result()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
 def main() -> None:
     from datmo_cli.batch import ensure_warm
     from datmo_cli.cluster import DaskExecutor
@@ -71,6 +87,7 @@ def main() -> None:
                 t0 = time.perf_counter()
                 executors[n] = DaskExecutor(f"local:{n}")
                 started[n] = time.perf_counter() - t0
+            noop = noop_round_trip(executors[1])
             for _ in range(REPEAT):        # interleaved, so a busy spell of the machine hits every setting alike
                 seconds, scans = local_batch(inputs, tmp)
                 best["local"] = min(best["local"], seconds)
@@ -88,7 +105,8 @@ def main() -> None:
                 f"{os.cpu_count()} cores, best of {REPEAT}", rows)
     print_lines("Batch targets", [
         f"2 workers / 1 worker throughput: {speedup:.2f}x (target >= 1.7x on 2 cores)",
-        f"scheduler overhead per input (local:1 against --jobs 1): {overhead:+.3f} s (target < 0.2 s)",
+        f"scheduler overhead per input (local:1 against --jobs 1): {overhead:+.3f} s (target < 0.2 s); an empty "
+        f"task's round trip from this client: {1000 * noop:.1f} ms",
         f"load average while measuring: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (figures need idle cores)",
     ])
 
