@@ -94,7 +94,9 @@ class TrackedRun:
         return offsets, items
 
 
-_CHUNK = 64   # fewest scans per compiled tracking call (progress is reported between calls)
+# scans per compiled tracking call: at least _CHUNK (a call costs ~0.4 ms of Python around it), at most
+# _CHUNK_MAX (the tails a block gives for the markers take 320 B per track and scan); progress between calls
+_CHUNK, _CHUNK_MAX = 512, 4096
 
 
 class TrackStream:
@@ -126,7 +128,7 @@ class TrackStream:
         if len(feats) != n:
             raise ValueError(f"features for {len(feats)} scans, the run has {n}")
         stamps = run.stamps.tolist()
-        step = max(n // 20, _CHUNK)
+        step = min(max(n // 10, _CHUNK), _CHUNK_MAX)
         for a in range(0, n, step):   # one compiled call per chunk of scans (Tracker.track_block)
             b = min(a + step, n)
             block = tracker.track_block(run.stamps[a:b], feats[a:b], run.ranges[a:b],
