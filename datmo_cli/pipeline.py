@@ -97,9 +97,11 @@ def warm_up() -> None:
     (odometry), before any input's clock starts and before worker processes start: they then inherit the
     compiled kernels (fork) or find the cache complete (spawn), and never compile one kernel at once (a
     first run after an install would otherwise have every worker writing the same cache files)."""
+    from .numba_runtime import prepare
     from .perception.egomotion import odometry_for
     from .sim.simulate import simulate_scene
 
+    prepare()
     for scene in ("hall", "patrol"):
         sim = simulate_scene(scene, duration=8.0)
         derive(sim.run, sim.odometry)

@@ -113,6 +113,9 @@ def stream_log(stream: LogStream, out: str | Path, *, command: str, params: dict
     message type}, in this order) that `stage(block)` gives block by block ({topic: (msgtype, stamps,
     payloads)}), with provenance (`command`, its effective `params`). Returns the number of scans.
     `progress(done, total)` follows the scans."""
+    from .numba_runtime import prepare
+
+    prepare()   # the stages load numba kernels: numba's set-up without its scipy.linalg import
     provenance = mcapio.Provenance(command, params, [stream.path], command_line)
     total = stream.n_scans
     with mcapio.LogWriter(out, force=force, provenance=provenance) as writer:
@@ -148,6 +151,9 @@ def stream_odometry(stream: LogStream, mode: str, block_scans: int = BLOCK_SCANS
     odometry, n = stream.odometry, stream.n_scans
     if (odometry is not None and len(odometry)) or mode == "off" or n < 2:
         return odometry, False
+    from .numba_runtime import prepare
+
+    prepare()   # scan matching loads numba kernels
     if mode == "auto":
         pairs = sample_pairs(stream, block_scans=block_scans)
         if not pairs_move(pairs, n):

@@ -13,7 +13,7 @@ from functools import cache
 
 import numpy as np
 
-from .types import typestore
+from .types import fields as msg_fields
 
 CDR_HEADER = b"\x00\x01\x00\x00"  # CDR, little endian
 HEADER_TYPE = "std_msgs/msg/Header"
@@ -40,7 +40,7 @@ def element_dtype(msgtype: str) -> np.dtype:
 
 def _struct_layout(msgtype: str) -> tuple[np.dtype, int]:
     """(dtype, alignment) of a fixed-size struct laid out as CDR lays out consecutive elements."""
-    _, fields = typestore().fielddefs[msgtype]
+    fields = msg_fields(msgtype)
     names, formats, offsets = [], [], []
     pos, max_align = 0, 1
     for name, (node, spec) in fields:
@@ -86,7 +86,7 @@ class _Field:
 
 @cache
 def _plan(msgtype: str) -> tuple[_Field, ...]:
-    _, fields = typestore().fielddefs[msgtype]
+    fields = msg_fields(msgtype)
     plan = []
     for name, (node, spec) in fields:
         if node == 2 and spec == HEADER_TYPE:

@@ -1,0 +1,61 @@
+"""Getting numba ready to load cached kernels at a low fixed cost per process.
+
+The first cached kernel a process loads makes numba import its typing and lowering registries; one of
+them, numba.np.arraymath, imports scipy.linalg (about 0.3 s, a quarter of a one-scan `datmo run`) only to
+learn whether BLAS is there (`numba.np.linalg.ensure_blas` imports scipy.linalg.cython_blas). `prepare`
+sets the registries up once with that one extension module loaded on its own for the moment of the check
+(a few ms; the check's answer is the same), then forgets it, so a later `import scipy.linalg` anywhere is
+the ordinary one. No datmo kernel calls BLAS; numba binds BLAS functions only when it compiles a kernel
+that does, and then imports scipy.linalg itself.
+"""
+
+from __future__ import annotations
+
+import sys
+
+_READY = False
+BLAS = "scipy.linalg.cython_blas"
+
+
+def prepare() -> None:
+    """Import numba and initialise its CPU target (what loading the first cached kernel would do), once."""
+    global _READY
+    if _READY:
+        return
+    loaded = None if "scipy.linalg" in sys.modules else _load_blas_alone()
+    try:
+        from numba.core.registry import cpu_target
+
+        cpu_target.target_context.refresh()
+    finally:
+        if loaded is not None and sys.modules.get(BLAS) is loaded and "scipy.linalg" not in sys.modules:
+            del sys.modules[BLAS]
+    _READY = True
+
+
+def _load_blas_alone():  # noqa: ANN202 - a module or None
+    """scipy.linalg.cython_blas loaded without its package (registered in sys.modules), or None when scipy
+    is missing or the module cannot be found or loaded that way (numba then checks as it always does)."""
+    import importlib.machinery
+    import importlib.util
+    from pathlib import Path
+
+    try:
+        spec = importlib.util.find_spec("scipy")
+        if spec is None or not spec.submodule_search_locations:
+            return None
+        folder = Path(next(iter(spec.submodule_search_locations))) / "linalg"
+        for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+            path = folder / f"cython_blas{suffix}"
+            if path.is_file():
+                break
+        else:
+            return None
+        blas_spec = importlib.util.spec_from_file_location(BLAS, path)
+        module = importlib.util.module_from_spec(blas_spec)
+        sys.modules[BLAS] = module
+        blas_spec.loader.exec_module(module)
+        return module
+    except Exception:  # noqa: BLE001 - any failure: numba imports scipy.linalg as usual
+        sys.modules.pop(BLAS, None)
+        return None

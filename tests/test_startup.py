@@ -1,0 +1,106 @@
+"""Start-up: what each command imports (in a fresh interpreter), the tables that spare the type store, and
+numba's set-up without scipy.linalg. No wall-clock asserts: benchmarks/bench_startup.py measures times."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from datmo_cli.log import cdr, mcapio, types
+from datmo_cli.log.scan import ScanGeometry, encode_scan
+
+HEAVY = ("numba", "scipy", "scipy.linalg", "sklearn", "rosbags.typesys.stores.ros2_humble", "matplotlib", "dask")
+
+PROBE = """
+import json, sys
+from datmo_cli.cli import main
+try:
+    main({args!r})
+except SystemExit as exc:
+    code = exc.code
+else:
+    code = 0
+print("\\nPROBE " + json.dumps({{"code": code, "heavy": [m for m in {heavy!r} if m in sys.modules]}}))
+"""
+
+
+def imported(args: list[str], cwd: Path) -> tuple[int, list[str]]:
+    """(exit code, HEAVY modules in sys.modules) after `datmo ARGS` in a fresh interpreter."""
+    out = subprocess.run([sys.executable, "-c", PROBE.format(args=args, heavy=HEAVY)], capture_output=True,
+                         text=True, cwd=cwd, check=True).stdout
+    result = json.loads(out.rsplit("\nPROBE ", 1)[1])
+    return result["code"], result["heavy"]
+
+
+def one_scan_log(path: Path, tracks: bool = False) -> Path:
+    """A log of one scan (and, with `tracks`, one empty /datmo/tracks message), written without numba."""
+    g = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0)
+    stamp = 1_000_000_000
+    with mcapio.LogWriter(path) as w:
+        w.write(mcapio.TOPIC_SCAN, types.LASERSCAN, stamp, encode_scan(stamp, np.full(361, 3.0, np.float32), g))
+        if tracks:
+            w.write(mcapio.TOPIC_TRACKS, types.TRACKS, stamp,
+                    cdr.encode(types.TRACKS, {"stamp_ns": stamp, "frame_id": "laser"}))
+    return path
+
+
+@pytest.mark.parametrize("args", [["--help"], ["info", "{log}"], ["info", "{log}", "--json"], ["report", "{done}"],
+                                  ["report", "{done}", "--format", "json"]])
+def test_light_commands_import_neither_numba_nor_scipy_nor_the_type_store(tmp_path: Path, args: list[str]):
+    log, done = one_scan_log(tmp_path / "one.mcap"), one_scan_log(tmp_path / "done.mcap", tracks=True)
+    code, heavy = imported([a.format(log=log, done=done) for a in args], tmp_path)
+    assert code == 0
+    assert heavy == []
+
+
+def test_the_command_group_alone_imports_no_numpy(tmp_path: Path):
+    out = subprocess.run([sys.executable, "-c", "import sys; import datmo_cli.cli; "
+                          "print([m for m in ('numpy', 'rich', 'mcap') if m in sys.modules])"],
+                         capture_output=True, text=True, cwd=tmp_path, check=True).stdout
+    assert out.strip() == "[]"
+
+
+@pytest.mark.parametrize("command", ["features", "track", "run"])
+def test_stage_commands_load_numba_without_scipy_linalg_or_the_type_store(tmp_path: Path, command: str):
+    log = one_scan_log(tmp_path / "one.mcap")
+    out = ["-o", str(tmp_path / "out"), "--no-report"] if command == "run" else ["-o", str(tmp_path / "out.mcap")]
+    code, heavy = imported([command, str(log), *out], tmp_path)
+    assert code == 0
+    assert heavy == ["numba", "scipy"]   # scipy's package only (numba's BLAS check), not scipy.linalg
+
+
+def test_the_field_definitions_read_from_the_msg_files_are_the_type_stores():
+    store = types.typestore()
+    for msgtype in [*types.datmo_msg_files(), "builtin_interfaces/msg/Time"]:
+        assert list(types.fields(msgtype)) == list(store.fielddefs[msgtype][1]), msgtype
+
+
+def test_the_shipped_schema_table_is_the_type_stores():
+    """msg/schemas.json holds what the type store generates (python -m datmo_cli.log.types rewrites it)."""
+    assert types._schema_table() == types.schema_table()
+    for msgtype in types.WRITTEN_TYPES:
+        assert types.schema_text(msgtype) == types.typestore().generate_msgdef(msgtype, ros_version=2)[0]
+
+
+def test_numba_is_prepared_without_scipy_linalg_and_scipy_linalg_still_imports_whole(tmp_path: Path):
+    code = """
+import sys
+from datmo_cli.numba_runtime import prepare
+prepare()
+import numba.np.arraymath as arraymath
+before = [m for m in sys.modules if m.startswith("scipy.linalg")]
+import numpy as np
+import numba
+import scipy.linalg
+from scipy.linalg import cython_blas
+f = numba.njit(lambda a, b: np.dot(a, b))
+print(before, arraymath._HAVE_BLAS, scipy.linalg.cython_blas is cython_blas, f(np.ones(3), np.ones(3)))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
+                         check=True).stdout
+    assert out.strip() == "[] True True 3.0"
