@@ -43,9 +43,9 @@ def test_one_and_two_threads_give_the_same_features(log):
     two = extract_run(run, landmarks=False, threads=2)
     assert len(one.lines) and len(one.legs)
     assert_same(one, two)
-    # blocks of a few scans (more parts than scans per thread) and the paper's rule too
+    # the smallest block that runs on two threads, and the paper's rule too
     p = FeatureParams(leg_model="paper")
-    short = run.slice(0, 7)
+    short = run.slice(0, 2 * T.MIN_SCANS_PER_THREAD + 1)
     assert_same(extract_run(short, p, landmarks=False, threads=1), extract_run(short, p, landmarks=False, threads=2))
 
 
@@ -79,6 +79,12 @@ def test_resolve():
         T.resolve(-1)
     with pytest.raises(ValueError):
         T.set_default(-2)
+
+
+def test_a_few_scans_run_on_one_thread():
+    assert T.for_scans(2, 2 * T.MIN_SCANS_PER_THREAD) == 2
+    assert T.for_scans(2, 2 * T.MIN_SCANS_PER_THREAD - 1) == 1
+    assert T.for_scans(4, 0) == 1 and T.for_scans(1, 10_000) == 1
 
 
 def test_a_process_forked_after_the_pool_started_runs_one_thread(monkeypatch):

@@ -214,7 +214,8 @@ def _extract_block(block: np.ndarray, args: tuple, given: np.ndarray, given_off:
     # empty, not zeros: only the rows the kernel fills are read
     seg, lines, circles, blobs = (np.empty((rows, c), np.int64 if c == 2 else np.float64) for c in (2, 13, 9, 9))
     counts = np.zeros((n, 4), np.int64)
-    if threads > 1 and n > 1:
+    threads = T.for_scans(threads, n)
+    if threads > 1:
         with T.numba_threads(threads):
             K.extract_parallel(block, min(n, 4 * threads), *args, seg, lines, circles, blobs, counts, given, given_off)
     else:

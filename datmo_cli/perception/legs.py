@@ -409,7 +409,8 @@ def leg_probabilities(ranges, angles, seg_start, seg_end, seg_offsets, range_min
         args = (cos_a, sin_a, angles, start, end, offsets, lo, hi, RADIUS_CLIP, OCCLUSION_MARGIN, CANDIDATE_MAX_WIDTH,
                 CANDIDATE_MIN_POINTS, _angle_step(angles), *model._kernel_args(), feats, out)
         N = len(ranges)
-        if threads > 1 and N > 1:
+        threads = T.for_scans(threads, N)
+        if threads > 1:
             with T.numba_threads(threads):
                 LK.block_probabilities_parallel(ranges, min(N, 4 * threads), *args)
         else:

@@ -48,6 +48,15 @@ def resolve(threads: int | None = None) -> int:
     return max(n, 1)
 
 
+MIN_SCANS_PER_THREAD = 16   # fewer scans per thread run on one (the parallel kernels' start-up and compile cost)
+
+
+def for_scans(threads: int, scans: int) -> int:
+    """The threads a block of `scans` scans runs on, of `threads`: each gets at least MIN_SCANS_PER_THREAD
+    (a run of a few scans never starts, nor compiles, the parallel kernels)."""
+    return max(1, min(threads, scans // MIN_SCANS_PER_THREAD))
+
+
 @contextmanager
 def numba_threads(n: int) -> Iterator[int]:
     """Run numba's parallel kernels inside the block on `n` threads (a resolve()d count > 1)."""
