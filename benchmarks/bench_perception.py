@@ -66,7 +66,11 @@ def startup_seconds(cache_dir: str | None = None) -> float:
 
 
 def one_core() -> set[int] | None:
-    """Pin this process to one CPU (the kernels are serial; this keeps numpy to one core too)."""
+    """Pin this process to one CPU and the perception kernels to one thread (their default is all cores;
+    see bench_perception_cores for the figures on several); this keeps numpy to one core too."""
+    from datmo_cli.perception.threads import set_default
+
+    set_default(1)
     if not hasattr(os, "sched_getaffinity"):
         return None
     before = os.sched_getaffinity(0)
