@@ -186,17 +186,6 @@ def _bounding_box(x, y, s, e, rho_res, max_width, box) -> int:
 
 
 @njit(cache=True)
-def _offsets_for(x, y, s, e, cos_t, sin_t, rho_res, lo, max_width) -> int:
-    """lo[t]: the smallest rho the bounding box of points [s, e) gives at theta cell t; returns the number of
-    rho cells the box can produce (the accumulator adapted to the segment)."""
-    box = np.empty(4)
-    width = _bounding_box(x, y, s, e, rho_res, max_width, box)
-    for t in range(cos_t.shape[0]):
-        lo[t] = _row_offset(box, cos_t[t], sin_t[t])
-    return width
-
-
-@njit(cache=True)
 def _one_line(x, y, a, b, tol, tail) -> bool:
     """Whether the total-least-squares line of points [a, b) lies within `tol` of 90 % of them and of each
     of the last `tail` points."""
@@ -232,7 +221,8 @@ def line_subsegments(x, y, s, e, acc, lo, cos_t, sin_t, rho_res, k, cell, touche
     """Split points [s, e) into runs that each hold one line: the accumulator peak is followed as points are
     added in scan order, and when more than three consecutive new points lie off the peak's line (farther
     than two rho cells), a new line starts at the first of them. Returns the number of runs in sub_s/sub_e;
-    peaks[k] = (votes, theta cell, rho cell) of run k's accumulator peak (lo: see _offsets_for; cell: see
+    peaks[k] = (votes, theta cell, rho cell) of run k's accumulator peak (lo[t]: the smallest rho the
+    segment's bounding box gives at theta cell t, see _row_offset; cell: see
     normal_cells; k: theta cells voted either side of the normal; hist: scratch of at least e - s rows). Only
     the rows voted in get their lo (a peak's row always is); acc (nt, width_max) is used as one flat array of
     rows as wide as the segment needs and is left all zero, as `touched` is left all False."""
