@@ -59,3 +59,34 @@ def _load_blas_alone():  # noqa: ANN202 - a module or None
     except Exception:  # noqa: BLE001 - any failure: numba imports scipy.linalg as usual
         sys.modules.pop(BLAS, None)
         return None
+
+
+def cache_looks_stale() -> bool:
+    """Whether a stage would compile kernels rather than load them from numba's cache, judged from the index
+    files (*.nbi) in datmo's __pycache__ folders without importing numba: none at all (the first run after an
+    install, or a cache kept elsewhere by NUMBA_CACHE_DIR or a read-only install), or a module edited after
+    its kernels were last cached (numba keys its cache on the source's time and size). A kernel never yet
+    called in a module whose others are cached is not seen; it compiles when first called."""
+    import os
+
+    if os.environ.get("NUMBA_DISABLE_JIT", "0") != "0":
+        return False
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return True   # not judged: as stale
+    package = os.path.dirname(os.path.abspath(__file__))
+    newest: dict[str, float] = {}
+    for folder in [package, *(e.path for e in os.scandir(package) if e.is_dir() and not e.name.startswith("_"))]:
+        try:
+            entries = list(os.scandir(os.path.join(folder, "__pycache__")))
+        except OSError:
+            continue
+        for e in entries:
+            if e.name.endswith(".nbi"):
+                source = os.path.join(folder, e.name.split(".", 1)[0] + ".py")
+                newest[source] = max(newest.get(source, 0.0), e.stat().st_mtime)
+    if not newest:
+        return True
+    try:
+        return any(os.stat(source).st_mtime > cached for source, cached in newest.items())
+    except OSError:
+        return True

@@ -104,3 +104,26 @@ print(before, arraymath._HAVE_BLAS, scipy.linalg.cython_blas is cython_blas, f(n
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
                          check=True).stdout
     assert out.strip() == "[] True True 3.0"
+
+
+def test_the_cache_looks_stale_without_index_files_or_after_an_edit(tmp_path: Path, monkeypatch):
+    import os
+
+    from datmo_cli import numba_runtime
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.delenv("NUMBA_DISABLE_JIT", raising=False)
+    monkeypatch.setattr(numba_runtime, "__file__", str(tmp_path / "numba_runtime.py"))
+    source = tmp_path / "perception" / "_kernels.py"
+    (source.parent / "__pycache__").mkdir(parents=True)
+    source.write_text("")
+    assert numba_runtime.cache_looks_stale()   # nothing cached: a first run
+    index = source.parent / "__pycache__" / "_kernels.segment-12.py311.nbi"
+    index.write_bytes(b"")
+    os.utime(source, (1_000, 1_000))
+    os.utime(index, (2_000, 2_000))
+    assert not numba_runtime.cache_looks_stale()
+    os.utime(source, (3_000, 3_000))         # edited after its kernels were cached
+    assert numba_runtime.cache_looks_stale()
+    monkeypatch.setenv("NUMBA_DISABLE_JIT", "1")
+    assert not numba_runtime.cache_looks_stale()
