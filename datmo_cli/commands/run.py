@@ -138,8 +138,8 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         executor = DaskExecutor(scheduler, retries=retries)
     else:
         executor = LocalExecutor(jobs)
-        if min(executor.workers, len(batch.tasks)) > 1:
-            _warm_up()   # only for a pool: one process loads just the kernels its input uses, as it goes
+        if batch.tasks and (min(executor.workers, len(batch.tasks)) > 1 or _compiling()):
+            _warm_up()   # a pool, or a first run to say; else one process loads just the kernels it uses
     import time
 
     t0 = time.perf_counter()
@@ -212,6 +212,13 @@ def _final_table(records: list[dict], seconds: float, where: str) -> None:
     click.echo(f"{len(records)} input{'s' if len(records) != 1 else ''}: {counts[DONE]} done, {counts[SKIPPED]} "
                f"skipped (already in the manifest), {counts[FAILED]} failed; {scans:,} scans in {seconds:.1f} s on "
                f"{where} ({rate:,.0f} scans/s)", err=True)
+
+
+def _compiling() -> bool:
+    """Whether the kernels look uncompiled (numba_runtime.cache_looks_stale: a few ms, no numba import)."""
+    from ..numba_runtime import cache_looks_stale
+
+    return cache_looks_stale()
 
 
 def _warm_up() -> None:
