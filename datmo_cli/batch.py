@@ -294,6 +294,7 @@ class Task:
     params: dict | None
     params_hash: str
     command_line: str | None
+    threads: int | None = None     # --threads: perception threads on a Dask worker (None: one per task there)
 
 
 def record(task: Task, status: str, **fields) -> dict:
@@ -461,7 +462,7 @@ class Batch:
 
 
 def prepare(specs: list[str], out_dir: str, *, params: dict | None = None, force: bool = False,
-            command_line: str | None = None) -> Batch:
+            command_line: str | None = None, threads: int | None = None) -> Batch:
     """Find the inputs, read the manifest and decide what to redo.
 
     An input is skipped when its latest manifest line is done (or skipped) with the same parameters' hash
@@ -489,7 +490,7 @@ def prepare(specs: list[str], out_dir: str, *, params: dict | None = None, force
                             "finished": datetime.now(UTC).isoformat(timespec="seconds")})
             continue
         overwrite = force or (exists(dst) and (owned or _leftover(dst, src)))
-        tasks.append(Task(i, src, dst, overwrite, params, phash, command_line))
+        tasks.append(Task(i, src, dst, overwrite, params, phash, command_line, threads))
     if ledger:
         manifest.compact(ledger)   # one line per input before this batch appends its own
     return Batch(out_dir, tasks, skipped, manifest, [d for _, d in pairs])

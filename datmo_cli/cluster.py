@@ -53,7 +53,10 @@ def _worker_task(task: Task, cancel_event: str) -> dict:
     """What a worker runs for one input: warm (once per process), then run_task polling the cancel Event."""
     from distributed import Event
 
+    from .perception.threads import set_default
+
     ensure_warm()
+    set_default(task.threads or 1)   # Dask runs one task per worker thread: perception on one thread unless told
     event = Event(cancel_event)
     last = [0.0, False]
 

@@ -92,7 +92,8 @@ class _BatchProgress:
                    "or 'paper' (the paper's circle rule and walking pattern) [default: default].")
 @click.option("--threads", type=click.IntRange(min=1), default=None,
               help="Threads for each input's per-scan perception (segmentation, features, leg detector) [default: "
-                   "all cores; one in each of several local jobs at once]; the results are the same for any number.")
+                   "all cores; one in each of several local jobs at once, and in each task on a Dask worker]; the "
+                   "results are the same for any number.")
 def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: str | None, retries: int,
             force: bool, config: Path | None, plot: bool, fmt: str, top: int | None, sort: str, no_report: bool,
             no_markers: bool, ego_motion: str | None, leg_model: str | None, threads: int | None) -> None:
@@ -126,7 +127,8 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     params = _params(config, leg_model, ego_motion)
     if no_markers:
         params["markers"] = False
-    batch = prepare(list(inputs), out_dir, params=params, force=force, command_line=invocation("run"))
+    batch = prepare(list(inputs), out_dir, params=params, force=force, command_line=invocation("run"),
+                    threads=threads)
     plots = [Path(t.output).with_suffix(".png") for t in batch.tasks] if plot else []
     if plots:
         from .report import check_plot_outputs
