@@ -218,7 +218,7 @@ class Tracker:
         ranges_arg = (np.zeros((N, 0), np.float32) if ranges is None
                       else np.ascontiguousarray(ranges, np.float32).reshape(N, -1))
         poses_arg = np.zeros((N, 3)) if poses is None else np.ascontiguousarray(poses, np.float64).reshape(N, 3)
-        cap = max(64, 2 * N * max(len(self.tracks), 4))
+        cap = N * (len(self.tracks) + 4)   # grown in the call when more tracks live
         T = self.tracks.tail_length
         offsets = np.zeros(N + 1, np.int64)
         tab, out, tail, count = _step.track_block(
