@@ -339,12 +339,11 @@ def input_sha256(path: str) -> str:
 
 
 def headline(path: str) -> dict:
-    """The run's headline figures from its output: confirmed tracks, by class, and dynamic ones."""
-    from .log import mcapio
-    from .report import RunData, summarise
+    """The run's headline figures from its output (read in one streaming pass): confirmed tracks, by class,
+    and dynamic ones."""
+    from .report import summarise_file
 
-    data = RunData.from_log(mcapio.read_log(path, topics=(mcapio.TOPIC_SCAN, mcapio.TOPIC_TRACKS)))
-    row = summarise(data).file_row()
+    row = summarise_file(path).file_row()
     return {"confirmed": row["tracks"], **{c: row[c] for c in TRACK_CLASSES}, "dynamic": row["dynamic"]}
 
 
