@@ -418,15 +418,18 @@ def gated_costs(tab, n, mx, my, mkind, compat, crow, prm):  # noqa: ANN001, ANN2
     """Costs (n, M) d2 + ln det S and which pairs pass the gate, the distance bound and kind compatibility
     (_kernels.gated_costs on the table; the cost of a pair that does not pass is inf, not computed)."""
     M = len(mx)
-    cost = np.empty((n, M))
+    cost = np.full((n, M), np.inf)
     ok = np.zeros((n, M), np.bool_)
+    far = prm[P_MAX_GATE_DISTANCE]
     for k in range(n):
         row = crow[k]
         for j in range(M):
+            dx, dy = mx[j] - tab[k, X], my[j] - tab[k, Y]
+            if not compat[row, mkind[j]] or abs(dx) > far or abs(dy) > far:   # then hypot(dx, dy) > far too
+                continue
             s = prm[P_LEG_MEASUREMENT_NOISE] if mkind[j] == K_LEG else prm[P_MEASUREMENT_NOISE]
             v = s * s
             a, b, c = tab[k, P0] + v, tab[k, P0 + 1], tab[k, P0 + 5] + v
-            dx, dy = mx[j] - tab[k, X], my[j] - tab[k, Y]
             det = a * c - b * b
             d2 = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / det
             ok[k, j] = compat[row, mkind[j]] and d2 <= prm[P_GATE] and np.hypot(dx, dy) <= prm[P_MAX_GATE_DISTANCE]
