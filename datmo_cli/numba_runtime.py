@@ -12,8 +12,10 @@ that does, and then imports scipy.linalg itself.
 from __future__ import annotations
 
 import sys
+import threading
 
 _READY = False
+_LOCK = threading.Lock()
 BLAS = "scipy.linalg.cython_blas"
 
 
@@ -22,15 +24,18 @@ def prepare() -> None:
     global _READY
     if _READY:
         return
-    loaded = None if "scipy.linalg" in sys.modules else _load_blas_alone()
-    try:
-        from numba.core.registry import cpu_target
+    with _LOCK:   # threads of one Dask worker may start stages at once
+        if _READY:
+            return
+        loaded = None if "scipy.linalg" in sys.modules else _load_blas_alone()
+        try:
+            from numba.core.registry import cpu_target
 
-        cpu_target.target_context.refresh()
-    finally:
-        if loaded is not None and sys.modules.get(BLAS) is loaded and "scipy.linalg" not in sys.modules:
-            del sys.modules[BLAS]
-    _READY = True
+            cpu_target.target_context.refresh()
+        finally:
+            if loaded is not None and sys.modules.get(BLAS) is loaded and "scipy.linalg" not in sys.modules:
+                del sys.modules[BLAS]
+        _READY = True
 
 
 def _load_blas_alone():  # noqa: ANN202 - a module or None
