@@ -13,10 +13,13 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .errors import DatmoError, InputError
 from .log import mcapio
-from .report import RunData
+
+if TYPE_CHECKING:
+    from .report import RunData
 
 REPORT_TOPICS = (mcapio.TOPIC_SCAN, mcapio.TOPIC_ODOM, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS,
                  mcapio.TOPIC_TRACKS)
@@ -28,6 +31,8 @@ def read_run_data(path: str | Path, *, keep_scans: bool = False, ground_truth: b
 
     Raises MissingChannelError naming the command to run first when /scan or /datmo/tracks is missing.
     """
+    from .report import RunData  # here, not at the top: the stages need no report module
+
     topics = REPORT_TOPICS + ((mcapio.TOPIC_GROUND_TRUTH,) if ground_truth else ())
     return RunData.from_log(mcapio.read_log(path, topics=topics), keep_scans=keep_scans)
 
