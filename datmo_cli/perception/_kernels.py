@@ -603,13 +603,14 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
     """Features of one scan's segments (points x, y, m, sensor frame): HTL on every segment, then the
     decision rule of method.md section 5.2, a circle kept only when well posed (circle_posed; `dalpha`: the
     scan's angle step, rad). Appends rows to lines/circles/blobs from nl/nc/nb; returns the new counts.
-    `work`: see scratch()."""
+    `work`: the scratch arrays extract_scans makes; acc is zeroed as segments first need it (work[-1][0]: how
+    many flat cells of acc are zero)."""
     rho_res = p[P_RHO_RES]
     window = p[P_WINDOW]
     min_pts = p[P_LINE_MIN_POINTS]
     min_racc = p[P_LINE_MIN_RACC]
     min_len = p[P_LINE_MIN_LENGTH]
-    lo, toff, cell, touched, peaks, cand, kept, cidx, cout, hist = work
+    lo, toff, cell, touched, peaks, cand, kept, cidx, cout, hist, box, zeroed = work
     nt = cos_t.shape[0]
     kwin = int(window / (np.pi / nt))
     tstep = np.pi / nt
@@ -618,6 +619,11 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
         e = ends[g]
         if e - s >= min_pts:
             normal_cells(x, y, s, e, nt, cell)
+            # line_subsegments uses the first nt * width cells of acc (flat): zero what was never used before
+            used = nt * _bounding_box(x, y, s, e, rho_res, acc.shape[1], box)
+            if used > zeroed[0]:
+                acc.reshape(-1)[zeroed[0]:used] = 0
+                zeroed[0] = used
             nsub = line_subsegments(x, y, s, e, acc, toff, cos_t, sin_t, rho_res, kwin, cell, touched, sub_s,
                                     sub_e, peaks, hist)
         else:
@@ -786,7 +792,8 @@ def extract_scans(ranges, k0, k1, cos_a, sin_a, cos_inc, c1, range_min, range_ma
     sub_s = np.empty(MAX_SUB, np.int64)
     sub_e = np.empty(MAX_SUB, np.int64)
     diag = 2.0 * min(range_max, 100.0)
-    acc = np.zeros((cos_t.shape[0], int(diag / p[P_RHO_RES]) + 3), np.int32)
+    # not zeroed here: extract_scan zeroes the part a segment needs the first time (a few % of it in practice)
+    acc = np.empty((cos_t.shape[0], int(diag / p[P_RHO_RES]) + 3), np.int32)
     w = int(round(p[P_CWINDOW] / p[P_CELL]))
     cacc = np.zeros((2 * w + 1, 2 * w + 1), np.int32)
     min_points = int(p[P_MIN_POINTS])
@@ -795,7 +802,8 @@ def extract_scans(ranges, k0, k1, cos_a, sin_a, cos_inc, c1, range_min, range_ma
     nt = cos_t.shape[0]
     work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
             np.empty((MAX_SUB, 3), np.int64), np.empty((MAX_SUB, 12)), np.empty(MAX_SUB, np.int64),
-            np.empty(MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64))
+            np.empty(MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64), np.empty(4),
+            np.zeros(1, np.int64))
     for k in range(k0, k1):
         r = ranges[k]
         if use_given:

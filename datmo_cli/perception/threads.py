@@ -67,7 +67,11 @@ def numba_threads(n: int) -> Iterator[int]:
         _POOL_PID = os.getpid()
     before = numba.get_num_threads()
     numba.set_num_threads(n)
+    # parts handed out one at a time (not n fixed shares): a thread the OS holds back leaves its share to
+    # the others, which matters when other processes share the cores
+    chunk = numba.set_parallel_chunksize(1)
     try:
         yield n
     finally:
+        numba.set_parallel_chunksize(chunk)
         numba.set_num_threads(before)
