@@ -195,6 +195,9 @@ def _walk_file(path: str | Path, topics: Iterable[str] | None, out: LogContents,
                       TruncatedLogWarning, stacklevel=3)
 
 
+_RELEASE = 8 << 20   # give back the pages of a mapped file every 8 MB read
+
+
 class _Truncated(Exception):
     pass
 
@@ -206,6 +209,7 @@ def _scan(buf, pos: int, end: int, out: LogContents, schemas: dict, want: set[st
     import zstandard
 
     channels = out.channels
+    released = [0]   # bytes of a mapped file given back to the system (see _RELEASE)
     while pos < end:
         if pos + 9 > end:
             raise _Truncated
@@ -244,6 +248,11 @@ def _scan(buf, pos: int, end: int, out: LogContents, schemas: dict, want: set[st
                 data = bytes(data)
             yield from _scan(memoryview(data), 0, len(data), out, schemas, want, wanted_ids, top=False)
             out.chunks += 1
+            if top and isinstance(buf, mmap.mmap) and pos - released[0] >= _RELEASE:
+                # pages of the file read so far leave this process's memory (a long log is not held whole)
+                upto = pos - pos % mmap.PAGESIZE
+                buf.madvise(mmap.MADV_DONTNEED, released[0], upto - released[0])
+                released[0] = upto
         elif op == _OP_SCHEMA:
             sid = _U16.unpack_from(buf, body)[0]
             name, p = _string(buf, body + 2)

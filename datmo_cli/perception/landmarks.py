@@ -428,6 +428,9 @@ def landmark_elements(db: np.ndarray, first_ns: np.ndarray, snap_idx: np.ndarray
     return out
 
 
+SNAPSHOT_SCANS = 32   # scans per kernel call of LandmarkStream.add
+
+
 class LandmarkStream:
     """The landmark database built block by block: `add` folds one block of scans' detections in and returns
     the database after each of its scans. Memory: one row per landmark candidate ever seen (13 floats and two
@@ -464,10 +467,29 @@ class LandmarkStream:
         """Fold in the detections (rows DET_*, DET_SCAN counted from this block's first scan, world or sensor
         frame as the database's) of the next len(stamps) scans, stamped `stamps` (ns). Returns (elements,
         offsets (len(stamps) + 1,)): the Landmark elements in the database after each of these scans."""
-        p = self.p
         stamps = np.ascontiguousarray(stamps, np.int64)
         nb = len(stamps)
         det = np.ascontiguousarray(detections[np.argsort(detections[:, DET_SCAN], kind="stable")])
+        # a few scans a kernel call: the snapshot buffer is sized for the worst case of each scan
+        cuts = np.searchsorted(det[:, DET_SCAN], np.arange(0, nb + SNAPSHOT_SCANS, SNAPSHOT_SCANS))
+        parts, counts = [], []
+        for a, lo, hi in zip(range(0, nb, SNAPSHOT_SCANS), cuts[:-1].tolist(), cuts[1:].tolist(), strict=False):
+            chunk = det[lo:hi].copy()
+            chunk[:, DET_SCAN] -= a
+            elems, count = self._add(chunk, stamps[a:a + SNAPSHOT_SCANS])
+            parts.append(elems)
+            counts.append(count)
+        elems = np.concatenate(parts) if parts else np.zeros(0, LANDMARK_DTYPE)
+        offsets = np.concatenate([[0], np.cumsum(np.concatenate(counts) if counts else [])]).astype(np.int64)
+        if nb:
+            self._last = elems[offsets[-2]:offsets[-1]]
+        return elems, offsets
+
+    def _add(self, det: np.ndarray, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One kernel call: detections `det` (sorted, DET_SCAN counted from the call's first scan) of the next
+        len(stamps) scans; (elements, count per scan)."""
+        p = self.p
+        nb = len(stamps)
         det[:, DET_SCAN] += self.scans
         self._reserve(int(self.counters[C_ROWS]) + len(det) + 1)
         cap = nb * (int(self.counters[C_CONFIRMED]) + len(det)) + 1
@@ -477,11 +499,7 @@ class LandmarkStream:
                         p.column_min_time * 1e9, 10, p.leg_radius_max, self.db, self.first_ns, self.last_ns,
                         self.live, self.confirmed, self.counters, snap_idx, snap_vals, snap_last, snap_count)
         self.scans += nb
-        elems = landmark_elements(self.db, self.first_ns, snap_idx[:ns], snap_vals[:ns], snap_last[:ns])
-        offsets = np.concatenate([[0], np.cumsum(snap_count)]).astype(np.int64)
-        if nb:
-            self._last = elems[offsets[-2]:offsets[-1]]
-        return elems, offsets
+        return landmark_elements(self.db, self.first_ns, snap_idx[:ns], snap_vals[:ns], snap_last[:ns]), snap_count
 
     def final(self) -> np.ndarray:
         """Landmark elements of the database after the last scan added."""
