@@ -386,7 +386,8 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
         with _staged_input(task.input) as src, _staged_output(task.output, task.force) as out:
             sha = input_sha256(src)
             n = pipeline.process_file(src, out, force=task.force, params=task.params,
-                                      command_line=task.command_line, progress=progress)
+                                      command_line=task.command_line, progress=progress,
+                                      input_name=task.input if remote(task.input) else None)
             figures = headline(out)
         seconds = time.perf_counter() - t0
         return record(task, DONE, input_sha256=sha, input_size=size, input_mtime_ns=mtime, scans=n,

@@ -245,10 +245,11 @@ def derive(run, odometry, params: dict | None = None,  # noqa: ANN001 - ScanRun,
 
 def process_file(src: str | Path, out: str | Path, *, force: bool = False, params: dict | None = None,
                  command_line: str | None = None, progress: Callable[[int, int], None] | None = None,
-                 markers: bool = True, block_scans: int | None = None) -> int:
+                 markers: bool = True, block_scans: int | None = None, input_name: str | None = None) -> int:
     """Segment, extract features and track `src` in one streaming pass into `out` (see module docstring and
     streaming); returns the number of scans. `progress(done, total)` is called as scans are processed;
-    `markers` (and params["markers"], default True): also write the Foxglove markers."""
+    `markers` (and params["markers"], default True): also write the Foxglove markers; `input_name`: what the
+    output's provenance calls the input (default its path)."""
     from .streaming import BLOCK_SCANS, LogStream, stream_log, stream_odometry
 
     stream = src if isinstance(src, LogStream) else LogStream(src)
@@ -258,7 +259,7 @@ def process_file(src: str | Path, out: str | Path, *, force: bool = False, param
     stages = RunStages(odometry, params, estimated=estimated, markers=markers)
     return stream_log(stream, out, command="run", params=stages.effective(), derived=stages.derived(), stage=stages,
                       force=force, command_line=command_line, block_scans=block_scans or BLOCK_SCANS,
-                      progress=progress)
+                      progress=progress, input_name=input_name)
 
 
 def features_leg_model(log) -> str:  # noqa: ANN001 - mcapio.LogContents

@@ -150,3 +150,25 @@ def test_no_markers_leaves_out_the_drawings_and_nothing_else(tmp_path: Path) -> 
         done = runner.invoke(cli, [command, str(src), "-o", str(out), "--no-markers"])
         assert done.exit_code == 0, done.output
         assert not markers & channels(out).keys() and mcapio.TOPIC_FEATURES in channels(out)
+
+
+def test_an_input_fetched_from_an_object_store_is_named_by_its_url_in_provenance(tmp_path: Path) -> None:
+    fsspec = pytest.importorskip("fsspec")
+    from click.testing import CliRunner
+
+    from datmo_cli.cli import cli
+
+    mem = fsspec.filesystem("memory")
+    mem.pipe("/datmo-prov/in/corridor.mcap", (SAMPLES / "corridor.mcap").read_bytes())
+    try:
+        done = CliRunner().invoke(cli, ["run", "memory://datmo-prov/in/corridor.mcap", "-o", str(tmp_path / "out"),
+                                        "--no-report", "-j", "1"])
+        assert done.exit_code == 0, done.output
+        meta = mcapio.summary(tmp_path / "out" / "corridor.mcap").metadata["datmo.inputs"]
+        assert list(meta) == ["memory://datmo-prov/in/corridor.mcap"]
+        assert meta["memory://datmo-prov/in/corridor.mcap"] == mcapio.sha256_of(SAMPLES / "corridor.mcap")
+    finally:
+        mem.rm("/datmo-prov", recursive=True)
+    local = tmp_path / "local.mcap"
+    process_file(SAMPLES / "corridor.mcap", local)
+    assert list(mcapio.summary(local).metadata["datmo.inputs"]) == [str(SAMPLES / "corridor.mcap")]

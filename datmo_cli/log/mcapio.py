@@ -420,6 +420,7 @@ class Provenance:
     params: dict = field(default_factory=dict)
     inputs: list = field(default_factory=list)
     command_line: str | None = None
+    names: list | None = None   # what the inputs are called in the records (e.g. the URL a local copy came from)
 
     def records(self) -> dict[str, dict[str, str]]:
         from ..cli import invocation
@@ -428,7 +429,8 @@ class Provenance:
         return {
             "datmo": {"tool": "datmo", "version": __version__, "command": self.command, "command_line": line},
             "datmo.params": {str(k): json.dumps(v, sort_keys=True, default=str) for k, v in self.params.items()},
-            "datmo.inputs": {str(p): sha256_of(p) for p in self.inputs},
+            "datmo.inputs": {str(name): sha256_of(p)
+                             for name, p in zip(self.names or self.inputs, self.inputs, strict=True)},
         }
 
 
