@@ -1,21 +1,19 @@
-"""Reading processed logs for the report, and the one-pass run (segment, features, track) behind `datmo run`.
+"""The stages behind the commands that turn a log into a log, and reading processed logs for the plot.
 
-The one pass calls the same functions the stage commands write their channels with: perception's
-`derive_features` (the channels of `datmo segment` and `datmo features`, and the RunFeatures) and
-tracking's `derive_tracks` (the channels of `datmo track`), so its output holds the same payloads as the
-three stages run one after another, without intermediate files.
+`RunStages` is `datmo run`'s one pass (segmentation, features, tracking) over each block of a streamed log;
+`track_file`, `features_file` and `segment_file` are the stage commands' passes, and `derive` runs the same
+stages on a run held in memory. They all write their channels through streaming.stream_log, so `datmo run`'s
+output holds the same payloads as the three stages run one after another, without intermediate files.
 """
 
 from __future__ import annotations
 
-import os
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .errors import DatmoError, InputError
+from .errors import InputError
 from .log import mcapio
 
 if TYPE_CHECKING:
@@ -40,62 +38,6 @@ def read_run_data(path: str | Path, *, keep_scans: bool = False, ground_truth: b
 # ------------------------------------------------------------------------------------------ datmo run
 
 
-@dataclass
-class JobResult:
-    """The outcome of one input of `datmo run`: its output, or the one-line error that stopped it."""
-
-    input: Path
-    output: Path
-    scans: int = 0
-    seconds: float = 0.0
-    error: str | None = None
-
-
-def output_paths(inputs: list[Path], out_dir: Path) -> list[Path]:
-    """OUT_DIR/NAME.mcap for each input; refuses two inputs with the same name."""
-    outs = [out_dir / f"{Path(p).stem}.mcap" for p in inputs]
-    seen: dict[Path, Path] = {}
-    for src, out in zip(inputs, outs, strict=True):
-        if out in seen:
-            raise InputError(f"{src}: same output name as {seen[out]} ({out}); rename one of them")
-        seen[out] = src
-    return outs
-
-
-def run_many(inputs: list[Path], out_dir: Path, *, jobs: int | None = None, force: bool = False,
-             params: dict | None = None, command_line: str | None = None,
-             progress: Callable[[int, int, int], None] | None = None) -> list[JobResult]:
-    """Process every input into OUT_DIR/NAME.mcap, `jobs` at a time in separate processes (default: all
-    cores). A failing input gives a JobResult with its error; the others go on. `progress(i, done, total)`
-    reports scans done for input i (called in this process)."""
-    outs = output_paths(inputs, out_dir)
-    jobs = min(jobs or os.cpu_count() or 1, len(inputs))
-    args = [(Path(src), out, force, params, command_line) for src, out in zip(inputs, outs, strict=True)]
-    if jobs <= 1:
-        return [_job(i, a, progress) for i, a in enumerate(args)]
-    warm_up()
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
-
-    results: list[JobResult | None] = [None] * len(args)
-    with multiprocessing.Manager() as manager, ProcessPoolExecutor(max_workers=jobs) as pool:
-        queue = manager.Queue()
-        futures = {pool.submit(_job_queued, i, a, queue): i for i, a in enumerate(args)}
-        pending = set(futures)
-        while pending:
-            done, pending = wait(pending, timeout=0.1, return_when=FIRST_COMPLETED)
-            _drain(queue, progress)
-            for fut in done:
-                i = futures[fut]
-                try:
-                    results[i] = fut.result()
-                except BrokenProcessPool as exc:
-                    results[i] = JobResult(args[i][0], args[i][1], error=f"{args[i][0]}: worker died ({exc})")
-        _drain(queue, progress)
-    return [r for r in results if r is not None]
-
-
 def warm_up() -> None:
     """Compile every numba kernel of the pipeline in this process (or load it from numba's cache) on short
     simulated runs of the hall (people, a platform, columns, benches, occlusions) and of the patrol scene
@@ -111,37 +53,6 @@ def warm_up() -> None:
         sim = simulate_scene(scene, duration=8.0)
         derive(sim.run, sim.odometry)
     odometry_for(sim.run, None, "on")   # scan matching, for logs without odometry
-
-
-def _drain(queue, progress) -> None:  # noqa: ANN001
-    import queue as queue_mod
-
-    while True:
-        try:
-            i, done, total = queue.get_nowait()
-        except queue_mod.Empty:
-            return
-        if progress:
-            progress(i, done, total)
-
-
-def _job_queued(i: int, args: tuple, queue) -> JobResult:  # noqa: ANN001 - a Manager queue proxy
-    return _job(i, args, lambda i, d, t: queue.put((i, d, t)))
-
-
-def _job(i: int, args: tuple, report: Callable[[int, int, int], None] | None) -> JobResult:
-    """Run one input; every failure becomes the JobResult's one-line error."""
-    src, out, force, params, command_line = args
-    t0 = time.perf_counter()
-    try:
-        scans = process_file(src, out, force=force, params=params, command_line=command_line,
-                             progress=(lambda d, t: report(i, d, t)) if report else None)
-    except DatmoError as exc:
-        text = str(exc)
-        return JobResult(src, out, error=text if text.startswith(str(src)) else f"{src}: {text}")
-    except Exception as exc:  # noqa: BLE001 - one input's bug must not lose the others' results
-        return JobResult(src, out, error=f"{src}: failed: {type(exc).__name__}: {exc}")
-    return JobResult(src, out, scans, time.perf_counter() - t0)
 
 
 def estimated_odometry(run, odometry, mode: str) -> tuple:  # noqa: ANN001 - ScanRun, Odometry | None

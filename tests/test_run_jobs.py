@@ -11,7 +11,7 @@ import pytest
 import synthetic_logs
 from click.testing import CliRunner
 
-from datmo_cli import pipeline
+from datmo_cli import batch, pipeline
 from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 
@@ -42,25 +42,18 @@ def inputs(tmp_path, monkeypatch):
     return [tmp_path / n for n in names]
 
 
-def test_output_paths_one_per_input_and_no_clashes(tmp_path):
-    assert pipeline.output_paths([Path("x/a.mcap"), Path("y/b.log")], tmp_path) == [tmp_path / "a.mcap",
-                                                                                    tmp_path / "b.mcap"]
-    with pytest.raises(InputError, match="same output name"):
-        pipeline.output_paths([Path("x/a.mcap"), Path("y/a.mcap")], tmp_path)
-
-
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_failures_are_reported_and_the_others_finish(tmp_path, inputs, jobs):
     out = tmp_path / "out"
-    out.mkdir()
     seen = []
-    results = pipeline.run_many(inputs, out, jobs=jobs, progress=lambda i, d, t: seen.append((i, d, t)))
-    assert [r.input for r in results] == inputs
-    assert [r.error is None for r in results] == [True, False, True, False]
-    assert "bad magic bytes" in results[1].error
-    assert results[3].error == f"{inputs[3]}: failed: ZeroDivisionError: division by zero"
+    prepared = batch.prepare(list(map(str, inputs)), str(out))
+    results = batch.run(prepared, batch.LocalExecutor(jobs), on_scans=lambda i, d, t: seen.append((i, d, t)))
+    assert [r["input"] for r in results] == list(map(str, inputs))
+    assert [r["status"] for r in results] == ["done", "failed", "done", "failed"]
+    assert "bad magic bytes" in results[1]["error"]
+    assert results[3]["error"] == f"{inputs[3]}: failed: ZeroDivisionError: division by zero"
     assert (out / "a.mcap").exists() and (out / "b.mcap").exists()
-    assert results[0].scans == 50
+    assert results[0]["scans"] == 50
     assert (0, 50, 50) in seen and (2, 50, 50) in seen
 
 
