@@ -38,3 +38,14 @@ def shared_data() -> Path:
 @pytest.fixture(scope="session")
 def sample_logs() -> Path:
     return SAMPLE_LOGS
+
+
+def pytest_terminal_summary(terminalreporter) -> None:  # noqa: ANN001 - pytest's hook signature
+    """Print the fault-injection and fuzz counts (tests/fuzzing.py) after the run."""
+    from fuzzing import summary_lines
+
+    lines = summary_lines()
+    if lines:
+        terminalreporter.section("fault injection and fuzz")
+        for line in lines:
+            terminalreporter.write_line(line)
