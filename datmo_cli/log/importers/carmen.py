@@ -12,7 +12,9 @@ Messages read (one per line, fields separated by white space):
 - ``ODOM x y theta tv rv accel ipc_timestamp hostname logger_timestamp``: used for /odom only with RAWLASER
   (the other laser messages carry their own pose). ``PARAM``, ``#`` comments and other upper-case messages
   (NEFF, SYNC, TRUEPOS, g2o's VERTEX_SE2 and EDGE_SE2, ...) are ignored; any other line, and a laser or
-  ODOM line with the wrong number of fields or a non-number, is malformed: skipped and counted.
+  ODOM line with the wrong number of fields or a non-number, or a RAWLASER/ROBOTLASER line whose beam fan
+  cannot be a laser's (field of view or step zero, negative, NaN or over 360°), is malformed: skipped and
+  counted. A line holding NUL bytes is malformed too; it does not make the file "binary".
 
 Conventions (stated in the README):
 
@@ -30,6 +32,8 @@ Conventions (stated in the README):
 - Stamps: ipc_timestamp seconds -> int64 ns. When up to 5 % of them go backwards or repeat (intel), each
   such stamp is set 1 ms after the one before; when more do (several logs print them with 6 significant
   digits, or as 0), all are synthesised at 1 s per scan from the first stamp (0 when negative). Both warn.
+  A stamp that is not finite, or beyond int64 nanoseconds (after 2262), counts as a stamp that cannot be
+  kept: all are synthesised.
 
 Streaming (`stream_carmen`): those rules need the whole log (its largest reading, its stamps, which laser
 messages it holds), so one pass parses every line and spools the parsed scans to a temporary file, keeping
@@ -63,16 +67,17 @@ SICK_CODE_M = 81.83        # SICK LMS cm mode: 8183..8191 are error / no-return 
 CARMEN_CAP_M = 50.0        # CARMEN logs cap no-return readings at (or just above) 50 m
 MM_CODE_M = 32.767         # 0x7FFF mm
 SYNTH_PERIOD_NS = 1_000_000_000
+MAX_STAMP_S = 9.2e9        # the largest stamp, seconds, that int64 nanoseconds hold (2^63 ns is 9.22e9 s)
 _META = struct.Struct("<4d")   # spooled per scan: ipc stamp, laser pose (NaN when none); per ODOM line: a row
 
 
 def sniff_text(head: bytes) -> str | None:
     """'carmen' or 'g2o' when the first bytes of a file look like such a text log, else None."""
-    if b"\x00" in head:
-        return None
     lines = head.decode("latin-1").splitlines()
     seen = set()
     for line in lines[:2000]:
+        if "\x00" in line:   # a block of NULs (a crash, a copy cut short) is a malformed line, not a binary file
+            continue
         tok = line.split(None, 1)
         if tok and _MESSAGE.match(tok[0]):
             seen.add(tok[0])
@@ -224,9 +229,9 @@ class _Malformed(ValueError):
 
 def _laser_fields(tok: list[str], robot: bool) -> tuple[tuple, np.ndarray, np.ndarray, float, tuple | None]:
     """(geometry, ranges, remissions, ipc_s, laser pose) of a RAWLASER/ROBOTLASER line."""
-    head = np.array(tok[2:6], float)  # start, fov, resolution, max_range
+    start, fov, res, max_range = np.array(tok[2:6], float).tolist()
     n = int(tok[8])
-    if n < 1 or len(tok) < 10 + n:
+    if n < 1 or len(tok) < 10 + n or not _sane_fan(start, fov, res, max_range):
         raise _Malformed
     ranges = np.array(tok[9:9 + n], float)
     n_rem = int(tok[9 + n])
@@ -237,7 +242,15 @@ def _laser_fields(tok: list[str], robot: bool) -> tuple[tuple, np.ndarray, np.nd
     rem = np.array(tok[10 + n:10 + n + n_rem], float)
     nums = np.array(rest[:extra + 1], float)
     pose = tuple(nums[:3]) if robot else None
-    return (float(head[0]), float(head[2]), float(head[3])), ranges, rem, float(nums[extra]), pose
+    return (start, res, max_range), ranges, rem, float(nums[extra]), pose
+
+
+def _sane_fan(start: float, fov: float, res: float, max_range: float) -> bool:
+    """Whether a RAWLASER/ROBOTLASER line's beam fan (radians) and stated maximum range (metres) can be a
+    laser's: a finite start angle, a field of view in (0, 2π], a step in (0, fov], a finite maximum (zero
+    or negative means "not stated"). A field of view of 0, or NaN, makes the line malformed, not a 0° step."""
+    return (math.isfinite(start) and 0 < fov <= 2 * math.pi * 1.001 and 0 < res <= fov * 1.001
+            and math.isfinite(max_range))
 
 
 def _flaser_fields(tok: list[str]) -> tuple[np.ndarray, float, tuple]:
@@ -377,8 +390,8 @@ class StampCheck:
     def add(self, t: float) -> None:
         if self.n == 0:
             self.t0 = t
-            self.ok = math.isfinite(t) and t >= 0
-        elif not math.isfinite(t):
+            self.ok = math.isfinite(t) and 0 <= t < MAX_STAMP_S
+        elif not (math.isfinite(t) and t < MAX_STAMP_S):
             self.ok = False
         elif t - self._prev <= 0:
             self.bad += 1
@@ -425,7 +438,7 @@ class StampCheck:
                 last = int(ns[i])
             self._last_ns = last
             return ns
-        t0 = float(self.t0) if self.n and np.isfinite(self.t0) and self.t0 >= 0 else 0.0
+        t0 = float(self.t0) if self.n and np.isfinite(self.t0) and 0 <= self.t0 < MAX_STAMP_S else 0.0
         return int(round(t0 * 1e9)) + np.arange(first, first + len(t), dtype=np.int64) * SYNTH_PERIOD_NS
 
 
