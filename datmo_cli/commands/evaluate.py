@@ -30,11 +30,7 @@ def score_file(path: Path, *, gt_csv: Path | None = None, match_radius: float = 
     hyps = ev.track_frames(tracks.stamps, tracks.offsets["tracks"], tracks.items["tracks"],
                            include_coasting=include_occluded, exclude_static=exclude_static)
     if gt_csv is not None:
-        try:
-            text = Path(gt_csv).read_text(encoding="utf-8")
-        except OSError as exc:
-            raise InputError(f"{gt_csv}: {exc.strerror or exc}") from None
-        gt, regions = ev.parse_ground_truth_csv(text, str(gt_csv)), None
+        gt, regions = ev.read_ground_truth_csv(gt_csv), None
         dt = np.diff(np.sort(tracks.stamps))
         tolerance = int(np.median(dt) // 2) if len(dt) else 0  # annotation stamps may be rounded
         source = str(gt_csv)
@@ -47,6 +43,8 @@ def score_file(path: Path, *, gt_csv: Path | None = None, match_radius: float = 
                                              truth.scalars.get("sensor_theta"), include_occluded=include_occluded)
         tolerance = 0
         source = mcapio.TOPIC_GROUND_TRUTH
+        if not (np.isfinite(gt.x).all() and np.isfinite(gt.y).all()):
+            raise InputError(f"{path}: {source} holds positions that are not finite numbers")
     scores = ev.evaluate(gt, hyps, regions=regions, match_radius=match_radius, stamp_tolerance_ns=tolerance)
     if scores["all"]["frames_without_tracks"] == len(gt.stamps):
         raise InputError(f"{path}: no Tracks message has the stamp of any ground-truth frame of {source}")
