@@ -195,7 +195,8 @@ class ImportStream:
             self.closer()
 
     def collect(self) -> ImportResult:
-        """The whole run as one ImportResult."""
+        """The whole run as one ImportResult: its scans in time order, a scan that repeats the stamp of
+        one before it dropped, with the warning write_import gives."""
         import numpy as np
 
         runs, poses = [], []
@@ -205,9 +206,16 @@ class ImportStream:
             if odom is not None and len(odom):
                 poses.append(odom)
         if runs:
+            from ..ordered import order_note, stamp_order
+
             g = runs[0].geometry
-            run = ScanRun(np.concatenate([r.stamps for r in runs]), np.concatenate([r.ranges for r in runs]), g,
-                          np.concatenate([r.intensities for r in runs]))
+            stamps = np.concatenate([r.stamps for r in runs])
+            keep, *counts = stamp_order(stamps)
+            note = order_note(self.source, len(stamps), *counts)
+            if note:   # as write_import writes them: in time order, a repeated stamp dropped
+                self.warnings.append(note)
+            run = ScanRun(stamps[keep], np.concatenate([r.ranges for r in runs])[keep], g,
+                          np.concatenate([r.intensities for r in runs])[keep])
         else:
             g = self.geometry or ScanGeometry(0.0, 0.0, 0, 0.0, 0.0)
             run = ScanRun(np.zeros(0, np.int64), np.zeros((0, g.n_beams), np.float32), g)
@@ -239,9 +247,10 @@ def write_import(stream: ImportStream, output: str | Path, *, force: bool = Fals
     """Write `stream`'s scans to /scan and poses to /odom of `output` (atomically, LogWriter), block by block
     in time order (OrderedSink over `window` messages), then its facts as metadata "datmo.import". Raises
     InputError when there are no scans. A message more than the window late is written out of order
-    with a warning added to stream.warnings."""
+    with a warning added to stream.warnings; so is a warning for scans that came out of time order
+    (written in time order) or repeat a stamp (dropped, the first kept), as collect() does."""
     from .. import mcapio, types
-    from ..ordered import WINDOW, OrderedSink
+    from ..ordered import WINDOW, OrderedSink, order_note
 
     window = window or WINDOW
     src = stream.source
@@ -249,8 +258,8 @@ def write_import(stream: ImportStream, output: str | Path, *, force: bool = Fals
     geometry = None
     try:
         with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
-            sink = OrderedSink(writer, window)
             scan_cid, odom_cid = writer.channel(mcapio.TOPIC_SCAN, types.LASERSCAN), None
+            sink = OrderedSink(writer, window, unique=(scan_cid,))
             for run, odom in stream.blocks():
                 if run is not None and len(run):
                     geometry = geometry or run.geometry
@@ -265,6 +274,10 @@ def write_import(stream: ImportStream, output: str | Path, *, force: bool = Fals
             if scans == 0:
                 raise InputError(f"{src}: no scans to write")
             sink.close()
+            note = order_note(src, scans, sink.reordered, sink.first_reordered, sink.dropped, sink.first_dropped)
+            if note:
+                stream.warnings.append(note)
+            scans -= sink.dropped
             if sink.late:
                 stream.warnings.append(f"{src}: {sink.late} message{'s' if sink.late != 1 else ''} came after later "
                                        f"ones beyond a window of {window}; written out of time order")
