@@ -10,10 +10,15 @@ Blocks end right before the scan that would make them longer than the block size
 stage derived from a scan at the same stamp (a log's /datmo/features after its /scan) fall in that scan's
 block. Within a block, messages are written in log-time order (then channel order: the input's channels
 before derived ones), as a whole-run write would order them.
+
+A log whose scan stamps go backwards or repeat is refused when it is opened (`StampOrder`), with the count
+and the first such scan: the tracker's time comes from the stamps, and `datmo import` puts such a log in
+time order (dropping repeated stamps) with a warning.
 """
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +29,7 @@ from .errors import InputError
 from .log import mcapio
 from .log.scan import Odometry, ScanGeometry, ScanRun
 
+_STAMP = struct.Struct("<iI")   # a CDR header stamp: sec, nanosec
 BLOCK_SCANS = 1024   # scans per block: large enough that per-block costs vanish, small enough to stay flat
 
 
@@ -40,15 +46,25 @@ class Block:
 
 class LogStream:
     """An input log opened for streaming: its channels, metadata, scan count and odometry (one pass that
-    keeps no other payloads), then `blocks` in file order."""
+    keeps no other payloads, and checks that the scan stamps increase), then `blocks` in file order."""
 
     def __init__(self, path: str | Path, scan_topic: str = mcapio.TOPIC_SCAN) -> None:
         self.path = Path(path)
         self.scan_topic = scan_topic
-        self.log = mcapio.read_log(self.path, topics=[mcapio.TOPIC_ODOM])
+        self.log = mcapio.LogContents(path=self.path)
+        odom: tuple[list[int], list[bytes]] = ([], [])
+        order = StampOrder()
+        for topic, stamp, payload in mcapio.iter_messages(self.path, [mcapio.TOPIC_ODOM, scan_topic], self.log):
+            if topic == scan_topic:
+                order.add(payload)
+            else:
+                odom[0].append(stamp)
+                odom[1].append(payload)
         self.n_scans = mcapio.check_scan_channel(self.log, scan_topic)
+        order.check(self.path)
+        self.log.messages = {mcapio.TOPIC_ODOM: odom}
         self.odometry = mcapio.odometry_from_log(self.log)
-        self.log.messages.pop(mcapio.TOPIC_ODOM, None)   # copied block by block like every other channel
+        self.log.messages = {}   # every channel is copied block by block
 
     def has(self, topic: str) -> bool:
         return self.log.has(topic)
@@ -100,6 +116,42 @@ class LogStream:
         """Just the scans, block by block."""
         for block in self.blocks(size):
             yield block.run
+
+
+class StampOrder:
+    """Whether a log's scan stamps (header stamps, ns) increase, one scan payload at a time: how many are at
+    or before a stamp that came before them, and the first such scan's index.
+
+    The stages take a log in file order and the tracker's time from the stamps, so a scan stamped before the
+    one before it, or at the same instant, would make time stand still or run back. Such a log is refused
+    (`check`) before anything is written; `datmo import` rewrites it in time order without the repeats."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.bad = 0
+        self.first_bad: int | None = None
+        self._top: int | None = None
+
+    def add(self, payload: bytes) -> None:
+        """One CDR LaserScan payload (a payload too short for a header, or not little-endian, is left to
+        the decoder to refuse)."""
+        if len(payload) >= 12 and payload[1] == 1:
+            sec, nanosec = _STAMP.unpack_from(payload, 4)
+            t = sec * 1_000_000_000 + nanosec
+            if self._top is not None and t <= self._top:
+                self.bad += 1
+                if self.first_bad is None:
+                    self.first_bad = self.n
+            else:
+                self._top = t
+        self.n += 1
+
+    def check(self, path: Path) -> None:
+        """Raise InputError naming `path`, the count and the first scan when the stamps do not increase."""
+        if self.bad:
+            raise InputError(f"{path}: scan stamps go backwards or repeat at {self.bad} of {self.n} scans (first "
+                             f"at scan {self.first_bad}); datmo import {path} -o FIXED.mcap writes them in time "
+                             "order without the repeats")
 
 
 Stage = Callable[[Block], dict[str, tuple[str, np.ndarray, list]]]
