@@ -250,12 +250,10 @@ class Manifest:
         p = Path(local(self.path))
         if not lines and not p.exists():
             return
-        tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.writelines(lines)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, p)
+        from .outputs import atomic_output
+
+        with atomic_output(p, force=True, what="manifest") as f:
+            f.write("".join(lines).encode("utf-8"))
 
     def append(self, record: dict) -> None:
         line = json.dumps(record, sort_keys=True) + "\n"
@@ -264,7 +262,9 @@ class Manifest:
                 self._lines.append(line)
                 self._put()
                 return
-            with open(local(self.path), "a", encoding="utf-8") as f:
+            from .outputs import writing
+
+            with writing(local(self.path)), open(local(self.path), "a", encoding="utf-8") as f:
                 f.write(line)
                 f.flush()
                 os.fsync(f.fileno())
@@ -397,6 +397,12 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
         return record(task, CANCELLED)
     except DatmoError as exc:
         return failed(task, str(exc))
+    except OSError as exc:      # reading the input (a write error is an OutputError naming the output)
+        if raise_unexpected:
+            raise
+        from .outputs import os_error
+
+        return failed(task, str(os_error(exc)))
     except Exception as exc:
         if raise_unexpected:
             raise
@@ -427,7 +433,13 @@ def _staged_output(path: str, force: bool) -> Iterator[str]:
     made when missing), or a local temporary file uploaded to a temporary name beside a remote output and
     moved into place when complete."""
     if not remote(path):
-        os.makedirs(os.path.dirname(local(path)) or ".", exist_ok=True)
+        folder = os.path.dirname(local(path)) or "."
+        try:
+            os.makedirs(folder, exist_ok=True)
+        except OSError as exc:
+            from .outputs import os_error
+
+            raise os_error(exc, folder, "making the output folder") from None
         yield local(path)
         return
     fs, p = _fs(path)
@@ -646,10 +658,16 @@ def run(batch: Batch, executor: Executor, *, on_record: Callable[[dict], None] |
         if on_record:
             on_record(rec)
 
+    from .outputs import Terminated
+
     for rec in batch.skipped:
         finished(rec)
     try:
         executor.run(batch.tasks, finished, on_scans)
+    except Terminated:          # SIGTERM, SIGHUP: the same clean-up; the CLI exits 143 or 129
+        remove_partial([t.output for t in batch.tasks if t.input not in batch.records])
+        batch.manifest.close()
+        raise
     except KeyboardInterrupt:
         remove_partial([t.output for t in batch.tasks if t.input not in batch.records])
         batch.manifest.close()

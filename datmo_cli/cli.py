@@ -46,6 +46,90 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     click.echo(f"datmo: warning: {message}", err=True)
 
 
+def _escape(err: UnicodeEncodeError) -> tuple[str, int]:
+    """Codec error handler: a file name's byte that is not UTF-8 (a surrogate from os.fsdecode) as \\xNN,
+    any other unencodable character as \\uNNNN."""
+    bad = err.object[err.start:err.end]
+    return "".join(f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF else f"\\u{ord(c):04x}"
+                   for c in bad), err.end
+
+
+def _safe_streams() -> None:
+    """Let stdout and stderr print any file name: bytes that are not UTF-8 come out as \\xNN rather than
+    raising UnicodeEncodeError."""
+    import codecs
+
+    codecs.register_error("datmo-escape", _escape)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.reconfigure(errors="datmo-escape")
+        except (AttributeError, ValueError, OSError):
+            pass
+
+
+def _debug(ctx: click.Context) -> bool:
+    import os
+
+    return bool(ctx.params.get("debug")) or os.environ.get("DATMO_DEBUG", "") not in ("", "0")
+
+
+_DECOMPRESSION = {("zstandard", "ZstdError"), ("zstd", "ZstdError"), ("zlib", "error"), ("gzip", "BadGzipFile"),
+                  ("_lzma", "LZMAError"), ("lzma", "LZMAError"), ("_bz2", "OSError"), ("lz4.frame", "LZ4FrameError")}
+
+
+def _input_named(exc: BaseException) -> str | None:
+    """The one input file argument of the command `exc` came out of, if it has exactly one (to name the
+    file in errors that do not say which): read from the subcommand's context on the traceback."""
+    import os
+
+    tb, sub = exc.__traceback__, None
+    while tb is not None and sub is None:
+        candidate = tb.tb_frame.f_locals.get("sub_ctx")
+        sub = candidate if isinstance(candidate, click.Context) else None
+        tb = tb.tb_next
+    if sub is None:
+        return None
+    found = []
+    for param in sub.command.params:
+        if isinstance(param, click.Argument):
+            value = sub.params.get(param.name)
+            values = value if isinstance(value, (tuple, list)) else [value]
+            found += [v for v in values if v is not None and os.path.exists(v)]
+    return os.fsdecode(found[0]) if len(found) == 1 else None
+
+
+def clean_error(exc: BaseException) -> CleanError | None:
+    """The one-line error (and exit code) for `exc`, or None for an exit that needs no message."""
+    from . import outputs
+    from .errors import DatmoError
+
+    if isinstance(exc, SystemExit):
+        return None
+    if isinstance(exc, DatmoError):
+        return CleanError(str(exc), exc.exit_code)
+    if isinstance(exc, KeyboardInterrupt):
+        return CleanError("interrupted (Ctrl-C); unfinished outputs removed", 130)
+    if isinstance(exc, outputs.Terminated):
+        return CleanError(f"{exc}; unfinished outputs removed", exc.exit_code)
+    if isinstance(exc, MemoryError):
+        return CleanError("out of memory (a parameter or an input asks for more than this machine has)")
+    named = _input_named(exc)
+    kind = (type(exc).__module__, type(exc).__name__)
+    if kind in _DECOMPRESSION or "decompress" in str(exc).lower():
+        return CleanError(f"{named + ': ' if named else ''}corrupt compressed data ({exc})")
+    if isinstance(exc, OSError):
+        return CleanError(str(outputs.os_error(exc)))
+    if isinstance(exc, RecursionError):
+        return CleanError(f"{named + ': ' if named else ''}input too deeply nested ({exc})")
+    import traceback
+
+    ours = [f for f in traceback.extract_tb(exc.__traceback__) if "datmo_cli" in f.filename]
+    where = f" at datmo_cli{ours[-1].filename.rsplit('datmo_cli', 1)[-1]}:{ours[-1].lineno}" if ours else ""
+    about = f" (input {named})" if named else ""
+    return CleanError(f"internal error{about}: {type(exc).__name__}: {exc}{where} (a bug: rerun with --debug or "
+                      "DATMO_DEBUG=1 for the traceback)", 70)
+
+
 class CleanError(click.ClickException):
     """A DatmoError as Click shows it: one line on stderr, no traceback."""
 
@@ -58,7 +142,12 @@ class CleanError(click.ClickException):
 
 
 class LazyGroup(click.Group):
-    """A group whose commands are imported on first use; DatmoError becomes a clean message."""
+    """A group whose commands are imported on first use, and the one place where errors become messages.
+
+    DatmoError, OSError (the disk full, a read-only folder, a name too long), MemoryError, corrupt
+    compressed data and any unexpected exception each give one line on stderr and a non-zero exit, never
+    a traceback (`datmo --debug` or DATMO_DEBUG=1 shows it). Ctrl-C exits 130, SIGTERM 143, SIGHUP 129.
+    On every way out the temporary files of unfinished outputs are removed (outputs.remove_live)."""
 
     def main(self, args=None, *rest, **kwargs):  # noqa: ANN001, ANN201 - Click's signature
         _ARGS[:] = list(sys.argv[1:] if args is None else args)
@@ -67,15 +156,26 @@ class LazyGroup(click.Group):
     def invoke(self, ctx: click.Context):  # noqa: ANN201 - Click's signature
         import warnings
 
-        from .errors import DatmoError
+        from . import outputs
 
+        _safe_streams()
         try:
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(), outputs.handle_signals():
                 warnings.simplefilter("always", UserWarning)
                 warnings.showwarning = _show_warning
                 return super().invoke(ctx)
-        except DatmoError as exc:
-            raise CleanError(str(exc), exc.exit_code) from None
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except BaseException as exc:
+            outputs.remove_live()
+            if _debug(ctx) and not isinstance(exc, (KeyboardInterrupt, outputs.Terminated, SystemExit)):
+                raise
+            clean = clean_error(exc)
+            if clean is None:
+                raise
+            raise clean from None
+        finally:
+            outputs.remove_live()
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return [name for name in COMMANDS if self._available(name)]
@@ -89,7 +189,7 @@ class LazyGroup(click.Group):
         if name not in COMMANDS or not self._available(name):
             return None
         module = importlib.import_module(f"datmo_cli.commands.{COMMANDS[name][0]}")
-        return module.command
+        return _guard_file_outputs(module.command)
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = [(name, COMMANDS[name][1]) for name in self.list_commands(ctx)]
@@ -98,9 +198,45 @@ class LazyGroup(click.Group):
                 formatter.write_dl(rows)
 
 
+class _FileOutput(click.ParamType):
+    """A file output option's type: Click's Path type, but a value ending in '/' is refused (a Path would
+    drop the slash and write a file named like the folder)."""
+
+    def __init__(self, inner: click.Path) -> None:
+        self.inner = inner
+        self.name = inner.name
+
+    def convert(self, value, param, ctx):  # noqa: ANN001, ANN201 - Click's signature
+        import os
+
+        if isinstance(value, (str, bytes)) and os.fsdecode(value).endswith(("/", os.sep)):
+            from .errors import OutputError
+
+            option = param.opts[-1] if param is not None and param.opts else "output"
+            raise OutputError(f"{os.fsdecode(value)}: {option} ends with '/' (a folder); give a file name")
+        return self.inner.convert(value, param, ctx)
+
+    def get_metavar(self, *args, **kwargs):  # noqa: ANN002, ANN003, ANN201
+        return self.inner.get_metavar(*args, **kwargs)
+
+    def shell_complete(self, ctx, param, incomplete):  # noqa: ANN001, ANN201
+        return self.inner.shell_complete(ctx, param, incomplete)
+
+
+FILE_OUTPUTS = ("output", "plot", "link")   # option names that name one file a command writes
+
+
+def _guard_file_outputs(command: click.Command) -> click.Command:
+    for param in command.params:
+        if isinstance(param, click.Option) and param.name in FILE_OUTPUTS and isinstance(param.type, click.Path):
+            param.type = _FileOutput(param.type)
+    return command
+
+
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="datmo")
-def cli() -> None:
+@click.option("--debug", is_flag=True, help="Show the traceback of an error (also: environment DATMO_DEBUG=1).")
+def cli(debug: bool) -> None:
     """datmo: detect, classify and track moving objects in 2D laser-scanner logs.
 
     Implements Castro, Nunes and Ruano (2004). Logs are MCAP files with ROS 2 messages,
@@ -112,7 +248,17 @@ def cli() -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Console entry point."""
+    from . import outputs
+
+    _safe_streams()
     try:
-        cli.main(args=argv, prog_name="datmo")
+        with outputs.handle_signals():   # as early as can be: a SIGTERM while importing still cleans up
+            cli.main(args=argv, prog_name="datmo")
     except BrokenPipeError:
         sys.exit(141)
+    except KeyboardInterrupt:   # outside a command (Click would say "Aborted!" and exit 1)
+        outputs.remove_live()
+        sys.exit(130)
+    except outputs.Terminated as exc:
+        outputs.remove_live()
+        sys.exit(exc.exit_code)

@@ -11,6 +11,11 @@ class InputError(DatmoError):
     """An input file is missing, unreadable, empty, truncated or of the wrong kind."""
 
 
+class OutputError(InputError):
+    """An output cannot be written there: a folder, FIFO or device in the way, a missing or read-only folder,
+    a name too long, the output is an input, the disk full (an InputError: the output path is input too)."""
+
+
 class OutputExistsError(DatmoError):
     """The output exists and --force was not given."""
 

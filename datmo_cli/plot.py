@@ -8,6 +8,7 @@ else in the sensor frame. Metres. matplotlib is imported here only, with the Agg
 from __future__ import annotations
 
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -50,14 +51,15 @@ def _sensor_marker(ax, x: float, y: float, theta: float, size: float) -> None:  
     ax.add_patch(Polygon(pts, closed=True, facecolor="black", edgecolor="black", zorder=6, label="scanner"))
 
 
-def plot_run(data: RunData, out: str | Path, *, title: str | None = None, max_points: int = 150_000,
+def plot_run(data: RunData, out: str | Path | BinaryIO, *, title: str | None = None, max_points: int = 150_000,
              dpi: int = 150) -> Path:
-    """Draw `data` (a RunData with scans kept) into `out` (.png, .svg or .pdf) and return the path."""
+    """Draw `data` (a RunData with scans kept) into `out` (.png, .svg or .pdf; or an open file, in the format
+    rcParams["savefig.format"] says) and return it."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
-    out = Path(out)
+    out = out if hasattr(out, "write") else Path(out)
     # Scan points can be put in the world frame only with odometry; tracks follow the scan points' frame.
     hist = track_history(data.tracks, world=data.odometry is not None)
     world = hist.world

@@ -36,9 +36,12 @@ FAULT_HELP = ("Faults to inject, comma-separated: garbage:P (a burst of random b
 @click.option("--indices", is_flag=True, help="Send real-time scan indices from power-up.")
 @click.option("--fault", "fault_spec", default=None, metavar="SPEC", help=FAULT_HELP)
 @click.option("--link", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Also make a symlink at this path to the pseudo-terminal.")
+              help="Also make a symlink at this path to the pseudo-terminal (removed on exit). An existing path is "
+                   "refused unless --force, which replaces only a symlink or a regular file.")
+@click.option("--force", is_flag=True, help="Let --link replace an existing symlink or regular file.")
 def command(scene: str | None, log_path: Path | None, seed: int, duration: float | None, baud: str, angle: str,
-            resolution: str, units: str, indices: bool, fault_spec: str | None, link: Path | None) -> None:
+            resolution: str, units: str, indices: bool, fault_spec: str | None, link: Path | None,
+            force: bool) -> None:
     """Run a virtual SICK LMS200 on a pseudo-terminal until Ctrl-C.
 
     Prints the device path to give `datmo record --port`. The device follows the LMS2xx serial protocol
@@ -56,6 +59,10 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
         raise ConfigError("give --scene or --log, not both")
     if angle == "180" and resolution == "0.25":
         raise click.BadParameter("0.25° is available only with --angle 100", param_hint="--resolution")
+    if link is not None:
+        from ..outputs import check_output
+
+        check_output(link, force=force, what="link")   # before the device starts
     faults = Faults.parse(fault_spec)
     source = source_for(log=log_path, scene=scene, seed=seed, duration=duration)
     emu = Emulator(source, faults=faults, seed=seed, baud=int(baud), angle_deg=int(angle),
@@ -66,13 +73,12 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
     def handler(signum, frame) -> None:  # noqa: ANN001
         done.set()
 
-    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     emu.start()
+    made = None
     try:
         if link is not None:
-            if link.is_symlink() or link.exists():
-                link.unlink()
-            os.symlink(emu.device_path, link)
+            made = make_link(emu.device_path, link, force)
         click.echo(emu.device_path)
         what = f"log {log_path}" if log_path is not None else f"scene {scene or 'hall'}"
         click.echo(f"emulate: LMS200 on {emu.device_path} at {baud} Bd serving {what}; Ctrl-C to stop", err=True)
@@ -82,8 +88,36 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
                 break
     finally:
         emu.stop()
+        if made is not None:
+            remove_link(link, made)
         for sig, h in old.items():
             signal.signal(sig, h)
-        if link is not None and link.is_symlink():
-            link.unlink()
     click.echo(f"emulate: sent {len(emu.sent)} scans; faults {dict(emu.stats.faults) or 'none'}", err=True)
+
+
+def make_link(target: str, link: Path, force: bool) -> tuple[int, int]:
+    """Make `link` a symlink to `target` (a symlink made beside it, renamed over it, so an existing symlink or
+    regular file is replaced only when outputs.check_output allows it); returns the link's (device, inode)."""
+    from .. import outputs
+
+    outputs.check_output(link, force=force, what="link")
+    with outputs.critical():
+        tmp = outputs.temp_path(link)
+        try:
+            os.symlink(target, tmp)
+            outputs.track(tmp)
+        except OSError as exc:
+            raise outputs.os_error(exc, link, "making the link") from None
+    outputs.commit(tmp, link, force)
+    st = os.lstat(link)
+    return st.st_dev, st.st_ino
+
+
+def remove_link(link: Path, made: tuple[int, int]) -> None:
+    """Remove `link` if it is still the symlink make_link made (not a file put there since)."""
+    try:
+        st = os.lstat(link)
+        if (st.st_dev, st.st_ino) == made and os.path.islink(link):
+            os.unlink(link)
+    except OSError:
+        pass

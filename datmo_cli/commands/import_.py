@@ -33,16 +33,11 @@ def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic:
     \b
     Example: datmo import ../shared/data/carmen/csail-corrected.log.gz -o csail.mcap
     """
-    from ..errors import InputError
     from ..log import mcapio
     from ..log.importers import open_import, write_import
+    from ..outputs import check_output
 
-    if output.exists() and not force:  # before reading a big input
-        from ..errors import OutputExistsError
-
-        raise OutputExistsError(f"{output}: exists; use --force to overwrite it")
-    if src.exists() and output.exists() and src.resolve() == output.resolve():
-        raise InputError(f"{output}: the output would overwrite the input")
+    check_output(output, force=force, inputs=[src])   # before reading a big input
     with _progress(src) as progress:
         stream = open_import(src, topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress,
                              spool_dir=output.parent if output.parent.is_dir() else None)

@@ -1,8 +1,8 @@
 """`datmo record`: stream a SICK LMS200 over a serial port into a log, safely.
 
 The log is written in streaming mode and flushed at least twice a second, so a power cut loses at most
-about half a second (the reader recovers every complete chunk of the temporary file). Ctrl-C and SIGTERM
-stop the scanner's output and finish the file; a disconnect finishes it up to the last good scan.
+about half a second (the reader recovers every complete chunk of the temporary file). Ctrl-C, SIGTERM and
+SIGHUP stop the scanner's output and finish the file; a disconnect finishes it up to the last good scan.
 """
 
 from __future__ import annotations
@@ -140,7 +140,8 @@ def record(driver, writer, *, duration: float | None = None, max_scans: int | No
 
 
 class _Signals:
-    """Turn SIGINT and SIGTERM into a stop request while recording (main thread only)."""
+    """Turn SIGINT, SIGTERM and SIGHUP (the terminal closed) into a stop request while recording (main thread
+    only): the file is finished up to the last scan, and the command exits 0 (stopping is how a recording ends)."""
 
     def __init__(self, stop: threading.Event) -> None:
         self.stop = stop
@@ -153,7 +154,7 @@ class _Signals:
 
     def __enter__(self) -> _Signals:
         if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
+            for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
                 self.old[sig] = signal.signal(sig, self._handler)
         return self
 

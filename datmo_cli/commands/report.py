@@ -19,16 +19,27 @@ def plot_paths(plot: Path, files: list[Path]) -> list[Path]:
 
 
 def check_plot_outputs(paths: list[Path], force: bool) -> None:
-    """Refuse a bad plot suffix, a missing folder or an existing plot without --force, before any work."""
-    from ..errors import InputError, OutputExistsError
+    """Refuse a bad plot suffix or a plot path outputs.check_output refuses (an existing plot without
+    --force, a folder or device in the way, a missing or read-only folder), before any work."""
+    from ..errors import InputError
+    from ..outputs import check_output
 
     for p in paths:
         if p.suffix.lower() not in PLOT_SUFFIXES:
             raise InputError(f"{p}: plot format must be one of {', '.join(PLOT_SUFFIXES)}")
-        if not (p.parent if str(p.parent) else Path(".")).is_dir():
-            raise InputError(f"{p.parent}: output folder does not exist")
-        if p.exists() and not force:
-            raise OutputExistsError(f"{p}: exists; use --force to overwrite it")
+        check_output(p, force=force, what="plot")
+
+
+def save_plot(data, path: Path, force: bool) -> None:  # noqa: ANN001 - pipeline.RunData
+    """Draw `data` into `path` atomically (a temporary file renamed when the figure is complete)."""
+    import matplotlib
+
+    from ..outputs import atomic_output
+    from ..plot import plot_run
+
+    with atomic_output(path, force=force, what="plot") as f, \
+            matplotlib.rc_context({"savefig.format": path.suffix.lower().lstrip(".")}):
+        plot_run(data, f)
 
 
 @click.command(name="report")
@@ -70,11 +81,9 @@ def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, plot:
         if not plot:   # one streaming pass; the plot draws every scan and state, so it decodes the whole run
             summaries.append(summarise_file(path))
             continue
-        from ..plot import plot_run
-
         data = read_run_data(path, keep_scans=True)
         summaries.append(summarise(data))
-        plot_run(data, plots[i])
+        save_plot(data, plots[i], force)
     if fmt == "rich":
         from ..report import console, render_rich
 

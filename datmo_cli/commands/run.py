@@ -158,7 +158,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     if ok and (not no_report or plots) and not remote(out_dir):
         made = {Path(r["output"]) for r in ok if r["status"] == DONE}
         _report([Path(r["output"]) for r in ok], [p for p in plots if p.with_suffix(".mcap") in made],
-                None if no_report else fmt, top, sort)
+                None if no_report else fmt, top, sort, force)
     failed = len(records) - len(ok)
     if failed == len(records) and failed > 1:
         raise DatmoError(f"all {failed} inputs failed")
@@ -240,7 +240,8 @@ def _warm_up() -> None:
                    "runs)", err=True)
 
 
-def _report(outputs: list[Path], plots: list[Path], fmt: str | None, top: int | None, sort: str) -> None:
+def _report(outputs: list[Path], plots: list[Path], fmt: str | None, top: int | None, sort: str,
+            force: bool = False) -> None:
     """Draw the plots, and print the report of `outputs` in `fmt` (None: no report)."""
     from ..pipeline import read_run_data
     from ..report import console, render, summarise, summarise_file
@@ -251,11 +252,11 @@ def _report(outputs: list[Path], plots: list[Path], fmt: str | None, top: int | 
             if fmt:
                 summaries.append(summarise_file(out))
             continue
-        from ..plot import plot_run
+        from .report import save_plot
 
         data = read_run_data(out, keep_scans=True)
         summaries.append(summarise(data))
-        plot_run(data, plots[i])
+        save_plot(data, plots[i], force)
         click.echo(f"{plots[i]}: plot written", err=True)
     if fmt == "rich":
         render(summaries, fmt, top=top, sort=sort, console=console())

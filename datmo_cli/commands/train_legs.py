@@ -96,16 +96,11 @@ def command(positives: tuple[Path, ...], negatives: tuple[Path, ...], topic: str
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from ..errors import InputError, OutputExistsError
+    from ..errors import InputError
+    from ..outputs import check_output
     from ..perception import training as T
 
-    if output.is_dir():
-        raise InputError(f"{output}: is a directory; give a file name for the model")
-    if output.exists() and not force:
-        raise OutputExistsError(f"{output}: exists; use --force to overwrite it")
-    parent = output.parent if str(output.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(f"{parent}: output folder does not exist")
+    check_output(output, force=force, inputs=[*positives, *negatives], what="model")   # before the training
     if not positives:
         raise InputError("no labelled file: give at least one with --positive")
     T.require_sklearn()
@@ -137,9 +132,7 @@ def command(positives: tuple[Path, ...], negatives: tuple[Path, ...], topic: str
     else:
         click.echo("datmo: no held-out figures: they need two or more --positive files (one is held out while "
                    "the others train)", err=True)
-    if output.exists() and not force:   # appeared while training
-        raise OutputExistsError(f"{output}: exists; use --force to overwrite it")
-    result.model.save(output)
+    result.model.save(output, force=force)   # checked again: it may have appeared while training
     n_legs = sum(int(t.label.sum()) for t in result.tables)
     n_seg = sum(len(t) for t in result.tables)
     click.echo(f"{output}: {result.model.n_trees} trees, threshold {result.threshold:.2f}; trained on {n_seg:,} "

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..errors import GeometryError, InputError, MissingChannelError, OutputExistsError
+from ..errors import GeometryError, InputError, MissingChannelError
 from . import types
 from .scan import GeometryChangeError, Odometry, ScanGeometry, ScanRun, decode_scans, encode_scan, encode_scans
 
@@ -427,11 +427,18 @@ class Provenance:
 
         line = self.command_line if self.command_line is not None else invocation(self.command)
         return {
-            "datmo": {"tool": "datmo", "version": __version__, "command": self.command, "command_line": line},
+            "datmo": {"tool": "datmo", "version": __version__, "command": self.command,
+                      "command_line": _text(line)},
             "datmo.params": {str(k): json.dumps(v, sort_keys=True, default=str) for k, v in self.params.items()},
-            "datmo.inputs": {str(name): sha256_of(p)
+            "datmo.inputs": {_text(str(name)): sha256_of(p)
                              for name, p in zip(self.names or self.inputs, self.inputs, strict=True)},
         }
+
+
+def _text(name: str) -> str:
+    """`name` as valid UTF-8 text: the bytes of a file name that is not UTF-8 (os.fsdecode gives them as
+    surrogates, which MCAP cannot store) as \\xNN escapes."""
+    return os.fsencode(name).decode("utf-8", "backslashreplace")
 
 
 # ---------------------------------------------------------------------------------------------- writing
@@ -442,39 +449,37 @@ class LogWriter:
 
     Use as a context manager. Messages are buffered and written in log-time order on close
     (`streaming=True` writes them at once instead, for `record`, with `flush()` to push data to disk).
-    An existing `path` is refused unless `force`; on an exception the temporary file is removed.
+    `path` is checked by outputs.check_output (an existing file needs `force`; a folder, FIFO or device is
+    never replaced; a symlink is replaced itself). On any error or signal, in the `with` block or in
+    `close()`, the temporary file is removed; write errors are OutputErrors naming `path`.
     """
 
     def __init__(self, path: str | Path, *, force: bool = False, provenance: Provenance | None = None,
                  streaming: bool = False, chunk_size: int = 1 << 20) -> None:
         from mcap.writer import CompressionType, Writer
 
-        self.path = Path(path)
+        from .. import outputs
+
+        self.path = outputs.check_output(path, force=force, inputs=provenance.inputs if provenance else ())
         self.force = force
-        if self.path.is_dir():
-            raise InputError(f"{self.path}: is a directory; give a file name for the output")
-        if self.path.exists() and not force:
-            raise OutputExistsError(f"{self.path}: exists; use --force to overwrite it")
-        if provenance is not None:
-            for p in provenance.inputs:
-                if Path(p).exists() and Path(p).resolve() == self.path.resolve():
-                    raise InputError(f"{self.path}: the output would overwrite the input")
-        parent = self.path.parent if str(self.path.parent) else Path(".")
-        if not parent.exists():
-            raise InputError(f"{parent}: output folder does not exist")
-        self.tmp = parent / f".{self.path.name}.{os.getpid()}.tmp"
-        self._file = open(self.tmp, "wb")
-        self._writer = Writer(self._file, chunk_size=chunk_size, compression=CompressionType.ZSTD)
-        self._writer.start(profile="ros2", library=f"datmo {__version__}")
-        self._streaming = streaming
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
-        self._buffer: list[tuple[np.ndarray, int, list[bytes]]] = []  # (stamps, channel id, payloads)
-        self._seq = 0
         self._closed = False
-        if provenance is not None:
-            for name, data in provenance.records().items():
-                self._writer.add_metadata(name, data)
+        self.tmp, file = outputs.open_temp(self.path)
+        self._file = outputs.Guarded(file, self.path)   # a write error names the output, not the temporary file
+        try:
+            with outputs.writing(self.path):
+                self._writer = Writer(self._file, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+                self._writer.start(profile="ros2", library=f"datmo {__version__}")
+                self._streaming = streaming
+                self._schemas: dict[str, int] = {}
+                self._channels: dict[str, int] = {}
+                self._buffer: list[tuple[np.ndarray, int, list[bytes]]] = []  # (stamps, channel id, payloads)
+                self._seq = 0
+                if provenance is not None:
+                    for name, data in provenance.records().items():
+                        self._writer.add_metadata(name, data)
+        except BaseException:
+            self.abort()
+            raise
 
     # -- channels
     def channel(self, topic: str, msgtype: str, *, schema_text: str | None = None,
@@ -583,32 +588,46 @@ class LogWriter:
     # -- finishing
     def flush(self) -> None:
         """Close the current chunk and push everything written so far to disk (streaming mode)."""
-        self._writer.flush()
-        self._file.flush()
-        os.fsync(self._file.fileno())
+        from .. import outputs
+
+        with outputs.writing(self.path):
+            self._writer.flush()
+            self._file.flush()
+            os.fsync(self._file.fileno())
 
     def close(self) -> Path:
-        """Write buffered messages in time order, finish the file and rename it to `path`."""
+        """Write buffered messages in time order, finish the file, sync it and rename it to `path`. On any
+        error (the disk full, a signal) the temporary file is removed and `path` is left as it was."""
+        from .. import outputs
+
         if self._closed:
             return self.path
-        self.drain()
-        self._writer.finish()
-        self._file.close()
+        try:
+            with outputs.writing(self.path):
+                self.drain()
+                self._writer.finish()
+                self._file.flush()
+                os.fsync(self._file.fileno())
+                self._file.close()
+            outputs.commit(self.tmp, self.path, self.force)
+        except BaseException:
+            self.abort()
+            raise
         self._closed = True
-        if self.path.exists() and not self.force:
-            self.tmp.unlink(missing_ok=True)
-            raise OutputExistsError(f"{self.path}: appeared while writing; use --force to overwrite it")
-        os.replace(self.tmp, self.path)
         return self.path
 
     def abort(self) -> None:
         """Drop the temporary file; `path` is left as it was."""
+        from .. import outputs
+
         if not self._closed:
             self._closed = True
             try:
                 self._file.close()
+            except Exception:  # noqa: BLE001 - the buffered rest could not be written: the file goes anyway
+                pass
             finally:
-                self.tmp.unlink(missing_ok=True)
+                outputs.discard(self.tmp)
 
     def __enter__(self) -> LogWriter:
         return self

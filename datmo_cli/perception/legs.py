@@ -21,7 +21,6 @@ from __future__ import annotations
 import io
 import json
 import math
-import os
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -284,16 +283,13 @@ class LegModel:
         LK.ensemble(f, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, *self._kernel_args(), out)
         return out
 
-    def save(self, path: str | Path) -> None:
-        """Write the model to one .npz at `path` (exactly that name; via a temporary file renamed)."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
-        try:
-            with open(tmp, "wb") as f:
-                self._write(f)
-            os.replace(tmp, path)
-        finally:
-            tmp.unlink(missing_ok=True)
+    def save(self, path: str | Path, *, force: bool = True) -> None:
+        """Write the model to one .npz at `path` (exactly that name; via a temporary file renamed, see
+        outputs.atomic_output: an existing regular file is replaced only with `force`)."""
+        from ..outputs import atomic_output
+
+        with atomic_output(path, force=force, what="model") as f:
+            self._write(f)
 
     def _write(self, f) -> None:
         np.savez_compressed(
