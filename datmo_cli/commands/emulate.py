@@ -9,6 +9,8 @@ from pathlib import Path
 
 import click
 
+from ..bounds import OPTIONS, option
+
 FAULT_HELP = ("Faults to inject, comma-separated: garbage:P (a burst of random bytes before a scan), crc:P (corrupt "
               "a scan's CRC), truncate:P (cut a scan short), drop:P (leave out one byte of a scan), with P the "
               "probability per scan telegram; disconnect:N (hang up after N scan telegrams); nak:N (answer the "
@@ -21,10 +23,10 @@ FAULT_HELP = ("Faults to inject, comma-separated: garbage:P (a burst of random b
                    "[default: hall].")
 @click.option("--log", "log_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Serve the scans of this log instead (repeated; beams mapped by angle onto the variant).")
-@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,
-              help="Random seed of the scene and of the faults.")
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Seconds of scene to simulate before it repeats [default: the scene's].")
+@option("--seed", bound=OPTIONS["seed"], default=0, show_default=True,
+        help="Random seed of the scene and of the faults.")
+@option("--duration", bound=OPTIONS["sim_duration"], default=None,
+        help="Seconds of scene to simulate before it repeats [default: the scene's].")
 @click.option("--baud", type=click.Choice(["9600", "19200", "38400", "500000"]), default="9600", show_default=True,
               help="Baud at power-up (a real LMS200 starts at 9600).")
 @click.option("--angle", type=click.Choice(["180", "100"]), default="180", show_default=True,

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from ..bounds import OPTIONS, option
+
 COLUMNS = {"mota": "MOTA", "motp": "MOTP m", "idf1": "IDF1", "num_objects": "objects", "num_matches": "matches",
            "num_false_positives": "false pos.", "num_misses": "misses", "num_switches": "ID switches",
            "precision": "precision", "recall": "recall", "mostly_tracked": "mostly tracked",
@@ -75,15 +77,15 @@ def _table(result: dict, by_metric: bool = False):  # noqa: ANN202 - report.Tabl
 @click.option("--gt", "gt_csv", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Ground truth as CSV (stamp_ns,id,x,y in the sensor frame, metres; optional class column) "
                    "instead of the log's /datmo/ground_truth channel.")
-@click.option("--match-radius", type=click.FloatRange(min=0, min_open=True), default=0.5, show_default=True,
-              help="Largest distance, metres, at which a track can match a ground-truth object.")
+@option("--match-radius", bound=OPTIONS["match_radius"], default=0.5, show_default=True,
+        help="Largest distance, metres, at which a track can match a ground-truth object.")
 @click.option("--include-occluded", is_flag=True,
               help="Also score movers no beam hits, with coasting tracks as hypotheses.")
 @click.option("--exclude-static", is_flag=True, help="Do not count tracks the tracker classifies static.")
 @click.option("--format", "fmt", type=click.Choice(["rich", "json", "markdown"]), default="rich", show_default=True,
               help="rich tables for a terminal; json or markdown for scripts and CI.")
-@click.option("--min-mota", type=float, default=None,
-              help="Exit with status 1 when the overall MOTA is below this (for CI).")
+@option("--min-mota", bound=OPTIONS["min_mota"], default=None,
+        help="Exit with status 1 when the overall MOTA is below this (for CI).")
 def command(file: Path, gt_csv: Path | None, match_radius: float, include_occluded: bool, exclude_static: bool,
             fmt: str, min_mota: float | None) -> None:
     """Score FILE's tracks against ground truth: MOTA, MOTP, IDF1, false positives, misses and identity

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from ..bounds import FEATURES, OPTIONS, option, pair_option
 from ..perception.params import FeatureParams
 from .segment import feature_params
 
@@ -22,24 +23,24 @@ D = FeatureParams()
               help="TOML file with a [features] table: any parameter of datmo_cli/perception/params.py.")
 @click.option("--resegment", is_flag=True, help="Segment again even when the input has /datmo/segments.")
 @click.option("--no-markers", is_flag=True, help="Do not write /datmo/markers/features (Foxglove drawings).")
-@click.option("--c0", type=click.FloatRange(min=0), default=None,
-              help=f"Segmentation threshold C0, m [default: {D.c0:g}].")
-@click.option("--min-points", type=click.IntRange(min=1), default=None,
-              help=f"Drop segments with fewer points [default: {D.min_points}; the paper's is 5].")
-@click.option("--theta-resolution", type=click.FloatRange(min=0.05, max=10), default=None,
-              help=f"HTL theta cell, degrees [default: {D.theta_resolution:g}].")
-@click.option("--rho-resolution", type=click.FloatRange(min=0, min_open=True), default=None,
-              help=f"HTL rho cell, m [default: {D.rho_resolution:g}].")
-@click.option("--circle-radius", "circle_radius", type=(float, float), default=None, metavar="MIN MAX",
-              help=f"HTC radius range, m [default: {D.circle_radius_min:g} {D.circle_radius_max:g}].")
+@option("--c0", bound=FEATURES["c0"], default=None, help=f"Segmentation threshold C0, m [default: {D.c0:g}].")
+@option("--min-points", bound=FEATURES["min_points"], default=None,
+        help=f"Drop segments with fewer points [default: {D.min_points}; the paper's is 5].")
+@option("--theta-resolution", bound=FEATURES["theta_resolution"], default=None,
+        help=f"HTL theta cell, degrees [default: {D.theta_resolution:g}].")
+@option("--rho-resolution", bound=FEATURES["rho_resolution"], default=None,
+        help=f"HTL rho cell, m [default: {D.rho_resolution:g}].")
+@pair_option("--circle-radius", "circle_radius", bounds=(FEATURES["circle_radius_min"], FEATURES["circle_radius_max"]),
+             names=("MIN", "MAX"), default=None,
+             help=f"HTC radius range, m [default: {D.circle_radius_min:g} {D.circle_radius_max:g}].")
 @click.option("--leg-model", default=None, metavar="MODEL",
               help="Leg detector: 'default' (the model shipped with datmo), a model file from datmo train-legs, "
                    "or 'paper' (no detector: legs by the paper's circle rule) [default: default].")
-@click.option("--d-max", type=click.FloatRange(min=0, min_open=True), default=None,
-              help=f"Lines longer than this are walls (static), m [default: {D.d_max:g}].")
-@click.option("--threads", type=click.IntRange(min=1), default=None,
-              help="Threads for the per-scan perception (segmentation, features, leg detector) [default: all "
-                   "cores]; the results are the same for any number.")
+@option("--d-max", bound=FEATURES["d_max"], default=None,
+        help=f"Lines longer than this are walls (static), m [default: {D.d_max:g}].")
+@option("--threads", bound=OPTIONS["threads"], default=None,
+        help="Threads for the per-scan perception (segmentation, features, leg detector) [default: all "
+             "cores]; the results are the same for any number.")
 def command(input: Path, output: Path, force: bool, config: Path | None, resegment: bool, no_markers: bool,
             c0: float | None,
             min_points: int | None, theta_resolution: float | None, rho_resolution: float | None,

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import click
 
+from ..bounds import OPTIONS, option
+
 
 @click.command(name="import")
 @click.argument("src", type=click.Path(path_type=Path))
@@ -18,8 +20,8 @@ import click
                    "or a CARMEN message name (FLASER, RLASER, RAWLASER1-4, ROBOTLASER1).")
 @click.option("--odom-topic", default=None,
               help="The nav_msgs/Odometry topic of a bag or MCAP [default: the only one, if any].")
-@click.option("--max-scans", type=click.IntRange(min=1), default=None,
-              help="Keep only the first N scans (and the poses up to the last of them).")
+@option("--max-scans", bound=OPTIONS["scans"], default=None,
+        help="Keep only the first N scans (and the poses up to the last of them).")
 def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic: str | None,
             max_scans: int | None) -> None:
     """Convert a CARMEN log, g2o file, ROS 1/2 bag or MCAP file to a datmo scan log.

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import click
 
+from ..bounds import OPTIONS, option
+
 FLUSH_EVERY_S = 0.5
 TELEGRAM_TYPE = "std_msgs/msg/UInt8MultiArray"
 
@@ -176,9 +178,8 @@ class _Signals:
               help="Angular resolution, degrees (0.25 only with --angle 100).")
 @click.option("--units", type=click.Choice(["mm", "cm"]), default="mm", show_default=True,
               help="Distance units the device reports (changed in its EEPROM only when different).")
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Stop after this many seconds.")
-@click.option("--scans", "max_scans", type=click.IntRange(min=1), default=None, help="Stop after this many scans.")
+@option("--duration", bound=OPTIONS["record_duration"], default=None, help="Stop after this many seconds.")
+@option("--scans", "max_scans", bound=OPTIONS["scans"], default=None, help="Stop after this many scans.")
 @click.option("--indices", is_flag=True,
               help="Have the device send real-time scan indices (exact dropped-scan counts; one EEPROM write "
                    "if it does not send them yet).")

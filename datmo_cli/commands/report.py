@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from ..bounds import OPTIONS, option
 from ..report import FORMATS, SORT_KEYS
 
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
@@ -46,8 +47,8 @@ def save_plot(data, path: Path, force: bool) -> None:  # noqa: ANN001 - pipeline
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default="rich", show_default=True,
               help="rich tables for a terminal; json, csv or markdown for scripts and CI.")
-@click.option("--top", type=click.IntRange(min=0), default=None,
-              help="Tracks in the per-track table (0: all) [default: 20 for rich and markdown, all for json, csv].")
+@option("--top", bound=OPTIONS["top"], default=None,
+        help="Tracks in the per-track table (0: all) [default: 20 for rich and markdown, all for json, csv].")
 @click.option("--sort", type=click.Choice(SORT_KEYS), default="lifetime", show_default=True,
               help="Order of the per-track table (lifetime, distance and speed: largest first).")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,

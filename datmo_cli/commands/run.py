@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from ..bounds import OPTIONS, option
 from ..report import FORMATS, SORT_KEYS
 
 
@@ -63,13 +64,13 @@ class _BatchProgress:
 @click.option("-o", "--output-dir", "out_dir", required=True,
               help="Folder (or fsspec URL) for the outputs: OUT_DIR/NAME.mcap per input file, the relative path "
                    "for logs found in a folder; and OUT_DIR/manifest.jsonl, the batch's ledger (created if missing).")
-@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
-              help="Inputs processed at once, in separate processes on this machine [default: all cores].")
+@option("-j", "--jobs", bound=OPTIONS["jobs"], default=None,
+        help="Inputs processed at once, in separate processes on this machine [default: all cores].")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Run one task per input on a running Dask scheduler (tcp://host:8786), or on a local cluster of N "
                    "worker processes started for the run (local[:N]). Needs pip install 'datmo[dask]'.")
-@click.option("--retries", type=click.IntRange(min=0), default=2, show_default=True,
-              help="With --scheduler: times a task is retried after an unexpected error or the death of its worker.")
+@option("--retries", bound=OPTIONS["retries"], default=2, show_default=True,
+        help="With --scheduler: times a task is retried after an unexpected error or the death of its worker.")
 @click.option("--force", is_flag=True, help="Redo every input and overwrite existing outputs (and plots); without it "
               "inputs the manifest lists as done with the same input and parameters are skipped.")
 @click.option("--config", type=click.Path(dir_okay=False, path_type=Path), default=None,
@@ -78,7 +79,7 @@ class _BatchProgress:
 @click.option("--plot", is_flag=True, help="Also draw each run from above into OUT_DIR/NAME.png.")
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default="rich", show_default=True,
               help="Format of the report printed at the end (see datmo report).")
-@click.option("--top", type=click.IntRange(min=0), default=None, help="Tracks in the report's track table (0: all).")
+@option("--top", bound=OPTIONS["top"], default=None, help="Tracks in the report's track table (0: all).")
 @click.option("--sort", type=click.Choice(SORT_KEYS), default="lifetime", show_default=True,
               help="Order of the report's track table.")
 @click.option("--no-report", is_flag=True, help="Do not print the report.")
@@ -90,10 +91,10 @@ class _BatchProgress:
 @click.option("--leg-model", default=None, metavar="MODEL",
               help="Leg detector: 'default' (the model shipped with datmo), a model file from datmo train-legs, "
                    "or 'paper' (the paper's circle rule and walking pattern) [default: default].")
-@click.option("--threads", type=click.IntRange(min=1), default=None,
-              help="Threads for each input's per-scan perception (segmentation, features, leg detector) [default: "
-                   "all cores; one in each of several local jobs at once, and in each task on a Dask worker]; the "
-                   "results are the same for any number.")
+@option("--threads", bound=OPTIONS["threads"], default=None,
+        help="Threads for each input's per-scan perception (segmentation, features, leg detector) [default: "
+             "all cores; one in each of several local jobs at once, and in each task on a Dask worker]; the "
+             "results are the same for any number.")
 def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: str | None, retries: int,
             force: bool, config: Path | None, plot: bool, fmt: str, top: int | None, sort: str, no_report: bool,
             no_markers: bool, ego_motion: str | None, leg_model: str | None, threads: int | None) -> None:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from ..bounds import FEATURES, option
 from ..perception.params import FeatureParams
 
 D = FeatureParams()
@@ -26,10 +27,10 @@ def feature_params(config: Path | None, **options) -> FeatureParams:  # noqa: AN
 @click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
 @click.option("--config", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="TOML file with a [features] table (c0, min_points and the feature parameters).")
-@click.option("--c0", type=click.FloatRange(min=0), default=None,
-              help=f"C0 of the threshold C0 + C1·min(r_i, r_i+1), m [default: {D.c0:g}].")
-@click.option("--min-points", type=click.IntRange(min=1), default=None,
-              help=f"Drop segments with fewer points [default: {D.min_points}; the paper's is 5].")
+@option("--c0", bound=FEATURES["c0"], default=None,
+        help=f"C0 of the threshold C0 + C1·min(r_i, r_i+1), m [default: {D.c0:g}].")
+@option("--min-points", bound=FEATURES["min_points"], default=None,
+        help=f"Drop segments with fewer points [default: {D.min_points}; the paper's is 5].")
 def command(input: Path, output: Path, force: bool, config: Path | None, c0: float | None,
             min_points: int | None) -> None:
     """Split each scan into segments: consecutive points join while their distance is at most

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from ..bounds import OPTIONS, option
+
 SCENE_HELP = "Built-in scene name (hall, corridor, crowd, static, patrol) or the path of a .toml scene file."
 
 
@@ -24,13 +26,13 @@ def _list_scenes(ctx: click.Context, _param: click.Parameter, value: bool) -> No
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="The log to write (MCAP).")
 @click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
-@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,
-              help="Random seed (crowd paths, range noise); a seed always gives the same file.")
-@click.option("--duration", type=float, default=None, help="Seconds to simulate [default: the scene's, 60 s].")
-@click.option("--rate", type=float, default=5.0, show_default=True,
-              help="Scans per second (at most 75 Hz at 1°, 37.5 Hz at 0.5°, 18.75 Hz at 0.25°).")
-@click.option("--people", type=click.IntRange(min=0), default=None,
-              help="Walkers in a crowd scene [default: the scene's].")
+@option("--seed", bound=OPTIONS["seed"], default=0, show_default=True,
+        help="Random seed (crowd paths, range noise); a seed always gives the same file.")
+@option("--duration", bound=OPTIONS["sim_duration"], default=None,
+        help="Seconds to simulate [default: the scene's, 60 s].")
+@option("--rate", bound=OPTIONS["sim_rate"], default=5.0, show_default=True,
+        help="Scans per second (at most 75 Hz at 1°, 37.5 Hz at 0.5°, 18.75 Hz at 0.25°).")
+@option("--people", bound=OPTIONS["people"], default=None, help="Walkers in a crowd scene [default: the scene's].")
 @click.option("--angle", type=click.Choice(["180", "100"]), default="180", show_default=True,
               help="Field of view, degrees.")
 @click.option("--resolution", type=click.Choice(["1", "0.5", "0.25"]), default="0.5", show_default=True,
@@ -39,7 +41,7 @@ def _list_scenes(ctx: click.Context, _param: click.Parameter, value: bool) -> No
               help="Range mode, metres.")
 @click.option("--units", type=click.Choice(["mm", "cm"]), default=None,
               help="Output units [default: mm, or cm with --range 80].")
-@click.option("--noise", type=float, default=0.01, show_default=True, help="Range noise sigma, metres.")
+@option("--noise", bound=OPTIONS["sim_noise"], default=0.01, show_default=True, help="Range noise sigma, metres.")
 @click.option("--list-scenes", is_flag=True, expose_value=False, is_eager=True, callback=_list_scenes,
               help="List the built-in scenes and exit.")
 def command(scene: str, output: Path, force: bool, seed: int, duration: float | None, rate: float,

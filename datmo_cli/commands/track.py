@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from ..bounds import TRACK, option, pair_option
 from ..tracking.params import TrackingParams
 
 D = TrackingParams()
@@ -20,21 +21,22 @@ D = TrackingParams()
 @click.option("--config", "config", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="TOML file with a [track] table of parameters (names as in the options below and more), and "
                    "a [features] table used when the input has no features.")
-@click.option("--process-noise", type=click.FloatRange(min=0, min_open=True), default=None,
-              help=f"White-noise acceleration variance q, (m/s²)² per Hz [default: {D.process_noise:g}].")
-@click.option("--measurement-noise", type=click.FloatRange(min=0, min_open=True), default=None,
-              help=f"Sigma of a measured model centre, m [default: {D.measurement_noise:g}].")
-@click.option("--gate", type=click.FloatRange(min=0, min_open=True), default=None,
-              help=f"Gate on the squared Mahalanobis distance [default: {D.gate:g}, chi² 2 dof 99.9 %].")
-@click.option("--confirm", "confirm", type=(int, int), default=None, metavar="M N",
-              help=f"Confirm a track after M hits in N scans [default: {D.confirm_hits} {D.confirm_window}].")
-@click.option("--delete-after", type=click.FloatRange(min=0, min_open=True), default=None,
-              help=f"Seconds a confirmed track lives unseen when it should be seen [default: {D.delete_after:g}].")
-@click.option("--delete-after-occluded", type=click.FloatRange(min=0, min_open=True), default=None,
-              help=f"Seconds a confirmed track lives unseen while occluded or out of view "
-                   f"[default: {D.delete_after_occluded:g}].")
-@click.option("--d-max", type=click.FloatRange(min=0, min_open=True), default=None,
-              help=f"Objects larger than this are static, m [default: {D.d_max:g}].")
+@option("--process-noise", bound=TRACK["process_noise"], default=None,
+        help=f"White-noise acceleration variance q, (m/s²)² per Hz [default: {D.process_noise:g}].")
+@option("--measurement-noise", bound=TRACK["measurement_noise"], default=None,
+        help=f"Sigma of a measured model centre, m [default: {D.measurement_noise:g}].")
+@option("--gate", bound=TRACK["gate"], default=None,
+        help=f"Gate on the squared Mahalanobis distance [default: {D.gate:g}, chi² 2 dof 99.9 %].")
+@pair_option("--confirm", "confirm", bounds=(TRACK["confirm_hits"], TRACK["confirm_window"]), names=("M", "N"),
+             default=None,
+             help=f"Confirm a track after M hits in N scans [default: {D.confirm_hits} {D.confirm_window}].")
+@option("--delete-after", bound=TRACK["delete_after"], default=None,
+        help=f"Seconds a confirmed track lives unseen when it should be seen [default: {D.delete_after:g}].")
+@option("--delete-after-occluded", bound=TRACK["delete_after_occluded"], default=None,
+        help=f"Seconds a confirmed track lives unseen while occluded or out of view "
+             f"[default: {D.delete_after_occluded:g}].")
+@option("--d-max", bound=TRACK["d_max"], default=None,
+        help=f"Objects larger than this are static, m [default: {D.d_max:g}].")
 @click.option("--ego-motion", type=click.Choice(["auto", "on", "off"]), default=None,
               help="For a log without /odom: track in poses estimated by scan matching (written to /odom, frame "
                    "scan_odom) when the scanner moves ('auto'), always ('on') or never ('off') [default: auto].")

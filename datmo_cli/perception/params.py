@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..bounds import FEATURES, check, features_combined
 from ..errors import ConfigError
 
 
@@ -86,18 +87,13 @@ class FeatureParams:
                          self.circle_residual_ratio, self.circle_radius_margin, self.circle_lines_ratio], np.float64)
 
 
-_POSITIVE_INT = {"min_points", "line_min_points", "circle_min_points", "landmark_min_count"}
 _STRINGS = {"leg_model"}
-_ZERO_OK = {"c0", "deflection_min", "perpendicular_tolerance", "circle_min_coverage", "circle_residual_ratio",
-            "circle_radius_margin", "circle_lines_ratio"}
-_RANGES = {"leg_min_probability": (0.0, 1.0),
-           "line_min_racc": (0.0, 1.0), "vote_window": (1.0, 90.0), "perpendicular_tolerance": (0.0, 45.0),
-           "theta_resolution": (0.05, 10.0), "deflection_min": (0.0, 90.0)}
 
 
 def from_dict(values: dict, where: str = "features") -> FeatureParams:
-    """FeatureParams from a mapping, checking names, types and ranges; ConfigError names the key."""
-    known = {f.name: f for f in fields(FeatureParams)}
+    """FeatureParams from a mapping, checking names, types and ranges (bounds.FEATURES); ConfigError names the
+    key, the value and the allowed range."""
+    known = {f.name for f in fields(FeatureParams)}
     out = {}
     for key, value in values.items():
         if key not in known:
@@ -105,22 +101,11 @@ def from_dict(values: dict, where: str = "features") -> FeatureParams:
         if key in _STRINGS:
             if not isinstance(value, str) or not value.strip():
                 raise ConfigError(f"{where}.{key}: must be a non-empty string, got {value!r}")
-        elif key in _POSITIVE_INT:
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ConfigError(f"{where}.{key}: must be a positive integer, got {value!r}")
+            out[key] = value
         else:
-            if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
-                raise ConfigError(f"{where}.{key}: must be a number, got {value!r}")
-            value = float(value)
-            lo, hi = _RANGES.get(key, (0.0, np.inf))
-            if not (lo <= value <= hi) or (value == 0.0 and key not in _ZERO_OK):
-                raise ConfigError(f"{where}.{key}: {value:g} is out of range ({lo:g} to {hi:g}, not 0)")
-        out[key] = value
+            out[key] = check(FEATURES[key], value, f"{where}.{key}")
     params = FeatureParams(**{**asdict(FeatureParams()), **out})
-    if params.circle_radius_min >= params.circle_radius_max:
-        raise ConfigError(f"{where}: circle_radius_min must be below circle_radius_max")
-    if params.bench_min_length >= params.bench_max_length:
-        raise ConfigError(f"{where}: bench_min_length must be below bench_max_length")
+    features_combined(params, where)
     return params
 
 

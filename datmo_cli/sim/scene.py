@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..bounds import OPTIONS, Bound, check
 from ..errors import ConfigError, InputError
 from .paths import PathSpec
 from .walking import Gait
@@ -173,7 +174,7 @@ def parse_scene(text: str, source: str = "<scene>", default_name: str = "scene")
     kw: dict = {
         "name": v.string(data, "top level", "name", default_name),
         "description": v.string(data, "top level", "description", ""),
-        "duration": v.number(data, "top level", "duration", 60.0, positive=True),
+        "duration": v.bounded(data, "top level", "duration", 60.0, OPTIONS["sim_duration"]),
     }
     if "sensor" in data:
         t = v.table(data, "sensor", "[sensor]")
@@ -281,7 +282,7 @@ def _person(v: _Validator, t: dict, where: str, index: int) -> Person:
 def _crowd(v: _Validator, t: dict) -> Crowd:
     where = "[crowd]"
     v.keys(t, where, {"people", "area", "speed", "pause_probability", "max_pause"})
-    people = v.integer(t, where, "people", 6)
+    people = v.bounded(t, where, "people", 6, OPTIONS["people"])
     area = v.points(t, where, "area", minimum=2)
     if len(area) != 2 or np.any(area[1] <= area[0]):
         raise ConfigError(f"{v.source}: {where}, key 'area': give [[x0, y0], [x1, y1]] with x0 < x1 and y0 < y1")
@@ -368,6 +369,13 @@ class _Validator:
             self.fail(where, key, f"must be >= 0, got {x!r}")
         return float(x)
 
+    def bounded(self, t: dict, where: str, key: str, default: float, bound: Bound) -> float | int:
+        """A number within `bound` (bounds.py), its range said in the error."""
+        x = self._get(t, where, key, default)
+        if x is _REQUIRED:
+            return default
+        return check(bound, x, f"{self.source}: {where}, key '{key}'")
+
     def vector(self, t: dict, where: str, key: str, n: int, default=_REQUIRED):
         x = self._get(t, where, key, default)
         if x is _REQUIRED:
@@ -407,7 +415,7 @@ class _Validator:
         for p in pauses_raw:
             if (not isinstance(p, list) or len(p) != 2 or isinstance(p[0], bool) or not isinstance(p[0], int)
                     or not 0 <= p[0] < len(pts) or isinstance(p[1], bool) or not isinstance(p[1], int | float)
-                    or p[1] < 0):
+                    or not 0 <= p[1] < np.inf):
                 self.fail(where, "pauses", f"each pause is [waypoint index 0..{len(pts) - 1}, seconds >= 0], "
                                            f"got {p!r}")
             pauses[int(p[0])] = float(p[1])

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..bounds import OPTIONS, check
 from ..errors import ConfigError
 from ..log import cdr, types
 from ..log.scan import Odometry, ScanRun
@@ -99,14 +100,14 @@ class Simulation:
                                  float(rate), float(dropout))
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
-        duration = self.scene.duration if duration is None else float(duration)
-        if not (np.isfinite(duration) and duration > 0):
-            raise ConfigError(f"duration must be a positive number of seconds, got {duration}")
+        if duration is not None:
+            duration = check(OPTIONS["sim_duration"], float(duration), "duration")
+        duration = self.scene.duration if duration is None else duration
         if people is not None and self.scene.crowd is None:
             raise ConfigError(f"{self.scene.source}: --people applies to scenes with a [crowd] table; "
                               "this one has none")
-        if people is not None and people < 0:
-            raise ConfigError(f"people must be >= 0, got {people}")
+        if people is not None:
+            check(OPTIONS["people"], people, "people")
         if seed < 0:
             raise ConfigError(f"seed must be >= 0, got {seed}")
         n = max(1, int(np.floor(duration * self.sensor.rate_hz + 1e-9)))

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
+from ..bounds import TRACK, check, track_combined
 from ..errors import ConfigError
 
 
@@ -80,12 +81,10 @@ class TrackingParams:
         return from_dict({**self.to_dict(), **changes})
 
 
-_POSITIVE = ("confirm_hits", "confirm_window", "gate", "d_max", "background_cell", "background_extent")
-
-
 def from_dict(values: dict, where: str = "track") -> TrackingParams:
-    """TrackingParams from a mapping, checking names, types and ranges; ConfigError names the key."""
-    known = {f.name: f for f in fields(TrackingParams)}
+    """TrackingParams from a mapping, checking names, types and ranges (bounds.TRACK); ConfigError names the
+    key, the value and the allowed range."""
+    known = {f.name for f in fields(TrackingParams)}
     out = {}
     for key, value in values.items():
         if key not in known:
@@ -94,25 +93,10 @@ def from_dict(values: dict, where: str = "track") -> TrackingParams:
             if value not in ("auto", "on", "off"):
                 raise ConfigError(f"{where}.{key}: one of auto, on, off; got {value!r}")
             out[key] = value
-            continue
-        want = int if known[key].type in ("int", int) else float
-        bad_int = want is int and not isinstance(value, int)
-        if isinstance(value, bool) or not isinstance(value, int | float) or bad_int:
-            raise ConfigError(f"{where}.{key}: expected {want.__name__}, got {value!r}")
-        if value < 0 or (key in _POSITIVE and value <= 0):
-            raise ConfigError(f"{where}.{key}: must be positive, got {value!r}")
-        out[key] = want(value)
+        else:
+            out[key] = check(TRACK[key], value, f"{where}.{key}")
     params = TrackingParams(**out)
-    for key in ("leg_evidence_rate", "person_evidence", "moving_person_evidence", "leg_probability"):
-        value = getattr(params, key)
-        if value > 1 or (key == "leg_evidence_rate" and value == 0):
-            raise ConfigError(f"{where}.{key}: a share, in (0, 1], got {value!r}")
-    if params.confirm_hits < 2:
-        raise ConfigError(f"{where}.confirm_hits: must be at least 2 (no track confirmed from one scan)")
-    if params.confirm_window > 16:
-        raise ConfigError(f"{where}.confirm_window: at most 16 scans, got {params.confirm_window}")
-    if params.confirm_window < params.confirm_hits:
-        raise ConfigError(f"{where}.confirm_window: must be at least confirm_hits ({params.confirm_hits})")
+    track_combined(params, where)
     return params
 
 

@@ -1,0 +1,280 @@
+"""The allowed range of every numeric parameter, and the one check of a value against it.
+
+Every `[features]` and `[track]` key (FEATURES, TRACK) and every numeric command-line option that is not one of
+them (OPTIONS) has a Bound here: its unit, its closed or open range and why the range ends where it does.
+`check` refuses NaN, infinities, wrong types and values outside the range with a ConfigError naming the key
+or option, the value and the range; `Bounded` is the Click type built on it, so a bad option is one line
+(`datmo: error: --gate: ...`, exit status 2 as for any bad option). The ranges are wide enough for any
+scanner (a 30 m Hokuyo, an 80 m SICK, a big hall); what they exclude would hang a kernel, allocate
+unbounded arrays or make no sense. Some parameters combine into an array's size or a kernel's work
+(Hough accumulators, the background grid): `features_combined` and `track_combined` refuse combinations
+above a limit, naming both parameters.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import click
+
+from .errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Bound:
+    """lo <= x <= hi (lo < x with lo_open), in `unit`; `why`: what the range protects, said in errors."""
+
+    lo: float
+    hi: float
+    unit: str = ""
+    why: str = ""
+    lo_open: bool = False
+    integer: bool = False
+
+    def describe(self) -> str:
+        """The range as help and errors show it, e.g. '0 < x ≤ 1000 m' or '2 ≤ n ≤ 16'."""
+        x = "n" if self.integer else "x"
+        text = f"{_show(self.lo)} {'<' if self.lo_open else '≤'} {x} ≤ {_show(self.hi)}"
+        return f"{text} {self.unit}" if self.unit else text
+
+
+class OptionError(ConfigError):
+    """A command-line option's value is out of its range (exit status 2, as Click's usage errors)."""
+
+    exit_code = 2
+
+
+def _show(v: float) -> str:
+    if isinstance(v, int) and not isinstance(v, bool):
+        s = str(v)
+        return s if len(s) <= 16 else f"a {len(s)}-digit number"
+    return f"{v:g}"
+
+
+def check(bound: Bound, value: object, name: str, error: type[ConfigError] = ConfigError) -> float | int:
+    """`value` as a float (an int for an integer Bound) when it is a finite number within `bound`; else
+    `error` naming `name` (the TOML key or the option), the value and the range."""
+    want = "int" if bound.integer else "float"
+    if isinstance(value, bool) or not isinstance(value, int | float) or (bound.integer and not isinstance(value, int)):
+        raise error(f"{name}: expected {want}, got {value!r}")
+    allowed = f"allowed: {bound.describe()}" + (f" ({bound.why})" if bound.why else "")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise error(f"{name}: {value} is not a finite number; {allowed}")
+    if value < bound.lo or (bound.lo_open and value == bound.lo):
+        problem = ("must be positive" if bound.lo == 0 and bound.lo_open
+                   else f"must be {'above' if bound.lo_open else 'at least'} {_show(bound.lo)}")
+        raise error(f"{name}: {problem}, got {_show(value)}; {allowed}")
+    if value > bound.hi:
+        raise error(f"{name}: must be at most {_show(bound.hi)}, got {_show(value)}; {allowed}")
+    return int(value) if bound.integer else float(value)
+
+
+def _b(lo: float, hi: float, unit: str = "", why: str = "", *, open_: bool = False, integer: bool = False) -> Bound:
+    return Bound(lo, hi, unit, why, open_, integer)
+
+
+_SHARE = "a share"
+_NO_SENSE = "beyond any scanner's reach"
+
+# the `[features]` table (perception/params.py); units metres and degrees
+FEATURES: dict[str, Bound] = {
+    "c0": _b(0, 5, "m", "0: the angular term alone; metres of gap would join everything"),
+    "min_points": _b(1, 10_000, "beams", "more than any scanner has in a scan", integer=True),
+    "theta_resolution": _b(0.1, 10, "degrees", "finer cells only grow the line accumulator (the fit refines)"),
+    "rho_resolution": _b(0.001, 1, "m", "below 1 mm the line accumulator outgrows memory"),
+    "vote_window": _b(1, 90, "degrees", "90: a point votes for every direction"),
+    "line_min_points": _b(1, 10_000, "points", integer=True),
+    "line_min_racc": _b(0, 1, "", "r_acc is a share of the segment's points", open_=True),
+    "line_min_length": _b(0, 100, "m", _NO_SENSE, open_=True),
+    "perpendicular_tolerance": _b(0, 45, "degrees", "beyond 45° any two lines would be perpendicular"),
+    "circle_radius_min": _b(0, 2, "m", "circles are legs, posts and columns", open_=True),
+    "circle_radius_max": _b(0, 5, "m", "circles are legs, posts and columns", open_=True),
+    "circle_radius_step": _b(0.001, 1, "m", "each radius is a pass of the circle transform"),
+    "circle_cell": _b(0.001, 0.5, "m", "finer cells only grow the circle accumulator (the fit refines)"),
+    "circle_window": _b(0, 0.5, "m", "the centre estimate is off by centimetres, not metres", open_=True),
+    "circle_tolerance": _b(0, 1, "m", "a ring wider than a metre is no circle", open_=True),
+    "circle_min_points": _b(1, 10_000, "points", integer=True),
+    "circle_check_extent": _b(0, 10, "m", open_=True),
+    "circle_check_radius": _b(0, 5, "m", open_=True),
+    "circle_min_sagitta": _b(0, 1, "m", open_=True),
+    "circle_min_coverage": _b(0, 1, "", _SHARE + "; 0 turns the test off"),
+    "circle_residual_ratio": _b(0, 100, "", "0 turns the test off"),
+    "circle_radius_margin": _b(0, 1, "m", "0 turns the test off"),
+    "circle_lines_ratio": _b(0, 100, "", "0 turns the test off"),
+    "d_max": _b(0, 100, "m", _NO_SENSE, open_=True),
+    "corner_gap": _b(0, 10, "m", open_=True),
+    "deflection_min": _b(0, 90, "degrees"),
+    "leg_radius_max": _b(0, 2, "m", open_=True),
+    "bench_min_length": _b(0, 10, "m", open_=True),
+    "bench_max_length": _b(0, 20, "m", open_=True),
+    "landmark_match": _b(0, 10, "m", open_=True),
+    "landmark_min_count": _b(1, 1_000_000, "scans", integer=True),
+    "column_max_drift": _b(0, 10, "m", open_=True),
+    "column_min_time": _b(0, 86_400, "s", "a day", open_=True),
+    "leg_min_probability": _b(0, 1, "", "a probability"),
+}
+
+_HOUR = "an hour: longer waits are no tracking"
+# the `[track]` table (tracking/params.py); units metres, seconds, m/s
+TRACK: dict[str, Bound] = {
+    "process_noise": _b(0, 1000, "(m/s²)²/Hz", "above 1000 the filter's covariance explodes", open_=True),
+    "person_process_noise": _b(0, 1000, "(m/s²)²/Hz", "above 1000 the filter's covariance explodes", open_=True),
+    "measurement_noise": _b(0, 10, "m", "sigmas of metres are no measurement", open_=True),
+    "leg_measurement_noise": _b(0, 10, "m", "sigmas of metres are no measurement", open_=True),
+    "initial_speed_sigma": _b(0, 100, "m/s"),
+    "gate": _b(0, 1000, "", "chi² with 2 dof; 1000 already passes anything", open_=True),
+    "max_gate_distance": _b(0, 100, "m", _NO_SENSE),
+    "confirm_hits": _b(2, 16, "scans", "no track confirmed from one scan; 16 bits of history", integer=True),
+    "confirm_window": _b(2, 16, "scans", "16 bits of hit history", integer=True),
+    "delete_after": _b(0, 3600, "s", _HOUR),
+    "delete_after_occluded": _b(0, 3600, "s", _HOUR),
+    "reacquire_speed": _b(0, 50, "m/s"),
+    "reacquire_distance": _b(0, 100, "m", _NO_SENSE),
+    "occlusion_margin": _b(0, 10, "m"),
+    "tentative_delete_after": _b(0, 3600, "s", _HOUR),
+    "d_max": _b(0, 100, "m", _NO_SENSE, open_=True),
+    "undefined_window": _b(0, 3600, "s", _HOUR),
+    "moving_distance": _b(0, 100, "m", _NO_SENSE),
+    "moving_speed": _b(0, 50, "m/s"),
+    "moving_time": _b(0, 3600, "s", _HOUR),
+    "leg_radius_max": _b(0, 2, "m"),
+    "leg_blob_max": _b(0, 2, "m"),
+    "stride_max": _b(0, 5, "m"),
+    "leg_reach": _b(0, 5, "m"),
+    "leg_beside": _b(0, 5, "m"),
+    "spawn_clearance": _b(0, 10, "m"),
+    "step_min": _b(0, 5, "m"),
+    "walking_after": _b(0, 3600, "s", _HOUR),
+    "step_max": _b(0, 5, "m"),
+    "merge_distance": _b(0, 10, "m"),
+    "merge_speed": _b(0, 50, "m/s"),
+    "person_votes": _b(0, 1, "", _SHARE),
+    "leg_probability": _b(0, 1, "", "a probability"),
+    "leg_evidence_rate": _b(0, 1, "", "a share; 0 would never learn", open_=True),
+    "person_evidence": _b(0, 1, "", "a probability"),
+    "moving_person_evidence": _b(0, 1, "", "a probability"),
+    "person_pairs": _b(0, 1_000_000, "scans", integer=True),
+    "moving_person_pairs": _b(0, 1_000_000, "scans", integer=True),
+    "carried_travel": _b(0, 1000, "m"),
+    "carried_radius": _b(0, 10, "m"),
+    "background_time": _b(0, 3600, "s", "0 turns the background off"),
+    "background_cell": _b(0.05, 10, "m", "finer cells only grow the grid"),
+    "background_extent": _b(0, 100, "m", "the grid's memory grows with its square", open_=True),
+    "tail_length": _b(0, 10_000, "points", "each track holds its tail", integer=True),
+}
+
+_SIM_HOUR = "an hour of scans; the world's paths are planned for the whole run up front"
+# options that are not `[features]` or `[track]` keys (and the scene files' duration and crowd size)
+OPTIONS: dict[str, Bound] = {
+    "seed": _b(0, 2**63 - 1, "", "a 63-bit seed", integer=True),
+    "sim_duration": _b(0, 3600, "s", _SIM_HOUR, open_=True),
+    "sim_rate": _b(0, 75, "Hz", "the LMS200's fastest rate (at 1°; finer resolutions allow less)", open_=True),
+    "sim_noise": _b(0, 1, "m", "range noise sigma"),
+    "people": _b(0, 100, "walkers", "each walker's path avoids the earlier ones", integer=True),
+    "record_duration": _b(0, 31_536_000, "s", "a year", open_=True),
+    "scans": _b(1, 10**12, "scans", integer=True),
+    "threads": _b(1, 1024, "threads", integer=True),
+    "jobs": _b(1, 1024, "processes", integer=True),
+    "retries": _b(0, 100, "retries", integer=True),
+    "top": _b(0, 10**9, "tracks", "0: all", integer=True),
+    "match_radius": _b(0, 100, "m", _NO_SENSE, open_=True),
+    "min_mota": _b(-100, 1, "", "MOTA is at most 1"),
+}
+
+LINE_ACCUMULATOR_CELLS = 2**25     # theta x rho cells of the HTL accumulator, int32, one per thread (128 MB)
+LINE_RANGE_M = 100.0               # the kernels size the rho axis for ranges up to this (min(range_max, 100))
+CIRCLE_VOTES = 2**18               # radii x (a, b) cells a point votes over in the HTC (the kernel's work)
+BACKGROUND_SIDE = 2048             # cells along a side of the tracker's background grid (16 bytes a cell)
+
+
+def line_accumulator_cells(theta_resolution: float, rho_resolution: float) -> int:
+    """Cells of the HTL accumulator: theta cells over 180° times rho cells over ±LINE_RANGE_M (degrees, m)."""
+    nt = max(int(round(180.0 / theta_resolution)), 1)
+    return nt * (int(2.0 * LINE_RANGE_M / rho_resolution) + 3)
+
+
+def circle_votes(radius_min: float, radius_max: float, radius_step: float, window: float, cell: float) -> int:
+    """Radii voted for times the (a, b) cells of the HTC window, each point's share of the work (m)."""
+    radii = int(math.floor((radius_max - radius_min) / radius_step + 1e-9)) + 1
+    side = 2 * int(round(window / cell)) + 1
+    return radii * side * side
+
+
+def background_side(extent: float, cell: float) -> int:
+    """Cells along a side of the background grid spanning ±extent (m) in cells of `cell` (m)."""
+    return int(math.ceil(2.0 * extent / cell))
+
+
+def features_combined(p, where: str = "features") -> None:  # noqa: ANN001 - FeatureParams
+    """ConfigError when parameters that are each in range combine into a contradiction or too big a kernel."""
+    if p.circle_radius_min >= p.circle_radius_max:
+        raise ConfigError(f"{where}: circle_radius_min must be below circle_radius_max")
+    if p.bench_min_length >= p.bench_max_length:
+        raise ConfigError(f"{where}: bench_min_length must be below bench_max_length")
+    cells = line_accumulator_cells(p.theta_resolution, p.rho_resolution)
+    if cells > LINE_ACCUMULATOR_CELLS:
+        raise ConfigError(f"{where}: theta_resolution {p.theta_resolution:g}° and rho_resolution "
+                          f"{p.rho_resolution:g} m make a line accumulator of {cells:,} cells (at most "
+                          f"{LINE_ACCUMULATOR_CELLS:,}); raise either")
+    votes = circle_votes(p.circle_radius_min, p.circle_radius_max, p.circle_radius_step, p.circle_window,
+                         p.circle_cell)
+    if votes > CIRCLE_VOTES:
+        raise ConfigError(f"{where}: circle_radius_step {p.circle_radius_step:g} m (radii from "
+                          f"{p.circle_radius_min:g} to {p.circle_radius_max:g} m) and circle_cell {p.circle_cell:g} m "
+                          f"(window {p.circle_window:g} m) make {votes:,} circle votes per point (at most "
+                          f"{CIRCLE_VOTES:,}); raise circle_radius_step or circle_cell")
+
+
+def track_combined(p, where: str = "track") -> None:  # noqa: ANN001 - TrackingParams
+    """ConfigError when tracking parameters that are each in range contradict or make too big a grid."""
+    if p.confirm_window < p.confirm_hits:
+        raise ConfigError(f"{where}.confirm_window: must be at least confirm_hits ({p.confirm_hits})")
+    side = background_side(p.background_extent, p.background_cell)
+    if p.background_time > 0 and side > BACKGROUND_SIDE:
+        raise ConfigError(f"{where}: background_extent {p.background_extent:g} m and background_cell "
+                          f"{p.background_cell:g} m make a background grid {side:,} cells a side (at most "
+                          f"{BACKGROUND_SIDE:,}); raise background_cell or lower background_extent")
+
+
+def option_name(param: click.Parameter | None) -> str:
+    """An option as the user typed it: its longest flag ('--gate'), or its name."""
+    if param is None:
+        return "value"
+    flags = [o for o in getattr(param, "opts", []) if o.startswith("-")]
+    return max(flags, key=len) if flags else (param.name or "value")
+
+
+class Bounded(click.ParamType):
+    """A number within a Bound; a bad value is one line naming the option and the range (OptionError)."""
+
+    def __init__(self, bound: Bound) -> None:
+        self.bound = bound
+        self.name = "integer" if bound.integer else "float"
+
+    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
+        return "INTEGER" if self.bound.integer else "FLOAT"
+
+    def convert(self, value, param, ctx):  # noqa: ANN001, ANN201 - Click's signature
+        name = option_name(param)
+        if isinstance(value, str):
+            text = value.strip()
+            try:
+                value = int(text) if self.bound.integer else float(text)
+            except ValueError:
+                kind = "a whole number" if self.bound.integer else "a number"
+                raise OptionError(f"{name}: expected {kind}, got {text!r}; allowed: {self.bound.describe()}") from None
+        return check(self.bound, value, name, OptionError)
+
+
+def option(*decls: str, bound: Bound, help: str, **kwargs) -> click.decorators.FC:  # noqa: A002, ANN003
+    """click.option for a number within `bound`, the range appended to its help."""
+    return click.option(*decls, type=Bounded(bound), help=f"{help} Range: {bound.describe()}.", **kwargs)
+
+
+def pair_option(*decls: str, bounds: tuple[Bound, Bound], names: tuple[str, str], help: str,  # noqa: A002
+                **kwargs) -> click.decorators.FC:  # noqa: ANN003
+    """click.option taking two numbers (e.g. MIN MAX), each within its bound, the ranges appended to its help."""
+    ranges = ", ".join(f"{n} {b.describe()}" for n, b in zip(names, bounds, strict=True))
+    return click.option(*decls, type=click.Tuple([Bounded(bounds[0]), Bounded(bounds[1])]),
+                        metavar=" ".join(names), help=f"{help} Range: {ranges}.", **kwargs)
