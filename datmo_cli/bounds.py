@@ -116,10 +116,11 @@ FEATURES: dict[str, Bound] = {
 }
 
 _HOUR = "an hour: longer waits are no tracking"
+_ACCELERATION = "√1000 ≈ 32 m/s² of acceleration noise is beyond any walker or vehicle"
 # the `[track]` table (tracking/params.py); units metres, seconds, m/s
 TRACK: dict[str, Bound] = {
-    "process_noise": _b(0, 1000, "(m/s²)²/Hz", "above 1000 the filter's covariance explodes", open_=True),
-    "person_process_noise": _b(0, 1000, "(m/s²)²/Hz", "above 1000 the filter's covariance explodes", open_=True),
+    "process_noise": _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
+    "person_process_noise": _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
     "measurement_noise": _b(0, 10, "m", "sigmas of metres are no measurement", open_=True),
     "leg_measurement_noise": _b(0, 10, "m", "sigmas of metres are no measurement", open_=True),
     "initial_speed_sigma": _b(0, 100, "m/s"),
