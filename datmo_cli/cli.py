@@ -73,8 +73,7 @@ def _debug(ctx: click.Context) -> bool:
     return bool(ctx.params.get("debug")) or os.environ.get("DATMO_DEBUG", "") not in ("", "0")
 
 
-_DECOMPRESSION = {("zstandard", "ZstdError"), ("zstd", "ZstdError"), ("zlib", "error"), ("gzip", "BadGzipFile"),
-                  ("_lzma", "LZMAError"), ("lzma", "LZMAError"), ("_bz2", "OSError"), ("lz4.frame", "LZ4FrameError")}
+_DECOMPRESSION = {"ZstdError", "BadGzipFile", "LZMAError", "LZ4FrameError"}   # exception names of the codecs
 
 
 def _input_named(exc: BaseException) -> str | None:
@@ -114,8 +113,8 @@ def clean_error(exc: BaseException) -> CleanError | None:
     if isinstance(exc, MemoryError):
         return CleanError("out of memory (a parameter or an input asks for more than this machine has)")
     named = _input_named(exc)
-    kind = (type(exc).__module__, type(exc).__name__)
-    if kind in _DECOMPRESSION or "decompress" in str(exc).lower():
+    zlib_error = (type(exc).__module__, type(exc).__name__) == ("zlib", "error")
+    if type(exc).__name__ in _DECOMPRESSION or zlib_error or "decompress" in str(exc).lower():
         return CleanError(f"{named + ': ' if named else ''}corrupt compressed data ({exc})")
     if isinstance(exc, OSError):
         return CleanError(str(outputs.os_error(exc)))
@@ -214,6 +213,10 @@ class _FileOutput(click.ParamType):
 
             option = param.opts[-1] if param is not None and param.opts else "output"
             raise OutputError(f"{os.fsdecode(value)}: {option} ends with '/' (a folder); give a file name")
+        if isinstance(value, (str, bytes)) and os.path.isdir(value):
+            from .errors import OutputError
+
+            raise OutputError(f"{os.fsdecode(value)}: is a directory; give a file name")
         return self.inner.convert(value, param, ctx)
 
     def get_metavar(self, *args, **kwargs):  # noqa: ANN002, ANN003, ANN201
