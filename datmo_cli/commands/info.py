@@ -22,6 +22,8 @@ def describe(path: Path) -> dict:
         "profile": log.profile,
         "library": log.library,
         "truncated": log.truncated,
+        "corrupt_chunks": log.corrupt_chunks,
+        "corrupt_bytes": log.corrupt_bytes,
         "start_ns": log.start_ns,
         "end_ns": log.end_ns,
         "duration_s": round(duration, 6),
@@ -66,6 +68,9 @@ def _print_rich(info: dict) -> None:
                   f"{info['duration_s']:.1f} s, profile {info['profile'] or '-'}, written by {info['library'] or '-'}")
     if info["truncated"]:
         console.print("[yellow]truncated: only complete chunks were read[/]")
+    if info["corrupt_chunks"]:
+        console.print(f"[yellow]corrupt: {info['corrupt_chunks']} chunk(s) ({info['corrupt_bytes']:,} bytes) failed "
+                      "their CRC or did not decompress and were skipped; counts and scans leave them out[/]")
     table = Table(title="Channels", title_justify="left")
     for col in ("topic", "type", "encoding", "messages"):
         table.add_column(col, justify="right" if col == "messages" else "left")

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, InputError
 from . import protocol as P
 
 SPEEDS = {9600: termios.B9600, 19200: termios.B19200, 38400: termios.B38400,
@@ -141,6 +141,8 @@ class LogSource(ScanSource):
 
         self.run = read_run(path)
         self.path = Path(path)
+        if self.run.geometry.n_beams == 0:
+            raise InputError(f"{path}: its scans have no beams: nothing to serve")
 
     def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):  # noqa: ANN001, ANN201
         g = self.run.geometry

@@ -156,23 +156,41 @@ def _geometry_of(rec: np.void | np.ndarray, frame_id: str, n_beams: int) -> Scan
                         frame_id=frame_id)
 
 
+GEOMETRY_FIELDS = ("angle_min", "angle_increment", "angle_max", "range_min", "range_max")   # must be finite
+_NS = 1_000_000_000
+
+
 def decode_scan(data: bytes | memoryview) -> tuple[int, np.ndarray, np.ndarray, ScanGeometry]:
-    """(stamp_ns, ranges, intensities, geometry) of one LaserScan CDR payload."""
+    """(stamp_ns, ranges, intensities, geometry) of one LaserScan CDR payload.
+
+    Raises ValueError saying what is wrong for a payload whose length fields run past its end, whose header
+    stamp is before 1970 or not a time (nanosec of 10^9 or more), or whose geometry is not finite."""
     buf = memoryview(data)
     if bytes(buf[:2]) != CDR_HEADER[:2]:
         raise ValueError("not little-endian CDR data")
+    size = len(buf)
+    if size < 16:
+        raise ValueError(f"LaserScan payload of {size} bytes is too short for a header")
     frame_len = int.from_bytes(buf[12:16], "little")
+    if 16 + frame_len + 36 > size:
+        raise ValueError(f"frame_id length {frame_len} runs past the end of the {size}-byte message")
     p0 = 4 + 12 + frame_len
     p0 += (-(p0 - 4)) % 4
     n = int.from_bytes(buf[p0 + 28:p0 + 32], "little")
     pi = p0 + 32 + 4 * n
+    if pi + 4 > size:
+        raise ValueError(f"{n} ranges run past the end of the {size}-byte message")
     ni = int.from_bytes(buf[pi:pi + 4], "little")
+    if pi + 4 + 4 * ni > size:
+        raise ValueError(f"{ni} intensities run past the end of the {size}-byte message")
     dt = _row_dtype(frame_len, n, ni)
-    if len(buf) != dt.itemsize:
-        raise ValueError(f"LaserScan payload of {len(buf)} bytes, expected {dt.itemsize}")
-    rec = np.frombuffer(buf, dt, 1)[0]
+    if size != dt.itemsize:
+        raise ValueError(f"LaserScan payload of {size} bytes, expected {dt.itemsize}")
+    rows = np.frombuffer(buf, dt, 1)
+    _check_rows(rows, None)
+    rec = rows[0]
     frame_id = bytes(buf[16:16 + max(frame_len - 1, 0)]).decode(errors="replace")
-    stamp = int(rec["sec"]) * 1_000_000_000 + int(rec["nanosec"])
+    stamp = int(rec["sec"]) * _NS + int(rec["nanosec"])
     inten = rec["intensities"].copy() if ni else np.zeros(0, np.float32)
     return stamp, rec["ranges"].copy(), inten, _geometry_of(rec, frame_id, n)
 
@@ -181,32 +199,64 @@ class GeometryChangeError(ValueError):
     """Scans of one topic change geometry mid-run."""
 
 
-def decode_scans(payloads: list[bytes]) -> ScanRun:
-    """Decode many LaserScan payloads into one ScanRun.
+def _check_rows(rows: np.ndarray, first: int | None) -> None:
+    """Raise ValueError ("scan K: ...", K counted from `first`; no scan named when None) for the first of
+    decoded LaserScan rows whose header stamp is before 1970 or not a time, or whose geometry is not finite."""
+    bad = np.flatnonzero(rows["sec"] < 0)
+    if len(bad):
+        raise ValueError(f"{_scan_label(first, bad[0])}header stamp before 1970 "
+                         f"(sec = {int(rows['sec'][bad[0]])})")
+    bad = np.flatnonzero(rows["nanosec"] >= _NS)
+    if len(bad):
+        raise ValueError(f"{_scan_label(first, bad[0])}header stamp nanosec = "
+                         f"{int(rows['nanosec'][bad[0]])} is not below 10^9")
+    for name in GEOMETRY_FIELDS:
+        bad = np.flatnonzero(~np.isfinite(rows[name]))
+        if len(bad):
+            raise ValueError(f"{_scan_label(first, bad[0])}{name} is {float(rows[name][bad[0]])}")
 
-    Fast path: when every payload has the same length (same frame id, beam and intensity counts),
-    the payloads are joined and viewed as one record array. Raises GeometryChangeError when the
-    beam layout changes from one scan to the next.
+
+def _scan_label(first: int | None, i: int) -> str:
+    return "" if first is None else f"scan {first + int(i)}: "
+
+
+def decode_scans(payloads: list[bytes], first: int = 0) -> ScanRun:
+    """Decode many LaserScan payloads into one ScanRun; errors name scans counted from `first` (the index of
+    payloads[0] in its log).
+
+    Fast path: when every payload has the same length and the same layout (frame id length, beam and
+    intensity counts), the payloads are joined and viewed as one record array. Raises GeometryChangeError
+    when the beam layout changes from one scan to the next, ValueError ("scan K: ...") for a scan that
+    decode_scan refuses.
     """
     if not payloads:
         raise ValueError("no scans")
-    first = payloads[0]
-    _, _, _, g0 = decode_scan(first)
-    size = len(first)
+    first_payload = payloads[0]
+    try:
+        _, _, inten0, g0 = decode_scan(first_payload)
+    except ValueError as exc:
+        raise ValueError(f"scan {first}: {exc}") from None
+    size = len(first_payload)
     if all(len(p) == size for p in payloads):
-        frame_len = int.from_bytes(first[12:16], "little")
-        n_int = len(decode_scan(first)[2])
+        frame_len = int.from_bytes(first_payload[12:16], "little")
+        n_int = len(inten0)
         dt = _row_dtype(frame_len, g0.n_beams, n_int)
         rows = np.frombuffer(b"".join(payloads), dt)
-        _check_constant(rows, g0)
-        stamps = rows["sec"].astype(np.int64) * 1_000_000_000 + rows["nanosec"]
-        inten = rows["intensities"] if n_int else np.zeros((len(rows), 0), np.float32)
-        return ScanRun(stamps, rows["ranges"], g0, inten)
+        if all((rows[name] == rows[name][0]).all() for name in ("frame_len", "n_ranges", "n_intens")):
+            _check_rows(rows, first)
+            _check_constant(rows, g0, first)
+            stamps = rows["sec"].astype(np.int64) * _NS + rows["nanosec"]
+            inten = rows["intensities"] if n_int else np.zeros((len(rows), 0), np.float32)
+            return ScanRun(stamps, rows["ranges"], g0, inten)
     stamps, ranges, intens = [], [], []
     for i, p in enumerate(payloads):
-        s, r, it, g = decode_scan(p)
+        try:
+            s, r, it, g = decode_scan(p)
+        except ValueError as exc:
+            raise ValueError(f"scan {first + i}: {exc}") from None
         if not g.same_beams(g0):
-            raise GeometryChangeError(f"scan geometry changes at scan {i}: {g0.describe()} -> {g.describe()}")
+            raise GeometryChangeError(f"scan geometry changes at scan {first + i}: {g0.describe()} -> "
+                                      f"{g.describe()}")
         stamps.append(s)
         ranges.append(r)
         intens.append(it)
@@ -223,8 +273,8 @@ def decode_scans(payloads: list[bytes]) -> ScanRun:
     return ScanRun(np.array(stamps, np.int64), np.stack(ranges), g0, inten)
 
 
-def _check_constant(rows: np.ndarray, g0: ScanGeometry) -> None:
-    for name in ("frame_len", "frame", "angle_min", "angle_increment", "range_min", "range_max", "n_ranges"):
+def _check_constant(rows: np.ndarray, g0: ScanGeometry, first: int = 0) -> None:
+    for name in ("frame", "angle_min", "angle_increment", "range_min", "range_max"):
         col = rows[name]
         bad = np.flatnonzero(col != col[0])
         if len(bad):
@@ -232,4 +282,5 @@ def _check_constant(rows: np.ndarray, g0: ScanGeometry) -> None:
             frame_len = int(rows["frame_len"][i])
             frame_id = bytes(rows["frame"][i])[:max(frame_len - 1, 0)].decode(errors="replace")
             gi = _geometry_of(rows[i], frame_id, int(rows["n_ranges"][i]))
-            raise GeometryChangeError(f"scan geometry changes at scan {i}: {g0.describe()} -> {gi.describe()}")
+            raise GeometryChangeError(f"scan geometry changes at scan {first + i}: {g0.describe()} -> "
+                                      f"{gi.describe()}")

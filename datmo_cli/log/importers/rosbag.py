@@ -359,7 +359,7 @@ def _mcap_survey(path: Path, label: str, topic: str, max_scans: int | None) -> t
     from ..scan import decode_scan
 
     count, sizes, last, n_beams = 0, {}, None, 0
-    for _, log_time, payload in mcapio.iter_messages(path, [topic]):
+    for _, log_time, payload in mcapio.iter_messages(path, [topic], warn=False):
         if max_scans is not None and count >= max_scans:
             break
         if len(payload) not in sizes:
