@@ -240,6 +240,18 @@ def test_row11_absurd_frame_id_length(tmp_path, scan, n):
     assert leftovers(tmp_path, {"in.mcap"}) == []
 
 
+@pytest.mark.parametrize("field, at, message", [
+    ("ranges", 24 + 28, "4294967280 ranges run past the end"),
+    ("intensities", 24 + 32 + 4 * GEOM.n_beams, "4294967280 intensities run past the end")])
+def test_row11_absurd_sequence_lengths(tmp_path, field, at, message):
+    def patch(raw):
+        raw[at:at + 4] = struct.pack("<I", 0xFFFFFFF0)
+
+    path = _bad_log(tmp_path, 1, patch)
+    code, lines, _ = run_cli("info", path)
+    assert_one_error(code, lines, str(path), f"scan 1: {message}")
+
+
 # track takes scan 0: a later scan stamped before 1970 goes back in time, which streaming refuses first
 @pytest.mark.parametrize("command, scan", [("track", 0), ("import", 2), ("info", 2)])
 def test_row12_stamp_before_1970(tmp_path, command, scan):
