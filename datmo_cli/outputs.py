@@ -284,6 +284,17 @@ def track(tmp: Path) -> None:
     _LIVE[os.fspath(tmp)] = os.getpid()
 
 
+def forget(tmp: str | Path) -> None:
+    """Stop tracking `tmp`: it stays on disk (a recording kept, or one that could not be renamed into place)."""
+    _LIVE.pop(os.fspath(tmp), None)
+
+
+def interrupt(signum: int) -> None:
+    """Act on `signum` as `handle_signals` does (held inside `critical()`): for a handler of one's own that
+    passes a signal on, e.g. record's second Ctrl-C."""
+    _handler(signum, None)
+
+
 def _file_for(fd: int, mode: str) -> IO:
     """The file object of a temporary file's descriptor (tests replace this to inject write failures)."""
     return os.fdopen(fd, mode)

@@ -573,7 +573,8 @@ class LogWriter:
     (`streaming=True` writes them at once instead, for `record`, with `flush()` to push data to disk).
     `path` is checked by outputs.check_output (an existing file needs `force`; a folder, FIFO or device is
     never replaced; a symlink is replaced itself). On any error or signal, in the `with` block or in
-    `close()`, the temporary file is removed; write errors are OutputErrors naming `path`.
+    `close()`, the temporary file is removed; write errors are OutputErrors naming `path`. In streaming
+    mode a failed `close()` leaves the temporary file for `keep_flushed` (removed at exit if not kept).
     """
 
     def __init__(self, path: str | Path, *, force: bool = False, provenance: Provenance | None = None,
@@ -585,6 +586,10 @@ class LogWriter:
         self.path = outputs.check_output(path, force=force, inputs=provenance.inputs if provenance else ())
         self.force = force
         self._closed = False
+        self.flushed = 0   # bytes of the temporary file known to be on disk, ending after a complete record
+        self.kept = 0      # bytes kept in `path` by keep_flushed
+        self._whole = False
+        self._left: Exception | None = None
         self.tmp, file = outputs.open_temp(self.path)
         self._file = outputs.Guarded(file, self.path)   # a write error names the output, not the temporary file
         try:
@@ -709,17 +714,21 @@ class LogWriter:
 
     # -- finishing
     def flush(self) -> None:
-        """Close the current chunk and push everything written so far to disk (streaming mode)."""
+        """Close the current chunk and push everything written so far to disk (streaming mode); `flushed`
+        becomes the file's length then (bytes), where `keep_flushed` can cut it."""
         from .. import outputs
 
         with outputs.writing(self.path):
             self._writer.flush()
             self._file.flush()
             os.fsync(self._file.fileno())
+            self.flushed = self._file.tell()
 
     def close(self) -> Path:
         """Write buffered messages in time order, finish the file, sync it and rename it to `path`. On any
-        error (the disk full, a signal) the temporary file is removed and `path` is left as it was."""
+        error (the disk full, a signal) the temporary file is removed and `path` is left as it was; in
+        streaming mode it is left for `keep_flushed` instead, and a finished file that cannot be renamed
+        stays where it is, named in the error."""
         from .. import outputs
 
         if self._closed:
@@ -730,13 +739,75 @@ class LogWriter:
                 self._writer.finish()
                 self._file.flush()
                 os.fsync(self._file.fileno())
+                end = self._file.tell()
                 self._file.close()
-            outputs.commit(self.tmp, self.path, self.force)
+            if self._streaming:
+                self.flushed, self._whole = end, True
+                self.keep_flushed()
+            else:
+                outputs.commit(self.tmp, self.path, self.force)
         except BaseException:
-            self.abort()
+            if self._streaming:
+                self._release()   # keep_flushed keeps what reached the disk (remove_live drops it otherwise)
+            else:
+                self.abort()
             raise
         self._closed = True
         return self.path
+
+    @property
+    def complete(self) -> bool:
+        """Whether `path` now holds the whole finished file (not only a flushed part of it)."""
+        return self._whole and self.kept > 0
+
+    def _release(self) -> None:
+        """Close the temporary file, whatever its buffered rest does (a full disk refuses it)."""
+        try:
+            self._file.close()
+        except Exception:  # noqa: BLE001 - the rest is cut off or dropped by the caller
+            pass
+
+    def keep_flushed(self) -> int:
+        """After a failure in streaming mode (the disk full, a second Ctrl-C): keep what reached the disk.
+
+        The temporary file is cut at the last `flush()` (after complete chunks, which the reader recovers
+        with a truncation warning), synced and renamed to `path`; returns the bytes kept (`kept`). With
+        nothing flushed the temporary file is removed and 0 returned. If the cut or the rename fails, the
+        temporary file is left where it is (no longer removed on exit) and an OutputError names it (again
+        on a later call).
+        """
+        from .. import outputs
+        from ..errors import DatmoError, OutputError
+
+        if self._closed:
+            if self._left is not None:
+                raise self._left
+            return self.kept
+        self._closed = True
+        self._release()
+        if self.flushed <= 0:
+            outputs.discard(self.tmp)
+            return 0
+        with outputs.critical():   # a signal waits until `kept` says where the data is
+            try:
+                fd = os.open(self.tmp, os.O_WRONLY | getattr(os, "O_CLOEXEC", 0))
+                try:
+                    os.ftruncate(fd, self.flushed)
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
+                outputs.check_replaceable(self.path, self.force)
+                os.replace(self.tmp, self.path)
+            except (OSError, DatmoError) as exc:
+                outputs.forget(self.tmp)
+                why = outputs.reason(exc) if isinstance(exc, OSError) else str(exc)
+                self._left = OutputError(
+                    f"{os.fsdecode(self.tmp)}: holds the data written so far (its first {self.flushed:,} bytes are "
+                    f"complete) but could not become {os.fsdecode(self.path)} ({why}); rename it yourself")
+                raise self._left from exc
+            outputs.forget(self.tmp)
+            self.kept = self.flushed
+        return self.kept
 
     def abort(self) -> None:
         """Drop the temporary file; `path` is left as it was."""
