@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
 import sys
 import time
@@ -102,7 +104,25 @@ def test_emulate_command_serves_record(tmp_path):
         assert "10 scans" in rec.stderr
         assert len(mcapio.read_run(out)) == 10
     finally:
-        emu.send_signal(2)
+        emu.send_signal(signal.SIGINT)
         _, err = emu.communicate(timeout=10)
-    assert emu.returncode == 0
+    assert emu.returncode == 130                 # Ctrl-C, after the summary and the link's removal
     assert "baud 500000" in err and "sent" in err
+    assert "Traceback" not in err and not (tmp_path / "lms").exists()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_emulate_exits_128_plus_the_signal_after_cleaning_up(tmp_path, sig):
+    link = tmp_path / "lms"
+    emu = subprocess.Popen([sys.executable, "-c", "from datmo_cli.cli import main; main()", "emulate",
+                            "--scene", "static", "--link", str(link)],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert emu.stdout.readline().strip().startswith("/dev/pts/")
+        assert link.is_symlink()
+    finally:
+        emu.send_signal(sig)
+        _, err = emu.communicate(timeout=10)
+    assert emu.returncode == 128 + sig, err
+    assert err.strip().splitlines()[-1].startswith("emulate: sent ") and "Traceback" not in err
+    assert not os.path.lexists(link) and not list(tmp_path.iterdir())

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import errno
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -15,8 +17,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from datmo_cli import outputs
 from datmo_cli.cli import cli
+from datmo_cli.commands import record as record_cmd
 from datmo_cli.commands.record import record
+from datmo_cli.errors import OutputError
 from datmo_cli.lms2xx import protocol as P
 from datmo_cli.lms2xx.driver import LMS2xx
 from datmo_cli.lms2xx.emulator import ArraySource, Emulator, Faults, LogSource, SceneSource
@@ -225,7 +230,7 @@ def _datmo(*args: str) -> list[str]:
     return [sys.executable, "-c", "from datmo_cli.cli import main; main()", *args]
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_signal_stops_the_stream_and_finishes_the_file(tmp_path, sig):
     out = tmp_path / "run.mcap"
     with Emulator(scene()) as emu:
@@ -242,13 +247,132 @@ def test_signal_stops_the_stream_and_finishes_the_file(tmp_path, sig):
                 proc.kill()
         assert settled(lambda: emu.mode == P.MODE_STOP and emu.baud == 9600)   # stream stopped, baud restored
         sent = emu.good_scans()
-    assert proc.returncode == 0, err
-    assert "(interrupted)" in err
+    assert proc.returncode == 128 + sig, err                                 # 130 Ctrl-C, 143 SIGTERM
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"{out}: ") and f"(interrupted: {signal.Signals(sig).name})" in last, err
+    assert "Traceback" not in err
     run = mcapio.read_run(out)
     assert len(run) >= 20
     assert_bit_exact(run, sent[:len(run)])
     assert not mcapio.read_log(out).truncated
     assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_a_second_ctrl_c_gives_up_at_once_keeping_what_reached_the_disk(tmp_path):
+    out = tmp_path / "run.mcap"
+    with Emulator(scene()) as emu:
+        proc = subprocess.Popen(_datmo("record", "--port", emu.device_path, "-o", str(out), "--baud", "500000"),
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + 20
+            while len(emu.sent) < 40 and time.monotonic() < deadline and proc.poll() is None:
+                time.sleep(0.05)
+            proc.send_signal(signal.SIGINT)
+            time.sleep(0.02)
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=20)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        sent = emu.good_scans()
+    # 130; or killed by the SIGINT itself (the shell shows 130 too) when the second one comes as the interpreter
+    # exits, after the file was finished and its handlers were reset
+    assert proc.returncode in (130, -signal.SIGINT), err
+    assert "Traceback" not in err
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", mcapio.TruncatedLogWarning)   # cut at its last flush, if it came to that
+        run = mcapio.read_run(out)
+    assert len(run) >= 10
+    assert_bit_exact(run, sent[:len(run)])
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+class _StoppedAfter(LMS2xx):
+    """A driver whose read_scan raises `exc` (a second Ctrl-C, a SIGTERM, a bug) after `n` scans."""
+
+    def __init__(self, *args, n: int, exc: BaseException, **kw) -> None:  # noqa: ANN002, ANN003
+        super().__init__(*args, **kw)
+        self.n, self.exc = n, exc
+
+    def read_scan(self, timeout: float = 0.2):  # noqa: ANN201
+        if self.n <= 0:
+            raise self.exc
+        scan = super().read_scan(timeout)
+        self.n -= scan is not None
+        return scan
+
+
+@pytest.mark.parametrize("exc, code", [(KeyboardInterrupt(), 130), (outputs.Terminated(signal.SIGTERM), 143),
+                                       (ValueError("a bug"), 70)])
+def test_a_failure_while_recording_keeps_the_flushed_scans(tmp_path, monkeypatch, exc, code):
+    monkeypatch.setattr(record_cmd, "FLUSH_EVERY_S", 0.05)
+    out = tmp_path / "run.mcap"
+    with Emulator(scene()) as emu:
+        driver = _StoppedAfter(emu.device_path, baud=500000, n=25, exc=exc)
+        writer = mcapio.LogWriter(out, streaming=True)
+        with pytest.raises(record_cmd.RecordingCut) as caught:
+            record(driver, writer, display=False)
+        assert settled(lambda: emu.mode == P.MODE_STOP) == isinstance(exc, Exception)   # stopped after a bug
+        sent = emu.good_scans()
+    message = str(caught.value)
+    kept = int(re.search(r"keeps the (\d+) scans? that reached the disk", message).group(1))
+    assert caught.value.exit_code == code and "\n" not in message
+    assert 0 < kept <= 25 and (str(out) in message)
+    with pytest.warns(mcapio.TruncatedLogWarning):
+        run = mcapio.read_run(out)
+    assert len(run) == kept
+    assert_bit_exact(run, sent[:kept])
+    assert not list(tmp_path.glob(".*.tmp")) and not outputs.live()
+
+
+def _flushed_writer(path, n: int = 5) -> mcapio.LogWriter:  # noqa: ANN001
+    g = ScanGeometry(-np.pi / 2, np.radians(0.5), 361, 0.0, 8.0)
+    writer = mcapio.LogWriter(path, streaming=True)
+    for i in range(n):
+        writer.write_scan(i * 10**8, np.full(361, 1.0 + i, np.float32), g)
+    writer.flush()
+    writer.write_scan(n * 10**8, np.full(361, 9.0, np.float32), g)   # after the flush: not kept
+    return writer
+
+
+def test_keep_flushed_cuts_the_file_at_the_last_flush(tmp_path):
+    writer = _flushed_writer(tmp_path / "run.mcap")
+    assert writer.keep_flushed() == writer.flushed > 0 and not writer.complete
+    with pytest.warns(mcapio.TruncatedLogWarning):
+        run = mcapio.read_run(tmp_path / "run.mcap")
+    assert len(run) == 5 and np.all(run.ranges[:, 0] == 1.0 + np.arange(5))
+    assert [p.name for p in tmp_path.iterdir()] == ["run.mcap"] and not outputs.live()
+
+
+def test_keep_flushed_with_nothing_flushed_leaves_nothing(tmp_path):
+    writer = mcapio.LogWriter(tmp_path / "run.mcap", streaming=True)
+    assert writer.keep_flushed() == 0
+    assert not list(tmp_path.iterdir()) and not outputs.live()
+
+
+@pytest.mark.parametrize("finished", [False, True])
+def test_a_recording_that_cannot_be_renamed_is_left_in_its_temporary_file(tmp_path, monkeypatch, finished):
+    writer = _flushed_writer(tmp_path / "run.mcap")
+
+    def refuse(src, dst):  # noqa: ANN001
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    monkeypatch.setattr(os, "replace", refuse)
+    with pytest.raises(OutputError) as caught:
+        writer.close() if finished else writer.keep_flushed()
+    monkeypatch.undo()
+    message = str(caught.value)
+    assert message.startswith(f"{writer.tmp}: holds the data written so far") and "read-only file system" in message
+    assert "rename it yourself" in message and "\n" not in message
+    assert not (tmp_path / "run.mcap").exists() and writer.tmp.exists() and not outputs.live()
+    with pytest.raises(OutputError):   # asked again, it says so again: never "nothing kept"
+        writer.keep_flushed()
+    with warnings.catch_warnings(record=True) as caught_warnings:
+        warnings.simplefilter("always")
+        run = mcapio.read_run(writer.tmp)
+    assert len(run) == (6 if finished else 5)
+    assert bool(caught_warnings) != finished              # the finished file is whole, the other one cut
+    writer.tmp.unlink()
 
 
 def _one_line_error(res, *needles: str) -> None:  # noqa: ANN001

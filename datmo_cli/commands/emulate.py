@@ -44,7 +44,7 @@ FAULT_HELP = ("Faults to inject, comma-separated: garbage:P (a burst of random b
 def command(scene: str | None, log_path: Path | None, seed: int, duration: float | None, baud: str, angle: str,
             resolution: str, units: str, indices: bool, fault_spec: str | None, link: Path | None,
             force: bool) -> None:
-    """Run a virtual SICK LMS200 on a pseudo-terminal until Ctrl-C.
+    """Run a virtual SICK LMS200 on a pseudo-terminal until Ctrl-C (exit 130; SIGTERM 143, SIGHUP 129).
 
     Prints the device path to give `datmo record --port`. The device follows the LMS2xx serial protocol
     (power-up at 9600 Bd, baud changes, variant and configuration commands, NAK on bad CRCs, continuous
@@ -71,8 +71,10 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
                    resolution_deg=float(resolution), units=units, indices=indices,
                    on_event=lambda text: click.echo(f"emulate: {text}", err=True))
     done = threading.Event()
+    stopped_by: list[int] = []
 
     def handler(signum, frame) -> None:  # noqa: ANN001
+        stopped_by.append(signum)
         done.set()
 
     old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
@@ -94,7 +96,12 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
             remove_link(link, made)
         for sig, h in old.items():
             signal.signal(sig, h)
-    click.echo(f"emulate: sent {len(emu.sent)} scans; faults {dict(emu.stats.faults) or 'none'}", err=True)
+    try:
+        click.echo(f"emulate: sent {len(emu.sent)} scans; faults {dict(emu.stats.faults) or 'none'}", err=True)
+    except OSError:   # the terminal hung up (SIGHUP)
+        pass
+    if stopped_by:   # stopping is how an emulator ends, but the status says how: 130, 143 or 129
+        raise click.exceptions.Exit(128 + stopped_by[0])
 
 
 def make_link(target: str, link: Path, force: bool) -> tuple[int, int]:

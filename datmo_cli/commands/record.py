@@ -2,7 +2,10 @@
 
 The log is written in streaming mode and flushed at least twice a second, so a power cut loses at most
 about half a second (the reader recovers every complete chunk of the temporary file). Ctrl-C, SIGTERM and
-SIGHUP stop the scanner's output and finish the file; a disconnect finishes it up to the last good scan.
+SIGHUP stop the scanner's output and finish the file, then the command exits 130, 143 or 129; a disconnect
+finishes it up to the last good scan (exit 1). A failure after that point (the disk full, the file-size
+limit, a second Ctrl-C) keeps what the last flush put on disk: the temporary file is cut there, after its
+last complete chunk, and renamed to the output; the error says how many scans it holds.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS, option
+from ..errors import DatmoError
 
 FLUSH_EVERY_S = 0.5
 TELEGRAM_TYPE = "std_msgs/msg/UInt8MultiArray"
@@ -51,11 +55,22 @@ def _panel(scans: int, elapsed: float, stats, port: str, baud: int):  # noqa: AN
     return t
 
 
+class RecordingCut(DatmoError):
+    """A recording ended by a failure after it started (the disk full, a second signal, a device error): the
+    message says what happened and what the output keeps."""
+
+    def __init__(self, message: str, exit_code: int = 1) -> None:
+        super().__init__(message)
+        self.exit_code = exit_code
+
+
 def record(driver, writer, *, duration: float | None = None, max_scans: int | None = None,  # noqa: ANN001
            raw: bool = False, stop: threading.Event | None = None, display: bool = True) -> RecordResult:
     """Connect `driver` (an LMS2xx), stream scans into `writer` (a streaming LogWriter) until `duration`
     seconds, `max_scans`, `stop` or a disconnect; stop the scanner and close the writer (also after a
-    disconnect). Other errors abort the writer and propagate."""
+    disconnect). An error before the scanner streams aborts the writer and propagates; any failure after
+    (the disk full, a second Ctrl-C) keeps the scans flushed before it (writer.keep_flushed) and raises
+    RecordingCut saying so."""
     from ..lms2xx.driver import DeviceDisconnected
     from ..log import mcapio
 
@@ -81,18 +96,12 @@ def record(driver, writer, *, duration: float | None = None, max_scans: int | No
         raise
     t0 = time.monotonic()
     last_flush = t0
+    flushed = 0   # scans on disk at the last flush
     live = None
-    if display:
-        from rich.console import Console
-        from rich.live import Live
-
-        console = Console(stderr=True)
-        if console.is_terminal:
-            live = Live(_panel(0, 0.0, driver.stats, driver.name, driver.baud), console=console,
-                        refresh_per_second=4, transient=True)
-            live.start()
     last_view = t0
     try:
+        if display:
+            live = _live_panel(driver)
         while True:
             now = time.monotonic()
             if stop.is_set():
@@ -116,42 +125,114 @@ def record(driver, writer, *, duration: float | None = None, max_scans: int | No
             now = time.monotonic()
             if now - last_flush >= FLUSH_EVERY_S:
                 writer.flush()
+                flushed = result.scans
                 last_flush = now
             if live is not None and now - last_view >= 0.25:
                 live.update(_panel(result.scans, now - t0, driver.stats, driver.name, driver.baud))
                 last_view = now
         result.seconds = time.monotonic() - t0
         if result.disconnect is None:
-            try:
-                driver.stop()
-            except Exception as exc:  # noqa: BLE001 - finish the file whatever the device does now
-                import warnings
-
-                warnings.warn(f"{driver.name}: could not stop the scanner cleanly ({exc})", stacklevel=2)
+            _stop_scanner(driver)
         result.stats = driver.stats.as_dict()
         writer.add_metadata("lms2xx.stats", result.stats)
         writer.close()
-    except BaseException:
-        writer.abort()
-        raise
+    except BaseException as exc:
+        result.seconds = time.monotonic() - t0
+        cut = _cut(writer, result, flushed, exc)
+        if isinstance(exc, Exception) and result.disconnect is None:
+            from ..outputs import Terminated
+
+            try:
+                _stop_scanner(driver)   # the disk full: the scanner need not stream on
+            except (KeyboardInterrupt, Terminated):   # not waited for; the data is kept already
+                pass
+        raise cut from exc
     finally:
         if live is not None:
-            live.stop()
+            try:
+                live.stop()
+            except OSError:   # the terminal hung up (SIGHUP)
+                pass
         driver.close()
     return result
 
 
+def _live_panel(driver):  # noqa: ANN001, ANN202
+    """A rich Live panel of the counts on a terminal's stderr (started), or None."""
+    from rich.console import Console
+    from rich.live import Live
+
+    console = Console(stderr=True)
+    if not console.is_terminal:
+        return None
+    live = Live(_panel(0, 0.0, driver.stats, driver.name, driver.baud), console=console, refresh_per_second=4,
+                transient=True)
+    live.start()
+    return live
+
+
+def _stop_scanner(driver) -> None:  # noqa: ANN001
+    """Stop the scanner's output and restore its baud; a warning if it does not answer."""
+    try:
+        driver.stop()
+    except Exception as exc:  # noqa: BLE001 - finish the file whatever the device does now
+        import warnings
+
+        warnings.warn(f"{driver.name}: could not stop the scanner cleanly ({exc})", stacklevel=2)
+
+
+def _cause(exc: BaseException) -> tuple[str, int]:
+    """What stopped a recording, as a phrase, and the exit code it gives."""
+    from .. import outputs
+    from ..cli import clean_error
+
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted (Ctrl-C) before the file was finished", 130
+    if isinstance(exc, outputs.Terminated):
+        return f"{exc} before the file was finished", exc.exit_code
+    clean = clean_error(exc)
+    return (clean.format_message(), clean.exit_code) if clean is not None else (str(exc), 1)
+
+
+def _scans(n: int) -> str:
+    return f"{n} scan" if n == 1 else f"{n} scans"
+
+
+def _cut(writer, result: RecordResult, flushed: int, exc: BaseException) -> RecordingCut:  # noqa: ANN001
+    """Keep what reached the disk after `exc` stopped the recording; the error that says what and where."""
+    from ..errors import OutputError
+
+    what, code = _cause(exc)
+    try:
+        writer.keep_flushed()
+    except OutputError as left:
+        return RecordingCut(what if left is exc else f"{what}; {left}", code)
+    if writer.complete:
+        return RecordingCut(f"{what}; {writer.path} is complete ({result.scans} scans)", code)
+    if writer.kept:
+        lost = result.scans - flushed
+        return RecordingCut(f"{what}; {writer.path} keeps the {_scans(flushed)} that reached the disk before that "
+                            f"(readable, cut after its last complete chunk; later scans lost: {lost})", code)
+    return RecordingCut(f"{what}; no scan had reached the disk, so no {writer.path} was written", code)
+
+
 class _Signals:
     """Turn SIGINT, SIGTERM and SIGHUP (the terminal closed) into a stop request while recording (main thread
-    only): the file is finished up to the last scan, and the command exits 0 (stopping is how a recording ends)."""
+    only): the file is finished up to the last scan, then the command exits 128 + the signal's number. A
+    second signal gives up at once (outputs.interrupt), keeping the scans flushed before it."""
 
     def __init__(self, stop: threading.Event) -> None:
         self.stop = stop
+        self.signum: int | None = None
         self.old: dict[int, object] = {}
 
     def _handler(self, signum, frame) -> None:  # noqa: ANN001
-        if self.stop.is_set():  # a second Ctrl-C: give up at once
-            raise KeyboardInterrupt
+        from .. import outputs
+
+        if self.stop.is_set():
+            outputs.interrupt(signum)
+            return
+        self.signum = signum
         self.stop.set()
 
     def __enter__(self) -> _Signals:
@@ -193,9 +274,11 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
 
     Finds the scanner's baud, switches to --baud, sets the variant and units only when they differ,
     and streams scans to /scan (sensor_msgs/LaserScan, stamped with the host time of each telegram's
-    first byte) until --duration, --scans, Ctrl-C or SIGTERM; the scanner's output is then stopped and
-    the file finished. Data reaches the disk at least twice a second. The device status goes into the
-    log's metadata (lms2xx.status), with the counts of CRC errors, resyncs and dropped scans (lms2xx.stats).
+    first byte) until --duration, --scans, Ctrl-C or SIGTERM; the scanner's output is then stopped, the
+    file finished, and the exit status is 130 after Ctrl-C, 143 after SIGTERM, 129 after SIGHUP. Data
+    reaches the disk at least twice a second; if the disk fills, the scans already there are kept. The
+    device status goes into the log's metadata (lms2xx.status), with the counts of CRC errors, resyncs and
+    dropped scans (lms2xx.stats).
 
     Example: datmo record --port /dev/ttyUSB0 -o run.mcap
     """
@@ -212,14 +295,19 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
     driver = LMS2xx(port, baud=int(baud), angle=int(angle), resolution=float(resolution), units=units,
                     indices=indices, interlaced=interlaced)
     stop = threading.Event()
-    with _Signals(stop):
+    with _Signals(stop) as signals:
         result = record(driver, writer, duration=duration, max_scans=max_scans, raw=raw, stop=stop)
     s = result.stats
     rate = result.scans / result.seconds if result.seconds > 0 else 0.0
-    click.echo(f"{output}: {result.scans} scans in {result.seconds:.1f} s ({rate:.2f} Hz); "
-               f"crc errors {s.get('crc_errors', 0)}, length errors {s.get('length_errors', 0)}, "
-               f"resyncs {s.get('resyncs', 0)}, dropped scans {s.get('dropped', 0)}"
-               + (" (interrupted)" if result.reason == "interrupted" else ""), err=True)
+    why = "" if signals.signum is None else f" (interrupted: {signal.Signals(signals.signum).name})"
+    try:
+        click.echo(f"{output}: {result.scans} scans in {result.seconds:.1f} s ({rate:.2f} Hz); "
+                   f"crc errors {s.get('crc_errors', 0)}, length errors {s.get('length_errors', 0)}, "
+                   f"resyncs {s.get('resyncs', 0)}, dropped scans {s.get('dropped', 0)}" + why, err=True)
+    except OSError:   # the terminal that would show it hung up (SIGHUP): the file is complete all the same
+        pass
     if result.disconnect is not None:
         raise DeviceError(f"{result.disconnect}; {output} is complete up to the last good scan "
                           f"({result.scans} scans)")
+    if signals.signum is not None:
+        raise click.exceptions.Exit(128 + signals.signum)
