@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import errno
 import hashlib
+import json
 import random
+import re
 import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -118,6 +121,79 @@ def test_write_failures_at_seeded_points_of_every_writing_command(logs, tmp_path
         ok = ok and {k: digest(p) for k, p in logs.items()} == before
         tally("write failures", failed=not ok)
         assert ok, (name, room, res.exit_code, res.output[-2000:], made, temps(folder))
+
+
+# ---------------------------------------------------------------------------------------- record, disk full
+
+KEPT = re.compile(r"keeps the (\d+) scans? that reached the disk")
+
+
+def _record_case(emu, folder: Path, room: int) -> tuple[bool, str]:  # noqa: ANN001
+    """`datmo record` from `emu` into a disk with `room` bytes: (promise kept, what happened)."""
+    out = folder / "run.mcap"
+    before = len(emu.sent)
+    res = CliRunner().invoke(cli, ["record", "--port", emu.device_path, "-o", str(out), "--baud", "500000",
+                                   "--scans", str(RECORD_SCANS)])
+    sent = [s for s in emu.sent[before:] if s.good]
+    err = res.stderr.strip()
+    last = err.splitlines()[-1] if err else ""
+    clean = "Traceback" not in res.output and not temps(folder) and not outputs.live()
+    if res.exit_code == 0:           # everything fitted: the whole recording, finished
+        run = mcapio.read_run(out)
+        return clean and len(run) == RECORD_SCANS and _exact(run, sent), "complete"
+    ok = clean and last.startswith("datmo: error: ") and "no space left on the device" in last
+    kept = KEPT.search(last)
+    if kept is None:                 # full before the first flush (or before recording began): no output at all
+        return ok and not out.exists(), "nothing kept"
+    n = int(kept.group(1))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        log = mcapio.read_log(out, topics=[mcapio.TOPIC_SCAN])
+    run = mcapio.run_from_log(log)
+    warned = any(issubclass(w.category, mcapio.TruncatedLogWarning) for w in caught)
+    info = CliRunner().invoke(cli, ["info", str(out), "--json"])
+    counted = json.loads(info.stdout)
+    ok = ok and n > 0 and len(run) == n and _exact(run, sent) and log.truncated and warned and counted["truncated"]
+    return ok, f"kept {n} scans"
+
+
+def _exact(run: ScanRun, sent) -> bool:  # noqa: ANN001
+    expected = np.stack([s.ranges() for s in sent[:len(run)]])
+    return np.array_equal(run.ranges.view(np.uint32), np.ascontiguousarray(expected, np.float32).view(np.uint32))
+
+
+RECORD_SCANS = 20
+# bytes the disk takes: full at once, full before the first scan is flushed, after a few flushes, never
+RECORD_ROOM = [0, 2_000, 12_000, 10**8]
+
+
+def test_write_failures_at_seeded_points_of_record(tmp_path, monkeypatch):
+    """A full disk while recording keeps every scan flushed before it: the file cut after its last complete
+    chunk and renamed into place, one line saying so, exit 1, no temporary file."""
+    from datmo_cli.commands import record as record_cmd
+    from datmo_cli.lms2xx.emulator import ArraySource, Emulator
+
+    rng = random.Random("write failures record")
+    rooms = RECORD_ROOM + [rng.randrange(1_000, 20_000) for _ in range(2)]
+    monkeypatch.setattr(record_cmd, "FLUSH_EVERY_S", 0.05)   # many flushes in a short recording
+    values = (np.arange(361, dtype=np.uint16)[None] * 7 + np.arange(16, dtype=np.uint16)[:, None] * 13) % 8000
+    real = outputs._file_for
+    outcomes = []
+    with Emulator(ArraySource(values), seed=1) as emu:
+        for i, room in enumerate(rooms):
+            folder = tmp_path / f"case{i}"
+            folder.mkdir()
+            monkeypatch.setattr(outputs, "_file_for", lambda fd, mode, room=room: FullDisk(real(fd, mode), room))
+            try:
+                ok, what = _record_case(emu, folder, room)
+            finally:
+                monkeypatch.setattr(outputs, "_file_for", real)
+            ok = ok and (room < 12_000 or what != "nothing kept")   # room for a first flush: scans kept
+            tally("write failures", failed=not ok)
+            outcomes.append((room, what))
+            assert ok, (room, what, list(folder.iterdir()))
+    assert {what for _, what in outcomes} >= {"complete", "nothing kept"}
+    assert any(what.startswith("kept ") for _, what in outcomes), outcomes
 
 
 # ------------------------------------------------------------------------------------------------- signals
