@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import os
 import re
+import resource
 import shutil
 import signal
 import subprocess
@@ -323,6 +324,32 @@ def test_a_failure_while_recording_keeps_the_flushed_scans(tmp_path, monkeypatch
     assert len(run) == kept
     assert_bit_exact(run, sent[:kept])
     assert not list(tmp_path.glob(".*.tmp")) and not outputs.live()
+
+
+def test_the_file_size_limit_while_recording_keeps_the_scans_on_disk(tmp_path):
+    """A real EFBIG (ulimit -f), with the partial buffered writes it makes: the scans of the last flush kept."""
+    limit = 40_000
+    out = tmp_path / "run.mcap"
+    values = (np.arange(361, dtype=np.uint16)[None] * 7 + np.arange(16, dtype=np.uint16)[:, None] * 13) % 8000
+
+    def limited() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    with Emulator(ArraySource(values)) as emu:
+        proc = subprocess.run(_datmo("record", "--port", emu.device_path, "-o", str(out), "--baud", "500000",
+                                     "--scans", "500"), capture_output=True, text=True, timeout=60,
+                              preexec_fn=limited)
+        sent = emu.good_scans()
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 1 and len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert lines[0].startswith(f"datmo: error: {out}: file too large for the file-size limit"), lines
+    kept = int(re.search(r"keeps the (\d+) scans? that reached the disk", lines[0]).group(1))
+    assert 0 < kept < 500 and out.stat().st_size <= limit
+    with pytest.warns(mcapio.TruncatedLogWarning):
+        run = mcapio.read_run(out)
+    assert len(run) == kept
+    assert_bit_exact(run, sent[:kept])
+    assert [p.name for p in tmp_path.iterdir()] == ["run.mcap"]
 
 
 def _flushed_writer(path, n: int = 5) -> mcapio.LogWriter:  # noqa: ANN001
