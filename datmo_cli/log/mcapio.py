@@ -1,7 +1,8 @@
 """The one module that owns MCAP: topic names, reading logs into arrays, and writing logs safely.
 
 Reading uses a linear record scanner over the file (fast, and it recovers every complete chunk of a
-truncated file). Writing uses mcap's Writer with zstd chunks and the `ros2` profile, so Foxglove and
+truncated file). Each chunk's CRC-32 and size are checked before its records are parsed: a corrupt chunk is
+skipped, counted and warned about, never decoded. Writing uses mcap's Writer with zstd chunks and the `ros2` profile, so Foxglove and
 `ros2 bag` open the files; messages are CDR with their `ros2msg` schemas embedded.
 """
 
