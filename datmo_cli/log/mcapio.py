@@ -2,8 +2,8 @@
 
 Reading uses a linear record scanner over the file (fast, and it recovers every complete chunk of a
 truncated file). Each chunk's CRC-32 and size are checked before its records are parsed: a corrupt chunk is
-skipped, counted and warned about, never decoded. Writing uses mcap's Writer with zstd chunks and the `ros2` profile, so Foxglove and
-`ros2 bag` open the files; messages are CDR with their `ros2msg` schemas embedded.
+skipped, counted and warned about, never decoded. Writing uses mcap's Writer with zstd chunks and the `ros2`
+profile, so Foxglove and `ros2 bag` open the files; messages are CDR with their `ros2msg` schemas embedded.
 """
 
 from __future__ import annotations
