@@ -1,0 +1,132 @@
+"""What the commands say while they work: one progress bar helper, `--quiet`, and consoles for piped output.
+
+Rules shared by every command:
+- progress goes to stderr, as a rich bar with a known total on a terminal; when stderr is not a terminal
+  (a pipe, a file, CI) nothing is drawn (no control codes, no redraws), and under --quiet nothing at all;
+- informational lines (`say`) go to stderr unless --quiet; warnings and errors always do;
+- tables on stdout never wrap or cut names when stdout is not a terminal (`console`), so
+  `datmo info out.mcap | grep MarkerArray` sees whole type names.
+
+rich is imported only when a bar or a console is made, so `datmo --help` stays light.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+import click
+
+QUIET_KEY = "datmo.quiet"   # in the Click context's meta, shared by a command and its group
+PIPE_WIDTH = 10_000         # columns of a console that is not a terminal: wide enough never to wrap a row
+
+
+def quiet() -> bool:
+    """Whether the running command was given --quiet (False outside a command, e.g. in a worker process)."""
+    ctx = click.get_current_context(silent=True)
+    return bool(ctx is not None and ctx.meta.get(QUIET_KEY))
+
+
+def _set_quiet(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
+    ctx.meta[QUIET_KEY] = bool(value)
+
+
+def quiet_option(f: Callable) -> Callable:
+    """The `-q/--quiet` option: no progress bars and no informational lines; warnings and errors are still
+    printed on stderr, and a command's result (tables, JSON, CSV on stdout) is still printed."""
+    return click.option("-q", "--quiet", is_flag=True, expose_value=False, is_eager=True, callback=_set_quiet,
+                        help="No progress and no informational output (warnings and errors still go to stderr).")(f)
+
+
+def say(message: str) -> None:
+    """An informational line on stderr, unless --quiet."""
+    if not quiet():
+        click.echo(message, err=True)
+
+
+def console(*, stderr: bool = False):  # noqa: ANN201 - rich.console.Console, imported lazily
+    """A rich console on stdout (or stderr) for tables: the terminal's width on a terminal; otherwise
+    PIPE_WIDTH columns, no wrapping and no colour, so piped and redirected output keeps every name whole."""
+    import sys
+
+    from rich.console import Console
+
+    stream = sys.stderr if stderr else sys.stdout
+    if _isatty(stream):
+        return Console(stderr=stderr)
+    return Console(stderr=stderr, width=PIPE_WIDTH, soft_wrap=True, no_color=True, highlight=False)
+
+
+def _isatty(stream) -> bool:  # noqa: ANN001 - a text stream
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError, OSError):
+        return False
+
+
+class Bar:
+    """One task of a rich Progress on stderr, or nothing (quiet, not a terminal). `update(done, total)`
+    is also the (done, total) callback the pipeline functions take."""
+
+    def __init__(self, progress, task) -> None:  # noqa: ANN001 - rich Progress and its task id, or None
+        self.progress = progress
+        self.task = task
+
+    @property
+    def shown(self) -> bool:
+        """Whether a bar is drawn (a terminal, not --quiet)."""
+        return self.progress is not None
+
+    def update(self, done: int, total: int | None = None, **fields) -> None:  # noqa: ANN003 - column fields
+        """Set the count done (and the total when it becomes known, and any extra column's fields)."""
+        if self.progress is not None:
+            extra = {} if total is None else {"total": total}
+            self.progress.update(self.task, completed=done, **extra, **fields)
+
+    def advance(self, n: int = 1, **fields) -> None:  # noqa: ANN003 - column fields
+        """Count `n` more done."""
+        if self.progress is not None:
+            self.progress.update(self.task, advance=n, **fields)
+
+    def __call__(self, done: int, total: int | None = None) -> None:
+        self.update(done, total)
+
+    @contextmanager
+    def compile_notice(self) -> Iterator[Callable[[int, int], None]]:
+        """A (done, total) callback that also says when numba is compiling the kernels (commands.compiling)."""
+        if self.progress is None:
+            yield self.update
+            return
+        from .commands.compiling import compile_notice
+
+        with compile_notice(self.progress, self.task) as report:
+            yield report
+
+
+@contextmanager
+def bar(description: str, total: int | None, *, unit: str = "scans", info: bool = False) -> Iterator[Bar]:
+    """A progress bar on stderr: `description`, the bar, done/total `unit`, elapsed and remaining time (and,
+    with `info`, a free text column set by `update(..., info=TEXT)`). Removed when the block ends.
+    Nothing is drawn under --quiet or when stderr is not a terminal."""
+    import sys
+
+    if quiet() or not _isatty(sys.stderr):
+        yield Bar(None, None)
+        return
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn(unit)]
+    if info:
+        columns.append(TextColumn("{task.fields[info]}", style="progress.data.speed"))
+    columns += [TimeElapsedColumn(), TimeRemainingColumn()]
+    with Progress(*columns, console=Console(stderr=True), transient=True) as progress:
+        task = progress.add_task(description, total=total, **({"info": ""} if info else {}))
+        yield Bar(progress, task)
