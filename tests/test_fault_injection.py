@@ -196,6 +196,51 @@ def test_write_failures_at_seeded_points_of_record(tmp_path, monkeypatch):
     assert any(what.startswith("kept ") for _, what in outcomes), outcomes
 
 
+# ---------------------------------------------------------------------------------------- train-legs, disk full
+
+
+@pytest.mark.slow
+def test_write_failures_at_seeded_points_of_train_legs(tmp_path, monkeypatch):
+    """`datmo train-legs` with the disk full while its model is written: one line, no model, no temporary
+    file. The training itself runs once (it takes seconds); each case reuses its result, so what is tried at
+    every point is the command's reading of its inputs and its write."""
+    pytest.importorskip("sklearn")
+    from datmo_cli.perception import training
+    from datmo_cli.perception.legs import LegModel
+    from tests.synthetic_legs import scene, write_bag
+
+    positive = write_bag(tmp_path / "p0.bag", *scene(20, seed=0))
+    before = digest(positive)
+    trained = []
+    real_train = training.train_leg_model
+
+    def train_once(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        if not trained:
+            trained.append(real_train(*args, **kwargs))
+        return trained[0]
+
+    monkeypatch.setattr(training, "train_leg_model", train_once)
+    rng = random.Random("write failures train-legs")
+    real = outputs._file_for
+    for i, room in enumerate([10**9, *ROOM, rng.randrange(1, 200_000)]):
+        folder = tmp_path / f"case{i}"
+        folder.mkdir()
+        out = folder / "legs.npz"
+        monkeypatch.setattr(outputs, "_file_for", lambda fd, mode, room=room: FullDisk(real(fd, mode), room))
+        res = CliRunner().invoke(cli, ["train-legs", "--positive", str(positive), "-o", str(out)])
+        monkeypatch.setattr(outputs, "_file_for", real)
+        made = [p for p in folder.rglob("*") if p.is_file()]
+        last = res.stderr.strip().splitlines()[-1] if res.stderr.strip() else ""
+        if res.exit_code == 0:       # the model fitted in `room`: it must then be whole
+            ok = made == [out] and LegModel.load(out).n_trees > 0
+        else:
+            ok = (res.exit_code != 0 and last.startswith("datmo: error: ") and "no space left on the device" in last
+                  and "Traceback" not in res.output and not made and not outputs.live())
+        ok = ok and not temps(folder) and digest(positive) == before and (room != 0 or res.exit_code != 0)
+        tally("write failures", failed=not ok)
+        assert ok, (room, res.exit_code, res.output[-2000:], made)
+
+
 # ------------------------------------------------------------------------------------------------- signals
 
 
