@@ -196,6 +196,8 @@ def test_row13_non_utf8_input_and_output_names(small, tmp_path):
 
 @pytest.mark.parametrize("code", [errno.EROFS, errno.EACCES, errno.EPERM])
 def test_row14_read_only_folder_is_one_line_naming_it(small, tmp_path, monkeypatch, code):
+    tracked = tmp_path / "tracked.mcap"
+    assert datmo("track", small, "-o", tracked).exit_code == 0
     real = os.open
 
     def refuse(path, *a, **k):  # noqa: ANN001, ANN002, ANN003
@@ -206,8 +208,9 @@ def test_row14_read_only_folder_is_one_line_naming_it(small, tmp_path, monkeypat
     monkeypatch.setattr(os, "open", refuse)
     out = tmp_path / "sub" / "out.mcap"
     out.parent.mkdir()
-    for args in (["segment", small, "-o", out], ["import", small, "-o", out],
-                 ["simulate", "--scene", "hall", "--duration", "1", "-o", out]):
+    for args in (["segment", small, "-o", out], ["track", small, "-o", out], ["import", small, "-o", out],
+                 ["simulate", "--scene", "hall", "--duration", "1", "-o", out],
+                 ["report", tracked, "--plot", out.with_suffix(".png")]):
         line = one_line_error(datmo(*args), f"{out.parent}: ", "creating a file there")
         assert outputs.reason(OSError(code, "")) in line
     assert not list(out.parent.iterdir())
