@@ -1,0 +1,417 @@
+"""Per-scan tables out of processed logs: every track's state after every scan (and, optionally, every feature
+of every scan), one row each, as CSV, NDJSON or Parquet, streamed in constant memory.
+
+Schema (the same columns, in this order, in every format; units in the names: m, m/s (`mps`), ns, rad):
+
+    file          the input log, as given on the command line
+    scan          index of the scan's message on the exported channel of that file, from 0
+    stamp_ns      header stamp of the scan, ns since 1970
+    frame_id      the scan's frame (the sensor frame; world_* columns are in the odometry frame)
+    kind          track; with --features also line, circle, blob, point or leg
+    id            track id (empty for features)
+    class         unknown, person, circle object or rectangular object (tracks)
+    mobility      static, dynamic or undefined (tracks)
+    status        tentative, confirmed or coasting (tracks)
+    x_m, y_m      track: model centre; circle: centre; blob, point, leg: centroid; line: its first end P_ini;
+                  sensor frame, m
+    vx_mps, vy_mps               track velocity, sensor frame, m/s
+    world_x_m, world_y_m         track position in the odometry frame, m (empty when the log has no odometry)
+    world_vx_mps, world_vy_mps   track velocity in the odometry frame, m/s (likewise)
+    size_m        track: object extent; blob, point: largest distance between two of its points; line: length;
+                  leg: width first to last point; m
+    occluded      true when a nearer segment covers the track's bearing (tracks)
+    age, hits, misses            scans since the track was created, scans with a measurement, consecutive
+                                 scans without one (tracks)
+
+With --features these columns follow (empty for tracks and for kinds they do not describe):
+
+    segment       index of the feature's segment in the scan's Segments message
+    first_beam, last_beam        beam indices of the feature's first and last points (inclusive)
+    n_points      returns on the feature
+    x_end_m, y_end_m             line: its second end P_end, sensor frame, m
+    radius_m      circle radius, m
+    rho_m, theta_rad             line normal: rho = x cos(theta) + y sin(theta), m; theta in [0, pi), rad
+    r_acc         line, circle: votes in the Hough peak cell / points on the segment
+    probability   leg: the leg detector's probability, 0 to 1
+
+Missing values are empty in CSV and null in NDJSON and Parquet (NaN world coordinates included). Floats are
+written as the shortest text that reads back to the same float32 (CSV, NDJSON) or as float32 (Parquet).
+A file's rows are its track states in file order, then (with --features) its features in file order.
+
+Streaming: each file is read twice, a summary pass (its channels and message counts: the progress bar's
+total, and an input without /datmo/tracks refused before anything is written) and one pass per exported
+channel with mcapio.iter_messages, one chunk in memory at a time, decoded and written `block` messages at a
+time (a CSV or NDJSON batch of lines, a Parquet row group).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import sys
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+
+from .errors import ConfigError, DatmoError, InputError, MissingChannelError
+from .log import cdr, mcapio, types
+from .report import CLASS_NAMES, MOBILITY_NAMES
+
+FORMATS = ("csv", "ndjson", "parquet")
+SUFFIXES = {".csv": "csv", ".ndjson": "ndjson", ".jsonl": "ndjson", ".parquet": "parquet", ".pq": "parquet"}
+BLOCK_MESSAGES = 1000        # messages decoded and written at once (one batch, one Parquet row group)
+STATUS_NAMES = {0: "tentative", 1: "confirmed", 2: "coasting"}
+PARQUET_HINT = "pip install 'datmo[parquet]'"
+
+# name -> value kind: str, int (uint32, or int64 for stamp_ns), float (float32), bool
+TRACK_COLUMNS: dict[str, str] = {
+    "file": "str", "scan": "int", "stamp_ns": "int", "frame_id": "str", "kind": "str", "id": "int",
+    "class": "str", "mobility": "str", "status": "str", "x_m": "float", "y_m": "float", "vx_mps": "float",
+    "vy_mps": "float", "world_x_m": "float", "world_y_m": "float", "world_vx_mps": "float",
+    "world_vy_mps": "float", "size_m": "float", "occluded": "bool", "age": "int", "hits": "int", "misses": "int",
+}
+FEATURE_COLUMNS: dict[str, str] = {
+    "segment": "int", "first_beam": "int", "last_beam": "int", "n_points": "int", "x_end_m": "float",
+    "y_end_m": "float", "radius_m": "float", "rho_m": "float", "theta_rad": "float", "r_acc": "float",
+    "probability": "float",
+}
+
+
+class ParquetMissingError(DatmoError):
+    """pyarrow, needed to write Parquet, is not installed."""
+
+
+def columns(features: bool = False) -> dict[str, str]:
+    """The output's columns (name -> value kind) in order: the track columns, then with `features` the
+    feature columns."""
+    return {**TRACK_COLUMNS, **(FEATURE_COLUMNS if features else {})}
+
+
+def format_for(output: Path, fmt: str | None) -> str:
+    """The format to write: `fmt` when given, else from OUT's suffix (.csv, .ndjson or .jsonl, .parquet or
+    .pq), else csv for stdout ('-'); ConfigError naming -o for any other output."""
+    if fmt is not None:
+        return fmt
+    if str(output) == "-":
+        return "csv"
+    found = SUFFIXES.get(output.suffix.lower())
+    if found is None:
+        raise ConfigError(f"{output}: cannot tell the format from the suffix {output.suffix or '(none)'!r}; name it "
+                          f"{', '.join(SUFFIXES)} or give --format {'/'.join(FORMATS)}")
+    return found
+
+
+# -------------------------------------------------------------------------------------------- batches
+
+
+@dataclass
+class Batch:
+    """Rows of one block of messages: `values[name]` (n,) for the columns these rows have; the output's other
+    columns are empty. Float NaN is empty too."""
+
+    n: int
+    values: dict[str, np.ndarray]
+
+
+def _constant(value: object, n: int) -> np.ndarray:
+    out = np.empty(n, object)
+    out[:] = [value] * n
+    return out
+
+
+def _names(codes: np.ndarray, names: dict[int, str], fallback: str) -> np.ndarray:
+    return np.array([names.get(int(c), fallback) for c in codes], object)
+
+
+def _decode(path: Path, msgtype: str, topic: str, payloads: list[bytes], first: int) -> list[dict]:
+    out = []
+    for k, p in enumerate(payloads):
+        try:
+            out.append(cdr.decode(msgtype, p))
+        except (ValueError, IndexError, TypeError, UnicodeDecodeError) as exc:
+            raise InputError(f"{path}: bad {msgtype} message {first + k} on {topic} ({exc})") from None
+    return out
+
+
+def _per_message(file: str, first: int, decoded: list[dict], seq: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """(elements of sequence `seq` of every message joined, the common columns of their rows)."""
+    parts = [d[seq] for d in decoded]
+    counts = np.array([len(p) for p in parts], np.int64)
+    n = int(counts.sum())
+    items = np.concatenate(parts) if n else np.zeros(0, parts[0].dtype if parts else np.float32)
+    index = np.repeat(np.arange(len(decoded)), counts)
+    common = {"file": _constant(file, n), "scan": (first + index).astype(np.int64),
+              "stamp_ns": np.array([d["stamp_ns"] for d in decoded], np.int64)[index],
+              "frame_id": np.array([d["frame_id"] for d in decoded], object)[index]}
+    return items, common
+
+
+def track_batch(file: str, first: int, decoded: list[dict]) -> Batch:
+    """The rows of decoded Tracks messages (scans first, first + 1, ... of `file`): one per track state."""
+    t, common = _per_message(file, first, decoded, "tracks")
+    n = len(t)
+    if not n:
+        return Batch(0, {})
+    values = {**common, "kind": _constant("track", n), "id": t["id"],
+              "class": _names(t["classification"], CLASS_NAMES, "unknown"),
+              "mobility": _names(t["mobility"], MOBILITY_NAMES, "undefined"),
+              "status": _names(t["status"], STATUS_NAMES, "unknown"),
+              "x_m": t["x"], "y_m": t["y"], "vx_mps": t["vx"], "vy_mps": t["vy"], "world_x_m": t["world_x"],
+              "world_y_m": t["world_y"], "world_vx_mps": t["world_vx"], "world_vy_mps": t["world_vy"],
+              "size_m": t["size"], "occluded": t["occluded"] != 0, "age": t["age"], "hits": t["hits"],
+              "misses": t["misses"]}
+    return Batch(n, values)
+
+
+def _feature_part(file: str, first: int, decoded: list[dict], seq: str) -> Batch:
+    f, common = _per_message(file, first, decoded, seq)
+    n = len(f)
+    if not n:
+        return Batch(0, {})
+    v = {**common, "segment": f["segment"], "first_beam": f["first"], "last_beam": f["last"],
+         "n_points": f["n_points"]}
+    if seq == "lines":
+        v.update(kind=_constant("line", n), x_m=f["x_ini"], y_m=f["y_ini"], x_end_m=f["x_end"], y_end_m=f["y_end"],
+                 size_m=f["length"], rho_m=f["rho"], theta_rad=f["theta"], r_acc=f["r_acc"])
+    elif seq == "circles":
+        v.update(kind=_constant("circle", n), x_m=f["x"], y_m=f["y"], radius_m=f["radius"], r_acc=f["r_acc"])
+    elif seq == "blobs":
+        kind = np.where(f["kind"] == 1, "point", "blob").astype(object)
+        v.update(kind=kind, x_m=f["x"], y_m=f["y"], size_m=f["size"])
+    else:
+        v.update(kind=_constant("leg", n), x_m=f["x"], y_m=f["y"], size_m=f["width"], probability=f["probability"])
+    return Batch(n, v)
+
+
+FEATURE_KINDS = ("lines", "circles", "blobs", "legs")
+
+
+def feature_batch(file: str, first: int, decoded: list[dict]) -> Batch:
+    """The rows of decoded Features messages: per message its lines, circles, blobs (and points), legs, each
+    kind's rows in message order, the kinds in that order within the batch."""
+    parts = [_feature_part(file, first, decoded, seq) for seq in FEATURE_KINDS if decoded and seq in decoded[0]]
+    parts = [p for p in parts if p.n]
+    if not parts:
+        return Batch(0, {})
+    names = [name for name in columns(True) if any(name in p.values for p in parts)]
+    values = {}
+    for name in names:
+        kind = columns(True)[name]
+        filled = []
+        for p in parts:
+            if name in p.values:
+                filled.append(p.values[name])
+            elif kind == "float":
+                filled.append(np.full(p.n, np.nan, np.float32))
+            else:
+                filled.append(_constant(None, p.n))
+        values[name] = np.concatenate([a.astype(object) if any(x.dtype == object for x in filled) else a
+                                       for a in filled])
+    return Batch(sum(p.n for p in parts), values)
+
+
+# ---------------------------------------------------------------------------------------------- sinks
+
+
+def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
+    """A column's values as text: float32 as its shortest round-trip form, NaN and None as `null`; strings
+    JSON-quoted with `quote`."""
+    if kind == "float" and a.dtype != object:
+        out = a.astype(np.float32).astype(str).astype(object)
+        out[~np.isfinite(a)] = null
+        return out.tolist()
+    if kind == "bool" and a.dtype != object:
+        return np.where(a, "true", "false").tolist()
+    if a.dtype != object:
+        return a.astype(str).tolist()
+    cache: dict = {}
+    out = []
+    for v in a.tolist():
+        if v not in cache:
+            if v is None or (isinstance(v, float) and not np.isfinite(v)):
+                cache[v] = null
+            elif kind == "str":
+                cache[v] = json.dumps(v) if quote else v
+            elif kind == "bool":
+                cache[v] = "true" if v else "false"
+            elif kind == "float":
+                cache[v] = str(np.float32(v))
+            else:
+                cache[v] = str(v)
+        out.append(cache[v])
+    return out
+
+
+def _text_columns(cols: dict[str, str], batch: Batch, null: str, quote: bool) -> list[list[str]]:
+    return [_text_column(kind, batch.values[name], null, quote) if name in batch.values else [null] * batch.n
+            for name, kind in cols.items()]
+
+
+class TextSink:
+    """CSV or NDJSON rows to a binary stream, one write per batch. Strings in UTF-8 (file names that are not
+    are written as their bytes in CSV, \\uXXXX-escaped in NDJSON)."""
+
+    def __init__(self, stream: IO[bytes], fmt: str, cols: dict[str, str]) -> None:
+        self.stream, self.fmt, self.cols = stream, fmt, cols
+        self.rows = self.batches = self.peak_rows = 0
+        keys = ",".join(f"{json.dumps(name)}:%s" for name in cols)
+        self._template = "{" + keys + "}\n"
+        if fmt == "csv":
+            self._write(",".join(cols) + "\n")
+
+    def _write(self, text: str) -> None:
+        self.stream.write(text.encode("utf-8", "surrogateescape"))
+
+    def write(self, batch: Batch) -> None:
+        if not batch.n:
+            return
+        if self.fmt == "csv":
+            text = io.StringIO()
+            csv.writer(text, lineterminator="\n").writerows(zip(*_text_columns(self.cols, batch, "", False),
+                                                                 strict=True))
+            self._write(text.getvalue())
+        else:
+            template = self._template
+            self._write("".join(template % row for row in zip(*_text_columns(self.cols, batch, "null", True),
+                                                               strict=True)))
+        self.rows += batch.n
+        self.batches += 1
+        self.peak_rows = max(self.peak_rows, batch.n)
+
+    def close(self) -> None:
+        self.stream.flush()
+
+
+def require_pyarrow():  # noqa: ANN201 - the pyarrow module
+    """pyarrow (with its parquet module), or ParquetMissingError naming the extra to install."""
+    try:
+        import pyarrow
+        import pyarrow.parquet  # noqa: F401
+    except ImportError:
+        raise ParquetMissingError(f"writing Parquet needs pyarrow: {PARQUET_HINT}") from None
+    return pyarrow
+
+
+class ParquetSink:
+    """Rows to a Parquet file (pyarrow.parquet.ParquetWriter), one row group per batch, zstd-compressed."""
+
+    def __init__(self, stream: IO[bytes], cols: dict[str, str]) -> None:
+        pa = self.pa = require_pyarrow()
+        self.cols = cols
+        kinds = {"str": pa.string(), "float": pa.float32(), "bool": pa.bool_(), "int": pa.uint32()}
+        self.schema = pa.schema([(name, pa.int64() if name in ("stamp_ns", "scan") else kinds[kind])
+                                 for name, kind in cols.items()])
+        import pyarrow.parquet as pq
+
+        self.writer = pq.ParquetWriter(stream, self.schema, compression="zstd")
+        self.rows = self.batches = self.peak_rows = 0
+
+    def _array(self, name: str, a: np.ndarray | None, n: int):  # noqa: ANN202 - a pyarrow Array
+        pa, typ = self.pa, self.schema.field(name).type
+        if a is None:
+            return pa.nulls(n, typ)
+        if a.dtype == object:
+            values = [None if v is None or (isinstance(v, float) and np.isnan(v)) else v for v in a.tolist()]
+            if pa.types.is_string(typ):
+                values = [v if v is None else v.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+                          for v in values]
+            return pa.array(values, typ)
+        if pa.types.is_floating(typ):
+            return pa.array(a.astype(np.float32), typ, mask=np.isnan(a))
+        return pa.array(a, typ)
+
+    def write(self, batch: Batch) -> None:
+        if not batch.n:
+            return
+        arrays = [self._array(name, batch.values.get(name), batch.n) for name in self.cols]
+        self.writer.write_table(self.pa.Table.from_arrays(arrays, schema=self.schema), row_group_size=batch.n)
+        self.rows += batch.n
+        self.batches += 1
+        self.peak_rows = max(self.peak_rows, batch.n)
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+def sink_for(stream: IO[bytes], fmt: str, features: bool) -> TextSink | ParquetSink:
+    """The writer of `fmt` rows (with the feature columns when `features`) to the binary `stream`."""
+    cols = columns(features)
+    return ParquetSink(stream, cols) if fmt == "parquet" else TextSink(stream, fmt, cols)
+
+
+# ----------------------------------------------------------------------------------------------- export
+
+
+@dataclass
+class Plan:
+    """What the summary pass of each input found: its path and its message counts per exported topic."""
+
+    files: list[Path]
+    counts: list[dict[str, int]] = field(default_factory=list)
+
+    def total(self, topic: str) -> int:
+        return sum(c.get(topic, 0) for c in self.counts)
+
+
+def _require(log: mcapio.LogContents, topic: str, msgtype: str) -> int:
+    ch = log.topics().get(topic)
+    if ch is None or not ch.count:
+        raise MissingChannelError(f"{log.path}: no messages on {topic}; run {mcapio.PRODUCER[topic]} first")
+    if ch.msgtype != msgtype or ch.message_encoding != "cdr":
+        raise InputError(f"{log.path}: {topic} holds {ch.message_encoding} {ch.msgtype}, not CDR {msgtype}")
+    return ch.count
+
+
+def plan(files: list[Path], features: bool = False) -> Plan:
+    """Summary pass over every input (mcapio.summary): refuses, before anything is written, an input that is
+    not a log or has no /datmo/tracks (or, with `features`, no /datmo/features), naming the command to run."""
+    out = Plan(list(files))
+    for path in files:
+        log = mcapio.summary(path)
+        counts = {mcapio.TOPIC_TRACKS: _require(log, mcapio.TOPIC_TRACKS, types.TRACKS)}
+        if features:
+            counts[mcapio.TOPIC_FEATURES] = _require(log, mcapio.TOPIC_FEATURES, types.FEATURES)
+        out.counts.append(counts)
+    return out
+
+
+def _batches(path: Path, topic: str, block: int) -> Iterator[tuple[int, list[bytes]]]:
+    """(index of the first, payloads) of each block of `block` messages on `topic` of the log at `path`."""
+    pending: list[bytes] = []
+    first = 0
+    for _, _, payload in mcapio.iter_messages(path, [topic], warn=False):
+        pending.append(payload)
+        if len(pending) == block:
+            yield first, pending
+            first += len(pending)
+            pending = []
+    if pending:
+        yield first, pending
+
+
+def export(p: Plan, sink: TextSink | ParquetSink, *, features: bool = False, block: int = BLOCK_MESSAGES,
+           progress: Callable[[str, int], None] | None = None) -> None:
+    """Write the rows of every input of `p` to `sink`, `block` messages at a time. `progress(topic, n)` after
+    each block of n messages of `topic`."""
+    jobs = [(mcapio.TOPIC_TRACKS, types.TRACKS, track_batch)]
+    if features:
+        jobs.append((mcapio.TOPIC_FEATURES, types.FEATURES, feature_batch))
+    for path in p.files:
+        name = os.fsdecode(path)
+        for topic, msgtype, rows in jobs:
+            for first, payloads in _batches(path, topic, block):
+                sink.write(rows(name, first, _decode(path, msgtype, topic, payloads, first)))
+                if progress is not None:
+                    progress(topic, len(payloads))
+
+
+def to_stdout(fmt: str) -> IO[bytes]:
+    """stdout's binary stream for CSV or NDJSON rows; Parquet (binary, written at the end) is refused."""
+    if fmt == "parquet":
+        raise ConfigError("-o -: Parquet is not written to stdout; give a file name (or --format csv or ndjson)")
+    return sys.stdout.buffer
