@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("run", "Segment, extract features and track in one pass; then report."),
     "report": ("report", "Summarise what a processed run saw."),
     "export": ("export", "Write every track's state per scan (and features) as CSV, NDJSON or Parquet."),
+    "play": ("play", "Serve a log to Foxglove live (WebSocket), processing scans as they play."),
     "evaluate": ("evaluate", "Score tracks against ground truth (CLEAR-MOT, IDF1)."),
     "train-legs": ("train_legs", "Train the learned leg detector on labelled scans; print held-out figures."),
 }

@@ -1,0 +1,74 @@
+"""`datmo play`: serve a log to Foxglove over its WebSocket protocol at the log's rate (the live view)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ..bounds import OPTIONS, option
+
+
+def host_option(*decls: str, help_: str = "Address to serve on (0.0.0.0: every interface).") -> click.decorators.FC:
+    return click.option(*decls, default="127.0.0.1", show_default=True, metavar="HOST", help=help_)
+
+
+@click.command(name="play")
+@click.argument("input", type=click.Path(path_type=Path))
+@host_option("--host")
+@option("--port", bound=OPTIONS["live_port"], default=8765, show_default=True,
+        help="WebSocket port to serve on (0: any free port; the URL printed says which).")
+@option("--rate", bound=OPTIONS["play_rate"], default=1.0, show_default=True,
+        help="Play at this multiple of the log's speed.")
+@click.option("--loop", is_flag=True, help="Start over at the end of the log (until Ctrl-C).")
+@click.option("--wait/--no-wait", default=True, show_default=True,
+              help="Start playing when a client subscribes to a channel (else at once).")
+@click.option("--config", "config", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="TOML file with [features] and [track] tables, for a log that is processed on the fly.")
+def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bool, config: Path | None) -> None:
+    """Serve a log to Foxglove (WebSocket, foxglove-sdk) at the log's rate: the scan, features, tracks,
+    markers and transforms, every channel with its ROS 2 schema.
+
+    A log without /datmo/tracks is segmented, its features extracted and tracked on the fly, as datmo run
+    would; a processed log is served as it is. Transforms come from the log's /tf and /tf_static, else from
+    its odometry. Open the URL printed, or in Foxglove desktop: Open connection, Foxglove WebSocket, the
+    ws:// address. The layout foxglove/datmo-layout.json of the datmo repository shows the scan, features
+    and tracks and plots track speeds (Layouts, Import from file). Ctrl-C stops (exit status 130).
+    Needs the live extra: pip install 'datmo[live]'.
+
+    Example: datmo play sample_logs/hall.mcap --rate 2 --loop
+    """
+    from .. import live, outputs
+
+    server = live.LiveServer(host, port)   # the package and the port are checked before the log is read
+    try:
+        params = _params(config)
+        source = live.LogSource(input, params)
+        source.declare(server)
+        what = "as it is" if source.processed else "segmented, features and tracks made on the fly"
+        click.echo(f"datmo play: serving {input} ({source.stream.n_scans:,} scans, {what}) on {server.url}")
+        click.echo(f"  open {server.app_url}")
+        click.echo(f"  or in Foxglove desktop: Open connection > Foxglove WebSocket > {server.url}")
+        if wait:
+            click.echo("  waiting for a client to subscribe (Ctrl-C to stop)", err=True)
+            while not server.subscribed.wait(0.2):
+                pass
+        scans = live.play(source, server, rate=rate, loop=loop)
+        click.echo(f"datmo play: {scans:,} scans served", err=True)
+    except (KeyboardInterrupt, outputs.Terminated) as exc:
+        code = 130 if isinstance(exc, KeyboardInterrupt) else exc.exit_code
+        click.echo(f"datmo play: stopped ({'Ctrl-C' if code == 130 else exc}); {server.sent:,} messages served",
+                   err=True)
+        raise click.exceptions.Exit(code) from None
+    finally:
+        server.close()
+
+
+def _params(config: Path | None) -> dict | None:
+    """The [features] and [track] parameters of `config` (None: the defaults)."""
+    if config is None:
+        return None
+    from ..perception.params import load_toml as load_features
+    from ..tracking.params import load_toml
+
+    return {"track": load_toml(config), "features": load_features(config)}

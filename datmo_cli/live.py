@@ -1,0 +1,421 @@
+"""The live view: a log's channels served to Foxglove over its WebSocket protocol (foxglove-sdk), as they are
+made.
+
+`datmo play` publishes a log at its own rate (scans segmented, their features extracted and tracked on the
+fly when the log has no /datmo/tracks); `datmo record --live` publishes each scan as it arrives from the
+scanner. Every channel goes out with its ROS 2 schema (ros2msg) and CDR payloads, as in the log files, so
+Foxglove decodes them as it decodes a datmo log. Transforms: the log's own /tf and /tf_static when it has
+them; else, with odometry, odom -> base_link at every scan stamp on /tf (and base_link -> the scan's frame,
+identity, on /tf_static when the frames differ). Static transforms are sent again every second, so a client
+that subscribes late still places the scan.
+
+Times are the log's (header stamps, ns): the server advertises the time capability and broadcasts each
+scan's stamp, so Foxglove's clock follows the log (and restarts with it when `play --loop` starts over).
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from urllib.parse import quote
+
+import numpy as np
+
+from .errors import ConfigError, DatmoError
+from .log import mcapio, types
+from .log.scan import Odometry, ScanGeometry, ScanRun
+
+TOPIC_TF = "/tf"
+TOPIC_TF_STATIC = "/tf_static"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+STATIC_EVERY_NS = 1_000_000_000    # static transforms are sent again after this much log time
+SUBPROTOCOL = "foxglove.sdk.v1"     # what the SDK's server speaks (the app's WebSocket data source)
+INSTALL = "pip install 'datmo[live]'"
+_APP = "https://app.foxglove.dev/"
+
+
+class LiveUnavailable(DatmoError):
+    """The live view's package (foxglove-sdk) is not installed."""
+
+
+def require_foxglove():  # noqa: ANN201 - the foxglove module
+    """The foxglove module, or LiveUnavailable saying how to install it."""
+    try:
+        import foxglove
+        import foxglove.websocket  # noqa: F401 - the server lives there
+    except ImportError as exc:
+        raise LiveUnavailable(f"the live view needs the foxglove-sdk package ({exc}); install it with {INSTALL}") \
+            from None
+    return foxglove
+
+
+def ws_url(host: str, port: int) -> str:
+    """The WebSocket URL a client on this machine or the network opens: a wildcard host ('0.0.0.0', '::',
+    '') becomes this machine's name."""
+    import socket
+
+    if host in ("", "0.0.0.0", "::"):
+        host = socket.gethostname()
+    if ":" in host and not host.startswith("["):
+        host = f"[{host}]"   # an IPv6 address
+    return f"ws://{host}:{port}"
+
+
+def app_url(host: str, port: int) -> str:
+    """The Foxglove web app's URL that opens the server at `host`:`port` as its data source."""
+    return f"{_APP}?ds=foxglove-websocket&ds.url={quote(ws_url(host, port), safe='')}"
+
+
+@dataclass(frozen=True)
+class Message:
+    """One message to publish: its time (the header stamp, ns), topic, ROS 2 type and CDR payload."""
+
+    stamp: int
+    topic: str
+    msgtype: str
+    payload: bytes
+
+
+# ------------------------------------------------------------------------------------------- transforms
+
+
+def _quaternion_z(theta: float) -> dict:
+    return {"x": 0.0, "y": 0.0, "z": math.sin(theta / 2.0), "w": math.cos(theta / 2.0)}
+
+
+def tf_payload(stamp: int, transforms: Iterable[tuple[str, str, float, float, float]]) -> bytes:
+    """CDR of a tf2_msgs/msg/TFMessage stamped `stamp` (ns) holding `transforms`: (parent frame, child
+    frame, x m, y m, yaw rad) each, in the plane."""
+    from rosbags.typesys.stores import ros2_humble as m
+
+    when = m.builtin_interfaces__msg__Time(sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
+    items = [m.geometry_msgs__msg__TransformStamped(
+        header=m.std_msgs__msg__Header(stamp=when, frame_id=parent), child_frame_id=child,
+        transform=m.geometry_msgs__msg__Transform(
+            translation=m.geometry_msgs__msg__Vector3(x=float(x), y=float(y), z=0.0),
+            rotation=m.geometry_msgs__msg__Quaternion(**_quaternion_z(float(yaw)))))
+        for parent, child, x, y, yaw in transforms]
+    return bytes(types.typestore().serialize_cdr(m.tf2_msgs__msg__TFMessage(transforms=items), TF_MESSAGE))
+
+
+class Transforms:
+    """The transforms a log lacks, scan by scan: with odometry, odom -> base_link at each scan's stamp
+    (/tf) and base_link -> the scan's frame, identity, when the two differ (/tf_static, every second of log
+    time). Nothing when the log has /tf of its own or no odometry."""
+
+    def __init__(self, odometry: Odometry | None, scan_frame: str, has_own: bool) -> None:
+        self.odometry = odometry if odometry is not None and len(odometry) and not has_own else None
+        self.scan_frame = scan_frame
+        self._static_at: int | None = None
+
+    def messages(self, stamps: np.ndarray) -> list[Message]:
+        o = self.odometry
+        if o is None or not len(stamps):
+            return []
+        out = []
+        static = o.child_frame_id != self.scan_frame
+        for stamp, (x, y, yaw) in zip(stamps.tolist(), o.at(stamps).tolist(), strict=True):
+            if static and (self._static_at is None or stamp - self._static_at >= STATIC_EVERY_NS
+                           or stamp < self._static_at):
+                out.append(Message(stamp, TOPIC_TF_STATIC, TF_MESSAGE,
+                                   tf_payload(stamp, [(o.child_frame_id, self.scan_frame, 0.0, 0.0, 0.0)])))
+                self._static_at = stamp
+            out.append(Message(stamp, TOPIC_TF, TF_MESSAGE,
+                               tf_payload(stamp, [(o.frame_id, o.child_frame_id, x, y, yaw)])))
+        return out
+
+
+# ------------------------------------------------------------------------------------------- the server
+
+
+class LiveServer:
+    """A Foxglove WebSocket server on `host`:`port` (0: any free port) publishing ROS 2 messages.
+
+    `declare` advertises a channel before it has messages (so a client can subscribe and playback wait for
+    it); `publish` sends a Message (the channel declared on first use); `subscribed` is set once a client
+    subscribes to any channel. Static transforms are kept and sent again with `repeat_static`."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, name: str = "datmo") -> None:
+        foxglove = require_foxglove()
+        from foxglove.websocket import Capability
+
+        self._foxglove = foxglove
+        self.host = host
+        self.context = foxglove.Context()
+        self.subscribed = threading.Event()
+        self.channels: dict[str, object] = {}
+        self.static: dict[str, Message] = {}
+        self.sent = 0
+        try:
+            self.server = foxglove.start_server(name=name, host=host, port=port, capabilities=[Capability.Time],
+                                                server_listener=_Listener(self.subscribed), context=self.context)
+        except Exception as exc:  # noqa: BLE001 - the SDK raises its own errors for a busy port or a bad host
+            raise ConfigError(f"--port {port}, --host {host}: cannot serve there ({_reason(exc)})") from None
+        self.port = self.server.port
+
+    @property
+    def url(self) -> str:
+        return ws_url(self.host, self.port)
+
+    @property
+    def app_url(self) -> str:
+        return app_url(self.host, self.port)
+
+    def declare(self, topic: str, msgtype: str, schema: bytes | None = None, encoding: str = "ros2msg") -> None:
+        """Advertise `topic` with its ROS 2 type's schema (`schema`: the log's own text, else datmo's)."""
+        if topic in self.channels:
+            return
+        data = schema if schema else types.schema_text(msgtype).encode()
+        self.channels[topic] = self._foxglove.Channel(
+            topic, schema=self._foxglove.Schema(name=msgtype, encoding=encoding, data=data),
+            message_encoding="cdr", context=self.context)
+
+    def declare_log(self, log: mcapio.LogContents, exclude: Iterable[str] = ()) -> None:
+        """Advertise every channel of `log` that holds messages (but `exclude`), with the log's own schemas."""
+        skip = set(exclude)
+        for ch in log.topics().values():
+            if ch.count and ch.topic not in skip and ch.message_encoding == "cdr":
+                self.declare(ch.topic, ch.msgtype, ch.schema_data, ch.schema_encoding or "ros2msg")
+
+    def publish(self, message: Message) -> None:
+        if message.topic not in self.channels:
+            self.declare(message.topic, message.msgtype)
+        self.channels[message.topic].log(message.payload, log_time=message.stamp)
+        if message.topic == TOPIC_TF_STATIC:
+            self.static[message.topic] = message
+        self.sent += 1
+
+    def repeat_static(self, stamp: int) -> None:
+        """Send the static transforms again (for clients that subscribed after they went out)."""
+        for m in self.static.values():
+            self.channels[m.topic].log(m.payload, log_time=stamp)
+
+    def time(self, stamp: int) -> None:
+        """Tell the clients the log's time is now `stamp` (ns)."""
+        self.server.broadcast_time(int(stamp))
+
+    def restart(self) -> None:
+        """A new session: clients drop what they hold (the log's time starts over)."""
+        self.static.clear()
+        self.server.clear_session()
+
+    def close(self) -> None:
+        for ch in self.channels.values():
+            ch.close()
+        self.server.stop()
+
+
+class _Listener:
+    """The server's listener: notes the first subscription."""
+
+    def __init__(self, subscribed: threading.Event) -> None:
+        self.subscribed = subscribed
+
+    def on_subscribe(self, client, channel) -> None:  # noqa: ANN001 - foxglove's Client, ChannelView
+        self.subscribed.set()
+
+
+def _reason(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+# ------------------------------------------------------------------------------------ what gets published
+
+
+class Stages:
+    """Segmentation, features and tracking of scans as they come (pipeline.RunStages, its state carried from
+    call to call): `messages(run)` gives the derived messages of the next scans, with the transforms."""
+
+    def __init__(self, odometry: Odometry | None, params: dict | None = None, estimated: bool = False,
+                 has_tf: bool = False, scan_frame: str = "laser") -> None:
+        from .pipeline import RunStages
+
+        self.stages = RunStages(odometry, params, estimated=estimated)
+        self.derived = self.stages.derived()
+        self.transforms = Transforms(odometry, scan_frame, has_tf or TOPIC_TF in self.derived)
+        self.first = 0
+
+    def messages(self, run: ScanRun) -> list[Message]:
+        from .streaming import Block
+
+        out = self.transforms.messages(run.stamps)
+        for topic, (msgtype, stamps, payloads) in self.stages(Block(self.first, run)).items():
+            out += [Message(int(s), topic, msgtype, bytes(p)) for s, p in zip(stamps, payloads, strict=True)]
+        self.first += len(run)
+        return out
+
+
+def _ordered(messages: list[Message], order: dict[str, int]) -> list[Message]:
+    """In time order; at one instant the scan first, then the channels in `order` (the log's, then derived)."""
+    return sorted(messages, key=lambda m: (m.stamp, order.get(m.topic, len(order))))
+
+
+class LogSource:
+    """A log's messages as the live view publishes them, a short block at a time, in time order: the log's
+    channels, and when it has no /datmo/tracks, segmentation, features and tracks made from its scans (with
+    the transforms; the channels those stages make replace any the log has)."""
+
+    def __init__(self, path: str | Path, params: dict | None = None, block_scans: int = 8) -> None:
+        from .pipeline import RunStages
+        from .streaming import LogStream, stream_odometry
+
+        self.stream = LogStream(path)
+        self.block_scans = block_scans
+        self.params = params
+        self.processed = self.stream.has(mcapio.TOPIC_TRACKS)
+        self.odometry, self.estimated = None, False
+        self.derived: dict[str, str] = {}
+        if not self.processed:
+            probe = RunStages(None, params)
+            self.odometry, self.estimated = stream_odometry(self.stream, probe.track_params.ego_motion)
+            self.derived = RunStages(self.odometry, params, estimated=self.estimated).derived()
+        topics = [c.topic for c in self.stream.log.topics().values() if c.count and c.topic not in self.derived]
+        self.copied = topics
+        self.order = {t: i for i, t in enumerate([self.stream.scan_topic] + topics + list(self.derived))}
+
+    def declare(self, server: LiveServer) -> None:
+        """Advertise every channel this source will publish (transforms as they come)."""
+        server.declare_log(self.stream.log, exclude=self.derived)
+        for topic, msgtype in self.derived.items():
+            server.declare(topic, msgtype)
+
+    def batches(self) -> Iterator[list[Message]]:
+        """The log from its start, a block of scans at a time (the block's messages in time order)."""
+        stages = None
+        if not self.processed:
+            frame = self._scan_frame()
+            stages = Stages(self.odometry, self.params, self.estimated, self.stream.has(TOPIC_TF), frame)
+        for block in self.stream.blocks(self.block_scans, copy=set(self.copied)):
+            out = []
+            for topic, (stamps, payloads) in block.copies.items():
+                msgtype = self.stream.log.topics()[topic].msgtype
+                out += [Message(int(s), topic, msgtype, bytes(p)) for s, p in zip(stamps, payloads, strict=True)]
+            if stages is not None:
+                out += stages.messages(block.run)
+            yield _ordered(out, self.order)
+
+    def _scan_frame(self) -> str:
+        for run in self.stream.scans(1):
+            return run.geometry.frame_id
+        return "laser"
+
+
+class Pace:
+    """When to send a message of log time `stamp` (ns) so the log plays at `rate` times its own speed:
+    `due(stamp)` is the monotonic time (s) to send it at, the clock starting at the first stamp given."""
+
+    def __init__(self, rate: float, clock: Callable[[], float] = time.monotonic) -> None:
+        self.rate = rate
+        self.clock = clock
+        self.origin: tuple[int, float] | None = None
+
+    def due(self, stamp: int) -> float:
+        if self.origin is None:
+            self.origin = (stamp, self.clock())
+        first, start = self.origin
+        return start + (stamp - first) / 1e9 / self.rate
+
+    def wait(self, stamp: int, sleep: Callable[[float], None] = time.sleep) -> None:
+        """Sleep until `stamp` is due (at once when it is past)."""
+        delay = self.due(stamp) - self.clock()
+        if delay > 0:
+            sleep(delay)
+
+
+def play(source: LogSource, server: LiveServer, *, rate: float = 1.0, loop: bool = False,
+         sleep: Callable[[float], None] = time.sleep) -> int:
+    """Publish `source` on `server` at `rate` times the log's speed, from the start again after the end with
+    `loop` (a new session each time); returns the number of scans sent."""
+    scans = 0
+    while True:
+        pace = Pace(rate)
+        last_static: int | None = None
+        for batch in source.batches():
+            for m in batch:
+                pace.wait(m.stamp, sleep)
+                if m.topic == source.stream.scan_topic:
+                    server.time(m.stamp)
+                    scans += 1
+                    if last_static is None or m.stamp - last_static >= STATIC_EVERY_NS:
+                        server.repeat_static(m.stamp)
+                        last_static = m.stamp
+                server.publish(m)
+        if not loop:
+            return scans
+        server.restart()
+
+
+# ---------------------------------------------------------------------------------- record --live
+
+
+class LiveFeed:
+    """Scans from a recording, processed and published on a thread of their own so that recording never
+    waits for the view: `scan(stamp, ranges, geometry)` queues a scan (dropped, and counted, when the view
+    is behind by `backlog` scans); `close()` finishes. A failure of the view stops the view, not the
+    recording (`failure` says what it was)."""
+
+    def __init__(self, server: LiveServer, params: dict | None = None, backlog: int = 256,
+                 batch: int = 16) -> None:
+        self.server = server
+        self.params = params
+        self.batch = batch
+        self.queue: queue.Queue = queue.Queue(maxsize=backlog)
+        self.dropped = 0
+        self.published = 0
+        self.failure: str | None = None
+        self._thread = threading.Thread(target=self._run, name="datmo-live", daemon=True)
+        self._thread.start()
+
+    def scan(self, stamp_ns: int, ranges: np.ndarray, geometry: ScanGeometry) -> None:
+        if self.failure is not None:
+            return
+        try:
+            self.queue.put_nowait((int(stamp_ns), np.array(ranges, np.float32), geometry))
+        except queue.Full:
+            self.dropped += 1
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Stop the thread (after the queued scans, waiting at most `timeout` seconds)."""
+        self.queue.put(None)
+        self._thread.join(timeout)
+
+    def _run(self) -> None:
+        from .log.scan import encode_scan
+
+        stages: Stages | None = None
+        geometry: ScanGeometry | None = None
+        try:
+            while True:
+                items = [self.queue.get()]
+                while items[-1] is not None and len(items) < self.batch:
+                    try:
+                        items.append(self.queue.get_nowait())
+                    except queue.Empty:
+                        break
+                done = items[-1] is None
+                scans = [i for i in items if i is not None and (geometry is None or i[2].same_beams(geometry))]
+                if scans:
+                    if stages is None:
+                        geometry = scans[0][2]
+                        scans = [i for i in scans if i[2].same_beams(geometry)]
+                        stages = Stages(None, self.params, scan_frame=geometry.frame_id)
+                    run = ScanRun(np.array([s for s, _, _ in scans], np.int64), np.stack([r for _, r, _ in scans]),
+                                  geometry)
+                    derived = stages.messages(run)
+                    for stamp, ranges, g in scans:
+                        self.server.time(stamp)
+                        self.server.publish(Message(stamp, mcapio.TOPIC_SCAN, types.LASERSCAN,
+                                                    encode_scan(stamp, ranges, g)))
+                    for m in derived:
+                        self.server.publish(m)
+                    self.published += len(scans)
+                if done:
+                    return
+        except Exception as exc:  # noqa: BLE001 - the view may fail; the recording goes on
+            self.failure = f"{type(exc).__name__}: {exc}"
