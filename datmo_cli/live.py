@@ -261,7 +261,7 @@ class LogSource:
     channels, and when it has no /datmo/tracks, segmentation, features and tracks made from its scans (with
     the transforms; the channels those stages make replace any the log has)."""
 
-    def __init__(self, path: str | Path, params: dict | None = None, block_scans: int = 8) -> None:
+    def __init__(self, path: str | Path, params: dict | None = None, block_scans: int = 32) -> None:
         from .pipeline import RunStages
         from .streaming import LogStream, stream_odometry
 

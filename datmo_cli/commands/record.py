@@ -65,12 +65,13 @@ class RecordingCut(DatmoError):
 
 
 def record(driver, writer, *, duration: float | None = None, max_scans: int | None = None,  # noqa: ANN001
-           raw: bool = False, stop: threading.Event | None = None, display: bool = True) -> RecordResult:
+           raw: bool = False, stop: threading.Event | None = None, display: bool = True,
+           on_scan=None) -> RecordResult:  # noqa: ANN001 - on_scan(stamp_ns, ranges, geometry), e.g. LiveFeed.scan
     """Connect `driver` (an LMS2xx), stream scans into `writer` (a streaming LogWriter) until `duration`
     seconds, `max_scans`, `stop` or a disconnect; stop the scanner and close the writer (also after a
     disconnect). An error before the scanner streams aborts the writer and propagates; any failure after
     (the disk full, a second Ctrl-C) keeps the scans flushed before it (writer.keep_flushed) and raises
-    RecordingCut saying so."""
+    RecordingCut saying so. `on_scan` is called with each scan once it is written (the live view)."""
     from ..lms2xx.driver import DeviceDisconnected
     from ..log import mcapio
 
@@ -122,6 +123,8 @@ def record(driver, writer, *, duration: float | None = None, max_scans: int | No
             if scan is not None:
                 writer.write_scan(scan.stamp_ns, scan.ranges, geometry)
                 result.scans += 1
+                if on_scan is not None:
+                    on_scan(scan.stamp_ns, scan.ranges, geometry)
             now = time.monotonic()
             if now - last_flush >= FLUSH_EVERY_S:
                 writer.flush()
@@ -268,8 +271,15 @@ class _Signals:
               help="Interlaced output (20 2A): partial scans merged into complete ones by the host.")
 @click.option("--raw", is_flag=True, help="Also store every telegram's bytes on /lms2xx/telegram.")
 @click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
+@click.option("--live", is_flag=True, help="Also serve the scans, features, tracks and markers to Foxglove while "
+              "recording (WebSocket; needs pip install 'datmo[live]'); the URL to open is printed.")
+@click.option("--live-host", default="127.0.0.1", show_default=True, metavar="HOST",
+              help="Address the live view serves on (0.0.0.0: every interface).")
+@option("--live-port", bound=OPTIONS["live_port"], default=8765, show_default=True,
+        help="WebSocket port of the live view (0: any free port).")
 def command(port: str, output: Path, baud: str, angle: str, resolution: str, units: str, duration: float | None,
-            max_scans: int | None, indices: bool, interlaced: bool, raw: bool, force: bool) -> None:
+            max_scans: int | None, indices: bool, interlaced: bool, raw: bool, force: bool, live: bool,
+            live_host: str, live_port: int) -> None:
     """Record a SICK LMS200 over a serial port into a log.
 
     Finds the scanner's baud, switches to --baud, sets the variant and units only when they differ,
@@ -278,9 +288,10 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
     file finished, and the exit status is 130 after Ctrl-C, 143 after SIGTERM, 129 after SIGHUP. Data
     reaches the disk at least twice a second; if the disk fills, the scans already there are kept. The
     device status goes into the log's metadata (lms2xx.status), with the counts of CRC errors, resyncs and
-    dropped scans (lms2xx.stats).
+    dropped scans (lms2xx.stats). With --live, each scan is also segmented, its features extracted and
+    tracked as it arrives and served to Foxglove (see datmo play); the view never holds up the recording.
 
-    Example: datmo record --port /dev/ttyUSB0 -o run.mcap
+    Example: datmo record --port /dev/ttyUSB0 -o run.mcap --live
     """
     from ..errors import DeviceError
     from ..lms2xx.driver import LMS2xx
@@ -295,8 +306,14 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
     driver = LMS2xx(port, baud=int(baud), angle=int(angle), resolution=float(resolution), units=units,
                     indices=indices, interlaced=interlaced)
     stop = threading.Event()
-    with _Signals(stop) as signals:
-        result = record(driver, writer, duration=duration, max_scans=max_scans, raw=raw, stop=stop)
+    feed = _live_feed(live_host, live_port) if live else None
+    try:
+        with _Signals(stop) as signals:
+            result = record(driver, writer, duration=duration, max_scans=max_scans, raw=raw, stop=stop,
+                            on_scan=feed.scan if feed is not None else None)
+    finally:
+        if feed is not None:
+            _close_live(feed)
     s = result.stats
     rate = result.scans / result.seconds if result.seconds > 0 else 0.0
     why = "" if signals.signum is None else f" (interrupted: {signal.Signals(signals.signum).name})"
@@ -311,3 +328,25 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
                           f"({result.scans} scans)")
     if signals.signum is not None:
         raise click.exceptions.Exit(128 + signals.signum)
+
+
+def _live_feed(host: str, port: int):  # noqa: ANN202 - a live.LiveFeed
+    """The live view of a recording, its URL printed (the port is checked before the scanner starts)."""
+    from ..live import LiveFeed, LiveServer
+
+    server = LiveServer(host, port)
+    click.echo(f"datmo record: live view on {server.url}; open {server.app_url}", err=True)
+    return LiveFeed(server)
+
+
+def _close_live(feed) -> None:  # noqa: ANN001 - a live.LiveFeed
+    """Stop the live view; a warning if it failed or fell behind (the recording is whole either way)."""
+    import warnings
+
+    feed.close()
+    feed.server.close()
+    if feed.failure is not None:
+        warnings.warn(f"the live view stopped ({feed.failure}); the recording went on", stacklevel=2)
+    elif feed.dropped:
+        warnings.warn(f"the live view fell behind and skipped {feed.dropped} of {feed.published + feed.dropped} "
+                      "scans (all are in the recording)", stacklevel=2)
