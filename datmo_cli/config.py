@@ -30,3 +30,67 @@ def read_table(path: str | Path, name: str) -> dict:
     if table is data:
         table = {k: v for k, v in data.items() if not isinstance(v, dict) and k not in STAGES}
     return table
+
+
+LOCAL = "datmo.toml"   # picked up from the current folder when no --config is given
+PICKED_KEY = "datmo.config_picked"   # in the Click context's meta: ./datmo.toml was picked up
+
+
+def effective_path(config: str | Path | None, no_config: bool) -> Path | None:
+    """The config file a command uses: `--config`, else ./datmo.toml when present (said on stderr unless
+    --quiet, and noted for the provenance), else none; `--no-config` ignores both."""
+    if no_config and config is not None:
+        raise ConfigError("--config and --no-config: give one or the other")
+    if no_config:
+        return None
+    if config is not None:
+        return Path(config)
+    local = Path(LOCAL)
+    if not local.is_file():
+        return None
+    import click
+
+    from .progress import say
+
+    ctx = click.get_current_context(silent=True)
+    if ctx is not None:
+        ctx.meta[PICKED_KEY] = True
+    say(f"datmo: using ./{LOCAL}")
+    return local
+
+
+def provenance_line(line: str) -> str:
+    """The command line recorded in an output's provenance: `line`, with `--config datmo.toml` appended when
+    ./datmo.toml was picked up without being named (so the record says which file set the parameters)."""
+    import click
+
+    ctx = click.get_current_context(silent=True)
+    return f"{line} --config {LOCAL}" if ctx is not None and ctx.meta.get(PICKED_KEY) else line
+
+
+def _toml_value(value: object) -> str:
+    """`value` as a TOML value that reads back equal (floats by repr, strings JSON-escaped)."""
+    import json
+
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    raise ConfigError(f"cannot write {value!r} as TOML")
+
+
+def to_toml(tables: dict[str, dict], sources: dict[str, dict[str, str]], header: str = "") -> str:
+    """TOML text of `tables` (stage -> key -> value), each key followed by a comment naming where its value
+    came from (sources: stage -> key -> source)."""
+    lines = [f"# {h}" for h in header.splitlines()] if header else []
+    for stage, table in tables.items():
+        if lines:
+            lines.append("")
+        lines.append(f"[{stage}]")
+        width = max((len(f"{k} = {_toml_value(v)}") for k, v in table.items()), default=0)
+        for key, value in table.items():
+            entry = f"{key} = {_toml_value(value)}"
+            lines.append(f"{entry:{width}s}  # {sources[stage][key]}")
+    return "\n".join(lines) + "\n"

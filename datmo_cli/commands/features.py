@@ -8,6 +8,7 @@ import click
 
 from ..bounds import FEATURES, OPTIONS, option, pair_option
 from ..perception.params import FeatureParams
+from .options import config_options, input_options, no_stdout, quiet_option, scan_log
 from .segment import feature_params
 
 D = FeatureParams()
@@ -15,12 +16,11 @@ D = FeatureParams()
 
 @click.command(name="features")
 @click.argument("input", type=click.Path(path_type=Path))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), callback=no_stdout(),
               help="The log to write (MCAP): the input's channels plus /datmo/features, /datmo/landmarks and "
                    "/datmo/markers/features (and /datmo/segments when the input has none).")
 @click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
-@click.option("--config", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="TOML file with a [features] table: any parameter of datmo_cli/perception/params.py.")
+@config_options("TOML file with a [features] table: any parameter of datmo_cli/perception/params.py.")
 @click.option("--resegment", is_flag=True, help="Segment again even when the input has /datmo/segments.")
 @click.option("--no-markers", is_flag=True, help="Do not write /datmo/markers/features (Foxglove drawings).")
 @option("--c0", bound=FEATURES["c0"], default=None, help=f"Segmentation threshold C0, m [default: {D.c0:g}].")
@@ -41,11 +41,13 @@ D = FeatureParams()
 @option("--threads", bound=OPTIONS["threads"], default=None,
         help="Threads for the per-scan perception (segmentation, features, leg detector) [default: all "
              "cores]; the results are the same for any number.")
+@input_options
+@quiet_option
 def command(input: Path, output: Path, force: bool, config: Path | None, resegment: bool, no_markers: bool,
             c0: float | None,
             min_points: int | None, theta_resolution: float | None, rho_resolution: float | None,
             circle_radius: tuple[float, float] | None, leg_model: str | None, d_max: float | None,
-            threads: int | None) -> None:
+            threads: int | None, topic: str | None, odom_topic: str | None) -> None:
     """Extract the features of every scan: lines by the Hough transform for lines (accumulators adapted to
     each segment, several lines per segment by following the peak, refined by least squares), circles by
     the Hough transform for circles (centre from P_ini, P_near, P_end; refined by least squares), the
@@ -54,18 +56,17 @@ def command(input: Path, output: Path, force: bool, config: Path | None, resegme
 
     Writes /datmo/features, /datmo/landmarks and /datmo/markers/features (for Foxglove), segmenting first
     when the input has no /datmo/segments. Options override the config file, which overrides the defaults;
-    the effective parameters go into the output's metadata.
+    the effective parameters go into the output's metadata. INPUT is a datmo log, or a ROS 1/2 bag
+    converted on the fly (--topic, --odom-topic).
 
     Example: datmo features sample_logs/hall.mcap -o hall-features.mcap
     """
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-
     from ..cli import invocation
+    from ..config import provenance_line
     from ..perception.threads import set_default
     from ..pipeline import features_file
+    from ..progress import bar, say
     from ..streaming import LogStream
-    from .compiling import compile_notice
 
     set_default(threads)
 
@@ -73,12 +74,10 @@ def command(input: Path, output: Path, force: bool, config: Path | None, resegme
     params = feature_params(config, c0=c0, min_points=min_points, theta_resolution=theta_resolution,
                             rho_resolution=rho_resolution, circle_radius_min=rmin, circle_radius_max=rmax,
                             leg_model=leg_model, d_max=d_max)
-    stream = LogStream(input)   # a bad input is said before the progress bar starts
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), console=Console(stderr=True),
-                  transient=True) as bar:
-        task = bar.add_task("features", total=None)
-        with compile_notice(bar, task) as report:
+    with scan_log(input, output, topic, odom_topic, force=force) as src:
+        stream = LogStream(src)   # a bad input is said before the progress bar starts
+        with bar("features", stream.n_scans) as progress, progress.compile_notice() as report:
             c = features_file(stream, output, params, resegment=resegment, force=force, markers=not no_markers,
-                              command_line=invocation("features"), progress=report)
-    click.echo(f"{output}: {c.scans:,} scans; per scan {c.per_scan('lines'):.1f} lines, {c.per_scan('circles'):.1f} "
-               f"circles, {c.per_scan('blobs'):.1f} blobs; {c.landmarks} landmarks", err=True)
+                              command_line=provenance_line(invocation("features")), progress=report)
+    say(f"{output}: {c.scans:,} scans; per scan {c.per_scan('lines'):.1f} lines, {c.per_scan('circles'):.1f} "
+        f"circles, {c.per_scan('blobs'):.1f} blobs; {c.landmarks} landmarks")

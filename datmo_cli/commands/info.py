@@ -7,6 +7,8 @@ from pathlib import Path
 
 import click
 
+from ..progress import quiet_option
+
 
 def describe(path: Path) -> dict:
     """A JSON-ready description of a log: channels, scan geometry and rate, provenance metadata."""
@@ -60,10 +62,11 @@ def describe(path: Path) -> dict:
 
 
 def _print_rich(info: dict) -> None:
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    from ..progress import console as make_console
+
+    console = make_console()
     console.print(f"[bold]{info['file']}[/]  {info['size_bytes'] / 1e6:.2f} MB, "
                   f"{info['duration_s']:.1f} s, profile {info['profile'] or '-'}, written by {info['library'] or '-'}")
     if info["truncated"]:
@@ -111,6 +114,7 @@ def _print_rich(info: dict) -> None:
 @click.command(name="info")
 @click.argument("log", type=click.Path(path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON for scripts instead of tables.")
+@quiet_option
 def command(log: Path, as_json: bool) -> None:
     """Show LOG's channels, scan geometry, rate and provenance.
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS, option
+from .options import no_stdout, quiet_option
 
 SCENE_HELP = "Built-in scene name (hall, corridor, crowd, static, patrol) or the path of a .toml scene file."
 
@@ -24,7 +25,7 @@ def _list_scenes(ctx: click.Context, _param: click.Parameter, value: bool) -> No
 @click.command(name="simulate")
 @click.option("--scene", metavar="NAME|PATH", default="hall", show_default=True, help=SCENE_HELP)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="The log to write (MCAP).")
+              callback=no_stdout(), help="The log to write (MCAP).")
 @click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
 @option("--seed", bound=OPTIONS["seed"], default=0, show_default=True,
         help="Random seed (crowd paths, range noise); a seed always gives the same file.")
@@ -44,6 +45,7 @@ def _list_scenes(ctx: click.Context, _param: click.Parameter, value: bool) -> No
 @option("--noise", bound=OPTIONS["sim_noise"], default=0.01, show_default=True, help="Range noise sigma, metres.")
 @click.option("--list-scenes", is_flag=True, expose_value=False, is_eager=True, callback=_list_scenes,
               help="List the built-in scenes and exit.")
+@quiet_option
 def command(scene: str, output: Path, force: bool, seed: int, duration: float | None, rate: float,
             people: int | None, angle: str, resolution: str, range_m: str, units: str | None, noise: float) -> None:
     """Simulate a SICK LMS200 in a scene and write a log with ground truth.
@@ -55,6 +57,7 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     Example: datmo simulate --scene hall --duration 60 -o hall.mcap
     """
     from ..log import mcapio
+    from ..progress import say
     from ..sim.scene import load_scene
 
     if units is None:
@@ -68,18 +71,18 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
         n, n_objects, geometry = _write(writer, loaded, seed, duration, rate, int(angle), float(resolution),
                                         int(range_m), units, noise, people)
-    click.echo(f"{output}: {n} scans of {geometry.describe()}, {n_objects} ground-truth objects", err=True)
+    say(f"{output}: {n} scans of {geometry.describe()}, {n_objects} ground-truth objects")
 
 
 def _write(writer, scene, seed, duration, rate, angle, resolution, range_m, units, noise, people):  # noqa: ANN001, ANN202
     """Simulate block by block into `writer` (/scan, /odom for a moving sensor, ground truth), each block
     written and forgotten before the next is cast: memory holds one block whatever the duration.
     Returns (scans, ground-truth objects, scan geometry)."""
-    import contextlib
     from pathlib import Path
 
     from ..log import mcapio, types
     from ..log.scan import Odometry, ScanRun
+    from ..progress import bar
     from ..sim.simulate import Simulation, ground_truth_payloads
 
     sim = Simulation(scene, seed=seed, duration=duration, rate=rate, fov_deg=angle, resolution_deg=resolution,
@@ -89,15 +92,7 @@ def _write(writer, scene, seed, duration, rate, angle, resolution, range_m, unit
     odom_cid = writer.channel(mcapio.TOPIC_ODOM, types.ODOMETRY) if sim.sensor_moves else None
     truth_cid = writer.channel(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH)
     total = len(sim)
-    with contextlib.ExitStack() as stack:
-        progress = None
-        if total >= 5000:
-            from rich.console import Console
-            from rich.progress import Progress
-
-            bar = stack.enter_context(Progress(console=Console(stderr=True), transient=True))
-            task = bar.add_task("simulating", total=total)
-            progress = lambda done: bar.update(task, completed=done)  # noqa: E731
+    with bar("simulating", total) as progress:
         for c in sim.chunks():
             run = ScanRun(c.stamps, c.ranges, sim.geometry)
             writer.write_ids(scan_cid, c.stamps, mcapio.encode_scans(run))
@@ -108,6 +103,5 @@ def _write(writer, scene, seed, duration, rate, angle, resolution, range_m, unit
             writer.write_ids(truth_cid, c.stamps, ground_truth_payloads(c.stamps, c.sensor_poses, c.truth,
                                                                         sim.geometry.frame_id))
             writer.drain()
-            if progress is not None:
-                progress(c.start + len(c.stamps))
+            progress(c.start + len(c.stamps))
     return total, len(sim.objects), sim.geometry
