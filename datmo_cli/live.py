@@ -138,9 +138,10 @@ class LiveServer:
 
     `declare` advertises a channel before it has messages (so a client can subscribe and playback wait for
     it); `publish` sends a Message (the channel declared on first use); `subscribed` is set once a client
-    subscribes to any channel. Static transforms are kept and sent again with `repeat_static`."""
+    subscribes to any channel. Static transforms are kept and sent again with `repeat_static`. `option`:
+    the port's option, as errors name it."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 8765, name: str = "datmo") -> None:
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, name: str = "datmo", option: str = "--port") -> None:
         foxglove = require_foxglove()
         from foxglove.websocket import Capability
 
@@ -155,7 +156,7 @@ class LiveServer:
             self.server = foxglove.start_server(name=name, host=host, port=port, capabilities=[Capability.Time],
                                                 server_listener=_Listener(self.subscribed), context=self.context)
         except Exception as exc:  # noqa: BLE001 - the SDK raises its own errors for a busy port or a bad host
-            raise ConfigError(f"--port {port}, --host {host}: cannot serve there ({_reason(exc)})") from None
+            raise ConfigError(f"{option} {port}: cannot serve on {host}:{port} ({_reason(exc)})") from None
         self.port = self.server.port
 
     @property
@@ -222,7 +223,7 @@ class _Listener:
 
 def _reason(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
-    return text[0] if text else type(exc).__name__
+    return text[0].removeprefix("FoxgloveError: ") if text else type(exc).__name__
 
 
 # ------------------------------------------------------------------------------------ what gets published

@@ -32,8 +32,8 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
     A log without /datmo/tracks is segmented, its features extracted and tracked on the fly, as datmo run
     would; a processed log is served as it is. Transforms come from the log's /tf and /tf_static, else from
     its odometry. Open the URL printed, or in Foxglove desktop: Open connection, Foxglove WebSocket, the
-    ws:// address. The layout foxglove/datmo-layout.json of the datmo repository shows the scan, features
-    and tracks and plots track speeds (Layouts, Import from file). Ctrl-C stops (exit status 130).
+    ws:// address. The layout foxglove-layouts/datmo-layout.json of the datmo repository shows the scan,
+    features and tracks and plots track velocities (Layouts, Import from file). Ctrl-C stops (exit 130).
     Needs the live extra: pip install 'datmo[live]'.
 
     Example: datmo play sample_logs/hall.mcap --rate 2 --loop

@@ -334,7 +334,7 @@ def _live_feed(host: str, port: int):  # noqa: ANN202 - a live.LiveFeed
     """The live view of a recording, its URL printed (the port is checked before the scanner starts)."""
     from ..live import LiveFeed, LiveServer
 
-    server = LiveServer(host, port)
+    server = LiveServer(host, port, option="--live-port")
     click.echo(f"datmo record: live view on {server.url}; open {server.app_url}", err=True)
     return LiveFeed(server)
 
