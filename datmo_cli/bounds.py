@@ -183,6 +183,8 @@ OPTIONS: dict[str, Bound] = {
     "min_mota": _b(-100, 1, "", "MOTA is at most 1"),
     "live_port": _b(0, 65535, "", "a TCP port; 0: any free one", integer=True),
     "play_rate": _b(0, 1000, "× the log's speed", "beyond 1000× a scan log is a blur", open_=True),
+    "laser_offset": _b(-100, 100, "m", "the scanner sits on the robot"),
+    "laser_yaw": _b(-360, 360, "degrees"),
 }
 
 LINE_ACCUMULATOR_CELLS = 2**25     # theta x rho cells of the HTL accumulator, int32, one per thread (128 MB)
@@ -281,3 +283,40 @@ def pair_option(*decls: str, bounds: tuple[Bound, Bound], names: tuple[str, str]
     ranges = ", ".join(f"{n} {b.describe()}" for n, b in zip(names, bounds, strict=True))
     return click.option(*decls, type=click.Tuple([Bounded(bounds[0]), Bounded(bounds[1])]),
                         metavar=" ".join(names), help=f"{help} Range: {ranges}.", **kwargs)
+
+
+class LaserPose(click.ParamType):
+    """`X,Y,YAW`: where the scanner sits on the robot (metres, metres, degrees), each within its Bound; the value
+    is (x, y, yaw in radians)."""
+
+    name = "pose"
+    parts = (("x", OPTIONS["laser_offset"]), ("y", OPTIONS["laser_offset"]), ("yaw", OPTIONS["laser_yaw"]))
+
+    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
+        return "X,Y,YAW"
+
+    def convert(self, value, param, ctx):  # noqa: ANN001, ANN201 - Click's signature
+        if isinstance(value, tuple):
+            return value
+        name = option_name(param)
+        fields = str(value).split(",")
+        if len(fields) != 3:
+            raise OptionError(f"{name}: expected X,Y,YAW (metres, metres, degrees), got {value!r}")
+        out = []
+        for text, (part, bound) in zip(fields, self.parts, strict=True):
+            try:
+                number = float(text.strip())
+            except ValueError:
+                raise OptionError(f"{name}: {part} is not a number, got {text.strip()!r}; expected X,Y,YAW "
+                                  "(metres, metres, degrees)") from None
+            out.append(check(bound, number, f"{name} {part}", OptionError))
+        return out[0], out[1], math.radians(out[2])
+
+
+def laser_pose_option() -> click.decorators.FC:
+    """--laser-pose X,Y,YAW (see LaserPose)."""
+    ranges = ", ".join(f"{part} {bound.describe()}" for part, bound in LaserPose.parts)
+    return click.option("--laser-pose", type=LaserPose(), default=None,
+                        help="Where the scanner sits on the robot: X,Y in metres and YAW in degrees, in the base frame "
+                             f"(base_link); written to /tf_static and the metadata (datmo.laser_pose). "
+                             f"Range: {ranges}.")
