@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS, option
+from .options import quiet_option
 
 FAULT_HELP = ("Faults to inject, comma-separated: garbage:P (a burst of random bytes before a scan), crc:P (corrupt "
               "a scan's CRC), truncate:P (cut a scan short), drop:P (leave out one byte of a scan), with P the "
@@ -41,6 +42,7 @@ FAULT_HELP = ("Faults to inject, comma-separated: garbage:P (a burst of random b
               help="Also make a symlink at this path to the pseudo-terminal (removed on exit). An existing path is "
                    "refused unless --force, which replaces only a symlink or a regular file.")
 @click.option("--force", is_flag=True, help="Let --link replace an existing symlink or regular file.")
+@quiet_option
 def command(scene: str | None, log_path: Path | None, seed: int, duration: float | None, baud: str, angle: str,
             resolution: str, units: str, indices: bool, fault_spec: str | None, link: Path | None,
             force: bool) -> None:
@@ -56,6 +58,13 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
     """
     from ..errors import ConfigError
     from ..lms2xx.emulator import Emulator, Faults, source_for
+    from ..progress import quiet
+
+    silent = quiet()   # read here: the emulator's thread, which also says things, has no Click context
+
+    def say(text: str) -> None:
+        if not silent:
+            click.echo(text, err=True)
 
     if log_path is not None and scene is not None:
         raise ConfigError("give --scene or --log, not both")
@@ -69,7 +78,7 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
     source = source_for(log=log_path, scene=scene, seed=seed, duration=duration)
     emu = Emulator(source, faults=faults, seed=seed, baud=int(baud), angle_deg=int(angle),
                    resolution_deg=float(resolution), units=units, indices=indices,
-                   on_event=lambda text: click.echo(f"emulate: {text}", err=True))
+                   on_event=lambda text: say(f"emulate: {text}"))
     done = threading.Event()
     stopped_by: list[int] = []
 
@@ -85,7 +94,7 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
             made = make_link(emu.device_path, link, force)
         click.echo(emu.device_path)
         what = f"log {log_path}" if log_path is not None else f"scene {scene or 'hall'}"
-        click.echo(f"emulate: LMS200 on {emu.device_path} at {baud} Bd serving {what}; Ctrl-C to stop", err=True)
+        say(f"emulate: LMS200 on {emu.device_path} at {baud} Bd serving {what}; Ctrl-C to stop")
         while not done.wait(0.2):
             if emu.disconnected.is_set():
                 click.echo("emulate: disconnected (fault)", err=True)
@@ -97,7 +106,7 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
         for sig, h in old.items():
             signal.signal(sig, h)
     try:
-        click.echo(f"emulate: sent {len(emu.sent)} scans; faults {dict(emu.stats.faults) or 'none'}", err=True)
+        say(f"emulate: sent {len(emu.sent)} scans; faults {dict(emu.stats.faults) or 'none'}")
     except OSError:   # the terminal hung up (SIGHUP)
         pass
     if stopped_by:   # stopping is how an emulator ends, but the status says how: 130, 143 or 129

@@ -3,17 +3,19 @@
 from __future__ import annotations
 
 import contextlib
+import math
 from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS, option
+from ..bounds import OPTIONS, laser_pose_option, option
+from .options import no_stdout, quiet_option
 
 
 @click.command(name="import")
 @click.argument("src", type=click.Path(path_type=Path))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="The log to write (MCAP with /scan and, when the source has poses, /odom).")
+              callback=no_stdout(), help="The log to write (MCAP with /scan and, when the source has poses, /odom).")
 @click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
 @click.option("--topic", default=None,
               help="The scan stream to take when there are several: a LaserScan topic of a bag or MCAP, "
@@ -22,14 +24,19 @@ from ..bounds import OPTIONS, option
               help="The nav_msgs/Odometry topic of a bag or MCAP [default: the only one, if any].")
 @option("--max-scans", bound=OPTIONS["scans"], default=None,
         help="Keep only the first N scans (and the poses up to the last of them).")
+@laser_pose_option()
+@quiet_option
 def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic: str | None,
-            max_scans: int | None) -> None:
+            max_scans: int | None, laser_pose: tuple | None) -> None:
     """Convert a CARMEN log, g2o file, ROS 1/2 bag or MCAP file to a datmo scan log.
 
     SRC is a CARMEN text log (FLASER, RLASER, RAWLASER1-4, ROBOTLASER1; plain or gzipped), a g2o file with
     ROBOTLASER1 lines, a ROS 1 .bag, a ROS 2 bag folder or an MCAP file with sensor_msgs/LaserScan. The
     kind is found from the content. Scans go to /scan (ranges in metres; "no return" readings as +inf)
-    and poses, when the source has them, to /odom. Malformed CARMEN lines are skipped with a warning.
+    and poses, when the source has them, to /odom with /tf (one transform a pose) and /tf_static (the
+    poses' child frame -> the scan's frame); a bag's own /tf and /tf_static are kept. With --laser-pose, poses
+    of the scanner itself (CARMEN's) become the base's (base_link). Malformed CARMEN lines are skipped with a
+    warning.
     The output is written beside OUTPUT under a temporary name and renamed when complete; SRC is only read.
 
     \b
@@ -38,6 +45,7 @@ def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic:
     from ..log import mcapio
     from ..log.importers import open_import, write_import
     from ..outputs import check_output
+    from ..progress import say
 
     check_output(output, force=force, inputs=[src])   # before reading a big input
     with _progress(src) as progress:
@@ -45,27 +53,34 @@ def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic:
                              spool_dir=output.parent if output.parent.is_dir() else None)
         params = {"topic": stream.topic, "odom_topic": stream.odom_topic, "max_scans": max_scans,
                   "kind": stream.kind}
+        mount = None
+        if laser_pose is not None:
+            from ..log.transforms import LaserPose
+
+            mount = LaserPose(*laser_pose)
+            params["laser_pose"] = {"x_m": mount.x, "y_m": mount.y, "yaw_deg": math.degrees(mount.yaw)}
         provenance = mcapio.Provenance("import", params, [src] if src.is_file() else [])
         try:
-            stats = write_import(stream, output, force=force, provenance=provenance)
+            stats = write_import(stream, output, force=force, provenance=provenance, laser_pose=mount)
         finally:
             for w in stream.warnings:
                 click.echo(f"datmo: warning: {w}", err=True)
     odom = f", {stats.poses} poses on /odom" if stats.poses else ""
-    click.echo(f"{output}: {stats.scans} scans of {stats.geometry.describe()} from {stream.kind} "
-               f"{stream.topic}{odom}", err=True)
+    say(f"{output}: {stats.scans} scans of {stats.geometry.describe()} from {stream.kind} {stream.topic}{odom}")
 
 
 @contextlib.contextmanager
 def _progress(src: Path):  # noqa: ANN202
-    """A progress callback drawing a bar on stderr for inputs over 20 MB, else None."""
+    """A progress callback (done, total) drawing a bar on stderr for inputs over 20 MB, else None. The
+    total is the bytes of a text log or the messages of a bag, as the importer counts them."""
+    from ..log.importers import detect_kind
+
     size = src.stat().st_size if src.is_file() else 0
     if size < 20_000_000:
         yield None
         return
-    from rich.console import Console
-    from rich.progress import Progress
+    from ..progress import bar
 
-    with Progress(console=Console(stderr=True), transient=True) as bar:
-        task = bar.add_task(f"reading {src.name}", total=None)
-        yield lambda done, total: bar.update(task, completed=done, total=total or None)
+    unit = "messages" if detect_kind(src) in ("ros1", "ros2", "mcap") else "bytes"
+    with bar(f"reading {src.name}", None, unit=unit) as progress:
+        yield lambda done, total: progress.update(done, total or None)

@@ -10,6 +10,7 @@ last complete chunk, and renamed to the output; the error says how many scans it
 
 from __future__ import annotations
 
+import math
 import signal
 import struct
 import threading
@@ -19,8 +20,9 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS, option
+from ..bounds import OPTIONS, laser_pose_option, option
 from ..errors import DatmoError
+from .options import no_stdout, quiet_option
 
 FLUSH_EVERY_S = 0.5
 TELEGRAM_TYPE = "std_msgs/msg/UInt8MultiArray"
@@ -160,13 +162,25 @@ def record(driver, writer, *, duration: float | None = None, max_scans: int | No
     return result
 
 
+def _write_mount(writer, pose: tuple) -> None:  # noqa: ANN001 - a streaming LogWriter
+    """/tf_static base_link -> laser (the scanner's frame) of a laser pose (x, y m, yaw rad), and its metadata
+    record: a recording has no odometry, so this is its only transform."""
+    from ..log import transforms
+
+    mount, now = transforms.LaserPose(*pose), time.time_ns()
+    writer.add_metadata(transforms.LASER_POSE_RECORD, mount.record(transforms.BASE_FRAME, "laser"))
+    writer.write_transforms([now], [transforms.mount_tf(now, transforms.BASE_FRAME, "laser", mount)], static=True)
+
+
 def _live_panel(driver):  # noqa: ANN001, ANN202
-    """A rich Live panel of the counts on a terminal's stderr (started), or None."""
+    """A rich Live panel of the counts on a terminal's stderr (started), or None (not a terminal, --quiet)."""
     from rich.console import Console
     from rich.live import Live
 
+    from ..progress import quiet
+
     console = Console(stderr=True)
-    if not console.is_terminal:
+    if not console.is_terminal or quiet():
         return None
     live = Live(_panel(0, 0.0, driver.stats, driver.name, driver.baud), console=console, refresh_per_second=4,
                 transient=True)
@@ -253,7 +267,7 @@ class _Signals:
 @click.option("--port", required=True, metavar="PORT",
               help="Serial device of the LMS200 (e.g. /dev/ttyUSB0, or the path `datmo emulate` prints).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="The log to write (MCAP).")
+              callback=no_stdout(), help="The log to write (MCAP).")
 @click.option("--baud", type=click.Choice(["9600", "19200", "38400", "500000"]), default="38400", show_default=True,
               help="Baud to record at; the device's current baud is found automatically. 500000 needs RS-422.")
 @click.option("--angle", type=click.Choice(["180", "100"]), default="180", show_default=True,
@@ -277,9 +291,11 @@ class _Signals:
               help="Address the live view serves on (0.0.0.0: every interface).")
 @option("--live-port", bound=OPTIONS["live_port"], default=8765, show_default=True,
         help="WebSocket port of the live view (0: any free port).")
+@laser_pose_option()
+@quiet_option
 def command(port: str, output: Path, baud: str, angle: str, resolution: str, units: str, duration: float | None,
             max_scans: int | None, indices: bool, interlaced: bool, raw: bool, force: bool, live: bool,
-            live_host: str, live_port: int) -> None:
+            live_host: str, live_port: int, laser_pose: tuple | None = None) -> None:
     """Record a SICK LMS200 over a serial port into a log.
 
     Finds the scanner's baud, switches to --baud, sets the variant and units only when they differ,
@@ -296,13 +312,18 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
     from ..errors import DeviceError
     from ..lms2xx.driver import LMS2xx
     from ..log import mcapio
+    from ..progress import say
 
     if angle == "180" and resolution == "0.25":
         raise click.BadParameter("0.25° is available only with --angle 100", param_hint="--resolution")
     params = {"port": port, "baud": int(baud), "angle": int(angle), "resolution": float(resolution), "units": units,
               "duration": duration, "scans": max_scans, "indices": indices, "interlaced": interlaced, "raw": raw}
+    if laser_pose is not None:
+        params["laser_pose"] = {"x_m": laser_pose[0], "y_m": laser_pose[1], "yaw_deg": math.degrees(laser_pose[2])}
     writer = mcapio.LogWriter(output, force=force, provenance=mcapio.Provenance("record", params, []),
                               streaming=True)
+    if laser_pose is not None:
+        _write_mount(writer, laser_pose)
     driver = LMS2xx(port, baud=int(baud), angle=int(angle), resolution=float(resolution), units=units,
                     indices=indices, interlaced=interlaced)
     stop = threading.Event()
@@ -318,9 +339,9 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
     rate = result.scans / result.seconds if result.seconds > 0 else 0.0
     why = "" if signals.signum is None else f" (interrupted: {signal.Signals(signals.signum).name})"
     try:
-        click.echo(f"{output}: {result.scans} scans in {result.seconds:.1f} s ({rate:.2f} Hz); "
-                   f"crc errors {s.get('crc_errors', 0)}, length errors {s.get('length_errors', 0)}, "
-                   f"resyncs {s.get('resyncs', 0)}, dropped scans {s.get('dropped', 0)}" + why, err=True)
+        say(f"{output}: {result.scans} scans in {result.seconds:.1f} s ({rate:.2f} Hz); "
+            f"crc errors {s.get('crc_errors', 0)}, length errors {s.get('length_errors', 0)}, "
+            f"resyncs {s.get('resyncs', 0)}, dropped scans {s.get('dropped', 0)}" + why)
     except OSError:   # the terminal that would show it hung up (SIGHUP): the file is complete all the same
         pass
     if result.disconnect is not None:

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from .options import no_stdout, quiet_option
+
 LABELS_TOPIC = "/leg_cluster_positions"
 _MANY = ("--positive", "--negative")
 
@@ -70,11 +72,12 @@ def print_figures(held_out: list, mean: dict, console) -> None:  # noqa: ANN001 
 @click.option("--labels-topic", default=LABELS_TOPIC, show_default=True,
               help="The geometry_msgs/PoseArray topic of the labelled legs.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="The model to write (.npz).")
+              callback=no_stdout("a model"), help="The model to write (.npz).")
 @click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
 @click.option("--with-simulated", is_flag=True,
               help="Also train on simulated LMS200 recordings with exact leg positions (datmo's simulator; never "
                    "held out): for scanners like the LMS200 (0.5°-1° steps, legs to 8 m). The shipped model uses it.")
+@quiet_option
 def command(positives: tuple[Path, ...], negatives: tuple[Path, ...], topic: str | None, labels_topic: str,
             output: Path, force: bool, with_simulated: bool) -> None:
     """Train the learned leg detector (a tree ensemble over per-segment shape features) and estimate how it
@@ -93,48 +96,41 @@ def command(positives: tuple[Path, ...], negatives: tuple[Path, ...], topic: str
     Example: datmo train-legs --positive ../shared/data/legtracker/positive_*.bag \\
         --negative ../shared/data/legtracker/negative_2.bag -o legs.npz
     """
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
     from ..errors import InputError
     from ..outputs import check_output
     from ..perception import training as T
+    from ..progress import bar, console, say
 
     check_output(output, force=force, inputs=[*positives, *negatives], what="model")   # before the training
     if not positives:
         raise InputError("no labelled file: give at least one with --positive")
     T.require_sklearn()
-    err = Console(stderr=True)
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=err, transient=True) as bar:
-        task = bar.add_task("reading", total=len(positives) + len(negatives))
+    with bar("reading", len(positives) + len(negatives), unit="steps") as shown:
         labelled, empty = [], []
         for i, p in enumerate(positives):
             labelled.append(T.read_labelled(p, topic, labels_topic))
-            bar.update(task, completed=i + 1)
+            shown.update(i + 1)
         for i, p in enumerate(negatives):
             empty.extend(T.read_empty(p))
-            bar.update(task, completed=len(positives) + i + 1)
+            shown.update(len(positives) + i + 1)
 
         def progress(stage: str, done: int, total: int) -> None:
-            bar.update(task, description=stage, completed=done, total=total)
+            shown.update(done, total, description=stage)
 
         extra = []
         if with_simulated:
             from ..perception.sim_legs import simulated_recordings
 
-            bar.update(task, description="simulating")
+            shown.update(0, description="simulating")
             extra = simulated_recordings()
         result = T.train_leg_model(labelled, empty, progress=progress, labels_topic=labels_topic, extra=extra)
     if result.held_out:
-        out = Console()
-        print_figures(result.held_out, result.mean, out if out.is_terminal else Console(width=150))
+        print_figures(result.held_out, result.mean, console())
     else:
-        click.echo("datmo: no held-out figures: they need two or more --positive files (one is held out while "
-                   "the others train)", err=True)
+        say("datmo: no held-out figures: they need two or more --positive files (one is held out while "
+            "the others train)")
     result.model.save(output, force=force)   # checked again: it may have appeared while training
     n_legs = sum(int(t.label.sum()) for t in result.tables)
     n_seg = sum(len(t) for t in result.tables)
-    click.echo(f"{output}: {result.model.n_trees} trees, threshold {result.threshold:.2f}; trained on {n_seg:,} "
-               f"segments ({n_legs:,} legs) of {len(labelled)} labelled and {len(empty)} empty recordings",
-               err=True)
+    say(f"{output}: {result.model.n_trees} trees, threshold {result.threshold:.2f}; trained on {n_seg:,} "
+        f"segments ({n_legs:,} legs) of {len(labelled)} labelled and {len(empty)} empty recordings")
