@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "play": ("play", "Serve a log to Foxglove live (WebSocket), processing scans as they play."),
     "evaluate": ("evaluate", "Score tracks against ground truth (CLEAR-MOT, IDF1)."),
     "train-legs": ("train_legs", "Train the learned leg detector on labelled scans; print held-out figures."),
+    "config": ("config", "Print the effective configuration ([features], [track]) as TOML."),
 }
 
 
