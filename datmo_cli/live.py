@@ -113,6 +113,13 @@ class Transforms:
         self.scan_frame = scan_frame
         self._static_at: int | None = None
 
+    def topics(self) -> dict[str, str]:
+        """{topic: message type} of what `messages` gives (to advertise them before the first)."""
+        if self.odometry is None:
+            return {}
+        static = self.odometry.child_frame_id != self.scan_frame
+        return {TOPIC_TF: TF_MESSAGE} | ({TOPIC_TF_STATIC: TF_MESSAGE} if static else {})
+
     def messages(self, stamps: np.ndarray) -> list[Message]:
         o = self.odometry
         if o is None or not len(stamps):
@@ -276,6 +283,10 @@ class LogSource:
             probe = RunStages(None, params)
             self.odometry, self.estimated = stream_odometry(self.stream, probe.track_params.ego_motion)
             self.derived = RunStages(self.odometry, params, estimated=self.estimated).derived()
+        else:
+            self.odometry = self.stream.odometry
+        self.transforms = Transforms(self.odometry, self._scan_frame(), self.stream.has(TOPIC_TF)
+                                     or TOPIC_TF in self.derived)
         topics = [c.topic for c in self.stream.log.topics().values() if c.count and c.topic not in self.derived]
         self.copied = topics
         self.order = {t: i for i, t in enumerate([self.stream.scan_topic] + topics + list(self.derived))}
@@ -283,20 +294,19 @@ class LogSource:
     def declare(self, server: LiveServer) -> None:
         """Advertise every channel this source will publish (transforms as they come)."""
         server.declare_log(self.stream.log, exclude=self.derived)
-        for topic, msgtype in self.derived.items():
+        for topic, msgtype in (self.derived | self.transforms.topics()).items():
             server.declare(topic, msgtype)
 
     def batches(self) -> Iterator[list[Message]]:
         """The log from its start, a block of scans at a time (the block's messages in time order)."""
-        stages = None
-        if not self.processed:
-            frame = self._scan_frame()
-            stages = Stages(self.odometry, self.params, self.estimated, self.stream.has(TOPIC_TF), frame)
+        stages = None if self.processed else Stages(self.odometry, self.params, self.estimated, has_tf=True)
+        transforms = Transforms(self.transforms.odometry, self.transforms.scan_frame, False)
         for block in self.stream.blocks(self.block_scans, copy=set(self.copied)):
             out = []
             for topic, (stamps, payloads) in block.copies.items():
                 msgtype = self.stream.log.topics()[topic].msgtype
                 out += [Message(int(s), topic, msgtype, bytes(p)) for s, p in zip(stamps, payloads, strict=True)]
+            out += transforms.messages(block.run.stamps)
             if stages is not None:
                 out += stages.messages(block.run)
             yield _ordered(out, self.order)
