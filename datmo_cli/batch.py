@@ -86,19 +86,25 @@ def _is_log(name: str) -> bool:
     return base.lower().endswith(LOG_SUFFIXES) and not base.startswith(".")
 
 
-def discover(specs: list[str], out_dir: str) -> list[tuple[str, str]]:
+def discover(specs: list[str], out_dir: str, bag_dir: bool = False) -> list[tuple[str, str]]:
     """(input, output) for every log that `specs` name, in order, without repeats.
 
     A file is taken as it is (its output is OUT_DIR/STEM.mcap); a folder is searched recursively for .mcap
     logs (hidden files and the output folder itself left out) and its logs keep their relative paths under
     OUT_DIR; a glob (`*`, `?`, `[`, `**`) takes the logs it matches. A glob or folder without logs, or two
-    inputs with the same output, is an InputError naming them.
+    inputs with the same output, is an InputError naming them. With `bag_dir` each output is the log file of a
+    ROS 2 bag folder, OUT_DIR/STEM/STEM_0.mcap (log.bagdir.member_path).
     """
     out_root = None if remote(out_dir) else os.path.abspath(local(out_dir))
     pairs: list[tuple[str, str]] = []
     for spec in specs:
         for src, rel in _expand(spec, out_root):
-            pairs.append((src, join(out_dir, str(Path(rel).with_suffix(".mcap")))))
+            name = str(Path(rel).with_suffix(".mcap"))
+            if bag_dir:
+                from .log.bagdir import member_path
+
+                name = member_path(name)
+            pairs.append((src, join(out_dir, name)))
     seen_in: set[str] = set()
     seen_out: dict[str, str] = {}
     out: list[tuple[str, str]] = []
@@ -474,7 +480,7 @@ class Batch:
 
 
 def prepare(specs: list[str], out_dir: str, *, params: dict | None = None, force: bool = False,
-            command_line: str | None = None, threads: int | None = None) -> Batch:
+            command_line: str | None = None, threads: int | None = None, bag_dir: bool = False) -> Batch:
     """Find the inputs, read the manifest and decide what to redo.
 
     An input is skipped when its latest manifest line is done (or skipped) with the same parameters' hash
@@ -489,7 +495,7 @@ def prepare(specs: list[str], out_dir: str, *, params: dict | None = None, force
             raise InputError(f"{out_dir}: exists and is not a folder")
         d.mkdir(parents=True, exist_ok=True)
         out_dir = str(d.resolve())
-    pairs = discover(specs, out_dir)
+    pairs = discover(specs, out_dir, bag_dir)
     manifest = Manifest(out_dir)
     ledger = manifest.latest()
     phash = params_hash(params)

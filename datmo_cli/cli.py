@@ -211,6 +211,8 @@ class _FileOutput(click.ParamType):
     def convert(self, value, param, ctx):  # noqa: ANN001, ANN201 - Click's signature
         import os
 
+        if ctx is not None and ctx.params.get("bag_dir"):   # a folder (an eager --bag-dir; log/bagdir.py checks it)
+            return self.inner.convert(value, param, ctx)
         if isinstance(value, (str, bytes)) and os.fsdecode(value).endswith(("/", os.sep)):
             from .errors import OutputError
 

@@ -160,7 +160,9 @@ def process_file(src: str | Path, out: str | Path, *, force: bool = False, param
     """Segment, extract features and track `src` in one streaming pass into `out` (see module docstring and
     streaming); returns the number of scans. `progress(done, total)` is called as scans are processed;
     `markers` (and params["markers"], default True): also write the Foxglove markers; `input_name`: what the
-    output's provenance calls the input (default its path)."""
+    output's provenance calls the input (default its path). With params["bag_dir"], `out` is the log file of a
+    ROS 2 bag folder (log.bagdir.member_path), and the folder is written whole."""
+    from .log import bagdir
     from .streaming import BLOCK_SCANS, LogStream, stream_log, stream_odometry
 
     stream = src if isinstance(src, LogStream) else LogStream(src)
@@ -168,9 +170,11 @@ def process_file(src: str | Path, out: str | Path, *, force: bool = False, param
     probe = RunStages(None, params)
     odometry, estimated = stream_odometry(stream, probe.track_params.ego_motion, block_scans or BLOCK_SCANS)
     stages = RunStages(odometry, params, estimated=estimated, markers=markers)
-    return stream_log(stream, out, command="run", params=stages.effective(), derived=stages.derived(), stage=stages,
-                      force=force, command_line=command_line, block_scans=block_scans or BLOCK_SCANS,
-                      progress=progress, input_name=input_name)
+    bag = bool((params or {}).get("bag_dir"))
+    with bagdir.output(Path(out).parent if bag else out, bag, force=force, inputs=[src]) as dst:
+        return stream_log(stream, dst, command="run", params=stages.effective(), derived=stages.derived(),
+                          stage=stages, force=force, command_line=command_line,
+                          block_scans=block_scans or BLOCK_SCANS, progress=progress, input_name=input_name)
 
 
 def features_leg_model(log) -> str:  # noqa: ANN001 - mcapio.LogContents

@@ -77,6 +77,9 @@ class _BatchProgress:
               help="TOML file of parameters: its [features] table as for datmo features, its [track] table as "
                    "for datmo track.")
 @click.option("--plot", is_flag=True, help="Also draw each run from above into OUT_DIR/NAME.png.")
+@click.option("--bag-dir", is_flag=True,
+              help="Write each output as a ROS 2 bag folder for ros2 bag play: OUT_DIR/NAME/ holding NAME_0.mcap "
+                   "(the output, as the manifest names it) and metadata.yaml.")
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default="rich", show_default=True,
               help="Format of the report printed at the end (see datmo report).")
 @option("--top", bound=OPTIONS["top"], default=None, help="Tracks in the report's track table (0: all).")
@@ -96,7 +99,8 @@ class _BatchProgress:
              "all cores; one in each of several local jobs at once, and in each task on a Dask worker]; the "
              "results are the same for any number.")
 def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: str | None, retries: int,
-            force: bool, config: Path | None, plot: bool, fmt: str, top: int | None, sort: str, no_report: bool,
+            force: bool, config: Path | None, plot: bool, bag_dir: bool, fmt: str, top: int | None, sort: str,
+            no_report: bool,
             no_markers: bool, ego_motion: str | None, leg_model: str | None, threads: int | None) -> None:
     """Segment, extract features and track each input in one pass, then print the report.
 
@@ -110,6 +114,9 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     tracks by class, parameters' hash). Running the same command again skips the inputs already done with
     the same input and parameters and does the rest (after a failure or Ctrl-C); --force redoes all.
 
+    With --bag-dir each output is a ROS 2 bag folder, OUT_DIR/NAME/ holding NAME_0.mcap and metadata.yaml, which
+    ros2 bag play and other bag tools open (build datmo_msgs for the /datmo topics); plots stay OUT_DIR/NAME.png.
+
     Example: datmo run sample_logs/hall.mcap sample_logs/corridor.mcap -o out --plot
 
     Example: datmo run 'logs/**/*.mcap' -o out --scheduler tcp://10.0.0.5:8786
@@ -118,6 +125,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     from ..batch import run as run_batch
     from ..cli import invocation
     from ..errors import DatmoError
+    from ..log import bagdir
     from ..perception.threads import set_default
 
     set_default(threads)   # a run-time setting: not among the parameters (the outputs do not depend on it)
@@ -125,12 +133,18 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         raise DatmoError("--jobs is for local runs; with --scheduler the cluster's workers run the inputs")
     if plot and remote(out_dir):
         raise DatmoError(f"{out_dir}: --plot needs a local output folder")
+    if bag_dir and remote(out_dir):
+        raise DatmoError(f"{out_dir}: --bag-dir needs a local output folder")
     params = _params(config, leg_model, ego_motion)
     if no_markers:
         params["markers"] = False
+    if bag_dir:
+        params["bag_dir"] = True
     batch = prepare(list(inputs), out_dir, params=params, force=force, command_line=invocation("run"),
-                    threads=threads)
-    plots = [Path(t.output).with_suffix(".png") for t in batch.tasks] if plot else []
+                    threads=threads, bag_dir=bag_dir)
+    plot_of = {t.output: bagdir.plot_path(t.output) if bag_dir else Path(t.output).with_suffix(".png")
+               for t in batch.tasks} if plot else {}
+    plots = list(plot_of.values())
     if plots:
         from .report import check_plot_outputs
 
@@ -158,7 +172,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     ok = [r for r in records if r["status"] in (DONE, SKIPPED)]
     if ok and (not no_report or plots) and not remote(out_dir):
         made = {Path(r["output"]) for r in ok if r["status"] == DONE}
-        _report([Path(r["output"]) for r in ok], [p for p in plots if p.with_suffix(".mcap") in made],
+        _report([Path(r["output"]) for r in ok], [p for o, p in plot_of.items() if Path(o) in made],
                 None if no_report else fmt, top, sort, force)
     failed = len(records) - len(ok)
     if failed == len(records) and failed > 1:

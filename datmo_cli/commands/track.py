@@ -19,8 +19,9 @@ D = TrackingParams()
               help="The log to write (MCAP): the input's channels plus /datmo/tracks and /datmo/markers/tracks.")
 @click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
 @click.option("--no-markers", is_flag=True, help="Do not write /datmo/markers/* (Foxglove drawings).")
-@click.option("--bag-dir", is_flag=True, help="Write OUTPUT as a ROS 2 bag folder for ros2 bag play: OUTPUT/ holding "
-              "OUTPUT_0.mcap and metadata.yaml (--force replaces only a bag folder).")
+@click.option("--bag-dir", is_flag=True, is_eager=True,
+              help="Write OUTPUT as a ROS 2 bag folder for ros2 bag play: OUTPUT/ holding OUTPUT_0.mcap and "
+                   "metadata.yaml (--force replaces only a bag folder).")
 @config_options("TOML file with a [track] table of parameters (names as in the options below and more), and "
                 "a [features] table used when the input has no features.")
 @option("--process-noise", bound=TRACK["process_noise"], default=None,
