@@ -16,6 +16,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -176,6 +177,33 @@ def class_rows(tracks: list[dict]) -> list[dict]:
     return out
 
 
+def moving(row: dict) -> bool:
+    """Whether a track row is reported in full: a person (whatever its mobility) or a dynamic track."""
+    return row["class"] == "person" or row["mobility"] == "dynamic"
+
+
+def static_rows(tracks: list[dict]) -> list[dict]:
+    """The confirmed tracks that are neither people nor dynamic (static or undecided pieces of walls and
+    furniture), summarised per (class, mobility): how many, their mean lifetime (s) and where their last
+    confirmed positions are: bounding box and centroid (m, the report's frame)."""
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for r in tracks:
+        if r["confirmed"] and not moving(r):
+            groups.setdefault((r["class"], r["mobility"]), []).append(r)
+    order = {name: i for i, name in enumerate(CLASS_NAMES.values())}
+    out = []
+    for (cls, mob), rs in sorted(groups.items(), key=lambda kv: (order[kv[0][0]], kv[0][1] != "static")):
+        xy = np.array([(r["x_m"], r["y_m"]) for r in rs if r["x_m"] is not None and r["y_m"] is not None],
+                      np.float64).reshape(-1, 2)
+        where = dict.fromkeys(("centroid_x_m", "centroid_y_m", "x_min_m", "x_max_m", "y_min_m", "y_max_m"))
+        if len(xy):
+            (cx, cy), (x0, y0), (x1, y1) = xy.mean(0), xy.min(0), xy.max(0)
+            where = {k: round(float(v), 3) for k, v in zip(where, (cx, cy, x0, x1, y0, y1), strict=True)}
+        out.append({"class": cls, "mobility": mob, "tracks": len(rs),
+                    "mean_lifetime_s": round(float(np.mean([r["lifetime_s"] for r in rs])), 3), **where})
+    return out
+
+
 @dataclass
 class RunSummary:
     """Everything `datmo report` prints about one run (see the module docstring for units and frames)."""
@@ -190,15 +218,21 @@ class RunSummary:
     def confirmed(self) -> list[dict]:
         return [r for r in self.tracks if r["confirmed"]]
 
+    def shown(self, top: int | None, sort: str, all_tracks: bool = False) -> list[dict]:
+        """The tracks reported in full: the moving ones (every confirmed one with `all_tracks`), ordered by
+        `sort`, the first `top` (all when None or 0)."""
+        rows = sort_tracks([r for r in self.confirmed() if all_tracks or moving(r)], sort)
+        return rows[:top] if top else rows
+
     def to_dict(self, top: int | None = None, sort: str = "lifetime") -> dict:
-        tracks = sort_tracks(self.confirmed(), sort)
-        return {"run": self.run, "features": self.features, "landmarks": self.landmarks,
-                "tracks": {"frame": self.frame, "confirmed": len(tracks),
-                           "tentative_only": len(self.tracks) - len(tracks), "by_class": self.classes,
-                           "table": tracks[:top] if top else tracks}}
+        """The file's entry of the JSON report: its file_row, then its details (see REPORT_SCHEMA)."""
+        return {**self.file_row(), "run": self.run, "features": self.features, "landmark_list": self.landmarks,
+                "frame": self.frame, "tentative_only": len(self.tracks) - len(self.confirmed()),
+                "classes": self.classes, "moving_tracks": self.shown(top, sort),
+                "static_by_class": static_rows(self.tracks)}
 
     def file_row(self) -> dict:
-        """The one-row view used when several files are reported together."""
+        """The file's row of the report (FILE_COLUMNS' keys, in order)."""
         conf = self.confirmed()
         f = self.features or {}
         row = {"file": self.run["file"], "duration_s": self.run["duration_s"], "scans": self.run["scans"]}
@@ -206,6 +240,8 @@ class RunSummary:
             row[f"{name}_per_scan"] = f[name]["per_scan"] if name in f else None
         row["landmarks"] = len(self.landmarks) if self.landmarks is not None else None
         row["tracks"] = len(conf)
+        row["moving"] = sum(moving(r) for r in conf)
+        row["static_pieces"] = len(conf) - row["moving"]
         for cls in ("person", "circle object", "rectangular object", "unknown"):
             row[cls.replace(" ", "_")] = sum(r["class"] == cls for r in conf)
         row["dynamic"] = sum(r["mobility"] == "dynamic" for r in conf)
@@ -335,7 +371,8 @@ class TrackStats:
         (s from t0, over every reported state); and over its confirmed states only (coasting predictions and
         tentative states are not observations): distance travelled (m, sum of steps between consecutive
         confirmed positions), mean and max filter speed (m/s), in the world frame when `world` else the
-        sensor frame; occlusions (episodes of consecutive occluded scans) and whether it was ever confirmed."""
+        sensor frame; occlusions (episodes of consecutive occluded scans), whether it was ever confirmed, and
+        its last confirmed position x_m, y_m (m, same frame; None when never confirmed)."""
         f = int(self.world)
         rows = []
         for g, tid in enumerate(self.ids.tolist()):
@@ -350,9 +387,14 @@ class TrackStats:
                 "mean_speed_mps": round(float(self.speed_sum[f, g] / n_conf), 3) if n_conf else 0.0,
                 "max_speed_mps": round(float(self.speed_max[f, g]), 3) if n_conf else 0.0,
                 "occlusions": int(self.occlusions[g]), "occluded_scans": int(self.occluded[g]),
-                "confirmed": bool(n_conf),
+                "confirmed": bool(n_conf), "x_m": _metres(self.last_x[f, g]), "y_m": _metres(self.last_y[f, g]),
             })
         return rows
+
+
+def _metres(v: float) -> float | None:
+    """A position rounded to the millimetre; None when not finite."""
+    return round(float(v), 3) if np.isfinite(v) else None
 
 
 class ScanStats:
@@ -517,7 +559,8 @@ BLOCK_MESSAGES = 1000      # messages decoded at once by summarise_file
 SUMMARY_TOPICS = (mcapio.TOPIC_SCAN, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS, mcapio.TOPIC_TRACKS)
 
 
-def summarise_file(path: str | Path, *, block: int = BLOCK_MESSAGES) -> RunSummary:
+def summarise_file(path: str | Path, *, block: int = BLOCK_MESSAGES,
+                   progress: Callable[[int], None] | None = None) -> RunSummary:
     """The report of the processed log at `path`, read in one streaming pass (see `stream_run`) in memory
     that does not grow with the log's length: the same RunSummary as `summarise(RunData.from_log(...))`
     (but where a track's header stamps go back across blocks, never in a log datmo writes: see TrackStats).
@@ -525,15 +568,17 @@ def summarise_file(path: str | Path, *, block: int = BLOCK_MESSAGES) -> RunSumma
     Raises as RunData.from_log: MissingChannelError naming the command to run first when /scan or
     /datmo/tracks is absent, InputError for a /scan channel that is not LaserScans or whose geometry changes.
     """
-    return stream_run(path, block=block).summary()
+    return stream_run(path, block=block, progress=progress).summary()
 
 
-def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES) -> RunAccumulator:
+def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES,
+               progress: Callable[[int], None] | None = None) -> RunAccumulator:
     """Walk the log at `path` once (mcapio.iter_messages, file order) and feed a RunAccumulator its /scan,
     /datmo/features, /datmo/landmarks and /datmo/tracks messages, `block` messages at a time: it holds at
     most `block` payloads and their decoded forms at once (`peak_messages` says how many it held), so
     memory does not depend on the log's length. Scans are decoded block by block for their header stamps
-    and geometry (a change of geometry is refused as RunData.from_log refuses it)."""
+    and geometry (a change of geometry is refused as RunData.from_log refuses it). `progress(scans)` is
+    called after each block with the number of scans read so far."""
     contents = mcapio.LogContents(path=Path(path))
     acc = RunAccumulator(str(Path(path)))
     pending: dict[str, list[bytes]] = {t: [] for t in SUMMARY_TOPICS}
@@ -552,6 +597,8 @@ def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES) -> RunAccumulat
                 state["geometry"] = run.geometry
                 acc.add_scans(run.stamps, run.geometry.n_beams)
         state["first"] += len(scans)
+        if progress is not None and scans:
+            progress(state["first"])
         if pending[mcapio.TOPIC_FEATURES]:
             decoded = [cdr.decode(types.FEATURES, p) for p in pending[mcapio.TOPIC_FEATURES]]
             acc.add_features(len(decoded), {k: np.array([len(d[k]) for d in decoded], np.int64)
@@ -598,10 +645,9 @@ def sort_tracks(rows: list[dict], key: str) -> list[dict]:
 
 
 def total_row(rows: list[dict]) -> dict:
-    """Sum of file rows (per-scan figures weighted by scans)."""
-    scans = sum(r["scans"] for r in rows)
-    out = {"file": "total"}
-    for k in rows[0]:
+    """Sum of file rows (per-scan figures weighted by scans); zeros and None when there are none."""
+    out: dict = {"file": "total"}
+    for k in FILE_COLUMNS:
         if k == "file":
             continue
         vals = [r[k] for r in rows if r[k] is not None]
@@ -609,10 +655,9 @@ def total_row(rows: list[dict]) -> dict:
             ws = [r["scans"] for r in rows if r[k] is not None]
             out[k] = round(sum(v * w for v, w in zip(vals, ws, strict=True)) / sum(ws), 3) if sum(ws) else None
         elif not vals:
-            out[k] = None
+            out[k] = None if rows else (0.0 if k.endswith(("_s", "_m")) else 0)
         else:
             out[k] = round(sum(vals), 3) if isinstance(vals[0], float) else sum(vals)
-    out["scans"] = scans
     return out
 
 
@@ -649,62 +694,86 @@ def _table(title: str, rows: list[dict], columns: dict[str, str]) -> Table:
     return Table(title, [columns[k] for k in keys], values, numeric)
 
 
+SCHEMA = "datmo.report/1"
 TRACK_COLUMNS = {"id": "id", "class": "class", "mobility": "mobility", "first_s": "first s", "last_s": "last s",
                  "lifetime_s": "lifetime s", "distance_m": "distance m", "mean_speed_mps": "mean m/s",
-                 "max_speed_mps": "max m/s", "occlusions": "occlusions"}
-CLASS_COLUMNS = {"class": "class", "mobility": "mobility", "tracks": "tracks", "mean_lifetime_s": "mean lifetime s",
-                 "max_lifetime_s": "max lifetime s", "distance_m": "distance m", "mean_speed_mps": "mean m/s",
-                 "max_speed_mps": "max m/s", "occlusions": "occlusions"}
+                 "max_speed_mps": "max m/s", "occlusions": "occlusions", "x_m": "last x m", "y_m": "last y m"}
+STATIC_COLUMNS = {"class": "class", "mobility": "mobility", "tracks": "tracks", "mean_lifetime_s": "mean lifetime s",
+                  "centroid_x_m": "centroid x m", "centroid_y_m": "centroid y m", "x_min_m": "x min m",
+                  "x_max_m": "x max m", "y_min_m": "y min m", "y_max_m": "y max m"}
 LANDMARK_COLUMNS = {"id": "id", "type": "type", "x_m": "x m", "y_m": "y m", "size_m": "size m",
                     "first_seen_s": "first seen s", "last_seen_s": "last seen s", "scans": "scans"}
 FILE_COLUMNS = {"file": "file", "duration_s": "duration s", "scans": "scans", "lines_per_scan": "lines/scan",
                 "circles_per_scan": "circles/scan", "blobs_per_scan": "blobs/scan", "landmarks": "landmarks",
-                "tracks": "tracks", "person": "people", "circle_object": "circle obj.",
-                "rectangular_object": "rect. obj.", "unknown": "unknown", "dynamic": "dynamic",
-                "distance_m": "distance m"}
+                "tracks": "tracks", "moving": "moving", "static_pieces": "static pieces", "person": "people",
+                "circle_object": "circle obj.", "rectangular_object": "rect. obj.", "unknown": "unknown",
+                "dynamic": "dynamic", "distance_m": "distance m"}
+# `--format csv --tracks`: one row per track of every file
+TRACK_CSV_KEYS = ["file", *TRACK_COLUMNS, "occluded_scans", "scans"]
+REPORT_SCHEMA = f"""The report's shapes, the same for one file, several files, batch folders and datmo run's report:
+
+csv            one row per file, then a row whose file is "total"; header:
+               {",".join(FILE_COLUMNS)}
+csv --tracks   one row per track reported in full (moving ones; every confirmed one with --all); header:
+               {",".join(TRACK_CSV_KEYS)}
+json           {{"schema": "{SCHEMA}", "files": [FILE...], "total": ROW, "batches": [BATCH...],
+                 "tracks": [TRACK...] (with --tracks only)}}
+               FILE: the file's csv row plus "run" (facts, provenance), "features", "landmark_list" (the
+               landmark database; null without /datmo/landmarks), "frame", "tentative_only", "classes"
+               (confirmed tracks by class and mobility), "moving_tracks" (people and dynamic tracks in full)
+               and "static_by_class" (the other confirmed tracks per class and mobility: count, centroid,
+               bounding box); BATCH: {{"folder", "summary", "inputs"}} of a batch folder's manifest.jsonl;
+               TRACK: a csv --tracks row.
+Moving: a person, or a track whose mobility is dynamic. Times in s from the file's first scan; positions
+in m in the world frame when every track state has one, else the sensor frame; speeds in m/s."""
 
 
-def tables(summary: RunSummary, top: int | None = 20, sort: str = "lifetime") -> list[Table]:
-    """The tables of a one-run report: run facts, features, landmarks, tracks by class, the track table."""
+def file_tables(summary: RunSummary, top: int | None = 20, sort: str = "lifetime",
+                all_tracks: bool = False) -> list[Table]:
+    """The tables of one file: run facts, features, landmarks, the tracks in full (the moving ones, or every
+    confirmed one with `all_tracks`) and the static pieces per class."""
     r = summary.run
+    name = Path(r["file"]).name
     facts = [["file", r["file"]], ["duration", f"{r['duration_s']:.1f} s"], ["scans", r["scans"]],
              ["rate", f"{r['rate_hz']:.2f} Hz" if r["rate_hz"] else "-"], ["beams", r["beams"]],
              ["dropped scans", r["dropped_scans"]], ["datmo version", r["version"]], ["command", r["command"]]]
     facts += [[f"param {k}", json.dumps(v) if not isinstance(v, str) else v] for k, v in r["parameters"].items()]
-    out = [Table("Run", ["what", "value"], facts)]
+    out = [Table(f"{name}: run", ["what", "value"], facts)]
     f = summary.features
     if f is not None:
-        out.append(Table(f"Features ({f['scans']:,} scans)", ["feature", "total", "per scan", "max per scan"],
+        out.append(Table(f"{name}: features ({f['scans']:,} scans)", ["feature", "total", "per scan", "max per scan"],
                          [[n, f[n]["total"], f[n]["per_scan"], f[n]["max_per_scan"]]
                           for n in ("lines", "circles", "blobs")], {1, 2, 3}))
     if summary.landmarks is not None:
         frame = summary.landmarks[0]["frame"] if summary.landmarks else ""
-        out.append(_table(f"Landmarks ({len(summary.landmarks)}, frame {frame or '-'})", summary.landmarks,
+        out.append(_table(f"{name}: landmarks ({len(summary.landmarks)}, frame {frame or '-'})", summary.landmarks,
                           LANDMARK_COLUMNS))
     conf = summary.confirmed()
-    tentative = len(summary.tracks) - len(conf)
-    out.append(_table(f"Confirmed tracks by class ({len(conf)}; {tentative} never confirmed; "
-                      f"{summary.frame} frame)", summary.classes, CLASS_COLUMNS))
-    shown = sort_tracks(conf, sort)
-    shown = shown[:top] if top else shown
-    title = f"Tracks ({len(shown)} of {len(conf)}, by {sort})"
-    out.append(_table(title, shown, TRACK_COLUMNS))
+    n_moving = sum(moving(t) for t in conf)
+    shown = summary.shown(top, sort, all_tracks)
+    what = "confirmed tracks" if all_tracks else "people and dynamic tracks"
+    of = len(conf) if all_tracks else n_moving
+    out.append(_table(f"{name}: {what} ({len(shown)} of {of}, by {sort}; {len(conf)} confirmed, "
+                      f"{len(summary.tracks) - len(conf)} never confirmed; {summary.frame} frame)", shown,
+                      TRACK_COLUMNS))
+    statics = static_rows(summary.tracks)
+    out.append(_table(f"{name}: static pieces by class ({len(conf) - n_moving} tracks; where they were last seen)",
+                      statics, STATIC_COLUMNS))
     return out
 
 
 def file_table(summaries: list[RunSummary]) -> Table:
     """One row per file and a total row."""
     rows = [s.file_row() for s in summaries]
-    return _table(f"{len(rows)} runs", rows + [total_row(rows)], FILE_COLUMNS)
+    return _table(f"{len(rows)} file{'s' if len(rows) != 1 else ''}", rows + [total_row(rows)], FILE_COLUMNS)
 
 
 def console():  # noqa: ANN201 - rich.console.Console, imported lazily
-    """A rich console on stdout; 140 columns wide when stdout is not a terminal (files, pipes, CI logs)."""
-    import sys
+    """A rich console on stdout: the terminal's width on a terminal, else a plain, unlimited width (no
+    wrapping, no colour) so piped names stay whole (progress.console)."""
+    from .progress import console as make
 
-    from rich.console import Console
-
-    return Console(width=None if sys.stdout.isatty() else 140)
+    return make()
 
 
 def render_rich(tabs: list[Table], console) -> None:  # noqa: ANN001 - rich.console.Console, imported lazily
@@ -762,31 +831,41 @@ def to_json(obj: object) -> str:
     return json.dumps(clean(obj), indent=2)
 
 
-def render(summaries: list[RunSummary], fmt: str, *, top: int | None, sort: str, console=None) -> str | None:  # noqa: ANN001
-    """A report of one or more runs in `fmt` (one of FORMATS). Returns the text, or prints to `console`
-    (rich). One run: every table; csv gives the track table. Several runs: one row per file and a total
-    row (json: every run's full report too)."""
-    if top is None and fmt in ("rich", "markdown"):
-        top = 20
-    if len(summaries) == 1:
-        s = summaries[0]
-        if fmt == "json":
-            return to_json(s.to_dict(top, sort))
-        if fmt == "csv":
-            rows = sort_tracks(s.confirmed(), sort)
-            rows = rows[:top] if top else rows
-            keys = list(TRACK_COLUMNS) + ["occluded_scans", "scans"]
-            return render_csv(Table("tracks", keys, [[r[k] for k in keys] for r in rows]))
-        tabs = tables(s, top, sort)
-    else:
-        ft = file_table(summaries)
-        if fmt == "json":
-            rows = [s.file_row() for s in summaries]
-            return to_json({"files": rows, "total": total_row(rows),
-                            "runs": [s.to_dict(top, sort) for s in summaries]})
-        if fmt == "csv":
-            return render_csv(ft, list(FILE_COLUMNS))
-        tabs = [ft]
+def track_rows(summaries: list[RunSummary], top: int | None, sort: str, all_tracks: bool) -> list[dict]:
+    """The `--tracks` rows: each file's tracks reported in full (RunSummary.shown), TRACK_CSV_KEYS."""
+    return [{"file": s.run["file"], **{k: t[k] for k in TRACK_CSV_KEYS[1:]}}
+            for s in summaries for t in s.shown(top, sort, all_tracks)]
+
+
+def report_dict(summaries: list[RunSummary], *, top: int | None, sort: str, tracks: bool = False,
+                all_tracks: bool = False, batches: list[dict] | None = None) -> dict:
+    """The JSON report (REPORT_SCHEMA): schema, files, total, batches and, with `tracks`, tracks."""
+    out = {"schema": SCHEMA, "files": [s.to_dict(top, sort) for s in summaries],
+           "total": total_row([s.file_row() for s in summaries]), "batches": batches or []}
+    if tracks:
+        out["tracks"] = track_rows(summaries, top, sort, all_tracks)
+    return out
+
+
+def render(summaries: list[RunSummary], fmt: str, *, top: int | None, sort: str, tracks: bool = False,
+           all_tracks: bool = False, batches: list[dict] | None = None, console=None,  # noqa: ANN001
+           before: list[Table] | None = None) -> str | None:
+    """The report of any number of runs in `fmt` (one of FORMATS), in the shapes REPORT_SCHEMA gives.
+    Returns the text, or prints to `console` (rich). `top` limits each file's track table (None: 20 for rich
+    and markdown, all for json and csv); rich and markdown show the files table, then each file's tables,
+    after the tables `before` (a batch folder's)."""
+    if fmt == "json":
+        return to_json(report_dict(summaries, top=top, sort=sort, tracks=tracks, all_tracks=all_tracks,
+                                   batches=batches))
+    if fmt == "csv":
+        if tracks:
+            rows = track_rows(summaries, top, sort, all_tracks)
+            return render_csv(Table("tracks", TRACK_CSV_KEYS, [[r[k] for k in TRACK_CSV_KEYS] for r in rows]))
+        return render_csv(file_table(summaries), list(FILE_COLUMNS))
+    top = 20 if top is None else top
+    tabs = list(before or []) + [file_table(summaries)]
+    for s in summaries:
+        tabs += file_tables(s, top, sort, all_tracks)
     if fmt == "markdown":
         return render_markdown(tabs)
     render_rich(tabs, console)

@@ -219,9 +219,9 @@ def test_report_of_a_batch_folder(logs, tmp_path):
     s = doc["batches"][0]["summary"]
     assert (s["inputs"], s["done"], s["failed"], s["scans"]) == (3, 2, 1, 100)
     assert s["tracks"]["person"] == 6 and s["failures"][0]["input"] == str(logs / "bad.mcap")
-    assert len(doc["report"]["files"]) == 2
+    assert len(doc["files"]) == 2 and doc["total"]["scans"] == 100
     csv = CliRunner().invoke(cli, ["report", str(out), "--format", "csv"]).stdout.splitlines()
-    assert csv[0].startswith("input,output,status") and len(csv) == 4
+    assert csv[0].startswith("file,duration_s,scans") and len(csv) == 4 and csv[3].startswith("total,")
     rich = CliRunner().invoke(cli, ["report", str(out)])
     assert rich.exit_code == 0 and "Failed inputs" in rich.stdout
     missing = CliRunner().invoke(cli, ["report", str(logs)])

@@ -87,39 +87,52 @@ def test_class_rows_count_confirmed_tracks(summary):
 def test_sort_and_top(summary):
     assert [r["id"] for r in report.sort_tracks(summary.confirmed(), "distance")][:3] == [1, 7, 2]
     assert [r["id"] for r in report.sort_tracks(summary.confirmed(), "first")] == [1, 2, 5, 3, 7, 4]
-    assert len(summary.to_dict(top=2)["tracks"]["table"]) == 2
+    assert [r["id"] for r in summary.to_dict(top=2)["moving_tracks"]] == [1, 3]
+    assert [r["id"] for r in summary.shown(None, "id", all_tracks=True)] == [1, 2, 3, 4, 5, 7]
+
+
+def test_moving_tracks_in_full_static_pieces_summarised(summary):
+    assert [r["id"] for r in summary.shown(None, "id")] == [1, 2, 3, 4, 7]    # 5 is a static rectangle
+    five = next(r for r in summary.tracks if r["id"] == 5)
+    (static,) = report.static_rows(summary.tracks)
+    assert (static["class"], static["mobility"], static["tracks"]) == ("rectangular object", "static", 1)
+    assert (static["centroid_x_m"], static["centroid_y_m"]) == (five["x_m"], five["y_m"])
+    assert static["x_min_m"] == static["x_max_m"] == five["x_m"]
+    row = summary.file_row()
+    assert (row["tracks"], row["moving"], row["static_pieces"]) == (6, 5, 1)
 
 
 def test_cli_rich(log):
     result = invoke("report", log)
     assert result.exit_code == 0, result.output
-    for text in ("Run", "5.00 Hz", "dropped scans", "Features (50 scans)", "Landmarks (2", "column",
-                 "Confirmed tracks by class (6; 1 never confirmed", "person", "circle object", "Tracks (6 of 6"):
+    for text in ("1 file", "run.mcap: run", "5.00 Hz", "dropped scans", "features (50 scans)", "landmarks (2",
+                 "column", "people and dynamic tracks (5 of 5, by lifetime; 6 confirmed, 1 never confirmed",
+                 "person", "circle object", "static pieces by class (1 tracks"):
         assert text in result.output, text
 
 
 def test_cli_json(log):
     result = invoke("report", log, "--format", "json", "--sort", "id")
     assert result.exit_code == 0, result.output
-    data = json.loads(result.output)
-    assert data["run"]["scans"] == 50
-    assert data["tracks"]["confirmed"] == 6 and data["tracks"]["tentative_only"] == 1
-    assert [t["id"] for t in data["tracks"]["table"]] == [1, 2, 3, 4, 5, 7]
+    (data,) = json.loads(result.output)["files"]
+    assert data["run"]["scans"] == 50 and data["scans"] == 50
+    assert data["tracks"] == 6 and data["tentative_only"] == 1
+    assert [t["id"] for t in data["moving_tracks"]] == [1, 2, 3, 4, 7]
     assert data["features"]["lines"]["total"] == 100
-    assert len(data["landmarks"]) == 2
+    assert len(data["landmark_list"]) == 2
 
 
-def test_cli_csv_is_the_track_table(log):
-    result = invoke("report", log, "--format", "csv", "--top", "3", "--sort", "lifetime")
+def test_cli_csv_tracks_is_the_track_table(log):
+    result = invoke("report", log, "--format", "csv", "--tracks", "--top", "3", "--sort", "lifetime", "--all")
     rows = list(csv.DictReader(io.StringIO(result.output)))
-    assert [int(r["id"]) for r in rows] == [1, 5, 3]
+    assert [int(r["id"]) for r in rows] == [1, 5, 3] and {r["file"] for r in rows} == {str(log)}
     assert float(rows[0]["distance_m"]) == pytest.approx(5.64, abs=1e-3)
 
 
 def test_cli_markdown(log):
     result = invoke("report", log, "--format", "markdown")
     assert result.exit_code == 0
-    assert "### Run" in result.output and "| id | class | mobility |" in result.output
+    assert "### run.mcap: run" in result.output and "| id | class | mobility |" in result.output
     assert "|---:|---|---|" in result.output
 
 
@@ -132,9 +145,9 @@ def test_several_files_give_a_row_each_and_a_total(tmp_path, log):
     assert int(rows[2]["scans"]) == 75
     assert int(rows[2]["tracks"]) == int(rows[0]["tracks"]) + int(rows[1]["tracks"])
     rich = invoke("report", log, other)
-    assert "total" in rich.output and "2 runs" in rich.output
+    assert "total" in rich.output and "2 files" in rich.output
     data = json.loads(invoke("report", log, other, "--format", "json").output)
-    assert data["total"]["scans"] == 75 and len(data["runs"]) == 2
+    assert data["total"]["scans"] == 75 and len(data["files"]) == 2
 
 
 def test_plot_is_written(tmp_path, log):
@@ -169,8 +182,8 @@ def test_missing_channel_names_the_command(tmp_path, channels, missing, command)
 def test_report_without_features_still_summarises_tracks(tmp_path):
     path = tmp_path / "nofeatures.mcap"
     write(path, with_features=False)
-    data = json.loads(invoke("report", path, "--format", "json").output)
-    assert data["features"] is None and data["landmarks"] is None and data["tracks"]["confirmed"] == 6
+    (data,) = json.loads(invoke("report", path, "--format", "json").output)["files"]
+    assert data["features"] is None and data["landmark_list"] is None and data["tracks"] == 6
 
 
 def test_bad_input_is_one_clean_line(tmp_path):

@@ -46,6 +46,8 @@ def ref_track_rows(h: report.TrackHistory, t0_ns: int) -> list[dict]:
             "max_speed_mps": round(float(speed.max()), 3) if len(speed) else 0.0,
             "occlusions": int(occ[0]) + int(np.sum(occ[1:] & ~occ[:-1])), "occluded_scans": int(occ.sum()),
             "confirmed": bool(conf.any()),
+            "x_m": round(float(x[-1]), 3) if len(x) and np.isfinite(x[-1]) else None,
+            "y_m": round(float(y[-1]), 3) if len(y) and np.isfinite(y[-1]) else None,
         })
     return rows
 
@@ -161,7 +163,7 @@ def test_report_command_streams_without_a_plot(outputs, monkeypatch):
     result = CliRunner().invoke(cli, ["report", str(path), "--format", "json"])
     assert result.exit_code == 0, result.output
     assert result.output == want
-    assert json.loads(want)["run"]["scans"] == 300
+    assert json.loads(want)["files"][0]["run"]["scans"] == 300
 
 
 def test_run_final_report_streams_without_plots(outputs, monkeypatch, capsys):

@@ -7,7 +7,10 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS, option
+from ..progress import quiet_option
 from ..report import FORMATS, SORT_KEYS
+
+PLOT_KINDS = ("auto", "top", "counts", "speeds", "all")
 
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
 
@@ -31,8 +34,9 @@ def check_plot_outputs(paths: list[Path], force: bool) -> None:
         check_output(p, force=force, what="plot")
 
 
-def save_plot(data, path: Path, force: bool) -> None:  # noqa: ANN001 - pipeline.RunData
-    """Draw `data` into `path` atomically (a temporary file renamed when the figure is complete)."""
+def save_plot(data, path: Path, force: bool, kind: str = "auto", all_labels: bool = False) -> str:  # noqa: ANN001
+    """Draw `data` (pipeline.RunData) into `path` atomically (a temporary file renamed when the figure is
+    complete); returns the line that says so (with the labels left out where they would overlap)."""
     import matplotlib
 
     from ..outputs import atomic_output
@@ -40,7 +44,21 @@ def save_plot(data, path: Path, force: bool) -> None:  # noqa: ANN001 - pipeline
 
     with atomic_output(path, force=force, what="plot") as f, \
             matplotlib.rc_context({"savefig.format": path.suffix.lower().lstrip(".")}):
-        plot_run(data, f)
+        drawn = plot_run(data, f, kind=kind, all_labels=all_labels)
+    note = f" ({drawn.dropped} of {drawn.dropped + drawn.placed} labels left out: no room without overlap)" \
+        if drawn.dropped else ""
+    return f"{path}: plot written, {drawn.kind}{note}"
+
+
+def _scan_counts(files: list[Path]) -> list[int]:
+    """Scans on /scan of each file, from its summary (the progress bar's total)."""
+    from ..log import mcapio
+
+    counts = []
+    for f in files:
+        ch = mcapio.summary(f).topics().get(mcapio.TOPIC_SCAN)
+        counts.append(ch.count if ch is not None else 0)
+    return counts
 
 
 @click.command(name="report")
@@ -48,66 +66,73 @@ def save_plot(data, path: Path, force: bool) -> None:  # noqa: ANN001 - pipeline
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default="rich", show_default=True,
               help="rich tables for a terminal; json, csv or markdown for scripts and CI.")
 @option("--top", bound=OPTIONS["top"], default=None,
-        help="Tracks in the per-track table (0: all) [default: 20 for rich and markdown, all for json, csv].")
+        help="Tracks in each file's track table (0: all) [default: 20 for rich and markdown, all for json, csv].")
 @click.option("--sort", type=click.Choice(SORT_KEYS), default="lifetime", show_default=True,
-              help="Order of the per-track table (lifetime, distance and speed: largest first).")
+              help="Order of the track tables (lifetime, distance and speed: largest first).")
+@click.option("--tracks", "track_table", is_flag=True,
+              help="csv: one row per track (with a file column) instead of one per file; json: add a tracks list.")
+@click.option("--all", "all_tracks", is_flag=True,
+              help="Report every confirmed track in full (static pieces too) and label all of them in the plot.")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Also draw the run from above into this .png, .svg or .pdf "
+              help="Also draw the run into this .png, .svg or .pdf "
                    "(several files: one plot each, named PLOT-STEM.png).")
+@click.option("--plot-kind", type=click.Choice(PLOT_KINDS), default="auto", show_default=True,
+              help="top: the run from above; counts: confirmed tracks per class over time; speeds: the moving "
+                   "tracks' speeds over time; all: the three side by side; auto: all when something moves, "
+                   "else top.")
 @click.option("--force", is_flag=True, help="Overwrite existing plots.")
-def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, plot: Path | None, force: bool) -> None:
-    """Summarise what processed runs saw: run facts, features, landmarks, tracks by class and mobility
-    (counts, lifetimes, distance travelled, speeds, occlusions) and a per-track table.
+@quiet_option
+def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, track_table: bool, all_tracks: bool,
+            plot: Path | None, plot_kind: str, force: bool) -> None:
+    """Summarise what processed runs saw, leading with what moves: run facts, features, landmarks, people
+    and dynamic tracks in full (lifetimes, distance travelled, speeds, occlusions, last position), and the
+    static pieces (walls, furniture) per class: how many and where.
 
-    FILES are logs that went through datmo track or datmo run. Several files give one row per file and
-    a total row. csv prints the track table of one file, or the per-file table of several.
+    FILES are logs that went through datmo track or datmo run. Every format has one shape whatever the
+    number of files: csv gives one row per file and a total row (--tracks: one row per track, with a file
+    column); json gives {"schema": "datmo.report/1", "files": [...], "total": {...}, "batches": [...]} (and
+    "tracks" with --tracks); rich and markdown the files table, then each file's tables.
 
-    A folder is a batch of datmo run (-o DIR): its manifest.jsonl gives the batch's figures (inputs done
-    and failed, scans, tracks by class, failures), and its outputs the per-file table (csv: one row per
-    input of the manifest).
+    A folder is a batch of datmo run (-o DIR): its outputs that are done join FILES, and its manifest.jsonl
+    gives the batch's figures (inputs done and failed, scans, tracks by class, failures): rich and markdown
+    tables before the report, json "batches".
 
     Example: datmo report out/hall.mcap --plot out/hall.png
     """
     from ..pipeline import read_run_data
+    from ..progress import bar, say
     from ..report import render, summarise, summarise_file
 
     files, batches = _batches(list(files))
-    if batches and fmt == "csv":
-        click.echo(_batch_csv(batches), nl=False)
-        return
     plots = plot_paths(plot, files) if plot else []
     check_plot_outputs(plots, force)
-    summaries = []
-    for i, path in enumerate(files):
-        if not plot:   # one streaming pass; the plot draws every scan and state, so it decodes the whole run
-            summaries.append(summarise_file(path))
-            continue
-        data = read_run_data(path, keep_scans=True)
-        summaries.append(summarise(data))
-        save_plot(data, plots[i], force)
-    if fmt == "rich":
-        from ..report import console, render_rich
-
-        if batches:
-            render_rich(_batch_tables(batches), console())
-        if summaries:
-            render(summaries, fmt, top=top, sort=sort, console=console())
-    elif fmt == "json" and batches:
-        import json
-
+    counts = _scan_counts(files)
+    summaries, written = [], []
+    with bar("report", sum(counts)) as progress:
+        done = 0
+        for i, path in enumerate(files):
+            if plot:   # the plot draws every scan and state, so it decodes the whole run
+                data = read_run_data(path, keep_scans=True)
+                summaries.append(summarise(data))
+                written.append(save_plot(data, plots[i], force, plot_kind, all_tracks))
+            else:      # one streaming pass
+                summaries.append(summarise_file(path, progress=lambda n, d=done: progress.update(d + n)))
+            done += counts[i]
+            progress.update(done)
+    options = {"top": top, "sort": sort, "tracks": track_table, "all_tracks": all_tracks}
+    if fmt == "json":
         from ..batch import summary
-        from ..report import to_json
 
-        report = json.loads(render(summaries, fmt, top=top, sort=sort)) if summaries else None
-        click.echo(to_json({"batches": [{"folder": str(d), "summary": summary(recs), "inputs": recs}
-                                        for d, recs in batches], "report": report}))
+        click.echo(render(summaries, fmt, **options, batches=[{"folder": str(d), "summary": summary(recs),
+                                                                 "inputs": recs} for d, recs in batches]))
+    elif fmt == "rich":
+        from ..report import console
+
+        render(summaries, fmt, **options, console=console(), before=_batch_tables(batches))
     else:
-        from ..report import render_markdown
-
-        text = render(summaries, fmt, top=top, sort=sort) if summaries else ""
-        click.echo((render_markdown(_batch_tables(batches)) + "\n" if batches else "") + text, nl=False)
-    for p in plots:
-        click.echo(f"{p}: plot written", err=True)
+        click.echo(render(summaries, fmt, **options, before=_batch_tables(batches)), nl=False)
+    for line in written:
+        say(line)
 
 
 def _batches(paths: list[Path]) -> tuple[list[Path], list[tuple[Path, list[dict]]]]:
@@ -127,6 +152,8 @@ def _batch_tables(batches: list[tuple[Path, list[dict]]]) -> list:
     from ..batch import TRACK_CLASSES, summary
     from ..report import Table
 
+    if not batches:
+        return []
     sums = [(d, summary(recs)) for d, recs in batches]
     figures = Table("Batches (from each folder's manifest.jsonl)",
                     ["folder", "inputs", "done", "failed", "scans", "task s", "scans/s per task", "datmo",
@@ -147,16 +174,3 @@ def _batch_tables(batches: list[tuple[Path, list[dict]]]) -> list:
     if missing:
         out.append(Table("Done in the manifest but missing", ["folder", "output"], missing))
     return out
-
-
-def _batch_csv(batches: list[tuple[Path, list[dict]]]) -> str:
-    """One CSV row per input of every batch: its manifest line, tracks by class flattened."""
-    from ..batch import TRACK_CLASSES
-    from ..report import Table, render_csv
-
-    keys = ["input", "output", "status", "scans", "seconds", "scans_per_s", "input_sha256", "params_hash",
-            "datmo_version", "error"]
-    tkeys = ["confirmed", *TRACK_CLASSES, "dynamic"]
-    rows = [[r.get(k) for k in keys] + [(r.get("tracks") or {}).get(k) for k in tkeys]
-            for _, recs in batches for r in recs]
-    return render_csv(Table("inputs", keys + tkeys, rows))
