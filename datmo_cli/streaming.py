@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .log import mcapio
+from .log import mcapio, transforms
 from .log.scan import Odometry, ScanGeometry, ScanRun
 
 _STAMP = struct.Struct("<iI")   # a CDR header stamp: sec, nanosec
@@ -54,16 +54,25 @@ class LogStream:
         self.log = mcapio.LogContents(path=self.path)
         odom: tuple[list[int], list[bytes]] = ([], [])
         order = StampOrder()
-        for topic, stamp, payload in mcapio.iter_messages(self.path, [mcapio.TOPIC_ODOM, scan_topic], self.log):
+        statics: list[bytes] = []
+        self.scan_frame = ""
+        for topic, stamp, payload in mcapio.iter_messages(self.path, [mcapio.TOPIC_ODOM, mcapio.TOPIC_TF_STATIC,
+                                                                      scan_topic], self.log):
             if topic == scan_topic:
+                if not order.n:
+                    self.scan_frame = _frame(payload)
                 order.add(payload)
-            else:
+            elif topic == mcapio.TOPIC_ODOM:
                 odom[0].append(stamp)
                 odom[1].append(payload)
+            else:
+                statics.append(payload)
         self.n_scans = mcapio.check_scan_channel(self.log, scan_topic)
         order.check(self.path)
         self.log.messages = {mcapio.TOPIC_ODOM: odom}
-        self.odometry = mcapio.odometry_from_log(self.log)
+        self.statics = [t for p in statics for t in _transforms(self.path, p)]
+        # the tracker and the landmarks take the scanner's poses: the base's composed with its mount
+        self.odometry = transforms.sensor_odometry(mcapio.odometry_from_log(self.log), self.statics, self.scan_frame)
         self.log.messages = {}   # every channel is copied block by block
 
     def has(self, topic: str) -> bool:
@@ -116,6 +125,20 @@ class LogStream:
         """Just the scans, block by block."""
         for block in self.blocks(size):
             yield block.run
+
+
+def _frame(payload: bytes) -> str:
+    try:
+        return transforms.header_frame(payload)
+    except (ValueError, struct.error):
+        return ""   # the scan decoder names what is wrong with it
+
+
+def _transforms(path: Path, payload: bytes) -> list[transforms.Transform]:
+    try:
+        return transforms.decode_tf(payload)
+    except ValueError as exc:
+        raise InputError(f"{path}: bad tf2_msgs/msg/TFMessage on {mcapio.TOPIC_TF_STATIC}: {exc}") from None
 
 
 class StampOrder:
@@ -175,19 +198,52 @@ def stream_log(stream: LogStream, out: str | Path, *, command: str, params: dict
     with mcapio.LogWriter(out, force=force, provenance=provenance) as writer:
         copy_ids = writer.copy_channels(stream.log, exclude=list(derived))
         ids = {topic: writer.channel(topic, msgtype) for topic, msgtype in derived.items()}
+        tf = _DerivedTf(stream, writer, mcapio.TOPIC_ODOM in derived)
         done = 0
         if progress is not None:
             progress(0, total)
         for block in stream.blocks(block_scans, aligned=aligned, copy=set(copy_ids)):
             for topic, (stamps, payloads) in block.copies.items():
                 writer.write_ids(copy_ids[topic], stamps, payloads)
-            for topic, (_, stamps, payloads) in stage(block).items():
+            out_channels = stage(block)
+            for topic, (_, stamps, payloads) in out_channels.items():
                 writer.write_ids(ids[topic], stamps, payloads)
+            odom = out_channels[mcapio.TOPIC_ODOM][1:] if mcapio.TOPIC_ODOM in out_channels else \
+                block.copies.get(mcapio.TOPIC_ODOM)
+            tf.block(block, odom)
             writer.drain()
             done += len(block.run)
             if progress is not None:
                 progress(done, total)
     return done
+
+
+class _DerivedTf:
+    """/tf (one transform per /odom pose) and /tf_static (the odometry's child frame -> the scan's frame, the
+    identity) for an output with odometry whose input has no /tf (older datmo logs, odometry estimated here);
+    nothing when the input's own /tf is copied."""
+
+    def __init__(self, stream: LogStream, writer: mcapio.LogWriter, estimated: bool) -> None:
+        self.stream, self.writer = stream, writer
+        self.on = not stream.has(mcapio.TOPIC_TF) and (estimated or stream.has(mcapio.TOPIC_ODOM))
+        self.static = self.on and not stream.has(mcapio.TOPIC_TF_STATIC)
+        self.joined = {stream.scan_frame}   # child frames given a static transform (the scan's own needs none)
+
+    def block(self, block: Block, odom: tuple | None) -> None:  # noqa: ANN001 - (stamps, payloads) of /odom
+        if not self.on or odom is None or not len(odom[1]):
+            return
+        stamps, payloads = odom
+        try:
+            poses = transforms.decode_odometry(payloads)
+        except ValueError as exc:
+            raise InputError(f"{self.stream.path}: bad nav_msgs/msg/Odometry on {mcapio.TOPIC_ODOM}: {exc}") from None
+        self.writer.write_transforms(stamps, transforms.odometry_tf(poses))
+        child = poses.child_frame_id
+        if self.static and child not in self.joined:
+            self.joined.add(child)
+            at = int(min(block.run.stamps[0], np.min(stamps)))
+            self.writer.write_transforms([at], [transforms.mount_tf(at, child, self.stream.scan_frame,
+                                                                    transforms.LaserPose())], static=True)
 
 
 # ------------------------------------------------------------------------------------------- odometry

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS, option
+from ..bounds import OPTIONS, laser_pose_option, option
 from .options import no_stdout, quiet_option
 
 SCENE_HELP = "Built-in scene name (hall, corridor, crowd, static, patrol) or the path of a .toml scene file."
@@ -45,14 +46,18 @@ def _list_scenes(ctx: click.Context, _param: click.Parameter, value: bool) -> No
 @option("--noise", bound=OPTIONS["sim_noise"], default=0.01, show_default=True, help="Range noise sigma, metres.")
 @click.option("--list-scenes", is_flag=True, expose_value=False, is_eager=True, callback=_list_scenes,
               help="List the built-in scenes and exit.")
+@laser_pose_option()
 @quiet_option
 def command(scene: str, output: Path, force: bool, seed: int, duration: float | None, rate: float,
-            people: int | None, angle: str, resolution: str, range_m: str, units: str | None, noise: float) -> None:
+            people: int | None, angle: str, resolution: str, range_m: str, units: str | None, noise: float,
+            laser_pose: tuple | None) -> None:
     """Simulate a SICK LMS200 in a scene and write a log with ground truth.
 
     The log holds /scan (sensor_msgs/LaserScan), /datmo/ground_truth (one message per scan: every
     object's class, position and velocity in the sensor and world frames, size, and whether beams hit
-    it) and, when the scene moves the scanner, /odom. The same seed always gives the same file.
+    it) and, when the scene moves the scanner, /odom with /tf (odom -> base_link) and /tf_static (base_link ->
+    laser). The scene's scanner pose is the laser's: with --laser-pose, /odom holds the base's poses under it.
+    The same seed always gives the same file.
 
     Example: datmo simulate --scene hall --duration 60 -o hall.mcap
     """
@@ -66,21 +71,24 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     params = {"scene": scene, "seed": seed, "duration": duration if duration is not None else loaded.duration,
               "rate": rate, "people": people, "angle": int(angle), "resolution": float(resolution),
               "range": int(range_m), "units": units, "noise": noise}
+    if laser_pose is not None:
+        params["laser_pose"] = {"x_m": laser_pose[0], "y_m": laser_pose[1], "yaw_deg": math.degrees(laser_pose[2])}
     user_file = scene.endswith(".toml") or "/" in scene
     provenance = mcapio.Provenance("simulate", params, [scene] if user_file else [])
     with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
         n, n_objects, geometry = _write(writer, loaded, seed, duration, rate, int(angle), float(resolution),
-                                        int(range_m), units, noise, people)
+                                        int(range_m), units, noise, people, laser_pose)
     say(f"{output}: {n} scans of {geometry.describe()}, {n_objects} ground-truth objects")
 
 
-def _write(writer, scene, seed, duration, rate, angle, resolution, range_m, units, noise, people):  # noqa: ANN001, ANN202
-    """Simulate block by block into `writer` (/scan, /odom for a moving sensor, ground truth), each block
-    written and forgotten before the next is cast: memory holds one block whatever the duration.
-    Returns (scans, ground-truth objects, scan geometry)."""
+def _write(writer, scene, seed, duration, rate, angle, resolution, range_m, units, noise, people,  # noqa: ANN001, ANN202
+           laser_pose=None):  # noqa: ANN001
+    """Simulate block by block into `writer` (/scan, /odom and /tf for a moving sensor, ground truth, /tf_static
+    for a moving sensor or a `laser_pose` (x, y, yaw rad)), each block written and forgotten before the next is
+    cast: memory holds one block whatever the duration. Returns (scans, ground-truth objects, scan geometry)."""
     from pathlib import Path
 
-    from ..log import mcapio, types
+    from ..log import mcapio, transforms, types
     from ..log.scan import Odometry, ScanRun
     from ..progress import bar
     from ..sim.simulate import Simulation, ground_truth_payloads
@@ -92,6 +100,14 @@ def _write(writer, scene, seed, duration, rate, angle, resolution, range_m, unit
     odom_cid = writer.channel(mcapio.TOPIC_ODOM, types.ODOMETRY) if sim.sensor_moves else None
     truth_cid = writer.channel(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH)
     total = len(sim)
+    mount = transforms.LaserPose(*laser_pose) if laser_pose is not None else None
+    base, laser = transforms.BASE_FRAME, sim.geometry.frame_id
+    if mount is not None:
+        writer.add_metadata(transforms.LASER_POSE_RECORD, mount.record(base, laser))
+    if mount is not None or sim.sensor_moves:
+        t0 = int(sim.stamps[0])
+        writer.write_transforms([t0], [transforms.mount_tf(t0, base, laser, mount or transforms.LaserPose())],
+                                static=True)
     with bar("simulating", total) as progress:
         for c in sim.chunks():
             run = ScanRun(c.stamps, c.ranges, sim.geometry)
@@ -99,7 +115,10 @@ def _write(writer, scene, seed, duration, rate, angle, resolution, range_m, unit
             if odom_cid is not None:
                 p = c.sensor_poses
                 odom = Odometry(c.stamps.copy(), p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy())
+                if mount is not None:
+                    odom = transforms.base_odometry(odom, mount, base)
                 writer.write_ids(odom_cid, c.stamps, mcapio.encode_odometry(odom))
+                writer.write_transforms(c.stamps, transforms.odometry_tf(odom))
             writer.write_ids(truth_cid, c.stamps, ground_truth_payloads(c.stamps, c.sensor_poses, c.truth,
                                                                         sim.geometry.frame_id))
             writer.drain()

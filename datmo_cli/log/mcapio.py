@@ -36,6 +36,8 @@ TOPIC_GROUND_TRUTH = "/datmo/ground_truth"
 TOPIC_MARKERS_FEATURES = "/datmo/markers/features"
 TOPIC_MARKERS_TRACKS = "/datmo/markers/tracks"
 TOPIC_TELEGRAM = "/lms2xx/telegram"
+TOPIC_TF = "/tf"
+TOPIC_TF_STATIC = "/tf_static"
 
 MAGIC = b"\x89MCAP0\r\n"
 
@@ -843,3 +845,18 @@ class LogWriter:
             self.close()
         else:
             self.abort()
+
+    # -- transforms
+    def transform_channel(self, static: bool = False) -> int:
+        """The id of /tf (or /tf_static) as tf2_msgs/msg/TFMessage; /tf_static offered transient-local, as tf2's
+        static broadcaster publishes it, so `ros2 bag play` hands it to nodes that start later."""
+        from . import transforms
+
+        topic = TOPIC_TF_STATIC if static else TOPIC_TF
+        qos = QOS_YAML_LATCHED if static else QOS_YAML
+        return self.channel(topic, transforms.TF_MESSAGE, schema_text=transforms.SCHEMA,
+                            metadata={"offered_qos_profiles": qos})
+
+    def write_transforms(self, stamps_ns, payloads: list[bytes], static: bool = False) -> None:
+        """TFMessage payloads (transforms.encode_tf) on /tf, or on /tf_static; stamps in ns."""
+        self._add(self.transform_channel(static), stamps_ns, payloads)

@@ -178,6 +178,10 @@ class ImportStream:
     sort_odometry: bool = False      # collect() sorts the poses by stamp (what the whole-run bag import did)
     closer: Callable[[], None] | None = None   # releases what the source holds open, when blocks() is not run
     peak_scans: int = 0
+    # the source's /tf and /tf_static: (topic, log time ns, CDR TFMessage payload) read with the last block, taken
+    # by write_import; `tf_topics` those it has (known up front)
+    transforms: list[tuple[str, int, bytes]] = field(default_factory=list)
+    tf_topics: tuple[str, ...] = ()
 
     def blocks(self) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
         with _compressed_errors(self.source or Path("?")):
@@ -243,12 +247,13 @@ class ImportStats:
 
 
 def write_import(stream: ImportStream, output: str | Path, *, force: bool = False, provenance=None,  # noqa: ANN001
-                 window: int | None = None) -> ImportStats:
+                 window: int | None = None, laser_pose=None) -> ImportStats:  # noqa: ANN001
     """Write `stream`'s scans to /scan and poses to /odom of `output` (atomically, LogWriter), block by block
-    in time order (OrderedSink over `window` messages), then its facts as metadata "datmo.import". Raises
-    InputError when there are no scans. A message more than the window late is written out of order
-    with a warning added to stream.warnings; so is a warning for scans that came out of time order
-    (written in time order) or repeat a stamp (dropped, the first kept), as collect() does."""
+    in time order (OrderedSink over `window` messages), with the transforms (see Frames), then its facts as
+    metadata "datmo.import". Raises InputError when there are no scans. A message more than the window late is
+    written out of order with a warning added to stream.warnings; so is a warning for scans that came out of time
+    order (written in time order) or repeat a stamp (dropped, the first kept), as collect() does.
+    `laser_pose`: a transforms.LaserPose, where the scanner sits on the base (None: not given)."""
     from .. import mcapio, types
     from ..ordered import WINDOW, OrderedSink, order_note
 
@@ -260,16 +265,20 @@ def write_import(stream: ImportStream, output: str | Path, *, force: bool = Fals
         with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
             scan_cid, odom_cid = writer.channel(mcapio.TOPIC_SCAN, types.LASERSCAN), None
             sink = OrderedSink(writer, window, unique=(scan_cid,))
+            frames = Frames(stream, writer, sink, laser_pose)
             for run, odom in stream.blocks():
                 if run is not None and len(run):
                     geometry = geometry or run.geometry
+                    frames.scans(run)
                     sink.add(scan_cid, run.stamps, mcapio.encode_scans(run))
                     scans += len(run)
                 if odom is not None and len(odom):
                     if odom_cid is None:
                         odom_cid = writer.channel(mcapio.TOPIC_ODOM, types.ODOMETRY)
+                    odom = frames.poses(odom)
                     sink.add(odom_cid, odom.stamps, mcapio.encode_odometry(odom))
                     poses += len(odom)
+                frames.copy()
                 sink.flush()
             if scans == 0:
                 raise InputError(f"{src}: no scans to write")
@@ -282,9 +291,91 @@ def write_import(stream: ImportStream, output: str | Path, *, force: bool = Fals
                 stream.warnings.append(f"{src}: {sink.late} message{'s' if sink.late != 1 else ''} came after later "
                                        f"ones beyond a window of {window}; written out of time order")
             writer.add_metadata("datmo.import", import_facts(stream))
+            if laser_pose is not None:
+                from ..transforms import BASE_FRAME, LASER_POSE_RECORD
+
+                writer.add_metadata(LASER_POSE_RECORD, laser_pose.record(BASE_FRAME, geometry.frame_id))
     finally:
         stream.close()
     return ImportStats(scans, poses, geometry, sink.late, stream.peak_scans, sink.peak)
+
+
+class Frames:
+    """The transforms of an import. The source's own /tf and /tf_static are kept (a ROS 1 tf/tfMessage or
+    tf2_msgs/TFMessage converted to tf2_msgs/msg/TFMessage). /tf is derived from the poses (one transform a pose,
+    frame_id -> child_frame_id) when the source has none. /tf_static gets `odometry child -> scan frame` (the laser
+    pose, else the identity) when the poses are a base's and the source has no /tf_static, and `base_link -> scan
+    frame` for a laser pose without poses. Poses of the scanner itself (child frame = the scan's, as CARMEN's
+    laser poses) become the base's under a laser pose, child base_link."""
+
+    def __init__(self, stream: ImportStream, writer, sink, laser_pose) -> None:  # noqa: ANN001
+        from .. import mcapio
+
+        self.stream, self.writer, self.sink, self.mount = stream, writer, sink, laser_pose
+        self.keep_tf = mcapio.TOPIC_TF in stream.tf_topics
+        self.keep_static = mcapio.TOPIC_TF_STATIC in stream.tf_topics
+        self.ids: dict[str, int] = {}
+        self.laser: str | None = None      # the scan's frame, once a scan came
+        self.first: int | None = None      # the first scan's stamp
+        self.joined: set[str] = set()      # child frames tied to the scan's frame by /tf_static
+        self.pending: list = []            # poses' child frames (and stamps) waiting for the first scan
+
+    def _cid(self, topic: str) -> int:
+        from .. import mcapio
+
+        if topic not in self.ids:
+            self.ids[topic] = self.writer.transform_channel(static=topic == mcapio.TOPIC_TF_STATIC)
+        return self.ids[topic]
+
+    def _static(self, stamp: int, parent: str, pose) -> None:  # noqa: ANN001 - transforms.LaserPose
+        from .. import mcapio, transforms
+
+        self.joined.add(parent)
+        self.sink.add(self._cid(mcapio.TOPIC_TF_STATIC), [stamp],
+                      [transforms.mount_tf(stamp, parent, self.laser, pose)])
+
+    def scans(self, run: ScanRun) -> None:
+        """A block of scans: the first fixes the scan's frame (and writes what waited for it)."""
+        from .. import transforms
+
+        if self.laser is not None:
+            return
+        self.laser, self.first = run.geometry.frame_id, int(run.stamps[0])
+        if self.mount is not None and self.stream.odom_topic is None:
+            self._static(self.first, transforms.BASE_FRAME, self.mount)
+        for child, stamp in self.pending:
+            self._tie(child, stamp)
+        self.pending = []
+
+    def _tie(self, child: str, stamp: int) -> None:
+        from .. import transforms
+
+        if child in self.joined or child == self.laser or (self.keep_static and self.mount is None):
+            return
+        self._static(min(stamp, self.first), child, self.mount or transforms.LaserPose())
+
+    def poses(self, odom: Odometry) -> Odometry:
+        """A block of poses as written to /odom, their /tf written unless the source has its own."""
+        from .. import mcapio, transforms
+
+        laser = self.laser
+        if laser is None and self.stream.geometry is not None:   # poses before the first scan
+            laser = self.stream.geometry.frame_id
+        if self.mount is not None and odom.child_frame_id == laser:
+            odom = transforms.base_odometry(odom, self.mount)
+        if not self.keep_tf:
+            self.sink.add(self._cid(mcapio.TOPIC_TF), odom.stamps, transforms.odometry_tf(odom))
+        if self.laser is None:
+            self.pending.append((odom.child_frame_id, int(odom.stamps[0])))
+        else:
+            self._tie(odom.child_frame_id, int(odom.stamps[0]))
+        return odom
+
+    def copy(self) -> None:
+        """The source's transforms read with the last block."""
+        for topic, stamp, payload in self.stream.transforms:
+            self.sink.add(self._cid(topic), [stamp], [payload])
+        self.stream.transforms.clear()
 
 
 def import_facts(stream: ImportStream) -> dict[str, str]:

@@ -22,6 +22,26 @@ from ..scan import GeometryChangeError, Odometry, ScanGeometry, ScanRun
 
 LASERSCAN_TYPES = ("sensor_msgs/msg/LaserScan", "sensor_msgs/LaserScan")
 ODOMETRY_TYPES = ("nav_msgs/msg/Odometry", "nav_msgs/Odometry")
+# ROS 2's tf2 message, and ROS 1's (tf's tfMessage before tf2; tf2_msgs/TFMessage after): the same fields
+TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf2_msgs/TFMessage", "tf/msg/tfMessage", "tf/tfMessage")
+TF_TOPICS = ("/tf", "/tf_static")
+
+
+def tf_topics(topics: dict[str, tuple[str, int]]) -> tuple[str, ...]:
+    """The /tf and /tf_static topics among `topics` ({topic: (msgtype, count)}) that hold transforms."""
+    return tuple(t for t in TF_TOPICS if t in topics and topics[t][0] in TF_TYPES and topics[t][1])
+
+
+def tf_payload(msg) -> bytes:  # noqa: ANN001 - a deserialised TFMessage (ROS 1 or 2)
+    """A deserialised TFMessage (ROS 2, or ROS 1's tf/tfMessage) as a CDR tf2_msgs/msg/TFMessage payload."""
+    from ..transforms import Transform, encode_tf
+
+    out = []
+    for t in msg.transforms:
+        s, p, q = t.header.stamp, t.transform.translation, t.transform.rotation
+        out.append(Transform(int(s.sec) * 1_000_000_000 + int(s.nanosec), t.header.frame_id, t.child_frame_id,
+                             float(p.x), float(p.y), float(p.z), float(q.x), float(q.y), float(q.z), float(q.w)))
+    return encode_tf(out)
 
 
 def choose_topic(label: str, topics: dict[str, tuple[str, int]], wanted: str | None, types: tuple[str, ...],
@@ -136,9 +156,12 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
     if odom_topic is None and o_topic is None and sum(m in ODOMETRY_TYPES for m, _ in topics.values()) > 1:
         warns.append(f"{label}: several nav_msgs/Odometry topics; none written (choose one with --odom-topic)")
 
+    tfs = tf_topics(topics)
+    moved: list[tuple[str, int, bytes]] = []
+
     def pieces() -> Iterator[tuple[ScanRun | None, Odometry | None]]:
         try:
-            yield from _bag_blocks(reader, scan_topic, o_topic, survey, block_scans, progress, total)
+            yield from _bag_blocks(reader, scan_topic, o_topic, survey, block_scans, progress, total, tfs, moved)
         except (InputError, GeometryError):
             raise
         except Exception as exc:  # corrupt chunks, unknown message definitions
@@ -148,7 +171,7 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
 
     return ImportStream(pieces(), warnings=warns, topic=scan_topic, odom_topic=o_topic,
                         facts={"topics": {t: m for t, (m, _) in topics.items()}}, geometry=survey.geometry,
-                        sort_odometry=True, closer=close)
+                        sort_odometry=True, closer=close, transforms=moved, tf_topics=tfs)
 
 
 @dataclass
@@ -188,9 +211,11 @@ def _survey(reader, label: str, topic: str, total: int, max_scans: int | None, p
 
 
 def _bag_blocks(reader, topic: str, o_topic: str | None, survey: _Survey, size: int, progress,  # noqa: ANN001
-                total: int) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
-    """Scans (and poses up to the first after the last scan) in the bag's order, `size` scans a block."""
-    conns = [c for c in reader.connections if c.topic in (topic, o_topic)]
+                total: int, tfs: tuple[str, ...] = (),
+                moved: list | None = None) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
+    """Scans (and poses up to the first after the last scan) in the bag's order, `size` scans a block; the
+    transforms on `tfs` read on the way appended to `moved` as (topic, log time, CDR TFMessage)."""
+    conns = [c for c in reader.connections if c.topic in (topic, o_topic, *tfs)]
     g0, n = survey.geometry, survey.geometry.n_beams
     stamps, ranges, intens = [], [], []
     rows: list[tuple] = []
@@ -218,7 +243,9 @@ def _bag_blocks(reader, topic: str, o_topic: str | None, survey: _Survey, size: 
                         child_frame_id=odo_frames[1])
 
     for conn, log_time, raw in reader.messages(connections=conns):
-        if conn.topic == topic:
+        if conn.topic in tfs:
+            moved.append((conn.topic, int(log_time), tf_payload(reader.deserialize(raw, conn.msgtype))))
+        elif conn.topic == topic:
             if scans >= survey.count:
                 if odom_done:
                     break
@@ -280,6 +307,7 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
         scan_topic = choose_topic(label, topics, topic, LASERSCAN_TYPES, "sensor_msgs/LaserScan", "--topic")
         o_topic = choose_topic(label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic",
                                required=False)
+        tfs = tuple(t for t in tf_topics(topics) if head.topics()[t].message_encoding == "cdr")
         if head.topics()[scan_topic].count:
             mcapio.check_scan_channel(head, scan_topic)
         count, inten_mode, last, n_beams = _mcap_survey(path, label, scan_topic, max_scans)
@@ -322,9 +350,11 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
             first_pose = False
             return odom
 
-        for t, stamp, payload in mcapio.iter_messages(path, [scan_topic] + ([o_topic] if o_topic else []),
+        for t, stamp, payload in mcapio.iter_messages(path, [scan_topic, *tfs] + ([o_topic] if o_topic else []),
                                                       warn=False):
-            if t == scan_topic:
+            if t in tfs:
+                moved.append((t, stamp, payload))
+            elif t == scan_topic:
                 if scans_done:
                     if odom_done:
                         break
@@ -348,8 +378,9 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
         elif o_payloads:
             yield None, poses()
 
+    moved: list[tuple[str, int, bytes]] = []
     return ImportStream(pieces(), warnings=warns, topic=scan_topic, odom_topic=o_topic,
-                        facts={"topics": {t: m for t, (m, _) in topics.items()}})
+                        facts={"topics": {t: m for t, (m, _) in topics.items()}}, transforms=moved, tf_topics=tfs)
 
 
 def _mcap_survey(path: Path, label: str, topic: str, max_scans: int | None) -> tuple[int, str, int, int]:
