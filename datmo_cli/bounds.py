@@ -181,6 +181,7 @@ OPTIONS: dict[str, Bound] = {
     "top": _b(0, 10**9, "tracks", "0: all", integer=True),
     "match_radius": _b(0, 100, "m", _NO_SENSE, open_=True),
     "min_mota": _b(-100, 1, "", "MOTA is at most 1"),
+    "min_hota": _b(0, 1, "", "HOTA is a share"),
     "live_port": _b(0, 65535, "", "a TCP port; 0: any free one", integer=True),
     "play_rate": _b(0, 1000, "× the log's speed", "beyond 1000× a scan log is a blur", open_=True),
     "laser_offset": _b(-100, 100, "m", "the scanner sits on the robot"),
