@@ -357,7 +357,9 @@ def _live_feed(host: str, port: int):  # noqa: ANN202 - a live.LiveFeed
 
     server = LiveServer(host, port, option="--live-port")
     click.echo(f"datmo record: live view on {server.url}; open {server.app_url}", err=True)
-    return LiveFeed(server)
+    feed = LiveFeed(server)
+    feed.warm_up()
+    return feed
 
 
 def _close_live(feed) -> None:  # noqa: ANN001 - a live.LiveFeed
