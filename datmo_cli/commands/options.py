@@ -11,18 +11,18 @@ import click
 
 from ..progress import quiet_option
 
-__all__ = ["config_options", "input_options", "no_stdout", "quiet_option", "scan_log"]
+__all__ = ["config_options", "input_options", "needs_conversion", "no_stdout", "quiet_option", "scan_log"]
 
 STDOUT = "-"
 
 
-def no_stdout(what: str = "an MCAP log") -> Callable:
+def no_stdout(what: str = "an MCAP log", give: str = "a file name") -> Callable:
     """An option callback refusing `-` (stdout) for an output that cannot go to a stream."""
     def callback(ctx: click.Context, param: click.Parameter, value):  # noqa: ANN001, ANN202 - Click's signature
         if value is not None and str(value) == STDOUT:
             from ..errors import OutputError
 
-            raise OutputError(f"{param.opts[-1]} -: cannot write {what} to stdout; give a file name")
+            raise OutputError(f"{param.opts[-1]} -: cannot write {what} to stdout; give {give}")
         return value
     return callback
 
@@ -55,22 +55,23 @@ def input_options(f: Callable) -> Callable:
 
 @contextmanager
 def scan_log(src: Path, output: Path, topic: str | None = None, odom_topic: str | None = None, *,
-             force: bool = False) -> Iterator[Path]:
+             force: bool = False, dest: Path | None = None) -> Iterator[Path]:
     """The datmo log to read for `src`: `src` itself when it is an MCAP file and no topic is chosen; otherwise
     (a ROS 1 or ROS 2 bag, a CARMEN log, or a topic chosen) `src` converted as by `datmo import` into a
     temporary MCAP beside `output`, said on stderr and removed when the block ends (or on any way out).
-    Before converting, `output` is checked (check_output with `force`): a refused output costs no conversion."""
+    Before converting, `output` is checked (check_output with `force`): a refused output costs no conversion.
+    `dest`: the temporary MCAP's path (default: a hidden name beside `output`)."""
     from .. import outputs
     from ..log.importers import detect_kind, open_import, write_import
     from ..progress import say
 
     src = _bag_folder(Path(src))
-    if topic is None and odom_topic is None and not src.is_dir() and not _is_ros1_bag(src):
+    if not needs_conversion(src, topic, odom_topic):
         yield src   # an MCAP (or not a log at all: the reader says what is wrong with it)
         return
     detect_kind(src)   # a missing file, a folder without metadata.yaml: one line
     outputs.check_output(output, force=force, inputs=[src])
-    tmp = outputs.temp_path(Path(output))
+    tmp = dest if dest is not None else outputs.temp_path(Path(output))
     outputs.track(tmp)
     try:
         folder = outputs.folder_of(Path(output))
@@ -86,6 +87,14 @@ def scan_log(src: Path, output: Path, topic: str | None = None, odom_topic: str 
         yield tmp
     finally:
         outputs.discard(tmp)
+
+
+def needs_conversion(src: Path, topic: str | None = None, odom_topic: str | None = None) -> bool:
+    """Whether `src` is read through the importers: a bag (ROS 1 file, ROS 2 folder or its .db3) or a topic
+    chosen; a datmo MCAP is read as it is."""
+    src = Path(src)
+    return (topic is not None or odom_topic is not None or src.is_dir() or src.suffix == ".db3"
+            or _is_ros1_bag(src))
 
 
 def _bag_folder(src: Path) -> Path:

@@ -2,66 +2,91 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import click
 
 from ..bounds import OPTIONS, option
 from ..report import FORMATS, SORT_KEYS
+from .options import config_options, input_options, no_stdout, quiet_option
+
+
+def _scan_count(spec: str) -> int | None:
+    """The scans of a local log from its summary (no payloads read), or None (remote, unreadable: the
+    task itself says what is wrong)."""
+    from ..batch import local, remote
+    from ..log import mcapio
+
+    if remote(spec):
+        return None
+    try:
+        return mcapio.summary(local(spec)).topics()[mcapio.TOPIC_SCAN].count or None
+    except Exception:  # noqa: BLE001 - only an estimate for the bar
+        return None
 
 
 class _BatchProgress:
-    """One progress bar over the batch on stderr: inputs done of all, scans and scans/s (across every worker:
-    scans of finished inputs, and of running ones where the executor follows them), failures, time left."""
+    """One progress bar over the batch's scans on stderr, each scan counted once (all stages run in one pass
+    over it), across every worker; beside it the inputs done of all, scans/s and failures. The total is the
+    scans of the inputs to run, from their summaries; an input whose count is not known up front adds it
+    when it starts, and a failed one its scans done."""
 
     def __init__(self, batch) -> None:  # noqa: ANN001 - batch.Batch
         import time
 
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+        from ..progress import bar
 
         self.t0 = time.perf_counter()
-        self.running: dict[int, int] = {}
+        self.n_inputs = batch.total
         self.index = {t.input: t.index for t in batch.tasks}
-        self.scans = self.failed = 0
-        self.bar = Progress(TextColumn("batch"), BarColumn(), MofNCompleteColumn(), TextColumn("inputs"),
-                            TextColumn("{task.fields[info]}", style="progress.data.speed"), TimeRemainingColumn(),
-                            console=Console(stderr=True), transient=True)
-        self.task = self.bar.add_task("batch", total=batch.total, info="")
+        self.totals: dict[int, int | None] = {t.index: _scan_count(t.input) for t in batch.tasks}
+        self.running: dict[int, int] = {}
+        self.scans = self.failed = self.inputs = 0
+        self._bar = bar("run", self._total(), info=True)
+
+    def _total(self) -> int | None:
+        return sum(n for n in self.totals.values() if n is not None) or None
 
     def __enter__(self) -> _BatchProgress:
-        self.bar.__enter__()
+        self.bar = self._bar.__enter__()
         return self
 
     def __exit__(self, *exc) -> None:  # noqa: ANN002
-        self.bar.__exit__(*exc)
+        self._bar.__exit__(*exc)
 
-    def _show(self, advance: int = 0) -> None:
+    def _show(self) -> None:
         import time
 
         scans = self.scans + sum(self.running.values())
         rate = scans / max(time.perf_counter() - self.t0, 1e-9)
-        info = f"{scans:,} scans  {rate:,.0f} scans/s" + (f"  {self.failed} failed" if self.failed else "")
-        self.bar.update(self.task, advance=advance, info=info)
+        info = (f"inputs {self.inputs}/{self.n_inputs}  {rate:,.0f} scans/s"
+                + (f"  {self.failed} failed" if self.failed else ""))
+        self.bar.update(scans, self._total(), info=info)
 
     def record(self, rec: dict) -> None:
         from ..batch import DONE, FAILED
 
-        self.running.pop(self.index.get(rec["input"], -1), None)
+        i = self.index.get(rec["input"], -1)
+        done = self.running.pop(i, 0)
         if rec["status"] == DONE:
             self.scans += rec["scans"]
+            self.totals[i] = rec["scans"]
+        elif i in self.totals:   # failed or cancelled: what it did is all it will do
+            self.scans += done
+            self.totals[i] = done
+        self.inputs += 1
         self.failed += rec["status"] == FAILED
-        self._show(advance=1)
+        self._show()
 
     def progress(self, index: int, done: int, total: int) -> None:
-        self.running[index] = done // 2   # process_file counts each scan twice (features, then tracking)
+        self.running[index] = done
+        self.totals[index] = total
         self._show()
 
 
 @click.command(name="run")
 @click.argument("inputs", nargs=-1, required=True)
-@click.option("-o", "--output-dir", "out_dir", required=True,
+@click.option("-o", "--output-dir", "out_dir", required=True, callback=no_stdout("outputs", "a folder"),
               help="Folder (or fsspec URL) for the outputs: OUT_DIR/NAME.mcap per input file, the relative path "
                    "for logs found in a folder; and OUT_DIR/manifest.jsonl, the batch's ledger (created if missing).")
 @option("-j", "--jobs", bound=OPTIONS["jobs"], default=None,
@@ -73,9 +98,8 @@ class _BatchProgress:
         help="With --scheduler: times a task is retried after an unexpected error or the death of its worker.")
 @click.option("--force", is_flag=True, help="Redo every input and overwrite existing outputs (and plots); without it "
               "inputs the manifest lists as done with the same input and parameters are skipped.")
-@click.option("--config", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="TOML file of parameters: its [features] table as for datmo features, its [track] table as "
-                   "for datmo track.")
+@config_options("TOML file of parameters: its [features] table as for datmo features, its [track] table as "
+                "for datmo track.")
 @click.option("--plot", is_flag=True, help="Also draw each run from above into OUT_DIR/NAME.png.")
 @click.option("--bag-dir", is_flag=True,
               help="Write each output as a ROS 2 bag folder for ros2 bag play: OUT_DIR/NAME/ holding NAME_0.mcap "
@@ -98,17 +122,22 @@ class _BatchProgress:
         help="Threads for each input's per-scan perception (segmentation, features, leg detector) [default: "
              "all cores; one in each of several local jobs at once, and in each task on a Dask worker]; the "
              "results are the same for any number.")
+@input_options
+@quiet_option
 def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: str | None, retries: int,
             force: bool, config: Path | None, plot: bool, bag_dir: bool, fmt: str, top: int | None, sort: str,
             no_report: bool,
-            no_markers: bool, ego_motion: str | None, leg_model: str | None, threads: int | None) -> None:
+            no_markers: bool, ego_motion: str | None, leg_model: str | None, threads: int | None,
+            topic: str | None, odom_topic: str | None) -> None:
     """Segment, extract features and track each input in one pass, then print the report.
 
     Each output holds the input's channels and /datmo/segments, /datmo/features, /datmo/landmarks,
     /datmo/tracks and markers, with the same messages as datmo segment, datmo features and datmo track
     run one after another. INPUTS are files, folders (searched recursively for .mcap logs) and globs, or
-    fsspec URLs. Inputs run in parallel in local processes (--jobs) or on a Dask cluster (--scheduler);
-    a failing input is reported and the others' outputs are kept (the exit status is then 1).
+    fsspec URLs; ROS 1 bags and ROS 2 bag folders (and any input with --topic) are converted first, as by
+    datmo import, into OUT_DIR/.converted-PID/ (removed after the run). Inputs run in parallel in local
+    processes (--jobs) or on a Dask cluster (--scheduler); a failing input is reported and the others'
+    outputs are kept (the exit status is then 1).
 
     OUT_DIR/manifest.jsonl gets one line per input as it finishes (input SHA-256, output, status, scans,
     tracks by class, parameters' hash). Running the same command again skips the inputs already done with
@@ -124,6 +153,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     from ..batch import DONE, FAILED, SKIPPED, LocalExecutor, prepare, remote
     from ..batch import run as run_batch
     from ..cli import invocation
+    from ..config import provenance_line
     from ..errors import DatmoError
     from ..log import bagdir
     from ..perception.threads import set_default
@@ -136,11 +166,13 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     if bag_dir and remote(out_dir):
         raise DatmoError(f"{out_dir}: --bag-dir needs a local output folder")
     params = _params(config, leg_model, ego_motion)
+    inputs = _converted(inputs, out_dir, topic, odom_topic)
     if no_markers:
         params["markers"] = False
     if bag_dir:
         params["bag_dir"] = True
-    batch = prepare(list(inputs), out_dir, params=params, force=force, command_line=invocation("run"),
+    batch = prepare(list(inputs), out_dir, params=params, force=force,
+                    command_line=provenance_line(invocation("run")),
                     threads=threads, bag_dir=bag_dir)
     plot_of = {t.output: bagdir.plot_path(t.output) if bag_dir else Path(t.output).with_suffix(".png")
                for t in batch.tasks} if plot else {}
@@ -183,6 +215,39 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         raise SystemExit(1)  # the one error is printed above
 
 
+def _converted(inputs: tuple[str, ...], out_dir: str, topic: str | None, odom_topic: str | None) -> list[str]:
+    """`inputs` with each bag (and, with a topic chosen, each local file) replaced by its conversion to a datmo
+    log, OUT_DIR/.converted-PID/NAME.mcap (so the output keeps the name NAME.mcap), removed with the folder
+    when the command ends, on any way out."""
+    import os
+    import shutil
+
+    from ..batch import local, remote
+    from .options import needs_conversion, scan_log
+
+    ctx = click.get_current_context()
+    folder = None
+    out = []
+    for spec in inputs:
+        path = Path(local(spec))
+        if remote(spec) or not path.exists() or not needs_conversion(path, topic, odom_topic) or (
+                path.is_dir() and not (path / "metadata.yaml").is_file()):
+            out.append(spec)
+            continue
+        if folder is None:
+            if remote(out_dir):
+                from ..errors import DatmoError
+
+                raise DatmoError(f"{spec}: a bag is converted beside the outputs, which needs a local output folder")
+            folder = Path(local(out_dir)) / f".converted-{os.getpid()}"
+            folder.mkdir(parents=True, exist_ok=True)
+            ctx.call_on_close(lambda f=folder: shutil.rmtree(f, ignore_errors=True))
+        name = (path.parent.name if path.suffix == ".db3" else path.stem) or "bag"
+        dest = folder / f"{name}.mcap"
+        out.append(str(ctx.with_resource(scan_log(path, dest, topic, odom_topic, force=True, dest=dest))))
+    return out
+
+
 def _params(config: Path | None, leg_model: str | None, ego_motion: str | None) -> dict:
     """The features and track parameters of a run: TOML file, then options; a bad leg model is one error."""
     from ..perception.legs import load_leg_model
@@ -203,11 +268,15 @@ FINAL_ROWS = 50
 
 
 def _final_table(records: list[dict], seconds: float, where: str) -> None:
-    """The batch's table on stderr (every input up to FINAL_ROWS, then only failures) and its totals line."""
-    from rich.console import Console
+    """The batch's table on stderr (every input up to FINAL_ROWS, then only failures) and its totals line;
+    nothing under --quiet (failures are said as errors all the same)."""
     from rich.table import Table
 
     from ..batch import DONE, FAILED, SKIPPED
+    from ..progress import console, quiet
+
+    if quiet():
+        return
 
     done = [r for r in records if r["status"] == DONE]
     scans = sum(r["scans"] for r in done)
@@ -223,7 +292,7 @@ def _final_table(records: list[dict], seconds: float, where: str) -> None:
                           f"{r['scans_per_s']:,.0f}" if r["status"] == DONE else "",
                           str(t.get("confirmed", "")), str(t.get("person", "")),
                           r["error"] if r["status"] == FAILED else r["output"])
-        Console(stderr=True, width=None if sys.stderr.isatty() else 140).print(table)
+        console(stderr=True).print(table)
     counts = {s: sum(r["status"] == s for r in records) for s in (DONE, SKIPPED, FAILED)}
     rate = scans / seconds if seconds > 0 else 0.0
     click.echo(f"{len(records)} input{'s' if len(records) != 1 else ''}: {counts[DONE]} done, {counts[SKIPPED]} "
@@ -244,6 +313,7 @@ def _warm_up() -> None:
     import time
 
     from ..batch import ensure_warm
+    from ..progress import say
     from .compiling import said_if_slow
 
     t0 = time.perf_counter()
@@ -251,8 +321,8 @@ def _warm_up() -> None:
         ensure_warm()   # once per process: the --jobs pool forks after it
     seconds = time.perf_counter() - t0
     if seconds > 2.0:
-        click.echo(f"compiled the numba kernels in {seconds:.0f} s (first run after an install; cached for the next "
-                   "runs)", err=True)
+        say(f"compiled the numba kernels in {seconds:.0f} s (first run after an install; cached for the next "
+            "runs)")
 
 
 def _report(outputs: list[Path], plots: list[Path], fmt: str | None, top: int | None, sort: str,
