@@ -34,7 +34,8 @@ With --features these columns follow (empty for tracks and for kinds they do not
     r_acc         line, circle: votes in the Hough peak cell / points on the segment
     probability   leg: the leg detector's probability, 0 to 1
 
-Missing values are empty in CSV and null in NDJSON and Parquet (NaN world coordinates included). Floats are
+Missing values are empty in CSV and null in NDJSON and Parquet (NaN world coordinates, any non-finite float
+included). Floats are
 written as the shortest text that reads back to the same float32 (CSV, NDJSON) or as float32 (Parquet).
 A file's rows are its track states in file order, then (with --features) its features in file order.
 
@@ -46,8 +47,6 @@ time (a CSV or NDJSON batch of lines, a Parquet row group).
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import os
 import sys
@@ -125,7 +124,8 @@ def _constant(value: object, n: int) -> np.ndarray:
 
 
 def _names(codes: np.ndarray, names: dict[int, str], fallback: str) -> np.ndarray:
-    return np.array([names.get(int(c), fallback) for c in codes], object)
+    table = np.array([names.get(c, fallback) for c in range(256)], object)   # codes are uint8
+    return table[codes]
 
 
 def _decode(path: Path, msgtype: str, topic: str, payloads: list[bytes], first: int) -> list[dict]:
@@ -143,7 +143,8 @@ def _per_message(file: str, first: int, decoded: list[dict], seq: str) -> tuple[
     parts = [d[seq] for d in decoded]
     counts = np.array([len(p) for p in parts], np.int64)
     n = int(counts.sum())
-    items = np.concatenate(parts) if n else np.zeros(0, parts[0].dtype if parts else np.float32)
+    dtype = parts[0].dtype if parts else np.dtype(np.float32)
+    items = np.frombuffer(b"".join(p.tobytes() for p in parts), dtype) if n else np.zeros(0, dtype)
     index = np.repeat(np.arange(len(decoded)), counts)
     common = {"file": _constant(file, n), "scan": (first + index).astype(np.int64),
               "stamp_ns": np.array([d["stamp_ns"] for d in decoded], np.int64)[index],
@@ -219,8 +220,8 @@ def feature_batch(file: str, first: int, decoded: list[dict]) -> Batch:
 
 
 def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
-    """A column's values as text: float32 as its shortest round-trip form, NaN and None as `null`; strings
-    JSON-quoted with `quote`."""
+    """A column's values as text: float32 as its shortest round-trip form, non-finite floats and None as `null`;
+    strings JSON-quoted with `quote`, else as CSV fields."""
     if kind == "float" and a.dtype != object:
         out = a.astype(np.float32).astype(str).astype(object)
         out[~np.isfinite(a)] = null
@@ -228,23 +229,27 @@ def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
     if kind == "bool" and a.dtype != object:
         return np.where(a, "true", "false").tolist()
     if a.dtype != object:
-        return a.astype(str).tolist()
-    cache: dict = {}
-    out = []
-    for v in a.tolist():
-        if v not in cache:
-            if v is None or (isinstance(v, float) and not np.isfinite(v)):
-                cache[v] = null
-            elif kind == "str":
-                cache[v] = json.dumps(v) if quote else v
-            elif kind == "bool":
-                cache[v] = "true" if v else "false"
-            elif kind == "float":
-                cache[v] = str(np.float32(v))
-            else:
-                cache[v] = str(v)
-        out.append(cache[v])
-    return out
+        return list(map(str, a.tolist()))
+
+    def text(v: object) -> str:
+        if v is None:
+            return null
+        if kind == "str":
+            return json.dumps(v) if quote else _csv_field(v)
+        if kind == "bool":
+            return "true" if v else "false"
+        return str(v)
+
+    values = a.tolist()
+    texts = {v: text(v) for v in set(values)}   # few distinct values: file names, classes, kinds
+    return list(map(texts.__getitem__, values))
+
+
+def _csv_field(text: str) -> str:
+    """`text` as a CSV field: quoted (quotes doubled) when it holds a comma, a quote or a line break."""
+    if any(c in text for c in ',"\r\n'):
+        return '"' + text.replace('"', '""') + '"'
+    return text
 
 
 def _text_columns(cols: dict[str, str], batch: Batch, null: str, quote: bool) -> list[list[str]]:
@@ -262,7 +267,7 @@ class TextSink:
         keys = ",".join(f"{json.dumps(name)}:%s" for name in cols)
         self._template = "{" + keys + "}\n"
         if fmt == "csv":
-            self._write(",".join(cols) + "\n")
+            self._write(",".join(_csv_field(name) for name in cols) + "\n")
 
     def _write(self, text: str) -> None:
         self.stream.write(text.encode("utf-8", "surrogateescape"))
@@ -271,10 +276,8 @@ class TextSink:
         if not batch.n:
             return
         if self.fmt == "csv":
-            text = io.StringIO()
-            csv.writer(text, lineterminator="\n").writerows(zip(*_text_columns(self.cols, batch, "", False),
-                                                                 strict=True))
-            self._write(text.getvalue())
+            self._write("".join(",".join(row) + "\n" for row in zip(*_text_columns(self.cols, batch, "", False),
+                                                                      strict=True)))
         else:
             template = self._template
             self._write("".join(template % row for row in zip(*_text_columns(self.cols, batch, "null", True),

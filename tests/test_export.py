@@ -1,0 +1,362 @@
+"""`datmo export`: per-scan tables out of processed logs. Rows are checked against /datmo/tracks and
+/datmo/features as an independent reader (mcap_ros2) decodes them, in all three formats and for two files at
+once; the header is pinned; what is held at once is counted on a tiled long log; stdout, the missing pyarrow
+extra and bad inputs give what the project promises (one line, nothing written)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import sys
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from fuzzing import tally
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from mcap_ros2.reader import read_ros2_messages
+
+from datmo_cli import export, pipeline
+from datmo_cli.cli import cli
+from datmo_cli.log import cdr, mcapio, types
+
+SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
+CLASSES = {0: "unknown", 1: "person", 2: "circle object", 3: "rectangular object"}
+MOBILITIES = {0: "static", 1: "dynamic", 2: "undefined"}
+STATUSES = {0: "tentative", 1: "confirmed", 2: "coasting"}
+HEADER = ["file", "scan", "stamp_ns", "frame_id", "kind", "id", "class", "mobility", "status", "x_m", "y_m", "vx_mps",
+          "vy_mps", "world_x_m", "world_y_m", "world_vx_mps", "world_vy_mps", "size_m", "occluded", "age", "hits",
+          "misses"]
+FEATURE_HEADER = ["segment", "first_beam", "last_beam", "n_points", "x_end_m", "y_end_m", "radius_m", "rho_m",
+                  "theta_rad", "r_acc", "probability"]
+SUFFIX = {"csv": ".csv", "ndjson": ".ndjson", "parquet": ".parquet"}
+
+
+@pytest.fixture(scope="module")
+def processed(tmp_path_factory) -> dict[str, Path]:
+    """datmo run's outputs of a log with odometry (patrol) and one without (static)."""
+    out = tmp_path_factory.mktemp("processed")
+    paths = {}
+    for name in ("patrol", "static"):
+        paths[name] = out / f"{name}.mcap"
+        pipeline.process_file(SAMPLES / f"{name}.mcap", paths[name])
+    return paths
+
+
+def invoke(*args: str, input: bytes | None = None):  # noqa: ANN201 - click's Result
+    return CliRunner().invoke(cli, ["export", *args], input=input)
+
+
+# ------------------------------------------------------------------------------ reference and reading back
+
+
+def f32(v) -> float | None:  # noqa: ANN001
+    """A float column's value as the float32 it stands for; None for an empty value (NaN)."""
+    return None if v is None or (isinstance(v, float) and math.isnan(v)) else float(np.float32(v))
+
+
+def stamp(header) -> int:  # noqa: ANN001 - std_msgs/Header
+    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+
+
+def reference_tracks(path: Path, name: str) -> list[dict]:
+    """Every track state of /datmo/tracks, decoded by mcap_ros2, as the export's rows."""
+    rows = []
+    for scan, m in enumerate(read_ros2_messages(str(path), topics=[mcapio.TOPIC_TRACKS])):
+        msg = m.ros_msg
+        for t in msg.tracks:
+            rows.append({
+                "file": name, "scan": scan, "stamp_ns": stamp(msg.header), "frame_id": msg.header.frame_id,
+                "kind": "track", "id": t.id, "class": CLASSES[t.classification], "mobility": MOBILITIES[t.mobility],
+                "status": STATUSES[t.status], "x_m": f32(t.x), "y_m": f32(t.y), "vx_mps": f32(t.vx),
+                "vy_mps": f32(t.vy), "world_x_m": f32(t.world_x), "world_y_m": f32(t.world_y),
+                "world_vx_mps": f32(t.world_vx), "world_vy_mps": f32(t.world_vy), "size_m": f32(t.size),
+                "occluded": bool(t.occluded), "age": t.age, "hits": t.hits, "misses": t.misses})
+    return rows
+
+
+def reference_features(path: Path, name: str) -> list[dict]:
+    """Every line, circle, blob or point and leg of /datmo/features (mcap_ros2), as the export's rows: within a
+    batch of messages the kinds come in that order, each in message order (one batch: under 1,000 scans)."""
+    per_kind: dict[str, list[dict]] = {"lines": [], "circles": [], "blobs": [], "legs": []}
+    empty = dict.fromkeys(HEADER[5:] + FEATURE_HEADER)
+    for scan, m in enumerate(read_ros2_messages(str(path), topics=[mcapio.TOPIC_FEATURES])):
+        msg = m.ros_msg
+        common = {**empty, "file": name, "scan": scan, "stamp_ns": stamp(msg.header),
+                  "frame_id": msg.header.frame_id}
+        for f in msg.lines:
+            per_kind["lines"].append({
+                **common, "kind": "line", "segment": f.segment, "first_beam": f.first, "last_beam": f.last,
+                "n_points": f.n_points, "x_m": f32(f.x_ini), "y_m": f32(f.y_ini), "x_end_m": f32(f.x_end),
+                "y_end_m": f32(f.y_end), "size_m": f32(f.length), "rho_m": f32(f.rho), "theta_rad": f32(f.theta),
+                "r_acc": f32(f.r_acc)})
+        for f in msg.circles:
+            per_kind["circles"].append({
+                **common, "kind": "circle", "segment": f.segment, "first_beam": f.first, "last_beam": f.last,
+                "n_points": f.n_points, "x_m": f32(f.x), "y_m": f32(f.y), "radius_m": f32(f.radius),
+                "r_acc": f32(f.r_acc)})
+        for f in msg.blobs:
+            per_kind["blobs"].append({
+                **common, "kind": "point" if f.kind == 1 else "blob", "segment": f.segment, "first_beam": f.first,
+                "last_beam": f.last, "n_points": f.n_points, "x_m": f32(f.x), "y_m": f32(f.y),
+                "size_m": f32(f.size)})
+        for f in msg.legs:
+            per_kind["legs"].append({
+                **common, "kind": "leg", "segment": f.segment, "first_beam": f.first, "last_beam": f.last,
+                "n_points": f.n_points, "x_m": f32(f.x), "y_m": f32(f.y), "size_m": f32(f.width),
+                "probability": f32(f.probability)})
+    return [r for rows in per_kind.values() for r in rows]
+
+
+def typed(row: dict, kinds: dict[str, str]) -> dict:
+    """A row read back from any format, each value as the reference holds it."""
+    out = {}
+    for name, kind in kinds.items():
+        v = row[name]
+        if v is None or v == "":
+            out[name] = None
+        elif kind == "float":
+            out[name] = f32(float(v))
+        elif kind == "int":
+            out[name] = int(v)
+        elif kind == "bool":
+            out[name] = v if isinstance(v, bool) else {"true": True, "false": False}[v]
+        else:
+            out[name] = v
+    return out
+
+
+def read_table(path: Path, fmt: str, features: bool = False) -> tuple[list[str], list[dict]]:
+    """(column names, typed rows) of an exported table."""
+    kinds = export.columns(features)
+    if fmt == "csv":
+        reader = csv.DictReader(io.StringIO(path.read_text()))
+        rows = list(reader)
+        names = list(reader.fieldnames)
+    elif fmt == "ndjson":
+        rows = [json.loads(line) for line in path.read_text().splitlines()]
+        names = list(rows[0])
+        assert all(list(r) == names for r in rows)
+    else:
+        import pyarrow.parquet as pq
+
+        table = pq.read_table(path)
+        names, rows = table.schema.names, table.to_pylist()
+    return names, [typed(r, kinds) for r in rows]
+
+
+# --------------------------------------------------------------------------------------------------- tests
+
+
+@pytest.mark.parametrize("fmt", export.FORMATS)
+def test_two_files_rows_equal_the_decoded_tracks(processed, tmp_path, fmt):
+    out = tmp_path / f"tracks{SUFFIX[fmt]}"
+    files = [str(processed["patrol"]), str(processed["static"])]
+    result = invoke(*files, "-o", str(out))
+    assert result.exit_code == 0, result.output
+    names, rows = read_table(out, fmt)
+    assert names == HEADER
+    expected = reference_tracks(processed["patrol"], files[0]) + reference_tracks(processed["static"], files[1])
+    assert len(rows) == len(expected) > 1000
+    assert rows == expected
+    assert any(r["world_x_m"] is not None for r in rows[:100]) and all(r["world_x_m"] is None for r in rows[-100:])
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+@pytest.mark.parametrize("fmt", export.FORMATS)
+def test_features_follow_the_tracks_of_each_file(processed, tmp_path, fmt):
+    out = tmp_path / f"all{SUFFIX[fmt]}"
+    name = str(processed["patrol"])
+    assert invoke(name, "--features", "-o", str(out)).exit_code == 0
+    names, rows = read_table(out, fmt, features=True)
+    assert names == HEADER + FEATURE_HEADER
+    tracks = [{**r, **dict.fromkeys(FEATURE_HEADER)} for r in reference_tracks(processed["patrol"], name)]
+    features = reference_features(processed["patrol"], name)
+    assert {r["kind"] for r in features} >= {"line", "circle", "leg"}
+    assert rows == tracks + features
+
+
+def test_format_from_the_option_over_the_suffix(processed, tmp_path):
+    out = tmp_path / "tracks.txt"
+    assert invoke(str(processed["static"]), "-o", str(out), "--format", "ndjson").exit_code == 0
+    assert json.loads(out.read_text().splitlines()[0])["file"] == str(processed["static"])
+    jsonl = tmp_path / "tracks.jsonl"
+    assert invoke(str(processed["static"]), "-o", str(jsonl)).exit_code == 0
+    assert jsonl.read_bytes() == out.read_bytes()
+
+
+def test_stdout_is_the_same_table(processed, tmp_path):
+    out = tmp_path / "tracks.csv"
+    assert invoke(str(processed["static"]), "-o", str(out)).exit_code == 0
+    result = invoke(str(processed["static"]), "-o", "-", "-q")
+    assert result.exit_code == 0
+    assert result.stdout_bytes == out.read_bytes()
+    nd = invoke(str(processed["static"]), "-o", "-", "--format", "ndjson", "-q")
+    assert nd.exit_code == 0 and len(nd.stdout.splitlines()) == len(out.read_text().splitlines()) - 1
+    assert not (Path.cwd() / "-").exists()
+
+
+def test_parquet_to_stdout_is_refused_before_any_work(processed, monkeypatch):
+    monkeypatch.setattr(export, "plan", lambda *a, **k: pytest.fail("read the inputs"))
+    result = invoke(str(processed["static"]), "-o", "-", "--format", "parquet")
+    assert result.exit_code == 1
+    assert result.stdout == ""
+    assert result.stderr.splitlines() == ["datmo: error: -o -: Parquet is not written to stdout; give a file name "
+                                          "(or --format csv or ndjson)"]
+
+
+def test_missing_pyarrow_names_the_extra(processed, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyarrow", None)   # `import pyarrow` now raises ImportError
+    monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)
+    out = tmp_path / "tracks.parquet"
+    result = invoke(str(processed["static"]), "-o", str(out))
+    assert result.exit_code == 1
+    assert result.stderr.splitlines() == ["datmo: error: writing Parquet needs pyarrow: pip install 'datmo[parquet]'"]
+    assert list(tmp_path.iterdir()) == []
+    assert invoke(str(processed["static"]), "-o", str(tmp_path / "tracks.csv")).exit_code == 0   # CSV needs none
+
+
+def test_progress_counts_every_scan_once(processed):
+    plan = export.plan([processed["patrol"], processed["static"]], features=True)
+    assert plan.total(mcapio.TOPIC_TRACKS) == plan.total(mcapio.TOPIC_FEATURES) == 600
+    seen: dict[str, int] = {}
+    sink = export.sink_for(io.BytesIO(), "csv", True)
+    export.export(plan, sink, features=True, block=64, progress=lambda t, n: seen.__setitem__(t, seen.get(t, 0) + n))
+    assert seen == {mcapio.TOPIC_TRACKS: 600, mcapio.TOPIC_FEATURES: 600}
+
+
+def tiled(src: Path, path: Path, times: int) -> Path:
+    """A log whose /datmo/tracks is `src`'s repeated `times` times, one scan period apart, in chunks of 64 kB
+    (the short and the long log both hold many: what a reader keeps of a chunk is the same)."""
+    stamps, payloads = mcapio.read_messages(src, mcapio.TOPIC_TRACKS)
+    span = int(stamps[-1] - stamps[0]) + int(np.median(np.diff(stamps)))
+    with mcapio.LogWriter(path, chunk_size=64 << 10) as w:
+        for k in range(times):
+            w.write_many(mcapio.TOPIC_TRACKS, types.TRACKS, stamps + k * span, payloads)
+    return path
+
+
+class Recorder(io.RawIOBase):
+    """A binary stream that keeps nothing: it counts its writes and the lines written."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.sizes: list[int] = []
+        self.lines = 0
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, data) -> int:  # noqa: ANN001
+        self.sizes.append(len(data))
+        self.lines += bytes(data).count(b"\n")
+        return len(data)
+
+
+def test_memory_does_not_grow_with_the_log(processed, tmp_path):
+    per_scan = max(len(cdr.decode(types.TRACKS, p)["tracks"])
+                   for p in mcapio.read_messages(processed["patrol"], mcapio.TOPIC_TRACKS)[1])
+    peaks, rows = {}, {}
+    for times in (1, 5):
+        log = tiled(processed["patrol"], tmp_path / f"tiled{times}.mcap", times)
+        plan = export.plan([log])
+        stream = Recorder()
+        sink = export.sink_for(stream, "ndjson", False)
+        tracemalloc.start()
+        export.export(plan, sink, block=30)
+        peaks[times] = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert sink.batches == len(stream.sizes) == 10 * times   # one write per batch of 30 of the 300 scans
+        assert sink.peak_rows <= 30 * per_scan                  # rows held at once: one batch's
+        rows[times] = sink.rows
+        assert stream.lines == sink.rows
+    assert rows[5] == 5 * rows[1]
+    assert peaks[5] < 1.5 * peaks[1]   # what the rows of the whole log would hold grows fivefold
+
+
+def test_parquet_writes_a_row_group_per_batch(processed, tmp_path):
+    import pyarrow.parquet as pq
+
+    log = tiled(processed["patrol"], tmp_path / "tiled.mcap", 4)
+    with open(tmp_path / "t.parquet", "wb") as f:
+        sink = export.sink_for(f, "parquet", False)
+        export.export(export.plan([log]), sink, block=100)
+        sink.close()
+    meta = pq.ParquetFile(tmp_path / "t.parquet").metadata
+    assert meta.num_row_groups == sink.batches == 12
+    assert meta.num_rows == sink.rows and max(meta.row_group(i).num_rows for i in range(12)) == sink.peak_rows
+
+
+def test_inputs_checked_before_anything_is_written(processed, tmp_path):
+    out = tmp_path / "t.csv"
+    raw = SAMPLES / "hall.mcap"
+    result = invoke(str(processed["static"]), str(raw), "-o", str(out))
+    assert result.exit_code == 1
+    assert result.stderr.splitlines() == [f"datmo: error: {raw}: no messages on /datmo/tracks; run datmo track (or "
+                                          "datmo run) first"]
+    assert list(tmp_path.iterdir()) == []
+    tracks_only = tmp_path / "tracks-only.mcap"
+    with mcapio.LogWriter(tracks_only) as w:
+        w.copy_from(processed["static"], exclude=[t for t in mcapio.PRODUCER if t != mcapio.TOPIC_TRACKS])
+    result = invoke(str(tracks_only), "--features", "-o", str(out))
+    assert result.exit_code == 1 and "no messages on /datmo/features; run datmo features" in result.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["-o", "{dir}/t.txt"], "{dir}/t.txt: cannot tell the format from the suffix '.txt'"),
+    (["-o", "{static}", "--format", "csv", "--force"], "{static}: the output would overwrite the input"),
+    (["-o", "{dir}/exists.csv"], "{dir}/exists.csv: exists; use --force to overwrite it"),
+    (["-o", "{dir}/none/t.csv"], "{dir}/none: output folder does not exist"),
+])
+def test_bad_outputs_are_one_line(processed, tmp_path, args, message):
+    (tmp_path / "exists.csv").write_text("keep")
+    fill = {"dir": tmp_path, "static": processed["static"]}
+    result = invoke(str(processed["static"]), *[a.format(**fill) for a in args])
+    assert result.exit_code != 0
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("datmo: error: " + message.format(**fill))
+    assert (tmp_path / "exists.csv").read_text() == "keep"
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_force_replaces_an_existing_table(processed, tmp_path):
+    out = tmp_path / "t.csv"
+    out.write_text("old")
+    assert invoke(str(processed["static"]), "-o", str(out), "--force").exit_code == 0
+    assert out.read_text().startswith(",".join(HEADER) + "\n")
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_damaged_tracks_messages_are_one_line(processed, tmp_path, data):
+    """A Tracks payload cut, flipped or replaced: exported as it decodes, or refused in one line naming the
+    file and the message; never a traceback, never a partial output."""
+    stamps, payloads = mcapio.read_messages(processed["static"], mcapio.TOPIC_TRACKS)
+    k = data.draw(st.integers(0, len(payloads) - 1))
+    p = bytearray(payloads[k])
+    how = data.draw(st.sampled_from(["cut", "flip", "random"]))
+    if how == "cut":
+        p = p[:data.draw(st.integers(0, len(p) - 1))]
+    elif how == "flip":
+        for _ in range(data.draw(st.integers(1, 8))):
+            p[data.draw(st.integers(0, len(p) - 1))] ^= data.draw(st.integers(1, 255))
+    else:
+        p = bytearray(data.draw(st.binary(max_size=200)))
+    log, out = tmp_path / "damaged.mcap", tmp_path / "damaged.csv"
+    out.unlink(missing_ok=True)
+    with mcapio.LogWriter(log, force=True) as w:
+        w.write_many(mcapio.TOPIC_TRACKS, types.TRACKS, stamps, payloads[:k] + [bytes(p)] + payloads[k + 1:])
+    result = invoke(str(log), "-o", str(out))
+    lines = result.stderr.splitlines()
+    ok = (result.exit_code == 0 and out.exists()) or (
+        result.exit_code == 1 and len(lines) == 1 and lines[0].startswith(f"datmo: error: {log}: bad ")
+        and f"message {k} on /datmo/tracks" in lines[0] and not out.exists())
+    tally("export: damaged Tracks messages", failed=not ok)
+    assert ok, result.stderr
+    assert not list(tmp_path.glob(".*.tmp"))
