@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS, option
+from .options import config_options, quiet_option
 
 
 def host_option(*decls: str, help_: str = "Address to serve on (0.0.0.0: every interface).") -> click.decorators.FC:
@@ -23,8 +24,8 @@ def host_option(*decls: str, help_: str = "Address to serve on (0.0.0.0: every i
 @click.option("--loop", is_flag=True, help="Start over at the end of the log (until Ctrl-C).")
 @click.option("--wait/--no-wait", default=True, show_default=True,
               help="Start playing when a client subscribes to a channel (else at once).")
-@click.option("--config", "config", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="TOML file with [features] and [track] tables, for a log that is processed on the fly.")
+@config_options("TOML file with [features] and [track] tables, for a log that is processed on the fly.")
+@quiet_option
 def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bool, config: Path | None) -> None:
     """Serve a log to Foxglove (WebSocket, foxglove-sdk) at the log's rate: the scan, features, tracks,
     markers and transforms, every channel with its ROS 2 schema.
@@ -39,6 +40,7 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
     Example: datmo play sample_logs/hall.mcap --rate 2 --loop
     """
     from .. import live, outputs
+    from ..progress import say
 
     server = live.LiveServer(host, port)   # the package and the port are checked before the log is read
     try:
@@ -50,15 +52,14 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
         click.echo(f"  open {server.app_url}")
         click.echo(f"  or in Foxglove desktop: Open connection > Foxglove WebSocket > {server.url}")
         if wait:
-            click.echo("  waiting for a client to subscribe (Ctrl-C to stop)", err=True)
+            say("  waiting for a client to subscribe (Ctrl-C to stop)")
             while not server.subscribed.wait(0.2):
                 pass
         scans = live.play(source, server, rate=rate, loop=loop)
-        click.echo(f"datmo play: {scans:,} scans served", err=True)
+        say(f"datmo play: {scans:,} scans served")
     except (KeyboardInterrupt, outputs.Terminated) as exc:
         code = 130 if isinstance(exc, KeyboardInterrupt) else exc.exit_code
-        click.echo(f"datmo play: stopped ({'Ctrl-C' if code == 130 else exc}); {server.sent:,} messages served",
-                   err=True)
+        say(f"datmo play: stopped ({'Ctrl-C' if code == 130 else exc}); {server.sent:,} messages served")
         raise click.exceptions.Exit(code) from None
     finally:
         server.close()
