@@ -175,6 +175,61 @@ def test_min_mota_gates_ci(log):
     assert json.loads(low.output[:low.output.rindex("}") + 1])["scores"]["all"]["num_switches"] == 1
 
 
+def test_cli_text_csv_and_json_carry_hota(log):
+    import csv
+    import io
+
+    data = json.loads(invoke("evaluate", log, "--format", "json").output)["scores"]
+    assert set(data) == {"all", "person", "circle object", "rectangular object"}
+    assert 0 < data["all"]["hota"] < 1 and 0 < data["all"]["assa"] < 1 and 0 < data["all"]["loca"] <= 1
+    assert data["rectangular object"]["hota"] == 0.0  # only a false track has this class
+    result = invoke("evaluate", log, "--format", "csv")
+    assert result.exit_code == 0, result.output
+    rows = list(csv.DictReader(io.StringIO(result.output)))
+    assert [r["class"] for r in rows] == list(data)
+    assert list(rows[0]) == ["class"] + list(data["all"])  # the JSON's keys, in order
+    for r in rows:
+        for key in ("hota", "deta", "assa", "mota", "num_switches"):
+            v = data[r["class"]][key]
+            assert r[key] == ("" if v is None else str(v)), (r["class"], key)
+    text = invoke("evaluate", log).output
+    for label in ("HOTA", "DetA", "AssA", "LocA"):
+        assert label in text
+    assert f"{data['all']['hota']:.3f}" in text
+    markdown = invoke("evaluate", log, "--format", "markdown").output
+    assert "| IDF1 | HOTA | DetA | AssA | LocA |" in markdown
+
+
+def test_min_hota_gates_ci(log):
+    hota = json.loads(invoke("evaluate", log, "--format", "json").output)["scores"]["all"]["hota"]
+    assert invoke("evaluate", log, "--format", "csv", "--min-hota", f"{hota - 0.01:.4f}").exit_code == 0
+    low = invoke("evaluate", log, "--format", "csv", "--min-hota", f"{hota + 0.01:.4f}")
+    assert low.exit_code == 1 and "Traceback" not in low.output
+    assert low.output.endswith(f"datmo: error: {log}: HOTA {hota:.3f} is below --min-hota {hota + 0.01:.4f}\n")
+    both = invoke("evaluate", log, "--format", "csv", "--min-hota", "0.99", "--min-mota", "0.9")
+    assert both.output.endswith("MOTA 0.841 is below --min-mota 0.9; HOTA "
+                                f"{hota:.3f} is below --min-hota 0.99\n")
+    for bad in ("1.5", "-0.1", "nan"):
+        result = invoke("evaluate", log, "--min-hota", bad)
+        assert result.exit_code == 2 and "--min-hota" in result.output, bad
+
+
+def test_progress_counts_ground_truth_frames():
+    calls = []
+    gt, hyps, regions = frames()
+    ev.evaluate(gt, hyps, regions=regions, progress=lambda done, total, stage: calls.append((done, total, stage)))
+    assert {total for _, total, _ in calls} == {syn.N}
+    matching = [done for done, _, stage in calls if stage == "matching"]
+    assert matching == sorted(matching) and matching[-1] == syn.N
+    hota_stages = [stage for done, _, stage in calls if stage.startswith("HOTA") and done == syn.N]
+    assert hota_stages == ["HOTA all", "HOTA person", "HOTA circle object", "HOTA rectangular object"]
+
+
+def test_quiet_prints_only_the_result(log):
+    result = CliRunner().invoke(cli, ["evaluate", str(log), "--format", "json", "--quiet"])
+    assert result.exit_code == 0 and json.loads(result.output)["scores"]["all"]["num_switches"] == 1
+
+
 @pytest.mark.parametrize("channels, needle", [
     ({"with_tracks": False}, "no messages on /datmo/tracks; run datmo track (or datmo run) first"),
     ({"with_truth": False}, "no messages on /datmo/ground_truth; run datmo simulate first, or give annotations "
@@ -220,5 +275,6 @@ def test_a_perfect_tracker_scores_perfectly_on_the_sample_logs(sample_logs, name
     s = ev.evaluate(gt, hyps, regions=regions)["all"]
     assert s["num_objects"] > 100
     assert (s["mota"], s["idf1"], s["num_false_positives"], s["num_switches"]) == (1.0, 1.0, 0, 0)
+    assert (s["hota"], s["deta"], s["assa"], s["loca"]) == pytest.approx((1.0, 1.0, 1.0, 1.0), abs=1e-12)
     # people who never move (corridor, patrol: one stands all along) are ignored, not false positives
     assert (s["ignored_hypotheses"] > 0) == (name != "hall")
