@@ -1,4 +1,4 @@
-"""Tracking accuracy (make accuracy): CLEAR-MOT and IDF1 on the simulated sample logs, class accuracy,
+"""Tracking accuracy (make accuracy): CLEAR-MOT, IDF1 and HOTA on the simulated sample logs, class accuracy,
 the platform through the column occlusion, the static scene, and the legtracker bags (real data).
 
 Each simulated log is tracked twice: from datmo's own features (segmentation + Hough, the real pipeline)
@@ -90,8 +90,10 @@ def sim_lines(source: str, feature_params: dict | None = None) -> list[str]:
         s = r["scores"]
         people = s.get("person", {})
         line = (f"{name:9s} people MOTA {_fmt(people.get('mota'))} IDF1 {_fmt(people.get('idf1'))} "
-                f"switches {people.get('num_switches', 'n/a')} | all MOTA {_fmt(s['all']['mota'])} "
-                f"IDF1 {_fmt(s['all']['idf1'])} | class right {_fmt(r['class_accuracy'])}")
+                f"HOTA {_fmt(people.get('hota'))} switches {people.get('num_switches', 'n/a')} | "
+                f"all MOTA {_fmt(s['all']['mota'])} IDF1 {_fmt(s['all']['idf1'])} HOTA {_fmt(s['all']['hota'])} "
+                f"(DetA {_fmt(s['all']['deta'])}, AssA {_fmt(s['all']['assa'])}) | "
+                f"class right {_fmt(r['class_accuracy'])}")
         if "platform_switches" in r and name == "hall":
             line += (f" | platform: {r['platform_switches']} id switches, circle object "
                      f"{_fmt(r['platform_as_circle'])} of the time")
