@@ -1,4 +1,5 @@
-"""Scoring tracks against ground truth: CLEAR-MOT (MOTA, MOTP), IDF1 and their counts, with py-motmetrics.
+"""Scoring tracks against ground truth: CLEAR-MOT (MOTA, MOTP), IDF1 and their counts with py-motmetrics, HOTA
+(DetA, AssA, LocA) with TrackEval.
 
 What is scored (pure functions over arrays; positions in the sensor frame, metres):
 - Targets: ground-truth objects of a mover class (person, circle object, rectangular object:
@@ -34,7 +35,9 @@ and computes the figures from all of them at the end; IDF1 in particular is one 
 ids to track ids over the whole run. Feeding the accumulator block by block would save only the decoded
 messages (a few numbers per object and frame, next to the accumulator's rows), and which targets count
 (`moved_ids`: movers that move at some time) is itself a whole-run fact. Bounding it would mean computing
-CLEAR-MOT and IDF1 here from per-id counts instead of motmetrics' events; not done.
+CLEAR-MOT and IDF1 here from per-id counts instead of motmetrics' events; not done. HOTA likewise needs
+the whole run (its matching weighs each pair by the two ids' alignment over all frames): it keeps each
+frame's targets x hypotheses similarities, a few numbers per frame.
 """
 
 from __future__ import annotations
