@@ -99,7 +99,7 @@ def test_simulate_equals_the_whole_run_simulation(name, tmp_path):
 
 def test_simulate_of_a_moving_sensor_over_several_blocks_equals_the_whole_run(tmp_path):
     """Against the whole-run writer datmo simulate had (simulate_scene, then every channel at once)."""
-    from datmo_cli.log import types
+    from datmo_cli.log import transforms, types
     from datmo_cli.sim.scene import load_scene
     from datmo_cli.sim.simulate import CHUNK, simulate_scene
 
@@ -117,6 +117,10 @@ def test_simulate_of_a_moving_sensor_over_several_blocks_equals_the_whole_run(tm
         writer.write_scans(res.run)
         writer.write_odometry(res.odometry)
         writer.write_many(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH, res.run.stamps, res.ground_truth_payloads())
+        t0 = int(res.run.stamps[0])   # the transforms: base_link -> laser (the identity), odom -> base_link a pose
+        writer.write_transforms([t0], [transforms.mount_tf(t0, "base_link", "laser", transforms.LaserPose())],
+                                static=True)
+        writer.write_transforms(res.odometry.stamps, transforms.odometry_tf(res.odometry))
     assert digest(out, out) == digest(ref, ref)
 
 
@@ -143,7 +147,7 @@ def test_carmen_import_holds_one_block_whatever_the_length(tmp_path):
     assert (short.scans, long.scans) == (2_500, 10_000)
     assert (short.poses, long.poses) == (2_500, 10_000)
     assert short.peak_scans == long.peak_scans == 100
-    assert short.peak_messages == long.peak_messages <= 2 * 300 + 2 * 100
+    assert short.peak_messages == long.peak_messages <= 2 * 300 + 3 * 100   # a block: scans, poses and their /tf
     assert short.late == long.late == 0
     assert not list(tmp_path.glob(".datmo-import-*"))
 
@@ -189,7 +193,7 @@ def test_bag_import_holds_one_block_whatever_the_length(tmp_path):
     long = _held(_bag(tmp_path, 4_000), tmp_path / "long.mcap")
     assert (short.scans, long.scans) == (1_000, 4_000)
     assert short.peak_scans == long.peak_scans == 100
-    assert short.peak_messages == long.peak_messages <= 2 * 300 + 2 * 100
+    assert short.peak_messages == long.peak_messages <= 2 * 300 + 3 * 100   # a block: scans, poses and their /tf
 
 
 def test_simulate_holds_one_block_whatever_the_duration(tmp_path, monkeypatch):
