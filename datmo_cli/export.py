@@ -37,7 +37,8 @@ With --features these columns follow (empty for tracks and for kinds they do not
 Missing values are empty in CSV and null in NDJSON and Parquet (NaN world coordinates, any non-finite float
 included). Floats are
 written as the shortest text that reads back to the same float32 (CSV, NDJSON) or as float32 (Parquet).
-A file's rows are its track states in file order, then (with --features) its features in file order.
+Rows come in this order: the track states of every file (files in the order given, each file's in its order),
+then with --features the features of every file likewise.
 
 Streaming: each file is read twice, a summary pass (its channels and message counts: the progress bar's
 total, and an input without /datmo/tracks refused before anything is written) and one pass per exported
@@ -399,14 +400,15 @@ def _batches(path: Path, topic: str, block: int) -> Iterator[tuple[int, list[byt
 
 def export(p: Plan, sink: TextSink | ParquetSink, *, features: bool = False, block: int = BLOCK_MESSAGES,
            progress: Callable[[str, int], None] | None = None) -> None:
-    """Write the rows of every input of `p` to `sink`, `block` messages at a time. `progress(topic, n)` after
-    each block of n messages of `topic`."""
+    """Write the rows of every input of `p` to `sink`, `block` messages at a time: every file's track states,
+    then (with `features`) every file's features. `progress(topic, n)` after each block of n messages of
+    `topic`."""
     jobs = [(mcapio.TOPIC_TRACKS, types.TRACKS, track_batch)]
     if features:
         jobs.append((mcapio.TOPIC_FEATURES, types.FEATURES, feature_batch))
-    for path in p.files:
-        name = os.fsdecode(path)
-        for topic, msgtype, rows in jobs:
+    for topic, msgtype, rows in jobs:
+        for path in p.files:
+            name = os.fsdecode(path)
             for first, payloads in _batches(path, topic, block):
                 sink.write(rows(name, first, _decode(path, msgtype, topic, payloads, first)))
                 if progress is not None:

@@ -169,14 +169,14 @@ def test_two_files_rows_equal_the_decoded_tracks(processed, tmp_path, fmt):
 
 
 @pytest.mark.parametrize("fmt", export.FORMATS)
-def test_features_follow_the_tracks_of_each_file(processed, tmp_path, fmt):
+def test_features_follow_every_files_tracks(processed, tmp_path, fmt):
     out = tmp_path / f"all{SUFFIX[fmt]}"
-    name = str(processed["patrol"])
-    assert invoke(name, "--features", "-o", str(out)).exit_code == 0
+    logs = [processed["patrol"], processed["static"]]
+    assert invoke(*map(str, logs), "--features", "-o", str(out)).exit_code == 0
     names, rows = read_table(out, fmt, features=True)
     assert names == HEADER + FEATURE_HEADER
-    tracks = [{**r, **dict.fromkeys(FEATURE_HEADER)} for r in reference_tracks(processed["patrol"], name)]
-    features = reference_features(processed["patrol"], name)
+    tracks = [{**r, **dict.fromkeys(FEATURE_HEADER)} for log in logs for r in reference_tracks(log, str(log))]
+    features = [r for log in logs for r in reference_features(log, str(log))]
     assert {r["kind"] for r in features} >= {"line", "circle", "leg"}
     assert rows == tracks + features
 

@@ -31,7 +31,8 @@ def command(files: tuple[Path, ...], output: Path, fmt: str | None, features: bo
     the --features columns, is in datmo_cli/export.py.
 
     FILES are logs that went through datmo track or datmo run; their rows follow one another in the order
-    given. Memory stays the same whatever the logs' length: rows are written 1,000 messages at a time.
+    given (with --features: every file's track states, then every file's features). Memory stays the same
+    whatever the logs' length: rows are written 1,000 messages at a time.
 
     Example: datmo export out/hall.mcap -o hall-tracks.csv
     """
@@ -50,7 +51,7 @@ def command(files: tuple[Path, ...], output: Path, fmt: str | None, features: bo
         shown = {"topic": export.mcapio.TOPIC_TRACKS}
 
         def progress(topic: str, n: int) -> None:
-            if topic != shown["topic"]:   # the features pass of a file: the bar counts its scans anew
+            if topic != shown["topic"]:   # the features pass, after every file's tracks: its own count of scans
                 shown["topic"] = topic
                 b.update(0, p.total(topic), description="features")
             b.advance(n)
