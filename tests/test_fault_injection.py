@@ -94,6 +94,7 @@ COMMANDS = {
     "simulate": lambda L, o: ["simulate", "--scene", "hall", "--duration", "4", "-o", o],
     "report-plot": lambda L, o: ["report", L["tracked"], "--format", "json", "--plot", o.with_suffix(".png")],
     "run": lambda L, o: ["run", L["small"], "-o", o.parent / "batch", "--no-report", "--jobs", "1"],
+    "export": lambda L, o: ["export", L["tracked"], "--features", "-o", o.with_suffix(".csv")],
 }
 ROOM = [0, 64, 700, 5_000, 40_000, 150_000]     # bytes the disk takes before it is full
 
