@@ -50,7 +50,7 @@ def one_scan_log(path: Path, tracks: bool = False) -> Path:
 
 
 @pytest.mark.parametrize("args", [["--help"], ["info", "{log}"], ["info", "{log}", "--json"], ["report", "{done}"],
-                                  ["report", "{done}", "--format", "json"]])
+                                  ["report", "{done}", "--format", "json"], ["export", "{done}", "-o", "-"]])
 def test_light_commands_import_neither_numba_nor_scipy_nor_the_type_store(tmp_path: Path, args: list[str]):
     log, done = one_scan_log(tmp_path / "one.mcap"), one_scan_log(tmp_path / "done.mcap", tracks=True)
     code, heavy = imported([a.format(log=log, done=done) for a in args], tmp_path)
