@@ -331,6 +331,7 @@ def test_ros1_bag_without_tf_gets_tf_from_its_odometry(tmp_path):
     assert_chains_resolve(tmp_path / "out" / "odom.mcap")
 
 
+@pytest.mark.slow
 def test_an_old_log_with_odometry_but_no_tf_gets_them_in_every_processed_output(tmp_path):
     from datmo_cli.log import mcapio
 
