@@ -70,11 +70,9 @@ def measure(logs: list[Path], out_dir: Path, jobs: int | None = None) -> tuple[d
             if rep.returncode:
                 problems.append(f"{log.name}: datmo report failed: {rep.stderr.strip()}")
                 continue
-            by_class = json.loads(rep.stdout)["tracks"]
-            table = by_class["table"]
-            figures[log.stem] = {"ground_truth": False, "tracks": by_class["confirmed"],
-                                 "dynamic": sum(t["mobility"] == "dynamic" for t in table),
-                                 "person": sum(t["class"] == "person" for t in table)}
+            row = json.loads(rep.stdout)["files"][0]
+            figures[log.stem] = {"ground_truth": False, "tracks": row["tracks"], "dynamic": row["dynamic"],
+                                 "person": row["person"]}
         else:
             problems.append(f"{log.name}: datmo evaluate failed: {ev.stderr.strip()}")
     return figures, problems
