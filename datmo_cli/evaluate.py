@@ -113,6 +113,22 @@ def _frames(stamps: np.ndarray, offsets: np.ndarray, items: np.ndarray, cls_fiel
                   items["x"].astype(np.float64), items["y"].astype(np.float64), items[cls_field].astype(np.int64))
 
 
+def moved_ids(objects: np.ndarray) -> np.ndarray:
+    """Ids (int64, sorted) of the GroundTruthObject elements of a mover class that move in at least one of
+    them: over a whole run, the movers that can be targets."""
+    mover = np.isin(objects["classification"], list(MOVER_CLASSES))
+    return np.unique(objects["id"][mover & objects["moving"].astype(bool)].astype(np.int64))
+
+
+def target_mask(objects: np.ndarray, moved: np.ndarray, *, include_occluded: bool = False) -> np.ndarray:
+    """Which GroundTruthObject elements are targets: a mover class, an id in `moved` (moved_ids of the whole
+    run) and, unless `include_occluded`, hit by a beam in that scan."""
+    target = np.isin(objects["classification"], list(MOVER_CLASSES)) & np.isin(objects["id"].astype(np.int64), moved)
+    if not include_occluded:
+        target &= objects["visible"].astype(bool)
+    return target
+
+
 def ground_truth_frames(stamps: np.ndarray, offsets: np.ndarray, objects: np.ndarray,
                         sensor_theta: np.ndarray | None = None, *,
                         include_occluded: bool = False) -> tuple[Frames, Regions]:
@@ -120,11 +136,7 @@ def ground_truth_frames(stamps: np.ndarray, offsets: np.ndarray, objects: np.nda
     GroundTruthObject elements, message k's at offsets[k]:offsets[k + 1]; sensor_theta (rad, per message)
     turns the objects' world orientations into the sensor frame (zero when None)."""
     f = _frames(stamps, offsets, objects, "classification")
-    mover = np.isin(f.cls, list(MOVER_CLASSES))
-    moved_ids = np.unique(f.ids[mover & objects["moving"].astype(bool)])
-    target = mover & np.isin(f.ids, moved_ids)
-    if not include_occluded:
-        target &= objects["visible"].astype(bool)
+    target = target_mask(objects, moved_ids(objects), include_occluded=include_occluded)
     theta = np.zeros(len(stamps)) if sensor_theta is None else np.asarray(sensor_theta, np.float64)
     frame = np.repeat(np.arange(len(stamps)), np.diff(f.offsets))
     other = ~target
