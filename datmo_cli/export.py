@@ -40,10 +40,28 @@ written as the shortest text that reads back to the same float32 (CSV, NDJSON) o
 Rows come in this order: the track states of every file (files in the order given, each file's in its order),
 then with --features the features of every file likewise.
 
+With --ground-truth the table is instead one log's /datmo/ground_truth (datmo simulate) in the shape
+`datmo evaluate --gt` reads, holding exactly the targets evaluate scores from the channel:
+
+    stamp_ns      header stamp of the GroundTruth message (the scan's), ns since 1970
+    id            the object's id (empty on a row that only marks a scan with no target)
+    x, y          the object's centre, sensor frame, m (the float32 of the message, written exactly)
+    class         person, circle object or rectangular object
+
+Targets (evaluate.target_mask): objects of a mover class that move at some time in the run, in the scans
+where a beam hits them (with `include_occluded`, in every scan). A message with no target gives one row with
+only its stamp, so that evaluate counts the scan as a frame. What the CSV cannot carry: the channel's other
+objects (scene structure, movers that never move, hidden targets), which evaluate uses as don't-care
+regions; scored against the CSV, a confirmed track on one of them is a false positive, and may take a match
+from a target. Every figure that only counts targets (frames, objects, unique objects, misses when no
+track is near structure) stays the same; evaluate's ignored_hypotheses on the channel says how many tracks
+the regions took out.
+
 Streaming: each file is read twice, a summary pass (its channels and message counts: the progress bar's
 total, and an input without /datmo/tracks refused before anything is written) and one pass per exported
 channel with mcapio.iter_messages, one chunk in memory at a time, decoded and written `block` messages at a
-time (a CSV or NDJSON batch of lines, a Parquet row group).
+time (a CSV or NDJSON batch of lines, a Parquet row group). The ground truth is read twice as well after
+its summary: once for the ids that move (a whole-run fact; only the ids are kept), once for the rows.
 """
 
 from __future__ import annotations
@@ -59,6 +77,7 @@ from typing import IO
 import numpy as np
 
 from .errors import ConfigError, DatmoError, InputError, MissingChannelError
+from .evaluate import MOVER_CLASSES, moved_ids, target_mask
 from .log import cdr, mcapio, types
 from .report import CLASS_NAMES, MOBILITY_NAMES
 
@@ -68,7 +87,7 @@ BLOCK_MESSAGES = 1000        # messages decoded and written at once (one batch, 
 STATUS_NAMES = {0: "tentative", 1: "confirmed", 2: "coasting"}
 PARQUET_HINT = "pip install 'datmo[parquet]'"
 
-# name -> value kind: str, int (uint32, or int64 for stamp_ns), float (float32), bool
+# name -> value kind: str, int (uint32, or int64 for stamp_ns), float (float32), double (float64), bool
 TRACK_COLUMNS: dict[str, str] = {
     "file": "str", "scan": "int", "stamp_ns": "int", "frame_id": "str", "kind": "str", "id": "int",
     "class": "str", "mobility": "str", "status": "str", "x_m": "float", "y_m": "float", "vx_mps": "float",
@@ -80,6 +99,8 @@ FEATURE_COLUMNS: dict[str, str] = {
     "y_end_m": "float", "radius_m": "float", "rho_m": "float", "theta_rad": "float", "r_acc": "float",
     "probability": "float",
 }
+
+GROUND_TRUTH_COLUMNS: dict[str, str] = {"stamp_ns": "int", "id": "int", "x": "double", "y": "double", "class": "str"}
 
 
 class ParquetMissingError(DatmoError):
@@ -223,8 +244,8 @@ def feature_batch(file: str, first: int, decoded: list[dict]) -> Batch:
 def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
     """A column's values as text: float32 as its shortest round-trip form, non-finite floats and None as `null`;
     strings JSON-quoted with `quote`, else as CSV fields."""
-    if kind == "float" and a.dtype != object:
-        out = a.astype(np.float32).astype(str).astype(object)
+    if kind in ("float", "double") and a.dtype != object:
+        out = a.astype(np.float32 if kind == "float" else np.float64).astype(str).astype(object)
         out[~np.isfinite(a)] = null
         return out.tolist()
     if kind == "bool" and a.dtype != object:
@@ -307,7 +328,8 @@ class ParquetSink:
     def __init__(self, stream: IO[bytes], cols: dict[str, str]) -> None:
         pa = self.pa = require_pyarrow()
         self.cols = cols
-        kinds = {"str": pa.string(), "float": pa.float32(), "bool": pa.bool_(), "int": pa.uint32()}
+        kinds = {"str": pa.string(), "float": pa.float32(), "double": pa.float64(), "bool": pa.bool_(),
+                 "int": pa.uint32()}
         self.schema = pa.schema([(name, pa.int64() if name in ("stamp_ns", "scan") else kinds[kind])
                                  for name, kind in cols.items()])
         import pyarrow.parquet as pq
@@ -326,7 +348,8 @@ class ParquetSink:
                           for v in values]
             return pa.array(values, typ)
         if pa.types.is_floating(typ):
-            return pa.array(a.astype(np.float32), typ, mask=np.isnan(a))
+            return pa.array(a.astype(np.float64 if pa.types.is_float64(typ) else np.float32), typ,
+                            mask=np.isnan(a))
         return pa.array(a, typ)
 
     def write(self, batch: Batch) -> None:
@@ -342,9 +365,11 @@ class ParquetSink:
         self.writer.close()
 
 
-def sink_for(stream: IO[bytes], fmt: str, features: bool) -> TextSink | ParquetSink:
-    """The writer of `fmt` rows (with the feature columns when `features`) to the binary `stream`."""
-    cols = columns(features)
+def sink_for(stream: IO[bytes], fmt: str, features: bool = False,
+             cols: dict[str, str] | None = None) -> TextSink | ParquetSink:
+    """The writer of `fmt` rows to the binary `stream`: of `cols` when given (GROUND_TRUTH_COLUMNS), else of
+    columns(features)."""
+    cols = cols or columns(features)
     return ParquetSink(stream, cols) if fmt == "parquet" else TextSink(stream, fmt, cols)
 
 
@@ -365,18 +390,26 @@ class Plan:
 def _require(log: mcapio.LogContents, topic: str, msgtype: str) -> int:
     ch = log.topics().get(topic)
     if ch is None or not ch.count:
+        if topic == mcapio.TOPIC_GROUND_TRUTH:
+            raise MissingChannelError(f"{log.path}: no messages on {topic}; only {mcapio.PRODUCER[topic]} writes "
+                                      "ground truth (annotate a real log as a stamp_ns,id,x,y CSV instead)")
         raise MissingChannelError(f"{log.path}: no messages on {topic}; run {mcapio.PRODUCER[topic]} first")
     if ch.msgtype != msgtype or ch.message_encoding != "cdr":
         raise InputError(f"{log.path}: {topic} holds {ch.message_encoding} {ch.msgtype}, not CDR {msgtype}")
     return ch.count
 
 
-def plan(files: list[Path], features: bool = False) -> Plan:
+def plan(files: list[Path], features: bool = False, ground_truth: bool = False) -> Plan:
     """Summary pass over every input (mcapio.summary): refuses, before anything is written, an input that is
-    not a log or has no /datmo/tracks (or, with `features`, no /datmo/features), naming the command to run."""
+    not a log or has no /datmo/tracks (or, with `features`, no /datmo/features; with `ground_truth` only
+    /datmo/ground_truth is needed), naming the command to run."""
     out = Plan(list(files))
     for path in files:
         log = mcapio.summary(path)
+        if ground_truth:
+            out.counts.append({mcapio.TOPIC_GROUND_TRUTH: _require(log, mcapio.TOPIC_GROUND_TRUTH,
+                                                                   types.GROUND_TRUTH)})
+            continue
         counts = {mcapio.TOPIC_TRACKS: _require(log, mcapio.TOPIC_TRACKS, types.TRACKS)}
         if features:
             counts[mcapio.TOPIC_FEATURES] = _require(log, mcapio.TOPIC_FEATURES, types.FEATURES)
@@ -413,6 +446,53 @@ def export(p: Plan, sink: TextSink | ParquetSink, *, features: bool = False, blo
                 sink.write(rows(name, first, _decode(path, msgtype, topic, payloads, first)))
                 if progress is not None:
                     progress(topic, len(payloads))
+
+
+def ground_truth_batch(path: Path, first: int, decoded: list[dict], moved: np.ndarray, *,
+                       include_occluded: bool = False) -> Batch:
+    """The rows of decoded GroundTruth messages (messages first, first + 1, ... of the log at `path`): each
+    message's targets in its order (`moved`: the run's moved_ids), or one row with only the stamp when it has
+    none. A target position that is not finite is refused (InputError naming the message)."""
+    parts = [d["objects"] for d in decoded]
+    objects = np.concatenate(parts)
+    frame = np.repeat(np.arange(len(decoded)), [len(o) for o in parts])
+    keep = target_mask(objects, moved, include_occluded=include_occluded)
+    t = objects[keep]
+    bad = ~(np.isfinite(t["x"]) & np.isfinite(t["y"]))
+    if bad.any():
+        k = first + int(frame[keep][np.argmax(bad)])
+        raise InputError(f"{path}: {mcapio.TOPIC_GROUND_TRUTH} message {k} holds a target position that is not a "
+                         "finite number")
+    empty = np.flatnonzero(np.bincount(frame[keep], minlength=len(decoded)) == 0)
+    order = np.argsort(np.concatenate([frame[keep], empty]), kind="stable")   # each message's rows in place
+    n = len(order)
+    ids, cls = np.empty(n, object), np.empty(n, object)
+    ids[:len(t)] = t["id"].tolist()
+    cls[:len(t)] = [MOVER_CLASSES[c] for c in t["classification"].tolist()]
+    x = np.concatenate([t["x"].astype(np.float64), np.full(len(empty), np.nan)])
+    y = np.concatenate([t["y"].astype(np.float64), np.full(len(empty), np.nan)])
+    stamps = np.array([d["stamp_ns"] for d in decoded], np.int64)[np.concatenate([frame[keep], empty])]
+    return Batch(n, {"stamp_ns": stamps[order], "id": ids[order], "x": x[order], "y": y[order],
+                     "class": cls[order]})
+
+
+def export_ground_truth(path: Path, sink: TextSink | ParquetSink, *, include_occluded: bool = False,
+                        block: int = BLOCK_MESSAGES, progress: Callable[[str, int], None] | None = None) -> None:
+    """Write the targets of the /datmo/ground_truth channel of the log at `path` to `sink` (of
+    GROUND_TRUTH_COLUMNS), `block` messages at a time, in two passes: `progress("movers", n)` after each
+    block of the pass that finds the ids that move, `progress("targets", n)` after each block written."""
+    topic, msgtype = mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH
+    moved = np.zeros(0, np.int64)
+    for first, payloads in _batches(path, topic, block):
+        decoded = _decode(path, msgtype, topic, payloads, first)
+        moved = np.union1d(moved, moved_ids(np.concatenate([d["objects"] for d in decoded])))
+        if progress is not None:
+            progress("movers", len(payloads))
+    for first, payloads in _batches(path, topic, block):
+        decoded = _decode(path, msgtype, topic, payloads, first)
+        sink.write(ground_truth_batch(path, first, decoded, moved, include_occluded=include_occluded))
+        if progress is not None:
+            progress("targets", len(payloads))
 
 
 def to_stdout(fmt: str) -> IO[bytes]:
