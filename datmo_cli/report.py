@@ -714,7 +714,7 @@ REPORT_SCHEMA = f"""The report's shapes, the same for one file, several files, b
 
 csv            one row per file, then a row whose file is "total"; header:
                {",".join(FILE_COLUMNS)}
-csv --tracks   one row per track reported in full (moving ones; every confirmed one with --all); header:
+csv --tracks   one row per confirmed track (static pieces too), with a file column; header:
                {",".join(TRACK_CSV_KEYS)}
 json           {{"schema": "{SCHEMA}", "files": [FILE...], "total": ROW, "batches": [BATCH...],
                  "tracks": [TRACK...] (with --tracks only)}}
@@ -831,19 +831,20 @@ def to_json(obj: object) -> str:
     return json.dumps(clean(obj), indent=2)
 
 
-def track_rows(summaries: list[RunSummary], top: int | None, sort: str, all_tracks: bool) -> list[dict]:
-    """The `--tracks` rows: each file's tracks reported in full (RunSummary.shown), TRACK_CSV_KEYS."""
+def track_rows(summaries: list[RunSummary], top: int | None, sort: str) -> list[dict]:
+    """The `--tracks` rows, TRACK_CSV_KEYS: every confirmed track of each file (a table for scripts, which
+    filter on class and mobility themselves), ordered by `sort`, the first `top` of each file."""
     return [{"file": s.run["file"], **{k: t[k] for k in TRACK_CSV_KEYS[1:]}}
-            for s in summaries for t in s.shown(top, sort, all_tracks)]
+            for s in summaries for t in s.shown(top, sort, True)]
 
 
 def report_dict(summaries: list[RunSummary], *, top: int | None, sort: str, tracks: bool = False,
-                all_tracks: bool = False, batches: list[dict] | None = None) -> dict:
+                batches: list[dict] | None = None) -> dict:
     """The JSON report (REPORT_SCHEMA): schema, files, total, batches and, with `tracks`, tracks."""
     out = {"schema": SCHEMA, "files": [s.to_dict(top, sort) for s in summaries],
            "total": total_row([s.file_row() for s in summaries]), "batches": batches or []}
     if tracks:
-        out["tracks"] = track_rows(summaries, top, sort, all_tracks)
+        out["tracks"] = track_rows(summaries, top, sort)
     return out
 
 
@@ -855,11 +856,10 @@ def render(summaries: list[RunSummary], fmt: str, *, top: int | None, sort: str,
     and markdown, all for json and csv); rich and markdown show the files table, then each file's tables,
     after the tables `before` (a batch folder's)."""
     if fmt == "json":
-        return to_json(report_dict(summaries, top=top, sort=sort, tracks=tracks, all_tracks=all_tracks,
-                                   batches=batches))
+        return to_json(report_dict(summaries, top=top, sort=sort, tracks=tracks, batches=batches))
     if fmt == "csv":
         if tracks:
-            rows = track_rows(summaries, top, sort, all_tracks)
+            rows = track_rows(summaries, top, sort)
             return render_csv(Table("tracks", TRACK_CSV_KEYS, [[r[k] for k in TRACK_CSV_KEYS] for r in rows]))
         return render_csv(file_table(summaries), list(FILE_COLUMNS))
     top = 20 if top is None else top

@@ -70,7 +70,8 @@ def _scan_counts(files: list[Path]) -> list[int]:
 @click.option("--sort", type=click.Choice(SORT_KEYS), default="lifetime", show_default=True,
               help="Order of the track tables (lifetime, distance and speed: largest first).")
 @click.option("--tracks", "track_table", is_flag=True,
-              help="csv: one row per track (with a file column) instead of one per file; json: add a tracks list.")
+              help="csv: one row per confirmed track (with a file column) instead of one per file; json: add that "
+                   "tracks list.")
 @click.option("--all", "all_tracks", is_flag=True,
               help="Report every confirmed track in full (static pieces too) and label all of them in the plot.")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
