@@ -360,3 +360,225 @@ def test_damaged_tracks_messages_are_one_line(processed, tmp_path, data):
     tally("export: damaged Tracks messages", failed=not ok)
     assert ok, result.stderr
     assert not list(tmp_path.glob(".*.tmp"))
+
+
+# ----------------------------------------------------------------------------------------- --ground-truth
+
+GT_HEADER = ["stamp_ns", "id", "x", "y", "class"]
+SIMULATED = ("hall", "crowd6", "corridor", "patrol")
+# Figures that depend on the tracks in don't-care regions, which the CSV cannot carry (see datmo_cli/export.py).
+REGION_FIGURES = {"num_predictions", "num_false_positives", "mota", "idf1", "idp", "precision", "hota", "deta",
+                  "assa", "ignored_hypotheses"}
+
+
+def channel_targets(path: Path, include_occluded: bool = False):  # noqa: ANN201 - evaluate.Frames, Regions
+    """Targets and regions as evaluate reads them from /datmo/ground_truth."""
+    from datmo_cli import evaluate as ev
+    from datmo_cli.report import decode_channel
+
+    stamps, payloads = mcapio.read_messages(path, mcapio.TOPIC_GROUND_TRUTH)
+    truth = decode_channel(types.GROUND_TRUTH, payloads)
+    return ev.ground_truth_frames(truth.stamps, truth.offsets["objects"], truth.items["objects"],
+                                  truth.scalars.get("sensor_theta"), include_occluded=include_occluded)
+
+
+def ground_truth_rows(path: Path, fmt: str) -> list[dict]:
+    """An exported ground-truth table's rows, in any format, as plain values (None for empty)."""
+    if fmt == "csv":
+        rows = list(csv.DictReader(io.StringIO(path.read_text())))
+    elif fmt == "ndjson":
+        rows = [json.loads(line) for line in path.read_text().splitlines()]
+    else:
+        import pyarrow.parquet as pq
+
+        rows = pq.read_table(path).to_pylist()
+    return [{"stamp_ns": int(r["stamp_ns"]), "id": None if r["id"] in (None, "") else int(r["id"]),
+             "x": None if r["x"] in (None, "") else float(r["x"]),
+             "y": None if r["y"] in (None, "") else float(r["y"]), "class": r["class"] or None} for r in rows]
+
+
+@pytest.mark.parametrize("include_occluded", [False, True])
+@pytest.mark.parametrize("name", SIMULATED)
+def test_ground_truth_csv_reads_back_as_the_targets_evaluate_scores(tmp_path, name, include_occluded):
+    from datmo_cli import evaluate as ev
+
+    log, out = SAMPLES / f"{name}.mcap", tmp_path / "gt.csv"
+    args = ["--include-occluded"] if include_occluded else []
+    result = invoke(str(log), "--ground-truth", *args, "-o", str(out))
+    assert result.exit_code == 0, result.output
+    assert out.read_text().splitlines()[0] == ",".join(GT_HEADER)
+    got, (want, _) = ev.read_ground_truth_csv(out), channel_targets(log, include_occluded)
+    assert len(want.ids) > 100
+    for attr in ("stamps", "offsets", "ids", "x", "y", "cls"):
+        np.testing.assert_array_equal(getattr(got, attr), getattr(want, attr), err_msg=attr)
+
+
+def test_a_scan_without_targets_is_a_stamp_only_row(tmp_path):
+    """static.mcap's objects never move: no targets, and still every scan is a frame."""
+    from datmo_cli import evaluate as ev
+
+    out = tmp_path / "gt.csv"
+    assert invoke(str(SAMPLES / "static.mcap"), "--ground-truth", "-o", str(out)).exit_code == 0
+    stamps = mcapio.read_messages(SAMPLES / "static.mcap", mcapio.TOPIC_GROUND_TRUTH)[0]
+    assert out.read_text().splitlines()[1:] == [f"{s},,,," for s in stamps.tolist()]
+    frames = ev.read_ground_truth_csv(out)
+    assert frames.stamps.tolist() == stamps.tolist() and len(frames.ids) == 0
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory) -> dict[str, Path]:
+    """datmo run's outputs of the simulated sample logs (they keep /datmo/ground_truth)."""
+    out = tmp_path_factory.mktemp("simulated")
+    paths = {}
+    for name in SIMULATED:
+        paths[name] = out / f"{name}.mcap"
+        pipeline.process_file(SAMPLES / f"{name}.mcap", paths[name])
+    return paths
+
+
+@pytest.mark.parametrize("name", [pytest.param("hall", marks=pytest.mark.slow), "crowd6", "corridor", "patrol"])
+def test_evaluate_scores_the_exported_csv_as_the_channel_but_for_dont_care_regions(simulated, tmp_path, name):
+    """Scored against the exported CSV: every figure the same as against the channel, except that tracks
+    in don't-care regions, which the CSV cannot carry, become false positives."""
+    from datmo_cli.commands.evaluate import score_file
+
+    log, gt = simulated[name], tmp_path / "gt.csv"
+    assert invoke(str(log), "--ground-truth", "-o", str(gt)).exit_code == 0
+    channel = score_file(log, match_radius=0.3)["scores"]
+    exported = score_file(log, gt_csv=gt, match_radius=0.3)["scores"]
+    # a class whose only tracks the regions took out gets a row of its own, with no targets
+    assert set(channel) <= set(exported)
+    assert all(exported[cls]["num_objects"] == 0 < exported[cls]["num_false_positives"]
+               for cls in set(exported) - set(channel))
+    for cls in channel:
+        same = set(channel[cls]) - REGION_FIGURES
+        for k in same:   # motmetrics sums the same distances in another order when the regions took tracks out
+            want = channel[cls][k]
+            assert exported[cls][k] == (want if want is None else pytest.approx(want, rel=1e-12)), (cls, k)
+    ignored = channel["all"]["ignored_hypotheses"]
+    assert ignored > 0 and exported["all"]["ignored_hypotheses"] == 0
+    for key in ("num_predictions", "num_false_positives"):
+        assert exported["all"][key] == channel["all"][key] + ignored, key
+
+
+def test_without_the_dont_care_regions_the_channel_scores_as_the_exported_csv(simulated, tmp_path):
+    """The channel's targets with its regions left out score exactly as the CSV: the regions are the only
+    difference."""
+    from datmo_cli import evaluate as ev
+    from datmo_cli.commands.evaluate import score_file
+    from datmo_cli.report import decode_channel
+
+    log, gt = simulated["patrol"], tmp_path / "gt.csv"
+    assert invoke(str(log), "--ground-truth", "-o", str(gt)).exit_code == 0
+    targets, _ = channel_targets(log)
+    tracks = decode_channel(types.TRACKS, mcapio.read_messages(log, mcapio.TOPIC_TRACKS)[1])
+    hyps = ev.track_frames(tracks.stamps, tracks.offsets["tracks"], tracks.items["tracks"])
+    assert ev.evaluate(targets, hyps, match_radius=0.3) == score_file(log, gt_csv=gt, match_radius=0.3)["scores"]
+
+
+@pytest.mark.parametrize("fmt", ["ndjson", "parquet"])
+def test_ground_truth_in_every_format_holds_the_csvs_rows(tmp_path, fmt):
+    log = str(SAMPLES / "crowd6.mcap")
+    assert invoke(log, "--ground-truth", "-o", str(tmp_path / "gt.csv")).exit_code == 0
+    assert invoke(log, "--ground-truth", "-o", str(tmp_path / f"gt{SUFFIX[fmt]}")).exit_code == 0
+    rows = ground_truth_rows(tmp_path / f"gt{SUFFIX[fmt]}", fmt)
+    assert rows == ground_truth_rows(tmp_path / "gt.csv", "csv")
+    assert len(rows) > 1000 and {r["class"] for r in rows} == {"person"}
+    if fmt == "parquet":
+        import pyarrow.parquet as pq
+
+        assert pq.read_schema(tmp_path / "gt.parquet").names == GT_HEADER
+
+
+def test_ground_truth_to_stdout_is_the_same_table(tmp_path):
+    out = tmp_path / "gt.csv"
+    assert invoke(str(SAMPLES / "patrol.mcap"), "--ground-truth", "-o", str(out)).exit_code == 0
+    result = invoke(str(SAMPLES / "patrol.mcap"), "--ground-truth", "-o", "-", "-q")
+    assert result.exit_code == 0 and result.stderr == ""
+    assert result.stdout_bytes == out.read_bytes()
+
+
+def test_ground_truth_streams_in_two_passes_each_scan_once():
+    seen: dict[str, int] = {}
+    sink = export.sink_for(io.BytesIO(), "csv", cols=export.GROUND_TRUTH_COLUMNS)
+    export.export_ground_truth(SAMPLES / "hall.mcap", sink, block=64,
+                               progress=lambda stage, n: seen.__setitem__(stage, seen.get(stage, 0) + n))
+    assert seen == {"movers": 300, "targets": 300}
+    assert sink.batches == 5 and sink.peak_rows < sink.rows   # 300 scans, 64 at a time
+
+
+@pytest.mark.parametrize("args, message", [
+    (["{hall}", "--ground-truth", "--features"], "--ground-truth with --features: the ground truth is a table of "
+                                                 "its own (stamp_ns,id,x,y,class); export it and the tracks with "
+                                                 "two commands"),
+    (["{hall}", "{crowd6}", "--ground-truth"], "--ground-truth: give one FILE (evaluate --gt scores one log), not 2"),
+    (["{hall}", "--include-occluded"], "--include-occluded: only with --ground-truth (the targets no beam hits)"),
+    (["{csail}", "--ground-truth"], "{csail}: no messages on /datmo/ground_truth; only datmo simulate writes ground "
+                                    "truth (annotate a real log as a stamp_ns,id,x,y CSV instead)"),
+])
+def test_ground_truth_refusals_are_one_line(tmp_path, args, message):
+    fill = {name: SAMPLES / f"{name}.mcap" for name in ("hall", "crowd6")} | {"csail": SAMPLES / "csail-excerpt.mcap"}
+    result = invoke(*[a.format(**fill) for a in args], "-o", str(tmp_path / "gt.csv"))
+    assert result.exit_code == 1
+    assert result.stderr.splitlines() == ["datmo: error: " + message.format(**fill)]
+    assert list(tmp_path.iterdir()) == []
+
+
+def rewritten_ground_truth(path: Path, k: int, payload: bytes) -> Path:
+    """hall.mcap's /datmo/ground_truth with message k's payload replaced, as the log at `path`."""
+    stamps, payloads = mcapio.read_messages(SAMPLES / "hall.mcap", mcapio.TOPIC_GROUND_TRUTH)
+    with mcapio.LogWriter(path, force=True) as w:
+        w.write_many(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH, stamps, payloads[:k] + [payload] + payloads[k + 1:])
+    return path
+
+
+def test_a_target_position_that_is_not_finite_is_one_line(tmp_path):
+    payload = mcapio.read_messages(SAMPLES / "hall.mcap", mcapio.TOPIC_GROUND_TRUTH)[1][7]
+    msg = cdr.decode(types.GROUND_TRUTH, payload)
+    objects = msg["objects"].copy()
+    person = np.flatnonzero(objects["classification"] == 1)[0]
+    objects["x"][person] = np.inf
+    log = rewritten_ground_truth(tmp_path / "inf.mcap", 7, cdr.encode(types.GROUND_TRUTH, {**msg, "objects": objects}))
+    out = tmp_path / "gt.csv"
+    result = invoke(str(log), "--ground-truth", "-o", str(out))
+    assert result.exit_code == 1
+    assert result.stderr.splitlines() == [f"datmo: error: {log}: /datmo/ground_truth message 7 holds a target "
+                                          "position that is not a finite number"]
+    assert not out.exists() and not list(tmp_path.glob(".*.tmp"))
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_damaged_ground_truth_messages_are_one_line(tmp_path, data):
+    """A GroundTruth payload cut, flipped or replaced: exported as it decodes, to a CSV evaluate reads, or
+    refused in one line naming the file; never a traceback, never a partial output."""
+    from datmo_cli import evaluate as ev
+    from datmo_cli.errors import InputError
+
+    payloads = mcapio.read_messages(SAMPLES / "hall.mcap", mcapio.TOPIC_GROUND_TRUTH)[1]
+    k = data.draw(st.integers(0, len(payloads) - 1))
+    p = bytearray(payloads[k])
+    how = data.draw(st.sampled_from(["cut", "flip", "random"]))
+    if how == "cut":
+        p = p[:data.draw(st.integers(0, len(p) - 1))]
+    elif how == "flip":
+        for _ in range(data.draw(st.integers(1, 8))):
+            p[data.draw(st.integers(0, len(p) - 1))] ^= data.draw(st.integers(1, 255))
+    else:
+        p = bytearray(data.draw(st.binary(max_size=200)))
+    log, out = rewritten_ground_truth(tmp_path / "damaged.mcap", k, bytes(p)), tmp_path / "damaged.csv"
+    out.unlink(missing_ok=True)
+    result = invoke(str(log), "--ground-truth", "-o", str(out))
+    lines = result.stderr.splitlines()
+    if result.exit_code == 0 and out.exists():
+        try:
+            ev.read_ground_truth_csv(out)
+            ok = True
+        except InputError:
+            ok = False
+    else:
+        ok = (result.exit_code == 1 and len(lines) == 1 and lines[0].startswith(f"datmo: error: {log}: ")
+              and "/datmo/ground_truth" in lines[0] and not out.exists())
+    tally("export --ground-truth: damaged GroundTruth messages", failed=not ok)
+    assert ok, result.stderr
+    assert not list(tmp_path.glob(".*.tmp"))
