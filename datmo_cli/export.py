@@ -53,9 +53,10 @@ where a beam hits them (with `include_occluded`, in every scan). A message with 
 only its stamp, so that evaluate counts the scan as a frame. What the CSV cannot carry: the channel's other
 objects (scene structure, movers that never move, hidden targets), which evaluate uses as don't-care
 regions; scored against the CSV, a confirmed track on one of them is a false positive, and may take a match
-from a target. Every figure that only counts targets (frames, objects, unique objects, misses when no
-track is near structure) stays the same; evaluate's ignored_hypotheses on the channel says how many tracks
-the regions took out.
+from a target, and a class whose only tracks lie on them gets a row of its own (no targets, all false
+positives). On the simulated sample logs every other figure is the same (frames, objects, matches, misses,
+switches, MOTP, LocA, recall, mostly tracked/lost), and false positives grow by exactly the channel's
+ignored_hypotheses; MOTA, IDF1, precision, HOTA and DetA fall accordingly.
 
 Streaming: each file is read twice, a summary pass (its channels and message counts: the progress bar's
 total, and an input without /datmo/tracks refused before anything is written) and one pass per exported
