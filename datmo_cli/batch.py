@@ -136,6 +136,9 @@ def _expand(spec: str, out_root: str | None) -> list[tuple[str, str]]:
             return [(fs.unstrip_protocol(p), os.path.relpath(p, path)) for p in found]
         return [(spec, os.path.basename(path))]
     path = local(spec)
+    bag = _bag_of(path)
+    if bag is not None and not magic:
+        return [(bag, os.path.basename(bag))]
     if magic:
         found = [os.path.abspath(p) for p in sorted(glob.glob(path, recursive=True)) if os.path.isfile(p)]
         found = [p for p in found if _is_log(p) and not _inside(p, out_root)]
@@ -153,6 +156,15 @@ def _expand(spec: str, out_root: str | None) -> list[tuple[str, str]]:
             raise InputError(f"{spec}: no .mcap logs in this folder")
         return [(p, os.path.relpath(p, root)) for p in found]
     return [(os.path.abspath(path), os.path.basename(path))]   # a missing file fails as its own input
+
+
+def _bag_of(path: str) -> str | None:
+    """The absolute path of the ROS 2 bag folder that local `path` names (the folder, or its .db3 file), else
+    None. A bag is one input, converted by its task (run_task), and its output is named after the folder."""
+    folder = os.path.dirname(path) if path.endswith(".db3") else path
+    if os.path.isdir(folder) and os.path.isfile(os.path.join(folder, "metadata.yaml")):
+        return os.path.abspath(folder)
+    return None
 
 
 def _inside(path: str, folder: str | None) -> bool:
@@ -204,6 +216,9 @@ def params_hash(params: dict | None) -> str:
            "leg_model": model.get("sha256", model.get("model"))}
     if params.get("markers") is False:   # --no-markers: other outputs (the hash of a default run is unchanged)
         doc["markers"] = False
+    for key in ("topic", "odom_topic"):   # --topic, --odom-topic: another conversion of a bag
+        if params.get(key) is not None:
+            doc[key] = params[key]
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
@@ -320,12 +335,16 @@ def failed(task: Task, error: str) -> dict:
 
 
 def input_stat(path: str) -> tuple[int | None, int | None]:
-    """(size, mtime in ns) of an input, (None, None) when it cannot be seen."""
+    """(size, mtime in ns) of an input, (None, None) when it cannot be seen; for a ROS 2 bag folder the size of
+    its files in all and the latest mtime of the folder and its files."""
     try:
         if remote(path):
             fs, p = _fs(path)
             return int(fs.info(p)["size"]), None
         st = os.stat(local(path))
+        if os.path.isdir(local(path)):
+            files = [os.stat(p) for p in Path(local(path)).rglob("*") if p.is_file()]
+            return sum(f.st_size for f in files), max([st.st_mtime_ns, *(f.st_mtime_ns for f in files)])
         return st.st_size, st.st_mtime_ns
     except (OSError, KeyError, ValueError, DatmoError):
         return None, None
@@ -373,7 +392,8 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
     A DatmoError (bad input, refused overwrite) gives a failed line with the one-line error; any other
     exception too, unless `raise_unexpected` (Dask then retries the task). `cancelled()` is polled as the
     scans go by; when it says so the task stops, drops its partial output and returns a "cancelled" line.
-    `scans(done, total)` follows the scans of this input.
+    `scans(done, total)` follows the scans of this input. A bag (ROS 1 file, ROS 2 folder) and, with a topic
+    in the parameters, any input is converted here first (`converted`), so a skipped input never is.
     """
     from . import pipeline
 
@@ -391,9 +411,11 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
         size, mtime = input_stat(task.input)
         with _staged_input(task.input) as src, _staged_output(task.output, task.force) as out:
             sha = input_sha256(src)
-            n = pipeline.process_file(src, out, force=task.force, params=task.params,
-                                      command_line=task.command_line, progress=progress,
-                                      input_name=task.input if remote(task.input) else None)
+            with converted(src, out, task) as log:
+                origin = {} if Path(log) == Path(src) else {"origin": src}   # provenance hashes the bag, not the copy
+                n = pipeline.process_file(log, out, force=task.force, params=task.params,
+                                          command_line=task.command_line, progress=progress,
+                                          input_name=task.input if remote(task.input) else None, **origin)
             figures = headline(out)
         seconds = time.perf_counter() - t0
         return record(task, DONE, input_sha256=sha, input_size=size, input_mtime_ns=mtime, scans=n,
@@ -415,10 +437,28 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
         return failed(task, f"failed: {type(exc).__name__}: {exc}")
 
 
+def converted(src: str, out: str, task: Task):  # noqa: ANN201 - a context manager of the log's Path
+    """The datmo log to process for local input `src`: `src` itself, or its conversion as by datmo import (a
+    bag, or any input when params give "topic" or "odom_topic") into a temporary MCAP beside output `out` (beside
+    the bag folder with params["bag_dir"]), removed when the block ends, on every way out (scan_log). The
+    output is checked first, so a refused output costs no conversion."""
+    from .commands.options import scan_log
+    from .outputs import temp_path
+
+    params = task.params or {}
+    dest = temp_path(Path(out).parent if params.get("bag_dir") else Path(out))
+    return scan_log(Path(src), Path(out), params.get("topic"), params.get("odom_topic"), force=task.force,
+                    dest=dest)
+
+
 @contextmanager
 def _staged_input(path: str) -> Iterator[str]:
-    """A local path of the input: itself, or a copy of a remote one in a temporary folder."""
+    """A local path of the input: itself (a file or a ROS 2 bag folder), or a copy of a remote file in a
+    temporary folder."""
     if not remote(path):
+        if _bag_of(local(path)) == os.path.abspath(local(path)):
+            yield local(path)
+            return
         if not os.path.isfile(local(path)):
             why = "is a directory, not an MCAP log" if os.path.isdir(local(path)) else "no such file"
             raise InputError(f"{path}: {why}")

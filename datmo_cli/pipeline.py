@@ -156,12 +156,14 @@ def derive(run, odometry, params: dict | None = None,  # noqa: ANN001 - ScanRun,
 
 def process_file(src: str | Path, out: str | Path, *, force: bool = False, params: dict | None = None,
                  command_line: str | None = None, progress: Callable[[int, int], None] | None = None,
-                 markers: bool = True, block_scans: int | None = None, input_name: str | None = None) -> int:
+                 markers: bool = True, block_scans: int | None = None, input_name: str | None = None,
+                 origin: str | Path | None = None) -> int:
     """Segment, extract features and track `src` in one streaming pass into `out` (see module docstring and
     streaming); returns the number of scans. `progress(done, total)` is called as scans are processed;
     `markers` (and params["markers"], default True): also write the Foxglove markers; `input_name`: what the
-    output's provenance calls the input (default its path). With params["bag_dir"], `out` is the log file of a
-    ROS 2 bag folder (log.bagdir.member_path), and the folder is written whole."""
+    output's provenance calls the input (default its path); `origin`: the file or bag folder `src` was converted
+    from (`src` a temporary copy of a bag), which provenance hashes and names instead. With params["bag_dir"],
+    `out` is the log file of a ROS 2 bag folder (log.bagdir.member_path), and the folder is written whole."""
     from .log import bagdir
     from .streaming import BLOCK_SCANS, LogStream, stream_log, stream_odometry
 
@@ -171,10 +173,12 @@ def process_file(src: str | Path, out: str | Path, *, force: bool = False, param
     odometry, estimated = stream_odometry(stream, probe.track_params.ego_motion, block_scans or BLOCK_SCANS)
     stages = RunStages(odometry, params, estimated=estimated, markers=markers)
     bag = bool((params or {}).get("bag_dir"))
-    with bagdir.output(Path(out).parent if bag else out, bag, force=force, inputs=[src]) as dst:
+    origin = Path(origin) if origin is not None else src
+    with bagdir.output(Path(out).parent if bag else out, bag, force=force, inputs=[origin]) as dst:
         return stream_log(stream, dst, command="run", params=stages.effective(), derived=stages.derived(),
                           stage=stages, force=force, command_line=command_line,
-                          block_scans=block_scans or BLOCK_SCANS, progress=progress, input_name=input_name)
+                          block_scans=block_scans or BLOCK_SCANS, progress=progress, input_name=input_name,
+                          origin=origin)
 
 
 def features_leg_model(log) -> str:  # noqa: ANN001 - mcapio.LogContents

@@ -183,16 +183,18 @@ Stage = Callable[[Block], dict[str, tuple[str, np.ndarray, list]]]
 def stream_log(stream: LogStream, out: str | Path, *, command: str, params: dict, derived: dict[str, str],
                stage: Stage, force: bool = False, command_line: str | None = None,
                aligned: tuple[str, ...] = (), block_scans: int = BLOCK_SCANS,
-               progress: Callable[[int, int], None] | None = None, input_name: str | None = None) -> int:
+               progress: Callable[[int, int], None] | None = None, input_name: str | None = None,
+               origin: str | Path | None = None) -> int:
     """Write `out`: the input's channels (those in `derived` replaced) and the `derived` channels ({topic:
     message type}, in this order) that `stage(block)` gives block by block ({topic: (msgtype, stamps,
     payloads)}), with provenance (`command`, its effective `params`). Returns the number of scans.
     `progress(done, total)` follows the scans; `input_name`: what provenance calls the input (default its path,
-    e.g. the URL a local copy was fetched from)."""
+    e.g. the URL a local copy was fetched from); `origin`: the file provenance hashes as the input (default the
+    stream's; a bag the stream's log was converted from)."""
     from .numba_runtime import prepare
 
     prepare()   # the stages load numba kernels: numba's set-up without its scipy.linalg import
-    provenance = mcapio.Provenance(command, params, [stream.path], command_line,
+    provenance = mcapio.Provenance(command, params, [origin or stream.path], command_line,
                                    names=[input_name] if input_name else None)
     total = stream.n_scans
     with mcapio.LogWriter(out, force=force, provenance=provenance) as writer:

@@ -134,14 +134,16 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     Each output holds the input's channels and /datmo/segments, /datmo/features, /datmo/landmarks,
     /datmo/tracks and markers, with the same messages as datmo segment, datmo features and datmo track
     run one after another. INPUTS are files, folders (searched recursively for .mcap logs) and globs, or
-    fsspec URLs; ROS 1 bags and ROS 2 bag folders (and any input with --topic) are converted first, as by
-    datmo import, into OUT_DIR/.converted-PID/ (removed after the run). Inputs run in parallel in local
+    fsspec URLs. ROS 1 bags and ROS 2 bag folders or their .db3 (and any input with --topic) are converted as
+    by datmo import by the input's own task, into a temporary MCAP beside its output (removed when the task
+    ends); the output is named after the bag and its provenance names the bag. Inputs run in parallel in local
     processes (--jobs) or on a Dask cluster (--scheduler); a failing input is reported and the others'
     outputs are kept (the exit status is then 1).
 
     OUT_DIR/manifest.jsonl gets one line per input as it finishes (input SHA-256, output, status, scans,
-    tracks by class, parameters' hash). Running the same command again skips the inputs already done with
-    the same input and parameters and does the rest (after a failure or Ctrl-C); --force redoes all.
+    tracks by class, parameters' hash, which counts --topic and --odom-topic). Running the same command again
+    skips the inputs already done with the same input and parameters, bags without converting them, and does
+    the rest (after a failure or Ctrl-C); --force redoes all.
 
     With --bag-dir each output is a ROS 2 bag folder, OUT_DIR/NAME/ holding NAME_0.mcap and metadata.yaml, which
     ros2 bag play and other bag tools open (build datmo_msgs for the /datmo topics); plots stay OUT_DIR/NAME.png.
@@ -166,7 +168,10 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     if bag_dir and remote(out_dir):
         raise DatmoError(f"{out_dir}: --bag-dir needs a local output folder")
     params = _params(config, leg_model, ego_motion)
-    inputs = _converted(inputs, out_dir, topic, odom_topic)
+    if topic is not None:
+        params["topic"] = topic
+    if odom_topic is not None:
+        params["odom_topic"] = odom_topic
     if no_markers:
         params["markers"] = False
     if bag_dir:
@@ -213,39 +218,6 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         raise DatmoError(f"{failed} of {len(records)} inputs failed; the other outputs are complete")
     if failed:
         raise SystemExit(1)  # the one error is printed above
-
-
-def _converted(inputs: tuple[str, ...], out_dir: str, topic: str | None, odom_topic: str | None) -> list[str]:
-    """`inputs` with each bag (and, with a topic chosen, each local file) replaced by its conversion to a datmo
-    log, OUT_DIR/.converted-PID/NAME.mcap (so the output keeps the name NAME.mcap), removed with the folder
-    when the command ends, on any way out."""
-    import os
-    import shutil
-
-    from ..batch import local, remote
-    from .options import needs_conversion, scan_log
-
-    ctx = click.get_current_context()
-    folder = None
-    out = []
-    for spec in inputs:
-        path = Path(local(spec))
-        if remote(spec) or not path.exists() or not needs_conversion(path, topic, odom_topic) or (
-                path.is_dir() and not (path / "metadata.yaml").is_file()):
-            out.append(spec)
-            continue
-        if folder is None:
-            if remote(out_dir):
-                from ..errors import DatmoError
-
-                raise DatmoError(f"{spec}: a bag is converted beside the outputs, which needs a local output folder")
-            folder = Path(local(out_dir)) / f".converted-{os.getpid()}"
-            folder.mkdir(parents=True, exist_ok=True)
-            ctx.call_on_close(lambda f=folder: shutil.rmtree(f, ignore_errors=True))
-        name = (path.parent.name if path.suffix == ".db3" else path.stem) or "bag"
-        dest = folder / f"{name}.mcap"
-        out.append(str(ctx.with_resource(scan_log(path, dest, topic, odom_topic, force=True, dest=dest))))
-    return out
 
 
 def _params(config: Path | None, leg_model: str | None, ego_motion: str | None) -> dict:
