@@ -411,7 +411,8 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
         size, mtime = input_stat(task.input)
         with _staged_input(task.input) as src, _staged_output(task.output, task.force) as out:
             sha = input_sha256(src)
-            with converted(src, out, task) as log:
+            notes: list[str] = []
+            with converted(src, out, task, notes.append) as log:
                 origin = {} if Path(log) == Path(src) else {"origin": src}   # provenance hashes the bag, not the copy
                 n = pipeline.process_file(log, out, force=task.force, params=task.params,
                                           command_line=task.command_line, progress=progress,
@@ -420,7 +421,7 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
         seconds = time.perf_counter() - t0
         return record(task, DONE, input_sha256=sha, input_size=size, input_mtime_ns=mtime, scans=n,
                       seconds=round(seconds, 3), scans_per_s=round(n / seconds, 1) if seconds > 0 else 0.0,
-                      tracks=figures)
+                      tracks=figures, **({"notes": notes} if notes else {}))
     except Cancelled:
         return record(task, CANCELLED)
     except DatmoError as exc:
@@ -437,18 +438,19 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
         return failed(task, f"failed: {type(exc).__name__}: {exc}")
 
 
-def converted(src: str, out: str, task: Task):  # noqa: ANN201 - a context manager of the log's Path
+def converted(src: str, out: str, task: Task, tell: Callable[[str], None]):  # noqa: ANN201 - a context manager
     """The datmo log to process for local input `src`: `src` itself, or its conversion as by datmo import (a
     bag, or any input when params give "topic" or "odom_topic") into a temporary MCAP beside output `out` (beside
     the bag folder with params["bag_dir"]), removed when the block ends, on every way out (scan_log). The
-    output is checked first, so a refused output costs no conversion."""
+    output is checked first, so a refused output costs no conversion. `tell` gets the lines the conversion says
+    (they go in the task's record, "notes", which the command prints: a worker does not print)."""
     from .commands.options import scan_log
     from .outputs import temp_path
 
     params = task.params or {}
     dest = temp_path(Path(out).parent if params.get("bag_dir") else Path(out))
     return scan_log(Path(src), Path(out), params.get("topic"), params.get("odom_topic"), force=task.force,
-                    dest=dest)
+                    dest=dest, tell=tell)
 
 
 @contextmanager

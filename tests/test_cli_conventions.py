@@ -352,7 +352,7 @@ def test_run_takes_a_ros1_bag_and_names_the_output_after_it(tmp_path, bags):
     assert result.exit_code == 0, result.output
     assert "converted" in result.stderr and "legs.bag" in result.stderr
     assert mcapio.summary(out / "legs.mcap").topics()[mcapio.TOPIC_TRACKS].count == N_SCANS
-    assert _left_over(out) == []   # the converted copy and its folder are gone
+    assert _left_over(out) == []   # the converted copy is gone
 
 
 # ---------------------------------------------------------------------------------------- completion

@@ -18,8 +18,8 @@ from datmo_cli.errors import InputError
 from datmo_cli.log import importers, mcapio
 
 
-def invoke(*args):  # noqa: ANN201 - click.testing.Result
-    return CliRunner().invoke(cli, ["run", *map(str, args), "--no-report", "-q"])
+def invoke(*args, quiet: bool = True):  # noqa: ANN201 - click.testing.Result
+    return CliRunner().invoke(cli, ["run", *map(str, args), "--no-report", *(["-q"] if quiet else [])])
 
 
 def latest(out: Path) -> dict[str, dict]:
@@ -218,11 +218,15 @@ def test_a_remote_bag_is_converted_by_its_task(tmp_path, bags, conversions):
 
 
 def test_local_processes_convert_their_own_bags(tmp_path, bags):
-    """--jobs 2: each bag converted in its worker process; a rerun in one process skips both."""
+    """--jobs 2: each bag converted in its worker process, which says so through its record (the command
+    prints it, above the bar: a forked worker's own stderr is not this one); a rerun in one process skips both."""
     out = tmp_path / "out"
-    result = invoke(bags["ros1"], bags["ros2"], "-o", out, "-j", "2")
+    result = invoke(bags["ros1"], bags["ros2"], "-o", out, "-j", "2", quiet=False)
     assert result.exit_code == 0, result.output
     assert {r["status"] for r in latest(out).values()} == {"done"} and hidden(out) == []
+    for bag in bags.values():
+        said = [line for line in result.stderr.splitlines() if line.startswith(f"datmo: converted {bag} ")]
+        assert len(said) == 1 and said == latest(out)[str(bag)]["notes"]
     again = invoke(bags["ros1"], bags["ros2"], "-o", out, "-j", "1")
     assert again.exit_code == 0 and {r["status"] for r in latest(out).values()} == {"skipped"}
 

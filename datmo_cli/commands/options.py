@@ -55,12 +55,14 @@ def input_options(f: Callable) -> Callable:
 
 @contextmanager
 def scan_log(src: Path, output: Path, topic: str | None = None, odom_topic: str | None = None, *,
-             force: bool = False, dest: Path | None = None) -> Iterator[Path]:
+             force: bool = False, dest: Path | None = None,
+             tell: Callable[[str], None] | None = None) -> Iterator[Path]:
     """The datmo log to read for `src`: `src` itself when it is an MCAP file and no topic is chosen; otherwise
     (a ROS 1 or ROS 2 bag, a CARMEN log, or a topic chosen) `src` converted as by `datmo import` into a
     temporary MCAP beside `output`, said on stderr and removed when the block ends (or on any way out).
     Before converting, `output` is checked (check_output with `force`): a refused output costs no conversion.
-    `dest`: the temporary MCAP's path (default: a hidden name beside `output`)."""
+    `dest`: the temporary MCAP's path (default: a hidden name beside `output`); `tell`: what gets the lines
+    said (the conversion, warnings), e.g. a batch task's record (default: stderr, the conversion unless --quiet)."""
     from .. import outputs
     from ..log.importers import detect_kind, open_import, write_import
     from ..progress import say
@@ -80,10 +82,11 @@ def scan_log(src: Path, output: Path, topic: str | None = None, odom_topic: str 
             stats = write_import(stream, tmp, force=True)
         finally:
             for w in stream.warnings:
-                click.echo(f"datmo: warning: {w}", err=True)
+                (tell or functools.partial(click.echo, err=True))(f"datmo: warning: {w}")
         odom = f" and {stats.poses} poses from {stream.odom_topic}" if stats.poses else ""
         kind = {"ros1": "ROS 1 bag", "ros2": "ROS 2 bag"}.get(stream.kind, stream.kind)
-        say(f"datmo: converted {src} ({kind}: {stats.scans} scans from {stream.topic}{odom}) to a temporary MCAP")
+        (tell or say)(f"datmo: converted {src} ({kind}: {stats.scans} scans from {stream.topic}{odom}) to a "
+                      "temporary MCAP")
         yield tmp
     finally:
         outputs.discard(tmp)
