@@ -1,0 +1,258 @@
+"""The README runs (issue #15 point 8): every ```sh block of README.md, in the README's order, in a fresh folder,
+as a user would after `make demo`.
+
+The folder holds a copy of `sample_logs/` and the demo's outputs (`out/`, made first with the Makefile's demo
+command), and sits beside a `shared` link to ../shared, so `../shared/data/...` resolves as in a clone beside
+CI's data. The README's conventions for lines that are not run (it states them under its first block):
+- a block whose first line is a comment `# needs ...` (ROS 2, a Dask cluster) is not run;
+- a line ending in a comment `# needs ...` (an LMS200 on /dev/ttyUSB0) is not run;
+- `make` lines are not run: the demo's command has run already, and `make test` would run this test again.
+`datmo emulate` runs in the background until its block ends, then gets Ctrl-C and must exit 130; the device
+path it prints replaces the README's example path (`/dev/pts/N`) in that block's later lines. Every other
+line must exit 0 without a traceback. Lines not run are printed with their reason; the counts go to the
+"README commands" tallies of the run's summary.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import selectors
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import pytest
+from conftest import ROOT, SAMPLE_LOGS, SHARED_DATA, shared_path
+from fuzzing import tally
+
+README = ROOT / "README.md"
+MAKEFILE = ROOT / "Makefile"
+NEEDS = re.compile(r"(?:^|\s)#\s*(needs\b.*)$")   # the README's marker: a comment starting "needs"
+HEREDOC = re.compile(r"<<-?\s*['\"]?(\w+)['\"]?")   # cat > FILE <<'EOF' ... EOF
+OUTPUT = re.compile(r"(?:\s-o\s+|\s>\s*)([^\s;|&<>]+)")   # -o PATH, > PATH
+EXAMPLE_PTY = re.compile(r"/dev/pts/\d+")
+COMMAND_TIMEOUT = 600   # s, a hung command fails the test instead of hanging it
+EMULATE_START_TIMEOUT = 60   # s to print its device path
+
+
+def sh_blocks(text: str) -> list[list[str]]:
+    """The lines of every ```sh fenced block, in order (only top-level fences: indented ones are quoted data)."""
+    blocks, block = [], None
+    for line in text.splitlines():
+        if block is None and line.rstrip() == "```sh":
+            block = []
+        elif block is not None and line.rstrip() == "```":
+            blocks.append(block)
+            block = None
+        elif block is not None:
+            block.append(line)
+    assert block is None, "README.md: a ```sh block is not closed"
+    return blocks
+
+
+def logical_lines(block: list[str]) -> list[str]:
+    """The block's shell commands: continued lines joined, a here-document kept with its command."""
+    out, pending, end = [], "", None
+    for line in block:
+        if end is not None:
+            pending += "\n" + line
+            if line.strip() == end:
+                out.append(pending)
+                pending, end = "", None
+            continue
+        if line.rstrip().endswith("\\"):
+            pending += line.rstrip()[:-1] + " "
+            continue
+        pending += line
+        heredoc = HEREDOC.search(line)
+        if heredoc:
+            end = heredoc.group(1)
+            continue
+        out.append(pending)
+        pending = ""
+    assert end is None and not pending, f"README.md: a block ends inside a command: {pending!r}"
+    return out
+
+
+def commands(block: list[str]) -> list[tuple[str, str | None]]:
+    """The block's commands (continued lines joined), each with the reason it is not run, or None."""
+    first = next((line.strip() for line in block if line.strip()), "")
+    block_reason = NEEDS.search(first).group(1) if first.startswith("#") and NEEDS.search(first) else None
+    out = []
+    for line in logical_lines(block):
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        marker = NEEDS.search(stripped)
+        if block_reason:
+            out.append((stripped, block_reason))
+        elif marker:
+            out.append((stripped, marker.group(1)))
+        elif stripped.startswith("make "):
+            out.append((stripped, "a make target: the demo's command has run; make test would run this test again"))
+        else:
+            out.append((stripped, None))
+    return out
+
+
+def demo_command() -> str:
+    """The Makefile's `demo` recipe as a user's shell runs it (datmo on PATH)."""
+    text = MAKEFILE.read_text()
+    demo_log = re.search(r"^DEMO_LOG\s*:=\s*(\S+)", text, re.M).group(1)
+    recipe = re.search(r"^demo:.*\n\t(.+)$", text, re.M).group(1)
+    return recipe.replace("$(BIN)/", "").replace("$(DEMO_LOG)", demo_log)
+
+
+def run(command: str, cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess:
+    """Run one README command with bash in `cwd`."""
+    return subprocess.run(["bash", "-c", command], cwd=cwd, env=env, capture_output=True, text=True,
+                          timeout=COMMAND_TIMEOUT)
+
+
+def start_emulator(command: str, cwd: Path, env: dict[str, str]) -> tuple[subprocess.Popen, str]:
+    """Start `datmo emulate` in the background; return it and the device path it prints on its first line."""
+    proc = subprocess.Popen(["bash", "-c", "exec " + command], cwd=cwd, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    sel = selectors.DefaultSelector()
+    sel.register(proc.stdout, selectors.EVENT_READ)
+    if not sel.select(EMULATE_START_TIMEOUT):
+        proc.kill()
+        pytest.fail(f"{command}: printed no device path in {EMULATE_START_TIMEOUT} s")
+    device = proc.stdout.readline().strip()
+    if not device.startswith("/dev/"):
+        proc.kill()
+        pytest.fail(f"{command}: first line {device!r} is not a device path; stderr: {proc.stderr.read()}")
+    return proc, device
+
+
+def stop_emulator(proc: subprocess.Popen, command: str) -> str | None:
+    """Ctrl-C the emulator; a problem as one line, or None when it exits 130 as documented."""
+    proc.send_signal(signal.SIGINT)
+    try:
+        _, err = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return f"{command}: still running 30 s after Ctrl-C"
+    if proc.returncode != 130:
+        return f"{command}: exit {proc.returncode} after Ctrl-C (documented: 130); stderr: {err.strip()}"
+    return None
+
+
+def outputs(command: str) -> list[str]:
+    """The files a command names as its outputs: `-o PATH` (not `-`) and `> PATH` redirections."""
+    first_line = command.split("\n", 1)[0]
+    return [path for path in OUTPUT.findall(first_line) if path != "-"]
+
+
+def problem(command: str, result: subprocess.CompletedProcess, cwd: Path) -> str | None:
+    """Why a README command's run breaks the README's promise, or None."""
+    if result.returncode != 0:
+        tail = (result.stderr.strip() or result.stdout.strip())[-2000:]
+        return f"{command}: exit {result.returncode}: {tail}"
+    if "Traceback" in result.stderr:
+        return f"{command}: a traceback on stderr: {result.stderr.strip()[-2000:]}"
+    empty = [path for path in outputs(command) if not (cwd / path).exists() or (cwd / path).stat().st_size == 0]
+    if empty:
+        return f"{command}: exit 0 but no output or an empty one: {', '.join(empty)}"
+    return None
+
+
+def test_sh_blocks_and_markers():
+    """The extraction itself: continued lines join, markers skip a block or a line, make lines are skipped."""
+    text = "\n".join([
+        "```sh", "make demo    # a comment", "datmo a \\", "    --b c", "datmo d   # needs an LMS200", "```",
+        "  ```sh", "  indented: quoted data", "  ```",
+        "```toml", "x = 1", "```",
+        "```sh", "# needs ROS 2", "ros2 bag play x", "```",
+        "```sh", "cat > a.toml <<'EOF'", "# not a comment line here", "x = 1", "EOF", "datmo e", "```",
+    ])
+    blocks = sh_blocks(text)
+    assert len(blocks) == 3
+    first, second, third = (commands(block) for block in blocks)
+    assert [c for c, _ in first] == ["make demo    # a comment", "datmo a      --b c", "datmo d   # needs an LMS200"]
+    assert first[0][1].startswith("a make target") and first[1][1] is None and first[2][1] == "needs an LMS200"
+    assert second == [("ros2 bag play x", "needs ROS 2")]
+    assert third == [("cat > a.toml <<'EOF'\n# not a comment line here\nx = 1\nEOF", None), ("datmo e", None)]
+    assert demo_command().startswith("datmo run sample_logs/")
+
+
+def test_outputs_named():
+    """The outputs a command names, whose absence or emptiness fails it."""
+    assert outputs("datmo run a.mcap -o out-all --plot") == ["out-all"]
+    assert outputs("datmo config --no-config > my-params.toml   # a comment") == ["my-params.toml"]
+    assert outputs("datmo export x.mcap -o - --format ndjson | head -3") == []
+    assert outputs("cat > my_room.toml <<'EOF'\nname = 'x' > y\nEOF") == ["my_room.toml"]
+
+
+def test_readme_config_example(tmp_path):
+    """The README's example datmo.toml (its ```toml block) is a config datmo takes every key of."""
+    blocks = re.findall(r"^```toml\n(.*?)^```", README.read_text(), re.M | re.S)
+    assert blocks, "README.md: no ```toml example"
+    for block in blocks:
+        (tmp_path / "datmo.toml").write_text(block)
+        result = subprocess.run([str(Path(sys.executable).with_name("datmo")), "config"], cwd=tmp_path,
+                                capture_output=True, text=True, timeout=120)
+        assert result.returncode == 0, result.stderr
+        keys = [key for table in tomllib.loads(block).values() for key in table]
+        taken = [key for key in keys if re.search(rf"^{key} = .*# from datmo\.toml", result.stdout, re.M)]
+        assert taken == keys, f"keys of the README's datmo.toml not taken from it: {set(keys) - set(taken)}"
+
+
+def test_readme_fences_are_sh():
+    """Shell examples use ```sh fences only (no ```bash, ```shell or ```console): the test below sees them all."""
+    fences = re.findall(r"^```(\w+)", README.read_text(), re.M)
+    assert not {"bash", "shell", "console", "zsh"} & set(fences), fences
+
+
+@pytest.mark.slow
+@pytest.mark.shared
+def test_readme_runs(tmp_path):
+    """Every README command not marked otherwise exits 0, in order, in a fresh folder after the demo."""
+    shared_path()   # the README reads ../shared/data: skip where absent, fail under CI=true
+    (tmp_path / "shared").symlink_to(SHARED_DATA.parent, target_is_directory=True)
+    work = tmp_path / "datmo"
+    work.mkdir()
+    shutil.copytree(SAMPLE_LOGS, work / "sample_logs")
+    env = dict(os.environ)
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    env.pop("DATMO_DEBUG", None)
+
+    demo = demo_command()
+    result = run(demo, work, env)
+    assert result.returncode == 0, f"{demo}: exit {result.returncode}: {result.stderr[-2000:]}"
+    assert (work / "out").is_dir()
+
+    failures, ran, skipped = [], 0, []
+    print()
+    for block in sh_blocks(README.read_text()):
+        emulator = None
+        for command, reason in commands(block):
+            if reason:
+                skipped.append((command, reason))
+                tally("README commands not run (marked)")
+                continue
+            if emulator is not None:
+                command = EXAMPLE_PTY.sub(emulator[1], command)
+            ran += 1
+            if command.startswith("datmo emulate "):
+                emulator = (*start_emulator(command, work, env), command)
+                continue
+            start = time.monotonic()
+            why = problem(command, run(command, work, env), work)
+            print(f"  {time.monotonic() - start:6.1f} s  {command}")
+            tally("README commands", failed=why is not None)
+            failures += [why] if why else []
+        if emulator is not None:   # counted here: its exit after Ctrl-C is part of its promise
+            why = stop_emulator(emulator[0], emulator[2])
+            tally("README commands", failed=why is not None)
+            failures += [why] if why else []
+    print(f"README: {ran} commands run, {len(skipped)} not run:")
+    for command, reason in skipped:
+        print(f"  not run ({reason}): {command}")
+    assert ran > 0
+    assert not failures, "README commands that fail as written:\n" + "\n".join(failures)
