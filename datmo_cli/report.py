@@ -728,6 +728,20 @@ Moving: a person, or a track whose mobility is dynamic. Times in s from the file
 in m in the world frame when every track state has one, else the sensor frame; speeds in m/s."""
 
 
+PARAM_WIDTH = 160   # characters of a parameter's value in the run table; `datmo info FILE --json` has it whole
+
+
+def param_text(name: str, value) -> str:  # noqa: ANN001 - any JSON value from the provenance
+    """A parameter's value as the run table shows it: the leg model by its name, digest and threshold (its
+    record holds the training figures), any other value as JSON cut at PARAM_WIDTH characters."""
+    if name == "leg_model" and isinstance(value, dict) and "sha256" in value:
+        threshold = value.get("threshold")
+        about = f", threshold {threshold:.2f}" if isinstance(threshold, float) else ""
+        return f"{value.get('model') or value.get('path')} (sha256 {str(value['sha256'])[:12]}{about})"
+    text = value if isinstance(value, str) else json.dumps(value)
+    return text if len(text) <= PARAM_WIDTH else text[:PARAM_WIDTH - 1] + "…"
+
+
 def file_tables(summary: RunSummary, top: int | None = 20, sort: str = "lifetime",
                 all_tracks: bool = False) -> list[Table]:
     """The tables of one file: run facts, features, landmarks, the tracks in full (the moving ones, or every
@@ -737,7 +751,7 @@ def file_tables(summary: RunSummary, top: int | None = 20, sort: str = "lifetime
     facts = [["file", r["file"]], ["duration", f"{r['duration_s']:.1f} s"], ["scans", r["scans"]],
              ["rate", f"{r['rate_hz']:.2f} Hz" if r["rate_hz"] else "-"], ["beams", r["beams"]],
              ["dropped scans", r["dropped_scans"]], ["datmo version", r["version"]], ["command", r["command"]]]
-    facts += [[f"param {k}", json.dumps(v) if not isinstance(v, str) else v] for k, v in r["parameters"].items()]
+    facts += [[f"param {k}", param_text(k, v)] for k, v in r["parameters"].items()]
     out = [Table(f"{name}: run", ["what", "value"], facts)]
     f = summary.features
     if f is not None:

@@ -71,7 +71,7 @@ def test_cli_single_input_prints_its_report_and_plot(tmp_path, inputs):
     out = tmp_path / "out"
     result = CliRunner().invoke(cli, ["run", str(inputs[0]), "-o", str(out), "--plot"])
     assert result.exit_code == 0, result.output
-    assert "Confirmed tracks by class" in result.stdout
+    assert "people and dynamic tracks" in result.stdout
     assert (out / "a.png").stat().st_size > 10_000
     again = CliRunner().invoke(cli, ["run", str(inputs[0]), "-o", str(out), "--plot"])
     assert again.exit_code == 0 and "0 done, 1 skipped" in again.stderr   # the manifest says it is done
