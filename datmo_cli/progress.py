@@ -54,7 +54,46 @@ def console(*, stderr: bool = False):  # noqa: ANN201 - rich.console.Console, im
     stream = sys.stderr if stderr else sys.stdout
     if _isatty(stream):
         return Console(stderr=stderr)
-    return Console(stderr=stderr, width=PIPE_WIDTH, soft_wrap=True, no_color=True, highlight=False)
+    plain = Console(file=_Trimmed(stream), width=PIPE_WIDTH, soft_wrap=True, no_color=True, highlight=False)
+    plain.datmo_plain = True
+    return plain
+
+
+def table(console, **kwargs):  # noqa: ANN001, ANN003, ANN201 - rich Console and Table, imported lazily
+    """A rich Table for `console`: boxed on a terminal; plain columns without borders on a console that is
+    not one (see `console`), whose trimmed lines then end with their own text, not padded out to the table's
+    widest row."""
+    from rich.table import Table
+
+    if getattr(console, "datmo_plain", False):
+        kwargs.update(box=None, pad_edge=False)
+    return Table(**kwargs)
+
+
+class _Trimmed:
+    """A text stream that writes whole lines without their trailing spaces."""
+
+    def __init__(self, stream) -> None:  # noqa: ANN001 - a text stream
+        self.stream = stream
+        self.pending = ""
+
+    def write(self, text: str) -> int:
+        *lines, self.pending = (self.pending + text).split("\n")
+        if lines:
+            self.stream.write("".join(line.rstrip() + "\n" for line in lines))
+        return len(text)
+
+    def flush(self) -> None:
+        if self.pending:
+            self.stream.write(self.pending.rstrip())
+            self.pending = ""
+        self.stream.flush()
+
+    def isatty(self) -> bool:
+        return False
+
+    def fileno(self) -> int:
+        return self.stream.fileno()
 
 
 def _isatty(stream) -> bool:  # noqa: ANN001 - a text stream

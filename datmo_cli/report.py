@@ -792,10 +792,10 @@ def console():  # noqa: ANN201 - rich.console.Console, imported lazily
 
 def render_rich(tabs: list[Table], console) -> None:  # noqa: ANN001 - rich.console.Console, imported lazily
     """Print tables with rich."""
-    from rich.table import Table as RichTable
+    from .progress import table as rich_table
 
     for t in tabs:
-        rt = RichTable(title=t.title, title_justify="left")
+        rt = rich_table(console, title=t.title, title_justify="left")
         for i, c in enumerate(t.columns):
             rt.add_column(c, justify="right" if i in t.numeric else "left", overflow="fold")
         for row in t.rows:

@@ -62,9 +62,8 @@ def describe(path: Path) -> dict:
 
 
 def _print_rich(info: dict) -> None:
-    from rich.table import Table
-
     from ..progress import console as make_console
+    from ..progress import table as make_table
 
     console = make_console()
     console.print(f"[bold]{info['file']}[/]  {info['size_bytes'] / 1e6:.2f} MB, "
@@ -74,7 +73,7 @@ def _print_rich(info: dict) -> None:
     if info["corrupt_chunks"]:
         console.print(f"[yellow]corrupt: {info['corrupt_chunks']} chunk(s) ({info['corrupt_bytes']:,} bytes) failed "
                       "their CRC or did not decompress and were skipped; counts and scans leave them out[/]")
-    table = Table(title="Channels", title_justify="left")
+    table = make_table(console, title="Channels", title_justify="left")
     for col in ("topic", "type", "encoding", "messages"):
         table.add_column(col, justify="right" if col == "messages" else "left")
     for c in info["channels"]:
@@ -82,7 +81,7 @@ def _print_rich(info: dict) -> None:
     console.print(table)
     scan = info["scan"]
     if scan:
-        t = Table(title="Scans (/scan)", title_justify="left", show_header=False)
+        t = make_table(console, title="Scans (/scan)", title_justify="left", show_header=False)
         t.add_column("what")
         t.add_column("value")
         rows = [
@@ -101,7 +100,7 @@ def _print_rich(info: dict) -> None:
             t.add_row(*r)
         console.print(t)
     if info["metadata"]:
-        m = Table(title="Provenance and metadata", title_justify="left")
+        m = make_table(console, title="Provenance and metadata", title_justify="left")
         m.add_column("record")
         m.add_column("key")
         m.add_column("value", overflow="fold")

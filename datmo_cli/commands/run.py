@@ -256,10 +256,9 @@ FINAL_ROWS = 50
 def _final_table(records: list[dict], seconds: float, where: str) -> None:
     """The batch's table on stderr (every input up to FINAL_ROWS, then only failures) and its totals line;
     nothing under --quiet (failures are said as errors all the same)."""
-    from rich.table import Table
-
     from ..batch import DONE, FAILED, SKIPPED
     from ..progress import console, quiet
+    from ..progress import table as make_table
 
     if quiet():
         return
@@ -268,7 +267,8 @@ def _final_table(records: list[dict], seconds: float, where: str) -> None:
     scans = sum(r["scans"] for r in done)
     shown = records if len(records) <= FINAL_ROWS else [r for r in records if r["status"] == FAILED][:FINAL_ROWS]
     if shown:
-        table = Table(title_justify="left")
+        err = console(stderr=True)
+        table = make_table(err, title_justify="left")
         for col in ("input", "status", "scans", "scans/s", "tracks", "people", "output or error"):
             table.add_column(col, justify="right" if col in ("scans", "scans/s", "tracks", "people") else "left",
                              overflow="fold")
@@ -278,7 +278,7 @@ def _final_table(records: list[dict], seconds: float, where: str) -> None:
                           f"{r['scans_per_s']:,.0f}" if r["status"] == DONE else "",
                           str(t.get("confirmed", "")), str(t.get("person", "")),
                           r["error"] if r["status"] == FAILED else r["output"])
-        console(stderr=True).print(table)
+        err.print(table)
     counts = {s: sum(r["status"] == s for r in records) for s in (DONE, SKIPPED, FAILED)}
     rate = scans / seconds if seconds > 0 else 0.0
     click.echo(f"{len(records)} input{'s' if len(records) != 1 else ''}: {counts[DONE]} done, {counts[SKIPPED]} "

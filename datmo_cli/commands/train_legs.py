@@ -42,9 +42,10 @@ def _fmt(v: float | None, digits: int = 3) -> str:
 
 def print_figures(held_out: list, mean: dict, console) -> None:  # noqa: ANN001 - rich Console
     """The held-out figures as a rich table: learned detector beside the paper's circle rule."""
-    from rich.table import Table
+    from ..progress import table as make_table
 
-    table = Table(title="Held-out figures (clusters within 5 m; learned | circle rule)", title_justify="left")
+    table = make_table(console, title="Held-out figures (clusters within 5 m; learned | circle rule)",
+                       title_justify="left")
     for col in ("held out", "empty scanner", "threshold", "precision", "recall", "AP", "false legs / empty scan"):
         table.add_column(col, justify="left" if col in ("held out", "empty scanner") else "right")
 
