@@ -290,7 +290,7 @@ def test_signals_at_seeded_moments_leave_no_partial_output(logs, tmp_path, comma
         else:
             last = err.strip().splitlines()[-1] if err.strip() else ""
             ok = (proc.returncode == 128 + sig and last.startswith("datmo: error: ") and "Traceback" not in err
-                  and not result.exists())
+                  and (not result.exists() or len(mcapio.read_run(result)) == 1200))   # nothing, or the whole
         ok = ok and writing and not temps(folder) and digest(long) == before
         tally("signals", failed=not ok)
         assert ok, (command, signal.Signals(sig).name, proc.returncode, err[-2000:])
