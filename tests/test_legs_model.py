@@ -98,6 +98,17 @@ def test_save_load_round_trip(tmp_path):
     assert load_leg_model(str(path)).n_trees == 5
 
 
+def test_a_model_file_read_before_and_unchanged_is_not_read_again(tmp_path):
+    X, y = random_features(300, 7)
+    path = tmp_path / "m.npz"
+    from_sklearn(GradientBoostingClassifier(n_estimators=5, random_state=0).fit(X, y), 0.42, {}).save(path)
+    first = load_leg_model(str(path))
+    assert load_leg_model(str(path)) is first and load_leg_model("default") is load_leg_model("default")
+    from_sklearn(GradientBoostingClassifier(n_estimators=3, random_state=0).fit(X, y), 0.5, {}).save(path, force=True)
+    again = load_leg_model(str(path))     # rewritten: another size (and mtime), so read anew
+    assert again is not first and (again.n_trees, again.threshold_p) == (3, 0.5)
+
+
 def test_bad_files(tmp_path):
     with pytest.raises(InputError, match="absent.npz"):
         LegModel.load(tmp_path / "absent.npz")

@@ -378,14 +378,29 @@ def from_sklearn(estimator, threshold_p: float, provenance: dict) -> LegModel:
                      "ExtraTreesClassifier or GradientBoostingClassifier")
 
 
+_LOADED: dict[tuple, LegModel] = {}   # (resolved path, mtime ns, size) -> the model read from it
+
+
 def load_leg_model(spec: str) -> LegModel | None:
     """'default': the packaged model; 'paper': None (the paper's circle rule, no learned model); otherwise the
-    path of a model file (InputError when absent or bad)."""
+    path of a model file (InputError when absent or bad). A file read before and unchanged since (same
+    mtime and size) gives the model read then: streaming stages ask for it once a block, and reading and
+    checking the file costs tens of milliseconds. Models are not changed after loading."""
     if spec == "paper":
         return None
-    if spec == "default":
-        return LegModel.load(DEFAULT_MODEL_PATH)
-    return LegModel.load(spec)
+    path = Path(DEFAULT_MODEL_PATH if spec == "default" else spec)
+    try:
+        st = path.stat()
+        key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    except OSError:
+        return LegModel.load(path)   # missing or unreadable: load says so in one line
+    model = _LOADED.get(key)
+    if model is None:
+        model = LegModel.load(path)
+        if len(_LOADED) >= 8:
+            _LOADED.clear()
+        _LOADED[key] = model
+    return model
 
 
 def leg_probabilities(ranges, angles, seg_start, seg_end, seg_offsets, range_min: float, range_max: float,
