@@ -332,6 +332,19 @@ def test_force_replaces_an_existing_table(processed, tmp_path):
     assert out.read_text().startswith(",".join(HEADER) + "\n")
 
 
+def damaged(data, payload: bytes) -> bytearray:  # noqa: ANN001 - hypothesis' data object
+    """`payload` cut, with 1-8 bytes flipped, or replaced by random bytes (hypothesis draws which)."""
+    p = bytearray(payload)
+    how = data.draw(st.sampled_from(["cut", "flip", "random"]))
+    if how == "cut":
+        return p[:data.draw(st.integers(0, len(p) - 1))]
+    if how == "flip":
+        for _ in range(data.draw(st.integers(1, 8))):
+            p[data.draw(st.integers(0, len(p) - 1))] ^= data.draw(st.integers(1, 255))
+        return p
+    return bytearray(data.draw(st.binary(max_size=200)))
+
+
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_damaged_tracks_messages_are_one_line(processed, tmp_path, data):
@@ -339,15 +352,7 @@ def test_damaged_tracks_messages_are_one_line(processed, tmp_path, data):
     file and the message; never a traceback, never a partial output."""
     stamps, payloads = mcapio.read_messages(processed["static"], mcapio.TOPIC_TRACKS)
     k = data.draw(st.integers(0, len(payloads) - 1))
-    p = bytearray(payloads[k])
-    how = data.draw(st.sampled_from(["cut", "flip", "random"]))
-    if how == "cut":
-        p = p[:data.draw(st.integers(0, len(p) - 1))]
-    elif how == "flip":
-        for _ in range(data.draw(st.integers(1, 8))):
-            p[data.draw(st.integers(0, len(p) - 1))] ^= data.draw(st.integers(1, 255))
-    else:
-        p = bytearray(data.draw(st.binary(max_size=200)))
+    p = damaged(data, payloads[k])
     log, out = tmp_path / "damaged.mcap", tmp_path / "damaged.csv"
     out.unlink(missing_ok=True)
     with mcapio.LogWriter(log, force=True) as w:
@@ -557,15 +562,7 @@ def test_damaged_ground_truth_messages_are_one_line(tmp_path, data):
 
     payloads = mcapio.read_messages(SAMPLES / "hall.mcap", mcapio.TOPIC_GROUND_TRUTH)[1]
     k = data.draw(st.integers(0, len(payloads) - 1))
-    p = bytearray(payloads[k])
-    how = data.draw(st.sampled_from(["cut", "flip", "random"]))
-    if how == "cut":
-        p = p[:data.draw(st.integers(0, len(p) - 1))]
-    elif how == "flip":
-        for _ in range(data.draw(st.integers(1, 8))):
-            p[data.draw(st.integers(0, len(p) - 1))] ^= data.draw(st.integers(1, 255))
-    else:
-        p = bytearray(data.draw(st.binary(max_size=200)))
+    p = damaged(data, payloads[k])
     log, out = rewritten_ground_truth(tmp_path / "damaged.mcap", k, bytes(p)), tmp_path / "damaged.csv"
     out.unlink(missing_ok=True)
     result = invoke(str(log), "--ground-truth", "-o", str(out))
