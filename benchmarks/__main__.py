@@ -18,7 +18,7 @@ def main() -> int:
         module = importlib.import_module(f"benchmarks.{path.stem}")
         try:
             module.main()
-        except Exception as exc:  # noqa: BLE001 - report and go on with the other benchmarks
+        except Exception as exc:  # report and go on with the other benchmarks
             print(f"{path.name}: FAILED: {exc!r}")
             failed += 1
     return 1 if failed else 0

@@ -23,7 +23,7 @@ LEGTRACKER = ROOT.parent / "shared" / "data" / "legtracker"
 TARGETS = {"ap": 0.80, "ap_vs_circle": 4.0, "false_per_scan": 0.5}
 
 
-def shipped_spec():  # noqa: ANN201 - training.EstimatorSpec
+def shipped_spec():
     """The estimator settings of the packaged model (its provenance), or the defaults without one."""
     import dataclasses
 

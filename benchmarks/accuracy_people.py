@@ -59,7 +59,7 @@ def fold_models(folder: Path, quick: bool = False) -> tuple[dict[str, str], dict
     return by_bag, by_topic
 
 
-def tracked(run, leg_model: str):  # noqa: ANN001, ANN201 - ScanRun -> TrackedRun
+def tracked(run, leg_model: str):
     """`datmo track` as it runs on a log without odometry (poses from scan matching when the scanner moves)."""
     params = {"leg_model": leg_model}
     odometry, _ = odometry_for(run, None, "auto")

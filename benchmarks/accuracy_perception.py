@@ -131,7 +131,7 @@ def wall_line_errors(f: RunFeatures, rho: float, theta: float) -> tuple[np.ndarr
     return ang, np.abs(signed - rho), scans
 
 
-def circle_errors(f: RunFeatures, obj: tuple[float, float, float], match: float = 0.15):  # noqa: ANN201
+def circle_errors(f: RunFeatures, obj: tuple[float, float, float], match: float = 0.15):
     """(centre errors m, radius errors m, scans with a circle within `match` of the true centre)."""
     cx, cy = obj[0] * math.cos(obj[1]), obj[0] * math.sin(obj[1])
     d = np.hypot(f.circles["x"] - cx, f.circles["y"] - cy)
@@ -249,7 +249,7 @@ def main() -> None:
         label = f"{path.parent.name}/{path.name}{' ' + topic if topic else ''}"
         try:
             lines.append(f"{label}: {real(path, topic)}")
-        except Exception as exc:  # noqa: BLE001 - report every log, whatever fails
+        except Exception as exc:  # report every log, whatever fails
             failed += 1
             last = traceback.extract_tb(exc.__traceback__)[-1]
             lines.append(f"{label}: FAILED: {type(exc).__name__}: {exc} ({last.filename}:{last.lineno})")

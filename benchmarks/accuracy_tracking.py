@@ -37,7 +37,7 @@ def have_perception() -> bool:
     return importlib.util.find_spec("datmo_cli.perception.features") is not None
 
 
-def load_sim(name: str):  # noqa: ANN201
+def load_sim(name: str):
     log = mcapio.read_log(LOGS / f"{name}.mcap", topics=None)
     run = mcapio.run_from_log(log)
     truth = decode_channel(types.GROUND_TRUTH, log.messages[mcapio.TOPIC_GROUND_TRUTH][1])

@@ -22,7 +22,7 @@ REPEAT = 3
 SAMPLE = Path(__file__).resolve().parent.parent / "sample_logs" / "hall.mcap"
 
 
-def time_batch(inputs: list[str], executor, tmp: Path) -> tuple[float, int]:  # noqa: ANN001 - batch.Executor
+def time_batch(inputs: list[str], executor, tmp: Path) -> tuple[float, int]:
     """(seconds, scans) of one run of the batch into a fresh folder."""
     from datmo_cli import batch
 
@@ -61,7 +61,7 @@ def _nothing(i: int) -> int:
     return i
 
 
-def noop_round_trip(executor, n: int = 50) -> float:  # noqa: ANN001 - cluster.DaskExecutor
+def noop_round_trip(executor, n: int = 50) -> float:
     """Median seconds from submitting an empty task to holding its result, one task at a time."""
     import statistics
 

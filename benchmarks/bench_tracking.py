@@ -22,7 +22,7 @@ TRACK_TARGET_US = 40.0   # issue #13: the whole tracking step per scan, given fe
 REPEAT = 4   # the 60 s hall log is 300 scans; repeat it (later copies shifted in time) for steadier figures
 
 
-def _repeat(run, feats):  # noqa: ANN001, ANN202
+def _repeat(run, feats):
     from datmo_cli.log.scan import ScanRun
 
     span = int(run.stamps[-1] - run.stamps[0]) + 200_000_000

@@ -14,7 +14,7 @@ class WarmUp(WorkerPlugin):
     name = "datmo-warm-up"
     idempotent = True
 
-    def setup(self, worker) -> None:  # noqa: ANN001 - distributed.Worker
+    def setup(self, worker) -> None:
         ensure_warm()
 
 
@@ -25,7 +25,7 @@ class IgnoreInterrupt(WorkerPlugin):
     name = "datmo-ignore-interrupt"
     idempotent = True
 
-    def setup(self, worker) -> None:  # noqa: ANN001 - distributed.Worker
+    def setup(self, worker) -> None:
         import signal
         import threading
 

@@ -36,7 +36,7 @@ DONE, FAILED, SKIPPED, CANCELLED = "done", "failed", "skipped", "cancelled"
 TRACK_CLASSES = ("person", "circle_object", "rectangular_object", "unknown")
 
 
-class Cancelled(BaseException):  # noqa: N818 - like KeyboardInterrupt: no `except Exception` may swallow it
+class Cancelled(BaseException):
     """The batch was cancelled while this task ran; its partial output is dropped."""
 
 
@@ -59,7 +59,7 @@ def local(path: str) -> str:
     return path[len("file://"):] if path.startswith("file://") else path
 
 
-def _fs(url: str):  # noqa: ANN202 - (fsspec filesystem, path), fsspec imported lazily
+def _fs(url: str):
     try:
         import fsspec
     except ImportError:
@@ -438,7 +438,7 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
         return failed(task, f"failed: {type(exc).__name__}: {exc}")
 
 
-def converted(src: str, out: str, task: Task, tell: Callable[[str], None]):  # noqa: ANN201 - a context manager
+def converted(src: str, out: str, task: Task, tell: Callable[[str], None]):
     """The datmo log to process for local input `src`: `src` itself, or its conversion as by datmo import (a
     bag, or any input when params give "topic" or "odom_topic") into a temporary MCAP beside output `out` (beside
     the bag folder with params["bag_dir"]), removed when the block ends, on every way out (scan_log). The
@@ -604,7 +604,7 @@ class LocalExecutor(Executor):
         self.workers = jobs or os.cpu_count() or 1
         self.where = f"{self.workers} local process{'es' if self.workers > 1 else ''}"
 
-    def run(self, tasks, on_record, on_scans=None) -> None:  # noqa: ANN001 - see Executor
+    def run(self, tasks, on_record, on_scans=None) -> None:
         if not tasks:
             return
         if min(self.workers, len(tasks)) <= 1:
@@ -613,7 +613,7 @@ class LocalExecutor(Executor):
             return
         self._pool(tasks, on_record, on_scans)
 
-    def _pool(self, tasks, on_record, on_scans) -> None:  # noqa: ANN001
+    def _pool(self, tasks, on_record, on_scans) -> None:
         import multiprocessing
         from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
         from concurrent.futures.process import BrokenProcessPool
@@ -644,11 +644,11 @@ class LocalExecutor(Executor):
             pool.shutdown(wait=True)
 
 
-def _queued_task(task: Task, queue) -> dict:  # noqa: ANN001 - a Manager queue proxy
+def _queued_task(task: Task, queue) -> dict:
     return run_task(task, scans=lambda d, n: queue.put((task.index, d, n)))
 
 
-def _drain(queue, on_scans) -> None:  # noqa: ANN001
+def _drain(queue, on_scans) -> None:
     import queue as queue_mod
 
     while True:

@@ -212,7 +212,7 @@ def background_side(extent: float, cell: float) -> int:
     return int(math.ceil(2.0 * extent / cell))
 
 
-def features_combined(p, where: str = "features") -> None:  # noqa: ANN001 - FeatureParams
+def features_combined(p, where: str = "features") -> None:
     """ConfigError when parameters that are each in range combine into a contradiction or too big a kernel."""
     if p.circle_radius_min >= p.circle_radius_max:
         raise ConfigError(f"{where}: circle_radius_min must be below circle_radius_max")
@@ -232,7 +232,7 @@ def features_combined(p, where: str = "features") -> None:  # noqa: ANN001 - Fea
                           f"{CIRCLE_VOTES:,}); raise circle_radius_step or circle_cell")
 
 
-def track_combined(p, where: str = "track") -> None:  # noqa: ANN001 - TrackingParams
+def track_combined(p, where: str = "track") -> None:
     """ConfigError when tracking parameters that are each in range contradict or make too big a grid."""
     if p.confirm_window < p.confirm_hits:
         raise ConfigError(f"{where}.confirm_window: must be at least confirm_hits ({p.confirm_hits})")
@@ -261,7 +261,7 @@ class Bounded(click.ParamType):
     def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
         return "INTEGER" if self.bound.integer else "FLOAT"
 
-    def convert(self, value, param, ctx):  # noqa: ANN001, ANN201 - Click's signature
+    def convert(self, value, param, ctx):
         name = option_name(param)
         if isinstance(value, str):
             text = value.strip()
@@ -273,13 +273,13 @@ class Bounded(click.ParamType):
         return check(self.bound, value, name, OptionError)
 
 
-def option(*decls: str, bound: Bound, help: str, **kwargs) -> click.decorators.FC:  # noqa: A002, ANN003
+def option(*decls: str, bound: Bound, help: str, **kwargs) -> click.decorators.FC:
     """click.option for a number within `bound`, the range appended to its help."""
     return click.option(*decls, type=Bounded(bound), help=f"{help} Range: {bound.describe()}.", **kwargs)
 
 
-def pair_option(*decls: str, bounds: tuple[Bound, Bound], names: tuple[str, str], help: str,  # noqa: A002
-                **kwargs) -> click.decorators.FC:  # noqa: ANN003
+def pair_option(*decls: str, bounds: tuple[Bound, Bound], names: tuple[str, str], help: str,
+                **kwargs) -> click.decorators.FC:
     """click.option taking two numbers (e.g. MIN MAX), each within its bound, the ranges appended to its help."""
     ranges = ", ".join(f"{n} {b.describe()}" for n, b in zip(names, bounds, strict=True))
     return click.option(*decls, type=click.Tuple([Bounded(bounds[0]), Bounded(bounds[1])]),
@@ -296,7 +296,7 @@ class LaserPose(click.ParamType):
     def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
         return "X,Y,YAW"
 
-    def convert(self, value, param, ctx):  # noqa: ANN001, ANN201 - Click's signature
+    def convert(self, value, param, ctx):
         if isinstance(value, tuple):
             return value
         name = option_name(param)

@@ -45,7 +45,7 @@ def invocation(command: str) -> str:
     return "datmo " + " ".join(shlex.quote(a) for a in args)
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     click.echo(f"datmo: warning: {message}", err=True)
 
 
@@ -139,7 +139,7 @@ class CleanError(click.ClickException):
         super().__init__(message)
         self.exit_code = exit_code
 
-    def show(self, file=None) -> None:  # noqa: ANN001 - Click's signature
+    def show(self, file=None) -> None:
         click.echo(f"datmo: error: {self.format_message()}", err=True, file=file)
 
 
@@ -151,11 +151,11 @@ class LazyGroup(click.Group):
     a traceback (`datmo --debug` or DATMO_DEBUG=1 shows it). Ctrl-C exits 130, SIGTERM 143, SIGHUP 129.
     On every way out the temporary files of unfinished outputs are removed (outputs.remove_live)."""
 
-    def main(self, args=None, *rest, **kwargs):  # noqa: ANN001, ANN201 - Click's signature
+    def main(self, args=None, *rest, **kwargs):
         _ARGS[:] = list(sys.argv[1:] if args is None else args)
         return super().main(args, *rest, **kwargs)
 
-    def invoke(self, ctx: click.Context):  # noqa: ANN201 - Click's signature
+    def invoke(self, ctx: click.Context):
         import warnings
 
         from . import outputs
@@ -208,7 +208,7 @@ class _FileOutput(click.ParamType):
         self.inner = inner
         self.name = inner.name
 
-    def convert(self, value, param, ctx):  # noqa: ANN001, ANN201 - Click's signature
+    def convert(self, value, param, ctx):
         import os
 
         if ctx is not None and ctx.params.get("bag_dir"):   # a folder (an eager --bag-dir; log/bagdir.py checks it)
@@ -224,10 +224,10 @@ class _FileOutput(click.ParamType):
             raise OutputError(f"{os.fsdecode(value)}: is a directory; give a file name")
         return self.inner.convert(value, param, ctx)
 
-    def get_metavar(self, *args, **kwargs):  # noqa: ANN002, ANN003, ANN201
+    def get_metavar(self, *args, **kwargs):
         return self.inner.get_metavar(*args, **kwargs)
 
-    def shell_complete(self, ctx, param, incomplete):  # noqa: ANN001, ANN201
+    def shell_complete(self, ctx, param, incomplete):
         return self.inner.shell_complete(ctx, param, incomplete)
 
 

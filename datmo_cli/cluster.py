@@ -28,7 +28,7 @@ CANCEL_GRACE_S = 10.0
 CONNECT_TIMEOUT = "15s"
 
 
-def _distributed():  # noqa: ANN202 - the distributed module
+def _distributed():
     try:
         import distributed
     except ImportError:
@@ -133,7 +133,7 @@ class DaskExecutor(Executor):
             live[fut.key] = (fut, t)
             stream.add(fut)
 
-        def collect(fut) -> None:  # noqa: ANN001 - distributed.Future
+        def collect(fut) -> None:
             t = live.pop(fut.key)[1]
             try:
                 rec = fut.result()
@@ -142,7 +142,7 @@ class DaskExecutor(Executor):
                     submit(t)
                     return
                 rec = failed(t, f"worker died {attempts[t.index]} times running it ({exc})")
-            except Exception as exc:  # noqa: BLE001 - Dask retried it `retries` times
+            except Exception as exc:  # Dask retried it `retries` times
                 rec = failed(t, f"failed: {type(exc).__name__}: {exc}")
             fut.release()
             on_record(rec)
@@ -173,7 +173,7 @@ class DaskExecutor(Executor):
             for fut, _ in list(live.values()):
                 try:
                     rec = fut.result(timeout=max(0.1, deadline - time.monotonic()))
-                except Exception:  # noqa: BLE001, S112 - failed, retried elsewhere or still running: dropped
+                except Exception:
                     continue
                 if rec.get("status") != CANCELLED:
                     on_record(rec)
@@ -186,7 +186,7 @@ class DaskExecutor(Executor):
             if thing is not None:
                 try:
                     thing.close()
-                except Exception:  # noqa: BLE001, S110 - closing after a failure
+                except Exception:
                     pass
         self.cluster = None
 

@@ -161,7 +161,7 @@ def track_frames(stamps: np.ndarray, offsets: np.ndarray, tracks: np.ndarray, *,
 INT64_MAX = np.iinfo(np.int64).max
 
 
-def read_ground_truth_csv(path, name: str | None = None) -> Frames:  # noqa: ANN001 - str or Path
+def read_ground_truth_csv(path, name: str | None = None) -> Frames:
     """Ground truth from a CSV file (see parse_ground_truth_csv): UTF-8 text, a leading byte-order mark
     allowed (spreadsheets write one). A binary file, text that is not UTF-8, or a file that cannot be read
     raises InputError naming it."""
@@ -246,7 +246,7 @@ def _csv_rows(reader: csv.DictReader, cols: dict[str, str], name: str) -> tuple[
     return stamps, ids, xs, ys, cls, empty
 
 
-def _cells(row: dict, cols: dict[str, str]):  # noqa: ANN202 - (column) -> stripped text, "" when absent
+def _cells(row: dict, cols: dict[str, str]):
     return lambda col: (row.get(cols[col]) or "").strip() if col in cols else ""
 
 

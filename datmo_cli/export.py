@@ -313,11 +313,11 @@ class TextSink:
         self.stream.flush()
 
 
-def require_pyarrow():  # noqa: ANN201 - the pyarrow module
+def require_pyarrow():
     """pyarrow (with its parquet module), or ParquetMissingError naming the extra to install."""
     try:
         import pyarrow
-        import pyarrow.parquet  # noqa: F401
+        import pyarrow.parquet
     except ImportError:
         raise ParquetMissingError(f"writing Parquet needs pyarrow: {PARQUET_HINT}") from None
     return pyarrow
@@ -338,7 +338,7 @@ class ParquetSink:
         self.writer = pq.ParquetWriter(stream, self.schema, compression="zstd")
         self.rows = self.batches = self.peak_rows = 0
 
-    def _array(self, name: str, a: np.ndarray | None, n: int):  # noqa: ANN202 - a pyarrow Array
+    def _array(self, name: str, a: np.ndarray | None, n: int):
         pa, typ = self.pa, self.schema.field(name).type
         if a is None:
             return pa.nulls(n, typ)

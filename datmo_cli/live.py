@@ -43,11 +43,11 @@ class LiveUnavailable(DatmoError):
     """The live view's package (foxglove-sdk) is not installed."""
 
 
-def require_foxglove():  # noqa: ANN201 - the foxglove module
+def require_foxglove():
     """The foxglove module, or LiveUnavailable saying how to install it."""
     try:
         import foxglove
-        import foxglove.websocket  # noqa: F401 - the server lives there
+        import foxglove.websocket
     except ImportError as exc:
         raise LiveUnavailable(f"the live view needs the foxglove-sdk package ({exc}); install it with {INSTALL}") \
             from None
@@ -162,7 +162,7 @@ class LiveServer:
         try:
             self.server = foxglove.start_server(name=name, host=host, port=port, capabilities=[Capability.Time],
                                                 server_listener=_Listener(self.subscribed), context=self.context)
-        except Exception as exc:  # noqa: BLE001 - the SDK raises its own errors for a busy port or a bad host
+        except Exception as exc:  # the SDK raises its own errors for a busy port or a bad host
             raise ConfigError(f"{option} {port}: cannot serve on {host}:{port} ({_reason(exc)})") from None
         self.port = self.server.port
 
@@ -224,7 +224,7 @@ class _Listener:
     def __init__(self, subscribed: threading.Event) -> None:
         self.subscribed = subscribed
 
-    def on_subscribe(self, client, channel) -> None:  # noqa: ANN001 - foxglove's Client, ChannelView
+    def on_subscribe(self, client, channel) -> None:
         self.subscribed.set()
 
 
@@ -436,5 +436,5 @@ class LiveFeed:
                     self.published += len(scans)
                 if done:
                     return
-        except Exception as exc:  # noqa: BLE001 - the view may fail; the recording goes on
+        except Exception as exc:  # the view may fail; the recording goes on
             self.failure = f"{type(exc).__name__}: {exc}"

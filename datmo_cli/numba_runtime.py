@@ -38,7 +38,7 @@ def prepare() -> None:
         _READY = True
 
 
-def _load_blas_alone():  # noqa: ANN202 - a module or None
+def _load_blas_alone():
     """scipy.linalg.cython_blas loaded without its package (registered in sys.modules), or None when scipy
     is missing or the module cannot be found or loaded that way (numba then checks as it always does)."""
     import importlib.machinery
@@ -61,7 +61,7 @@ def _load_blas_alone():  # noqa: ANN202 - a module or None
         sys.modules[BLAS] = module
         blas_spec.loader.exec_module(module)
         return module
-    except Exception:  # noqa: BLE001 - any failure: numba imports scipy.linalg as usual
+    except Exception:  # any failure: numba imports scipy.linalg as usual
         sys.modules.pop(BLAS, None)
         return None
 

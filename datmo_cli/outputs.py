@@ -38,7 +38,7 @@ _LOCK = threading.Lock()
 _COUNTER = [0]
 
 
-class Terminated(BaseException):  # noqa: N818 - like KeyboardInterrupt: no `except Exception` may swallow it
+class Terminated(BaseException):
     """SIGTERM or SIGHUP arrived: unwind, drop temporary files, exit 128 + signum."""
 
     def __init__(self, signum: int) -> None:
@@ -65,7 +65,7 @@ def _raise_for(signum: int) -> None:
     raise Terminated(signum)
 
 
-def _handler(signum: int, frame) -> None:  # noqa: ANN001 - signal handler signature
+def _handler(signum: int, frame) -> None:
     if _state["depth"]:
         _PENDING.append(signum)
         return
@@ -249,7 +249,7 @@ class Guarded:
         self._file = file
         self._path = path
 
-    def write(self, data) -> int:  # noqa: ANN001 - bytes-like or str
+    def write(self, data) -> int:
         with writing(self._path):
             return self._file.write(data)
 
@@ -261,7 +261,7 @@ class Guarded:
         with writing(self._path):
             self._file.close()
 
-    def __getattr__(self, name: str):  # noqa: ANN204 - tell, fileno, closed, ...
+    def __getattr__(self, name: str):
         return getattr(self._file, name)
 
 

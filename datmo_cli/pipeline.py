@@ -55,7 +55,7 @@ def warm_up() -> None:
     odometry_for(sim.run, None, "on")   # scan matching, for logs without odometry
 
 
-def estimated_odometry(run, odometry, mode: str) -> tuple:  # noqa: ANN001 - ScanRun, Odometry | None
+def estimated_odometry(run, odometry, mode: str) -> tuple:
     """(odometry to track in, {"/odom": channel} when it was estimated from the scans here, else {}): a log
     without odometry whose scanner moves is tracked in poses from scan matching (see perception.egomotion),
     written to /odom (frame scan_odom) so the output holds the frame its world positions are in."""
@@ -68,7 +68,7 @@ def estimated_odometry(run, odometry, mode: str) -> tuple:  # noqa: ANN001 - Sca
     return odometry, {mcapio.TOPIC_ODOM: (types.ODOMETRY, odometry.stamps, mcapio.encode_odometry(odometry))}
 
 
-def odometry_channel(odometry, block) -> tuple:  # noqa: ANN001 - Odometry estimated at every scan, Block
+def odometry_channel(odometry, block) -> tuple:
     """The /odom channel (msgtype, stamps, payloads) of a block's scans from odometry estimated at every scan."""
     from .log import types
 
@@ -82,7 +82,7 @@ class RunStages:
     with each Block in order; it returns the block's derived channels. `estimated`: the odometry was
     estimated from the scans, and its poses are written to /odom block by block."""
 
-    def __init__(self, odometry, params: dict | None = None, estimated: bool = False,  # noqa: ANN001
+    def __init__(self, odometry, params: dict | None = None, estimated: bool = False,
                  markers: bool = True) -> None:
         from .perception.features import FeatureStream
         from .perception.params import FeatureParams
@@ -118,7 +118,7 @@ class RunStages:
         return {"features": self.feature_params.to_dict(), "track": self.track_params.to_dict(),
                 "leg_model": leg_model_provenance(self.feature_params.leg_model)}
 
-    def __call__(self, block) -> dict[str, tuple]:  # noqa: ANN001 - streaming.Block
+    def __call__(self, block) -> dict[str, tuple]:
         from .tracking.pipeline import TrackStream, iter_run_features
 
         run = block.run
@@ -136,7 +136,7 @@ class RunStages:
         return out
 
 
-def derive(run, odometry, params: dict | None = None,  # noqa: ANN001 - ScanRun, Odometry | None
+def derive(run, odometry, params: dict | None = None,
            progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], dict]:
     """Every derived channel of a run held in memory, {topic: (msgtype, stamps, payloads)}, and the effective
     parameters (`params` may hold "track" (a TrackingParams) and "features" (a FeatureParams)). The same
@@ -181,7 +181,7 @@ def process_file(src: str | Path, out: str | Path, *, force: bool = False, param
                           origin=origin)
 
 
-def features_leg_model(log) -> str:  # noqa: ANN001 - mcapio.LogContents
+def features_leg_model(log) -> str:
     """The leg detector a log's /datmo/features were made with, from its provenance ("paper" for features
     made before datmo had a detector, whose legs are the paper's circles)."""
     import json
@@ -196,8 +196,8 @@ def features_leg_model(log) -> str:  # noqa: ANN001 - mcapio.LogContents
     return "paper"
 
 
-def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=None,  # noqa: ANN001
-               feature_params=None, leg_model: str | None = None, command_line: str | None = None,  # noqa: ANN001
+def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=None,
+               feature_params=None, leg_model: str | None = None, command_line: str | None = None,
                markers: bool = True, block_scans: int | None = None,
                progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
     """Track `src` into `out` in one streaming pass (its channels copied, /datmo/tracks and
@@ -238,7 +238,7 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=
         effective = {"track": params.to_dict(),
                      "leg_model": leg_model_provenance(used) if used == "paper" else {"model": used}}
 
-        def stage(block) -> dict:  # noqa: ANN001 - streaming.Block
+        def stage(block) -> dict:
             run, out = block.run, {}
             if estimated:
                 out[mcapio.TOPIC_ODOM] = odometry_channel(odometry, block)
@@ -269,7 +269,7 @@ class FeatureCounts:
         return getattr(self, name) / max(self.scans, 1)
 
 
-def features_file(src: str | Path, out: str | Path, params=None, *, resegment: bool = False,  # noqa: ANN001
+def features_file(src: str | Path, out: str | Path, params=None, *, resegment: bool = False,
                   force: bool = False, command_line: str | None = None, markers: bool = True,
                   block_scans: int | None = None, progress: Callable[[int, int], None] | None = None) -> FeatureCounts:
     """Extract the features of `src` into `out` in one streaming pass: /datmo/features, /datmo/landmarks and
@@ -294,7 +294,7 @@ def features_file(src: str | Path, out: str | Path, params=None, *, resegment: b
     if markers:
         derived[mcapio.TOPIC_MARKERS_FEATURES] = types.MARKER_ARRAY
 
-    def stage(block) -> dict:  # noqa: ANN001 - streaming.Block
+    def stage(block) -> dict:
         segments = decode_segments(block.aligned[mcapio.TOPIC_SEGMENTS]) if given else None
         channels, f = features.block(block.run, segments)
         counts.scans += len(f)
@@ -314,7 +314,7 @@ def features_file(src: str | Path, out: str | Path, params=None, *, resegment: b
     return counts
 
 
-def segment_file(src: str | Path, out: str | Path, params=None, *, force: bool = False,  # noqa: ANN001
+def segment_file(src: str | Path, out: str | Path, params=None, *, force: bool = False,
                  command_line: str | None = None, block_scans: int | None = None,
                  progress: Callable[[int, int], None] | None = None) -> int:
     """Segment every scan of `src` into `out` (its channels plus /datmo/segments) in one streaming pass;

@@ -105,7 +105,7 @@ def _scan_points(data: RunData, world: bool, max_points: int) -> tuple[np.ndarra
     return x[keep], y[keep], poses
 
 
-def _sensor_marker(ax, x: float, y: float, theta: float, size: float) -> None:  # noqa: ANN001
+def _sensor_marker(ax, x: float, y: float, theta: float, size: float) -> None:
     from matplotlib.patches import Polygon
 
     tri = np.array([[1.0, 0.0], [-0.6, 0.55], [-0.6, -0.55]]) * size
@@ -114,7 +114,7 @@ def _sensor_marker(ax, x: float, y: float, theta: float, size: float) -> None:  
     ax.add_patch(Polygon(pts, closed=True, facecolor="black", edgecolor="black", zorder=6, label="scanner"))
 
 
-def _top_view(ax, data: RunData, hist: TrackHistory, lines: TrackLines, max_points: int,  # noqa: ANN001
+def _top_view(ax, data: RunData, hist: TrackHistory, lines: TrackLines, max_points: int,
               all_labels: bool) -> list[tuple[int, float, float, str]]:
     """Draw the run from above into `ax`; return the labels to place (id, x, y, colour), most important first."""
     from matplotlib.lines import Line2D
@@ -177,7 +177,7 @@ def _seconds(data: RunData, stamps: np.ndarray) -> np.ndarray:
     return (stamps - t0) / 1e9
 
 
-def _counts(ax, data: RunData, hist: TrackHistory, lines: TrackLines) -> None:  # noqa: ANN001
+def _counts(ax, data: RunData, hist: TrackHistory, lines: TrackLines) -> None:
     """Tracks per class over time (confirmed tracks' confirmed and coasting states, so a track does not
     blink out while it coasts): moving ones per class, static pieces together (dotted)."""
     stamps = np.unique(hist.stamps)
@@ -201,7 +201,7 @@ def _counts(ax, data: RunData, hist: TrackHistory, lines: TrackLines) -> None:  
         ax.legend(fontsize=7, frameon=False, loc="upper right")
 
 
-def _speeds(ax, data: RunData, hist: TrackHistory, lines: TrackLines) -> None:  # noqa: ANN001
+def _speeds(ax, data: RunData, hist: TrackHistory, lines: TrackLines) -> None:
     """The filter speed of each moving track over its confirmed states, coloured by class."""
     drawn = set()
     for (_, a, b), cls, moves, conf in zip(lines.groups, lines.classes, lines.moving, lines.confirmed, strict=True):
@@ -219,7 +219,7 @@ def _speeds(ax, data: RunData, hist: TrackHistory, lines: TrackLines) -> None:  
         ax.legend(fontsize=7, frameon=False, loc="upper right")
 
 
-def place_labels(ax, labels: list[tuple[int, float, float, str]]) -> tuple[list, int]:  # noqa: ANN001
+def place_labels(ax, labels: list[tuple[int, float, float, str]]) -> tuple[list, int]:
     """Put each label (id, x, y, colour; in order) at the first spot of LABEL_SPOTS around its point where it
     stays inside the axes and its box, padded by a pixel, meets no label placed before; leave it out when
     there is none. Needs the figure's layout done (Figure.draw_without_rendering). Returns the placed

@@ -44,7 +44,7 @@ def say(message: str) -> None:
         click.echo(message, err=True)
 
 
-def console(*, stderr: bool = False):  # noqa: ANN201 - rich.console.Console, imported lazily
+def console(*, stderr: bool = False):
     """A rich console on stdout (or stderr) for tables: the terminal's width on a terminal; otherwise
     PIPE_WIDTH columns, no wrapping and no colour, so piped and redirected output keeps every name whole."""
     import sys
@@ -59,7 +59,7 @@ def console(*, stderr: bool = False):  # noqa: ANN201 - rich.console.Console, im
     return plain
 
 
-def table(console, **kwargs):  # noqa: ANN001, ANN003, ANN201 - rich Console and Table, imported lazily
+def table(console, **kwargs):
     """A rich Table for `console`: boxed on a terminal; plain columns without borders on a console that is
     not one (see `console`), whose trimmed lines then end with their own text, not padded out to the table's
     widest row."""
@@ -73,7 +73,7 @@ def table(console, **kwargs):  # noqa: ANN001, ANN003, ANN201 - rich Console and
 class _Trimmed:
     """A text stream that writes whole lines without their trailing spaces."""
 
-    def __init__(self, stream) -> None:  # noqa: ANN001 - a text stream
+    def __init__(self, stream) -> None:
         self.stream = stream
         self.pending = ""
 
@@ -96,7 +96,7 @@ class _Trimmed:
         return self.stream.fileno()
 
 
-def _isatty(stream) -> bool:  # noqa: ANN001 - a text stream
+def _isatty(stream) -> bool:
     try:
         return stream.isatty()
     except (AttributeError, ValueError, OSError):
@@ -107,7 +107,7 @@ class Bar:
     """One task of a rich Progress on stderr, or nothing (quiet, not a terminal). `update(done, total)`
     is also the (done, total) callback the pipeline functions take."""
 
-    def __init__(self, progress, task) -> None:  # noqa: ANN001 - rich Progress and its task id, or None
+    def __init__(self, progress, task) -> None:
         self.progress = progress
         self.task = task
 
@@ -116,13 +116,13 @@ class Bar:
         """Whether a bar is drawn (a terminal, not --quiet)."""
         return self.progress is not None
 
-    def update(self, done: int, total: int | None = None, **fields) -> None:  # noqa: ANN003 - column fields
+    def update(self, done: int, total: int | None = None, **fields) -> None:
         """Set the count done (and the total when it becomes known, and any extra column's fields)."""
         if self.progress is not None:
             extra = {} if total is None else {"total": total}
             self.progress.update(self.task, completed=done, **extra, **fields)
 
-    def advance(self, n: int = 1, **fields) -> None:  # noqa: ANN003 - column fields
+    def advance(self, n: int = 1, **fields) -> None:
         """Count `n` more done."""
         if self.progress is not None:
             self.progress.update(self.task, advance=n, **fields)

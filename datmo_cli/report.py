@@ -731,7 +731,7 @@ in m in the world frame when every track state has one, else the sensor frame; s
 PARAM_WIDTH = 160   # characters of a parameter's value in the run table; `datmo info FILE --json` has it whole
 
 
-def param_text(name: str, value) -> str:  # noqa: ANN001 - any JSON value from the provenance
+def param_text(name: str, value) -> str:
     """A parameter's value as the run table shows it: the leg model by its name, digest and threshold (its
     record holds the training figures), any other value as JSON cut at PARAM_WIDTH characters."""
     if name == "leg_model" and isinstance(value, dict) and "sha256" in value:
@@ -782,7 +782,7 @@ def file_table(summaries: list[RunSummary]) -> Table:
     return _table(f"{len(rows)} file{'s' if len(rows) != 1 else ''}", rows + [total_row(rows)], FILE_COLUMNS)
 
 
-def console():  # noqa: ANN201 - rich.console.Console, imported lazily
+def console():
     """A rich console on stdout: the terminal's width on a terminal, else a plain, unlimited width (no
     wrapping, no colour) so piped names stay whole (progress.console)."""
     from .progress import console as make
@@ -790,7 +790,7 @@ def console():  # noqa: ANN201 - rich.console.Console, imported lazily
     return make()
 
 
-def render_rich(tabs: list[Table], console) -> None:  # noqa: ANN001 - rich.console.Console, imported lazily
+def render_rich(tabs: list[Table], console) -> None:
     """Print tables with rich."""
     from .progress import table as rich_table
 
@@ -863,7 +863,7 @@ def report_dict(summaries: list[RunSummary], *, top: int | None, sort: str, trac
 
 
 def render(summaries: list[RunSummary], fmt: str, *, top: int | None, sort: str, tracks: bool = False,
-           all_tracks: bool = False, batches: list[dict] | None = None, console=None,  # noqa: ANN001
+           all_tracks: bool = False, batches: list[dict] | None = None, console=None,
            before: list[Table] | None = None) -> str | None:
     """The report of any number of runs in `fmt` (one of FORMATS), in the shapes REPORT_SCHEMA gives.
     Returns the text, or prints to `console` (rich). `top` limits each file's track table (None: 20 for rich

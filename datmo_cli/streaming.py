@@ -231,7 +231,7 @@ class _DerivedTf:
         self.static = self.on and not stream.has(mcapio.TOPIC_TF_STATIC)
         self.joined = {stream.scan_frame}   # child frames given a static transform (the scan's own needs none)
 
-    def block(self, block: Block, odom: tuple | None) -> None:  # noqa: ANN001 - (stamps, payloads) of /odom
+    def block(self, block: Block, odom: tuple | None) -> None:
         if not self.on or odom is None or not len(odom[1]):
             return
         stamps, payloads = odom

@@ -40,7 +40,7 @@ def sample_logs() -> Path:
     return SAMPLE_LOGS
 
 
-def pytest_terminal_summary(terminalreporter) -> None:  # noqa: ANN001 - pytest's hook signature
+def pytest_terminal_summary(terminalreporter) -> None:
     """Print the fault-injection and fuzz counts (tests/fuzzing.py) after the run."""
     from fuzzing import summary_lines
 

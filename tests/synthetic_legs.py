@@ -51,7 +51,7 @@ def scene(n_scans: int, seed: int = 0, people: bool = True) -> tuple[np.ndarray,
     return np.stack(ranges), legs
 
 
-def _scan_msg(store, t_ns: int, ranges: np.ndarray):  # noqa: ANN001, ANN202
+def _scan_msg(store, t_ns: int, ranges: np.ndarray):
     T = store.types
     stamp = T["builtin_interfaces/msg/Time"](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
     header = (T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id="laser") if store is STORE1
@@ -61,7 +61,7 @@ def _scan_msg(store, t_ns: int, ranges: np.ndarray):  # noqa: ANN001, ANN202
                    ranges=np.asarray(ranges, np.float32), intensities=np.zeros(0, np.float32))
 
 
-def _poses_msg(store, xy: np.ndarray):  # noqa: ANN001, ANN202
+def _poses_msg(store, xy: np.ndarray):
     T = store.types
     header = (T["std_msgs/msg/Header"](seq=0, stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0),
                                        frame_id="laser") if store is STORE1

@@ -38,7 +38,7 @@ N_SCANS = 30   # scans of the small logs made here
 
 
 @contextlib.contextmanager
-def inside(folder: Path):  # noqa: ANN201
+def inside(folder: Path):
     """Run the block with `folder` as the current folder."""
     here = Path.cwd()
     os.chdir(folder)
@@ -48,7 +48,7 @@ def inside(folder: Path):  # noqa: ANN201
         os.chdir(here)
 
 
-def invoke(*args: str):  # noqa: ANN201 - click.testing.Result
+def invoke(*args: str):
     return CliRunner().invoke(cli, [str(a) for a in args])
 
 

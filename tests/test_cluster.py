@@ -47,7 +47,7 @@ class Cluster:
         self.client = None
 
     def _start(self, name: str, *args: str) -> None:
-        log = open(self.logs / f"{name}.log", "w")  # noqa: SIM115 - closed with the process
+        log = open(self.logs / f"{name}.log", "w")
         self.procs[name] = subprocess.Popen([*self.dask, *args], stdout=log, stderr=subprocess.STDOUT,
                                             start_new_session=True)
 

@@ -17,7 +17,7 @@ class FakeBar:
         self.descriptions: list[str] = []
         self.completed: list[int] = []
 
-    def update(self, task, description=None, completed=None, total=None) -> None:  # noqa: ANN001
+    def update(self, task, description=None, completed=None, total=None) -> None:
         if description is not None:
             self.task.description = description
             self.descriptions.append(description)

@@ -48,19 +48,19 @@ def processed(tmp_path_factory) -> dict[str, Path]:
     return paths
 
 
-def invoke(*args: str, input: bytes | None = None):  # noqa: ANN201 - click's Result
+def invoke(*args: str, input: bytes | None = None):
     return CliRunner().invoke(cli, ["export", *args], input=input)
 
 
 # ------------------------------------------------------------------------------ reference and reading back
 
 
-def f32(v) -> float | None:  # noqa: ANN001
+def f32(v) -> float | None:
     """A float column's value as the float32 it stands for; None for an empty value (NaN)."""
     return None if v is None or (isinstance(v, float) and math.isnan(v)) else float(np.float32(v))
 
 
-def stamp(header) -> int:  # noqa: ANN001 - std_msgs/Header
+def stamp(header) -> int:
     return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
 
 
@@ -252,7 +252,7 @@ class Recorder(io.RawIOBase):
     def writable(self) -> bool:
         return True
 
-    def write(self, data) -> int:  # noqa: ANN001
+    def write(self, data) -> int:
         self.sizes.append(len(data))
         self.lines += bytes(data).count(b"\n")
         return len(data)
@@ -332,7 +332,7 @@ def test_force_replaces_an_existing_table(processed, tmp_path):
     assert out.read_text().startswith(",".join(HEADER) + "\n")
 
 
-def damaged(data, payload: bytes) -> bytearray:  # noqa: ANN001 - hypothesis' data object
+def damaged(data, payload: bytes) -> bytearray:
     """`payload` cut, with 1-8 bytes flipped, or replaced by random bytes (hypothesis draws which)."""
     p = bytearray(payload)
     how = data.draw(st.sampled_from(["cut", "flip", "random"]))
@@ -376,7 +376,7 @@ REGION_FIGURES = {"num_predictions", "num_false_positives", "mota", "idf1", "idp
                   "assa", "ignored_hypotheses"}
 
 
-def channel_targets(path: Path, include_occluded: bool = False):  # noqa: ANN201 - evaluate.Frames, Regions
+def channel_targets(path: Path, include_occluded: bool = False):
     """Targets and regions as evaluate reads them from /datmo/ground_truth."""
     from datmo_cli import evaluate as ev
     from datmo_cli.report import decode_channel

@@ -71,18 +71,18 @@ def logs(tmp_path_factory) -> dict[str, Path]:
 class FullDisk:
     """A temporary file that takes `room` bytes, then raises ENOSPC (as a full disk does)."""
 
-    def __init__(self, file, room: int) -> None:  # noqa: ANN001
+    def __init__(self, file, room: int) -> None:
         self._file = file
         self.room = room
 
-    def write(self, data) -> int:  # noqa: ANN001
+    def write(self, data) -> int:
         n = len(memoryview(data).cast("B"))
         if n > self.room:
             raise OSError(errno.ENOSPC, "No space left on device")
         self.room -= n
         return self._file.write(data)
 
-    def __getattr__(self, name: str):  # noqa: ANN204
+    def __getattr__(self, name: str):
         return getattr(self._file, name)
 
 
@@ -129,7 +129,7 @@ def test_write_failures_at_seeded_points_of_every_writing_command(logs, tmp_path
 KEPT = re.compile(r"keeps the (\d+) scans? that reached the disk")
 
 
-def _record_case(emu, folder: Path, room: int) -> tuple[bool, str]:  # noqa: ANN001
+def _record_case(emu, folder: Path, room: int) -> tuple[bool, str]:
     """`datmo record` from `emu` into a disk with `room` bytes: (promise kept, what happened)."""
     out = folder / "run.mcap"
     before = len(emu.sent)
@@ -158,7 +158,7 @@ def _record_case(emu, folder: Path, room: int) -> tuple[bool, str]:  # noqa: ANN
     return ok, f"kept {n} scans"
 
 
-def _exact(run: ScanRun, sent) -> bool:  # noqa: ANN001
+def _exact(run: ScanRun, sent) -> bool:
     expected = np.stack([s.ranges() for s in sent[:len(run)]])
     return np.array_equal(run.ranges.view(np.uint32), np.ascontiguousarray(expected, np.float32).view(np.uint32))
 
@@ -215,7 +215,7 @@ def test_write_failures_at_seeded_points_of_train_legs(tmp_path, monkeypatch):
     trained = []
     real_train = training.train_leg_model
 
-    def train_once(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+    def train_once(*args, **kwargs):
         if not trained:
             trained.append(real_train(*args, **kwargs))
         return trained[0]

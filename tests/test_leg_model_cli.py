@@ -24,12 +24,12 @@ def crowd(tmp_path_factory):
     return path
 
 
-def _legs(path) -> list[np.ndarray]:  # noqa: ANN001
+def _legs(path) -> list[np.ndarray]:
     _, payloads = mcapio.read_messages(path, mcapio.TOPIC_FEATURES)
     return [cdr.decode(types.FEATURES, p)["legs"] for p in payloads]
 
 
-def _model(path) -> dict:  # noqa: ANN001
+def _model(path) -> dict:
     return json.loads(mcapio.read_log(path, topics=()).metadata["datmo.params"]["leg_model"])
 
 

@@ -89,14 +89,14 @@ def test_no_held_out_recording_ever_trains_its_own_fold_or_threshold(monkeypatch
         def probabilities(self, features: np.ndarray) -> np.ndarray:
             return np.full(len(features), 0.5)
 
-    def spy_fit(tables, spec):  # noqa: ANN001, ANN202
+    def spy_fit(tables, spec):
         names = {t.name for t in tables}
         trained.append(names)
         return names
 
     scored: list[tuple[str, set[str]]] = []
 
-    def spy_scores(model, table):  # noqa: ANN001, ANN202
+    def spy_scores(model, table):
         scored.append((table.name, model.names))
         return np.full(len(table), 0.5)
 

@@ -38,7 +38,7 @@ def _datmo(*args: str) -> list[str]:
     return [sys.executable, "-c", "from datmo_cli.cli import main; main()", *args]
 
 
-def _decoder(channel: dict):  # noqa: ANN202 - a callable bytes -> decoded message
+def _decoder(channel: dict):
     schema = Schema(id=channel["id"], name=channel["schemaName"], encoding=channel["schemaEncoding"],
                     data=channel["schema"].encode())
     return DecoderFactory().decoder_for(channel["encoding"], schema)
@@ -68,7 +68,7 @@ async def _subscribe(url: str, topics: list[str], want: int, timeout: float = 60
     return got
 
 
-def _stamp(header) -> int:  # noqa: ANN001
+def _stamp(header) -> int:
     return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
 
 
@@ -177,7 +177,7 @@ def test_a_processed_log_is_served_as_it_is_with_transforms_from_its_odometry(tm
     assert source.transforms.topics() == {live.TOPIC_TF: live.TF_MESSAGE, live.TOPIC_TF_STATIC: live.TF_MESSAGE}
 
 
-def _tf_decoder():  # noqa: ANN202
+def _tf_decoder():
     return _decoder({"id": 1, "schemaName": live.TF_MESSAGE, "schemaEncoding": "ros2msg",
                      "schema": types.schema_text(live.TF_MESSAGE), "encoding": "cdr"})
 
@@ -258,7 +258,7 @@ def test_live_feed_publishes_each_scan_with_its_features_and_tracks():
 class _NoStages:
     """Stages that derive nothing (the view's processing is not what is tested)."""
 
-    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+    def __init__(self, *args, **kwargs) -> None:
         pass
 
     def messages(self, run: ScanRun) -> list[live.Message]:
@@ -337,7 +337,7 @@ def test_urls():
                                                "&ds.url=ws%3A%2F%2F127.0.0.1%3A8765")
 
 
-def _tree_leaves(node) -> list[str]:  # noqa: ANN001
+def _tree_leaves(node) -> list[str]:
     if isinstance(node, str):
         return [node]
     return _tree_leaves(node["first"]) + _tree_leaves(node["second"])

@@ -32,7 +32,7 @@ from datmo_cli.log.scan import ScanGeometry, ScanRun
 pytestmark = pytest.mark.timeout(60) if hasattr(pytest.mark, "timeout") else []
 
 
-def run_record(emu, path, *, baud=500000, scans=None, duration=None, stop=None, **kw):  # noqa: ANN001, ANN201
+def run_record(emu, path, *, baud=500000, scans=None, duration=None, stop=None, **kw):
     driver = LMS2xx(emu.device_path, baud=baud, **{k: v for k, v in kw.items() if k != "raw"})
     writer = mcapio.LogWriter(path, provenance=mcapio.Provenance("record", {"baud": baud}), streaming=True)
     result = record(driver, writer, max_scans=scans, duration=duration, raw=kw.get("raw", False), stop=stop,
@@ -40,7 +40,7 @@ def run_record(emu, path, *, baud=500000, scans=None, duration=None, stop=None, 
     return result, driver
 
 
-def settled(condition, seconds: float = 2.0) -> bool:  # noqa: ANN001
+def settled(condition, seconds: float = 2.0) -> bool:
     """Whether `condition()` holds within `seconds`: the emulator applies a baud change only after its reply
     has left, in its own thread, so the host can see the reply first."""
     deadline = time.monotonic() + seconds
@@ -53,7 +53,7 @@ def bits(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, np.float32).view(np.uint32)
 
 
-def assert_bit_exact(run: ScanRun, sent) -> None:  # noqa: ANN001
+def assert_bit_exact(run: ScanRun, sent) -> None:
     expected = np.stack([s.ranges() for s in sent])
     assert run.ranges.shape == expected.shape
     assert np.array_equal(bits(run.ranges), bits(expected))
@@ -291,11 +291,11 @@ def test_a_second_ctrl_c_gives_up_at_once_keeping_what_reached_the_disk(tmp_path
 class _StoppedAfter(LMS2xx):
     """A driver whose read_scan raises `exc` (a second Ctrl-C, a SIGTERM, a bug) after `n` scans."""
 
-    def __init__(self, *args, n: int, exc: BaseException, **kw) -> None:  # noqa: ANN002, ANN003
+    def __init__(self, *args, n: int, exc: BaseException, **kw) -> None:
         super().__init__(*args, **kw)
         self.n, self.exc = n, exc
 
-    def read_scan(self, timeout: float = 0.2):  # noqa: ANN201
+    def read_scan(self, timeout: float = 0.2):
         if self.n <= 0:
             raise self.exc
         scan = super().read_scan(timeout)
@@ -352,7 +352,7 @@ def test_the_file_size_limit_while_recording_keeps_the_scans_on_disk(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["run.mcap"]
 
 
-def _flushed_writer(path, n: int = 5) -> mcapio.LogWriter:  # noqa: ANN001
+def _flushed_writer(path, n: int = 5) -> mcapio.LogWriter:
     g = ScanGeometry(-np.pi / 2, np.radians(0.5), 361, 0.0, 8.0)
     writer = mcapio.LogWriter(path, streaming=True)
     for i in range(n):
@@ -381,7 +381,7 @@ def test_keep_flushed_with_nothing_flushed_leaves_nothing(tmp_path):
 def test_a_recording_that_cannot_be_renamed_is_left_in_its_temporary_file(tmp_path, monkeypatch, finished):
     writer = _flushed_writer(tmp_path / "run.mcap")
 
-    def refuse(src, dst):  # noqa: ANN001
+    def refuse(src, dst):
         raise OSError(errno.EROFS, "Read-only file system")
 
     monkeypatch.setattr(os, "replace", refuse)
@@ -402,7 +402,7 @@ def test_a_recording_that_cannot_be_renamed_is_left_in_its_temporary_file(tmp_pa
     writer.tmp.unlink()
 
 
-def _one_line_error(res, *needles: str) -> None:  # noqa: ANN001
+def _one_line_error(res, *needles: str) -> None:
     assert res.exit_code == 1, res.output
     assert res.output.count("\n") == 1 and res.output.startswith("datmo: error: "), res.output
     for n in needles:

@@ -28,7 +28,7 @@ def check_offsets(offsets: np.ndarray, n_scans: int, n_items: int) -> None:
     assert np.all(np.diff(offsets) >= 0)
 
 
-def check(path, topic=None, walls=True):  # noqa: ANN001, ANN201
+def check(path, topic=None, walls=True):
     """Extract every scan of the log at `path` and check the results' invariants; returns the features."""
     imported = import_log(path, topic)
     run, odom = imported.run, imported.odometry
@@ -89,7 +89,7 @@ def test_killian_g2o():
     assert len(f.landmarks.final()) > 0
 
 
-def scan_topics(bag) -> list[str]:  # noqa: ANN001
+def scan_topics(bag) -> list[str]:
     from rosbags.highlevel import AnyReader
 
     with AnyReader([bag]) as reader:

@@ -401,7 +401,7 @@ def _write(folder: Path, data: bytes) -> Path:
     return path
 
 
-def _carmen_case(path: Path, mutated: bytes, changed: set[int], spans) -> bool:  # noqa: ANN001
+def _carmen_case(path: Path, mutated: bytes, changed: set[int], spans) -> bool:
     ref, flipped = reference_scans(mutated)
     streams = [name for name, scans in ref.items() if scans]
     layouts = {(len(r), g) for name in streams for r, _, g in ref[name]}
@@ -493,7 +493,7 @@ def test_fuzz_rosbag_importer(kind):
         shutil.rmtree(folder)
 
 
-def _bag_case(path: Path, originals, changed: set[int], kind: str) -> bool:  # noqa: ANN001
+def _bag_case(path: Path, originals, changed: set[int], kind: str) -> bool:
     try:
         result = import_log(path)
     except DatmoError:

@@ -49,11 +49,11 @@ def temps(folder: Path) -> list[Path]:
     return [p for p in folder.iterdir() if p.name.startswith(".") and p.name.endswith(".tmp")]
 
 
-def datmo(*args) -> object:  # noqa: ANN002
+def datmo(*args) -> object:
     return CliRunner().invoke(cli, [os.fsdecode(a) if isinstance(a, bytes) else str(a) for a in args])
 
 
-def one_line_error(res, *needles: str, code: int | None = None) -> str:  # noqa: ANN001
+def one_line_error(res, *needles: str, code: int | None = None) -> str:
     err = res.stderr
     assert res.exit_code != 0 and (code is None or res.exit_code == code), (res.exit_code, res.output)
     assert "Traceback" not in res.output
@@ -128,7 +128,7 @@ def test_row2_force_replaces_a_symlink_itself_not_its_target(small, tmp_path):
 # -------------------------------------------------------------------------------------- row 3: a full disk
 
 
-def _limited(limit: int):  # noqa: ANN202
+def _limited(limit: int):
     return lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
 
@@ -200,7 +200,7 @@ def test_row14_read_only_folder_is_one_line_naming_it(small, tmp_path, monkeypat
     assert datmo("track", small, "-o", tracked).exit_code == 0
     real = os.open
 
-    def refuse(path, *a, **k):  # noqa: ANN001, ANN002, ANN003
+    def refuse(path, *a, **k):
         if os.fspath(path).endswith(".tmp"):
             raise OSError(code, os.strerror(code), os.fspath(path))
         return real(path, *a, **k)

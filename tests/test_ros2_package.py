@@ -185,11 +185,11 @@ def small(tmp_path_factory) -> Path:
     return path
 
 
-def datmo(*args) -> object:  # noqa: ANN002
+def datmo(*args) -> object:
     return CliRunner().invoke(cli, [str(a) for a in args])
 
 
-def one_line_error(res, *needles: str) -> None:  # noqa: ANN001
+def one_line_error(res, *needles: str) -> None:
     assert res.exit_code != 0 and "Traceback" not in res.output, res.output
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("datmo: error: "), res.stderr
@@ -296,7 +296,7 @@ def test_a_failed_bag_leaves_no_temporary_folder_and_the_old_bag_intact(small, t
     before = {p.name: p.read_bytes() for p in bag.iterdir()}
     real = outputs._file_for
 
-    def metadata_fails(log, name):  # noqa: ANN001, ANN202 - bagdir.metadata_text's signature
+    def metadata_fails(log, name):
         raise OSError(errno.ENOSPC, "No space left on device")
 
     cases = [("room", room) for room in ROOM[:4]] + [("metadata", None)]

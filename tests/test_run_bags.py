@@ -18,7 +18,7 @@ from datmo_cli.errors import InputError
 from datmo_cli.log import importers, mcapio
 
 
-def invoke(*args, quiet: bool = True):  # noqa: ANN201 - click.testing.Result
+def invoke(*args, quiet: bool = True):
     return CliRunner().invoke(cli, ["run", *map(str, args), "--no-report", *(["-q"] if quiet else [])])
 
 
@@ -45,7 +45,7 @@ def conversions(monkeypatch) -> list[Path]:
     opened: list[Path] = []
     real = importers.open_import
 
-    def counted(path, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+    def counted(path, *args, **kwargs):
         opened.append(Path(path))
         return real(path, *args, **kwargs)
 
@@ -120,12 +120,12 @@ def test_a_changed_bag_is_redone(tmp_path, bags, conversions):
     assert latest(out)[str(bag)]["input_sha256"] == mcapio.sha256_of(bag)
 
 
-def _failing(name: str, exc: BaseException, bad: Path):  # noqa: ANN202
+def _failing(name: str, exc: BaseException, bad: Path):
     """importers.`name` failing with `exc` for the bag `bad` (write_import after writing the temporary MCAP
     whole: a conversion that breaks at its very end), and as it is for other inputs."""
     real = getattr(importers, name)
 
-    def call(first, *args, **kwargs):  # noqa: ANN001, ANN002, ANN003, ANN202
+    def call(first, *args, **kwargs):
         path = first if name == "open_import" else first.source
         if Path(path) != bad:
             return real(first, *args, **kwargs)
@@ -176,7 +176,7 @@ def test_a_failing_conversion_fails_its_input_alone(tmp_path, bags, monkeypatch,
 def test_ctrl_c_during_a_conversion_leaves_no_temporary_file(tmp_path, bags, monkeypatch):
     real = importers.write_import
 
-    def interrupted(stream, output, **kwargs):  # noqa: ANN001, ANN003, ANN202
+    def interrupted(stream, output, **kwargs):
         real(stream, output, **kwargs)
         raise KeyboardInterrupt
 

@@ -76,12 +76,12 @@ class Held:
         decode, drain = DECODE, DRAIN
         held = self
 
-        def counting_decode(path, payloads, *args, **kw):  # noqa: ANN001, ANN002, ANN003, ANN202
+        def counting_decode(path, payloads, *args, **kw):
             held.block = max(held.block, len(payloads))
             held.blocks += 1
             return decode(path, payloads, *args, **kw)
 
-        def counting_drain(writer) -> None:  # noqa: ANN001
+        def counting_drain(writer) -> None:
             held.buffered = max(held.buffered, sum(len(b[2]) for b in writer._buffer))
             drain(writer)
 

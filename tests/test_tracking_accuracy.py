@@ -19,7 +19,7 @@ from datmo_cli.tracking import accuracy as acc
 from datmo_cli.tracking.pipeline import run_features, track_run
 
 
-def _score(sample_logs, name: str, source: str) -> dict:  # noqa: ANN001
+def _score(sample_logs, name: str, source: str) -> dict:
     log = mcapio.read_log(sample_logs / f"{name}.mcap", topics=None)
     run, odom = mcapio.run_from_log(log), mcapio.odometry_from_log(log)
     truth = decode_channel(types.GROUND_TRUTH, log.messages[mcapio.TOPIC_GROUND_TRUTH][1])

@@ -19,7 +19,7 @@ N = 30
 STAMPS = 1_700_000_000_000_000_000 + np.arange(N, dtype=np.int64) * 200_000_000
 
 
-def make_log(path, odometry: bool = False) -> None:  # noqa: ANN001
+def make_log(path, odometry: bool = False) -> None:
     run = ScanRun(STAMPS, np.full((N, 361), 7.5, np.float32), GEOM)
     scans = [{"circles": legs_as_circles(walker_legs(0.2 * k, (1, -3), (0.3, 1.0))) + [(5.0, 2.0, 0.25)]}
              for k in range(N)]
@@ -34,7 +34,7 @@ def make_log(path, odometry: bool = False) -> None:  # noqa: ANN001
             w.write_odometry(Odometry(STAMPS, np.full(N, 2.0), np.zeros(N), np.zeros(N)))
 
 
-def _tracks(path) -> list[dict]:  # noqa: ANN001
+def _tracks(path) -> list[dict]:
     _, payloads = mcapio.read_messages(path, mcapio.TOPIC_TRACKS)
     return [cdr.decode(types.TRACKS, p) for p in payloads]
 

@@ -19,7 +19,7 @@ from datmo_cli.tracking.pipeline import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
 
 
-def reference_measurements(circles, blobs, lines, legs, stride_max, d_max, weak=None):  # noqa: ANN001, ANN201
+def reference_measurements(circles, blobs, lines, legs, stride_max, d_max, weak=None):
     """Plain Python: legs paired (nearest pairs first, within the stride) or single; every other segment as
     its circle, its lines' bounding box or its blob, with its leg probability from `weak` ({segment: p}, else
     0); nothing larger than d_max. Rows (kind, x, y, size, probability; 0 for legs)."""
@@ -77,10 +77,10 @@ def test_learned_measurements_match_the_reference():
         others = sorted(set(segs.tolist()) - {g[0] for g in legs})
         weak = {seg: float(rng.uniform(0.05, 0.5)) for seg in others if rng.random() < 0.5}
 
-        def col(rows, k, t=f8):  # noqa: ANN001, ANN202
+        def col(rows, k, t=f8):
             return np.array([r[k] for r in rows], t)
 
-        def beams(rows, width=5):  # noqa: ANN001, ANN202 - segment s covers beams 10 s .. 10 s + width
+        def beams(rows, width=5):
             return col(rows, 0, i8) * 10, col(rows, 0, i8) * 10 + width
 
         ws = np.array(list(weak), i8)

@@ -12,7 +12,7 @@ from conftest import ROOT, shared_path
 pytestmark = [pytest.mark.slow, pytest.mark.shared]
 
 
-def _accuracy_module():  # noqa: ANN202
+def _accuracy_module():
     import sys
 
     if str(ROOT) not in sys.path:   # accuracy_tracking imports benchmarks.common

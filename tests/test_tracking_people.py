@@ -31,7 +31,7 @@ def walker_legs(t: float, start: tuple[float, float], velocity: tuple[float, flo
     return [stance, swing]
 
 
-def run_scene(n_scans: int, objects, params: TrackingParams | None = None, dt: float = 0.2, seed: int = 0):  # noqa: ANN001
+def run_scene(n_scans: int, objects, params: TrackingParams | None = None, dt: float = 0.2, seed: int = 0):
     """Run a tracker over `objects(t) -> dict of feature lists` (see features_from_lists) and return it with
     each scan's output."""
     rng = np.random.default_rng(seed)

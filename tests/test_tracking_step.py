@@ -245,7 +245,7 @@ def test_every_phase_equals_the_reference_scan_by_scan(name: str, leg_model: str
         lockstep(ref, t0, int(run.stamps[i]), m, run.ranges[i], None if poses is None else poses[i])
 
 
-def _flat_measurements(f, learned: bool) -> tuple:  # noqa: ANN001 - ScanFeatures
+def _flat_measurements(f, learned: bool) -> tuple:
     """The compiled features-to-measurements of one scan."""
     from datmo_cli.tracking.tracker import _flat
 
@@ -258,7 +258,7 @@ def _flat_measurements(f, learned: bool) -> tuple:  # noqa: ANN001 - ScanFeature
 
 
 # ------------------------------------------------------------------------------------------- whole runs
-def reference_run(run, feats, poses, learned: bool, frame: str) -> tuple[list, list, ReferenceTracker]:  # noqa: ANN001
+def reference_run(run, feats, poses, learned: bool, frame: str) -> tuple[list, list, ReferenceTracker]:
     ref = ReferenceTracker(P, run.geometry, learned=learned)
     tracks, markers = [], []
     for i, f in enumerate(feats):
@@ -317,7 +317,7 @@ GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0)
 
 
 @st.composite
-def scenes(draw) -> tuple:  # noqa: ANN001
+def scenes(draw) -> tuple:
     """A few objects (circles, legs of people, blobs, short lines) moving straight, seen with dropouts, over
     up to 25 scans at uneven stamps; sometimes a moving sensor's poses, sometimes ranges with a near wall."""
     seed = draw(st.integers(0, 2**32 - 1))

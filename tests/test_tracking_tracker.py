@@ -17,7 +17,7 @@ GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0)
 P = TrackingParams()
 
 
-def meas(*circles):  # noqa: ANN002, ANN201
+def meas(*circles):
     return measurements(features_from_lists([{"circles": list(circles)}])[0], P)
 
 
@@ -227,7 +227,7 @@ def test_a_duplicate_yields_to_the_person_whatever_its_hits():
     from datmo_cli.tracking.classification import CLASS_PERSON, CLASS_UNKNOWN, MOBILITY_DYNAMIC, MOBILITY_STATIC
     from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
 
-    def tracks(cls, mobility, hits):  # noqa: ANN001, ANN202
+    def tracks(cls, mobility, hits):
         t = state.TrackTable(P.tail_length, capacity=2)
         t.n = 2
         tab = t.table

@@ -11,11 +11,11 @@ from datmo_cli.cli import cli
 from tests.synthetic_legs import scene, write_bag, write_mcap
 
 
-def _run(*args: str):  # noqa: ANN202
+def _run(*args: str):
     return CliRunner().invoke(cli, ["train-legs", *args])
 
 
-def _one_line_error(result, text: str) -> None:  # noqa: ANN001
+def _one_line_error(result, text: str) -> None:
     assert result.exit_code != 0
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("datmo: error: ") and text in lines[0], result.output

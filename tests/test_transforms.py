@@ -34,16 +34,16 @@ def datmo(*args: str) -> str:
 # ------------------------------------------------------------------------------------- an independent tf buffer
 
 
-def _yaw(q) -> float:  # noqa: ANN001 - a geometry_msgs/Quaternion as mcap_ros2 decodes it
+def _yaw(q) -> float:
     return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
 
 
-def _compose(a, b):  # noqa: ANN001, ANN202 - planar poses (x, y, yaw): a ∘ b
+def _compose(a, b):
     c, s = math.cos(a[2]), math.sin(a[2])
     return a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]
 
 
-def _inverse(a):  # noqa: ANN001, ANN202
+def _inverse(a):
     c, s = math.cos(a[2]), math.sin(a[2])
     return -(c * a[0] + s * a[1]), -(-s * a[0] + c * a[1]), -a[2]
 
@@ -56,7 +56,7 @@ class TfBuffer:
         self.static: dict[str, tuple[str, tuple]] = {}
         self.dynamic: dict[str, list[tuple[int, str, tuple]]] = defaultdict(list)
 
-    def add(self, msg, static: bool) -> None:  # noqa: ANN001 - a decoded tf2_msgs/msg/TFMessage
+    def add(self, msg, static: bool) -> None:
         for t in msg.transforms:
             tr, stamp = t.transform, t.header.stamp.sec * 1_000_000_000 + t.header.stamp.nanosec
             pose = (tr.translation.x, tr.translation.y, _yaw(tr.rotation))
@@ -96,7 +96,7 @@ class TfBuffer:
         return _compose(_inverse(t), s) if root_t == root_s else None
 
 
-def read_output(path: Path):  # noqa: ANN201 - (TfBuffer, scan frames, [(topic, frame, stamp)], topic counts)
+def read_output(path: Path):
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
@@ -258,12 +258,12 @@ def _ros1_bag(path: Path, n: int = 60, with_tf: bool = True) -> Path:
     store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", ROS1_TF))
     T = store.types
 
-    def header(t: int, frame: str):  # noqa: ANN202
+    def header(t: int, frame: str):
         return T["std_msgs/msg/Header"](seq=0, stamp=T["builtin_interfaces/msg/Time"](sec=t // 10**9,
                                                                                      nanosec=t % 10**9),
                                         frame_id=frame)
 
-    def tfm(t: int, parent: str, child: str, x: float, y: float, yaw: float):  # noqa: ANN202
+    def tfm(t: int, parent: str, child: str, x: float, y: float, yaw: float):
         return T[ROS1_TF](transforms=[T["geometry_msgs/msg/TransformStamped"](
             header=header(t, parent), child_frame_id=child, transform=T["geometry_msgs/msg/Transform"](
                 translation=T["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.0),

@@ -31,7 +31,7 @@ def said_if_slow(delay: float = 2.0) -> Iterator[None]:
 
 
 @contextmanager
-def compile_notice(bar, task, delay: float = 2.0, *, armed: bool = True) -> Iterator[Callable[[int, int], None]]:  # noqa: ANN001
+def compile_notice(bar, task, delay: float = 2.0, *, armed: bool = True) -> Iterator[Callable[[int, int], None]]:
     """A progress callback (done, total) for `task` of the rich Progress `bar`. A report of 0 done starts a
     stage (and `armed` starts one at entry); when the stage's next report is more than `delay` s away,
     the task's description gets NOTICE appended until that report comes."""

@@ -82,7 +82,7 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
     done = threading.Event()
     stopped_by: list[int] = []
 
-    def handler(signum, frame) -> None:  # noqa: ANN001
+    def handler(signum, frame) -> None:
         stopped_by.append(signum)
         done.set()
 

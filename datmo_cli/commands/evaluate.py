@@ -18,7 +18,7 @@ COLUMNS = {"mota": "MOTA", "motp": "MOTP m", "idf1": "IDF1", "hota": "HOTA", "de
 
 
 def score_file(path: Path, *, gt_csv: Path | None = None, match_radius: float = 0.5, include_occluded: bool = False,
-               exclude_static: bool = False, progress=None) -> dict:  # noqa: ANN001 - evaluate.Progress
+               exclude_static: bool = False, progress=None) -> dict:
     """Read `path` (and the CSV) and score it: {"file", "ground_truth", "match_radius_m", "scores": {...}};
     `progress(done, total, stage)` as evaluate.evaluate calls it."""
     import numpy as np
@@ -58,7 +58,7 @@ def score_file(path: Path, *, gt_csv: Path | None = None, match_radius: float = 
             "include_occluded": include_occluded, "exclude_static": exclude_static, "scores": scores}
 
 
-def _table(result: dict, by_metric: bool = False):  # noqa: ANN202 - report.Table
+def _table(result: dict, by_metric: bool = False):
     """The scores as a table: one row per class, or (by_metric, narrow enough for a terminal) per metric."""
     from ..report import Table
 

@@ -73,7 +73,7 @@ def command(files: tuple[Path, ...], output: Path, fmt: str | None, features: bo
                 b.update(0, p.total(topic), description="features")
             b.advance(n)
 
-        def write(sink) -> None:  # noqa: ANN001 - export.TextSink or ParquetSink
+        def write(sink) -> None:
             export.export(p, sink, features=features, progress=progress)
 
         if stdout:
@@ -88,7 +88,7 @@ def command(files: tuple[Path, ...], output: Path, fmt: str | None, features: bo
 
 
 def _ground_truth(files: tuple[Path, ...], output: Path, fmt: str, features: bool, ground_truth: bool,
-                  include_occluded: bool, force: bool, stream) -> None:  # noqa: ANN001 - binary stream or None
+                  include_occluded: bool, force: bool, stream) -> None:
     """`--ground-truth`: one log's targets as the table evaluate --gt reads."""
     from .. import export
     from ..errors import ConfigError
@@ -113,7 +113,7 @@ def _ground_truth(files: tuple[Path, ...], output: Path, fmt: str, features: boo
                 b.update(0, scans, description="ground truth")
             b.advance(n)
 
-        def write(sink) -> None:  # noqa: ANN001 - export.TextSink or ParquetSink
+        def write(sink) -> None:
             export.export_ground_truth(files[0], sink, include_occluded=include_occluded, progress=progress)
 
         cols = export.GROUND_TRUTH_COLUMNS
@@ -128,7 +128,7 @@ def _ground_truth(files: tuple[Path, ...], output: Path, fmt: str, features: boo
         f"scans of {files[0]}")
 
 
-def _to_stdout(stream, sink, write):  # noqa: ANN001, ANN202 - binary stream, sink, (sink) -> None
+def _to_stdout(stream, sink, write):
     """Write the rows to stdout with `write(sink)`; a reader that stops early (| head) ends the command
     quietly, exit 141 as a shell gives a process killed by SIGPIPE."""
     import os

@@ -70,7 +70,7 @@ def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic:
 
 
 @contextlib.contextmanager
-def _progress(src: Path):  # noqa: ANN202
+def _progress(src: Path):
     """A progress callback (done, total) drawing a bar on stderr for inputs over 20 MB, else None. The
     total is the bytes of a text log or the messages of a bag, as the importer counts them."""
     from ..log.importers import detect_kind

@@ -18,7 +18,7 @@ STDOUT = "-"
 
 def no_stdout(what: str = "an MCAP log", give: str = "a file name") -> Callable:
     """An option callback refusing `-` (stdout) for an output that cannot go to a stream."""
-    def callback(ctx: click.Context, param: click.Parameter, value):  # noqa: ANN001, ANN202 - Click's signature
+    def callback(ctx: click.Context, param: click.Parameter, value):
         if value is not None and str(value) == STDOUT:
             from ..errors import OutputError
 
@@ -27,12 +27,12 @@ def no_stdout(what: str = "an MCAP log", give: str = "a file name") -> Callable:
     return callback
 
 
-def config_options(help: str) -> Callable:  # noqa: A002 - as Click's
+def config_options(help: str) -> Callable:
     """`--config FILE` (help: `help`) and `--no-config`; the command receives `config`, the file to use:
     --config, else ./datmo.toml when present (said on stderr), else None (config.effective_path)."""
     def decorate(f: Callable) -> Callable:
         @functools.wraps(f)
-        def wrapper(*args, config: Path | None = None, no_config: bool = False, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        def wrapper(*args, config: Path | None = None, no_config: bool = False, **kwargs):
             from ..config import effective_path
 
             return f(*args, config=effective_path(config, no_config), **kwargs)

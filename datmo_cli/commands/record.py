@@ -45,7 +45,7 @@ class RecordResult:
     disconnect: str | None = None
 
 
-def _panel(scans: int, elapsed: float, stats, port: str, baud: int):  # noqa: ANN001, ANN202
+def _panel(scans: int, elapsed: float, stats, port: str, baud: int):
     from rich.table import Table
 
     t = Table.grid(padding=(0, 2))
@@ -66,9 +66,9 @@ class RecordingCut(DatmoError):
         self.exit_code = exit_code
 
 
-def record(driver, writer, *, duration: float | None = None, max_scans: int | None = None,  # noqa: ANN001
+def record(driver, writer, *, duration: float | None = None, max_scans: int | None = None,
            raw: bool = False, stop: threading.Event | None = None, display: bool = True,
-           on_scan=None) -> RecordResult:  # noqa: ANN001 - on_scan(stamp_ns, ranges, geometry), e.g. LiveFeed.scan
+           on_scan=None) -> RecordResult:
     """Connect `driver` (an LMS2xx), stream scans into `writer` (a streaming LogWriter) until `duration`
     seconds, `max_scans`, `stop` or a disconnect; stop the scanner and close the writer (also after a
     disconnect). An error before the scanner streams aborts the writer and propagates; any failure after
@@ -80,7 +80,7 @@ def record(driver, writer, *, duration: float | None = None, max_scans: int | No
     stop = stop or threading.Event()
     result = RecordResult(writer.path)
     if raw:
-        def on_telegram(frame, stamp: int) -> None:  # noqa: ANN001
+        def on_telegram(frame, stamp: int) -> None:
             writer.write(mcapio.TOPIC_TELEGRAM, TELEGRAM_TYPE, stamp, telegram_payload(frame.raw))
 
         driver.on_telegram = on_telegram
@@ -162,7 +162,7 @@ def record(driver, writer, *, duration: float | None = None, max_scans: int | No
     return result
 
 
-def _write_mount(writer, pose: tuple) -> None:  # noqa: ANN001 - a streaming LogWriter
+def _write_mount(writer, pose: tuple) -> None:
     """/tf_static base_link -> laser (the scanner's frame) of a laser pose (x, y m, yaw rad), and its metadata
     record: a recording has no odometry, so this is its only transform."""
     from ..log import transforms
@@ -172,7 +172,7 @@ def _write_mount(writer, pose: tuple) -> None:  # noqa: ANN001 - a streaming Log
     writer.write_transforms([now], [transforms.mount_tf(now, transforms.BASE_FRAME, "laser", mount)], static=True)
 
 
-def _live_panel(driver):  # noqa: ANN001, ANN202
+def _live_panel(driver):
     """A rich Live panel of the counts on a terminal's stderr (started), or None (not a terminal, --quiet)."""
     from rich.console import Console
     from rich.live import Live
@@ -188,11 +188,11 @@ def _live_panel(driver):  # noqa: ANN001, ANN202
     return live
 
 
-def _stop_scanner(driver) -> None:  # noqa: ANN001
+def _stop_scanner(driver) -> None:
     """Stop the scanner's output and restore its baud; a warning if it does not answer."""
     try:
         driver.stop()
-    except Exception as exc:  # noqa: BLE001 - finish the file whatever the device does now
+    except Exception as exc:  # finish the file whatever the device does now
         import warnings
 
         warnings.warn(f"{driver.name}: could not stop the scanner cleanly ({exc})", stacklevel=2)
@@ -215,7 +215,7 @@ def _scans(n: int) -> str:
     return f"{n} scan" if n == 1 else f"{n} scans"
 
 
-def _cut(writer, result: RecordResult, flushed: int, exc: BaseException) -> RecordingCut:  # noqa: ANN001
+def _cut(writer, result: RecordResult, flushed: int, exc: BaseException) -> RecordingCut:
     """Keep what reached the disk after `exc` stopped the recording; the error that says what and where."""
     from ..errors import OutputError
 
@@ -243,7 +243,7 @@ class _Signals:
         self.signum: int | None = None
         self.old: dict[int, object] = {}
 
-    def _handler(self, signum, frame) -> None:  # noqa: ANN001
+    def _handler(self, signum, frame) -> None:
         from .. import outputs
 
         if self.stop.is_set():
@@ -351,7 +351,7 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
         raise click.exceptions.Exit(128 + signals.signum)
 
 
-def _live_feed(host: str, port: int):  # noqa: ANN202 - a live.LiveFeed
+def _live_feed(host: str, port: int):
     """The live view of a recording, its URL printed (the port is checked before the scanner starts)."""
     from ..live import LiveFeed, LiveServer
 
@@ -362,7 +362,7 @@ def _live_feed(host: str, port: int):  # noqa: ANN202 - a live.LiveFeed
     return feed
 
 
-def _close_live(feed) -> None:  # noqa: ANN001 - a live.LiveFeed
+def _close_live(feed) -> None:
     """Stop the live view; a warning if it failed or fell behind (the recording is whole either way)."""
     import warnings
 

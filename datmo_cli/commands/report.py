@@ -34,7 +34,7 @@ def check_plot_outputs(paths: list[Path], force: bool) -> None:
         check_output(p, force=force, what="plot")
 
 
-def save_plot(data, path: Path, force: bool, kind: str = "auto", all_labels: bool = False) -> str:  # noqa: ANN001
+def save_plot(data, path: Path, force: bool, kind: str = "auto", all_labels: bool = False) -> str:
     """Draw `data` (pipeline.RunData) into `path` atomically (a temporary file renamed when the figure is
     complete); returns the line that says so (with the labels left out where they would overlap)."""
     import matplotlib

@@ -21,7 +21,7 @@ def _scan_count(spec: str) -> int | None:
         return None
     try:
         return mcapio.summary(local(spec)).topics()[mcapio.TOPIC_SCAN].count or None
-    except Exception:  # noqa: BLE001 - only an estimate for the bar
+    except Exception:  # only an estimate for the bar
         return None
 
 
@@ -31,7 +31,7 @@ class _BatchProgress:
     scans of the inputs to run, from their summaries; an input whose count is not known up front adds it
     when it starts, and a failed one its scans done."""
 
-    def __init__(self, batch) -> None:  # noqa: ANN001 - batch.Batch
+    def __init__(self, batch) -> None:
         import time
 
         from ..progress import bar
@@ -51,7 +51,7 @@ class _BatchProgress:
         self.bar = self._bar.__enter__()
         return self
 
-    def __exit__(self, *exc) -> None:  # noqa: ANN002
+    def __exit__(self, *exc) -> None:
         self._bar.__exit__(*exc)
 
     def _show(self) -> None:

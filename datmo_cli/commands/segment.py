@@ -13,7 +13,7 @@ from .options import config_options, input_options, no_stdout, quiet_option, sca
 D = FeatureParams()
 
 
-def feature_params(config: Path | None, **options) -> FeatureParams:  # noqa: ANN003 - option values
+def feature_params(config: Path | None, **options) -> FeatureParams:
     """Defaults, overridden by the config file's [features] table, overridden by the options given."""
     from ..perception.params import load_toml
 

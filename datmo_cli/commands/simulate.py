@@ -81,8 +81,8 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     say(f"{output}: {n} scans of {geometry.describe()}, {n_objects} ground-truth objects")
 
 
-def _write(writer, scene, seed, duration, rate, angle, resolution, range_m, units, noise, people,  # noqa: ANN001, ANN202
-           laser_pose=None):  # noqa: ANN001
+def _write(writer, scene, seed, duration, rate, angle, resolution, range_m, units, noise, people,
+           laser_pose=None):
     """Simulate block by block into `writer` (/scan, /odom and /tf for a moving sensor, ground truth, /tf_static
     for a moving sensor or a `laser_pose` (x, y, yaw rad)), each block written and forgotten before the next is
     cast: memory holds one block whatever the duration. Returns (scans, ground-truth objects, scan geometry)."""

@@ -40,7 +40,7 @@ def _fmt(v: float | None, digits: int = 3) -> str:
     return "n/a" if v is None or v != v else f"{v:.{digits}f}"
 
 
-def print_figures(held_out: list, mean: dict, console) -> None:  # noqa: ANN001 - rich Console
+def print_figures(held_out: list, mean: dict, console) -> None:
     """The held-out figures as a rich table: learned detector beside the paper's circle rule."""
     from ..progress import table as make_table
 

@@ -78,7 +78,7 @@ class Scan:
         return self.telegram.scan_index
 
 
-def open_port(path: str, baud: int = 9600):  # noqa: ANN201 - a serial.Serial
+def open_port(path: str, baud: int = 9600):
     """Open `path` with pyserial: 8N1, raw, no flow control. Raises DeviceError with the reason."""
     import os
 
@@ -97,7 +97,7 @@ class LMS2xx:
     """A SICK LMS200 on a serial port. `connect()`, `start()`, then `read_scan()` until done; `stop()`,
     `close()`. Angle in degrees (180 or 100), resolution in degrees (1, 0.5, 0.25), units "mm" or "cm"."""
 
-    def __init__(self, port, *, baud: int = 38400, angle: int = 180, resolution: float = 0.5,  # noqa: ANN001
+    def __init__(self, port, *, baud: int = 38400, angle: int = 180, resolution: float = 0.5,
                  units: str = "mm", indices: bool = False, interlaced: bool = False, name: str | None = None,
                  clock: Callable[[], int] = time.time_ns,
                  on_telegram: Callable[[P.Frame, int], None] | None = None) -> None:
@@ -137,7 +137,7 @@ class LMS2xx:
         self._set_baud(9600)
         try:
             self.port.timeout = READ_TIMEOUT_S
-        except Exception:  # noqa: BLE001 - fakes may not allow it
+        except Exception:  # fakes may not allow it
             pass
 
     def close(self) -> None:
@@ -145,7 +145,7 @@ class LMS2xx:
         if self.port is not None:
             try:
                 self.port.close()
-            except Exception:  # noqa: BLE001
+            except Exception:
                 pass
             self.port = None
 
@@ -170,7 +170,7 @@ class LMS2xx:
                         pass
             else:
                 self.port.write(data)
-        except Exception as exc:  # noqa: BLE001 - SerialException, OSError, write timeouts
+        except Exception as exc:  # SerialException, OSError, write timeouts
             raise DeviceDisconnected(f"{self.name}: write failed ({exc})") from None
 
     def _flush_input(self) -> None:
@@ -178,7 +178,7 @@ class LMS2xx:
         if reset is not None:
             try:
                 reset()
-            except Exception as exc:  # noqa: BLE001
+            except Exception as exc:
                 raise DeviceDisconnected(f"{self.name}: {exc}") from None
         self._parser.reset()
         self._items.clear()
@@ -201,7 +201,7 @@ class LMS2xx:
                 more = getattr(self.port, "in_waiting", 0) or 0
                 if more:
                     data += self.port.read(more)
-        except Exception as exc:  # noqa: BLE001 - SerialException, OSError
+        except Exception as exc:  # SerialException, OSError
             raise DeviceDisconnected(f"{self.name}: device disconnected ({exc})") from None
         if not data:
             return 0

@@ -102,7 +102,7 @@ class ArraySource(ScanSource):
     def __init__(self, values: np.ndarray) -> None:
         self.values = np.atleast_2d(np.asarray(values, np.uint16))
 
-    def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):  # noqa: ANN001, ANN201
+    def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):
         n = P.VARIANTS[(angle_deg, resolution_cdeg)]
         rows = self.values if self.values.shape[1] == n else np.full((1, n), 2000, np.uint16)
         while True:
@@ -115,7 +115,7 @@ class SceneSource(ScanSource):
     def __init__(self, scene: str, *, seed: int = 0, duration: float | None = None, noise: float = 0.01) -> None:
         self.scene, self.seed, self.duration, self.noise = scene, seed, duration, noise
 
-    def _simulation(self, angle_deg: int, resolution_cdeg: int, units: str, measuring_mode: int):  # noqa: ANN202
+    def _simulation(self, angle_deg: int, resolution_cdeg: int, units: str, measuring_mode: int):
         from ..sim.sensor import MAX_RATE_HZ
         from ..sim.simulate import Simulation
 
@@ -126,7 +126,7 @@ class SceneSource(ScanSource):
                           fov_deg=angle_deg, resolution_deg=res, range_mode_m=range_m, units=units,
                           noise_sigma=self.noise)
 
-    def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):  # noqa: ANN001, ANN201
+    def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):
         while True:
             sim = self._simulation(angle_deg, resolution_cdeg, units, measuring_mode)
             for chunk in sim.chunks(64):
@@ -144,7 +144,7 @@ class LogSource(ScanSource):
         if self.run.geometry.n_beams == 0:
             raise InputError(f"{path}: its scans have no beams: nothing to serve")
 
-    def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):  # noqa: ANN001, ANN201
+    def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):
         g = self.run.geometry
         n = P.VARIANTS[(angle_deg, resolution_cdeg)]
         want = np.radians(-angle_deg / 2 + resolution_cdeg / 100 * np.arange(n))

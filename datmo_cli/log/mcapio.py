@@ -779,7 +779,7 @@ class LogWriter:
         """Close the temporary file, whatever its buffered rest does (a full disk refuses it)."""
         try:
             self._file.close()
-        except Exception:  # noqa: BLE001 - the rest is cut off or dropped by the caller
+        except Exception:  # the rest is cut off or dropped by the caller
             pass
 
     def keep_flushed(self) -> int:
@@ -832,7 +832,7 @@ class LogWriter:
             self._closed = True
             try:
                 self._file.close()
-            except Exception:  # noqa: BLE001 - the buffered rest could not be written: the file goes anyway
+            except Exception:  # the buffered rest could not be written: the file goes anyway
                 pass
             finally:
                 outputs.discard(self.tmp)

@@ -127,7 +127,7 @@ class OrderedSink:
         return pick[~repeat]
 
 
-def stamp_order(stamps) -> tuple[np.ndarray, int, int | None, int, int | None]:  # noqa: ANN001 - (N,) int64 ns
+def stamp_order(stamps) -> tuple[np.ndarray, int, int | None, int, int | None]:
     """What OrderedSink does to one unique channel's stamps, for a whole run held in memory: (indices of the
     messages to keep, in time order; how many of them were stamped before an earlier one, the first's index;
     how many repeat a stamp taken before, the first's index)."""
@@ -145,7 +145,7 @@ def stamp_order(stamps) -> tuple[np.ndarray, int, int | None, int, int | None]: 
             int(order[repeat].min()) if repeat.any() else None)
 
 
-def order_note(src, total: int, reordered: int, first_reordered: int | None, dropped: int,  # noqa: ANN001
+def order_note(src, total: int, reordered: int, first_reordered: int | None, dropped: int,
                first_dropped: int | None) -> str | None:
     """The one-line warning for `src`'s scans (`total` of them) that came out of time order (`reordered`,
     the first's index) or repeat a stamp (`dropped`); None when there are neither."""

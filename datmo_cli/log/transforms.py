@@ -185,7 +185,7 @@ def mount_tf(stamp_ns: int, base: str, laser: str, pose: LaserPose) -> bytes:
 # ------------------------------------------------------------------------------------------- planar poses
 
 
-def _compose(x, y, th, mx: float, my: float, mth: float):  # noqa: ANN001, ANN202 - arrays or floats
+def _compose(x, y, th, mx: float, my: float, mth: float):
     c, s = np.cos(th), np.sin(th)
     return x + c * mx - s * my, y + s * mx + c * my, np.arctan2(np.sin(th + mth), np.cos(th + mth))
 

@@ -116,7 +116,7 @@ class LandmarkScore:
         return self.spurious / self.defined if self.defined else 0.0
 
 
-def corner_observed(run, truth: np.ndarray, truth_offsets: np.ndarray, sensor_theta: np.ndarray,  # noqa: ANN001
+def corner_observed(run, truth: np.ndarray, truth_offsets: np.ndarray, sensor_theta: np.ndarray,
                     reach: float = 0.5, near: float = 0.03, min_points: int = 4, c0: float = 0.08) -> dict[int, int]:
     """For each true wall corner id, the number of scans in which the method can see it as a corner: each of
     its two walls has at least `min_points` scan points (the paper keeps a line of more than 3 points) within

@@ -156,7 +156,7 @@ def _check_segments(start: np.ndarray, end: np.ndarray, offsets: np.ndarray, bea
 
 
 def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.ndarray, count: np.ndarray,
-              lo: float, hi: float, angles: np.ndarray, model, floor: float,  # noqa: ANN001
+              lo: float, hi: float, angles: np.ndarray, model, floor: float,
               threads: int = 1) -> np.ndarray:
     """Rows (scan in block, segment in scan, first, last, n, x, y, width, probability) of the block's
     clusters (those legs.LegModel `model` scores: the segments, or leg_tracker's gap clusters) whose leg

@@ -141,7 +141,7 @@ def return_beyond(ranges: np.ndarray, scan: np.ndarray, beam: np.ndarray, step: 
 
 
 @njit(cache=True)
-def _beyond(ranges, scan, beam, step, lo, hi, dropout, out, where) -> None:  # noqa: ANN001
+def _beyond(ranges, scan, beam, step, lo, hi, dropout, out, where) -> None:
     B = ranges.shape[1]
     for i in range(len(beam)):
         for j in range(1, dropout + 2):

@@ -18,7 +18,7 @@ SIMULATED = (("crowd", 11, 6, 0.5, 60.0), ("crowd", 12, 8, 1.0, 60.0), ("corrido
 
 
 def simulated_recording(scene: str, seed: int, people: int | None = None, resolution: float = 0.5,
-                        duration: float = 60.0):  # noqa: ANN201 - training.Recording
+                        duration: float = 60.0):
     """One simulated LMS200 recording with every visible person's two leg centres as its labels."""
     from ..sim.simulate import simulate_scene
     from .training import Recording

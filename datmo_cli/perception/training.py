@@ -85,7 +85,7 @@ class _Raw:
     poses: tuple[np.ndarray, list[np.ndarray]] | None = None
 
 
-def _poses_xy(msg) -> np.ndarray:  # noqa: ANN001 - a deserialised PoseArray
+def _poses_xy(msg) -> np.ndarray:
     return np.array([[p.position.x, p.position.y] for p in msg.poses], np.float64).reshape(-1, 2)
 
 
@@ -505,7 +505,7 @@ class EstimatorSpec:
     negative_fraction: float = 0.3
     seed: int = 0
 
-    def build(self):  # noqa: ANN201 - a scikit-learn estimator
+    def build(self):
         require_sklearn()
         from sklearn.ensemble import ExtraTreesClassifier, GradientBoostingClassifier, RandomForestClassifier
 
@@ -566,7 +566,7 @@ def training_rows(tables: Sequence[SegmentTable], spec: EstimatorSpec) -> tuple[
     return X, y.astype(np.int64), w
 
 
-def fit(tables: Sequence[SegmentTable], spec: EstimatorSpec):  # noqa: ANN201 - a fitted scikit-learn estimator
+def fit(tables: Sequence[SegmentTable], spec: EstimatorSpec):
     """The estimator of `spec` fitted on the candidate segments of `tables`."""
     X, y, w = training_rows(tables, spec)
     if not y.any() or y.all():
@@ -576,14 +576,14 @@ def fit(tables: Sequence[SegmentTable], spec: EstimatorSpec):  # noqa: ANN201 - 
     return est
 
 
-def to_model(estimator, threshold: float = 0.5, provenance: dict | None = None):  # noqa: ANN001, ANN201
+def to_model(estimator, threshold: float = 0.5, provenance: dict | None = None):
     """The legs.LegModel of a fitted estimator (what run time evaluates)."""
     from .legs import from_sklearn
 
     return from_sklearn(estimator, float(threshold), provenance or {})
 
 
-def scores(model, table: SegmentTable) -> np.ndarray:  # noqa: ANN001 - legs.LegModel
+def scores(model, table: SegmentTable) -> np.ndarray:
     """Leg probability of every segment of `table` by the run-time evaluator (0 for non-candidates)."""
     return model.probabilities(table.features)
 
@@ -717,7 +717,7 @@ def cross_validate(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], spe
 
 def fold_model(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], fold: Fold,
                spec: EstimatorSpec | None = None, extra: Sequence[SegmentTable] = (),
-               clusters: dict | None = None, tune: bool = False):  # noqa: ANN201 - legs.LegModel
+               clusters: dict | None = None, tune: bool = False):
     """A model trained as the shipped one without `fold`'s held-out recordings, as a LegModel run time can use
     (its provenance names the clusters it scores), to track the held-out recordings with. Its threshold is
     tuned on the rest only with `tune` (tracking does not use it: it takes legs by TrackingParams.leg_probability);

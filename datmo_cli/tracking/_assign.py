@@ -26,7 +26,7 @@ INFEASIBLE = 1e12
 
 
 @njit(cache=True)
-def lsap(cost):  # noqa: ANN001, ANN201
+def lsap(cost):
     """Minimum-cost assignment of the (R, C) float64 `cost` (finite entries): (rows, cols) int64 of
     min(R, C) pairs, rows ascending, as scipy.optimize.linear_sum_assignment returns them."""
     R, C = cost.shape
@@ -110,7 +110,7 @@ def lsap(cost):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def _components(allowed, rows_in, cols_in, nr, nc):  # noqa: ANN001, ANN201
+def _components(allowed, rows_in, cols_in, nr, nc):
     """Connected components of the allowed pairs among rows rows_in[:nr] and columns cols_in[:nc]: a label per
     row and per column (0, 1, ...), and the number of components."""
     crow = np.full(nr, -1, np.int64)
@@ -144,7 +144,7 @@ def _components(allowed, rows_in, cols_in, nr, nc):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def gnn(cost, allowed):  # noqa: ANN001, ANN201
+def gnn(cost, allowed):
     """The allowed pairs (rows, cols) int64 of least summed cost, each row and column at most once, rows
     ascending (see the module docstring). Solved per connected component of the allowed pairs (a pair
     outside them could only be made at INFEASIBLE): a component of one row or one column takes its cheapest

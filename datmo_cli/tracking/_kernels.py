@@ -10,7 +10,7 @@ from numba import njit
 
 
 @njit(cache=True)
-def pair_legs(x, y, stride_max):  # noqa: ANN001, ANN201
+def pair_legs(x, y, stride_max):
     """Greedy nearest-first pairing; returns (a, b, n_pairs, single, n_single)."""
     n = len(x)
     a = np.empty(n // 2 + 1, np.int64)
@@ -43,7 +43,7 @@ def pair_legs(x, y, stride_max):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def legs_to_measurements(lx, ly, ls, stride_max):  # noqa: ANN001, ANN201
+def legs_to_measurements(lx, ly, ls, stride_max):
     """Person measurements (kind 0) at the centre of paired legs and single legs (kind 1): x, y, size,
     kind, legs (M, 4)."""
     a, b, single = pair_legs(lx, ly, stride_max)
@@ -68,7 +68,7 @@ def legs_to_measurements(lx, ly, ls, stride_max):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def _people_first(lx, ly, ls, stride_max, n_more):  # noqa: ANN001, ANN201
+def _people_first(lx, ly, ls, stride_max, n_more):
     """Measurement buffers (x, y, size, kind, legs) with room for n_more after the people and single legs
     made of leg candidates lx, ly, ls (legs_to_measurements), which fill them first; and how many those are."""
     px, py, psize, pkind, plegs = legs_to_measurements(lx, ly, ls, stride_max)
@@ -85,7 +85,7 @@ def _people_first(lx, ly, ls, stride_max, n_more):  # noqa: ANN001, ANN201
 
 @njit(cache=True)
 def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
-                 leg_radius_max, leg_blob_max, stride_max, d_max):  # noqa: ANN001, ANN201
+                 leg_radius_max, leg_blob_max, stride_max, d_max):
     """Measurements of one scan (see measurements.py): x, y, size, kind, legs (M, 4), and the leg
     candidates lx, ly, ls (L,)."""
     nc, nb, nl = len(cx), len(bx), len(lseg)
@@ -151,7 +151,7 @@ def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
 
 
 @njit(cache=True)
-def _beam_marks(first, last, value, top):  # noqa: ANN001, ANN201
+def _beam_marks(first, last, value, top):
     """Per beam 0..top-1, the largest `value` of the intervals [first, last] (beam indices) covering it."""
     out = np.zeros(top)
     for i in range(len(first)):
@@ -161,7 +161,7 @@ def _beam_marks(first, last, value, top):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def _span_max(marks, a, b):  # noqa: ANN001, ANN201
+def _span_max(marks, a, b):
     v = 0.0
     for j in range(a, b + 1):
         v = max(v, marks[j])
@@ -170,7 +170,7 @@ def _span_max(marks, a, b):  # noqa: ANN001, ANN201
 
 @njit(cache=True)
 def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0,
-                         lx1, ly1, gfirst, glast, gx, gy, gw, wfirst, wlast, wp, stride_max, d_max):  # noqa: ANN001, ANN201
+                         lx1, ly1, gfirst, glast, gx, gy, gw, wfirst, wlast, wp, stride_max, d_max):
     """Measurements of one scan when a leg detector ran (see measurements.py): its legs (beams gfirst..glast
     at gx, gy, width gw) paired into people or single, then everything else as what it is: a circle
     (kind 2), the bounding box of a segment's lines (kind 3) or a blob (kind 4), whatever its size up to
@@ -227,7 +227,7 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
 
 
 @njit(cache=True)
-def mahalanobis2(x, P, zx, zy, sigma):  # noqa: ANN001, ANN201
+def mahalanobis2(x, P, zx, zy, sigma):
     """(K, M) squared Mahalanobis distances and (K, M) Euclidean distances of measurements (zx, zy) with
     per-measurement sigma from the K tracks' predicted positions."""
     K, M = len(x), len(zx)
@@ -245,7 +245,7 @@ def mahalanobis2(x, P, zx, zy, sigma):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def update(x, P, rows, zx, zy, sigma):  # noqa: ANN001, ANN201
+def update(x, P, rows, zx, zy, sigma):
     """Kalman update of tracks `rows` with measurements (zx, zy) and sigmas, in place, Joseph form:
     P = (I - KH) P (I - KH)^T + K R K^T, as filterpy computes it."""
     I_KH = np.empty((4, 4))
@@ -280,7 +280,7 @@ def update(x, P, rows, zx, zy, sigma):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def predict(x, P, dt, q):  # noqa: ANN001, ANN201
+def predict(x, P, dt, q):
     """Constant-velocity prediction of every track dt seconds ahead, in place (Q of white-noise
     acceleration q[k] for track k)."""
     for k in range(len(x)):
@@ -305,7 +305,7 @@ def predict(x, P, dt, q):  # noqa: ANN001, ANN201
 
 @njit(cache=True)
 def classify(votes, walking, previous, age_s, size, displacement, speed, confirmed, person_votes, d_max,
-             undefined_window, moving_distance, moving_speed):  # noqa: ANN001, ANN201
+             undefined_window, moving_distance, moving_speed):
     """Class and mobility of every track: the rules of classification.py, fused into one pass."""
     K = len(votes)
     cls = np.empty(K, np.uint8)
@@ -340,7 +340,7 @@ def classify(votes, walking, previous, age_s, size, displacement, speed, confirm
 
 
 @njit(cache=True)
-def leg_stage(tx, ty, lx, ly, ls, reach, stride_max):  # noqa: ANN001, ANN201
+def leg_stage(tx, ty, lx, ly, ls, reach, stride_max):
     """Leg candidates (lx, ly, ls) to tracks predicted at (tx, ty), nearest pairs first: each leg to at
     most one track, each track at most two legs: the first within `reach`, the second within `stride_max`
     of the track and of the first leg (a lagging prediction sits by one leg, a stride from the other).
@@ -402,7 +402,7 @@ def leg_stage(tx, ty, lx, ly, ls, reach, stride_max):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def duplicates(x, y, vx, vy, candidate, confirmed, rank, merge_distance, merge_speed):  # noqa: ANN001, ANN201
+def duplicates(x, y, vx, vy, candidate, confirmed, rank, merge_distance, merge_speed):
     """Which candidate tracks lie within merge_distance of a candidate of higher rank (ties: lower index),
     when one of the two is tentative or their velocities differ by less than merge_speed (two confirmed
     people passing each other close are not one)."""
@@ -423,7 +423,7 @@ def duplicates(x, y, vx, vy, candidate, confirmed, rank, merge_distance, merge_s
 
 
 @njit(cache=True)
-def leg_stage_measurements(tx, ty, lx, ly, ls, reach, stride_max, mx, my, msize, mkind, mlegs):  # noqa: ANN001, ANN201
+def leg_stage_measurements(tx, ty, lx, ly, ls, reach, stride_max, mx, my, msize, mkind, mlegs):
     """leg_stage, then the scan's measurements rebuilt: first one per track that took legs (owner gives
     the track), then the free legs paired (legs_to_measurements), then the measurements of other kinds
     (mkind not 0 or 1). Returns (owner, x, y, size, kind, legs)."""
@@ -453,7 +453,7 @@ def leg_stage_measurements(tx, ty, lx, ly, ls, reach, stride_max, mx, my, msize,
 
 @njit(cache=True)
 def apply_updates(x, P, last, hit, votes, size, lead_left, lead_right, moving, rows, zx, zy, zkind, zsize,
-                  zlegs, sigma, sigma_leg, moving_speed, step_min, step_max):  # noqa: ANN001, ANN201
+                  zlegs, sigma, sigma_leg, moving_speed, step_min, step_max):
     """Kalman-update tracks `rows` with measurements (zx, zy) of kinds zkind, and record the hit: last
     position, kind votes, largest size, and for people that have been `moving` which leg leads along the
     velocity (the walking pattern; noise on a still pair of posts would fake it)."""
@@ -485,7 +485,7 @@ def apply_updates(x, P, last, hit, votes, size, lead_left, lead_right, moving, r
 
 @njit(cache=True)
 def life_cycle(hit, age, hits, misses, last_hit_ns, history, confirmed, occluded, stamp_ns, mask, popcount,
-               confirm_hits, delete_after, delete_after_occluded, tentative_delete_after):  # noqa: ANN001, ANN201
+               confirm_hits, delete_after, delete_after_occluded, tentative_delete_after):
     """Count the scan for every track (age, hits, misses, hit history, confirmation) and return which
     tracks are past their deletion timeout (s since the last hit: tentative, seen, occluded)."""
     K = len(hit)
@@ -511,7 +511,7 @@ def life_cycle(hit, age, hits, misses, last_hit_ns, history, confirmed, occluded
 
 
 @njit(cache=True)
-def marker_points(px, py, vx, vy, cls, shown, alpha, color_table, tail, tail_count):  # noqa: ANN001, ANN201
+def marker_points(px, py, vx, vy, cls, shown, alpha, color_table, tail, tail_count):
     """Points and colours of the track markers (markers.py): per shape list (people, circle objects,
     others) points (n, 3) and colours (n, 4); velocity arrows and trajectory tails of `shown` tracks as
     LINE_LIST points (2 per segment). Tentative tracks get colour alpha `alpha`."""
@@ -560,7 +560,7 @@ def marker_points(px, py, vx, vy, cls, shown, alpha, color_table, tail, tail_cou
 
 
 @njit(cache=True)
-def kind_groups(votes, mobility):  # noqa: ANN001, ANN201
+def kind_groups(votes, mobility):
     """The kind group that fed each track most: 0 legs or people, 1 circles, 2 lines, 3 blobs, 5 a lone
     leg never paired that is not dynamic (ties: the lower group)."""
     K = len(votes)
@@ -578,7 +578,7 @@ def kind_groups(votes, mobility):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, margin):  # noqa: ANN001, ANN201
+def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, margin):
     """Which missed tracks (sensor-frame centres sx, sy and extents, m) are hidden: outside the field of
     view or range, or behind a return at least `margin` m nearer within their angular extent."""
     K, B = len(sx), len(ranges)
@@ -601,7 +601,7 @@ def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, mar
 
 @njit(cache=True)
 def background_update(score, mark, active, n_active, scan, ranges, cos_a, sin_a, angle_min, increment, range_min,
-                      range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled):  # noqa: ANN001, ANN201
+                      range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled):
     """Update the background grid with one scan; returns the new number of active cells.
 
     score (n * n,): per cell, for how long (s) it has been hit without being seen through since; a cell is seen
@@ -653,7 +653,7 @@ def background_update(score, mark, active, n_active, scan, ranges, cos_a, sin_a,
 
 
 @njit(cache=True)
-def on_background(score, lx, ly, ls, px, py, x0, y0, cell, n, threshold):  # noqa: ANN001, ANN201
+def on_background(score, lx, ly, ls, px, py, x0, y0, cell, n, threshold):
     """Which leg candidates (lx, ly, extent ls; tracking frame) lie on the background: a cell around the
     candidate's side facing the sensor at (px, py) has been occupied for at least `threshold` s."""
     out = np.zeros(len(lx), np.bool_)
@@ -671,7 +671,7 @@ def on_background(score, lx, ly, ls, px, py, x0, y0, cell, n, threshold):  # noq
 
 
 @njit(cache=True)
-def gated_costs(x, P, zx, zy, zkind, sigma, sigma_leg, gate, max_distance, compat, compat_row):  # noqa: ANN001, ANN201
+def gated_costs(x, P, zx, zy, zkind, sigma, sigma_leg, gate, max_distance, compat, compat_row):
     """Association costs (K, M) of measurements from the tracks' predictions, and which pairs pass the gate
     (squared Mahalanobis distance d2 <= gate; measurement sigma by kind: sigma_leg for single legs), the
     distance bound and the kind compatibility compat[compat_row[k], zkind[j]]. The cost is d2 + ln det S
@@ -697,7 +697,7 @@ def gated_costs(x, P, zx, zy, zkind, sigma, sigma_leg, gate, max_distance, compa
 
 @njit(cache=True)
 def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, py, x0, y0, cell, n,
-                         threshold):  # noqa: ANN001, ANN201
+                         threshold):
     """Which of n_tracks tracks took (rows, cols) a measurement on the background (see on_background; legs and
     circles are tested on their side facing the sensor, other kinds at their centre)."""
     out = np.zeros(n_tracks, np.bool_)

@@ -126,13 +126,13 @@ ANY_ROW = 4   # the compatibility row of tentative tracks (tracker._COMPAT)
 
 # ------------------------------------------------------------------------------------- measurements
 @njit(cache=True)
-def _empty_meas():  # noqa: ANN202
+def _empty_meas():
     return (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros((0, 4)),
             np.zeros(0))
 
 
 @njit(cache=True)
-def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm):  # noqa: ANN001, ANN201
+def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm):
     """One scan's measurements by the paper's rule (measurements.measurements, learned=False), sensor frame:
     x, y, size, kind, legs (M, 4), raw leg candidates (L, 4: x, y, size, 0), prob (M,: zeros)."""
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
@@ -146,7 +146,7 @@ def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly
 
 @njit(cache=True)
 def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0,
-                         lx1, ly1, gfirst, glast, gx, gy, gw, gp, prm):  # noqa: ANN001, ANN201
+                         lx1, ly1, gfirst, glast, gx, gy, gw, gp, prm):
     """One scan's measurements with a leg detector's legs (measurements.measurements, learned=True): the legs
     of probability >= leg_probability not on the beams of a circle wider than leg_radius_max are legs, the
     others lend their probability to what covers their beams. Returns x, y, size, kind, legs, raw (L, 4: x, y,
@@ -180,7 +180,7 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
 
 
 @njit(cache=True)
-def moved(mx, my, mlegs, raw, px, py, pc, ps):  # noqa: ANN001, ANN201
+def moved(mx, my, mlegs, raw, px, py, pc, ps):
     """Measurements (mx, my), their legs and the raw leg candidates in the tracking frame of a sensor at
     (px, py) with heading cos/sin (pc, ps): new arrays (Measurements.moved)."""
     x = pc * mx - ps * my + px
@@ -199,7 +199,7 @@ def moved(mx, my, mlegs, raw, px, py, pc, ps):  # noqa: ANN001, ANN201
 
 # ------------------------------------------------------------------------------------------- helpers
 @njit(cache=True)
-def kind_group(tab, k):  # noqa: ANN001, ANN201
+def kind_group(tab, k):
     """The kind group that fed track k most (_kernels.kind_groups): 0 legs, 1 circles, 2 lines, 3 blobs,
     5 a lone leg never paired that is not dynamic."""
     legs = tab[k, VOTES + K_PERSON] + tab[k, VOTES + K_LEG]
@@ -214,7 +214,7 @@ def kind_group(tab, k):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def to_sensor(x, y, has_pose, pose):  # noqa: ANN001, ANN201
+def to_sensor(x, y, has_pose, pose):
     """A tracking-frame point in the sensor frame of `pose` (itself without a pose)."""
     if not has_pose:
         return x, y
@@ -224,7 +224,7 @@ def to_sensor(x, y, has_pose, pose):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def leg_probability(mx, my, mkind, mlegs, mprob, raw, has_prob, j):  # noqa: ANN001, ANN201
+def leg_probability(mx, my, mkind, mlegs, mprob, raw, has_prob, j):
     """The leg detector's probability of measurement j (tracker._leg_probability): a leg's own, the mean of
     a pair's two (the nearest raw candidates to its legs), the segment's for the rest; 1 for legs when the
     candidates carry no probability."""
@@ -248,7 +248,7 @@ def leg_probability(mx, my, mkind, mlegs, mprob, raw, has_prob, j):  # noqa: ANN
 
 
 @njit(cache=True)
-def predict(tab, n, dt, prm):  # noqa: ANN001, ANN201
+def predict(tab, n, dt, prm):
     """Constant-velocity prediction of tracks 0..n-1 dt s ahead, in place (_kernels.predict; q by kind group)."""
     if dt == 0:
         return
@@ -276,7 +276,7 @@ def predict(tab, n, dt, prm):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def kalman_update(tab, k, zx, zy, sigma, scratch):  # noqa: ANN001, ANN201
+def kalman_update(tab, k, zx, zy, sigma, scratch):
     """Kalman update of track k with a position measurement (zx, zy) of sigma m, Joseph form (_kernels.update);
     scratch: (3, 4, 4) work space."""
     P = tab[k, P0:P0 + 16].reshape((4, 4))
@@ -310,7 +310,7 @@ def kalman_update(tab, k, zx, zy, sigma, scratch):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def restart(tab, k, zx, zy, sigma, prm):  # noqa: ANN001, ANN201
+def restart(tab, k, zx, zy, sigma, prm):
     """Track k's filter restarted at (zx, zy): no velocity, position sigma m, speed sigma initial_speed_sigma."""
     tab[k, X], tab[k, Y], tab[k, VX], tab[k, VY] = zx, zy, 0.0, 0.0
     tab[k, P0:P0 + 16] = 0.0
@@ -320,7 +320,7 @@ def restart(tab, k, zx, zy, sigma, prm):  # noqa: ANN001, ANN201
 
 # -------------------------------------------------------------------------------------------- phases
 @njit(cache=True)
-def off_background(mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ctx, px, py, prm):  # noqa: ANN001, ANN201
+def off_background(mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ctx, px, py, prm):
     """The measurements with leg candidates on the background made blobs and the other legs paired again
     (tracker._off_background); the same arrays when none is."""
     if ctx[C_BG_READY] == 0 or len(raw) == 0:
@@ -364,7 +364,7 @@ def off_background(mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ctx, px, p
 
 
 @njit(cache=True)
-def leggy_tracks(tab, n, prm):  # noqa: ANN001, ANN201
+def leggy_tracks(tab, n, prm):
     """The confirmed tracks of legs or people (legs a share >= person_votes of their hits) that may take leg
     candidates first."""
     out = np.empty(n, np.int64)
@@ -382,7 +382,7 @@ def leggy_tracks(tab, n, prm):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm):  # noqa: ANN001, ANN201
+def legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm):
     """Tracks of legs or people take up to two leg candidates each (tracker._legs). Returns the measurements
     (rebuilt when some track took legs: theirs first) and rows0, the tracks owning the first len(rows0)."""
     none = np.zeros(0, np.int64)
@@ -414,7 +414,7 @@ def legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm):  # noqa: A
 
 
 @njit(cache=True)
-def gated_costs(tab, n, mx, my, mkind, compat, crow, prm):  # noqa: ANN001, ANN201
+def gated_costs(tab, n, mx, my, mkind, compat, crow, prm):
     """Costs (n, M) d2 + ln det S and which pairs pass the gate, the distance bound and kind compatibility
     (_kernels.gated_costs on the table; the cost of a pair that does not pass is inf, not computed)."""
     M = len(mx)
@@ -439,7 +439,7 @@ def gated_costs(tab, n, mx, my, mkind, compat, crow, prm):  # noqa: ANN001, ANN2
 
 
 @njit(cache=True)
-def associate(tab, n, mx, my, mkind, rows0, compat, crow, prm):  # noqa: ANN001, ANN201
+def associate(tab, n, mx, my, mkind, rows0, compat, crow, prm):
     """Tracks rows0 own measurements 0..len(rows0)-1; the others are gated and assigned by GNN. (rows, cols)."""
     n0 = len(rows0)
     cols0 = np.arange(n0)
@@ -455,7 +455,7 @@ def associate(tab, n, mx, my, mkind, rows0, compat, crow, prm):  # noqa: ANN001,
 
 
 @njit(cache=True)
-def hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg_score, ctx, px, py, prm):  # noqa: ANN001, ANN201
+def hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg_score, ctx, px, py, prm):
     """Mark (column ON_BG) the tracks that take (rows, cols) a measurement on the background this scan: their
     motion does not count (tracker._hit_background)."""
     for k in range(n):
@@ -470,7 +470,7 @@ def hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg_score, ctx, px, 
 
 
 @njit(cache=True)
-def update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm):  # noqa: ANN001, ANN201
+def update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm):
     """Kalman-update tracks rows with measurements cols and record the hits (_kernels.apply_updates)."""
     for k in range(n):
         tab[k, HIT] = 0.0
@@ -500,7 +500,7 @@ def update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm):  # noqa: ANN00
 
 
 @njit(cache=True)
-def reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm):  # noqa: ANN001, ANN201
+def reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm):
     """Confirmed tracks lost while occluded take the nearest free measurement they could have reached since
     their last hit, their filter restarted there (tracker._reacquire). Returns (rows2, cols2)."""
     none = np.zeros(0, np.int64)
@@ -564,7 +564,7 @@ def reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm):  # no
 
 
 @njit(cache=True)
-def merge_reacquired(rows, cols, rows2, cols2):  # noqa: ANN001, ANN201
+def merge_reacquired(rows, cols, rows2, cols2):
     """The association with the reacquisitions (rows2, cols2) in: pairs whose measurement a lost track took
     back leave it, and their tracks (tentative, started on it) are superseded. (rows, cols, superseded)."""
     if len(rows2) == 0:
@@ -578,7 +578,7 @@ def merge_reacquired(rows, cols, rows2, cols2):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, prm):  # noqa: ANN001, ANN201
+def leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, prm):
     """Fold the leg probability of each hit (rows took cols) into the tracks' running mean LEG_SCORE."""
     a = prm[P_LEG_EVIDENCE_RATE]
     for q in range(len(rows)):
@@ -588,7 +588,7 @@ def leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, pr
 
 
 @njit(cache=True)
-def occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm):  # noqa: ANN001, ANN201
+def occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm):
     """Mark each missed track occluded when a nearer return covers its bearing or it is out of view
     (tracker._occlusion; geo: angle_min, increment, range_max, has geometry)."""
     all_hit = True
@@ -612,7 +612,7 @@ def occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm):  # noqa: AN
 
 
 @njit(cache=True)
-def duplicates(tab, n, prm):  # noqa: ANN001, ANN201
+def duplicates(tab, n, prm):
     """Tracks of legs or people within merge_distance of a higher-ranked such track, unless both are
     confirmed and move differently (tracker._duplicates)."""
     x, y, vx, vy = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
@@ -631,7 +631,7 @@ def duplicates(tab, n, prm):  # noqa: ANN001, ANN201
 
 
 @njit(cache=True)
-def life_cycle(tab, n, stamp, superseded, prm):  # noqa: ANN001, ANN201
+def life_cycle(tab, n, stamp, superseded, prm):
     """Count the scan for every track, confirm, and delete the tracks past their timeout, the duplicates and
     the `superseded` ones, keeping the others' order. Returns the new number of tracks."""
     mask = (1 << int(prm[P_CONFIRM_WINDOW])) - 1
@@ -673,7 +673,7 @@ def life_cycle(tab, n, stamp, superseded, prm):  # noqa: ANN001, ANN201
 
 @njit(cache=True)
 def spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp, has_pose, pose, px, py, ctx,
-          prm):  # noqa: ANN001, ANN201
+          prm):
     """Start tentative tracks on measurements no track took, except legs beside a track that took a leg and
     measurements on top of a track (tracker._spawn). Returns the table (grown when full) and its row count."""
     M = len(mx)
@@ -725,7 +725,7 @@ def spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp
 
 
 @njit(cache=True)
-def classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm):  # noqa: ANN001, ANN201
+def classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm):
     """Class and mobility of every track (tracker._classify and _kernels.classify; with the leg detector,
     a person is what its evidence says and the scanner does not carry)."""
     for k in range(n):
@@ -793,7 +793,7 @@ def classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm):  # noqa: 
 
 
 @njit(cache=True)
-def push_tail(tab, n, prm):  # noqa: ANN001, ANN201
+def push_tail(tab, n, prm):
     """Append every track's position to its tail (ring buffer of tail_length points)."""
     T = int(prm[P_TAIL_LENGTH])
     for k in range(n):
@@ -804,7 +804,7 @@ def push_tail(tab, n, prm):  # noqa: ANN001, ANN201
 
 @njit(cache=True)
 def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a, sin_a, angle_min, increment,
-                      range_min, range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled, fresh):  # noqa: ANN001, ANN201
+                      range_min, range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled, fresh):
     """_kernels.background_update with each active cell's range and beam kept beside it (cache[a] = r, beam
     for active[a], beam -2: not yet computed), valid while the sensor pose does not change (`fresh`: it
     changed, compute them all again). The same arithmetic on the same numbers: the same grid. An inactive
@@ -859,7 +859,7 @@ def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a,
 
 @njit(cache=True)
 def background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, cos_a, sin_a, geo, px, py, pc, ps,
-               dt, prm):  # noqa: ANN001, ANN201
+               dt, prm):
     """Add the scan's returns to the background grid (tracker._background; geo: angle_min, increment,
     range_max, has geometry, range_min)."""
     if (not has_ranges or geo[3] == 0 or prm[P_BACKGROUND_TIME] <= 0 or len(ranges) != len(cos_a)
@@ -884,7 +884,7 @@ def background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, 
 
 
 @njit(cache=True)
-def write_tracks(out, o, tab, n, has_pose, pose):  # noqa: ANN001, ANN201
+def write_tracks(out, o, tab, n, has_pose, pose):
     """Track elements of tracks 0..n-1 into out[o:o + n] (tracker.output)."""
     c, s = (np.cos(pose[2]), np.sin(pose[2])) if has_pose else (1.0, 0.0)
     for k in range(n):
@@ -915,7 +915,7 @@ def write_tracks(out, o, tab, n, has_pose, pose):  # noqa: ANN001, ANN201
 # -------------------------------------------------------------------------------------------- the step
 @njit(cache=True)
 def track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
-               has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, learned, compat, reacq):  # noqa: ANN001, ANN201
+               has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, learned, compat, reacq):
     """One scan (measurements in the sensor frame, stamp in ns since the first scan) through every phase;
     returns the table (a new one when it grew). ctx[C_N_TRACKS] holds the number of live tracks."""
     n = int(ctx[C_N_TRACKS])
@@ -954,7 +954,7 @@ def track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, ha
 @njit(cache=True)
 def step_measurements(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
                       has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, learned, compat, reacq,
-                      out):  # noqa: ANN001, ANN201
+                      out):
     """track_scan on one scan's measurements, then its live tracks as Track elements in `out` (a new, larger
     array when it is too small). Returns (table, out)."""
     tab = track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
@@ -969,7 +969,7 @@ def step_measurements(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mp
 @njit(cache=True)
 def track_block(tab, ctx, prm, stamps, circles, blobs, lines, legs, learned, ranges, has_ranges, poses,
                 has_pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, compat, reacq, out, tails,
-                out_tail, out_tail_count, offsets):  # noqa: ANN001, ANN201
+                out_tail, out_tail_count, offsets):
     """Track scans 0..len(stamps)-1 of a block of features (flat per kind, with per-scan offsets) in one call.
 
     circles: (offsets, first, last, x, y, radius); blobs: (offsets, first, last, x, y, size, kind); lines:

@@ -25,7 +25,7 @@ BLOB_DTYPE = cdr.element_dtype(types.BLOB)
 LEG_DTYPE = cdr.element_dtype(types.LEG)
 
 
-def iter_run_features(features) -> Iterator[ScanFeatures]:  # noqa: ANN001 - perception's RunFeatures
+def iter_run_features(features) -> Iterator[ScanFeatures]:
     """Scan by scan views of a RunFeatures (lines/circles/blobs with line_/circle_/blob_offsets)."""
     lo, co, bo, go = (np.asarray(features.line_offsets), np.asarray(features.circle_offsets),
                       np.asarray(features.blob_offsets), np.asarray(features.leg_offsets))
@@ -106,7 +106,7 @@ class TrackStream:
     detector (else people by the paper's rule, see Tracker); odometry, when given, puts tracking in its
     world frame."""
 
-    def __init__(self, geometry, *, odometry: Odometry | None = None,  # noqa: ANN001 - ScanGeometry
+    def __init__(self, geometry, *, odometry: Odometry | None = None,
                  params: TrackingParams | None = None, markers: bool = True, learned: bool = False) -> None:
         self.params = params or TrackingParams()
         self.tracker = Tracker(self.params, geometry, learned=learned)
@@ -165,7 +165,7 @@ def track_run(run: ScanRun, features: list[ScanFeatures] | Iterator[ScanFeatures
     return stream.block(run, features, progress=(lambda d: progress(d, n)) if progress is not None else None)
 
 
-def run_features(run: ScanRun, odometry: Odometry | None = None, params=None) -> list[ScanFeatures]:  # noqa: ANN001
+def run_features(run: ScanRun, odometry: Odometry | None = None, params=None) -> list[ScanFeatures]:
     """Segment `run` and extract its features with datmo_cli.perception (`params`: a FeatureParams, a dict
     of overrides of its defaults, or None for the defaults)."""
     from ..perception.features import extract_run

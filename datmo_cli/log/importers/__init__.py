@@ -141,7 +141,7 @@ def open_import(path: str | Path, topic: str | None = None, *, odom_topic: str |
     return stream
 
 
-class _compressed_errors:  # noqa: N801 - used as a statement
+class _compressed_errors:
     """Corrupt or truncated compressed data as a one-line InputError naming the file."""
 
     def __init__(self, path: Path) -> None:
@@ -150,7 +150,7 @@ class _compressed_errors:  # noqa: N801 - used as a statement
     def __enter__(self) -> None:
         return None
 
-    def __exit__(self, exc_type, exc, tb) -> None:  # noqa: ANN001
+    def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is not None and issubclass(exc_type, (EOFError, gzip.BadGzipFile, zlib.error)):
             raise InputError(f"{self.path}: corrupt or truncated compressed data ({exc})") from None
 
@@ -246,8 +246,8 @@ class ImportStats:
     peak_messages: int
 
 
-def write_import(stream: ImportStream, output: str | Path, *, force: bool = False, provenance=None,  # noqa: ANN001
-                 window: int | None = None, laser_pose=None) -> ImportStats:  # noqa: ANN001
+def write_import(stream: ImportStream, output: str | Path, *, force: bool = False, provenance=None,
+                 window: int | None = None, laser_pose=None) -> ImportStats:
     """Write `stream`'s scans to /scan and poses to /odom of `output` (atomically, LogWriter), block by block
     in time order (OrderedSink over `window` messages), with the transforms (see Frames), then its facts as
     metadata "datmo.import". Raises InputError when there are no scans. A message more than the window late is
@@ -308,7 +308,7 @@ class Frames:
     frame` for a laser pose without poses. Poses of the scanner itself (child frame = the scan's, as CARMEN's
     laser poses) become the base's under a laser pose, child base_link."""
 
-    def __init__(self, stream: ImportStream, writer, sink, laser_pose) -> None:  # noqa: ANN001
+    def __init__(self, stream: ImportStream, writer, sink, laser_pose) -> None:
         from .. import mcapio
 
         self.stream, self.writer, self.sink, self.mount = stream, writer, sink, laser_pose
@@ -327,7 +327,7 @@ class Frames:
             self.ids[topic] = self.writer.transform_channel(static=topic == mcapio.TOPIC_TF_STATIC)
         return self.ids[topic]
 
-    def _static(self, stamp: int, parent: str, pose) -> None:  # noqa: ANN001 - transforms.LaserPose
+    def _static(self, stamp: int, parent: str, pose) -> None:
         from .. import mcapio, transforms
 
         self.joined.add(parent)

@@ -591,7 +591,7 @@ def _cat(parts: list[Odometry]) -> Odometry:
                     o.frame_id, o.child_frame_id)
 
 
-def build(parse: CarmenParse, topic: str | None = None, label: str = "<text>"):  # noqa: ANN201
+def build(parse: CarmenParse, topic: str | None = None, label: str = "<text>"):
     """(ScanRun, Odometry | None, warnings, facts) of a parsed log, whole (pure)."""
     p = plan(parse, topic, label)
     runs, poses = [], []
@@ -606,7 +606,7 @@ def build(parse: CarmenParse, topic: str | None = None, label: str = "<text>"): 
     return run, _cat(poses) if poses else None, p.warnings, p.facts
 
 
-def _lines(f, progress, raw, total: int, label: str, warnings: list[str]):  # noqa: ANN001, ANN202
+def _lines(f, progress, raw, total: int, label: str, warnings: list[str]):
     """Lines of a text stream; reports progress by compressed bytes; a truncated gzip stream ends the lines
     with a warning instead of an error."""
     step = 0
@@ -621,7 +621,7 @@ def _lines(f, progress, raw, total: int, label: str, warnings: list[str]):  # no
 
 
 def stream_carmen(path: str | Path, *, topic: str | None = None, max_scans: int | None = None, progress=None,
-                  spool_dir: str | Path | None = None, block_scans: int = 1024):  # noqa: ANN001, ANN201
+                  spool_dir: str | Path | None = None, block_scans: int = 1024):
     """ImportStream of a CARMEN (or g2o ROBOTLASER1) text log, plain or gzipped.
 
     One pass parses the text and spools the scans to a temporary folder in `spool_dir` (the system's
@@ -679,6 +679,6 @@ def stream_carmen(path: str | Path, *, topic: str | None = None, max_scans: int 
 
 
 def read_carmen(path: str | Path, *, topic: str | None = None, max_scans: int | None = None,
-                progress=None):  # noqa: ANN001, ANN201
+                progress=None):
     """ImportResult of a CARMEN (or g2o ROBOTLASER1) text log, plain or gzipped (the whole run)."""
     return stream_carmen(path, topic=topic, max_scans=max_scans, progress=progress).collect()

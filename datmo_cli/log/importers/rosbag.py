@@ -32,7 +32,7 @@ def tf_topics(topics: dict[str, tuple[str, int]]) -> tuple[str, ...]:
     return tuple(t for t in TF_TOPICS if t in topics and topics[t][0] in TF_TYPES and topics[t][1])
 
 
-def tf_payload(msg) -> bytes:  # noqa: ANN001 - a deserialised TFMessage (ROS 1 or 2)
+def tf_payload(msg) -> bytes:
     """A deserialised TFMessage (ROS 2, or ROS 1's tf/tfMessage) as a CDR tf2_msgs/msg/TFMessage payload."""
     from ..transforms import Transform, encode_tf
 
@@ -72,16 +72,16 @@ def choose_topic(label: str, topics: dict[str, tuple[str, int]], wanted: str | N
     return next(iter(fit))
 
 
-def _yaw(qx, qy, qz, qw):  # noqa: ANN001, ANN202
+def _yaw(qx, qy, qz, qw):
     return np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
 
 
-def _stamp(header, log_time: int) -> int:  # noqa: ANN001
+def _stamp(header, log_time: int) -> int:
     ns = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
     return ns if ns else int(log_time)
 
 
-def scan_geometry(msg) -> ScanGeometry:  # noqa: ANN001 - a deserialised LaserScan
+def scan_geometry(msg) -> ScanGeometry:
     """The ScanGeometry of a deserialised sensor_msgs/LaserScan."""
     return ScanGeometry(angle_min=float(msg.angle_min), angle_increment=float(msg.angle_increment),
                         n_beams=len(msg.ranges), range_min=float(msg.range_min), range_max=float(msg.range_max),
@@ -89,12 +89,12 @@ def scan_geometry(msg) -> ScanGeometry:  # noqa: ANN001 - a deserialised LaserSc
                         frame_id=msg.header.frame_id)
 
 
-def scan_stamp(msg, log_time: int) -> int:  # noqa: ANN001 - a deserialised message with a header
+def scan_stamp(msg, log_time: int) -> int:
     """The header stamp of a message (ns), or its log time when the stamp is zero."""
     return _stamp(msg.header, log_time)
 
 
-def open_bag(path: str | Path):  # noqa: ANN201 - (rosbags AnyReader, {topic: (msgtype, count)})
+def open_bag(path: str | Path):
     """An opened rosbags AnyReader on a ROS 1 bag or ROS 2 bag folder, and its topics with their types and
     message counts; InputError naming the file when it cannot be read. The caller closes the reader."""
     from rosbags.highlevel import AnyReader
@@ -112,13 +112,13 @@ def open_bag(path: str | Path):  # noqa: ANN201 - (rosbags AnyReader, {topic: (m
 
 
 def read_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
-             max_scans: int | None = None, progress=None):  # noqa: ANN001, ANN201
+             max_scans: int | None = None, progress=None):
     """ImportResult of a ROS 1 bag or ROS 2 bag folder (the whole run)."""
     return stream_bag(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress).collect()
 
 
 def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
-               max_scans: int | None = None, progress=None, block_scans: int = 1024):  # noqa: ANN001, ANN201
+               max_scans: int | None = None, progress=None, block_scans: int = 1024):
     """ImportStream of a ROS 1 bag or ROS 2 bag folder.
 
     A first pass over the scans settles what concerns the whole run (their geometry, which must not
@@ -184,7 +184,7 @@ class _Survey:
     last: int                 # the largest scan stamp, ns
 
 
-def _survey(reader, label: str, topic: str, total: int, max_scans: int | None, progress) -> _Survey:  # noqa: ANN001
+def _survey(reader, label: str, topic: str, total: int, max_scans: int | None, progress) -> _Survey:
     conns = [c for c in reader.connections if c.topic == topic]
     g0, sizes, count, last = None, set(), 0, None
     for i, (conn, log_time, raw) in enumerate(reader.messages(connections=conns)):
@@ -210,7 +210,7 @@ def _survey(reader, label: str, topic: str, total: int, max_scans: int | None, p
     return _Survey(g0, count, mode, last)
 
 
-def _bag_blocks(reader, topic: str, o_topic: str | None, survey: _Survey, size: int, progress,  # noqa: ANN001
+def _bag_blocks(reader, topic: str, o_topic: str | None, survey: _Survey, size: int, progress,
                 total: int, tfs: tuple[str, ...] = (),
                 moved: list | None = None) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
     """Scans (and poses up to the first after the last scan) in the bag's order, `size` scans a block; the
@@ -280,13 +280,13 @@ def _bag_blocks(reader, topic: str, o_topic: str | None, survey: _Survey, size: 
 
 
 def read_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
-              max_scans: int | None = None):  # noqa: ANN201
+              max_scans: int | None = None):
     """ImportResult of a single MCAP file holding CDR sensor_msgs/msg/LaserScan (the whole run)."""
     return stream_mcap(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans).collect()
 
 
 def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
-                max_scans: int | None = None, block_scans: int = 1024):  # noqa: ANN201
+                max_scans: int | None = None, block_scans: int = 1024):
     """ImportStream of a single MCAP file holding CDR sensor_msgs/msg/LaserScan (ROS 2 style).
 
     A first pass over the scan payloads (header stamps and intensity counts only) settles the intensities
