@@ -444,7 +444,7 @@ def converted(src: str, out: str, task: Task, tell: Callable[[str], None]):
     the bag folder with params["bag_dir"]), removed when the block ends, on every way out (scan_log). The
     output is checked first, so a refused output costs no conversion. `tell` gets the lines the conversion says
     (they go in the task's record, "notes", which the command prints: a worker does not print)."""
-    from .commands.options import scan_log
+    from .inputs import scan_log
     from .outputs import temp_path
 
     params = task.params or {}

@@ -132,11 +132,11 @@ class Bar:
 
     @contextmanager
     def compile_notice(self) -> Iterator[Callable[[int, int], None]]:
-        """A (done, total) callback that also says when numba is compiling the kernels (commands.compiling)."""
+        """A (done, total) callback that also says when numba is compiling the kernels (numba_runtime)."""
         if self.progress is None:
             yield self.update
             return
-        from .commands.compiling import compile_notice
+        from .numba_runtime import compile_notice
 
         with compile_notice(self.progress, self.task) as report:
             yield report

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from types import SimpleNamespace
 
-from datmo_cli.commands.compiling import NOTICE, compile_notice
+from datmo_cli.numba_runtime import NOTICE, compile_notice
 
 
 class FakeBar:
@@ -58,7 +58,7 @@ def test_each_stage_started_with_zero_done_is_watched():
 
 
 def test_a_slow_block_is_said_once_on_stderr(capsys):
-    from datmo_cli.commands.compiling import said_if_slow
+    from datmo_cli.numba_runtime import said_if_slow
 
     with said_if_slow(delay=0.05):
         time.sleep(0.3)

@@ -7,8 +7,9 @@ from pathlib import Path
 import click
 
 from ..bounds import FEATURES, OPTIONS, option, pair_option
+from ..inputs import scan_log
 from ..perception.params import FeatureParams
-from .options import config_options, input_options, no_stdout, quiet_option, scan_log
+from .options import config_options, input_options, no_stdout, quiet_option
 from .segment import feature_params
 
 D = FeatureParams()

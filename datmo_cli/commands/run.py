@@ -299,8 +299,8 @@ def _warm_up() -> None:
     import time
 
     from ..batch import ensure_warm
+    from ..numba_runtime import said_if_slow
     from ..progress import say
-    from .compiling import said_if_slow
 
     t0 = time.perf_counter()
     with said_if_slow():

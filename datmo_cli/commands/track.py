@@ -7,8 +7,9 @@ from pathlib import Path
 import click
 
 from ..bounds import TRACK, option, pair_option
+from ..inputs import scan_log
 from ..tracking.params import TrackingParams
-from .options import config_options, input_options, no_stdout, quiet_option, scan_log
+from .options import config_options, input_options, no_stdout, quiet_option
 
 D = TrackingParams()
 
