@@ -42,6 +42,7 @@ def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic:
     \b
     Example: datmo import ../shared/data/carmen/csail-corrected.log.gz -o csail.mcap
     """
+    from ..cli import invocation
     from ..log import mcapio
     from ..log.importers import open_import, write_import
     from ..outputs import check_output
@@ -59,7 +60,7 @@ def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic:
 
             mount = LaserPose(*laser_pose)
             params["laser_pose"] = {"x_m": mount.x, "y_m": mount.y, "yaw_deg": math.degrees(mount.yaw)}
-        provenance = mcapio.Provenance("import", params, [src] if src.is_file() else [])
+        provenance = mcapio.Provenance("import", params, [src] if src.is_file() else [], invocation("import"))
         try:
             stats = write_import(stream, output, force=force, provenance=provenance, laser_pose=mount)
         finally:

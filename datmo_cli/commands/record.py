@@ -309,6 +309,7 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
 
     Example: datmo record --port /dev/ttyUSB0 -o run.mcap --live
     """
+    from ..cli import invocation
     from ..errors import DeviceError
     from ..lms2xx.driver import LMS2xx
     from ..log import mcapio
@@ -320,8 +321,8 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
               "duration": duration, "scans": max_scans, "indices": indices, "interlaced": interlaced, "raw": raw}
     if laser_pose is not None:
         params["laser_pose"] = {"x_m": laser_pose[0], "y_m": laser_pose[1], "yaw_deg": math.degrees(laser_pose[2])}
-    writer = mcapio.LogWriter(output, force=force, provenance=mcapio.Provenance("record", params, []),
-                              streaming=True)
+    provenance = mcapio.Provenance("record", params, [], invocation("record"))
+    writer = mcapio.LogWriter(output, force=force, provenance=provenance, streaming=True)
     if laser_pose is not None:
         _write_mount(writer, laser_pose)
     driver = LMS2xx(port, baud=int(baud), angle=int(angle), resolution=float(resolution), units=units,

@@ -61,6 +61,7 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
 
     Example: datmo simulate --scene hall --duration 60 -o hall.mcap
     """
+    from ..cli import invocation
     from ..log import mcapio
     from ..progress import say
     from ..sim.scene import load_scene
@@ -74,7 +75,7 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     if laser_pose is not None:
         params["laser_pose"] = {"x_m": laser_pose[0], "y_m": laser_pose[1], "yaw_deg": math.degrees(laser_pose[2])}
     user_file = scene.endswith(".toml") or "/" in scene
-    provenance = mcapio.Provenance("simulate", params, [scene] if user_file else [])
+    provenance = mcapio.Provenance("simulate", params, [scene] if user_file else [], invocation("simulate"))
     with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
         n, n_objects, geometry = _write(writer, loaded, seed, duration, rate, int(angle), float(resolution),
                                         int(range_m), units, noise, people, laser_pose)

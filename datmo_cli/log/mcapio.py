@@ -551,7 +551,8 @@ def sha256_of(path: str | Path) -> str:
 
 @dataclass
 class Provenance:
-    """What made a file: the command, its effective parameters and its inputs (hashed on write)."""
+    """What made a file: the command, its effective parameters and its inputs (hashed on write).
+    `command_line`: the command line as the caller was started with it (default `datmo COMMAND`)."""
 
     command: str
     params: dict = field(default_factory=dict)
@@ -560,9 +561,7 @@ class Provenance:
     names: list | None = None   # what the inputs are called in the records (e.g. the URL a local copy came from)
 
     def records(self) -> dict[str, dict[str, str]]:
-        from ..cli import invocation
-
-        line = self.command_line if self.command_line is not None else invocation(self.command)
+        line = self.command_line if self.command_line is not None else f"datmo {self.command}"
         return {
             "datmo": {"tool": "datmo", "version": __version__, "command": self.command,
                       "command_line": _text(line)},
