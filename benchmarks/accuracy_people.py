@@ -21,8 +21,8 @@ import numpy as np
 from benchmarks.accuracy_tracking import LEGTRACKER, demo_figures, learned_legs, read_leg_labels, read_ros1_scans
 from benchmarks.common import print_lines
 from datmo_cli.perception.egomotion import odometry_for
+from datmo_cli.stages import run_features, track_run
 from datmo_cli.tracking import accuracy as acc
-from datmo_cli.tracking.pipeline import run_features, track_run
 
 NEGATIVE_TOPICS = ("/left_scan", "/right_scan", "/rear_scan")
 PERSON_RADIUS = 0.5     # m, a labelled leg this near a confirmed person track is covered

@@ -20,8 +20,8 @@ from datmo_cli import evaluate as ev
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.report import decode_channel
+from datmo_cli.stages import run_features, track_run
 from datmo_cli.tracking import accuracy as acc
-from datmo_cli.tracking.pipeline import run_features, track_run
 
 ROOT = Path(__file__).resolve().parent.parent
 LOGS = ROOT / "sample_logs"

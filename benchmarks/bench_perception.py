@@ -18,7 +18,8 @@ import numpy as np
 from benchmarks.common import Row, best_of, print_lines, print_table
 from datmo_cli.log import mcapio
 from datmo_cli.log.scan import ScanRun
-from datmo_cli.perception.features import derive_features, extract_run, segment_run
+from datmo_cli.perception.features import extract_run, segment_run
+from datmo_cli.stages import derive_features
 
 ROOT = Path(__file__).resolve().parent.parent
 HALL = ROOT / "sample_logs" / "hall.mcap"

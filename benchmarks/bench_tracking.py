@@ -13,9 +13,9 @@ import numpy as np
 from benchmarks.common import Row, best_of, print_lines, print_table
 from datmo_cli.log import mcapio, types
 from datmo_cli.report import decode_channel
+from datmo_cli.stages import TrackedRun, run_features, track_run
 from datmo_cli.tracking import accuracy as acc
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.pipeline import TrackedRun, run_features, track_run
 
 HALL = Path(__file__).resolve().parent.parent / "sample_logs" / "hall.mcap"
 TRACK_TARGET_US = 40.0   # issue #13: the whole tracking step per scan, given features

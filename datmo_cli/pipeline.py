@@ -119,7 +119,7 @@ class RunStages:
                 "leg_model": leg_model_provenance(self.feature_params.leg_model)}
 
     def __call__(self, block) -> dict[str, tuple]:
-        from .tracking.pipeline import TrackStream, iter_run_features
+        from .stages import TrackStream, iter_run_features
 
         run = block.run
         out = {}
@@ -208,9 +208,9 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=
     from .log import types
     from .perception.features import leg_model_provenance
     from .perception.params import FeatureParams
+    from .stages import TrackStream, decode_features
     from .streaming import BLOCK_SCANS, LogStream, stream_log, stream_odometry
     from .tracking.params import TrackingParams
-    from .tracking.pipeline import TrackStream, decode_features
 
     params = params or TrackingParams()
     stream = src if isinstance(src, LogStream) else LogStream(src)
@@ -320,8 +320,8 @@ def segment_file(src: str | Path, out: str | Path, params=None, *, force: bool =
     """Segment every scan of `src` into `out` (its channels plus /datmo/segments) in one streaming pass;
     returns the number of scans. `params`: a FeatureParams (c0, min_points; None: the defaults)."""
     from .log import types
-    from .perception.features import derive_segments
     from .perception.params import FeatureParams
+    from .stages import derive_segments
     from .streaming import BLOCK_SCANS, LogStream, stream_log
 
     params = params or FeatureParams()

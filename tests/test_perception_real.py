@@ -10,8 +10,9 @@ from conftest import shared_path
 
 from datmo_cli.log import mcapio
 from datmo_cli.log.importers import import_log
-from datmo_cli.perception.features import derive_features, extract_run, segment_run
+from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
+from datmo_cli.stages import derive_features
 
 pytestmark = pytest.mark.shared
 

@@ -15,8 +15,8 @@ import pytest
 from datmo_cli import evaluate as ev
 from datmo_cli.log import mcapio, types
 from datmo_cli.report import decode_channel
+from datmo_cli.stages import run_features, track_run
 from datmo_cli.tracking import accuracy as acc
-from datmo_cli.tracking.pipeline import run_features, track_run
 
 
 def _score(sample_logs, name: str, source: str) -> dict:

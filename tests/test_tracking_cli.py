@@ -12,7 +12,7 @@ from test_tracking_people import legs_as_circles, walker_legs
 from datmo_cli.cli import cli
 from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
-from datmo_cli.tracking.pipeline import features_from_lists
+from datmo_cli.tracking.synthetic import features_from_lists
 
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0, 0.0, 0.2, "laser")
 N = 30

@@ -15,7 +15,7 @@ from datmo_cli.tracking.classification import (
 )
 from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, measurements
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.pipeline import features_from_lists
+from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
 
 

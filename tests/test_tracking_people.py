@@ -8,7 +8,7 @@ from datmo_cli.tracking.classification import CLASS_PERSON, MOBILITY_DYNAMIC
 from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON, measurements
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.people import leg_lead, pair_legs
-from datmo_cli.tracking.pipeline import features_from_lists
+from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
 
 STEP, WIDTH = 2 * 0.9 * np.sin(np.radians(22)), 0.3   # 2 l sin(theta) and the legs' path distance, m

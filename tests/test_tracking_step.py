@@ -16,11 +16,12 @@ from hypothesis import strategies as st
 
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry
+from datmo_cli.stages import iter_run_features, track_run
 from datmo_cli.tracking import _kernels, _step, kalman, state
 from datmo_cli.tracking.markers import track_markers
 from datmo_cli.tracking.measurements import Measurements
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.pipeline import features_from_lists, iter_run_features, track_run
+from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import _COMPAT, _COMPAT_LEARNED, _REACQUIRE, TRACK_DTYPE, Tracker
 from tests.conftest import SAMPLE_LOGS
 from tests.reference_tracking import ReferenceTracker, reference_measurements

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from datmo_cli.log.scan import ScanGeometry
 from datmo_cli.tracking.measurements import measurements
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.pipeline import features_from_lists
+from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import STATUS_COASTING, STATUS_CONFIRMED, STATUS_TENTATIVE, Tracker
 
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0)

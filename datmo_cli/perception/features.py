@@ -2,7 +2,7 @@
 the one pass of `datmo run`.
 
 `segment_run` and `extract_run` validate the run and call the numba kernels block by block; results are
-flat arrays with per-scan offsets (RunFeatures). `derive_segments` / `derive_features` turn them into the
+flat arrays with per-scan offsets (RunFeatures). `FeatureStream` turns them into the
 channels the commands write: /datmo/segments, /datmo/features, /datmo/landmarks and
 /datmo/markers/features. Sensor frame of each scan (x forward, y left), metres and radians; landmarks in
 the odometry (world) frame when the run has odometry.
@@ -407,14 +407,6 @@ def landmark_payloads(f: RunFeatures) -> list[bytes]:
             for k, s in enumerate(np.asarray(f.stamps, np.int64).tolist())]
 
 
-def derive_segments(run: ScanRun, params: FeatureParams | None = None) -> dict[str, tuple]:
-    """The channel `datmo segment` adds: {topic: (msgtype, stamps, payloads)}."""
-    from ..log import mcapio
-
-    start, end, offsets = segment_run(run, params)
-    return {mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, run.stamps, segment_payloads(run, start, end, offsets))}
-
-
 def decode_segments(payloads: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(start, end, offsets) of datmo_msgs/msg/Segments payloads (a log's /datmo/segments)."""
     msgs = [cdr.decode(types.SEGMENTS, p) for p in payloads]
@@ -423,16 +415,3 @@ def decode_segments(payloads: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.n
     offsets = _offsets(np.array([len(s) for s in starts], np.int64))
     empty = np.zeros(0, np.int64)
     return (np.concatenate(starts) if starts else empty), (np.concatenate(ends) if ends else empty), offsets
-
-
-def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: FeatureParams | dict | None = None,
-                    segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                    progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], RunFeatures]:
-    """The channels `datmo features` adds ({topic: (msgtype, stamps, payloads)}: segments, features,
-    landmarks and feature markers) and the RunFeatures they came from. Given `segments` (a log's own),
-    they are used and /datmo/segments is not among the channels returned."""
-    if isinstance(params, dict):
-        from .params import from_dict
-
-        params = from_dict(params)
-    return FeatureStream(params, odometry).block(run, segments, progress)

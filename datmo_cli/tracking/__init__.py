@@ -8,7 +8,7 @@ classification  classes and mobility (0 static, 1 dynamic, X undefined)
 tracker       Tracker: the state between compiled steps, one call per scan (`step`) or per block of scans
               (`track_block`)
 markers       visualization_msgs/MarkerArray CDR for Foxglove
-pipeline      a whole run: features in, Tracks and markers payloads out
+synthetic     ScanFeatures from plain lists (tests, accuracy)
 accuracy      figures against ground truth that datmo_cli.evaluate does not give
 params        TrackingParams (defaults, TOML)
 _kernels      numba kernels behind kalman, measurements and the step

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .pipeline import ScanFeatures, features_from_lists
+from .measurements import ScanFeatures
+from .synthetic import features_from_lists
 
 PERSON, CIRCLE_OBJECT, RECTANGULAR_OBJECT, COLUMN, BENCH = 1, 2, 3, 4, 5
 

@@ -1,8 +1,11 @@
-"""Tracking over a whole run: features in, one Tracks message and one MarkerArray per scan out.
+"""The stages of the pipeline as channels, {topic: (msgtype, stamps, payloads)}: segmentation
+(`derive_segments`), features (`derive_features`, through perception.features.FeatureStream) and tracking
+(`TrackStream` block by block, `derive_tracks`, `track_run`), with the glue between perception and tracking
+(features decoded from a log or taken from a RunFeatures, one ScanFeatures per scan). With odometry,
+tracking runs in the world frame and every track also carries its world position.
 
-Features come either from a log's /datmo/features channel or from `datmo_cli.perception.features.
-extract_run` (a RunFeatures of flat arrays with per-scan offsets). With odometry, tracking runs in the
-world frame and every track also carries its world position.
+The core packages never import each other; this module (and pipeline, which runs these stages over files)
+is where perception's output becomes tracking's input.
 """
 
 from __future__ import annotations
@@ -12,17 +15,31 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..log import cdr, types
-from ..log.scan import Odometry, ScanRun
-from .markers import track_markers
-from .measurements import ScanFeatures
-from .params import TrackingParams
-from .tracker import TRACK_DTYPE, Tracker
+from .log import cdr, mcapio, types
+from .log.scan import Odometry, ScanRun
+from .perception.features import FeatureStream, RunFeatures, extract_run, segment_payloads, segment_run
+from .perception.params import FeatureParams, from_dict
+from .tracking.markers import track_markers
+from .tracking.measurements import ScanFeatures
+from .tracking.params import TrackingParams
+from .tracking.tracker import TRACK_DTYPE, Tracker
 
-LINE_DTYPE = cdr.element_dtype(types.LINE)
-CIRCLE_DTYPE = cdr.element_dtype(types.CIRCLE)
-BLOB_DTYPE = cdr.element_dtype(types.BLOB)
-LEG_DTYPE = cdr.element_dtype(types.LEG)
+
+def derive_segments(run: ScanRun, params: FeatureParams | None = None) -> dict[str, tuple]:
+    """The channel `datmo segment` adds: {topic: (msgtype, stamps, payloads)}."""
+    start, end, offsets = segment_run(run, params)
+    return {mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, run.stamps, segment_payloads(run, start, end, offsets))}
+
+
+def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: FeatureParams | dict | None = None,
+                    segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                    progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], RunFeatures]:
+    """The channels `datmo features` adds ({topic: (msgtype, stamps, payloads)}: segments, features,
+    landmarks and feature markers) and the RunFeatures they came from. Given `segments` (a log's own),
+    they are used and /datmo/segments is not among the channels returned."""
+    if isinstance(params, dict):
+        params = from_dict(params)
+    return FeatureStream(params, odometry).block(run, segments, progress)
 
 
 def iter_run_features(features) -> Iterator[ScanFeatures]:
@@ -41,33 +58,6 @@ def decode_features(payloads: list[bytes]) -> list[ScanFeatures]:
     for p in payloads:
         msg = cdr.decode(types.FEATURES, p)
         out.append(ScanFeatures(msg["lines"], msg["circles"], msg["blobs"], msg["legs"]))
-    return out
-
-
-def features_from_lists(scans: list[dict]) -> list[ScanFeatures]:
-    """ScanFeatures from plain lists, for tests and scripts: each scan a dict with optional "circles"
-    [(x, y, radius)], "lines" [(x_ini, y_ini, x_end, y_end)] (each its own segment), "blobs" [(x, y, size)]
-    and "legs" [(x, y, width)] (a leg detector's legs, each its own segment)."""
-    out = []
-    for s in scans:
-        c = np.zeros(len(s.get("circles", ())), CIRCLE_DTYPE)
-        for k, (x, y, r) in enumerate(s.get("circles", ())):
-            c[k]["x"], c[k]["y"], c[k]["radius"], c[k]["segment"] = x, y, r, k
-            c[k]["first"], c[k]["last"] = 10 * k, 10 * k + 5   # each its own beams
-        li = np.zeros(len(s.get("lines", ())), LINE_DTYPE)
-        for k, (x0, y0, x1, y1) in enumerate(s.get("lines", ())):
-            li[k]["x_ini"], li[k]["y_ini"], li[k]["x_end"], li[k]["y_end"] = x0, y0, x1, y1
-            li[k]["length"], li[k]["segment"] = np.hypot(x1 - x0, y1 - y0), 100 + k
-            li[k]["first"], li[k]["last"] = 10 * (100 + k), 10 * (100 + k) + 5
-        b = np.zeros(len(s.get("blobs", ())), BLOB_DTYPE)
-        for k, (x, y, size) in enumerate(s.get("blobs", ())):
-            b[k]["x"], b[k]["y"], b[k]["size"], b[k]["segment"] = x, y, size, 200 + k
-            b[k]["first"], b[k]["last"] = 10 * (200 + k), 10 * (200 + k) + 5
-        g = np.zeros(len(s.get("legs", ())), LEG_DTYPE)
-        for k, (x, y, width) in enumerate(s.get("legs", ())):
-            g[k]["x"], g[k]["y"], g[k]["width"], g[k]["segment"], g[k]["probability"] = x, y, width, 300 + k, 1.0
-            g[k]["first"], g[k]["last"] = 10 * (300 + k), 10 * (300 + k) + 5
-        out.append(ScanFeatures(li, c, b, g))
     return out
 
 
@@ -147,8 +137,6 @@ class TrackStream:
 
     def channels(self, tracked: TrackedRun) -> dict[str, tuple[str, np.ndarray, list]]:
         """The channels `datmo track` adds for a TrackedRun: {topic: (msgtype, stamps, payloads)}."""
-        from ..log import mcapio
-
         out = {mcapio.TOPIC_TRACKS: (types.TRACKS, tracked.stamps, tracked.track_payloads())}
         if self.markers:
             out[mcapio.TOPIC_MARKERS_TRACKS] = (types.MARKER_ARRAY, tracked.stamps, tracked.markers)
@@ -168,9 +156,6 @@ def track_run(run: ScanRun, features: list[ScanFeatures] | Iterator[ScanFeatures
 def run_features(run: ScanRun, odometry: Odometry | None = None, params=None) -> list[ScanFeatures]:
     """Segment `run` and extract its features with datmo_cli.perception (`params`: a FeatureParams, a dict
     of overrides of its defaults, or None for the defaults)."""
-    from ..perception.features import extract_run
-    from ..perception.params import FeatureParams
-
     if isinstance(params, dict):
         params = FeatureParams().replace(**params)
     return list(iter_run_features(extract_run(run, params=params, odometry=odometry)))
