@@ -39,7 +39,7 @@ def fold_models(folder: Path, quick: bool = False) -> tuple[dict[str, str], dict
     import dataclasses
 
     from datmo_cli.perception import training as T
-    from datmo_cli.perception.sim_legs import simulated_recordings
+    from datmo_cli.simulated import simulated_recordings
 
     positives = sorted(LEGTRACKER.glob("positive_*_extracted.bag"))
     lab = T.tables_of([T.read_labelled(p) for p in positives])

@@ -59,8 +59,9 @@ def bench_parser(n: int = 2000, chunk: int = 4096) -> tuple[Row, float]:
 def bench_record(n: int, realtime: bool) -> Row:
     from datmo_cli.commands.record import record
     from datmo_cli.lms2xx.driver import LMS2xx
-    from datmo_cli.lms2xx.emulator import Emulator, SceneSource
+    from datmo_cli.lms2xx.emulator import Emulator
     from datmo_cli.log import mcapio
+    from datmo_cli.simulated import SceneSource
 
     with tempfile.TemporaryDirectory() as d, Emulator(SceneSource("hall"), realtime=realtime) as emu:
         driver = LMS2xx(emu.device_path, baud=500000)
@@ -83,8 +84,9 @@ def bench_record_75hz(seconds: float = 30.0) -> tuple[Row, int, int, float]:
     import subprocess
     import sys
 
-    from datmo_cli.lms2xx.emulator import Emulator, SceneSource
+    from datmo_cli.lms2xx.emulator import Emulator
     from datmo_cli.log import mcapio
+    from datmo_cli.simulated import SceneSource
 
     datmo = Path(sys.executable).with_name("datmo")
     with tempfile.TemporaryDirectory() as d, \

@@ -288,7 +288,8 @@ def test_live_feed_drops_scans_rather_than_waiting(monkeypatch):
 def test_record_calls_on_scan_with_each_scan_written(tmp_path):
     from datmo_cli.commands.record import record
     from datmo_cli.lms2xx.driver import LMS2xx
-    from datmo_cli.lms2xx.emulator import Emulator, SceneSource
+    from datmo_cli.lms2xx.emulator import Emulator
+    from datmo_cli.simulated import SceneSource
 
     seen: list[tuple[int, np.ndarray, ScanGeometry]] = []
     with Emulator(SceneSource("hall", seed=3, duration=10)) as emu:

@@ -25,9 +25,10 @@ from datmo_cli.commands.record import record
 from datmo_cli.errors import OutputError
 from datmo_cli.lms2xx import protocol as P
 from datmo_cli.lms2xx.driver import LMS2xx
-from datmo_cli.lms2xx.emulator import ArraySource, Emulator, Faults, LogSource, SceneSource
+from datmo_cli.lms2xx.emulator import ArraySource, Emulator, Faults, LogSource
 from datmo_cli.log import mcapio
 from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.simulated import SceneSource
 
 pytestmark = pytest.mark.timeout(60) if hasattr(pytest.mark, "timeout") else []
 

@@ -87,10 +87,10 @@ def test_without_scikit_learn_the_error_says_how_to_install_it(tmp_path, monkeyp
 
 def test_with_simulated_recordings_always_in_training(tmp_path, monkeypatch):
     """--with-simulated adds simulated LMS200 recordings (exact legs) to every training set, never held out."""
-    from datmo_cli.perception import sim_legs
+    from datmo_cli import simulated
     from datmo_cli.perception.legs import LegModel
 
-    monkeypatch.setattr(sim_legs, "SIMULATED", (("crowd", 21, 3, 0.5, 4.0),))   # a short one, for speed
+    monkeypatch.setattr(simulated, "SIMULATED", (("crowd", 21, 3, 0.5, 4.0),))   # a short one, for speed
     positives = [str(write_bag(tmp_path / "p0.bag", *scene(20, seed=0))),
                  str(write_bag(tmp_path / "p1.bag", *scene(20, seed=1)))]
     out = tmp_path / "legs.npz"

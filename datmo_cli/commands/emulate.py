@@ -57,8 +57,9 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
     Example: datmo emulate --scene hall --fault garbage:0.05,crc:0.01
     """
     from ..errors import ConfigError
-    from ..lms2xx.emulator import Emulator, Faults, source_for
+    from ..lms2xx.emulator import Emulator, Faults
     from ..progress import quiet
+    from ..simulated import scan_source
 
     silent = quiet()   # read here: the emulator's thread, which also says things, has no Click context
 
@@ -75,7 +76,7 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
 
         check_output(link, force=force, what="link")   # before the device starts
     faults = Faults.parse(fault_spec)
-    source = source_for(log=log_path, scene=scene, seed=seed, duration=duration)
+    source = scan_source(log=log_path, scene=scene, seed=seed, duration=duration)
     emu = Emulator(source, faults=faults, seed=seed, baud=int(baud), angle_deg=int(angle),
                    resolution_deg=float(resolution), units=units, indices=indices,
                    on_event=lambda text: say(f"emulate: {text}"))

@@ -120,7 +120,7 @@ def command(positives: tuple[Path, ...], negatives: tuple[Path, ...], topic: str
 
         extra = []
         if with_simulated:
-            from ..perception.sim_legs import simulated_recordings
+            from ..simulated import simulated_recordings
 
             shown.update(0, description="simulating")
             extra = simulated_recordings()

@@ -9,8 +9,9 @@ A pty has no physical baud rate, so bytes are paced in software (baud/10 bytes p
 emulator compares the speed the host set on the terminal (termios) with the baud it is at: host bytes
 sent at the wrong speed are ignored, and the host receives garbage instead of the emulator's output.
 
-Scans come from a `ScanSource` (a simulated scene, a log, or fixed arrays); faults (garbage, corrupt CRCs,
-truncated telegrams, dropped bytes, NAKs, a disconnect) can be injected into the scan stream.
+Scans come from a `ScanSource` (a log, fixed arrays, or a simulated scene: datmo_cli.simulated); faults
+(garbage, corrupt CRCs, truncated telegrams, dropped bytes, NAKs, a disconnect) can be injected into the
+scan stream.
 """
 
 from __future__ import annotations
@@ -109,30 +110,6 @@ class ArraySource(ScanSource):
             yield from rows
 
 
-class SceneSource(ScanSource):
-    """A simulated scene (datmo_cli.sim), regenerated with the same seed when its duration runs out."""
-
-    def __init__(self, scene: str, *, seed: int = 0, duration: float | None = None, noise: float = 0.01) -> None:
-        self.scene, self.seed, self.duration, self.noise = scene, seed, duration, noise
-
-    def _simulation(self, angle_deg: int, resolution_cdeg: int, units: str, measuring_mode: int):
-        from ..sim.sensor import MAX_RATE_HZ
-        from ..sim.simulate import Simulation
-
-        bits = P.distance_bits(measuring_mode)
-        range_m = 80 if units == "cm" and bits == 13 else {13: 8, 14: 16, 15: 32, 16: 32}[bits]
-        res = resolution_cdeg / 100
-        return Simulation(self.scene, seed=self.seed, duration=self.duration, rate=MAX_RATE_HZ[res],
-                          fov_deg=angle_deg, resolution_deg=res, range_mode_m=range_m, units=units,
-                          noise_sigma=self.noise)
-
-    def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):
-        while True:
-            sim = self._simulation(angle_deg, resolution_cdeg, units, measuring_mode)
-            for chunk in sim.chunks(64):
-                yield from chunk.codes
-
-
 class LogSource(ScanSource):
     """The scans of a log, repeated; each beam of the variant takes the log's nearest beam (NaN outside)."""
 
@@ -157,14 +134,6 @@ class LogSource(ScanSource):
         values = P.ranges_to_values(ranges, units, measuring_mode)
         while True:
             yield from values
-
-
-def source_for(*, log: str | Path | None = None, scene: str | None = None, seed: int = 0,
-               duration: float | None = None) -> ScanSource:
-    """A LogSource for `log`, else a SceneSource for `scene` (default: the hall scene)."""
-    if log is not None:
-        return LogSource(log)
-    return SceneSource(scene or "hall", seed=seed, duration=duration)
 
 
 # -------------------------------------------------------------------------------------------- emulator

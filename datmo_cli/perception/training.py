@@ -799,7 +799,7 @@ def train_leg_model(labelled: Sequence[Recording], empty: Sequence[Recording], s
     all (see tuned_threshold); the model's provenance holds the data files and their SHA-256, the features,
     the estimator, the threshold and its rule, the held-out figures, scikit-learn's version, the date and the
     clusters the model scores (clusters, default DEFAULT_CLUSTERS; see legs.model_clusters). `extra`
-    labelled recordings (simulated ones: sim_legs) are in every training set, never held out or scored."""
+    labelled recordings (simulated ones: datmo_cli.simulated) are in every training set, never held out or scored."""
     require_sklearn()
     import sklearn
 

@@ -1,0 +1,82 @@
+"""The simulator's scenes as inputs of the other core packages, which never import it themselves: exactly
+labelled leg recordings for training the leg detector (perception.training), and scans for the LMS200
+emulator (lms2xx.emulator).
+
+The simulator knows every leg's centre (GroundTruth left/right leg, sensor frame, metres), so its scans are
+exactly labelled. They teach the detector the LMS200's geometry (0.5° and 1° steps, legs of the paper's
+10 cm radius at 1-8 m) that the real training bags (a 0.35° Hokuyo within about 5 m) lack. The scenes and
+seeds below are never those of sample_logs/ (seed 1), so the sample logs stay held out.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .lms2xx.emulator import LogSource, ScanSource
+
+# ------------------------------------------------------------------------------------ leg recordings
+
+# (scene, seed, people or None, resolution in degrees, duration in s)
+SIMULATED = (("crowd", 11, 6, 0.5, 60.0), ("crowd", 12, 8, 1.0, 60.0), ("corridor", 13, None, 0.5, 60.0),
+             ("crowd", 14, 4, 0.5, 30.0))
+
+
+def simulated_recording(scene: str, seed: int, people: int | None = None, resolution: float = 0.5,
+                        duration: float = 60.0):
+    """One simulated LMS200 recording with every visible person's two leg centres as its labels."""
+    from .perception.training import Recording
+    from .sim.simulate import simulate_scene
+
+    sim = simulate_scene(scene, seed=seed, duration=duration, people=people, resolution_deg=resolution)
+    legs = []
+    for k in range(len(sim.run)):
+        o = sim.truth[sim.truth_offsets[k]:sim.truth_offsets[k + 1]]
+        o = o[(o["classification"] == 1) & (o["visible"] == 1)]
+        left = np.stack([o["left_leg_x"], o["left_leg_y"]], axis=1)
+        right = np.stack([o["right_leg_x"], o["right_leg_y"]], axis=1)
+        legs.append(np.concatenate([left, right]).astype(np.float64).reshape(-1, 2))
+    name = f"simulated {scene} seed {seed}" + (f" {people} people" if people else "") + f" {resolution:g}°"
+    return Recording(name, Path(f"simulated/{scene}-{seed}"), "/scan", sim.run, legs)
+
+
+def simulated_recordings() -> list:
+    """The SIMULATED recordings (about 1,000 scans; a second or two to simulate)."""
+    return [simulated_recording(*spec) for spec in SIMULATED]
+
+
+# ------------------------------------------------------------------------------------- emulator scans
+
+
+class SceneSource(ScanSource):
+    """A simulated scene (datmo_cli.sim), regenerated with the same seed when its duration runs out."""
+
+    def __init__(self, scene: str, *, seed: int = 0, duration: float | None = None, noise: float = 0.01) -> None:
+        self.scene, self.seed, self.duration, self.noise = scene, seed, duration, noise
+
+    def _simulation(self, angle_deg: int, resolution_cdeg: int, units: str, measuring_mode: int):
+        from .lms2xx.protocol import distance_bits
+        from .sim.sensor import MAX_RATE_HZ
+        from .sim.simulate import Simulation
+
+        bits = distance_bits(measuring_mode)
+        range_m = 80 if units == "cm" and bits == 13 else {13: 8, 14: 16, 15: 32, 16: 32}[bits]
+        res = resolution_cdeg / 100
+        return Simulation(self.scene, seed=self.seed, duration=self.duration, rate=MAX_RATE_HZ[res],
+                          fov_deg=angle_deg, resolution_deg=res, range_mode_m=range_m, units=units,
+                          noise_sigma=self.noise)
+
+    def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):
+        while True:
+            sim = self._simulation(angle_deg, resolution_cdeg, units, measuring_mode)
+            for chunk in sim.chunks(64):
+                yield from chunk.codes
+
+
+def scan_source(*, log: str | Path | None = None, scene: str | None = None, seed: int = 0,
+                duration: float | None = None) -> ScanSource:
+    """A LogSource for `log`, else a SceneSource for `scene` (default: the hall scene)."""
+    if log is not None:
+        return LogSource(log)
+    return SceneSource(scene or "hall", seed=seed, duration=duration)
