@@ -57,9 +57,9 @@ def bench_parser(n: int = 2000, chunk: int = 4096) -> tuple[Row, float]:
 
 
 def bench_record(n: int, realtime: bool) -> Row:
-    from datmo_cli.commands.record import record
     from datmo_cli.lms2xx.driver import LMS2xx
     from datmo_cli.lms2xx.emulator import Emulator
+    from datmo_cli.lms2xx.recorder import record
     from datmo_cli.log import mcapio
     from datmo_cli.simulated import SceneSource
 
@@ -67,7 +67,7 @@ def bench_record(n: int, realtime: bool) -> Row:
         driver = LMS2xx(emu.device_path, baud=500000)
         writer = mcapio.LogWriter(Path(d) / "run.mcap", streaming=True)
         t0 = time.perf_counter()
-        result = record(driver, writer, max_scans=n, display=False)
+        result = record(driver, writer, max_scans=n)
         total = time.perf_counter() - t0
         got = len(mcapio.read_run(Path(d) / "run.mcap"))
     note = (f"scan period (37.5 Hz); {total - result.seconds:.2f} s connect+stop" if realtime

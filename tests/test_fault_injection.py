@@ -171,12 +171,12 @@ RECORD_ROOM = [0, 2_000, 12_000, 10**8]
 def test_write_failures_at_seeded_points_of_record(tmp_path, monkeypatch):
     """A full disk while recording keeps every scan flushed before it: the file cut after its last complete
     chunk and renamed into place, one line saying so, exit 1, no temporary file."""
-    from datmo_cli.commands import record as record_cmd
+    from datmo_cli.lms2xx import recorder
     from datmo_cli.lms2xx.emulator import ArraySource, Emulator
 
     rng = random.Random("write failures record")
     rooms = RECORD_ROOM + [rng.randrange(1_000, 20_000) for _ in range(2)]
-    monkeypatch.setattr(record_cmd, "FLUSH_EVERY_S", 0.05)   # many flushes in a short recording
+    monkeypatch.setattr(recorder, "FLUSH_EVERY_S", 0.05)   # many flushes in a short recording
     values = (np.arange(361, dtype=np.uint16)[None] * 7 + np.arange(16, dtype=np.uint16)[:, None] * 13) % 8000
     real = outputs._file_for
     outcomes = []

@@ -286,16 +286,16 @@ def test_live_feed_drops_scans_rather_than_waiting(monkeypatch):
 
 
 def test_record_calls_on_scan_with_each_scan_written(tmp_path):
-    from datmo_cli.commands.record import record
     from datmo_cli.lms2xx.driver import LMS2xx
     from datmo_cli.lms2xx.emulator import Emulator
+    from datmo_cli.lms2xx.recorder import record
     from datmo_cli.simulated import SceneSource
 
     seen: list[tuple[int, np.ndarray, ScanGeometry]] = []
     with Emulator(SceneSource("hall", seed=3, duration=10)) as emu:
         driver = LMS2xx(emu.device_path, baud=500000)
         writer = mcapio.LogWriter(tmp_path / "r.mcap", provenance=mcapio.Provenance("record", {}), streaming=True)
-        record(driver, writer, max_scans=8, display=False,
+        record(driver, writer, max_scans=8,
                on_scan=lambda stamp, ranges, g: seen.append((stamp, np.array(ranges), g)))
     run = mcapio.read_run(tmp_path / "r.mcap")
     assert [s for s, _, _ in seen] == run.stamps.tolist()

@@ -21,11 +21,12 @@ from click.testing import CliRunner
 from datmo_cli import outputs
 from datmo_cli.cli import cli
 from datmo_cli.commands import record as record_cmd
-from datmo_cli.commands.record import record
 from datmo_cli.errors import OutputError
 from datmo_cli.lms2xx import protocol as P
+from datmo_cli.lms2xx import recorder
 from datmo_cli.lms2xx.driver import LMS2xx
 from datmo_cli.lms2xx.emulator import ArraySource, Emulator, Faults, LogSource
+from datmo_cli.lms2xx.recorder import record
 from datmo_cli.log import mcapio
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.simulated import SceneSource
@@ -36,8 +37,7 @@ pytestmark = pytest.mark.timeout(60) if hasattr(pytest.mark, "timeout") else []
 def run_record(emu, path, *, baud=500000, scans=None, duration=None, stop=None, **kw):
     driver = LMS2xx(emu.device_path, baud=baud, **{k: v for k, v in kw.items() if k != "raw"})
     writer = mcapio.LogWriter(path, provenance=mcapio.Provenance("record", {"baud": baud}), streaming=True)
-    result = record(driver, writer, max_scans=scans, duration=duration, raw=kw.get("raw", False), stop=stop,
-                    display=False)
+    result = record(driver, writer, max_scans=scans, duration=duration, raw=kw.get("raw", False), stop=stop)
     return result, driver
 
 
@@ -307,13 +307,13 @@ class _StoppedAfter(LMS2xx):
 @pytest.mark.parametrize("exc, code", [(KeyboardInterrupt(), 130), (outputs.Terminated(signal.SIGTERM), 143),
                                        (ValueError("a bug"), 70)])
 def test_a_failure_while_recording_keeps_the_flushed_scans(tmp_path, monkeypatch, exc, code):
-    monkeypatch.setattr(record_cmd, "FLUSH_EVERY_S", 0.05)
+    monkeypatch.setattr(recorder, "FLUSH_EVERY_S", 0.05)
     out = tmp_path / "run.mcap"
     with Emulator(scene()) as emu:
         driver = _StoppedAfter(emu.device_path, baud=500000, n=25, exc=exc)
         writer = mcapio.LogWriter(out, streaming=True)
-        with pytest.raises(record_cmd.RecordingCut) as caught:
-            record(driver, writer, display=False)
+        with pytest.raises(recorder.RecordingCut) as caught:
+            record(driver, writer, describe=record_cmd.failure)   # a bug said as datmo record says it
         assert settled(lambda: emu.mode == P.MODE_STOP) == isinstance(exc, Exception)   # stopped after a bug
         sent = emu.good_scans()
     message = str(caught.value)

@@ -6,43 +6,21 @@ SIGHUP stop the scanner's output and finish the file, then the command exits 130
 finishes it up to the last good scan (exit 1). A failure after that point (the disk full, the file-size
 limit, a second Ctrl-C) keeps what the last flush put on disk: the temporary file is cut there, after its
 last complete chunk, and renamed to the output; the error says how many scans it holds.
+
+The recording loop is lms2xx.recorder.record; here are the options, the signals, its panel and the live view.
 """
 
 from __future__ import annotations
 
 import math
 import signal
-import struct
 import threading
-import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import click
 
 from ..bounds import OPTIONS, laser_pose_option, option
-from ..errors import DatmoError
 from .options import no_stdout, quiet_option
-
-FLUSH_EVERY_S = 0.5
-TELEGRAM_TYPE = "std_msgs/msg/UInt8MultiArray"
-
-
-def telegram_payload(raw: bytes) -> bytes:
-    """CDR of std_msgs/msg/UInt8MultiArray holding `raw` (empty layout)."""
-    return b"\x00\x01\x00\x00" + struct.pack("<III", 0, 0, len(raw)) + raw
-
-
-@dataclass
-class RecordResult:
-    """What a recording did: scans written, why it ended, the driver's counts."""
-
-    path: Path
-    scans: int = 0
-    seconds: float = 0.0
-    reason: str = ""
-    stats: dict = field(default_factory=dict)
-    disconnect: str | None = None
 
 
 def _panel(scans: int, elapsed: float, stats, port: str, baud: int):
@@ -57,123 +35,33 @@ def _panel(scans: int, elapsed: float, stats, port: str, baud: int):
     return t
 
 
-class RecordingCut(DatmoError):
-    """A recording ended by a failure after it started (the disk full, a second signal, a device error): the
-    message says what happened and what the output keeps."""
+class _Panel:
+    """The recording's counts in a rich Live panel on a terminal's stderr (recorder.record's progress callback),
+    started at the first report; nothing when stderr is not a terminal or with --quiet."""
 
-    def __init__(self, message: str, exit_code: int = 1) -> None:
-        super().__init__(message)
-        self.exit_code = exit_code
+    def __init__(self, port: str, baud: int) -> None:
+        self.port, self.baud = port, baud
+        self.live = None
+        self.started = False
 
+    def __call__(self, scans: int, elapsed: float, stats) -> None:
+        table = _panel(scans, elapsed, stats, self.port, self.baud)
+        if not self.started:
+            self.started = True
+            self.live = _live_panel(table)
+        elif self.live is not None:
+            self.live.update(table)
 
-def record(driver, writer, *, duration: float | None = None, max_scans: int | None = None,
-           raw: bool = False, stop: threading.Event | None = None, display: bool = True,
-           on_scan=None) -> RecordResult:
-    """Connect `driver` (an LMS2xx), stream scans into `writer` (a streaming LogWriter) until `duration`
-    seconds, `max_scans`, `stop` or a disconnect; stop the scanner and close the writer (also after a
-    disconnect). An error before the scanner streams aborts the writer and propagates; any failure after
-    (the disk full, a second Ctrl-C) keeps the scans flushed before it (writer.keep_flushed) and raises
-    RecordingCut saying so. `on_scan` is called with each scan once it is written (the live view)."""
-    from ..lms2xx.driver import DeviceDisconnected
-    from ..log import mcapio
-
-    stop = stop or threading.Event()
-    result = RecordResult(writer.path)
-    if raw:
-        def on_telegram(frame, stamp: int) -> None:
-            writer.write(mcapio.TOPIC_TELEGRAM, TELEGRAM_TYPE, stamp, telegram_payload(frame.raw))
-
-        driver.on_telegram = on_telegram
-    try:
-        status = driver.connect()
-        meta = status.as_metadata()
-        meta.update(port=str(driver.name), recorded_baud=str(driver.baud),
-                    config_hex=driver.config.raw.hex() if driver.config else "",
-                    indices=str(bool(driver.config and driver.config.indices)))
-        writer.add_metadata("lms2xx.status", meta)
-        geometry = driver.geometry()
-        driver.start()
-    except BaseException:
-        writer.abort()
-        driver.close()
-        raise
-    t0 = time.monotonic()
-    last_flush = t0
-    flushed = 0   # scans on disk at the last flush
-    live = None
-    last_view = t0
-    try:
-        if display:
-            live = _live_panel(driver)
-        while True:
-            now = time.monotonic()
-            if stop.is_set():
-                result.reason = "interrupted"
-                break
-            if duration is not None and now - t0 >= duration:
-                result.reason = "duration"
-                break
-            if max_scans is not None and result.scans >= max_scans:
-                result.reason = "scans"
-                break
+    def stop(self) -> None:
+        if self.live is not None:
             try:
-                scan = driver.read_scan(timeout=0.1)
-            except DeviceDisconnected as exc:
-                result.disconnect = str(exc)
-                result.reason = "disconnected"
-                break
-            if scan is not None:
-                writer.write_scan(scan.stamp_ns, scan.ranges, geometry)
-                result.scans += 1
-                if on_scan is not None:
-                    on_scan(scan.stamp_ns, scan.ranges, geometry)
-            now = time.monotonic()
-            if now - last_flush >= FLUSH_EVERY_S:
-                writer.flush()
-                flushed = result.scans
-                last_flush = now
-            if live is not None and now - last_view >= 0.25:
-                live.update(_panel(result.scans, now - t0, driver.stats, driver.name, driver.baud))
-                last_view = now
-        result.seconds = time.monotonic() - t0
-        if result.disconnect is None:
-            _stop_scanner(driver)
-        result.stats = driver.stats.as_dict()
-        writer.add_metadata("lms2xx.stats", result.stats)
-        writer.close()
-    except BaseException as exc:
-        result.seconds = time.monotonic() - t0
-        cut = _cut(writer, result, flushed, exc)
-        if isinstance(exc, Exception) and result.disconnect is None:
-            from ..outputs import Terminated
-
-            try:
-                _stop_scanner(driver)   # the disk full: the scanner need not stream on
-            except (KeyboardInterrupt, Terminated):   # not waited for; the data is kept already
-                pass
-        raise cut from exc
-    finally:
-        if live is not None:
-            try:
-                live.stop()
+                self.live.stop()
             except OSError:   # the terminal hung up (SIGHUP)
                 pass
-        driver.close()
-    return result
 
 
-def _write_mount(writer, pose: tuple) -> None:
-    """/tf_static base_link -> laser (the scanner's frame) of a laser pose (x, y m, yaw rad), and its metadata
-    record: a recording has no odometry, so this is its only transform."""
-    from ..log import transforms
-
-    mount, now = transforms.LaserPose(*pose), time.time_ns()
-    writer.add_metadata(transforms.LASER_POSE_RECORD, mount.record(transforms.BASE_FRAME, "laser"))
-    writer.write_transforms([now], [transforms.mount_tf(now, transforms.BASE_FRAME, "laser", mount)], static=True)
-
-
-def _live_panel(driver):
-    """A rich Live panel of the counts on a terminal's stderr (started), or None (not a terminal, --quiet)."""
+def _live_panel(first):
+    """A rich Live panel showing `first` on a terminal's stderr (started), or None (not a terminal, --quiet)."""
     from rich.console import Console
     from rich.live import Live
 
@@ -182,55 +70,17 @@ def _live_panel(driver):
     console = Console(stderr=True)
     if not console.is_terminal or quiet():
         return None
-    live = Live(_panel(0, 0.0, driver.stats, driver.name, driver.baud), console=console, refresh_per_second=4,
-                transient=True)
+    live = Live(first, console=console, refresh_per_second=4, transient=True)
     live.start()
     return live
 
 
-def _stop_scanner(driver) -> None:
-    """Stop the scanner's output and restore its baud; a warning if it does not answer."""
-    try:
-        driver.stop()
-    except Exception as exc:  # finish the file whatever the device does now
-        import warnings
-
-        warnings.warn(f"{driver.name}: could not stop the scanner cleanly ({exc})", stacklevel=2)
-
-
-def _cause(exc: BaseException) -> tuple[str, int]:
-    """What stopped a recording, as a phrase, and the exit code it gives."""
-    from .. import outputs
+def failure(exc: BaseException) -> tuple[str, int]:
+    """A failure that stopped a recording as the command says it (cli.clean_error), and its exit code."""
     from ..cli import clean_error
 
-    if isinstance(exc, KeyboardInterrupt):
-        return "interrupted (Ctrl-C) before the file was finished", 130
-    if isinstance(exc, outputs.Terminated):
-        return f"{exc} before the file was finished", exc.exit_code
     clean = clean_error(exc)
     return (clean.format_message(), clean.exit_code) if clean is not None else (str(exc), 1)
-
-
-def _scans(n: int) -> str:
-    return f"{n} scan" if n == 1 else f"{n} scans"
-
-
-def _cut(writer, result: RecordResult, flushed: int, exc: BaseException) -> RecordingCut:
-    """Keep what reached the disk after `exc` stopped the recording; the error that says what and where."""
-    from ..errors import OutputError
-
-    what, code = _cause(exc)
-    try:
-        writer.keep_flushed()
-    except OutputError as left:
-        return RecordingCut(what if left is exc else f"{what}; {left}", code)
-    if writer.complete:
-        return RecordingCut(f"{what}; {writer.path} is complete ({result.scans} scans)", code)
-    if writer.kept:
-        lost = result.scans - flushed
-        return RecordingCut(f"{what}; {writer.path} keeps the {_scans(flushed)} that reached the disk before that "
-                            f"(readable, cut after its last complete chunk; later scans lost: {lost})", code)
-    return RecordingCut(f"{what}; no scan had reached the disk, so no {writer.path} was written", code)
 
 
 class _Signals:
@@ -312,6 +162,7 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
     from ..cli import invocation
     from ..errors import DeviceError
     from ..lms2xx.driver import LMS2xx
+    from ..lms2xx.recorder import record, write_mount
     from ..log import mcapio
     from ..progress import say
 
@@ -324,16 +175,18 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
     provenance = mcapio.Provenance("record", params, [], invocation("record"))
     writer = mcapio.LogWriter(output, force=force, provenance=provenance, streaming=True)
     if laser_pose is not None:
-        _write_mount(writer, laser_pose)
+        write_mount(writer, laser_pose)
     driver = LMS2xx(port, baud=int(baud), angle=int(angle), resolution=float(resolution), units=units,
                     indices=indices, interlaced=interlaced)
     stop = threading.Event()
     feed = _live_feed(live_host, live_port) if live else None
+    panel = _Panel(driver.name, driver.baud)
     try:
         with _Signals(stop) as signals:
             result = record(driver, writer, duration=duration, max_scans=max_scans, raw=raw, stop=stop,
-                            on_scan=feed.scan if feed is not None else None)
+                            on_scan=feed.scan if feed is not None else None, progress=panel, describe=failure)
     finally:
+        panel.stop()
         if feed is not None:
             _close_live(feed)
     s = result.stats

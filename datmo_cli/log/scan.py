@@ -7,6 +7,7 @@ intensities (N x B float32, or N x 0 when the sensor gives none).
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -147,6 +148,15 @@ def encode_scan(stamp_ns: int, ranges: np.ndarray, geometry: ScanGeometry,
     inten = None if intensities is None else np.asarray(intensities, np.float32)[None]
     run = ScanRun(np.array([stamp_ns]), np.asarray(ranges, np.float32)[None], geometry, inten)
     return encode_scans(run)[0]
+
+
+TELEGRAM = "std_msgs/msg/UInt8MultiArray"   # the message type of a scanner's raw telegrams (datmo record --raw)
+_EMPTY_LAYOUT = struct.pack("<II", 0, 0)      # MultiArrayLayout: no dims, data_offset 0
+
+
+def encode_telegram(raw: bytes) -> bytes:
+    """CDR payload of a std_msgs/msg/UInt8MultiArray holding `raw` (a telegram's bytes) with an empty layout."""
+    return CDR_HEADER + _EMPTY_LAYOUT + struct.pack("<I", len(raw)) + raw
 
 
 def _geometry_of(rec: np.void | np.ndarray, frame_id: str, n_beams: int) -> ScanGeometry:
