@@ -270,8 +270,8 @@ class LogSource:
     the transforms; the channels those stages make replace any the log has)."""
 
     def __init__(self, path: str | Path, params: dict | None = None, block_scans: int = 32) -> None:
-        from .pipeline import RunStages
-        from .streaming import LogStream, stream_odometry
+        from .pipeline import open_stages
+        from .streaming import LogStream
 
         self.stream = LogStream(path)
         self.block_scans = block_scans
@@ -280,9 +280,8 @@ class LogSource:
         self.odometry, self.estimated = None, False
         self.derived: dict[str, str] = {}
         if not self.processed:
-            probe = RunStages(None, params)
-            self.odometry, self.estimated = stream_odometry(self.stream, probe.track_params.ego_motion)
-            self.derived = RunStages(self.odometry, params, estimated=self.estimated).derived()
+            stages = open_stages(self.stream, params)
+            self.odometry, self.estimated, self.derived = stages.odometry, stages.estimated, stages.derived()
         else:
             self.odometry = self.stream.odometry
         self.transforms = Transforms(self.odometry, self._scan_frame(), self.stream.has(TOPIC_TF)

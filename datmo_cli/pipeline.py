@@ -77,6 +77,45 @@ def odometry_channel(odometry, block) -> tuple:
     return types.ODOMETRY, part.stamps, mcapio.encode_odometry(part)
 
 
+def derived_topics(*, odom: bool = False, segments: bool = False, features: bool = False, tracks: bool = False,
+                   markers: bool = True) -> dict[str, str]:
+    """{topic: message type} of the channels the stages write, in writing order: /odom (estimated here),
+    /datmo/segments, /datmo/features with /datmo/landmarks (and /datmo/markers/features), /datmo/tracks (and
+    /datmo/markers/tracks)."""
+    from .log import types
+
+    out = {mcapio.TOPIC_ODOM: types.ODOMETRY} if odom else {}
+    if segments:
+        out[mcapio.TOPIC_SEGMENTS] = types.SEGMENTS
+    if features:
+        out |= {mcapio.TOPIC_FEATURES: types.FEATURES, mcapio.TOPIC_LANDMARKS: types.LANDMARKS}
+        if markers:
+            out[mcapio.TOPIC_MARKERS_FEATURES] = types.MARKER_ARRAY
+    if tracks:
+        out[mcapio.TOPIC_TRACKS] = types.TRACKS
+        if markers:
+            out[mcapio.TOPIC_MARKERS_TRACKS] = types.MARKER_ARRAY
+    return out
+
+
+def track_params(params: dict | None):
+    """The TrackingParams of a stages' parameter dict (its "track", else the defaults)."""
+    from .tracking.params import TrackingParams
+
+    return (params or {}).get("track") or TrackingParams()
+
+
+def open_stages(stream, params: dict | None = None, *, markers: bool = True,
+                block_scans: int | None = None) -> RunStages:
+    """The stages of a streamed log (a streaming.LogStream) in the odometry it is tracked in: the log's own,
+    else (ego-motion mode of params["track"]) poses estimated from its scans, then written to /odom (see
+    streaming.stream_odometry). Every pass over a log reads its odometry here, once."""
+    from .streaming import BLOCK_SCANS, stream_odometry
+
+    odometry, estimated = stream_odometry(stream, track_params(params).ego_motion, block_scans or BLOCK_SCANS)
+    return RunStages(odometry, params, estimated=estimated, markers=markers)
+
+
 class RunStages:
     """Segmentation, features and tracking of one log, block by block (the stages of `datmo run`): call it
     with each Block in order; it returns the block's derived channels. `estimated`: the odometry was
@@ -86,10 +125,9 @@ class RunStages:
                  markers: bool = True) -> None:
         from .perception.features import FeatureStream
         from .perception.params import FeatureParams
-        from .tracking.params import TrackingParams
 
         params = params or {}
-        self.track_params = params.get("track") or TrackingParams()
+        self.track_params = track_params(params)
         self.feature_params = params.get("features") or FeatureParams()
         self.odometry = odometry
         self.estimated = estimated
@@ -99,17 +137,7 @@ class RunStages:
 
     def derived(self) -> dict[str, str]:
         """{topic: message type} of the channels the stages write, in writing order."""
-        from .log import types
-
-        out = {mcapio.TOPIC_ODOM: types.ODOMETRY} if self.estimated else {}
-        out |= {mcapio.TOPIC_SEGMENTS: types.SEGMENTS, mcapio.TOPIC_FEATURES: types.FEATURES,
-                mcapio.TOPIC_LANDMARKS: types.LANDMARKS}
-        if self.markers:
-            out[mcapio.TOPIC_MARKERS_FEATURES] = types.MARKER_ARRAY
-        out[mcapio.TOPIC_TRACKS] = types.TRACKS
-        if self.markers:
-            out[mcapio.TOPIC_MARKERS_TRACKS] = types.MARKER_ARRAY
-        return out
+        return derived_topics(odom=self.estimated, segments=True, features=True, tracks=True, markers=self.markers)
 
     def effective(self) -> dict:
         """The effective parameters, as provenance records them."""
@@ -143,8 +171,7 @@ def derive(run, odometry, params: dict | None = None,
     stages as process_file, on one block."""
     from .streaming import Block
 
-    stages = RunStages(odometry, params)
-    odometry, odom_channel = estimated_odometry(run, odometry, stages.track_params.ego_motion)
+    odometry, odom_channel = estimated_odometry(run, odometry, track_params(params).ego_motion)
     stages = RunStages(odometry, params, estimated=bool(odom_channel))
     if progress:
         progress(0, len(run))
@@ -165,13 +192,11 @@ def process_file(src: str | Path, out: str | Path, *, force: bool = False, param
     from (`src` a temporary copy of a bag), which provenance hashes and names instead. With params["bag_dir"],
     `out` is the log file of a ROS 2 bag folder (log.bagdir.member_path), and the folder is written whole."""
     from .log import bagdir
-    from .streaming import BLOCK_SCANS, LogStream, stream_log, stream_odometry
+    from .streaming import BLOCK_SCANS, LogStream, stream_log
 
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
-    probe = RunStages(None, params)
-    odometry, estimated = stream_odometry(stream, probe.track_params.ego_motion, block_scans or BLOCK_SCANS)
-    stages = RunStages(odometry, params, estimated=estimated, markers=markers)
+    stages = open_stages(stream, params, markers=markers, block_scans=block_scans)
     bag = bool((params or {}).get("bag_dir"))
     origin = Path(origin) if origin is not None else src
     with bagdir.output(Path(out).parent if bag else out, bag, force=force, inputs=[origin]) as dst:
@@ -205,11 +230,10 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=
     the rule of the leg detector they were made with; `leg_model`, when given, must be that one); else
     segmentation and features run here (with `leg_model` when given) and their channels are written too,
     as datmo run writes them. Returns (scans, whether features were computed here)."""
-    from .log import types
     from .perception.features import leg_model_provenance
     from .perception.params import FeatureParams
     from .stages import TrackStream, decode_features
-    from .streaming import BLOCK_SCANS, LogStream, stream_log, stream_odometry
+    from .streaming import BLOCK_SCANS, LogStream, stream_log
     from .tracking.params import TrackingParams
 
     params = params or TrackingParams()
@@ -224,17 +248,16 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=
         if stream.count(mcapio.TOPIC_FEATURES) != stream.n_scans:
             raise InputError(f"{src}: {stream.count(mcapio.TOPIC_FEATURES)} messages on {mcapio.TOPIC_FEATURES} "
                              f"for {stream.n_scans} scans; run datmo features again")
-    odometry, estimated = stream_odometry(stream, params.ego_motion, block_scans or BLOCK_SCANS)
+    stage_params = {"track": params}
     if computed:
-        feature_params = (feature_params or FeatureParams()).replace(leg_model=leg_model)
-        stages = RunStages(odometry, {"track": params, "features": feature_params}, estimated, markers)
+        stage_params["features"] = (feature_params or FeatureParams()).replace(leg_model=leg_model)
+    stages = open_stages(stream, stage_params, markers=markers, block_scans=block_scans)
+    odometry, estimated = stages.odometry, stages.estimated
+    if computed:
         derived, stage, effective = stages.derived(), stages, stages.effective()
     else:
         state: dict = {}
-        derived = {mcapio.TOPIC_ODOM: types.ODOMETRY} if estimated else {}
-        derived[mcapio.TOPIC_TRACKS] = types.TRACKS
-        if markers:
-            derived[mcapio.TOPIC_MARKERS_TRACKS] = types.MARKER_ARRAY
+        derived = derived_topics(odom=estimated, tracks=True, markers=markers)
         effective = {"track": params.to_dict(),
                      "leg_model": leg_model_provenance(used) if used == "paper" else {"model": used}}
 
@@ -275,7 +298,6 @@ def features_file(src: str | Path, out: str | Path, params=None, *, resegment: b
     """Extract the features of `src` into `out` in one streaming pass: /datmo/features, /datmo/landmarks and
     /datmo/markers/features, and /datmo/segments unless the input has its own (used unless `resegment`).
     `params`: a FeatureParams (None: the defaults)."""
-    from .log import types
     from .perception.features import FeatureStream, decode_segments
     from .perception.params import FeatureParams
     from .streaming import BLOCK_SCANS, LogStream, stream_log
@@ -289,10 +311,7 @@ def features_file(src: str | Path, out: str | Path, params=None, *, resegment: b
                          f"{stream.n_scans} scans; run datmo segment again or pass --resegment")
     features = FeatureStream(params, stream.odometry)
     counts = FeatureCounts()
-    derived = {} if given else {mcapio.TOPIC_SEGMENTS: types.SEGMENTS}
-    derived |= {mcapio.TOPIC_FEATURES: types.FEATURES, mcapio.TOPIC_LANDMARKS: types.LANDMARKS}
-    if markers:
-        derived[mcapio.TOPIC_MARKERS_FEATURES] = types.MARKER_ARRAY
+    derived = derived_topics(segments=not given, features=True, markers=markers)
 
     def stage(block) -> dict:
         segments = decode_segments(block.aligned[mcapio.TOPIC_SEGMENTS]) if given else None
@@ -319,7 +338,6 @@ def segment_file(src: str | Path, out: str | Path, params=None, *, force: bool =
                  progress: Callable[[int, int], None] | None = None) -> int:
     """Segment every scan of `src` into `out` (its channels plus /datmo/segments) in one streaming pass;
     returns the number of scans. `params`: a FeatureParams (c0, min_points; None: the defaults)."""
-    from .log import types
     from .perception.params import FeatureParams
     from .stages import derive_segments
     from .streaming import BLOCK_SCANS, LogStream, stream_log
@@ -328,6 +346,6 @@ def segment_file(src: str | Path, out: str | Path, params=None, *, force: bool =
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
     return stream_log(stream, out, command="segment", params={"features": params.to_dict()},
-                      derived={mcapio.TOPIC_SEGMENTS: types.SEGMENTS},
+                      derived=derived_topics(segments=True),
                       stage=lambda block: derive_segments(block.run, params), force=force, command_line=command_line,
                       block_scans=block_scans or BLOCK_SCANS, progress=progress)
