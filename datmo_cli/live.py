@@ -29,6 +29,7 @@ import numpy as np
 from .errors import ConfigError, DatmoError
 from .log import mcapio, types
 from .log.scan import Odometry, ScanGeometry, ScanRun
+from .log.transforms import Transform, encode_tf
 
 TOPIC_TF = "/tf"
 TOPIC_TF_STATIC = "/tf_static"
@@ -84,23 +85,10 @@ class Message:
 # ------------------------------------------------------------------------------------------- transforms
 
 
-def _quaternion_z(theta: float) -> dict:
-    return {"x": 0.0, "y": 0.0, "z": math.sin(theta / 2.0), "w": math.cos(theta / 2.0)}
-
-
 def tf_payload(stamp: int, transforms: Iterable[tuple[str, str, float, float, float]]) -> bytes:
     """CDR of a tf2_msgs/msg/TFMessage stamped `stamp` (ns) holding `transforms`: (parent frame, child
     frame, x m, y m, yaw rad) each, in the plane."""
-    from rosbags.typesys.stores import ros2_humble as m
-
-    when = m.builtin_interfaces__msg__Time(sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
-    items = [m.geometry_msgs__msg__TransformStamped(
-        header=m.std_msgs__msg__Header(stamp=when, frame_id=parent), child_frame_id=child,
-        transform=m.geometry_msgs__msg__Transform(
-            translation=m.geometry_msgs__msg__Vector3(x=float(x), y=float(y), z=0.0),
-            rotation=m.geometry_msgs__msg__Quaternion(**_quaternion_z(float(yaw)))))
-        for parent, child, x, y, yaw in transforms]
-    return bytes(types.typestore().serialize_cdr(m.tf2_msgs__msg__TFMessage(transforms=items), TF_MESSAGE))
+    return encode_tf([Transform.planar(stamp, parent, child, x, y, yaw) for parent, child, x, y, yaw in transforms])
 
 
 class Transforms:
