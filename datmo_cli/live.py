@@ -26,7 +26,8 @@ from urllib.parse import quote
 
 import numpy as np
 
-from .errors import ConfigError, DatmoError
+from .errors import ConfigError
+from .extras import require
 from .log import mcapio, types
 from .log.scan import Odometry, ScanGeometry, ScanRun
 from .log.transforms import Transform, encode_tf
@@ -36,23 +37,13 @@ TOPIC_TF_STATIC = "/tf_static"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 STATIC_EVERY_NS = 1_000_000_000    # static transforms are sent again after this much log time
 SUBPROTOCOL = "foxglove.sdk.v1"     # what the SDK's server speaks (the app's WebSocket data source)
-INSTALL = "pip install 'datmo[live]'"
 _APP = "https://app.foxglove.dev/"
 
 
-class LiveUnavailable(DatmoError):
-    """The live view's package (foxglove-sdk) is not installed."""
-
-
 def require_foxglove():
-    """The foxglove module, or LiveUnavailable saying how to install it."""
-    try:
-        import foxglove
-        import foxglove.websocket
-    except ImportError as exc:
-        raise LiveUnavailable(f"the live view needs the foxglove-sdk package ({exc}); install it with {INSTALL}") \
-            from None
-    return foxglove
+    """The foxglove module (with its websocket module loaded), or MissingExtraError naming the live extra."""
+    require("foxglove.websocket", for_="the live view")
+    return require("foxglove", for_="the live view")
 
 
 def ws_url(host: str, port: int) -> str:

@@ -313,15 +313,6 @@ def test_record_calls_on_scan_with_each_scan_written(tmp_path):
     assert all(g.same_beams(run.geometry) for _, _, g in seen)
 
 
-def test_without_foxglove_sdk_one_line_says_how_to_install(monkeypatch):
-    monkeypatch.setitem(sys.modules, "foxglove", None)
-    result = CliRunner().invoke(cli, ["play", str(HALL), "--port", "0"])
-    lines = result.output.strip().splitlines()
-    assert result.exit_code == 1 and len(lines) == 1, result.output
-    assert lines[0].startswith("datmo: error: the live view needs the foxglove-sdk package (")
-    assert lines[0].endswith("install it with pip install 'datmo[live]'")
-
-
 def test_a_busy_port_is_one_line_naming_the_option():
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
