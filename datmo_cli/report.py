@@ -187,7 +187,7 @@ def class_rows(tracks: list[dict]) -> list[dict]:
 
 def moving(row: dict) -> bool:
     """Whether a track row is reported in full: a person (whatever its mobility) or a dynamic track."""
-    return row["class"] == "person" or row["mobility"] == "dynamic"
+    return row["class"] == CLASS_NAMES[CLASS_PERSON] or row["mobility"] == MOBILITY_NAMES[MOBILITY_DYNAMIC]
 
 
 def static_rows(tracks: list[dict]) -> list[dict]:
@@ -200,7 +200,8 @@ def static_rows(tracks: list[dict]) -> list[dict]:
             groups.setdefault((r["class"], r["mobility"]), []).append(r)
     order = {name: i for i, name in enumerate(CLASS_NAMES.values())}
     out = []
-    for (cls, mob), rs in sorted(groups.items(), key=lambda kv: (order[kv[0][0]], kv[0][1] != "static")):
+    static = MOBILITY_NAMES[MOBILITY_STATIC]
+    for (cls, mob), rs in sorted(groups.items(), key=lambda kv: (order[kv[0][0]], kv[0][1] != static)):
         xy = np.array([(r["x_m"], r["y_m"]) for r in rs if r["x_m"] is not None and r["y_m"] is not None],
                       np.float64).reshape(-1, 2)
         where = dict.fromkeys(("centroid_x_m", "centroid_y_m", "x_min_m", "x_max_m", "y_min_m", "y_max_m"))
