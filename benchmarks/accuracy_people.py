@@ -20,9 +20,9 @@ import numpy as np
 
 from benchmarks.accuracy_tracking import LEGTRACKER, demo_figures, learned_legs, read_leg_labels, read_ros1_scans
 from benchmarks.common import print_lines
+from datmo_cli.log.vocabulary import CLASS_PERSON, STATUS_TENTATIVE
 from datmo_cli.perception.egomotion import odometry_for
 from datmo_cli.stages import run_features, track_run
-from datmo_cli.tracking import accuracy as acc
 
 NEGATIVE_TOPICS = ("/left_scan", "/right_scan", "/rear_scan")
 PERSON_RADIUS = 0.5     # m, a labelled leg this near a confirmed person track is covered
@@ -73,7 +73,7 @@ def longest_person(stamps: np.ndarray, tracks: list[np.ndarray]) -> tuple[float,
     since: dict[int, int] = {}
     longest: dict[int, float] = {}
     for s, t in zip(stamps.tolist(), tracks, strict=True):
-        now = set(t["id"][(t["status"] != 0) & (t["classification"] == acc.PERSON)].tolist())
+        now = set(t["id"][(t["status"] != STATUS_TENTATIVE) & (t["classification"] == CLASS_PERSON)].tolist())
         since = {i: since.get(i, s) for i in now}
         for i, s0 in since.items():
             longest[i] = max(longest.get(i, 0.0), (s - s0) * 1e-9)
@@ -106,7 +106,7 @@ def covered(labels: list[np.ndarray], ready: list[np.ndarray], tracks: list[np.n
         if not len(lab):
             continue
         total += len(lab)
-        p = t[(t["status"] != 0) & (t["classification"] == acc.PERSON)]
+        p = t[(t["status"] != STATUS_TENTATIVE) & (t["classification"] == CLASS_PERSON)]
         if len(p):
             d = np.hypot(lab[:, 0:1] - p["x"][None, :], lab[:, 1:2] - p["y"][None, :])
             hit += int((d <= PERSON_RADIUS).any(axis=1).sum())

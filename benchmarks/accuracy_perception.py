@@ -16,9 +16,9 @@ import numpy as np
 from benchmarks.common import print_lines
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.log.vocabulary import LANDMARK_NAMES
 from datmo_cli.perception import accuracy as acc
 from datmo_cli.perception.features import RunFeatures, extract_run
-from datmo_cli.perception.landmarks import TYPE_NAMES
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.report import decode_channel
 
@@ -154,7 +154,7 @@ def synthetic() -> list[str]:
         lc, lr, leg_scans = circle_errors(f, LEG)
         cc, cr, col_scans = circle_errors(f, COLUMN)
         db = f.landmarks.final()
-        kinds = ", ".join(f"{int((db['type'] == t).sum())} {TYPE_NAMES[t]}" for t in np.unique(db["type"]).tolist())
+        kinds = ", ".join(f"{int((db['type'] == t).sum())} {LANDMARK_NAMES[t]}" for t in np.unique(db["type"]).tolist())
         out += [f"wall at {rho} m, normal {th:+.0f}°: in {wall_scans}/{N_SYNTH} scans; angle median "
                 f"{_vs(_stat(ang, 50), WALL_ANGLE_DEG, '°')}, rho median {_vs(_stat(drho, 50, 100), 2, 'cm')}",
                 f"  leg at {LEG[0]} m: in {leg_scans}/{N_SYNTH} scans; centre median "
@@ -196,7 +196,7 @@ def real(path: Path, topic: str | None) -> str:
     c = f.counts()
     db = f.landmarks.final()
     per_scan = np.diff(f.landmarks.snap_offsets).mean() if len(run) else 0.0
-    kinds = ", ".join(f"{int((db['type'] == t).sum())} {TYPE_NAMES[t]}" for t in np.unique(db["type"]).tolist())
+    kinds = ", ".join(f"{int((db['type'] == t).sum())} {LANDMARK_NAMES[t]}" for t in np.unique(db["type"]).tolist())
     g = run.geometry
     return (f"ok: {len(run)} scans x {g.n_beams} beams ({math.degrees(g.angle_increment):.2f}°), "
             f"{len(run) / dt:,.0f} scans/s; per scan {c['lines']:.1f} lines, {c['circles']:.1f} circles, "

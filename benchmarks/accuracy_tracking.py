@@ -19,6 +19,7 @@ from benchmarks.common import print_lines
 from datmo_cli import evaluate as ev
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.log.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON, MOBILITY_DYNAMIC, STATUS_CONFIRMED
 from datmo_cli.report import decode_channel
 from datmo_cli.stages import run_features, track_run
 from datmo_cli.tracking import accuracy as acc
@@ -65,14 +66,14 @@ def score_sim(name: str, source: str, feature_params: dict | None = None) -> dic
     tid, tcls, gid, gcls = acc.matched_targets(gt_off, gt, off, items)
     out = {"scores": scores, "class_accuracy": acc.class_accuracy(tcls, gcls, gid), "seconds": seconds,
            "scans": len(run)}
-    dyn = items[(items["status"] == 1) & (items["mobility"] == 1)]
+    dyn = items[(items["status"] == STATUS_CONFIRMED) & (items["mobility"] == MOBILITY_DYNAMIC)]
     out["confirmed_dynamic_tracks"] = len(np.unique(dyn["id"]))
-    platforms = np.unique(gt["id"][gt["classification"] == acc.CIRCLE_OBJECT])
+    platforms = np.unique(gt["id"][gt["classification"] == CLASS_CIRCLE_OBJECT])
     if len(platforms):
         pid = int(platforms[0])
         on = gid == pid
         out["platform_switches"] = acc.id_switches(tid, gid, pid)
-        out["platform_as_circle"] = float(np.mean(tcls[on] == acc.CIRCLE_OBJECT)) if on.any() else None
+        out["platform_as_circle"] = float(np.mean(tcls[on] == CLASS_CIRCLE_OBJECT)) if on.any() else None
     return out
 
 
@@ -153,8 +154,8 @@ def demo_figures(path: Path, feature_params: dict | None = None) -> dict:
     feats = run_features(run, None, feature_params)
     tracked = track_run(run, feats, markers=False, learned=learned_legs(feature_params))
     off, items = tracked.all_tracks()
-    conf = items[items["status"] == 1]
-    people = np.unique(conf["id"][conf["classification"] == acc.PERSON])
+    conf = items[items["status"] == STATUS_CONFIRMED]
+    people = np.unique(conf["id"][conf["classification"] == CLASS_PERSON])
     # walls: with a still scanner, the per-beam median range over the run is the background
     # beams that never return have no background (NaN: nothing is near it)
     with warnings.catch_warnings():
@@ -164,7 +165,7 @@ def demo_figures(path: Path, feature_params: dict | None = None) -> dict:
     beam = np.clip(np.rint((np.arctan2(conf["y"], conf["x"]) - run.geometry.angle_min)
                            / run.geometry.angle_increment).astype(int), 0, run.geometry.n_beams - 1)
     near = np.abs(rng - background[beam]) < 0.25
-    suspect = (conf["mobility"] == 1) | (conf["classification"] == acc.PERSON)
+    suspect = (conf["mobility"] == MOBILITY_DYNAMIC) | (conf["classification"] == CLASS_PERSON)
     wall_dynamic = []   # tracks that stay on the background all their life: walls, not passers-by
     for i in np.unique(conf["id"][suspect]).tolist():
         mine = conf["id"] == i

@@ -21,20 +21,11 @@ from contextlib import contextmanager
 
 from .batch import CANCELLED, Executor, Task, ensure_warm, failed, run_task
 from .errors import DatmoError
+from .extras import require
 
-INSTALL_HINT = "pip install 'datmo[dask]'"
 CANCEL_POLL_S = 0.5
 CANCEL_GRACE_S = 10.0
 CONNECT_TIMEOUT = "15s"
-
-
-def _distributed():
-    try:
-        import distributed
-    except ImportError:
-        raise DatmoError(f"--scheduler needs Dask's distributed scheduler, which is not installed: {INSTALL_HINT}") \
-            from None
-    return distributed
 
 
 def parse_local(address: str) -> int | None:
@@ -74,8 +65,8 @@ class DaskExecutor(Executor):
     N worker processes of one thread started for the run)."""
 
     def __init__(self, address: str, *, retries: int = 2, window: int | None = None) -> None:
-        distributed = _distributed()
-        import dask
+        distributed = require("distributed", for_="--scheduler")
+        dask = require("dask", for_="--scheduler")
 
         self.address = address
         self.retries = retries

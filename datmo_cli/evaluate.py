@@ -50,11 +50,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
+from .log.vocabulary import (
+    CLASS_NAMES,
+    CLASS_PERSON,
+    CLASS_UNKNOWN,
+    MOBILITY_STATIC,
+    STATUS_COASTING,
+    STATUS_CONFIRMED,
+)
 
-MOVER_CLASSES = {1: "person", 2: "circle object", 3: "rectangular object"}
-CLASS_BY_NAME = {"person": 1, "people": 1, "circle": 2, "circle object": 2, "circle_object": 2,
-                 "rectangular": 3, "rectangular object": 3, "rectangular_object": 3}
-TRACK_STATIC, STATUS_CONFIRMED, STATUS_COASTING = 0, 1, 2
+MOVER_CLASSES = {code: name for code, name in CLASS_NAMES.items() if code != CLASS_UNKNOWN}
+# a ground-truth CSV's class: the name, with underscores or its first word ("circle"), or "people"
+CLASS_BY_NAME = {"people": CLASS_PERSON, **{alias: code for code, name in MOVER_CLASSES.items()
+                                            for alias in (name, name.replace(" ", "_"), name.split()[0])}}
 METRICS = ["num_frames", "num_objects", "num_unique_objects", "num_predictions", "num_matches",
            "num_false_positives", "num_misses", "num_switches", "num_fragmentations", "mota", "motp", "idf1",
            "idp", "idr", "precision", "recall", "mostly_tracked", "partially_tracked", "mostly_lost"]
@@ -154,7 +162,7 @@ def track_frames(stamps: np.ndarray, offsets: np.ndarray, tracks: np.ndarray, *,
     status = tracks["status"]
     keep = (status == STATUS_CONFIRMED) | ((status == STATUS_COASTING) if include_coasting else False)
     if exclude_static:
-        keep &= tracks["mobility"] != TRACK_STATIC
+        keep &= tracks["mobility"] != MOBILITY_STATIC
     return f.select(np.asarray(keep, bool))
 
 

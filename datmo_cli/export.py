@@ -77,16 +77,15 @@ from typing import IO
 
 import numpy as np
 
-from .errors import ConfigError, DatmoError, InputError, MissingChannelError
+from .errors import ConfigError, InputError, MissingChannelError
 from .evaluate import MOVER_CLASSES, moved_ids, target_mask
+from .extras import require
 from .log import cdr, mcapio, types
-from .report import CLASS_NAMES, MOBILITY_NAMES
+from .log.vocabulary import BLOB_KIND_NAMES, CLASS_NAMES, MOBILITY_NAMES, STATUS_NAMES
 
 FORMATS = ("csv", "ndjson", "parquet")
 SUFFIXES = {".csv": "csv", ".ndjson": "ndjson", ".jsonl": "ndjson", ".parquet": "parquet", ".pq": "parquet"}
 BLOCK_MESSAGES = 1000        # messages decoded and written at once (one batch, one Parquet row group)
-STATUS_NAMES = {0: "tentative", 1: "confirmed", 2: "coasting"}
-PARQUET_HINT = "pip install 'datmo[parquet]'"
 
 # name -> value kind: str, int (uint32, or int64 for stamp_ns), float (float32), double (float64), bool
 TRACK_COLUMNS: dict[str, str] = {
@@ -102,10 +101,6 @@ FEATURE_COLUMNS: dict[str, str] = {
 }
 
 GROUND_TRUTH_COLUMNS: dict[str, str] = {"stamp_ns": "int", "id": "int", "x": "double", "y": "double", "class": "str"}
-
-
-class ParquetMissingError(DatmoError):
-    """pyarrow, needed to write Parquet, is not installed."""
 
 
 def columns(features: bool = False) -> dict[str, str]:
@@ -205,7 +200,7 @@ def _feature_part(file: str, first: int, decoded: list[dict], seq: str) -> Batch
     elif seq == "circles":
         v.update(kind=_constant("circle", n), x_m=f["x"], y_m=f["y"], radius_m=f["radius"], r_acc=f["r_acc"])
     elif seq == "blobs":
-        kind = np.where(f["kind"] == 1, "point", "blob").astype(object)
+        kind = _names(f["kind"], BLOB_KIND_NAMES, "blob")
         v.update(kind=kind, x_m=f["x"], y_m=f["y"], size_m=f["size"])
     else:
         v.update(kind=_constant("leg", n), x_m=f["x"], y_m=f["y"], size_m=f["width"], probability=f["probability"])
@@ -314,13 +309,9 @@ class TextSink:
 
 
 def require_pyarrow():
-    """pyarrow (with its parquet module), or ParquetMissingError naming the extra to install."""
-    try:
-        import pyarrow
-        import pyarrow.parquet
-    except ImportError:
-        raise ParquetMissingError(f"writing Parquet needs pyarrow: {PARQUET_HINT}") from None
-    return pyarrow
+    """pyarrow (with its parquet module loaded), or MissingExtraError naming the parquet extra."""
+    require("pyarrow.parquet", for_="writing Parquet")
+    return require("pyarrow", for_="writing Parquet")
 
 
 class ParquetSink:

@@ -26,32 +26,24 @@ from urllib.parse import quote
 
 import numpy as np
 
-from .errors import ConfigError, DatmoError
+from .errors import ConfigError
+from .extras import require
 from .log import mcapio, types
 from .log.scan import Odometry, ScanGeometry, ScanRun
+from .log.transforms import Transform, encode_tf
 
 TOPIC_TF = "/tf"
 TOPIC_TF_STATIC = "/tf_static"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 STATIC_EVERY_NS = 1_000_000_000    # static transforms are sent again after this much log time
 SUBPROTOCOL = "foxglove.sdk.v1"     # what the SDK's server speaks (the app's WebSocket data source)
-INSTALL = "pip install 'datmo[live]'"
 _APP = "https://app.foxglove.dev/"
 
 
-class LiveUnavailable(DatmoError):
-    """The live view's package (foxglove-sdk) is not installed."""
-
-
 def require_foxglove():
-    """The foxglove module, or LiveUnavailable saying how to install it."""
-    try:
-        import foxglove
-        import foxglove.websocket
-    except ImportError as exc:
-        raise LiveUnavailable(f"the live view needs the foxglove-sdk package ({exc}); install it with {INSTALL}") \
-            from None
-    return foxglove
+    """The foxglove module (with its websocket module loaded), or MissingExtraError naming the live extra."""
+    require("foxglove.websocket", for_="the live view")
+    return require("foxglove", for_="the live view")
 
 
 def ws_url(host: str, port: int) -> str:
@@ -84,23 +76,10 @@ class Message:
 # ------------------------------------------------------------------------------------------- transforms
 
 
-def _quaternion_z(theta: float) -> dict:
-    return {"x": 0.0, "y": 0.0, "z": math.sin(theta / 2.0), "w": math.cos(theta / 2.0)}
-
-
 def tf_payload(stamp: int, transforms: Iterable[tuple[str, str, float, float, float]]) -> bytes:
     """CDR of a tf2_msgs/msg/TFMessage stamped `stamp` (ns) holding `transforms`: (parent frame, child
     frame, x m, y m, yaw rad) each, in the plane."""
-    from rosbags.typesys.stores import ros2_humble as m
-
-    when = m.builtin_interfaces__msg__Time(sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000)
-    items = [m.geometry_msgs__msg__TransformStamped(
-        header=m.std_msgs__msg__Header(stamp=when, frame_id=parent), child_frame_id=child,
-        transform=m.geometry_msgs__msg__Transform(
-            translation=m.geometry_msgs__msg__Vector3(x=float(x), y=float(y), z=0.0),
-            rotation=m.geometry_msgs__msg__Quaternion(**_quaternion_z(float(yaw)))))
-        for parent, child, x, y, yaw in transforms]
-    return bytes(types.typestore().serialize_cdr(m.tf2_msgs__msg__TFMessage(transforms=items), TF_MESSAGE))
+    return encode_tf([Transform.planar(stamp, parent, child, x, y, yaw) for parent, child, x, y, yaw in transforms])
 
 
 class Transforms:

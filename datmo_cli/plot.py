@@ -20,21 +20,31 @@ from typing import BinaryIO
 
 import numpy as np
 
-from .report import (
+from .log.vocabulary import (
+    CLASS_CIRCLE_OBJECT,
     CLASS_NAMES,
+    CLASS_PERSON,
+    CLASS_RECTANGULAR_OBJECT,
+    CLASS_UNKNOWN,
+    LANDMARK_BENCH,
+    LANDMARK_COLUMN,
+    LANDMARK_CONCAVE_DEFLECTION,
+    LANDMARK_CONVEX_DEFLECTION,
+    LANDMARK_CORNER,
+    LANDMARK_LINE_END,
     LANDMARK_NAMES,
+    MOBILITY_DYNAMIC,
     STATUS_CONFIRMED,
     STATUS_TENTATIVE,
-    RunData,
-    TrackHistory,
-    track_history,
 )
+from .report import RunData, TrackHistory, track_history
 
-CLASS_COLOURS = {0: "tab:gray", 1: "tab:red", 2: "tab:blue", 3: "tab:green"}
-LANDMARK_MARKERS = {0: "v", 1: "^", 2: "<", 3: "x", 4: "o", 5: "s"}
+CLASS_COLOURS = {CLASS_UNKNOWN: "tab:gray", CLASS_PERSON: "tab:red", CLASS_CIRCLE_OBJECT: "tab:blue",
+                 CLASS_RECTANGULAR_OBJECT: "tab:green"}
+LANDMARK_MARKERS = {LANDMARK_CORNER: "v", LANDMARK_CONVEX_DEFLECTION: "^", LANDMARK_CONCAVE_DEFLECTION: "<",
+                    LANDMARK_LINE_END: "x", LANDMARK_COLUMN: "o", LANDMARK_BENCH: "s"}
 FORMATS = (".png", ".svg", ".pdf")
 KINDS = ("auto", "top", "counts", "speeds", "all")
-PERSON, DYNAMIC = 1, 1          # classification and mobility codes of datmo_msgs/Track
 # label offsets from the point (points) and the text's alignment there: the four diagonals first
 LABEL_SPOTS = [(dx * r, dy * r, ha, va) for r in (3, 9)
                for dx, dy, ha, va in ((1, 1, "left", "bottom"), (1, -1, "left", "top"), (-1, 1, "right", "bottom"),
@@ -77,7 +87,7 @@ def track_lines(hist: TrackHistory) -> TrackLines:
         cls = int(st["classification"][-1])
         out.groups.append((tid, a, b))
         out.classes.append(cls)
-        out.moving.append(cls == PERSON or int(st["mobility"][-1]) == DYNAMIC)
+        out.moving.append(cls == CLASS_PERSON or int(st["mobility"][-1]) == MOBILITY_DYNAMIC)
         out.confirmed.append(conf)
     return out
 
@@ -149,7 +159,7 @@ def _top_view(ax, data: RunData, hist: TrackHistory, lines: TrackLines, max_poin
         else:
             ax.plot(x[-1], y[-1], marker="s", ms=4, mfc="none", mec=colour, alpha=0.6, zorder=2)
         if moves or all_labels:
-            priority = (not moves, cls != PERSON, -int(conf.sum()), tid)
+            priority = (not moves, cls != CLASS_PERSON, -int(conf.sum()), tid)
             labels.append((priority, (tid, float(x[-1]), float(y[-1]), colour)))
     for cls in sorted(set(lines.classes)):
         handles.append(Line2D([], [], color=CLASS_COLOURS.get(cls, "tab:gray"), lw=2, label=CLASS_NAMES[cls]))

@@ -24,12 +24,20 @@ import numpy as np
 
 from .errors import InputError, MissingChannelError
 from .log import cdr, mcapio, types
+from .log.vocabulary import (
+    CLASS_CIRCLE_OBJECT,
+    CLASS_NAMES,
+    CLASS_PERSON,
+    CLASS_RECTANGULAR_OBJECT,
+    CLASS_UNKNOWN,
+    LANDMARK_NAMES,
+    MOBILITY_DYNAMIC,
+    MOBILITY_NAMES,
+    MOBILITY_STATIC,
+    MOBILITY_UNDEFINED,
+    STATUS_CONFIRMED,
+)
 
-CLASS_NAMES = {0: "unknown", 1: "person", 2: "circle object", 3: "rectangular object"}
-MOBILITY_NAMES = {0: "static", 1: "dynamic", 2: "undefined"}
-LANDMARK_NAMES = {0: "corner", 1: "convex deflection", 2: "concave deflection", 3: "line end", 4: "column",
-                  5: "bench"}
-STATUS_TENTATIVE, STATUS_CONFIRMED, STATUS_COASTING = 0, 1, 2
 SORT_KEYS = ("lifetime", "distance", "speed", "first", "id")
 FORMATS = ("rich", "json", "csv", "markdown")
 
@@ -164,7 +172,7 @@ def class_rows(tracks: list[dict]) -> list[dict]:
         if r["confirmed"]:
             groups.setdefault((r["class"], r["mobility"]), []).append(r)
     order = {name: i for i, name in enumerate(CLASS_NAMES.values())}
-    morder = {name: i for i, name in enumerate(("dynamic", "undefined", "static"))}
+    morder = {MOBILITY_NAMES[m]: i for i, m in enumerate((MOBILITY_DYNAMIC, MOBILITY_UNDEFINED, MOBILITY_STATIC))}
     out = []
     for (cls, mob), rs in sorted(groups.items(), key=lambda kv: (order[kv[0][0]], morder[kv[0][1]])):
         life = np.array([r["lifetime_s"] for r in rs])
@@ -179,7 +187,7 @@ def class_rows(tracks: list[dict]) -> list[dict]:
 
 def moving(row: dict) -> bool:
     """Whether a track row is reported in full: a person (whatever its mobility) or a dynamic track."""
-    return row["class"] == "person" or row["mobility"] == "dynamic"
+    return row["class"] == CLASS_NAMES[CLASS_PERSON] or row["mobility"] == MOBILITY_NAMES[MOBILITY_DYNAMIC]
 
 
 def static_rows(tracks: list[dict]) -> list[dict]:
@@ -192,7 +200,8 @@ def static_rows(tracks: list[dict]) -> list[dict]:
             groups.setdefault((r["class"], r["mobility"]), []).append(r)
     order = {name: i for i, name in enumerate(CLASS_NAMES.values())}
     out = []
-    for (cls, mob), rs in sorted(groups.items(), key=lambda kv: (order[kv[0][0]], kv[0][1] != "static")):
+    static = MOBILITY_NAMES[MOBILITY_STATIC]
+    for (cls, mob), rs in sorted(groups.items(), key=lambda kv: (order[kv[0][0]], kv[0][1] != static)):
         xy = np.array([(r["x_m"], r["y_m"]) for r in rs if r["x_m"] is not None and r["y_m"] is not None],
                       np.float64).reshape(-1, 2)
         where = dict.fromkeys(("centroid_x_m", "centroid_y_m", "x_min_m", "x_max_m", "y_min_m", "y_max_m"))
@@ -242,9 +251,9 @@ class RunSummary:
         row["tracks"] = len(conf)
         row["moving"] = sum(moving(r) for r in conf)
         row["static_pieces"] = len(conf) - row["moving"]
-        for cls in ("person", "circle object", "rectangular object", "unknown"):
-            row[cls.replace(" ", "_")] = sum(r["class"] == cls for r in conf)
-        row["dynamic"] = sum(r["mobility"] == "dynamic" for r in conf)
+        for c in (CLASS_PERSON, CLASS_CIRCLE_OBJECT, CLASS_RECTANGULAR_OBJECT, CLASS_UNKNOWN):
+            row[CLASS_NAMES[c].replace(" ", "_")] = sum(r["class"] == CLASS_NAMES[c] for r in conf)
+        row["dynamic"] = sum(r["mobility"] == MOBILITY_NAMES[MOBILITY_DYNAMIC] for r in conf)
         row["distance_m"] = round(sum(r["distance_m"] for r in conf), 3)
         return row
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .lms2xx.emulator import LogSource, ScanSource
+from .log.vocabulary import CLASS_PERSON
 
 # ------------------------------------------------------------------------------------ leg recordings
 
@@ -33,7 +34,7 @@ def simulated_recording(scene: str, seed: int, people: int | None = None, resolu
     legs = []
     for k in range(len(sim.run)):
         o = sim.truth[sim.truth_offsets[k]:sim.truth_offsets[k + 1]]
-        o = o[(o["classification"] == 1) & (o["visible"] == 1)]
+        o = o[(o["classification"] == CLASS_PERSON) & (o["visible"] == 1)]
         left = np.stack([o["left_leg_x"], o["left_leg_y"]], axis=1)
         right = np.stack([o["right_leg_x"], o["right_leg_y"]], axis=1)
         legs.append(np.concatenate([left, right]).astype(np.float64).reshape(-1, 2))

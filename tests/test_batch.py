@@ -229,23 +229,6 @@ def test_report_of_a_batch_folder(logs, tmp_path):
         "(a batch folder is the -o folder of datmo run)"
 
 
-def test_scheduler_without_dask_says_how_to_install_it(logs, tmp_path, monkeypatch):
-    import builtins
-
-    real = builtins.__import__
-
-    def no_dask(name, *args, **kwargs):
-        if name == "distributed" or name.startswith("distributed."):
-            raise ImportError(name)
-        return real(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", no_dask)
-    r = run(logs / "a.mcap", "-o", tmp_path / "out", "--scheduler", "tcp://127.0.0.1:1")
-    assert r.exit_code == 1
-    assert r.output.strip() == ("datmo: error: --scheduler needs Dask's distributed scheduler, which is not "
-                                "installed: pip install 'datmo[dask]'")
-
-
 def test_an_unreachable_scheduler_is_one_line(logs, tmp_path, monkeypatch):
     pytest.importorskip("distributed")
     import socket

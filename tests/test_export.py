@@ -216,7 +216,8 @@ def test_missing_pyarrow_names_the_extra(processed, tmp_path, monkeypatch):
     out = tmp_path / "tracks.parquet"
     result = invoke(str(processed["static"]), "-o", str(out))
     assert result.exit_code == 1
-    assert result.stderr.splitlines() == ["datmo: error: writing Parquet needs pyarrow: pip install 'datmo[parquet]'"]
+    assert result.stderr.splitlines() == ["datmo: error: writing Parquet needs pyarrow, which is not installed: "
+                                          "pip install 'datmo[parquet]'"]
     assert list(tmp_path.iterdir()) == []
     assert invoke(str(processed["static"]), "-o", str(tmp_path / "tracks.csv")).exit_code == 0   # CSV needs none
 

@@ -5,7 +5,7 @@ datmo_cli, at the top or inside a function, points down the layers or within its
     pipeline   the other top-level modules: the stages and the passes over files
     core       perception, tracking, sim, lms2xx (each importing only itself, log and base), above log
     log        datmo_cli.log.* (importing only itself and base)
-    base       errors, outputs, bounds, config, numba_runtime, progress and the package itself (__version__):
+    base       errors, extras, outputs, bounds, config, numba_runtime, progress and the package itself (__version__):
                usable by every layer, importing only base
 """
 
@@ -19,16 +19,13 @@ import pytest
 PACKAGE = "datmo_cli"
 ROOT = Path(__file__).resolve().parent.parent / PACKAGE
 
-BASE = {"errors", "outputs", "bounds", "config", "numba_runtime", "progress"}
+BASE = {"errors", "extras", "outputs", "bounds", "config", "numba_runtime", "progress"}
 CLI = {"cli", "__main__", "commands"}
 CORE = {"perception", "tracking", "sim", "lms2xx"}
 RANK = {"base": 0, "log": 1, "core": 2, "pipeline": 3, "cli": 4}
 
 # arrows against the layers that another branch removes; each names that branch
-KNOWN = {
-    # fixed on branch vocab (the MarkerArray writer moves into log/markers.py)
-    ("datmo_cli.perception.markers", "datmo_cli.tracking.markers"),
-}
+KNOWN: set[tuple[str, str]] = set()
 
 
 def layer(module: str) -> tuple[str, str]:

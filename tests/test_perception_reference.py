@@ -14,9 +14,9 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.log.vocabulary import LANDMARK_COLUMN
 from datmo_cli.perception import _kernels as K
 from datmo_cli.perception.features import extract_run, segment_run
-from datmo_cli.perception.landmarks import COLUMN
 from datmo_cli.perception.params import FeatureParams
 
 INC = math.radians(0.5)
@@ -184,9 +184,9 @@ def test_a_free_standing_column_is_one_landmark_and_a_moving_circle_none():
     still = np.stack([noisy(np.minimum(wall, ref.ray_circle(ANGLES, 3.0, 1.0, 0.25)), 0.01, s) for s in range(40)])
     f = extract_run(run_of(still))
     db = f.landmarks.final()
-    cols = db[db["type"] == COLUMN]
+    cols = db[db["type"] == LANDMARK_COLUMN]
     assert len(cols) == 1 and math.hypot(cols[0]["x"] - 3.0, cols[0]["y"] - 1.0) < 0.03
     moving = np.stack([noisy(np.minimum(wall, ref.ray_circle(ANGLES, 3.0, -1.5 + 0.2 * k, 0.25)), 0.01, k)
                        for k in range(40)])
     f = extract_run(run_of(moving))
-    assert not np.any(f.landmarks.final()["type"] == COLUMN)
+    assert not np.any(f.landmarks.final()["type"] == LANDMARK_COLUMN)

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.log.vocabulary import LANDMARK_BENCH, LANDMARK_COLUMN, LANDMARK_LINE_END
 from datmo_cli.perception.features import extract_run
-from datmo_cli.perception.landmarks import BENCH, COLUMN, LINE_END
 
 INC = math.radians(0.5)
 ANGLE_MIN = -math.pi / 2
@@ -218,7 +218,7 @@ def test_a_free_standing_column_is_one_landmark_at_its_place():
     clean = ref.ray_circle(ANGLES, cx, cy, 0.25)        # open space behind it: nothing else in range
     f = extract_run(run_of(noisy_scans(clean, n=20)))
     db = f.landmarks.final()
-    cols = db[db["type"] == COLUMN]
+    cols = db[db["type"] == LANDMARK_COLUMN]
     assert len(cols) == 1
     assert math.hypot(cols[0]["x"] - cx, cols[0]["y"] - cy) < 0.04
     assert abs(cols[0]["size"] - 0.25) < 0.03
@@ -230,7 +230,7 @@ def test_a_column_in_front_of_a_far_wall_is_one_landmark():
     clean = np.minimum(ref.ray_wall(ANGLES, 7.0, 0.0), ref.ray_circle(ANGLES, cx, cy, 0.25))
     f = extract_run(run_of(noisy_scans(clean, n=20)))
     cols = f.landmarks.final()
-    cols = cols[cols["type"] == COLUMN]
+    cols = cols[cols["type"] == LANDMARK_COLUMN]
     assert len(cols) == 1 and math.hypot(cols[0]["x"] - cx, cols[0]["y"] - cy) < 0.04
 
 
@@ -241,10 +241,10 @@ def test_a_circle_moving_20_cm_per_scan_is_no_landmark():
         scans.append(noisy_scans(clean, n=1, seed=k)[0])
     f = extract_run(run_of(np.stack(scans)))
     assert len(f.circles) >= 15                               # it is seen, as a circle, in most scans
-    assert not np.any(f.landmarks.final()["type"] == COLUMN)
-    assert not np.any(f.landmarks.rows[:, 0] == COLUMN) or np.all(
-        (f.landmarks.rows[f.landmarks.rows[:, 0] == COLUMN, 5] < 3)
-        | (f.landmarks.rows[f.landmarks.rows[:, 0] == COLUMN, 10] != 0))
+    assert not np.any(f.landmarks.final()["type"] == LANDMARK_COLUMN)
+    assert not np.any(f.landmarks.rows[:, 0] == LANDMARK_COLUMN) or np.all(
+        (f.landmarks.rows[f.landmarks.rows[:, 0] == LANDMARK_COLUMN, 5] < 3)
+        | (f.landmarks.rows[f.landmarks.rows[:, 0] == LANDMARK_COLUMN, 10] != 0))
 
 
 @pytest.mark.parametrize("dropouts", [[150], [140, 141], [175, 176, 177, 210]])
@@ -258,4 +258,4 @@ def test_dropouts_on_a_wall_make_no_line_ends_benches_or_columns(dropouts):
     f = extract_run(run_of(scans))
     assert len(f.lines) >= 3 * 20             # the pieces are seen as lines
     types = f.landmarks.final()["type"]
-    assert not np.isin(types, [LINE_END, BENCH, COLUMN]).any(), types
+    assert not np.isin(types, [LANDMARK_LINE_END, LANDMARK_BENCH, LANDMARK_COLUMN]).any(), types

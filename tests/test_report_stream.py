@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from datmo_cli import pipeline, report
 from datmo_cli.cli import cli
 from datmo_cli.errors import GeometryError, MissingChannelError
-from datmo_cli.log import cdr, mcapio, types
+from datmo_cli.log import cdr, mcapio, types, vocabulary
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
@@ -32,13 +32,13 @@ def ref_track_rows(h: report.TrackHistory, t0_ns: int) -> list[dict]:
     for g, tid in enumerate(h.ids.tolist()):
         a, b = int(h.starts[g]), int(h.starts[g + 1])
         s = h.states[a:b]
-        conf = s["status"] == report.STATUS_CONFIRMED
+        conf = s["status"] == vocabulary.STATUS_CONFIRMED
         x, y, speed = h.x[a:b][conf], h.y[a:b][conf], h.speed[a:b][conf]
         occ = s["occluded"].astype(bool)
         t_first, t_last = (h.stamps[a] - t0_ns) / 1e9, (h.stamps[b - 1] - t0_ns) / 1e9
         rows.append({
-            "id": tid, "class": report.CLASS_NAMES.get(int(s["classification"][-1]), "unknown"),
-            "mobility": report.MOBILITY_NAMES.get(int(s["mobility"][-1]), "undefined"),
+            "id": tid, "class": vocabulary.CLASS_NAMES.get(int(s["classification"][-1]), "unknown"),
+            "mobility": vocabulary.MOBILITY_NAMES.get(int(s["mobility"][-1]), "undefined"),
             "first_s": round(float(t_first), 3), "last_s": round(float(t_last), 3),
             "lifetime_s": round(float(t_last - t_first), 3), "scans": b - a,
             "distance_m": round(float(np.hypot(np.diff(x), np.diff(y)).sum()), 3),
@@ -92,7 +92,7 @@ def ref_landmark_rows(landmarks: report.Decoded | None, t0_ns: int) -> list[dict
     def secs(t: np.ndarray) -> float:
         return round((int(t["sec"]) * 1_000_000_000 + int(t["nanosec"]) - t0_ns) / 1e9, 3)
 
-    return [{"id": int(lm["id"]), "type": report.LANDMARK_NAMES.get(int(lm["type"]), str(int(lm["type"]))),
+    return [{"id": int(lm["id"]), "type": vocabulary.LANDMARK_NAMES.get(int(lm["type"]), str(int(lm["type"]))),
              "x_m": round(float(lm["x"]), 3), "y_m": round(float(lm["y"]), 3), "size_m": round(float(lm["size"]), 3),
              "first_seen_s": secs(lm["first_seen"]), "last_seen_s": secs(lm["last_seen"]), "scans": int(lm["count"]),
              "frame": landmarks.frame_id} for lm in landmarks.items["landmarks"][off[-2]:off[-1]]]

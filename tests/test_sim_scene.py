@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from datmo_cli.errors import ConfigError, InputError
+from datmo_cli.log.vocabulary import CLASS_BENCH, CLASS_CIRCLE_OBJECT, CLASS_COLUMN, CLASS_PERSON, CLASS_WALL_CORNER
 from datmo_cli.sim.scene import builtin_scenes, load_scene, parse_scene
 from datmo_cli.sim.simulate import simulate_scene
-from datmo_cli.sim.world import BENCH, CIRCLE_OBJECT, COLUMN, PERSON, WALL_CORNER
 
 MINIMAL = """
 name = "mini"
@@ -41,9 +41,9 @@ def test_movers_never_run_through_static_objects(name):
     r = simulate_scene(name, seed=3, rate=5.0, duration=60.0, noise_sigma=0.0)
     gt = r.truth.reshape(len(r.run), -1)
     cls = gt["classification"][0]
-    for k in np.flatnonzero(np.isin(cls, [PERSON, CIRCLE_OBJECT])):
+    for k in np.flatnonzero(np.isin(cls, [CLASS_PERSON, CLASS_CIRCLE_OBJECT])):
         reach = gt["length"][:, k].max() / 2
-        for j in np.flatnonzero(np.isin(cls, [COLUMN, BENCH])):
+        for j in np.flatnonzero(np.isin(cls, [CLASS_COLUMN, CLASS_BENCH])):
             dx, dy = gt["world_x"][:, k] - gt["world_x"][0, j], gt["world_y"][:, k] - gt["world_y"][0, j]
             c, s = np.cos(gt["orientation"][0, j]), np.sin(gt["orientation"][0, j])
             along, across = np.abs(c * dx + s * dy), np.abs(-s * dx + c * dy)
@@ -56,13 +56,13 @@ def test_hall_people_are_mostly_visible_and_the_platform_briefly_occluded():
     r = simulate_scene("hall", seed=0)
     gt = r.truth.reshape(len(r.run), -1)
     in_view = gt["x"] > 0.3
-    people = np.flatnonzero(gt["classification"][0] == PERSON)
-    platform = int(np.flatnonzero(gt["classification"][0] == CIRCLE_OBJECT)[0])
+    people = np.flatnonzero(gt["classification"][0] == CLASS_PERSON)
+    platform = int(np.flatnonzero(gt["classification"][0] == CLASS_CIRCLE_OBJECT)[0])
     for k in people:
         assert gt["visible"][in_view[:, k], k].mean() > 0.85
     hidden = in_view[:, platform] & (gt["visible"][:, platform] == 0)
     assert 0 < hidden.sum() < 0.1 * in_view[:, platform].sum()
-    corners = gt["classification"][0] == WALL_CORNER
+    corners = gt["classification"][0] == CLASS_WALL_CORNER
     assert corners.sum() >= 6 and gt["visible"][:, corners].any(axis=0).sum() >= 4
 
 
@@ -103,7 +103,7 @@ def test_scene_files_by_path(tmp_path):
 def test_crowd_walkers_mostly_keep_apart():
     r = simulate_scene("crowd", seed=1, people=6, noise_sigma=0.0)
     gt = r.truth.reshape(len(r.run), -1)
-    p = np.flatnonzero(gt["classification"][0] == PERSON)
+    p = np.flatnonzero(gt["classification"][0] == CLASS_PERSON)
     assert len(p) == 6
     x, y = gt["world_x"][:, p], gt["world_y"][:, p]
     d = np.hypot(x[:, :, None] - x[:, None, :], y[:, :, None] - y[:, None, :]) + 99 * np.eye(6)

@@ -9,9 +9,9 @@ from click.testing import CliRunner
 from datmo_cli.cli import cli
 from datmo_cli.errors import ConfigError
 from datmo_cli.log import cdr, mcapio, types
+from datmo_cli.log.vocabulary import CLASS_COLUMN, CLASS_PERSON, CLASS_WALL_CORNER
 from datmo_cli.sim.scene import parse_scene
 from datmo_cli.sim.simulate import START_NS, simulate_scene
-from datmo_cli.sim.world import COLUMN, PERSON, WALL_CORNER
 
 OCCLUSION = """
 [[column]]
@@ -49,7 +49,7 @@ def test_crowd_people_keep_their_paths_with_more_people_and_a_longer_run_of_the_
     n = len(short.run)
     s = short.truth.reshape(n, -1)
     lg = long.truth.reshape(len(long.run), -1)[:n]
-    assert (lg["classification"][0] == PERSON).sum() == 8
+    assert (lg["classification"][0] == CLASS_PERSON).sum() == 8
     np.testing.assert_array_equal(s["world_x"][:, :6], lg["world_x"][:, :6])
 
 
@@ -65,7 +65,7 @@ def test_stamps_rate_and_geometry():
 def test_sensor_frame_agrees_with_world_frame_and_scan():
     r = simulate_scene("static", duration=1.0, noise_sigma=0.0)
     gt = r.truth_at(0)
-    col = gt[gt["classification"] == COLUMN][0]
+    col = gt[gt["classification"] == CLASS_COLUMN][0]
     np.testing.assert_allclose([col["x"], col["y"]], [col["world_x"], col["world_y"]], atol=1e-6)
     # the beam towards the column's centre measures centre distance minus radius
     bearing = np.arctan2(col["y"], col["x"])
@@ -78,7 +78,7 @@ def test_sensor_frame_agrees_with_world_frame_and_scan():
 def test_visible_flags_follow_occlusion():
     r = simulate_scene(parse_scene(OCCLUSION, "occ.toml"), duration=6.0, rate=10.0, noise_sigma=0.0)
     gt = r.truth.reshape(len(r.run), -1)
-    person = int(np.flatnonzero(gt["classification"][0] == PERSON)[0])
+    person = int(np.flatnonzero(gt["classification"][0] == CLASS_PERSON)[0])
     y = gt["world_y"][:, person]
     vis = gt["visible"][:, person].astype(bool)
     # the column (r 0.3 at 2 m) hides y in about +-0.75 m at 5 m, minus the legs' own extent
@@ -100,7 +100,7 @@ def test_moving_sensor_writes_odometry_and_relative_velocities():
     assert r.odometry is not None and len(r.odometry) == len(r.run)
     np.testing.assert_allclose(r.odometry.x[:5], [0.0, 0.1, 0.2, 0.3, 0.4])
     gt = r.truth.reshape(len(r.run), -1)
-    col = int(np.flatnonzero(gt["classification"][0] == COLUMN)[0])
+    col = int(np.flatnonzero(gt["classification"][0] == CLASS_COLUMN)[0])
     np.testing.assert_allclose(gt["vx"][1:5, col], -0.5, atol=1e-6)   # a static column seen from a moving robot
     np.testing.assert_allclose(gt["world_vx"][:, col], 0.0)
     # sensor-frame positions follow the pose
@@ -109,7 +109,7 @@ def test_moving_sensor_writes_odometry_and_relative_velocities():
     dx, dy = gt["world_x"][k, col] - x, gt["world_y"][k, col] - y
     assert gt["x"][k, col] == pytest.approx(np.cos(th) * dx + np.sin(th) * dy, abs=1e-5)
     assert gt["y"][k, col] == pytest.approx(-np.sin(th) * dx + np.cos(th) * dy, abs=1e-5)
-    assert (gt["classification"][0] == WALL_CORNER).sum() == 1
+    assert (gt["classification"][0] == CLASS_WALL_CORNER).sum() == 1
 
 
 def test_moving_sensor_turns_on_the_spot_and_velocities_are_derivatives():
@@ -123,7 +123,7 @@ def test_moving_sensor_turns_on_the_spot_and_velocities_are_derivatives():
     assert len(turning) == pytest.approx(rate, abs=2)                  # a 90° turn takes 1 s
     assert np.ptp(r.sensor_poses[turning, :2], axis=0).max() < 1e-9   # on the spot
     gt = r.truth.reshape(len(r.run), -1)
-    col = int(np.flatnonzero(gt["classification"][0] == COLUMN)[0])
+    col = int(np.flatnonzero(gt["classification"][0] == CLASS_COLUMN)[0])
     for axis in ("x", "y"):
         numeric = np.gradient(gt[axis][:, col].astype(float), 1 / rate)
         inner = turning[2:-2]

@@ -14,6 +14,7 @@ import pytest
 
 from datmo_cli import evaluate as ev
 from datmo_cli.log import mcapio, types
+from datmo_cli.log.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON, STATUS_CONFIRMED
 from datmo_cli.report import decode_channel
 from datmo_cli.stages import run_features, track_run
 from datmo_cli.tracking import accuracy as acc
@@ -34,11 +35,12 @@ def _score(sample_logs, name: str, source: str) -> dict:
     g, regions, hy = ev.frames_from_channels(truth.stamps, off, gt, truth.scalars.get("sensor_theta"),
                                              tracked.stamps, toff, items)
     tid, tcls, gid, gcls = acc.matched_targets(off, gt, toff, items)
-    platform = np.unique(gt["id"][gt["classification"] == acc.CIRCLE_OBJECT])
+    platform = np.unique(gt["id"][gt["classification"] == CLASS_CIRCLE_OBJECT])
     return {"scores": ev.evaluate(g, hy, regions=regions), "class": acc.class_accuracy(tcls, gcls, gid),
             "platform_switches": acc.id_switches(tid, gid, int(platform[0])) if len(platform) else 0,
             "dynamic": len(np.unique(items["id"][(items["status"] == 1) & (items["mobility"] == 1)])),
-            "people": len(np.unique(items["id"][(items["status"] == 1) & (items["classification"] == acc.PERSON)]))}
+            "people": len(np.unique(items["id"][(items["status"] == STATUS_CONFIRMED)
+                                                & (items["classification"] == CLASS_PERSON)]))}
 
 
 SOURCES = ["ideal", "degraded", "datmo", "paper"]

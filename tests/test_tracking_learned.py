@@ -6,13 +6,8 @@ from __future__ import annotations
 import numpy as np
 from test_tracking_people import walker_legs
 
+from datmo_cli.log.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON, MOBILITY_DYNAMIC, MOBILITY_STATIC
 from datmo_cli.tracking import _kernels
-from datmo_cli.tracking.classification import (
-    CLASS_CIRCLE_OBJECT,
-    CLASS_PERSON,
-    MOBILITY_DYNAMIC,
-    MOBILITY_STATIC,
-)
 from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, measurements
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.synthetic import features_from_lists

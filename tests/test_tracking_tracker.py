@@ -8,10 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from datmo_cli.log.scan import ScanGeometry
+from datmo_cli.log.vocabulary import STATUS_COASTING, STATUS_CONFIRMED, STATUS_TENTATIVE
 from datmo_cli.tracking.measurements import measurements
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.synthetic import features_from_lists
-from datmo_cli.tracking.tracker import STATUS_COASTING, STATUS_CONFIRMED, STATUS_TENTATIVE, Tracker
+from datmo_cli.tracking.tracker import Tracker
 
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0)
 P = TrackingParams()
@@ -223,8 +224,8 @@ def test_a_duplicate_yields_to_the_person_whatever_its_hits():
     """Two confirmed leg/person tracks moving alike within merge_distance are one: the one that goes is
     not the person, even when the other (e.g. a track on a bench's pieces uncovered by the person walking
     past) has more hits; between two unknowns, the one with fewer hits goes."""
+    from datmo_cli.log.vocabulary import CLASS_PERSON, CLASS_UNKNOWN, MOBILITY_DYNAMIC, MOBILITY_STATIC
     from datmo_cli.tracking import _step, state
-    from datmo_cli.tracking.classification import CLASS_PERSON, CLASS_UNKNOWN, MOBILITY_DYNAMIC, MOBILITY_STATIC
     from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
 
     def tracks(cls, mobility, hits):

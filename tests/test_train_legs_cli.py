@@ -77,14 +77,6 @@ def test_writes_a_model_from_synthetic_labelled_files_and_refuses_to_overwrite(t
     assert LegModel.load(out).provenance["held_out"]["folds"] == []
 
 
-def test_without_scikit_learn_the_error_says_how_to_install_it(tmp_path, monkeypatch):
-    import sys
-
-    good = write_bag(tmp_path / "p.bag", *scene(5))
-    monkeypatch.setitem(sys.modules, "sklearn", None)     # import sklearn raises ImportError
-    _one_line_error(_run("--positive", str(good), "-o", str(tmp_path / "m.npz")), "pip install 'datmo[train]'")
-
-
 def test_with_simulated_recordings_always_in_training(tmp_path, monkeypatch):
     """--with-simulated adds simulated LMS200 recordings (exact legs) to every training set, never held out."""
     from datmo_cli import simulated

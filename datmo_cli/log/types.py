@@ -107,6 +107,21 @@ def fields(msgtype: str) -> tuple:
 _msg_texts = cache(datmo_msg_files)
 
 
+@cache
+def constants(msgtype: str) -> dict[str, int]:
+    """The integer constants of datmo_msgs type `msgtype` ({name: value}, in file order), as rosbags' type
+    store gives them (class attributes of `typestore().types[msgtype]`): parsed from its .msg file without
+    building the store (vocabulary needs them at start-up; tests check them against the store)."""
+    out = {}
+    for line in _msg_texts()[msgtype].splitlines():
+        line = line.split("#", 1)[0].strip()
+        if "=" in line:
+            kind, assignment = line.split(None, 1)
+            name, value = (s.strip() for s in assignment.split("=", 1))
+            out[name] = int(value, 0)
+    return out
+
+
 def _field_type(kind: str, owner: str) -> tuple:
     if kind.endswith("]"):
         inner, count = kind[:-1].split("[")

@@ -10,10 +10,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..log.vocabulary import (
+    CLASS_BENCH,
+    CLASS_COLUMN,
+    CLASS_PERSON,
+    CLASS_WALL,
+    CLASS_WALL_CORNER,
+    LANDMARK_BENCH,
+    LANDMARK_COLUMN,
+    LANDMARK_CONCAVE_DEFLECTION,
+    LANDMARK_CONVEX_DEFLECTION,
+    LANDMARK_CORNER,
+    LANDMARK_LINE_END,
+)
 from .features import RunFeatures
-from .landmarks import BENCH, COLUMN, LINE_END
 
-CLASS_PERSON, CLASS_COLUMN, CLASS_BENCH, CLASS_WALL_CORNER, CLASS_WALL = 1, 4, 5, 6, 7
 LEG_RADIUS = 0.10
 
 
@@ -187,13 +198,14 @@ def landmark_score(f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray,
                 continue
             nv += 1
             x, y = float(rows[kx][-1]), float(rows[ky][-1])
-            types = {CLASS_COLUMN: (COLUMN,), CLASS_BENCH: (BENCH,)}.get(cls, (0, 1, 2, LINE_END))
+            types = {CLASS_COLUMN: (LANDMARK_COLUMN,), CLASS_BENCH: (LANDMARK_BENCH,)}.get(
+                cls, (LANDMARK_CORNER, LANDMARK_CONVEX_DEFLECTION, LANDMARK_CONCAVE_DEFLECTION, LANDMARK_LINE_END))
             near = np.isin(db["type"], types) & (np.hypot(db["x"] - x, db["y"] - y) <= match)
             nf += bool(near.any())
         found[name] = (nf, nv)
     txy = np.array(true_xy).reshape(-1, 2)
-    defined = db[db["type"] != LINE_END]
-    ends = db[db["type"] == LINE_END]
+    defined = db[db["type"] != LANDMARK_LINE_END]
+    ends = db[db["type"] == LANDMARK_LINE_END]
 
     def near_truth(items: np.ndarray) -> np.ndarray:
         if not len(txy) or not len(items):

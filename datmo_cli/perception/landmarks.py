@@ -16,10 +16,16 @@ import numpy as np
 from numba import njit
 
 from ..log import cdr, types
+from ..log.vocabulary import (
+    LANDMARK_BENCH,
+    LANDMARK_COLUMN,
+    LANDMARK_CONCAVE_DEFLECTION,
+    LANDMARK_CONVEX_DEFLECTION,
+    LANDMARK_CORNER,
+    LANDMARK_LINE_END,
+)
 from .params import FeatureParams
 
-CORNER, CONVEX_DEFLECTION, CONCAVE_DEFLECTION, LINE_END, COLUMN, BENCH = range(6)
-TYPE_NAMES = ("corner", "convex_deflection", "concave_deflection", "line_end", "column", "bench")
 LANDMARK_DTYPE = cdr.element_dtype(types.LANDMARK)
 # a detection: scan index, type, x, y, orientation (rad), size (m)
 DET_SCAN, DET_TYPE, DET_X, DET_Y, DET_ORIENT, DET_SIZE = range(6)
@@ -62,7 +68,7 @@ def junction_detections(lines: np.ndarray, scan: np.ndarray, p: FeatureParams) -
         orient = np.arctan2(uy / nu + vy / nv, ux / nu + vx / nv)
     ex, ey = b["x_end"] - a["x_ini"], b["y_end"] - a["y_ini"]
     convex = (ex * (jy - a["y_ini"]) - ey * (jx - a["x_ini"])) * (ex * -a["y_ini"] - ey * -a["x_ini"]) > 0
-    kind = np.where(corner, CORNER, np.where(convex, CONVEX_DEFLECTION, CONCAVE_DEFLECTION))
+    kind = np.where(corner, LANDMARK_CORNER, np.where(convex, LANDMARK_CONVEX_DEFLECTION, LANDMARK_CONCAVE_DEFLECTION))
     keep = corner | deflection
     out = np.zeros((int(keep.sum()), 6))
     out[:, DET_SCAN] = scan[i][keep]
@@ -94,7 +100,7 @@ def line_end_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarr
         seen = exists & (there > here + 0.5) & (here < 0.9 * limits[1])
         keep = (beam == at_end) & seen
         rows = np.zeros((int(keep.sum()), 6))
-        rows[:, DET_SCAN], rows[:, DET_TYPE] = s[keep], LINE_END
+        rows[:, DET_SCAN], rows[:, DET_TYPE] = s[keep], LANDMARK_LINE_END
         rows[:, DET_X], rows[:, DET_Y] = ex[keep], ey[keep]
         rows[:, DET_ORIENT] = np.arctan2(fy[keep] - ey[keep], fx[keep] - ex[keep])
         out.append(rows)
@@ -112,7 +118,7 @@ def circle_detections(circles: np.ndarray, scan: np.ndarray, lines: np.ndarray, 
                                    limits)]
     c = circles[big]
     cols = np.zeros((len(big), 6))
-    cols[:, DET_SCAN], cols[:, DET_TYPE] = scan[big], COLUMN
+    cols[:, DET_SCAN], cols[:, DET_TYPE] = scan[big], LANDMARK_COLUMN
     cols[:, DET_X], cols[:, DET_Y], cols[:, DET_SIZE] = c["x"], c["y"], c["radius"]
     benches = np.zeros((len(big), 6))
     nb = _benches(scan[big].astype(np.int64), c["x"].astype(np.float64), c["y"].astype(np.float64),
@@ -208,7 +214,7 @@ def seat_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarray, 
     free = spans & free_standing(s, a, b, ranges, p.c0, limits, line)
     ln, s = ln[free], s[free]
     out = np.zeros((len(ln), 6))
-    out[:, DET_SCAN], out[:, DET_TYPE] = s, BENCH
+    out[:, DET_SCAN], out[:, DET_TYPE] = s, LANDMARK_BENCH
     out[:, DET_X] = 0.5 * (ln["x_ini"] + ln["x_end"])
     out[:, DET_Y] = 0.5 * (ln["y_ini"] + ln["y_end"])
     out[:, DET_ORIENT] = np.arctan2(ln["y_end"] - ln["y_ini"], ln["x_end"] - ln["x_ini"])
@@ -241,7 +247,7 @@ def _benches(cs, cx, cy, cr, x0, y0, x1, y1, line_offsets, dmin, dmax, out) -> i
                 dy = y1[q] - y0[q]
                 if 0 < along < d and across < 0.4 and abs(dx * ux + dy * uy) >= 0.9 * np.hypot(dx, dy):
                     out[n, 0] = k
-                    out[n, 1] = BENCH
+                    out[n, 1] = LANDMARK_BENCH
                     out[n, 2] = 0.5 * (cx[u] + cx[v])
                     out[n, 3] = 0.5 * (cy[u] + cy[v])
                     out[n, 4] = np.arctan2(uy, ux)

@@ -3,17 +3,15 @@
 Per scan: DELETEALL, a LINE_LIST of the lines (green), a LINE_LIST drawing every circle as an 8-sided
 polygon (red), a SPHERE_LIST of blob centroids (orange), in the scan's sensor frame; and the landmark
 database after the scan as a CUBE_LIST coloured by type, in the landmarks' frame (odom with odometry).
-Bytes are written by tracking.markers' CDR writer (checked against rosbags in the tests).
+Bytes are written by log.markers (checked against rosbags in the tests).
 """
 
 from __future__ import annotations
 
-import struct
-
 import numpy as np
 
+from ..log.markers import ADD, ARROW, CUBE_LIST, DELETEALL, LINE_LIST, SPHERE_LIST, MarkerArrayWriter, header
 from ..log.scan import Odometry, ScanRun
-from ..tracking.markers import ADD, ARROW, CUBE_LIST, DELETEALL, LINE_LIST, SPHERE_LIST, _cstr, _string, _Writer
 from .features import RunFeatures
 
 NS = "datmo/features"
@@ -22,11 +20,6 @@ LANDMARK_COLORS = np.array([   # by landmark type: corner, convex, concave, line
     (1.0, 1.0, 0.0, 1.0), (0.6, 0.4, 0.2, 1.0)], np.float32)
 _POLY = 8   # sides of a circle drawn as a polygon: round enough at leg and column radii
 _ANG = np.linspace(0.0, 2 * np.pi, _POLY + 1)
-
-
-def _head(stamp_ns: int, frame_id: str) -> bytes:
-    return (struct.pack("<iI", stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000) + _string(_cstr(frame_id))
-            + _string(_cstr(NS)))
 
 
 def line_points(lines: np.ndarray) -> np.ndarray:
@@ -59,7 +52,7 @@ def feature_markers(run: ScanRun, f: RunFeatures, odometry: Odometry | None = No
     poses = odometry.at(f.stamps) if odometry is not None and len(odometry) else None
     out = []
     for k, stamp in enumerate(np.asarray(f.stamps, np.int64).tolist()):
-        w = _Writer(5, _head(stamp, frame))
+        w = MarkerArrayWriter(5, header(stamp, frame, NS))
         w.marker(0, ARROW, DELETEALL)
         w.marker(1, LINE_LIST, ADD, scale=(0.04, 0.0, 0.0), color=(0.1, 0.9, 0.2, 1.0),
                  points=line_points(f.lines[lo[k]:lo[k + 1]]))

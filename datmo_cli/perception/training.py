@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DatmoError, GeometryError, InputError
+from ..extras import require
 from ..log.scan import ScanGeometry, ScanRun
 from .params import FeatureParams
 
@@ -45,16 +46,9 @@ DEFAULT_CLUSTERS = GAP_CLUSTERS
 Progress = Callable[[str, int, int], None]
 
 
-class TrainingDependencyError(DatmoError):
-    """scikit-learn, needed to train a leg model, is not installed."""
-
-
-def require_sklearn() -> None:
-    """Raise TrainingDependencyError unless scikit-learn can be imported."""
-    try:
-        import sklearn  # noqa: F401
-    except ImportError:
-        raise TrainingDependencyError("training a leg model needs scikit-learn: pip install 'datmo[train]'") from None
+def require_sklearn():
+    """scikit-learn, or MissingExtraError naming the train extra."""
+    return require("sklearn", for_="training a leg model")
 
 
 # ------------------------------------------------------------------------------------------------ reading
@@ -800,8 +794,7 @@ def train_leg_model(labelled: Sequence[Recording], empty: Sequence[Recording], s
     the estimator, the threshold and its rule, the held-out figures, scikit-learn's version, the date and the
     clusters the model scores (clusters, default DEFAULT_CLUSTERS; see legs.model_clusters). `extra`
     labelled recordings (simulated ones: datmo_cli.simulated) are in every training set, never held out or scored."""
-    require_sklearn()
-    import sklearn
+    sklearn = require_sklearn()
 
     from .. import __version__
     from .legs import CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, FEATURE_NAMES

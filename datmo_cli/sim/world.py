@@ -8,14 +8,20 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..log.vocabulary import (
+    CLASS_BENCH,
+    CLASS_CIRCLE_OBJECT,
+    CLASS_COLUMN,
+    CLASS_PERSON,
+    CLASS_RECTANGULAR_OBJECT,
+    CLASS_WALL,
+    CLASS_WALL_CORNER,
+)
 from .paths import PathSpec, Timeline
 from .raycast import Primitives, rectangle_segments
 from .scene import Crowd, Person, Scene
 from .walking import Gait, legs
 
-PERSON, CIRCLE_OBJECT, RECTANGULAR_OBJECT, COLUMN, BENCH, WALL_CORNER, WALL = 1, 2, 3, 4, 5, 6, 7
-CLASS_NAMES = {PERSON: "person", CIRCLE_OBJECT: "circle_object", RECTANGULAR_OBJECT: "rectangular_object",
-               COLUMN: "column", BENCH: "bench", WALL_CORNER: "wall_corner", WALL: "wall"}
 CORNER_MIN_TURN = np.radians(10.0)  # a polyline vertex is a corner when the wall turns by more than this
 TOW_DT = 0.01                        # s, integration step of towed loads
 
@@ -288,18 +294,18 @@ class World:
         walkers = {}
         for p in persons:
             walkers[p.name] = Walker(p, t_end)
-            self.movers.append((self._add(PERSON, p.name), walkers[p.name]))
+            self.movers.append((self._add(CLASS_PERSON, p.name), walkers[p.name]))
         for i, pf in enumerate(scene.platforms, 1):
             if pf.pulled_by is not None:
                 mover = Towed(walkers[pf.pulled_by], pf.radius, pf.wire, pf.center, t_end)
-                self.movers.append((self._add(CIRCLE_OBJECT, f"platform{i}"), mover))
+                self.movers.append((self._add(CLASS_CIRCLE_OBJECT, f"platform{i}"), mover))
             elif pf.path is not None:
                 mover = Driven(pf.path, t_end, radius=pf.radius)
-                self.movers.append((self._add(CIRCLE_OBJECT, f"platform{i}"), mover))
+                self.movers.append((self._add(CLASS_CIRCLE_OBJECT, f"platform{i}"), mover))
         for i, b in enumerate(scene.boxes, 1):
             if b.path is not None:
                 mover = Driven(b.path, t_end, size=(b.length, b.width))
-                self.movers.append((self._add(RECTANGULAR_OBJECT, f"box{i}"), mover))
+                self.movers.append((self._add(CLASS_RECTANGULAR_OBJECT, f"box{i}"), mover))
 
     def _circle(self, k: int, centre, radius: float) -> None:
         self._circs.append([float(centre[0]), float(centre[1]), radius])
@@ -312,20 +318,20 @@ class World:
     def _add_fixtures(self, scene: Scene) -> None:
         for i, pf in enumerate(scene.platforms, 1):
             if pf.pulled_by is None and pf.path is None:
-                k = self._add(CIRCLE_OBJECT, f"platform{i}", pf.center, 0.0, 2 * pf.radius, 2 * pf.radius)
+                k = self._add(CLASS_CIRCLE_OBJECT, f"platform{i}", pf.center, 0.0, 2 * pf.radius, 2 * pf.radius)
                 self._circle(k, pf.center, pf.radius)
         for i, b in enumerate(scene.boxes, 1):
             if b.path is None:
-                k = self._add(RECTANGULAR_OBJECT, f"box{i}", b.center, b.orientation, b.length, b.width)
+                k = self._add(CLASS_RECTANGULAR_OBJECT, f"box{i}", b.center, b.orientation, b.length, b.width)
                 self._rectangle(k, b.center, b.length, b.width, b.orientation)
         for i, c in enumerate(scene.columns, 1):
-            k = self._add(COLUMN, f"column{i}", c.center, 0.0, 2 * c.radius, 2 * c.radius)
+            k = self._add(CLASS_COLUMN, f"column{i}", c.center, 0.0, 2 * c.radius, 2 * c.radius)
             self._circle(k, c.center, c.radius)
         for i, b in enumerate(scene.benches, 1):
             a, c = b.supports
             span = float(np.hypot(*(c - a)))
             heading = float(np.arctan2(*(c - a)[::-1]))
-            k = self._add(BENCH, f"bench{i}", (a + c) / 2, heading, span + 2 * b.support_radius,
+            k = self._add(CLASS_BENCH, f"bench{i}", (a + c) / 2, heading, span + 2 * b.support_radius,
                           max(b.seat_width, 2 * b.support_radius))
             self._circle(k, a, b.support_radius)
             self._circle(k, c, b.support_radius)
@@ -348,13 +354,13 @@ class World:
                 d1, d2 = p0 - v, p2 - v
                 if np.pi - _angle_between(d1, d2) > CORNER_MIN_TURN:
                     bis = d1 / np.hypot(*d1) + d2 / np.hypot(*d2)
-                    k = self._add(WALL_CORNER, f"corner{len(corners) + 1}", v, float(np.arctan2(bis[1], bis[0])))
+                    k = self._add(CLASS_WALL_CORNER, f"corner{len(corners) + 1}", v, float(np.arctan2(bis[1], bis[0])))
                     corners.append((k, wi, a, b))
         seg_index = {}
         for wi, ws in enumerate(wall_segments):
             for j, (p, q) in enumerate(ws):
                 d = q - p
-                k = self._add(WALL, f"wall{wi + 1}.{j + 1}", (p + q) / 2, float(np.arctan2(d[1], d[0])),
+                k = self._add(CLASS_WALL, f"wall{wi + 1}.{j + 1}", (p + q) / 2, float(np.arctan2(d[1], d[0])),
                               float(np.hypot(*d)), 0.0)
                 seg_index[wi, j] = k
                 self._segs.append([*p, *q])

@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..log.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_COLUMN, CLASS_PERSON, CLASS_RECTANGULAR_OBJECT, STATUS_CONFIRMED
 from .measurements import ScanFeatures
 from .synthetic import features_from_lists
-
-PERSON, CIRCLE_OBJECT, RECTANGULAR_OBJECT, COLUMN, BENCH = 1, 2, 3, 4, 5
 
 
 def ideal_features(offsets: np.ndarray, objects: np.ndarray, rng: np.random.Generator, noise: float = 0.01,
@@ -30,7 +29,7 @@ def ideal_features(offsets: np.ndarray, objects: np.ndarray, rng: np.random.Gene
             if not g["visible"]:
                 continue
             c = int(g["classification"])
-            if c == PERSON:
+            if c == CLASS_PERSON:
                 legs = [(float(g["left_leg_x"]), float(g["left_leg_y"])), (float(g["right_leg_x"]),
                                                                             float(g["right_leg_y"]))]
                 if degraded:
@@ -46,9 +45,9 @@ def ideal_features(offsets: np.ndarray, objects: np.ndarray, rng: np.random.Gene
                     legs = [leg for leg in legs if rng.random() > 0.05]
                 for lx, ly in legs:
                     circles.append((lx + rng.normal(0, noise), ly + rng.normal(0, noise), 0.1))
-            elif c in (CIRCLE_OBJECT, COLUMN):
+            elif c in (CLASS_CIRCLE_OBJECT, CLASS_COLUMN):
                 circles.append((g["x"] + rng.normal(0, noise), g["y"] + rng.normal(0, noise), g["length"] / 2))
-            elif c == RECTANGULAR_OBJECT:
+            elif c == CLASS_RECTANGULAR_OBJECT:
                 lines.append((g["x"] - g["width"] / 2, g["y"], g["x"] + g["width"] / 2, g["y"]))
         scans.append({"circles": circles, "lines": lines, "blobs": blobs})
     return features_from_lists(scans)
@@ -61,14 +60,14 @@ def matched_targets(gt_offsets: np.ndarray, gt: np.ndarray, tr_offsets: np.ndarr
     Returns (track id, track class, target id or -1 when unmatched, target class or 0), time ordered."""
     from scipy.optimize import linear_sum_assignment
 
-    movers = np.isin(gt["classification"], [PERSON, CIRCLE_OBJECT, RECTANGULAR_OBJECT])
+    movers = np.isin(gt["classification"], [CLASS_PERSON, CLASS_CIRCLE_OBJECT, CLASS_RECTANGULAR_OBJECT])
     moved = np.unique(gt["id"][movers & (gt["moving"] == 1)])
     tid, tcls, gid, gcls = [], [], [], []
     for k in range(len(gt_offsets) - 1):
         g = gt[gt_offsets[k]:gt_offsets[k + 1]]
         g = g[(g["visible"] == 1) & np.isin(g["id"], moved)]
         t = tracks[tr_offsets[k]:tr_offsets[k + 1]]
-        t = t[t["status"] == 1]
+        t = t[t["status"] == STATUS_CONFIRMED]
         if not len(t):
             continue
         ids, cls = np.full(len(t), -1, np.int64), np.zeros(len(t), np.int64)
@@ -114,7 +113,7 @@ def leg_coverage(legs: list[np.ndarray], circles: list[np.ndarray], tracks: list
         if len(c):
             d = np.hypot(lg[:, 0:1] - c["x"][None, :], lg[:, 1:2] - c["y"][None, :])
             ok |= (d <= c["radius"][None, :] + 0.05).any(axis=1)
-        p = t[t["classification"] == PERSON]
+        p = t[t["classification"] == CLASS_PERSON]
         if len(p):
             d = np.hypot(lg[:, 0:1] - p["x"][None, :], lg[:, 1:2] - p["y"][None, :])
             ok |= (d <= person_radius).any(axis=1)

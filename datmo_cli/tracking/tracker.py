@@ -33,7 +33,6 @@ from .measurements import (
 )
 from .params import TrackingParams
 
-STATUS_TENTATIVE, STATUS_CONFIRMED, STATUS_COASTING = 0, 1, 2
 TRACK_DTYPE = cdr.element_dtype(types.TRACK)
 # which measurement kinds (columns) a confirmed track may take, by the kind group that fed it most (rows:
 # legs, circles, lines, blobs, -, a lone leg; see _kernels.kind_groups); tentative tracks (row 4) take any
