@@ -60,10 +60,9 @@ def local(path: str) -> str:
 
 
 def _fs(url: str):
-    try:
-        import fsspec
-    except ImportError:
-        raise DatmoError(f"{url}: URLs need fsspec: pip install 'datmo[dask]'") from None
+    from .extras import require
+
+    fsspec = require("fsspec", for_=f"{url}: reading a URL")
     try:
         return fsspec.core.url_to_fs(url)
     except (ImportError, ValueError) as exc:
