@@ -10,6 +10,7 @@ seeds below are never those of sample_logs/ (seed 1), so the sample logs stay he
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -81,3 +82,44 @@ def scan_source(*, log: str | Path | None = None, scene: str | None = None, seed
     if log is not None:
         return LogSource(log)
     return SceneSource(scene or "hall", seed=seed, duration=duration)
+
+
+def write_simulation(writer, sim, laser_pose: tuple[float, float, float] | None = None,
+                     progress: Callable[[int], None] | None = None) -> None:
+    """Write simulation `sim` (sim.simulate.Simulation) block by block into `writer` (an open mcapio.LogWriter):
+    /scan, /odom and /tf for a moving sensor, /datmo/ground_truth, /tf_static for a moving sensor or a
+    `laser_pose` (x m, y m, yaw rad: the scanner on the base), and the scene as metadata. Each block is written
+    and forgotten before the next is cast, so memory holds one block whatever the duration; `progress` gets
+    the scans written so far after each block."""
+    from .log import mcapio, transforms, types
+    from .log.scan import Odometry, ScanRun
+    from .sim.simulate import ground_truth_payloads
+
+    scene = sim.scene
+    writer.add_metadata("datmo.scene", {"name": scene.name, "source": Path(scene.source).name, "toml": scene.text})
+    scan_cid = writer.channel(mcapio.TOPIC_SCAN, types.LASERSCAN)
+    odom_cid = writer.channel(mcapio.TOPIC_ODOM, types.ODOMETRY) if sim.sensor_moves else None
+    truth_cid = writer.channel(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH)
+    mount = transforms.LaserPose(*laser_pose) if laser_pose is not None else None
+    base, laser = transforms.BASE_FRAME, sim.geometry.frame_id
+    if mount is not None:
+        writer.add_metadata(transforms.LASER_POSE_RECORD, mount.record(base, laser))
+    if mount is not None or sim.sensor_moves:
+        t0 = int(sim.stamps[0])
+        writer.write_transforms([t0], [transforms.mount_tf(t0, base, laser, mount or transforms.LaserPose())],
+                                static=True)
+    for c in sim.chunks():
+        run = ScanRun(c.stamps, c.ranges, sim.geometry)
+        writer.write_ids(scan_cid, c.stamps, mcapio.encode_scans(run))
+        if odom_cid is not None:
+            p = c.sensor_poses
+            odom = Odometry(c.stamps.copy(), p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy())
+            if mount is not None:
+                odom = transforms.base_odometry(odom, mount, base)
+            writer.write_ids(odom_cid, c.stamps, mcapio.encode_odometry(odom))
+            writer.write_transforms(c.stamps, transforms.odometry_tf(odom))
+        writer.write_ids(truth_cid, c.stamps, ground_truth_payloads(c.stamps, c.sensor_poses, c.truth,
+                                                                    sim.geometry.frame_id))
+        writer.drain()
+        if progress is not None:
+            progress(c.start + len(c.stamps))

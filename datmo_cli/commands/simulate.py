@@ -63,8 +63,10 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     """
     from ..cli import invocation
     from ..log import mcapio
-    from ..progress import say
+    from ..progress import bar, say
     from ..sim.scene import load_scene
+    from ..sim.simulate import Simulation
+    from ..simulated import write_simulation
 
     if units is None:
         units = "cm" if range_m == "80" else "mm"
@@ -77,51 +79,11 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     user_file = scene.endswith(".toml") or "/" in scene
     provenance = mcapio.Provenance("simulate", params, [scene] if user_file else [], invocation("simulate"))
     with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
-        n, n_objects, geometry = _write(writer, loaded, seed, duration, rate, int(angle), float(resolution),
-                                        int(range_m), units, noise, people, laser_pose)
+        sim = Simulation(loaded, seed=seed, duration=duration, rate=rate, fov_deg=int(angle),
+                         resolution_deg=float(resolution), range_mode_m=int(range_m), units=units,
+                         noise_sigma=noise, people=people)
+        with bar("simulating", len(sim)) as done:
+            write_simulation(writer, sim, laser_pose, progress=done)
+    n, n_objects, geometry = len(sim), len(sim.objects), sim.geometry
     say(f"{output}: {n} scans of {geometry.describe()}, {n_objects} ground-truth objects")
 
-
-def _write(writer, scene, seed, duration, rate, angle, resolution, range_m, units, noise, people,
-           laser_pose=None):
-    """Simulate block by block into `writer` (/scan, /odom and /tf for a moving sensor, ground truth, /tf_static
-    for a moving sensor or a `laser_pose` (x, y, yaw rad)), each block written and forgotten before the next is
-    cast: memory holds one block whatever the duration. Returns (scans, ground-truth objects, scan geometry)."""
-    from pathlib import Path
-
-    from ..log import mcapio, transforms, types
-    from ..log.scan import Odometry, ScanRun
-    from ..progress import bar
-    from ..sim.simulate import Simulation, ground_truth_payloads
-
-    sim = Simulation(scene, seed=seed, duration=duration, rate=rate, fov_deg=angle, resolution_deg=resolution,
-                     range_mode_m=range_m, units=units, noise_sigma=noise, people=people)
-    writer.add_metadata("datmo.scene", {"name": scene.name, "source": Path(scene.source).name, "toml": scene.text})
-    scan_cid = writer.channel(mcapio.TOPIC_SCAN, types.LASERSCAN)
-    odom_cid = writer.channel(mcapio.TOPIC_ODOM, types.ODOMETRY) if sim.sensor_moves else None
-    truth_cid = writer.channel(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH)
-    total = len(sim)
-    mount = transforms.LaserPose(*laser_pose) if laser_pose is not None else None
-    base, laser = transforms.BASE_FRAME, sim.geometry.frame_id
-    if mount is not None:
-        writer.add_metadata(transforms.LASER_POSE_RECORD, mount.record(base, laser))
-    if mount is not None or sim.sensor_moves:
-        t0 = int(sim.stamps[0])
-        writer.write_transforms([t0], [transforms.mount_tf(t0, base, laser, mount or transforms.LaserPose())],
-                                static=True)
-    with bar("simulating", total) as progress:
-        for c in sim.chunks():
-            run = ScanRun(c.stamps, c.ranges, sim.geometry)
-            writer.write_ids(scan_cid, c.stamps, mcapio.encode_scans(run))
-            if odom_cid is not None:
-                p = c.sensor_poses
-                odom = Odometry(c.stamps.copy(), p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy())
-                if mount is not None:
-                    odom = transforms.base_odometry(odom, mount, base)
-                writer.write_ids(odom_cid, c.stamps, mcapio.encode_odometry(odom))
-                writer.write_transforms(c.stamps, transforms.odometry_tf(odom))
-            writer.write_ids(truth_cid, c.stamps, ground_truth_payloads(c.stamps, c.sensor_poses, c.truth,
-                                                                        sim.geometry.frame_id))
-            writer.drain()
-            progress(c.start + len(c.stamps))
-    return total, len(sim.objects), sim.geometry
