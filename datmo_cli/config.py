@@ -1,13 +1,57 @@
-"""Config files: TOML with one table per stage (`[features]`, `[track]`), shared by the commands."""
+"""The configuration tree: `DatmoConfig`, one section per stage (`[features]`, `[track]` in a TOML file), its
+one loader (`load`: defaults, then the file, then the options) and the file conventions the commands share.
+
+Each section's fields carry their own default, range and help (bounds.param); `bounds.validate` is the one
+check of a section, `commands.options.param_option` builds the Click options from the same fields.
+"""
 
 from __future__ import annotations
 
 import tomllib
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from .bounds import Bound, Section, bounds_of, validate
 from .errors import ConfigError
+from .perception.params import FeatureParams
+from .tracking.params import TrackingParams
 
-STAGES = ("features", "track")   # the tables of a config file, one per stage
+SECTIONS: dict[str, type[Section]] = {"features": FeatureParams, "track": TrackingParams}
+STAGES = tuple(SECTIONS)   # the tables of a config file, one per stage
+BOUNDS: dict[str, dict[str, Bound]] = {s: bounds_of(c) for s, c in SECTIONS.items()}   # section -> key -> Bound
+
+
+@dataclass(frozen=True)
+class DatmoConfig:
+    """Every parameter of datmo: the `[features]` section (segmentation, features, landmarks, legs) and the
+    `[track]` section (tracking and classification)."""
+
+    features: FeatureParams = field(default_factory=FeatureParams)
+    track: TrackingParams = field(default_factory=TrackingParams)
+
+    def to_dict(self) -> dict[str, dict]:
+        """Section -> key -> value, as the TOML file and the provenance hold them."""
+        return {s: getattr(self, s).to_dict() for s in STAGES}
+
+    def replace(self, **sections: dict) -> DatmoConfig:
+        """A copy with each given section's values changed (section -> key -> value; None values ignored)."""
+        return DatmoConfig(**{s: getattr(self, s).replace(**sections.get(s, {})) for s in STAGES})
+
+
+
+
+def load(path: str | Path | None = None, options: dict[str, dict] | None = None) -> DatmoConfig:
+    """The configuration: the defaults, overridden by the `[features]` and `[track]` tables of the TOML file
+    at `path` (None: no file), overridden by `options` (section -> key -> value; None values ignored).
+    ConfigError names the file, the key, the value and what is allowed."""
+    tables = {s: {} for s in STAGES}
+    if path is not None:
+        tables = {s: read_table(path, s) for s in STAGES}
+    sections = {}
+    for s, cls in SECTIONS.items():
+        given = validate(cls, tables[s], f"{path}: {s}" if path is not None else s)
+        sections[s] = given.replace(**(options or {}).get(s, {}))
+    return DatmoConfig(**sections)
 
 
 def read_table(path: str | Path, name: str) -> dict:

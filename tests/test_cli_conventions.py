@@ -22,14 +22,11 @@ from fuzzing import tally
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datmo_cli.bounds import FEATURES, TRACK
 from datmo_cli.cli import COMMANDS, cli
-from datmo_cli.config import to_toml
+from datmo_cli.config import BOUNDS, DatmoConfig, load, to_toml
 from datmo_cli.log import mcapio
 from datmo_cli.perception.params import FeatureParams
-from datmo_cli.perception.params import load_toml as load_features
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.params import load_toml as load_track
 
 ROOT = Path(__file__).resolve().parents[1]
 DATMO = Path(sys.executable).with_name("datmo")
@@ -206,7 +203,7 @@ def test_config_prints_every_key_with_its_source_and_reads_back(tmp_path):
         assert len(body) == len(FeatureParams().to_dict()) + len(TrackingParams().to_dict())
         assert all(line.split("#", 1)[1].strip().startswith("default") for line in body)
         Path("mine.toml").write_text(result.stdout)
-        assert load_features("mine.toml") == features and load_track("mine.toml") == track
+        assert load("mine.toml") == DatmoConfig(features, track)
 
 
 def test_local_config_is_picked_up_said_and_overridden(tmp_path):
@@ -234,7 +231,7 @@ def test_local_config_is_picked_up_said_and_overridden(tmp_path):
 def test_config_to_a_file_follows_the_output_rules(tmp_path):
     with inside(tmp_path):
         assert CliRunner().invoke(cli, ["config", "--no-config", "-o", "c.toml"]).exit_code == 0
-        assert load_track("c.toml") == TrackingParams()
+        assert load("c.toml") == DatmoConfig()
         again = CliRunner().invoke(cli, ["config", "--no-config", "-o", "c.toml"])
         assert again.exit_code == 1 and "exists" in again.stderr
 
@@ -254,8 +251,8 @@ def test_local_config_reaches_the_output_and_its_provenance(tmp_path, small_log)
         assert "--config" not in meta["datmo"]["command_line"]
 
 
-_FEATURE_KEYS = sorted(k for k, b in FEATURES.items() if not b.integer)
-_TRACK_KEYS = sorted(k for k, b in TRACK.items() if not b.integer)
+_FEATURE_KEYS = sorted(k for k, b in BOUNDS["features"].items() if not b.integer)
+_TRACK_KEYS = sorted(k for k, b in BOUNDS["track"].items() if not b.integer)
 
 
 @settings(max_examples=60, deadline=None)
@@ -263,9 +260,9 @@ _TRACK_KEYS = sorted(k for k, b in TRACK.items() if not b.integer)
 def test_toml_of_any_value_reads_back_equal(data):
     """Every float a parameter may take, written by to_toml, reads back to the same float."""
     tables = {}
-    for stage, keys, bounds in (("features", _FEATURE_KEYS, FEATURES), ("track", _TRACK_KEYS, TRACK)):
+    for stage, keys in (("features", _FEATURE_KEYS), ("track", _TRACK_KEYS)):
         key = data.draw(st.sampled_from(keys))
-        b = bounds[key]
+        b = BOUNDS[stage][key]
         value = data.draw(st.floats(b.lo, b.hi, exclude_min=b.lo_open, allow_nan=False))
         tables[stage] = {key: value}
     sources = {stage: dict.fromkeys(t, "from a test") for stage, t in tables.items()}

@@ -148,19 +148,20 @@ def test_raw_log_is_segmented_and_tracked(tmp_path):
 def test_config_tables_are_read_per_stage(tmp_path):
     """One datmo.toml serves every command: [track] for tracking, [features] ignored by it, and a file with
     no tables at all is read as the stage's own table."""
+    from datmo_cli.config import load
     from datmo_cli.errors import ConfigError
-    from datmo_cli.tracking.params import TrackingParams, load_toml
+    from datmo_cli.tracking.params import TrackingParams
 
     both = tmp_path / "both.toml"
     both.write_text("[features]\nmin_points = 4\n\n[track]\ngate = 9.0\n")
-    assert load_toml(both).gate == 9.0
+    assert load(both).track.gate == 9.0 and load(both).features.min_points == 4
     only_features = tmp_path / "features.toml"
     only_features.write_text("[features]\nmin_points = 4\n")
-    assert load_toml(only_features) == TrackingParams()
+    assert load(only_features).track == TrackingParams()
     flat = tmp_path / "flat.toml"
     flat.write_text("gate = 7.5\n")
-    assert load_toml(flat).gate == 7.5
+    assert load(flat).track.gate == 7.5
     bad = tmp_path / "bad.toml"
     bad.write_text("[track]\ngaet = 7.5\n")
     with pytest.raises(ConfigError, match="gaet"):
-        load_toml(bad)
+        load(bad)

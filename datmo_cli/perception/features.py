@@ -432,7 +432,5 @@ def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: F
     landmarks and feature markers) and the RunFeatures they came from. Given `segments` (a log's own),
     they are used and /datmo/segments is not among the channels returned."""
     if isinstance(params, dict):
-        from .params import from_dict
-
-        params = from_dict(params)
+        params = FeatureParams().replace(**params)
     return FeatureStream(params, odometry).block(run, segments, progress)
