@@ -30,7 +30,7 @@ def sources(cfg: DatmoConfig, config: Path | None) -> dict[str, dict[str, str]]:
 @click.command(name="config")
 @config_options("TOML file of parameters ([features] and [track] tables) to show merged with the defaults.",
                 path=True)
-@output_option("Where to write the TOML ('-': stdout).", stdout=True)
+@output_option("Where to write the TOML ('-': stdout).", dash=True, default=STDOUT, show_default=True)
 @force_option()
 @quiet_option
 def command(cfg: DatmoConfig, config: Path | None, output: Path, force: bool) -> None:

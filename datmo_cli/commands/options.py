@@ -31,17 +31,14 @@ def no_stdout(what: str = "an MCAP log", give: str = "a file name") -> Callable:
     return callback
 
 
-def output_option(help: str, *decls: str, stdout: bool = False, file: bool = True, **kwargs) -> Callable:
-    """`-o/--output PATH` (or `decls`; help: `help`): required and refusing `-` (no_stdout), or with `stdout`
-    `-` (stdout) by default; `file`: a file, not a folder. `kwargs` go to click.option (e.g. type=str for an
-    fsspec URL, callback=no_stdout(what, give) for another refusal)."""
-    if stdout:
-        kwargs.setdefault("default", STDOUT)
-        kwargs.setdefault("show_default", True)
-    else:
-        kwargs.setdefault("required", True)
+def output_option(help: str, *decls: str, dash: bool = False, file: bool = True, **kwargs) -> Callable:
+    """`-o/--output PATH` (or `decls`; help: `help`), required unless a default is given; `-` (stdout) refused
+    (no_stdout) unless `dash`; `file`: a file, not a folder. `kwargs` go to click.option (e.g. type=str for
+    an fsspec URL, callback=no_stdout(what, give) for another refusal, default=STDOUT)."""
+    kwargs.setdefault("required", "default" not in kwargs)
+    if not dash:
         kwargs.setdefault("callback", no_stdout())
-    kwargs.setdefault("type", click.Path(dir_okay=not file, path_type=Path))
+    kwargs.setdefault("type", click.Path(dir_okay=not file, allow_dash=dash, path_type=Path))
     return click.option(*(decls or ("-o", "--output")), help=help, **kwargs)
 
 
