@@ -80,11 +80,14 @@ def _b(lo: float, hi: float, unit: str = "", why: str = "", *, open_: bool = Fal
 bound = _b   # for the parameter sections (perception/params.py, tracking/params.py)
 
 
-def param(default: object, bound: Bound | None = None, help: str = "", *, choices: tuple[str, ...] = ()) -> Any:
+def param(default: object, bound: Bound | None = None, help: str = "", *, choices: tuple[str, ...] = (),
+          same_as: str = "") -> Any:
     """A field of a parameter section with its metadata: `bound` (a number's range and unit), `help` (what it
     does, as the TOML comment and the option's help say it) and, for a string, the `choices` it takes (none:
-    any non-empty string). The one declaration the validator, the Click options and `datmo config` read."""
-    return field(default=default, metadata={"bound": bound, "help": help, "choices": choices})
+    any non-empty string). The one declaration the validator, the Click options and `datmo config` read.
+    `same_as` ('section.key'): the field is that parameter, whose home is there; the configuration tree sets
+    it from its home (config.DatmoConfig), and a value written in this section is read as the home's."""
+    return field(default=default, metadata={"bound": bound, "help": help, "choices": choices, "same_as": same_as})
 
 
 class Section:
@@ -142,6 +145,7 @@ def validate(section: type[Section], values: dict, where: str | None = None) -> 
 
 
 _NO_SENSE = "beyond any scanner's reach"
+D_MAX = _b(0, 100, "m", _NO_SENSE, open_=True)   # the paper's d_max: features.d_max, read by tracking too
 _SIM_HOUR = "an hour of scans; the world's paths are planned for the whole run up front"
 # options that are not `[features]` or `[track]` keys (and the scene files' duration and crowd size)
 OPTIONS: dict[str, Bound] = {

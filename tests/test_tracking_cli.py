@@ -70,13 +70,14 @@ def test_track_options_and_config(tmp_path):
     make_log(src)
     cfg = tmp_path / "c.toml"
     cfg.write_text("[track]\nconfirm_hits = 4\nconfirm_window = 4\n")
-    result = CliRunner().invoke(cli, ["track", str(src), "-o", str(out), "--config", str(cfg), "--gate", "9.2"])
+    result = CliRunner().invoke(cli, ["track", str(src), "-o", str(out), "--config", str(cfg), "--gate", "9.2",
+                                       "--d-max", "2.0"])
     assert result.exit_code == 0, result.output
     msgs = _tracks(out)
     assert all((m["tracks"]["status"] == 0).all() for m in msgs[:3])   # 4 hits needed
     params = mcapio.summary(out).metadata["datmo.params"]
     assert json.loads(params["track"])["confirm_hits"] == 4
-    assert json.loads(params["track"])["gate"] == 9.2
+    assert json.loads(params["track"])["gate"] == 9.2 and json.loads(params["track"])["d_max"] == 2.0
     assert "features" not in params   # the log had /datmo/features: no feature extraction ran
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from datmo_cli.bounds import validate
-from datmo_cli.config import load
+from datmo_cli.config import DatmoConfig, load
 from datmo_cli.errors import ConfigError
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.params import TrackingParams
@@ -58,3 +58,30 @@ def test_the_features_leg_radius_max_of_an_old_config_is_refused_naming_its_new_
     cfg = load(f)
     assert (cfg.features.column_radius_min, cfg.track.leg_radius_max) == (0.15, 0.25)
     assert (FeatureParams().column_radius_min, TrackingParams().leg_radius_max) == (0.13, 0.2)
+
+
+def test_d_max_is_one_parameter_at_home_in_features_and_read_from_track_for_old_files(tmp_path):
+    """The paper's d_max: lines and objects larger are static, for landmarks and tracking alike."""
+    assert FeatureParams().d_max == TrackingParams().d_max == 1.5
+    f = tmp_path / "c.toml"
+    for text in ("[features]\nd_max = 2.5\n", "[track]\nd_max = 2.5\n",
+                 "[features]\nd_max = 2.5\n[track]\nd_max = 2.5\n"):
+        f.write_text(text)
+        cfg = load(f)
+        assert (cfg.features.d_max, cfg.track.d_max) == (2.5, 2.5), text
+        assert "d_max" in cfg.to_dict()["features"] and "d_max" not in cfg.to_dict()["track"]
+    f.write_text("[features]\nd_max = 2.0\n[track]\nd_max = 2.5\n")
+    with pytest.raises(ConfigError, match=r"c.toml: track.d_max and features.d_max are one parameter"):
+        load(f)
+    assert load(None, {"track": {"d_max": 3.0}}).features.d_max == 3.0
+    assert DatmoConfig(FeatureParams().replace(d_max=2.0)).track.d_max == 2.0
+
+
+def test_keys_outside_any_table_go_to_the_section_that_declares_them(tmp_path):
+    f = tmp_path / "flat.toml"
+    f.write_text("c0 = 0.1\ngate = 9.0\nd_max = 2.0\n")
+    cfg = load(f)
+    assert (cfg.features.c0, cfg.track.gate, cfg.features.d_max, cfg.track.d_max) == (0.1, 9.0, 2.0, 2.0)
+    f.write_text("nope = 1\n")
+    with pytest.raises(ConfigError, match="flat.toml: nope: unknown parameter"):
+        load(f)

@@ -15,14 +15,20 @@ if TYPE_CHECKING:
 
 def sources(cfg: DatmoConfig, config: Path | None) -> dict[str, dict[str, str]]:
     """Where each value of `cfg` comes from ('default' or the config file's name) with its unit, by section
-    and key."""
-    from ..config import BOUNDS, read_table
+    and key (a parameter written outside its home section, as [track] d_max, counts for its home)."""
+    from ..config import BOUNDS, SECTIONS, STAGES, read_tables, same_as
 
+    tables = read_tables(config) if config is not None else {}
+    given = {s: set(tables.get(s, ())) for s in STAGES}
+    for s in STAGES:
+        for name, key in same_as(SECTIONS[s]).items():
+            home, _, home_key = key.partition(".")
+            if name in given[s]:
+                given[home].add(home_key)
     out = {}
     for stage, table in cfg.to_dict().items():
-        given = set(read_table(config, stage)) if config is not None else set()
         bounds = BOUNDS[stage]
-        out[stage] = {key: (f"from {config}" if key in given else "default")
+        out[stage] = {key: (f"from {config}" if key in given[stage] else "default")
                       + (f"; {bounds[key].unit}" if key in bounds and bounds[key].unit else "") for key in table}
     return out
 

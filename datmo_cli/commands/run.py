@@ -75,23 +75,12 @@ class _BatchProgress:
                 + (f"  {self.failed} failed" if self.failed else ""))
         self.bar.update(scans, self._total(), info=info)
 
-    def _tell(self, line: str) -> None:
-        """A line a task said (its bag's conversion, a warning), above the bar when one is drawn."""
-        from ..progress import say
-
-        if self.bar.shown:     # a worker's own print would tear the bar's line
-            self.bar.progress.console.print(line, markup=False, highlight=False, soft_wrap=True)
-        elif line.startswith("datmo: warning"):
-            click.echo(line, err=True)
-        else:
-            say(line)
-
     def record(self, rec: dict) -> None:
         from ..batch import DONE, FAILED
 
         if rec["status"] == DONE:
             for line in rec.get("notes") or ():
-                self._tell(line)
+                self.bar.tell(line)
         i = self.index.get(rec["input"], -1)
         done = self.running.pop(i, 0)
         if rec["status"] == DONE:

@@ -19,7 +19,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..bounds import Section, features_combined, param
+from ..bounds import D_MAX, Section, features_combined, param
 from ..bounds import bound as _b
 
 _SHARE = "a share"
@@ -90,8 +90,8 @@ class FeatureParams(Section):
                                       "... and its residual at most this times the segment's HTL lines' (two or "
                                       "more: a corner).")
     # landmarks (section 6.2)
-    d_max: float = param(1.5, _b(0, 100, "m", _NO_SENSE, open_=True),
-                         "Lines longer than this are walls (static): the paper's d_max.")
+    d_max: float = param(1.5, D_MAX, "Lines and objects larger than this are static (walls): the paper's d_max, "
+                                     "for landmarks and tracking alike.")
     corner_gap: float = param(0.3, _b(0, 10, "m", open_=True),
                               "Two wall lines meet when their ends are this close to the junction.")
     deflection_min: float = param(10.0, _b(0, 90, "degrees"), "Smaller turns between wall lines are no deflections.")

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from ..bounds import Section, param, track_combined
+from ..bounds import D_MAX, Section, param, track_combined
 from ..bounds import bound as _b
 
 _SHARE = "a share"
@@ -57,8 +57,8 @@ class TrackingParams(Section):
     tentative_delete_after: float = param(0.5, _b(0, 3600, "s", _HOUR),
                                           "Seconds a track never confirmed lives unseen.")
     # classification (method.md §6)
-    d_max: float = param(1.5, _b(0, 100, "m", _NO_SENSE, open_=True),
-                         "Objects larger than this are static: the paper's d_max.")
+    d_max: float = param(1.5, D_MAX, "Objects larger than this are static: the paper's d_max, one parameter "
+                                     "whose home is [features] d_max.", same_as="features.d_max")
     undefined_window: float = param(1.0, _b(0, 3600, "s", _HOUR), "Seconds a small circle or blob stays undefined.")
     moving_distance: float = param(0.5, _b(0, 100, "m", _NO_SENSE),
                                    "Distance from its first position before a track can be dynamic.")
