@@ -85,3 +85,14 @@ def test_keys_outside_any_table_go_to_the_section_that_declares_them(tmp_path):
     f.write_text("nope = 1\n")
     with pytest.raises(ConfigError, match="flat.toml: nope: unknown parameter"):
         load(f)
+
+
+def test_every_numeric_track_parameter_reaches_the_kernels_in_its_slot():
+    from datmo_cli.config import BOUNDS
+    from datmo_cli.tracking import state
+
+    assert set(state.PARAM_NAMES) == set(BOUNDS["track"]) and len(state.PARAM_NAMES) == state.N_PARAMS
+    p = TrackingParams().replace(gate=9.5, tail_length=0)
+    v = p.kernel_vector()
+    assert v.dtype == "float64" and v[state.P_GATE] == 9.5 and v[state.P_TAIL_LENGTH] == 1
+    assert load(None, {"features": {"d_max": 2.0}}).track.kernel_vector()[state.P_D_MAX] == 2.0

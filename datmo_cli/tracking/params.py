@@ -9,8 +9,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+import numpy as np
+
 from ..bounds import D_MAX, Section, param, track_combined
 from ..bounds import bound as _b
+from .state import P_TAIL_LENGTH, PARAM_NAMES
 
 _SHARE = "a share"
 _NO_SENSE = "beyond any scanner's reach"
@@ -116,3 +119,10 @@ class TrackingParams(Section):
     @classmethod
     def combined(cls, params: TrackingParams, where: str) -> None:
         track_combined(params, where)
+
+    def kernel_vector(self) -> np.ndarray:
+        """The parameters as the tracking kernels read them: one float64 vector indexed by state.P_* (in the
+        order of state.PARAM_NAMES; units as the fields; tail_length at least 1)."""
+        out = np.array([float(getattr(self, name)) for name in PARAM_NAMES], np.float64)
+        out[P_TAIL_LENGTH] = max(self.tail_length, 1)
+        return out
