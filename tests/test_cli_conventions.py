@@ -15,6 +15,7 @@ import sys
 import tomllib
 from pathlib import Path
 
+import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -23,6 +24,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from datmo_cli.cli import COMMANDS, cli
+from datmo_cli.commands.options import config_options, param_option
 from datmo_cli.config import BOUNDS, DatmoConfig, load, to_toml
 from datmo_cli.log import mcapio
 from datmo_cli.perception.params import FeatureParams
@@ -64,6 +66,57 @@ def tracked(small_log, tmp_path_factory) -> Path:
     result = invoke("track", small_log, "-o", path)
     assert result.exit_code == 0, result.output
     return path
+
+
+# ------------------------------------------------------------------------------------ parameter options
+
+
+def _param_options() -> list[tuple[str, object, list[str]]]:
+    """(command, click option, the 'section.key's it sets) of every option built from the configuration."""
+    from datmo_cli.commands.options import OPTIONS_KEY
+
+    out = []
+    for name in sorted(COMMANDS):
+        command = cli.get_command(None, name)
+        for p in command.params:
+            if getattr(p, "callback", None) is not None and p.callback.__qualname__.startswith("_keep."):
+                ctx = click.Context(command)
+                p.callback(ctx, p, (1, 2) if p.nargs == 2 else 1)
+                out.append((name, p, [f"{s}.{k}" for s, t in ctx.meta[OPTIONS_KEY].items() for k in t]))
+    return out
+
+
+def test_parameter_options_take_their_help_default_and_range_from_the_field():
+    options = _param_options()
+    assert {name for name, _, _ in options} >= {"segment", "features", "track", "run"}
+    defaults = DatmoConfig()
+    for name, p, keys in options:
+        help_text = p.help
+        for key in keys:
+            section, _, field_name = key.partition(".")
+            value = defaults.get(key)
+            assert (f"{value:g}" if isinstance(value, float) else str(value)) in help_text, (name, key, help_text)
+            if field_name in BOUNDS[section]:
+                assert BOUNDS[section][field_name].describe() in help_text, (name, key)
+        if len(keys) == 1:
+            assert p.name == keys[0].partition(".")[2], (name, p.opts)
+
+
+def test_options_override_the_config_file_which_overrides_the_defaults(tmp_path):
+    with inside(tmp_path):
+        Path("c.toml").write_text("[features]\nc0 = 0.12\nmin_points = 5\n")
+        seen = {}
+
+        @click.command()
+        @config_options("a file")
+        @param_option("features.c0")
+        def show(cfg):
+            seen["cfg"] = cfg
+
+        assert CliRunner().invoke(show, ["--config", "c.toml", "--c0", "0.2"]).exit_code == 0
+        assert (seen["cfg"].features.c0, seen["cfg"].features.min_points) == (0.2, 5)
+        assert CliRunner().invoke(show, ["--no-config"]).exit_code == 0
+        assert seen["cfg"] == DatmoConfig()
 
 
 # ------------------------------------------------------------------------------------------------ --quiet
