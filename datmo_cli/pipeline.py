@@ -113,10 +113,12 @@ class RunStages:
 
     def effective(self) -> dict:
         """The effective parameters, as provenance records them."""
+        from .config import DatmoConfig
         from .perception.features import leg_model_provenance
 
         return {"features": self.feature_params.to_dict(), "track": self.track_params.to_dict(),
-                "leg_model": leg_model_provenance(self.feature_params.leg_model)}
+                "leg_model": leg_model_provenance(self.feature_params.leg_model),
+                "config": DatmoConfig(self.feature_params, self.track_params).to_dict()}
 
     def __call__(self, block) -> dict[str, tuple]:
         from .tracking.pipeline import TrackStream, iter_run_features
@@ -196,23 +198,24 @@ def features_leg_model(log) -> str:
     return "paper"
 
 
-def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=None,
-               feature_params=None, leg_model: str | None = None, command_line: str | None = None,
+def track_file(src: str | Path, out: str | Path, *, force: bool = False, config=None,
+               leg_model: str | None = None, command_line: str | None = None,
                markers: bool = True, block_scans: int | None = None,
                progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
     """Track `src` into `out` in one streaming pass (its channels copied, /datmo/tracks and
     /datmo/markers/tracks added). Features come from src's /datmo/features when present (people then by
     the rule of the leg detector they were made with; `leg_model`, when given, must be that one); else
     segmentation and features run here (with `leg_model` when given) and their channels are written too,
-    as datmo run writes them. Returns (scans, whether features were computed here)."""
+    as datmo run writes them. `config`: the DatmoConfig (None: the defaults), recorded whole in the provenance.
+    Returns (scans, whether features were computed here)."""
+    from .config import DatmoConfig
     from .log import types
     from .perception.features import leg_model_provenance
-    from .perception.params import FeatureParams
     from .streaming import BLOCK_SCANS, LogStream, stream_log, stream_odometry
-    from .tracking.params import TrackingParams
     from .tracking.pipeline import TrackStream, decode_features
 
-    params = params or TrackingParams()
+    config = config or DatmoConfig()
+    params = config.track
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
     computed = not stream.has(mcapio.TOPIC_FEATURES)
@@ -226,7 +229,7 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=
                              f"for {stream.n_scans} scans; run datmo features again")
     odometry, estimated = stream_odometry(stream, params.ego_motion, block_scans or BLOCK_SCANS)
     if computed:
-        feature_params = (feature_params or FeatureParams()).replace(leg_model=leg_model)
+        feature_params = config.features.replace(leg_model=leg_model)
         stages = RunStages(odometry, {"track": params, "features": feature_params}, estimated, markers)
         derived, stage, effective = stages.derived(), stages, stages.effective()
     else:
@@ -236,7 +239,8 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=
         if markers:
             derived[mcapio.TOPIC_MARKERS_TRACKS] = types.MARKER_ARRAY
         effective = {"track": params.to_dict(),
-                     "leg_model": leg_model_provenance(used) if used == "paper" else {"model": used}}
+                     "leg_model": leg_model_provenance(used) if used == "paper" else {"model": used},
+                     "config": config.to_dict()}
 
         def stage(block) -> dict:
             run, out = block.run, {}
@@ -269,18 +273,20 @@ class FeatureCounts:
         return getattr(self, name) / max(self.scans, 1)
 
 
-def features_file(src: str | Path, out: str | Path, params=None, *, resegment: bool = False,
+def features_file(src: str | Path, out: str | Path, config=None, *, resegment: bool = False,
                   force: bool = False, command_line: str | None = None, markers: bool = True,
                   block_scans: int | None = None, progress: Callable[[int, int], None] | None = None) -> FeatureCounts:
     """Extract the features of `src` into `out` in one streaming pass: /datmo/features, /datmo/landmarks and
     /datmo/markers/features, and /datmo/segments unless the input has its own (used unless `resegment`).
-    `params`: a FeatureParams (None: the defaults)."""
+    `config`: the DatmoConfig (None: the defaults), its features section used and the whole recorded in the
+    provenance."""
+    from .config import DatmoConfig
     from .log import types
     from .perception.features import FeatureStream, decode_segments
-    from .perception.params import FeatureParams
     from .streaming import BLOCK_SCANS, LogStream, stream_log
 
-    params = params or FeatureParams()
+    config = config or DatmoConfig()
+    params = config.features
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
     given = stream.has(mcapio.TOPIC_SEGMENTS) and not resegment
@@ -307,27 +313,30 @@ def features_file(src: str | Path, out: str | Path, params=None, *, resegment: b
 
     from .perception.features import leg_model_provenance
 
-    effective = {"features": params.to_dict(), "leg_model": leg_model_provenance(params.leg_model)}
+    effective = {"features": params.to_dict(), "leg_model": leg_model_provenance(params.leg_model),
+                 "config": config.to_dict()}
     stream_log(stream, out, command="features", params=effective, derived=derived, stage=stage, force=force,
                command_line=command_line, aligned=(mcapio.TOPIC_SEGMENTS,) if given else (),
                block_scans=block_scans or BLOCK_SCANS, progress=progress)
     return counts
 
 
-def segment_file(src: str | Path, out: str | Path, params=None, *, force: bool = False,
+def segment_file(src: str | Path, out: str | Path, config=None, *, force: bool = False,
                  command_line: str | None = None, block_scans: int | None = None,
                  progress: Callable[[int, int], None] | None = None) -> int:
     """Segment every scan of `src` into `out` (its channels plus /datmo/segments) in one streaming pass;
-    returns the number of scans. `params`: a FeatureParams (c0, min_points; None: the defaults)."""
+    returns the number of scans. `config`: the DatmoConfig (None: the defaults), its features' c0 and
+    min_points used and the whole recorded in the provenance."""
+    from .config import DatmoConfig
     from .log import types
     from .perception.features import derive_segments
-    from .perception.params import FeatureParams
     from .streaming import BLOCK_SCANS, LogStream, stream_log
 
-    params = params or FeatureParams()
+    config = config or DatmoConfig()
+    params = config.features
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
-    return stream_log(stream, out, command="segment", params={"features": params.to_dict()},
+    return stream_log(stream, out, command="segment", params={"features": params.to_dict(), "config": config.to_dict()},
                       derived={mcapio.TOPIC_SEGMENTS: types.SEGMENTS},
                       stage=lambda block: derive_segments(block.run, params), force=force, command_line=command_line,
                       block_scans=block_scans or BLOCK_SCANS, progress=progress)

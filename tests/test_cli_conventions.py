@@ -296,6 +296,7 @@ def test_local_config_reaches_the_output_and_its_provenance(tmp_path, small_log)
         assert used.exit_code == 0 and used.stderr.startswith("datmo: using ./datmo.toml\n")
         meta = mcapio.summary("a.mcap").metadata
         assert json.loads(meta["datmo.params"]["features"])["c0"] == 0.12
+        assert json.loads(meta["datmo.params"]["config"]) == load("datmo.toml").to_dict()   # the whole tree
         assert meta["datmo"]["command_line"].endswith("--config datmo.toml")
         ignored = CliRunner().invoke(cli, ["segment", str(small_log), "-o", "b.mcap", "--no-config"])
         assert ignored.exit_code == 0 and "datmo.toml" not in ignored.stderr

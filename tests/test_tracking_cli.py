@@ -10,8 +10,10 @@ from click.testing import CliRunner
 from test_tracking_people import legs_as_circles, walker_legs
 
 from datmo_cli.cli import cli
+from datmo_cli.config import DatmoConfig
 from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
+from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.pipeline import features_from_lists
 
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0, 0.0, 0.2, "laser")
@@ -140,7 +142,8 @@ def test_raw_log_is_segmented_and_tracked(tmp_path):
     assert len(column) == 1 and column["classification"][0] == 2
     assert (confirmed["classification"] == 1).sum() == 1   # the walker
     params = log.metadata["datmo.params"]
-    assert set(params) == {"track", "features", "leg_model"}
+    assert set(params) == {"track", "features", "leg_model", "config"}
+    assert json.loads(params["config"]) == DatmoConfig(features=FeatureParams(leg_model="default")).to_dict()
     assert json.loads(params["track"])["confirm_hits"] == 3 and "min_points" in json.loads(params["features"])
     model = json.loads(params["leg_model"])   # the detector that found the legs, with its file's hash
     assert model["model"] == "default" and len(model["sha256"]) == 64 and 0 < model["threshold"] < 1

@@ -67,11 +67,10 @@ def command(input: Path, output: Path, force: bool, cfg: DatmoConfig, resegment:
     from ..streaming import LogStream
 
     set_default(threads)
-    params = cfg.features
     with scan_log(input, output, topic, odom_topic, force=force) as src:
         stream = LogStream(src)   # a bad input is said before the progress bar starts
         with bar("features", stream.n_scans) as progress, progress.compile_notice() as report:
-            c = features_file(stream, output, params, resegment=resegment, force=force, markers=not no_markers,
+            c = features_file(stream, output, cfg, resegment=resegment, force=force, markers=not no_markers,
                               command_line=provenance_line(invocation("features")), progress=report)
     say(f"{output}: {c.scans:,} scans; per scan {c.per_scan('lines'):.1f} lines, {c.per_scan('circles'):.1f} "
         f"circles, {c.per_scan('blobs'):.1f} blobs; {c.landmarks} landmarks")

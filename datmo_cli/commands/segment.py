@@ -37,10 +37,9 @@ def command(input: Path, output: Path, force: bool, cfg: DatmoConfig, topic: str
     from ..progress import bar, say
     from ..streaming import LogStream
 
-    params = cfg.features
     with scan_log(input, output, topic, odom_topic, force=force) as src:
         stream = LogStream(src)   # a bad input is said before the progress bar starts
         with bar("segmenting", stream.n_scans) as progress:
-            scans = segment_file(stream, output, params, force=force, progress=progress,
+            scans = segment_file(stream, output, cfg, force=force, progress=progress,
                                  command_line=provenance_line(invocation("segment")))
     say(f"{output}: segments of {scans:,} scans")

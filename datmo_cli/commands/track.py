@@ -73,7 +73,7 @@ def command(input: Path, output: Path, force: bool, no_markers: bool, bag_dir: b
           scan_log(input, out, topic, odom_topic, force=force) as src):
         stream = LogStream(src)   # a bad input is said before the progress bar starts
         with bar("tracking", stream.n_scans) as progress, progress.compile_notice() as report:
-            scans, computed = track_file(stream, out, force=force, params=cfg.track, feature_params=cfg.features,
+            scans, computed = track_file(stream, out, force=force, config=cfg,
                                          leg_model=leg_model, command_line=provenance_line(invocation("track")),
                                          markers=not no_markers, progress=report)
     how = " (segmented and extracted features first)" if computed else ""
