@@ -1,7 +1,9 @@
-"""The allowed range of every numeric parameter, and the one check of a value against it.
+"""The allowed range of every numeric parameter, the one check of a value against it, and the one validator
+of a config section.
 
-Every `[features]` and `[track]` key (FEATURES, TRACK) and every numeric command-line option that is not one of
-them (OPTIONS) has a Bound here: its unit, its closed or open range and why the range ends where it does.
+Every `[features]` and `[track]` key has its Bound in its field's declaration (`param`, in perception/params.py
+and tracking/params.py; `bounds_of` lists them) and every numeric command-line option that is not one of them
+(OPTIONS) has a Bound here: its unit, its closed or open range and why the range ends where it does.
 `check` refuses NaN, infinities, wrong types and values outside the range with a ConfigError naming the key
 or option, the value and the range; `Bounded` is the Click type built on it, so a bad option is one line
 (`datmo: error: --gate: ...`, exit status 2 as for any bad option). The ranges are wide enough for any
@@ -14,7 +16,8 @@ above a limit, naming both parameters.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any, ClassVar, Self
 
 import click
 
@@ -74,97 +77,75 @@ def _b(lo: float, hi: float, unit: str = "", why: str = "", *, open_: bool = Fal
     return Bound(lo, hi, unit, why, open_, integer)
 
 
-_SHARE = "a share"
+bound = _b   # for the parameter sections (perception/params.py, tracking/params.py)
+
+
+def param(default: object, bound: Bound | None = None, help: str = "", *, choices: tuple[str, ...] = (),
+          same_as: str = "") -> Any:
+    """A field of a parameter section with its metadata: `bound` (a number's range and unit), `help` (what it
+    does, as the TOML comment and the option's help say it) and, for a string, the `choices` it takes (none:
+    any non-empty string). The one declaration the validator, the Click options and `datmo config` read.
+    `same_as` ('section.key'): the field is that parameter, whose home is there; the configuration tree sets
+    it from its home (config.DatmoConfig), and a value written in this section is read as the home's."""
+    return field(default=default, metadata={"bound": bound, "help": help, "choices": choices, "same_as": same_as})
+
+
+class Section:
+    """A table of a config file (`[features]`, `[track]`): a frozen dataclass whose fields are declared with
+    `param`. `renamed`: keys an older datmo read, each with the key that replaces it and why (an old config
+    file using one is refused with the new name, not read with a changed meaning)."""
+
+    name: ClassVar[str]
+    renamed: ClassVar[dict[str, str]] = {}
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def replace(self, **changes) -> Self:
+        """A copy with `changes` (keys checked; None values ignored)."""
+        changes = {k: v for k, v in changes.items() if v is not None}
+        return validate(type(self), {**self.to_dict(), **changes})
+
+    @classmethod
+    def combined(cls, params: Self, where: str) -> None:
+        """ConfigError when values each in range contradict each other (see features_combined)."""
+
+
+def bounds_of(section: type[Section]) -> dict[str, Bound]:
+    """The Bound of every numeric field of a section, by key."""
+    return {f.name: f.metadata["bound"] for f in fields(section) if f.metadata.get("bound") is not None}
+
+
+def validate(section: type[Section], values: dict, where: str | None = None) -> Section:
+    """A section from a mapping, every key checked against its field's metadata (names, types, ranges,
+    choices) and the combination checked (Section.combined); keys not given take their defaults. ConfigError
+    names `where`.key (default: the section's name), the value and what is allowed."""
+    where = where or section.name
+    known = {f.name: f for f in fields(section)}
+    out = {}
+    for key, value in values.items():
+        if key in section.renamed:
+            raise ConfigError(f"{where}.{key}: renamed to {section.renamed[key]}")
+        if key not in known:
+            raise ConfigError(f"{where}.{key}: unknown parameter (known: {', '.join(sorted(known))})")
+        meta = known[key].metadata
+        if meta["bound"] is not None:
+            out[key] = check(meta["bound"], value, f"{where}.{key}")
+        elif meta["choices"]:
+            if value not in meta["choices"]:
+                raise ConfigError(f"{where}.{key}: one of {', '.join(meta['choices'])}; got {value!r}")
+            out[key] = value
+        else:
+            if not isinstance(value, str) or not value.strip():
+                raise ConfigError(f"{where}.{key}: must be a non-empty string, got {value!r}")
+            out[key] = value
+    params = section(**out)
+    section.combined(params, where)
+    return params
+
+
 _NO_SENSE = "beyond any scanner's reach"
-
-# the `[features]` table (perception/params.py); units metres and degrees
-FEATURES: dict[str, Bound] = {
-    "c0": _b(0, 5, "m", "0: the angular term alone; metres of gap would join everything"),
-    "min_points": _b(1, 10_000, "beams", "more than any scanner has in a scan", integer=True),
-    "theta_resolution": _b(0.1, 10, "degrees", "finer cells only grow the line accumulator (the fit refines)"),
-    "rho_resolution": _b(0.001, 1, "m", "below 1 mm the line accumulator outgrows memory"),
-    "vote_window": _b(1, 90, "degrees", "90: a point votes for every direction"),
-    "line_min_points": _b(1, 10_000, "points", integer=True),
-    "line_min_racc": _b(0, 1, "", "r_acc is a share of the segment's points", open_=True),
-    "line_min_length": _b(0, 100, "m", _NO_SENSE, open_=True),
-    "perpendicular_tolerance": _b(0, 45, "degrees", "beyond 45° any two lines would be perpendicular"),
-    "circle_radius_min": _b(0, 2, "m", "circles are legs, posts and columns", open_=True),
-    "circle_radius_max": _b(0, 5, "m", "circles are legs, posts and columns", open_=True),
-    "circle_radius_step": _b(0.001, 1, "m", "each radius is a pass of the circle transform"),
-    "circle_cell": _b(0.001, 0.5, "m", "finer cells only grow the circle accumulator (the fit refines)"),
-    "circle_window": _b(0, 0.5, "m", "the centre estimate is off by centimetres, not metres", open_=True),
-    "circle_tolerance": _b(0, 1, "m", "a ring wider than a metre is no circle", open_=True),
-    "circle_min_points": _b(1, 10_000, "points", integer=True),
-    "circle_check_extent": _b(0, 10, "m", open_=True),
-    "circle_check_radius": _b(0, 5, "m", open_=True),
-    "circle_min_sagitta": _b(0, 1, "m", open_=True),
-    "circle_min_coverage": _b(0, 1, "", _SHARE + "; 0 turns the test off"),
-    "circle_residual_ratio": _b(0, 100, "", "0 turns the test off"),
-    "circle_radius_margin": _b(0, 1, "m", "0 turns the test off"),
-    "circle_lines_ratio": _b(0, 100, "", "0 turns the test off"),
-    "d_max": _b(0, 100, "m", _NO_SENSE, open_=True),
-    "corner_gap": _b(0, 10, "m", open_=True),
-    "deflection_min": _b(0, 90, "degrees"),
-    "leg_radius_max": _b(0, 2, "m", open_=True),
-    "bench_min_length": _b(0, 10, "m", open_=True),
-    "bench_max_length": _b(0, 20, "m", open_=True),
-    "landmark_match": _b(0, 10, "m", open_=True),
-    "landmark_min_count": _b(1, 1_000_000, "scans", integer=True),
-    "column_max_drift": _b(0, 10, "m", open_=True),
-    "column_min_time": _b(0, 86_400, "s", "a day", open_=True),
-    "leg_min_probability": _b(0, 1, "", "a probability"),
-}
-
-_HOUR = "an hour: longer waits are no tracking"
-_ACCELERATION = "√1000 ≈ 32 m/s² of acceleration noise is beyond any walker or vehicle"
-# the `[track]` table (tracking/params.py); units metres, seconds, m/s
-TRACK: dict[str, Bound] = {
-    "process_noise": _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
-    "person_process_noise": _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
-    "measurement_noise": _b(0, 10, "m", "sigmas of metres are no measurement", open_=True),
-    "leg_measurement_noise": _b(0, 10, "m", "sigmas of metres are no measurement", open_=True),
-    "initial_speed_sigma": _b(0, 100, "m/s"),
-    "gate": _b(0, 1000, "", "chi² with 2 dof; 1000 already passes anything", open_=True),
-    "max_gate_distance": _b(0, 100, "m", _NO_SENSE),
-    "confirm_hits": _b(2, 16, "scans", "no track confirmed from one scan; 16 bits of history", integer=True),
-    "confirm_window": _b(2, 16, "scans", "16 bits of hit history", integer=True),
-    "delete_after": _b(0, 3600, "s", _HOUR),
-    "delete_after_occluded": _b(0, 3600, "s", _HOUR),
-    "reacquire_speed": _b(0, 50, "m/s"),
-    "reacquire_distance": _b(0, 100, "m", _NO_SENSE),
-    "occlusion_margin": _b(0, 10, "m"),
-    "tentative_delete_after": _b(0, 3600, "s", _HOUR),
-    "d_max": _b(0, 100, "m", _NO_SENSE, open_=True),
-    "undefined_window": _b(0, 3600, "s", _HOUR),
-    "moving_distance": _b(0, 100, "m", _NO_SENSE),
-    "moving_speed": _b(0, 50, "m/s"),
-    "moving_time": _b(0, 3600, "s", _HOUR),
-    "leg_radius_max": _b(0, 2, "m"),
-    "leg_blob_max": _b(0, 2, "m"),
-    "stride_max": _b(0, 5, "m"),
-    "leg_reach": _b(0, 5, "m"),
-    "leg_beside": _b(0, 5, "m"),
-    "spawn_clearance": _b(0, 10, "m"),
-    "step_min": _b(0, 5, "m"),
-    "walking_after": _b(0, 3600, "s", _HOUR),
-    "step_max": _b(0, 5, "m"),
-    "merge_distance": _b(0, 10, "m"),
-    "merge_speed": _b(0, 50, "m/s"),
-    "person_votes": _b(0, 1, "", _SHARE),
-    "leg_probability": _b(0, 1, "", "a probability"),
-    "leg_evidence_rate": _b(0, 1, "", "a share; 0 would never learn", open_=True),
-    "person_evidence": _b(0, 1, "", "a probability"),
-    "moving_person_evidence": _b(0, 1, "", "a probability"),
-    "person_pairs": _b(0, 1_000_000, "scans", integer=True),
-    "moving_person_pairs": _b(0, 1_000_000, "scans", integer=True),
-    "carried_travel": _b(0, 1000, "m"),
-    "carried_radius": _b(0, 10, "m"),
-    "background_time": _b(0, 3600, "s", "0 turns the background off"),
-    "background_cell": _b(0.05, 10, "m", "finer cells only grow the grid"),
-    "background_extent": _b(0, 100, "m", "the grid's memory grows with its square", open_=True),
-    "tail_length": _b(0, 10_000, "points", "each track holds its tail", integer=True),
-}
-
+D_MAX = _b(0, 100, "m", _NO_SENSE, open_=True)   # the paper's d_max: features.d_max, read by tracking too
 _SIM_HOUR = "an hour of scans; the world's paths are planned for the whole run up front"
 # options that are not `[features]` or `[track]` keys (and the scene files' duration and crowd size)
 OPTIONS: dict[str, Bound] = {

@@ -1,18 +1,95 @@
-"""Config files: TOML with one table per stage (`[features]`, `[track]`), shared by the commands."""
+"""The configuration tree: `DatmoConfig`, one section per stage (`[features]`, `[track]` in a TOML file), its
+one loader (`load`: defaults, then the file, then the options) and the file conventions the commands share.
+
+Each section's fields carry their own default, range and help (bounds.param); `bounds.validate` is the one
+check of a section, `commands.options.param_option` builds the Click options from the same fields.
+"""
 
 from __future__ import annotations
 
 import tomllib
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+from .bounds import Bound, Section, bounds_of, validate
 from .errors import ConfigError
+from .perception.params import FeatureParams
+from .tracking.params import TrackingParams
 
-STAGES = ("features", "track")   # the tables of a config file, one per stage
+SECTIONS: dict[str, type[Section]] = {"features": FeatureParams, "track": TrackingParams}
+STAGES = tuple(SECTIONS)   # the tables of a config file, one per stage
+BOUNDS: dict[str, dict[str, Bound]] = {s: bounds_of(c) for s, c in SECTIONS.items()}   # section -> key -> Bound
 
 
-def read_table(path: str | Path, name: str) -> dict:
-    """The `[name]` table of a TOML file, or its top-level keys when it has no such table (other stages'
-    tables are then left out). ConfigError names the file and what is wrong."""
+@dataclass(frozen=True)
+class DatmoConfig:
+    """Every parameter of datmo: the `[features]` section (segmentation, features, landmarks, legs) and the
+    `[track]` section (tracking and classification)."""
+
+    features: FeatureParams = field(default_factory=FeatureParams)
+    track: TrackingParams = field(default_factory=TrackingParams)
+
+    def __post_init__(self) -> None:
+        for s in STAGES:   # a parameter with its home in another section takes its value from there
+            section = getattr(self, s)
+            home = {name: self.get(key) for name, key in same_as(type(section)).items()}
+            if any(getattr(section, name) != value for name, value in home.items()):
+                object.__setattr__(self, s, section.replace(**home))
+
+    def get(self, key: str) -> object:
+        """The value of 'section.name'."""
+        section, _, name = key.partition(".")
+        return getattr(getattr(self, section), name)
+
+    def to_dict(self) -> dict[str, dict]:
+        """Section -> key -> value, as a TOML file holds them (each parameter once, in its home section)."""
+        return {s: {k: v for k, v in getattr(self, s).to_dict().items() if k not in same_as(SECTIONS[s])}
+                for s in STAGES}
+
+    def replace(self, **sections: dict) -> DatmoConfig:
+        """A copy with each given section's values changed (section -> key -> value; None values ignored)."""
+        return _build({s: getattr(self, s) for s in STAGES}, sections)
+
+
+def same_as(section: type[Section]) -> dict[str, str]:
+    """The fields of `section` that are a parameter whose home is another section: name -> 'section.key'."""
+    return {f.name: f.metadata["same_as"] for f in fields(section) if f.metadata.get("same_as")}
+
+
+def _build(sections: dict[str, Section], changes: dict[str, dict], where: str = "") -> DatmoConfig:
+    """DatmoConfig of `sections` with `changes` (section -> key -> value; None values ignored); a parameter
+    given in a section that is not its home is set at its home, and given in both with two values is refused."""
+    moved = {s: dict(changes.get(s, {})) for s in STAGES}
+    for s in STAGES:
+        for name, key in same_as(SECTIONS[s]).items():
+            if moved[s].get(name) is None:
+                moved[s].pop(name, None)
+                continue
+            value, (home, _, home_key) = moved[s].pop(name), key.partition(".")
+            if moved[home].get(home_key) not in (None, value):
+                raise ConfigError(f"{where}{s}.{name} and {key} are one parameter (its home is {key}), given "
+                                  f"as {value!r} and {moved[home][home_key]!r}; give it once, as {key}")
+            moved[home][home_key] = value
+    return DatmoConfig(**{s: sections[s].replace(**moved[s]) for s in STAGES})
+
+
+def load(path: str | Path | None = None, options: dict[str, dict] | None = None) -> DatmoConfig:
+    """The configuration: the defaults, overridden by the `[features]` and `[track]` tables of the TOML file
+    at `path` (None: no file), overridden by `options` (section -> key -> value; None values ignored).
+    ConfigError names the file, the key, the value and what is allowed. A key written in a section that is
+    not its home (track.d_max: features.d_max) is read as the same parameter."""
+    tables = read_tables(path) if path is not None else {s: {} for s in STAGES}
+    where = f"{path}: " if path is not None else ""
+    given = {s: validate(cls, tables[s], f"{where}{s}") for s, cls in SECTIONS.items()}   # each where written
+    cfg = _build({s: cls() for s, cls in SECTIONS.items()},
+                 {s: {k: getattr(given[s], k) for k in tables[s]} for s in STAGES}, where)
+    return cfg.replace(**(options or {}))
+
+
+def read_tables(path: str | Path) -> dict[str, dict]:
+    """The `[features]` and `[track]` tables of a TOML file, by section (an absent table: {}). Keys at the top
+    level, outside any table, go to the section that declares them (features first: the home of d_max); one
+    neither declares is an unknown parameter. ConfigError names the file and what is wrong."""
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -26,10 +103,20 @@ def read_table(path: str | Path, name: str) -> dict:
         if stage in data and not isinstance(data[stage], dict):
             raise ConfigError(f"{path}: {stage} must be a table ([{stage}] with its parameters), "
                               f"got {data[stage]!r}")
-    table = data.get(name, data)
-    if table is data:
-        table = {k: v for k, v in data.items() if not isinstance(v, dict) and k not in STAGES}
-    return table
+    tables = {s: dict(data.get(s, {})) for s in STAGES}
+    for key, value in data.items():
+        if key in STAGES or isinstance(value, dict):
+            continue   # a stage's table, or another table datmo does not read
+        owner = next((s for s in STAGES if s not in data and key in _names(SECTIONS[s])), None)
+        if owner is None:
+            raise ConfigError(f"{path}: {key}: unknown parameter at the top level (not in a [features] or [track] "
+                              "table, nor a key of a section without its table)")
+        tables[owner][key] = value
+    return tables
+
+
+def _names(section: type[Section]) -> set[str]:
+    return {f.name for f in fields(section)}
 
 
 LOCAL = "datmo.toml"   # picked up from the current folder when no --config is given

@@ -141,10 +141,12 @@ class RunStages:
 
     def effective(self) -> dict:
         """The effective parameters, as provenance records them."""
+        from .config import DatmoConfig
         from .perception.features import leg_model_provenance
 
         return {"features": self.feature_params.to_dict(), "track": self.track_params.to_dict(),
-                "leg_model": leg_model_provenance(self.feature_params.leg_model)}
+                "leg_model": leg_model_provenance(self.feature_params.leg_model),
+                "config": DatmoConfig(self.feature_params, self.track_params).to_dict()}
 
     def __call__(self, block) -> dict[str, tuple]:
         from .stages import TrackStream, iter_run_features
@@ -221,22 +223,23 @@ def features_leg_model(log) -> str:
     return "paper"
 
 
-def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=None,
-               feature_params=None, leg_model: str | None = None, command_line: str | None = None,
+def track_file(src: str | Path, out: str | Path, *, force: bool = False, config=None,
+               leg_model: str | None = None, command_line: str | None = None,
                markers: bool = True, block_scans: int | None = None,
                progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
     """Track `src` into `out` in one streaming pass (its channels copied, /datmo/tracks and
     /datmo/markers/tracks added). Features come from src's /datmo/features when present (people then by
     the rule of the leg detector they were made with; `leg_model`, when given, must be that one); else
     segmentation and features run here (with `leg_model` when given) and their channels are written too,
-    as datmo run writes them. Returns (scans, whether features were computed here)."""
+    as datmo run writes them. `config`: the DatmoConfig (None: the defaults), recorded whole in the provenance.
+    Returns (scans, whether features were computed here)."""
+    from .config import DatmoConfig
     from .perception.features import leg_model_provenance
-    from .perception.params import FeatureParams
     from .stages import TrackStream, decode_features
     from .streaming import BLOCK_SCANS, LogStream, stream_log
-    from .tracking.params import TrackingParams
 
-    params = params or TrackingParams()
+    config = config or DatmoConfig()
+    params = config.track
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
     computed = not stream.has(mcapio.TOPIC_FEATURES)
@@ -250,7 +253,7 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=
                              f"for {stream.n_scans} scans; run datmo features again")
     stage_params = {"track": params}
     if computed:
-        stage_params["features"] = (feature_params or FeatureParams()).replace(leg_model=leg_model)
+        stage_params["features"] = config.features.replace(leg_model=leg_model)
     stages = open_stages(stream, stage_params, markers=markers, block_scans=block_scans)
     odometry, estimated = stages.odometry, stages.estimated
     if computed:
@@ -259,7 +262,8 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, params=
         state: dict = {}
         derived = derived_topics(odom=estimated, tracks=True, markers=markers)
         effective = {"track": params.to_dict(),
-                     "leg_model": leg_model_provenance(used) if used == "paper" else {"model": used}}
+                     "leg_model": leg_model_provenance(used) if used == "paper" else {"model": used},
+                     "config": config.to_dict()}
 
         def stage(block) -> dict:
             run, out = block.run, {}
@@ -292,17 +296,19 @@ class FeatureCounts:
         return getattr(self, name) / max(self.scans, 1)
 
 
-def features_file(src: str | Path, out: str | Path, params=None, *, resegment: bool = False,
+def features_file(src: str | Path, out: str | Path, config=None, *, resegment: bool = False,
                   force: bool = False, command_line: str | None = None, markers: bool = True,
                   block_scans: int | None = None, progress: Callable[[int, int], None] | None = None) -> FeatureCounts:
     """Extract the features of `src` into `out` in one streaming pass: /datmo/features, /datmo/landmarks and
     /datmo/markers/features, and /datmo/segments unless the input has its own (used unless `resegment`).
-    `params`: a FeatureParams (None: the defaults)."""
+    `config`: the DatmoConfig (None: the defaults), its features section used and the whole recorded in the
+    provenance."""
+    from .config import DatmoConfig
     from .perception.features import FeatureStream, decode_segments
-    from .perception.params import FeatureParams
     from .streaming import BLOCK_SCANS, LogStream, stream_log
 
-    params = params or FeatureParams()
+    config = config or DatmoConfig()
+    params = config.features
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
     given = stream.has(mcapio.TOPIC_SEGMENTS) and not resegment
@@ -326,26 +332,29 @@ def features_file(src: str | Path, out: str | Path, params=None, *, resegment: b
 
     from .perception.features import leg_model_provenance
 
-    effective = {"features": params.to_dict(), "leg_model": leg_model_provenance(params.leg_model)}
+    effective = {"features": params.to_dict(), "leg_model": leg_model_provenance(params.leg_model),
+                 "config": config.to_dict()}
     stream_log(stream, out, command="features", params=effective, derived=derived, stage=stage, force=force,
                command_line=command_line, aligned=(mcapio.TOPIC_SEGMENTS,) if given else (),
                block_scans=block_scans or BLOCK_SCANS, progress=progress)
     return counts
 
 
-def segment_file(src: str | Path, out: str | Path, params=None, *, force: bool = False,
+def segment_file(src: str | Path, out: str | Path, config=None, *, force: bool = False,
                  command_line: str | None = None, block_scans: int | None = None,
                  progress: Callable[[int, int], None] | None = None) -> int:
     """Segment every scan of `src` into `out` (its channels plus /datmo/segments) in one streaming pass;
-    returns the number of scans. `params`: a FeatureParams (c0, min_points; None: the defaults)."""
-    from .perception.params import FeatureParams
+    returns the number of scans. `config`: the DatmoConfig (None: the defaults), its features' c0 and
+    min_points used and the whole recorded in the provenance."""
+    from .config import DatmoConfig
     from .stages import derive_segments
     from .streaming import BLOCK_SCANS, LogStream, stream_log
 
-    params = params or FeatureParams()
+    config = config or DatmoConfig()
+    params = config.features
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
-    return stream_log(stream, out, command="segment", params={"features": params.to_dict()},
+    return stream_log(stream, out, command="segment", params={"features": params.to_dict(), "config": config.to_dict()},
                       derived=derived_topics(segments=True),
                       stage=lambda block: derive_segments(block.run, params), force=force, command_line=command_line,
                       block_scans=block_scans or BLOCK_SCANS, progress=progress)

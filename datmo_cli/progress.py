@@ -130,6 +130,16 @@ class Bar:
     def __call__(self, done: int, total: int | None = None) -> None:
         self.update(done, total)
 
+    def tell(self, line: str) -> None:
+        """A line said while the bar runs (e.g. a worker's warning): printed above the bar when one is drawn
+        (a plain print would tear the bar's line), else on stderr as `say` does, warnings even under --quiet."""
+        if self.progress is not None:
+            self.progress.console.print(line, markup=False, highlight=False, soft_wrap=True)
+        elif line.startswith("datmo: warning"):
+            click.echo(line, err=True)
+        else:
+            say(line)
+
     @contextmanager
     def compile_notice(self) -> Iterator[Callable[[int, int], None]]:
         """A (done, total) callback that also says when numba is compiling the kernels (numba_runtime)."""

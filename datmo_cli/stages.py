@@ -18,7 +18,7 @@ import numpy as np
 from .log import cdr, mcapio, types
 from .log.scan import Odometry, ScanRun
 from .perception.features import FeatureStream, RunFeatures, extract_run, segment_payloads, segment_run
-from .perception.params import FeatureParams, from_dict
+from .perception.params import FeatureParams
 from .tracking.markers import track_markers
 from .tracking.measurements import ScanFeatures
 from .tracking.params import TrackingParams
@@ -38,7 +38,7 @@ def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: F
     landmarks and feature markers) and the RunFeatures they came from. Given `segments` (a log's own),
     they are used and /datmo/segments is not among the channels returned."""
     if isinstance(params, dict):
-        params = from_dict(params)
+        params = FeatureParams().replace(**params)
     return FeatureStream(params, odometry).block(run, segments, progress)
 
 

@@ -15,6 +15,7 @@ import sys
 import tomllib
 from pathlib import Path
 
+import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -22,14 +23,12 @@ from fuzzing import tally
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datmo_cli.bounds import FEATURES, TRACK
 from datmo_cli.cli import COMMANDS, cli
-from datmo_cli.config import to_toml
+from datmo_cli.commands.options import config_options, param_option
+from datmo_cli.config import BOUNDS, DatmoConfig, load, to_toml
 from datmo_cli.log import mcapio
 from datmo_cli.perception.params import FeatureParams
-from datmo_cli.perception.params import load_toml as load_features
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.params import load_toml as load_track
 
 ROOT = Path(__file__).resolve().parents[1]
 DATMO = Path(sys.executable).with_name("datmo")
@@ -67,6 +66,57 @@ def tracked(small_log, tmp_path_factory) -> Path:
     result = invoke("track", small_log, "-o", path)
     assert result.exit_code == 0, result.output
     return path
+
+
+# ------------------------------------------------------------------------------------ parameter options
+
+
+def _param_options() -> list[tuple[str, object, list[str]]]:
+    """(command, click option, the 'section.key's it sets) of every option built from the configuration."""
+    from datmo_cli.commands.options import OPTIONS_KEY
+
+    out = []
+    for name in sorted(COMMANDS):
+        command = cli.get_command(None, name)
+        for p in command.params:
+            if getattr(p, "callback", None) is not None and p.callback.__qualname__.startswith("_keep."):
+                ctx = click.Context(command)
+                p.callback(ctx, p, (1, 2) if p.nargs == 2 else 1)
+                out.append((name, p, [f"{s}.{k}" for s, t in ctx.meta[OPTIONS_KEY].items() for k in t]))
+    return out
+
+
+def test_parameter_options_take_their_help_default_and_range_from_the_field():
+    options = _param_options()
+    assert {name for name, _, _ in options} >= {"segment", "features", "track", "run"}
+    defaults = DatmoConfig()
+    for name, p, keys in options:
+        help_text = p.help
+        for key in keys:
+            section, _, field_name = key.partition(".")
+            value = defaults.get(key)
+            assert (f"{value:g}" if isinstance(value, float) else str(value)) in help_text, (name, key, help_text)
+            if field_name in BOUNDS[section]:
+                assert BOUNDS[section][field_name].describe() in help_text, (name, key)
+        if len(keys) == 1:
+            assert p.name == keys[0].partition(".")[2], (name, p.opts)
+
+
+def test_options_override_the_config_file_which_overrides_the_defaults(tmp_path):
+    with inside(tmp_path):
+        Path("c.toml").write_text("[features]\nc0 = 0.12\nmin_points = 5\n")
+        seen = {}
+
+        @click.command()
+        @config_options("a file")
+        @param_option("features.c0")
+        def show(cfg):
+            seen["cfg"] = cfg
+
+        assert CliRunner().invoke(show, ["--config", "c.toml", "--c0", "0.2"]).exit_code == 0
+        assert (seen["cfg"].features.c0, seen["cfg"].features.min_points) == (0.2, 5)
+        assert CliRunner().invoke(show, ["--no-config"]).exit_code == 0
+        assert seen["cfg"] == DatmoConfig()
 
 
 # ------------------------------------------------------------------------------------------------ --quiet
@@ -203,10 +253,10 @@ def test_config_prints_every_key_with_its_source_and_reads_back(tmp_path):
         features, track = _tables(result.stdout)
         assert features == FeatureParams() and track == TrackingParams()
         body = [line for line in result.stdout.splitlines() if " = " in line]
-        assert len(body) == len(FeatureParams().to_dict()) + len(TrackingParams().to_dict())
+        assert len(body) == len(FeatureParams().to_dict()) + len(TrackingParams().to_dict()) - 1   # d_max once
         assert all(line.split("#", 1)[1].strip().startswith("default") for line in body)
         Path("mine.toml").write_text(result.stdout)
-        assert load_features("mine.toml") == features and load_track("mine.toml") == track
+        assert load("mine.toml") == DatmoConfig(features, track)
 
 
 def test_local_config_is_picked_up_said_and_overridden(tmp_path):
@@ -234,7 +284,7 @@ def test_local_config_is_picked_up_said_and_overridden(tmp_path):
 def test_config_to_a_file_follows_the_output_rules(tmp_path):
     with inside(tmp_path):
         assert CliRunner().invoke(cli, ["config", "--no-config", "-o", "c.toml"]).exit_code == 0
-        assert load_track("c.toml") == TrackingParams()
+        assert load("c.toml") == DatmoConfig()
         again = CliRunner().invoke(cli, ["config", "--no-config", "-o", "c.toml"])
         assert again.exit_code == 1 and "exists" in again.stderr
 
@@ -246,6 +296,7 @@ def test_local_config_reaches_the_output_and_its_provenance(tmp_path, small_log)
         assert used.exit_code == 0 and used.stderr.startswith("datmo: using ./datmo.toml\n")
         meta = mcapio.summary("a.mcap").metadata
         assert json.loads(meta["datmo.params"]["features"])["c0"] == 0.12
+        assert json.loads(meta["datmo.params"]["config"]) == load("datmo.toml").to_dict()   # the whole tree
         assert meta["datmo"]["command_line"].endswith("--config datmo.toml")
         ignored = CliRunner().invoke(cli, ["segment", str(small_log), "-o", "b.mcap", "--no-config"])
         assert ignored.exit_code == 0 and "datmo.toml" not in ignored.stderr
@@ -254,8 +305,8 @@ def test_local_config_reaches_the_output_and_its_provenance(tmp_path, small_log)
         assert "--config" not in meta["datmo"]["command_line"]
 
 
-_FEATURE_KEYS = sorted(k for k, b in FEATURES.items() if not b.integer)
-_TRACK_KEYS = sorted(k for k, b in TRACK.items() if not b.integer)
+_FEATURE_KEYS = sorted(k for k, b in BOUNDS["features"].items() if not b.integer)
+_TRACK_KEYS = sorted(k for k, b in BOUNDS["track"].items() if not b.integer)
 
 
 @settings(max_examples=60, deadline=None)
@@ -263,9 +314,9 @@ _TRACK_KEYS = sorted(k for k, b in TRACK.items() if not b.integer)
 def test_toml_of_any_value_reads_back_equal(data):
     """Every float a parameter may take, written by to_toml, reads back to the same float."""
     tables = {}
-    for stage, keys, bounds in (("features", _FEATURE_KEYS, FEATURES), ("track", _TRACK_KEYS, TRACK)):
+    for stage, keys in (("features", _FEATURE_KEYS), ("track", _TRACK_KEYS)):
         key = data.draw(st.sampled_from(keys))
-        b = bounds[key]
+        b = BOUNDS[stage][key]
         value = data.draw(st.floats(b.lo, b.hi, exclude_min=b.lo_open, allow_nan=False))
         tables[stage] = {key: value}
     sources = {stage: dict.fromkeys(t, "from a test") for stage, t in tables.items()}

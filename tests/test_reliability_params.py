@@ -1,9 +1,10 @@
-"""Every numeric parameter is checked in one place (datmo_cli/bounds.py): NaN, infinities and values outside
-its range give one line naming the option or TOML key and the range, a non-zero exit, no traceback and no
-output; the defaults and the bounds themselves pass (issue #14, rows 6, 8, 9, 16, 17, 21).
+"""Every numeric parameter is checked in one place (datmo_cli/bounds.py, against the Bound its field
+declares): NaN, infinities and values outside its range give one line naming the option or TOML key and the
+range, a non-zero exit, no traceback and no output; the defaults and the bounds themselves pass (issue #14,
+rows 6, 8, 9, 16, 17, 21).
 
-The parameters are enumerated from bounds.py and from the commands themselves, so a new one is covered
-without touching this file."""
+The parameters are enumerated from the configuration's fields, bounds.OPTIONS and the commands themselves, so
+a new one is covered without touching this file."""
 
 from __future__ import annotations
 
@@ -21,16 +22,15 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from datmo_cli import bounds
-from datmo_cli.bounds import FEATURES, OPTIONS, TRACK, Bound, Bounded, OptionError, check
+from datmo_cli.bounds import OPTIONS, Bound, Bounded, OptionError, check, validate
 from datmo_cli.cli import COMMANDS, cli
+from datmo_cli.config import BOUNDS, SECTIONS, load
 from datmo_cli.errors import ConfigError
-from datmo_cli.perception import params as fparams
 from datmo_cli.perception.params import FeatureParams
-from datmo_cli.tracking import params as tparams
 from datmo_cli.tracking.params import TrackingParams
 
-TABLES = {"features": (FEATURES, FeatureParams, fparams), "track": (TRACK, TrackingParams, tparams)}
-KEYS = [(table, key) for table, (b, _, _) in TABLES.items() for key in sorted(b)]
+TABLES = {s: (BOUNDS[s], SECTIONS[s]) for s in SECTIONS}
+KEYS = [(table, key) for table, (b, _) in TABLES.items() for key in sorted(b)]
 
 # a key at a bound contradicts another key's default: the other key set so that the pair is consistent
 COMPANIONS = {("features", "circle_radius_min", "hi"): {"circle_radius_max": 5.0},
@@ -66,7 +66,7 @@ def bad_values(b: Bound) -> list:
 
 
 def test_every_numeric_parameter_has_a_bound_and_its_default_passes():
-    for table, (table_bounds, cls, _) in TABLES.items():
+    for table, (table_bounds, cls) in TABLES.items():
         assert set(table_bounds) == numeric_fields(cls), table
         defaults = asdict(cls())
         for key, b in table_bounds.items():
@@ -79,28 +79,28 @@ def test_every_numeric_parameter_has_a_bound_and_its_default_passes():
 
 @pytest.mark.parametrize("table, key", KEYS)
 def test_bad_values_of_every_key_are_refused_naming_it_and_the_range(table, key):
-    table_bounds, _, module = TABLES[table]
+    table_bounds, cls = TABLES[table]
     b = table_bounds[key]
     for value in bad_values(b):
         tally("params: bad TOML values refused")
         with pytest.raises(ConfigError) as exc:
-            module.from_dict({key: value})
+            validate(cls, {key: value})
         message = str(exc.value)
         assert message.startswith(f"{table}.{key}: ") and "\n" not in message, message
         if not (b.integer and isinstance(value, float)):   # a float for an int key is a type error
             assert b.describe() in message, message
     for value in ("1", True, [1]):
         with pytest.raises(ConfigError, match=f"{table}.{key}: expected"):
-            module.from_dict({key: value})
+            validate(cls, {key: value})
 
 
 @pytest.mark.parametrize("table, key", KEYS)
 def test_the_bounds_themselves_and_the_defaults_pass(table, key):
-    table_bounds, cls, module = TABLES[table]
-    assert module.from_dict(asdict(cls())) == cls()
+    table_bounds, cls = TABLES[table]
+    assert validate(cls, asdict(cls())) == cls()
     for end, value in inside(table_bounds[key]).items():
         values = {key: value, **COMPANIONS.get((table, key, end), {})}
-        assert getattr(module.from_dict(values), key) == value
+        assert getattr(validate(cls, values), key) == value
 
 
 @pytest.mark.parametrize("literal", ["nan", "inf", "-inf", "1e400"])
@@ -110,7 +110,7 @@ def test_toml_values_name_the_file_and_the_key(tmp_path, literal):
         config = tmp_path / "c.toml"
         config.write_text(f"[{table}]\n{key} = {literal}\n")
         with pytest.raises(ConfigError) as exc:
-            TABLES[table][2].load_toml(config)
+            load(config)
         tally("params: bad TOML values refused")
         assert str(exc.value).startswith(f"{config}: {table}.{key}: "), str(exc.value)
         assert b.integer or b.describe() in str(exc.value)
@@ -120,12 +120,11 @@ def test_toml_values_name_the_file_and_the_key(tmp_path, literal):
 def test_a_stage_name_that_is_not_a_table_is_said_so(tmp_path, table, other):
     config = tmp_path / "c.toml"
     config.write_text(f"{table} = 3\n")
-    for reader in (fparams.load_toml, tparams.load_toml):
-        with pytest.raises(ConfigError, match=rf"c.toml: {table} must be a table \(\[{table}\]"):
-            reader(config)
+    with pytest.raises(ConfigError, match=rf"c.toml: {table} must be a table \(\[{table}\]"):
+        load(config)
     config.write_text(f"{other} = [1]\n[{table}]\n")
     with pytest.raises(ConfigError, match=f"{other} must be a table"):
-        TABLES[table][2].load_toml(config)
+        load(config)
 
 
 @pytest.mark.parametrize("values, names", [
@@ -135,15 +134,15 @@ def test_a_stage_name_that_is_not_a_table_is_said_so(tmp_path, table, other):
 ])
 def test_feature_parameters_that_combine_into_too_big_a_kernel_are_refused_naming_both(values, names):
     with pytest.raises(ConfigError) as exc:
-        fparams.from_dict(values)
+        validate(FeatureParams, values)
     assert all(n in str(exc.value) for n in names), str(exc.value)
 
 
 def test_a_background_grid_too_big_is_refused_naming_both_and_off_it_allocates_nothing():
     with pytest.raises(ConfigError, match="background_extent 100 m and background_cell 0.05 m make a background grid "
                                           "4,000 cells a side"):
-        tparams.from_dict({"background_extent": 100, "background_cell": 0.05})
-    assert tparams.from_dict({"background_extent": 100, "background_cell": 0.05, "background_time": 0})
+        validate(TrackingParams, {"background_extent": 100, "background_cell": 0.05})
+    assert validate(TrackingParams, {"background_extent": 100, "background_cell": 0.05, "background_time": 0})
 
 
 def test_the_background_limit_is_what_the_tracker_allocates():
@@ -152,7 +151,7 @@ def test_the_background_limit_is_what_the_tracker_allocates():
     from datmo_cli.log.scan import ScanGeometry
     from datmo_cli.tracking.tracker import Tracker
 
-    t = tparams.from_dict({"background_extent": 100.0, "background_cell": 0.1})
+    t = validate(TrackingParams, {"background_extent": 100.0, "background_cell": 0.1})
     geometry = ScanGeometry(angle_min=-np.pi / 2, angle_increment=np.radians(0.5), n_beams=361, range_min=0.0,
                             range_max=80.0, scan_time=0.2, frame_id="laser")
     grid = Tracker(t, geometry)._bg[0]
@@ -169,7 +168,7 @@ def test_features_run_at_the_largest_settings_accepted(values):
     from datmo_cli.log import mcapio
     from datmo_cli.perception.features import extract_run
 
-    p = fparams.from_dict({**values, "leg_model": "paper"})
+    p = validate(FeatureParams, {**values, "leg_model": "paper"})
     cells = bounds.line_accumulator_cells(p.theta_resolution, p.rho_resolution)
     votes = bounds.circle_votes(p.circle_radius_min, p.circle_radius_max, p.circle_radius_step, p.circle_window,
                                 p.circle_cell)
@@ -186,10 +185,10 @@ def test_features_run_at_the_largest_settings_accepted(values):
                        st.none()))
 def test_fuzz_any_value_is_either_in_range_or_one_clean_error(key, value):
     table, name = key
-    table_bounds, _, module = TABLES[table]
+    table_bounds, cls = TABLES[table]
     b = table_bounds[name]
     try:
-        p = module.from_dict({name: value})
+        p = validate(cls, {name: value})
     except ConfigError as exc:
         tally("params: random values through the validator")
         assert "\n" not in str(exc) and name in str(exc)
@@ -229,7 +228,7 @@ def bounded_options() -> list[tuple[str, click.Option, Bounded]]:
     return out
 
 
-ALL_BOUNDS = [*FEATURES.values(), *TRACK.values(), *OPTIONS.values()]
+ALL_BOUNDS = [*BOUNDS["features"].values(), *BOUNDS["track"].values(), *OPTIONS.values()]
 OPTION_CASES = [(name, param.opts[-1], t) for name, param, t in bounded_options()]
 
 

@@ -10,8 +10,10 @@ from click.testing import CliRunner
 from test_tracking_people import legs_as_circles, walker_legs
 
 from datmo_cli.cli import cli
+from datmo_cli.config import DatmoConfig
 from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
+from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.synthetic import features_from_lists
 
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0, 0.0, 0.2, "laser")
@@ -70,13 +72,14 @@ def test_track_options_and_config(tmp_path):
     make_log(src)
     cfg = tmp_path / "c.toml"
     cfg.write_text("[track]\nconfirm_hits = 4\nconfirm_window = 4\n")
-    result = CliRunner().invoke(cli, ["track", str(src), "-o", str(out), "--config", str(cfg), "--gate", "9.2"])
+    result = CliRunner().invoke(cli, ["track", str(src), "-o", str(out), "--config", str(cfg), "--gate", "9.2",
+                                       "--d-max", "2.0"])
     assert result.exit_code == 0, result.output
     msgs = _tracks(out)
     assert all((m["tracks"]["status"] == 0).all() for m in msgs[:3])   # 4 hits needed
     params = mcapio.summary(out).metadata["datmo.params"]
     assert json.loads(params["track"])["confirm_hits"] == 4
-    assert json.loads(params["track"])["gate"] == 9.2
+    assert json.loads(params["track"])["gate"] == 9.2 and json.loads(params["track"])["d_max"] == 2.0
     assert "features" not in params   # the log had /datmo/features: no feature extraction ran
 
 
@@ -139,7 +142,8 @@ def test_raw_log_is_segmented_and_tracked(tmp_path):
     assert len(column) == 1 and column["classification"][0] == 2
     assert (confirmed["classification"] == 1).sum() == 1   # the walker
     params = log.metadata["datmo.params"]
-    assert set(params) == {"track", "features", "leg_model"}
+    assert set(params) == {"track", "features", "leg_model", "config"}
+    assert json.loads(params["config"]) == DatmoConfig(features=FeatureParams(leg_model="default")).to_dict()
     assert json.loads(params["track"])["confirm_hits"] == 3 and "min_points" in json.loads(params["features"])
     model = json.loads(params["leg_model"])   # the detector that found the legs, with its file's hash
     assert model["model"] == "default" and len(model["sha256"]) == 64 and 0 < model["threshold"] < 1
@@ -148,19 +152,20 @@ def test_raw_log_is_segmented_and_tracked(tmp_path):
 def test_config_tables_are_read_per_stage(tmp_path):
     """One datmo.toml serves every command: [track] for tracking, [features] ignored by it, and a file with
     no tables at all is read as the stage's own table."""
+    from datmo_cli.config import load
     from datmo_cli.errors import ConfigError
-    from datmo_cli.tracking.params import TrackingParams, load_toml
+    from datmo_cli.tracking.params import TrackingParams
 
     both = tmp_path / "both.toml"
     both.write_text("[features]\nmin_points = 4\n\n[track]\ngate = 9.0\n")
-    assert load_toml(both).gate == 9.0
+    assert load(both).track.gate == 9.0 and load(both).features.min_points == 4
     only_features = tmp_path / "features.toml"
     only_features.write_text("[features]\nmin_points = 4\n")
-    assert load_toml(only_features) == TrackingParams()
+    assert load(only_features).track == TrackingParams()
     flat = tmp_path / "flat.toml"
     flat.write_text("gate = 7.5\n")
-    assert load_toml(flat).gate == 7.5
+    assert load(flat).track.gate == 7.5
     bad = tmp_path / "bad.toml"
     bad.write_text("[track]\ngaet = 7.5\n")
     with pytest.raises(ConfigError, match="gaet"):
-        load_toml(bad)
+        load(bad)

@@ -27,7 +27,7 @@ from tests.conftest import SAMPLE_LOGS
 from tests.reference_tracking import ReferenceTracker, reference_measurements
 
 P = TrackingParams()
-PRM = state.param_vector(P)
+PRM = P.kernel_vector()
 LOGS = sorted(p.name for p in SAMPLE_LOGS.glob("*.mcap"))
 EXACT = ("id", "age", "hits", "misses", "classification", "mobility", "status", "occluded")
 

@@ -241,7 +241,7 @@ def test_a_duplicate_yields_to_the_person_whatever_its_hits():
         tab[:, state.HITS] = hits
         return tab
 
-    prm = state.param_vector(P)
+    prm = P.kernel_vector()
     person_fewer_hits = tracks([CLASS_PERSON, CLASS_UNKNOWN], [MOBILITY_DYNAMIC, MOBILITY_STATIC], [40, 80])
     assert _step.duplicates(person_fewer_hits, 2, prm).tolist() == [False, True]
     unknowns = tracks([CLASS_UNKNOWN, CLASS_UNKNOWN], [MOBILITY_STATIC, MOBILITY_STATIC], [40, 80])

@@ -10,7 +10,7 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS, option
-from .options import quiet_option
+from .options import force_option, quiet_option
 
 FAULT_HELP = ("Faults to inject, comma-separated: garbage:P (a burst of random bytes before a scan), crc:P (corrupt "
               "a scan's CRC), truncate:P (cut a scan short), drop:P (leave out one byte of a scan), with P the "
@@ -41,7 +41,7 @@ FAULT_HELP = ("Faults to inject, comma-separated: garbage:P (a burst of random b
 @click.option("--link", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also make a symlink at this path to the pseudo-terminal (removed on exit). An existing path is "
                    "refused unless --force, which replaces only a symlink or a regular file.")
-@click.option("--force", is_flag=True, help="Let --link replace an existing symlink or regular file.")
+@force_option("Let --link replace an existing symlink or regular file.")
 @quiet_option
 def command(scene: str | None, log_path: Path | None, seed: int, duration: float | None, baud: str, angle: str,
             resolution: str, units: str, indices: bool, fault_spec: str | None, link: Path | None,

@@ -7,15 +7,14 @@ from pathlib import Path
 
 import click
 
-from ..progress import quiet_option
+from .options import force_option, output_option, quiet_option
 
 FORMATS = ("csv", "ndjson", "parquet")   # as datmo_cli.export.FORMATS, which imports numpy
 
 
 @click.command(name="export")
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, allow_dash=True, path_type=Path),
-              help="The table to write; '-' writes CSV or NDJSON to stdout.")
+@output_option("The table to write; '-' writes CSV or NDJSON to stdout.", dash=True)
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default=None,
               help="csv, ndjson (one JSON object a line) or parquet (needs pip install 'datmo[parquet]') "
                    "[default: from OUT's suffix .csv, .ndjson/.jsonl, .parquet/.pq; csv for '-'].")
@@ -28,7 +27,7 @@ FORMATS = ("csv", "ndjson", "parquet")   # as datmo_cli.export.FORMATS, which im
                    "a beam hits them), sensor frame, m. One FILE.")
 @click.option("--include-occluded", is_flag=True,
               help="With --ground-truth: also the targets no beam hits (what evaluate --include-occluded scores).")
-@click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
+@force_option()
 @quiet_option
 def command(files: tuple[Path, ...], output: Path, fmt: str | None, features: bool, ground_truth: bool,
             include_occluded: bool, force: bool) -> None:

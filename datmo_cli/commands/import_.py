@@ -9,14 +9,13 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS, laser_pose_option, option
-from .options import no_stdout, quiet_option
+from .options import force_option, output_option, quiet_option
 
 
 @click.command(name="import")
 @click.argument("src", type=click.Path(path_type=Path))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              callback=no_stdout(), help="The log to write (MCAP with /scan and, when the source has poses, /odom).")
-@click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
+@output_option("The log to write (MCAP with /scan and, when the source has poses, /odom).")
+@force_option()
 @click.option("--topic", default=None,
               help="The scan stream to take when there are several: a LaserScan topic of a bag or MCAP, "
                    "or a CARMEN message name (FLASER, RLASER, RAWLASER1-4, ROBOTLASER1).")

@@ -1,18 +1,22 @@
-"""Click options shared by several commands: --quiet, --config/--no-config, refusing `-o -` for logs."""
+"""Click options shared by the commands: -o/--output, --force, --config/--no-config with the parameter options
+built from the configuration's fields, --quiet, the bag inputs' --topic and --odom-topic."""
 
 from __future__ import annotations
 
 import functools
 from collections.abc import Callable
+from dataclasses import fields
 from pathlib import Path
 
 import click
 
 from ..progress import quiet_option
 
-__all__ = ["config_options", "input_options", "no_stdout", "quiet_option"]
+__all__ = ["config_options", "force_option", "input_options", "no_stdout", "output_option", "param_option",
+           "param_pair_option", "quiet_option"]
 
 STDOUT = "-"
+OPTIONS_KEY = "datmo.param_options"   # in the Click context's meta: section -> key -> value given as an option
 
 
 def no_stdout(what: str = "an MCAP log", give: str = "a file name") -> Callable:
@@ -26,21 +30,103 @@ def no_stdout(what: str = "an MCAP log", give: str = "a file name") -> Callable:
     return callback
 
 
-def config_options(help: str) -> Callable:
-    """`--config FILE` (help: `help`) and `--no-config`; the command receives `config`, the file to use:
-    --config, else ./datmo.toml when present (said on stderr), else None (config.effective_path)."""
+def output_option(help: str, *decls: str, dash: bool = False, file: bool = True, **kwargs) -> Callable:
+    """`-o/--output PATH` (or `decls`; help: `help`), required unless a default is given; `-` (stdout) refused
+    (no_stdout) unless `dash`; `file`: a file, not a folder. `kwargs` go to click.option (e.g. type=str for
+    an fsspec URL, callback=no_stdout(what, give) for another refusal, default=STDOUT)."""
+    kwargs.setdefault("required", "default" not in kwargs)
+    if not dash:
+        kwargs.setdefault("callback", no_stdout())
+    kwargs.setdefault("type", click.Path(dir_okay=not file, allow_dash=dash, path_type=Path))
+    return click.option(*(decls or ("-o", "--output")), help=help, **kwargs)
+
+
+def force_option(help: str = "Overwrite the output if it exists.") -> Callable:
+    """`--force` (help: `help`)."""
+    return click.option("--force", is_flag=True, help=help)
+
+
+def config_options(help: str, *, path: bool = False) -> Callable:
+    """`--config FILE` (help: `help`) and `--no-config`; the command receives `cfg`, the DatmoConfig it runs
+    with: the defaults, overridden by --config (else ./datmo.toml when present, said on stderr; see
+    config.effective_path), overridden by the parameter options given (param_option); with `path`, also
+    `config`, the file read (None: none)."""
     def decorate(f: Callable) -> Callable:
         @functools.wraps(f)
         def wrapper(*args, config: Path | None = None, no_config: bool = False, **kwargs):
-            from ..config import effective_path
+            from .. import config as configuration
 
-            return f(*args, config=effective_path(config, no_config), **kwargs)
+            ctx = click.get_current_context()
+            file = configuration.effective_path(config, no_config)
+            cfg = configuration.load(file, ctx.meta.get(OPTIONS_KEY))
+            return f(*args, cfg=cfg, **({"config": file} if path else {}), **kwargs)
 
         wrapper = click.option("--no-config", is_flag=True,
                                help="Ignore ./datmo.toml: defaults and options only.")(wrapper)
         return click.option("--config", type=click.Path(dir_okay=False, path_type=Path), default=None,
                             help=f"{help} [default: ./datmo.toml when present]")(wrapper)
     return decorate
+
+
+def _field(key: str):
+    """The section and the dataclass field of 'section.key' (e.g. 'track.gate')."""
+    from ..config import SECTIONS
+
+    section, _, name = key.partition(".")
+    by_name = {f.name: f for f in fields(SECTIONS[section])}
+    return section, by_name[name]
+
+
+def _keep(*keys: str) -> Callable:
+    """An option callback keeping its value (a tuple for several keys) for config_options, not for the
+    command's parameters."""
+    def callback(ctx: click.Context, _param: click.Parameter, value) -> None:
+        if value is None:
+            return
+        for key, v in zip(keys, value if len(keys) > 1 else (value,), strict=True):
+            section, f = _field(key)
+            ctx.meta.setdefault(OPTIONS_KEY, {}).setdefault(section, {})[f.name] = v
+    return callback
+
+
+def _default(value: object) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def param_option(key: str, *decls: str, help: str | None = None) -> Callable:
+    """The option setting configuration parameter `key` ('section.name', e.g. 'track.gate'), built from its
+    field: `--name` (or `decls`), its type from the field's Bound (or choices), its help the field's help (or
+    `help`) with the default and the range. The value goes to the DatmoConfig config_options makes (the
+    command gets `cfg`, not the option), overriding the config file."""
+    from ..bounds import Bounded
+
+    _, f = _field(key)
+    meta = f.metadata
+    decls = decls or (f"--{f.name.replace('_', '-')}",)
+    text = f"{(help or meta['help']).rstrip('.')} [default: {_default(f.default)}]"
+    if meta["bound"] is not None:
+        kind, text = Bounded(meta["bound"]), f"{text}. Range: {meta['bound'].describe()}."
+    elif meta["choices"]:
+        kind, text = click.Choice(meta["choices"]), f"{text}."
+    else:
+        kind, text = str, f"{text}."
+    extra = {"metavar": "MODEL"} if f.name == "leg_model" else {}
+    return click.option(*decls, f.name, type=kind, default=None, expose_value=False, callback=_keep(key),
+                        help=text, **extra)
+
+
+def param_pair_option(decl: str, first: str, second: str, names: tuple[str, str], help: str) -> Callable:
+    """One option setting two numeric parameters (e.g. --circle-radius MIN MAX: features.circle_radius_min and
+    features.circle_radius_max), each within its field's Bound; help: `help` with both defaults and ranges."""
+    from ..bounds import Bounded
+
+    (_, a), (_, b) = _field(first), _field(second)
+    bounds = (a.metadata["bound"], b.metadata["bound"])
+    ranges = ", ".join(f"{n} {bd.describe()}" for n, bd in zip(names, bounds, strict=True))
+    return click.option(decl, type=click.Tuple([Bounded(bounds[0]), Bounded(bounds[1])]), metavar=" ".join(names),
+                        default=None, expose_value=False, callback=_keep(first, second),
+                        help=f"{help.rstrip('.')} [default: {_default(a.default)} {_default(b.default)}]. "
+                             f"Range: {ranges}.")
 
 
 def input_options(f: Callable) -> Callable:

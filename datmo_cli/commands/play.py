@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from ..bounds import OPTIONS, option
 from .options import config_options, quiet_option
+
+if TYPE_CHECKING:
+    from ..config import DatmoConfig
 
 
 def host_option(*decls: str, help_: str = "Address to serve on (0.0.0.0: every interface).") -> click.decorators.FC:
@@ -26,7 +30,7 @@ def host_option(*decls: str, help_: str = "Address to serve on (0.0.0.0: every i
               help="Start playing when a client subscribes to a channel (else at once).")
 @config_options("TOML file with [features] and [track] tables, for a log that is processed on the fly.")
 @quiet_option
-def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bool, config: Path | None) -> None:
+def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bool, cfg: DatmoConfig) -> None:
     """Serve a log to Foxglove (WebSocket, foxglove-sdk) at the log's rate: the scan, features, tracks,
     markers and transforms, every channel with its ROS 2 schema.
 
@@ -44,7 +48,7 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
 
     server = live.LiveServer(host, port)   # the package and the port are checked before the log is read
     try:
-        params = _params(config)
+        params = {"features": cfg.features, "track": cfg.track}
         source = live.LogSource(input, params)
         source.declare(server)
         what = "as it is" if source.processed else "segmented, features and tracks made on the fly"
@@ -64,12 +68,3 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
     finally:
         server.close()
 
-
-def _params(config: Path | None) -> dict | None:
-    """The [features] and [track] parameters of `config` (None: the defaults)."""
-    if config is None:
-        return None
-    from ..perception.params import load_toml as load_features
-    from ..tracking.params import load_toml
-
-    return {"track": load_toml(config), "features": load_features(config)}

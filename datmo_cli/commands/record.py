@@ -20,7 +20,7 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS, laser_pose_option, option
-from .options import no_stdout, quiet_option
+from .options import force_option, output_option, quiet_option
 
 
 def _panel(scans: int, elapsed: float, stats, port: str, baud: int):
@@ -116,8 +116,7 @@ class _Signals:
 @click.command(name="record")
 @click.option("--port", required=True, metavar="PORT",
               help="Serial device of the LMS200 (e.g. /dev/ttyUSB0, or the path `datmo emulate` prints).")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              callback=no_stdout(), help="The log to write (MCAP).")
+@output_option("The log to write (MCAP).")
 @click.option("--baud", type=click.Choice(["9600", "19200", "38400", "500000"]), default="38400", show_default=True,
               help="Baud to record at; the device's current baud is found automatically. 500000 needs RS-422.")
 @click.option("--angle", type=click.Choice(["180", "100"]), default="180", show_default=True,
@@ -134,7 +133,7 @@ class _Signals:
 @click.option("--interlaced", is_flag=True,
               help="Interlaced output (20 2A): partial scans merged into complete ones by the host.")
 @click.option("--raw", is_flag=True, help="Also store every telegram's bytes on /lms2xx/telegram.")
-@click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
+@force_option()
 @click.option("--live", is_flag=True, help="Also serve the scans, features, tracks and markers to Foxglove while "
               "recording (WebSocket; needs pip install 'datmo[live]'); the URL to open is printed.")
 @click.option("--live-host", default="127.0.0.1", show_default=True, metavar="HOST",

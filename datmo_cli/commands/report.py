@@ -7,8 +7,8 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS, option
-from ..progress import quiet_option
 from ..report import FORMATS, SORT_KEYS
+from .options import force_option, quiet_option
 
 PLOT_KINDS = ("auto", "top", "counts", "speeds", "all")
 
@@ -81,7 +81,7 @@ def _scan_counts(files: list[Path]) -> list[int]:
               help="top: the run from above; counts: confirmed tracks per class over time; speeds: the moving "
                    "tracks' speeds over time; all: the three side by side; auto: all when something moves, "
                    "else top.")
-@click.option("--force", is_flag=True, help="Overwrite existing plots.")
+@force_option("Overwrite existing plots.")
 @quiet_option
 def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, track_table: bool, all_tracks: bool,
             plot: Path | None, plot_kind: str, force: bool) -> None:

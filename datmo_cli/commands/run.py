@@ -3,12 +3,24 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from ..bounds import OPTIONS, option
 from ..report import FORMATS, SORT_KEYS
-from .options import config_options, input_options, no_stdout, quiet_option
+from .options import (
+    config_options,
+    force_option,
+    input_options,
+    no_stdout,
+    output_option,
+    param_option,
+    quiet_option,
+)
+
+if TYPE_CHECKING:
+    from ..config import DatmoConfig
 
 
 def _scan_count(spec: str) -> int | None:
@@ -63,23 +75,12 @@ class _BatchProgress:
                 + (f"  {self.failed} failed" if self.failed else ""))
         self.bar.update(scans, self._total(), info=info)
 
-    def _tell(self, line: str) -> None:
-        """A line a task said (its bag's conversion, a warning), above the bar when one is drawn."""
-        from ..progress import say
-
-        if self.bar.shown:     # a worker's own print would tear the bar's line
-            self.bar.progress.console.print(line, markup=False, highlight=False, soft_wrap=True)
-        elif line.startswith("datmo: warning"):
-            click.echo(line, err=True)
-        else:
-            say(line)
-
     def record(self, rec: dict) -> None:
         from ..batch import DONE, FAILED
 
         if rec["status"] == DONE:
             for line in rec.get("notes") or ():
-                self._tell(line)
+                self.bar.tell(line)
         i = self.index.get(rec["input"], -1)
         done = self.running.pop(i, 0)
         if rec["status"] == DONE:
@@ -100,9 +101,9 @@ class _BatchProgress:
 
 @click.command(name="run")
 @click.argument("inputs", nargs=-1, required=True)
-@click.option("-o", "--output-dir", "out_dir", required=True, callback=no_stdout("outputs", "a folder"),
-              help="Folder (or fsspec URL) for the outputs: OUT_DIR/NAME.mcap per input file, the relative path "
-                   "for logs found in a folder; and OUT_DIR/manifest.jsonl, the batch's ledger (created if missing).")
+@output_option("Folder (or fsspec URL) for the outputs: OUT_DIR/NAME.mcap per input file, the relative path "
+               "for logs found in a folder; and OUT_DIR/manifest.jsonl, the batch's ledger (created if missing).",
+               "-o", "--output-dir", "out_dir", type=str, callback=no_stdout("outputs", "a folder"))
 @option("-j", "--jobs", bound=OPTIONS["jobs"], default=None,
         help="Inputs processed at once, in separate processes on this machine [default: all cores].")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
@@ -110,7 +111,7 @@ class _BatchProgress:
                    "worker processes started for the run (local[:N]). Needs pip install 'datmo[dask]'.")
 @option("--retries", bound=OPTIONS["retries"], default=2, show_default=True,
         help="With --scheduler: times a task is retried after an unexpected error or the death of its worker.")
-@click.option("--force", is_flag=True, help="Redo every input and overwrite existing outputs (and plots); without it "
+@force_option("Redo every input and overwrite existing outputs (and plots); without it "
               "inputs the manifest lists as done with the same input and parameters are skipped.")
 @config_options("TOML file of parameters: its [features] table as for datmo features, its [track] table as "
                 "for datmo track.")
@@ -126,12 +127,8 @@ class _BatchProgress:
 @click.option("--no-report", is_flag=True, help="Do not print the report.")
 @click.option("--no-markers", is_flag=True,
               help="Do not write /datmo/markers/* (Foxglove drawings): smaller outputs for batches never viewed.")
-@click.option("--ego-motion", type=click.Choice(["auto", "on", "off"]), default=None,
-              help="For logs without /odom: track in poses estimated by scan matching (written to /odom, frame "
-                   "scan_odom) when the scanner moves ('auto'), always ('on') or never ('off') [default: auto].")
-@click.option("--leg-model", default=None, metavar="MODEL",
-              help="Leg detector: 'default' (the model shipped with datmo), a model file from datmo train-legs, "
-                   "or 'paper' (the paper's circle rule and walking pattern) [default: default].")
+@param_option("track.ego_motion")
+@param_option("features.leg_model")
 @option("--threads", bound=OPTIONS["threads"], default=None,
         help="Threads for each input's per-scan perception (segmentation, features, leg detector) [default: "
              "all cores; one in each of several local jobs at once, and in each task on a Dask worker]; the "
@@ -139,9 +136,9 @@ class _BatchProgress:
 @input_options
 @quiet_option
 def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: str | None, retries: int,
-            force: bool, config: Path | None, plot: bool, bag_dir: bool, fmt: str, top: int | None, sort: str,
+            force: bool, cfg: DatmoConfig, plot: bool, bag_dir: bool, fmt: str, top: int | None, sort: str,
             no_report: bool,
-            no_markers: bool, ego_motion: str | None, leg_model: str | None, threads: int | None,
+            no_markers: bool, threads: int | None,
             topic: str | None, odom_topic: str | None) -> None:
     """Segment, extract features and track each input in one pass, then print the report.
 
@@ -181,7 +178,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         raise DatmoError(f"{out_dir}: --plot needs a local output folder")
     if bag_dir and remote(out_dir):
         raise DatmoError(f"{out_dir}: --bag-dir needs a local output folder")
-    params = _params(config, leg_model, ego_motion)
+    params = _params(cfg)
     if topic is not None:
         params["topic"] = topic
     if odom_topic is not None:
@@ -234,20 +231,12 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         raise SystemExit(1)  # the one error is printed above
 
 
-def _params(config: Path | None, leg_model: str | None, ego_motion: str | None) -> dict:
-    """The features and track parameters of a run: TOML file, then options; a bad leg model is one error."""
+def _params(cfg: DatmoConfig) -> dict:
+    """The features and track parameters of a run, as the batch takes them; a bad leg model is one error."""
     from ..perception.legs import load_leg_model
-    from ..perception.params import FeatureParams
-    from ..perception.params import load_toml as load_features
-    from ..tracking.params import TrackingParams
-    from ..tracking.params import load_toml as load_track
 
-    params = {"features": load_features(config) if config is not None else FeatureParams(),
-              "track": load_track(config) if config is not None else TrackingParams()}
-    params["features"] = params["features"].replace(leg_model=leg_model)
-    params["track"] = params["track"].replace(ego_motion=ego_motion)
-    load_leg_model(params["features"].leg_model)
-    return params
+    load_leg_model(cfg.features.leg_model)
+    return {"features": cfg.features, "track": cfg.track}
 
 
 FINAL_ROWS = 50

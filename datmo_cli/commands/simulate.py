@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS, laser_pose_option, option
-from .options import no_stdout, quiet_option
+from .options import force_option, output_option, quiet_option
 
 SCENE_HELP = "Built-in scene name (hall, corridor, crowd, static, patrol) or the path of a .toml scene file."
 
@@ -25,9 +25,8 @@ def _list_scenes(ctx: click.Context, _param: click.Parameter, value: bool) -> No
 
 @click.command(name="simulate")
 @click.option("--scene", metavar="NAME|PATH", default="hall", show_default=True, help=SCENE_HELP)
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              callback=no_stdout(), help="The log to write (MCAP).")
-@click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
+@output_option("The log to write (MCAP).")
+@force_option()
 @option("--seed", bound=OPTIONS["seed"], default=0, show_default=True,
         help="Random seed (crowd paths, range noise); a seed always gives the same file.")
 @option("--duration", bound=OPTIONS["sim_duration"], default=None,

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .options import no_stdout, quiet_option
+from .options import force_option, no_stdout, output_option, quiet_option
 
 LABELS_TOPIC = "/leg_cluster_positions"
 _MANY = ("--positive", "--negative")
@@ -72,9 +72,8 @@ def print_figures(held_out: list, mean: dict, console) -> None:
 @click.option("--topic", default=None, help="The LaserScan topic of the labelled files [default: the only one].")
 @click.option("--labels-topic", default=LABELS_TOPIC, show_default=True,
               help="The geometry_msgs/PoseArray topic of the labelled legs.")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              callback=no_stdout("a model"), help="The model to write (.npz).")
-@click.option("--force", is_flag=True, help="Overwrite the output if it exists.")
+@output_option("The model to write (.npz).", callback=no_stdout("a model"))
+@force_option()
 @click.option("--with-simulated", is_flag=True,
               help="Also train on simulated LMS200 recordings with exact leg positions (datmo's simulator; never "
                    "held out): for scanners like the LMS200 (0.5°-1° steps, legs to 8 m). The shipped model uses it.")

@@ -112,7 +112,7 @@ def circle_detections(circles: np.ndarray, scan: np.ndarray, lines: np.ndarray, 
                       ranges: np.ndarray, limits: tuple[float, float], p: FeatureParams) -> np.ndarray:
     """Column candidates (free-standing circles larger than a leg) and benches (two such supports with a
     line between them, near their axis and along it), sensor frame."""
-    big = np.flatnonzero(circles["radius"] > p.leg_radius_max)
+    big = np.flatnonzero(circles["radius"] > p.column_radius_min)
     g = seg_offsets[scan[big]] + circles["segment"][big].astype(np.int64)
     big = big[free_standing(scan[big], seg_start[g].astype(np.int64), seg_end[g].astype(np.int64), ranges, p.c0,
                                    limits)]
@@ -502,7 +502,7 @@ class LandmarkStream:
         snap_idx, snap_vals = np.zeros(cap, np.int64), np.zeros((cap, 6))
         snap_last, snap_count = np.zeros(cap, np.int64), np.zeros(nb, np.int64)
         ns = accumulate(det, stamps, self.scans, p.landmark_match, p.landmark_min_count, p.column_max_drift,
-                        p.column_min_time * 1e9, 10, p.leg_radius_max, self.db, self.first_ns, self.last_ns,
+                        p.column_min_time * 1e9, 10, p.column_radius_min, self.db, self.first_ns, self.last_ns,
                         self.live, self.confirmed, self.counters, snap_idx, snap_vals, snap_last, snap_count)
         self.scans += nb
         return landmark_elements(self.db, self.first_ns, snap_idx[:ns], snap_vals[:ns], snap_last[:ns]), snap_count

@@ -1,107 +1,128 @@
-"""Tracking and classification parameters (method.md §6): one dataclass with the defaults, and TOML loading.
+"""Tracking and classification parameters (method.md §6): the `[track]` section, each field declared with its
+default, range and help.
 
 Units: metres, seconds, m/s. Every constant of the tracker is here, none is a literal in the code.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
-from pathlib import Path
+from dataclasses import dataclass
+from typing import ClassVar
 
-from ..bounds import TRACK, check, track_combined
-from ..errors import ConfigError
+import numpy as np
+
+from ..bounds import D_MAX, Section, param, track_combined
+from ..bounds import bound as _b
+from .state import P_TAIL_LENGTH, PARAM_NAMES
+
+_SHARE = "a share"
+_NO_SENSE = "beyond any scanner's reach"
+_HOUR = "an hour: longer waits are no tracking"
+_ACCELERATION = "√1000 ≈ 32 m/s² of acceleration noise is beyond any walker or vehicle"
+_SIGMA = "sigmas of metres are no measurement"
+_P = "a probability"
 
 
 @dataclass(frozen=True)
-class TrackingParams:
-    """Parameters of `datmo track` (the `[track]` table of a config file)."""
+class TrackingParams(Section):
+    """The `[track]` table of a config file: parameters of `datmo track`."""
+
+    name: ClassVar[str] = "track"
 
     # Kalman filter: constant velocity, white-noise acceleration (Kohler 1997)
-    process_noise: float = 2.0          # acceleration spectral density q, (m/s^2)^2 per Hz
-    person_process_noise: float = 4.0   # q of tracks fed mostly by legs (people start and stop sharply)
-    measurement_noise: float = 0.05     # sigma of a model-centre measurement, m
-    leg_measurement_noise: float = 0.2  # sigma when one leg stands for a person's centre, m
-    initial_speed_sigma: float = 1.0    # sigma of the velocity of a new track, m/s
+    process_noise: float = param(2.0, _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
+                                 "White-noise acceleration variance q (spectral density).")
+    person_process_noise: float = param(4.0, _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
+                                        "q of tracks fed mostly by legs (people start and stop sharply).")
+    measurement_noise: float = param(0.05, _b(0, 10, "m", _SIGMA, open_=True), "Sigma of a measured model centre.")
+    leg_measurement_noise: float = param(0.2, _b(0, 10, "m", _SIGMA, open_=True),
+                                         "Sigma when one leg stands for a person's centre.")
+    initial_speed_sigma: float = param(1.0, _b(0, 100, "m/s"), "Sigma of the velocity of a new track.")
     # association
-    gate: float = 13.8                  # Mahalanobis distance squared (chi2, 2 dof, 99.9 %)
-    max_gate_distance: float = 1.5      # m; no match farther than this whatever the covariance
+    gate: float = param(13.8, _b(0, 1000, "", "chi² with 2 dof; 1000 already passes anything", open_=True),
+                        "Gate on the squared Mahalanobis distance (13.8: chi² 2 dof 99.9 %).")
+    max_gate_distance: float = param(1.5, _b(0, 100, "m", _NO_SENSE),
+                                     "No match farther than this whatever the covariance.")
     # life cycle
-    confirm_hits: int = 3               # M hits ...
-    confirm_window: int = 5             # ... in the last N scans confirm a track (M >= 2)
-    delete_after: float = 0.8           # s without a hit while it should have been seen
-    delete_after_occluded: float = 8.0  # s without a hit while occluded or out of view
-    reacquire_speed: float = 1.5        # m/s; a lost occluded track may take a measurement it could reach
-    reacquire_distance: float = 4.0     # m; ... but none farther than this from where it was last seen
-    occlusion_margin: float = 0.3       # m; a return this much nearer than a track hides it
-    tentative_delete_after: float = 0.5  # s without a hit for a track never confirmed
+    confirm_hits: int = param(3, _b(2, 16, "scans", "no track confirmed from one scan; 16 bits of history",
+                                    integer=True), "M: a track is confirmed after M hits ...")
+    confirm_window: int = param(5, _b(2, 16, "scans", "16 bits of hit history", integer=True),
+                                "... N: in its last N scans.")
+    delete_after: float = param(0.8, _b(0, 3600, "s", _HOUR),
+                                "Seconds a confirmed track lives unseen when it should be seen.")
+    delete_after_occluded: float = param(8.0, _b(0, 3600, "s", _HOUR),
+                                         "Seconds a confirmed track lives unseen while occluded or out of view.")
+    reacquire_speed: float = param(1.5, _b(0, 50, "m/s"),
+                                   "A lost occluded track may take a measurement it could reach at this speed ...")
+    reacquire_distance: float = param(4.0, _b(0, 100, "m", _NO_SENSE),
+                                      "... but none farther than this from where it was last seen.")
+    occlusion_margin: float = param(0.3, _b(0, 10, "m"), "A return this much nearer than a track hides it.")
+    tentative_delete_after: float = param(0.5, _b(0, 3600, "s", _HOUR),
+                                          "Seconds a track never confirmed lives unseen.")
     # classification (method.md §6)
-    d_max: float = 1.5                  # segments larger than this are static, m
-    undefined_window: float = 1.0       # s a small circle or blob stays undefined (X)
-    moving_distance: float = 0.5        # m from its first position before a track can be dynamic
-    moving_speed: float = 0.2           # m/s, filtered speed above which a track is moving
-    moving_time: float = 1.0            # s of moving at consecutive hits before a track is dynamic
+    d_max: float = param(1.5, D_MAX, "Objects larger than this are static: the paper's d_max, one parameter "
+                                     "whose home is [features] d_max.", same_as="features.d_max")
+    undefined_window: float = param(1.0, _b(0, 3600, "s", _HOUR), "Seconds a small circle or blob stays undefined.")
+    moving_distance: float = param(0.5, _b(0, 100, "m", _NO_SENSE),
+                                   "Distance from its first position before a track can be dynamic.")
+    moving_speed: float = param(0.2, _b(0, 50, "m/s"), "Filtered speed above which a track is moving.")
+    moving_time: float = param(1.0, _b(0, 3600, "s", _HOUR),
+                               "Seconds of moving at consecutive hits before a track is dynamic.")
     # people
-    leg_radius_max: float = 0.2         # circles up to this radius may be legs, m
-    leg_blob_max: float = 0.35          # blobs up to this size may be legs, m
-    stride_max: float = 0.9             # legs farther apart than this are not one person, m
-    leg_reach: float = 0.6              # a person track takes legs this near its predicted centre, m
-    leg_beside: float = 0.55            # a lone leg this near a person track just seen is its other leg, m
-    spawn_clearance: float = 0.2        # no new track this near an existing one, m
-    step_min: float = 0.1               # legs must each lead by this much to show the walking pattern, m
-    walking_after: float = 0.4          # s of moving before the legs' alternation counts as walking
-    step_max: float = 1.0               # an along-track leg separation above 2 l sin(theta) bound, m
-    merge_distance: float = 0.55        # two leg or person tracks nearer than this are one, m ...
-    merge_speed: float = 0.5            # ... when one is tentative or their velocities differ less, m/s
-    person_votes: float = 0.5           # share of a track's hits that were leg measurements for a person
+    leg_radius_max: float = param(0.2, _b(0, 2, "m"), "Circles up to this radius may be legs.")
+    leg_blob_max: float = param(0.35, _b(0, 2, "m"), "Blobs up to this size may be legs.")
+    stride_max: float = param(0.9, _b(0, 5, "m"), "Legs farther apart than this are not one person.")
+    leg_reach: float = param(0.6, _b(0, 5, "m"), "A person track takes legs this near its predicted centre.")
+    leg_beside: float = param(0.55, _b(0, 5, "m"), "A lone leg this near a person track just seen is its other leg.")
+    spawn_clearance: float = param(0.2, _b(0, 10, "m"), "No new track this near an existing one.")
+    step_min: float = param(0.1, _b(0, 5, "m"), "Legs must each lead by this much to show the walking pattern.")
+    walking_after: float = param(0.4, _b(0, 3600, "s", _HOUR),
+                                 "Seconds of moving before the legs' alternation counts as walking.")
+    step_max: float = param(1.0, _b(0, 5, "m"), "Bound of an along-track leg separation, above 2 l sin(theta).")
+    merge_distance: float = param(0.55, _b(0, 10, "m"), "Two leg or person tracks nearer than this are one ...")
+    merge_speed: float = param(0.5, _b(0, 50, "m/s"),
+                               "... when one is tentative or their velocities differ less than this.")
+    person_votes: float = param(0.5, _b(0, 1, "", _SHARE),
+                                "Share of a track's hits that were leg measurements for a person.")
     # people with a leg detector: leg_score follows the leg probability of a track's recent hits
-    leg_probability: float = 0.5        # segments the detector gives at least this are legs (paired into people)
-    leg_evidence_rate: float = 0.25     # weight of each new hit in the running mean (about 1/rate hits remembered)
-    person_evidence: float = 0.6        # a track is a person while that running leg probability is at least this
-    moving_person_evidence: float = 0.35  # ... or this, once it is dynamic (clutter that passes for legs stays put)
-    person_pairs: int = 3               # a person not dynamic has been seen with two legs this many times
-    moving_person_pairs: int = 1        # ... and a dynamic one
-    carried_travel: float = 1.0         # m; a track the sensor has carried this far ...
-    carried_radius: float = 0.1         # m; ... moving in the sensor frame less than this (running mean) is no person
+    leg_probability: float = param(0.5, _b(0, 1, "", _P),
+                                   "Segments the detector gives at least this are legs (paired into people).")
+    leg_evidence_rate: float = param(0.25, _b(0, 1, "", "a share; 0 would never learn", open_=True),
+                                     "Weight of each new hit in the running mean (about 1/rate hits remembered).")
+    person_evidence: float = param(0.6, _b(0, 1, "", _P),
+                                   "A track is a person while that running leg probability is at least this ...")
+    moving_person_evidence: float = param(0.35, _b(0, 1, "", _P),
+                                          "... or this, once it is dynamic (clutter that passes for legs stays put).")
+    person_pairs: int = param(3, _b(0, 1_000_000, "scans", integer=True),
+                              "A person not dynamic has been seen with two legs this many times ...")
+    moving_person_pairs: int = param(1, _b(0, 1_000_000, "scans", integer=True), "... and a dynamic one this many.")
+    carried_travel: float = param(1.0, _b(0, 1000, "m"), "A track the sensor has carried this far ...")
+    carried_radius: float = param(0.1, _b(0, 10, "m"),
+                                  "... moving in the sensor frame less than this (running mean) is no person.")
     # background: a grid of how long each place was hit by a return (tracking frame); a leg candidate on a place
     # occupied for long (a wall, a bench, a column) is not a leg (real perception finds leg-sized pieces there)
-    background_time: float = 3.0        # s a place must have been hit, never seen through, to be background; 0: off
-    background_cell: float = 0.1        # m, grid cell
-    background_extent: float = 40.0     # m, the grid spans this much either side of the first sensor pose
+    background_time: float = param(3.0, _b(0, 3600, "s", "0 turns the background off"),
+                                   "Seconds a place must have been hit, never seen through, to be background "
+                                   "(0: no background).")
+    background_cell: float = param(0.1, _b(0.05, 10, "m", "finer cells only grow the grid"), "Background grid cell.")
+    background_extent: float = param(40.0, _b(0, 100, "m", "the grid's memory grows with its square", open_=True),
+                                     "The background grid spans this much either side of the first sensor pose.")
     # a log without odometry whose scanner moves: track in poses estimated from the scans (scan matching)
-    ego_motion: str = "auto"            # "auto": when the scenery changes and the estimate moves; "on"; "off"
+    ego_motion: str = param("auto", choices=("auto", "on", "off"),
+                            help="For a log without /odom: track in poses estimated by scan matching (written to "
+                                 "/odom, frame scan_odom) when the scanner moves ('auto'), always ('on') or never "
+                                 "('off').")
     # output
-    tail_length: int = 20               # trajectory points in each track's marker tail
+    tail_length: int = param(20, _b(0, 10_000, "points", "each track holds its tail", integer=True),
+                             "Trajectory points in each track's marker tail.")
 
-    def to_dict(self) -> dict:
-        return asdict(self)
+    @classmethod
+    def combined(cls, params: TrackingParams, where: str) -> None:
+        track_combined(params, where)
 
-    def replace(self, **changes) -> TrackingParams:
-        """A copy with `changes` (keys checked; None values ignored)."""
-        changes = {k: v for k, v in changes.items() if v is not None}
-        return from_dict({**self.to_dict(), **changes})
-
-
-def from_dict(values: dict, where: str = "track") -> TrackingParams:
-    """TrackingParams from a mapping, checking names, types and ranges (bounds.TRACK); ConfigError names the
-    key, the value and the allowed range."""
-    known = {f.name for f in fields(TrackingParams)}
-    out = {}
-    for key, value in values.items():
-        if key not in known:
-            raise ConfigError(f"{where}.{key}: unknown parameter (known: {', '.join(sorted(known))})")
-        if key == "ego_motion":
-            if value not in ("auto", "on", "off"):
-                raise ConfigError(f"{where}.{key}: one of auto, on, off; got {value!r}")
-            out[key] = value
-        else:
-            out[key] = check(TRACK[key], value, f"{where}.{key}")
-    params = TrackingParams(**out)
-    track_combined(params, where)
-    return params
-
-
-def load_toml(path: str | Path) -> TrackingParams:
-    """Parameters from the `[track]` table of a TOML file (or its top level when it has no such table)."""
-    from ..config import read_table
-
-    return from_dict(read_table(path, "track"), where=f"{path}: track")
+    def kernel_vector(self) -> np.ndarray:
+        """The parameters as the tracking kernels read them: one float64 vector indexed by state.P_* (in the
+        order of state.PARAM_NAMES; units as the fields; tail_length at least 1)."""
+        out = np.array([float(getattr(self, name)) for name in PARAM_NAMES], np.float64)
+        out[P_TAIL_LENGTH] = max(self.tail_length, 1)
+        return out

@@ -9,7 +9,8 @@ scanner, or the world frame when the steps are given poses), m and m/s; P is the
 When a scan spawns more tracks than the table holds, the compiled step returns a table of twice the
 capacity (growth policy: doubling; rows are never dropped).
 
-Parameters: TrackingParams as one float64 vector (`param_vector`), indexed by the P_* constants.
+Parameters: TrackingParams as one float64 vector (TrackingParams.kernel_vector, in the order of PARAM_NAMES),
+indexed by the P_* constants.
 Context: the tracker's scalars between scans (last stamp, next id, background grid bookkeeping), one
 float64 vector indexed by the C_* constants.
 """
@@ -17,8 +18,6 @@ float64 vector indexed by the C_* constants.
 from __future__ import annotations
 
 import numpy as np
-
-from .params import TrackingParams
 
 # ------------------------------------------------------------------------------------------ track table
 ID = 0
@@ -55,15 +54,15 @@ N_FIXED = TAIL
  P_MOVING_PERSON_EVIDENCE, P_PERSON_PAIRS, P_MOVING_PERSON_PAIRS, P_CARRIED_TRAVEL, P_CARRIED_RADIUS,
  P_BACKGROUND_TIME, P_BACKGROUND_CELL, P_BACKGROUND_EXTENT, P_TAIL_LENGTH) = range(44)
 N_PARAMS = 44
-_PARAM_NAMES = ("process_noise", "person_process_noise", "measurement_noise", "leg_measurement_noise",
-                "initial_speed_sigma", "gate", "max_gate_distance", "confirm_hits", "confirm_window",
-                "delete_after", "delete_after_occluded", "reacquire_speed", "reacquire_distance",
-                "occlusion_margin", "tentative_delete_after", "d_max", "undefined_window", "moving_distance",
-                "moving_speed", "moving_time", "leg_radius_max", "leg_blob_max", "stride_max", "leg_reach",
-                "leg_beside", "spawn_clearance", "step_min", "walking_after", "step_max", "merge_distance",
-                "merge_speed", "person_votes", "leg_probability", "leg_evidence_rate", "person_evidence",
-                "moving_person_evidence", "person_pairs", "moving_person_pairs", "carried_travel",
-                "carried_radius", "background_time", "background_cell", "background_extent", "tail_length")
+PARAM_NAMES = ("process_noise", "person_process_noise", "measurement_noise", "leg_measurement_noise",
+               "initial_speed_sigma", "gate", "max_gate_distance", "confirm_hits", "confirm_window",
+               "delete_after", "delete_after_occluded", "reacquire_speed", "reacquire_distance",
+               "occlusion_margin", "tentative_delete_after", "d_max", "undefined_window", "moving_distance",
+               "moving_speed", "moving_time", "leg_radius_max", "leg_blob_max", "stride_max", "leg_reach",
+               "leg_beside", "spawn_clearance", "step_min", "walking_after", "step_max", "merge_distance",
+               "merge_speed", "person_votes", "leg_probability", "leg_evidence_rate", "person_evidence",
+               "moving_person_evidence", "person_pairs", "moving_person_pairs", "carried_travel",
+               "carried_radius", "background_time", "background_cell", "background_extent", "tail_length")
 
 # ------------------------------------------------------------------------------------------- context
 (C_HAS_STAMP, C_STAMP, C_NEXT_ID, C_BG_READY, C_BG_COUNT, C_BG_SCAN, C_BG_X0, C_BG_Y0, C_BG_LO, C_BG_HI,
@@ -71,13 +70,6 @@ _PARAM_NAMES = ("process_noise", "person_process_noise", "measurement_noise", "l
 N_CONTEXT = 16
 # C_BG_CACHED: the background's active cells carry their range and beam as seen from the sensor pose
 # (C_BG_PX, C_BG_PY, heading cos/sin C_BG_PC, C_BG_PS); a still sensor need not compute them again
-
-
-def param_vector(params: TrackingParams) -> np.ndarray:
-    """The float64 parameter vector of `params` (P_* indices; units as TrackingParams's)."""
-    out = np.array([float(getattr(params, name)) for name in _PARAM_NAMES], np.float64)
-    out[P_TAIL_LENGTH] = max(params.tail_length, 1)
-    return out
 
 
 def n_columns(tail_length: int) -> int:

@@ -132,7 +132,7 @@ class Tracker:
         self.tracks = state.TrackTable(self.params.tail_length)
         self.stamp_ns: int | None = None
         self.pose: np.ndarray | None = None
-        self._prm = state.param_vector(self.params)
+        self._prm = self.params.kernel_vector()
         self._ctx = state.new_context()
         self._t0: int | None = None   # ns of the first scan: the table's times count from it
         self._compat = _COMPAT_LEARNED if learned else _COMPAT
