@@ -28,7 +28,7 @@ def time_batch(inputs: list[str], executor, tmp: Path) -> tuple[float, int]:
 
     out = Path(tempfile.mkdtemp(dir=tmp))
     t0 = time.perf_counter()
-    records = batch.run(batch.prepare(inputs, str(out)), executor)
+    records = batch.run_many(batch.prepare(inputs, str(out)), executor)
     seconds = time.perf_counter() - t0
     bad = [r["error"] for r in records if r["status"] != batch.DONE]
     if bad:

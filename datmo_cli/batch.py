@@ -581,7 +581,7 @@ def _leftover(dst: str, src: str) -> bool:
 
 
 class Executor:
-    """Runs tasks somewhere; `run` calls `on_record(record)` in this process as each task finishes (in any
+    """Runs tasks somewhere; `run_many` calls `on_record(record)` in this process as each task finishes (in any
     order) and `on_scans(task_index, done, total)` when it can follow scans; Ctrl-C stops the workers'
     tasks (their partial outputs dropped) and is raised again."""
 
@@ -690,7 +690,7 @@ def _interrupt_deferred() -> Iterator[None]:
 _NOT_DEFERRING = _DEFERRING
 
 
-def run(batch: Batch, executor: Executor, *, on_record: Callable[[dict], None] | None = None,
+def run_many(batch: Batch, executor: Executor, *, on_record: Callable[[dict], None] | None = None,
         on_scans: Callable[[int, int, int], None] | None = None) -> list[dict]:
     """Run a prepared batch: skipped inputs' lines first, then each task's line as it finishes, all
     appended to the manifest. Returns this batch's lines in input order. Ctrl-C: the executor stops its

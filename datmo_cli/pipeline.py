@@ -2,7 +2,7 @@
 
 `RunStages` is `datmo run`'s one pass (segmentation, features, tracking) over each block of a streamed log;
 `track_file`, `features_file` and `segment_file` are the stage commands' passes, and `derive` runs the same
-stages on a run held in memory. They all write their channels through streaming.stream_log, so `datmo run`'s
+stages on a run held in memory. They all write their channels through streaming.write_derived, so `datmo run`'s
 output holds the same payloads as the three stages run one after another, without intermediate files.
 """
 
@@ -194,7 +194,7 @@ def process_file(src: str | Path, out: str | Path, *, force: bool = False, param
     from (`src` a temporary copy of a bag), which provenance hashes and names instead. With params["bag_dir"],
     `out` is the log file of a ROS 2 bag folder (log.bagdir.member_path), and the folder is written whole."""
     from .log import bagdir
-    from .streaming import BLOCK_SCANS, LogStream, stream_log
+    from .streaming import BLOCK_SCANS, LogStream, write_derived
 
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
@@ -202,10 +202,10 @@ def process_file(src: str | Path, out: str | Path, *, force: bool = False, param
     bag = bool((params or {}).get("bag_dir"))
     origin = Path(origin) if origin is not None else src
     with bagdir.output(Path(out).parent if bag else out, bag, force=force, inputs=[origin]) as dst:
-        return stream_log(stream, dst, command="run", params=stages.effective(), derived=stages.derived(),
-                          stage=stages, force=force, command_line=command_line,
-                          block_scans=block_scans or BLOCK_SCANS, progress=progress, input_name=input_name,
-                          origin=origin)
+        return write_derived(stream, dst, command="run", params=stages.effective(), derived=stages.derived(),
+                             stage=stages, force=force, command_line=command_line,
+                             block_scans=block_scans or BLOCK_SCANS, progress=progress, input_name=input_name,
+                             origin=origin)
 
 
 def features_leg_model(log) -> str:
@@ -236,7 +236,7 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, config=
     from .config import DatmoConfig
     from .perception.features import leg_model_provenance
     from .stages import TrackStream, decode_features
-    from .streaming import BLOCK_SCANS, LogStream, stream_log
+    from .streaming import BLOCK_SCANS, LogStream, write_derived
 
     config = config or DatmoConfig()
     params = config.track
@@ -275,9 +275,9 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, config=
             tracking = state["tracking"]
             return out | tracking.channels(tracking.block(run, decode_features(block.aligned[mcapio.TOPIC_FEATURES])))
 
-    scans = stream_log(stream, out, command="track", params=effective, derived=derived, stage=stage, force=force,
-                       command_line=command_line, aligned=() if computed else (mcapio.TOPIC_FEATURES,),
-                       block_scans=block_scans or BLOCK_SCANS, progress=progress)
+    scans = write_derived(stream, out, command="track", params=effective, derived=derived, stage=stage, force=force,
+                          command_line=command_line, aligned=() if computed else (mcapio.TOPIC_FEATURES,),
+                          block_scans=block_scans or BLOCK_SCANS, progress=progress)
     return scans, computed
 
 
@@ -305,7 +305,7 @@ def features_file(src: str | Path, out: str | Path, config=None, *, resegment: b
     provenance."""
     from .config import DatmoConfig
     from .perception.features import FeatureStream, decode_segments
-    from .streaming import BLOCK_SCANS, LogStream, stream_log
+    from .streaming import BLOCK_SCANS, LogStream, write_derived
 
     config = config or DatmoConfig()
     params = config.features
@@ -334,9 +334,9 @@ def features_file(src: str | Path, out: str | Path, config=None, *, resegment: b
 
     effective = {"features": params.to_dict(), "leg_model": leg_model_provenance(params.leg_model),
                  "config": config.to_dict()}
-    stream_log(stream, out, command="features", params=effective, derived=derived, stage=stage, force=force,
-               command_line=command_line, aligned=(mcapio.TOPIC_SEGMENTS,) if given else (),
-               block_scans=block_scans or BLOCK_SCANS, progress=progress)
+    write_derived(stream, out, command="features", params=effective, derived=derived, stage=stage, force=force,
+                  command_line=command_line, aligned=(mcapio.TOPIC_SEGMENTS,) if given else (),
+                  block_scans=block_scans or BLOCK_SCANS, progress=progress)
     return counts
 
 
@@ -348,13 +348,13 @@ def segment_file(src: str | Path, out: str | Path, config=None, *, force: bool =
     min_points used and the whole recorded in the provenance."""
     from .config import DatmoConfig
     from .stages import derive_segments
-    from .streaming import BLOCK_SCANS, LogStream, stream_log
+    from .streaming import BLOCK_SCANS, LogStream, write_derived
 
     config = config or DatmoConfig()
     params = config.features
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
-    return stream_log(stream, out, command="segment", params={"features": params.to_dict(), "config": config.to_dict()},
-                      derived=derived_topics(segments=True),
-                      stage=lambda block: derive_segments(block.run, params), force=force, command_line=command_line,
-                      block_scans=block_scans or BLOCK_SCANS, progress=progress)
+    effective = {"features": params.to_dict(), "config": config.to_dict()}
+    return write_derived(stream, out, command="segment", params=effective, derived=derived_topics(segments=True),
+                         stage=lambda block: derive_segments(block.run, params), force=force,
+                         command_line=command_line, block_scans=block_scans or BLOCK_SCANS, progress=progress)

@@ -1,7 +1,7 @@
 """Streaming a log through the stages: read it a block of scans at a time, derive the block's channels,
 write them with the input's own messages of the same stretch, and forget the block.
 
-Every command that turns a log into a log (segment, features, track, run) goes through `stream_log`, so
+Every command that turns a log into a log (segment, features, track, run) goes through `write_derived`, so
 its memory holds one block (BLOCK_SCANS scans with the messages between them) whatever the log's length.
 What is kept whole: the input's odometry (four numbers a pose) and, for a log without odometry whose
 scanner moves, the scans themselves while ego-motion is estimated (see `stream_odometry`).
@@ -180,11 +180,11 @@ class StampOrder:
 Stage = Callable[[Block], dict[str, tuple[str, np.ndarray, list]]]
 
 
-def stream_log(stream: LogStream, out: str | Path, *, command: str, params: dict, derived: dict[str, str],
-               stage: Stage, force: bool = False, command_line: str | None = None,
-               aligned: tuple[str, ...] = (), block_scans: int = BLOCK_SCANS,
-               progress: Callable[[int, int], None] | None = None, input_name: str | None = None,
-               origin: str | Path | None = None) -> int:
+def write_derived(stream: LogStream, out: str | Path, *, command: str, params: dict, derived: dict[str, str],
+                  stage: Stage, force: bool = False, command_line: str | None = None,
+                  aligned: tuple[str, ...] = (), block_scans: int = BLOCK_SCANS,
+                  progress: Callable[[int, int], None] | None = None, input_name: str | None = None,
+                  origin: str | Path | None = None) -> int:
     """Write `out`: the input's channels (those in `derived` replaced) and the `derived` channels ({topic:
     message type}, in this order) that `stage(block)` gives block by block ({topic: (msgtype, stamps,
     payloads)}), with provenance (`command`, its effective `params`). Returns the number of scans.

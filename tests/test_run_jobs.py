@@ -47,7 +47,7 @@ def test_failures_are_reported_and_the_others_finish(tmp_path, inputs, jobs):
     out = tmp_path / "out"
     seen = []
     prepared = batch.prepare(list(map(str, inputs)), str(out))
-    results = batch.run(prepared, batch.LocalExecutor(jobs), on_scans=lambda i, d, t: seen.append((i, d, t)))
+    results = batch.run_many(prepared, batch.LocalExecutor(jobs), on_scans=lambda i, d, t: seen.append((i, d, t)))
     assert [r["input"] for r in results] == list(map(str, inputs))
     assert [r["status"] for r in results] == ["done", "failed", "done", "failed"]
     assert "bad magic bytes" in results[1]["error"]

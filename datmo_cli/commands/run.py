@@ -163,8 +163,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
 
     Example: datmo run 'logs/**/*.mcap' -o out --scheduler tcp://10.0.0.5:8786
     """
-    from ..batch import DONE, FAILED, SKIPPED, LocalExecutor, prepare, remote
-    from ..batch import run as run_batch
+    from ..batch import DONE, FAILED, SKIPPED, LocalExecutor, prepare, remote, run_many
     from ..cli import invocation
     from ..config import provenance_line
     from ..errors import DatmoError
@@ -210,7 +209,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     t0 = time.perf_counter()
     try:
         with _BatchProgress(batch) as bar:
-            records = run_batch(batch, executor, on_record=bar.record, on_scans=bar.progress)
+            records = run_many(batch, executor, on_record=bar.record, on_scans=bar.progress)
     finally:
         executor.close()
     _final_table(records, time.perf_counter() - t0, executor.where)
