@@ -7,16 +7,17 @@ import numpy as np
 from test_tracking_people import walker_legs
 
 from datmo_cli.tracking import _kernels
-from datmo_cli.tracking.classification import (
+from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT
+from datmo_cli.tracking.params import TrackingParams
+from datmo_cli.tracking.pipeline import features_from_lists
+from datmo_cli.tracking.tracker import Tracker
+from tests.reference_tracking import (
     CLASS_CIRCLE_OBJECT,
     CLASS_PERSON,
     MOBILITY_DYNAMIC,
     MOBILITY_STATIC,
 )
-from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, measurements
-from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.pipeline import features_from_lists
-from datmo_cli.tracking.tracker import Tracker
+from tests.reference_tracking import reference_measurements as measurements
 
 
 def reference_measurements(circles, blobs, lines, legs, stride_max, d_max, weak=None):

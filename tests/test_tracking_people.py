@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from datmo_cli.tracking.classification import CLASS_PERSON, MOBILITY_DYNAMIC
-from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON, measurements
+from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.people import leg_lead, pair_legs
 from datmo_cli.tracking.pipeline import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
+from tests.reference_tracking import CLASS_PERSON, MOBILITY_DYNAMIC, leg_lead, pair_legs
+from tests.reference_tracking import reference_measurements as measurements
 
 STEP, WIDTH = 2 * 0.9 * np.sin(np.radians(22)), 0.3   # 2 l sin(theta) and the legs' path distance, m
 

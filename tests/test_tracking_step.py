@@ -16,14 +16,14 @@ from hypothesis import strategies as st
 
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry
-from datmo_cli.tracking import _kernels, _step, kalman, state
+from datmo_cli.tracking import _step, state
 from datmo_cli.tracking.markers import track_markers
 from datmo_cli.tracking.measurements import Measurements
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.pipeline import features_from_lists, iter_run_features, track_run
 from datmo_cli.tracking.tracker import _COMPAT, _COMPAT_LEARNED, _REACQUIRE, TRACK_DTYPE, Tracker
 from tests.conftest import SAMPLE_LOGS
-from tests.reference_tracking import ReferenceTracker, reference_measurements
+from tests.reference_tracking import ReferenceTracker, kalman_predict, kind_groups, reference_measurements
 
 P = TrackingParams()
 PRM = state.param_vector(P)
@@ -125,12 +125,12 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
     ref._dt, ref.stamp_ns, ref.pose = dt, stamp_ns, None if pose is None else pose_arr
     t = ref.tracks
     n = len(t)
-    group = _kernels.kind_groups(t.votes, t.mobility)
+    group = kind_groups(t.votes, t.mobility)
     ref._compat_row = np.where(t.confirmed, group, 4)
     tab = to_table(ref, t0)
     crow = np.array([_step.kind_group(tab, k) if t.confirmed[k] else 4 for k in range(n)], np.int64)
     np.testing.assert_array_equal(crow, ref._compat_row)
-    kalman.predict(t.x, t.P, dt, np.where((group == 0) | (group == 5), p.person_process_noise, p.process_noise))
+    kalman_predict(t.x, t.P, dt, np.where((group == 0) | (group == 5), p.person_process_noise, p.process_noise))
     _step.predict(tab, n, dt, PRM)
     same_tracks(ref, t0, tab, n, "predict")
     px, py, pc, ps = ref._sensor()

@@ -8,10 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from datmo_cli.log.scan import ScanGeometry
-from datmo_cli.tracking.measurements import measurements
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.pipeline import features_from_lists
 from datmo_cli.tracking.tracker import STATUS_COASTING, STATUS_CONFIRMED, STATUS_TENTATIVE, Tracker
+from tests.reference_tracking import background_update
+from tests.reference_tracking import reference_measurements as measurements
 
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0)
 P = TrackingParams()
@@ -204,14 +205,14 @@ def test_background_grid_marks_long_hit_places_and_forgets_places_seen_through()
     wall = np.array([3.0, 3.0, 3.0], np.float32)
     count = 0
     for scan in range(1, 21):   # 4 s at 5 Hz
-        count = _kernels.background_update(score, mark, active, count, scan, wall, np.cos(angles), np.sin(angles),
+        count = background_update(score, mark, active, count, scan, wall, np.cos(angles), np.sin(angles),
                                            angles[0], angles[1] - angles[0], 0.0, 8.0, 0.0, 0.0, 1.0, 0.0, 0.2,
                                            -5.0, -5.0, cell, n, 0.3, 6.0)
     on = _kernels.on_background(score, np.array([3.0]), np.array([0.0]), np.array([0.0]), 0.0, 0.0, -5.0, -5.0,
                                 cell, n, 3.0)
     assert on[0]
     gone = np.array([6.0, 6.0, 6.0], np.float32)   # the object left: the beams now reach 6 m
-    count = _kernels.background_update(score, mark, active, count, 21, gone, np.cos(angles), np.sin(angles),
+    count = background_update(score, mark, active, count, 21, gone, np.cos(angles), np.sin(angles),
                                        angles[0], angles[1] - angles[0], 0.0, 8.0, 0.0, 0.0, 1.0, 0.0, 0.2,
                                        -5.0, -5.0, cell, n, 0.3, 6.0)
     on = _kernels.on_background(score, np.array([3.0]), np.array([0.0]), np.array([0.0]), 0.0, 0.0, -5.0, -5.0,
@@ -224,8 +225,8 @@ def test_a_duplicate_yields_to_the_person_whatever_its_hits():
     not the person, even when the other (e.g. a track on a bench's pieces uncovered by the person walking
     past) has more hits; between two unknowns, the one with fewer hits goes."""
     from datmo_cli.tracking import _step, state
-    from datmo_cli.tracking.classification import CLASS_PERSON, CLASS_UNKNOWN, MOBILITY_DYNAMIC, MOBILITY_STATIC
     from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
+    from tests.reference_tracking import CLASS_PERSON, CLASS_UNKNOWN, MOBILITY_DYNAMIC, MOBILITY_STATIC
 
     def tracks(cls, mobility, hits):
         t = state.TrackTable(P.tail_length, capacity=2)

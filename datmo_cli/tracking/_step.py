@@ -11,7 +11,7 @@ over whole logs.
 Frames: measurements arrive in the sensor frame (x forward, y left, m); tracks live in the tracking frame
 (the world frame when a pose (x, y, theta) is given, else the sensor frame); the Track elements out carry
 sensor-frame positions and velocities and, with a pose, world ones. Times: ns since the tracker's first
-scan (int64), seconds for durations. Kinds: measurements.KIND_*; classes and mobility: classification's.
+scan (int64), seconds for durations. Kinds: measurements.KIND_*; classes and mobility: datmo_msgs/Track's.
 """
 
 from __future__ import annotations
@@ -133,8 +133,9 @@ def _empty_meas():
 
 @njit(cache=True)
 def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm):
-    """One scan's measurements by the paper's rule (measurements.measurements, learned=False), sensor frame:
-    x, y, size, kind, legs (M, 4), raw leg candidates (L, 4: x, y, size, 0), prob (M,: zeros)."""
+    """One scan's measurements by the paper's rule (reference: tests/reference_tracking.reference_measurements,
+    learned=False), sensor frame: x, y, size, kind, legs (M, 4), raw leg candidates (L, 4: x, y, size, 0),
+    prob (M,: zeros)."""
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
         cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm[P_LEG_RADIUS_MAX], prm[P_LEG_BLOB_MAX],
         prm[P_STRIDE_MAX], prm[P_D_MAX])
@@ -147,7 +148,7 @@ def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly
 @njit(cache=True)
 def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0,
                          lx1, ly1, gfirst, glast, gx, gy, gw, gp, prm):
-    """One scan's measurements with a leg detector's legs (measurements.measurements, learned=True): the legs
+    """One scan's measurements with a leg detector's legs (reference_measurements, learned=True): the legs
     of probability >= leg_probability not on the beams of a circle wider than leg_radius_max are legs, the
     others lend their probability to what covers their beams. Returns x, y, size, kind, legs, raw (L, 4: x, y,
     width, probability of the legs), prob. The thresholds compare in float32, as numpy compares the
@@ -200,7 +201,7 @@ def moved(mx, my, mlegs, raw, px, py, pc, ps):
 # ------------------------------------------------------------------------------------------- helpers
 @njit(cache=True)
 def kind_group(tab, k):
-    """The kind group that fed track k most (_kernels.kind_groups): 0 legs, 1 circles, 2 lines, 3 blobs,
+    """The kind group that fed track k most (reference_tracking.kind_groups): 0 legs, 1 circles, 2 lines, 3 blobs,
     5 a lone leg never paired that is not dynamic."""
     legs = tab[k, VOTES + K_PERSON] + tab[k, VOTES + K_LEG]
     best, arg = legs, 0
@@ -249,7 +250,8 @@ def leg_probability(mx, my, mkind, mlegs, mprob, raw, has_prob, j):
 
 @njit(cache=True)
 def predict(tab, n, dt, prm):
-    """Constant-velocity prediction of tracks 0..n-1 dt s ahead, in place (_kernels.predict; q by kind group)."""
+    """Constant-velocity prediction of tracks 0..n-1 dt s ahead, in place (q by kind
+    group; reference: tests/reference_tracking.cv_predict)."""
     if dt == 0:
         return
     for k in range(n):
@@ -277,8 +279,8 @@ def predict(tab, n, dt, prm):
 
 @njit(cache=True)
 def kalman_update(tab, k, zx, zy, sigma, scratch):
-    """Kalman update of track k with a position measurement (zx, zy) of sigma m, Joseph form (_kernels.update);
-    scratch: (3, 4, 4) work space."""
+    """Kalman update of track k with a position measurement (zx, zy) of sigma m, Joseph form
+    (reference: tests/reference_tracking.joseph_update); scratch: (3, 4, 4) work space."""
     P = tab[k, P0:P0 + 16].reshape((4, 4))
     I_KH = scratch[0]
     G = scratch[1]
@@ -416,7 +418,7 @@ def legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm):
 @njit(cache=True)
 def gated_costs(tab, n, mx, my, mkind, compat, crow, prm):
     """Costs (n, M) d2 + ln det S and which pairs pass the gate, the distance bound and kind compatibility
-    (_kernels.gated_costs on the table; the cost of a pair that does not pass is inf, not computed)."""
+    (reference_tracking.gated_costs on the table; the cost of a pair that does not pass is inf, not computed)."""
     M = len(mx)
     cost = np.full((n, M), np.inf)
     ok = np.zeros((n, M), np.bool_)
@@ -471,7 +473,7 @@ def hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg_score, ctx, px, 
 
 @njit(cache=True)
 def update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm):
-    """Kalman-update tracks rows with measurements cols and record the hits (_kernels.apply_updates)."""
+    """Kalman-update tracks rows with measurements cols and record the hits (reference_tracking.apply_updates)."""
     for k in range(n):
         tab[k, HIT] = 0.0
     scratch = np.empty((3, 4, 4))
@@ -726,8 +728,8 @@ def spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp
 
 @njit(cache=True)
 def classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm):
-    """Class and mobility of every track (tracker._classify and _kernels.classify; with the leg detector,
-    a person is what its evidence says and the scanner does not carry)."""
+    """Class and mobility of every track (references: tests/reference_tracking's ReferenceTracker._classify
+    and classify_tracks; with the leg detector, a person is what its evidence says and the scanner does not carry)."""
     for k in range(n):
         speed = np.hypot(tab[k, VX], tab[k, VY])
         if tab[k, HIT] != 0 and tab[k, ON_BG] == 0 and speed > prm[P_MOVING_SPEED]:
@@ -805,7 +807,7 @@ def push_tail(tab, n, prm):
 @njit(cache=True)
 def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a, sin_a, angle_min, increment,
                       range_min, range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled, fresh):
-    """_kernels.background_update with each active cell's range and beam kept beside it (cache[a] = r, beam
+    """reference_tracking.background_update with each active cell's range and beam kept beside it (cache[a] = r, beam
     for active[a], beam -2: not yet computed), valid while the sensor pose does not change (`fresh`: it
     changed, compute them all again). The same arithmetic on the same numbers: the same grid. An inactive
     cell's mark is 0 here, not -1 (scans count from 1), so a new grid is all zeros (no 5 MB to fill)."""
