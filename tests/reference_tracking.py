@@ -16,14 +16,14 @@ Frames and units as datmo_cli/tracking/tracker.py says.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from numba import njit
 
 from datmo_cli.log import cdr, types
 from datmo_cli.log.scan import ScanGeometry
-from datmo_cli.tracking import _kernels
+from datmo_cli.tracking import _kernels, state
 from datmo_cli.tracking.measurements import (
     KIND_BLOB,
     KIND_CIRCLE,
@@ -272,6 +272,11 @@ def process_noise(dt: float, q: float) -> np.ndarray:
     return np.array([[a, 0, b, 0], [0, a, 0, b], [b, 0, c, 0], [0, b, 0, c]])
 
 
+def param_vector(**values: float) -> np.ndarray:
+    """The kernels' parameter vector (state.param_vector) of the default TrackingParams with `values` set."""
+    return state.param_vector(replace(TrackingParams(), **values))
+
+
 def gate(d2: np.ndarray, dist: np.ndarray, gate: float, max_distance: float) -> np.ndarray:
     """Boolean (K, M): pairs whose squared Mahalanobis distance is within `gate` and whose Euclidean
     distance (m) is within `max_distance`."""
@@ -301,6 +306,23 @@ def reference_gnn(cost: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np
 gnn = reference_gnn
 
 
+def moved(m: Measurements, pose: np.ndarray | None) -> Measurements:
+    """The same measurements in the world frame of a sensor at pose (x, y, theta); m itself when None."""
+    if pose is None:
+        return m
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    x = c * m.x - s * m.y + pose[0]
+    y = s * m.x + c * m.y + pose[1]
+    legs = m.legs.copy()
+    for i in (0, 2):
+        legs[:, i] = c * m.legs[:, i] - s * m.legs[:, i + 1] + pose[0]
+        legs[:, i + 1] = s * m.legs[:, i] + c * m.legs[:, i + 1] + pose[1]
+    raw = m.raw_legs.copy()
+    raw[:, 0] = c * m.raw_legs[:, 0] - s * m.raw_legs[:, 1] + pose[0]
+    raw[:, 1] = s * m.raw_legs[:, 0] + c * m.raw_legs[:, 1] + pose[1]
+    return Measurements(x, y, m.size, m.kind, legs, raw, m.prob)
+
+
 def reference_measurements(features: ScanFeatures, params: TrackingParams, learned: bool = False) -> Measurements:
     """The measurements of one scan's features (the rule of measurements.py's docstring) from the compiled
     features-to-measurements kernels, with the thresholding of learned legs done here in numpy."""
@@ -321,15 +343,14 @@ def reference_measurements(features: ScanFeatures, params: TrackingParams, learn
             li["last"].astype(i8), li["x_ini"].astype(f8), li["y_ini"].astype(f8), li["x_end"].astype(f8),
             li["y_end"].astype(f8), g["first"].astype(i8), g["last"].astype(i8), g["x"].astype(f8),
             g["y"].astype(f8), g["width"].astype(f8), weak["first"].astype(i8), weak["last"].astype(i8),
-            weak["probability"].astype(f8), params.stride_max, params.d_max)
+            weak["probability"].astype(f8), state.param_vector(params))
         raw = np.stack([g["x"].astype(f8), g["y"].astype(f8), g["width"].astype(f8), g["probability"].astype(f8)],
                        axis=1).reshape(-1, 4)
         return Measurements(x, y, size, kind, legs, raw, prob)
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
         c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8), b["x"].astype(f8), b["y"].astype(f8),
         b["size"].astype(f8), b["kind"].astype(np.int64), li["segment"].astype(np.int64), li["x_ini"].astype(f8),
-        li["y_ini"].astype(f8), li["x_end"].astype(f8), li["y_end"].astype(f8), params.leg_radius_max,
-        params.leg_blob_max, params.stride_max, params.d_max)
+        li["y_ini"].astype(f8), li["x_end"].astype(f8), li["y_end"].astype(f8), state.param_vector(params))
     return Measurements(x, y, size, kind, legs, np.stack([lx, ly, ls], axis=1))
 
 
@@ -761,6 +782,7 @@ class ReferenceTracker:
     def __init__(self, params: TrackingParams | None = None, geometry: ScanGeometry | None = None,
                  learned: bool = False) -> None:
         self.params = params or TrackingParams()
+        self.prm = state.param_vector(self.params)
         self.learned = learned
         self.geometry = geometry
         self.tracks = TrackArrays.empty(self.params.tail_length)
@@ -797,7 +819,7 @@ class ReferenceTracker:
         self._compat_row = np.where(t.confirmed, group, _ANY)
         kalman_predict(t.x, t.P, dt, np.where((group == 0) | (group == _LONE_LEG), p.person_process_noise,
                                               p.process_noise))
-        m = self._off_background(meas.moved(self.pose))
+        m = self._off_background(moved(meas, self.pose))
         m, rows0 = self._legs(t, m)
         rows, cols = self._associate(t, m, rows0)
         self._hit_background(t, m, rows, cols)
@@ -857,28 +879,24 @@ class ReferenceTracker:
         if self._bg_score is None:
             self._on_bg = np.zeros(len(t), bool)
             return
-        p = self.params
         px, py, _, _ = self._sensor()
         self._on_bg = _kernels.tracks_on_background(self._bg_score, m.x, m.y, m.size, m.kind, rows, cols, len(t), px,
-                                                    py, self._bg_origin[0], self._bg_origin[1], p.background_cell,
-                                                    self._bg_n, p.background_time)
+                                                    py, self._bg_origin[0], self._bg_origin[1], self._bg_n, self.prm)
 
     def _off_background(self, m: Measurements) -> Measurements:
         """The measurements with leg candidates on the background (a place hit for a long time: a wall, a
         bench, a column) taken out of the legs: each becomes a blob, and the other legs are paired again."""
-        p = self.params
         raw = m.raw_legs
         if self._bg_score is None or not len(raw):
             return m
         px, py, _, _ = self._sensor()
         bg = _kernels.on_background(self._bg_score, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), px, py,
-                                    self._bg_origin[0], self._bg_origin[1], p.background_cell, self._bg_n,
-                                    p.background_time)
+                                    self._bg_origin[0], self._bg_origin[1], self._bg_n, self.prm)
         if not bg.any():
             return m
         keep = raw[~bg]
         lx, ly, ls, kind, legs = _kernels.legs_to_measurements(keep[:, 0].copy(), keep[:, 1].copy(),
-                                                               keep[:, 2].copy(), p.stride_max)
+                                                               keep[:, 2].copy(), self.prm)
         other = m.kind > KIND_LEG
         n_bg = int(bg.sum())
         return Measurements(np.concatenate([lx, raw[bg, 0], m.x[other]]), np.concatenate([ly, raw[bg, 1], m.y[other]]),
@@ -904,7 +922,7 @@ class ReferenceTracker:
             return m, none
         owner, x, y, size, kind, legs = _kernels.leg_stage_measurements(
             t.x[leggy, 0], t.x[leggy, 1], raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(),
-            p.leg_reach, p.stride_max, m.x, m.y, m.size, m.kind, m.legs)
+            m.x, m.y, m.size, m.kind, m.legs, self.prm)
         if not len(owner):
             return m, none
         prob = np.zeros(len(x))
@@ -987,7 +1005,7 @@ class ReferenceTracker:
         sx, sy = self._to_sensor(t.x[:, 0], t.x[:, 1])
         t.occluded = _kernels.occlusion(np.ascontiguousarray(sx), np.ascontiguousarray(sy), t.size, ~t.hit,
                                         np.ascontiguousarray(ranges, np.float32), self._angle_min, self._inc,
-                                        self.geometry.range_max, self.params.occlusion_margin)
+                                        self.geometry.range_max, self.prm)
 
     def _life_cycle(self, t: TrackArrays, stamp_ns: int) -> None:
         p = self.params
@@ -1013,8 +1031,7 @@ class ReferenceTracker:
         x = np.ascontiguousarray(t.x.T)
         rank = (t.hits.astype(np.int64) * 2 + t.confirmed + (t.mobility == MOBILITY_DYNAMIC) * (1 << 40)
                 + (t.cls == CLASS_PERSON) * (1 << 41))
-        return _kernels.duplicates(x[0], x[1], x[2], x[3], candidate, t.confirmed, rank,
-                                   self.params.merge_distance, self.params.merge_speed)
+        return _kernels.duplicates(x[0], x[1], x[2], x[3], candidate, t.confirmed, rank, self.prm)
 
     def _spawn(self, m: Measurements, rows: np.ndarray, cols: np.ndarray, stamp_ns: int) -> None:
         """Start tentative tracks on measurements no track took, except legs beside a track that took a

@@ -16,6 +16,7 @@ from tests.reference_tracking import (
     CLASS_PERSON,
     MOBILITY_DYNAMIC,
     MOBILITY_STATIC,
+    param_vector,
 )
 from tests.reference_tracking import reference_measurements as measurements
 
@@ -90,7 +91,7 @@ def test_learned_measurements_match_the_reference():
             *beams(blobs), col(blobs, 1), col(blobs, 2), col(blobs, 3),
             col(lines, 0, i8), *beams(lines, 2), col(lines, 1), col(lines, 2), col(lines, 3), col(lines, 4),
             *beams(legs), col(legs, 1), col(legs, 2), col(legs, 3), ws * 10, ws * 10 + 5,
-            np.array(list(weak.values()), f8), 0.9, 1.5)
+            np.array(list(weak.values()), f8), param_vector(stride_max=0.9, d_max=1.5))
         x, y, size, kind, _, prob = got
         rows = sorted((int(k), round(float(a), 9), round(float(b), 9), round(float(s), 9), round(float(p), 9))
                       for k, a, b, s, p in zip(kind, x, y, size, prob, strict=True))

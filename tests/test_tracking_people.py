@@ -8,7 +8,7 @@ from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.pipeline import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
-from tests.reference_tracking import CLASS_PERSON, MOBILITY_DYNAMIC, leg_lead, pair_legs
+from tests.reference_tracking import CLASS_PERSON, MOBILITY_DYNAMIC, leg_lead, pair_legs, param_vector
 from tests.reference_tracking import reference_measurements as measurements
 
 STEP, WIDTH = 2 * 0.9 * np.sin(np.radians(22)), 0.3   # 2 l sin(theta) and the legs' path distance, m
@@ -123,7 +123,7 @@ def test_pairing_kernel_matches_the_reference():
         n = int(rng.integers(0, 9))
         x, y = rng.uniform(0, 3, n), rng.uniform(0, 3, n)
         want = pair_legs(x, y, 0.9)
-        got = _kernels.pair_legs(x, y, 0.9)
+        got = _kernels.pair_legs(x, y, param_vector(stride_max=0.9))
         assert all(np.array_equal(w, g) for w, g in zip(want, got, strict=True))
 
 

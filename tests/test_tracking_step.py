@@ -23,7 +23,7 @@ from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.pipeline import features_from_lists, iter_run_features, track_run
 from datmo_cli.tracking.tracker import _COMPAT, _COMPAT_LEARNED, _REACQUIRE, TRACK_DTYPE, Tracker
 from tests.conftest import SAMPLE_LOGS
-from tests.reference_tracking import ReferenceTracker, kalman_predict, kind_groups, reference_measurements
+from tests.reference_tracking import ReferenceTracker, kalman_predict, kind_groups, moved, reference_measurements
 
 P = TrackingParams()
 PRM = state.param_vector(P)
@@ -134,7 +134,7 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
     _step.predict(tab, n, dt, PRM)
     same_tracks(ref, t0, tab, n, "predict")
     px, py, pc, ps = ref._sensor()
-    m = meas.moved(ref.pose)
+    m = moved(meas, ref.pose)
     if has_pose:
         a = meas_arrays(meas)
         got = _step.moved(a[0], a[1], a[4], a[5], px, py, pc, ps)

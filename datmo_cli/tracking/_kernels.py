@@ -1,7 +1,8 @@
 """numba kernels of the tracker's per-scan arithmetic, called by the compiled step (_step.py) and markers.py.
 
-Kernels take contiguous arrays and scalars; frames and units are their callers'. Their references are in
-tests/reference_tracking.py.
+Kernels take contiguous arrays and scalars; frames and units are their callers'. Tracking parameters arrive
+as one float64 vector `prm` (state.param_vector, indexed by the state.P_* constants), as in _step.py. Their
+references are in tests/reference_tracking.py.
 """
 
 from __future__ import annotations
@@ -9,10 +10,25 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .state import (
+    P_BACKGROUND_CELL,
+    P_BACKGROUND_TIME,
+    P_D_MAX,
+    P_LEG_BLOB_MAX,
+    P_LEG_RADIUS_MAX,
+    P_LEG_REACH,
+    P_MERGE_DISTANCE,
+    P_MERGE_SPEED,
+    P_OCCLUSION_MARGIN,
+    P_STRIDE_MAX,
+)
+
 
 @njit(cache=True)
-def pair_legs(x, y, stride_max):
-    """Greedy nearest-first pairing; returns (a, b, n_pairs, single, n_single)."""
+def pair_legs(x, y, prm):
+    """Greedy nearest-first pairing of leg candidates at most prm[P_STRIDE_MAX] m apart; returns (a, b, single):
+    the pairs' two legs and the unpaired legs (indices)."""
+    stride_max = prm[P_STRIDE_MAX]
     n = len(x)
     a = np.empty(n // 2 + 1, np.int64)
     b = np.empty(n // 2 + 1, np.int64)
@@ -44,10 +60,10 @@ def pair_legs(x, y, stride_max):
 
 
 @njit(cache=True)
-def legs_to_measurements(lx, ly, ls, stride_max):
+def legs_to_measurements(lx, ly, ls, prm):
     """Person measurements (kind 0) at the centre of paired legs and single legs (kind 1): x, y, size,
     kind, legs (M, 4)."""
-    a, b, single = pair_legs(lx, ly, stride_max)
+    a, b, single = pair_legs(lx, ly, prm)
     n = len(a) + len(single)
     x = np.empty(n)
     y = np.empty(n)
@@ -69,10 +85,10 @@ def legs_to_measurements(lx, ly, ls, stride_max):
 
 
 @njit(cache=True)
-def _people_first(lx, ly, ls, stride_max, n_more):
+def _people_first(lx, ly, ls, prm, n_more):
     """Measurement buffers (x, y, size, kind, legs) with room for n_more after the people and single legs
     made of leg candidates lx, ly, ls (legs_to_measurements), which fill them first; and how many those are."""
-    px, py, psize, pkind, plegs = legs_to_measurements(lx, ly, ls, stride_max)
+    px, py, psize, pkind, plegs = legs_to_measurements(lx, ly, ls, prm)
     n = len(px)
     cap = n + n_more
     x = np.empty(cap)
@@ -85,10 +101,10 @@ def _people_first(lx, ly, ls, stride_max, n_more):
 
 
 @njit(cache=True)
-def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
-                 leg_radius_max, leg_blob_max, stride_max, d_max):
+def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm):
     """Measurements of one scan (see measurements.py): x, y, size, kind, legs (M, 4), and the leg
     candidates lx, ly, ls (L,)."""
+    leg_radius_max, leg_blob_max, d_max = prm[P_LEG_RADIUS_MAX], prm[P_LEG_BLOB_MAX], prm[P_D_MAX]
     nc, nb, nl = len(cx), len(bx), len(lseg)
     # rectangular objects: the bounding box of each segment's lines
     ox = np.empty(nl)
@@ -129,7 +145,7 @@ def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
             lx[nleg], ly[nleg], ls[nleg] = ox[i], oy[i], osize[i]
             nleg += 1
     lx, ly, ls = lx[:nleg], ly[:nleg], ls[:nleg]
-    x, y, size, kind, legs, m = _people_first(lx, ly, ls, stride_max, nc + nb + no)
+    x, y, size, kind, legs, m = _people_first(lx, ly, ls, prm, nc + nb + no)
     for i in range(nc):
         if cr[i] > leg_radius_max:
             x[m], y[m], size[m], kind[m] = cx[i], cy[i], 2.0 * cr[i], 2
@@ -171,7 +187,7 @@ def _span_max(marks, a, b):
 
 @njit(cache=True)
 def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0,
-                         lx1, ly1, gfirst, glast, gx, gy, gw, wfirst, wlast, wp, stride_max, d_max):
+                         lx1, ly1, gfirst, glast, gx, gy, gw, wfirst, wlast, wp, prm):
     """Measurements of one scan when a leg detector ran (see measurements.py): its legs (beams gfirst..glast
     at gx, gy, width gw) paired into people or single, then everything else as what it is: a circle
     (kind 2), the bounding box of a segment's lines (kind 3) or a blob (kind 4), whatever its size up to
@@ -180,13 +196,14 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
     Beam ranges are inclusive. Returns x, y, size, kind, legs (M, 4), prob (M,: 0 for the legs, whose
     probabilities the caller has, and for what the detector gave none)."""
     nc, nb, nl, ng = len(cx), len(bx), len(lseg), len(gx)
+    d_max = prm[P_D_MAX]
     top = 1
     for arr in (clast, blast, llast, glast, wlast):
         for v in arr:
             top = max(top, v + 1)
     is_leg = _beam_marks(gfirst, glast, np.ones(ng), top)
     weak = _beam_marks(wfirst, wlast, wp, top)
-    x, y, size, kind, legs, m = _people_first(gx, gy, gw, stride_max, nc + nb + nl)
+    x, y, size, kind, legs, m = _people_first(gx, gy, gw, prm, nc + nb + nl)
     prob = np.zeros(len(x))
     for i in range(nc):
         if _span_max(is_leg, cfirst[i], clast[i]) == 0.0:
@@ -228,12 +245,13 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
 
 
 @njit(cache=True)
-def leg_stage(tx, ty, lx, ly, ls, reach, stride_max):
+def leg_stage(tx, ty, lx, ly, ls, prm):
     """Leg candidates (lx, ly, ls) to tracks predicted at (tx, ty), nearest pairs first: each leg to at
-    most one track, each track at most two legs: the first within `reach`, the second within `stride_max`
+    most one track, each track at most two legs: the first within leg_reach, the second within stride_max
     of the track and of the first leg (a lagging prediction sits by one leg, a stride from the other).
     Returns (owner, x, y, size, kind, legs, taken): one measurement per track that took legs (the centre
     of two legs, kind 0, or one leg, kind 1) with the owner's index, and which legs were taken."""
+    reach, stride_max = prm[P_LEG_REACH], prm[P_STRIDE_MAX]
     T, L = len(tx), len(lx)
     d = np.empty((T, L))
     for k in range(T):
@@ -290,10 +308,11 @@ def leg_stage(tx, ty, lx, ly, ls, reach, stride_max):
 
 
 @njit(cache=True)
-def duplicates(x, y, vx, vy, candidate, confirmed, rank, merge_distance, merge_speed):
+def duplicates(x, y, vx, vy, candidate, confirmed, rank, prm):
     """Which candidate tracks lie within merge_distance of a candidate of higher rank (ties: lower index),
     when one of the two is tentative or their velocities differ by less than merge_speed (two confirmed
     people passing each other close are not one)."""
+    merge_distance, merge_speed = prm[P_MERGE_DISTANCE], prm[P_MERGE_SPEED]
     K = len(x)
     dup = np.zeros(K, np.bool_)
     for i in range(K):
@@ -311,13 +330,13 @@ def duplicates(x, y, vx, vy, candidate, confirmed, rank, merge_distance, merge_s
 
 
 @njit(cache=True)
-def leg_stage_measurements(tx, ty, lx, ly, ls, reach, stride_max, mx, my, msize, mkind, mlegs):
+def leg_stage_measurements(tx, ty, lx, ly, ls, mx, my, msize, mkind, mlegs, prm):
     """leg_stage, then the scan's measurements rebuilt: first one per track that took legs (owner gives
     the track), then the free legs paired (legs_to_measurements), then the measurements of other kinds
     (mkind not 0 or 1). Returns (owner, x, y, size, kind, legs)."""
-    owner, ox, oy, osize, okind, olegs, taken = leg_stage(tx, ty, lx, ly, ls, reach, stride_max)
+    owner, ox, oy, osize, okind, olegs, taken = leg_stage(tx, ty, lx, ly, ls, prm)
     free = ~taken
-    rx, ry, rsize, rkind, rlegs = legs_to_measurements(lx[free], ly[free], ls[free], stride_max)
+    rx, ry, rsize, rkind, rlegs = legs_to_measurements(lx[free], ly[free], ls[free], prm)
     n_other = 0
     for i in range(len(mx)):
         if mkind[i] > 1:
@@ -389,9 +408,10 @@ def marker_points(px, py, vx, vy, cls, shown, alpha, color_table, tail, tail_cou
 
 
 @njit(cache=True)
-def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, margin):
+def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, prm):
     """Which missed tracks (sensor-frame centres sx, sy and extents, m) are hidden: outside the field of
-    view or range, or behind a return at least `margin` m nearer within their angular extent."""
+    view or range, or behind a return more than occlusion_margin m nearer within their angular extent."""
+    margin = prm[P_OCCLUSION_MARGIN]
     K, B = len(sx), len(ranges)
     occ = np.zeros(K, np.bool_)
     for k in range(K):
@@ -411,9 +431,11 @@ def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, mar
 
 
 @njit(cache=True)
-def on_background(score, lx, ly, ls, px, py, x0, y0, cell, n, threshold):
-    """Which leg candidates (lx, ly, extent ls; tracking frame) lie on the background: a cell around the
-    candidate's side facing the sensor at (px, py) has been occupied for at least `threshold` s."""
+def on_background(score, lx, ly, ls, px, py, x0, y0, n, prm):
+    """Which leg candidates (lx, ly, extent ls; tracking frame) lie on the background: a cell (of the n x n
+    grid of background_cell m cells, cell (0, 0) at (x0, y0)) around the candidate's side facing the sensor at
+    (px, py) has been occupied for at least background_time s."""
+    cell, threshold = prm[P_BACKGROUND_CELL], prm[P_BACKGROUND_TIME]
     out = np.zeros(len(lx), np.bool_)
     for m in range(len(lx)):
         dx, dy = lx[m] - px, ly[m] - py
@@ -429,8 +451,7 @@ def on_background(score, lx, ly, ls, px, py, x0, y0, cell, n, threshold):
 
 
 @njit(cache=True)
-def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, py, x0, y0, cell, n,
-                         threshold):
+def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, py, x0, y0, n, prm):
     """Which of n_tracks tracks took (rows, cols) a measurement on the background (see on_background; legs and
     circles are tested on their side facing the sensor, other kinds at their centre)."""
     out = np.zeros(n_tracks, np.bool_)
@@ -444,7 +465,7 @@ def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, 
         x[q], y[q] = mx[j], my[j]
         if mkind[j] == 1 or mkind[j] == 2:
             front[q] = msize[j]
-    bg = on_background(score, x, y, front, px, py, x0, y0, cell, n, threshold)
+    bg = on_background(score, x, y, front, px, py, x0, y0, n, prm)
     for q in range(len(rows)):
         out[rows[q]] = bg[q]
     return out

@@ -72,16 +72,12 @@ from .state import (
     P_GATE,
     P_INITIAL_SPEED_SIGMA,
     P_LEG_BESIDE,
-    P_LEG_BLOB_MAX,
     P_LEG_EVIDENCE_RATE,
     P_LEG_MEASUREMENT_NOISE,
     P_LEG_PROBABILITY,
     P_LEG_RADIUS_MAX,
-    P_LEG_REACH,
     P_MAX_GATE_DISTANCE,
     P_MEASUREMENT_NOISE,
-    P_MERGE_DISTANCE,
-    P_MERGE_SPEED,
     P_MOVING_DISTANCE,
     P_MOVING_PERSON_EVIDENCE,
     P_MOVING_PERSON_PAIRS,
@@ -98,7 +94,6 @@ from .state import (
     P_SPAWN_CLEARANCE,
     P_STEP_MAX,
     P_STEP_MIN,
-    P_STRIDE_MAX,
     P_TAIL_LENGTH,
     P_TENTATIVE_DELETE_AFTER,
     P_UNDEFINED_WINDOW,
@@ -137,8 +132,7 @@ def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly
     learned=False), sensor frame: x, y, size, kind, legs (M, 4), raw leg candidates (L, 4: x, y, size, 0),
     prob (M,: zeros)."""
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
-        cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm[P_LEG_RADIUS_MAX], prm[P_LEG_BLOB_MAX],
-        prm[P_STRIDE_MAX], prm[P_D_MAX])
+        cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm)
     raw = np.zeros((len(lx), 4))
     for i in range(len(lx)):
         raw[i, 0], raw[i, 1], raw[i, 2] = lx[i], ly[i], ls[i]
@@ -166,7 +160,7 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
     x, y, size, kind, legs, prob = _kernels.learned_measurements(
         cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0, lx1, ly1,
         gfirst[strong], glast[strong], gx[strong], gy[strong], gw[strong], gfirst[weak], glast[weak], gp[weak],
-        prm[P_STRIDE_MAX], prm[P_D_MAX])
+        prm)
     ns = 0
     for i in range(len(gx)):
         if strong[i]:
@@ -183,7 +177,7 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
 @njit(cache=True)
 def moved(mx, my, mlegs, raw, px, py, pc, ps):
     """Measurements (mx, my), their legs and the raw leg candidates in the tracking frame of a sensor at
-    (px, py) with heading cos/sin (pc, ps): new arrays (Measurements.moved)."""
+    (px, py) with heading cos/sin (pc, ps): new arrays (reference: tests/reference_tracking.moved)."""
     x = pc * mx - ps * my + px
     y = ps * mx + pc * my + py
     legs = mlegs.copy()
@@ -329,12 +323,12 @@ def off_background(mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ctx, px, p
         return mx, my, msize, mkind, mlegs, raw, mprob
     nbg = int(np.sqrt(len(bg_score)) + 0.5)
     bg = _kernels.on_background(bg_score, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), px, py,
-                                ctx[C_BG_X0], ctx[C_BG_Y0], prm[P_BACKGROUND_CELL], nbg, prm[P_BACKGROUND_TIME])
+                                ctx[C_BG_X0], ctx[C_BG_Y0], nbg, prm)
     if not bg.any():
         return mx, my, msize, mkind, mlegs, raw, mprob
     keep = raw[~bg]
     lx, ly, ls, kind, legs = _kernels.legs_to_measurements(keep[:, 0].copy(), keep[:, 1].copy(), keep[:, 2].copy(),
-                                                           prm[P_STRIDE_MAX])
+                                                           prm)
     n_bg = 0
     for i in range(len(bg)):
         if bg[i]:
@@ -398,8 +392,7 @@ def legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm):
     for q in range(len(leggy)):
         tx[q], ty[q] = tab[leggy[q], X], tab[leggy[q], Y]
     owner, x, y, size, kind, legs = _kernels.leg_stage_measurements(
-        tx, ty, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), prm[P_LEG_REACH], prm[P_STRIDE_MAX],
-        mx, my, msize, mkind, mlegs)
+        tx, ty, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), mx, my, msize, mkind, mlegs, prm)
     if len(owner) == 0:
         return mx, my, msize, mkind, mlegs, mprob, none
     prob = np.zeros(len(x))
@@ -466,7 +459,7 @@ def hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg_score, ctx, px, 
         return
     nbg = int(np.sqrt(len(bg_score)) + 0.5)
     on_bg = _kernels.tracks_on_background(bg_score, mx, my, msize, mkind, rows, cols, n, px, py, ctx[C_BG_X0],
-                                          ctx[C_BG_Y0], prm[P_BACKGROUND_CELL], nbg, prm[P_BACKGROUND_TIME])
+                                          ctx[C_BG_Y0], nbg, prm)
     for k in range(n):
         tab[k, ON_BG] = 1.0 if on_bg[k] else 0.0
 
@@ -608,7 +601,7 @@ def occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm):
         sx[k], sy[k] = to_sensor(tab[k, X], tab[k, Y], has_pose, pose)
         size[k] = tab[k, SIZE]
         missed[k] = tab[k, HIT] == 0
-    occ = _kernels.occlusion(sx, sy, size, missed, ranges, geo[0], geo[1], geo[2], prm[P_OCCLUSION_MARGIN])
+    occ = _kernels.occlusion(sx, sy, size, missed, ranges, geo[0], geo[1], geo[2], prm)
     for k in range(n):
         tab[k, OCCLUDED] = 1.0 if occ[k] else 0.0
 
@@ -629,7 +622,7 @@ def duplicates(tab, n, prm):
         rank[k] = (np.int64(tab[k, HITS]) * 2 + np.int64(tab[k, CONFIRMED])
                    + (np.int64(1) << 40 if tab[k, MOBILITY] == DYNAMIC else 0)
                    + (np.int64(1) << 41 if tab[k, CLS] == CLASS_PERSON else 0))
-    return _kernels.duplicates(x, y, vx, vy, candidate, confirmed, rank, prm[P_MERGE_DISTANCE], prm[P_MERGE_SPEED])
+    return _kernels.duplicates(x, y, vx, vy, candidate, confirmed, rank, prm)
 
 
 @njit(cache=True)

@@ -31,7 +31,8 @@ class ScanFeatures:
 @dataclass
 class Measurements:
     """Measurements of one scan: centre (x, y) m, size m, kind KIND_*, and for people the two legs
-    (left/right unknown: a and b; NaN for other kinds). Frame: as given (sensor, or world after `moved`)."""
+    (left/right unknown: a and b; NaN for other kinds). Frame: as given (the compiled step moves them to
+    the tracking frame)."""
 
     x: np.ndarray
     y: np.ndarray
@@ -50,31 +51,3 @@ class Measurements:
 
     def __len__(self) -> int:
         return len(self.x)
-
-    def moved(self, pose: np.ndarray | None) -> Measurements:
-        """The same measurements in the world frame of a sensor at pose (x, y, theta); self when None."""
-        if pose is None:
-            return self
-        c, s = np.cos(pose[2]), np.sin(pose[2])
-        x = c * self.x - s * self.y + pose[0]
-        y = s * self.x + c * self.y + pose[1]
-        legs = self.legs.copy()
-        for i in (0, 2):
-            legs[:, i] = c * self.legs[:, i] - s * self.legs[:, i + 1] + pose[0]
-            legs[:, i + 1] = s * self.legs[:, i] + c * self.legs[:, i + 1] + pose[1]
-        raw = self.raw_legs.copy()
-        raw[:, 0] = c * self.raw_legs[:, 0] - s * self.raw_legs[:, 1] + pose[0]
-        raw[:, 1] = s * self.raw_legs[:, 0] + c * self.raw_legs[:, 1] + pose[1]
-        return Measurements(x, y, self.size, self.kind, legs, raw, self.prob)
-
-    def take(self, keep: np.ndarray) -> Measurements:
-        """The measurements selected by `keep` (mask or indices), leg candidates unchanged."""
-        return Measurements(self.x[keep], self.y[keep], self.size[keep], self.kind[keep], self.legs[keep],
-                            self.raw_legs, self.prob[keep])
-
-    def extend(self, other: Measurements) -> Measurements:
-        """These measurements followed by `other`'s (leg candidates: these)."""
-        return Measurements(np.concatenate([self.x, other.x]), np.concatenate([self.y, other.y]),
-                            np.concatenate([self.size, other.size]), np.concatenate([self.kind, other.kind]),
-                            np.concatenate([self.legs, other.legs]), self.raw_legs,
-                            np.concatenate([self.prob, other.prob]))
