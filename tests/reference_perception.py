@@ -537,6 +537,33 @@ def tree_leaf(model, root: int, x: np.ndarray) -> int:
     return node
 
 
+def is_candidate(row: np.ndarray) -> bool:
+    """A segment that may be a leg: at least CANDIDATE_MIN_POINTS points, at most CANDIDATE_MAX_WIDTH m wide."""
+    f = dict(zip(FEATURE_NAMES, row, strict=True))
+    return bool(f["n_points"] >= CANDIDATE_MIN_POINTS and f["width"] <= CANDIDATE_MAX_WIDTH)
+
+
+def ensemble_probability(model, leaves: list[int]) -> float:
+    """The leg probability from the leaves a row reached, one per tree: the mean of their values for a forest,
+    sigmoid(base + scale * their sum) for boosting (summed tree by tree, in the model's order)."""
+    total = 0.0
+    for leaf in leaves:
+        total += float(model.value[leaf])
+    if model.kind == "forest":
+        return total / len(leaves)
+    return 1.0 / (1.0 + math.exp(-(model.base + model.scale * total)))
+
+
+def check_segments(start, end, offsets, n_beams: int) -> int:
+    """0 when offsets index the segments (non-decreasing from 0 to their number) and every segment is a beam
+    range [start, end) within 0..n_beams; 1 for bad offsets, 2 for a bad segment."""
+    if len(offsets) == 0 or offsets[0] != 0 or offsets[-1] != len(start) or np.any(np.diff(offsets) < 0):
+        return 1
+    if np.any((start < 0) | (end < start) | (end > n_beams)):
+        return 2
+    return 0
+
+
 def gap_clusters(ranges, angles, range_min, range_max, gap, min_points):
     """leg_tracker's clustering, one beam at a time: (start, end, offsets) as legs.gap_clusters."""
     start, end, offsets = [], [], [0]
@@ -628,6 +655,26 @@ def nearest(q, map_xy, max_dist):
     d2 = ((map_xy - q) ** 2).sum(axis=1)
     j = int(np.argmin(d2))
     return j if d2[j] <= max_dist ** 2 else -1
+
+
+def add_to_map(points, normals, pose, min_spacing, map_xy, map_n, capacity):
+    """The map (points, normals; world frame) after adding sensor-frame points with their normals seen from
+    pose (x, y, theta), in order: a point whose normal is NaN is skipped, and so is one within min_spacing
+    (m) of a map point already there (added earlier in the same call included); at most `capacity` points."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    rot = np.array([[c, -s], [s, c]])
+    xy, nn = [tuple(p) for p in map_xy], [tuple(v) for v in map_n]
+    for p, v in zip(points, normals, strict=True):
+        if len(xy) >= capacity:
+            break
+        if math.isnan(v[0]):
+            continue
+        w = rot @ p + pose[:2]
+        if min_spacing > 0 and xy and nearest(w, np.array(xy), min_spacing) >= 0:
+            continue
+        xy.append(tuple(w))
+        nn.append(tuple(rot @ v))
+    return np.array(xy).reshape(-1, 2), np.array(nn).reshape(-1, 2)
 
 
 def weight(ares, scale, redescend):
