@@ -10,6 +10,7 @@ their callers only); it may only shrink. Plain data: conftest.py reads it at col
 from __future__ import annotations
 
 HERE = "test_kernels_reference.py"
+STEP_PHASES = "test_tracking_step.py::test_every_phase_equals_the_reference_on_small_scenes"
 
 CHECKS: dict[str, str] = {
     # tracking: the kernels the compiled step calls
@@ -27,6 +28,27 @@ CHECKS: dict[str, str] = {
     "tracking._kernels.on_background": f"{HERE}::test_on_background",
     "tracking._kernels.tracks_on_background": f"{HERE}::test_tracks_on_background",
     "tracking._kernels.marker_points": "test_tracking_markers.py::test_kernel_tails_equal_tail_segments",
+    # tracking: the compiled step's phases, each run on the reference tracker's state (lockstep)
+    "tracking._step.paper_measurements": STEP_PHASES,
+    "tracking._step.learned_measurements": STEP_PHASES,
+    "tracking._step.moved": STEP_PHASES,
+    "tracking._step.kind_group": STEP_PHASES,
+    "tracking._step.predict": STEP_PHASES,
+    "tracking._step.off_background": STEP_PHASES,
+    "tracking._step.legs_stage": STEP_PHASES,
+    "tracking._step.associate": STEP_PHASES,
+    "tracking._step.hit_background": STEP_PHASES,
+    "tracking._step.update": STEP_PHASES,
+    "tracking._step.reacquire": STEP_PHASES,
+    "tracking._step.merge_reacquired": STEP_PHASES,
+    "tracking._step.leg_evidence": STEP_PHASES,
+    "tracking._step.occlusion": STEP_PHASES,
+    "tracking._step.life_cycle": STEP_PHASES,
+    "tracking._step.spawn": STEP_PHASES,
+    "tracking._step.classify": STEP_PHASES,
+    "tracking._step.push_tail": STEP_PHASES,
+    "tracking._step.background": STEP_PHASES,
+    "tracking._step.write_tracks": STEP_PHASES,
     # tracking: the assignment solver
     "tracking._assign.lsap": "test_tracking_assign.py::test_lsap_is_scipys_assignment",
     "tracking._assign.gnn": "test_tracking_assign.py::test_gnn_is_the_reference_gnn_on_gated_matrices",
@@ -93,12 +115,9 @@ UNCHECKED: frozenset[str] = frozenset({
     "perception._leg_kernels.block_probabilities_parallel",
     "perception.landmarks._beyond", "perception.landmarks._benches", "perception.landmarks.accumulate",
     "perception.landmarks._hide_bench_supports",
-    # the compiled step's phases: checked against the reference tracker phase by phase on whole logs
-    # (test_tracking_step.py::test_every_phase_equals_the_reference_scan_by_scan), not on small inputs
+    # the compiled step's drivers and the helpers inside its phases: checked through the phases and whole
+    # runs (test_tracking_step.py), not one by one
     *(f"tracking._step.{n}" for n in (
-        "_empty_meas", "paper_measurements", "learned_measurements", "moved", "kind_group", "to_sensor",
-        "leg_probability", "predict", "kalman_update", "restart", "off_background", "leggy_tracks", "legs_stage",
-        "gated_costs", "associate", "hit_background", "update", "reacquire", "merge_reacquired", "leg_evidence",
-        "occlusion", "duplicates", "life_cycle", "spawn", "classify", "push_tail", "background_update",
-        "background", "write_tracks", "track_scan", "step_measurements", "track_block")),
+        "_empty_meas", "to_sensor", "leg_probability", "kalman_update", "restart", "leggy_tracks", "gated_costs",
+        "duplicates", "background_update", "track_scan", "step_measurements", "track_block")),
 })

@@ -378,6 +378,20 @@ def test_random_scenes_equal_the_reference(scene: tuple):
     assert block.items.tobytes() == np.concatenate(want).tobytes()
 
 
+@settings(max_examples=6, deadline=None)
+@given(scene=scenes())
+def test_every_phase_equals_the_reference_on_small_scenes(scene: tuple):
+    """The lockstep of the sample logs on small random scenes (a few objects, a few scans): every compiled
+    phase called directly on the reference's state, and the compiled features-to-measurements."""
+    stamps, feats, poses, ranges, learned = scene
+    ref = ReferenceTracker(P, GEOM, learned=learned)
+    for i, f in enumerate(feats):
+        m = reference_measurements(f, P, learned)
+        same_meas(_flat_measurements(f, learned), m, f"measurements of scan {i}")
+        lockstep(ref, int(stamps[0]), int(stamps[i]), m, None if ranges is None else ranges[i],
+                 None if poses is None else poses[i])
+
+
 def test_the_table_grows_past_its_capacity():
     """A scan with more new objects than the table holds: the table doubles, nothing is lost."""
     n = 150

@@ -880,31 +880,32 @@ def background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, 
 
 @njit(cache=True)
 def write_tracks(out, o, tab, n, has_pose, pose):
-    """Track elements of tracks 0..n-1 into out[o:o + n] (tracker.output)."""
+    """Track elements of tracks 0..n-1 into out[o:o + n] (tracker.output). Fields by r["name"], which numba
+    compiles as r.name and plain Python (NUMBA_DISABLE_JIT=1) understands on a numpy record."""
     c, s = (np.cos(pose[2]), np.sin(pose[2])) if has_pose else (1.0, 0.0)
     for k in range(n):
         r = out[o + k]
-        r.id = np.uint32(tab[k, ID])
-        r.age = np.uint32(tab[k, AGE])
-        r.hits = np.uint32(tab[k, HITS])
-        r.misses = np.uint32(tab[k, MISSES])
+        r["id"] = np.uint32(tab[k, ID])
+        r["age"] = np.uint32(tab[k, AGE])
+        r["hits"] = np.uint32(tab[k, HITS])
+        r["misses"] = np.uint32(tab[k, MISSES])
         sx, sy = to_sensor(tab[k, X], tab[k, Y], has_pose, pose)
-        r.x, r.y = sx, sy
+        r["x"], r["y"] = sx, sy
         if has_pose:
-            r.vx = c * tab[k, VX] + s * tab[k, VY]
-            r.vy = -s * tab[k, VX] + c * tab[k, VY]
-            r.world_x, r.world_y, r.world_vx, r.world_vy = tab[k, X], tab[k, Y], tab[k, VX], tab[k, VY]
+            r["vx"] = c * tab[k, VX] + s * tab[k, VY]
+            r["vy"] = -s * tab[k, VX] + c * tab[k, VY]
+            r["world_x"], r["world_y"], r["world_vx"], r["world_vy"] = tab[k, X], tab[k, Y], tab[k, VX], tab[k, VY]
         else:
-            r.vx, r.vy = tab[k, VX], tab[k, VY]
-            r.world_x = r.world_y = r.world_vx = r.world_vy = np.nan
+            r["vx"], r["vy"] = tab[k, VX], tab[k, VY]
+            r["world_x"] = r["world_y"] = r["world_vx"] = r["world_vy"] = np.nan
         for i in range(16):
-            r.covariance[i] = tab[k, P0 + i]
-        r.size = tab[k, SIZE]
-        r.classification = np.uint8(tab[k, CLS])
-        r.mobility = np.uint8(tab[k, MOBILITY])
+            r["covariance"][i] = tab[k, P0 + i]
+        r["size"] = tab[k, SIZE]
+        r["classification"] = np.uint8(tab[k, CLS])
+        r["mobility"] = np.uint8(tab[k, MOBILITY])
         confirmed, hit = tab[k, CONFIRMED] != 0, tab[k, HIT] != 0
-        r.status = np.uint8((1 if hit else 2) if confirmed else 0)
-        r.occluded = np.uint8(tab[k, OCCLUDED])
+        r["status"] = np.uint8((1 if hit else 2) if confirmed else 0)
+        r["occluded"] = np.uint8(tab[k, OCCLUDED])
 
 
 # -------------------------------------------------------------------------------------------- the step
