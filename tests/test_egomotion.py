@@ -147,7 +147,7 @@ def test_normals_match_reference(geom):
     kinds = {"line": 0, "point": 0, "none": 0}
     for i, b in enumerate(valid):
         ex, ey = reference.beam_normal(r, a, geom.range_min, geom.range_max, b, p.normal_radius, p.max_gap, win,
-                                   p.planarity)
+                                       p.planarity)
         if math.isnan(ex):
             assert math.isnan(nx[i])
             kinds["none"] += 1
@@ -183,7 +183,7 @@ def test_icp_step_matches_reference(pose, redescend):
     got = K.icp_step(sx, sy, len(sx), *pose, mx, my, mnx, mny, 0.25, head, nxt, 0.25, 0.05, redescend, 0.05,
                      hess, grad)
     H, g, matched, abs_sum, inliers = reference.icp_step(np.stack([sx, sy], 1), pose, np.stack([mx, my], 1),
-                                                     np.stack([mnx, mny], 1), 0.25, 0.05, redescend, 0.05)
+                                                         np.stack([mnx, mny], 1), 0.25, 0.05, redescend, 0.05)
     assert got[0] == matched and got[2] == inliers and matched > 50
     assert got[1] == pytest.approx(abs_sum, rel=1e-9)
     np.testing.assert_allclose(hess, H, rtol=1e-9, atol=1e-9)
@@ -202,7 +202,7 @@ def test_icp_align_matches_reference(init):
     got = K.icp_align(sx, sy, len(sx), *init, mx, my, mnx, mny, 0.25, head, nxt, 0.5, 0.25, 0.05, 0.05, 30, 1.0,
                       pose)
     want, stats = reference.icp_align(np.stack([sx, sy], 1), init, np.stack([mx, my], 1), np.stack([mnx, mny], 1),
-                                  0.5, 0.25, 0.05, 0.05, 30, 1.0)
+                                      0.5, 0.25, 0.05, 0.05, 30, 1.0)
     np.testing.assert_allclose(pose, want, atol=1e-9)
     assert got[0] == stats[0] and got[2] == stats[2] and got[3] == stats[3]
     assert got[1] == pytest.approx(stats[1], rel=1e-9)
