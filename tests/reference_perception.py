@@ -139,6 +139,19 @@ def fit_line(x, y) -> tuple[float, float]:
     return theta, cx * math.cos(theta) + cy * math.sin(theta)
 
 
+def line_distances(x, y) -> list[float]:
+    """Each point's distance (m) from the total-least-squares line of the points."""
+    theta, rho = fit_line(x, y)
+    return [abs(xi * math.cos(theta) + yi * math.sin(theta) - rho) for xi, yi in zip(x, y, strict=True)]
+
+
+def one_line(x, y, tol: float, tail: int) -> bool:
+    """The points hold one line: their total-least-squares line lies within tol (m) of 90 % of them and of
+    each of the last `tail` points."""
+    d = line_distances(x, y)
+    return sum(di <= tol for di in d) >= 0.9 * len(d) and all(di <= tol for di in d[len(d) - tail:])
+
+
 def refine_line(x, y, theta_p: float, rho_p: float, rho_res: float) -> tuple[float, float, list[int]]:
     """The HTL peak line refined by least squares: the points within a rho cell of the peak line are fitted;
     the points within a rho cell of that fit, when more, are fitted again. Returns (theta, rho, points used)."""

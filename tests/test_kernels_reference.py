@@ -298,6 +298,37 @@ def test_bounding_box_and_row_offset():
         assert KP._row_offset(box, math.cos(th), math.sin(th)) == pytest.approx(lo[t], abs=1e-12)
 
 
+def test_scatter():
+    rng = np.random.default_rng(17)
+    x, y = rng.uniform(-3, 3, 20), rng.uniform(-3, 3, 20)
+    idx = rng.permutation(20)
+    cx, cy, sxx, syy, sxy = KP.scatter(x, y, idx, 12)
+    px, py = x[idx[:12]], y[idx[:12]]
+    np.testing.assert_allclose([cx, cy], [px.mean(), py.mean()], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose([sxx, syy, sxy], [((px - px.mean()) ** 2).sum(), ((py - py.mean()) ** 2).sum(),
+                                                 ((px - px.mean()) * (py - py.mean())).sum()], rtol=1e-12)
+
+
+def test_one_line():
+    rng = np.random.default_rng(18)
+    seen = set()
+    for _ in range(300):
+        n = int(rng.integers(4, 30))
+        t = np.sort(rng.uniform(-1, 1, n))
+        theta = rng.uniform(0, np.pi)
+        x = 2 * np.cos(theta) - t * np.sin(theta) + rng.normal(0, 0.01, n)
+        y = 2 * np.sin(theta) + t * np.cos(theta) + rng.normal(0, 0.01, n)
+        if rng.random() < 0.5:   # a bend at the end
+            x[-3:] += rng.uniform(0, 0.2)
+        tol, tail = float(rng.choice([0.01, 0.02, 0.05])), int(rng.integers(1, 4))
+        if min(abs(d - tol) for d in rp.line_distances(x, y)) < 1e-9:
+            continue   # a point on the tolerance itself: rounding decides
+        want = rp.one_line(x, y, tol, tail)
+        assert KP._one_line(np.concatenate([[9.0], x]), np.concatenate([[9.0], y]), 1, n + 1, tol, tail) == want
+        seen.add(want)
+    assert seen == {True, False}
+
+
 def test_perpendicular_and_convex():
     rng = np.random.default_rng(8)
     for _ in range(200):
