@@ -298,6 +298,21 @@ def test_bounding_box_and_row_offset():
         assert KP._row_offset(box, math.cos(th), math.sin(th)) == pytest.approx(lo[t], abs=1e-12)
 
 
+def test_segment_block():
+    rng = np.random.default_rng(19)
+    inc = math.radians(0.5)
+    ranges = np.repeat(rng.uniform(0.5, 6.0, (4, 1)), 120, axis=1) + rng.normal(0, 0.3, (4, 120))
+    ranges[rng.random((4, 120)) < 0.08] = np.nan
+    seg = np.empty((4 * 120, 2), np.int64)
+    count = np.zeros(4, np.int64)
+    c1 = math.sqrt(2.0 * (1.0 - math.cos(inc)))
+    total = KP.segment_block(ranges, math.cos(inc), 0.05, c1, 0.1, 8.0, 3, seg, count)
+    want = [rp.segment(r, inc, 0.05, 0.1, 8.0, 3) for r in ranges]
+    assert count.tolist() == [len(w) for w in want] and total == sum(count)
+    assert [tuple(s) for s in seg[:total].tolist()] == [s for w in want for s in w]
+    assert total >= 4
+
+
 def test_scatter():
     rng = np.random.default_rng(17)
     x, y = rng.uniform(-3, 3, 20), rng.uniform(-3, 3, 20)
