@@ -104,6 +104,8 @@ CHECKS: dict[str, str] = {
     "perception._leg_kernels.is_candidate": f"{HERE}::test_ensemble_leaf_and_candidates",
     "perception._leg_kernels._leaf": f"{HERE}::test_ensemble_leaf_and_candidates",
     "perception._leg_kernels._leaves4": f"{HERE}::test_ensemble_leaf_and_candidates",
+    "perception._leg_kernels.block_probabilities": f"{HERE}::test_block_probabilities",
+    "perception._leg_kernels.block_probabilities_parallel": f"{HERE}::test_block_probabilities",
 }
 
 UNCHECKED: frozenset[str] = frozenset({
@@ -113,8 +115,7 @@ UNCHECKED: frozenset[str] = frozenset({
     "perception._kernels._vote", "perception._kernels._clear",
     "perception._kernels.extract_scan",
     "perception._kernels.extract_scans", "perception._kernels.extract_parallel",
-    "perception._leg_kernels.segment_features", "perception._leg_kernels.block_probabilities",
-    "perception._leg_kernels.block_probabilities_parallel",
+    "perception._leg_kernels.segment_features",
     "perception.landmarks._beyond", "perception.landmarks._benches", "perception.landmarks.accumulate",
     "perception.landmarks._hide_bench_supports",
     # the compiled step's drivers and the helpers inside its phases: checked through the phases and whole

@@ -486,3 +486,34 @@ def test_ensemble_leaf_and_candidates():
         for root in model.roots[:3]:
             got = KL._leaves4(nodes, split, X[q], X[q + 1], X[q + 2], X[q + 3], root)
             assert list(got) == [rp.tree_leaf(model, root, X[q + i]) for i in range(4)]
+
+
+def test_block_probabilities():
+    """Features of the candidates (the reference's, to 1e-6) and their probability by the reference tree walk
+    over the features the kernel computed; non-candidates 0; the threaded kernel gives the same, split in parts."""
+    from datmo_cli.perception import legs
+
+    model = legs.load_leg_model("default")
+    rng = np.random.default_rng(20)
+    angles = np.radians(np.linspace(-40.0, 40.0, 120))
+    ranges = (3.0 + rng.normal(0, 0.005, (4, 120))).astype(np.float32)   # a wall: wide, not a candidate
+    for k in range(4):   # two legs in front of it: short arcs 1.2-2 m away
+        for i in rng.choice(np.arange(5, 110, 12), 2, replace=False):
+            d = rng.uniform(1.2, 2.0)
+            ranges[k, i:i + 6] = d + 0.06 * (1 - np.cos(np.linspace(-1.2, 1.2, 6)))
+    start, end, offsets = rp.gap_clusters(ranges, angles, 0.05, 30.0, 0.13, 1)
+    args = (np.cos(angles), np.sin(angles), angles, start, end, offsets, 0.05, 30.0, legs.RADIUS_CLIP,
+            legs.OCCLUSION_MARGIN, legs.CANDIDATE_MAX_WIDTH, legs.CANDIDATE_MIN_POINTS, abs(angles[1] - angles[0]),
+            *model._kernel_args())
+    feats, out = np.empty((len(start), KL.N_FEATURES)), np.empty(len(start))
+    KL.block_probabilities(ranges, *args, feats, out)
+    want_feats = rp.cluster_features(ranges, angles, start, end, offsets, 0.05, 30.0)
+    candidate = np.array([rp.is_candidate(x) for x in want_feats])
+    assert candidate.any() and not candidate.all()
+    np.testing.assert_allclose(feats[candidate], want_feats[candidate], rtol=1e-6, atol=1e-7)
+    want = [rp.ensemble_probability(model, [rp.tree_leaf(model, root, x) for root in model.roots]) if c else 0.0
+            for x, c in zip(feats, candidate, strict=True)]
+    np.testing.assert_allclose(out, want, rtol=1e-12, atol=1e-15)
+    feats2, out2 = np.empty_like(feats), np.empty_like(out)
+    KL.block_probabilities_parallel(ranges, 2, *args, feats2, out2)
+    np.testing.assert_array_equal(out2, out)
