@@ -216,6 +216,69 @@ def test_tracks_on_background():
     assert want.any() and not want.all()
 
 
+def _table(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A track table of n tracks with random states and covariances: (table, x (n, 4), P (n, 4, 4))."""
+    from datmo_cli.tracking import state
+
+    tab = np.zeros((n, state.n_columns(1)))
+    x = rng.normal(0, 2, (n, 4))
+    A = rng.normal(size=(n, 4, 4))
+    P = 0.1 * A @ A.transpose(0, 2, 1) + 0.01 * np.eye(4)
+    tab[:, state.X:state.X + 4] = x
+    tab[:, state.P0:state.P0 + 16] = P.reshape(n, 16)
+    return tab, x, P
+
+
+def test_step_kalman_update_and_restart():
+    from datmo_cli.tracking import _step, state
+
+    rng = np.random.default_rng(21)
+    tab, x, P = _table(rng, 5)
+    rows = np.array([0, 2, 3])
+    zx, zy, sigma = rng.normal(0, 2, 3), rng.normal(0, 2, 3), rng.uniform(0.02, 0.3, 3)
+    scratch = np.empty((3, 4, 4))
+    for q, k in enumerate(rows.tolist()):
+        _step.kalman_update(tab, k, zx[q], zy[q], sigma[q], scratch)
+    rt.joseph_update(x, P, rows, zx, zy, sigma)
+    np.testing.assert_array_equal(tab[:, state.X:state.X + 4], x)
+    np.testing.assert_array_equal(tab[:, state.P0:state.P0 + 16], P.reshape(5, 16))
+    prm = rt.param_vector(initial_speed_sigma=0.7)
+    _step.restart(tab, 4, 1.5, -0.5, 0.1, prm)
+    want = np.diag([0.1**2, 0.1**2, 0.7**2, 0.7**2])
+    np.testing.assert_array_equal(tab[4, state.X:state.X + 4], [1.5, -0.5, 0.0, 0.0])
+    np.testing.assert_array_equal(tab[4, state.P0:state.P0 + 16], want.reshape(16))
+
+
+def test_step_to_sensor():
+    from datmo_cli.tracking import _step
+
+    rng = np.random.default_rng(22)
+    for _ in range(20):
+        pose, p = rng.uniform(-3, 3, 3), rng.uniform(-5, 5, 2)
+        got = _step.to_sensor(p[0], p[1], True, pose)
+        want = np.linalg.inv(rp.se2(*pose)) @ [p[0], p[1], 1.0]
+        np.testing.assert_allclose(got, want[:2], atol=1e-12)
+        assert _step.to_sensor(p[0], p[1], False, pose) == (p[0], p[1])
+
+
+def test_step_gated_costs():
+    from datmo_cli.tracking import _step
+    from datmo_cli.tracking.params import TrackingParams
+
+    rng = np.random.default_rng(23)
+    tab, x, P = _table(rng, 6)
+    mx, my, kind = rng.normal(0, 2, 9), rng.normal(0, 2, 9), rng.integers(0, 5, 9)
+    compat = rng.random((6, 5)) < 0.7
+    row = rng.integers(0, 6, 6)
+    p = TrackingParams()
+    cost, ok = _step.gated_costs(tab, 6, mx, my, kind, compat, row, rt.param_vector())
+    want_cost, want_ok = rt.gated_costs(x, P, mx, my, kind, p.measurement_noise, p.leg_measurement_noise, p.gate,
+                                        p.max_gate_distance, compat, row)
+    np.testing.assert_array_equal(ok, want_ok)
+    np.testing.assert_array_equal(cost[ok], want_cost[ok])
+    assert np.isinf(cost[~ok]).all() and ok.any() and not ok.all()
+
+
 def test_components():
     rng = np.random.default_rng(5)
     for _ in range(20):
