@@ -53,6 +53,10 @@ CHECKS: dict[str, str] = {
     "tracking._step.restart": f"{HERE}::test_step_kalman_update_and_restart",
     "tracking._step.to_sensor": f"{HERE}::test_step_to_sensor",
     "tracking._step.gated_costs": f"{HERE}::test_step_gated_costs",
+    "tracking._step.background_update": f"{HERE}::test_step_background_update",
+    "tracking._step.leg_probability": f"{HERE}::test_step_leg_probability",
+    "tracking._step.leggy_tracks": f"{HERE}::test_step_leggy_tracks_and_duplicates",
+    "tracking._step.duplicates": f"{HERE}::test_step_leggy_tracks_and_duplicates",
     # tracking: the assignment solver
     "tracking._assign.lsap": "test_tracking_assign.py::test_lsap_is_scipys_assignment",
     "tracking._assign.gnn": "test_tracking_assign.py::test_gnn_is_the_reference_gnn_on_gated_matrices",
@@ -125,6 +129,5 @@ UNCHECKED: frozenset[str] = frozenset({
     # the compiled step's drivers and the helpers inside its phases: checked through the phases and whole
     # runs (test_tracking_step.py), not one by one
     *(f"tracking._step.{n}" for n in (
-        "_empty_meas", "leg_probability", "leggy_tracks", "duplicates", "background_update", "track_scan",
-        "step_measurements", "track_block")),
+        "_empty_meas", "track_scan", "step_measurements", "track_block")),
 })

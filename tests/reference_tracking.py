@@ -221,6 +221,23 @@ def duplicates(x, y, vx, vy, candidate, confirmed, rank, merge_distance, merge_s
     return (both & higher & near & alike).any(axis=1)
 
 
+def leggy_tracks(votes: np.ndarray, cls: np.ndarray, confirmed: np.ndarray, person_votes: float) -> np.ndarray:
+    """The confirmed tracks of legs or people that may take leg candidates first: legs (pairs and single legs)
+    are at least person_votes of their hits, and their class is unknown or person."""
+    legs = votes[:, KIND_PERSON] + votes[:, KIND_LEG]
+    return np.flatnonzero((legs >= person_votes * np.maximum(votes.sum(axis=1), 1)) & (legs > 0)
+                          & (cls <= CLASS_PERSON) & confirmed)
+
+
+def duplicate_ranks(votes, hits, confirmed, mobility, cls) -> tuple[np.ndarray, np.ndarray]:
+    """Which tracks may be a duplicate (fed legs, class unknown or person) and their rank: a person before
+    anything else, then a dynamic track, then more hits, then confirmed."""
+    candidate = ((votes[:, KIND_PERSON] + votes[:, KIND_LEG]) > 0) & (cls <= CLASS_PERSON)
+    rank = (hits.astype(np.int64) * 2 + confirmed + (mobility == MOBILITY_DYNAMIC) * (1 << 40)
+            + (cls == CLASS_PERSON) * (1 << 41))
+    return candidate, rank
+
+
 def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, margin) -> np.ndarray:
     """Missed tracks (sensor-frame centres, extents in m) that are hidden: their bearing outside the beams or
     their range at least range_max, or a return more than `margin` m nearer within the beams their extent
@@ -915,9 +932,7 @@ class ReferenceTracker:
         raw = m.raw_legs
         if not len(t) or not len(raw):
             return m, none
-        legs_votes = t.votes[:, KIND_PERSON] + t.votes[:, KIND_LEG]
-        leggy = np.flatnonzero((legs_votes >= p.person_votes * np.maximum(t.votes.sum(axis=1), 1))
-                               & (legs_votes > 0) & (t.cls <= CLASS_PERSON) & t.confirmed)
+        leggy = leggy_tracks(t.votes, t.cls, t.confirmed, p.person_votes)
         if not len(leggy):
             return m, none
         owner, x, y, size, kind, legs = _kernels.leg_stage_measurements(
@@ -1026,11 +1041,8 @@ class ReferenceTracker:
         are confirmed and move differently: one person's two legs must not keep two tracks alive. Rank: a
         person before anything else, then a dynamic track, then more hits (a person walking past a bench
         keeps its track; the track on the bench's pieces its passing uncovers goes)."""
-        legs = t.votes[:, KIND_PERSON] + t.votes[:, KIND_LEG]
-        candidate = (legs > 0) & (t.cls <= CLASS_PERSON)
+        candidate, rank = duplicate_ranks(t.votes, t.hits, t.confirmed, t.mobility, t.cls)
         x = np.ascontiguousarray(t.x.T)
-        rank = (t.hits.astype(np.int64) * 2 + t.confirmed + (t.mobility == MOBILITY_DYNAMIC) * (1 << 40)
-                + (t.cls == CLASS_PERSON) * (1 << 41))
         return _kernels.duplicates(x[0], x[1], x[2], x[3], candidate, t.confirmed, rank, self.prm)
 
     def _spawn(self, m: Measurements, rows: np.ndarray, cols: np.ndarray, stamp_ns: int) -> None:

@@ -279,6 +279,83 @@ def test_step_gated_costs():
     assert np.isinf(cost[~ok]).all() and ok.any() and not ok.all()
 
 
+def test_step_leggy_tracks_and_duplicates():
+    from datmo_cli.tracking import _step, state
+
+    rng = np.random.default_rng(24)
+    found = 0
+    for _ in range(20):
+        n = 8
+        tab, x, _ = _table(rng, n)
+        tab[:, state.X:state.X + 2] = rng.uniform(0, 1.0, (n, 2))   # close together: some within merge_distance
+        x[:, :2] = tab[:, state.X:state.X + 2]
+        votes = rng.integers(0, 4, (n, 5)) * (rng.random((n, 5)) < 0.6)
+        cls, mob = rng.integers(0, 4, n), rng.integers(0, 3, n)
+        confirmed, hits = rng.random(n) < 0.6, rng.integers(1, 20, n)
+        tab[:, state.VOTES:state.VOTES + 5] = votes
+        tab[:, state.CLS], tab[:, state.MOBILITY], tab[:, state.CONFIRMED], tab[:, state.HITS] = \
+            cls, mob, confirmed, hits
+        prm = rt.param_vector()
+        np.testing.assert_array_equal(_step.leggy_tracks(tab, n, prm),
+                                      rt.leggy_tracks(votes, cls, confirmed, prm[state.P_PERSON_VOTES]))
+        candidate, rank = rt.duplicate_ranks(votes, hits, confirmed, mob, cls)
+        want = rt.duplicates(x[:, 0], x[:, 1], x[:, 2], x[:, 3], candidate, confirmed, rank,
+                             prm[state.P_MERGE_DISTANCE], prm[state.P_MERGE_SPEED])
+        np.testing.assert_array_equal(_step.duplicates(tab, n, prm), want)
+        found += int(want.sum())
+    assert found > 0
+
+
+def test_step_leg_probability():
+    from datmo_cli.tracking import _step
+    from datmo_cli.tracking.measurements import Measurements
+
+    rng = np.random.default_rng(25)
+    for with_prob in (True, False):
+        M, L = 7, 5
+        raw = np.column_stack([rng.uniform(0, 3, (L, 2)), rng.uniform(0.05, 0.2, L), rng.uniform(0, 1, L)])
+        kind = np.array([0, 0, 1, 1, 2, 3, 4])
+        legs = np.full((M, 4), np.nan)
+        legs[:2] = raw[[0, 2]][:, :2].reshape(1, 4) + rng.normal(0, 0.02, (2, 4))
+        m = Measurements(rng.uniform(0, 3, M), rng.uniform(0, 3, M), rng.uniform(0.1, 1, M), kind, legs,
+                         raw if with_prob else raw[:, :3], rng.uniform(0, 1, M))
+        want = rt._leg_probability(m, np.arange(M))
+        got = [_step.leg_probability(m.x, m.y, m.kind, m.legs, m.prob, raw, with_prob, j) for j in range(M)]
+        np.testing.assert_array_equal(got, want)
+
+
+def test_step_background_update():
+    """Scan after scan (a still sensor, then a moved one), the grid with its range/beam cache equals the
+    reference's: scores, active cells in order, and the scans that hit them."""
+    from datmo_cli.tracking import _step
+
+    rng = np.random.default_rng(26)
+    B, n, cell = 91, 40, 0.25
+    angles = np.radians(np.linspace(-45.0, 45.0, B))
+    inc = angles[1] - angles[0]
+    score, mark, active = np.zeros(n * n), np.zeros(n * n, np.int64), np.zeros(400, np.int64)
+    cache = np.zeros((400, 2))
+    want_score, want_mark, want_active = np.zeros(n * n), np.full(n * n, -1, np.int64), np.zeros(400, np.int64)
+    count = want_count = 0
+    pose = (0.0, 0.0, 1.0, 0.0)
+    for scan in range(1, 25):
+        fresh = scan in (1, 13)
+        if scan == 13:
+            pose = (0.3, -0.2, math.cos(0.2), math.sin(0.2))
+        ranges = np.full(B, 3.0, np.float32)
+        ranges[rng.random(B) < 0.3] = rng.uniform(0.5, 4.5)
+        ranges[rng.random(B) < 0.05] = np.inf
+        args = (ranges, np.cos(angles), np.sin(angles), angles[0], inc, 0.1, 8.0, *pose, 0.2, -5.0, -5.0, cell, n,
+                0.3, 0.8)
+        count = _step.background_update(score, mark, active, cache, count, scan, *args, fresh)
+        want_count = rt.background_update(want_score, want_mark, want_active, want_count, scan, *args)
+        assert count == want_count
+        np.testing.assert_array_equal(active[:count], want_active[:count])
+        np.testing.assert_array_equal(score, want_score)
+        np.testing.assert_array_equal(np.where(mark == 0, -1, mark), want_mark)
+    assert (score >= 0.8).any()
+
+
 def test_components():
     rng = np.random.default_rng(5)
     for _ in range(20):
