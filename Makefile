@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 DEMO_LOG := sample_logs/hall.mcap
 
-.PHONY: install demo test test-fast lint bench accuracy sample-logs regress regress-update clean legs-model
+.PHONY: install demo test test-fast test-nojit lint bench accuracy sample-logs regress regress-update clean legs-model
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,6 +22,9 @@ test: install ## the whole test suite (what CI runs)
 
 test-fast: install ## the suite without tests marked slow
 	$(BIN)/pytest -q -m "not slow"
+
+test-nojit: install ## the kernel reference checks (tests/kernel_checks.py) with the kernels as plain Python (NUMBA_DISABLE_JIT=1)
+	NUMBA_DISABLE_JIT=1 $(BIN)/pytest -q -m "kernels and not slow"
 
 lint: install
 	$(BIN)/ruff check datmo_cli tests benchmarks

@@ -49,3 +49,13 @@ def pytest_terminal_summary(terminalreporter) -> None:
         terminalreporter.section("fault injection and fuzz")
         for line in lines:
             terminalreporter.write_line(line)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark `kernels` the tests tests/kernel_checks.py names as a kernel's reference check."""
+    from kernel_checks import CHECKS
+
+    checks = {tuple(node.split("::")) for node in CHECKS.values()}
+    for item in items:
+        if (item.path.name, getattr(item, "originalname", item.name)) in checks:
+            item.add_marker(pytest.mark.kernels)

@@ -1,6 +1,17 @@
-"""Slow, plain references for the perception kernels (method.md sections 4 and 5), written for reading, not
-speed: loops over points, numpy only for small linear algebra, scipy for the circle fit. Sensor frame,
-metres, radians."""
+"""Slow, plain references for datmo's perception kernels, written to be read, not for speed: loops over
+points and segments, numpy only for small linear algebra, scipy for the circle fit. No numba.
+
+- Features (method.md sections 4 and 5, followed literally; datmo_cli/perception/_kernels.py): segmentation,
+  the Hough transform for lines and its refinement, circles; the scene helpers ray-cast walls and circles
+  analytically, for synthetic scans of known geometry.
+- The leg detector (datmo_cli/perception/_leg_kernels.py): segment features one segment at a time, in the
+  feature order of legs.FEATURE_NAMES, and tree-ensemble evaluation.
+- Ego-motion (datmo_cli/perception/_egomotion_kernels.py): scan points and their thinning, line normals from
+  beam neighbours, brute-force nearest map points, one Gauss-Newton linearisation of the robust
+  point-to-line cost, and the whole ICP. A pose (x, y, theta) maps a sensor point p to R(theta) p + (x, y).
+
+Sensor frame (x forward, y left) and the map frame, metres, radians.
+"""
 
 from __future__ import annotations
 
@@ -9,86 +20,740 @@ import math
 import numpy as np
 from scipy.optimize import least_squares
 
+from datmo_cli.perception.legs import (
+    CANDIDATE_MAX_WIDTH,
+    CANDIDATE_MIN_POINTS,
+    DENSITY_CLIP,
+    FEATURE_NAMES,
+    JUMP_CLIP,
+    NEIGHBOUR_CLIP,
+    OCCLUSION_MARGIN,
+    RADIUS_CLIP,
+)
 
-def valid(r: float, range_min: float, range_max: float) -> bool:
+MIN_MATCHES = 12
+CONVERGED_STEP, CONVERGED_TURN = 2e-4, 5e-5   # m, rad
+
+
+# ----------------------------------------------------------------------------------------------- section 4
+
+
+def is_valid(r: float, range_min: float, range_max: float) -> bool:
+    """A return that counts: finite and strictly between the range limits."""
     return math.isfinite(r) and range_min < r < range_max
 
 
-def segments(ranges, angle_increment: float, c0: float, range_min: float, range_max: float,
-             min_points: int) -> list[tuple[int, int]]:
-    """[start, end) beam ranges: P_i+1 joins P_i's segment when d(P_i, P_i+1) <= C0 + C1 min(r_i, r_i+1)."""
-    c1 = math.sqrt(2.0 * (1.0 - math.cos(angle_increment)))
-    out, start = [], None
-    for i, r in enumerate(ranges):
-        r = float(r)
-        if not valid(r, range_min, range_max):
-            if start is not None and i - start >= min_points:
-                out.append((start, i))
-            start = None
+def c1_of(angle_increment: float) -> float:
+    """C1 = sqrt(2 (1 - cos delta_alpha)): the chord of the angle step at unit range."""
+    return math.sqrt(2.0 * (1.0 - math.cos(angle_increment)))
+
+
+def point_distance(r_i: float, r_j: float, angle_increment: float) -> float:
+    """d(P_i, P_i+1) by the law of cosines."""
+    return math.sqrt(max(r_j * r_j + r_i * r_i - 2.0 * r_j * r_i * math.cos(angle_increment), 0.0))
+
+
+def segment(ranges, angle_increment: float, c0: float, range_min: float, range_max: float,
+            min_points: int) -> list[tuple[int, int]]:
+    """Segments [start, end) of one scan. P_i+1 joins P_i's segment when both are valid returns and
+    d(P_i, P_i+1) <= C0 + C1 min(r_i, r_i+1); segments of fewer than min_points points are dropped."""
+    c1 = c1_of(angle_increment)
+    groups: list[list[int]] = []
+    current: list[int] = []
+    for i in range(len(ranges)):
+        r = float(ranges[i])
+        if not is_valid(r, range_min, range_max):
+            if current:
+                groups.append(current)
+            current = []
             continue
-        if start is None:
-            start = i
-            continue
-        a = float(ranges[i - 1])
-        d = math.sqrt(max(a * a + r * r - 2.0 * a * r * math.cos(angle_increment), 0.0))
-        if d > c0 + c1 * min(a, r):
-            if i - start >= min_points:
-                out.append((start, i))
-            start = i
-    if start is not None and len(ranges) - start >= min_points:
-        out.append((start, len(ranges)))
-    return out
+        if current:
+            prev = float(ranges[current[-1]])
+            if point_distance(prev, r, angle_increment) > c0 + c1 * min(prev, r):
+                groups.append(current)
+                current = []
+        current.append(i)
+    if current:
+        groups.append(current)
+    return [(g[0], g[-1] + 1) for g in groups if len(g) >= min_points]
+
+
+# ----------------------------------------------------------------------------------------------- HTL
+
+
+def theta_table(n_theta: int) -> list[float]:
+    """The theta cells of an accumulator over [0, pi)."""
+    return [t * math.pi / n_theta for t in range(n_theta)]
+
+
+def box_rho_offsets(x, y, n_theta: int, rho_res: float) -> tuple[list[float], int]:
+    """The accumulator adapted to the points' bounding box: for each theta cell the smallest rho a corner of
+    the box gives, and how many rho cells the box's diagonal spans (plus two)."""
+    xmin, xmax, ymin, ymax = min(x), max(x), min(y), max(y)
+    lo = []
+    for th in theta_table(n_theta):
+        c, s = math.cos(th), math.sin(th)
+        lo.append(min(xmin * c, xmax * c) + min(ymin * s, ymax * s))
+    width = int(math.hypot(xmax - xmin, ymax - ymin) / rho_res) + 2
+    return lo, width
+
+
+def htl_accumulator(x, y, n_theta: int, rho_res: float) -> tuple[dict[tuple[int, int], int], tuple[int, int, int]]:
+    """Full Hough accumulator for lines: every point votes in every theta cell, in the rho cell of
+    rho = x cos(theta) + y sin(theta) counted from the box's smallest rho. Returns the accumulator
+    {(theta cell, rho cell): votes} and its peak (votes, theta cell, rho cell); of equal cells, the peak is
+    the one that reached its count first (points in order, theta cells in order)."""
+    lo, width = box_rho_offsets(x, y, n_theta, rho_res)
+    inv = 1.0 / rho_res
+    acc: dict[tuple[int, int], int] = {}
+    peak = (0, 0, 0)
+    for px, py in zip(x, y, strict=True):
+        for t, th in enumerate(theta_table(n_theta)):
+            k = int((px * math.cos(th) + py * math.sin(th) - lo[t]) * inv)
+            k = min(max(k, 0), width - 1)
+            acc[(t, k)] = acc.get((t, k), 0) + 1
+            if acc[(t, k)] > peak[0]:
+                peak = (acc[(t, k)], t, k)
+    return acc, peak
+
+
+def htl_peak_line(x, y, n_theta: int, rho_res: float) -> tuple[float, float, int]:
+    """The peak line of the points: (theta, rho at the centre of the peak rho cell, votes)."""
+    lo, _ = box_rho_offsets(x, y, n_theta, rho_res)
+    _, (votes, t, k) = htl_accumulator(x, y, n_theta, rho_res)
+    return t * math.pi / n_theta, lo[t] + (k + 0.5) * rho_res, votes
 
 
 def fit_line(x, y) -> tuple[float, float]:
-    """Total least squares: (theta in [0, pi), rho) of the line x cos(theta) + y sin(theta) = rho."""
-    pts = np.column_stack([x, y]).astype(float)
-    c = pts.mean(axis=0)
-    w, v = np.linalg.eigh(np.cov((pts - c).T))
-    n = v[:, 0]                       # the normal: direction of least spread
-    theta = math.atan2(n[1], n[0]) % math.pi
-    return theta, c[0] * math.cos(theta) + c[1] * math.sin(theta)
+    """Total least squares: (theta in [0, pi), rho) of x cos(theta) + y sin(theta) = rho, the normal being the
+    eigenvector of the smallest eigenvalue of the scatter matrix."""
+    n = len(x)
+    cx = sum(x) / n
+    cy = sum(y) / n
+    sxx = sum((xi - cx) ** 2 for xi in x)
+    syy = sum((yi - cy) ** 2 for yi in y)
+    sxy = sum((xi - cx) * (yi - cy) for xi, yi in zip(x, y, strict=True))
+    w, v = np.linalg.eigh(np.array([[sxx, sxy], [sxy, syy]]))
+    nx, ny = v[0, 0], v[1, 0]
+    theta = math.atan2(ny, nx) % math.pi
+    return theta, cx * math.cos(theta) + cy * math.sin(theta)
 
 
-def htl_peak(x, y, n_theta: int, rho_res: float) -> int:
-    """Votes in the peak cell of a full accumulator adapted to the points' bounding box: theta cells of
-    pi / n_theta over [0, pi); rho cells of rho_res from the smallest rho the box can give at each theta."""
-    xs, ys = [min(x), max(x)], [min(y), max(y)]
-    width = int(math.hypot(xs[1] - xs[0], ys[1] - ys[0]) / rho_res) + 2
-    best = 0
-    for t in range(n_theta):
-        th = t * math.pi / n_theta
-        c, s = math.cos(th), math.sin(th)
-        lo = min(xs[0] * c, xs[1] * c) + min(ys[0] * s, ys[1] * s)
-        cells: dict[int, int] = {}
-        for px, py in zip(x, y, strict=True):
-            k = min(max(int((px * c + py * s - lo) / rho_res), 0), width - 1)
-            cells[k] = cells.get(k, 0) + 1
-        best = max(best, max(cells.values()))
-    return best
+def line_distances(x, y) -> list[float]:
+    """Each point's distance (m) from the total-least-squares line of the points."""
+    theta, rho = fit_line(x, y)
+    return [abs(xi * math.cos(theta) + yi * math.sin(theta) - rho) for xi, yi in zip(x, y, strict=True)]
+
+
+def one_line(x, y, tol: float, tail: int) -> bool:
+    """The points hold one line: their total-least-squares line lies within tol (m) of 90 % of them and of
+    each of the last `tail` points."""
+    d = line_distances(x, y)
+    return sum(di <= tol for di in d) >= 0.9 * len(d) and all(di <= tol for di in d[len(d) - tail:])
+
+
+def refine_line(x, y, theta_p: float, rho_p: float, rho_res: float) -> tuple[float, float, list[int]]:
+    """The HTL peak line refined by least squares: the points within a rho cell of the peak line are fitted;
+    the points within a rho cell of that fit, when more, are fitted again. Returns (theta, rho, points used)."""
+    def near(theta, rho):
+        c, s = math.cos(theta), math.sin(theta)
+        return [i for i in range(len(x)) if abs(x[i] * c + y[i] * s - rho) <= rho_res]
+
+    used = near(theta_p, rho_p)
+    theta, rho = fit_line([x[i] for i in used], [y[i] for i in used])
+    again = near(theta, rho)
+    if len(again) > len(used):
+        used = again
+        theta, rho = fit_line([x[i] for i in used], [y[i] for i in used])
+    return theta, rho, used
+
+
+def angle_diff(a: float, b: float) -> float:
+    """Difference of two line normal angles modulo pi, in [-pi/2, pi/2)."""
+    return (a - b + math.pi / 2) % math.pi - math.pi / 2
+
+
+def same_line(theta_a: float, rho_a: float, theta_b: float, rho_b: float) -> tuple[float, float]:
+    """(angle difference, rho difference) of two lines in normal form, allowing (theta, rho) ~ (theta +- pi, -rho)."""
+    d = angle_diff(theta_a, theta_b)
+    if abs(theta_a - theta_b) > math.pi / 2:
+        return abs(d), abs(rho_a + rho_b)
+    return abs(d), abs(rho_a - rho_b)
+
+
+def intersect(theta_a: float, rho_a: float, theta_b: float, rho_b: float) -> tuple[float, float]:
+    """Where two lines in normal form cross."""
+    m = np.array([[math.cos(theta_a), math.sin(theta_a)], [math.cos(theta_b), math.sin(theta_b)]])
+    px, py = np.linalg.solve(m, [rho_a, rho_b])
+    return float(px), float(py)
+
+
+# ----------------------------------------------------------------------------------------------- HTC
 
 
 def fit_circle(x, y, guess: tuple[float, float, float]) -> tuple[float, float, float]:
-    """Geometric least-squares circle (a, b, r) through the points."""
-    x, y = np.asarray(x, float), np.asarray(y, float)
+    """Geometric least squares circle (a, b, r): minimise sum (|p - c| - r)^2 (scipy)."""
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
     res = least_squares(lambda q: np.hypot(x - q[0], y - q[1]) - q[2], np.asarray(guess, float),
-                        xtol=1e-12, ftol=1e-12, gtol=1e-12)
+                        xtol=1e-14, ftol=1e-14, gtol=1e-14, method="lm")
     return float(res.x[0]), float(res.x[1]), float(res.x[2])
 
 
+def circle_through(p0, p1, p2) -> tuple[float, float, float]:
+    """The circle through three points (e.g. P_ini, P_near, P_end)."""
+    (ax, ay), (bx, by), (cx, cy) = p0, p1, p2
+    d = 2.0 * (ax * (by - cy) + bx * (cy - ay) + cx * (ay - by))
+    ux = ((ax * ax + ay * ay) * (by - cy) + (bx * bx + by * by) * (cy - ay) + (cx * cx + cy * cy) * (ay - by)) / d
+    uy = ((ax * ax + ay * ay) * (cx - bx) + (bx * bx + by * by) * (ax - cx) + (cx * cx + cy * cy) * (bx - ax)) / d
+    return ux, uy, math.hypot(ax - ux, ay - uy)
+
+
+def chord_centre(x0: float, y0: float, x1: float, y1: float, radius: float) -> tuple[float, float]:
+    """The centre of the circle of `radius` through P_ini and P_end that lies beyond the chord, away from the
+    scanner (the side P_near bulges from)."""
+    chord = math.hypot(x1 - x0, y1 - y0)
+    mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    nx, ny = (y1 - y0) / chord, -(x1 - x0) / chord
+    if nx * mx + ny * my < 0:
+        nx, ny = -nx, -ny
+    h = math.sqrt(max(radius * radius - (0.5 * chord) ** 2, 0.0))
+    return mx + nx * h, my + ny * h
+
+
+def htc_window(x, y, ca: float, cb: float, radius: float, w: int, cell: float,
+               tol: float) -> tuple[list[list[int]], tuple[int, int, int]]:
+    """HTC with known radius in a window of (2w + 1)^2 centre cells of size `cell` around (ca, cb): a point
+    votes for a centre when its distance to it is within `tol` of the radius. Returns the votes
+    (votes[ia][ib], centre ca + (ia - w) cell, cb + (ib - w) cell) and the peak (votes, ia, ib); of equal
+    cells the one nearest the window's centre, then the first."""
+    size = 2 * w + 1
+    lo2 = max(radius - tol, 0.0) ** 2
+    hi2 = (radius + tol) ** 2
+    votes = [[0] * size for _ in range(size)]
+    for px, py in zip(x, y, strict=True):
+        for ia in range(size):
+            for ib in range(size):
+                dx = px - (ca + (ia - w) * cell)
+                dy = py - (cb + (ib - w) * cell)
+                if lo2 <= dx * dx + dy * dy <= hi2:
+                    votes[ia][ib] += 1
+    best = (0, w, w)
+    best_dc = None
+    for ia in range(size):
+        for ib in range(size):
+            v = votes[ia][ib]
+            dc = (ia - w) ** 2 + (ib - w) ** 2
+            if v > best[0] or (v == best[0] and v > 0 and best_dc is not None and dc < best_dc):
+                best, best_dc = (v, ia, ib), dc
+    return votes, best
+
+
+def htc_peak(x, y, r_min: float, r_max: float, r_step: float, w: int, cell: float, tol: float,
+             min_sagitta: float) -> int:
+    """HTC over every radius the arc allows, each voted in full (htc_window): the peak's votes (0: no radius).
+    The radii are r_min + k r_step within [r_lo, r_hi]: no smaller than half the chord (less tol), than the
+    circle through the chord's ends and P_near (the point nearest the scanner) pushed tol further out, no larger
+    than that circle with P_near pulled tol in; the nearest step to their middle when no step lies inside. Each
+    radius's window is centred on the circle of that radius through the chord's ends, on the far side from the
+    scanner. A later radius takes the peak only with more votes; no arc (sagitta under min_sagitta): 0."""
+    n = len(x)
+    if n < 3:
+        return 0
+    near = min(range(n), key=lambda i: (x[i] * x[i] + y[i] * y[i], i))
+    chord = math.hypot(x[-1] - x[0], y[-1] - y[0])
+    if chord < 1e-6:
+        return 0
+    mx, my = 0.5 * (x[0] + x[-1]), 0.5 * (y[0] + y[-1])
+    nx, ny = (y[-1] - y[0]) / chord, -(x[-1] - x[0]) / chord
+    if nx * mx + ny * my < 0:
+        nx, ny = -nx, -ny
+    sag = -((x[near] - mx) * nx + (y[near] - my) * ny)
+    if sag < min_sagitta:
+        return 0
+    half = 0.5 * chord
+    r_lo, r_hi = max(r_min, half - tol), r_max
+    if sag > tol:
+        r_hi = min(r_hi, ((sag - tol) ** 2 + half * half) / (2.0 * (sag - tol)) + tol)
+    s2 = max(sag, 0.0) + tol
+    r_lo = max(r_lo, (s2 * s2 + half * half) / (2.0 * s2) - tol)
+    if r_lo > r_hi:
+        return 0
+    k0 = math.ceil((r_lo - r_min) / r_step - 1e-9)
+    k1 = math.floor((r_hi - r_min) / r_step + 1e-9)
+    if k1 < k0:
+        k0 = k1 = round((0.5 * (r_lo + r_hi) - r_min) / r_step)
+    best = 0
+    for k in range(k0, k1 + 1):
+        r = r_min + k * r_step
+        h = math.sqrt(max(r * r - half * half, 0.0))
+        _, (votes, _, _) = htc_window(x, y, mx + nx * h, my + ny * h, r, w, cell, tol)
+        best = max(best, votes)
+    return best
+
+
+# ----------------------------------------------------------------------------------------------- scenes
+
+
 def ray_wall(angles, rho: float, theta: float) -> np.ndarray:
-    """Ranges of beams at `angles` to the infinite line x cos(theta) + y sin(theta) = rho (rho > 0); inf
-    where the beam runs away from it."""
-    cosd = np.cos(angles - theta)
-    with np.errstate(divide="ignore"):
-        r = np.where(cosd > 1e-9, rho / cosd, np.inf)
-    return r
+    """Ranges of beams at `angles` to the line x cos(theta) + y sin(theta) = rho (rho > 0); inf where the beam
+    runs parallel to it or away from it."""
+    out = np.full(len(angles), np.inf)
+    for i, a in enumerate(angles):
+        c = math.cos(a - theta)
+        if c > 1e-9:
+            out[i] = rho / c
+    return out
+
+
+def ray_segment(angles, p0, p1) -> np.ndarray:
+    """Ranges of beams to the wall segment p0-p1; inf where they miss it."""
+    out = np.full(len(angles), np.inf)
+    (x0, y0), (x1, y1) = p0, p1
+    for i, a in enumerate(angles):
+        ux, uy = math.cos(a), math.sin(a)
+        ex, ey = x1 - x0, y1 - y0
+        den = ux * ey - uy * ex
+        if abs(den) < 1e-12:
+            continue
+        t = (x0 * ey - y0 * ex) / den          # distance along the beam
+        s = (x0 * uy - y0 * ux) / den          # position along the wall, 0..1
+        if t > 0 and 0.0 <= s <= 1.0:
+            out[i] = t
+    return out
 
 
 def ray_circle(angles, cx: float, cy: float, radius: float) -> np.ndarray:
-    """Ranges of beams at `angles` to the circle's near side; inf where they miss it."""
-    ux, uy = np.cos(angles), np.sin(angles)
-    b = ux * cx + uy * cy
-    disc = b * b - (cx * cx + cy * cy - radius * radius)
-    r = b - np.sqrt(np.maximum(disc, 0.0))
-    return np.where((disc >= 0) & (r > 0), r, np.inf)
+    """Ranges of beams to the near side of a circle; inf where they miss it."""
+    out = np.full(len(angles), np.inf)
+    for i, a in enumerate(angles):
+        b = math.cos(a) * cx + math.sin(a) * cy
+        disc = b * b - (cx * cx + cy * cy - radius * radius)
+        if disc >= 0 and b - math.sqrt(disc) > 0:
+            out[i] = b - math.sqrt(disc)
+    return out
+
+
+def points(ranges, angles) -> tuple[np.ndarray, np.ndarray]:
+    """Cartesian points of ranges at angles (float64)."""
+    r = np.asarray(ranges, np.float64)
+    a = np.asarray(angles, np.float64)
+    return r * np.cos(a), r * np.sin(a)
+
+
+# ----------------------------------------------------------------------------------------------- well-posed arcs
+
+
+def circle_well_posed(x, y, circle: tuple[float, float, float], params, angle_step: float,
+                      lines: list[tuple[float, float]] | None = None) -> bool:
+    """Whether the circle (a, b, r) fitted to the points is a well-posed arc (FeatureParams `params`; a test
+    whose parameter is 0 is off): at least 3 points, and
+    - a radius more than circle_radius_margin inside [circle_radius_min, circle_radius_max];
+    - at least circle_min_coverage of the beams (angle step `angle_step`) that the circle's near side spans
+      seen from the scanner: 2 asin(r / |c|) / angle_step (pi when the scanner is inside it);
+    - a circle residual (root sum of squares) at most circle_residual_ratio times the total-least-squares
+      line's, and at most circle_lines_ratio times that of the points to the segment's HTL `lines` (theta, rho),
+      each point to the nearest (when there are such lines)."""
+    a, b, r = circle
+    m = len(x)
+    if m < 3:
+        return False
+    margin = params.circle_radius_margin
+    if margin > 0 and not (params.circle_radius_min + margin <= r <= params.circle_radius_max - margin):
+        return False
+    if params.circle_min_coverage > 0 and angle_step > 0:
+        d = math.hypot(a, b)
+        span = math.pi if r >= d else 2.0 * math.asin(r / d)
+        if m < params.circle_min_coverage * span / angle_step:
+            return False
+    if params.circle_residual_ratio > 0:
+        circle_rss = sum((math.hypot(px - a, py - b) - r) ** 2 for px, py in zip(x, y, strict=True))
+        theta, rho = fit_line(x, y)
+        line_rss = sum((px * math.cos(theta) + py * math.sin(theta) - rho) ** 2 for px, py in zip(x, y, strict=True))
+        if math.sqrt(circle_rss) > params.circle_residual_ratio * math.sqrt(line_rss):
+            return False
+    if params.circle_lines_ratio > 0 and lines:
+        circle_rss = sum((math.hypot(px - a, py - b) - r) ** 2 for px, py in zip(x, y, strict=True))
+        lines_rss = sum(min(abs(px * math.cos(t) + py * math.sin(t) - rho) for t, rho in lines) ** 2
+                        for px, py in zip(x, y, strict=True))
+        if math.sqrt(circle_rss) > params.circle_lines_ratio * math.sqrt(lines_rss):
+            return False
+    return True
+
+
+def perpendicular(t1: float, t2: float, tol: float) -> bool:
+    """Two line normals (rad) at a right angle, within tol (rad), whatever their turns by pi."""
+    d = math.fmod(abs(t1 - t2), math.pi)
+    return abs(d - math.pi / 2) <= tol
+
+
+def convex(a, j, b) -> bool:
+    """Junction j bulges towards the scanner at the origin from the chord a-b: j and the origin lie on the
+    same side of the line through a and b."""
+    e = np.subtract(b, a)
+    side_j = e[0] * (j[1] - a[1]) - e[1] * (j[0] - a[0])
+    side_o = e[0] * (0.0 - a[1]) - e[1] * (0.0 - a[0])
+    return bool(side_j * side_o > 0)
+
+
+def se2(x: float, y: float, theta: float) -> np.ndarray:
+    """The 3 x 3 homogeneous matrix of the pose (x, y, theta): a point p in the pose's frame is R p + (x, y)."""
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
+
+
+def pose_of(m: np.ndarray) -> np.ndarray:
+    """(x, y, theta in (-pi, pi]) of a homogeneous pose matrix."""
+    return np.array([m[0, 2], m[1, 2], math.atan2(m[1, 0], m[0, 0])])
+
+
+def cell_hash(ix: int, iy: int, mask: int) -> int:
+    """The bucket of grid cell (ix, iy) in a table of mask + 1 buckets: the spatial hash of Teschner et al.
+    (2003), on 64-bit integers."""
+    return int((np.int64(ix) * np.int64(73856093)) ^ (np.int64(iy) * np.int64(19349663))) & mask
+
+
+# ---------------------------------------------------------------------------------------------------------------- legs
+
+
+def circle_fit(p: np.ndarray) -> tuple[float, np.ndarray] | None:
+    """Least-squares algebraic circle (minimise sum (|p - c|^2 - r^2)^2): (radius, centre), or None when the
+    points are (nearly) collinear or fewer than 3."""
+    if len(p) < 3:
+        return None
+    q = p - p.mean(axis=0)
+    scatter = q.T @ q
+    if np.linalg.det(scatter) <= 1e-12 * np.trace(scatter) ** 2:
+        return None
+    # |q - c|^2 = r^2  <=>  2 q.c + (r^2 - |c|^2) = |q|^2
+    A = np.column_stack([2 * q, np.ones(len(q))])
+    sol = np.linalg.lstsq(A, (q ** 2).sum(axis=1), rcond=None)[0]
+    c = sol[:2]
+    return math.sqrt(sol[2] + c @ c), c + p.mean(axis=0)
+
+
+def angle_at(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Angle a-p-b, radians in [0, pi] (0 when a or b coincides with p)."""
+    u, v = a - p, b - p
+    nu, nv = np.linalg.norm(u), np.linalg.norm(v)
+    if nu == 0 or nv == 0:
+        return 0.0
+    return math.acos(max(-1.0, min(1.0, float(u @ v) / (nu * nv))))
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+def signed_curvature(a: np.ndarray, p: np.ndarray, b: np.ndarray) -> float:
+    """1 / circumradius of triangle a, p, b; positive when p lies on the sensor's side of the chord a-b."""
+    la, lb, lc = np.linalg.norm(p - a), np.linalg.norm(b - p), np.linalg.norm(b - a)
+    area = abs(cross(b - a, p - a)) / 2
+    if la * lb * lc == 0 or area == 0:
+        return 0.0
+    k = 4 * area / (la * lb * lc)
+    same_side = np.sign(cross(b - a, p - a)) == np.sign(cross(b - a, -a))
+    return k if same_side else -k
+
+
+def segment_features(r: np.ndarray, angles: np.ndarray, start: int, end: int, range_min: float,
+                     range_max: float) -> np.ndarray:
+    """The feature vector of beams [start, end) of one scan r (invalid returns skipped)."""
+    beams = [i for i in range(start, end) if is_valid(float(r[i]), range_min, range_max)]
+    f = dict.fromkeys(FEATURE_NAMES, 0.0)
+    if not beams:
+        return np.array([f[k] for k in FEATURE_NAMES])
+    rr = np.array([float(r[i]) for i in beams])
+    aa = angles[beams]
+    p = np.column_stack([rr * np.cos(aa), rr * np.sin(aa)])
+    n = len(p)
+    centroid = p.mean(axis=0)
+    f["n_points"] = n
+    f["width"] = np.linalg.norm(p[-1] - p[0])
+    # the best line's residuals: the smallest singular value of the centred points
+    sv = np.linalg.svd(p - centroid, compute_uv=False)
+    f["linearity"] = (sv[1] if len(sv) > 1 else 0.0) / math.sqrt(n)
+    fit = circle_fit(p)
+    if fit is None:
+        f["radius"], f["circularity"] = RADIUS_CLIP, f["linearity"]
+    else:
+        radius, c = fit
+        f["radius"] = min(radius, RADIUS_CLIP)
+        f["circularity"] = math.sqrt(np.mean((np.linalg.norm(p - c, axis=1) - radius) ** 2))
+    if n > 1:
+        f["std"] = math.sqrt(((p - centroid) ** 2).sum() / (n - 1))
+    f["median_deviation"] = np.mean(np.linalg.norm(p - np.median(p, axis=0), axis=1))
+    steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    if n > 1:
+        f["boundary_length"] = steps.sum()
+        f["boundary_regularity"] = steps.std()
+    if n > 2:
+        f["mean_curvature"] = np.mean([signed_curvature(p[i - 1], p[i], p[i + 1]) for i in range(1, n - 1)])
+        inscribed = [angle_at(p[i], p[0], p[-1]) for i in range(1, n - 1)]
+        f["mean_inscribed_angle"] = np.mean(inscribed)
+        f["inscribed_angle_std"] = np.std(inscribed)
+    f["distance"] = np.linalg.norm(centroid)
+    first, last = beams[0], beams[-1]
+    f["subtended_angle"] = abs(angles[last] - angles[first])
+    before, after = first - 1, last + 1
+    f["occluded_start"] = float(before >= 0 and is_valid(float(r[before]), range_min, range_max)
+                                and float(r[before]) < float(r[first]) - OCCLUSION_MARGIN)
+    f["occluded_end"] = float(after < len(r) and is_valid(float(r[after]), range_min, range_max)
+                              and float(r[after]) < float(r[last]) - OCCLUSION_MARGIN)
+    f["jump_start"] = jump(r, first, -1, range_min, range_max)
+    f["jump_end"] = jump(r, last, +1, range_min, range_max)
+    step = abs(float(angles[-1]) - float(angles[0])) / (len(angles) - 1) if len(angles) > 1 else 0.0
+    f["density"] = min(n * step * f["distance"] / f["width"], DENSITY_CLIP) if f["width"] > 0 else DENSITY_CLIP
+    f["relative_curvature"] = f["mean_curvature"] * f["width"]
+    return np.array([f[k] for k in FEATURE_NAMES], np.float64)
+
+
+def jump(r: np.ndarray, i: int, direction: int, range_min: float, range_max: float) -> float:
+    """The nearest valid return beyond beam i (towards direction) minus r[i], clipped; +JUMP_CLIP if none."""
+    j = i + direction
+    while 0 <= j < len(r):
+        if is_valid(float(r[j]), range_min, range_max):
+            return float(np.clip(float(r[j]) - float(r[i]), -JUMP_CLIP, JUMP_CLIP))
+        j += direction
+    return JUMP_CLIP
+
+
+def centroid(r: np.ndarray, angles: np.ndarray, start: int, end: int, range_min: float, range_max: float):
+    beams = [i for i in range(start, end) if is_valid(float(r[i]), range_min, range_max)]
+    rr = np.array([float(r[i]) for i in beams])
+    return np.column_stack([rr * np.cos(angles[beams]), rr * np.sin(angles[beams])]).mean(axis=0)
+
+
+def cluster_features(ranges, angles, seg_start, seg_end, seg_offsets, range_min, range_max) -> np.ndarray:
+    rows = []
+    for k in range(len(ranges)):
+        scan = [segment_features(ranges[k], angles, int(seg_start[g]), int(seg_end[g]), range_min, range_max)
+                for g in range(seg_offsets[k], seg_offsets[k + 1])]
+        # the neighbour distance: to the nearest other candidate (>= 3 points, <= 0.8 m wide) of the scan
+        cand = [f[0] >= CANDIDATE_MIN_POINTS and f[1] <= CANDIDATE_MAX_WIDTH for f in scan]
+        cents = [centroid(ranges[k], angles, int(seg_start[g]), int(seg_end[g]), range_min, range_max)
+                 if f[0] > 0 else None for g, f in zip(range(seg_offsets[k], seg_offsets[k + 1]), scan, strict=True)]
+        for a, f in enumerate(scan):
+            if f[0] == 0:
+                continue
+            d = [np.linalg.norm(cents[a] - cents[b]) for b in range(len(scan)) if cand[b] and b != a]
+            f[FEATURE_NAMES.index("neighbour_distance")] = min([NEIGHBOUR_CLIP, *d])
+        rows.extend(scan)
+    return np.array(rows).reshape(-1, len(FEATURE_NAMES))
+
+
+def tree_leaf(model, root: int, x: np.ndarray) -> int:
+    """The leaf x reaches in the tree at root (x goes left when float32(x[feature]) <= threshold)."""
+    node = root
+    while model.feature[node] >= 0:
+        node = model.left[node] if np.float32(x[model.feature[node]]) <= model.threshold[node] else model.right[node]
+    return node
+
+
+def is_candidate(row: np.ndarray) -> bool:
+    """A segment that may be a leg: at least CANDIDATE_MIN_POINTS points, at most CANDIDATE_MAX_WIDTH m wide."""
+    f = dict(zip(FEATURE_NAMES, row, strict=True))
+    return bool(f["n_points"] >= CANDIDATE_MIN_POINTS and f["width"] <= CANDIDATE_MAX_WIDTH)
+
+
+def ensemble_probability(model, leaves: list[int]) -> float:
+    """The leg probability from the leaves a row reached, one per tree: the mean of their values for a forest,
+    sigmoid(base + scale * their sum) for boosting (summed tree by tree, in the model's order)."""
+    total = 0.0
+    for leaf in leaves:
+        total += float(model.value[leaf])
+    if model.kind == "forest":
+        return total / len(leaves)
+    return 1.0 / (1.0 + math.exp(-(model.base + model.scale * total)))
+
+
+def check_segments(start, end, offsets, n_beams: int) -> int:
+    """0 when offsets index the segments (non-decreasing from 0 to their number) and every segment is a beam
+    range [start, end) within 0..n_beams; 1 for bad offsets, 2 for a bad segment."""
+    if len(offsets) == 0 or offsets[0] != 0 or offsets[-1] != len(start) or np.any(np.diff(offsets) < 0):
+        return 1
+    if np.any((start < 0) | (end < start) | (end > n_beams)):
+        return 2
+    return 0
+
+
+def gap_clusters(ranges, angles, range_min, range_max, gap, min_points):
+    """leg_tracker's clustering, one beam at a time: (start, end, offsets) as legs.gap_clusters."""
+    start, end, offsets = [], [], [0]
+    for r in ranges:
+        runs, cur = [], []
+        prev = None
+        for i in range(len(r)):
+            if not is_valid(float(r[i]), range_min, range_max):
+                runs.append(cur)
+                cur, prev = [], None
+                continue
+            p = np.array([float(r[i]) * math.cos(angles[i]), float(r[i]) * math.sin(angles[i])])
+            if prev is not None and np.linalg.norm(p - prev) > gap:
+                runs.append(cur)
+                cur = []
+            cur.append(i)
+            prev = p
+        runs.append(cur)
+        for c in runs:
+            if len(c) >= min_points:
+                start.append(c[0])
+                end.append(c[-1] + 1)
+        offsets.append(len(start))
+    return np.array(start, np.int64), np.array(end, np.int64), np.array(offsets, np.int64)
+
+
+# ---------------------------------------------------------------------------------------------------------- ego-motion
+
+
+def scan_points(r, angles, range_min, range_max, min_spacing, max_points):
+    """(x, y, beams) of valid returns, each kept when at least min_spacing from the last kept one, then
+    indices floor(i * n / max_points) when over max_points."""
+    xs, ys, beams = [], [], []
+    for b, rb in enumerate(r):
+        if not is_valid(float(rb), range_min, range_max):
+            continue
+        x, y = float(rb) * math.cos(angles[b]), float(rb) * math.sin(angles[b])
+        if xs and math.hypot(x - xs[-1], y - ys[-1]) < min_spacing:
+            continue
+        xs.append(x)
+        ys.append(y)
+        beams.append(b)
+    n = len(xs)
+    if n > max_points:
+        keep = [(i * n) // max_points for i in range(max_points)]
+        xs, ys, beams = [xs[j] for j in keep], [ys[j] for j in keep], [beams[j] for j in keep]
+    return np.array(xs), np.array(ys), np.array(beams, np.int64)
+
+
+def beam_normal(r, angles, range_min, range_max, b, normal_radius, max_gap, max_window, planarity):
+    """Line normal at beam b: walk each way over valid beams, each step within max_gap of the last point taken,
+    stopping once two are taken and one is normal_radius away (or after max_window beams); eigenvector of the
+    smallest eigenvalue of the points' covariance when line-like, (0, 0) when compact but not line-like,
+    (NaN, NaN) otherwise or under 3 points."""
+    p = np.array([r[b] * math.cos(angles[b]), r[b] * math.sin(angles[b])])
+    pts = [p]
+    far = 0.0
+    for direction in (-1, 1):
+        last, taken = p, 0
+        for step in range(1, max_window + 1):
+            j = b + direction * step
+            if not 0 <= j < len(r):
+                break
+            if not is_valid(float(r[j]), range_min, range_max):
+                continue
+            q = np.array([r[j] * math.cos(angles[j]), r[j] * math.sin(angles[j])])
+            if np.linalg.norm(q - last) > max_gap:
+                break
+            pts.append(q)
+            taken += 1
+            last = q
+            d = float(np.linalg.norm(q - p))
+            far = max(far, d)
+            if taken >= 2 and d >= normal_radius:
+                break
+    if len(pts) < 3:
+        return math.nan, math.nan
+    cov = np.cov(np.array(pts).T, bias=True)
+    w, v = np.linalg.eigh(cov)
+    if w[1] > 0 and w[0] <= planarity ** 2 * w[1]:
+        return float(v[0, 0]), float(v[1, 0])
+    if far <= 2 * normal_radius:
+        return 0.0, 0.0
+    return math.nan, math.nan
+
+
+def nearest(q, map_xy, max_dist):
+    """Index of the nearest map point within max_dist (lowest index on ties), or -1."""
+    d2 = ((map_xy - q) ** 2).sum(axis=1)
+    j = int(np.argmin(d2))
+    return j if d2[j] <= max_dist ** 2 else -1
+
+
+def add_to_map(points, normals, pose, min_spacing, map_xy, map_n, capacity):
+    """The map (points, normals; world frame) after adding sensor-frame points with their normals seen from
+    pose (x, y, theta), in order: a point whose normal is NaN is skipped, and so is one within min_spacing
+    (m) of a map point already there (added earlier in the same call included); at most `capacity` points."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    rot = np.array([[c, -s], [s, c]])
+    xy, nn = [tuple(p) for p in map_xy], [tuple(v) for v in map_n]
+    for p, v in zip(points, normals, strict=True):
+        if len(xy) >= capacity:
+            break
+        if math.isnan(v[0]):
+            continue
+        w = rot @ p + pose[:2]
+        if min_spacing > 0 and xy and nearest(w, np.array(xy), min_spacing) >= 0:
+            continue
+        xy.append(tuple(w))
+        nn.append(tuple(rot @ v))
+    return np.array(xy).reshape(-1, 2), np.array(nn).reshape(-1, 2)
+
+
+def weight(ares, scale, redescend):
+    if redescend:
+        return 1.0 / (1.0 + (ares / scale) ** 2) ** 2
+    return 1.0 if ares <= scale else scale / ares
+
+
+def icp_step(src, pose, map_xy, map_n, max_dist, scale, redescend, inlier_tol):
+    """(H, g, matched, sum |r|, inliers) of the robust point-to-line cost at pose; rows stacked as a matrix."""
+    x, y, t = pose
+    R = np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
+    rows, res, ws = [], [], []
+    matched = inliers = 0
+    abs_sum = 0.0
+    for p in src:
+        rp = R @ p
+        q = rp + (x, y)
+        j = nearest(q, map_xy, max_dist)
+        if j < 0:
+            continue
+        matched += 1
+        e = q - map_xy[j]
+        n = map_n[j]
+        dq_dt = np.array([-rp[1], rp[0]])
+        if n[0] != 0 or n[1] != 0:
+            r = float(n @ e)
+            a = abs(r)
+            rows.append([n[0], n[1], n @ dq_dt])
+            res.append(r)
+            ws.append(weight(a, scale, redescend))
+        else:
+            a = float(np.linalg.norm(e))
+            w = weight(a, scale, redescend)
+            rows += [[1.0, 0.0, dq_dt[0]], [0.0, 1.0, dq_dt[1]]]
+            res += [e[0], e[1]]
+            ws += [w, w]
+        abs_sum += a
+        inliers += a <= inlier_tol
+    J = np.array(rows).reshape(-1, 3)
+    W = np.diag(ws)
+    return J.T @ W @ J, J.T @ W @ np.array(res), matched, abs_sum, inliers
+
+
+def icp_align(src, init, map_xy, map_n, max_dist0, max_dist, scale, inlier_tol, max_iter, prior_weight):
+    """Pose and (matched, mean |r|, inliers, iterations) by the kernel's schedule: Huber while the gate halves
+    from max_dist0 to max_dist, then Geman-McClure until the step is tiny; a prior pulls toward init."""
+    pose = np.array(init, float)
+    gate = max_dist0
+    it = matched = 0
+    while it < max_iter:
+        it += 1
+        H, g, matched, _, _ = icp_step(src, pose, map_xy, map_n, gate, scale, gate <= max_dist, inlier_tol)
+        if matched < MIN_MATCHES:
+            break
+        H = H + prior_weight * np.eye(3)
+        g = g + prior_weight * (pose - init)
+        step = np.linalg.solve(H, g)
+        pose = pose - step
+        small = max(abs(step[0]), abs(step[1])) < CONVERGED_STEP and abs(step[2]) < CONVERGED_TURN
+        if gate > max_dist:
+            gate = max(max_dist, 0.5 * gate)
+        elif small:
+            break
+    if matched < MIN_MATCHES:
+        return np.array(init, float), (matched, 0.0, 0, it)
+    _, _, matched, abs_sum, inliers = icp_step(src, pose, map_xy, map_n, gate, scale, True, inlier_tol)
+    pose[2] = math.atan2(math.sin(pose[2]), math.cos(pose[2]))
+    return pose, (matched, abs_sum / max(matched, 1), inliers, it)

@@ -1,27 +1,41 @@
-"""The tracker as it was before the compiled step (issue #13 point 2): today's rules as numpy statements over
-the tracking kernels, kept as the reference the compiled tracker (datmo_cli/tracking/_step.py) is checked
-against, phase by phase and run by run. Features to measurements (`reference_measurements`) and the global
-nearest neighbour (`reference_gnn`, scipy's linear_sum_assignment) are the reference's too.
+"""The plain statements of the tracking rules, and the tracker as it was before the compiled step (issue #13
+point 2), kept as the references the package's kernels (datmo_cli/tracking/_kernels.py, _step.py, _assign.py)
+are checked against, phase by phase and run by run. Not part of the package: tests only.
 
-Frames and units as datmo_cli/tracking/tracker.py says. Not part of the package: tests only.
+- People (method.md §6.1): `pair_legs`, `leg_lead`. Classification (method.md §6): `classify`, `mobility`.
+  Kalman model (filterpy's): `transition`, `process_noise`; gating: `gate`; global nearest neighbour:
+  `reference_gnn` (scipy's linear_sum_assignment).
+- The per-scan arithmetic of the tracker before the compiled step (`cv_predict`, `joseph_update`,
+  `mahalanobis2`, `gated_costs`, `apply_updates`, `life_cycle`, `kind_groups`, `classify_tracks`,
+  `background_update`): loops over arrays, compiled with numba here for the speed of the run-long
+  comparisons (plain Python under NUMBA_DISABLE_JIT=1); each is checked against the plain rules above.
+- `reference_measurements` (features to measurements) and `ReferenceTracker` (the whole scan).
+
+Frames and units as datmo_cli/tracking/tracker.py says.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
+from numba import njit
 
 from datmo_cli.log import cdr, types
 from datmo_cli.log.scan import ScanGeometry
-from datmo_cli.tracking import _kernels, kalman
-from datmo_cli.tracking.classification import (
+from datmo_cli.log.vocabulary import (
     CLASS_CIRCLE_OBJECT,
     CLASS_PERSON,
     CLASS_RECTANGULAR_OBJECT,
     CLASS_UNKNOWN,
     MOBILITY_DYNAMIC,
+    MOBILITY_STATIC,
+    MOBILITY_UNDEFINED,
+    STATUS_COASTING,
+    STATUS_CONFIRMED,
+    STATUS_TENTATIVE,
 )
+from datmo_cli.tracking import _kernels
 from datmo_cli.tracking.measurements import (
     KIND_BLOB,
     KIND_CIRCLE,
@@ -36,6 +50,266 @@ from datmo_cli.tracking.params import TrackingParams
 
 INFEASIBLE = 1e12
 _LEG_DTYPE = cdr.element_dtype(types.LEG)
+
+
+# ------------------------------------------------------------------------------- people (method.md §6.1)
+def pair_legs(x: np.ndarray, y: np.ndarray, stride_max: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pair leg candidates greedily, nearest pairs first, each leg at most once, pairs at most
+    `stride_max` m apart. Returns (a, b, single): index arrays of the pairs' legs and of unpaired legs."""
+    n = len(x)
+    if n < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.arange(n)
+    d = np.hypot(x[:, None] - x[None, :], y[:, None] - y[None, :])
+    i, j = np.nonzero(np.triu(d <= stride_max, 1))
+    if not len(i):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.arange(n)
+    order = np.argsort(d[i, j], kind="stable")
+    used = np.zeros(n, bool)
+    a, b = [], []
+    for k in order.tolist():
+        p, q = i[k], j[k]
+        if not used[p] and not used[q]:
+            used[p] = used[q] = True
+            a.append(p)
+            b.append(q)
+    return np.array(a, np.int64), np.array(b, np.int64), np.flatnonzero(~used)
+
+
+def leg_lead(legs: np.ndarray, vx: np.ndarray, vy: np.ndarray) -> np.ndarray:
+    """How far the left leg leads the right one along the direction of travel (m), for rows of
+    legs (ax, ay, bx, by) and velocities (vx, vy); NaN where the speed is zero. Left is the leg on the
+    left of the direction of travel, so the sign alternates from step to step while walking."""
+    speed = np.hypot(vx, vy)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ux, uy = vx / speed, vy / speed
+    dx, dy = legs[:, 0] - legs[:, 2], legs[:, 1] - legs[:, 3]  # a minus b
+    along = dx * ux + dy * uy
+    left_is_a = (ux * dy - uy * dx) > 0                          # a lies left of b
+    return np.where(left_is_a, along, -along)
+
+
+# ------------------------------------------------------------------------- classification (method.md §6)
+def classify(votes: np.ndarray, walking: np.ndarray, moving: np.ndarray, params: TrackingParams) -> np.ndarray:
+    """Class of each track from `votes` (K, N_KINDS: hits per measurement kind), `walking` (the walking
+    pattern was seen) and `moving` (mobility is dynamic).
+
+    Legs: a person once walking is seen; a pair of legs that never walked stays unknown; a lone small
+    circle that does not move is a circle object (a bench support, a bin). Otherwise the kind with most
+    hits: circles give circle objects, lines rectangular objects, blobs unknown."""
+    total = votes.sum(axis=1)
+    legs = votes[:, KIND_PERSON] + votes[:, KIND_LEG]
+    leggy = legs >= params.person_votes * np.maximum(total, 1)
+    shape = np.stack([votes[:, KIND_CIRCLE], votes[:, KIND_RECT], votes[:, KIND_BLOB]], axis=1)
+    by_shape = np.array([CLASS_CIRCLE_OBJECT, CLASS_RECTANGULAR_OBJECT, CLASS_UNKNOWN])[np.argmax(shape, axis=1)]
+    by_shape = np.where(shape.sum(axis=1) > 0, by_shape, CLASS_UNKNOWN)
+    lone_static_leg = (votes[:, KIND_PERSON] == 0) & ~moving
+    leg_class = np.where(walking & (votes[:, KIND_PERSON] > 0), CLASS_PERSON,
+                         np.where(lone_static_leg, CLASS_CIRCLE_OBJECT, CLASS_UNKNOWN))
+    return np.where(leggy, leg_class, by_shape).astype(np.uint8)
+
+
+def mobility(previous: np.ndarray, age_s: np.ndarray, size: np.ndarray, displacement: np.ndarray,
+             speed: np.ndarray, confirmed: np.ndarray, params: TrackingParams) -> np.ndarray:
+    """New mobility of each track: `previous` mobility, age (s), largest extent seen (m), distance from
+    where it was first seen (m), filtered speed (m/s), and whether it is confirmed."""
+    dynamic = (previous == MOBILITY_DYNAMIC) | (confirmed & (displacement > params.moving_distance)
+                                                & (speed > params.moving_speed))
+    static = (size > params.d_max) | (age_s >= params.undefined_window)
+    out = np.where(static, MOBILITY_STATIC, MOBILITY_UNDEFINED)
+    return np.where(dynamic, MOBILITY_DYNAMIC, out).astype(np.uint8)
+
+
+def legs_to_measurements(lx: np.ndarray, ly: np.ndarray, ls: np.ndarray,
+                         stride_max: float) -> tuple[np.ndarray, ...]:
+    """Leg candidates (x, y, extent; m) as measurements: each pair of `pair_legs` a person (kind KIND_PERSON)
+    at the centre of its legs, its size their distance plus their mean extent; each unpaired leg a single leg
+    (KIND_LEG). People first, in pairing order, then single legs. Returns x, y, size, kind, legs (M, 4: the
+    pair's legs, NaN for single legs)."""
+    a, b, single = pair_legs(lx, ly, stride_max)
+    x = np.concatenate([0.5 * (lx[a] + lx[b]), lx[single]])
+    y = np.concatenate([0.5 * (ly[a] + ly[b]), ly[single]])
+    size = np.concatenate([np.hypot(lx[a] - lx[b], ly[a] - ly[b]) + 0.5 * (ls[a] + ls[b]), ls[single]])
+    kind = np.concatenate([np.full(len(a), KIND_PERSON), np.full(len(single), KIND_LEG)]).astype(np.int64)
+    legs = np.full((len(x), 4), np.nan)
+    legs[:len(a)] = np.stack([lx[a], ly[a], lx[b], ly[b]], axis=1)
+    return x, y, size, kind, legs
+
+
+def line_boxes(lseg: np.ndarray, lx0: np.ndarray, ly0: np.ndarray, lx1: np.ndarray,
+               ly1: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rectangular objects: per segment (in segment order) the centre and diagonal (m) of the bounding box
+    of its lines' end points. Returns the segments, x, y, size."""
+    segs = np.unique(lseg)
+    x, y, size = np.zeros(len(segs)), np.zeros(len(segs)), np.zeros(len(segs))
+    for q, g in enumerate(segs):
+        on = lseg == g
+        xs, ys = np.concatenate([lx0[on], lx1[on]]), np.concatenate([ly0[on], ly1[on]])
+        x[q], y[q] = 0.5 * (xs.min() + xs.max()), 0.5 * (ys.min() + ys.max())
+        size[q] = np.hypot(xs.max() - xs.min(), ys.max() - ys.min())
+    return segs, x, y, size
+
+
+def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, leg_radius_max,
+                       leg_blob_max, stride_max, d_max) -> tuple[np.ndarray, ...]:
+    """The paper's rule for one scan's features (measurements.py's docstring): leg candidates are circles of
+    radius <= leg_radius_max (extent: the diameter), blobs of kind 0 no larger than leg_blob_max, and
+    segments whose lines' box is no larger than leg_blob_max; they become people and single legs
+    (`legs_to_measurements`), followed by the other circles (KIND_CIRCLE), blobs (KIND_BLOB) and boxes
+    (KIND_RECT); measurements larger than d_max are dropped. Returns x, y, size, kind, legs and the leg
+    candidates lx, ly, ls."""
+    _, ox, oy, osize = line_boxes(lseg, lx0, ly0, lx1, ly1)
+    c_leg = cr <= leg_radius_max
+    b_leg = (bsize <= leg_blob_max) & (bkind == 0)
+    o_leg = osize <= leg_blob_max
+    lx = np.concatenate([cx[c_leg], bx[b_leg], ox[o_leg]])
+    ly = np.concatenate([cy[c_leg], by[b_leg], oy[o_leg]])
+    ls = np.concatenate([2.0 * cr[c_leg], bsize[b_leg], osize[o_leg]])
+    px, py, psize, pkind, plegs = legs_to_measurements(lx, ly, ls, stride_max)
+    x = np.concatenate([px, cx[~c_leg], bx[~b_leg], ox[~o_leg]])
+    y = np.concatenate([py, cy[~c_leg], by[~b_leg], oy[~o_leg]])
+    size = np.concatenate([psize, 2.0 * cr[~c_leg], bsize[~b_leg], osize[~o_leg]])
+    kind = np.concatenate([pkind, np.full((~c_leg).sum(), KIND_CIRCLE), np.full((~b_leg).sum(), KIND_BLOB),
+                           np.full((~o_leg).sum(), KIND_RECT)]).astype(np.int64)
+    legs = np.concatenate([plegs, np.full((len(x) - len(px), 4), np.nan)])
+    keep = size <= d_max
+    return x[keep], y[keep], size[keep], kind[keep], legs[keep], lx, ly, ls
+
+
+def beam_marks(first: np.ndarray, last: np.ndarray, value: np.ndarray, top: int) -> np.ndarray:
+    """Per beam 0..top-1, the largest `value` of the inclusive beam intervals [first, last] covering it
+    (0 where none does)."""
+    beams = np.arange(top)
+    cover = (beams[None, :] >= first[:, None]) & (beams[None, :] <= last[:, None])
+    return np.where(cover, value[:, None], 0.0).max(axis=0, initial=0.0)
+
+
+def leg_stage(tx, ty, lx, ly, ls, reach, stride_max) -> tuple[np.ndarray, ...]:
+    """Leg candidates to the tracks predicted at (tx, ty) (see _kernels.leg_stage): repeatedly the nearest
+    (track, leg) pair still allowed, in row-major order on ties: a track's first leg within `reach`, its
+    second within `stride_max` of the track and of its first leg; each leg once, each track two at most.
+    Returns owner, x, y, size, kind, legs (as legs_to_measurements, one per track that took legs) and taken."""
+    d = np.hypot(lx[None, :] - tx[:, None], ly[None, :] - ty[:, None])
+    first = np.full(len(tx), -1)
+    second = np.full(len(tx), -1)
+    taken = np.zeros(len(lx), bool)
+    while len(lx):
+        limit = np.where(first < 0, reach, stride_max)[:, None]
+        ok = (d <= limit) & ~taken[None, :] & (second < 0)[:, None]
+        has = first >= 0
+        f = np.where(has, first, 0)
+        ok &= ~has[:, None] | (np.hypot(lx[None, :] - lx[f][:, None], ly[None, :] - ly[f][:, None]) <= stride_max)
+        if not ok.any():
+            break
+        k, j = np.unravel_index(int(np.argmin(np.where(ok, d, np.inf))), d.shape)
+        taken[j] = True
+        if first[k] < 0:
+            first[k] = j
+        else:
+            second[k] = j
+    owner = np.flatnonzero(first >= 0)
+    i, j = first[owner], second[owner]
+    pair = j >= 0
+    jj = np.where(pair, j, i)
+    x = np.where(pair, 0.5 * (lx[i] + lx[jj]), lx[i])
+    y = np.where(pair, 0.5 * (ly[i] + ly[jj]), ly[i])
+    size = np.where(pair, np.hypot(lx[i] - lx[jj], ly[i] - ly[jj]) + 0.5 * (ls[i] + ls[jj]), ls[i])
+    kind = np.where(pair, KIND_PERSON, KIND_LEG).astype(np.int64)
+    legs = np.where(pair[:, None], np.stack([lx[i], ly[i], lx[jj], ly[jj]], axis=1), np.nan)
+    return owner, x, y, size, kind, legs, taken
+
+
+def duplicates(x, y, vx, vy, candidate, confirmed, rank, merge_distance, merge_speed) -> np.ndarray:
+    """Candidate tracks within merge_distance of a candidate of higher rank (ties: the lower index ranks
+    higher), unless both are confirmed and their velocities differ by merge_speed or more."""
+    K = len(x)
+    idx = np.arange(K)
+    higher = (rank[None, :] > rank[:, None]) | ((rank[None, :] == rank[:, None]) & (idx[None, :] < idx[:, None]))
+    near = np.hypot(x[:, None] - x[None, :], y[:, None] - y[None, :]) < merge_distance
+    alike = ~(confirmed[:, None] & confirmed[None, :]) | (np.hypot(vx[:, None] - vx[None, :],
+                                                                   vy[:, None] - vy[None, :]) < merge_speed)
+    both = candidate[:, None] & candidate[None, :] & (idx[None, :] != idx[:, None])
+    return (both & higher & near & alike).any(axis=1)
+
+
+def leggy_tracks(votes: np.ndarray, cls: np.ndarray, confirmed: np.ndarray, person_votes: float) -> np.ndarray:
+    """The confirmed tracks of legs or people that may take leg candidates first: legs (pairs and single legs)
+    are at least person_votes of their hits, and their class is unknown or person."""
+    legs = votes[:, KIND_PERSON] + votes[:, KIND_LEG]
+    return np.flatnonzero((legs >= person_votes * np.maximum(votes.sum(axis=1), 1)) & (legs > 0)
+                          & (cls <= CLASS_PERSON) & confirmed)
+
+
+def duplicate_ranks(votes, hits, confirmed, mobility, cls) -> tuple[np.ndarray, np.ndarray]:
+    """Which tracks may be a duplicate (fed legs, class unknown or person) and their rank: a person before
+    anything else, then a dynamic track, then more hits, then confirmed."""
+    candidate = ((votes[:, KIND_PERSON] + votes[:, KIND_LEG]) > 0) & (cls <= CLASS_PERSON)
+    rank = (hits.astype(np.int64) * 2 + confirmed + (mobility == MOBILITY_DYNAMIC) * (1 << 40)
+            + (cls == CLASS_PERSON) * (1 << 41))
+    return candidate, rank
+
+
+def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, margin) -> np.ndarray:
+    """Missed tracks (sensor-frame centres, extents in m) that are hidden: their bearing outside the beams or
+    their range at least range_max, or a return more than `margin` m nearer within the beams their extent
+    (at least 0.2 m, at a range of at least 0.1 m) spans either side of their bearing."""
+    rng = np.hypot(sx, sy)
+    beam = np.rint((np.arctan2(sy, sx) - angle_min) / increment).astype(np.int64)
+    out = missed & ((beam < 0) | (beam >= len(ranges)) | (rng >= range_max))
+    half = np.ceil(np.arctan2(np.maximum(size, 0.2) / 2, np.maximum(rng, 0.1)) / abs(increment)).astype(np.int64)
+    for k in np.flatnonzero(missed & ~out):
+        near = ranges[max(beam[k] - half[k], 0):beam[k] + half[k] + 1]
+        out[k] = bool((near < rng[k] - margin).any())
+    return out
+
+
+def on_background(score, lx, ly, ls, px, py, x0, y0, cell, n, threshold) -> np.ndarray:
+    """Leg candidates (tracking frame; extent ls, m) on the background: one of the 3 x 3 grid cells around the
+    point of the candidate facing the sensor at (px, py) has score >= threshold (s). Cell (i, k) has its
+    corner at (x0 + i cell, y0 + k cell) and index i n + k."""
+    dx, dy = lx - px, ly - py
+    d = np.maximum(np.hypot(dx, dy), 1e-6)
+    ci = np.floor((lx - 0.5 * ls * dx / d - x0) / cell).astype(np.int64)
+    ck = np.floor((ly - 0.5 * ls * dy / d - y0) / cell).astype(np.int64)
+    grid = score.reshape(n, n) >= threshold
+    return np.array([grid[max(i - 1, 0):min(i + 2, n), max(k - 1, 0):min(k + 2, n)].any()
+                     for i, k in zip(ci.tolist(), ck.tolist(), strict=True)], bool)
+
+
+def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, py, x0, y0, cell, n,
+                         threshold) -> np.ndarray:
+    """Which of n_tracks tracks took (rows, cols) a measurement on the background: single legs and circles
+    tested on their side facing the sensor, other kinds at their centre (`on_background`)."""
+    front = np.where((mkind[cols] == KIND_LEG) | (mkind[cols] == KIND_CIRCLE), msize[cols], 0.0)
+    out = np.zeros(n_tracks, bool)
+    out[rows] = on_background(score, mx[cols], my[cols], front, px, py, x0, y0, cell, n, threshold)
+    return out
+
+
+# ----------------------------------------------------------------------- Kalman model and association
+def transition(dt: float) -> np.ndarray:
+    """F for a step of dt seconds (4x4)."""
+    F = np.eye(4)
+    F[0, 2] = F[1, 3] = dt
+    return F
+
+
+def process_noise(dt: float, q: float) -> np.ndarray:
+    """Q for a step of dt seconds and white-noise acceleration of variance q (4x4, filterpy's values)."""
+    a, b, c = 0.25 * dt**4 * q, 0.5 * dt**3 * q, dt**2 * q
+    return np.array([[a, 0, b, 0], [0, a, 0, b], [b, 0, c, 0], [0, b, 0, c]])
+
+
+def param_vector(**values: float) -> np.ndarray:
+    """The kernels' parameter vector (TrackingParams.kernel_vector) of the defaults with `values` set."""
+    return replace(TrackingParams(), **values).kernel_vector()
+
+
+def gate(d2: np.ndarray, dist: np.ndarray, gate: float, max_distance: float) -> np.ndarray:
+    """Boolean (K, M): pairs whose squared Mahalanobis distance is within `gate` and whose Euclidean
+    distance (m) is within `max_distance`."""
+    return (d2 <= gate) & (dist <= max_distance)
+
+
 
 
 def reference_gnn(cost: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -59,8 +333,26 @@ def reference_gnn(cost: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np
 gnn = reference_gnn
 
 
+def moved(m: Measurements, pose: np.ndarray | None) -> Measurements:
+    """The same measurements in the world frame of a sensor at pose (x, y, theta); m itself when None."""
+    if pose is None:
+        return m
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    x = c * m.x - s * m.y + pose[0]
+    y = s * m.x + c * m.y + pose[1]
+    legs = m.legs.copy()
+    for i in (0, 2):
+        legs[:, i] = c * m.legs[:, i] - s * m.legs[:, i + 1] + pose[0]
+        legs[:, i + 1] = s * m.legs[:, i] + c * m.legs[:, i + 1] + pose[1]
+    raw = m.raw_legs.copy()
+    raw[:, 0] = c * m.raw_legs[:, 0] - s * m.raw_legs[:, 1] + pose[0]
+    raw[:, 1] = s * m.raw_legs[:, 0] + c * m.raw_legs[:, 1] + pose[1]
+    return Measurements(x, y, m.size, m.kind, legs, raw, m.prob)
+
+
 def reference_measurements(features: ScanFeatures, params: TrackingParams, learned: bool = False) -> Measurements:
-    """The measurements of one scan's features, as datmo_cli.tracking.measurements.measurements made them."""
+    """The measurements of one scan's features (the rule of measurements.py's docstring) from the compiled
+    features-to-measurements kernels, with the thresholding of learned legs done here in numpy."""
     c, b, li = features.circles, features.blobs, features.lines
     f8 = np.float64
     if learned:
@@ -78,22 +370,331 @@ def reference_measurements(features: ScanFeatures, params: TrackingParams, learn
             li["last"].astype(i8), li["x_ini"].astype(f8), li["y_ini"].astype(f8), li["x_end"].astype(f8),
             li["y_end"].astype(f8), g["first"].astype(i8), g["last"].astype(i8), g["x"].astype(f8),
             g["y"].astype(f8), g["width"].astype(f8), weak["first"].astype(i8), weak["last"].astype(i8),
-            weak["probability"].astype(f8), params.stride_max, params.d_max)
+            weak["probability"].astype(f8), params.kernel_vector())
         raw = np.stack([g["x"].astype(f8), g["y"].astype(f8), g["width"].astype(f8), g["probability"].astype(f8)],
                        axis=1).reshape(-1, 4)
         return Measurements(x, y, size, kind, legs, raw, prob)
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
         c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8), b["x"].astype(f8), b["y"].astype(f8),
         b["size"].astype(f8), b["kind"].astype(np.int64), li["segment"].astype(np.int64), li["x_ini"].astype(f8),
-        li["y_ini"].astype(f8), li["x_end"].astype(f8), li["y_end"].astype(f8), params.leg_radius_max,
-        params.leg_blob_max, params.stride_max, params.d_max)
+        li["y_ini"].astype(f8), li["x_end"].astype(f8), li["y_end"].astype(f8), params.kernel_vector())
     return Measurements(x, y, size, kind, legs, np.stack([lx, ly, ls], axis=1))
 
 
-STATUS_TENTATIVE, STATUS_CONFIRMED, STATUS_COASTING = 0, 1, 2
+# ------------------------------------------------ the per-scan arithmetic of the tracker before _step
+
+@njit(cache=True)
+def mahalanobis2(x, P, zx, zy, sigma):
+    """(K, M) squared Mahalanobis distances and (K, M) Euclidean distances of measurements (zx, zy) with
+    per-measurement sigma from the K tracks' predicted positions."""
+    K, M = len(x), len(zx)
+    d2 = np.empty((K, M))
+    dist = np.empty((K, M))
+    for k in range(K):
+        for j in range(M):
+            v = sigma[j] * sigma[j]
+            a, b, c = P[k, 0, 0] + v, P[k, 0, 1], P[k, 1, 1] + v
+            det = a * c - b * b
+            dx, dy = zx[j] - x[k, 0], zy[j] - x[k, 1]
+            d2[k, j] = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / det
+            dist[k, j] = np.hypot(dx, dy)
+    return d2, dist
+
+
+@njit(cache=True)
+def joseph_update(x, P, rows, zx, zy, sigma):
+    """Kalman update of tracks `rows` with measurements (zx, zy) and sigmas, in place, Joseph form:
+    P = (I - KH) P (I - KH)^T + K R K^T, as filterpy computes it."""
+    I_KH = np.empty((4, 4))
+    G = np.empty((4, 2))
+    T = np.empty((4, 4))
+    for n in range(len(rows)):
+        k = rows[n]
+        v = sigma[n] * sigma[n]
+        a, b, c = P[k, 0, 0] + v, P[k, 0, 1], P[k, 1, 1] + v
+        det = a * c - b * b
+        i00, i01, i11 = c / det, -b / det, a / det
+        for r in range(4):
+            G[r, 0] = P[k, r, 0] * i00 + P[k, r, 1] * i01
+            G[r, 1] = P[k, r, 0] * i01 + P[k, r, 1] * i11
+        dx, dy = zx[n] - x[k, 0], zy[n] - x[k, 1]
+        for r in range(4):
+            x[k, r] += G[r, 0] * dx + G[r, 1] * dy
+            for s in range(4):
+                I_KH[r, s] = (1.0 if r == s else 0.0) - (G[r, s] if s < 2 else 0.0)
+        for r in range(4):
+            for s in range(4):
+                acc = 0.0
+                for u in range(4):
+                    acc += I_KH[r, u] * P[k, u, s]
+                T[r, s] = acc
+        for r in range(4):
+            for s in range(4):
+                acc = 0.0
+                for u in range(4):
+                    acc += T[r, u] * I_KH[s, u]
+                P[k, r, s] = acc + v * (G[r, 0] * G[s, 0] + G[r, 1] * G[s, 1])
+
+
+@njit(cache=True)
+def cv_predict(x, P, dt, q):
+    """Constant-velocity prediction of every track dt seconds ahead, in place (Q of white-noise
+    acceleration q[k] for track k)."""
+    for k in range(len(x)):
+        qa, qb, qc = 0.25 * dt**4 * q[k], 0.5 * dt**3 * q[k], dt**2 * q[k]
+        x[k, 0] += dt * x[k, 2]
+        x[k, 1] += dt * x[k, 3]
+        for s in range(4):
+            P[k, 0, s] += dt * P[k, 2, s]
+            P[k, 1, s] += dt * P[k, 3, s]
+        for r in range(4):
+            P[k, r, 0] += dt * P[k, r, 2]
+            P[k, r, 1] += dt * P[k, r, 3]
+        P[k, 0, 0] += qa
+        P[k, 1, 1] += qa
+        P[k, 0, 2] += qb
+        P[k, 2, 0] += qb
+        P[k, 1, 3] += qb
+        P[k, 3, 1] += qb
+        P[k, 2, 2] += qc
+        P[k, 3, 3] += qc
+
+
+@njit(cache=True)
+def classify_tracks(votes, walking, previous, age_s, size, displacement, speed, confirmed, person_votes, d_max,
+             undefined_window, moving_distance, moving_speed):
+    """Class and mobility of every track: the rules of `classify` and `mobility` above, fused
+    into one pass."""
+    K = len(votes)
+    cls = np.empty(K, np.uint8)
+    mob = np.empty(K, np.uint8)
+    for k in range(K):
+        dynamic = previous[k] == 1 or (confirmed[k] and displacement[k] > moving_distance
+                                       and speed[k] > moving_speed)
+        if dynamic:
+            mob[k] = 1
+        elif size[k] > d_max or age_s[k] >= undefined_window:
+            mob[k] = 0
+        else:
+            mob[k] = 2
+        person, leg, circle, rect, blob = votes[k, 0], votes[k, 1], votes[k, 2], votes[k, 3], votes[k, 4]
+        total = person + leg + circle + rect + blob
+        if person + leg >= person_votes * max(total, 1):
+            if walking[k] and person > 0:
+                cls[k] = 1
+            elif person == 0 and not dynamic:
+                cls[k] = 2
+            else:
+                cls[k] = 0
+        elif circle + rect + blob == 0:
+            cls[k] = 0
+        elif circle >= rect and circle >= blob:
+            cls[k] = 2
+        elif rect >= blob:
+            cls[k] = 3
+        else:
+            cls[k] = 0
+    return cls, mob
+
+
+@njit(cache=True)
+def apply_updates(x, P, last, hit, votes, size, lead_left, lead_right, moving, rows, zx, zy, zkind, zsize,
+                  zlegs, sigma, sigma_leg, moving_speed, step_min, step_max):
+    """Kalman-update tracks `rows` with measurements (zx, zy) of kinds zkind, and record the hit: last
+    position, kind votes, largest size, and for people that have been `moving` which leg leads along the
+    velocity (the walking pattern; noise on a still pair of posts would fake it)."""
+    hit[:] = False
+    sig = np.empty(len(rows))
+    for n in range(len(rows)):
+        sig[n] = sigma_leg if zkind[n] == 1 else sigma
+    joseph_update(x, P, rows, zx, zy, sig)
+    for n in range(len(rows)):
+        k = rows[n]
+        last[k, 0], last[k, 1] = x[k, 0], x[k, 1]
+        hit[k] = True
+        votes[k, zkind[n]] += 1
+        size[k] = max(size[k], zsize[n])
+        if zkind[n] == 0 and moving[k]:
+            vx, vy = x[k, 2], x[k, 3]
+            speed = np.hypot(vx, vy)
+            if speed > moving_speed:
+                ux, uy = vx / speed, vy / speed
+                dx, dy = zlegs[n, 0] - zlegs[n, 2], zlegs[n, 1] - zlegs[n, 3]
+                along = dx * ux + dy * uy
+                lead = along if (ux * dy - uy * dx) > 0 else -along   # left leg minus right leg
+                if abs(lead) <= step_max:
+                    if lead > step_min:
+                        lead_left[k] = True
+                    elif lead < -step_min:
+                        lead_right[k] = True
+
+
+@njit(cache=True)
+def life_cycle(hit, age, hits, misses, last_hit_ns, history, confirmed, occluded, stamp_ns, mask, popcount,
+               confirm_hits, delete_after, delete_after_occluded, tentative_delete_after):
+    """Count the scan for every track (age, hits, misses, hit history, confirmation) and return which
+    tracks are past their deletion timeout (s since the last hit: tentative, seen, occluded)."""
+    K = len(hit)
+    dead = np.zeros(K, np.bool_)
+    for k in range(K):
+        age[k] += 1
+        if hit[k]:
+            hits[k] += 1
+            misses[k] = 0
+            last_hit_ns[k] = stamp_ns
+        else:
+            misses[k] += 1
+        history[k] = ((history[k] << 1) | (1 if hit[k] else 0)) & mask
+        if popcount[history[k]] >= confirm_hits:
+            confirmed[k] = True
+        since = (stamp_ns - last_hit_ns[k]) * 1e-9
+        if confirmed[k]:
+            limit = delete_after_occluded if occluded[k] else delete_after
+        else:
+            limit = tentative_delete_after
+        dead[k] = since > limit + 1e-9
+    return dead
+
+
+@njit(cache=True)
+def kind_groups(votes, mobility):
+    """The kind group that fed each track most: 0 legs or people, 1 circles, 2 lines, 3 blobs, 5 a lone
+    leg never paired that is not dynamic (ties: the lower group)."""
+    K = len(votes)
+    g = np.empty(K, np.int64)
+    for k in range(K):
+        legs = votes[k, 0] + votes[k, 1]
+        best, arg = legs, 0
+        for j, v in ((1, votes[k, 2]), (2, votes[k, 3]), (3, votes[k, 4])):
+            if v > best:
+                best, arg = v, j
+        if arg == 0 and votes[k, 0] == 0 and mobility[k] != 1:
+            arg = 5
+        g[k] = arg
+    return g
+
+
+@njit(cache=True)
+def background_update(score, mark, active, n_active, scan, ranges, cos_a, sin_a, angle_min, increment, range_min,
+                      range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled):
+    """Update the background grid with one scan; returns the new number of active cells.
+
+    score (n * n,): per cell, for how long (s) it has been hit without being seen through since; a cell is seen
+    through when the beam at its bearing returns more than `margin` beyond it (or nothing within range).
+    mark (n * n,) int64: the last scan (number `scan`) that hit the cell, or -1 when the cell is not active.
+    active[:n_active]: the cells with a score (only those are tested for being seen through).
+    The sensor is at (px, py) with heading cos/sin (pc, ps); cell (0, 0) has its corner at (x0, y0).
+    Cells hit for `settled` s or more (walls) are tested every fourth scan only, which saves time."""
+    B = len(ranges)
+    keep = 0
+    for a in range(n_active):
+        c = active[a]
+        if score[c] >= settled and (c + scan) % 4 != 0:
+            active[keep] = c
+            keep += 1
+            continue
+        wx, wy = x0 + (c // n + 0.5) * cell - px, y0 + (c % n + 0.5) * cell - py
+        sx, sy = pc * wx + ps * wy, -ps * wx + pc * wy
+        r = np.hypot(sx, sy)
+        j = int(np.rint((np.arctan2(sy, sx) - angle_min) / increment))
+        if 0 <= j < B and r < range_max:
+            rj = ranges[j]
+            if (rj > r + margin and rj > range_min) or rj >= range_max:
+                score[c] = 0.0
+                mark[c] = -1
+                continue
+        active[keep] = c
+        keep += 1
+    for j in range(B):
+        r = ranges[j]
+        if not (r > range_min and r < range_max):
+            continue
+        sx, sy = r * cos_a[j], r * sin_a[j]
+        i = int(np.floor((pc * sx - ps * sy + px - x0) / cell))
+        k = int(np.floor((ps * sx + pc * sy + py - y0) / cell))
+        if i < 0 or k < 0 or i >= n or k >= n:
+            continue
+        c = i * n + k
+        if mark[c] == scan:
+            continue
+        if mark[c] < 0:
+            if keep >= len(active):
+                continue
+            active[keep] = c
+            keep += 1
+        mark[c] = scan
+        score[c] += dt
+    return keep
+
+
+@njit(cache=True)
+def gated_costs(x, P, zx, zy, zkind, sigma, sigma_leg, gate, max_distance, compat, compat_row):
+    """Association costs (K, M) of measurements from the tracks' predictions, and which pairs pass the gate
+    (squared Mahalanobis distance d2 <= gate; measurement sigma by kind: sigma_leg for single legs), the
+    distance bound and the kind compatibility compat[compat_row[k], zkind[j]]. The cost is d2 + ln det S
+    (twice the negative log-likelihood up to a constant), not d2: a track coasting for long, with a wide
+    covariance, would otherwise win every measurement it can reach over the well-tracked object the
+    measurement belongs to."""
+    K, M = len(x), len(zx)
+    cost = np.empty((K, M))
+    ok = np.zeros((K, M), np.bool_)
+    for k in range(K):
+        row = compat_row[k]
+        for j in range(M):
+            s = sigma_leg if zkind[j] == 1 else sigma
+            v = s * s
+            a, b, c = P[k, 0, 0] + v, P[k, 0, 1], P[k, 1, 1] + v
+            dx, dy = zx[j] - x[k, 0], zy[j] - x[k, 1]
+            det = a * c - b * b
+            d2 = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / det
+            cost[k, j] = d2 + np.log(det)
+            ok[k, j] = compat[row, zkind[j]] and d2 <= gate and np.hypot(dx, dy) <= max_distance
+    return cost, ok
+
+
+
+def kalman_predict(x: np.ndarray, P: np.ndarray, dt: float, q: float | np.ndarray) -> None:
+    """Predict every track dt seconds ahead, in place: x (K, 4), P (K, 4, 4) float64 C-contiguous;
+    q the white-noise acceleration variance, one for all tracks or one per track."""
+    if len(x) and dt != 0:
+        cv_predict(x, P, float(dt), np.ascontiguousarray(np.broadcast_to(q, (len(x),)), np.float64))
+
+
+def kalman_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, r: np.ndarray) -> None:
+    """Update every track with position measurements z (K, 2), sigmas r (K,) in m, in place (Joseph form)."""
+    z = np.asarray(z, np.float64)
+    if len(x):
+        joseph_update(x, P, np.arange(len(x)), np.ascontiguousarray(z[:, 0]), np.ascontiguousarray(z[:, 1]),
+                      np.ascontiguousarray(np.broadcast_to(np.asarray(r, np.float64), (len(x),))))
+
+
+
+def components(allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Connected components of the bipartite graph of allowed (row, column) pairs, numbered in the order of
+    their smallest row: a label per row and per column (-1 for a column no allowed pair reaches), and the
+    number of components."""
+    nr, nc = allowed.shape
+    crow, ccol = np.full(nr, -1, np.int64), np.full(nc, -1, np.int64)
+    n = 0
+    for start in range(nr):
+        if crow[start] >= 0:
+            continue
+        rows = np.zeros(nr, bool)
+        rows[start] = True
+        while True:   # grow the component until no allowed pair adds to it
+            cols = allowed[rows].any(axis=0)
+            more = rows | allowed[:, cols].any(axis=1)
+            if (more == rows).all():
+                break
+            rows = more
+        crow[rows], ccol[cols] = n, n
+        n += 1
+    return crow, ccol, n
+
+
 TRACK_DTYPE = cdr.element_dtype(types.TRACK)
 # which measurement kinds (columns) a confirmed track may take, by the kind group that fed it most (rows:
-# legs, circles, lines, blobs, -, a lone leg; see _kernels.kind_groups); tentative tracks (row 4) take any
+# legs, circles, lines, blobs, -, a lone leg; see kind_groups); tentative tracks (row 4) take any
 _COMPAT = np.ones((6, N_KINDS), bool)
 _COMPAT[0, [KIND_CIRCLE, KIND_RECT]] = False
 _COMPAT[1, [KIND_PERSON, KIND_RECT]] = False   # a circle partly seen may pass for a leg
@@ -207,6 +808,7 @@ class ReferenceTracker:
     def __init__(self, params: TrackingParams | None = None, geometry: ScanGeometry | None = None,
                  learned: bool = False) -> None:
         self.params = params or TrackingParams()
+        self.prm = self.params.kernel_vector()
         self.learned = learned
         self.geometry = geometry
         self.tracks = TrackArrays.empty(self.params.tail_length)
@@ -239,11 +841,11 @@ class ReferenceTracker:
         self.stamp_ns = stamp_ns
         self.pose = None if pose is None else np.asarray(pose, np.float64)
         t = self.tracks
-        group = _kernels.kind_groups(t.votes, t.mobility)
+        group = kind_groups(t.votes, t.mobility)
         self._compat_row = np.where(t.confirmed, group, _ANY)
-        kalman.predict(t.x, t.P, dt, np.where((group == 0) | (group == _LONE_LEG), p.person_process_noise,
+        kalman_predict(t.x, t.P, dt, np.where((group == 0) | (group == _LONE_LEG), p.person_process_noise,
                                               p.process_noise))
-        m = self._off_background(meas.moved(self.pose))
+        m = self._off_background(moved(meas, self.pose))
         m, rows0 = self._legs(t, m)
         rows, cols = self._associate(t, m, rows0)
         self._hit_background(t, m, rows, cols)
@@ -272,7 +874,7 @@ class ReferenceTracker:
 
     def _background(self, ranges: np.ndarray | None) -> None:
         """Add the scan's returns to the background grid: per cell, how long it has been hit without being
-        seen through (see _kernels.background_update)."""
+        seen through (see background_update)."""
         p = self.params
         if ranges is None or self.geometry is None or p.background_time <= 0 or len(ranges) != self._n:
             return
@@ -291,7 +893,7 @@ class ReferenceTracker:
             self._bg_hi = float(g.range_max) if np.isfinite(g.range_max) and g.range_max > self._bg_lo else np.inf
         self._bg_scan += 1
         # cells hit for four background times are walls: seen-through tests on them every fourth scan suffice
-        self._bg_count = _kernels.background_update(
+        self._bg_count = background_update(
             self._bg_score, self._bg_mark, self._bg_active, self._bg_count, self._bg_scan,
             np.ascontiguousarray(ranges, np.float32), self._cos, self._sin, self._angle_min, self._inc, self._bg_lo,
             self._bg_hi, px, py, pc, ps, max(self._dt, 0.0), self._bg_origin[0], self._bg_origin[1],
@@ -303,28 +905,24 @@ class ReferenceTracker:
         if self._bg_score is None:
             self._on_bg = np.zeros(len(t), bool)
             return
-        p = self.params
         px, py, _, _ = self._sensor()
         self._on_bg = _kernels.tracks_on_background(self._bg_score, m.x, m.y, m.size, m.kind, rows, cols, len(t), px,
-                                                    py, self._bg_origin[0], self._bg_origin[1], p.background_cell,
-                                                    self._bg_n, p.background_time)
+                                                    py, self._bg_origin[0], self._bg_origin[1], self._bg_n, self.prm)
 
     def _off_background(self, m: Measurements) -> Measurements:
         """The measurements with leg candidates on the background (a place hit for a long time: a wall, a
         bench, a column) taken out of the legs: each becomes a blob, and the other legs are paired again."""
-        p = self.params
         raw = m.raw_legs
         if self._bg_score is None or not len(raw):
             return m
         px, py, _, _ = self._sensor()
         bg = _kernels.on_background(self._bg_score, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), px, py,
-                                    self._bg_origin[0], self._bg_origin[1], p.background_cell, self._bg_n,
-                                    p.background_time)
+                                    self._bg_origin[0], self._bg_origin[1], self._bg_n, self.prm)
         if not bg.any():
             return m
         keep = raw[~bg]
         lx, ly, ls, kind, legs = _kernels.legs_to_measurements(keep[:, 0].copy(), keep[:, 1].copy(),
-                                                               keep[:, 2].copy(), p.stride_max)
+                                                               keep[:, 2].copy(), self.prm)
         other = m.kind > KIND_LEG
         n_bg = int(bg.sum())
         return Measurements(np.concatenate([lx, raw[bg, 0], m.x[other]]), np.concatenate([ly, raw[bg, 1], m.y[other]]),
@@ -343,14 +941,12 @@ class ReferenceTracker:
         raw = m.raw_legs
         if not len(t) or not len(raw):
             return m, none
-        legs_votes = t.votes[:, KIND_PERSON] + t.votes[:, KIND_LEG]
-        leggy = np.flatnonzero((legs_votes >= p.person_votes * np.maximum(t.votes.sum(axis=1), 1))
-                               & (legs_votes > 0) & (t.cls <= CLASS_PERSON) & t.confirmed)
+        leggy = leggy_tracks(t.votes, t.cls, t.confirmed, p.person_votes)
         if not len(leggy):
             return m, none
         owner, x, y, size, kind, legs = _kernels.leg_stage_measurements(
             t.x[leggy, 0], t.x[leggy, 1], raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(),
-            p.leg_reach, p.stride_max, m.x, m.y, m.size, m.kind, m.legs)
+            m.x, m.y, m.size, m.kind, m.legs, self.prm)
         if not len(owner):
             return m, none
         prob = np.zeros(len(x))
@@ -366,7 +962,7 @@ class ReferenceTracker:
         cols0 = np.arange(n0, dtype=np.int64)
         if not len(t) or len(m) == n0:
             return rows0, cols0
-        d2, allowed = _kernels.gated_costs(t.x, t.P, m.x, m.y, m.kind, p.measurement_noise,
+        d2, allowed = gated_costs(t.x, t.P, m.x, m.y, m.kind, p.measurement_noise,
                                                p.leg_measurement_noise, p.gate, p.max_gate_distance,
                                                _COMPAT_LEARNED if self.learned else _COMPAT, self._compat_row)
         if n0:
@@ -378,7 +974,7 @@ class ReferenceTracker:
     def _update(self, t: TrackArrays, m: Measurements, rows: np.ndarray, cols: np.ndarray) -> None:
         p = self.params
         moving = t.moving_time >= p.walking_after
-        _kernels.apply_updates(t.x, t.P, t.last, t.hit, t.votes, t.size, t.lead_left, t.lead_right, moving, rows,
+        apply_updates(t.x, t.P, t.last, t.hit, t.votes, t.size, t.lead_left, t.lead_right, moving, rows,
                                m.x[cols], m.y[cols], m.kind[cols], m.size[cols], m.legs[cols], p.measurement_noise,
                                p.leg_measurement_noise, p.moving_speed, p.step_min, p.step_max)
 
@@ -433,11 +1029,11 @@ class ReferenceTracker:
         sx, sy = self._to_sensor(t.x[:, 0], t.x[:, 1])
         t.occluded = _kernels.occlusion(np.ascontiguousarray(sx), np.ascontiguousarray(sy), t.size, ~t.hit,
                                         np.ascontiguousarray(ranges, np.float32), self._angle_min, self._inc,
-                                        self.geometry.range_max, self.params.occlusion_margin)
+                                        self.geometry.range_max, self.prm)
 
     def _life_cycle(self, t: TrackArrays, stamp_ns: int) -> None:
         p = self.params
-        dead = _kernels.life_cycle(t.hit, t.age, t.hits, t.misses, t.last_hit_ns, t.history, t.confirmed,
+        dead = life_cycle(t.hit, t.age, t.hits, t.misses, t.last_hit_ns, t.history, t.confirmed,
                                    t.occluded, stamp_ns, self._mask, self._popcount, p.confirm_hits, p.delete_after,
                                    p.delete_after_occluded, p.tentative_delete_after)
         dead |= self._duplicates(t)
@@ -454,13 +1050,9 @@ class ReferenceTracker:
         are confirmed and move differently: one person's two legs must not keep two tracks alive. Rank: a
         person before anything else, then a dynamic track, then more hits (a person walking past a bench
         keeps its track; the track on the bench's pieces its passing uncovers goes)."""
-        legs = t.votes[:, KIND_PERSON] + t.votes[:, KIND_LEG]
-        candidate = (legs > 0) & (t.cls <= CLASS_PERSON)
+        candidate, rank = duplicate_ranks(t.votes, t.hits, t.confirmed, t.mobility, t.cls)
         x = np.ascontiguousarray(t.x.T)
-        rank = (t.hits.astype(np.int64) * 2 + t.confirmed + (t.mobility == MOBILITY_DYNAMIC) * (1 << 40)
-                + (t.cls == CLASS_PERSON) * (1 << 41))
-        return _kernels.duplicates(x[0], x[1], x[2], x[3], candidate, t.confirmed, rank,
-                                   self.params.merge_distance, self.params.merge_speed)
+        return _kernels.duplicates(x[0], x[1], x[2], x[3], candidate, t.confirmed, rank, self.prm)
 
     def _spawn(self, m: Measurements, rows: np.ndarray, cols: np.ndarray, stamp_ns: int) -> None:
         """Start tentative tracks on measurements no track took, except legs beside a track that took a
@@ -514,7 +1106,7 @@ class ReferenceTracker:
         speed = np.where(t.moving_time >= p.moving_time, speed, 0.0)
         moved = np.hypot(t.x[:, 0] - t.first[:, 0], t.x[:, 1] - t.first[:, 1])
         age_s = (self.stamp_ns - t.born_ns) * 1e-9
-        t.cls, t.mobility = _kernels.classify(t.votes, t.lead_left & t.lead_right, t.mobility, age_s, t.size, moved,
+        t.cls, t.mobility = classify_tracks(t.votes, t.lead_left & t.lead_right, t.mobility, age_s, t.size, moved,
                                               speed, t.confirmed, p.person_votes, p.d_max, p.undefined_window,
                                               p.moving_distance, p.moving_speed)
         if self.learned:

@@ -1,13 +1,13 @@
-"""Ego-motion from scans: kernels against tests/naive_egomotion.py, known motions in a hand-made room, the
+"""Ego-motion from scans: kernels against tests/reference_perception.py, known motions in a hand-made room, the
 simulator's moving (patrol) and still (hall) scanners."""
 
 from __future__ import annotations
 
 import math
 
-import naive_egomotion as naive
 import numpy as np
 import pytest
+import reference_perception as reference
 
 from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
 from datmo_cli.perception import _egomotion_kernels as K
@@ -124,7 +124,7 @@ def test_scan_points_match_reference(spacing, max_points):
     a = G361.angles()
     x, y, beams = np.zeros(361), np.zeros(361), np.zeros(361, np.int64)
     n = K.scan_points(r, np.cos(a), np.sin(a), G361.range_min, G361.range_max, spacing, max_points, x, y, beams)
-    ex, ey, eb = naive.scan_points(r, a, G361.range_min, G361.range_max, spacing, max_points)
+    ex, ey, eb = reference.scan_points(r, a, G361.range_min, G361.range_max, spacing, max_points)
     assert n == len(ex)
     np.testing.assert_array_equal(beams[:n], eb)
     np.testing.assert_allclose(x[:n], ex, atol=1e-12)
@@ -146,8 +146,8 @@ def test_normals_match_reference(geom):
                    p.max_gap, win, p.planarity, nx, ny)
     kinds = {"line": 0, "point": 0, "none": 0}
     for i, b in enumerate(valid):
-        ex, ey = naive.beam_normal(r, a, geom.range_min, geom.range_max, b, p.normal_radius, p.max_gap, win,
-                                   p.planarity)
+        ex, ey = reference.beam_normal(r, a, geom.range_min, geom.range_max, b, p.normal_radius, p.max_gap, win,
+                                       p.planarity)
         if math.isnan(ex):
             assert math.isnan(nx[i])
             kinds["none"] += 1
@@ -182,8 +182,8 @@ def test_icp_step_matches_reference(pose, redescend):
     hess, grad = np.zeros((3, 3)), np.zeros(3)
     got = K.icp_step(sx, sy, len(sx), *pose, mx, my, mnx, mny, 0.25, head, nxt, 0.25, 0.05, redescend, 0.05,
                      hess, grad)
-    H, g, matched, abs_sum, inliers = naive.icp_step(np.stack([sx, sy], 1), pose, np.stack([mx, my], 1),
-                                                     np.stack([mnx, mny], 1), 0.25, 0.05, redescend, 0.05)
+    H, g, matched, abs_sum, inliers = reference.icp_step(np.stack([sx, sy], 1), pose, np.stack([mx, my], 1),
+                                                         np.stack([mnx, mny], 1), 0.25, 0.05, redescend, 0.05)
     assert got[0] == matched and got[2] == inliers and matched > 50
     assert got[1] == pytest.approx(abs_sum, rel=1e-9)
     np.testing.assert_allclose(hess, H, rtol=1e-9, atol=1e-9)
@@ -201,8 +201,8 @@ def test_icp_align_matches_reference(init):
     pose = np.zeros(3)
     got = K.icp_align(sx, sy, len(sx), *init, mx, my, mnx, mny, 0.25, head, nxt, 0.5, 0.25, 0.05, 0.05, 30, 1.0,
                       pose)
-    want, stats = naive.icp_align(np.stack([sx, sy], 1), init, np.stack([mx, my], 1), np.stack([mnx, mny], 1),
-                                  0.5, 0.25, 0.05, 0.05, 30, 1.0)
+    want, stats = reference.icp_align(np.stack([sx, sy], 1), init, np.stack([mx, my], 1), np.stack([mnx, mny], 1),
+                                      0.5, 0.25, 0.05, 0.05, 30, 1.0)
     np.testing.assert_allclose(pose, want, atol=1e-9)
     assert got[0] == stats[0] and got[2] == stats[2] and got[3] == stats[3]
     assert got[1] == pytest.approx(stats[1], rel=1e-9)
@@ -218,7 +218,7 @@ def test_grid_nearest_matches_brute_force():
     for q in rng.uniform(-3.5, 3.5, (300, 2)):
         for dist in (0.1, 0.25, 0.6):
             assert K.grid_nearest(q[0], q[1], pts[:, 0].copy(), pts[:, 1].copy(), 0.25, head, nxt, dist) \
-                == naive.nearest(q, pts, dist)
+                == reference.nearest(q, pts, dist)
 
 
 # --- known motions in the hand-made room -------------------------------------------------------------------------

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import math
 
-import naive_legs
 import numpy as np
 import pytest
+import reference_perception as ref
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -112,7 +112,7 @@ def test_validation():
 
 def assert_matches_naive(ranges, angles, start, end, offsets, lo, hi):
     got = cluster_features(ranges, angles, start, end, offsets, lo, hi)
-    want = naive_legs.cluster_features(ranges, angles, start, end, offsets, lo, hi)
+    want = ref.cluster_features(ranges, angles, start, end, offsets, lo, hi)
     np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
 
 
@@ -233,7 +233,7 @@ def test_gap_clusters_known_scan():
 def test_gap_clusters_match_naive(case, gap, min_points):
     ranges, angles, *_, lo, hi = case
     got = legs.gap_clusters(ranges, angles, lo, hi, gap, min_points)
-    want = naive_legs.gap_clusters(ranges, angles, lo, hi, gap, min_points)
+    want = ref.gap_clusters(ranges, angles, lo, hi, gap, min_points)
     for a, b in zip(got, want, strict=True):
         assert a.tolist() == b.tolist()
     assert_matches_naive(ranges, angles, *got, lo, hi)

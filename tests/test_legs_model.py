@@ -3,9 +3,9 @@ model and leg_probabilities."""
 
 from __future__ import annotations
 
-import naive_legs
 import numpy as np
 import pytest
+import reference_perception as ref
 from sklearn.ensemble import ExtraTreesClassifier, GradientBoostingClassifier, RandomForestClassifier
 
 from datmo_cli.errors import InputError
@@ -59,7 +59,7 @@ def test_probabilities_equal_predict_proba(estimator):
 def test_ensemble_matches_naive_walk():
     X, y = random_features(300, 4)
     model = from_sklearn(RandomForestClassifier(n_estimators=4, random_state=0).fit(X, y), 0.5, {})
-    want = [np.mean([model.value[naive_legs.tree_leaf(model, root, x)] for root in model.roots]) for x in X]
+    want = [np.mean([model.value[ref.tree_leaf(model, root, x)] for root in model.roots]) for x in X]
     np.testing.assert_allclose(model.probabilities(X), want, atol=1e-12)
 
 

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import math
 
-import naive_perception as ref
 import numpy as np
 import pytest
+import reference_perception as ref
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 

@@ -1,4 +1,4 @@
-"""Each numba kernel of datmo_cli/perception/_kernels.py against the plain references of naive_perception.py:
+"""Each numba kernel of datmo_cli/perception/_kernels.py against the plain references of reference_perception.py:
 segmentation, total least squares line fit, geometric circle fit, the full HTL accumulator, line splitting
 and refinement, HTC voting; on hand-made inputs and on random ones (hypothesis)."""
 
@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import math
 
-import naive_perception as ref
 import numpy as np
 import pytest
+import reference_perception as ref
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays

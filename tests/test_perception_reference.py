@@ -47,7 +47,7 @@ def test_segmentation_by_hand():
     r = np.full(20, 2.0, np.float32)
     r[5] = np.nan            # an invalid return breaks the segment
     r[12:] = 4.0             # a jump of 2 m breaks it too
-    assert kernel_segments(r, min_points=3) == ref.segments(r, INC, 0.08, 0.0, 8.0, 3) == [(0, 5), (6, 12), (12, 20)]
+    assert kernel_segments(r, min_points=3) == ref.segment(r, INC, 0.08, 0.0, 8.0, 3) == [(0, 5), (6, 12), (12, 20)]
     assert kernel_segments(r, min_points=7) == [(12, 20)]
 
 
@@ -55,7 +55,7 @@ def test_segmentation_by_hand():
 @given(ranges_strategy, st.sampled_from([0.25, 0.5, 1.0]), st.floats(0.0, 0.3), st.integers(1, 8))
 def test_segmentation_equals_the_reference(r, inc_deg, c0, min_points):
     inc = math.radians(inc_deg)
-    assert kernel_segments(r, inc, c0, 0.0, 8.0, min_points) == ref.segments(r, inc, c0, 0.0, 8.0, min_points)
+    assert kernel_segments(r, inc, c0, 0.0, 8.0, min_points) == ref.segment(r, inc, c0, 0.0, 8.0, min_points)
 
 
 def test_segment_run_uses_each_scans_geometry():
@@ -120,7 +120,7 @@ def test_full_accumulator_peak_equals_the_reference(theta, rho, n, seed):
     y = rho * math.sin(theta) + t * math.cos(theta) + rng.normal(0, 0.005, n)
     runs, votes = htl_kernel_peak(x, y, 120, 0.02, 60)   # window of the whole half turn: the paper's HTL
     assert runs == 1
-    assert votes == ref.htl_peak(x, y, 120, 0.02)
+    assert votes == ref.htl_peak_line(x, y, 120, 0.02)[2]
 
 
 def test_corner_gives_two_runs_that_meet_at_the_corner():

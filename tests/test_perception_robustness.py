@@ -12,9 +12,9 @@ import sys
 import textwrap
 from pathlib import Path
 
-import naive_perception as ref
 import numpy as np
 import pytest
+import reference_perception as ref
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays

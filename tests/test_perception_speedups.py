@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import math
 
-import naive_perception as ref
 import numpy as np
+import reference_perception as ref
 from hypothesis import given, settings
 from hypothesis import strategies as st
 

@@ -1,5 +1,5 @@
 """extract_run on synthetic scans of known geometry (walls, a box corner, legs of radius 0.1 m and columns of
-radius 0.25 m in front of a wall), ray-cast analytically by naive_perception and given Gaussian range noise of
+radius 0.25 m in front of a wall), ray-cast analytically by reference_perception and given Gaussian range noise of
 1 cm from fixed seeds; the section 5.2 decision rule; the landmark database on a static and a moving column.
 Bounds are looser than the paper's: medians over many scans."""
 
@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import math
 
-import naive_perception as ref
 import numpy as np
 import pytest
+import reference_perception as ref
 
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.log.vocabulary import LANDMARK_BENCH, LANDMARK_COLUMN, LANDMARK_LINE_END

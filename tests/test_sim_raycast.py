@@ -1,4 +1,4 @@
-"""Ray casting: analytic answers (wall, circle, rectangle corner), occlusion, and the kernel vs naive_sim."""
+"""Ray casting: analytic answers (wall, circle, rectangle corner), occlusion, and the kernel vs reference_sim."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from naive_sim import cast as naive_cast
+from reference_sim import cast as naive_cast
 
 from datmo_cli.sim.raycast import Primitives, cast, rectangle_segments
 

@@ -8,7 +8,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datmo_cli.tracking.association import gate, gnn
+from datmo_cli.tracking._assign import gnn
+from tests.reference_tracking import gate, gated_costs, mahalanobis2
 
 
 def _brute_force(cost: np.ndarray, allowed: np.ndarray) -> tuple[int, float]:
@@ -60,8 +61,6 @@ def test_gnn_empty_inputs():
 
 
 def test_fused_gating_kernel_matches_the_reference():
-    from datmo_cli.tracking import _kernels, kalman
-
     rng = np.random.default_rng(4)
     x = rng.normal(0, 2, (6, 4))
     A = rng.normal(size=(6, 4, 4))
@@ -69,9 +68,9 @@ def test_fused_gating_kernel_matches_the_reference():
     zx, zy, kind = rng.normal(0, 2, 9), rng.normal(0, 2, 9), rng.integers(0, 5, 9)
     compat = rng.random((6, 5)) < 0.7
     row = rng.integers(0, 6, 6)
-    cost, ok = _kernels.gated_costs(x, P, zx, zy, kind, 0.05, 0.2, 13.8, 1.5, compat, row)
+    cost, ok = gated_costs(x, P, zx, zy, kind, 0.05, 0.2, 13.8, 1.5, compat, row)
     sigma = np.where(kind == 1, 0.2, 0.05)
-    ref_d2, dist = kalman.distances(x, P, zx, zy, sigma)
+    ref_d2, dist = mahalanobis2(x, P, zx, zy, sigma)
     S = P[:, None, :2, :2] + (sigma**2)[None, :, None, None] * np.eye(2)
     assert np.allclose(cost, ref_d2 + np.log(np.linalg.det(S)))
     assert np.array_equal(ok, gate(ref_d2, dist, 13.8, 1.5) & compat[row][:, kind])

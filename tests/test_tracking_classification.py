@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from datmo_cli.tracking.classification import (
+from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, N_KINDS
+from datmo_cli.tracking.params import TrackingParams
+from tests.reference_tracking import (
     CLASS_CIRCLE_OBJECT,
     CLASS_PERSON,
     CLASS_RECTANGULAR_OBJECT,
@@ -13,10 +15,9 @@ from datmo_cli.tracking.classification import (
     MOBILITY_STATIC,
     MOBILITY_UNDEFINED,
     classify,
+    classify_tracks,
     mobility,
 )
-from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, N_KINDS
-from datmo_cli.tracking.params import TrackingParams
 
 P = TrackingParams()
 
@@ -60,8 +61,6 @@ def test_mobility_states():
 
 
 def test_fused_kernel_matches_the_rules():
-    from datmo_cli.tracking import _kernels
-
     rng = np.random.default_rng(2)
     K = 500
     v = rng.integers(0, 4, (K, N_KINDS)) * (rng.random((K, N_KINDS)) < 0.5)
@@ -71,7 +70,7 @@ def test_fused_kernel_matches_the_rules():
     moved, speed = rng.uniform(0, 1, K), rng.uniform(0, 1, K)
     mob = mobility(prev, age, size, moved, speed, confirmed, P)
     cls = classify(v, walking, mob == MOBILITY_DYNAMIC, P)
-    kcls, kmob = _kernels.classify(v.astype(np.int64), walking, prev, age, size, moved, speed, confirmed,
-                                   P.person_votes, P.d_max, P.undefined_window, P.moving_distance, P.moving_speed)
+    kcls, kmob = classify_tracks(v.astype(np.int64), walking, prev, age, size, moved, speed, confirmed,
+                                 P.person_votes, P.d_max, P.undefined_window, P.moving_distance, P.moving_speed)
     assert np.array_equal(kmob, mob)
     assert np.array_equal(kcls, cls)

@@ -1,4 +1,5 @@
-"""datmo's batched constant-velocity Kalman filter against filterpy's KalmanFilter (the oracle)."""
+"""The reference constant-velocity Kalman filter (tests/reference_tracking.py, the arithmetic the compiled step's
+predict and kalman_update are checked against) against filterpy's KalmanFilter (the oracle)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from filterpy.kalman import KalmanFilter
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datmo_cli.tracking import kalman
+from tests import reference_tracking as kalman
 
 
 def _oracle(x0: np.ndarray, P0: np.ndarray) -> KalmanFilter:
@@ -38,7 +39,7 @@ def test_matches_filterpy_on_random_sequences(seed: int, n_tracks: int, steps: i
     q = float(rng.uniform(0.01, 5))
     for _ in range(steps):
         dt = float(rng.choice([0.0, rng.uniform(0.001, 2.0)]))   # repeated stamps and uneven rates
-        kalman.predict(x, P, dt, q)
+        kalman.kalman_predict(x, P, dt, q)
         for f in filters:
             f.predict(F=kalman.transition(dt), Q=Q_discrete_white_noise(2, dt, q, block_size=2, order_by_dim=False))
         measured = rng.random(n_tracks) < 0.7                     # some tracks miss the scan
@@ -46,7 +47,7 @@ def test_matches_filterpy_on_random_sequences(seed: int, n_tracks: int, steps: i
             z = x[measured, :2] + rng.normal(0, 0.5, (int(measured.sum()), 2))
             r = rng.uniform(0.01, 0.5, int(measured.sum()))
             xs, Ps = x[measured], P[measured]
-            kalman.update(xs, Ps, z, r)
+            kalman.kalman_update(xs, Ps, z, r)
             x[measured], P[measured] = xs, Ps
             for f, zk, rk in zip([f for f, m in zip(filters, measured, strict=True) if m], z, r, strict=True):
                 f.update(zk, R=np.eye(2) * rk**2)
@@ -61,7 +62,7 @@ def test_distances_match_explicit_formula():
     A = rng.normal(size=(4, 4, 4))
     P = A @ A.transpose(0, 2, 1) + np.eye(4)
     zx, zy, sigma = rng.normal(size=5), rng.normal(size=5), rng.uniform(0.01, 0.5, 5)
-    d2, dist = kalman.distances(x, P, zx, zy, sigma)
+    d2, dist = kalman.mahalanobis2(x, P, zx, zy, sigma)
     for k in range(4):
         for j in range(5):
             y = np.array([zx[j], zy[j]]) - x[k, :2]

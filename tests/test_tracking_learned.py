@@ -8,10 +8,12 @@ from test_tracking_people import walker_legs
 
 from datmo_cli.log.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON, MOBILITY_DYNAMIC, MOBILITY_STATIC
 from datmo_cli.tracking import _kernels
-from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, measurements
+from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
+from tests.reference_tracking import param_vector
+from tests.reference_tracking import reference_measurements as measurements
 
 
 def reference_measurements(circles, blobs, lines, legs, stride_max, d_max, weak=None):
@@ -84,7 +86,7 @@ def test_learned_measurements_match_the_reference():
             *beams(blobs), col(blobs, 1), col(blobs, 2), col(blobs, 3),
             col(lines, 0, i8), *beams(lines, 2), col(lines, 1), col(lines, 2), col(lines, 3), col(lines, 4),
             *beams(legs), col(legs, 1), col(legs, 2), col(legs, 3), ws * 10, ws * 10 + 5,
-            np.array(list(weak.values()), f8), 0.9, 1.5)
+            np.array(list(weak.values()), f8), param_vector(stride_max=0.9, d_max=1.5))
         x, y, size, kind, _, prob = got
         rows = sorted((int(k), round(float(a), 9), round(float(b), 9), round(float(s), 9), round(float(p), 9))
                       for k, a, b, s, p in zip(kind, x, y, size, prob, strict=True))

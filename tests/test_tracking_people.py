@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from datmo_cli.tracking.classification import CLASS_PERSON, MOBILITY_DYNAMIC
-from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON, measurements
+from datmo_cli.log.vocabulary import CLASS_PERSON, MOBILITY_DYNAMIC
+from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.people import leg_lead, pair_legs
 from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
+from tests.reference_tracking import leg_lead, pair_legs, param_vector
+from tests.reference_tracking import reference_measurements as measurements
 
 STEP, WIDTH = 2 * 0.9 * np.sin(np.radians(22)), 0.3   # 2 l sin(theta) and the legs' path distance, m
 
@@ -123,7 +124,7 @@ def test_pairing_kernel_matches_the_reference():
         n = int(rng.integers(0, 9))
         x, y = rng.uniform(0, 3, n), rng.uniform(0, 3, n)
         want = pair_legs(x, y, 0.9)
-        got = _kernels.pair_legs(x, y, 0.9)
+        got = _kernels.pair_legs(x, y, param_vector(stride_max=0.9))
         assert all(np.array_equal(w, g) for w, g in zip(want, got, strict=True))
 
 

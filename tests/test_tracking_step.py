@@ -17,14 +17,14 @@ from hypothesis import strategies as st
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry
 from datmo_cli.stages import iter_run_features, track_run
-from datmo_cli.tracking import _kernels, _step, kalman, state
+from datmo_cli.tracking import _step, state
 from datmo_cli.tracking.markers import track_markers
 from datmo_cli.tracking.measurements import Measurements
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import _COMPAT, _COMPAT_LEARNED, _REACQUIRE, TRACK_DTYPE, Tracker
 from tests.conftest import SAMPLE_LOGS
-from tests.reference_tracking import ReferenceTracker, reference_measurements
+from tests.reference_tracking import ReferenceTracker, kalman_predict, kind_groups, moved, reference_measurements
 
 P = TrackingParams()
 PRM = P.kernel_vector()
@@ -126,16 +126,16 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
     ref._dt, ref.stamp_ns, ref.pose = dt, stamp_ns, None if pose is None else pose_arr
     t = ref.tracks
     n = len(t)
-    group = _kernels.kind_groups(t.votes, t.mobility)
+    group = kind_groups(t.votes, t.mobility)
     ref._compat_row = np.where(t.confirmed, group, 4)
     tab = to_table(ref, t0)
     crow = np.array([_step.kind_group(tab, k) if t.confirmed[k] else 4 for k in range(n)], np.int64)
     np.testing.assert_array_equal(crow, ref._compat_row)
-    kalman.predict(t.x, t.P, dt, np.where((group == 0) | (group == 5), p.person_process_noise, p.process_noise))
+    kalman_predict(t.x, t.P, dt, np.where((group == 0) | (group == 5), p.person_process_noise, p.process_noise))
     _step.predict(tab, n, dt, PRM)
     same_tracks(ref, t0, tab, n, "predict")
     px, py, pc, ps = ref._sensor()
-    m = meas.moved(ref.pose)
+    m = moved(meas, ref.pose)
     if has_pose:
         a = meas_arrays(meas)
         got = _step.moved(a[0], a[1], a[4], a[5], px, py, pc, ps)
@@ -377,6 +377,20 @@ def test_random_scenes_equal_the_reference(scene: tuple):
         want.append(a)
     block = Tracker(P, GEOM, learned=learned).track_block(stamps, feats, ranges, poses)
     assert block.items.tobytes() == np.concatenate(want).tobytes()
+
+
+@settings(max_examples=6, deadline=None)
+@given(scene=scenes())
+def test_every_phase_equals_the_reference_on_small_scenes(scene: tuple):
+    """The lockstep of the sample logs on small random scenes (a few objects, a few scans): every compiled
+    phase called directly on the reference's state, and the compiled features-to-measurements."""
+    stamps, feats, poses, ranges, learned = scene
+    ref = ReferenceTracker(P, GEOM, learned=learned)
+    for i, f in enumerate(feats):
+        m = reference_measurements(f, P, learned)
+        same_meas(_flat_measurements(f, learned), m, f"measurements of scan {i}")
+        lockstep(ref, int(stamps[0]), int(stamps[i]), m, None if ranges is None else ranges[i],
+                 None if poses is None else poses[i])
 
 
 def test_the_table_grows_past_its_capacity():

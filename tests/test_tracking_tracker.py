@@ -9,10 +9,11 @@ from hypothesis import strategies as st
 
 from datmo_cli.log.scan import ScanGeometry
 from datmo_cli.log.vocabulary import STATUS_COASTING, STATUS_CONFIRMED, STATUS_TENTATIVE
-from datmo_cli.tracking.measurements import measurements
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
+from tests.reference_tracking import background_update, param_vector
+from tests.reference_tracking import reference_measurements as measurements
 
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0)
 P = TrackingParams()
@@ -205,18 +206,18 @@ def test_background_grid_marks_long_hit_places_and_forgets_places_seen_through()
     wall = np.array([3.0, 3.0, 3.0], np.float32)
     count = 0
     for scan in range(1, 21):   # 4 s at 5 Hz
-        count = _kernels.background_update(score, mark, active, count, scan, wall, np.cos(angles), np.sin(angles),
+        count = background_update(score, mark, active, count, scan, wall, np.cos(angles), np.sin(angles),
                                            angles[0], angles[1] - angles[0], 0.0, 8.0, 0.0, 0.0, 1.0, 0.0, 0.2,
                                            -5.0, -5.0, cell, n, 0.3, 6.0)
     on = _kernels.on_background(score, np.array([3.0]), np.array([0.0]), np.array([0.0]), 0.0, 0.0, -5.0, -5.0,
-                                cell, n, 3.0)
+                                n, param_vector(background_cell=cell, background_time=3.0))
     assert on[0]
     gone = np.array([6.0, 6.0, 6.0], np.float32)   # the object left: the beams now reach 6 m
-    count = _kernels.background_update(score, mark, active, count, 21, gone, np.cos(angles), np.sin(angles),
+    count = background_update(score, mark, active, count, 21, gone, np.cos(angles), np.sin(angles),
                                        angles[0], angles[1] - angles[0], 0.0, 8.0, 0.0, 0.0, 1.0, 0.0, 0.2,
                                        -5.0, -5.0, cell, n, 0.3, 6.0)
     on = _kernels.on_background(score, np.array([3.0]), np.array([0.0]), np.array([0.0]), 0.0, 0.0, -5.0, -5.0,
-                                cell, n, 3.0)
+                                n, param_vector(background_cell=cell, background_time=3.0))
     assert not on[0]
 
 

@@ -5,7 +5,7 @@ Frames: scan points are in the sensor frame (x forward, y left, metres); the map
 in metres and its heading in radians, so a sensor point p maps to R(theta) p + (x, y).
 
 The public wrapper (validation, allocation, parameters) is egomotion.py; every kernel is checked against
-the plain-numpy reference in tests/naive_egomotion.py.
+the plain-numpy reference in tests/reference_perception.py.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """numba kernels of segmentation and Hough feature extraction (method.md sections 4 and 5).
 
 Sensor frame: x forward, y left, metres; angles in radians. Every kernel is checked against the plain
-Python reference in tests/naive_perception.py. Parameters arrive as one float64 vector (see
+Python reference in tests/reference_perception.py. Parameters arrive as one float64 vector (see
 FeatureParams.kernel_vector) whose positions are the P_* constants below.
 """
 
@@ -21,6 +21,11 @@ L_SCAN, L_SEG, L_FIRST, L_LAST, L_N, L_X0, L_Y0, L_X1, L_Y1, L_RHO, L_THETA, L_L
 C_SCAN, C_SEG, C_FIRST, C_LAST, C_N, C_X, C_Y, C_R, C_RACC = range(9)
 # columns of blob rows: scan, segment, first, last, n, x, y, size, kind
 B_SCAN, B_SEG, B_FIRST, B_LAST, B_N, B_X, B_Y, B_SIZE, B_KIND = range(9)
+# a line candidate (line_of_run's `out`, the rows of extract_scan's `cand`): points, first and last point,
+# end points (x0, y0, x1, y1), rho, theta, length, r_acc, and r_acc of the HTL peak cell alone
+LC_N, LC_FIRST, LC_LAST, LC_X0, LC_Y0, LC_X1, LC_Y1, LC_RHO, LC_THETA, LC_LEN, LC_RACC, LC_PEAK_RACC = range(12)
+# a circle candidate (circle_of_run's `out`): points, centre x, y, radius, r_acc
+CC_N, CC_X, CC_Y, CC_R, CC_RACC = range(5)
 MAX_SUB = 256   # line candidates per segment
 
 
@@ -330,11 +335,11 @@ def line_of_run(x, y, s, e, theta_t, rho_p, votes, rho_res, idx, out) -> None:
         if abs(x[i] * c + y[i] * sn - rho_p) <= rho_res:
             idx[m] = i
             m += 1
-    out[0] = m
-    out[10] = votes / (e - s)
-    out[11] = votes / (e - s)
+    out[LC_N] = m
+    out[LC_RACC] = votes / (e - s)
+    out[LC_PEAK_RACC] = votes / (e - s)
     if m < 2:
-        out[1:10] = 0.0
+        out[LC_FIRST:LC_RACC] = 0.0
         return
     theta, rho = fit_line(x, y, idx, m)
     c = np.cos(theta)
@@ -359,23 +364,23 @@ def line_of_run(x, y, s, e, theta_t, rho_p, votes, rho_res, idx, out) -> None:
     for k in range(m):
         if abs(x[idx[k]] * c + y[idx[k]] * sn - rho) <= 0.5 * rho_res:
             on += 1
-    out[0] = m
-    out[10] = max(votes, on) / (e - s)
-    out[11] = votes / (e - s)
+    out[LC_N] = m
+    out[LC_RACC] = max(votes, on) / (e - s)
+    out[LC_PEAK_RACC] = votes / (e - s)
     i0 = idx[0]
     i1 = idx[m - 1]
     # P_ini and P_end projected on the fitted line
     d0 = x[i0] * c + y[i0] * sn - rho
     d1 = x[i1] * c + y[i1] * sn - rho
-    out[1] = i0
-    out[2] = i1
-    out[3] = x[i0] - d0 * c
-    out[4] = y[i0] - d0 * sn
-    out[5] = x[i1] - d1 * c
-    out[6] = y[i1] - d1 * sn
-    out[7] = rho
-    out[8] = theta
-    out[9] = np.hypot(out[5] - out[3], out[6] - out[4])
+    out[LC_FIRST] = i0
+    out[LC_LAST] = i1
+    out[LC_X0] = x[i0] - d0 * c
+    out[LC_Y0] = y[i0] - d0 * sn
+    out[LC_X1] = x[i1] - d1 * c
+    out[LC_Y1] = y[i1] - d1 * sn
+    out[LC_RHO] = rho
+    out[LC_THETA] = theta
+    out[LC_LEN] = np.hypot(out[LC_X1] - out[LC_X0], out[LC_Y1] - out[LC_Y0])
 
 
 @njit(cache=True)
@@ -427,8 +432,8 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     peak whose r_acc is not above `beat` is not refined (out[0] = 0: it would not be kept anyway); nor is a
     radius voted for that cannot give more votes than the peak so far, or than `beat` allows (the points
     near enough to the ring of some cell of its window, counted first): its peak could not be the circle."""
-    out[0] = 0.0
-    out[4] = 0.0
+    out[CC_N] = 0.0
+    out[CC_RACC] = 0.0
     n = e - s
     if n < 3 or beat >= 1.0:   # r_acc is at most 1: nothing can beat `beat`
         return
@@ -521,7 +526,7 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     if best == 0:
         return
     if best / n <= beat:
-        out[4] = best / n
+        out[CC_RACC] = best / n
         return
     m = 0
     for i in range(s, e):
@@ -534,11 +539,11 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
         # keep the fit when it stays a circle of the allowed size near the Hough estimate
         if ok and p[P_R_MIN] * 0.8 <= fr <= p[P_R_MAX] * 1.2 and np.hypot(fa - ba, fb - bb) <= 2 * p[P_CWINDOW]:
             a, b, r = fa, fb, fr
-    out[0] = m
-    out[1] = a
-    out[2] = b
-    out[3] = r
-    out[4] = best / n
+    out[CC_N] = m
+    out[CC_X] = a
+    out[CC_Y] = b
+    out[CC_R] = r
+    out[CC_RACC] = best / n
 
 
 @njit(cache=True)
@@ -636,11 +641,11 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
             line_of_run(x, y, sub_s[k], sub_e[k], t * tstep, toff[t] + (peaks[k, 2] + 0.5) * rho_res, peaks[k, 0],
                         rho_res, idx, lo)
             cand[k, :] = lo
-            if lo[0] >= min_pts:   # an HTL line (more than 3 points) for the decision rule
+            if lo[LC_N] >= min_pts:   # an HTL line (more than 3 points) for the decision rule
                 cidx[ncand] = k
                 ncand += 1
-                votes += lo[10] * (sub_e[k] - sub_s[k])   # the refined line's r_acc, in points
-            if lo[0] >= min_pts and lo[10] > min_racc and lo[9] > min_len:
+                votes += lo[LC_RACC] * (sub_e[k] - sub_s[k])   # the refined line's r_acc, in points
+            if lo[LC_N] >= min_pts and lo[LC_RACC] > min_racc and lo[LC_LEN] > min_len:
                 kept[nkept] = k
                 nkept += 1
         htl_racc = votes / (e - s)   # r_acc of the segment's lines together
@@ -650,14 +655,16 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
             for q in range(1, nkept):
                 a = cand[kept[m - 1]]
                 b = cand[kept[q]]
-                dt = abs(a[8] - b[8])
+                dt = abs(a[LC_THETA] - b[LC_THETA])
                 dt = min(dt, np.pi - dt)
-                same_side = abs(a[7] - b[7]) if abs(a[8] - b[8]) < np.pi / 2 else abs(a[7] + b[7])
+                same_side = (abs(a[LC_RHO] - b[LC_RHO]) if abs(a[LC_THETA] - b[LC_THETA]) < np.pi / 2
+                             else abs(a[LC_RHO] + b[LC_RHO]))
                 if dt < 3.0 * np.pi / 180 and same_side < 2 * rho_res and kept[q] == kept[m - 1] + 1:
                     len_a = sub_e[kept[m - 1]] - sub_s[kept[m - 1]]
                     len_b = sub_e[kept[q]] - sub_s[kept[q]]
-                    merged = a[10] * len_a + b[10] * len_b
-                    line_of_run(x, y, sub_s[kept[m - 1]], sub_e[kept[q]], a[8], a[7], merged, rho_res, idx, lo)
+                    merged = a[LC_RACC] * len_a + b[LC_RACC] * len_b
+                    line_of_run(x, y, sub_s[kept[m - 1]], sub_e[kept[q]], a[LC_THETA], a[LC_RHO], merged, rho_res,
+                                idx, lo)
                     sub_e[kept[m - 1]] = sub_e[kept[q]]
                     cand[kept[m - 1], :] = lo
                 else:
@@ -677,49 +684,50 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                 # line of a segment small enough to be a circle, and keeps the better fit (a leg a few metres
                 # away, or a column's arc, is a shallow arc that HTL can take for a line with r_acc > 0.5)
                 try_circle = True
-                leg_only = cand[cidx[0], 11] >= min_racc   # not the paper's case: no circle keeps the line
+                leg_only = cand[cidx[0], LC_PEAK_RACC] >= min_racc   # not the paper's case: no circle keeps the line
             elif ncand == 2:
                 # two non-perpendicular lines: the paper's case; two perpendicular ones may be a box's corner
                 # or an arc cut in two halves (a column seen whole): the better fit decides, lines on a tie
                 try_circle = True
-                leg_only = _perpendicular(cand[cidx[0], 8], cand[cidx[1], 8], p[P_PERP_TOL])
+                leg_only = _perpendicular(cand[cidx[0], LC_THETA], cand[cidx[1], LC_THETA], p[P_PERP_TOL])
             else:
                 convex = 0
                 for q in range(ncand - 1):
                     a = cand[cidx[q]]
                     b = cand[cidx[q + 1]]
-                    if _convex(a[3], a[4], a[5], a[6], b[5], b[6]):
+                    if _convex(a[LC_X0], a[LC_Y0], a[LC_X1], a[LC_Y1], b[LC_X1], b[LC_Y1]):
                         convex += 1
                 try_circle = convex >= 2
         if try_circle:
             if e - s >= p[P_CIRCLE_MIN_POINTS]:
                 circle_of_run(x, y, s, e, p, cacc, idx, cout, max(htl_racc, min_racc))
             else:
-                cout[4] = 0.0
+                cout[CC_RACC] = 0.0
             lines_rss = -1.0   # the circle's points to the segment's HTL lines (two or more: a corner?)
-            if ncand >= 2 and cout[0] >= 3:
+            if ncand >= 2 and cout[CC_N] >= 3:
                 lines_rss = 0.0
-                for q in range(int(cout[0])):
+                for q in range(int(cout[CC_N])):
                     i = idx[q]
                     dmin = np.inf
                     for j in range(ncand):
                         c = cand[cidx[j]]
-                        dmin = min(dmin, abs(x[i] * np.cos(c[8]) + y[i] * np.sin(c[8]) - c[7]))
+                        dmin = min(dmin, abs(x[i] * np.cos(c[LC_THETA]) + y[i] * np.sin(c[LC_THETA]) - c[LC_RHO]))
                     lines_rss += dmin * dmin
             # a circle beats the lines, and holds like a line must (r_acc above line_min_racc)
             # and is a well-posed arc (idx[:n] still holds the points circle_of_run fitted)
-            if (cout[4] > max(htl_racc, min_racc) and cout[0] >= p[P_CIRCLE_MIN_POINTS]
-                    and circle_posed(x, y, idx, int(cout[0]), cout[1], cout[2], cout[3], p, dalpha, lines_rss)):
+            if (cout[CC_RACC] > max(htl_racc, min_racc) and cout[CC_N] >= p[P_CIRCLE_MIN_POINTS]
+                    and circle_posed(x, y, idx, int(cout[CC_N]), cout[CC_X], cout[CC_Y], cout[CC_R], p, dalpha,
+                                     lines_rss)):
                 row = circles[nc]
                 row[C_SCAN] = scan
                 row[C_SEG] = g
                 row[C_FIRST] = s
                 row[C_LAST] = e - 1
-                row[C_N] = cout[0]
-                row[C_X] = cout[1]
-                row[C_Y] = cout[2]
-                row[C_R] = cout[3]
-                row[C_RACC] = cout[4]
+                row[C_N] = cout[CC_N]
+                row[C_X] = cout[CC_X]
+                row[C_Y] = cout[CC_Y]
+                row[C_R] = cout[CC_R]
+                row[C_RACC] = cout[CC_RACC]
                 nc += 1
                 continue
             if not leg_only:
@@ -730,17 +738,17 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                 row = lines[nl]
                 row[L_SCAN] = scan
                 row[L_SEG] = g
-                row[L_FIRST] = c[1]
-                row[L_LAST] = c[2]
-                row[L_N] = c[0]
-                row[L_X0] = c[3]
-                row[L_Y0] = c[4]
-                row[L_X1] = c[5]
-                row[L_Y1] = c[6]
-                row[L_RHO] = c[7]
-                row[L_THETA] = c[8]
-                row[L_LEN] = c[9]
-                row[L_RACC] = c[10]
+                row[L_FIRST] = c[LC_FIRST]
+                row[L_LAST] = c[LC_LAST]
+                row[L_N] = c[LC_N]
+                row[L_X0] = c[LC_X0]
+                row[L_Y0] = c[LC_Y0]
+                row[L_X1] = c[LC_X1]
+                row[L_Y1] = c[LC_Y1]
+                row[L_RHO] = c[LC_RHO]
+                row[L_THETA] = c[LC_THETA]
+                row[L_LEN] = c[LC_LEN]
+                row[L_RACC] = c[LC_RACC]
                 nl += 1
             continue
         # a blob (or a point): centroid and largest extent

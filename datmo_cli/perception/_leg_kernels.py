@@ -2,7 +2,7 @@
 
 Sensor frame: x forward, y left, metres; angles in radians. The public wrappers (validation, allocation,
 model loading) are in legs.py; every feature is checked against the plain-numpy reference in
-tests/naive_legs.py. Feature columns are the F_* constants below, in the order of legs.FEATURE_NAMES.
+tests/reference_perception.py. Feature columns are the F_* constants below, in the order of legs.FEATURE_NAMES.
 """
 
 from __future__ import annotations

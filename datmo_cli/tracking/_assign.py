@@ -6,15 +6,15 @@ scipy.optimize.linear_sum_assignment: columns are scanned from the last, an equa
 in a free column wins, a tall matrix is solved transposed. So on the same matrix it returns scipy's
 assignment, ties included (tests/test_tracking_assign.py checks that on random gated matrices).
 
-`gnn` is association.gnn's rule: the pairs of `allowed` minimising the summed cost, disallowed pairs priced
-INFEASIBLE (so the most allowed pairs are made first) and dropped from the answer. Costs are unitless
-(squared Mahalanobis distance plus log det S, or metres); rows are tracks, columns measurements. It solves
-each connected component of the allowed pairs apart (most tracks and measurements of a scan have one
-candidate or none), which gives the same assignment as scipy on the whole matrix except where two
-assignments' costs tie, exactly or within the resolution of sums of INFEASIBLE (about 1e-4 per pair priced
-INFEASIBLE): there scipy's choice is decided by its scan order and rounding, this one by the component's
-and the exact costs. On the sample logs the two never differ (tests/test_tracking_step.py compares whole
-runs byte for byte).
+`gnn` is the global nearest neighbour rule (tests/reference_tracking.reference_gnn): the pairs of `allowed`
+minimising the summed cost, disallowed pairs priced INFEASIBLE (so the most allowed pairs are made first) and
+dropped from the answer. Costs are unitless (squared Mahalanobis distance plus log det S, or metres); rows are
+tracks, columns measurements. It solves each connected component of the allowed pairs apart (most tracks and
+measurements of a scan have one candidate or none), which gives the same assignment as scipy on the whole matrix
+except where two assignments' costs tie, exactly or within the resolution of sums of INFEASIBLE (about 1e-4 per pair
+priced INFEASIBLE): there scipy's choice is decided by its scan order and rounding, this one by the component's and
+the exact costs. On the sample logs the two never differ (tests/test_tracking_step.py compares whole runs byte for
+byte).
 """
 
 from __future__ import annotations

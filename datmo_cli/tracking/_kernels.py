@@ -1,6 +1,8 @@
-"""numba kernels of the tracker's per-scan arithmetic (wrapped by measurements.py, kalman.py, tracker.py).
+"""numba kernels of the tracker's per-scan arithmetic, called by the compiled step (_step.py) and markers.py.
 
-Kernels take contiguous arrays and scalars; frames and units are their wrappers'.
+Kernels take contiguous arrays and scalars; frames and units are their callers'. Tracking parameters arrive
+as one float64 vector `prm` (state.param_vector, indexed by the state.P_* constants), as in _step.py. Their
+references are in tests/reference_tracking.py.
 """
 
 from __future__ import annotations
@@ -8,10 +10,26 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..log.vocabulary import BLOB_KIND_BLOB, CLASS_CIRCLE_OBJECT, CLASS_PERSON
+from .state import (
+    P_BACKGROUND_CELL,
+    P_BACKGROUND_TIME,
+    P_D_MAX,
+    P_LEG_BLOB_MAX,
+    P_LEG_RADIUS_MAX,
+    P_LEG_REACH,
+    P_MERGE_DISTANCE,
+    P_MERGE_SPEED,
+    P_OCCLUSION_MARGIN,
+    P_STRIDE_MAX,
+)
+
 
 @njit(cache=True)
-def pair_legs(x, y, stride_max):
-    """Greedy nearest-first pairing; returns (a, b, n_pairs, single, n_single)."""
+def pair_legs(x, y, prm):
+    """Greedy nearest-first pairing of leg candidates at most prm[P_STRIDE_MAX] m apart; returns (a, b, single):
+    the pairs' two legs and the unpaired legs (indices)."""
+    stride_max = prm[P_STRIDE_MAX]
     n = len(x)
     a = np.empty(n // 2 + 1, np.int64)
     b = np.empty(n // 2 + 1, np.int64)
@@ -43,10 +61,10 @@ def pair_legs(x, y, stride_max):
 
 
 @njit(cache=True)
-def legs_to_measurements(lx, ly, ls, stride_max):
+def legs_to_measurements(lx, ly, ls, prm):
     """Person measurements (kind 0) at the centre of paired legs and single legs (kind 1): x, y, size,
     kind, legs (M, 4)."""
-    a, b, single = pair_legs(lx, ly, stride_max)
+    a, b, single = pair_legs(lx, ly, prm)
     n = len(a) + len(single)
     x = np.empty(n)
     y = np.empty(n)
@@ -68,10 +86,10 @@ def legs_to_measurements(lx, ly, ls, stride_max):
 
 
 @njit(cache=True)
-def _people_first(lx, ly, ls, stride_max, n_more):
+def _people_first(lx, ly, ls, prm, n_more):
     """Measurement buffers (x, y, size, kind, legs) with room for n_more after the people and single legs
     made of leg candidates lx, ly, ls (legs_to_measurements), which fill them first; and how many those are."""
-    px, py, psize, pkind, plegs = legs_to_measurements(lx, ly, ls, stride_max)
+    px, py, psize, pkind, plegs = legs_to_measurements(lx, ly, ls, prm)
     n = len(px)
     cap = n + n_more
     x = np.empty(cap)
@@ -84,10 +102,10 @@ def _people_first(lx, ly, ls, stride_max, n_more):
 
 
 @njit(cache=True)
-def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
-                 leg_radius_max, leg_blob_max, stride_max, d_max):
+def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm):
     """Measurements of one scan (see measurements.py): x, y, size, kind, legs (M, 4), and the leg
     candidates lx, ly, ls (L,)."""
+    leg_radius_max, leg_blob_max, d_max = prm[P_LEG_RADIUS_MAX], prm[P_LEG_BLOB_MAX], prm[P_D_MAX]
     nc, nb, nl = len(cx), len(bx), len(lseg)
     # rectangular objects: the bounding box of each segment's lines
     ox = np.empty(nl)
@@ -120,7 +138,7 @@ def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
             lx[nleg], ly[nleg], ls[nleg] = cx[i], cy[i], 2.0 * cr[i]
             nleg += 1
     for i in range(nb):
-        if bsize[i] <= leg_blob_max and bkind[i] == 0:
+        if bsize[i] <= leg_blob_max and bkind[i] == BLOB_KIND_BLOB:
             lx[nleg], ly[nleg], ls[nleg] = bx[i], by[i], bsize[i]
             nleg += 1
     for i in range(no):
@@ -128,13 +146,13 @@ def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1,
             lx[nleg], ly[nleg], ls[nleg] = ox[i], oy[i], osize[i]
             nleg += 1
     lx, ly, ls = lx[:nleg], ly[:nleg], ls[:nleg]
-    x, y, size, kind, legs, m = _people_first(lx, ly, ls, stride_max, nc + nb + no)
+    x, y, size, kind, legs, m = _people_first(lx, ly, ls, prm, nc + nb + no)
     for i in range(nc):
         if cr[i] > leg_radius_max:
             x[m], y[m], size[m], kind[m] = cx[i], cy[i], 2.0 * cr[i], 2
             m += 1
     for i in range(nb):
-        if not (bsize[i] <= leg_blob_max and bkind[i] == 0):
+        if not (bsize[i] <= leg_blob_max and bkind[i] == BLOB_KIND_BLOB):
             x[m], y[m], size[m], kind[m] = bx[i], by[i], bsize[i], 4
             m += 1
     for i in range(no):
@@ -170,7 +188,7 @@ def _span_max(marks, a, b):
 
 @njit(cache=True)
 def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0,
-                         lx1, ly1, gfirst, glast, gx, gy, gw, wfirst, wlast, wp, stride_max, d_max):
+                         lx1, ly1, gfirst, glast, gx, gy, gw, wfirst, wlast, wp, prm):
     """Measurements of one scan when a leg detector ran (see measurements.py): its legs (beams gfirst..glast
     at gx, gy, width gw) paired into people or single, then everything else as what it is: a circle
     (kind 2), the bounding box of a segment's lines (kind 3) or a blob (kind 4), whatever its size up to
@@ -179,13 +197,14 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
     Beam ranges are inclusive. Returns x, y, size, kind, legs (M, 4), prob (M,: 0 for the legs, whose
     probabilities the caller has, and for what the detector gave none)."""
     nc, nb, nl, ng = len(cx), len(bx), len(lseg), len(gx)
+    d_max = prm[P_D_MAX]
     top = 1
     for arr in (clast, blast, llast, glast, wlast):
         for v in arr:
             top = max(top, v + 1)
     is_leg = _beam_marks(gfirst, glast, np.ones(ng), top)
     weak = _beam_marks(wfirst, wlast, wp, top)
-    x, y, size, kind, legs, m = _people_first(gx, gy, gw, stride_max, nc + nb + nl)
+    x, y, size, kind, legs, m = _people_first(gx, gy, gw, prm, nc + nb + nl)
     prob = np.zeros(len(x))
     for i in range(nc):
         if _span_max(is_leg, cfirst[i], clast[i]) == 0.0:
@@ -227,125 +246,13 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
 
 
 @njit(cache=True)
-def mahalanobis2(x, P, zx, zy, sigma):
-    """(K, M) squared Mahalanobis distances and (K, M) Euclidean distances of measurements (zx, zy) with
-    per-measurement sigma from the K tracks' predicted positions."""
-    K, M = len(x), len(zx)
-    d2 = np.empty((K, M))
-    dist = np.empty((K, M))
-    for k in range(K):
-        for j in range(M):
-            v = sigma[j] * sigma[j]
-            a, b, c = P[k, 0, 0] + v, P[k, 0, 1], P[k, 1, 1] + v
-            det = a * c - b * b
-            dx, dy = zx[j] - x[k, 0], zy[j] - x[k, 1]
-            d2[k, j] = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / det
-            dist[k, j] = np.hypot(dx, dy)
-    return d2, dist
-
-
-@njit(cache=True)
-def update(x, P, rows, zx, zy, sigma):
-    """Kalman update of tracks `rows` with measurements (zx, zy) and sigmas, in place, Joseph form:
-    P = (I - KH) P (I - KH)^T + K R K^T, as filterpy computes it."""
-    I_KH = np.empty((4, 4))
-    G = np.empty((4, 2))
-    T = np.empty((4, 4))
-    for n in range(len(rows)):
-        k = rows[n]
-        v = sigma[n] * sigma[n]
-        a, b, c = P[k, 0, 0] + v, P[k, 0, 1], P[k, 1, 1] + v
-        det = a * c - b * b
-        i00, i01, i11 = c / det, -b / det, a / det
-        for r in range(4):
-            G[r, 0] = P[k, r, 0] * i00 + P[k, r, 1] * i01
-            G[r, 1] = P[k, r, 0] * i01 + P[k, r, 1] * i11
-        dx, dy = zx[n] - x[k, 0], zy[n] - x[k, 1]
-        for r in range(4):
-            x[k, r] += G[r, 0] * dx + G[r, 1] * dy
-            for s in range(4):
-                I_KH[r, s] = (1.0 if r == s else 0.0) - (G[r, s] if s < 2 else 0.0)
-        for r in range(4):
-            for s in range(4):
-                acc = 0.0
-                for u in range(4):
-                    acc += I_KH[r, u] * P[k, u, s]
-                T[r, s] = acc
-        for r in range(4):
-            for s in range(4):
-                acc = 0.0
-                for u in range(4):
-                    acc += T[r, u] * I_KH[s, u]
-                P[k, r, s] = acc + v * (G[r, 0] * G[s, 0] + G[r, 1] * G[s, 1])
-
-
-@njit(cache=True)
-def predict(x, P, dt, q):
-    """Constant-velocity prediction of every track dt seconds ahead, in place (Q of white-noise
-    acceleration q[k] for track k)."""
-    for k in range(len(x)):
-        qa, qb, qc = 0.25 * dt**4 * q[k], 0.5 * dt**3 * q[k], dt**2 * q[k]
-        x[k, 0] += dt * x[k, 2]
-        x[k, 1] += dt * x[k, 3]
-        for s in range(4):
-            P[k, 0, s] += dt * P[k, 2, s]
-            P[k, 1, s] += dt * P[k, 3, s]
-        for r in range(4):
-            P[k, r, 0] += dt * P[k, r, 2]
-            P[k, r, 1] += dt * P[k, r, 3]
-        P[k, 0, 0] += qa
-        P[k, 1, 1] += qa
-        P[k, 0, 2] += qb
-        P[k, 2, 0] += qb
-        P[k, 1, 3] += qb
-        P[k, 3, 1] += qb
-        P[k, 2, 2] += qc
-        P[k, 3, 3] += qc
-
-
-@njit(cache=True)
-def classify(votes, walking, previous, age_s, size, displacement, speed, confirmed, person_votes, d_max,
-             undefined_window, moving_distance, moving_speed):
-    """Class and mobility of every track: the rules of classification.py, fused into one pass."""
-    K = len(votes)
-    cls = np.empty(K, np.uint8)
-    mob = np.empty(K, np.uint8)
-    for k in range(K):
-        dynamic = previous[k] == 1 or (confirmed[k] and displacement[k] > moving_distance
-                                       and speed[k] > moving_speed)
-        if dynamic:
-            mob[k] = 1
-        elif size[k] > d_max or age_s[k] >= undefined_window:
-            mob[k] = 0
-        else:
-            mob[k] = 2
-        person, leg, circle, rect, blob = votes[k, 0], votes[k, 1], votes[k, 2], votes[k, 3], votes[k, 4]
-        total = person + leg + circle + rect + blob
-        if person + leg >= person_votes * max(total, 1):
-            if walking[k] and person > 0:
-                cls[k] = 1
-            elif person == 0 and not dynamic:
-                cls[k] = 2
-            else:
-                cls[k] = 0
-        elif circle + rect + blob == 0:
-            cls[k] = 0
-        elif circle >= rect and circle >= blob:
-            cls[k] = 2
-        elif rect >= blob:
-            cls[k] = 3
-        else:
-            cls[k] = 0
-    return cls, mob
-
-
-@njit(cache=True)
-def leg_stage(tx, ty, lx, ly, ls, reach, stride_max):
+def leg_stage(tx, ty, lx, ly, ls, prm):
     """Leg candidates (lx, ly, ls) to tracks predicted at (tx, ty), nearest pairs first: each leg to at
-    most one track, each track at most two legs: the first within `reach`, the second within `stride_max`
+    most one track, each track at most two legs: the first within leg_reach, the second within stride_max
     of the track and of the first leg (a lagging prediction sits by one leg, a stride from the other).
     Returns (owner, x, y, size, kind, legs, taken): one measurement per track that took legs (the centre
     of two legs, kind 0, or one leg, kind 1) with the owner's index, and which legs were taken."""
+    reach, stride_max = prm[P_LEG_REACH], prm[P_STRIDE_MAX]
     T, L = len(tx), len(lx)
     d = np.empty((T, L))
     for k in range(T):
@@ -402,10 +309,11 @@ def leg_stage(tx, ty, lx, ly, ls, reach, stride_max):
 
 
 @njit(cache=True)
-def duplicates(x, y, vx, vy, candidate, confirmed, rank, merge_distance, merge_speed):
+def duplicates(x, y, vx, vy, candidate, confirmed, rank, prm):
     """Which candidate tracks lie within merge_distance of a candidate of higher rank (ties: lower index),
     when one of the two is tentative or their velocities differ by less than merge_speed (two confirmed
     people passing each other close are not one)."""
+    merge_distance, merge_speed = prm[P_MERGE_DISTANCE], prm[P_MERGE_SPEED]
     K = len(x)
     dup = np.zeros(K, np.bool_)
     for i in range(K):
@@ -423,13 +331,13 @@ def duplicates(x, y, vx, vy, candidate, confirmed, rank, merge_distance, merge_s
 
 
 @njit(cache=True)
-def leg_stage_measurements(tx, ty, lx, ly, ls, reach, stride_max, mx, my, msize, mkind, mlegs):
+def leg_stage_measurements(tx, ty, lx, ly, ls, mx, my, msize, mkind, mlegs, prm):
     """leg_stage, then the scan's measurements rebuilt: first one per track that took legs (owner gives
     the track), then the free legs paired (legs_to_measurements), then the measurements of other kinds
     (mkind not 0 or 1). Returns (owner, x, y, size, kind, legs)."""
-    owner, ox, oy, osize, okind, olegs, taken = leg_stage(tx, ty, lx, ly, ls, reach, stride_max)
+    owner, ox, oy, osize, okind, olegs, taken = leg_stage(tx, ty, lx, ly, ls, prm)
     free = ~taken
-    rx, ry, rsize, rkind, rlegs = legs_to_measurements(lx[free], ly[free], ls[free], stride_max)
+    rx, ry, rsize, rkind, rlegs = legs_to_measurements(lx[free], ly[free], ls[free], prm)
     n_other = 0
     for i in range(len(mx)):
         if mkind[i] > 1:
@@ -452,65 +360,6 @@ def leg_stage_measurements(tx, ty, lx, ly, ls, reach, stride_max, mx, my, msize,
 
 
 @njit(cache=True)
-def apply_updates(x, P, last, hit, votes, size, lead_left, lead_right, moving, rows, zx, zy, zkind, zsize,
-                  zlegs, sigma, sigma_leg, moving_speed, step_min, step_max):
-    """Kalman-update tracks `rows` with measurements (zx, zy) of kinds zkind, and record the hit: last
-    position, kind votes, largest size, and for people that have been `moving` which leg leads along the
-    velocity (the walking pattern; noise on a still pair of posts would fake it)."""
-    hit[:] = False
-    sig = np.empty(len(rows))
-    for n in range(len(rows)):
-        sig[n] = sigma_leg if zkind[n] == 1 else sigma
-    update(x, P, rows, zx, zy, sig)
-    for n in range(len(rows)):
-        k = rows[n]
-        last[k, 0], last[k, 1] = x[k, 0], x[k, 1]
-        hit[k] = True
-        votes[k, zkind[n]] += 1
-        size[k] = max(size[k], zsize[n])
-        if zkind[n] == 0 and moving[k]:
-            vx, vy = x[k, 2], x[k, 3]
-            speed = np.hypot(vx, vy)
-            if speed > moving_speed:
-                ux, uy = vx / speed, vy / speed
-                dx, dy = zlegs[n, 0] - zlegs[n, 2], zlegs[n, 1] - zlegs[n, 3]
-                along = dx * ux + dy * uy
-                lead = along if (ux * dy - uy * dx) > 0 else -along   # left leg minus right leg
-                if abs(lead) <= step_max:
-                    if lead > step_min:
-                        lead_left[k] = True
-                    elif lead < -step_min:
-                        lead_right[k] = True
-
-
-@njit(cache=True)
-def life_cycle(hit, age, hits, misses, last_hit_ns, history, confirmed, occluded, stamp_ns, mask, popcount,
-               confirm_hits, delete_after, delete_after_occluded, tentative_delete_after):
-    """Count the scan for every track (age, hits, misses, hit history, confirmation) and return which
-    tracks are past their deletion timeout (s since the last hit: tentative, seen, occluded)."""
-    K = len(hit)
-    dead = np.zeros(K, np.bool_)
-    for k in range(K):
-        age[k] += 1
-        if hit[k]:
-            hits[k] += 1
-            misses[k] = 0
-            last_hit_ns[k] = stamp_ns
-        else:
-            misses[k] += 1
-        history[k] = ((history[k] << 1) | (1 if hit[k] else 0)) & mask
-        if popcount[history[k]] >= confirm_hits:
-            confirmed[k] = True
-        since = (stamp_ns - last_hit_ns[k]) * 1e-9
-        if confirmed[k]:
-            limit = delete_after_occluded if occluded[k] else delete_after
-        else:
-            limit = tentative_delete_after
-        dead[k] = since > limit + 1e-9
-    return dead
-
-
-@njit(cache=True)
 def marker_points(px, py, vx, vy, cls, shown, alpha, color_table, tail, tail_count):
     """Points and colours of the track markers (markers.py): per shape list (people, circle objects,
     others) points (n, 3) and colours (n, 4); velocity arrows and trajectory tails of `shown` tracks as
@@ -522,7 +371,7 @@ def marker_points(px, py, vx, vy, cls, shown, alpha, color_table, tail, tail_cou
     n_shown = 0
     n_seg = 0
     for k in range(K):
-        g = 0 if cls[k] == 1 else (1 if cls[k] == 2 else 2)
+        g = 0 if cls[k] == CLASS_PERSON else (1 if cls[k] == CLASS_CIRCLE_OBJECT else 2)
         group[k] = g
         counts[g] += 1
         if shown[k]:
@@ -560,27 +409,10 @@ def marker_points(px, py, vx, vy, cls, shown, alpha, color_table, tail, tail_cou
 
 
 @njit(cache=True)
-def kind_groups(votes, mobility):
-    """The kind group that fed each track most: 0 legs or people, 1 circles, 2 lines, 3 blobs, 5 a lone
-    leg never paired that is not dynamic (ties: the lower group)."""
-    K = len(votes)
-    g = np.empty(K, np.int64)
-    for k in range(K):
-        legs = votes[k, 0] + votes[k, 1]
-        best, arg = legs, 0
-        for j, v in ((1, votes[k, 2]), (2, votes[k, 3]), (3, votes[k, 4])):
-            if v > best:
-                best, arg = v, j
-        if arg == 0 and votes[k, 0] == 0 and mobility[k] != 1:
-            arg = 5
-        g[k] = arg
-    return g
-
-
-@njit(cache=True)
-def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, margin):
+def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, prm):
     """Which missed tracks (sensor-frame centres sx, sy and extents, m) are hidden: outside the field of
-    view or range, or behind a return at least `margin` m nearer within their angular extent."""
+    view or range, or behind a return more than occlusion_margin m nearer within their angular extent."""
+    margin = prm[P_OCCLUSION_MARGIN]
     K, B = len(sx), len(ranges)
     occ = np.zeros(K, np.bool_)
     for k in range(K):
@@ -600,62 +432,11 @@ def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, mar
 
 
 @njit(cache=True)
-def background_update(score, mark, active, n_active, scan, ranges, cos_a, sin_a, angle_min, increment, range_min,
-                      range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled):
-    """Update the background grid with one scan; returns the new number of active cells.
-
-    score (n * n,): per cell, for how long (s) it has been hit without being seen through since; a cell is seen
-    through when the beam at its bearing returns more than `margin` beyond it (or nothing within range).
-    mark (n * n,) int64: the last scan (number `scan`) that hit the cell, or -1 when the cell is not active.
-    active[:n_active]: the cells with a score (only those are tested for being seen through).
-    The sensor is at (px, py) with heading cos/sin (pc, ps); cell (0, 0) has its corner at (x0, y0).
-    Cells hit for `settled` s or more (walls) are tested every fourth scan only, which saves time."""
-    B = len(ranges)
-    keep = 0
-    for a in range(n_active):
-        c = active[a]
-        if score[c] >= settled and (c + scan) % 4 != 0:
-            active[keep] = c
-            keep += 1
-            continue
-        wx, wy = x0 + (c // n + 0.5) * cell - px, y0 + (c % n + 0.5) * cell - py
-        sx, sy = pc * wx + ps * wy, -ps * wx + pc * wy
-        r = np.hypot(sx, sy)
-        j = int(np.rint((np.arctan2(sy, sx) - angle_min) / increment))
-        if 0 <= j < B and r < range_max:
-            rj = ranges[j]
-            if (rj > r + margin and rj > range_min) or rj >= range_max:
-                score[c] = 0.0
-                mark[c] = -1
-                continue
-        active[keep] = c
-        keep += 1
-    for j in range(B):
-        r = ranges[j]
-        if not (r > range_min and r < range_max):
-            continue
-        sx, sy = r * cos_a[j], r * sin_a[j]
-        i = int(np.floor((pc * sx - ps * sy + px - x0) / cell))
-        k = int(np.floor((ps * sx + pc * sy + py - y0) / cell))
-        if i < 0 or k < 0 or i >= n or k >= n:
-            continue
-        c = i * n + k
-        if mark[c] == scan:
-            continue
-        if mark[c] < 0:
-            if keep >= len(active):
-                continue
-            active[keep] = c
-            keep += 1
-        mark[c] = scan
-        score[c] += dt
-    return keep
-
-
-@njit(cache=True)
-def on_background(score, lx, ly, ls, px, py, x0, y0, cell, n, threshold):
-    """Which leg candidates (lx, ly, extent ls; tracking frame) lie on the background: a cell around the
-    candidate's side facing the sensor at (px, py) has been occupied for at least `threshold` s."""
+def on_background(score, lx, ly, ls, px, py, x0, y0, n, prm):
+    """Which leg candidates (lx, ly, extent ls; tracking frame) lie on the background: a cell (of the n x n
+    grid of background_cell m cells, cell (0, 0) at (x0, y0)) around the candidate's side facing the sensor at
+    (px, py) has been occupied for at least background_time s."""
+    cell, threshold = prm[P_BACKGROUND_CELL], prm[P_BACKGROUND_TIME]
     out = np.zeros(len(lx), np.bool_)
     for m in range(len(lx)):
         dx, dy = lx[m] - px, ly[m] - py
@@ -671,33 +452,7 @@ def on_background(score, lx, ly, ls, px, py, x0, y0, cell, n, threshold):
 
 
 @njit(cache=True)
-def gated_costs(x, P, zx, zy, zkind, sigma, sigma_leg, gate, max_distance, compat, compat_row):
-    """Association costs (K, M) of measurements from the tracks' predictions, and which pairs pass the gate
-    (squared Mahalanobis distance d2 <= gate; measurement sigma by kind: sigma_leg for single legs), the
-    distance bound and the kind compatibility compat[compat_row[k], zkind[j]]. The cost is d2 + ln det S
-    (twice the negative log-likelihood up to a constant), not d2: a track coasting for long, with a wide
-    covariance, would otherwise win every measurement it can reach over the well-tracked object the
-    measurement belongs to."""
-    K, M = len(x), len(zx)
-    cost = np.empty((K, M))
-    ok = np.zeros((K, M), np.bool_)
-    for k in range(K):
-        row = compat_row[k]
-        for j in range(M):
-            s = sigma_leg if zkind[j] == 1 else sigma
-            v = s * s
-            a, b, c = P[k, 0, 0] + v, P[k, 0, 1], P[k, 1, 1] + v
-            dx, dy = zx[j] - x[k, 0], zy[j] - x[k, 1]
-            det = a * c - b * b
-            d2 = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / det
-            cost[k, j] = d2 + np.log(det)
-            ok[k, j] = compat[row, zkind[j]] and d2 <= gate and np.hypot(dx, dy) <= max_distance
-    return cost, ok
-
-
-@njit(cache=True)
-def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, py, x0, y0, cell, n,
-                         threshold):
+def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, py, x0, y0, n, prm):
     """Which of n_tracks tracks took (rows, cols) a measurement on the background (see on_background; legs and
     circles are tested on their side facing the sensor, other kinds at their centre)."""
     out = np.zeros(n_tracks, np.bool_)
@@ -711,7 +466,7 @@ def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, 
         x[q], y[q] = mx[j], my[j]
         if mkind[j] == 1 or mkind[j] == 2:
             front[q] = msize[j]
-    bg = on_background(score, x, y, front, px, py, x0, y0, cell, n, threshold)
+    bg = on_background(score, x, y, front, px, py, x0, y0, n, prm)
     for q in range(len(rows)):
         out[rows[q]] = bg[q]
     return out

@@ -11,7 +11,7 @@ over whole logs.
 Frames: measurements arrive in the sensor frame (x forward, y left, m); tracks live in the tracking frame
 (the world frame when a pose (x, y, theta) is given, else the sensor frame); the Track elements out carry
 sensor-frame positions and velocities and, with a pose, world ones. Times: ns since the tracker's first
-scan (int64), seconds for durations. Kinds: measurements.KIND_*; classes and mobility: classification's.
+scan (int64), seconds for durations. Kinds: measurements.KIND_*; classes and mobility: datmo_msgs/Track's.
 """
 
 from __future__ import annotations
@@ -19,6 +19,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..log.vocabulary import (
+    CLASS_CIRCLE_OBJECT,
+    CLASS_PERSON,
+    CLASS_RECTANGULAR_OBJECT,
+    CLASS_UNKNOWN,
+    MOBILITY_DYNAMIC,
+)
 from . import _assign, _kernels
 from .state import (
     AGE,
@@ -72,16 +79,12 @@ from .state import (
     P_GATE,
     P_INITIAL_SPEED_SIGMA,
     P_LEG_BESIDE,
-    P_LEG_BLOB_MAX,
     P_LEG_EVIDENCE_RATE,
     P_LEG_MEASUREMENT_NOISE,
     P_LEG_PROBABILITY,
     P_LEG_RADIUS_MAX,
-    P_LEG_REACH,
     P_MAX_GATE_DISTANCE,
     P_MEASUREMENT_NOISE,
-    P_MERGE_DISTANCE,
-    P_MERGE_SPEED,
     P_MOVING_DISTANCE,
     P_MOVING_PERSON_EVIDENCE,
     P_MOVING_PERSON_PAIRS,
@@ -98,7 +101,6 @@ from .state import (
     P_SPAWN_CLEARANCE,
     P_STEP_MAX,
     P_STEP_MIN,
-    P_STRIDE_MAX,
     P_TAIL_LENGTH,
     P_TENTATIVE_DELETE_AFTER,
     P_UNDEFINED_WINDOW,
@@ -119,8 +121,6 @@ from .state import (
 )
 
 K_PERSON, K_LEG, K_CIRCLE, K_RECT, K_BLOB = 0, 1, 2, 3, 4
-CLASS_UNKNOWN, CLASS_PERSON, CLASS_CIRCLE, CLASS_RECT = 0, 1, 2, 3
-DYNAMIC = 1
 ANY_ROW = 4   # the compatibility row of tentative tracks (tracker._COMPAT)
 
 
@@ -133,11 +133,11 @@ def _empty_meas():
 
 @njit(cache=True)
 def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm):
-    """One scan's measurements by the paper's rule (measurements.measurements, learned=False), sensor frame:
-    x, y, size, kind, legs (M, 4), raw leg candidates (L, 4: x, y, size, 0), prob (M,: zeros)."""
+    """One scan's measurements by the paper's rule (reference: tests/reference_tracking.reference_measurements,
+    learned=False), sensor frame: x, y, size, kind, legs (M, 4), raw leg candidates (L, 4: x, y, size, 0),
+    prob (M,: zeros)."""
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
-        cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm[P_LEG_RADIUS_MAX], prm[P_LEG_BLOB_MAX],
-        prm[P_STRIDE_MAX], prm[P_D_MAX])
+        cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm)
     raw = np.zeros((len(lx), 4))
     for i in range(len(lx)):
         raw[i, 0], raw[i, 1], raw[i, 2] = lx[i], ly[i], ls[i]
@@ -147,7 +147,7 @@ def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly
 @njit(cache=True)
 def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0,
                          lx1, ly1, gfirst, glast, gx, gy, gw, gp, prm):
-    """One scan's measurements with a leg detector's legs (measurements.measurements, learned=True): the legs
+    """One scan's measurements with a leg detector's legs (reference_measurements, learned=True): the legs
     of probability >= leg_probability not on the beams of a circle wider than leg_radius_max are legs, the
     others lend their probability to what covers their beams. Returns x, y, size, kind, legs, raw (L, 4: x, y,
     width, probability of the legs), prob. The thresholds compare in float32, as numpy compares the
@@ -165,7 +165,7 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
     x, y, size, kind, legs, prob = _kernels.learned_measurements(
         cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0, lx1, ly1,
         gfirst[strong], glast[strong], gx[strong], gy[strong], gw[strong], gfirst[weak], glast[weak], gp[weak],
-        prm[P_STRIDE_MAX], prm[P_D_MAX])
+        prm)
     ns = 0
     for i in range(len(gx)):
         if strong[i]:
@@ -182,7 +182,7 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
 @njit(cache=True)
 def moved(mx, my, mlegs, raw, px, py, pc, ps):
     """Measurements (mx, my), their legs and the raw leg candidates in the tracking frame of a sensor at
-    (px, py) with heading cos/sin (pc, ps): new arrays (Measurements.moved)."""
+    (px, py) with heading cos/sin (pc, ps): new arrays (reference: tests/reference_tracking.moved)."""
     x = pc * mx - ps * my + px
     y = ps * mx + pc * my + py
     legs = mlegs.copy()
@@ -200,7 +200,7 @@ def moved(mx, my, mlegs, raw, px, py, pc, ps):
 # ------------------------------------------------------------------------------------------- helpers
 @njit(cache=True)
 def kind_group(tab, k):
-    """The kind group that fed track k most (_kernels.kind_groups): 0 legs, 1 circles, 2 lines, 3 blobs,
+    """The kind group that fed track k most (reference_tracking.kind_groups): 0 legs, 1 circles, 2 lines, 3 blobs,
     5 a lone leg never paired that is not dynamic."""
     legs = tab[k, VOTES + K_PERSON] + tab[k, VOTES + K_LEG]
     best, arg = legs, 0
@@ -208,7 +208,7 @@ def kind_group(tab, k):
         v = tab[k, VOTES + 1 + j]
         if v > best:
             best, arg = v, j
-    if arg == 0 and tab[k, VOTES + K_PERSON] == 0 and tab[k, MOBILITY] != DYNAMIC:
+    if arg == 0 and tab[k, VOTES + K_PERSON] == 0 and tab[k, MOBILITY] != MOBILITY_DYNAMIC:
         arg = 5
     return arg
 
@@ -249,7 +249,8 @@ def leg_probability(mx, my, mkind, mlegs, mprob, raw, has_prob, j):
 
 @njit(cache=True)
 def predict(tab, n, dt, prm):
-    """Constant-velocity prediction of tracks 0..n-1 dt s ahead, in place (_kernels.predict; q by kind group)."""
+    """Constant-velocity prediction of tracks 0..n-1 dt s ahead, in place (q by kind
+    group; reference: tests/reference_tracking.cv_predict)."""
     if dt == 0:
         return
     for k in range(n):
@@ -277,8 +278,8 @@ def predict(tab, n, dt, prm):
 
 @njit(cache=True)
 def kalman_update(tab, k, zx, zy, sigma, scratch):
-    """Kalman update of track k with a position measurement (zx, zy) of sigma m, Joseph form (_kernels.update);
-    scratch: (3, 4, 4) work space."""
+    """Kalman update of track k with a position measurement (zx, zy) of sigma m, Joseph form
+    (reference: tests/reference_tracking.joseph_update); scratch: (3, 4, 4) work space."""
     P = tab[k, P0:P0 + 16].reshape((4, 4))
     I_KH = scratch[0]
     G = scratch[1]
@@ -327,12 +328,12 @@ def off_background(mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ctx, px, p
         return mx, my, msize, mkind, mlegs, raw, mprob
     nbg = int(np.sqrt(len(bg_score)) + 0.5)
     bg = _kernels.on_background(bg_score, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), px, py,
-                                ctx[C_BG_X0], ctx[C_BG_Y0], prm[P_BACKGROUND_CELL], nbg, prm[P_BACKGROUND_TIME])
+                                ctx[C_BG_X0], ctx[C_BG_Y0], nbg, prm)
     if not bg.any():
         return mx, my, msize, mkind, mlegs, raw, mprob
     keep = raw[~bg]
     lx, ly, ls, kind, legs = _kernels.legs_to_measurements(keep[:, 0].copy(), keep[:, 1].copy(), keep[:, 2].copy(),
-                                                           prm[P_STRIDE_MAX])
+                                                           prm)
     n_bg = 0
     for i in range(len(bg)):
         if bg[i]:
@@ -396,8 +397,7 @@ def legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm):
     for q in range(len(leggy)):
         tx[q], ty[q] = tab[leggy[q], X], tab[leggy[q], Y]
     owner, x, y, size, kind, legs = _kernels.leg_stage_measurements(
-        tx, ty, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), prm[P_LEG_REACH], prm[P_STRIDE_MAX],
-        mx, my, msize, mkind, mlegs)
+        tx, ty, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), mx, my, msize, mkind, mlegs, prm)
     if len(owner) == 0:
         return mx, my, msize, mkind, mlegs, mprob, none
     prob = np.zeros(len(x))
@@ -416,7 +416,7 @@ def legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm):
 @njit(cache=True)
 def gated_costs(tab, n, mx, my, mkind, compat, crow, prm):
     """Costs (n, M) d2 + ln det S and which pairs pass the gate, the distance bound and kind compatibility
-    (_kernels.gated_costs on the table; the cost of a pair that does not pass is inf, not computed)."""
+    (reference_tracking.gated_costs on the table; the cost of a pair that does not pass is inf, not computed)."""
     M = len(mx)
     cost = np.full((n, M), np.inf)
     ok = np.zeros((n, M), np.bool_)
@@ -464,14 +464,14 @@ def hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg_score, ctx, px, 
         return
     nbg = int(np.sqrt(len(bg_score)) + 0.5)
     on_bg = _kernels.tracks_on_background(bg_score, mx, my, msize, mkind, rows, cols, n, px, py, ctx[C_BG_X0],
-                                          ctx[C_BG_Y0], prm[P_BACKGROUND_CELL], nbg, prm[P_BACKGROUND_TIME])
+                                          ctx[C_BG_Y0], nbg, prm)
     for k in range(n):
         tab[k, ON_BG] = 1.0 if on_bg[k] else 0.0
 
 
 @njit(cache=True)
 def update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm):
-    """Kalman-update tracks rows with measurements cols and record the hits (_kernels.apply_updates)."""
+    """Kalman-update tracks rows with measurements cols and record the hits (reference_tracking.apply_updates)."""
     for k in range(n):
         tab[k, HIT] = 0.0
     scratch = np.empty((3, 4, 4))
@@ -548,7 +548,7 @@ def reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm):
             j = cand[b]
             dist[a, b] = np.hypot(mx[j] - tab[k, LAST_X], my[j] - tab[k, LAST_Y])
             ok[a, b] = (dist[a, b] <= reach and reacq[crow[k], mkind[j]]
-                        and (free[j] or tab[k, MOBILITY] == DYNAMIC))
+                        and (free[j] or tab[k, MOBILITY] == MOBILITY_DYNAMIC))
     r, c = _assign.gnn(dist, ok)
     rows2 = np.empty(len(r), np.int64)
     cols2 = np.empty(len(r), np.int64)
@@ -606,7 +606,7 @@ def occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm):
         sx[k], sy[k] = to_sensor(tab[k, X], tab[k, Y], has_pose, pose)
         size[k] = tab[k, SIZE]
         missed[k] = tab[k, HIT] == 0
-    occ = _kernels.occlusion(sx, sy, size, missed, ranges, geo[0], geo[1], geo[2], prm[P_OCCLUSION_MARGIN])
+    occ = _kernels.occlusion(sx, sy, size, missed, ranges, geo[0], geo[1], geo[2], prm)
     for k in range(n):
         tab[k, OCCLUDED] = 1.0 if occ[k] else 0.0
 
@@ -625,9 +625,9 @@ def duplicates(tab, n, prm):
         candidate[k] = legs > 0 and tab[k, CLS] <= CLASS_PERSON
         confirmed[k] = tab[k, CONFIRMED] != 0
         rank[k] = (np.int64(tab[k, HITS]) * 2 + np.int64(tab[k, CONFIRMED])
-                   + (np.int64(1) << 40 if tab[k, MOBILITY] == DYNAMIC else 0)
+                   + (np.int64(1) << 40 if tab[k, MOBILITY] == MOBILITY_DYNAMIC else 0)
                    + (np.int64(1) << 41 if tab[k, CLS] == CLASS_PERSON else 0))
-    return _kernels.duplicates(x, y, vx, vy, candidate, confirmed, rank, prm[P_MERGE_DISTANCE], prm[P_MERGE_SPEED])
+    return _kernels.duplicates(x, y, vx, vy, candidate, confirmed, rank, prm)
 
 
 @njit(cache=True)
@@ -726,8 +726,8 @@ def spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp
 
 @njit(cache=True)
 def classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm):
-    """Class and mobility of every track (tracker._classify and _kernels.classify; with the leg detector,
-    a person is what its evidence says and the scanner does not carry)."""
+    """Class and mobility of every track (references: tests/reference_tracking's ReferenceTracker._classify
+    and classify_tracks; with the leg detector, a person is what its evidence says and the scanner does not carry)."""
     for k in range(n):
         speed = np.hypot(tab[k, VX], tab[k, VY])
         if tab[k, HIT] != 0 and tab[k, ON_BG] == 0 and speed > prm[P_MOVING_SPEED]:
@@ -739,7 +739,7 @@ def classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm):
         moved = np.hypot(tab[k, X] - tab[k, FIRST_X], tab[k, Y] - tab[k, FIRST_Y])
         age_s = (stamp - np.int64(tab[k, BORN])) * 1e-9
         confirmed = tab[k, CONFIRMED] != 0
-        dynamic = tab[k, MOBILITY] == DYNAMIC or (confirmed and moved > prm[P_MOVING_DISTANCE]
+        dynamic = tab[k, MOBILITY] == MOBILITY_DYNAMIC or (confirmed and moved > prm[P_MOVING_DISTANCE]
                                                   and speed > prm[P_MOVING_SPEED])
         if dynamic:
             mob = 1
@@ -755,15 +755,15 @@ def classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm):
             if walking and person > 0:
                 cls = CLASS_PERSON
             elif person == 0 and not dynamic:
-                cls = CLASS_CIRCLE
+                cls = CLASS_CIRCLE_OBJECT
             else:
                 cls = CLASS_UNKNOWN
         elif circle + rect + blob == 0:
             cls = CLASS_UNKNOWN
         elif circle >= rect and circle >= blob:
-            cls = CLASS_CIRCLE
+            cls = CLASS_CIRCLE_OBJECT
         elif rect >= blob:
-            cls = CLASS_RECT
+            cls = CLASS_RECTANGULAR_OBJECT
         else:
             cls = CLASS_UNKNOWN
         tab[k, MOBILITY] = mob
@@ -771,9 +771,9 @@ def classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm):
             if circle + rect + blob == 0:
                 cls = CLASS_UNKNOWN
             elif circle >= rect and circle >= blob:
-                cls = CLASS_CIRCLE
+                cls = CLASS_CIRCLE_OBJECT
             elif rect >= blob:
-                cls = CLASS_RECT
+                cls = CLASS_RECTANGULAR_OBJECT
             else:
                 cls = CLASS_UNKNOWN
             sx, sy = to_sensor(tab[k, X], tab[k, Y], has_pose, pose)
@@ -784,7 +784,7 @@ def classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm):
             tab[k, SENSOR_REF_Y] = (1.0 - a) * tab[k, SENSOR_REF_Y] + a * sy
             travel = np.hypot(px - tab[k, POSE_FIRST_X], py - tab[k, POSE_FIRST_Y])
             carried = travel >= prm[P_CARRIED_TRAVEL] and tab[k, SENSOR_DEV] <= prm[P_CARRIED_RADIUS]
-            dyn = mob == DYNAMIC
+            dyn = mob == MOBILITY_DYNAMIC
             need = prm[P_MOVING_PERSON_EVIDENCE] if dyn else prm[P_PERSON_EVIDENCE]
             pairs = prm[P_MOVING_PERSON_PAIRS] if dyn else prm[P_PERSON_PAIRS]
             if tab[k, LEG_SCORE] >= need and person >= pairs and not carried:
@@ -805,7 +805,7 @@ def push_tail(tab, n, prm):
 @njit(cache=True)
 def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a, sin_a, angle_min, increment,
                       range_min, range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled, fresh):
-    """_kernels.background_update with each active cell's range and beam kept beside it (cache[a] = r, beam
+    """reference_tracking.background_update with each active cell's range and beam kept beside it (cache[a] = r, beam
     for active[a], beam -2: not yet computed), valid while the sensor pose does not change (`fresh`: it
     changed, compute them all again). The same arithmetic on the same numbers: the same grid. An inactive
     cell's mark is 0 here, not -1 (scans count from 1), so a new grid is all zeros (no 5 MB to fill)."""
@@ -885,31 +885,32 @@ def background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, 
 
 @njit(cache=True)
 def write_tracks(out, o, tab, n, has_pose, pose):
-    """Track elements of tracks 0..n-1 into out[o:o + n] (tracker.output)."""
+    """Track elements of tracks 0..n-1 into out[o:o + n] (tracker.output). Fields by r["name"], which numba
+    compiles as r.name and plain Python (NUMBA_DISABLE_JIT=1) understands on a numpy record."""
     c, s = (np.cos(pose[2]), np.sin(pose[2])) if has_pose else (1.0, 0.0)
     for k in range(n):
         r = out[o + k]
-        r.id = np.uint32(tab[k, ID])
-        r.age = np.uint32(tab[k, AGE])
-        r.hits = np.uint32(tab[k, HITS])
-        r.misses = np.uint32(tab[k, MISSES])
+        r["id"] = np.uint32(tab[k, ID])
+        r["age"] = np.uint32(tab[k, AGE])
+        r["hits"] = np.uint32(tab[k, HITS])
+        r["misses"] = np.uint32(tab[k, MISSES])
         sx, sy = to_sensor(tab[k, X], tab[k, Y], has_pose, pose)
-        r.x, r.y = sx, sy
+        r["x"], r["y"] = sx, sy
         if has_pose:
-            r.vx = c * tab[k, VX] + s * tab[k, VY]
-            r.vy = -s * tab[k, VX] + c * tab[k, VY]
-            r.world_x, r.world_y, r.world_vx, r.world_vy = tab[k, X], tab[k, Y], tab[k, VX], tab[k, VY]
+            r["vx"] = c * tab[k, VX] + s * tab[k, VY]
+            r["vy"] = -s * tab[k, VX] + c * tab[k, VY]
+            r["world_x"], r["world_y"], r["world_vx"], r["world_vy"] = tab[k, X], tab[k, Y], tab[k, VX], tab[k, VY]
         else:
-            r.vx, r.vy = tab[k, VX], tab[k, VY]
-            r.world_x = r.world_y = r.world_vx = r.world_vy = np.nan
+            r["vx"], r["vy"] = tab[k, VX], tab[k, VY]
+            r["world_x"] = r["world_y"] = r["world_vx"] = r["world_vy"] = np.nan
         for i in range(16):
-            r.covariance[i] = tab[k, P0 + i]
-        r.size = tab[k, SIZE]
-        r.classification = np.uint8(tab[k, CLS])
-        r.mobility = np.uint8(tab[k, MOBILITY])
+            r["covariance"][i] = tab[k, P0 + i]
+        r["size"] = tab[k, SIZE]
+        r["classification"] = np.uint8(tab[k, CLS])
+        r["mobility"] = np.uint8(tab[k, MOBILITY])
         confirmed, hit = tab[k, CONFIRMED] != 0, tab[k, HIT] != 0
-        r.status = np.uint8((1 if hit else 2) if confirmed else 0)
-        r.occluded = np.uint8(tab[k, OCCLUDED])
+        r["status"] = np.uint8((1 if hit else 2) if confirmed else 0)
+        r["occluded"] = np.uint8(tab[k, OCCLUDED])
 
 
 # -------------------------------------------------------------------------------------------- the step

@@ -35,7 +35,7 @@ from .params import TrackingParams
 
 TRACK_DTYPE = cdr.element_dtype(types.TRACK)
 # which measurement kinds (columns) a confirmed track may take, by the kind group that fed it most (rows:
-# legs, circles, lines, blobs, -, a lone leg; see _kernels.kind_groups); tentative tracks (row 4) take any
+# legs, circles, lines, blobs, -, a lone leg; see _step.kind_group); tentative tracks (row 4) take any
 _COMPAT = np.ones((6, N_KINDS), bool)
 _COMPAT[0, [KIND_CIRCLE, KIND_RECT]] = False
 _COMPAT[1, [KIND_PERSON, KIND_RECT]] = False   # a circle partly seen may pass for a leg
@@ -200,7 +200,8 @@ class Tracker:
                     poses: np.ndarray | None = None, tails: bool = True) -> TrackBlock:
         """Track N scans in one compiled call: stamps (N,) ns, their features (sensor frame), ranges (N, B)
         m or None, the sensor's world poses (N, 3: x, y m, theta rad) or None (track in the sensor frame).
-        Features become measurements as measurements.measurements makes them (learned or the paper's rule).
+        Features become measurements by the paper's rule or with the learned legs (_step.paper_measurements,
+        learned_measurements).
         `tails`: give every track's tail at every scan too (for the markers; else TrackBlock.tail is empty)."""
         from . import _step
 

@@ -1,0 +1,133 @@
+"""Which test checks each numba kernel of the package directly against its reference in tests/reference_*.py.
+
+Keys: 'package.module.kernel' under datmo_cli; values: 'test file::test function'. The tests named here get
+the `kernels` marker (conftest.py), so `make test-nojit` runs them all with NUMBA_DISABLE_JIT=1, the kernels as
+plain Python; tests/test_kernels_reference.py checks that the table covers every kernel the package defines.
+`UNCHECKED` lists the kernels no test checks directly against a reference yet (they are exercised through
+their callers only); it may only shrink. Plain data: conftest.py reads it at collection.
+"""
+
+from __future__ import annotations
+
+HERE = "test_kernels_reference.py"
+STEP_PHASES = "test_tracking_step.py::test_every_phase_equals_the_reference_on_small_scenes"
+
+CHECKS: dict[str, str] = {
+    # tracking: the kernels the compiled step calls
+    "tracking._kernels.pair_legs": "test_tracking_people.py::test_pairing_kernel_matches_the_reference",
+    "tracking._kernels.legs_to_measurements": f"{HERE}::test_legs_to_measurements",
+    "tracking._kernels._people_first": f"{HERE}::test_people_first",
+    "tracking._kernels.measurements": f"{HERE}::test_paper_measurements",
+    "tracking._kernels._beam_marks": f"{HERE}::test_beam_marks_and_span_max",
+    "tracking._kernels._span_max": f"{HERE}::test_beam_marks_and_span_max",
+    "tracking._kernels.learned_measurements": "test_tracking_learned.py::test_learned_measurements_match_the_reference",
+    "tracking._kernels.leg_stage": f"{HERE}::test_leg_stage",
+    "tracking._kernels.leg_stage_measurements": f"{HERE}::test_leg_stage_measurements",
+    "tracking._kernels.duplicates": f"{HERE}::test_duplicates",
+    "tracking._kernels.occlusion": f"{HERE}::test_occlusion",
+    "tracking._kernels.on_background": f"{HERE}::test_on_background",
+    "tracking._kernels.tracks_on_background": f"{HERE}::test_tracks_on_background",
+    "tracking._kernels.marker_points": "test_tracking_markers.py::test_kernel_tails_equal_tail_segments",
+    # tracking: the compiled step's phases, each run on the reference tracker's state (lockstep)
+    "tracking._step.paper_measurements": STEP_PHASES,
+    "tracking._step.learned_measurements": STEP_PHASES,
+    "tracking._step.moved": STEP_PHASES,
+    "tracking._step.kind_group": STEP_PHASES,
+    "tracking._step.predict": STEP_PHASES,
+    "tracking._step.off_background": STEP_PHASES,
+    "tracking._step.legs_stage": STEP_PHASES,
+    "tracking._step.associate": STEP_PHASES,
+    "tracking._step.hit_background": STEP_PHASES,
+    "tracking._step.update": STEP_PHASES,
+    "tracking._step.reacquire": STEP_PHASES,
+    "tracking._step.merge_reacquired": STEP_PHASES,
+    "tracking._step.leg_evidence": STEP_PHASES,
+    "tracking._step.occlusion": STEP_PHASES,
+    "tracking._step.life_cycle": STEP_PHASES,
+    "tracking._step.spawn": STEP_PHASES,
+    "tracking._step.classify": STEP_PHASES,
+    "tracking._step.push_tail": STEP_PHASES,
+    "tracking._step.background": STEP_PHASES,
+    "tracking._step.write_tracks": STEP_PHASES,
+    "tracking._step.kalman_update": f"{HERE}::test_step_kalman_update_and_restart",
+    "tracking._step.restart": f"{HERE}::test_step_kalman_update_and_restart",
+    "tracking._step.to_sensor": f"{HERE}::test_step_to_sensor",
+    "tracking._step.gated_costs": f"{HERE}::test_step_gated_costs",
+    "tracking._step.background_update": f"{HERE}::test_step_background_update",
+    "tracking._step.leg_probability": f"{HERE}::test_step_leg_probability",
+    "tracking._step.leggy_tracks": f"{HERE}::test_step_leggy_tracks_and_duplicates",
+    "tracking._step.duplicates": f"{HERE}::test_step_leggy_tracks_and_duplicates",
+    # tracking: the assignment solver
+    "tracking._assign.lsap": "test_tracking_assign.py::test_lsap_is_scipys_assignment",
+    "tracking._assign.gnn": "test_tracking_assign.py::test_gnn_is_the_reference_gnn_on_gated_matrices",
+    "tracking._assign._components": f"{HERE}::test_components",
+    # sim
+    "sim._kernels._ray_segment": f"{HERE}::test_ray_segment_and_circle",
+    "sim._kernels._ray_circle": f"{HERE}::test_ray_segment_and_circle",
+    "sim._kernels.cast_batch": f"{HERE}::test_cast_batch",
+    "sim._kernels.tow": "test_sim_walking.py::test_towed_load_keeps_the_wire_length",
+    # perception: features
+    "perception._kernels.valid_return": f"{HERE}::test_valid_return",
+    "perception._kernels._atan2": f"{HERE}::test_atan2",
+    "perception._kernels._wrap_pi": "test_perception_speedups.py::test_wrap_pi_is_the_float_modulo",
+    "perception._kernels.segment_scan": "test_perception_reference.py::test_segmentation_equals_the_reference",
+    "perception._kernels.fit_line": "test_perception_reference.py::test_line_fit_equals_the_reference",
+    "perception._kernels.fit_circle": "test_perception_reference.py::test_circle_fit_equals_the_reference",
+    "perception._kernels.circle_posed": "test_perception_circles.py::test_circle_posed_equals_the_reference",
+    "perception._kernels.gather_rows": "test_perception_speedups.py::test_gather_rows_keeps_each_scans_rows_in_order",
+    "perception._kernels.normal_cells": "test_perception_reference.py::test_full_accumulator_peak_equals_the_reference",
+    "perception._kernels.line_subsegments":
+        "test_perception_reference.py::test_full_accumulator_peak_equals_the_reference",
+    "perception._kernels.line_of_run": "test_perception_kernels.py::test_noisy_wall_is_one_line_near_the_truth",
+    "perception._kernels.circle_of_run": "test_perception_kernels.py::test_circle_votes_equal_the_reference_window",
+    "perception._kernels.segment_block": f"{HERE}::test_segment_block",
+    "perception._kernels.scatter": f"{HERE}::test_scatter",
+    "perception._kernels._one_line": f"{HERE}::test_one_line",
+    "perception._kernels._row_offset": f"{HERE}::test_bounding_box_and_row_offset",
+    "perception._kernels._bounding_box": f"{HERE}::test_bounding_box_and_row_offset",
+    "perception._kernels._perpendicular": f"{HERE}::test_perpendicular_and_convex",
+    "perception._kernels._convex": f"{HERE}::test_perpendicular_and_convex",
+    # perception: ego-motion
+    "perception._egomotion_kernels.scan_points": "test_egomotion.py::test_scan_points_match_reference",
+    "perception._egomotion_kernels.beam_normal": "test_egomotion.py::test_normals_match_reference",
+    "perception._egomotion_kernels.scan_normals": "test_egomotion.py::test_normals_match_reference",
+    "perception._egomotion_kernels.grid_insert": "test_egomotion.py::test_grid_nearest_matches_brute_force",
+    "perception._egomotion_kernels.grid_nearest": "test_egomotion.py::test_grid_nearest_matches_brute_force",
+    "perception._egomotion_kernels.icp_step": "test_egomotion.py::test_icp_step_matches_reference",
+    "perception._egomotion_kernels.icp_align": "test_egomotion.py::test_icp_align_matches_reference",
+    "perception._egomotion_kernels.robust_weight": f"{HERE}::test_robust_weight",
+    "perception._egomotion_kernels.solve3": f"{HERE}::test_solve3",
+    "perception._egomotion_kernels.compose": f"{HERE}::test_compose_and_between",
+    "perception._egomotion_kernels.between": f"{HERE}::test_compose_and_between",
+    "perception._egomotion_kernels.add_to_map": f"{HERE}::test_add_to_map",
+    "perception._egomotion_kernels.cell_of": f"{HERE}::test_cell_of_and_hash",
+    "perception._egomotion_kernels.cell_hash": f"{HERE}::test_cell_of_and_hash",
+    # perception: the leg detector
+    "perception._leg_kernels._gap_pass": f"{HERE}::test_gap_pass_and_block_features",
+    "perception._leg_kernels.block_features": f"{HERE}::test_gap_pass_and_block_features",
+    "perception._leg_kernels.check_segments": f"{HERE}::test_check_segments",
+    "perception._leg_kernels._median": f"{HERE}::test_median_and_jump",
+    "perception._leg_kernels._jump": f"{HERE}::test_median_and_jump",
+    "perception._leg_kernels.ensemble": f"{HERE}::test_ensemble_leaf_and_candidates",
+    "perception._leg_kernels.is_candidate": f"{HERE}::test_ensemble_leaf_and_candidates",
+    "perception._leg_kernels._leaf": f"{HERE}::test_ensemble_leaf_and_candidates",
+    "perception._leg_kernels._leaves4": f"{HERE}::test_ensemble_leaf_and_candidates",
+    "perception._leg_kernels.block_probabilities": f"{HERE}::test_block_probabilities",
+    "perception._leg_kernels.block_probabilities_parallel": f"{HERE}::test_block_probabilities",
+}
+
+UNCHECKED: frozenset[str] = frozenset({
+    # checked through their callers only (whole scans, whole runs), not yet one by one
+    "perception._egomotion_kernels._gather",
+    "perception._egomotion_kernels.rebuild_map", "perception._egomotion_kernels.odometry_run",
+    "perception._kernels._vote", "perception._kernels._clear",
+    "perception._kernels.extract_scan",
+    "perception._kernels.extract_scans", "perception._kernels.extract_parallel",
+    "perception._leg_kernels.segment_features",
+    "perception.landmarks._beyond", "perception.landmarks._benches", "perception.landmarks.accumulate",
+    "perception.landmarks._hide_bench_supports",
+    # the compiled step's drivers and the helpers inside its phases: checked through the phases and whole
+    # runs (test_tracking_step.py), not one by one
+    *(f"tracking._step.{n}" for n in (
+        "_empty_meas", "track_scan", "step_measurements", "track_block")),
+})
