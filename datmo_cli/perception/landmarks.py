@@ -279,8 +279,8 @@ C_ROWS, C_LIVE, C_CONFIRMED = 0, 1, 2
 
 
 @njit(cache=True)
-def accumulate(det, stamps, k0, match, min_count, max_drift, column_time, forget, leg_radius_max, db, first_ns,
-               last_ns, live, confirmed, counters, snap_idx, snap_vals, snap_last, snap_count):
+def accumulate(det, stamps, k0, match, min_count, max_drift, column_time, forget, column_radius_min, db,
+               first_ns, last_ns, live, confirmed, counters, snap_idx, snap_vals, snap_last, snap_count):
     """Fold one block of scans' detections (rows DET_*, sorted by scan; scans k0 .. k0 + len(stamps) - 1,
     stamped `stamps` ns) into the database `db` (rows as DB_COLUMNS; first_ns/last_ns: the stamps its row was
     first and last seen), carrying `live`, `confirmed` and `counters` (C_*) from the blocks before. After
@@ -289,7 +289,7 @@ def accumulate(det, stamps, k0, match, min_count, max_drift, column_time, forget
     seen, ns), and their number stored in snap_count[k - k0]. A candidate seen fewer than min_count times and
     not for `forget` scans is forgotten; a column enters the database only once seen over `column_time` ns (a
     circle object that stops for a moment is not a column); a column candidate by a confirmed bench's support
-    (its end, leg_radius_max in) is hidden. Capacities: db rows >= counters[C_ROWS] + len(det), snapshot
+    (its end, column_radius_min in) is hidden. Capacities: db rows >= counters[C_ROWS] + len(det), snapshot
     entries >= len(stamps) * (counters[C_CONFIRMED] + len(det)). Returns the snapshot entries written."""
     n_scans = stamps.shape[0]
     nd = det.shape[0]
@@ -380,7 +380,7 @@ def accumulate(det, stamps, k0, match, min_count, max_drift, column_time, forget
                 live[u] = live[nlive]
             else:
                 u += 1
-        _hide_bench_supports(db, confirmed, nconf, min_count, leg_radius_max)
+        _hide_bench_supports(db, confirmed, nconf, min_count, column_radius_min)
         count = 0
         for u in range(nconf):
             q = confirmed[u]
@@ -400,8 +400,8 @@ def accumulate(det, stamps, k0, match, min_count, max_drift, column_time, forget
 
 
 @njit(cache=True)
-def _hide_bench_supports(db, confirmed, nconf, min_count, leg_radius_max):
-    """Hide each confirmed column within 0.5 m of a support of a confirmed bench (its ends, leg_radius_max
+def _hide_bench_supports(db, confirmed, nconf, min_count, column_radius_min):
+    """Hide each confirmed column within 0.5 m of a support of a confirmed bench (its ends, column_radius_min
     in): it is part of the bench, not a column."""
     for u in range(nconf):
         q = confirmed[u]
@@ -411,7 +411,7 @@ def _hide_bench_supports(db, confirmed, nconf, min_count, leg_radius_max):
             b = confirmed[v]
             if db[b, 0] != 5.0 or db[b, 5] < min_count:
                 continue
-            half = 0.5 * (db[b, 4] - 2 * leg_radius_max)
+            half = 0.5 * (db[b, 4] - 2 * column_radius_min)
             for sgn in (-1.0, 1.0):
                 sx = db[b, 1] + sgn * half * np.cos(db[b, 3])
                 sy = db[b, 2] + sgn * half * np.sin(db[b, 3])
