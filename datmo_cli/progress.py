@@ -1,13 +1,15 @@
-"""What the commands say while they work: one progress bar helper, `--quiet`, and consoles for piped output.
+"""What the commands say while they work: one progress helper (a bar, or a panel redrawn in place), `--quiet`,
+and consoles for piped output.
 
 Rules shared by every command:
-- progress goes to stderr, as a rich bar with a known total on a terminal; when stderr is not a terminal
-  (a pipe, a file, CI) nothing is drawn (no control codes, no redraws), and under --quiet nothing at all;
+- progress goes to stderr, as a rich bar with a known total (`bar`) or a panel of counts (`Panel`) on a
+  terminal; when stderr is not a terminal (a pipe, a file, CI) nothing is drawn (no control codes, no
+  redraws), and under --quiet nothing at all;
 - informational lines (`say`) go to stderr unless --quiet; warnings and errors always do;
 - tables on stdout never wrap or cut names when stdout is not a terminal (`console`), so
   `datmo info out.mcap | grep MarkerArray` sees whole type names.
 
-rich is imported only when a bar or a console is made, so `datmo --help` stays light.
+rich is imported only when a bar, a panel or a console is made, so `datmo --help` stays light.
 """
 
 from __future__ import annotations
@@ -103,6 +105,52 @@ def _isatty(stream) -> bool:
         return False
 
 
+def _drawn() -> bool:
+    """Whether progress is drawn: stderr is a terminal and the command was not given --quiet."""
+    import sys
+
+    return not quiet() and _isatty(sys.stderr)
+
+
+def _progress_console():
+    """The rich console progress is drawn on: the terminal's stderr."""
+    from rich.console import Console
+
+    return Console(stderr=True)
+
+
+class Panel:
+    """A rich renderable (e.g. a table of a recording's counts) redrawn in place on stderr, a few times a second,
+    removed by `stop()`; nothing under --quiet or when stderr is not a terminal, as for `bar` (decided when
+    the Panel is made, in the command). `show(renderable)` starts it, then replaces what it shows; it may be
+    called from another thread (a recording loop's progress callback)."""
+
+    def __init__(self, refresh_per_second: float = 4) -> None:
+        self.shown = _drawn()
+        self.refresh_per_second = refresh_per_second
+        self.live = None
+
+    def show(self, renderable) -> None:
+        if not self.shown:
+            return
+        if self.live is None:
+            from rich.live import Live
+
+            self.live = Live(renderable, console=_progress_console(), refresh_per_second=self.refresh_per_second,
+                             transient=True)
+            self.live.start()
+        else:
+            self.live.update(renderable)
+
+    def stop(self) -> None:
+        """Remove the panel (nothing if it never started; a terminal that hung up, SIGHUP, is no error)."""
+        if self.live is not None:
+            try:
+                self.live.stop()
+            except OSError:
+                pass
+
+
 class Bar:
     """One task of a rich Progress on stderr, or nothing (quiet, not a terminal). `update(done, total)`
     is also the (done, total) callback the pipeline functions take."""
@@ -157,12 +205,9 @@ def bar(description: str, total: int | None, *, unit: str = "scans", info: bool 
     """A progress bar on stderr: `description`, the bar, done/total `unit`, elapsed and remaining time (and,
     with `info`, a free text column set by `update(..., info=TEXT)`). Removed when the block ends.
     Nothing is drawn under --quiet or when stderr is not a terminal."""
-    import sys
-
-    if quiet() or not _isatty(sys.stderr):
+    if not _drawn():
         yield Bar(None, None)
         return
-    from rich.console import Console
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -176,6 +221,6 @@ def bar(description: str, total: int | None, *, unit: str = "scans", info: bool 
     if info:
         columns.append(TextColumn("{task.fields[info]}", style="progress.data.speed"))
     columns += [TimeElapsedColumn(), TimeRemainingColumn()]
-    with Progress(*columns, console=Console(stderr=True), transient=True) as progress:
+    with Progress(*columns, console=_progress_console(), transient=True) as progress:
         task = progress.add_task(description, total=total, **({"info": ""} if info else {}))
         yield Bar(progress, task)

@@ -213,6 +213,39 @@ def test_run_bar_counts_each_scan_once(tmp_path, small_log):
     assert f"/{N_SCANS} scans" in shown and f"/{2 * N_SCANS} scans" not in shown
 
 
+def test_record_draws_its_panel_on_a_terminal_and_quiet_draws_none(tmp_path):
+    from datmo_cli.lms2xx.emulator import Emulator
+    from datmo_cli.simulated import SceneSource
+
+    with Emulator(SceneSource("hall", seed=3, duration=10)) as emu:
+        shown = on_terminal(["record", "--port", emu.device_path, "-o", "a.mcap", "--scans", "40"], tmp_path)
+        silent = on_terminal(["record", "--port", emu.device_path, "-o", "b.mcap", "--scans", "40", "-q"],
+                             tmp_path)
+    assert "recording" in shown and "crc errors" in shown
+    assert "recording" not in silent and "crc errors" not in silent
+    assert mcapio.summary(tmp_path / "b.mcap").topics()[mcapio.TOPIC_SCAN].count == 40
+
+
+def test_a_panel_is_drawn_only_on_a_terminal_and_not_under_quiet(monkeypatch):
+    from rich.text import Text
+
+    from datmo_cli import progress
+
+    assert not progress.Panel().shown   # pytest's stderr is not a terminal
+    monkeypatch.setattr(progress, "_isatty", lambda stream: True)
+    panel = progress.Panel()
+    panel.show(Text("first"))
+    panel.show(Text("second"))
+    assert panel.live is not None and panel.live.is_started
+    panel.stop()
+    assert not panel.live.is_started
+    with click.Context(click.Command("x")) as ctx:
+        ctx.meta[progress.QUIET_KEY] = True
+        quiet = progress.Panel()
+        quiet.show(Text("first"))
+        assert not quiet.shown and quiet.live is None
+
+
 # ------------------------------------------------------------------------------------------------ -o -
 
 

@@ -36,43 +36,21 @@ def _panel(scans: int, elapsed: float, stats, port: str, baud: int):
 
 
 class _Panel:
-    """The recording's counts in a rich Live panel on a terminal's stderr (recorder.record's progress callback),
-    started at the first report; nothing when stderr is not a terminal or with --quiet."""
+    """The recording's counts in a progress.Panel on stderr (recorder.record's progress callback), started at
+    the first report; nothing when stderr is not a terminal or with --quiet."""
 
     def __init__(self, port: str, baud: int) -> None:
+        from ..progress import Panel
+
         self.port, self.baud = port, baud
-        self.live = None
-        self.started = False
+        self.panel = Panel()
 
     def __call__(self, scans: int, elapsed: float, stats) -> None:
-        table = _panel(scans, elapsed, stats, self.port, self.baud)
-        if not self.started:
-            self.started = True
-            self.live = _live_panel(table)
-        elif self.live is not None:
-            self.live.update(table)
+        if self.panel.shown:
+            self.panel.show(_panel(scans, elapsed, stats, self.port, self.baud))
 
     def stop(self) -> None:
-        if self.live is not None:
-            try:
-                self.live.stop()
-            except OSError:   # the terminal hung up (SIGHUP)
-                pass
-
-
-def _live_panel(first):
-    """A rich Live panel showing `first` on a terminal's stderr (started), or None (not a terminal, --quiet)."""
-    from rich.console import Console
-    from rich.live import Live
-
-    from ..progress import quiet
-
-    console = Console(stderr=True)
-    if not console.is_terminal or quiet():
-        return None
-    live = Live(first, console=console, refresh_per_second=4, transient=True)
-    live.start()
-    return live
+        self.panel.stop()
 
 
 def failure(exc: BaseException) -> tuple[str, int]:
