@@ -102,6 +102,36 @@ def test_parameter_options_take_their_help_default_and_range_from_the_field():
             assert p.name == keys[0].partition(".")[2], (name, p.opts)
 
 
+def test_no_command_declares_a_parameter_option_by_hand():
+    """An option named after a configuration parameter is built from its field (param_option), in every
+    command, so its help, default and range cannot drift from the configuration."""
+    from dataclasses import fields
+
+    from datmo_cli.config import SECTIONS
+
+    names = {f.name for section in SECTIONS.values() for f in fields(section)}
+    built = {(name, p.name) for name, p, _ in _param_options()}
+    for name in sorted(COMMANDS):
+        for p in cli.get_command(None, name).params:
+            if p.name in names:
+                assert (name, p.name) in built, f"datmo {name} {p.opts}: declared by hand, not with param_option"
+
+
+def test_an_exposed_parameter_option_reaches_the_command_and_the_configuration():
+    seen = {}
+
+    @click.command()
+    @config_options("a file")
+    @param_option("features.leg_model", expose=True)
+    def show(cfg, leg_model):
+        seen.update(cfg=cfg, leg_model=leg_model)
+
+    assert CliRunner().invoke(show, ["--no-config", "--leg-model", "paper"]).exit_code == 0
+    assert (seen["leg_model"], seen["cfg"].features.leg_model) == ("paper", "paper")
+    assert CliRunner().invoke(show, ["--no-config"]).exit_code == 0
+    assert (seen["leg_model"], seen["cfg"]) == (None, DatmoConfig())
+
+
 def test_options_override_the_config_file_which_overrides_the_defaults(tmp_path):
     with inside(tmp_path):
         Path("c.toml").write_text("[features]\nc0 = 0.12\nmin_points = 5\n")

@@ -78,14 +78,15 @@ def _field(key: str):
 
 
 def _keep(*keys: str) -> Callable:
-    """An option callback keeping its value (a tuple for several keys) for config_options, not for the
-    command's parameters."""
-    def callback(ctx: click.Context, _param: click.Parameter, value) -> None:
+    """An option callback keeping its value (a tuple for several keys) for config_options; the value is
+    returned as well, for an option the command also receives (param_option's `expose`)."""
+    def callback(ctx: click.Context, _param: click.Parameter, value):
         if value is None:
-            return
+            return None
         for key, v in zip(keys, value if len(keys) > 1 else (value,), strict=True):
             section, f = _field(key)
             ctx.meta.setdefault(OPTIONS_KEY, {}).setdefault(section, {})[f.name] = v
+        return value
     return callback
 
 
@@ -93,11 +94,12 @@ def _default(value: object) -> str:
     return f"{value:g}" if isinstance(value, float) else str(value)
 
 
-def param_option(key: str, *decls: str, help: str | None = None) -> Callable:
+def param_option(key: str, *decls: str, help: str | None = None, expose: bool = False) -> Callable:
     """The option setting configuration parameter `key` ('section.name', e.g. 'track.gate'), built from its
     field: `--name` (or `decls`), its type from the field's Bound (or choices), its help the field's help (or
     `help`) with the default and the range. The value goes to the DatmoConfig config_options makes (the
-    command gets `cfg`, not the option), overriding the config file."""
+    command gets `cfg`, not the option), overriding the config file; with `expose` the command also gets the
+    option's value as given (None: not given), for a command that treats an explicit value apart."""
     from ..bounds import Bounded
 
     _, f = _field(key)
@@ -111,7 +113,7 @@ def param_option(key: str, *decls: str, help: str | None = None) -> Callable:
     else:
         kind, text = str, f"{text}."
     extra = {"metavar": "MODEL"} if f.name == "leg_model" else {}
-    return click.option(*decls, f.name, type=kind, default=None, expose_value=False, callback=_keep(key),
+    return click.option(*decls, f.name, type=kind, default=None, expose_value=expose, callback=_keep(key),
                         help=text, **extra)
 
 

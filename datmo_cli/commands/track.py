@@ -42,9 +42,10 @@ if TYPE_CHECKING:
 @param_option("track.delete_after_occluded")
 @param_option("track.d_max")
 @param_option("track.ego_motion")
-@click.option("--leg-model", default=None, metavar="MODEL",
-              help="Leg detector for inputs without features: 'default' (shipped), a file from datmo train-legs, "
-                   "or 'paper' (the paper's circle rule and walking pattern). Inputs with features keep theirs.")
+@param_option("features.leg_model", expose=True,
+              help="Leg detector for inputs without features: 'default' (shipped), a file from datmo train-legs, or "
+                   "'paper' (the paper's circle rule and walking pattern). Inputs with features keep theirs, which "
+                   "a given MODEL must be.")
 @input_options
 @quiet_option
 def command(input: Path, output: Path, force: bool, no_markers: bool, bag_dir: bool, cfg: DatmoConfig,
