@@ -26,9 +26,13 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from . import __version__
 from .errors import DatmoError, InputError, OutputExistsError
+
+if TYPE_CHECKING:
+    from .config import DatmoConfig
 
 MANIFEST = "manifest.jsonl"
 LOG_SUFFIXES = (".mcap",)
@@ -200,24 +204,35 @@ def remove_partial(outputs: list[str]) -> int:
 # ------------------------------------------------------------------------------------------ parameters
 
 
-def params_hash(params: dict | None) -> str:
-    """SHA-256 (first 16 hex digits) of the effective parameters: features and track tables and the leg
-    model's SHA-256, so the same settings hash alike wherever they were given (defaults, TOML, options)."""
-    from .perception.features import leg_model_provenance
-    from .perception.params import FeatureParams
-    from .tracking.params import TrackingParams
+@dataclass(frozen=True)
+class RunOptions:
+    """The switches of `datmo run` that are not parameters of the stages: `markers` (False for --no-markers),
+    `topic` and `odom_topic` (--topic, --odom-topic: the channels a bag is converted from) and `bag_dir`
+    (--bag-dir: each output a ROS 2 bag folder)."""
 
-    params = params or {}
-    features = params.get("features") or FeatureParams()
-    track = params.get("track") or TrackingParams()
-    model = leg_model_provenance(features.leg_model)
-    doc = {"features": features.to_dict(), "track": track.to_dict(),
+    markers: bool = True
+    topic: str | None = None
+    odom_topic: str | None = None
+    bag_dir: bool = False
+
+
+def params_hash(config: DatmoConfig | None = None, options: RunOptions | None = None) -> str:
+    """SHA-256 (first 16 hex digits) of the effective parameters: features and track tables and the leg
+    model's SHA-256, so the same settings hash alike wherever they were given (defaults, TOML, options); and
+    the options that change the output (--no-markers, --topic, --odom-topic; a default run hashes without
+    them)."""
+    from .config import DatmoConfig
+    from .perception.features import leg_model_provenance
+
+    config, options = config or DatmoConfig(), options or RunOptions()
+    model = leg_model_provenance(config.features.leg_model)
+    doc = {"features": config.features.to_dict(), "track": config.track.to_dict(),
            "leg_model": model.get("sha256", model.get("model"))}
-    if params.get("markers") is False:   # --no-markers: other outputs (the hash of a default run is unchanged)
+    if not options.markers:
         doc["markers"] = False
-    for key in ("topic", "odom_topic"):   # --topic, --odom-topic: another conversion of a bag
-        if params.get(key) is not None:
-            doc[key] = params[key]
+    for key in ("topic", "odom_topic"):
+        if getattr(options, key) is not None:
+            doc[key] = getattr(options, key)
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
@@ -311,7 +326,8 @@ class Task:
     input: str
     output: str
     force: bool
-    params: dict | None
+    config: DatmoConfig | None
+    options: RunOptions
     params_hash: str
     command_line: str | None
     threads: int | None = None     # --threads: perception threads on a Dask worker (None: one per task there)
@@ -413,7 +429,8 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
             notes: list[str] = []
             with converted(src, out, task, notes.append) as log:
                 origin = {} if Path(log) == Path(src) else {"origin": src}   # provenance hashes the bag, not the copy
-                n = pipeline.process_file(log, out, force=task.force, params=task.params,
+                n = pipeline.process_file(log, out, force=task.force, config=task.config,
+                                          markers=task.options.markers, bag_dir=task.options.bag_dir,
                                           command_line=task.command_line, progress=progress,
                                           input_name=task.input if remote(task.input) else None, **origin)
             figures = headline(out)
@@ -439,16 +456,16 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
 
 def converted(src: str, out: str, task: Task, tell: Callable[[str], None]):
     """The datmo log to process for local input `src`: `src` itself, or its conversion as by datmo import (a
-    bag, or any input when params give "topic" or "odom_topic") into a temporary MCAP beside output `out` (beside
-    the bag folder with params["bag_dir"]), removed when the block ends, on every way out (scan_log). The
+    bag, or any input when the options give a topic or an odometry topic) into a temporary MCAP beside output
+    `out` (beside the bag folder with options.bag_dir), removed when the block ends, on every way out (scan_log). The
     output is checked first, so a refused output costs no conversion. `tell` gets the lines the conversion says
     (they go in the task's record, "notes", which the command prints: a worker does not print)."""
     from .inputs import scan_log
     from .outputs import temp_path
 
-    params = task.params or {}
-    dest = temp_path(Path(out).parent if params.get("bag_dir") else Path(out))
-    return scan_log(Path(src), Path(out), params.get("topic"), params.get("odom_topic"), force=task.force,
+    options = task.options
+    dest = temp_path(Path(out).parent if options.bag_dir else Path(out))
+    return scan_log(Path(src), Path(out), options.topic, options.odom_topic, force=task.force,
                     dest=dest, tell=tell)
 
 
@@ -520,8 +537,9 @@ class Batch:
         return len(self.tasks) + len(self.skipped)
 
 
-def prepare(specs: list[str], out_dir: str, *, params: dict | None = None, force: bool = False,
-            command_line: str | None = None, threads: int | None = None, bag_dir: bool = False) -> Batch:
+def prepare(specs: list[str], out_dir: str, *, config: DatmoConfig | None = None,
+            options: RunOptions | None = None, force: bool = False, command_line: str | None = None,
+            threads: int | None = None) -> Batch:
     """Find the inputs, read the manifest and decide what to redo.
 
     An input is skipped when its latest manifest line is done (or skipped) with the same parameters' hash
@@ -536,10 +554,11 @@ def prepare(specs: list[str], out_dir: str, *, params: dict | None = None, force
             raise InputError(f"{out_dir}: exists and is not a folder")
         d.mkdir(parents=True, exist_ok=True)
         out_dir = str(d.resolve())
-    pairs = discover(specs, out_dir, bag_dir)
+    options = options or RunOptions()
+    pairs = discover(specs, out_dir, options.bag_dir)
     manifest = Manifest(out_dir)
     ledger = manifest.latest()
-    phash = params_hash(params)
+    phash = params_hash(config, options)
     tasks, skipped = [], []
     for i, (src, dst) in enumerate(pairs):
         last = ledger.get(src)
@@ -549,7 +568,7 @@ def prepare(specs: list[str], out_dir: str, *, params: dict | None = None, force
                             "finished": datetime.now(UTC).isoformat(timespec="seconds")})
             continue
         overwrite = force or (exists(dst) and (owned or _leftover(dst, src)))
-        tasks.append(Task(i, src, dst, overwrite, params, phash, command_line, threads))
+        tasks.append(Task(i, src, dst, overwrite, config, options, phash, command_line, threads))
     if ledger:
         manifest.compact(ledger)   # one line per input before this batch appends its own
     return Batch(out_dir, tasks, skipped, manifest, [d for _, d in pairs])

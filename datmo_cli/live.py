@@ -22,6 +22,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 import numpy as np
@@ -31,6 +32,9 @@ from .extras import require
 from .log import mcapio, types
 from .log.scan import Odometry, ScanGeometry, ScanRun
 from .log.transforms import Transform, encode_tf
+
+if TYPE_CHECKING:
+    from .config import DatmoConfig
 
 TOPIC_TF = "/tf"
 TOPIC_TF_STATIC = "/tf_static"
@@ -219,11 +223,11 @@ class Stages:
     """Segmentation, features and tracking of scans as they come (pipeline.RunStages, its state carried from
     call to call): `messages(run)` gives the derived messages of the next scans, with the transforms."""
 
-    def __init__(self, odometry: Odometry | None, params: dict | None = None, estimated: bool = False,
+    def __init__(self, odometry: Odometry | None, config: DatmoConfig | None = None, estimated: bool = False,
                  has_tf: bool = False, scan_frame: str = "laser") -> None:
         from .pipeline import RunStages
 
-        self.stages = RunStages(odometry, params, estimated=estimated)
+        self.stages = RunStages(odometry, config, estimated=estimated)
         self.derived = self.stages.derived()
         self.transforms = Transforms(odometry, scan_frame, has_tf or TOPIC_TF in self.derived)
         self.first = 0
@@ -248,18 +252,18 @@ class LogSource:
     channels, and when it has no /datmo/tracks, segmentation, features and tracks made from its scans (with
     the transforms; the channels those stages make replace any the log has)."""
 
-    def __init__(self, path: str | Path, params: dict | None = None, block_scans: int = 32) -> None:
+    def __init__(self, path: str | Path, config: DatmoConfig | None = None, block_scans: int = 32) -> None:
         from .pipeline import open_stages
         from .streaming import LogStream
 
         self.stream = LogStream(path)
         self.block_scans = block_scans
-        self.params = params
+        self.config = config
         self.processed = self.stream.has(mcapio.TOPIC_TRACKS)
         self.odometry, self.estimated = None, False
         self.derived: dict[str, str] = {}
         if not self.processed:
-            stages = open_stages(self.stream, params)
+            stages = open_stages(self.stream, config)
             self.odometry, self.estimated, self.derived = stages.odometry, stages.estimated, stages.derived()
         else:
             self.odometry = self.stream.odometry
@@ -277,7 +281,7 @@ class LogSource:
 
     def batches(self) -> Iterator[list[Message]]:
         """The log from its start, a block of scans at a time (the block's messages in time order)."""
-        stages = None if self.processed else Stages(self.odometry, self.params, self.estimated, has_tf=True)
+        stages = None if self.processed else Stages(self.odometry, self.config, self.estimated, has_tf=True)
         transforms = Transforms(self.transforms.odometry, self.transforms.scan_frame, False)
         for block in self.stream.blocks(self.block_scans, copy=set(self.copied)):
             out = []
@@ -349,10 +353,10 @@ class LiveFeed:
     is behind by `backlog` scans); `close()` finishes. A failure of the view stops the view, not the
     recording (`failure` says what it was)."""
 
-    def __init__(self, server: LiveServer, params: dict | None = None, backlog: int = 256,
+    def __init__(self, server: LiveServer, config: DatmoConfig | None = None, backlog: int = 256,
                  batch: int = 16) -> None:
         self.server = server
-        self.params = params
+        self.config = config
         self.batch = batch
         self.queue: queue.Queue = queue.Queue(maxsize=backlog)
         self.dropped = 0
@@ -367,7 +371,7 @@ class LiveFeed:
         geometry = ScanGeometry(angle_min=-math.pi / 2, angle_increment=math.pi / 360, n_beams=361, range_min=0.0,
                                 range_max=8.0)
         run = ScanRun(np.array([0, 100_000_000]), np.full((2, geometry.n_beams), 3.0, np.float32), geometry)
-        Stages(None, self.params).messages(run)
+        Stages(None, self.config).messages(run)
 
     def scan(self, stamp_ns: int, ranges: np.ndarray, geometry: ScanGeometry) -> None:
         if self.failure is not None:
@@ -401,7 +405,7 @@ class LiveFeed:
                     if stages is None:
                         geometry = scans[0][2]
                         scans = [i for i in scans if i[2].same_beams(geometry)]
-                        stages = Stages(None, self.params, scan_frame=geometry.frame_id)
+                        stages = Stages(None, self.config, scan_frame=geometry.frame_id)
                     run = ScanRun(np.array([s for s, _, _ in scans], np.int64), np.stack([r for _, r, _ in scans]),
                                   geometry)
                     derived = stages.messages(run)

@@ -17,6 +17,7 @@ from .errors import InputError
 from .log import mcapio
 
 if TYPE_CHECKING:
+    from .config import DatmoConfig
     from .report import RunData
 
 REPORT_TOPICS = (mcapio.TOPIC_SCAN, mcapio.TOPIC_ODOM, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS,
@@ -98,41 +99,35 @@ def derived_topics(*, odom: bool = False, segments: bool = False, features: bool
     return out
 
 
-def track_params(params: dict | None):
-    """The TrackingParams of a stages' parameter dict (its "track", else the defaults)."""
-    from .tracking.params import TrackingParams
-
-    return (params or {}).get("track") or TrackingParams()
-
-
-def open_stages(stream, params: dict | None = None, *, markers: bool = True,
+def open_stages(stream, config: DatmoConfig | None = None, *, markers: bool = True,
                 block_scans: int | None = None) -> RunStages:
     """The stages of a streamed log (a streaming.LogStream) in the odometry it is tracked in: the log's own,
-    else (ego-motion mode of params["track"]) poses estimated from its scans, then written to /odom (see
+    else (ego-motion mode of config.track) poses estimated from its scans, then written to /odom (see
     streaming.stream_odometry). Every pass over a log reads its odometry here, once."""
+    from .config import DatmoConfig
     from .streaming import BLOCK_SCANS, stream_odometry
 
-    odometry, estimated = stream_odometry(stream, track_params(params).ego_motion, block_scans or BLOCK_SCANS)
-    return RunStages(odometry, params, estimated=estimated, markers=markers)
+    config = config or DatmoConfig()
+    odometry, estimated = stream_odometry(stream, config.track.ego_motion, block_scans or BLOCK_SCANS)
+    return RunStages(odometry, config, estimated=estimated, markers=markers)
 
 
 class RunStages:
     """Segmentation, features and tracking of one log, block by block (the stages of `datmo run`): call it
-    with each Block in order; it returns the block's derived channels. `estimated`: the odometry was
-    estimated from the scans, and its poses are written to /odom block by block."""
+    with each Block in order; it returns the block's derived channels. `config`: the DatmoConfig (None: the
+    defaults); `estimated`: the odometry was estimated from the scans, and its poses are written to /odom block
+    by block; `markers`: also write the Foxglove markers."""
 
-    def __init__(self, odometry, params: dict | None = None, estimated: bool = False,
+    def __init__(self, odometry, config: DatmoConfig | None = None, *, estimated: bool = False,
                  markers: bool = True) -> None:
+        from .config import DatmoConfig
         from .perception.features import FeatureStream
-        from .perception.params import FeatureParams
 
-        params = params or {}
-        self.track_params = track_params(params)
-        self.feature_params = params.get("features") or FeatureParams()
+        self.config = config or DatmoConfig()
         self.odometry = odometry
         self.estimated = estimated
-        self.markers = markers and params.get("markers", True)   # params["markers"]: False for --no-markers
-        self.features = FeatureStream(self.feature_params, odometry)
+        self.markers = markers
+        self.features = FeatureStream(self.config.features, odometry)
         self.tracking = None
 
     def derived(self) -> dict[str, str]:
@@ -141,12 +136,11 @@ class RunStages:
 
     def effective(self) -> dict:
         """The effective parameters, as provenance records them."""
-        from .config import DatmoConfig
         from .perception.features import leg_model_provenance
 
-        return {"features": self.feature_params.to_dict(), "track": self.track_params.to_dict(),
-                "leg_model": leg_model_provenance(self.feature_params.leg_model),
-                "config": DatmoConfig(self.feature_params, self.track_params).to_dict()}
+        features, track = self.config.features, self.config.track
+        return {"features": features.to_dict(), "track": track.to_dict(),
+                "leg_model": leg_model_provenance(features.leg_model), "config": self.config.to_dict()}
 
     def __call__(self, block) -> dict[str, tuple]:
         from .stages import TrackStream, iter_run_features
@@ -160,21 +154,23 @@ class RunStages:
             channels.pop(mcapio.TOPIC_MARKERS_FEATURES)
         out |= channels
         if self.tracking is None:
-            self.tracking = TrackStream(run.geometry, odometry=self.odometry, params=self.track_params,
-                                        markers=self.markers, learned=self.feature_params.leg_model != "paper")
+            self.tracking = TrackStream(run.geometry, odometry=self.odometry, params=self.config.track,
+                                        markers=self.markers, learned=self.config.features.leg_model != "paper")
         out |= self.tracking.channels(self.tracking.block(run, iter_run_features(features)))
         return out
 
 
-def derive(run, odometry, params: dict | None = None,
+def derive(run, odometry, config: DatmoConfig | None = None,
            progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], dict]:
     """Every derived channel of a run held in memory, {topic: (msgtype, stamps, payloads)}, and the effective
-    parameters (`params` may hold "track" (a TrackingParams) and "features" (a FeatureParams)). The same
-    stages as process_file, on one block."""
+    parameters; `config`: the DatmoConfig (None: the defaults). The same stages as process_file, on one
+    block."""
+    from .config import DatmoConfig
     from .streaming import Block
 
-    odometry, odom_channel = estimated_odometry(run, odometry, track_params(params).ego_motion)
-    stages = RunStages(odometry, params, estimated=bool(odom_channel))
+    config = config or DatmoConfig()
+    odometry, odom_channel = estimated_odometry(run, odometry, config.track.ego_motion)
+    stages = RunStages(odometry, config, estimated=bool(odom_channel))
     if progress:
         progress(0, len(run))
     derived = stages(Block(0, run))
@@ -183,25 +179,25 @@ def derive(run, odometry, params: dict | None = None,
     return derived, stages.effective()
 
 
-def process_file(src: str | Path, out: str | Path, *, force: bool = False, params: dict | None = None,
+def process_file(src: str | Path, out: str | Path, *, force: bool = False, config: DatmoConfig | None = None,
                  command_line: str | None = None, progress: Callable[[int, int], None] | None = None,
-                 markers: bool = True, block_scans: int | None = None, input_name: str | None = None,
-                 origin: str | Path | None = None) -> int:
+                 markers: bool = True, bag_dir: bool = False, block_scans: int | None = None,
+                 input_name: str | None = None, origin: str | Path | None = None) -> int:
     """Segment, extract features and track `src` in one streaming pass into `out` (see module docstring and
-    streaming); returns the number of scans. `progress(done, total)` is called as scans are processed;
-    `markers` (and params["markers"], default True): also write the Foxglove markers; `input_name`: what the
-    output's provenance calls the input (default its path); `origin`: the file or bag folder `src` was converted
-    from (`src` a temporary copy of a bag), which provenance hashes and names instead. With params["bag_dir"],
-    `out` is the log file of a ROS 2 bag folder (log.bagdir.member_path), and the folder is written whole."""
+    streaming); returns the number of scans. `config`: the DatmoConfig (None: the defaults), recorded whole in
+    the provenance; `progress(done, total)` is called as scans are processed; `markers`: also write the Foxglove
+    markers; `input_name`: what the output's provenance calls the input (default its path); `origin`: the file
+    or bag folder `src` was converted from (`src` a temporary copy of a bag), which provenance hashes and names
+    instead. With `bag_dir`, `out` is the log file of a ROS 2 bag folder (log.bagdir.member_path), and the
+    folder is written whole."""
     from .log import bagdir
     from .streaming import BLOCK_SCANS, LogStream, write_derived
 
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
-    stages = open_stages(stream, params, markers=markers, block_scans=block_scans)
-    bag = bool((params or {}).get("bag_dir"))
+    stages = open_stages(stream, config, markers=markers, block_scans=block_scans)
     origin = Path(origin) if origin is not None else src
-    with bagdir.output(Path(out).parent if bag else out, bag, force=force, inputs=[origin]) as dst:
+    with bagdir.output(Path(out).parent if bag_dir else out, bag_dir, force=force, inputs=[origin]) as dst:
         return write_derived(stream, dst, command="run", params=stages.effective(), derived=stages.derived(),
                              stage=stages, force=force, command_line=command_line,
                              block_scans=block_scans or BLOCK_SCANS, progress=progress, input_name=input_name,
@@ -223,7 +219,7 @@ def features_leg_model(log) -> str:
     return "paper"
 
 
-def track_file(src: str | Path, out: str | Path, *, force: bool = False, config=None,
+def track_file(src: str | Path, out: str | Path, *, force: bool = False, config: DatmoConfig | None = None,
                leg_model: str | None = None, command_line: str | None = None,
                markers: bool = True, block_scans: int | None = None,
                progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
@@ -251,10 +247,8 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, config=
         if stream.count(mcapio.TOPIC_FEATURES) != stream.n_scans:
             raise InputError(f"{src}: {stream.count(mcapio.TOPIC_FEATURES)} messages on {mcapio.TOPIC_FEATURES} "
                              f"for {stream.n_scans} scans; run datmo features again")
-    stage_params = {"track": params}
-    if computed:
-        stage_params["features"] = config.features.replace(leg_model=leg_model)
-    stages = open_stages(stream, stage_params, markers=markers, block_scans=block_scans)
+    stages = open_stages(stream, config.replace(features={"leg_model": leg_model}) if computed else config,
+                         markers=markers, block_scans=block_scans)
     odometry, estimated = stages.odometry, stages.estimated
     if computed:
         derived, stage, effective = stages.derived(), stages, stages.effective()
@@ -296,7 +290,7 @@ class FeatureCounts:
         return getattr(self, name) / max(self.scans, 1)
 
 
-def features_file(src: str | Path, out: str | Path, config=None, *, resegment: bool = False,
+def features_file(src: str | Path, out: str | Path, config: DatmoConfig | None = None, *, resegment: bool = False,
                   force: bool = False, command_line: str | None = None, markers: bool = True,
                   block_scans: int | None = None, progress: Callable[[int, int], None] | None = None) -> FeatureCounts:
     """Extract the features of `src` into `out` in one streaming pass: /datmo/features, /datmo/landmarks and
@@ -340,7 +334,7 @@ def features_file(src: str | Path, out: str | Path, config=None, *, resegment: b
     return counts
 
 
-def segment_file(src: str | Path, out: str | Path, config=None, *, force: bool = False,
+def segment_file(src: str | Path, out: str | Path, config: DatmoConfig | None = None, *, force: bool = False,
                  command_line: str | None = None, block_scans: int | None = None,
                  progress: Callable[[int, int], None] | None = None) -> int:
     """Segment every scan of `src` into `out` (its channels plus /datmo/segments) in one streaming pass;

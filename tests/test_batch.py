@@ -18,7 +18,8 @@ from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 
 
-def fake_process(src, out, *, force=False, params=None, command_line=None, progress=None, input_name=None):
+def fake_process(src, out, *, force=False, config=None, markers=True, bag_dir=False, command_line=None,
+                 progress=None, input_name=None):
     src = Path(src)
     if "bad" in src.name:
         raise InputError(f"{src}: not an MCAP file (bad magic bytes)")
@@ -97,13 +98,29 @@ def test_manifest_tolerates_a_torn_last_line_and_compacts(tmp_path):
     assert (tmp_path / "manifest.jsonl").read_text() == '{"input": "a", "status": "done"}\n'
 
 
-def test_params_hash_follows_the_parameters():
-    from datmo_cli.perception.params import FeatureParams
-    from datmo_cli.tracking.params import TrackingParams
+DEFAULT_PARAMS_HASH = "3b3ddf5d44596696"   # the defaults' hash on main before DatmoConfig reached the batch
 
-    default = batch.params_hash(None)
-    assert batch.params_hash({"features": FeatureParams(), "track": TrackingParams()}) == default
-    assert batch.params_hash({"track": TrackingParams().replace(gate=10.0)}) != default
+
+def test_params_hash_follows_the_parameters():
+    from datmo_cli.config import DatmoConfig
+
+    default = batch.params_hash()
+    assert default == DEFAULT_PARAMS_HASH   # the manifests written before keep skipping default runs
+    assert batch.params_hash(DatmoConfig(), batch.RunOptions(bag_dir=True)) == default   # same outputs
+    assert batch.params_hash(DatmoConfig().replace(track={"gate": 10.0})) != default
+    assert batch.params_hash(None, batch.RunOptions(markers=False)) != default
+    assert batch.params_hash(None, batch.RunOptions(topic="/front")) != default
+
+
+def test_a_task_pickles_with_its_configuration():
+    import pickle
+
+    from datmo_cli.config import DatmoConfig
+
+    cfg = DatmoConfig().replace(track={"gate": 10.0})
+    task = batch.Task(0, "a.mcap", "out/a.mcap", False, cfg, batch.RunOptions(markers=False), "h", None)
+    back = pickle.loads(pickle.dumps(task))
+    assert back == task and back.config.track.gate == 10.0 and not back.options.markers
 
 
 def test_manifest_lines_then_resume_does_only_what_is_missing(logs, tmp_path):

@@ -83,3 +83,24 @@ def test_first_parallel_run_with_an_empty_numba_cache(tmp_path, hall_log):
     assert done.returncode == 0, done.stderr[-3000:]
     assert (tmp_path / "out" / "hall.mcap").exists() and (tmp_path / "out" / "copy.mcap").exists()
     assert any((tmp_path / "numba-cache").rglob("*.nbi"))
+
+
+def test_derive_and_the_streamed_stages_take_one_configuration(tmp_path, hall_log):
+    """A DatmoConfig reaches every stage in one convention: in memory (derive), streamed (process_file), and
+    both record it whole, with the tracks it changes."""
+    from datmo_cli.config import DatmoConfig
+
+    cfg = DatmoConfig().replace(track={"confirm_hits": 5, "confirm_window": 6})
+    run, odometry = mcapio.read_run(hall_log), mcapio.read_odometry(hall_log)
+    derived, effective = pipeline.derive(run, odometry, cfg)
+    default, _ = pipeline.derive(run, odometry)
+    assert effective["config"] == cfg.to_dict() and effective["track"]["confirm_hits"] == 5
+    def payloads(channels: dict, topic: str) -> list[bytes]:
+        return [bytes(p) for p in channels[topic][-1]]
+
+    assert payloads(derived, mcapio.TOPIC_FEATURES) == payloads(default, mcapio.TOPIC_FEATURES)
+    assert payloads(derived, mcapio.TOPIC_TRACKS) != payloads(default, mcapio.TOPIC_TRACKS)
+    pipeline.process_file(hall_log, tmp_path / "run.mcap", config=cfg, markers=False)
+    b = mcapio.read_log(tmp_path / "run.mcap", topics=None)
+    assert payloads(b.messages, mcapio.TOPIC_TRACKS) == payloads(derived, mcapio.TOPIC_TRACKS)
+    assert mcapio.TOPIC_MARKERS_TRACKS not in b.messages

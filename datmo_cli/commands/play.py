@@ -48,8 +48,7 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
 
     server = live.LiveServer(host, port)   # the package and the port are checked before the log is read
     try:
-        params = {"features": cfg.features, "track": cfg.track}
-        source = live.LogSource(input, params)
+        source = live.LogSource(input, cfg)
         source.declare(server)
         what = "as it is" if source.processed else "segmented, features and tracks made on the fly"
         click.echo(f"datmo play: serving {input} ({source.stream.n_scans:,} scans, {what}) on {server.url}")

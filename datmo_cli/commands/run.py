@@ -163,7 +163,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
 
     Example: datmo run 'logs/**/*.mcap' -o out --scheduler tcp://10.0.0.5:8786
     """
-    from ..batch import DONE, FAILED, SKIPPED, LocalExecutor, prepare, remote, run_many
+    from ..batch import DONE, FAILED, SKIPPED, LocalExecutor, RunOptions, prepare, remote, run_many
     from ..cli import invocation
     from ..config import provenance_line
     from ..errors import DatmoError
@@ -177,18 +177,10 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         raise DatmoError(f"{out_dir}: --plot needs a local output folder")
     if bag_dir and remote(out_dir):
         raise DatmoError(f"{out_dir}: --bag-dir needs a local output folder")
-    params = _params(cfg)
-    if topic is not None:
-        params["topic"] = topic
-    if odom_topic is not None:
-        params["odom_topic"] = odom_topic
-    if no_markers:
-        params["markers"] = False
-    if bag_dir:
-        params["bag_dir"] = True
-    batch = prepare(list(inputs), out_dir, params=params, force=force,
-                    command_line=provenance_line(invocation("run")),
-                    threads=threads, bag_dir=bag_dir)
+    _check_leg_model(cfg)
+    options = RunOptions(markers=not no_markers, topic=topic, odom_topic=odom_topic, bag_dir=bag_dir)
+    batch = prepare(list(inputs), out_dir, config=cfg, options=options, force=force,
+                    command_line=provenance_line(invocation("run")), threads=threads)
     plot_of = {t.output: bagdir.plot_path(t.output) if bag_dir else Path(t.output).with_suffix(".png")
                for t in batch.tasks} if plot else {}
     plots = list(plot_of.values())
@@ -230,12 +222,11 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         raise SystemExit(1)  # the one error is printed above
 
 
-def _params(cfg: DatmoConfig) -> dict:
-    """The features and track parameters of a run, as the batch takes them; a bad leg model is one error."""
+def _check_leg_model(cfg: DatmoConfig) -> None:
+    """A leg model that does not load is one error, before any input starts."""
     from ..perception.legs import load_leg_model
 
     load_leg_model(cfg.features.leg_model)
-    return {"features": cfg.features, "track": cfg.track}
 
 
 FINAL_ROWS = 50
