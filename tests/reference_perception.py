@@ -663,6 +663,40 @@ def beam_normal(r, angles, range_min, range_max, b, normal_radius, max_gap, max_
     return math.nan, math.nan
 
 
+def gather(r, angles, range_min, range_max, b, direction, normal_radius, max_gap, max_window):
+    """One side of beam_normal's walk from beam b in `direction` (+1 or -1): the points taken, relative to
+    b's point (m, sensor frame), and the farthest distance among them."""
+    p = np.array([float(r[b]) * math.cos(angles[b]), float(r[b]) * math.sin(angles[b])])
+    last, taken, far = p, [], 0.0
+    for step in range(1, max_window + 1):
+        j = b + direction * step
+        if not 0 <= j < len(r):
+            break
+        if not is_valid(float(r[j]), range_min, range_max):
+            continue
+        q = np.array([float(r[j]) * math.cos(angles[j]), float(r[j]) * math.sin(angles[j])])
+        if np.linalg.norm(q - last) > max_gap:
+            break
+        taken.append(q - p)
+        last = q
+        d = float(np.linalg.norm(q - p))
+        far = max(far, d)
+        if len(taken) >= 2 and d >= normal_radius:
+            break
+    return np.array(taken).reshape(-1, 2), far
+
+
+def rebuild_map(keyframes, newest, n_kf, map_spacing, capacity):
+    """The local map (points, normals; world frame) of the n_kf keyframes of the ring `keyframes` (a list of
+    (points, normals, pose)) ending at slot newest, newest first: its points all, each older one's only where
+    no map point is within map_spacing (m)."""
+    xy, nn = np.zeros((0, 2)), np.zeros((0, 2))
+    for a in range(n_kf):
+        pts, nrm, pose = keyframes[(newest - a) % len(keyframes)]
+        xy, nn = add_to_map(pts, nrm, pose, map_spacing if a > 0 else 0.0, xy, nn, capacity)
+    return xy, nn
+
+
 def nearest(q, map_xy, max_dist):
     """Index of the nearest map point within max_dist (lowest index on ties), or -1."""
     d2 = ((map_xy - q) ** 2).sum(axis=1)

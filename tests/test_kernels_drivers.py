@@ -1,0 +1,150 @@
+"""The kernels that drive others (a whole block of scans, a scan through every phase, a run of scans through
+ego-motion, a block of landmark detections), called directly on small scenes and compared with the plain
+references of tests/reference_*.py; tests/test_kernels_reference.py checks the kernels they call one by one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+from datmo_cli.perception import _egomotion_kernels as KE
+from datmo_cli.perception import _leg_kernels as KL
+from datmo_cli.tracking import _step
+from datmo_cli.tracking.tracker import _REACQUIRE, TRACK_DTYPE, Tracker, _flat
+from tests import reference_perception as rp
+from tests.reference_tracking import ReferenceTracker, reference_measurements
+from tests.test_tracking_step import GEOM, P, meas_arrays, scenes
+
+
+# ------------------------------------------------------------------------------------------------ tracking
+def _state(learned: bool) -> tuple:
+    """A new tracker's state as the compiled step takes it: (table, context, prm, geometry, cos, sin,
+    background arrays, compatibility table)."""
+    t = Tracker(P, GEOM, learned=learned)
+    return t.tracks.table, t._ctx, t._prm, t._geo, t._cos, t._sin, t._bg, t._compat
+
+
+@settings(max_examples=6, deadline=None)
+@given(scene=scenes())
+def test_track_block_step_measurements_and_track_scan(scene: tuple):
+    """A small scene through _step.track_block (one call), _step.step_measurements and _step.track_scan (scan by
+    scan, each on its own state): every scan's Track elements are the reference tracker's byte for byte."""
+    stamps, feats, poses, ranges, learned = scene
+    N = len(stamps)
+    ref = ReferenceTracker(P, GEOM, learned=learned)
+    want = []
+    for i, f in enumerate(feats):
+        want.append(ref.step(int(stamps[i]), reference_measurements(f, P, learned),
+                             None if ranges is None else ranges[i], None if poses is None else poses[i]))
+    rel = stamps - stamps[0]
+    ranges_arg = np.zeros((N, 0), np.float32) if ranges is None else ranges
+    poses_arg = np.zeros((N, 3)) if poses is None else poses
+
+    tab, ctx, prm, geo, cos_a, sin_a, bg, compat = _state(learned)
+    cap, T = 4, P.tail_length
+    offsets = np.zeros(N + 1, np.int64)
+    _, out, _, count = _step.track_block(tab, ctx, prm, rel, *_flat(feats), learned, ranges_arg, ranges is not None,
+                                         poses_arg, poses is not None, geo, cos_a, sin_a, *bg, compat, _REACQUIRE,
+                                         np.zeros(cap, TRACK_DTYPE), True, np.zeros((cap, T, 2)),
+                                         np.zeros(cap, np.int64), offsets)
+    np.testing.assert_array_equal(np.diff(offsets), [len(w) for w in want])
+    assert out[:offsets[-1]].tobytes() == np.concatenate(want).tobytes()
+    assert (count[:offsets[-1]] >= 1).all()
+
+    tab1, ctx1, prm1, geo1, cos1, sin1, bg1, compat1 = _state(learned)
+    tab2, ctx2, prm2, geo2, cos2, sin2, bg2, compat2 = _state(learned)
+    out1 = np.zeros(1, TRACK_DTYPE)
+    for i, f in enumerate(feats):
+        m = reference_measurements(f, P, learned)
+        mx, my, msize, mkind, mlegs, raw, mprob = meas_arrays(m)
+        has_prob = m.raw_legs.shape[1] >= 4
+        tab1, out1 = _step.step_measurements(tab1, ctx1, prm1, rel[i], mx, my, msize, mkind, mlegs, raw, mprob,
+                                             has_prob, ranges_arg[i], ranges is not None, poses is not None,
+                                             poses_arg[i], geo1, cos1, sin1, *bg1, learned, compat1, _REACQUIRE, out1)
+        n = int(ctx1[_step.C_N_TRACKS])
+        assert out1[:n].tobytes() == want[i].tobytes(), f"step_measurements, scan {i}"
+        tab2 = _step.track_scan(tab2, ctx2, prm2, rel[i], mx, my, msize, mkind, mlegs, raw, mprob, has_prob,
+                                ranges_arg[i], ranges is not None, poses is not None, poses_arg[i], geo2, cos2, sin2,
+                                *bg2, learned, compat2, _REACQUIRE)
+        n2 = int(ctx2[_step.C_N_TRACKS])
+        got = np.zeros(n2, TRACK_DTYPE)
+        _step.write_tracks(got, 0, tab2, n2, poses is not None, poses_arg[i])
+        assert got.tobytes() == want[i].tobytes(), f"track_scan, scan {i}"
+
+
+# --------------------------------------------------------------------------------------------- ego-motion
+def test_gather():
+    """Each side of a beam's neighbourhood: the count and sums of u, v, uu, uv, vv of the points the reference
+    walk takes, and its farthest distance."""
+    rng = np.random.default_rng(31)
+    angles = np.radians(np.linspace(-60.0, 60.0, 121))
+    r = (2.0 + 0.3 * np.sin(angles * 5) + rng.normal(0, 0.01, 121)).astype(np.float32)
+    r[rng.random(121) < 0.1] = np.nan
+    r[40:44] = 1.2   # a near object: the walk stops at its edge
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    for b in np.flatnonzero(np.isfinite(r)).tolist():
+        for direction in (-1, 1):
+            for radius, gap, window in ((0.1, 0.5, 20), (0.3, 0.08, 6)):
+                acc = np.zeros(6)
+                far = KE._gather(r, cos_a, sin_a, 0.05, 30.0, b, direction, radius, gap, window, acc)
+                uv, want_far = rp.gather(r, angles, 0.05, 30.0, b, direction, radius, gap, window)
+                u, v = uv[:, 0], uv[:, 1]
+                want = [len(uv), u.sum(), v.sum(), (u * u).sum(), (u * v).sum(), (v * v).sum()]
+                np.testing.assert_allclose(acc, want, rtol=1e-9, atol=1e-12)
+                assert far == pytest.approx(want_far, rel=1e-9, abs=1e-12)
+
+
+def test_rebuild_map():
+    """The map of a ring of keyframes, newest first, after a few keyframes and after the ring wrapped."""
+    rng = np.random.default_rng(32)
+    slots, beams, cell = 3, 40, 0.25
+    kf_x, kf_y, kf_nx, kf_ny = (np.zeros((slots, beams)) for _ in range(4))
+    kf_n, kf_pose = np.zeros(slots, np.int64), np.zeros((slots, 3))
+    cap = slots * beams
+    mx, my, mnx, mny = np.zeros(cap), np.zeros(cap), np.zeros(cap), np.zeros(cap)
+    head, nxt = np.full(512, KE.EMPTY, np.int64), np.full(cap, KE.EMPTY, np.int64)
+    ring: list = [(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(3))] * slots
+    for newest_count in range(1, 6):
+        newest, n_kf = (newest_count - 1) % slots, min(newest_count, slots)
+        m = int(rng.integers(20, beams))
+        pts = rng.uniform(-2, 2, (m, 2))
+        ang = rng.uniform(-np.pi, np.pi, m)
+        nrm = np.column_stack([np.cos(ang), np.sin(ang)])
+        nrm[rng.random(m) < 0.2] = np.nan
+        pose = rng.uniform(-0.3, 0.3, 3)
+        kf_x[newest, :m], kf_y[newest, :m], kf_nx[newest, :m], kf_ny[newest, :m] = pts[:, 0], pts[:, 1], \
+            nrm[:, 0], nrm[:, 1]
+        kf_n[newest], kf_pose[newest] = m, pose
+        ring[newest] = (pts, nrm, pose)
+        count = KE.rebuild_map(kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose, newest, n_kf, 0.2, cell, head, nxt, mx, my,
+                               mnx, mny)
+        want_xy, want_n = rp.rebuild_map(ring, newest, n_kf, 0.2, cap)
+        assert count == len(want_xy)
+        np.testing.assert_allclose(np.column_stack([mx, my])[:count], want_xy, atol=1e-12)
+        np.testing.assert_allclose(np.column_stack([mnx, mny])[:count], want_n, atol=1e-12)
+
+
+# ------------------------------------------------------------------------------------------------- legs
+def test_segment_features():
+    """The shape features of a segment's points; the scan-context columns (angle, occlusion, jumps, density)
+    are block_features' and are left zero."""
+    from datmo_cli.perception import legs
+
+    rng = np.random.default_rng(33)
+    angles = np.radians(np.linspace(-40.0, 40.0, 60))
+    context = [legs.FEATURE_NAMES.index(n) for n in ("subtended_angle", "occluded_start", "occluded_end",
+                                                      "jump_start", "jump_end", "density", "relative_curvature")]
+    shape = np.setdiff1d(np.arange(KL.N_FEATURES), context)
+    for _ in range(20):
+        r = (rng.uniform(1.0, 3.0) + 0.05 * np.cos(np.linspace(-1, 1, 60)) * rng.uniform(0, 1)
+             + rng.normal(0, 0.01, 60)).astype(np.float32)
+        s = int(rng.integers(0, 50))
+        e = s + int(rng.integers(1, 60 - s + 1))
+        x = r[s:e].astype(np.float64) * np.cos(angles[s:e])
+        y = r[s:e].astype(np.float64) * np.sin(angles[s:e])
+        out, work, step = np.zeros(KL.N_FEATURES), np.empty(e - s), np.empty(e - s)
+        KL.segment_features(x, y, e - s, legs.RADIUS_CLIP, work, step, out)
+        want = rp.segment_features(r, angles, s, e, 0.05, 30.0)
+        np.testing.assert_allclose(out[shape], want[shape], rtol=1e-6, atol=1e-7)
+        assert (out[context] == 0).all()
