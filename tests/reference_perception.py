@@ -791,3 +791,134 @@ def icp_align(src, init, map_xy, map_n, max_dist0, max_dist, scale, inlier_tol, 
     _, _, matched, abs_sum, inliers = icp_step(src, pose, map_xy, map_n, gate, scale, True, inlier_tol)
     pose[2] = math.atan2(math.sin(pose[2]), math.cos(pose[2]))
     return pose, (matched, abs_sum / max(matched, 1), inliers, it)
+
+
+# ----------------------------------------------------------------------------------------------------------- landmarks
+
+
+def beyond(ranges, scan, beam, step, lo, hi, dropout):
+    """For each (scan, beam): the first return in (lo, hi) (m) among the dropout + 1 beams beyond it in
+    direction `step` (inside the scan), and its beam; (inf, -1) where there is none."""
+    out, where = [], []
+    for k, b in zip(scan, beam, strict=True):
+        found = (math.inf, -1)
+        for j in range(1, dropout + 2):
+            nb = b + step * j
+            if not 0 <= nb < ranges.shape[1]:
+                break
+            r = float(ranges[k, nb])
+            if math.isfinite(r) and lo < r < hi:
+                found = (r, nb)
+                break
+        out.append(found[0])
+        where.append(found[1])
+    return np.array(out), np.array(where, np.int64)
+
+
+def benches(circles, lines, dmin, dmax, bench_type):
+    """Bench detections (scan, type, x, y, orientation, size) from support circles (scan, x, y, radius) and
+    lines (scan, x0, y0, x1, y1): two circles of one scan dmin..dmax (m) apart, the first line of the scan
+    whose middle lies between them (along their axis, within 0.4 m of it) and that runs along the axis
+    (at least 0.9 of its length)."""
+    out = []
+    for u, (su, xu, yu, ru) in enumerate(circles):
+        for sv, xv, yv, rv in circles[u + 1:]:
+            if sv != su:
+                continue
+            d = math.hypot(xv - xu, yv - yu)
+            if not dmin <= d <= dmax:
+                continue
+            axis = np.array([xv - xu, yv - yu]) / d
+            for sl, x0, y0, x1, y1 in lines:
+                if sl != su:
+                    continue
+                mid = np.array([0.5 * (x0 + x1) - xu, 0.5 * (y0 + y1) - yu])
+                along, across = mid @ axis, abs(axis[0] * mid[1] - axis[1] * mid[0])
+                run = np.array([x1 - x0, y1 - y0])
+                if 0 < along < d and across < 0.4 and abs(run @ axis) >= 0.9 * np.linalg.norm(run):
+                    out.append((su, bench_type, 0.5 * (xu + xv), 0.5 * (yu + yv), math.atan2(axis[1], axis[0]),
+                                d + ru + rv))
+                    break
+    return np.array(out).reshape(-1, 6)
+
+
+COLUMN, BENCH = 4, 5   # landmark types (Landmark.msg)
+
+
+def bench_support_hides(column, bench, support_radius) -> bool:
+    """Whether a column (x, y) is within 0.5 m of a support of a bench (x, y, orientation, length): the
+    supports stand support_radius (m) in from its ends."""
+    half = 0.5 * (bench[3] - 2 * support_radius)
+    for sgn in (-1.0, 1.0):
+        sx, sy = bench[0] + sgn * half * math.cos(bench[2]), bench[1] + sgn * half * math.sin(bench[2])
+        if math.hypot(column[0] - sx, column[1] - sy) < 0.5:
+            return True
+    return False
+
+
+def landmark_database(det, stamps, match, min_count, max_drift, column_time, forget, support_radius):
+    """The landmark database rules, scan by scan: detections det (scan, type, x, y, orientation, size), scan k
+    stamped stamps[k] (ns). A detection is the nearest landmark of its type not yet seen in this scan within
+    its gate (match; a column max_drift, at most 2 match; a bench 2 match, its distance measured across its
+    axis and beyond its half-length), else a new one. A match counts one more sighting: running mean
+    position and size, the latest orientation (a bench takes the whole detection when it is longer). A
+    column that drifts over max_drift from where it was first seen has moved. A landmark is confirmed at
+    min_count sightings (a column once seen over column_time ns). After each scan, unconfirmed landmarks
+    not seen for `forget` scans and moved ones are no longer matched, and confirmed columns by a confirmed
+    bench's supports are hidden. Returns (rows (type, x, y, orientation, size, count, first scan, last
+    scan, first x, first y, moved, confirmed, hidden), first_ns, and per scan the snapshot: (row, x, y,
+    orientation, size, count, last scan, last seen ns) of the confirmed landmarks neither moved nor hidden,
+    in the order confirmed)."""
+    rows, first_ns, last_ns, live, confirmed, snapshots = [], [], [], [], [], []
+    for k, stamp in enumerate(stamps):
+        for _, t, x, y, orient, size in det[det[:, 0] == k]:
+            gate = min(max_drift, 2 * match) if t == COLUMN else (2 * match if t == BENCH else match)
+            best, bd = -1, math.inf
+            for q in live:
+                row = rows[q]
+                if row[0] != t or row[7] == k:
+                    continue
+                d = math.hypot(row[1] - x, row[2] - y)
+                if t == BENCH:
+                    ux, uy, rx, ry = math.cos(row[3]), math.sin(row[3]), x - row[1], y - row[2]
+                    d = abs(ux * ry - uy * rx) + max(0.0, abs(rx * ux + ry * uy) - 0.5 * row[4])
+                if d <= gate and d < bd:
+                    best, bd = q, d
+            if best < 0:
+                rows.append([t, x, y, orient, size, 1.0, k, k, x, y, 0.0, 0.0, 0.0])
+                first_ns.append(stamp)
+                last_ns.append(stamp)
+                live.append(len(rows) - 1)
+                if min_count <= 1 and (t != COLUMN or column_time <= 0):
+                    rows[-1][11] = 1.0
+                    confirmed.append(len(rows) - 1)
+                continue
+            row = rows[best]
+            c = row[5] + 1
+            if t == BENCH:
+                if size > row[4]:
+                    row[1:5] = [x, y, orient, size]
+            else:
+                row[1] += (x - row[1]) / c
+                row[2] += (y - row[2]) / c
+                row[3] = orient
+                row[4] += (size - row[4]) / c
+            row[5], row[7] = c, k
+            last_ns[best] = stamp
+            if t == COLUMN and math.hypot(x - row[8], y - row[9]) > max_drift:
+                row[10] = 1.0
+            if row[11] == 0 and c >= min_count and (t != COLUMN or stamp - first_ns[best] >= column_time):
+                row[11] = 1.0
+                confirmed.append(best)
+        live = [q for q in live if not ((rows[q][11] == 0 and k - rows[q][7] > forget) or rows[q][10] != 0)]
+        for q in confirmed:
+            if rows[q][0] != COLUMN:
+                continue
+            for b in confirmed:
+                bench = rows[b]
+                if bench[0] == BENCH and bench[5] >= min_count and \
+                        bench_support_hides(rows[q][1:3], bench[1:5], support_radius):
+                    rows[q][12] = 1.0
+        snapshots.append([(q, *rows[q][1:6], rows[q][7], last_ns[q]) for q in confirmed
+                          if rows[q][10] == 0 and rows[q][12] == 0])
+    return np.array(rows).reshape(-1, 13), np.array(first_ns, np.int64), snapshots

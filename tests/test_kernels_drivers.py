@@ -148,3 +148,116 @@ def test_segment_features():
         want = rp.segment_features(r, angles, s, e, 0.05, 30.0)
         np.testing.assert_allclose(out[shape], want[shape], rtol=1e-6, atol=1e-7)
         assert (out[context] == 0).all()
+
+
+# -------------------------------------------------------------------------------------------- landmarks
+def test_beyond():
+    from datmo_cli.perception import landmarks
+
+    rng = np.random.default_rng(34)
+    ranges = rng.uniform(0.0, 9.0, (3, 30)).astype(np.float32)
+    ranges[rng.random((3, 30)) < 0.3] = np.nan
+    scan, beam = rng.integers(0, 3, 50), rng.integers(0, 30, 50)
+    for step in (-1, 1):
+        out, where = np.full(50, np.inf), np.full(50, -1, np.int64)
+        landmarks._beyond(ranges, scan, beam, step, 0.5, 8.0, 2, out, where)
+        want_out, want_where = rp.beyond(ranges, scan, beam, step, 0.5, 8.0, 2)
+        np.testing.assert_array_equal(out, want_out)
+        np.testing.assert_array_equal(where, want_where)
+        assert (where >= 0).any() and (where < 0).any()
+
+
+def test_benches():
+    from datmo_cli.log.vocabulary import LANDMARK_BENCH
+    from datmo_cli.perception import landmarks
+
+    rng = np.random.default_rng(35)
+    n_scans = 6
+    circles, lines = [], []
+    for k in range(n_scans):
+        for _ in range(int(rng.integers(0, 5))):
+            circles.append((k, *rng.uniform(-2, 2, 2), rng.uniform(0.1, 0.3)))
+        for _ in range(int(rng.integers(0, 4))):
+            x0, y0 = rng.uniform(-2, 2, 2)
+            a, n = rng.uniform(-np.pi, np.pi), rng.uniform(0.2, 2.0)
+            lines.append((k, x0, y0, x0 + n * np.cos(a), y0 + n * np.sin(a)))
+        if k % 2 == 0:   # a bench: two supports and a seat between them
+            cx, cy = rng.uniform(-1, 1, 2)
+            circles += [(k, cx - 0.7, cy, 0.15), (k, cx + 0.7, cy, 0.15)]
+            lines.append((k, cx - 0.5, cy + 0.05, cx + 0.5, cy + 0.1))
+    circles = np.array(sorted(circles, key=lambda c: c[0]))
+    lines = np.array(sorted(lines, key=lambda ln: ln[0]))
+    line_offsets = np.searchsorted(lines[:, 0], np.arange(n_scans + 1)).astype(np.int64)
+    out = np.zeros((len(circles) ** 2, 6))
+    n = landmarks._benches(circles[:, 0].astype(np.int64), circles[:, 1], circles[:, 2], circles[:, 3],
+                           lines[:, 1], lines[:, 2], lines[:, 3], lines[:, 4], line_offsets, 0.6, 2.5, out)
+    want = rp.benches(circles, lines, 0.6, 2.5, LANDMARK_BENCH)
+    assert n == len(want) >= n_scans // 2
+    np.testing.assert_allclose(out[:n], want, rtol=1e-12, atol=1e-12)
+
+
+def _landmark_scene(rng: np.random.Generator, n_scans: int) -> np.ndarray:
+    """Detections (scan, type, x, y, orientation, size) of still landmarks of every type seen with noise and
+    misses, a drifting column, columns at a bench's supports, and clutter seen once."""
+    from datmo_cli.log.vocabulary import LANDMARK_BENCH, LANDMARK_COLUMN
+
+    still = [(t, *rng.uniform(-5, 5, 2), rng.uniform(-np.pi, np.pi), rng.uniform(0.1, 0.5)) for t in range(6)]
+    still += [(LANDMARK_BENCH, 1.0, 2.0, 0.3, 1.6)]
+    for sgn in (-1, 1):   # columns where the bench's supports stand (0.13 m in from its ends)
+        half = 0.5 * (1.6 - 2 * 0.13)
+        still.append((LANDMARK_COLUMN, 1.0 + sgn * half * np.cos(0.3), 2.0 + sgn * half * np.sin(0.3), 0.0, 0.15))
+    det = []
+    for k in range(n_scans):
+        for t, x, y, a, size in still:
+            if rng.random() < 0.8:
+                det.append((k, t, x + rng.normal(0, 0.02), y + rng.normal(0, 0.02), a, size * rng.uniform(0.9, 1)))
+        det.append((k, LANDMARK_COLUMN, -3.0 + 0.02 * k, 1.0, 0.0, 0.2))   # drifts away
+        if rng.random() < 0.5:
+            det.append((k, rng.integers(0, 6), *rng.uniform(-6, 6, 2), 0.0, 0.3))
+    return np.array(det, np.float64)
+
+
+def test_accumulate_and_hide_bench_supports():
+    """The landmark database, folded in two calls (state carried between them), equals the plain statement of
+    its rules after every scan: the rows, the stamps first seen, and every scan's snapshot."""
+    from datmo_cli.perception import landmarks as LM
+
+    rng = np.random.default_rng(36)
+    n_scans, split = 40, 23
+    det = _landmark_scene(rng, n_scans)
+    stamps = (np.arange(n_scans) * 100_000_000 + 5 * 10**17).astype(np.int64)
+    match, min_count, drift, column_time, forget, support = 0.3, 3, 0.1, 1e9, 10, 0.13
+    cap = len(det) + 1
+    db, first_ns, last_ns = np.zeros((cap, LM.DB_COLUMNS)), np.zeros(cap, np.int64), np.zeros(cap, np.int64)
+    live, confirmed, counters = np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros(3, np.int64)
+    snaps = []
+    for k0, k1 in ((0, split), (split, n_scans)):
+        part = np.ascontiguousarray(det[(det[:, 0] >= k0) & (det[:, 0] < k1)])
+        size = (k1 - k0) * cap
+        snap_idx, snap_vals = np.zeros(size, np.int64), np.zeros((size, 6))
+        snap_last, snap_count = np.zeros(size, np.int64), np.zeros(k1 - k0, np.int64)
+        ns = LM.accumulate(part, stamps[k0:k1], k0, match, min_count, drift, column_time, forget, support, db,
+                           first_ns, last_ns, live, confirmed, counters, snap_idx, snap_vals, snap_last, snap_count)
+        assert ns == snap_count.sum()
+        offsets = np.concatenate([[0], np.cumsum(snap_count)])
+        for a, b in zip(offsets[:-1], offsets[1:], strict=True):
+            snaps.append([(snap_idx[q], *snap_vals[q], snap_last[q]) for q in range(a, b)])
+    rows, want_first, want_snaps = rp.landmark_database(det, stamps, match, min_count, drift, column_time, forget,
+                                                        support)
+    n = counters[LM.C_ROWS]
+    assert n == len(rows)
+    np.testing.assert_allclose(db[:n], rows, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(first_ns[:n], want_first)
+    for k in range(n_scans):
+        assert [s[0] for s in snaps[k]] == [s[0] for s in want_snaps[k]], f"scan {k}"
+        np.testing.assert_allclose(np.array(snaps[k]).reshape(-1, 8), np.array(want_snaps[k]).reshape(-1, 8),
+                                   rtol=1e-12, atol=1e-12)
+    assert rows[:, LM.DB_MOVED].any() and rows[:, LM.DB_HIDDEN].sum() == 2 and len(want_snaps[-1]) >= 6
+    # the hiding rule on its own: a confirmed column by a confirmed bench's support end, and one farther off
+    db2 = np.zeros((3, LM.DB_COLUMNS))
+    db2[0, :6] = [5, 0.0, 0.0, 0.0, 2.0, 3]
+    db2[1, :6] = [4, 0.85 + 0.3, 0.2, 0.0, 0.15, 3]
+    db2[2, :6] = [4, -0.87, 0.6, 0.0, 0.15, 3]
+    LM._hide_bench_supports(db2, np.array([0, 1, 2]), 3, 3, 0.15)
+    want = [rp.bench_support_hides(db2[q, 1:3], db2[0, 1:5], 0.15) for q in (1, 2)]
+    assert db2[1:, LM.DB_HIDDEN].tolist() == [float(w) for w in want] == [1.0, 0.0]
