@@ -91,6 +91,11 @@ CHECKS: dict[str, str] = {
     "perception._kernels._bounding_box": f"{HERE}::test_bounding_box_and_row_offset",
     "perception._kernels._perpendicular": f"{HERE}::test_perpendicular_and_convex",
     "perception._kernels._convex": f"{HERE}::test_perpendicular_and_convex",
+    "perception._kernels._vote": f"{HERE}::test_vote_and_clear",
+    "perception._kernels._clear": f"{HERE}::test_vote_and_clear",
+    "perception._kernels.extract_scan": f"{DRIVERS}::test_extract_scan_scans_and_parallel",
+    "perception._kernels.extract_scans": f"{DRIVERS}::test_extract_scan_scans_and_parallel",
+    "perception._kernels.extract_parallel": f"{DRIVERS}::test_extract_scan_scans_and_parallel",
     # perception: ego-motion
     "perception._egomotion_kernels.scan_points": "test_egomotion.py::test_scan_points_match_reference",
     "perception._egomotion_kernels.beam_normal": "test_egomotion.py::test_normals_match_reference",
@@ -131,7 +136,4 @@ CHECKS: dict[str, str] = {
 UNCHECKED: frozenset[str] = frozenset({
     # checked through their callers only (whole scans, whole runs), not yet one by one
     "perception._egomotion_kernels.odometry_run",
-    "perception._kernels._vote", "perception._kernels._clear",
-    "perception._kernels.extract_scan",
-    "perception._kernels.extract_scans", "perception._kernels.extract_parallel",
 })

@@ -78,6 +78,16 @@ def segment(ranges, angle_increment: float, c0: float, range_min: float, range_m
     return [(g[0], g[-1] + 1) for g in groups if len(g) >= min_points]
 
 
+def blob(x, y) -> tuple[float, float, float]:
+    """A blob's centroid and size (m): the largest distance from the point farthest from its first point
+    (the first of equal ones), at least that farthest distance itself."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    d0 = (x - x[0]) ** 2 + (y - y[0]) ** 2
+    far = int(np.argmax(d0))
+    d1 = (x - x[far]) ** 2 + (y - y[far]) ** 2
+    return float(x.mean()), float(y.mean()), math.sqrt(max(float(d0[far]), float(d1.max())))
+
+
 # ----------------------------------------------------------------------------------------------- HTL
 
 
@@ -98,17 +108,21 @@ def box_rho_offsets(x, y, n_theta: int, rho_res: float) -> tuple[list[float], in
     return lo, width
 
 
-def htl_accumulator(x, y, n_theta: int, rho_res: float) -> tuple[dict[tuple[int, int], int], tuple[int, int, int]]:
-    """Full Hough accumulator for lines: every point votes in every theta cell, in the rho cell of
-    rho = x cos(theta) + y sin(theta) counted from the box's smallest rho. Returns the accumulator
-    {(theta cell, rho cell): votes} and its peak (votes, theta cell, rho cell); of equal cells, the peak is
-    the one that reached its count first (points in order, theta cells in order)."""
+def htl_accumulator(x, y, n_theta: int, rho_res: float,
+                    windows=None) -> tuple[dict[tuple[int, int], int], tuple[int, int, int]]:
+    """Full Hough accumulator for lines: every point votes in every theta cell (or, with `windows`, point i
+    in the theta cells windows[i] in that order), in the rho cell of rho = x cos(theta) + y sin(theta)
+    counted from the box's smallest rho. Returns the accumulator {(theta cell, rho cell): votes} and its
+    peak (votes, theta cell, rho cell); of equal cells, the peak is the one that reached its count first
+    (points in order, theta cells in order)."""
     lo, width = box_rho_offsets(x, y, n_theta, rho_res)
     inv = 1.0 / rho_res
     acc: dict[tuple[int, int], int] = {}
     peak = (0, 0, 0)
-    for px, py in zip(x, y, strict=True):
-        for t, th in enumerate(theta_table(n_theta)):
+    thetas = theta_table(n_theta)
+    for i, (px, py) in enumerate(zip(x, y, strict=True)):
+        for t in (range(n_theta) if windows is None else windows[i]):
+            th = thetas[t]
             k = int((px * math.cos(th) + py * math.sin(th) - lo[t]) * inv)
             k = min(max(k, 0), width - 1)
             acc[(t, k)] = acc.get((t, k), 0) + 1

@@ -261,3 +261,85 @@ def test_accumulate_and_hide_bench_supports():
     LM._hide_bench_supports(db2, np.array([0, 1, 2]), 3, 3, 0.15)
     want = [rp.bench_support_hides(db2[q, 1:3], db2[0, 1:5], 0.15) for q in (1, 2)]
     assert db2[1:, LM.DB_HIDDEN].tolist() == [float(w) for w in want] == [1.0, 0.0]
+
+
+# ------------------------------------------------------------------------------------------- perception
+def _room_scans(n: int, angles: np.ndarray) -> np.ndarray:
+    """n scans (ranges, m) of two walls, a column, two legs and clutter, with noise and dropouts."""
+    rng = np.random.default_rng(38)
+    out = np.empty((n, len(angles)), np.float32)
+    for k in range(n):
+        r = np.minimum(rp.ray_wall(angles, 4.0, 0.0), rp.ray_wall(angles, 3.0, np.pi / 2))
+        for cx, cy, rad in ((2.0, -1.0 + 0.05 * k, 0.2), (1.5, 1.0, 0.06), (1.5, 1.2, 0.06)):
+            r = np.minimum(r, rp.ray_circle(angles, cx, cy, rad))
+        r = r + rng.normal(0, 0.005, len(r))
+        clutter = rng.random(len(r)) < 0.05
+        r[clutter] = rng.uniform(0.5, 3.0, clutter.sum())
+        r[rng.random(len(r)) < 0.03] = np.nan
+        out[k] = r
+    return out
+
+
+def test_extract_scan_scans_and_parallel():
+    """A block of scans through extract_scans (one call) and extract_parallel (split in parts) gives the same
+    rows as extract_scan called scan by scan on the reference's segments; each segment is one circle, or its
+    lines, or a blob, and blobs are the reference's centroid and extent."""
+    from datmo_cli.perception import _kernels as KP
+    from datmo_cli.perception.params import FeatureParams
+
+    p = FeatureParams()
+    inc = np.radians(0.5)
+    angles = -np.pi / 2 + inc * np.arange(361)
+    ranges = _room_scans(3, angles)
+    N, B = ranges.shape
+    nt = int(round(180.0 / p.theta_resolution))
+    theta = np.arange(nt) * (np.pi / nt)
+    cos_t, sin_t, vec = np.cos(theta), np.sin(theta), p.kernel_vector()
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    c1 = float(np.sqrt(2.0 * (1.0 - np.cos(inc))))
+    args = (cos_a, sin_a, float(np.cos(inc)), c1, 0.05, 8.0, vec, cos_t, sin_t)
+    none_given, none_off = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+
+    def rows() -> list:
+        return [np.zeros((N * B, c), np.int64 if c == 2 else np.float64) for c in (2, 13, 9, 9)] + \
+            [np.zeros((N, 4), np.int64)]
+
+    whole, parallel = rows(), rows()
+    KP.extract_scans(ranges, 0, N, *args, *whole, none_given, none_off)
+    KP.extract_parallel(ranges, 2, *args, *parallel, none_given, none_off)
+    for a, b in zip(whole, parallel, strict=True):
+        np.testing.assert_array_equal(a, b)
+    seg, lines, circles, blobs, counts = whole
+    assert (counts[:, 1:].sum(axis=0) > 0).all()   # lines, circles and blobs
+
+    w = int(round(vec[KP.P_CWINDOW] / vec[KP.P_CELL]))
+    for k in range(N):
+        want_seg = rp.segment(ranges[k], inc, vec[KP.P_C0], 0.05, 8.0, int(vec[KP.P_MIN_POINTS]))
+        assert [tuple(s) for s in seg[k * B:k * B + counts[k, 0]].tolist()] == want_seg
+        starts = np.array([s for s, _ in want_seg] + [0], np.int64)
+        ends = np.array([e for _, e in want_seg] + [0], np.int64)
+        r = np.where(np.isfinite(ranges[k]), ranges[k], 0.0).astype(np.float64)
+        x, y = r * cos_a, r * sin_a
+        out = [np.zeros((B, c)) for c in (13, 9, 9)]
+        acc = np.zeros((nt, int(2 * 8.0 / vec[KP.P_RHO_RES]) + 3), np.int32)
+        work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
+                np.empty((KP.MAX_SUB, 3), np.int64), np.empty((KP.MAX_SUB, 12)), np.empty(KP.MAX_SUB, np.int64),
+                np.empty(KP.MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64), np.empty(4),
+                np.zeros(1, np.int64))
+        nl, nc, nb = KP.extract_scan(x, y, starts, ends, len(want_seg), k, vec, acc,
+                                     np.zeros((2 * w + 1, 2 * w + 1), np.int32), cos_t, sin_t, np.empty(B, np.int64),
+                                     np.empty(KP.MAX_SUB, np.int64), np.empty(KP.MAX_SUB, np.int64), out[0], 0, out[1],
+                                     0, out[2], 0, work, inc)
+        got = [out[0][:nl], out[1][:nc], out[2][:nb]]
+        for j, (g, table) in enumerate(zip(got, (lines, circles, blobs), strict=True)):
+            np.testing.assert_array_equal(g, table[k * B:k * B + counts[k, j + 1]])
+        kinds = [set() for _ in want_seg]
+        for j, g in enumerate(got):
+            for row in g:
+                s, e = want_seg[int(row[1])]
+                assert s <= row[2] <= row[3] < e
+                kinds[int(row[1])].add(j)
+        assert all(len(kind) == 1 for kind in kinds)
+        for row in got[2]:
+            s, e = int(row[KP.B_FIRST]), int(row[KP.B_LAST]) + 1
+            np.testing.assert_allclose(row[KP.B_X:KP.B_SIZE + 1], rp.blob(x[s:e], y[s:e]), rtol=1e-12, atol=1e-12)
