@@ -2,9 +2,8 @@
 
 Keys: 'package.module.kernel' under datmo_cli; values: 'test file::test function'. The tests named here get
 the `kernels` marker (conftest.py), so `make test-nojit` runs them all with NUMBA_DISABLE_JIT=1, the kernels as
-plain Python; tests/test_kernels_reference.py checks that the table covers every kernel the package defines.
-`UNCHECKED` lists the kernels no test checks directly against a reference yet (they are exercised through
-their callers only); it may only shrink. Plain data: conftest.py reads it at collection.
+plain Python; tests/test_kernels_reference.py checks that the table covers every kernel the package defines,
+so a new kernel needs its direct check. Plain data: conftest.py reads it at collection.
 """
 
 from __future__ import annotations
@@ -113,6 +112,7 @@ CHECKS: dict[str, str] = {
     "perception._egomotion_kernels.cell_hash": f"{HERE}::test_cell_of_and_hash",
     "perception._egomotion_kernels._gather": f"{DRIVERS}::test_gather",
     "perception._egomotion_kernels.rebuild_map": f"{DRIVERS}::test_rebuild_map",
+    "perception._egomotion_kernels.odometry_run": f"{DRIVERS}::test_odometry_run",
     # perception: the leg detector
     "perception._leg_kernels._gap_pass": f"{HERE}::test_gap_pass_and_block_features",
     "perception._leg_kernels.block_features": f"{HERE}::test_gap_pass_and_block_features",
@@ -132,8 +132,3 @@ CHECKS: dict[str, str] = {
     "perception.landmarks.accumulate": f"{DRIVERS}::test_accumulate_and_hide_bench_supports",
     "perception.landmarks._hide_bench_supports": f"{DRIVERS}::test_accumulate_and_hide_bench_supports",
 }
-
-UNCHECKED: frozenset[str] = frozenset({
-    # checked through their callers only (whole scans, whole runs), not yet one by one
-    "perception._egomotion_kernels.odometry_run",
-})

@@ -645,7 +645,7 @@ def beam_normal(r, angles, range_min, range_max, b, normal_radius, max_gap, max_
     stopping once two are taken and one is normal_radius away (or after max_window beams); eigenvector of the
     smallest eigenvalue of the points' covariance when line-like, (0, 0) when compact but not line-like,
     (NaN, NaN) otherwise or under 3 points."""
-    p = np.array([r[b] * math.cos(angles[b]), r[b] * math.sin(angles[b])])
+    p = np.array([float(r[b]) * math.cos(angles[b]), float(r[b]) * math.sin(angles[b])])
     pts = [p]
     far = 0.0
     for direction in (-1, 1):
@@ -656,7 +656,7 @@ def beam_normal(r, angles, range_min, range_max, b, normal_radius, max_gap, max_
                 break
             if not is_valid(float(r[j]), range_min, range_max):
                 continue
-            q = np.array([r[j] * math.cos(angles[j]), r[j] * math.sin(angles[j])])
+            q = np.array([float(r[j]) * math.cos(angles[j]), float(r[j]) * math.sin(angles[j])])
             if np.linalg.norm(q - last) > max_gap:
                 break
             pts.append(q)
@@ -936,3 +936,68 @@ def landmark_database(det, stamps, match, min_count, max_drift, column_time, for
         snapshots.append([(q, *rows[q][1:6], rows[q][7], last_ns[q]) for q in confirmed
                           if rows[q][10] == 0 and rows[q][12] == 0])
     return np.array(rows).reshape(-1, 13), np.array(first_ns, np.int64), snapshots
+
+
+FLAG_KEYFRAME, FLAG_RECOVERED, FLAG_FAILED = 1, 2, 4
+
+
+def compose(a, b) -> np.ndarray:
+    """a (+) b: pose b (x, y, theta), given in a's frame, in a's parent frame (theta not wrapped)."""
+    x, y, _ = se2(*a) @ [b[0], b[1], 1.0]
+    return np.array([x, y, a[2] + b[2]])
+
+
+def odometry(ranges, dt, angles, range_min, range_max, p, max_window):
+    """Poses (N, 3) and stats (N, 6: mean |residual|, inlier share, matched, points, flags, iterations) of
+    scan-to-local-map ICP over scans `ranges` (m), dt (s) since the previous scan, parameters p (IcpParams).
+    Each scan is aligned (icp_align) to the map of the last p.n_keyframes keyframes (rebuild_map) from the
+    previous pose moved on by the previous motion times the ratio of the time steps (at most 3); when its
+    inlier share is under p.min_inlier_share or ICP used all p.max_iter iterations, also from the previous
+    pose moved by each recovery move, the best share kept. A scan is a keyframe when it is the first, or
+    (with MIN_MATCHES points) p.keyframe_dist or p.keyframe_angle from the newest, or its share is under
+    p.keyframe_share; its points are scan_points at p.map_spacing with their beam normals."""
+    slots = max(1, p.n_keyframes)
+    ring: list = [None] * slots
+    newest, n_kf = -1, 0
+    map_xy, map_n = np.zeros((0, 2)), np.zeros((0, 2))
+    moves = np.asarray(p.recovery_moves, float).reshape(-1, 3)
+    poses, stats = np.zeros((len(ranges), 3)), np.zeros((len(ranges), 6))
+    align = (p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight)
+    for k, r in enumerate(ranges):
+        sx, sy, _ = scan_points(r, angles, range_min, range_max, p.source_spacing, p.max_points)
+        src, n_src = np.column_stack([sx, sy]).reshape(-1, 2), len(sx)
+        flags = 0
+        if k == 0 or n_kf == 0:
+            pose, (matched, mean_res, inliers, iters), share = np.zeros(3), (0, 0.0, 0, 0), 0.0
+        else:
+            prev = poses[k - 1]
+            guess = prev
+            if k >= 2 and dt[k - 1] > 0:
+                motion = pose_of(np.linalg.inv(se2(*poses[k - 2])) @ se2(*prev))
+                guess = compose(prev, min(max(dt[k] / dt[k - 1], 0.0), 3.0) * motion)
+            pose, (matched, mean_res, inliers, iters) = icp_align(src, guess, map_xy, map_n, *align)
+            share = inliers / max(n_src, 1)
+            if share < p.min_inlier_share or iters >= p.max_iter:
+                for move in moves:
+                    trial, (m2, r2, i2, it2) = icp_align(src, compose(prev, move), map_xy, map_n, *align)
+                    iters += it2
+                    if m2 >= MIN_MATCHES and i2 / max(n_src, 1) > share:
+                        share, matched, mean_res, inliers, pose = i2 / max(n_src, 1), m2, r2, i2, trial
+                        flags |= FLAG_RECOVERED
+            if matched < MIN_MATCHES:
+                flags |= FLAG_FAILED
+        poses[k] = pose
+        new_kf = n_kf == 0
+        if not new_kf and n_src >= MIN_MATCHES:
+            dx, dy, dth = pose_of(np.linalg.inv(se2(*ring[newest][2])) @ se2(*pose))
+            new_kf = math.hypot(dx, dy) > p.keyframe_dist or abs(dth) > p.keyframe_angle or share < p.keyframe_share
+        if new_kf:
+            newest, n_kf = (newest + 1) % slots, min(n_kf + 1, slots)
+            kx, ky, beams = scan_points(r, angles, range_min, range_max, p.map_spacing, len(r))
+            normals = np.array([beam_normal(r, angles, range_min, range_max, b, p.normal_radius, p.max_gap,
+                                            max_window, p.planarity) for b in beams]).reshape(-1, 2)
+            ring[newest] = (np.column_stack([kx, ky]).reshape(-1, 2), normals, poses[k].copy())
+            map_xy, map_n = rebuild_map(ring, newest, n_kf, p.map_spacing, slots * len(r))
+            flags |= FLAG_KEYFRAME
+        stats[k] = mean_res, share, matched, n_src, flags, iters
+    return poses, stats

@@ -1,6 +1,7 @@
-"""The kernels that drive others (a whole block of scans, a scan through every phase, a run of scans through
-ego-motion, a block of landmark detections), called directly on small scenes and compared with the plain
-references of tests/reference_*.py; tests/test_kernels_reference.py checks the kernels they call one by one."""
+"""The kernels that run whole stages (a block of scans through tracking, feature extraction or ego-motion, a
+block of detections into the landmark database) and their helpers, called directly on small scenes and
+compared with the plain references of tests/reference_*.py; tests/test_kernels_reference.py checks the
+kernels they call one by one."""
 
 from __future__ import annotations
 
@@ -343,3 +344,33 @@ def test_extract_scan_scans_and_parallel():
         for row in got[2]:
             s, e = int(row[KP.B_FIRST]), int(row[KP.B_LAST]) + 1
             np.testing.assert_allclose(row[KP.B_X:KP.B_SIZE + 1], rp.blob(x[s:e], y[s:e]), rtol=1e-12, atol=1e-12)
+
+
+def test_odometry_run():
+    """A drive through the test room with a sudden turn (recovered from the recovery moves) and a blank scan:
+    every pose and statistic of the compiled run equals the reference's, keyframes included."""
+    from datmo_cli.perception.egomotion import IcpParams, _max_window
+    from tests.test_egomotion import cast, drive, geometry
+
+    geom, p = geometry(181, 180.0), IcpParams()
+    truth = drive(14)
+    truth[9:] = [(x, y, t + 0.5) for x, y, t in truth[9:]]   # a sudden turn on the spot
+    rng = np.random.default_rng(39)
+    ranges = np.stack([cast(pose, geom.angles(), noise=0.005, rng=rng) for pose in truth])
+    ranges[5] = np.inf   # nothing seen
+    dt = np.full(len(ranges), 0.1)
+    dt[0], dt[7] = 0.0, 0.2
+    angles = geom.angles().astype(np.float64)
+    poses, stats = np.zeros((len(ranges), 3)), np.zeros((len(ranges), KE.N_STATS))
+    KE.odometry_run(ranges, dt, np.cos(angles), np.sin(angles), geom.range_min, geom.range_max, p.max_points,
+                    p.source_spacing, p.map_spacing, p.normal_radius, p.max_gap, _max_window(geom), p.planarity,
+                    p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight,
+                    p.keyframe_dist, p.keyframe_angle, p.keyframe_share, p.n_keyframes, p.min_inlier_share,
+                    np.asarray(p.recovery_moves, np.float64).reshape(-1, 3), poses, stats)
+    want_poses, want_stats = rp.odometry(ranges, dt, angles, geom.range_min, geom.range_max, p, _max_window(geom))
+    np.testing.assert_allclose(poses, want_poses, rtol=0, atol=1e-9)
+    exact = [KE.S_MATCHED, KE.S_POINTS, KE.S_FLAGS, KE.S_ITERATIONS]
+    np.testing.assert_array_equal(stats[:, exact], want_stats[:, exact])
+    np.testing.assert_allclose(stats, want_stats, rtol=1e-9, atol=1e-12)
+    flags = stats[:, KE.S_FLAGS].astype(np.int64)
+    assert (flags & KE.FLAG_KEYFRAME).sum() >= 2 and (flags & KE.FLAG_RECOVERED).any()
