@@ -2,14 +2,14 @@
 
 Keys: 'package.module.kernel' under datmo_cli; values: 'test file::test function'. The tests named here get
 the `kernels` marker (conftest.py), so `make test-nojit` runs them all with NUMBA_DISABLE_JIT=1, the kernels as
-plain Python; tests/test_kernels_reference.py checks that the table covers every kernel the package defines.
-`UNCHECKED` lists the kernels no test checks directly against a reference yet (they are exercised through
-their callers only); it may only shrink. Plain data: conftest.py reads it at collection.
+plain Python; tests/test_kernels_reference.py checks that the table covers every kernel the package defines,
+so a new kernel needs its direct check. Plain data: conftest.py reads it at collection.
 """
 
 from __future__ import annotations
 
 HERE = "test_kernels_reference.py"
+DRIVERS = "test_kernels_drivers.py"
 STEP_PHASES = "test_tracking_step.py::test_every_phase_equals_the_reference_on_small_scenes"
 
 CHECKS: dict[str, str] = {
@@ -49,6 +49,9 @@ CHECKS: dict[str, str] = {
     "tracking._step.push_tail": STEP_PHASES,
     "tracking._step.background": STEP_PHASES,
     "tracking._step.write_tracks": STEP_PHASES,
+    "tracking._step.track_block": f"{DRIVERS}::test_track_block_step_measurements_and_track_scan",
+    "tracking._step.step_measurements": f"{DRIVERS}::test_track_block_step_measurements_and_track_scan",
+    "tracking._step.track_scan": f"{DRIVERS}::test_track_block_step_measurements_and_track_scan",
     "tracking._step.kalman_update": f"{HERE}::test_step_kalman_update_and_restart",
     "tracking._step.restart": f"{HERE}::test_step_kalman_update_and_restart",
     "tracking._step.to_sensor": f"{HERE}::test_step_to_sensor",
@@ -87,6 +90,11 @@ CHECKS: dict[str, str] = {
     "perception._kernels._bounding_box": f"{HERE}::test_bounding_box_and_row_offset",
     "perception._kernels._perpendicular": f"{HERE}::test_perpendicular_and_convex",
     "perception._kernels._convex": f"{HERE}::test_perpendicular_and_convex",
+    "perception._kernels._vote": f"{HERE}::test_vote_and_clear",
+    "perception._kernels._clear": f"{HERE}::test_vote_and_clear",
+    "perception._kernels.extract_scan": f"{DRIVERS}::test_extract_scan_scans_and_parallel",
+    "perception._kernels.extract_scans": f"{DRIVERS}::test_extract_scan_scans_and_parallel",
+    "perception._kernels.extract_parallel": f"{DRIVERS}::test_extract_scan_scans_and_parallel",
     # perception: ego-motion
     "perception._egomotion_kernels.scan_points": "test_egomotion.py::test_scan_points_match_reference",
     "perception._egomotion_kernels.beam_normal": "test_egomotion.py::test_normals_match_reference",
@@ -102,6 +110,9 @@ CHECKS: dict[str, str] = {
     "perception._egomotion_kernels.add_to_map": f"{HERE}::test_add_to_map",
     "perception._egomotion_kernels.cell_of": f"{HERE}::test_cell_of_and_hash",
     "perception._egomotion_kernels.cell_hash": f"{HERE}::test_cell_of_and_hash",
+    "perception._egomotion_kernels._gather": f"{DRIVERS}::test_gather",
+    "perception._egomotion_kernels.rebuild_map": f"{DRIVERS}::test_rebuild_map",
+    "perception._egomotion_kernels.odometry_run": f"{DRIVERS}::test_odometry_run",
     # perception: the leg detector
     "perception._leg_kernels._gap_pass": f"{HERE}::test_gap_pass_and_block_features",
     "perception._leg_kernels.block_features": f"{HERE}::test_gap_pass_and_block_features",
@@ -114,20 +125,10 @@ CHECKS: dict[str, str] = {
     "perception._leg_kernels._leaves4": f"{HERE}::test_ensemble_leaf_and_candidates",
     "perception._leg_kernels.block_probabilities": f"{HERE}::test_block_probabilities",
     "perception._leg_kernels.block_probabilities_parallel": f"{HERE}::test_block_probabilities",
+    "perception._leg_kernels.segment_features": f"{DRIVERS}::test_segment_features",
+    # perception: landmarks
+    "perception.landmarks._beyond": f"{DRIVERS}::test_beyond",
+    "perception.landmarks._benches": f"{DRIVERS}::test_benches",
+    "perception.landmarks.accumulate": f"{DRIVERS}::test_accumulate_and_hide_bench_supports",
+    "perception.landmarks._hide_bench_supports": f"{DRIVERS}::test_accumulate_and_hide_bench_supports",
 }
-
-UNCHECKED: frozenset[str] = frozenset({
-    # checked through their callers only (whole scans, whole runs), not yet one by one
-    "perception._egomotion_kernels._gather",
-    "perception._egomotion_kernels.rebuild_map", "perception._egomotion_kernels.odometry_run",
-    "perception._kernels._vote", "perception._kernels._clear",
-    "perception._kernels.extract_scan",
-    "perception._kernels.extract_scans", "perception._kernels.extract_parallel",
-    "perception._leg_kernels.segment_features",
-    "perception.landmarks._beyond", "perception.landmarks._benches", "perception.landmarks.accumulate",
-    "perception.landmarks._hide_bench_supports",
-    # the compiled step's drivers and the helpers inside its phases: checked through the phases and whole
-    # runs (test_tracking_step.py), not one by one
-    *(f"tracking._step.{n}" for n in (
-        "_empty_meas", "track_scan", "step_measurements", "track_block")),
-})

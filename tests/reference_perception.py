@@ -78,6 +78,16 @@ def segment(ranges, angle_increment: float, c0: float, range_min: float, range_m
     return [(g[0], g[-1] + 1) for g in groups if len(g) >= min_points]
 
 
+def blob(x, y) -> tuple[float, float, float]:
+    """A blob's centroid and size (m): the largest distance from the point farthest from its first point
+    (the first of equal ones), at least that farthest distance itself."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    d0 = (x - x[0]) ** 2 + (y - y[0]) ** 2
+    far = int(np.argmax(d0))
+    d1 = (x - x[far]) ** 2 + (y - y[far]) ** 2
+    return float(x.mean()), float(y.mean()), math.sqrt(max(float(d0[far]), float(d1.max())))
+
+
 # ----------------------------------------------------------------------------------------------- HTL
 
 
@@ -98,17 +108,21 @@ def box_rho_offsets(x, y, n_theta: int, rho_res: float) -> tuple[list[float], in
     return lo, width
 
 
-def htl_accumulator(x, y, n_theta: int, rho_res: float) -> tuple[dict[tuple[int, int], int], tuple[int, int, int]]:
-    """Full Hough accumulator for lines: every point votes in every theta cell, in the rho cell of
-    rho = x cos(theta) + y sin(theta) counted from the box's smallest rho. Returns the accumulator
-    {(theta cell, rho cell): votes} and its peak (votes, theta cell, rho cell); of equal cells, the peak is
-    the one that reached its count first (points in order, theta cells in order)."""
+def htl_accumulator(x, y, n_theta: int, rho_res: float,
+                    windows=None) -> tuple[dict[tuple[int, int], int], tuple[int, int, int]]:
+    """Full Hough accumulator for lines: every point votes in every theta cell (or, with `windows`, point i
+    in the theta cells windows[i] in that order), in the rho cell of rho = x cos(theta) + y sin(theta)
+    counted from the box's smallest rho. Returns the accumulator {(theta cell, rho cell): votes} and its
+    peak (votes, theta cell, rho cell); of equal cells, the peak is the one that reached its count first
+    (points in order, theta cells in order)."""
     lo, width = box_rho_offsets(x, y, n_theta, rho_res)
     inv = 1.0 / rho_res
     acc: dict[tuple[int, int], int] = {}
     peak = (0, 0, 0)
-    for px, py in zip(x, y, strict=True):
-        for t, th in enumerate(theta_table(n_theta)):
+    thetas = theta_table(n_theta)
+    for i, (px, py) in enumerate(zip(x, y, strict=True)):
+        for t in (range(n_theta) if windows is None else windows[i]):
+            th = thetas[t]
             k = int((px * math.cos(th) + py * math.sin(th) - lo[t]) * inv)
             k = min(max(k, 0), width - 1)
             acc[(t, k)] = acc.get((t, k), 0) + 1
@@ -631,7 +645,7 @@ def beam_normal(r, angles, range_min, range_max, b, normal_radius, max_gap, max_
     stopping once two are taken and one is normal_radius away (or after max_window beams); eigenvector of the
     smallest eigenvalue of the points' covariance when line-like, (0, 0) when compact but not line-like,
     (NaN, NaN) otherwise or under 3 points."""
-    p = np.array([r[b] * math.cos(angles[b]), r[b] * math.sin(angles[b])])
+    p = np.array([float(r[b]) * math.cos(angles[b]), float(r[b]) * math.sin(angles[b])])
     pts = [p]
     far = 0.0
     for direction in (-1, 1):
@@ -642,7 +656,7 @@ def beam_normal(r, angles, range_min, range_max, b, normal_radius, max_gap, max_
                 break
             if not is_valid(float(r[j]), range_min, range_max):
                 continue
-            q = np.array([r[j] * math.cos(angles[j]), r[j] * math.sin(angles[j])])
+            q = np.array([float(r[j]) * math.cos(angles[j]), float(r[j]) * math.sin(angles[j])])
             if np.linalg.norm(q - last) > max_gap:
                 break
             pts.append(q)
@@ -661,6 +675,40 @@ def beam_normal(r, angles, range_min, range_max, b, normal_radius, max_gap, max_
     if far <= 2 * normal_radius:
         return 0.0, 0.0
     return math.nan, math.nan
+
+
+def gather(r, angles, range_min, range_max, b, direction, normal_radius, max_gap, max_window):
+    """One side of beam_normal's walk from beam b in `direction` (+1 or -1): the points taken, relative to
+    b's point (m, sensor frame), and the farthest distance among them."""
+    p = np.array([float(r[b]) * math.cos(angles[b]), float(r[b]) * math.sin(angles[b])])
+    last, taken, far = p, [], 0.0
+    for step in range(1, max_window + 1):
+        j = b + direction * step
+        if not 0 <= j < len(r):
+            break
+        if not is_valid(float(r[j]), range_min, range_max):
+            continue
+        q = np.array([float(r[j]) * math.cos(angles[j]), float(r[j]) * math.sin(angles[j])])
+        if np.linalg.norm(q - last) > max_gap:
+            break
+        taken.append(q - p)
+        last = q
+        d = float(np.linalg.norm(q - p))
+        far = max(far, d)
+        if len(taken) >= 2 and d >= normal_radius:
+            break
+    return np.array(taken).reshape(-1, 2), far
+
+
+def rebuild_map(keyframes, newest, n_kf, map_spacing, capacity):
+    """The local map (points, normals; world frame) of the n_kf keyframes of the ring `keyframes` (a list of
+    (points, normals, pose)) ending at slot newest, newest first: its points all, each older one's only where
+    no map point is within map_spacing (m)."""
+    xy, nn = np.zeros((0, 2)), np.zeros((0, 2))
+    for a in range(n_kf):
+        pts, nrm, pose = keyframes[(newest - a) % len(keyframes)]
+        xy, nn = add_to_map(pts, nrm, pose, map_spacing if a > 0 else 0.0, xy, nn, capacity)
+    return xy, nn
 
 
 def nearest(q, map_xy, max_dist):
@@ -757,3 +805,199 @@ def icp_align(src, init, map_xy, map_n, max_dist0, max_dist, scale, inlier_tol, 
     _, _, matched, abs_sum, inliers = icp_step(src, pose, map_xy, map_n, gate, scale, True, inlier_tol)
     pose[2] = math.atan2(math.sin(pose[2]), math.cos(pose[2]))
     return pose, (matched, abs_sum / max(matched, 1), inliers, it)
+
+
+# ----------------------------------------------------------------------------------------------------------- landmarks
+
+
+def beyond(ranges, scan, beam, step, lo, hi, dropout):
+    """For each (scan, beam): the first return in (lo, hi) (m) among the dropout + 1 beams beyond it in
+    direction `step` (inside the scan), and its beam; (inf, -1) where there is none."""
+    out, where = [], []
+    for k, b in zip(scan, beam, strict=True):
+        found = (math.inf, -1)
+        for j in range(1, dropout + 2):
+            nb = b + step * j
+            if not 0 <= nb < ranges.shape[1]:
+                break
+            r = float(ranges[k, nb])
+            if math.isfinite(r) and lo < r < hi:
+                found = (r, nb)
+                break
+        out.append(found[0])
+        where.append(found[1])
+    return np.array(out), np.array(where, np.int64)
+
+
+def benches(circles, lines, dmin, dmax, bench_type):
+    """Bench detections (scan, type, x, y, orientation, size) from support circles (scan, x, y, radius) and
+    lines (scan, x0, y0, x1, y1): two circles of one scan dmin..dmax (m) apart, the first line of the scan
+    whose middle lies between them (along their axis, within 0.4 m of it) and that runs along the axis
+    (at least 0.9 of its length)."""
+    out = []
+    for u, (su, xu, yu, ru) in enumerate(circles):
+        for sv, xv, yv, rv in circles[u + 1:]:
+            if sv != su:
+                continue
+            d = math.hypot(xv - xu, yv - yu)
+            if not dmin <= d <= dmax:
+                continue
+            axis = np.array([xv - xu, yv - yu]) / d
+            for sl, x0, y0, x1, y1 in lines:
+                if sl != su:
+                    continue
+                mid = np.array([0.5 * (x0 + x1) - xu, 0.5 * (y0 + y1) - yu])
+                along, across = mid @ axis, abs(axis[0] * mid[1] - axis[1] * mid[0])
+                run = np.array([x1 - x0, y1 - y0])
+                if 0 < along < d and across < 0.4 and abs(run @ axis) >= 0.9 * np.linalg.norm(run):
+                    out.append((su, bench_type, 0.5 * (xu + xv), 0.5 * (yu + yv), math.atan2(axis[1], axis[0]),
+                                d + ru + rv))
+                    break
+    return np.array(out).reshape(-1, 6)
+
+
+COLUMN, BENCH = 4, 5   # landmark types (Landmark.msg)
+
+
+def bench_support_hides(column, bench, support_radius) -> bool:
+    """Whether a column (x, y) is within 0.5 m of a support of a bench (x, y, orientation, length): the
+    supports stand support_radius (m) in from its ends."""
+    half = 0.5 * (bench[3] - 2 * support_radius)
+    for sgn in (-1.0, 1.0):
+        sx, sy = bench[0] + sgn * half * math.cos(bench[2]), bench[1] + sgn * half * math.sin(bench[2])
+        if math.hypot(column[0] - sx, column[1] - sy) < 0.5:
+            return True
+    return False
+
+
+def landmark_database(det, stamps, match, min_count, max_drift, column_time, forget, support_radius):
+    """The landmark database rules, scan by scan: detections det (scan, type, x, y, orientation, size), scan k
+    stamped stamps[k] (ns). A detection is the nearest landmark of its type not yet seen in this scan within
+    its gate (match; a column max_drift, at most 2 match; a bench 2 match, its distance measured across its
+    axis and beyond its half-length), else a new one. A match counts one more sighting: running mean
+    position and size, the latest orientation (a bench takes the whole detection when it is longer). A
+    column that drifts over max_drift from where it was first seen has moved. A landmark is confirmed at
+    min_count sightings (a column once seen over column_time ns). After each scan, unconfirmed landmarks
+    not seen for `forget` scans and moved ones are no longer matched, and confirmed columns by a confirmed
+    bench's supports are hidden. Returns (rows (type, x, y, orientation, size, count, first scan, last
+    scan, first x, first y, moved, confirmed, hidden), first_ns, and per scan the snapshot: (row, x, y,
+    orientation, size, count, last scan, last seen ns) of the confirmed landmarks neither moved nor hidden,
+    in the order confirmed)."""
+    rows, first_ns, last_ns, live, confirmed, snapshots = [], [], [], [], [], []
+    for k, stamp in enumerate(stamps):
+        for _, t, x, y, orient, size in det[det[:, 0] == k]:
+            gate = min(max_drift, 2 * match) if t == COLUMN else (2 * match if t == BENCH else match)
+            best, bd = -1, math.inf
+            for q in live:
+                row = rows[q]
+                if row[0] != t or row[7] == k:
+                    continue
+                d = math.hypot(row[1] - x, row[2] - y)
+                if t == BENCH:
+                    ux, uy, rx, ry = math.cos(row[3]), math.sin(row[3]), x - row[1], y - row[2]
+                    d = abs(ux * ry - uy * rx) + max(0.0, abs(rx * ux + ry * uy) - 0.5 * row[4])
+                if d <= gate and d < bd:
+                    best, bd = q, d
+            if best < 0:
+                rows.append([t, x, y, orient, size, 1.0, k, k, x, y, 0.0, 0.0, 0.0])
+                first_ns.append(stamp)
+                last_ns.append(stamp)
+                live.append(len(rows) - 1)
+                if min_count <= 1 and (t != COLUMN or column_time <= 0):
+                    rows[-1][11] = 1.0
+                    confirmed.append(len(rows) - 1)
+                continue
+            row = rows[best]
+            c = row[5] + 1
+            if t == BENCH:
+                if size > row[4]:
+                    row[1:5] = [x, y, orient, size]
+            else:
+                row[1] += (x - row[1]) / c
+                row[2] += (y - row[2]) / c
+                row[3] = orient
+                row[4] += (size - row[4]) / c
+            row[5], row[7] = c, k
+            last_ns[best] = stamp
+            if t == COLUMN and math.hypot(x - row[8], y - row[9]) > max_drift:
+                row[10] = 1.0
+            if row[11] == 0 and c >= min_count and (t != COLUMN or stamp - first_ns[best] >= column_time):
+                row[11] = 1.0
+                confirmed.append(best)
+        live = [q for q in live if not ((rows[q][11] == 0 and k - rows[q][7] > forget) or rows[q][10] != 0)]
+        for q in confirmed:
+            if rows[q][0] != COLUMN:
+                continue
+            for b in confirmed:
+                bench = rows[b]
+                if bench[0] == BENCH and bench[5] >= min_count and \
+                        bench_support_hides(rows[q][1:3], bench[1:5], support_radius):
+                    rows[q][12] = 1.0
+        snapshots.append([(q, *rows[q][1:6], rows[q][7], last_ns[q]) for q in confirmed
+                          if rows[q][10] == 0 and rows[q][12] == 0])
+    return np.array(rows).reshape(-1, 13), np.array(first_ns, np.int64), snapshots
+
+
+FLAG_KEYFRAME, FLAG_RECOVERED, FLAG_FAILED = 1, 2, 4
+
+
+def compose(a, b) -> np.ndarray:
+    """a (+) b: pose b (x, y, theta), given in a's frame, in a's parent frame (theta not wrapped)."""
+    x, y, _ = se2(*a) @ [b[0], b[1], 1.0]
+    return np.array([x, y, a[2] + b[2]])
+
+
+def odometry(ranges, dt, angles, range_min, range_max, p, max_window):
+    """Poses (N, 3) and stats (N, 6: mean |residual|, inlier share, matched, points, flags, iterations) of
+    scan-to-local-map ICP over scans `ranges` (m), dt (s) since the previous scan, parameters p (IcpParams).
+    Each scan is aligned (icp_align) to the map of the last p.n_keyframes keyframes (rebuild_map) from the
+    previous pose moved on by the previous motion times the ratio of the time steps (at most 3); when its
+    inlier share is under p.min_inlier_share or ICP used all p.max_iter iterations, also from the previous
+    pose moved by each recovery move, the best share kept. A scan is a keyframe when it is the first, or
+    (with MIN_MATCHES points) p.keyframe_dist or p.keyframe_angle from the newest, or its share is under
+    p.keyframe_share; its points are scan_points at p.map_spacing with their beam normals."""
+    slots = max(1, p.n_keyframes)
+    ring: list = [None] * slots
+    newest, n_kf = -1, 0
+    map_xy, map_n = np.zeros((0, 2)), np.zeros((0, 2))
+    moves = np.asarray(p.recovery_moves, float).reshape(-1, 3)
+    poses, stats = np.zeros((len(ranges), 3)), np.zeros((len(ranges), 6))
+    align = (p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight)
+    for k, r in enumerate(ranges):
+        sx, sy, _ = scan_points(r, angles, range_min, range_max, p.source_spacing, p.max_points)
+        src, n_src = np.column_stack([sx, sy]).reshape(-1, 2), len(sx)
+        flags = 0
+        if k == 0 or n_kf == 0:
+            pose, (matched, mean_res, inliers, iters), share = np.zeros(3), (0, 0.0, 0, 0), 0.0
+        else:
+            prev = poses[k - 1]
+            guess = prev
+            if k >= 2 and dt[k - 1] > 0:
+                motion = pose_of(np.linalg.inv(se2(*poses[k - 2])) @ se2(*prev))
+                guess = compose(prev, min(max(dt[k] / dt[k - 1], 0.0), 3.0) * motion)
+            pose, (matched, mean_res, inliers, iters) = icp_align(src, guess, map_xy, map_n, *align)
+            share = inliers / max(n_src, 1)
+            if share < p.min_inlier_share or iters >= p.max_iter:
+                for move in moves:
+                    trial, (m2, r2, i2, it2) = icp_align(src, compose(prev, move), map_xy, map_n, *align)
+                    iters += it2
+                    if m2 >= MIN_MATCHES and i2 / max(n_src, 1) > share:
+                        share, matched, mean_res, inliers, pose = i2 / max(n_src, 1), m2, r2, i2, trial
+                        flags |= FLAG_RECOVERED
+            if matched < MIN_MATCHES:
+                flags |= FLAG_FAILED
+        poses[k] = pose
+        new_kf = n_kf == 0
+        if not new_kf and n_src >= MIN_MATCHES:
+            dx, dy, dth = pose_of(np.linalg.inv(se2(*ring[newest][2])) @ se2(*pose))
+            new_kf = math.hypot(dx, dy) > p.keyframe_dist or abs(dth) > p.keyframe_angle or share < p.keyframe_share
+        if new_kf:
+            newest, n_kf = (newest + 1) % slots, min(n_kf + 1, slots)
+            kx, ky, beams = scan_points(r, angles, range_min, range_max, p.map_spacing, len(r))
+            normals = np.array([beam_normal(r, angles, range_min, range_max, b, p.normal_radius, p.max_gap,
+                                            max_window, p.planarity) for b in beams]).reshape(-1, 2)
+            ring[newest] = (np.column_stack([kx, ky]).reshape(-1, 2), normals, poses[k].copy())
+            map_xy, map_n = rebuild_map(ring, newest, n_kf, p.map_spacing, slots * len(r))
+            flags |= FLAG_KEYFRAME
+        stats[k] = mean_res, share, matched, n_src, flags, iters
+    return poses, stats

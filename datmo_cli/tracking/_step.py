@@ -126,12 +126,6 @@ ANY_ROW = 4   # the compatibility row of tentative tracks (tracker._COMPAT)
 
 # ------------------------------------------------------------------------------------- measurements
 @njit(cache=True)
-def _empty_meas():
-    return (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros((0, 4)),
-            np.zeros(0))
-
-
-@njit(cache=True)
 def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm):
     """One scan's measurements by the paper's rule (reference: tests/reference_tracking.reference_measurements,
     learned=False), sensor frame: x, y, size, kind, legs (M, 4), raw leg candidates (L, 4: x, y, size, 0),

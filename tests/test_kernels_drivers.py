@@ -1,0 +1,376 @@
+"""The kernels that run whole stages (a block of scans through tracking, feature extraction or ego-motion, a
+block of detections into the landmark database) and their helpers, called directly on small scenes and
+compared with the plain references of tests/reference_*.py; tests/test_kernels_reference.py checks the
+kernels they call one by one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+from datmo_cli.perception import _egomotion_kernels as KE
+from datmo_cli.perception import _leg_kernels as KL
+from datmo_cli.tracking import _step
+from datmo_cli.tracking.tracker import _REACQUIRE, TRACK_DTYPE, Tracker, _flat
+from tests import reference_perception as rp
+from tests.reference_tracking import ReferenceTracker, reference_measurements
+from tests.test_tracking_step import GEOM, P, meas_arrays, scenes
+
+
+# ------------------------------------------------------------------------------------------------ tracking
+def _state(learned: bool) -> tuple:
+    """A new tracker's state as the compiled step takes it: (table, context, prm, geometry, cos, sin,
+    background arrays, compatibility table)."""
+    t = Tracker(P, GEOM, learned=learned)
+    return t.tracks.table, t._ctx, t._prm, t._geo, t._cos, t._sin, t._bg, t._compat
+
+
+@settings(max_examples=6, deadline=None)
+@given(scene=scenes())
+def test_track_block_step_measurements_and_track_scan(scene: tuple):
+    """A small scene through _step.track_block (one call), _step.step_measurements and _step.track_scan (scan by
+    scan, each on its own state): every scan's Track elements are the reference tracker's byte for byte."""
+    stamps, feats, poses, ranges, learned = scene
+    N = len(stamps)
+    ref = ReferenceTracker(P, GEOM, learned=learned)
+    want = []
+    for i, f in enumerate(feats):
+        want.append(ref.step(int(stamps[i]), reference_measurements(f, P, learned),
+                             None if ranges is None else ranges[i], None if poses is None else poses[i]))
+    rel = stamps - stamps[0]
+    ranges_arg = np.zeros((N, 0), np.float32) if ranges is None else ranges
+    poses_arg = np.zeros((N, 3)) if poses is None else poses
+
+    tab, ctx, prm, geo, cos_a, sin_a, bg, compat = _state(learned)
+    cap, T = 4, P.tail_length
+    offsets = np.zeros(N + 1, np.int64)
+    _, out, _, count = _step.track_block(tab, ctx, prm, rel, *_flat(feats), learned, ranges_arg, ranges is not None,
+                                         poses_arg, poses is not None, geo, cos_a, sin_a, *bg, compat, _REACQUIRE,
+                                         np.zeros(cap, TRACK_DTYPE), True, np.zeros((cap, T, 2)),
+                                         np.zeros(cap, np.int64), offsets)
+    np.testing.assert_array_equal(np.diff(offsets), [len(w) for w in want])
+    assert out[:offsets[-1]].tobytes() == np.concatenate(want).tobytes()
+    assert (count[:offsets[-1]] >= 1).all()
+
+    tab1, ctx1, prm1, geo1, cos1, sin1, bg1, compat1 = _state(learned)
+    tab2, ctx2, prm2, geo2, cos2, sin2, bg2, compat2 = _state(learned)
+    out1 = np.zeros(1, TRACK_DTYPE)
+    for i, f in enumerate(feats):
+        m = reference_measurements(f, P, learned)
+        mx, my, msize, mkind, mlegs, raw, mprob = meas_arrays(m)
+        has_prob = m.raw_legs.shape[1] >= 4
+        tab1, out1 = _step.step_measurements(tab1, ctx1, prm1, rel[i], mx, my, msize, mkind, mlegs, raw, mprob,
+                                             has_prob, ranges_arg[i], ranges is not None, poses is not None,
+                                             poses_arg[i], geo1, cos1, sin1, *bg1, learned, compat1, _REACQUIRE, out1)
+        n = int(ctx1[_step.C_N_TRACKS])
+        assert out1[:n].tobytes() == want[i].tobytes(), f"step_measurements, scan {i}"
+        tab2 = _step.track_scan(tab2, ctx2, prm2, rel[i], mx, my, msize, mkind, mlegs, raw, mprob, has_prob,
+                                ranges_arg[i], ranges is not None, poses is not None, poses_arg[i], geo2, cos2, sin2,
+                                *bg2, learned, compat2, _REACQUIRE)
+        n2 = int(ctx2[_step.C_N_TRACKS])
+        got = np.zeros(n2, TRACK_DTYPE)
+        _step.write_tracks(got, 0, tab2, n2, poses is not None, poses_arg[i])
+        assert got.tobytes() == want[i].tobytes(), f"track_scan, scan {i}"
+
+
+# --------------------------------------------------------------------------------------------- ego-motion
+def test_gather():
+    """Each side of a beam's neighbourhood: the count and sums of u, v, uu, uv, vv of the points the reference
+    walk takes, and its farthest distance."""
+    rng = np.random.default_rng(31)
+    angles = np.radians(np.linspace(-60.0, 60.0, 121))
+    r = (2.0 + 0.3 * np.sin(angles * 5) + rng.normal(0, 0.01, 121)).astype(np.float32)
+    r[rng.random(121) < 0.1] = np.nan
+    r[40:44] = 1.2   # a near object: the walk stops at its edge
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    for b in np.flatnonzero(np.isfinite(r)).tolist():
+        for direction in (-1, 1):
+            for radius, gap, window in ((0.1, 0.5, 20), (0.3, 0.08, 6)):
+                acc = np.zeros(6)
+                far = KE._gather(r, cos_a, sin_a, 0.05, 30.0, b, direction, radius, gap, window, acc)
+                uv, want_far = rp.gather(r, angles, 0.05, 30.0, b, direction, radius, gap, window)
+                u, v = uv[:, 0], uv[:, 1]
+                want = [len(uv), u.sum(), v.sum(), (u * u).sum(), (u * v).sum(), (v * v).sum()]
+                np.testing.assert_allclose(acc, want, rtol=1e-9, atol=1e-12)
+                assert far == pytest.approx(want_far, rel=1e-9, abs=1e-12)
+
+
+def test_rebuild_map():
+    """The map of a ring of keyframes, newest first, after a few keyframes and after the ring wrapped."""
+    rng = np.random.default_rng(32)
+    slots, beams, cell = 3, 40, 0.25
+    kf_x, kf_y, kf_nx, kf_ny = (np.zeros((slots, beams)) for _ in range(4))
+    kf_n, kf_pose = np.zeros(slots, np.int64), np.zeros((slots, 3))
+    cap = slots * beams
+    mx, my, mnx, mny = np.zeros(cap), np.zeros(cap), np.zeros(cap), np.zeros(cap)
+    head, nxt = np.full(512, KE.EMPTY, np.int64), np.full(cap, KE.EMPTY, np.int64)
+    ring: list = [(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(3))] * slots
+    for newest_count in range(1, 6):
+        newest, n_kf = (newest_count - 1) % slots, min(newest_count, slots)
+        m = int(rng.integers(20, beams))
+        pts = rng.uniform(-2, 2, (m, 2))
+        ang = rng.uniform(-np.pi, np.pi, m)
+        nrm = np.column_stack([np.cos(ang), np.sin(ang)])
+        nrm[rng.random(m) < 0.2] = np.nan
+        pose = rng.uniform(-0.3, 0.3, 3)
+        kf_x[newest, :m], kf_y[newest, :m], kf_nx[newest, :m], kf_ny[newest, :m] = pts[:, 0], pts[:, 1], \
+            nrm[:, 0], nrm[:, 1]
+        kf_n[newest], kf_pose[newest] = m, pose
+        ring[newest] = (pts, nrm, pose)
+        count = KE.rebuild_map(kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose, newest, n_kf, 0.2, cell, head, nxt, mx, my,
+                               mnx, mny)
+        want_xy, want_n = rp.rebuild_map(ring, newest, n_kf, 0.2, cap)
+        assert count == len(want_xy)
+        np.testing.assert_allclose(np.column_stack([mx, my])[:count], want_xy, atol=1e-12)
+        np.testing.assert_allclose(np.column_stack([mnx, mny])[:count], want_n, atol=1e-12)
+
+
+# ------------------------------------------------------------------------------------------------- legs
+def test_segment_features():
+    """The shape features of a segment's points; the scan-context columns (angle, occlusion, jumps, density)
+    are block_features' and are left zero."""
+    from datmo_cli.perception import legs
+
+    rng = np.random.default_rng(33)
+    angles = np.radians(np.linspace(-40.0, 40.0, 60))
+    context = [legs.FEATURE_NAMES.index(n) for n in ("subtended_angle", "occluded_start", "occluded_end",
+                                                      "jump_start", "jump_end", "density", "relative_curvature")]
+    shape = np.setdiff1d(np.arange(KL.N_FEATURES), context)
+    for _ in range(20):
+        r = (rng.uniform(1.0, 3.0) + 0.05 * np.cos(np.linspace(-1, 1, 60)) * rng.uniform(0, 1)
+             + rng.normal(0, 0.01, 60)).astype(np.float32)
+        s = int(rng.integers(0, 50))
+        e = s + int(rng.integers(1, 60 - s + 1))
+        x = r[s:e].astype(np.float64) * np.cos(angles[s:e])
+        y = r[s:e].astype(np.float64) * np.sin(angles[s:e])
+        out, work, step = np.zeros(KL.N_FEATURES), np.empty(e - s), np.empty(e - s)
+        KL.segment_features(x, y, e - s, legs.RADIUS_CLIP, work, step, out)
+        want = rp.segment_features(r, angles, s, e, 0.05, 30.0)
+        np.testing.assert_allclose(out[shape], want[shape], rtol=1e-6, atol=1e-7)
+        assert (out[context] == 0).all()
+
+
+# -------------------------------------------------------------------------------------------- landmarks
+def test_beyond():
+    from datmo_cli.perception import landmarks
+
+    rng = np.random.default_rng(34)
+    ranges = rng.uniform(0.0, 9.0, (3, 30)).astype(np.float32)
+    ranges[rng.random((3, 30)) < 0.3] = np.nan
+    scan, beam = rng.integers(0, 3, 50), rng.integers(0, 30, 50)
+    for step in (-1, 1):
+        out, where = np.full(50, np.inf), np.full(50, -1, np.int64)
+        landmarks._beyond(ranges, scan, beam, step, 0.5, 8.0, 2, out, where)
+        want_out, want_where = rp.beyond(ranges, scan, beam, step, 0.5, 8.0, 2)
+        np.testing.assert_array_equal(out, want_out)
+        np.testing.assert_array_equal(where, want_where)
+        assert (where >= 0).any() and (where < 0).any()
+
+
+def test_benches():
+    from datmo_cli.log.vocabulary import LANDMARK_BENCH
+    from datmo_cli.perception import landmarks
+
+    rng = np.random.default_rng(35)
+    n_scans = 6
+    circles, lines = [], []
+    for k in range(n_scans):
+        for _ in range(int(rng.integers(0, 5))):
+            circles.append((k, *rng.uniform(-2, 2, 2), rng.uniform(0.1, 0.3)))
+        for _ in range(int(rng.integers(0, 4))):
+            x0, y0 = rng.uniform(-2, 2, 2)
+            a, n = rng.uniform(-np.pi, np.pi), rng.uniform(0.2, 2.0)
+            lines.append((k, x0, y0, x0 + n * np.cos(a), y0 + n * np.sin(a)))
+        if k % 2 == 0:   # a bench: two supports and a seat between them
+            cx, cy = rng.uniform(-1, 1, 2)
+            circles += [(k, cx - 0.7, cy, 0.15), (k, cx + 0.7, cy, 0.15)]
+            lines.append((k, cx - 0.5, cy + 0.05, cx + 0.5, cy + 0.1))
+    circles = np.array(sorted(circles, key=lambda c: c[0]))
+    lines = np.array(sorted(lines, key=lambda ln: ln[0]))
+    line_offsets = np.searchsorted(lines[:, 0], np.arange(n_scans + 1)).astype(np.int64)
+    out = np.zeros((len(circles) ** 2, 6))
+    n = landmarks._benches(circles[:, 0].astype(np.int64), circles[:, 1], circles[:, 2], circles[:, 3],
+                           lines[:, 1], lines[:, 2], lines[:, 3], lines[:, 4], line_offsets, 0.6, 2.5, out)
+    want = rp.benches(circles, lines, 0.6, 2.5, LANDMARK_BENCH)
+    assert n == len(want) >= n_scans // 2
+    np.testing.assert_allclose(out[:n], want, rtol=1e-12, atol=1e-12)
+
+
+def _landmark_scene(rng: np.random.Generator, n_scans: int) -> np.ndarray:
+    """Detections (scan, type, x, y, orientation, size) of still landmarks of every type seen with noise and
+    misses, a drifting column, columns at a bench's supports, and clutter seen once."""
+    from datmo_cli.log.vocabulary import LANDMARK_BENCH, LANDMARK_COLUMN
+
+    still = [(t, *rng.uniform(-5, 5, 2), rng.uniform(-np.pi, np.pi), rng.uniform(0.1, 0.5)) for t in range(6)]
+    still += [(LANDMARK_BENCH, 1.0, 2.0, 0.3, 1.6)]
+    for sgn in (-1, 1):   # columns where the bench's supports stand (0.13 m in from its ends)
+        half = 0.5 * (1.6 - 2 * 0.13)
+        still.append((LANDMARK_COLUMN, 1.0 + sgn * half * np.cos(0.3), 2.0 + sgn * half * np.sin(0.3), 0.0, 0.15))
+    det = []
+    for k in range(n_scans):
+        for t, x, y, a, size in still:
+            if rng.random() < 0.8:
+                det.append((k, t, x + rng.normal(0, 0.02), y + rng.normal(0, 0.02), a, size * rng.uniform(0.9, 1)))
+        det.append((k, LANDMARK_COLUMN, -3.0 + 0.02 * k, 1.0, 0.0, 0.2))   # drifts away
+        if rng.random() < 0.5:
+            det.append((k, rng.integers(0, 6), *rng.uniform(-6, 6, 2), 0.0, 0.3))
+    return np.array(det, np.float64)
+
+
+def test_accumulate_and_hide_bench_supports():
+    """The landmark database, folded in two calls (state carried between them), equals the plain statement of
+    its rules after every scan: the rows, the stamps first seen, and every scan's snapshot."""
+    from datmo_cli.perception import landmarks as LM
+
+    rng = np.random.default_rng(36)
+    n_scans, split = 40, 23
+    det = _landmark_scene(rng, n_scans)
+    stamps = (np.arange(n_scans) * 100_000_000 + 5 * 10**17).astype(np.int64)
+    match, min_count, drift, column_time, forget, support = 0.3, 3, 0.1, 1e9, 10, 0.13
+    cap = len(det) + 1
+    db, first_ns, last_ns = np.zeros((cap, LM.DB_COLUMNS)), np.zeros(cap, np.int64), np.zeros(cap, np.int64)
+    live, confirmed, counters = np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros(3, np.int64)
+    snaps = []
+    for k0, k1 in ((0, split), (split, n_scans)):
+        part = np.ascontiguousarray(det[(det[:, 0] >= k0) & (det[:, 0] < k1)])
+        size = (k1 - k0) * cap
+        snap_idx, snap_vals = np.zeros(size, np.int64), np.zeros((size, 6))
+        snap_last, snap_count = np.zeros(size, np.int64), np.zeros(k1 - k0, np.int64)
+        ns = LM.accumulate(part, stamps[k0:k1], k0, match, min_count, drift, column_time, forget, support, db,
+                           first_ns, last_ns, live, confirmed, counters, snap_idx, snap_vals, snap_last, snap_count)
+        assert ns == snap_count.sum()
+        offsets = np.concatenate([[0], np.cumsum(snap_count)])
+        for a, b in zip(offsets[:-1], offsets[1:], strict=True):
+            snaps.append([(snap_idx[q], *snap_vals[q], snap_last[q]) for q in range(a, b)])
+    rows, want_first, want_snaps = rp.landmark_database(det, stamps, match, min_count, drift, column_time, forget,
+                                                        support)
+    n = counters[LM.C_ROWS]
+    assert n == len(rows)
+    np.testing.assert_allclose(db[:n], rows, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(first_ns[:n], want_first)
+    for k in range(n_scans):
+        assert [s[0] for s in snaps[k]] == [s[0] for s in want_snaps[k]], f"scan {k}"
+        np.testing.assert_allclose(np.array(snaps[k]).reshape(-1, 8), np.array(want_snaps[k]).reshape(-1, 8),
+                                   rtol=1e-12, atol=1e-12)
+    assert rows[:, LM.DB_MOVED].any() and rows[:, LM.DB_HIDDEN].sum() == 2 and len(want_snaps[-1]) >= 6
+    # the hiding rule on its own: a confirmed column by a confirmed bench's support end, and one farther off
+    db2 = np.zeros((3, LM.DB_COLUMNS))
+    db2[0, :6] = [5, 0.0, 0.0, 0.0, 2.0, 3]
+    db2[1, :6] = [4, 0.85 + 0.3, 0.2, 0.0, 0.15, 3]
+    db2[2, :6] = [4, -0.87, 0.6, 0.0, 0.15, 3]
+    LM._hide_bench_supports(db2, np.array([0, 1, 2]), 3, 3, 0.15)
+    want = [rp.bench_support_hides(db2[q, 1:3], db2[0, 1:5], 0.15) for q in (1, 2)]
+    assert db2[1:, LM.DB_HIDDEN].tolist() == [float(w) for w in want] == [1.0, 0.0]
+
+
+# ------------------------------------------------------------------------------------------- perception
+def _room_scans(n: int, angles: np.ndarray) -> np.ndarray:
+    """n scans (ranges, m) of two walls, a column, two legs and clutter, with noise and dropouts."""
+    rng = np.random.default_rng(38)
+    out = np.empty((n, len(angles)), np.float32)
+    for k in range(n):
+        r = np.minimum(rp.ray_wall(angles, 4.0, 0.0), rp.ray_wall(angles, 3.0, np.pi / 2))
+        for cx, cy, rad in ((2.0, -1.0 + 0.05 * k, 0.2), (1.5, 1.0, 0.06), (1.5, 1.2, 0.06)):
+            r = np.minimum(r, rp.ray_circle(angles, cx, cy, rad))
+        r = r + rng.normal(0, 0.005, len(r))
+        clutter = rng.random(len(r)) < 0.05
+        r[clutter] = rng.uniform(0.5, 3.0, clutter.sum())
+        r[rng.random(len(r)) < 0.03] = np.nan
+        out[k] = r
+    return out
+
+
+def test_extract_scan_scans_and_parallel():
+    """A block of scans through extract_scans (one call) and extract_parallel (split in parts) gives the same
+    rows as extract_scan called scan by scan on the reference's segments; each segment is one circle, or its
+    lines, or a blob, and blobs are the reference's centroid and extent."""
+    from datmo_cli.perception import _kernels as KP
+    from datmo_cli.perception.params import FeatureParams
+
+    p = FeatureParams()
+    inc = np.radians(0.5)
+    angles = -np.pi / 2 + inc * np.arange(361)
+    ranges = _room_scans(3, angles)
+    N, B = ranges.shape
+    nt = int(round(180.0 / p.theta_resolution))
+    theta = np.arange(nt) * (np.pi / nt)
+    cos_t, sin_t, vec = np.cos(theta), np.sin(theta), p.kernel_vector()
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    c1 = float(np.sqrt(2.0 * (1.0 - np.cos(inc))))
+    args = (cos_a, sin_a, float(np.cos(inc)), c1, 0.05, 8.0, vec, cos_t, sin_t)
+    none_given, none_off = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+
+    def rows() -> list:
+        return [np.zeros((N * B, c), np.int64 if c == 2 else np.float64) for c in (2, 13, 9, 9)] + \
+            [np.zeros((N, 4), np.int64)]
+
+    whole, parallel = rows(), rows()
+    KP.extract_scans(ranges, 0, N, *args, *whole, none_given, none_off)
+    KP.extract_parallel(ranges, 2, *args, *parallel, none_given, none_off)
+    for a, b in zip(whole, parallel, strict=True):
+        np.testing.assert_array_equal(a, b)
+    seg, lines, circles, blobs, counts = whole
+    assert (counts[:, 1:].sum(axis=0) > 0).all()   # lines, circles and blobs
+
+    w = int(round(vec[KP.P_CWINDOW] / vec[KP.P_CELL]))
+    for k in range(N):
+        want_seg = rp.segment(ranges[k], inc, vec[KP.P_C0], 0.05, 8.0, int(vec[KP.P_MIN_POINTS]))
+        assert [tuple(s) for s in seg[k * B:k * B + counts[k, 0]].tolist()] == want_seg
+        starts = np.array([s for s, _ in want_seg] + [0], np.int64)
+        ends = np.array([e for _, e in want_seg] + [0], np.int64)
+        r = np.where(np.isfinite(ranges[k]), ranges[k], 0.0).astype(np.float64)
+        x, y = r * cos_a, r * sin_a
+        out = [np.zeros((B, c)) for c in (13, 9, 9)]
+        acc = np.zeros((nt, int(2 * 8.0 / vec[KP.P_RHO_RES]) + 3), np.int32)
+        work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
+                np.empty((KP.MAX_SUB, 3), np.int64), np.empty((KP.MAX_SUB, 12)), np.empty(KP.MAX_SUB, np.int64),
+                np.empty(KP.MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64), np.empty(4),
+                np.zeros(1, np.int64))
+        nl, nc, nb = KP.extract_scan(x, y, starts, ends, len(want_seg), k, vec, acc,
+                                     np.zeros((2 * w + 1, 2 * w + 1), np.int32), cos_t, sin_t, np.empty(B, np.int64),
+                                     np.empty(KP.MAX_SUB, np.int64), np.empty(KP.MAX_SUB, np.int64), out[0], 0, out[1],
+                                     0, out[2], 0, work, inc)
+        got = [out[0][:nl], out[1][:nc], out[2][:nb]]
+        for j, (g, table) in enumerate(zip(got, (lines, circles, blobs), strict=True)):
+            np.testing.assert_array_equal(g, table[k * B:k * B + counts[k, j + 1]])
+        kinds = [set() for _ in want_seg]
+        for j, g in enumerate(got):
+            for row in g:
+                s, e = want_seg[int(row[1])]
+                assert s <= row[2] <= row[3] < e
+                kinds[int(row[1])].add(j)
+        assert all(len(kind) == 1 for kind in kinds)
+        for row in got[2]:
+            s, e = int(row[KP.B_FIRST]), int(row[KP.B_LAST]) + 1
+            np.testing.assert_allclose(row[KP.B_X:KP.B_SIZE + 1], rp.blob(x[s:e], y[s:e]), rtol=1e-12, atol=1e-12)
+
+
+def test_odometry_run():
+    """A drive through the test room with a sudden turn (recovered from the recovery moves) and a blank scan:
+    every pose and statistic of the compiled run equals the reference's, keyframes included."""
+    from datmo_cli.perception.egomotion import IcpParams, _max_window
+    from tests.test_egomotion import cast, drive, geometry
+
+    geom, p = geometry(181, 180.0), IcpParams()
+    truth = drive(14)
+    truth[9:] = [(x, y, t + 0.5) for x, y, t in truth[9:]]   # a sudden turn on the spot
+    rng = np.random.default_rng(39)
+    ranges = np.stack([cast(pose, geom.angles(), noise=0.005, rng=rng) for pose in truth])
+    ranges[5] = np.inf   # nothing seen
+    dt = np.full(len(ranges), 0.1)
+    dt[0], dt[7] = 0.0, 0.2
+    angles = geom.angles().astype(np.float64)
+    poses, stats = np.zeros((len(ranges), 3)), np.zeros((len(ranges), KE.N_STATS))
+    KE.odometry_run(ranges, dt, np.cos(angles), np.sin(angles), geom.range_min, geom.range_max, p.max_points,
+                    p.source_spacing, p.map_spacing, p.normal_radius, p.max_gap, _max_window(geom), p.planarity,
+                    p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight,
+                    p.keyframe_dist, p.keyframe_angle, p.keyframe_share, p.n_keyframes, p.min_inlier_share,
+                    np.asarray(p.recovery_moves, np.float64).reshape(-1, 3), poses, stats)
+    want_poses, want_stats = rp.odometry(ranges, dt, angles, geom.range_min, geom.range_max, p, _max_window(geom))
+    np.testing.assert_allclose(poses, want_poses, rtol=0, atol=1e-9)
+    exact = [KE.S_MATCHED, KE.S_POINTS, KE.S_FLAGS, KE.S_ITERATIONS]
+    np.testing.assert_array_equal(stats[:, exact], want_stats[:, exact])
+    np.testing.assert_allclose(stats, want_stats, rtol=1e-9, atol=1e-12)
+    flags = stats[:, KE.S_FLAGS].astype(np.int64)
+    assert (flags & KE.FLAG_KEYFRAME).sum() >= 2 and (flags & KE.FLAG_RECOVERED).any()
