@@ -78,16 +78,22 @@ def _b(lo: float, hi: float, unit: str = "", why: str = "", *, open_: bool = Fal
 
 
 bound = _b   # for the parameter sections (perception/params.py, tracking/params.py)
+# reasons a range ends where it does, shared by the sections and OPTIONS
+SHARE = "a share"
+PROBABILITY = "a probability"
+NO_SENSE = "beyond any scanner's reach"
 
 
 def param(default: object, bound: Bound | None = None, help: str = "", *, choices: tuple[str, ...] = (),
-          same_as: str = "") -> Any:
+          same_as: str = "", metavar: str | None = None) -> Any:
     """A field of a parameter section with its metadata: `bound` (a number's range and unit), `help` (what it
     does, as the TOML comment and the option's help say it) and, for a string, the `choices` it takes (none:
     any non-empty string). The one declaration the validator, the Click options and `datmo config` read.
     `same_as` ('section.key'): the field is that parameter, whose home is there; the configuration tree sets
-    it from its home (config.DatmoConfig), and a value written in this section is read as the home's."""
-    return field(default=default, metadata={"bound": bound, "help": help, "choices": choices, "same_as": same_as})
+    it from its home (config.DatmoConfig), and a value written in this section is read as the home's.
+    `metavar`: the option's value placeholder in help (default: from the type)."""
+    return field(default=default, metadata={"bound": bound, "help": help, "choices": choices, "same_as": same_as,
+                                            "metavar": metavar})
 
 
 class Section:
@@ -144,8 +150,7 @@ def validate(section: type[Section], values: dict, where: str | None = None) -> 
     return params
 
 
-_NO_SENSE = "beyond any scanner's reach"
-D_MAX = _b(0, 100, "m", _NO_SENSE, open_=True)   # the paper's d_max: features.d_max, read by tracking too
+D_MAX = _b(0, 100, "m", NO_SENSE, open_=True)   # the paper's d_max: features.d_max, read by tracking too
 _SIM_HOUR = "an hour of scans; the world's paths are planned for the whole run up front"
 # options that are not `[features]` or `[track]` keys (and the scene files' duration and crowd size)
 OPTIONS: dict[str, Bound] = {
@@ -160,7 +165,7 @@ OPTIONS: dict[str, Bound] = {
     "jobs": _b(1, 1024, "processes", integer=True),
     "retries": _b(0, 100, "retries", integer=True),
     "top": _b(0, 10**9, "tracks", "0: all", integer=True),
-    "match_radius": _b(0, 100, "m", _NO_SENSE, open_=True),
+    "match_radius": _b(0, 100, "m", NO_SENSE, open_=True),
     "min_mota": _b(-100, 1, "", "MOTA is at most 1"),
     "min_hota": _b(0, 1, "", "HOTA is a share"),
     "live_port": _b(0, 65535, "", "a TCP port; 0: any free one", integer=True),

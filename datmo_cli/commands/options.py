@@ -112,9 +112,8 @@ def param_option(key: str, *decls: str, help: str | None = None, expose: bool = 
         kind, text = click.Choice(meta["choices"]), f"{text}."
     else:
         kind, text = str, f"{text}."
-    extra = {"metavar": "MODEL"} if f.name == "leg_model" else {}
     return click.option(*decls, f.name, type=kind, default=None, expose_value=expose, callback=_keep(key),
-                        help=text, **extra)
+                        help=text, metavar=meta["metavar"])
 
 
 def param_pair_option(decl: str, first: str, second: str, names: tuple[str, str], help: str) -> Callable:

@@ -19,11 +19,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..bounds import D_MAX, Section, features_combined, param
+from ..bounds import D_MAX, NO_SENSE, PROBABILITY, SHARE, Section, features_combined, param
 from ..bounds import bound as _b
-
-_SHARE = "a share"
-_NO_SENSE = "beyond any scanner's reach"
 
 
 @dataclass(frozen=True)
@@ -52,7 +49,7 @@ class FeatureParams(Section):
     line_min_points: int = param(4, _b(1, 10_000, "points", integer=True), "A line has at least this many points.")
     line_min_racc: float = param(0.5, _b(0, 1, "", "r_acc is a share of the segment's points", open_=True),
                                  "... and r_acc above this.")
-    line_min_length: float = param(0.10, _b(0, 100, "m", _NO_SENSE, open_=True), "... and is longer than this.")
+    line_min_length: float = param(0.10, _b(0, 100, "m", NO_SENSE, open_=True), "... and is longer than this.")
     perpendicular_tolerance: float = param(15.0, _b(0, 45, "degrees",
                                                     "beyond 45° any two lines would be perpendicular"),
                                            "Two lines within this of 90° are perpendicular.")
@@ -79,7 +76,7 @@ class FeatureParams(Section):
     circle_min_sagitta: float = param(0.02, _b(0, 1, "m", open_=True),
                                       "An arc bulges this much towards the scanner (P_near against the chord).")
     # a circle must be a well-posed arc (0 turns a test off):
-    circle_min_coverage: float = param(0.6, _b(0, 1, "", _SHARE + "; 0 turns the test off"),
+    circle_min_coverage: float = param(0.6, _b(0, 1, "", SHARE + "; 0 turns the test off"),
                                        "A circle's points are at least this share of the beams its near side "
                                        "spans, 2 asin(r/d)/step.")
     circle_residual_ratio: float = param(0.8, _b(0, 100, "", "0 turns the test off"),
@@ -110,8 +107,8 @@ class FeatureParams(Section):
     # legs: the learned leg detector
     leg_model: str = param("default", help="Leg detector: 'default' (the model shipped with datmo), a model file "
                                            "from datmo train-legs, or 'paper' (no detector: legs by the paper's "
-                                           "circle rule and walking pattern).")
-    leg_min_probability: float = param(0.2, _b(0, 1, "", "a probability"),
+                                           "circle rule and walking pattern).", metavar="MODEL")
+    leg_min_probability: float = param(0.2, _b(0, 1, "", PROBABILITY),
                                        "Segments with at least this leg probability are listed as legs.")
 
     @classmethod

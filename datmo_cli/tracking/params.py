@@ -11,16 +11,13 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..bounds import D_MAX, Section, param, track_combined
+from ..bounds import D_MAX, NO_SENSE, PROBABILITY, SHARE, Section, param, track_combined
 from ..bounds import bound as _b
 from .state import P_TAIL_LENGTH, PARAM_NAMES
 
-_SHARE = "a share"
-_NO_SENSE = "beyond any scanner's reach"
 _HOUR = "an hour: longer waits are no tracking"
 _ACCELERATION = "√1000 ≈ 32 m/s² of acceleration noise is beyond any walker or vehicle"
 _SIGMA = "sigmas of metres are no measurement"
-_P = "a probability"
 
 
 @dataclass(frozen=True)
@@ -41,7 +38,7 @@ class TrackingParams(Section):
     # association
     gate: float = param(13.8, _b(0, 1000, "", "chi² with 2 dof; 1000 already passes anything", open_=True),
                         "Gate on the squared Mahalanobis distance (13.8: chi² 2 dof 99.9 %).")
-    max_gate_distance: float = param(1.5, _b(0, 100, "m", _NO_SENSE),
+    max_gate_distance: float = param(1.5, _b(0, 100, "m", NO_SENSE),
                                      "No match farther than this whatever the covariance.")
     # life cycle
     confirm_hits: int = param(3, _b(2, 16, "scans", "no track confirmed from one scan; 16 bits of history",
@@ -54,7 +51,7 @@ class TrackingParams(Section):
                                          "Seconds a confirmed track lives unseen while occluded or out of view.")
     reacquire_speed: float = param(1.5, _b(0, 50, "m/s"),
                                    "A lost occluded track may take a measurement it could reach at this speed ...")
-    reacquire_distance: float = param(4.0, _b(0, 100, "m", _NO_SENSE),
+    reacquire_distance: float = param(4.0, _b(0, 100, "m", NO_SENSE),
                                       "... but none farther than this from where it was last seen.")
     occlusion_margin: float = param(0.3, _b(0, 10, "m"), "A return this much nearer than a track hides it.")
     tentative_delete_after: float = param(0.5, _b(0, 3600, "s", _HOUR),
@@ -63,7 +60,7 @@ class TrackingParams(Section):
     d_max: float = param(1.5, D_MAX, "Objects larger than this are static: the paper's d_max, one parameter "
                                      "whose home is [features] d_max.", same_as="features.d_max")
     undefined_window: float = param(1.0, _b(0, 3600, "s", _HOUR), "Seconds a small circle or blob stays undefined.")
-    moving_distance: float = param(0.5, _b(0, 100, "m", _NO_SENSE),
+    moving_distance: float = param(0.5, _b(0, 100, "m", NO_SENSE),
                                    "Distance from its first position before a track can be dynamic.")
     moving_speed: float = param(0.2, _b(0, 50, "m/s"), "Filtered speed above which a track is moving.")
     moving_time: float = param(1.0, _b(0, 3600, "s", _HOUR),
@@ -82,16 +79,16 @@ class TrackingParams(Section):
     merge_distance: float = param(0.55, _b(0, 10, "m"), "Two leg or person tracks nearer than this are one ...")
     merge_speed: float = param(0.5, _b(0, 50, "m/s"),
                                "... when one is tentative or their velocities differ less than this.")
-    person_votes: float = param(0.5, _b(0, 1, "", _SHARE),
+    person_votes: float = param(0.5, _b(0, 1, "", SHARE),
                                 "Share of a track's hits that were leg measurements for a person.")
     # people with a leg detector: leg_score follows the leg probability of a track's recent hits
-    leg_probability: float = param(0.5, _b(0, 1, "", _P),
+    leg_probability: float = param(0.5, _b(0, 1, "", PROBABILITY),
                                    "Segments the detector gives at least this are legs (paired into people).")
     leg_evidence_rate: float = param(0.25, _b(0, 1, "", "a share; 0 would never learn", open_=True),
                                      "Weight of each new hit in the running mean (about 1/rate hits remembered).")
-    person_evidence: float = param(0.6, _b(0, 1, "", _P),
+    person_evidence: float = param(0.6, _b(0, 1, "", PROBABILITY),
                                    "A track is a person while that running leg probability is at least this ...")
-    moving_person_evidence: float = param(0.35, _b(0, 1, "", _P),
+    moving_person_evidence: float = param(0.35, _b(0, 1, "", PROBABILITY),
                                           "... or this, once it is dynamic (clutter that passes for legs stays put).")
     person_pairs: int = param(3, _b(0, 1_000_000, "scans", integer=True),
                               "A person not dynamic has been seen with two legs this many times ...")
