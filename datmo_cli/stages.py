@@ -1,6 +1,6 @@
 """The stages of the pipeline as channels, {topic: (msgtype, stamps, payloads)}: segmentation
 (`derive_segments`), features (`derive_features`, through perception.features.FeatureStream) and tracking
-(`TrackStream` block by block, `derive_tracks`, `track_run`), with the glue between perception and tracking
+(`TrackStream` block by block, `track_run`), with the glue between perception and tracking
 (features decoded from a log or taken from a RunFeatures, one ScanFeatures per scan). With odometry,
 tracking runs in the world frame and every track also carries its world position.
 
@@ -31,14 +31,12 @@ def derive_segments(run: ScanRun, params: FeatureParams | None = None) -> dict[s
     return {mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, run.stamps, segment_payloads(run, start, end, offsets))}
 
 
-def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: FeatureParams | dict | None = None,
+def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: FeatureParams | None = None,
                     segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
                     progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], RunFeatures]:
     """The channels `datmo features` adds ({topic: (msgtype, stamps, payloads)}: segments, features,
     landmarks and feature markers) and the RunFeatures they came from. Given `segments` (a log's own),
     they are used and /datmo/segments is not among the channels returned."""
-    if isinstance(params, dict):
-        params = FeatureParams().replace(**params)
     return FeatureStream(params, odometry).block(run, segments, progress)
 
 
@@ -160,12 +158,3 @@ def run_features(run: ScanRun, odometry: Odometry | None = None, params=None) ->
         params = FeatureParams().replace(**params)
     return list(iter_run_features(extract_run(run, params=params, odometry=odometry)))
 
-
-def derive_tracks(run: ScanRun, features: list[ScanFeatures], *, odometry: Odometry | None = None,
-                  params: TrackingParams | None = None, learned: bool = False,
-                  progress: Callable[[int, int], None] | None = None) -> dict[str, tuple[str, np.ndarray, list]]:
-    """The channels `datmo track` adds: {topic: (msgtype, stamps, payloads)} for /datmo/tracks and
-    /datmo/markers/tracks (topic names from mcapio). `learned`: the features' legs are a leg detector's."""
-    stream = TrackStream(run.geometry, odometry=odometry, params=params, learned=learned)
-    n = len(run)
-    return stream.channels(stream.block(run, features, progress=(lambda d: progress(d, n)) if progress else None))
