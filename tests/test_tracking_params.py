@@ -96,3 +96,20 @@ def test_every_numeric_track_parameter_reaches_the_kernels_in_its_slot():
     v = p.kernel_vector()
     assert v.dtype == "float64" and v[state.P_GATE] == 9.5 and v[state.P_TAIL_LENGTH] == 1
     assert load(None, {"features": {"d_max": 2.0}}).track.kernel_vector()[state.P_D_MAX] == 2.0
+
+
+def test_the_kernels_parameter_slots_are_the_track_fields_by_name():
+    """state.P_<NAME> is the slot of field <name> in kernel_vector, for every numeric [track] field."""
+    from dataclasses import fields
+
+    from datmo_cli.tracking import state
+
+    numeric = [f.name for f in fields(TrackingParams) if f.metadata.get("bound") is not None]
+    assert sorted(state.PARAM_NAMES) == sorted(numeric)
+    assert len(state.PARAM_NAMES) == state.N_PARAMS
+    defaults = TrackingParams()
+    vec = defaults.kernel_vector()
+    for i, name in enumerate(state.PARAM_NAMES):
+        assert getattr(state, f"P_{name.upper()}") == i, name
+        if name != "tail_length":
+            assert vec[i] == getattr(defaults, name), name
