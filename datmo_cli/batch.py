@@ -449,6 +449,10 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
 
         return failed(task, str(os_error(exc)))
     except Exception as exc:
+        from .outputs import interrupt_in
+
+        if (stop := interrupt_in(exc)) is not None:
+            raise stop from None    # Ctrl-C or SIGTERM inside a compiled call: the batch stops, no failed line
         if raise_unexpected:
             raise
         return failed(task, f"failed: {type(exc).__name__}: {exc}")

@@ -170,6 +170,7 @@ class LazyGroup(click.Group):
             raise
         except BaseException as exc:
             outputs.remove_live()
+            exc = outputs.interrupt_in(exc) or exc
             if _debug(ctx) and not isinstance(exc, (KeyboardInterrupt, outputs.Terminated, SystemExit)):
                 raise
             clean = clean_error(exc)

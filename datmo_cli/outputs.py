@@ -59,6 +59,21 @@ _state = {"depth": 0}
 _PENDING: list[int] = []
 
 
+def interrupt_in(exc: BaseException | None) -> BaseException | None:
+    """The KeyboardInterrupt or Terminated that `exc` is, or stands for; else None.
+
+    A signal handler can raise while a compiled (numba) call is boxing its result. CPython then reports a
+    SystemError ("... returned a result with an exception set") caused by the interrupt: that is a stop
+    request, not a bug, and is handled as the interrupt itself."""
+    while exc is not None:
+        if isinstance(exc, (KeyboardInterrupt, Terminated)):
+            return exc
+        if not isinstance(exc, SystemError):
+            return None
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def _raise_for(signum: int) -> None:
     if signum == signal.SIGINT:
         raise KeyboardInterrupt

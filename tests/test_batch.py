@@ -25,6 +25,9 @@ def fake_process(src, out, *, force=False, config=None, markers=True, bag_dir=Fa
         raise InputError(f"{src}: not an MCAP file (bad magic bytes)")
     if "stop" in src.name:
         raise KeyboardInterrupt
+    if "boxed" in src.name:     # how CPython reports a Ctrl-C whose handler ran while a numba call returned
+        raise SystemError("CPUDispatcher(<function track_block>) returned a result with an exception set") \
+            from KeyboardInterrupt()
     if Path(out).exists():
         if not force:
             raise InputError(f"{out}: exists; use --force to overwrite it")
@@ -202,6 +205,16 @@ def test_ctrl_c_keeps_finished_outputs_and_a_consistent_manifest(logs, tmp_path)
     names[2] = logs / "go.mcap"
     again = run(*names, "-o", out, "--jobs", "1")
     assert again.exit_code == 0 and CALLS == ["go.mcap", "c.mcap"], again.output
+
+
+def test_ctrl_c_inside_a_compiled_call_stops_the_batch_and_fails_no_log(logs, tmp_path):
+    out = tmp_path / "out"
+    (logs / "boxed.mcap").write_bytes(b"x")
+    r = run(logs / "a.mcap", logs / "boxed.mcap", logs / "b.mcap", "-o", out, "--jobs", "1")
+    assert r.exit_code == 130, r.output
+    assert "interrupted: 1 of 3 inputs done" in r.stderr and "SystemError" not in r.output
+    assert [(Path(x["input"]).name, x["status"]) for x in manifest(out)] == [("a.mcap", "done")]
+    assert CALLS == ["a.mcap"]
 
 
 def test_fsspec_urls_for_inputs_and_outputs(logs, tmp_path):

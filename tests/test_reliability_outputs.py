@@ -268,6 +268,28 @@ def test_clean_error_turns_os_memory_decompression_and_unexpected_errors_into_on
     assert clean_error(outputs.Terminated(1)).exit_code == 129
 
 
+def test_a_signal_reported_as_a_system_error_by_a_compiled_call_is_the_signal(small, tmp_path, monkeypatch):
+    def boxed(signal_exc):
+        def raise_it(*args, **kwargs):
+            # CPython's wording when a signal handler raised while a numba dispatcher boxed its result
+            raise SystemError("CPUDispatcher(<function track_block>) returned a result with an exception set") \
+                from signal_exc
+        return raise_it
+
+    for exc, code, needle in ((KeyboardInterrupt(), 130, "interrupted (Ctrl-C)"),
+                              (outputs.Terminated(15), 143, "stopped by SIGTERM")):
+        monkeypatch.setattr(outputs, "_file_for", boxed(exc))
+        res = datmo("segment", small, "-o", tmp_path / "a.mcap")
+        one_line_error(res, needle, code=code)
+        assert not list(tmp_path.glob(".*.tmp")) and not (tmp_path / "a.mcap").exists()
+    assert outputs.interrupt_in(SystemError("x")) is None
+    try:
+        raise ValueError("a real bug") from KeyboardInterrupt()
+    except ValueError as bug:
+        assert outputs.interrupt_in(bug) is None    # only the SystemError wrapping is unwrapped
+    assert clean_error(SystemError("returned NULL without setting an exception")).exit_code == 70
+
+
 def test_debug_flag_and_environment_show_the_original_exception(small, tmp_path, monkeypatch):
     monkeypatch.setattr(outputs, "_file_for", lambda fd, mode: (_ for _ in ()).throw(MemoryError()))
     plain = datmo("segment", small, "-o", tmp_path / "a.mcap")
