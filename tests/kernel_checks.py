@@ -92,7 +92,7 @@ CHECKS: dict[str, str] = {
     "perception._kernels._convex": f"{HERE}::test_perpendicular_and_convex",
     "perception._kernels._vote": f"{HERE}::test_vote_and_clear",
     "perception._kernels._clear": f"{HERE}::test_vote_and_clear",
-    "perception._kernels.extract_scan": f"{DRIVERS}::test_extract_scan_scans_and_parallel",
+    "perception._kernels.extract_scan": f"{DRIVERS}::test_extract_scan_decision_equals_the_reference",
     "perception._kernels.extract_scans": f"{DRIVERS}::test_extract_scan_scans_and_parallel",
     "perception._kernels.extract_parallel": f"{DRIVERS}::test_extract_scan_scans_and_parallel",
     # perception: ego-motion

@@ -16,10 +16,28 @@ Sensor frame (x forward, y left) and the map frame, metres, radians.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
 
+from datmo_cli.perception._kernels import (
+    CC_N,
+    CC_R,
+    CC_RACC,
+    CC_X,
+    CC_Y,
+    LC_LEN,
+    LC_N,
+    LC_PEAK_RACC,
+    LC_RACC,
+    LC_RHO,
+    LC_THETA,
+    LC_X0,
+    LC_X1,
+    LC_Y0,
+    LC_Y1,
+)
 from datmo_cli.perception.legs import (
     CANDIDATE_MAX_WIDTH,
     CANDIDATE_MIN_POINTS,
@@ -408,6 +426,137 @@ def convex(a, j, b) -> bool:
     side_j = e[0] * (j[1] - a[1]) - e[1] * (j[0] - a[0])
     side_o = e[0] * (0.0 - a[1]) - e[1] * (0.0 - a[0])
     return bool(side_j * side_o > 0)
+
+
+# ----------------------------------------------------------------------------------------------- the decision (5.2)
+
+
+def line_candidates(rows, runs, n: int, params) -> tuple[list[int], list[int], float]:
+    """A segment's HTL lines, one candidate per run of points (method.md 5.1). rows[k]: run k's line, in
+    line_of_run's columns LC_*; runs[k]: its points [start, end); n: the segment's points; params: FeatureParams.
+    Returns
+    - the HTL lines the decision rule counts: more than three points (line_min_points);
+    - the lines kept: also r_acc > line_min_racc and length > line_min_length (the paper's 0.5 and 10 cm);
+    - r_acc(HTL), the r_acc of the HTL lines together: each line's refined r_acc weighted by its run's points,
+      over the segment's points (0 when there is no line), summed in run order."""
+    htl = [k for k, row in enumerate(rows) if row[LC_N] >= params.line_min_points]
+    kept = [k for k in htl if rows[k][LC_RACC] > params.line_min_racc and rows[k][LC_LEN] > params.line_min_length]
+    votes = 0.0
+    for k in htl:
+        votes += rows[k][LC_RACC] * (runs[k][1] - runs[k][0])
+    return htl, kept, votes / n
+
+
+def merge_lines(rows, runs, kept: list[int], rho_res: float, refit):
+    """Consecutive kept lines that are one line split by noise, merged (datmo; the paper does not rejoin the
+    lines HTL cut where the accumulator peak moved). In scan order, kept line b joins the line a before it when
+    - their normals are within 3 degrees and their rho within two rho cells (same_line: the same side),
+    - and b's run follows a's: candidate index b = a + 1 (a candidate between them, an HTL line or not, keeps
+      them apart).
+    a is then refitted over both runs: refit(start, end, theta, rho, votes) is the line of points [start, end)
+    from a's (theta, rho) with `votes` votes (the kernel's line_of_run; votes: both lines' r_acc weighted by
+    their runs' points); a's run now reaches b's end and the next kept line is compared with the merged a.
+    As the kernel states it, a merged line keeps the index of its first candidate, so it takes no third line
+    (candidate a + 2 is not a + 1) even when that one is collinear.
+    rows (LC_* columns) and runs ([start, end)) are not changed; returns (kept lines left, rows, runs) after
+    the merges, and the (a, b) pairs merged."""
+    rows = [np.array(row, np.float64) for row in rows]
+    runs = [list(run) for run in runs]
+    left: list[int] = []
+    merged: list[tuple[int, int]] = []
+    for b in kept:
+        if left:
+            a = left[-1]
+            dt, drho = same_line(rows[a][LC_THETA], rows[a][LC_RHO], rows[b][LC_THETA], rows[b][LC_RHO])
+            if dt < math.radians(3.0) and drho < 2 * rho_res and b == a + 1:
+                votes = (rows[a][LC_RACC] * (runs[a][1] - runs[a][0])
+                         + rows[b][LC_RACC] * (runs[b][1] - runs[b][0]))
+                rows[a] = np.array(refit(runs[a][0], runs[b][1], rows[a][LC_THETA], rows[a][LC_RHO], votes),
+                                   np.float64)
+                runs[a][1] = runs[b][1]
+                merged.append((a, b))
+                continue
+        left.append(b)
+    return left, rows, runs, merged
+
+
+class Decision(NamedTuple):
+    """What feature_decision makes of a segment, and why."""
+    kind: str                  # "circle", "lines" or "blob"
+    lines: list[int]           # the candidates that are its lines (kind "lines"), in scan order
+    circle: np.ndarray | None  # the circle fit's output (CC_* columns) when HTC ran on the segment
+    ncand: int                 # HTL lines
+    tried: bool                # HTC applies (whether or not the segment has circle_min_points)
+    leg_only: bool             # a case the paper does not test as a circle: a failed circle leaves the lines
+    convex: int | None         # convex junctions (three HTL lines or more, small enough for a circle)
+
+
+def feature_decision(x, y, s: int, e: int, rows, htl: list[int], kept: list[int], htl_racc: float, params,
+                     angle_step: float, circle) -> Decision:
+    """Decision rule of method.md 5.2, as datmo extends it, for the segment of points [s, e) of x, y (sensor
+    frame, m). rows: its line candidates (LC_* columns) after merge_lines; htl, kept, htl_racc: line_candidates'
+    (htl: the HTL lines, in run order; kept: the kept lines left by merge_lines); params: FeatureParams;
+    angle_step: the scan's (rad); circle(beat) -> (CC_* row, indices of the points fitted): the HTC fit of the
+    segment (the kernel's circle_of_run, which stops refining a peak whose r_acc is not above `beat`: it could
+    not win).
+
+    The paper applies HTC when the segment has a single line with r_acc < 0.5, or two non-perpendicular lines,
+    or more than two convex lines; the circle wins when r_acc(HTC) > r_acc(HTL), else the segment is a blob;
+    in the other cases it is its lines, and a segment with no line and no circle is a blob. datmo:
+    - HTC only when the segment's end points are at most 2 circle_radius_max + 2 circle_tolerance apart
+      (a circle of the allowed radii fits; a long wall with a slight bend stays lines);
+    - a segment with no HTL line is tested as a circle too (a far leg of a few points);
+    - a single line is tested whatever its r_acc; when its peak cell's r_acc (LC_PEAK_RACC, not the refined
+      r_acc) is at least line_min_racc, the paper's ELSE case, a failed circle leaves its lines (`leg_only`);
+    - two perpendicular lines (perpendicular, within perpendicular_tolerance) are tested too (an arc cut in
+      two halves, or a box's corner); a failed circle leaves the lines;
+    - three lines or more: "convex" is at least two convex junctions (convex: the end of line q bulges towards
+      the scanner from the chord between the start of line q and the end of line q + 1, for consecutive HTL
+      lines);
+    - the circle wins only when r_acc(HTC) > max(r_acc(HTL), line_min_racc), it has at least circle_min_points
+      points, and it is a well-posed arc (circle_well_posed, against the segment's HTL lines when there are
+      two or more); a segment under circle_min_points gets no fit and loses.
+    Otherwise the kept lines, when there are any, else a blob.
+    As the kernel has it, r_acc(HTL) and the HTL lines counted are those before the merge, while the rows the
+    rule reads (perpendicular, convex, the lines of circle_well_posed) are merge_lines': a merged line's row in
+    place of its first candidate's, the candidate it absorbed still counted with its own row."""
+    n = e - s
+    ncand = len(htl)
+    extent = math.hypot(x[e - 1] - x[s], y[e - 1] - y[s])
+    tried = leg_only = False
+    n_convex = None
+    if extent <= 2.0 * params.circle_radius_max + 2.0 * params.circle_tolerance:
+        if ncand == 0:
+            tried = True
+        elif ncand == 1:
+            tried = True
+            leg_only = rows[htl[0]][LC_PEAK_RACC] >= params.line_min_racc
+        elif ncand == 2:
+            tried = True
+            leg_only = perpendicular(rows[htl[0]][LC_THETA], rows[htl[1]][LC_THETA],
+                                     math.radians(params.perpendicular_tolerance))
+        else:
+            n_convex = 0
+            for a, b in zip(htl[:-1], htl[1:], strict=True):
+                ra, rb = rows[a], rows[b]
+                n_convex += convex((ra[LC_X0], ra[LC_Y0]), (ra[LC_X1], ra[LC_Y1]), (rb[LC_X1], rb[LC_Y1]))
+            tried = n_convex >= 2
+    fit = None
+    if tried:
+        beat = max(htl_racc, params.line_min_racc)
+        if n >= params.circle_min_points:
+            fit, used = circle(beat)
+            fit = np.array(fit, np.float64)
+            lines = [(rows[k][LC_THETA], rows[k][LC_RHO]) for k in htl] if ncand >= 2 else None
+            px, py = [x[i] for i in used], [y[i] for i in used]
+            if (fit[CC_RACC] > beat and fit[CC_N] >= params.circle_min_points
+                    and circle_well_posed(px, py, (fit[CC_X], fit[CC_Y], fit[CC_R]), params, angle_step, lines)):
+                return Decision("circle", [], fit, ncand, tried, leg_only, n_convex)
+        if not leg_only:
+            kept = []
+    if kept:
+        return Decision("lines", list(kept), fit, ncand, tried, leg_only, n_convex)
+    return Decision("blob", [], fit, ncand, tried, leg_only, n_convex)
 
 
 def se2(x: float, y: float, theta: float) -> np.ndarray:

@@ -374,3 +374,241 @@ def test_odometry_run():
     np.testing.assert_allclose(stats, want_stats, rtol=1e-9, atol=1e-12)
     flags = stats[:, KE.S_FLAGS].astype(np.int64)
     assert (flags & KE.FLAG_KEYFRAME).sum() >= 2 and (flags & KE.FLAG_RECOVERED).any()
+
+
+def _feature_scenes(angles: np.ndarray) -> list[np.ndarray]:
+    """Scans (ranges, m) for every branch of the decision rule: legs and columns from 0.8 to 7 m, box corners,
+    wedges and a zigzag, polygonal pillars, shallow arcs, ellipses, walls with groups of points a few cm proud
+    of them (HTL cuts them, the merge rejoins them, or not: bends and steps near its limits); each scene drawn
+    twice with a seeded noise (4 mm, or 1 to 2.5 cm where the decision is to be close), each draw also with
+    clutter (single points and pairs)."""
+    rng = np.random.default_rng(40)
+
+    def polyline(*corners: tuple[float, float]) -> np.ndarray:
+        return np.min([rp.ray_segment(angles, a, b) for a, b in zip(corners[:-1], corners[1:], strict=True)], axis=0)
+
+    def polygon(d: float, bearing: float, radius: float, sides: int, turn: float) -> np.ndarray:
+        """A regular polygon centred d m away at `bearing`, corners `turn` past the bearing (pi + pi / sides:
+        a side faces the scanner)."""
+        cx, cy = d * np.cos(bearing), d * np.sin(bearing)
+        phi = bearing + turn + 2 * np.pi * np.arange(sides + 1) / sides
+        return polyline(*zip(cx + radius * np.cos(phi), cy + radius * np.sin(phi), strict=True))
+
+    def ellipse(d: float, bearing: float, a: float, b: float, turn: float) -> np.ndarray:
+        """An ellipse of half axes a and b centred d m away at `bearing`, its a axis `turn` from the x axis."""
+        phi = np.linspace(0.0, 2 * np.pi, 49)
+        u, v = a * np.cos(phi), b * np.sin(phi)
+        return polyline(*zip(d * np.cos(bearing) + u * np.cos(turn) - v * np.sin(turn),
+                             d * np.sin(bearing) + u * np.sin(turn) + v * np.cos(turn), strict=True))
+
+    def circles(*rings: tuple[float, float, float]) -> np.ndarray:
+        return np.min([rp.ray_circle(angles, d * np.cos(b), d * np.sin(b), rad) for d, b, rad in rings], axis=0)
+
+    scenes = [
+        # legs (r 6 and 10 cm) and columns (15 to 35 cm) from 0.8 m to 7 m
+        circles((0.8, -1.2, 0.06), (1.5, -0.8, 0.06), (2.5, -0.45, 0.06), (3.5, -0.3, 0.06), (4.0, -0.2, 0.06),
+                (4.5, -0.1, 0.06), (5.0, -0.05, 0.06), (6.0, 0.0, 0.06), (7.0, 0.12, 0.06), (1.2, 0.5, 0.15),
+                (2.5, 0.85, 0.25), (4.0, 1.1, 0.35), (1.8, 1.4, 0.35), (5.0, 0.25, 0.1), (6.0, 0.35, 0.15),
+                (7.0, -0.6, 0.2), (6.5, 0.7, 0.1)),
+        # box corners (small boxes, a large one), triangles (wedges), an octagonal pillar
+        np.min([polygon(1.2, -1.1, 0.2, 4, 0.0), polygon(2.0, -0.6, 0.25, 4, 0.3), polygon(3.0, -0.2, 0.7, 4, 0.0),
+                polygon(1.5, 0.4, 0.22, 3, 0.0), polygon(2.2, 0.9, 0.3, 3, 0.2), polygon(1.0, 1.3, 0.35, 8, 0.1)],
+               axis=0),
+        # octagonal and hexagonal pillars with a side facing the scanner (three lines, convex); a zigzag
+        np.min([polygon(1.0, -0.9, 0.33, 8, np.pi + np.pi / 8), polygon(1.6, -0.2, 0.36, 8, np.pi + np.pi / 8),
+                polygon(1.3, 0.5, 0.3, 6, np.pi + np.pi / 6),
+                polyline(*[(1.0 * np.cos(1.1) + off * np.cos(1.1) - v * np.sin(1.1),
+                            1.0 * np.sin(1.1) + off * np.sin(1.1) + v * np.cos(1.1))
+                           for v, off in ((-0.33, 0.0), (-0.11, -0.15), (0.11, 0.0), (0.33, -0.15))])], axis=0),
+        # shallow arcs (large radii, or a column far away) before a far wall
+        np.minimum(rp.ray_wall(angles, 6.5, 0.0), circles((4.4, -0.82, 1.0), (2.0, 0.3, 0.5), (5.5, 0.7, 0.38),
+                                                           (3.5, -0.3, 0.9))),
+        # ellipses (a torso, a bag), and legs and columns, seen with a noise of 1.5 cm: close decisions
+        np.min([ellipse(1.0, -1.0, 0.2, 0.1, 0.3), ellipse(1.5, -0.5, 0.3, 0.18, 1.2), ellipse(2.0, 0.0, 0.25, 0.1, 0),
+                ellipse(1.2, 0.6, 0.15, 0.1, 0.8), ellipse(2.5, 1.0, 0.35, 0.18, 2.0), circles((1.3, -1.3, 0.1),
+                (2.0, -0.75, 0.1), (3.0, -0.25, 0.1), (1.8, 0.3, 0.3), (3.0, 1.25, 0.2))], axis=0),
+    ]
+    sigma = [0.004] * 4 + [0.015]
+    bumps: list[list[tuple[float, int, float, float]]] = [[]] * 5   # (bearing, beams, depth from, to)
+
+    def wall(bearing: float, d: float, bend: float, step: float, half: float = 0.6) -> np.ndarray:
+        """A wall facing the scanner d m away, bent by `bend` (degrees) or stepped back `step` (m) where the
+        scanner's perpendicular meets it."""
+        n, v = np.array([np.cos(bearing), np.sin(bearing)]), np.array([-np.sin(bearing), np.cos(bearing)])
+        v2 = np.cos(np.radians(bend)) * v + np.sin(np.radians(bend)) * n
+        return np.minimum(rp.ray_segment(angles, d * n - half * v, d * n),
+                          rp.ray_segment(angles, (d + step) * n, (d + step) * n + half * v2))
+
+    # walls cut by HTL at a group of points proud of them, near the merge's limits: bent by 2.5 and 3.5 degrees,
+    # stepped back by 3 and 5 cm; then walls seen with 1 cm of noise (a merged line's r_acc is its votes) and a
+    # board short enough for a circle (cut and merged, it still counts as two lines: see rp.feature_decision)
+    scenes.append(np.min([wall(-1.1, 2.0, 2.5, 0.0), wall(-0.35, 2.2, 3.5, 0.0), wall(0.35, 2.0, 0.0, 0.03),
+                          wall(1.1, 2.2, 0.0, 0.05)], axis=0))
+    sigma.append(0.004)
+    bumps.append([(b, 6, 0.06, 0.08) for b in (-1.1, -0.35, 0.35, 1.1)])
+    scenes.append(np.min([wall(-0.8, 2.0, 0.0, 0.0), wall(0.6, 2.5, 0.0, 0.0), wall(1.3, 1.5, 0.0, 0.0, 0.375)],
+                         axis=0))
+    sigma.append(0.01)
+    bumps.append([(-0.8, 6, 0.07, 0.07), (0.6, 6, 0.07, 0.07), (1.3, 6, 0.06, 0.08)])
+    # a wall with three groups of seven beams 6.5 to 7.5 cm proud of it (HTL often cuts it in three, two merged)
+    for _ in range(2):
+        scenes.append(rp.ray_wall(angles, 2.0, np.pi / 2 + 0.2))
+        sigma.append(0.004)
+        bumps.append([(np.radians(a), 7, 0.065, 0.075) for a in (42.5, 57.5, 72.5)])
+    # legs and columns seen with a noise of 2 and 2.5 cm: circles near line_min_racc, or under circle_min_points
+    for noise in (0.02, 0.025):
+        scenes.append(circles((1.0, -1.2, 0.1), (1.5, -0.8, 0.1), (2.0, -0.4, 0.1), (3.0, -0.1, 0.1), (1.5, 0.3, 0.2),
+                              (2.0, 0.8, 0.3), (1.2, 1.3, 0.15), (4.0, 0.5, 0.1), (5.0, 0.1, 0.15)))
+        sigma.append(noise)
+        bumps.append([])
+    out = []
+    for base, noise, groups in zip(scenes, sigma, bumps, strict=True):
+        for _ in range(2):
+            r = base + rng.normal(0, noise, len(base))
+            for bearing, beams, lo, hi in groups:
+                i = int(np.searchsorted(angles, bearing)) - beams // 2
+                r[i:i + beams] -= rng.uniform(lo, hi, beams)
+            out.append(r.astype(np.float32))
+            # the same with clutter: single points and pairs
+            clutter = rng.random(len(r)) < 0.02
+            r[clutter] = rng.uniform(0.5, 3.0, clutter.sum())
+            out.append(r.astype(np.float32))
+    return out
+
+
+def _mirror_segment(x, y, s: int, e: int, vec: np.ndarray, params, dalpha: float, st: dict):
+    """Segment [s, e) as extract_scan takes it, its steps called one by one (the same calls, the same scratch
+    arrays kept from segment to segment in `st`, the accumulator zeroed as far as first needed), with the
+    decision and the merges left to the reference: (rp.Decision, the candidate rows after the merges, the
+    pairs merged, the kept lines before the decision, the r_acc a circle must beat)."""
+    from datmo_cli.perception import _kernels as KP
+
+    rho_res = vec[KP.P_RHO_RES]
+    cos_t, sin_t, acc, toff, idx, lo = st["cos_t"], st["sin_t"], st["acc"], st["toff"], st["idx"], st["lo"]
+    sub_s, sub_e, peaks = st["sub_s"], st["sub_e"], st["peaks"]
+    nt = cos_t.shape[0]
+    nsub = 0
+    if e - s >= vec[KP.P_LINE_MIN_POINTS]:
+        KP.normal_cells(x, y, s, e, nt, st["cell"])
+        used = nt * KP._bounding_box(x, y, s, e, rho_res, acc.shape[1], st["box"])
+        if used > st["zeroed"]:
+            acc.reshape(-1)[st["zeroed"]:used] = 0
+            st["zeroed"] = used
+        nsub = KP.line_subsegments(x, y, s, e, acc, toff, cos_t, sin_t, rho_res, int(vec[KP.P_WINDOW] / (np.pi / nt)),
+                                   st["cell"], st["touched"], sub_s, sub_e, peaks, st["hist"])
+    rows, runs = [], []
+    for k in range(nsub):
+        t = peaks[k, 1]
+        KP.line_of_run(x, y, sub_s[k], sub_e[k], t * (np.pi / nt), toff[t] + (peaks[k, 2] + 0.5) * rho_res,
+                       peaks[k, 0], rho_res, idx, lo)
+        rows.append(lo.copy())
+        runs.append((int(sub_s[k]), int(sub_e[k])))
+    htl, kept, htl_racc = rp.line_candidates(rows, runs, e - s, params)
+
+    def refit(a: int, b: int, theta: float, rho: float, votes: float) -> np.ndarray:
+        KP.line_of_run(x, y, a, b, theta, rho, votes, rho_res, idx, lo)
+        return lo.copy()
+
+    def circle(beat: float) -> tuple[np.ndarray, np.ndarray]:
+        KP.circle_of_run(x, y, s, e, vec, st["cacc"], idx, st["cout"], beat)
+        return st["cout"].copy(), idx[:int(st["cout"][KP.CC_N])].copy()
+
+    kept, rows, _, merged = rp.merge_lines(rows, runs, kept, rho_res, refit)
+    decision = rp.feature_decision(x, y, s, e, rows, htl, kept, htl_racc, params, dalpha, circle)
+    return decision, rows, merged, kept, max(htl_racc, params.line_min_racc)
+
+
+def test_extract_scan_decision_equals_the_reference():
+    """Every segment of varied scans (two rooms and _feature_scenes; 0.5 and 1 degree steps; default parameters,
+    and a larger circle_min_points and line_min_racc) is what the plain decision rule of method.md 5.2
+    (rp.line_candidates, rp.merge_lines, rp.feature_decision) makes of the kernel's own HTL candidates and
+    circle fit, those computed by the kernels extract_scan calls, called one by one (_mirror_segment): the same
+    kind, the lines the kept and merged candidates, the circle the fit, the blob the reference's centroid and
+    extent. Each branch of the rule is taken at least once, and some decisions are close."""
+    from datmo_cli.perception import _kernels as KP
+    from datmo_cli.perception.params import FeatureParams
+
+    counts: dict[str, int] = {}
+    default, strict = FeatureParams(), FeatureParams().replace(circle_min_points=8, line_min_racc=0.8)
+    for inc, params in ((np.radians(0.5), default), (np.radians(0.5), strict), (np.radians(1.0), default)):
+        angles = -np.pi / 2 + inc * np.arange(int(round(np.pi / inc)) + 1)
+        B = len(angles)
+        vec = params.kernel_vector()
+        nt = int(round(180.0 / params.theta_resolution))
+        theta = np.arange(nt) * (np.pi / nt)
+        cos_t, sin_t = np.cos(theta), np.sin(theta)
+        w = int(round(vec[KP.P_CWINDOW] / vec[KP.P_CELL]))
+        width = int(2 * 8.0 / vec[KP.P_RHO_RES]) + 3
+        for k, ranges in enumerate(list(_room_scans(2, angles)) + _feature_scenes(angles)):
+            segs = rp.segment(ranges, inc, vec[KP.P_C0], 0.05, 8.0, 1)   # single points and pairs too
+            starts = np.array([s for s, _ in segs] + [0], np.int64)
+            ends = np.array([e for _, e in segs] + [0], np.int64)
+            r = np.where(np.isfinite(ranges), ranges, 0.0).astype(np.float64)
+            x, y = r * np.cos(angles), r * np.sin(angles)
+            out = [np.zeros((B, c)) for c in (13, 9, 9)]
+            # the accumulator as extract_scans leaves it uninitialised: extract_scan zeroes what it uses
+            acc = np.full((nt, width), 7, np.int32)
+            work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
+                    np.empty((KP.MAX_SUB, 3), np.int64), np.empty((KP.MAX_SUB, 12)), np.empty(KP.MAX_SUB, np.int64),
+                    np.empty(KP.MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64), np.empty(4),
+                    np.zeros(1, np.int64))
+            nl, nc, nb = KP.extract_scan(x, y, starts, ends, len(segs), k, vec, acc,
+                                         np.zeros((2 * w + 1, 2 * w + 1), np.int32), cos_t, sin_t,
+                                         np.empty(B, np.int64), np.empty(KP.MAX_SUB, np.int64),
+                                         np.empty(KP.MAX_SUB, np.int64), out[0], 0, out[1], 0, out[2], 0, work, inc)
+            lines, circles, blobs = out[0][:nl], out[1][:nc], out[2][:nb]
+            st = {"cos_t": cos_t, "sin_t": sin_t, "acc": np.full((nt, width), 7, np.int32), "zeroed": 0,
+                  "toff": np.empty(nt), "idx": np.empty(B, np.int64), "lo": np.empty(12),
+                  "sub_s": np.empty(KP.MAX_SUB, np.int64), "sub_e": np.empty(KP.MAX_SUB, np.int64),
+                  "peaks": np.empty((KP.MAX_SUB, 3), np.int64), "cell": np.empty(B, np.int64),
+                  "touched": np.zeros(nt, np.bool_), "hist": np.empty((B, 3), np.int64), "box": np.empty(4),
+                  "cacc": np.zeros((2 * w + 1, 2 * w + 1), np.int32), "cout": np.empty(5)}
+            n_lines = n_circles = n_blobs = 0
+            for g, (s, e) in enumerate(segs):
+                d, rows, merged, kept, beat = _mirror_segment(x, y, s, e, vec, params, inc, st)
+                where = f"scan {k} at {np.degrees(inc):.1f} deg, segment {g} [{s}, {e}): {d}"
+                got_l, got_c, got_b = (t[t[:, 1] == g] for t in (lines, circles, blobs))
+                assert (len(got_c), len(got_l) > 0, len(got_b)) == \
+                    (d.kind == "circle", d.kind == "lines", d.kind == "blob"), where
+                if d.kind == "circle":
+                    c = d.circle
+                    np.testing.assert_array_equal(got_c[0], [k, g, s, e - 1, c[KP.CC_N], c[KP.CC_X], c[KP.CC_Y],
+                                                             c[KP.CC_R], c[KP.CC_RACC]], err_msg=where)
+                elif d.kind == "lines":
+                    want = [[k, g, *rows[q][[KP.LC_FIRST, KP.LC_LAST, KP.LC_N, KP.LC_X0, KP.LC_Y0, KP.LC_X1,
+                                             KP.LC_Y1, KP.LC_RHO, KP.LC_THETA, KP.LC_LEN, KP.LC_RACC]]]
+                            for q in d.lines]
+                    np.testing.assert_array_equal(got_l, want, err_msg=where)
+                else:
+                    np.testing.assert_array_equal(got_b[0][:5], [k, g, s, e - 1, e - s], err_msg=where)
+                    np.testing.assert_allclose(got_b[0][KP.B_X:KP.B_SIZE + 1], rp.blob(x[s:e], y[s:e]),
+                                               rtol=1e-12, atol=1e-12, err_msg=where)
+                    assert got_b[0][KP.B_KIND] == (e - s < 3), where
+                n_lines += len(d.lines)
+                n_circles += d.kind == "circle"
+                n_blobs += d.kind == "blob"
+                # the branches taken
+                lost = d.tried and d.kind != "circle"
+                fitted = d.circle is not None and d.circle[KP.CC_N] >= params.circle_min_points
+                voted = d.circle is not None and d.circle[KP.CC_RACC] > 0   # refined or not (see circle_of_run)
+                for branch, taken in (
+                        ("circle, no line", d.kind == "circle" and d.ncand == 0),
+                        ("circle, one line", d.kind == "circle" and d.ncand == 1),
+                        ("circle, two lines", d.kind == "circle" and d.ncand == 2),
+                        ("one line left after a failed circle", lost and d.kind == "lines" and d.ncand == 1),
+                        ("perpendicular lines left after a failed circle", lost and d.kind == "lines" and d.ncand == 2),
+                        ("lines dropped after a failed circle: a blob", lost and d.kind == "blob" and bool(kept)),
+                        ("three lines or more, convex: HTC", d.convex is not None and d.convex >= 2),
+                        ("three lines or more, not convex: lines", d.convex is not None and d.convex < 2),
+                        ("lines too far apart for a circle", not d.tried and d.kind == "lines"),
+                        ("lines merged", bool(merged)),
+                        ("blob", d.kind == "blob"),
+                        ("under line_min_points", e - s < params.line_min_points),
+                        ("under circle_min_points, HTC not run", d.tried and e - s < params.circle_min_points),
+                        ("close: the circle's r_acc within 0.05 of what it must beat, ties included",
+                         voted and abs(d.circle[KP.CC_RACC] - beat) <= 0.05),
+                        ("close: the circle beat the lines, not well posed",
+                         lost and fitted and d.circle[KP.CC_RACC] > beat)):
+                    counts[branch] = counts.get(branch, 0) + bool(taken)
+            assert (nl, nc, nb) == (n_lines, n_circles, n_blobs), f"scan {k}"
+    assert all(v > 0 for v in counts.values()), {k: v for k, v in counts.items() if not v}
