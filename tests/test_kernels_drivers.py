@@ -281,6 +281,28 @@ def _room_scans(n: int, angles: np.ndarray) -> np.ndarray:
     return out
 
 
+def _extract_scan_rows(x, y, segs: list, k: int, vec, acc, cos_t, sin_t, inc: float) -> list[np.ndarray]:
+    """extract_scan on one scan's points (x, y m, sensor frame) and segments [(start, end)] as scan k, with the
+    scratch arrays extract_scans makes and the accumulator `acc` as given (extract_scan zeroes what it uses):
+    its line, circle and blob rows."""
+    from datmo_cli.perception import _kernels as KP
+
+    B, nt = len(x), len(cos_t)
+    w = int(round(vec[KP.P_CWINDOW] / vec[KP.P_CELL]))
+    starts = np.array([s for s, _ in segs] + [0], np.int64)
+    ends = np.array([e for _, e in segs] + [0], np.int64)
+    out = [np.zeros((B, c)) for c in (13, 9, 9)]
+    work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
+            np.empty((KP.MAX_SUB, 3), np.int64), np.empty((KP.MAX_SUB, 12)), np.empty(KP.MAX_SUB, np.int64),
+            np.empty(KP.MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64), np.empty(4),
+            np.zeros(1, np.int64))
+    nl, nc, nb = KP.extract_scan(x, y, starts, ends, len(segs), k, vec, acc,
+                                 np.zeros((2 * w + 1, 2 * w + 1), np.int32), cos_t, sin_t, np.empty(B, np.int64),
+                                 np.empty(KP.MAX_SUB, np.int64), np.empty(KP.MAX_SUB, np.int64), out[0], 0, out[1],
+                                 0, out[2], 0, work, inc)
+    return [out[0][:nl], out[1][:nc], out[2][:nb]]
+
+
 def test_extract_scan_scans_and_parallel():
     """A block of scans through extract_scans (one call) and extract_parallel (split in parts) gives the same
     rows as extract_scan called scan by scan on the reference's segments; each segment is one circle, or its
@@ -313,25 +335,13 @@ def test_extract_scan_scans_and_parallel():
     seg, lines, circles, blobs, counts = whole
     assert (counts[:, 1:].sum(axis=0) > 0).all()   # lines, circles and blobs
 
-    w = int(round(vec[KP.P_CWINDOW] / vec[KP.P_CELL]))
     for k in range(N):
         want_seg = rp.segment(ranges[k], inc, vec[KP.P_C0], 0.05, 8.0, int(vec[KP.P_MIN_POINTS]))
         assert [tuple(s) for s in seg[k * B:k * B + counts[k, 0]].tolist()] == want_seg
-        starts = np.array([s for s, _ in want_seg] + [0], np.int64)
-        ends = np.array([e for _, e in want_seg] + [0], np.int64)
         r = np.where(np.isfinite(ranges[k]), ranges[k], 0.0).astype(np.float64)
         x, y = r * cos_a, r * sin_a
-        out = [np.zeros((B, c)) for c in (13, 9, 9)]
         acc = np.zeros((nt, int(2 * 8.0 / vec[KP.P_RHO_RES]) + 3), np.int32)
-        work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
-                np.empty((KP.MAX_SUB, 3), np.int64), np.empty((KP.MAX_SUB, 12)), np.empty(KP.MAX_SUB, np.int64),
-                np.empty(KP.MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64), np.empty(4),
-                np.zeros(1, np.int64))
-        nl, nc, nb = KP.extract_scan(x, y, starts, ends, len(want_seg), k, vec, acc,
-                                     np.zeros((2 * w + 1, 2 * w + 1), np.int32), cos_t, sin_t, np.empty(B, np.int64),
-                                     np.empty(KP.MAX_SUB, np.int64), np.empty(KP.MAX_SUB, np.int64), out[0], 0, out[1],
-                                     0, out[2], 0, work, inc)
-        got = [out[0][:nl], out[1][:nc], out[2][:nb]]
+        got = _extract_scan_rows(x, y, want_seg, k, vec, acc, cos_t, sin_t, inc)
         for j, (g, table) in enumerate(zip(got, (lines, circles, blobs), strict=True)):
             np.testing.assert_array_equal(g, table[k * B:k * B + counts[k, j + 1]])
         kinds = [set() for _ in want_seg]
@@ -541,22 +551,11 @@ def test_extract_scan_decision_equals_the_reference():
         width = int(2 * 8.0 / vec[KP.P_RHO_RES]) + 3
         for k, ranges in enumerate(list(_room_scans(2, angles)) + _feature_scenes(angles)):
             segs = rp.segment(ranges, inc, vec[KP.P_C0], 0.05, 8.0, 1)   # single points and pairs too
-            starts = np.array([s for s, _ in segs] + [0], np.int64)
-            ends = np.array([e for _, e in segs] + [0], np.int64)
             r = np.where(np.isfinite(ranges), ranges, 0.0).astype(np.float64)
             x, y = r * np.cos(angles), r * np.sin(angles)
-            out = [np.zeros((B, c)) for c in (13, 9, 9)]
             # the accumulator as extract_scans leaves it uninitialised: extract_scan zeroes what it uses
             acc = np.full((nt, width), 7, np.int32)
-            work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
-                    np.empty((KP.MAX_SUB, 3), np.int64), np.empty((KP.MAX_SUB, 12)), np.empty(KP.MAX_SUB, np.int64),
-                    np.empty(KP.MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64), np.empty(4),
-                    np.zeros(1, np.int64))
-            nl, nc, nb = KP.extract_scan(x, y, starts, ends, len(segs), k, vec, acc,
-                                         np.zeros((2 * w + 1, 2 * w + 1), np.int32), cos_t, sin_t,
-                                         np.empty(B, np.int64), np.empty(KP.MAX_SUB, np.int64),
-                                         np.empty(KP.MAX_SUB, np.int64), out[0], 0, out[1], 0, out[2], 0, work, inc)
-            lines, circles, blobs = out[0][:nl], out[1][:nc], out[2][:nb]
+            lines, circles, blobs = _extract_scan_rows(x, y, segs, k, vec, acc, cos_t, sin_t, inc)
             st = {"cos_t": cos_t, "sin_t": sin_t, "acc": np.full((nt, width), 7, np.int32), "zeroed": 0,
                   "toff": np.empty(nt), "idx": np.empty(B, np.int64), "lo": np.empty(12),
                   "sub_s": np.empty(KP.MAX_SUB, np.int64), "sub_e": np.empty(KP.MAX_SUB, np.int64),
@@ -610,5 +609,5 @@ def test_extract_scan_decision_equals_the_reference():
                         ("close: the circle beat the lines, not well posed",
                          lost and fitted and d.circle[KP.CC_RACC] > beat)):
                     counts[branch] = counts.get(branch, 0) + bool(taken)
-            assert (nl, nc, nb) == (n_lines, n_circles, n_blobs), f"scan {k}"
+            assert (len(lines), len(circles), len(blobs)) == (n_lines, n_circles, n_blobs), f"scan {k}"
     assert all(v > 0 for v in counts.values()), {k: v for k, v in counts.items() if not v}
