@@ -20,6 +20,7 @@ EXTRAS = {
     "fsspec": ("fsspec", "dask"),
     "pyarrow": ("pyarrow", "parquet"),
     "foxglove": ("foxglove-sdk", "live"),
+    "websockets": ("websockets", "live"),
 }
 
 

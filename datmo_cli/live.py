@@ -11,10 +11,20 @@ that subscribes late still places the scan.
 
 Times are the log's (header stamps, ns): the server advertises the time capability and broadcasts each
 scan's stamp, so Foxglove's clock follows the log (and restarts with it when `play --loop` starts over).
+
+Clients: foxglove-sdk's server accepts only the subprotocol `foxglove.sdk.v1` (Foxglove's app today), while
+the public protocol (github.com/foxglove/ws-protocol) and the clients written to it (`@foxglove/ws-protocol`,
+Lichtblick, older apps) ask for `foxglove.websocket.v1`: the same protocol under its older name. So the SDK's
+server listens on a loopback port of its own, and a small front (`_Front`, on `websockets`) takes the
+clients on the port asked for, accepts either name, and relays each client's frames to and from the SDK's
+server unchanged.
 """
 
 from __future__ import annotations
 
+import asyncio
+import concurrent.futures
+import logging
 import math
 import queue
 import threading
@@ -41,12 +51,17 @@ TOPIC_TF_STATIC = "/tf_static"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 STATIC_EVERY_NS = 1_000_000_000    # static transforms are sent again after this much log time
 SUBPROTOCOL = "foxglove.sdk.v1"     # what the SDK's server speaks (the app's WebSocket data source)
+PUBLIC_SUBPROTOCOL = "foxglove.websocket.v1"   # the public spec's name for the same protocol
+SUBPROTOCOLS = (SUBPROTOCOL, PUBLIC_SUBPROTOCOL)   # what the front accepts, the first preferred
+MIN_LOOP_PASS_S = 1.0               # play --loop: a pass of the log lasts at least this long (s, wall time)
 _APP = "https://app.foxglove.dev/"
 
 
 def require_foxglove():
-    """The foxglove module (with its websocket module loaded), or MissingExtraError naming the live extra."""
+    """The foxglove module (with its websocket module loaded), or MissingExtraError naming the live extra
+    (which also brings websockets, for the front)."""
     require("foxglove.websocket", for_="the live view")
+    require("websockets.asyncio.server", for_="the live view")
     return require("foxglove", for_="the live view")
 
 
@@ -143,11 +158,16 @@ class LiveServer:
         self.static: dict[str, Message] = {}
         self.sent = 0
         try:
-            self.server = foxglove.start_server(name=name, host=host, port=port, capabilities=[Capability.Time],
+            self.server = foxglove.start_server(name=name, host="127.0.0.1", port=0, capabilities=[Capability.Time],
                                                 server_listener=_Listener(self.subscribed), context=self.context)
-        except Exception as exc:  # the SDK raises its own errors for a busy port or a bad host
+        except Exception as exc:  # the SDK raises its own errors
+            raise ConfigError(f"{option} {port}: cannot start the live view's server ({_reason(exc)})") from None
+        try:
+            self.front = _Front(host, port, f"ws://127.0.0.1:{self.server.port}")
+        except Exception as exc:  # OSError for a busy port, a bad host or a name that does not resolve
+            self.server.stop()
             raise ConfigError(f"{option} {port}: cannot serve on {host}:{port} ({_reason(exc)})") from None
-        self.port = self.server.port
+        self.port = self.front.port
 
     @property
     def url(self) -> str:
@@ -196,13 +216,15 @@ class LiveServer:
         self.server.clear_session()
 
     def close(self) -> None:
+        self.front.close()
         for ch in self.channels.values():
             ch.close()
         self.server.stop()
 
 
 class _Listener:
-    """The server's listener: notes the first subscription."""
+    """The server's listener: notes the first subscription. The SDK calls on_unsubscribe for each channel a
+    client leaves (it is not optional: without it every client that leaves printed an AttributeError)."""
 
     def __init__(self, subscribed: threading.Event) -> None:
         self.subscribed = subscribed
@@ -210,8 +232,92 @@ class _Listener:
     def on_subscribe(self, client, channel) -> None:
         self.subscribed.set()
 
+    def on_unsubscribe(self, client, channel) -> None:
+        pass
+
+
+_QUIET = logging.getLogger("datmo.live.front")   # the front's connection log: kept off the terminal
+_QUIET.addHandler(logging.NullHandler())
+_QUIET.propagate = False
+
+
+class _Front:
+    """The port clients connect to: a WebSocket server (its own thread and event loop) that accepts a client
+    asking for any of SUBPROTOCOLS (else HTTP 400, as the SDK's server answers), opens a connection of its own
+    to the SDK's server at `backend` (a ws:// URL), and relays every frame both ways,
+    unchanged, until either side closes; then it closes the other. Nothing is printed when a client leaves or
+    fails. Raises OSError when it cannot listen on `host`:`port`."""
+
+    def __init__(self, host: str, port: int, backend: str) -> None:
+        self.backend = backend
+        self.loop = asyncio.new_event_loop()
+        self._server = None
+        started: concurrent.futures.Future = concurrent.futures.Future()
+        self._thread = threading.Thread(target=self._run, args=(host, port, started), name="datmo-live-front",
+                                        daemon=True)
+        self._thread.start()
+        self.port = started.result()
+
+    def _run(self, host: str, port: int, started: concurrent.futures.Future) -> None:
+        from websockets.asyncio.server import serve
+
+        async def listen():
+            return await serve(self._relay, host, port, subprotocols=list(SUBPROTOCOLS), compression=None,
+                               max_size=None, logger=_QUIET)
+
+        asyncio.set_event_loop(self.loop)
+        try:
+            self._server = self.loop.run_until_complete(listen())
+        except BaseException as exc:
+            started.set_exception(exc)
+            self.loop.close()
+            return
+        started.set_result(self._server.sockets[0].getsockname()[1])
+        try:
+            self.loop.run_forever()
+        finally:
+            self.loop.close()
+
+    async def _relay(self, client) -> None:
+        from websockets.asyncio.client import connect
+
+        try:
+            async with connect(self.backend, subprotocols=[SUBPROTOCOL], compression=None, max_size=None,
+                               logger=_QUIET) as backend:
+                pipes = [asyncio.create_task(_pipe(client, backend)), asyncio.create_task(_pipe(backend, client))]
+                _, pending = await asyncio.wait(pipes, return_when=asyncio.FIRST_COMPLETED)
+                for task in pending:
+                    task.cancel()
+                await asyncio.gather(*pending, return_exceptions=True)
+        except Exception:  # the client or the SDK's server went away: nothing to tell
+            pass
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Stop listening and close every client's connection (and its relay)."""
+        if self._server is None or self.loop.is_closed():
+            return
+
+        async def stop() -> None:
+            self._server.close()
+            await self._server.wait_closed()
+            self.loop.stop()
+
+        try:
+            asyncio.run_coroutine_threadsafe(stop(), self.loop)
+        except RuntimeError:  # the loop already closed
+            return
+        self._thread.join(timeout)
+
+
+async def _pipe(source, sink) -> None:
+    """Send every message from WebSocket connection `source` on `sink`, as it came (text or binary)."""
+    async for message in source:
+        await sink.send(message)
+
 
 def _reason(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
     text = str(exc).strip().splitlines()
     return text[0].removeprefix("FoxgloveError: ") if text else type(exc).__name__
 
@@ -322,12 +428,14 @@ class Pace:
 
 
 def play(source: LogSource, server: LiveServer, *, rate: float = 1.0, loop: bool = False,
-         sleep: Callable[[float], None] = time.sleep) -> int:
+         sleep: Callable[[float], None] = time.sleep, clock: Callable[[], float] = time.monotonic) -> int:
     """Publish `source` on `server` at `rate` times the log's speed, from the start again after the end with
-    `loop` (a new session each time); returns the number of scans sent."""
+    `loop` (a new session each time, each pass lasting at least MIN_LOOP_PASS_S, so that a log of one scan
+    does not spin); returns the number of scans sent. `sleep` and `clock`: time.sleep and time.monotonic."""
     scans = 0
     while True:
-        pace = Pace(rate)
+        pace = Pace(rate, clock)
+        started = clock()
         last_static: int | None = None
         for batch in source.batches():
             for m in batch:
@@ -341,6 +449,9 @@ def play(source: LogSource, server: LiveServer, *, rate: float = 1.0, loop: bool
                 server.publish(m)
         if not loop:
             return scans
+        rest = started + MIN_LOOP_PASS_S - clock()
+        if rest > 0:
+            sleep(rest)
         server.restart()
 
 

@@ -364,3 +364,107 @@ def test_the_foxglove_layout_shows_scan_features_tracks_and_a_plot_of_track_velo
         fields = re.findall(r"\{(\w+)==\d+\}|\.(\w+)$", p)
         assert {f for pair in fields for f in pair if f} <= track_fields, p
     assert {"vx", "vy"} <= {p.rsplit(".", 1)[1] for p in paths} and TRACK_FIELDS <= track_fields
+
+
+# --------------------------------------------------------------- play --loop (issue 25, item 17)
+
+
+class _Passes(_Recorder):
+    """A stand-in LiveServer for play(): counts the passes (restarts) and stops play after `passes`."""
+
+    def __init__(self, passes: int) -> None:
+        super().__init__()
+        self.passes, self.restarts = passes, 0
+
+    def repeat_static(self, stamp: int) -> None:
+        pass
+
+    def restart(self) -> None:
+        self.restarts += 1
+        if self.restarts == self.passes:
+            raise KeyboardInterrupt
+
+
+def test_play_loop_of_a_one_scan_log_waits_between_passes(tmp_path):
+    _processed_log(tmp_path / "one.mcap", n=1)
+    source = live.LogSource(tmp_path / "one.mcap")
+    now = [0.0]
+    slept: list[float] = []
+
+    def sleep(s: float) -> None:
+        slept.append(s)
+        now[0] += s
+
+    server = _Passes(passes=5)
+    with pytest.raises(KeyboardInterrupt):
+        live.play(source, server, rate=1000.0, loop=True, sleep=sleep, clock=lambda: now[0])
+    assert [m.topic for m in server.messages].count(mcapio.TOPIC_SCAN) == 5
+    # the clock moves only when play sleeps: each pass of a one-scan log is padded to the minimum period
+    assert slept == [live.MIN_LOOP_PASS_S] * 5
+
+
+# -------------------------------------- clients of either subprotocol, and leaving quietly (issue 26 and 25)
+
+
+async def _spec_client(url: str, subprotocol: str, topics: list[str], want: int, timeout: float = 60.0) -> dict:
+    """A client written to the public protocol (github.com/foxglove/ws-protocol, on websockets alone): asks for
+    `subprotocol`, reads serverInfo and the advertised channels, subscribes to `topics`, takes `want` messages
+    of each (messageData: opcode 1, subscription id, timestamp, payload) and the time frames (opcode 2) that
+    come meanwhile, unsubscribes and leaves."""
+    import websockets
+
+    out: dict = {"messages": {t: [] for t in topics}, "times": [], "channels": {}}
+    async with websockets.connect(url, subprotocols=[subprotocol], max_size=None) as ws:
+        out["subprotocol"] = ws.subprotocol
+        out["server_info"] = json.loads(await asyncio.wait_for(ws.recv(), timeout))
+        while not all(t in out["channels"] for t in topics):
+            m = json.loads(await asyncio.wait_for(ws.recv(), timeout))
+            if m["op"] == "advertise":
+                out["channels"] |= {c["topic"]: c for c in m["channels"]}
+        subs = {k: out["channels"][t]["id"] for k, t in enumerate(topics, 1)}
+        await ws.send(json.dumps({"op": "subscribe",
+                                  "subscriptions": [{"id": k, "channelId": c} for k, c in subs.items()]}))
+        got = out["messages"]
+        while min(len(v) for v in got.values()) < want:
+            m = await asyncio.wait_for(ws.recv(), timeout)
+            if isinstance(m, bytes) and m[0] == 1:
+                sub, stamp = struct.unpack_from("<IQ", m, 1)
+                got[topics[sub - 1]].append((stamp, m[13:]))
+            elif isinstance(m, bytes) and m[0] == 2:
+                out["times"].append(struct.unpack_from("<Q", m, 1)[0])
+        await ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": list(subs)}))
+    return out
+
+
+def test_play_serves_clients_of_either_subprotocol_and_says_nothing_when_they_leave(tmp_path):
+    run, payloads = _processed_log(tmp_path / "p.mcap")
+    by_stamp = dict(zip(run.stamps.tolist(), payloads, strict=True))
+    proc, url = _serve([str(tmp_path / "p.mcap"), "--port", "0", "--rate", "8", "--loop"])
+    try:
+        for subprotocol in (live.PUBLIC_SUBPROTOCOL, live.SUBPROTOCOL):
+            got = asyncio.run(_spec_client(url, subprotocol, [mcapio.TOPIC_TRACKS, mcapio.TOPIC_SCAN], want=3))
+            assert got["subprotocol"] == subprotocol
+            info = got["server_info"]
+            assert info["op"] == "serverInfo" and info["name"] == "datmo" and "time" in info["capabilities"]
+            tracks = got["channels"][mcapio.TOPIC_TRACKS]
+            assert (tracks["encoding"], tracks["schemaName"], tracks["schemaEncoding"]) == (
+                "cdr", types.TRACKS, "ros2msg")
+            for stamp, payload in got["messages"][mcapio.TOPIC_TRACKS]:
+                assert payload == by_stamp[stamp]                          # the log's bytes, at the log's time
+            for stamp, payload in got["messages"][mcapio.TOPIC_SCAN]:
+                assert stamp in by_stamp and payload[:4] == cdr.CDR_HEADER
+            assert got["times"] and set(got["times"]) <= set(by_stamp)
+        import websockets
+
+        with pytest.raises(websockets.InvalidStatus, match="400"):           # as foxglove-sdk's server answers
+            asyncio.run(_spec_client(url, "some.other.v1", [mcapio.TOPIC_SCAN], want=1))
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130
+    # two clients left (and one was turned away): nothing on stderr but play's own two lines
+    lines = err.splitlines()
+    assert lines[0] == "  waiting for a client to subscribe (Ctrl-C to stop)" and len(lines) == 2, err
+    assert re.fullmatch(r"datmo play: stopped \(Ctrl-C\); [\d,]+ messages served", lines[1]), err
