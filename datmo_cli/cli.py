@@ -28,6 +28,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("report", "Summarise what a processed run saw."),
     "export": ("export", "Write every track's state per scan (and features) as CSV, NDJSON or Parquet."),
     "play": ("play", "Serve a log to Foxglove live (WebSocket), processing scans as they play."),
+    "node": ("node", "Run live as a ROS 2 node over DDS: LaserScans in, tracks out (no ROS needed)."),
     "evaluate": ("evaluate", "Score tracks against ground truth (CLEAR-MOT, IDF1)."),
     "train-legs": ("train_legs", "Train the learned leg detector on labelled scans; print held-out figures."),
     "config": ("config", "Print the effective configuration ([features], [track]) as TOML."),

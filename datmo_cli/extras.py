@@ -21,6 +21,7 @@ EXTRAS = {
     "pyarrow": ("pyarrow", "parquet"),
     "foxglove": ("foxglove-sdk", "live"),
     "websockets": ("websockets", "live"),
+    "cyclonedds": ("cyclonedds", "node"),
 }
 
 

@@ -42,6 +42,8 @@ CASES = [
      "writing Parquet needs pyarrow, which is not installed: pip install 'datmo[parquet]'"),
     ("foxglove", ["play", "{log}", "--port", "0"],
      "the live view needs foxglove-sdk, which is not installed: pip install 'datmo[live]'"),
+    ("cyclonedds", ["node", "--no-config"],
+     "datmo node needs cyclonedds, which is not installed: pip install 'datmo[node]'"),
 ]
 
 
