@@ -219,14 +219,15 @@ def _wait_for(condition, what: str, timeout: float = 60.0) -> None:
 
 
 def _expected(tmp_path: Path, run: ScanRun, odom_stamps: np.ndarray) -> dict[int, bytes]:
-    """{stamp: the /datmo/tracks payload} that `datmo track` writes for `run` with the robot at POSE."""
+    """{stamp: the /datmo/tracks payload} that `datmo track --config datmo.toml` writes for `run` with the robot
+    at POSE."""
     n = len(odom_stamps)
     odom = Odometry(odom_stamps, np.full(n, POSE[0]), np.full(n, POSE[1]), np.full(n, POSE[2]))
     with mcapio.LogWriter(tmp_path / "in.mcap", provenance=mcapio.Provenance("test", {})) as w:
         w.write_scans(run)
         w.write_odometry(odom)
     result = CliRunner().invoke(cli, ["track", str(tmp_path / "in.mcap"), "-o", str(tmp_path / "out.mcap"),
-                                      "--no-config", "-q"])
+                                      "--config", str(tmp_path / "datmo.toml"), "-q"])
     assert result.exit_code == 0, result.output
     stamps, payloads = mcapio.read_messages(tmp_path / "out.mcap", mcapio.TOPIC_TRACKS)
     return dict(zip(stamps.tolist(), payloads, strict=True))
@@ -239,6 +240,7 @@ def test_an_independent_ros2_peer_gets_tracks_from_datmo_node(tmp_path, monkeypa
     monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
     run = mcapio.read_run(HALL).slice(0, N_SCANS)
     odom_stamps = np.concatenate([[run.stamps[0] - 10_000_000], run.stamps])
+    (tmp_path / "datmo.toml").write_text("[track]\nconfirm_hits = 2\ngate = 11.0\n")   # the node reads it too
     expected = _expected(tmp_path, run, odom_stamps)
     # then 10 scans of another geometry (every other beam), later
     g181 = ScanGeometry(angle_min=run.geometry.angle_min, angle_increment=2 * run.geometry.angle_increment,
@@ -247,7 +249,7 @@ def test_an_independent_ros2_peer_gets_tracks_from_datmo_node(tmp_path, monkeypa
     later = run.stamps[-1] + 200_000_000 * np.arange(1, 11)
 
     node = subprocess.Popen([sys.executable, "-c", "from datmo_cli.cli import main; main()", "node",
-                             "--odom-topic", "/odom", "--no-config"], stdout=subprocess.PIPE,
+                             "--odom-topic", "/odom", "--config", str(tmp_path / "datmo.toml")], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=os.environ | {"PYTHONUNBUFFERED": "1"})
     try:
         ready = node.stdout.readline()

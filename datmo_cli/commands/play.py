@@ -31,8 +31,9 @@ def host_option(*decls: str, help_: str = "Address to serve on (0.0.0.0: every i
 @config_options("TOML file with [features] and [track] tables, for a log that is processed on the fly.")
 @quiet_option
 def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bool, cfg: DatmoConfig) -> None:
-    """Serve a log to Foxglove (WebSocket, foxglove-sdk) at the log's rate: the scan, features, tracks,
-    markers and transforms, every channel with its ROS 2 schema.
+    """Serve a log to Foxglove (its WebSocket protocol, to clients asking for foxglove.sdk.v1 or
+    foxglove.websocket.v1) at the log's rate: the scan, features, tracks, markers and transforms, every
+    channel with its ROS 2 schema.
 
     A log without /datmo/tracks is segmented, its features extracted and tracked on the fly, as datmo run
     would; a processed log is served as it is. Transforms come from the log's /tf and /tf_static, else from
