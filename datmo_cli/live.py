@@ -288,7 +288,7 @@ class _Front:
                 _, pending = await asyncio.wait(pipes, return_when=asyncio.FIRST_COMPLETED)
                 for task in pending:
                     task.cancel()
-                await asyncio.gather(*pending, return_exceptions=True)
+                await asyncio.gather(*pipes, return_exceptions=True)   # each outcome taken: none is logged
         except Exception:  # the client or the SDK's server went away: nothing to tell
             pass
 

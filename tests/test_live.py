@@ -436,6 +436,22 @@ async def _spec_client(url: str, subprotocol: str, topics: list[str], want: int,
     return out
 
 
+async def _vanish(url: str) -> None:
+    """A client that subscribes to everything, takes one message and drops the connection (no close frame)."""
+    import websockets
+
+    async with websockets.connect(url, subprotocols=[live.PUBLIC_SUBPROTOCOL], max_size=None) as ws:
+        channels = []
+        while not channels:
+            m = json.loads(await asyncio.wait_for(ws.recv(), 60))
+            channels = [c["id"] for c in m.get("channels", [])]
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": i, "channelId": c}
+                                                                       for i, c in enumerate(channels)]}))
+        while not isinstance(await asyncio.wait_for(ws.recv(), 60), bytes):
+            pass
+        ws.transport.abort()
+
+
 def test_play_serves_clients_of_either_subprotocol_and_says_nothing_when_they_leave(tmp_path):
     run, payloads = _processed_log(tmp_path / "p.mcap")
     by_stamp = dict(zip(run.stamps.tolist(), payloads, strict=True))
@@ -456,6 +472,7 @@ def test_play_serves_clients_of_either_subprotocol_and_says_nothing_when_they_le
             assert got["times"] and set(got["times"]) <= set(by_stamp)
         import websockets
 
+        asyncio.run(_vanish(url))
         with pytest.raises(websockets.InvalidStatus, match="400"):           # as foxglove-sdk's server answers
             asyncio.run(_spec_client(url, "some.other.v1", [mcapio.TOPIC_SCAN], want=1))
         proc.send_signal(signal.SIGINT)
