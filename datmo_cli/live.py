@@ -517,7 +517,10 @@ class LiveFeed:
 
     def close(self, timeout: float = 5.0) -> None:
         """Stop the thread (after the queued scans, waiting at most `timeout` seconds)."""
-        self.queue.put(None)
+        try:
+            self.queue.put(None, timeout=timeout)
+        except queue.Full:   # the thread has stopped (a failure) with the queue full
+            return
         self._thread.join(timeout)
 
     def _run(self) -> None:

@@ -449,3 +449,45 @@ def test_bad_topics_and_domains_are_one_line(monkeypatch, args, env, line):
     result = CliRunner().invoke(cli, ["node", "--no-config", *args])
     assert result.exit_code == 1 and result.output.splitlines()[0].startswith(line), result.output
     assert len(result.output.splitlines()) == 1
+
+
+class _Broken:
+    def __init__(self, *args, **kwargs) -> None:
+        pass
+
+    def messages(self, run: ScanRun) -> list[live.Message]:
+        raise ValueError("a bug in the stages")
+
+
+def test_a_feed_whose_stages_failed_closes_even_with_its_queue_full(monkeypatch):
+    monkeypatch.setattr(live, "Stages", _Broken)
+    run = mcapio.read_run(HALL).slice(0, 1)
+    feed = live.LiveFeed(object(), backlog=2)
+    feed.scan(int(run.stamps[0]), run.ranges[0], run.geometry)
+    _wait_for(lambda: feed.failure is not None, "the stages to fail")
+    feed.scan(int(run.stamps[0]) + 1, run.ranges[0], run.geometry)        # ignored once failed
+    while not feed.queue.full():
+        feed.queue.put_nowait(("filler", None, None))
+    feed.close(timeout=0.1)                                                # returns: nothing takes from the queue
+    assert feed.failure == "ValueError: a bug in the stages"
+
+
+def test_the_node_stops_when_its_stages_fail(monkeypatch):
+    import datmo_cli.node
+
+    class Failing:
+        def __init__(self, domain, scan_topic, odom_topic, cfg, say) -> None:
+            self.scan_topic, self.odom_topic, self.topics = scan_topic, odom_topic, {"/datmo/tracks": types.TRACKS}
+            self.feed = type("Feed", (), {"failure": None})()
+            self.spins = 0
+
+        def spin(self) -> None:
+            self.spins += 1
+            if self.spins == 3:
+                self.feed.failure = "ValueError: a bug"
+
+    monkeypatch.setattr(datmo_cli.node, "Node", Failing)
+    result = CliRunner().invoke(cli, ["node", "--no-config", "--domain-id", "3"])
+    assert result.exit_code == 70, result.output
+    assert result.output.splitlines()[0] == "datmo node: ROS 2 domain 3: /scan in, /datmo/tracks out"
+    assert "the stages stopped: ValueError: a bug" in result.output.splitlines()[-1]

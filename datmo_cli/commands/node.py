@@ -45,8 +45,9 @@ def command(scan_topic: str, odom_topic: str | None, domain_id: int | None, cfg:
         inputs = node.scan_topic + (f" and {node.odom_topic}" if node.odom_topic else "")
         click.echo(f"datmo node: ROS 2 domain {domain}: {inputs} in, {', '.join(node.topics)} out")
         say("  Ctrl-C to stop")
-        while True:
+        while node.feed.failure is None:
             node.spin()
+        raise RuntimeError(f"the stages stopped: {node.feed.failure}")   # a bug: exit 70, one line
     except (KeyboardInterrupt, outputs.Terminated) as exc:
         code = 130 if isinstance(exc, KeyboardInterrupt) else exc.exit_code
         node.close()
