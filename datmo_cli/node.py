@@ -168,6 +168,6 @@ class Node:
         return ", ".join(parts)
 
     def close(self, timeout: float = 5.0) -> None:
-        """Finish the scans queued (waiting at most `timeout` seconds) and leave the domain."""
+        """Finish the scans queued (waiting at most `timeout` seconds). The node leaves the domain when the
+        process exits."""
         self.feed.close(timeout)
-        self.participant.close()
