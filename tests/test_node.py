@@ -503,3 +503,31 @@ def test_the_node_stops_when_its_stages_fail(monkeypatch):
     assert result.exit_code == 70, result.output
     assert result.output.splitlines()[0] == "datmo node: ROS 2 domain 3: /scan in, /datmo/tracks out"
     assert "the stages stopped: ValueError: a bug" in result.output.splitlines()[-1]
+
+
+def test_scans_and_poses_that_do_not_decode_are_counted_and_said_once(monkeypatch):
+    from datmo_cli.log.scan import encode_scan
+    from datmo_cli.node import Node
+
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+    said: list[str] = []
+    node = Node(_free_domain(), "/front/scan", "odom", say=said.append)
+    assert (node.scan_topic, node.odom_topic) == ("/front/scan", "/odom")
+    run = mcapio.read_run(HALL).slice(0, 3)
+    good = [encode_scan(int(s), r, run.geometry) for s, r in zip(run.stamps, run.ranges, strict=True)]
+    assert node._scan(good[0]) == 0 and node.counts.before_odometry == 1     # no pose yet: skipped
+    for bad in (good[1][:40], good[1] + b"\x00" * 8):
+        assert node._scan(bad) == 0
+    node._pose(b"\x00\x01\x00\x00" + b"\x01" * 10)
+    node._pose(_odom_msg(int(run.stamps[0])).serialize())
+    assert node._scan(good[2]) == 1
+    node.close(timeout=120)
+    c = node.counts
+    assert (c.scans, c.bad_scans, c.before_odometry, c.poses, c.bad_poses) == (4, 2, 1, 1, 1)
+    assert node.feed.published == 1 and node.feed.failure is None
+    assert [line.split(" (")[0] for line in said] == [
+        "datmo node: no odometry on /odom yet; scans are skipped until it comes",
+        "datmo node: a scan on /front/scan does not decode",
+        "datmo node: an odometry message on /odom does not decode"]
+    assert node.summary() == ("4 scans received, 1 processed, 0 dropped (the stages were behind), "
+                              "2 did not decode, 1 before any odometry")
