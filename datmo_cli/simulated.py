@@ -87,10 +87,11 @@ def scan_source(*, log: str | Path | None = None, scene: str | None = None, seed
 def write_simulation(writer, sim, laser_pose: tuple[float, float, float] | None = None,
                      progress: Callable[[int], None] | None = None) -> None:
     """Write simulation `sim` (sim.simulate.Simulation) block by block into `writer` (an open mcapio.LogWriter):
-    /scan, /odom and /tf for a moving sensor, /datmo/ground_truth, /tf_static for a moving sensor or a
-    `laser_pose` (x m, y m, yaw rad: the scanner on the base), and the scene as metadata. Each block is written
-    and forgotten before the next is cast, so memory holds one block whatever the duration; `progress` gets
-    the scans written so far after each block."""
+    /scan, /odom and /tf for a moving sensor (unless its scene leaves the odometry out), /datmo/ground_truth,
+    /tf_static for a log with /odom or a laser pose, and the scene as metadata. `laser_pose` (x m, y m, yaw rad:
+    the scanner on the base) defaults to the scene's. Each block is written and forgotten before the next is
+    cast, so memory holds one block whatever the duration; `progress` gets the scans written so far after each
+    block."""
     from .log import mcapio, transforms, types
     from .log.scan import Odometry, ScanRun
     from .sim.simulate import ground_truth_payloads
@@ -98,13 +99,14 @@ def write_simulation(writer, sim, laser_pose: tuple[float, float, float] | None 
     scene = sim.scene
     writer.add_metadata("datmo.scene", {"name": scene.name, "source": Path(scene.source).name, "toml": scene.text})
     scan_cid = writer.channel(mcapio.TOPIC_SCAN, types.LASERSCAN)
-    odom_cid = writer.channel(mcapio.TOPIC_ODOM, types.ODOMETRY) if sim.sensor_moves else None
+    odom_cid = writer.channel(mcapio.TOPIC_ODOM, types.ODOMETRY) if sim.writes_odometry else None
     truth_cid = writer.channel(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH)
+    laser_pose = laser_pose if laser_pose is not None else sim.mount
     mount = transforms.LaserPose(*laser_pose) if laser_pose is not None else None
     base, laser = transforms.BASE_FRAME, sim.geometry.frame_id
     if mount is not None:
         writer.add_metadata(transforms.LASER_POSE_RECORD, mount.record(base, laser))
-    if mount is not None or sim.sensor_moves:
+    if mount is not None or odom_cid is not None:
         t0 = int(sim.stamps[0])
         writer.write_transforms([t0], [transforms.mount_tf(t0, base, laser, mount or transforms.LaserPose())],
                                 static=True)
