@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS, laser_pose_option, option
+from ..bounds import OPTIONS, OptionError, laser_pose_option, option
 from .options import force_option, output_option, quiet_option
 
 SCENE_HELP = ("Built-in scene name (hall, corridor, crowd, static, patrol, following, lab-drive; see --list-scenes) "
@@ -65,7 +65,6 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     Example: datmo simulate --scene hall --duration 60 -o hall.mcap
     """
     from ..cli import invocation
-    from ..errors import ConfigError
     from ..log import mcapio
     from ..progress import bar, say
     from ..sim.scene import load_scene
@@ -77,10 +76,10 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     loaded = load_scene(scene)
     if loaded.scanner is not None and given:
         names = ", ".join("--" + k.replace("range_m", "range") for k in given)
-        raise ConfigError(f"{loaded.source}: the scene sets its own scanner ([scanner]); {names} "
+        raise OptionError(f"{loaded.source}: the scene sets its own scanner ([scanner]); {names} "
                           f"appl{'ies' if len(given) == 1 else 'y'} to the LMS200")
     if laser_pose is not None and loaded.sensor.mount is not None:
-        raise ConfigError(f"{loaded.source}: the scene mounts its scanner ([sensor] laser_pose); --laser-pose "
+        raise OptionError(f"{loaded.source}: the scene mounts its scanner ([sensor] laser_pose); --laser-pose "
                           "would place it twice")
     if units is None:
         units = "cm" if range_m == "80" else "mm"
