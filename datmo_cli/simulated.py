@@ -125,3 +125,43 @@ def write_simulation(writer, sim, laser_pose: tuple[float, float, float] | None 
         writer.drain()
         if progress is not None:
             progress(c.start + len(c.stamps))
+
+
+def write_simulation_bag(path, sim, laser_pose: tuple[float, float, float] | None = None, *, force: bool = False,
+                         progress: Callable[[int], None] | None = None) -> None:
+    """Write simulation `sim` as a ROS 1 bag at `path`, as a ROS 1 robot records it: /scan, /odom when the log
+    gets odometry (the base's poses, as write_simulation), and /tf holding `/odom -> /base_link` for each pose
+    and the mount `/base_link -> /laser` repeated with every scan (the identity when there is odometry but no
+    laser pose); frame names slash-prefixed, nothing on /tf_static. `laser_pose` (x m, y m, yaw rad) defaults
+    to the scene's. No ground truth: a ROS 1 bag has no datmo_msgs (simulate to MCAP for it). Written block by
+    block, like write_simulation."""
+    from dataclasses import replace
+
+    from .log import transforms
+    from .log.bag1 import Ros1BagWriter, ros1_frame
+    from .log.scan import Odometry, ScanRun
+
+    laser_pose = laser_pose if laser_pose is not None else sim.mount
+    mount = transforms.LaserPose(*laser_pose) if laser_pose is not None else None
+    odom_frame, base, laser = ros1_frame("odom"), ros1_frame(transforms.BASE_FRAME), ros1_frame(sim.geometry.frame_id)
+    geometry = replace(sim.geometry, frame_id=laser)
+    fixed = mount if mount is not None else transforms.LaserPose() if sim.writes_odometry else None
+    with Ros1BagWriter(path, force=force) as bag:
+        for c in sim.chunks():
+            stamps = c.stamps.tolist()
+            if fixed is not None:
+                for t in stamps:
+                    bag.transforms(t, [transforms.Transform.planar(t, base, laser, fixed.x, fixed.y, fixed.yaw)])
+            if sim.writes_odometry:
+                p = c.sensor_poses
+                odom = Odometry(c.stamps.copy(), p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy(), odom_frame, laser)
+                if mount is not None:
+                    odom = transforms.base_odometry(odom, mount, base)
+                else:
+                    odom = Odometry(odom.stamps, odom.x, odom.y, odom.theta, odom_frame, base)
+                for t, x, y, th in zip(stamps, odom.x.tolist(), odom.y.tolist(), odom.theta.tolist(), strict=True):
+                    bag.transforms(t, [transforms.Transform.planar(t, odom_frame, base, x, y, th)])
+                bag.odometry(odom)
+            bag.scans(ScanRun(c.stamps, c.ranges, geometry))
+            if progress is not None:
+                progress(c.start + len(c.stamps))

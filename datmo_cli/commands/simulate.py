@@ -27,7 +27,7 @@ def _list_scenes(ctx: click.Context, _param: click.Parameter, value: bool) -> No
 
 @click.command(name="simulate")
 @click.option("--scene", metavar="NAME|PATH", default="hall", show_default=True, help=SCENE_HELP)
-@output_option("The log to write (MCAP).")
+@output_option("The log to write: MCAP, or a ROS 1 bag when it ends in .bag (no ground truth there).")
 @force_option()
 @option("--seed", bound=OPTIONS["seed"], default=0, show_default=True,
         help="Random seed (crowd paths, range noise); a seed always gives the same file.")
@@ -62,6 +62,10 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     /odom holds the base's poses under it (a scene with its own laser_pose places the base instead).
     The same seed always gives the same file.
 
+    An OUTPUT ending in .bag is written as a ROS 1 bag, as a ROS 1 robot records it: /scan, /odom, and /tf with
+    odom -> base_link and the laser's mount repeated (slash-prefixed frame names, no /tf_static), without ground
+    truth (a ROS 1 bag cannot hold datmo_msgs: simulate the same scene and seed to an .mcap for it).
+
     Example: datmo simulate --scene hall --duration 60 -o hall.mcap
     """
     from ..cli import invocation
@@ -69,7 +73,7 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     from ..progress import bar, say
     from ..sim.scene import load_scene
     from ..sim.simulate import Simulation
-    from ..simulated import write_simulation
+    from ..simulated import write_simulation, write_simulation_bag
 
     ctx = click.get_current_context()
     given = [k for k in LMS_OPTIONS if ctx.get_parameter_source(k) != click.core.ParameterSource.DEFAULT]
@@ -97,10 +101,15 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     if laser_pose is not None:
         params["laser_pose"] = {"x_m": laser_pose[0], "y_m": laser_pose[1], "yaw_deg": math.degrees(laser_pose[2])}
     user_file = scene.endswith(".toml") or "/" in scene
+    n, n_objects, geometry = len(sim), len(sim.objects), sim.geometry
+    if output.suffix == ".bag":
+        with bar("simulating", len(sim)) as done:
+            write_simulation_bag(output, sim, laser_pose, force=force, progress=done)
+        say(f"{output}: ROS 1 bag, {n} scans of {geometry.describe()}; no ground truth (write an .mcap for it)")
+        return
     provenance = mcapio.Provenance("simulate", params, [scene] if user_file else [], invocation("simulate"))
     with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
         with bar("simulating", len(sim)) as done:
             write_simulation(writer, sim, laser_pose, progress=done)
-    n, n_objects, geometry = len(sim), len(sim.objects), sim.geometry
     say(f"{output}: {n} scans of {geometry.describe()}, {n_objects} ground-truth objects")
 
