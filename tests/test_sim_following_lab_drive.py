@@ -160,3 +160,22 @@ def test_a_scenes_own_scanner_or_mount_refuses_the_options_that_would_redo_it(tm
     with pytest.raises(ConfigError, match="applies to the LMS200"):
         Simulation("lab-drive", resolution_deg=0.5)
     assert Simulation("lab-drive", rate=20.0).sensor.rate_hz == 20.0 and Simulation("hall").sensor.rate_hz == 5.0
+
+
+def test_a_bag_that_cannot_be_finished_leaves_nothing_behind(tmp_path, monkeypatch):
+    from rosbags.rosbag1 import Writer
+
+    real, calls = Writer.write, []
+
+    def full_disk(self, *args):
+        calls.append(1)
+        if len(calls) > 50:
+            raise OSError(28, "No space left on device")
+        return real(self, *args)
+
+    monkeypatch.setattr(Writer, "write", full_disk)
+    out = tmp_path / "robot.bag"
+    result = CliRunner().invoke(cli, ["simulate", "--scene", "lab-drive", "--duration", "3", "-o", str(out)])
+    assert result.exit_code == 1
+    assert result.output.strip().splitlines() == [f"datmo: error: {out}: no space left on the device (writing it)"]
+    assert list(tmp_path.iterdir()) == []
