@@ -78,9 +78,16 @@ class SceneSource(ScanSource):
 
 def scan_source(*, log: str | Path | None = None, scene: str | None = None, seed: int = 0,
                 duration: float | None = None) -> ScanSource:
-    """A LogSource for `log`, else a SceneSource for `scene` (default: the hall scene)."""
+    """A LogSource for `log`, else a SceneSource for `scene` (default: the hall scene); ConfigError for a scene
+    with a scanner of its own (the emulator is an LMS200)."""
     if log is not None:
         return LogSource(log)
+    from .errors import ConfigError
+    from .sim.scene import load_scene
+
+    loaded = load_scene(scene or "hall")
+    if loaded.scanner is not None:
+        raise ConfigError(f"{loaded.source}: the scene sets its own scanner ([scanner]); the emulator is an LMS200")
     return SceneSource(scene or "hall", seed=seed, duration=duration)
 
 

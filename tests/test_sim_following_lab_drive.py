@@ -159,6 +159,8 @@ def test_a_scenes_own_scanner_or_mount_refuses_the_options_that_would_redo_it(tm
         assert result.exit_code == 2 and word in result.output and len(result.output.strip().splitlines()) == 1
     with pytest.raises(ConfigError, match="applies to the LMS200"):
         Simulation("lab-drive", resolution_deg=0.5)
+    result = CliRunner().invoke(cli, ["emulate", "--scene", "lab-drive"])
+    assert result.exit_code == 1 and "the emulator is an LMS200" in result.output
     assert Simulation("lab-drive", rate=20.0).sensor.rate_hz == 20.0 and Simulation("hall").sensor.rate_hz == 5.0
 
 
