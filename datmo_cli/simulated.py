@@ -78,19 +78,27 @@ class SceneSource(ScanSource):
 
 def scan_source(*, log: str | Path | None = None, scene: str | None = None, seed: int = 0,
                 duration: float | None = None) -> ScanSource:
-    """A LogSource for `log`, else a SceneSource for `scene` (default: the hall scene)."""
+    """A LogSource for `log`, else a SceneSource for `scene` (default: the hall scene); ConfigError for a scene
+    with a scanner of its own (the emulator is an LMS200)."""
     if log is not None:
         return LogSource(log)
+    from .errors import ConfigError
+    from .sim.scene import load_scene
+
+    loaded = load_scene(scene or "hall")
+    if loaded.scanner is not None:
+        raise ConfigError(f"{loaded.source}: the scene sets its own scanner ([scanner]); the emulator is an LMS200")
     return SceneSource(scene or "hall", seed=seed, duration=duration)
 
 
 def write_simulation(writer, sim, laser_pose: tuple[float, float, float] | None = None,
                      progress: Callable[[int], None] | None = None) -> None:
     """Write simulation `sim` (sim.simulate.Simulation) block by block into `writer` (an open mcapio.LogWriter):
-    /scan, /odom and /tf for a moving sensor, /datmo/ground_truth, /tf_static for a moving sensor or a
-    `laser_pose` (x m, y m, yaw rad: the scanner on the base), and the scene as metadata. Each block is written
-    and forgotten before the next is cast, so memory holds one block whatever the duration; `progress` gets
-    the scans written so far after each block."""
+    /scan, /odom and /tf for a moving sensor (unless its scene leaves the odometry out), /datmo/ground_truth,
+    /tf_static for a log with /odom or a laser pose, and the scene as metadata. `laser_pose` (x m, y m, yaw rad:
+    the scanner on the base) defaults to the scene's. Each block is written and forgotten before the next is
+    cast, so memory holds one block whatever the duration; `progress` gets the scans written so far after each
+    block."""
     from .log import mcapio, transforms, types
     from .log.scan import Odometry, ScanRun
     from .sim.simulate import ground_truth_payloads
@@ -98,13 +106,14 @@ def write_simulation(writer, sim, laser_pose: tuple[float, float, float] | None 
     scene = sim.scene
     writer.add_metadata("datmo.scene", {"name": scene.name, "source": Path(scene.source).name, "toml": scene.text})
     scan_cid = writer.channel(mcapio.TOPIC_SCAN, types.LASERSCAN)
-    odom_cid = writer.channel(mcapio.TOPIC_ODOM, types.ODOMETRY) if sim.sensor_moves else None
+    odom_cid = writer.channel(mcapio.TOPIC_ODOM, types.ODOMETRY) if sim.writes_odometry else None
     truth_cid = writer.channel(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH)
+    laser_pose = laser_pose if laser_pose is not None else sim.mount
     mount = transforms.LaserPose(*laser_pose) if laser_pose is not None else None
     base, laser = transforms.BASE_FRAME, sim.geometry.frame_id
     if mount is not None:
         writer.add_metadata(transforms.LASER_POSE_RECORD, mount.record(base, laser))
-    if mount is not None or sim.sensor_moves:
+    if mount is not None or odom_cid is not None:
         t0 = int(sim.stamps[0])
         writer.write_transforms([t0], [transforms.mount_tf(t0, base, laser, mount or transforms.LaserPose())],
                                 static=True)
@@ -123,3 +132,43 @@ def write_simulation(writer, sim, laser_pose: tuple[float, float, float] | None 
         writer.drain()
         if progress is not None:
             progress(c.start + len(c.stamps))
+
+
+def write_simulation_bag(path, sim, laser_pose: tuple[float, float, float] | None = None, *, force: bool = False,
+                         progress: Callable[[int], None] | None = None) -> None:
+    """Write simulation `sim` as a ROS 1 bag at `path`, as a ROS 1 robot records it: /scan, /odom when the log
+    gets odometry (the base's poses, as write_simulation), and /tf holding `/odom -> /base_link` for each pose
+    and the mount `/base_link -> /laser` repeated with every scan (the identity when there is odometry but no
+    laser pose); frame names slash-prefixed, nothing on /tf_static. `laser_pose` (x m, y m, yaw rad) defaults
+    to the scene's. No ground truth: a ROS 1 bag has no datmo_msgs (simulate to MCAP for it). Written block by
+    block, like write_simulation."""
+    from dataclasses import replace
+
+    from .log import transforms
+    from .log.bag1 import Ros1BagWriter, ros1_frame
+    from .log.scan import Odometry, ScanRun
+
+    laser_pose = laser_pose if laser_pose is not None else sim.mount
+    mount = transforms.LaserPose(*laser_pose) if laser_pose is not None else None
+    odom_frame, base, laser = ros1_frame("odom"), ros1_frame(transforms.BASE_FRAME), ros1_frame(sim.geometry.frame_id)
+    geometry = replace(sim.geometry, frame_id=laser)
+    fixed = mount if mount is not None else transforms.LaserPose() if sim.writes_odometry else None
+    with Ros1BagWriter(path, force=force) as bag:
+        for c in sim.chunks():
+            stamps = c.stamps.tolist()
+            if fixed is not None:
+                for t in stamps:
+                    bag.transforms(t, [transforms.Transform.planar(t, base, laser, fixed.x, fixed.y, fixed.yaw)])
+            if sim.writes_odometry:
+                p = c.sensor_poses
+                odom = Odometry(c.stamps.copy(), p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy(), odom_frame, laser)
+                if mount is not None:
+                    odom = transforms.base_odometry(odom, mount, base)
+                else:
+                    odom = Odometry(odom.stamps, odom.x, odom.y, odom.theta, odom_frame, base)
+                for t, x, y, th in zip(stamps, odom.x.tolist(), odom.y.tolist(), odom.theta.tolist(), strict=True):
+                    bag.transforms(t, [transforms.Transform.planar(t, odom_frame, base, x, y, th)])
+                bag.odometry(odom)
+            bag.scans(ScanRun(c.stamps, c.ranges, geometry))
+            if progress is not None:
+                progress(c.start + len(c.stamps))

@@ -42,7 +42,9 @@ def test_import_writes_scans_odometry_and_provenance(tmp_path, carmen_log):
     run = mcapio.read_run(out)
     assert run.ranges.shape == (6, 180) and run.stamps[0] == 100_000_000_000
     odom = mcapio.read_odometry(out)
-    assert odom.x.tolist() == [0, 1, 2, 3, 4, 5] and odom.child_frame_id == "laser"
+    # the laser's own poses with no mount known: the base is put on the laser (the same poses), with a warning
+    assert odom.x.tolist() == [0, 1, 2, 3, 4, 5] and (odom.frame_id, odom.child_frame_id) == ("odom", "base_link")
+    assert f"datmo: warning: {carmen_log}: no laser mount (base_link -> laser) in the log" in result.output
     meta = mcapio.summary(out).metadata
     assert meta["datmo"]["command"] == "import"
     assert meta["datmo.inputs"][str(carmen_log)] == before

@@ -197,12 +197,15 @@ def test_patrol_run_chains_resolve_and_match_the_ground_truth(tmp_path):
 
 def test_carmen_import_with_odometry_then_run(tmp_path):
     src = shared_path("carmen", "csail-corrected.log.gz")
-    datmo("import", src, "--max-scans", "120", "-o", tmp_path / "csail.mcap")
-    _, _, _, counts = read_output(tmp_path / "csail.mcap")
-    assert counts["/tf"] == counts["/odom"] == 120 and "/tf_static" not in counts   # CARMEN's poses are the laser's
+    out = datmo("import", src, "--max-scans", "120", "-o", tmp_path / "csail.mcap")
+    tf, _, _, counts = read_output(tmp_path / "csail.mcap")
+    # CARMEN's poses are the laser's, and no mount is known: the base is put on the laser, said in a warning
+    assert counts["/tf"] == counts["/odom"] == 120 and counts["/tf_static"] == 1
+    assert tf.static["laser"] == ("base_link", (0.0, 0.0, 0.0))
+    assert "no laser mount (base_link -> laser)" in out and "--laser-pose X,Y,YAW" in out
     datmo("run", tmp_path / "csail.mcap", "-o", tmp_path / "out")
     _, laser, frames = assert_chains_resolve(tmp_path / "out" / "csail.mcap")
-    assert "odom" in frames and laser == "laser"
+    assert "map" in frames and laser == "laser"       # SLAM-corrected poses: map -> base_link -> laser
 
     datmo("import", src, "--max-scans", "120", "-o", tmp_path / "mounted.mcap", "--laser-pose", "0.25,0,0")
     tf, laser, _, counts = read_output(tmp_path / "mounted.mcap")
@@ -249,9 +252,12 @@ ROS1_TF = "tf2_msgs/msg/TFMessage"
 MOUNT = (0.2, 0.05, 0.1)   # base_link -> laser, m, m, rad
 
 
-def _ros1_bag(path: Path, n: int = 60, with_tf: bool = True) -> Path:
+def _ros1_bag(path: Path, n: int = 60, with_tf: bool = True, mount_on: str = "/tf_static", slash: str = "",
+              wobble: float = 0.0) -> Path:
     """A ROS 1 bag: /scan (a room, 10 Hz) from a robot turning on the spot, /odom and, `with_tf`, /tf (odom ->
-    base_link at 20 Hz, stamped between the scans) and /tf_static (base_link -> laser)."""
+    base_link at 20 Hz, stamped between the scans) and the mount base_link -> laser on `mount_on`: once on
+    /tf_static, or with every odom -> base_link on /tf (its x `wobble` m more each time). Frame names start with
+    `slash` ("/" as ROS 1 tools wrote them)."""
     from rosbags.rosbag1 import Writer
 
     store = get_typestore(Stores.ROS1_NOETIC)
@@ -264,6 +270,7 @@ def _ros1_bag(path: Path, n: int = 60, with_tf: bool = True) -> Path:
                                         frame_id=frame)
 
     def tfm(t: int, parent: str, child: str, x: float, y: float, yaw: float):
+        parent, child = slash + parent, slash + child
         return T[ROS1_TF](transforms=[T["geometry_msgs/msg/TransformStamped"](
             header=header(t, parent), child_frame_id=child, transform=T["geometry_msgs/msg/Transform"](
                 translation=T["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.0),
@@ -276,13 +283,17 @@ def _ros1_bag(path: Path, n: int = 60, with_tf: bool = True) -> Path:
         odom = w.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=store)
         tf = w.add_connection("/tf", ROS1_TF, typestore=store)
         static = w.add_connection("/tf_static", ROS1_TF, typestore=store)
-        if with_tf:
+        if with_tf and mount_on == "/tf_static":
             w.write(static, t0, store.serialize_ros1(tfm(t0, "base_link", "laser", *MOUNT), ROS1_TF))
         for k in range(2 * n):
             t = t0 + k * 50_000_000
             yaw = 0.01 * k
             if with_tf:
                 w.write(tf, t, store.serialize_ros1(tfm(t, "odom", "base_link", 0.0, 0.0, yaw), ROS1_TF))
+            if with_tf and mount_on == "/tf":
+                x, y, mount_yaw = MOUNT
+                mount = tfm(t, "base_link", "laser", x + wobble * k, y, mount_yaw)
+                w.write(tf, t, store.serialize_ros1(mount, ROS1_TF))
             if k % 2:
                 continue
             pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
@@ -290,7 +301,7 @@ def _ros1_bag(path: Path, n: int = 60, with_tf: bool = True) -> Path:
                                                    x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)))
             zero, cov = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0), np.zeros(36)
             msg = T["nav_msgs/msg/Odometry"](
-                header=header(t, "odom"), child_frame_id="base_link",
+                header=header(t, slash + "odom"), child_frame_id=slash + "base_link",
                 pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
                 twist=T["geometry_msgs/msg/TwistWithCovariance"](
                     twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=cov))
@@ -298,7 +309,7 @@ def _ros1_bag(path: Path, n: int = 60, with_tf: bool = True) -> Path:
             ts = t + 20_000_000   # scans between the transforms: the buffer interpolates
             ranges = (3.0 / np.maximum(np.abs(np.cos(angles + yaw + MOUNT[2])), 0.4)).astype(np.float32)
             w.write(scan, ts, store.serialize_ros1(T["sensor_msgs/msg/LaserScan"](
-                header=header(ts, "laser"), angle_min=-math.pi / 2, angle_max=math.pi / 2,
+                header=header(ts, slash + "laser"), angle_min=-math.pi / 2, angle_max=math.pi / 2,
                 angle_increment=math.pi / 180, time_increment=0.0, scan_time=0.1, range_min=0.05, range_max=10.0,
                 ranges=ranges, intensities=np.zeros(0, np.float32)), "sensor_msgs/msg/LaserScan"))
     return path
@@ -323,12 +334,60 @@ def test_ros1_bag_import_keeps_tf_and_the_run_resolves_through_it(tmp_path):
 
 def test_ros1_bag_without_tf_gets_tf_from_its_odometry(tmp_path):
     _ros1_bag(tmp_path / "odom.bag", n=20, with_tf=False)
-    datmo("import", tmp_path / "odom.bag", "-o", tmp_path / "odom.mcap")
+    out = datmo("import", tmp_path / "odom.bag", "-o", tmp_path / "odom.mcap")
     tf, _, _, counts = read_output(tmp_path / "odom.mcap")
     assert counts["/tf"] == counts["/odom"] == 20 and counts["/tf_static"] == 1
     assert tf.static["laser"] == ("base_link", (0.0, 0.0, 0.0))      # the identity: no laser pose given
+    warning = [line for line in out.splitlines() if "laser mount" in line]   # never silently
+    assert warning == [f"datmo: warning: {tmp_path / 'odom.bag'}: no laser mount (base_link -> laser) in the log; "
+                       "wrote the identity: give the scanner's mounting with --laser-pose X,Y,YAW (metres, metres, "
+                       "degrees)"]
     datmo("run", tmp_path / "odom.mcap", "-o", tmp_path / "out")
     assert_chains_resolve(tmp_path / "out" / "odom.mcap")
+
+
+def test_a_ros1_mount_only_on_tf_with_slashed_names_is_taken_to_tf_static(tmp_path):
+    from datmo_cli.log import mcapio
+
+    _ros1_bag(tmp_path / "robot.bag", n=20, mount_on="/tf", slash="/")
+    out = datmo("import", tmp_path / "robot.bag", "-o", tmp_path / "robot.mcap")
+    assert "laser mount" not in out
+    tf, scan_frames, _, counts = read_output(tmp_path / "robot.mcap")
+    assert scan_frames == {"laser"} and counts["/tf_static"] == 1 and counts["/tf"] == 80   # the bag's /tf kept
+    assert tf.static["laser"] == ("base_link", pytest.approx(MOUNT))                      # constant on /tf
+    assert set(tf.dynamic) == {"base_link", "laser"} and tf.dynamic["base_link"][0][1] == "odom"   # no "/"
+    odom = mcapio.read_odometry(tmp_path / "robot.mcap")
+    assert (odom.frame_id, odom.child_frame_id) == ("odom", "base_link")
+    assert mcapio.summary(tmp_path / "robot.mcap").metadata["datmo.import"]["laser_pose"] == '"/tf (constant there)"'
+    datmo("run", tmp_path / "robot.mcap", "-o", tmp_path / "out")
+    tf, laser, frames = assert_chains_resolve(tmp_path / "out" / "robot.mcap")
+    assert "odom" in frames and laser == "laser"
+    t = 1_600_000_000 * 10**9 + 20 * 50_000_000 + 20_000_000
+    assert tf.lookup("odom", laser, t) == pytest.approx(_compose((0.0, 0.0, 0.01 * 20.4), MOUNT), abs=1e-9)
+
+
+def test_a_mount_that_moves_on_tf_is_not_taken_for_one(tmp_path):
+    _ros1_bag(tmp_path / "robot.bag", n=20, mount_on="/tf", wobble=0.01)
+    out = datmo("import", tmp_path / "robot.bag", "-o", tmp_path / "robot.mcap")
+    tf, _, _, _ = read_output(tmp_path / "robot.mcap")
+    assert tf.static["laser"] == ("base_link", (0.0, 0.0, 0.0)) and "no laser mount (base_link -> laser)" in out
+
+
+def test_constant_transforms_and_chains():
+    T = transforms.Transform.planar
+    seen = transforms.ConstantTransforms()
+    seen.add([T(1, "odom", "base", 0.0, 0.0, 0.0), T(1, "base", "mast", 0.1, 0.0, 0.0)])
+    seen.add([T(2, "odom", "base", 1.0, 0.0, 0.0), T(2, "base", "mast", 0.1, 0.0, 0.0), T(2, "mast", "laser", 0, 0, 1)])
+    assert seen.constant() == [T(1, "base", "mast", 0.1, 0.0, 0.0), T(2, "mast", "laser", 0, 0, 1)]
+    links = transforms.chain(seen.constant(), "base", "laser")
+    assert [(t.parent, t.child) for t in links] == [("mast", "laser"), ("base", "mast")]
+    assert transforms.chain(seen.constant(), "odom", "laser") is None and transforms.chain([], "a", "a") == []
+    assert transforms.static_chain(links, "base", "laser") == transforms.LaserPose(0.1, 0.0, 1.0)
+    assert [transforms.ros2_frame(f) for f in ("/base_link", "laser", "/", "//odom")] == ["base_link", "laser", "/",
+                                                                                        "odom"]
+    plain = transforms.encode_tf([T(3, "odom", "base_link", 1, 2, 3)])
+    assert transforms.without_slashes(plain) is plain
+    assert transforms.without_slashes(transforms.encode_tf([T(3, "/odom", "/base_link", 1, 2, 3)])) == plain
 
 
 @pytest.mark.slow

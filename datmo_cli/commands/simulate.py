@@ -7,10 +7,12 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS, laser_pose_option, option
+from ..bounds import OPTIONS, OptionError, laser_pose_option, option
 from .options import force_option, output_option, quiet_option
 
-SCENE_HELP = "Built-in scene name (hall, corridor, crowd, static, patrol) or the path of a .toml scene file."
+SCENE_HELP = ("Built-in scene name (hall, corridor, crowd, static, patrol, following, lab-drive; see --list-scenes) "
+              "or the path of a .toml scene file.")
+LMS_OPTIONS = ("angle", "resolution", "range_m", "units")
 
 
 def _list_scenes(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
@@ -25,17 +27,18 @@ def _list_scenes(ctx: click.Context, _param: click.Parameter, value: bool) -> No
 
 @click.command(name="simulate")
 @click.option("--scene", metavar="NAME|PATH", default="hall", show_default=True, help=SCENE_HELP)
-@output_option("The log to write (MCAP).")
+@output_option("The log to write: MCAP, or a ROS 1 bag when it ends in .bag (no ground truth there).")
 @force_option()
 @option("--seed", bound=OPTIONS["seed"], default=0, show_default=True,
         help="Random seed (crowd paths, range noise); a seed always gives the same file.")
 @option("--duration", bound=OPTIONS["sim_duration"], default=None,
         help="Seconds to simulate [default: the scene's, 60 s].")
-@option("--rate", bound=OPTIONS["sim_rate"], default=5.0, show_default=True,
-        help="Scans per second (at most 75 Hz at 1°, 37.5 Hz at 0.5°, 18.75 Hz at 0.25°).")
+@option("--rate", bound=OPTIONS["sim_rate"], default=None,
+        help="Scans per second [default: the scene's, else 5] (an LMS200: at most 75 Hz at 1°, 37.5 Hz at 0.5°, "
+             "18.75 Hz at 0.25°).")
 @option("--people", bound=OPTIONS["people"], default=None, help="Walkers in a crowd scene [default: the scene's].")
 @click.option("--angle", type=click.Choice(["180", "100"]), default="180", show_default=True,
-              help="Field of view, degrees.")
+              help="The LMS200's field of view, degrees (a scene with its own [scanner] refuses the LMS200 options).")
 @click.option("--resolution", type=click.Choice(["1", "0.5", "0.25"]), default="0.5", show_default=True,
               help="Angular resolution, degrees (0.25 only with --angle 100).")
 @click.option("--range", "range_m", type=click.Choice(["8", "16", "32", "80"]), default="8", show_default=True,
@@ -47,16 +50,21 @@ def _list_scenes(ctx: click.Context, _param: click.Parameter, value: bool) -> No
               help="List the built-in scenes and exit.")
 @laser_pose_option()
 @quiet_option
-def command(scene: str, output: Path, force: bool, seed: int, duration: float | None, rate: float,
+def command(scene: str, output: Path, force: bool, seed: int, duration: float | None, rate: float | None,
             people: int | None, angle: str, resolution: str, range_m: str, units: str | None, noise: float,
             laser_pose: tuple | None) -> None:
     """Simulate a SICK LMS200 in a scene and write a log with ground truth.
 
     The log holds /scan (sensor_msgs/LaserScan), /datmo/ground_truth (one message per scan: every
     object's class, position and velocity in the sensor and world frames, size, and whether beams hit
-    it) and, when the scene moves the scanner, /odom with /tf (odom -> base_link) and /tf_static (base_link ->
-    laser). The scene's scanner pose is the laser's: with --laser-pose, /odom holds the base's poses under it.
+    it) and, when the scene moves the scanner (and does not leave its odometry out), /odom with /tf (odom ->
+    base_link) and /tf_static (base_link -> laser). The scene's scanner pose is the laser's: with --laser-pose,
+    /odom holds the base's poses under it (a scene with its own laser_pose places the base instead).
     The same seed always gives the same file.
+
+    An OUTPUT ending in .bag is written as a ROS 1 bag, as a ROS 1 robot records it: /scan, /odom, and /tf with
+    odom -> base_link and the laser's mount repeated (slash-prefixed frame names, no /tf_static), without ground
+    truth (a ROS 1 bag cannot hold datmo_msgs: simulate the same scene and seed to an .mcap for it).
 
     Example: datmo simulate --scene hall --duration 60 -o hall.mcap
     """
@@ -65,24 +73,43 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     from ..progress import bar, say
     from ..sim.scene import load_scene
     from ..sim.simulate import Simulation
-    from ..simulated import write_simulation
+    from ..simulated import write_simulation, write_simulation_bag
 
+    ctx = click.get_current_context()
+    given = [k for k in LMS_OPTIONS if ctx.get_parameter_source(k) != click.core.ParameterSource.DEFAULT]
+    loaded = load_scene(scene)
+    if loaded.scanner is not None and given:
+        names = ", ".join("--" + k.replace("range_m", "range") for k in given)
+        raise OptionError(f"{loaded.source}: the scene sets its own scanner ([scanner]); {names} "
+                          f"appl{'ies' if len(given) == 1 else 'y'} to the LMS200")
+    if laser_pose is not None and loaded.sensor.mount is not None:
+        raise OptionError(f"{loaded.source}: the scene mounts its scanner ([sensor] laser_pose); --laser-pose "
+                          "would place it twice")
     if units is None:
         units = "cm" if range_m == "80" else "mm"
-    loaded = load_scene(scene)
+    lms = {} if loaded.scanner is not None else {"fov_deg": int(angle), "resolution_deg": float(resolution),
+                                                 "range_mode_m": int(range_m), "units": units}
+    sim = Simulation(loaded, seed=seed, duration=duration, rate=rate, noise_sigma=noise, people=people, **lms)
     params = {"scene": scene, "seed": seed, "duration": duration if duration is not None else loaded.duration,
-              "rate": rate, "people": people, "angle": int(angle), "resolution": float(resolution),
-              "range": int(range_m), "units": units, "noise": noise}
+              "rate": sim.sensor.rate_hz, "people": people}
+    if loaded.scanner is None:
+        params |= {"angle": int(angle), "resolution": float(resolution), "range": int(range_m), "units": units}
+    else:
+        sc = loaded.scanner
+        params["scanner"] = {"beams": sc.beams, "fov_deg": sc.fov_deg, "range_m": [sc.range_min, sc.range_max]}
+    params["noise"] = noise
     if laser_pose is not None:
         params["laser_pose"] = {"x_m": laser_pose[0], "y_m": laser_pose[1], "yaw_deg": math.degrees(laser_pose[2])}
     user_file = scene.endswith(".toml") or "/" in scene
+    n, n_objects, geometry = len(sim), len(sim.objects), sim.geometry
+    if output.suffix == ".bag":
+        with bar("simulating", len(sim)) as done:
+            write_simulation_bag(output, sim, laser_pose, force=force, progress=done)
+        say(f"{output}: ROS 1 bag, {n} scans of {geometry.describe()}; no ground truth (write an .mcap for it)")
+        return
     provenance = mcapio.Provenance("simulate", params, [scene] if user_file else [], invocation("simulate"))
     with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
-        sim = Simulation(loaded, seed=seed, duration=duration, rate=rate, fov_deg=int(angle),
-                         resolution_deg=float(resolution), range_mode_m=int(range_m), units=units,
-                         noise_sigma=noise, people=people)
         with bar("simulating", len(sim)) as done:
             write_simulation(writer, sim, laser_pose, progress=done)
-    n, n_objects, geometry = len(sim), len(sim.objects), sim.geometry
     say(f"{output}: {n} scans of {geometry.describe()}, {n_objects} ground-truth objects")
 

@@ -7,6 +7,11 @@ scanner's own (child frame = the scan's frame: CARMEN's laser poses, poses from 
 transform. Track markers and landmarks are in the odometry frame when there is odometry, so Foxglove resolves
 `odom -> base -> laser` to draw them over the scan.
 
+Frame names are ROS 2's: no leading slash (ROS 1 tools wrote `/base_link`; tf2 refuses such names), see
+`ros2_frame`. A mount may also come as a transform that a ROS 1 log repeats on /tf (as static_transform_publisher
+and robot_state_publisher did) instead of /tf_static: `ConstantTransforms` finds the /tf transforms that never
+change and `chain` the transforms that join two frames.
+
 Everything is planar: poses are (x, y, yaw) in metres and radians, z = 0, rotation about z only. Payloads
 are encoded with struct (the layout rosbags' serialiser gives, byte for byte; tests check it), so writing a
 transform per pose needs no type store.
@@ -16,7 +21,7 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -200,21 +205,77 @@ def base_odometry(sensor: Odometry, pose: LaserPose, base: str = BASE_FRAME) -> 
                     sensor.frame_id, base)
 
 
-def static_chain(statics: list[Transform], base: str, laser: str) -> LaserPose | None:
-    """The pose of frame `laser` in frame `base` through the static transforms (last one wins for a child),
-    or None when they do not join the two."""
-    parent = {t.child: t for t in statics}
-    x = y = yaw = 0.0
+def chain(transforms: list[Transform], base: str, laser: str) -> list[Transform] | None:
+    """The transforms that lead from frame `laser` up to frame `base` (laser's parent first; a later transform
+    of the same child replaces an earlier one), [] when the frames are the same, None when they do not join."""
+    parent = {t.child: t for t in transforms}
+    out: list[Transform] = []
     frame, seen = laser, set()
     while frame != base:
         t = parent.get(frame)
         if t is None or frame in seen:
             return None
         seen.add(frame)
+        out.append(t)
+        frame = t.parent
+    return out
+
+
+def static_chain(statics: list[Transform], base: str, laser: str) -> LaserPose | None:
+    """The pose of frame `laser` in frame `base` through the static transforms (last one wins for a child),
+    or None when they do not join the two."""
+    links = chain(statics, base, laser)
+    if links is None:
+        return None
+    x = y = yaw = 0.0
+    for t in links:
         c, s = math.cos(t.yaw), math.sin(t.yaw)
         x, y, yaw = t.x + c * x - s * y, t.y + s * x + c * y, t.yaw + yaw
-        frame = t.parent
     return LaserPose(x, y, math.atan2(math.sin(yaw), math.cos(yaw)))
+
+
+def ros2_frame(name: str) -> str:
+    """A frame name as ROS 2 writes it: without ROS 1's leading slash ("/base_link" -> "base_link")."""
+    return name.lstrip("/") or name
+
+
+def ros2_frames(transform: Transform) -> Transform:
+    """`transform` with ros2_frame names."""
+    return replace(transform, parent=ros2_frame(transform.parent), child=ros2_frame(transform.child))
+
+
+def without_slashes(payload: bytes) -> bytes:
+    """A TFMessage payload with ros2_frame names: `payload` itself when no name has a leading slash."""
+    found = decode_tf(payload)
+    if not any(t.parent.startswith("/") or t.child.startswith("/") for t in found):
+        return payload
+    return encode_tf([ros2_frames(t) for t in found])
+
+
+class ConstantTransforms:
+    """The /tf transforms of a log that never change: `add` every TFMessage's transforms in turn; `constant`
+    gives, per (parent, child), the first transform of the pairs whose translation and rotation stayed within
+    `tolerance` (metres, and quaternion components) of it in every message."""
+
+    def __init__(self, tolerance: float = 1e-9) -> None:
+        self.tolerance = tolerance
+        self.first: dict[tuple[str, str], Transform] = {}
+        self.varies: set[tuple[str, str]] = set()
+
+    def add(self, transforms: list[Transform]) -> None:
+        for t in transforms:
+            key = (t.parent, t.child)
+            f = self.first.get(key)
+            if f is None:
+                self.first[key] = t
+            elif key not in self.varies:
+                a = np.array([f.x, f.y, f.z, f.qx, f.qy, f.qz, f.qw])
+                b = np.array([t.x, t.y, t.z, t.qx, t.qy, t.qz, t.qw])
+                if not np.all(np.abs(a - b) <= self.tolerance):
+                    self.varies.add(key)
+
+    def constant(self) -> list[Transform]:
+        return [t for key, t in self.first.items() if key not in self.varies]
 
 
 def sensor_odometry(odom: Odometry | None, statics: list[Transform], laser: str) -> Odometry | None:

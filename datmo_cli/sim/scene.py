@@ -5,9 +5,21 @@ Every problem raises ConfigError naming the file and the table and key (or the T
 
 Scene file format (points are [x, y]; every table is optional; unknown keys are errors):
 
-    name, description, duration (s, default 60)
-    [sensor]      pose = [x, y, heading_deg]  (a still scanner), or a path (a moving one, with /odom)
-                  and turn_rate_deg (90: it turns on the spot where its path bends)
+    name, description, duration (s, default 60), rate (scans per second, default 5; --rate overrides it)
+    [sensor]      where the scanner is, one of: pose = [x, y, heading_deg] (a still scanner); a path (a robot
+                  driving it, facing its way, with turn_rate_deg = 90: it turns on the spot where the path
+                  bends); or follow = "person name" (a robot trailing that walking person along their path,
+                  gap = [1.5, 2.5] m behind: it drives at up to `speed` (m/s, default 1.3, above the person's)
+                  in proportion to how far the gap exceeds its low end, so it stops behind a person who stops
+                  and the gap shrinks to the low end and holds; it faces the person).
+                  odometry = true: a moving scanner's log gets /odom (and /tf); false leaves them out (the
+                  robot's motion is then unknown to datmo, which estimates it by scan matching).
+                  laser_pose = [x, y, yaw_deg]: the scanner's mount on the robot (m, m, degrees in base_link);
+                  pose, path or follow then place the robot's base, the scanner sits at base + mount, and the
+                  log gets the mount on /tf_static and in `datmo.laser_pose` (as --laser-pose does).
+    [scanner]     a scanner other than the LMS200 (the default, set by --angle, --resolution, --range):
+                  beams, fov_deg (beams fov/beams apart from -fov/2), range = [min, max] (m); e.g. a Hokuyo
+                  like the leg_tracker bags': beams = 768, fov_deg = 270.0, range = [0.02, 10.0]
     [[wall]]      points = [[x, y], ...], closed = false
     [[column]]    center, radius
     [[bench]]     supports = [[x, y], [x, y]], support_radius = 0.1, seat_width = 0.35 (0: no seat)
@@ -22,6 +34,9 @@ Scene file format (points are [x, y]; every table is optional; unknown keys are 
 
 A path is: path = [[x, y], ...] (two or more waypoints), speed (m/s, default 1), loop = false,
 start_time (s), pauses = [[waypoint index, seconds], ...].
+
+Ground-truth ids follow the table order: people first, in file order (so the first [[person]] is id 1),
+then the crowd, moving platforms and boxes, static fixtures, wall corners and wall segments (sim/world.py).
 """
 
 from __future__ import annotations
@@ -107,12 +122,31 @@ class Crowd:
 
 @dataclass(frozen=True)
 class SensorPlacement:
-    """A still scanner at `pose` (x, y in m, heading in rad), or one driving along `path`, facing its way and
-    turning on the spot at `turn_rate` (rad/s) where the path bends."""
+    """A still scanner at `pose` (x, y in m, heading in rad), one driving along `path`, facing its way and
+    turning on the spot at `turn_rate` (rad/s) where the path bends, or one following the person named
+    `follow` `gap` (low, high; m) behind along their path at up to `follow_speed` m/s. `odometry`: whether a
+    moving scanner's log gets /odom. `mount`: the scanner on the robot (x, y in m, yaw in rad, base frame); the
+    placement is then the base's."""
 
     pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
     path: PathSpec | None = None
     turn_rate: float = float(np.pi / 2)
+    follow: str | None = None
+    gap: tuple[float, float] = (1.5, 2.5)
+    follow_speed: float = 1.3
+    odometry: bool = True
+    mount: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ScannerSpec:
+    """A [scanner] table: `beams` beams over `fov_deg` degrees (fov/beams apart from -fov/2), ranges from
+    `range_min` to `range_max` m."""
+
+    beams: int
+    fov_deg: float
+    range_min: float
+    range_max: float
 
 
 @dataclass(frozen=True)
@@ -122,6 +156,8 @@ class Scene:
     text: str
     description: str = ""
     duration: float = 60.0
+    rate: float | None = None
+    scanner: ScannerSpec | None = None
     sensor: SensorPlacement = field(default_factory=SensorPlacement)
     walls: tuple[Wall, ...] = ()
     columns: tuple[Column, ...] = ()
@@ -169,22 +205,19 @@ def parse_scene(text: str, source: str = "<scene>", default_name: str = "scene")
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: invalid TOML: {exc}") from None
     v = _Validator(source)
-    v.keys(data, "top level", {"name", "description", "duration", "sensor", "wall", "column", "bench", "box",
-                               "platform", "person", "crowd"})
+    v.keys(data, "top level", {"name", "description", "duration", "rate", "sensor", "scanner", "wall", "column",
+                               "bench", "box", "platform", "person", "crowd"})
     kw: dict = {
         "name": v.string(data, "top level", "name", default_name),
         "description": v.string(data, "top level", "description", ""),
         "duration": v.bounded(data, "top level", "duration", 60.0, OPTIONS["sim_duration"]),
     }
+    if "rate" in data:
+        kw["rate"] = v.bounded(data, "top level", "rate", 5.0, OPTIONS["sim_rate"])
+    if "scanner" in data:
+        kw["scanner"] = _scanner(v, v.table(data, "scanner", "[scanner]"))
     if "sensor" in data:
-        t = v.table(data, "sensor", "[sensor]")
-        v.keys(t, "[sensor]", {"pose", "turn_rate_deg"} | PATH_KEYS)
-        if "pose" in t and "path" in t:
-            raise ConfigError(f"{source}: [sensor]: give 'pose' (a still scanner) or 'path' (a moving one), not both")
-        pose = v.vector(t, "[sensor]", "pose", 3, default=[0.0, 0.0, 0.0])
-        pose[2] = np.radians(pose[2])
-        turn = np.radians(v.number(t, "[sensor]", "turn_rate_deg", 90.0, positive=True))
-        kw["sensor"] = SensorPlacement(pose=pose, path=v.path(t, "[sensor]", required=False), turn_rate=float(turn))
+        kw["sensor"] = _sensor(v, v.table(data, "sensor", "[sensor]"))
     kw["walls"] = tuple(_wall(v, t, w) for t, w in v.tables(data, "wall"))
     kw["columns"] = tuple(_column(v, t, w) for t, w in v.tables(data, "column"))
     kw["benches"] = tuple(_bench(v, t, w) for t, w in v.tables(data, "bench"))
@@ -201,7 +234,67 @@ def parse_scene(text: str, source: str = "<scene>", default_name: str = "scene")
         raise ConfigError(f"{source}: [[person]] names must be unique; '{sorted(dup)[0]}' is used twice")
     if "crowd" in data:
         kw["crowd"] = _crowd(v, v.table(data, "crowd", "[crowd]"))
+    _check_follow(v, kw.get("sensor"), kw["people"])
     return Scene(source=source, text=text, **kw)
+
+
+def _sensor(v: _Validator, t: dict) -> SensorPlacement:
+    where = "[sensor]"
+    v.keys(t, where, {"pose", "turn_rate_deg", "follow", "gap", "odometry", "laser_pose"} | PATH_KEYS)
+    placements = [k for k in ("pose", "path", "follow") if k in t]
+    if len(placements) > 1:
+        raise ConfigError(f"{v.source}: {where}: give 'pose' (a still scanner), 'path' (a moving one) or 'follow' "
+                          f"(one trailing a person), not both {' and '.join(repr(k) for k in placements)}")
+    mount = v.vector(t, where, "laser_pose", 3, default=None)
+    if mount is not None:
+        mount[2] = np.radians(mount[2])
+    odometry = v.boolean(t, where, "odometry", True)
+    if "follow" in t:
+        for k in PATH_KEYS - {"speed"} | {"turn_rate_deg"}:
+            if k in t:
+                v.fail(where, k, "does not apply to a scanner that follows a person")
+        gap = v.vector(t, where, "gap", 2, default=[1.5, 2.5])
+        if not 0 < gap[0] < gap[1]:
+            v.fail(where, "gap", f"give [low, high] with 0 < low < high, got {gap.tolist()}")
+        return SensorPlacement(follow=v.string(t, where, "follow"), gap=(float(gap[0]), float(gap[1])),
+                               follow_speed=v.number(t, where, "speed", 1.3, positive=True), odometry=odometry,
+                               mount=mount)
+    if "gap" in t:
+        v.fail(where, "gap", "only applies with 'follow'")
+    pose = v.vector(t, where, "pose", 3, default=[0.0, 0.0, 0.0])
+    pose[2] = np.radians(pose[2])
+    turn = np.radians(v.number(t, where, "turn_rate_deg", 90.0, positive=True))
+    return SensorPlacement(pose=pose, path=v.path(t, where, required=False), turn_rate=float(turn),
+                           odometry=odometry, mount=mount)
+
+
+def _check_follow(v: _Validator, sensor: SensorPlacement | None, people: tuple[Person, ...]) -> None:
+    """A followed person exists, walks, and is slower than the robot."""
+    if sensor is None or sensor.follow is None:
+        return
+    leader = {p.name: p for p in people}.get(sensor.follow)
+    if leader is None:
+        v.fail("[sensor]", "follow", f"no [[person]] is named '{sensor.follow}'")
+    if leader.path is None:
+        v.fail("[sensor]", "follow", f"'{sensor.follow}' stands still (give them a path)")
+    if leader.path.speed >= sensor.follow_speed:
+        v.fail("[sensor]", "speed", f"the robot's top speed {sensor.follow_speed:g} m/s must be above "
+                                    f"'{sensor.follow}''s {leader.path.speed:g} m/s, or it falls behind")
+
+
+def _scanner(v: _Validator, t: dict) -> ScannerSpec:
+    where = "[scanner]"
+    v.keys(t, where, {"beams", "fov_deg", "range"})
+    beams = v.integer(t, where, "beams")
+    fov = v.number(t, where, "fov_deg", positive=True)
+    rng = v.vector(t, where, "range", 2)
+    if not 2 <= beams <= 10_000:
+        v.fail(where, "beams", f"must be 2 to 10000, got {beams}")
+    if fov > 360:
+        v.fail(where, "fov_deg", f"must be at most 360, got {fov:g}")
+    if not 0 <= rng[0] < rng[1] <= 60:
+        v.fail(where, "range", f"give [min, max] with 0 <= min < max <= 60 m, got {rng.tolist()}")
+    return ScannerSpec(beams, fov, float(rng[0]), float(rng[1]))
 
 
 def _wall(v: _Validator, t: dict, where: str) -> Wall:

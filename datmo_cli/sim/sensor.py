@@ -115,3 +115,77 @@ class Sensor:
         out[codes == top] = np.inf
         out[codes > top] = np.nan
         return out
+
+
+NO_RETURN_CODE = 0xFFFF   # Scanner: nothing within range_max
+ERROR_CODE = 0            # Scanner: a dropped return, or a target nearer than range_min
+
+
+@dataclass(frozen=True)
+class Scanner:
+    """A scanner other than the LMS200, as a scene's [scanner] table gives it (a Hokuyo-like one): `n_beams`
+    beams `fov_deg / n_beams` degrees apart from -fov_deg/2 (counter-clockwise, as Hokuyo drivers lay them
+    out: the last beam is one step short of +fov_deg/2), ranges from `range_min` to `range_max` metres sent as
+    whole millimetres, Gaussian noise of sigma `noise_sigma` m, `rate_hz` scans per second, and `dropout`, the
+    probability that a beam returns nothing. A beam that hits nothing within range_max reads +inf; a dropped
+    one, or one nearer than range_min, NaN."""
+
+    n_beams: int = 768
+    fov_deg: float = 270.0
+    range_min: float = 0.02
+    range_max: float = 10.0
+    noise_sigma: float = 0.01
+    rate_hz: float = 10.0
+    dropout: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 2 <= self.n_beams <= 10_000:
+            raise ValueError(f"beams must be 2 to 10000, got {self.n_beams}")
+        if not 0 < self.fov_deg <= 360:
+            raise ValueError(f"field of view must be in (0, 360] degrees, got {self.fov_deg:g}")
+        if not 0 <= self.range_min < self.range_max <= 60:
+            raise ValueError(f"range must be [min, max] with 0 <= min < max <= 60 m, got "
+                             f"[{self.range_min:g}, {self.range_max:g}]")
+        if not (self.noise_sigma >= 0 and np.isfinite(self.noise_sigma)):
+            raise ValueError(f"noise sigma must be a finite number >= 0, got {self.noise_sigma}")
+        if not 0 <= self.dropout < 1:
+            raise ValueError(f"dropout must be in [0, 1), got {self.dropout}")
+        if not 0 < self.rate_hz <= 75:
+            raise ValueError(f"rate must be above 0 and at most 75 Hz, got {self.rate_hz:g}")
+
+    @property
+    def resolution_deg(self) -> float:
+        return self.fov_deg / self.n_beams
+
+    def angles(self) -> np.ndarray:
+        """Beam angles (B,), radians, sensor frame, counter-clockwise from x (forward), -fov/2 first."""
+        return np.radians(-self.fov_deg / 2) + np.radians(self.resolution_deg) * np.arange(self.n_beams)
+
+    def geometry(self, frame_id: str = "laser") -> ScanGeometry:
+        return ScanGeometry(angle_min=float(np.radians(-self.fov_deg / 2)),
+                            angle_increment=float(np.radians(self.resolution_deg)), n_beams=self.n_beams,
+                            range_min=float(self.range_min), range_max=float(self.range_max), time_increment=0.0,
+                            scan_time=1.0 / self.rate_hz, frame_id=frame_id)
+
+    def measure(self, distances: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Whole millimetres (uint16) for true distances (m; inf: no target): NO_RETURN_CODE beyond range_max,
+        ERROR_CODE nearer than range_min and for dropped returns. Noise is added before rounding."""
+        d = np.asarray(distances, np.float64)
+        noise = rng.standard_normal(d.shape) * self.noise_sigma
+        with np.errstate(invalid="ignore"):
+            r = np.maximum(d + noise, 0.0)
+            far = ~(r < self.range_max)
+            near = r < self.range_min
+            q = np.where(far | near, 0.0, np.rint(r * 1000.0))
+        codes = np.where(far, NO_RETURN_CODE, np.where(near, ERROR_CODE, np.maximum(q, 1))).astype(np.uint16)
+        if self.dropout > 0:
+            codes[rng.random(d.shape) < self.dropout] = ERROR_CODE
+        return codes
+
+    def ranges(self, codes: np.ndarray) -> np.ndarray:
+        """Ranges (float32, m) of codes: NO_RETURN_CODE -> +inf, ERROR_CODE -> NaN."""
+        codes = np.asarray(codes)
+        out = (codes.astype(np.float64) * 0.001).astype(np.float32)
+        out[codes == NO_RETURN_CODE] = np.inf
+        out[codes == ERROR_CODE] = np.nan
+        return out

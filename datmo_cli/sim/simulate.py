@@ -21,7 +21,7 @@ from ..log import cdr, types
 from ..log.scan import Odometry, ScanRun
 from .raycast import cast
 from .scene import Scene, load_scene
-from .sensor import Sensor
+from .sensor import Scanner, Sensor
 from .world import ObjectInfo, World
 
 START_NS = 1_088_985_600 * 1_000_000_000   # 2004-07-05T00:00:00Z, the first scan's stamp
@@ -36,8 +36,10 @@ class SimResult:
 
     truth: ground-truth objects of every scan, one flat structured array of
     `cdr.element_dtype(types.GROUND_TRUTH_OBJECT)`; scan k's objects are truth[truth_offsets[k]:truth_offsets[k + 1]].
-    sensor_poses (N, 3): x, y (m), heading (rad) in the world frame at each scan. codes (N, B) uint16: the
-    values the LMS200 would send (see sensor.Sensor.measure); run.ranges are their ranges.
+    sensor_poses (N, 3): x, y (m), heading (rad) of the scanner in the world frame at each scan. codes (N, B)
+    uint16: the values the scanner would send (see sensor.Sensor.measure, sensor.Scanner.measure); run.ranges are
+    their ranges. odometry: the scanner's poses when the log gets /odom (a moving scanner whose scene does not
+    leave them out), else None.
     """
 
     run: ScanRun
@@ -46,7 +48,7 @@ class SimResult:
     truth_offsets: np.ndarray
     sensor_poses: np.ndarray
     codes: np.ndarray
-    sensor: Sensor
+    sensor: Sensor | Scanner
     scene: Scene
     objects: list[ObjectInfo]
 
@@ -91,13 +93,26 @@ class Simulation:
     """
 
     def __init__(self, scene: str | Path | Scene, *, seed: int = 0, duration: float | None = None,
-                 rate: float = 5.0, fov_deg: int = 180, resolution_deg: float = 0.5, range_mode_m: int = 8,
-                 units: str = "mm", noise_sigma: float = 0.01, people: int | None = None,
-                 dropout: float = 0.0) -> None:
+                 rate: float | None = None, fov_deg: int | None = None, resolution_deg: float | None = None,
+                 range_mode_m: int | None = None, units: str | None = None, noise_sigma: float = 0.01,
+                 people: int | None = None, dropout: float = 0.0) -> None:
         self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
+        rate = rate if rate is not None else self.scene.rate if self.scene.rate is not None else 5.0
+        lms = {"fov_deg": fov_deg, "resolution_deg": resolution_deg, "range_mode_m": range_mode_m, "units": units}
+        spec = self.scene.scanner
         try:
-            self.sensor = Sensor(int(fov_deg), float(resolution_deg), int(range_mode_m), units, float(noise_sigma),
-                                 float(rate), float(dropout))
+            if spec is not None:
+                given = [k for k, x in lms.items() if x is not None]
+                if given:
+                    raise ConfigError(f"{self.scene.source}: the scene sets its own scanner ([scanner]); "
+                                      f"{', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to the LMS200")
+                self.sensor = Scanner(spec.beams, spec.fov_deg, spec.range_min, spec.range_max, float(noise_sigma),
+                                      float(rate), float(dropout))
+            else:
+                self.sensor = Sensor(180 if fov_deg is None else int(fov_deg),
+                                     0.5 if resolution_deg is None else float(resolution_deg),
+                                     8 if range_mode_m is None else int(range_mode_m), units or "mm",
+                                     float(noise_sigma), float(rate), float(dropout))
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
         if duration is not None:
@@ -131,6 +146,17 @@ class Simulation:
     def sensor_moves(self) -> bool:
         return self.world.sensor.moves
 
+    @property
+    def writes_odometry(self) -> bool:
+        """Whether the log gets /odom: the scanner moves and the scene does not leave its odometry out."""
+        return self.world.sensor.moves and self.scene.sensor.odometry
+
+    @property
+    def mount(self) -> tuple[float, float, float] | None:
+        """The scene's laser pose on the robot (x m, y m, yaw rad), or None."""
+        m = self.scene.sensor.mount
+        return None if m is None else (float(m[0]), float(m[1]), float(m[2]))
+
     def chunks(self, size: int = CHUNK) -> Iterator[SimChunk]:
         """Blocks of `size` scans in time order (the range noise is one stream, so only one pass)."""
         if self._used:
@@ -144,14 +170,17 @@ class Simulation:
             yield SimChunk(a, self.stamps[a:b], poses, codes, ranges, truth)
 
 
-def simulate_scene(scene: str | Path | Scene, *, seed: int = 0, duration: float | None = None, rate: float = 5.0,
-                   fov_deg: int = 180, resolution_deg: float = 0.5, range_mode_m: int = 8, units: str = "mm",
-                   noise_sigma: float = 0.01, people: int | None = None, dropout: float = 0.0,
+def simulate_scene(scene: str | Path | Scene, *, seed: int = 0, duration: float | None = None,
+                   rate: float | None = None, fov_deg: int | None = None, resolution_deg: float | None = None,
+                   range_mode_m: int | None = None, units: str | None = None, noise_sigma: float = 0.01,
+                   people: int | None = None, dropout: float = 0.0,
                    progress: Callable[[int, int], None] | None = None) -> SimResult:
-    """Simulate an LMS200 in `scene` (a built-in name, a .toml path, or a loaded Scene).
+    """Simulate a scanner in `scene` (a built-in name, a .toml path, or a loaded Scene): the scene's [scanner],
+    else an LMS200.
 
-    duration (s) defaults to the scene's; rate in Hz; field of view and resolution in degrees; range mode
-    in metres; units "mm" or "cm"; noise_sigma: Gaussian range noise, m; people: walkers in the scene's
+    duration (s) defaults to the scene's; rate in Hz (default: the scene's, else 5); the LMS200's field of view
+    and resolution in degrees, range mode in metres, units "mm" or "cm" (defaults 180, 0.5, 8, mm; refused for a
+    scene with its own [scanner]); noise_sigma: Gaussian range noise, m; people: walkers in the scene's
     crowd (crowd scenes only); dropout: probability that a beam returns nothing (NaN).
     `progress(done, total)` is called after each block of scans. Raises ConfigError on bad settings.
     """
@@ -171,7 +200,7 @@ def simulate_scene(scene: str | Path | Scene, *, seed: int = 0, duration: float 
     stamps = sim.stamps
     run = ScanRun(stamps, ranges, sim.geometry)
     odom = Odometry(stamps.copy(), poses[:, 0].copy(), poses[:, 1].copy(), poses[:, 2].copy()) \
-        if sim.sensor_moves else None
+        if sim.writes_odometry else None
     return SimResult(run, odom, truth.reshape(-1), np.arange(n + 1, dtype=np.int64) * n_obj, poses, codes,
                      sim.sensor, sim.scene, sim.objects)
 

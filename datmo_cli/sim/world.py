@@ -188,6 +188,87 @@ class SensorTrack:
         return np.zeros(len(t)) if self.timeline is None else self._turning(t)[1]
 
 
+FOLLOW_DT = 0.01      # s, integration step of a following robot
+FOLLOW_STOP = 0.02    # m: a following robot stands while the gap is within this of its low end
+
+
+class FollowTrack:
+    """A robot trailing a walking person along the person's path (world frame, metres, seconds, radians).
+
+    The robot's arc length r along the path obeys dr/dt = speed * clip((d - low) / (high - low), 0, 1), with
+    d = u - r the gap along the path to the person's arc length u (and 0 while d is within FOLLOW_STOP of
+    `low`): it trails a steadily walking person at low + (high - low) * v / speed, closes in on one who stops
+    until the gap is `low`, and stands there. It starts `low` behind the person's first waypoint (on the
+    path's first leg, extended backwards), and faces the person's body.
+    """
+
+    def __init__(self, leader: Walker, gap: tuple[float, float], speed: float, t_end: float) -> None:
+        tl = leader.timeline
+        low, high = gap
+        self.tt = np.arange(0.0, t_end + 2 * FOLLOW_DT, FOLLOW_DT)
+        u = tl.arclength(self.tt)
+        r = np.empty_like(u)
+        r[0] = u[0] - low
+        for i in range(1, len(u)):
+            d = u[i - 1] - r[i - 1]
+            v = 0.0 if d - low < FOLLOW_STOP else speed * min(1.0, (d - low) / (high - low))
+            r[i] = r[i - 1] + v * FOLLOW_DT
+        self.xy, _ = tl.point_at(r)
+        lead = tl.position(self.tt)
+        self.heading = np.unwrap(np.arctan2(lead[:, 1] - self.xy[:, 1], lead[:, 0] - self.xy[:, 0]))
+        self.vel = np.gradient(self.xy, FOLLOW_DT, axis=0)
+        self.omega = np.gradient(self.heading, FOLLOW_DT)
+
+    moves = True
+
+    def _at(self, t: np.ndarray, a: np.ndarray) -> np.ndarray:
+        return np.interp(np.asarray(t, np.float64), self.tt, a)
+
+    def poses(self, t: np.ndarray) -> np.ndarray:
+        """(n, 3): x, y, heading."""
+        return np.stack([self._at(t, self.xy[:, 0]), self._at(t, self.xy[:, 1]),
+                         _wrap(self._at(t, self.heading))], 1)
+
+    def velocity(self, t: np.ndarray) -> np.ndarray:
+        """(n, 2) world-frame velocity, m/s."""
+        return np.stack([self._at(t, self.vel[:, 0]), self._at(t, self.vel[:, 1])], 1)
+
+    def yaw_rate(self, t: np.ndarray) -> np.ndarray:
+        """(n,) rad/s."""
+        return self._at(t, self.omega)
+
+
+class MountedTrack:
+    """The scanner on a robot: the pose of frame `laser` = the base's pose composed with `mount` (x, y in m and
+    yaw in rad, base frame); its velocity is the base's plus the base's turning about its own origin."""
+
+    def __init__(self, base: SensorTrack | FollowTrack, mount: np.ndarray) -> None:
+        self.base = base
+        self.mount = np.asarray(mount, np.float64)
+
+    @property
+    def moves(self) -> bool:
+        return self.base.moves
+
+    def _offset(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p = self.base.poses(t)
+        c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+        mx, my = self.mount[0], self.mount[1]
+        return p, np.stack([c * mx - s * my, s * mx + c * my], 1)
+
+    def poses(self, t: np.ndarray) -> np.ndarray:
+        p, off = self._offset(t)
+        return np.hstack([p[:, :2] + off, _wrap(p[:, 2] + self.mount[2])[:, None]])
+
+    def velocity(self, t: np.ndarray) -> np.ndarray:
+        _, off = self._offset(t)
+        w = self.base.yaw_rate(t)[:, None]
+        return self.base.velocity(t) + w * np.stack([-off[:, 1], off[:, 0]], 1)
+
+    def yaw_rate(self, t: np.ndarray) -> np.ndarray:
+        return self.base.yaw_rate(t)
+
+
 def _wrap(a):
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
@@ -270,7 +351,8 @@ def crowd_people(crowd: Crowd, t_end: float, seed: np.random.SeedSequence, first
 class World:
     """Everything the simulator needs for a run of `t_end` seconds: `objects` (the ground-truth table, in id
     order: people, platforms, boxes, columns, benches, wall corners, wall segments), `movers` (object
-    index, mover), `static` geometry, `corner_walls` and the `sensor` track."""
+    index, mover), `static` geometry, `corner_walls` and the `sensor` track (a SensorTrack or FollowTrack, in a
+    MountedTrack when the scene mounts the scanner on the robot: its poses are always the scanner's)."""
 
     def __init__(self, scene: Scene, t_end: float, seed: np.random.SeedSequence, people: int | None = None) -> None:
         self.objects: list[ObjectInfo] = []
@@ -283,14 +365,19 @@ class World:
         if scene.crowd is not None:
             crowd = scene.crowd if people is None else replace(scene.crowd, people=people)
             persons += crowd_people(crowd, t_end, seed, len(persons) + 1)
-        self._add_movers(scene, persons, t_end)
+        walkers = self._add_movers(scene, persons, t_end)
         self._add_fixtures(scene)
         self.corner_walls = self._add_walls(scene)   # (corner index, wall segment index, wall segment index)
         self.static = Primitives(np.array(self._segs, np.float64).reshape(-1, 4), np.array(self._seg_own, np.int32),
                                  np.array(self._circs, np.float64).reshape(-1, 3), np.array(self._circ_own, np.int32))
-        self.sensor = SensorTrack(scene.sensor.pose, scene.sensor.path, t_end, scene.sensor.turn_rate)
+        placed = scene.sensor
+        if placed.follow is not None:
+            base = FollowTrack(walkers[placed.follow], placed.gap, placed.follow_speed, t_end)
+        else:
+            base = SensorTrack(placed.pose, placed.path, t_end, placed.turn_rate)
+        self.sensor = base if placed.mount is None else MountedTrack(base, placed.mount)
 
-    def _add_movers(self, scene: Scene, persons: list[Person], t_end: float) -> None:
+    def _add_movers(self, scene: Scene, persons: list[Person], t_end: float) -> dict[str, Walker]:
         walkers = {}
         for p in persons:
             walkers[p.name] = Walker(p, t_end)
@@ -306,6 +393,7 @@ class World:
             if b.path is not None:
                 mover = Driven(b.path, t_end, size=(b.length, b.width))
                 self.movers.append((self._add(CLASS_RECTANGULAR_OBJECT, f"box{i}"), mover))
+        return walkers
 
     def _circle(self, k: int, centre, radius: float) -> None:
         self._circs.append([float(centre[0]), float(centre[1]), radius])

@@ -19,7 +19,7 @@ from __future__ import annotations
 import gzip
 import zlib
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ...errors import InputError
@@ -182,6 +182,8 @@ class ImportStream:
     # by write_import; `tf_topics` those it has (known up front)
     transforms: list[tuple[str, int, bytes]] = field(default_factory=list)
     tf_topics: tuple[str, ...] = ()
+    # a source with poses and transforms: its /tf_static and its /tf transforms that never change (rosbag.TfSurvey)
+    tf_survey: object | None = None
 
     def blocks(self) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
         with _compressed_errors(self.source or Path("?")):
@@ -301,24 +303,31 @@ def write_import(stream: ImportStream, output: str | Path, *, force: bool = Fals
 
 
 class Frames:
-    """The transforms of an import. The source's own /tf and /tf_static are kept (a ROS 1 tf/tfMessage or
-    tf2_msgs/TFMessage converted to tf2_msgs/msg/TFMessage). /tf is derived from the poses (one transform a pose,
-    frame_id -> child_frame_id) when the source has none. /tf_static gets `odometry child -> scan frame` (the laser
-    pose, else the identity) when the poses are a base's and the source has no /tf_static, and `base_link -> scan
-    frame` for a laser pose without poses. Poses of the scanner itself (child frame = the scan's, as CARMEN's
-    laser poses) become the base's under a laser pose, child base_link."""
+    """The transforms of an import: every log with poses gets `odom -> base -> laser` (the poses' frame, their
+    child frame, the scan's frame), whatever the source gave.
+
+    - The source's own /tf and /tf_static are kept (a ROS 1 tf/tfMessage or tf2_msgs/TFMessage converted to
+      tf2_msgs/msg/TFMessage), frame names without ROS 1's leading slash. /tf is derived from the poses (one
+      transform a pose, frame_id -> child_frame_id) when the source has none.
+    - The mount `base -> laser` on /tf_static, for each child frame of the poses: the laser pose when one is
+      given (--laser-pose); else nothing when the source's /tf_static joins the two frames; else the source's
+      /tf transforms that join them and never change (a ROS 1 robot repeats its mount on /tf), copied to
+      /tf_static; else the identity, with a one-line warning saying how to give --laser-pose.
+    - Poses of the scanner itself (child frame = the scan's, as CARMEN's laser poses) become the base's, child
+      base_link: under the laser pose when given, else under the identity (the same numbers), with that warning.
+    - A laser pose without poses: `base_link -> laser` on /tf_static."""
 
     def __init__(self, stream: ImportStream, writer, sink, laser_pose) -> None:
         from .. import mcapio
 
         self.stream, self.writer, self.sink, self.mount = stream, writer, sink, laser_pose
         self.keep_tf = mcapio.TOPIC_TF in stream.tf_topics
-        self.keep_static = mcapio.TOPIC_TF_STATIC in stream.tf_topics
         self.ids: dict[str, int] = {}
         self.laser: str | None = None      # the scan's frame, once a scan came
         self.first: int | None = None      # the first scan's stamp
-        self.joined: set[str] = set()      # child frames tied to the scan's frame by /tf_static
+        self.joined: set[str] = set()      # child frames of the poses whose mount is settled
         self.pending: list = []            # poses' child frames (and stamps) waiting for the first scan
+        self.warned = False
 
     def _cid(self, topic: str) -> int:
         from .. import mcapio
@@ -328,11 +337,22 @@ class Frames:
         return self.ids[topic]
 
     def _static(self, stamp: int, parent: str, pose) -> None:
+        from .. import transforms
+
+        self._write_static(stamp, [transforms.Transform.planar(stamp, parent, self.laser, pose.x, pose.y, pose.yaw)])
+
+    def _write_static(self, stamp: int, found: list) -> None:
         from .. import mcapio, transforms
 
-        self.joined.add(parent)
-        self.sink.add(self._cid(mcapio.TOPIC_TF_STATIC), [stamp],
-                      [transforms.mount_tf(stamp, parent, self.laser, pose)])
+        self.sink.add(self._cid(mcapio.TOPIC_TF_STATIC), [stamp], [transforms.encode_tf(found)])
+
+    def _no_mount(self, base: str, laser: str, how: str = "wrote the identity") -> None:
+        self.stream.facts["laser_pose"] = "identity (none found)"
+        if self.warned:
+            return
+        self.warned = True
+        self.stream.warnings.append(f"{self.stream.source}: no laser mount ({base} -> {laser}) in the log; {how}: "
+                                    "give the scanner's mounting with --laser-pose X,Y,YAW (metres, metres, degrees)")
 
     def scans(self, run: ScanRun) -> None:
         """A block of scans: the first fixes the scan's frame (and writes what waited for it)."""
@@ -342,6 +362,7 @@ class Frames:
             return
         self.laser, self.first = run.geometry.frame_id, int(run.stamps[0])
         if self.mount is not None and self.stream.odom_topic is None:
+            self.joined.add(transforms.BASE_FRAME)
             self._static(self.first, transforms.BASE_FRAME, self.mount)
         for child, stamp in self.pending:
             self._tie(child, stamp)
@@ -350,9 +371,25 @@ class Frames:
     def _tie(self, child: str, stamp: int) -> None:
         from .. import transforms
 
-        if child in self.joined or child == self.laser or (self.keep_static and self.mount is None):
+        if child in self.joined or child == self.laser:
             return
-        self._static(min(stamp, self.first), child, self.mount or transforms.LaserPose())
+        self.joined.add(child)
+        at = min(stamp, self.first)
+        if self.mount is not None:
+            self._static(at, child, self.mount)
+            return
+        survey = self.stream.tf_survey
+        statics = survey.statics if survey is not None else []
+        if transforms.chain(statics, child, self.laser) is not None:
+            self.stream.facts["laser_pose"] = "/tf_static"
+            return
+        links = transforms.chain(survey.constant + statics, child, self.laser) if survey is not None else None
+        if links is not None:
+            self.stream.facts["laser_pose"] = "/tf (constant there)"
+            self._write_static(at, [replace(t, stamp_ns=at) for t in links if t not in statics])
+            return
+        self._no_mount(child, self.laser)
+        self._static(at, child, transforms.LaserPose())
 
     def poses(self, odom: Odometry) -> Odometry:
         """A block of poses as written to /odom, their /tf written unless the source has its own."""
@@ -361,8 +398,12 @@ class Frames:
         laser = self.laser
         if laser is None and self.stream.geometry is not None:   # poses before the first scan
             laser = self.stream.geometry.frame_id
-        if self.mount is not None and odom.child_frame_id == laser:
-            odom = transforms.base_odometry(odom, self.mount)
+        if odom.child_frame_id == laser:
+            if self.mount is not None:
+                odom = transforms.base_odometry(odom, self.mount)
+            else:   # the identity mount: the same poses, the base's
+                self._no_mount(transforms.BASE_FRAME, laser, "the poses are the scanner's, so the base is put on it")
+                odom = Odometry(odom.stamps, odom.x, odom.y, odom.theta, odom.frame_id, transforms.BASE_FRAME)
         if not self.keep_tf:
             self.sink.add(self._cid(mcapio.TOPIC_TF), odom.stamps, transforms.odometry_tf(odom))
         if self.laser is None:

@@ -10,11 +10,13 @@ Messages read (one per line, fields separated by white space):
 - ``ROBOTLASER1..2``: as RAWLASER, then ``laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv
   forward_safety side_safety turn_axis`` before the timestamps.
 - ``ODOM x y theta tv rv accel ipc_timestamp hostname logger_timestamp``: used for /odom only with RAWLASER
-  (the other laser messages carry their own pose). ``PARAM``, ``#`` comments and other upper-case messages
-  (NEFF, SYNC, TRUEPOS, g2o's VERTEX_SE2 and EDGE_SE2, ...) are ignored; any other line, and a laser or
-  ODOM line with the wrong number of fields or a non-number, or a RAWLASER/ROBOTLASER line whose beam fan
-  cannot be a laser's (field of view or step zero, negative, NaN or over 360°), is malformed: skipped and
-  counted. A line holding NUL bytes is malformed too; it does not make the file "binary".
+  (the other laser messages carry their own pose). Poses are in frame "odom", or "map" when the file name
+  says they are SLAM-corrected (`pose_frame`: Radish's `*-corrected` logs). ``PARAM``, ``#`` comments and
+  other upper-case messages (NEFF, SYNC, TRUEPOS, g2o's VERTEX_SE2 and EDGE_SE2, ...) are ignored; any other
+  line, and a laser or ODOM line with the wrong number of fields or a non-number, or a RAWLASER/ROBOTLASER
+  line whose beam fan cannot be a laser's (field of view or step zero, negative, NaN or over 360°), is
+  malformed: skipped and counted. A line holding NUL bytes is malformed too; it does not make the file
+  "binary".
 
 Conventions (stated in the README):
 
@@ -472,6 +474,14 @@ class _Plan:
     odometry_source: str | None      # the laser message (its poses), "ODOM", or None
     warnings: list[str]
     facts: dict
+    pose_frame: str = "odom"         # the poses' frame: "map" for SLAM-corrected poses (see pose_frame)
+
+
+def pose_frame(label: str) -> str:
+    """The frame of a log's poses: "map" when its file name says they are SLAM-corrected (Radish's
+    `*-corrected` logs, whose FLASER x y theta, and odom_x odom_y odom_theta alike, come out of SLAM), else
+    "odom" (raw odometry). The content cannot tell: a corrected log's two poses are the same numbers."""
+    return "map" if "corrected" in Path(label).name.lower() else "odom"
 
 
 def plan(parse: CarmenParse, topic: str | None = None, label: str = "<text>") -> _Plan:
@@ -513,7 +523,10 @@ def plan(parse: CarmenParse, topic: str | None = None, label: str = "<text>") ->
     facts = {"message": s.name, "scans": s.count, "beams": n, "no_return_at_m": float(limit),
              "no_return_readings": 0, "stamps": fixed or "ipc_timestamp",
              "malformed_lines": parse.malformed, "odometry_source": odom_source}
-    return _Plan(s, geometry, limit, flip, fixed, odom_source, warnings, facts)
+    frame = pose_frame(label)
+    if odom_source is not None:
+        facts["pose_frame"] = frame
+    return _Plan(s, geometry, limit, flip, fixed, odom_source, warnings, facts, frame)
 
 
 def blocks(parse: CarmenParse, p: _Plan, size: int) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
@@ -534,7 +547,7 @@ def blocks(parse: CarmenParse, p: _Plan, size: int) -> Iterator[tuple[ScanRun | 
             odom = None
             if p.odometry_source == s.name:
                 odom = Odometry(stamps.copy(), poses[:, 0].copy(), poses[:, 1].copy(), poses[:, 2].copy(),
-                                frame_id="odom", child_frame_id=p.geometry.frame_id)
+                                frame_id=p.pose_frame, child_frame_id=p.geometry.frame_id)
             yield run, odom
 
     if p.odometry_source != "ODOM":
@@ -545,7 +558,8 @@ def blocks(parse: CarmenParse, p: _Plan, size: int) -> Iterator[tuple[ScanRun | 
 
     def poses() -> Iterator[Odometry]:
         for rows in parse.odom.blocks(size):
-            yield Odometry(check.apply(rows[:, 0]), rows[:, 1].copy(), rows[:, 2].copy(), rows[:, 3].copy())
+            yield Odometry(check.apply(rows[:, 0]), rows[:, 1].copy(), rows[:, 2].copy(), rows[:, 3].copy(),
+                           frame_id=p.pose_frame)
 
     yield from merge((run for run, _ in scans()), poses())
 

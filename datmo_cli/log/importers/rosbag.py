@@ -4,7 +4,9 @@ Scans come from one sensor_msgs/LaserScan topic (the only one, or `topic`); rang
 driver wrote them (metres, sensor frame `header.frame_id`; inf/NaN as REP 117), intensities when every
 message has one per beam. Stamps are header stamps (ns); a zero header stamp falls back to the bag's
 log (receive) time. Poses come from one nav_msgs/Odometry topic (the only one, or `odom_topic`):
-x, y in metres and yaw from the quaternion, in the message's frame.
+x, y in metres and yaw from the quaternion, in the message's frame. Frame names lose ROS 1's leading slash
+(`/laser` -> `laser`; transforms.ros2_frame) in scans, poses and transforms alike. A source with poses is first
+surveyed for its fixed transforms (`survey_tf`), so the import knows up front where the laser sits on the base.
 """
 
 from __future__ import annotations
@@ -12,13 +14,14 @@ from __future__ import annotations
 import struct
 import warnings as _warnings
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from ...errors import GeometryError, InputError
 from ..scan import GeometryChangeError, Odometry, ScanGeometry, ScanRun
+from ..transforms import ros2_frame, ros2_frames
 
 LASERSCAN_TYPES = ("sensor_msgs/msg/LaserScan", "sensor_msgs/LaserScan")
 ODOMETRY_TYPES = ("nav_msgs/msg/Odometry", "nav_msgs/Odometry")
@@ -32,16 +35,48 @@ def tf_topics(topics: dict[str, tuple[str, int]]) -> tuple[str, ...]:
     return tuple(t for t in TF_TOPICS if t in topics and topics[t][0] in TF_TYPES and topics[t][1])
 
 
-def tf_payload(msg) -> bytes:
-    """A deserialised TFMessage (ROS 2, or ROS 1's tf/tfMessage) as a CDR tf2_msgs/msg/TFMessage payload."""
-    from ..transforms import Transform, encode_tf
+def tf_transforms(msg) -> list:
+    """The transforms.Transform list of a deserialised TFMessage (ROS 2, or ROS 1's tf/tfMessage), frame names
+    without a leading slash."""
+    from ..transforms import Transform, ros2_frame
 
     out = []
     for t in msg.transforms:
         s, p, q = t.header.stamp, t.transform.translation, t.transform.rotation
-        out.append(Transform(int(s.sec) * 1_000_000_000 + int(s.nanosec), t.header.frame_id, t.child_frame_id,
-                             float(p.x), float(p.y), float(p.z), float(q.x), float(q.y), float(q.z), float(q.w)))
-    return encode_tf(out)
+        out.append(Transform(int(s.sec) * 1_000_000_000 + int(s.nanosec), ros2_frame(t.header.frame_id),
+                             ros2_frame(t.child_frame_id), float(p.x), float(p.y), float(p.z), float(q.x), float(q.y),
+                             float(q.z), float(q.w)))
+    return out
+
+
+def tf_payload(msg) -> bytes:
+    """A deserialised TFMessage (ROS 2, or ROS 1's tf/tfMessage) as a CDR tf2_msgs/msg/TFMessage payload, frame
+    names without a leading slash."""
+    from ..transforms import encode_tf
+
+    return encode_tf(tf_transforms(msg))
+
+
+@dataclass
+class TfSurvey:
+    """A source's fixed transforms, read before its blocks: everything on /tf_static, and the /tf transforms
+    that never change (transforms.ConstantTransforms), frame names without a leading slash."""
+
+    statics: list = field(default_factory=list)
+    constant: list = field(default_factory=list)
+
+
+def survey_tf(messages) -> TfSurvey:
+    """The TfSurvey of `messages`: (topic, list of transforms.Transform) of the source's /tf and /tf_static."""
+    from ..transforms import ConstantTransforms
+
+    statics, moving = [], ConstantTransforms()
+    for topic, found in messages:
+        if topic == "/tf_static":
+            statics += found
+        else:
+            moving.add(found)
+    return TfSurvey(statics, moving.constant())
 
 
 def choose_topic(label: str, topics: dict[str, tuple[str, int]], wanted: str | None, types: tuple[str, ...],
@@ -86,7 +121,7 @@ def scan_geometry(msg) -> ScanGeometry:
     return ScanGeometry(angle_min=float(msg.angle_min), angle_increment=float(msg.angle_increment),
                         n_beams=len(msg.ranges), range_min=float(msg.range_min), range_max=float(msg.range_max),
                         time_increment=float(msg.time_increment), scan_time=float(msg.scan_time),
-                        frame_id=msg.header.frame_id)
+                        frame_id=ros2_frame(msg.header.frame_id))
 
 
 def scan_stamp(msg, log_time: int) -> int:
@@ -145,7 +180,7 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
         o_topic = choose_topic(label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic",
                                required=False)
         total = topics[scan_topic][1]
-        survey = _survey(reader, label, scan_topic, total, max_scans, progress)
+        scans = _survey(reader, label, scan_topic, total, max_scans, progress)
     except (InputError, GeometryError):
         close()
         raise
@@ -158,10 +193,19 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
 
     tfs = tf_topics(topics)
     moved: list[tuple[str, int, bytes]] = []
+    survey = None
+    if o_topic is not None and tfs:
+        conns = [c for c in reader.connections if c.topic in tfs]
+        try:
+            survey = survey_tf((c.topic, tf_transforms(reader.deserialize(raw, c.msgtype)))
+                               for c, _, raw in reader.messages(connections=conns))
+        except Exception as exc:  # corrupt chunks, unknown message definitions
+            close()
+            raise InputError(f"{label}: cannot read bag ({type(exc).__name__}: {exc})") from None
 
     def pieces() -> Iterator[tuple[ScanRun | None, Odometry | None]]:
         try:
-            yield from _bag_blocks(reader, scan_topic, o_topic, survey, block_scans, progress, total, tfs, moved)
+            yield from _bag_blocks(reader, scan_topic, o_topic, scans, block_scans, progress, total, tfs, moved)
         except (InputError, GeometryError):
             raise
         except Exception as exc:  # corrupt chunks, unknown message definitions
@@ -170,8 +214,8 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
             close()
 
     return ImportStream(pieces(), warnings=warns, topic=scan_topic, odom_topic=o_topic,
-                        facts={"topics": {t: m for t, (m, _) in topics.items()}}, geometry=survey.geometry,
-                        sort_odometry=True, closer=close, transforms=moved, tf_topics=tfs)
+                        facts={"topics": {t: m for t, (m, _) in topics.items()}}, geometry=scans.geometry,
+                        sort_odometry=True, closer=close, transforms=moved, tf_topics=tfs, tf_survey=survey)
 
 
 @dataclass
@@ -264,7 +308,7 @@ def _bag_blocks(reader, topic: str, o_topic: str | None, survey: _Survey, size: 
             msg = reader.deserialize(raw, conn.msgtype)
             t = _stamp(msg.header, log_time)
             p, q = msg.pose.pose.position, msg.pose.pose.orientation
-            now = (msg.header.frame_id or frames[0], msg.child_frame_id or frames[1])
+            now = (ros2_frame(msg.header.frame_id) or frames[0], ros2_frame(msg.child_frame_id) or frames[1])
             if now != frames and rows:
                 yield None, poses()
                 rows = []
@@ -311,6 +355,10 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
         if head.topics()[scan_topic].count:
             mcapio.check_scan_channel(head, scan_topic)
         count, inten_mode, last, n_beams = _mcap_survey(path, label, scan_topic, max_scans)
+        survey = None
+        if o_topic is not None and tfs:
+            survey = survey_tf((t, [ros2_frames(x) for x in _decode_tf(payload)])
+                               for t, _, payload in mcapio.iter_messages(path, list(tfs), warn=False))
     warns += [f"{w.message}" for w in caught]
 
     def pieces() -> Iterator[tuple[ScanRun | None, Odometry | None]]:
@@ -324,7 +372,7 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
         def scan_block() -> ScanRun:
             nonlocal g0
             run = _decode_block(label, scan_topic, payloads, first, g0)
-            g0 = g0 or run.geometry
+            g0 = g0 or replace(run.geometry, frame_id=ros2_frame(run.geometry.frame_id))
             zero = run.stamps == 0
             if zero.any():
                 run.stamps[zero] = np.asarray(log_times, np.int64)[zero]
@@ -342,18 +390,16 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
                 odom = mcapio.odometry_from_log(log, o_topic)
             except Exception as exc:  # a message the ROS 2 type store cannot decode
                 raise InputError(f"{label}: bad nav_msgs/Odometry message on {o_topic}: {exc}") from None
-            if max_scans is not None:
-                keep = odom.stamps <= last
-                keep[0] |= first_pose
-                odom = Odometry(odom.stamps[keep], odom.x[keep], odom.y[keep], odom.theta[keep], odom.frame_id,
-                                odom.child_frame_id)
+            keep = odom.stamps <= last if max_scans is not None else np.ones(len(odom), bool)
+            keep[0] |= first_pose
             first_pose = False
-            return odom
+            return Odometry(odom.stamps[keep], odom.x[keep], odom.y[keep], odom.theta[keep],
+                            ros2_frame(odom.frame_id), ros2_frame(odom.child_frame_id))
 
         for t, stamp, payload in mcapio.iter_messages(path, [scan_topic, *tfs] + ([o_topic] if o_topic else []),
                                                       warn=False):
             if t in tfs:
-                moved.append((t, stamp, payload))
+                moved.append((t, stamp, _without_slashes(payload)))
             elif t == scan_topic:
                 if scans_done:
                     if odom_done:
@@ -380,7 +426,28 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
 
     moved: list[tuple[str, int, bytes]] = []
     return ImportStream(pieces(), warnings=warns, topic=scan_topic, odom_topic=o_topic,
-                        facts={"topics": {t: m for t, (m, _) in topics.items()}}, transforms=moved, tf_topics=tfs)
+                        facts={"topics": {t: m for t, (m, _) in topics.items()}}, transforms=moved, tf_topics=tfs,
+                        tf_survey=survey)
+
+
+def _decode_tf(payload: bytes) -> list:
+    """The transforms of a TFMessage payload; none when it does not decode (it is copied as it is, as before)."""
+    from ..transforms import decode_tf
+
+    try:
+        return decode_tf(payload)
+    except ValueError:
+        return []
+
+
+def _without_slashes(payload: bytes) -> bytes:
+    """transforms.without_slashes, or the payload as it is when it does not decode."""
+    from ..transforms import without_slashes
+
+    try:
+        return without_slashes(payload)
+    except ValueError:
+        return payload
 
 
 def _mcap_survey(path: Path, label: str, topic: str, max_scans: int | None) -> tuple[int, str, int, int]:
