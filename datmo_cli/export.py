@@ -77,6 +77,7 @@ from typing import IO
 
 import numpy as np
 
+from .csvsafe import neutralise
 from .errors import ConfigError, InputError, MissingChannelError
 from .evaluate import MOVER_CLASSES, moved_ids, target_mask
 from .extras import require
@@ -253,7 +254,7 @@ def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
         if v is None:
             return null
         if kind == "str":
-            return json.dumps(v) if quote else _csv_field(v)
+            return json.dumps(v) if quote else _csv_field(neutralise(v))
         if kind == "bool":
             return "true" if v else "false"
         return str(v)
