@@ -23,11 +23,15 @@ def plot_paths(plot: Path, files: list[Path]) -> list[Path]:
 
 
 def check_plot_outputs(paths: list[Path], force: bool) -> None:
-    """Refuse a bad plot suffix or a plot path outputs.check_output refuses (an existing plot without
-    --force, a folder or device in the way, a missing or read-only folder), before any work."""
+    """Refuse a missing matplotlib (the plot extra), a bad plot suffix or a plot path outputs.check_output
+    refuses (an existing plot without --force, a folder or device in the way, a missing or read-only folder),
+    before any work."""
     from ..errors import InputError
+    from ..extras import require
     from ..outputs import check_output
 
+    if paths:
+        require("matplotlib", for_="--plot")
     for p in paths:
         if p.suffix.lower() not in PLOT_SUFFIXES:
             raise InputError(f"{p}: plot format must be one of {', '.join(PLOT_SUFFIXES)}")
