@@ -473,12 +473,21 @@ def export_ground_truth(path: Path, sink: TextSink | ParquetSink, *, include_occ
                         block: int = BLOCK_MESSAGES, progress: Callable[[str, int], None] | None = None) -> None:
     """Write the targets of the /datmo/ground_truth channel of the log at `path` to `sink` (of
     GROUND_TRUTH_COLUMNS), `block` messages at a time, in two passes: `progress("movers", n)` after each
-    block of the pass that finds the ids that move, `progress("targets", n)` after each block written."""
+    block of the pass that finds the ids that move (and checks that the stamps increase: InputError naming the
+    first message that does not), `progress("targets", n)` after each block written."""
     topic, msgtype = mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH
     moved = np.zeros(0, np.int64)
+    last = None
     for first, payloads in _batches(path, topic, block):
         decoded = _decode(path, msgtype, topic, payloads, first)
         moved = np.union1d(moved, moved_ids(np.concatenate([d["objects"] for d in decoded])))
+        stamps = np.array(([] if last is None else [last]) + [d["stamp_ns"] for d in decoded], np.int64)
+        back = np.flatnonzero(np.diff(stamps) <= 0)
+        if len(back):   # a frame per stamp: evaluate --gt would read two messages of one stamp as one frame
+            k = first + int(back[0]) - (last is not None) + 1
+            raise InputError(f"{path}: {topic} message {k} has stamp_ns {int(stamps[back[0] + 1])}, not after the "
+                             f"previous message's {int(stamps[back[0]])}")
+        last = int(stamps[-1])
         if progress is not None:
             progress("movers", len(payloads))
     for first, payloads in _batches(path, topic, block):

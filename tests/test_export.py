@@ -217,7 +217,7 @@ def test_missing_pyarrow_names_the_extra(processed, tmp_path, monkeypatch):
     result = invoke(str(processed["static"]), "-o", str(out))
     assert result.exit_code == 1
     assert result.stderr.splitlines() == ["datmo: error: writing Parquet needs pyarrow, which is not installed: "
-                                          "pip install 'datmo[parquet]'"]
+                                          "pip install 'datmo-cli[parquet]'"]
     assert list(tmp_path.iterdir()) == []
     assert invoke(str(processed["static"]), "-o", str(tmp_path / "tracks.csv")).exit_code == 0   # CSV needs none
 
@@ -551,6 +551,29 @@ def test_a_target_position_that_is_not_finite_is_one_line(tmp_path):
     assert result.stderr.splitlines() == [f"datmo: error: {log}: /datmo/ground_truth message 7 holds a target "
                                           "position that is not a finite number"]
     assert not out.exists() and not list(tmp_path.glob(".*.tmp"))
+
+
+def test_a_ground_truth_stamp_that_does_not_increase_is_one_line(tmp_path):
+    """Found by the fuzz test below: a flipped byte gave message 0 a later message's stamp, and evaluate --gt
+    then refused the CSV (one id twice in one frame). Message k here gets message k - 2's stamp; k = 128 is the
+    first of a block of 64."""
+    from datmo_cli.errors import InputError
+
+    stamps, payloads = mcapio.read_messages(SAMPLES / "hall.mcap", mcapio.TOPIC_GROUND_TRUTH)
+    for k in (200, 128):
+        msg = cdr.decode(types.GROUND_TRUTH, payloads[k])
+        log = rewritten_ground_truth(tmp_path / "back.mcap", k, cdr.encode(types.GROUND_TRUTH,
+                                                                             {**msg, "stamp_ns": int(stamps[k - 2])}))
+        line = (f"{log}: /datmo/ground_truth message {k} has stamp_ns {stamps[k - 2]}, not after the previous "
+                f"message's {stamps[k - 1]}")
+        with pytest.raises(InputError) as err:
+            export.export_ground_truth(log, export.sink_for(io.BytesIO(), "csv", cols=export.GROUND_TRUTH_COLUMNS),
+                                       block=64)
+        assert str(err.value) == line
+        out = tmp_path / "gt.csv"
+        result = invoke(str(log), "--ground-truth", "-o", str(out))
+        assert result.exit_code == 1 and result.stderr.splitlines() == [f"datmo: error: {line}"]
+        assert not out.exists()
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
