@@ -1,44 +1,16 @@
 """Per-scan tables out of processed logs: every track's state after every scan (and, optionally, every feature
 of every scan), one row each, as CSV, NDJSON or Parquet, streamed in constant memory.
 
-Schema (the same columns, in this order, in every format; units in the names: m, m/s (`mps`), ns, rad):
-
-    file          the input log, as given on the command line
-    scan          index of the scan's message on the exported channel of that file, from 0
-    stamp_ns      header stamp of the scan, ns since 1970
-    frame_id      the scan's frame (the sensor frame; world_* columns are in the odometry frame)
-    kind          track; with --features also line, circle, blob, point or leg
-    id            track id (empty for features)
-    class         unknown, person, circle object or rectangular object (tracks)
-    mobility      static, dynamic or undefined (tracks)
-    status        tentative, confirmed or coasting (tracks)
-    x_m, y_m      track: model centre; circle: centre; blob, point, leg: centroid; line: its first end P_ini;
-                  sensor frame, m
-    vx_mps, vy_mps               track velocity, sensor frame, m/s
-    world_x_m, world_y_m         track position in the odometry frame, m (empty when the log has no odometry)
-    world_vx_mps, world_vy_mps   track velocity in the odometry frame, m/s (likewise)
-    size_m        track: object extent; blob, point: largest distance between two of its points; line: length;
-                  leg: width first to last point; m
-    occluded      true when a nearer segment covers the track's bearing (tracks)
-    age, hits, misses            scans since the track was created, scans with a measurement, consecutive
-                                 scans without one (tracks)
-
-With --features these columns follow (empty for tracks and for kinds they do not describe):
-
-    segment       index of the feature's segment in the scan's Segments message
-    first_beam, last_beam        beam indices of the feature's first and last points (inclusive)
-    n_points      returns on the feature
-    x_end_m, y_end_m             line: its second end P_end, sensor frame, m
-    radius_m      circle radius, m
-    rho_m, theta_rad             line normal: rho = x cos(theta) + y sin(theta), m; theta in [0, pi), rad
-    r_acc         line, circle: votes in the Hough peak cell / points on the segment
-    probability   leg: the leg detector's probability, 0 to 1
-
+The schema is TRACK_COLUMNS (then, with --features, FEATURE_COLUMNS): the same columns, in this order, with
+the same types in every format, whatever the number of logs, with or without odometry, and for a log with no
+track or feature at all (CSV: the header line alone; NDJSON: an empty file; Parquet: the typed schema and no
+row). docs/export.md documents every column (type, unit, frame, when it is null) and how to read each format
+with its types (pyarrow, polars, pandas); `arrow_schema` and `polars_schema` give the schema to their readers.
 Missing values are empty in CSV and null in NDJSON and Parquet (NaN world coordinates, any non-finite float
-included). Floats are
-written as the shortest text that reads back to the same float32 (CSV, NDJSON) or as float32 (Parquet).
-Rows come in this order: the track states of every file (files in the order given, each file's in its order),
-then with --features the features of every file likewise.
+included). Floats are written as the shortest text that reads back to the same float32 (CSV, NDJSON) or as
+float32 (Parquet). A CSV text field that a spreadsheet would run as a formula is written with a leading
+apostrophe (csvsafe.neutralise). Rows come in this order: the track states of every file (files in the order
+given, each file's in its order), then with --features the features of every file likewise.
 
 With --ground-truth the table is instead one log's /datmo/ground_truth (datmo simulate) in the shape
 `datmo evaluate --gt` reads, holding exactly the targets evaluate scores from the channel:
@@ -88,26 +60,49 @@ FORMATS = ("csv", "ndjson", "parquet")
 SUFFIXES = {".csv": "csv", ".ndjson": "ndjson", ".jsonl": "ndjson", ".parquet": "parquet", ".pq": "parquet"}
 BLOCK_MESSAGES = 1000        # messages decoded and written at once (one batch, one Parquet row group)
 
-# name -> value kind: str, int (uint32, or int64 for stamp_ns), float (float32), double (float64), bool
+# The schema: column name -> type, in order (docs/export.md documents each column with its unit and frame).
+# Types: string, int64, uint32, float32, float64, bool; every column may be null (empty in CSV).
+TYPES = ("string", "int64", "uint32", "float32", "float64", "bool")
 TRACK_COLUMNS: dict[str, str] = {
-    "file": "str", "scan": "int", "stamp_ns": "int", "frame_id": "str", "kind": "str", "id": "int",
-    "class": "str", "mobility": "str", "status": "str", "x_m": "float", "y_m": "float", "vx_mps": "float",
-    "vy_mps": "float", "world_x_m": "float", "world_y_m": "float", "world_vx_mps": "float",
-    "world_vy_mps": "float", "size_m": "float", "occluded": "bool", "age": "int", "hits": "int", "misses": "int",
+    "file": "string", "scan": "int64", "stamp_ns": "int64", "frame_id": "string", "kind": "string", "id": "uint32",
+    "class": "string", "mobility": "string", "status": "string", "x_m": "float32", "y_m": "float32",
+    "vx_mps": "float32", "vy_mps": "float32", "world_x_m": "float32", "world_y_m": "float32",
+    "world_vx_mps": "float32", "world_vy_mps": "float32", "size_m": "float32", "occluded": "bool", "age": "uint32",
+    "hits": "uint32", "misses": "uint32",
 }
 FEATURE_COLUMNS: dict[str, str] = {
-    "segment": "int", "first_beam": "int", "last_beam": "int", "n_points": "int", "x_end_m": "float",
-    "y_end_m": "float", "radius_m": "float", "rho_m": "float", "theta_rad": "float", "r_acc": "float",
-    "probability": "float",
+    "segment": "uint32", "first_beam": "uint32", "last_beam": "uint32", "n_points": "uint32", "x_end_m": "float32",
+    "y_end_m": "float32", "radius_m": "float32", "rho_m": "float32", "theta_rad": "float32", "r_acc": "float32",
+    "probability": "float32",
 }
 
-GROUND_TRUTH_COLUMNS: dict[str, str] = {"stamp_ns": "int", "id": "int", "x": "double", "y": "double", "class": "str"}
+GROUND_TRUTH_COLUMNS: dict[str, str] = {"stamp_ns": "int64", "id": "uint32", "x": "float64", "y": "float64",
+                                        "class": "string"}
 
 
 def columns(features: bool = False) -> dict[str, str]:
-    """The output's columns (name -> value kind) in order: the track columns, then with `features` the
+    """The output's columns (name -> type, one of TYPES) in order: the track columns, then with `features` the
     feature columns."""
     return {**TRACK_COLUMNS, **(FEATURE_COLUMNS if features else {})}
+
+
+def arrow_schema(cols: dict[str, str] | None = None, *, features: bool = False):
+    """The pyarrow.Schema of a table of `cols` (default: columns(features)), as Parquet files carry it and as
+    pyarrow's CSV and JSON readers take it (column_types, explicit_schema). Needs pyarrow (the parquet extra)."""
+    pa = require_pyarrow()
+    types_ = {"string": pa.string(), "int64": pa.int64(), "uint32": pa.uint32(), "float32": pa.float32(),
+              "float64": pa.float64(), "bool": pa.bool_()}
+    return pa.schema([(name, types_[t]) for name, t in (cols or columns(features)).items()])
+
+
+def polars_schema(cols: dict[str, str] | None = None, *, features: bool = False) -> dict:
+    """{column: polars data type} of a table of `cols` (default: columns(features)), for polars' readers
+    (`schema=`): CSV and NDJSON carry no types, and polars infers them from the first rows only. Needs polars."""
+    import polars as pl
+
+    types_ = {"string": pl.String, "int64": pl.Int64, "uint32": pl.UInt32, "float32": pl.Float32,
+              "float64": pl.Float64, "bool": pl.Boolean}
+    return {name: types_[t] for name, t in (cols or columns(features)).items()}
 
 
 def format_for(output: Path, fmt: str | None) -> str:
@@ -226,7 +221,7 @@ def feature_batch(file: str, first: int, decoded: list[dict]) -> Batch:
         for p in parts:
             if name in p.values:
                 filled.append(p.values[name])
-            elif kind == "float":
+            elif kind == "float32":
                 filled.append(np.full(p.n, np.nan, np.float32))
             else:
                 filled.append(_constant(None, p.n))
@@ -241,8 +236,8 @@ def feature_batch(file: str, first: int, decoded: list[dict]) -> Batch:
 def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
     """A column's values as text: float32 as its shortest round-trip form, non-finite floats and None as `null`;
     strings JSON-quoted with `quote`, else as CSV fields."""
-    if kind in ("float", "double") and a.dtype != object:
-        out = a.astype(np.float32 if kind == "float" else np.float64).astype(str).astype(object)
+    if kind in ("float32", "float64") and a.dtype != object:
+        out = a.astype(np.float32 if kind == "float32" else np.float64).astype(str).astype(object)
         out[~np.isfinite(a)] = null
         return out.tolist()
     if kind == "bool" and a.dtype != object:
@@ -253,7 +248,7 @@ def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
     def text(v: object) -> str:
         if v is None:
             return null
-        if kind == "str":
+        if kind == "string":
             return json.dumps(v) if quote else _csv_field(neutralise(v))
         if kind == "bool":
             return "true" if v else "false"
@@ -319,12 +314,9 @@ class ParquetSink:
     """Rows to a Parquet file (pyarrow.parquet.ParquetWriter), one row group per batch, zstd-compressed."""
 
     def __init__(self, stream: IO[bytes], cols: dict[str, str]) -> None:
-        pa = self.pa = require_pyarrow()
+        self.pa = require_pyarrow()
         self.cols = cols
-        kinds = {"str": pa.string(), "float": pa.float32(), "double": pa.float64(), "bool": pa.bool_(),
-                 "int": pa.uint32()}
-        self.schema = pa.schema([(name, pa.int64() if name in ("stamp_ns", "scan") else kinds[kind])
-                                 for name, kind in cols.items()])
+        self.schema = arrow_schema(cols)
         import pyarrow.parquet as pq
 
         self.writer = pq.ParquetWriter(stream, self.schema, compression="zstd")
