@@ -41,7 +41,7 @@ def run_document(path: Path, folder: Path, monkeypatch) -> None:
             exec(compile(text, f"{path.name} block", "exec"), namespace)
 
 
-@pytest.mark.parametrize("name", ["export.md"])
+@pytest.mark.parametrize("name", ["export.md", "python.md"])
 def test_the_examples_run_as_written(tmp_path, monkeypatch, name):
     run_document(DOCS / name, tmp_path, monkeypatch)
 
