@@ -126,6 +126,8 @@ def command(file: Path, gt_csv: Path | None, match_radius: float, include_occlud
     matches, in metres. HOTA's similarity of a track and a target d metres apart is 1 - d / --match-radius
     (0 beyond it); HOTA, DetA, AssA and LocA are means over the thresholds 0.05 to 0.95.
 
+    Needs the eval extra (motmetrics, TrackEval and scipy).
+
     Example: datmo evaluate out/hall.mcap --format json --min-mota 0.6 --min-hota 0.4
     """
     from ..errors import DatmoError

@@ -16,7 +16,7 @@ FORMATS = ("csv", "ndjson", "parquet")   # as datmo_cli.export.FORMATS, which im
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
 @output_option("The table to write; '-' writes CSV or NDJSON to stdout.", dash=True)
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default=None,
-              help="csv, ndjson (one JSON object a line) or parquet (needs pip install 'datmo-cli[parquet]') "
+              help="csv, ndjson (one JSON object a line) or parquet (needs the parquet extra, pyarrow) "
                    "[default: from OUT's suffix .csv, .ndjson/.jsonl, .parquet/.pq; csv for '-'].")
 @click.option("--features", is_flag=True,
               help="Also one row per line, circle, blob, point and leg of every scan (kind column; the feature "

@@ -80,7 +80,7 @@ def _scan_counts(files: list[Path]) -> list[int]:
               help="Report every confirmed track in full (static pieces too) and label all of them in the plot.")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also draw the run into this .png, .svg or .pdf "
-                   "(several files: one plot each, named PLOT-STEM.png).")
+                   "(several files: one plot each, named PLOT-STEM.png). Needs the plot extra (matplotlib).")
 @click.option("--plot-kind", type=click.Choice(PLOT_KINDS), default="auto", show_default=True,
               help="top: the run from above; counts: confirmed tracks per class over time; speeds: the moving "
                    "tracks' speeds over time; all: the three side by side; auto: all when something moves, "

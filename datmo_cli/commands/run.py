@@ -115,7 +115,8 @@ class _BatchProgress:
               "inputs the manifest lists as done with the same input and parameters are skipped.")
 @config_options("TOML file of parameters: its [features] table as for datmo features, its [track] table as "
                 "for datmo track.")
-@click.option("--plot", is_flag=True, help="Also draw each run from above into OUT_DIR/NAME.png.")
+@click.option("--plot", is_flag=True, help="Also draw each run from above into OUT_DIR/NAME.png (needs the plot "
+                                          "extra, matplotlib).")
 @click.option("--bag-dir", is_flag=True,
               help="Write each output as a ROS 2 bag folder for ros2 bag play: OUT_DIR/NAME/ holding NAME_0.mcap "
                    "(the output, as the manifest names it) and metadata.yaml.")
