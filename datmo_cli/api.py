@@ -129,21 +129,21 @@ class Log:
             return None
         return stream.odometry.at(self.read_scans().stamps)
 
-    def _rows(self, topic: str, msgtype: str, rows) -> Iterator[export.Batch]:
-        plan = export.plan([self.path], features=topic == mcapio.TOPIC_FEATURES)   # refuses a log without them
-        for first, payloads in export._batches(plan.files[0], topic, export.BLOCK_MESSAGES):
-            yield rows(self.name, first, export._decode(self.path, msgtype, topic, payloads, first))
+    def _rows(self, topic: str) -> Iterator[export.Batch]:
+        export.require_channel(self.contents, topic, export.ROWS[topic][0])
+        for _, batch in export.row_batches(self.path, topic, self.name):
+            yield batch
 
     def tracks(self) -> np.ndarray:
         """Every track's state after every scan: a structured array of TRACK_COLUMNS (the export's tracks
         table: class, mobility and status as names; world_* NaN without odometry). MissingChannelError when
         the log has no /datmo/tracks (run `process` or `datmo run` on it first)."""
-        return _table(self._rows(mcapio.TOPIC_TRACKS, types.TRACKS, export.track_batch), TRACK_COLUMNS)
+        return _table(self._rows(mcapio.TOPIC_TRACKS), TRACK_COLUMNS)
 
     def features(self) -> np.ndarray:
         """Every line, circle, blob, point and leg of every scan: a structured array of FEATURE_COLUMNS (kind says
         which; a float that does not describe the kind is NaN). MissingChannelError without /datmo/features."""
-        return _table(self._rows(mcapio.TOPIC_FEATURES, types.FEATURES, export.feature_batch), FEATURE_COLUMNS)
+        return _table(self._rows(mcapio.TOPIC_FEATURES), FEATURE_COLUMNS)
 
     def tracks_dataframe(self) -> pandas.DataFrame:
         """tracks() as a pandas DataFrame (needs pandas: pip install 'datmo-cli[pandas]')."""

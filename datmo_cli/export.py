@@ -372,7 +372,9 @@ class Plan:
         return sum(c.get(topic, 0) for c in self.counts)
 
 
-def _require(log: mcapio.LogContents, topic: str, msgtype: str) -> int:
+def require_channel(log: mcapio.LogContents, topic: str, msgtype: str) -> int:
+    """The number of `msgtype` messages on `topic` of `log`; MissingChannelError naming the command that writes
+    them when there are none, InputError when the channel holds another type."""
     ch = log.topics().get(topic)
     if ch is None or not ch.count:
         if topic == mcapio.TOPIC_GROUND_TRUTH:
@@ -392,12 +394,12 @@ def plan(files: list[Path], features: bool = False, ground_truth: bool = False) 
     for path in files:
         log = mcapio.summary(path)
         if ground_truth:
-            out.counts.append({mcapio.TOPIC_GROUND_TRUTH: _require(log, mcapio.TOPIC_GROUND_TRUTH,
+            out.counts.append({mcapio.TOPIC_GROUND_TRUTH: require_channel(log, mcapio.TOPIC_GROUND_TRUTH,
                                                                    types.GROUND_TRUTH)})
             continue
-        counts = {mcapio.TOPIC_TRACKS: _require(log, mcapio.TOPIC_TRACKS, types.TRACKS)}
+        counts = {mcapio.TOPIC_TRACKS: require_channel(log, mcapio.TOPIC_TRACKS, types.TRACKS)}
         if features:
-            counts[mcapio.TOPIC_FEATURES] = _require(log, mcapio.TOPIC_FEATURES, types.FEATURES)
+            counts[mcapio.TOPIC_FEATURES] = require_channel(log, mcapio.TOPIC_FEATURES, types.FEATURES)
         out.counts.append(counts)
     return out
 
@@ -416,21 +418,30 @@ def _batches(path: Path, topic: str, block: int) -> Iterator[tuple[int, list[byt
         yield first, pending
 
 
+ROWS = {mcapio.TOPIC_TRACKS: (types.TRACKS, track_batch), mcapio.TOPIC_FEATURES: (types.FEATURES, feature_batch)}
+
+
+def row_batches(path: Path, topic: str, name: str | None = None,
+                block: int = BLOCK_MESSAGES) -> Iterator[tuple[int, Batch]]:
+    """(messages read, their rows) for each block of `block` messages on `topic` (/datmo/tracks or
+    /datmo/features, a key of ROWS) of the log at `path`; `name` fills the file column (default: the path)."""
+    msgtype, rows = ROWS[topic]
+    name = os.fsdecode(path) if name is None else name
+    for first, payloads in _batches(path, topic, block):
+        yield len(payloads), rows(name, first, _decode(path, msgtype, topic, payloads, first))
+
+
 def export(p: Plan, sink: TextSink | ParquetSink, *, features: bool = False, block: int = BLOCK_MESSAGES,
            progress: Callable[[str, int], None] | None = None) -> None:
     """Write the rows of every input of `p` to `sink`, `block` messages at a time: every file's track states,
     then (with `features`) every file's features. `progress(topic, n)` after each block of n messages of
     `topic`."""
-    jobs = [(mcapio.TOPIC_TRACKS, types.TRACKS, track_batch)]
-    if features:
-        jobs.append((mcapio.TOPIC_FEATURES, types.FEATURES, feature_batch))
-    for topic, msgtype, rows in jobs:
+    for topic in [mcapio.TOPIC_TRACKS] + ([mcapio.TOPIC_FEATURES] if features else []):
         for path in p.files:
-            name = os.fsdecode(path)
-            for first, payloads in _batches(path, topic, block):
-                sink.write(rows(name, first, _decode(path, msgtype, topic, payloads, first)))
+            for n, batch in row_batches(path, topic, block=block):
+                sink.write(batch)
                 if progress is not None:
-                    progress(topic, len(payloads))
+                    progress(topic, n)
 
 
 def ground_truth_batch(path: Path, first: int, decoded: list[dict], moved: np.ndarray, *,

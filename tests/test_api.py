@@ -87,9 +87,15 @@ def test_dataframes_without_pandas_name_the_extra(made, monkeypatch):
         api.open_log(made["patrol"]).tracks_dataframe()
 
 
-def test_a_raw_log_has_no_tracks_yet():
+def test_a_raw_log_has_no_tracks_yet_and_a_features_output_has_features_only(tmp_path):
     with pytest.raises(MissingChannelError, match="no messages on /datmo/tracks; run datmo track"):
         api.open_log(SAMPLES / "hall.mcap").tracks()
+    out = tmp_path / "f.mcap"
+    assert CliRunner().invoke(cli, ["features", str(SAMPLES / "static.mcap"), "-o", str(out)]).exit_code == 0
+    log = api.open_log(out)
+    assert len(log.features()) > 1000 and set(log.features()["kind"].tolist()) >= {"line", "circle"}
+    with pytest.raises(MissingChannelError, match="no messages on /datmo/tracks"):
+        log.tracks()
 
 
 def test_process_takes_a_config(tmp_path):
