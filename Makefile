@@ -7,8 +7,10 @@ DEMO_LOG := sample_logs/hall.mcap
 
 .PHONY: install demo test test-fast test-nojit lint bench accuracy sample-logs regress regress-update clean legs-model
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml datmo_cli/__init__.py
 	$(PYTHON) -m venv $(VENV)
+	@# the distribution was called datmo before it became datmo-cli: an older venv drops the old name
+	$(BIN)/pip uninstall --quiet --disable-pip-version-check -y datmo 2>/dev/null || true
 	$(BIN)/pip install --quiet --disable-pip-version-check -e '.[dev]'
 	touch $(STAMP)
 
@@ -29,7 +31,7 @@ test-nojit: install ## the kernel reference checks (tests/kernel_checks.py) with
 lint: install
 	$(BIN)/ruff check datmo_cli tests benchmarks
 
-bench: install ## speed figures: scans/s and µs/scan per stage beside plain MCAP read speed
+bench: install ## speed figures: scans/s and µs/scan per stage beside plain MCAP read speed; a plain install's size
 	$(BIN)/python -m benchmarks bench
 
 accuracy: install ## accuracy figures on simulated logs (ground truth) and real data

@@ -99,7 +99,7 @@ def main() -> None:
     try:
         import sklearn  # noqa: F401
     except ImportError:
-        print_lines(title, ["skipped: scikit-learn is not installed (pip install 'datmo[train]')"])
+        print_lines(title, ["skipped: scikit-learn is not installed (pip install 'datmo-cli[train]')"])
         return
     np.seterr(all="ignore")
     print_lines(title, figure_lines())

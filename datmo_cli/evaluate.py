@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
+from .extras import require
 from .log.vocabulary import (
     CLASS_NAMES,
     CLASS_PERSON,
@@ -71,6 +72,13 @@ HOTA_METRICS = ["hota", "deta", "assa", "loca"]
 HIGHER_IS_BETTER = {"mota", "idf1", "idp", "idr", "precision", "recall", "mostly_tracked", "num_matches",
                     *HOTA_METRICS}
 PROGRESS_EVERY = 500   # frames between progress calls
+
+
+def require_scoring(for_: str = "scoring tracks (datmo evaluate)") -> None:
+    """Import what scoring needs (the eval extra: motmetrics, TrackEval, scipy), or MissingExtraError naming it."""
+    require("scipy.optimize", for_=for_)   # first: the other two import it
+    require("motmetrics", for_=for_)
+    require("trackeval.metrics.hota", for_=for_)
 
 
 @dataclass
@@ -412,6 +420,7 @@ def evaluate(gt: Frames, hyps: Frames, *, regions: Regions | None = None, match_
     "all" also has `ignored_hypotheses` (in don't-care regions) and `frames_without_tracks`.
     `progress(done, total, stage)` counts ground-truth frames: stage "matching" as they are matched (per
     PROGRESS_EVERY frames), then "HOTA <class>" at 0 and at the total around each class's HOTA."""
+    require_scoring()
     import motmetrics as mm
 
     if not match_radius > 0:

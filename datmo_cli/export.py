@@ -1,44 +1,16 @@
 """Per-scan tables out of processed logs: every track's state after every scan (and, optionally, every feature
 of every scan), one row each, as CSV, NDJSON or Parquet, streamed in constant memory.
 
-Schema (the same columns, in this order, in every format; units in the names: m, m/s (`mps`), ns, rad):
-
-    file          the input log, as given on the command line
-    scan          index of the scan's message on the exported channel of that file, from 0
-    stamp_ns      header stamp of the scan, ns since 1970
-    frame_id      the scan's frame (the sensor frame; world_* columns are in the odometry frame)
-    kind          track; with --features also line, circle, blob, point or leg
-    id            track id (empty for features)
-    class         unknown, person, circle object or rectangular object (tracks)
-    mobility      static, dynamic or undefined (tracks)
-    status        tentative, confirmed or coasting (tracks)
-    x_m, y_m      track: model centre; circle: centre; blob, point, leg: centroid; line: its first end P_ini;
-                  sensor frame, m
-    vx_mps, vy_mps               track velocity, sensor frame, m/s
-    world_x_m, world_y_m         track position in the odometry frame, m (empty when the log has no odometry)
-    world_vx_mps, world_vy_mps   track velocity in the odometry frame, m/s (likewise)
-    size_m        track: object extent; blob, point: largest distance between two of its points; line: length;
-                  leg: width first to last point; m
-    occluded      true when a nearer segment covers the track's bearing (tracks)
-    age, hits, misses            scans since the track was created, scans with a measurement, consecutive
-                                 scans without one (tracks)
-
-With --features these columns follow (empty for tracks and for kinds they do not describe):
-
-    segment       index of the feature's segment in the scan's Segments message
-    first_beam, last_beam        beam indices of the feature's first and last points (inclusive)
-    n_points      returns on the feature
-    x_end_m, y_end_m             line: its second end P_end, sensor frame, m
-    radius_m      circle radius, m
-    rho_m, theta_rad             line normal: rho = x cos(theta) + y sin(theta), m; theta in [0, pi), rad
-    r_acc         line, circle: votes in the Hough peak cell / points on the segment
-    probability   leg: the leg detector's probability, 0 to 1
-
+The schema is TRACK_COLUMNS (then, with --features, FEATURE_COLUMNS): the same columns, in this order, with
+the same types in every format, whatever the number of logs, with or without odometry, and for a log with no
+track or feature at all (CSV: the header line alone; NDJSON: an empty file; Parquet: the typed schema and no
+row). docs/export.md documents every column (type, unit, frame, when it is null) and how to read each format
+with its types (pyarrow, polars, pandas); `arrow_schema` and `polars_schema` give the schema to their readers.
 Missing values are empty in CSV and null in NDJSON and Parquet (NaN world coordinates, any non-finite float
-included). Floats are
-written as the shortest text that reads back to the same float32 (CSV, NDJSON) or as float32 (Parquet).
-Rows come in this order: the track states of every file (files in the order given, each file's in its order),
-then with --features the features of every file likewise.
+included). Floats are written as the shortest text that reads back to the same float32 (CSV, NDJSON) or as
+float32 (Parquet). A CSV text field that a spreadsheet would run as a formula is written with a leading
+apostrophe (csvsafe.neutralise). Rows come in this order: the track states of every file (files in the order
+given, each file's in its order), then with --features the features of every file likewise.
 
 With --ground-truth the table is instead one log's /datmo/ground_truth (datmo simulate) in the shape
 `datmo evaluate --gt` reads, holding exactly the targets evaluate scores from the channel:
@@ -77,6 +49,7 @@ from typing import IO
 
 import numpy as np
 
+from .csvsafe import neutralise
 from .errors import ConfigError, InputError, MissingChannelError
 from .evaluate import MOVER_CLASSES, moved_ids, target_mask
 from .extras import require
@@ -87,26 +60,49 @@ FORMATS = ("csv", "ndjson", "parquet")
 SUFFIXES = {".csv": "csv", ".ndjson": "ndjson", ".jsonl": "ndjson", ".parquet": "parquet", ".pq": "parquet"}
 BLOCK_MESSAGES = 1000        # messages decoded and written at once (one batch, one Parquet row group)
 
-# name -> value kind: str, int (uint32, or int64 for stamp_ns), float (float32), double (float64), bool
+# The schema: column name -> type, in order (docs/export.md documents each column with its unit and frame).
+# Types: string, int64, uint32, float32, float64, bool; every column may be null (empty in CSV).
+TYPES = ("string", "int64", "uint32", "float32", "float64", "bool")
 TRACK_COLUMNS: dict[str, str] = {
-    "file": "str", "scan": "int", "stamp_ns": "int", "frame_id": "str", "kind": "str", "id": "int",
-    "class": "str", "mobility": "str", "status": "str", "x_m": "float", "y_m": "float", "vx_mps": "float",
-    "vy_mps": "float", "world_x_m": "float", "world_y_m": "float", "world_vx_mps": "float",
-    "world_vy_mps": "float", "size_m": "float", "occluded": "bool", "age": "int", "hits": "int", "misses": "int",
+    "file": "string", "scan": "int64", "stamp_ns": "int64", "frame_id": "string", "kind": "string", "id": "uint32",
+    "class": "string", "mobility": "string", "status": "string", "x_m": "float32", "y_m": "float32",
+    "vx_mps": "float32", "vy_mps": "float32", "world_x_m": "float32", "world_y_m": "float32",
+    "world_vx_mps": "float32", "world_vy_mps": "float32", "size_m": "float32", "occluded": "bool", "age": "uint32",
+    "hits": "uint32", "misses": "uint32",
 }
 FEATURE_COLUMNS: dict[str, str] = {
-    "segment": "int", "first_beam": "int", "last_beam": "int", "n_points": "int", "x_end_m": "float",
-    "y_end_m": "float", "radius_m": "float", "rho_m": "float", "theta_rad": "float", "r_acc": "float",
-    "probability": "float",
+    "segment": "uint32", "first_beam": "uint32", "last_beam": "uint32", "n_points": "uint32", "x_end_m": "float32",
+    "y_end_m": "float32", "radius_m": "float32", "rho_m": "float32", "theta_rad": "float32", "r_acc": "float32",
+    "probability": "float32",
 }
 
-GROUND_TRUTH_COLUMNS: dict[str, str] = {"stamp_ns": "int", "id": "int", "x": "double", "y": "double", "class": "str"}
+GROUND_TRUTH_COLUMNS: dict[str, str] = {"stamp_ns": "int64", "id": "uint32", "x": "float64", "y": "float64",
+                                        "class": "string"}
 
 
 def columns(features: bool = False) -> dict[str, str]:
-    """The output's columns (name -> value kind) in order: the track columns, then with `features` the
+    """The output's columns (name -> type, one of TYPES) in order: the track columns, then with `features` the
     feature columns."""
     return {**TRACK_COLUMNS, **(FEATURE_COLUMNS if features else {})}
+
+
+def arrow_schema(cols: dict[str, str] | None = None, *, features: bool = False):
+    """The pyarrow.Schema of a table of `cols` (default: columns(features)), as Parquet files carry it and as
+    pyarrow's CSV and JSON readers take it (column_types, explicit_schema). Needs pyarrow (the parquet extra)."""
+    pa = require_pyarrow()
+    types_ = {"string": pa.string(), "int64": pa.int64(), "uint32": pa.uint32(), "float32": pa.float32(),
+              "float64": pa.float64(), "bool": pa.bool_()}
+    return pa.schema([(name, types_[t]) for name, t in (cols or columns(features)).items()])
+
+
+def polars_schema(cols: dict[str, str] | None = None, *, features: bool = False) -> dict:
+    """{column: polars data type} of a table of `cols` (default: columns(features)), for polars' readers
+    (`schema=`): CSV and NDJSON carry no types, and polars infers them from the first rows only. Needs polars."""
+    import polars as pl
+
+    types_ = {"string": pl.String, "int64": pl.Int64, "uint32": pl.UInt32, "float32": pl.Float32,
+              "float64": pl.Float64, "bool": pl.Boolean}
+    return {name: types_[t] for name, t in (cols or columns(features)).items()}
 
 
 def format_for(output: Path, fmt: str | None) -> str:
@@ -225,7 +221,7 @@ def feature_batch(file: str, first: int, decoded: list[dict]) -> Batch:
         for p in parts:
             if name in p.values:
                 filled.append(p.values[name])
-            elif kind == "float":
+            elif kind == "float32":
                 filled.append(np.full(p.n, np.nan, np.float32))
             else:
                 filled.append(_constant(None, p.n))
@@ -240,8 +236,8 @@ def feature_batch(file: str, first: int, decoded: list[dict]) -> Batch:
 def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
     """A column's values as text: float32 as its shortest round-trip form, non-finite floats and None as `null`;
     strings JSON-quoted with `quote`, else as CSV fields."""
-    if kind in ("float", "double") and a.dtype != object:
-        out = a.astype(np.float32 if kind == "float" else np.float64).astype(str).astype(object)
+    if kind in ("float32", "float64") and a.dtype != object:
+        out = a.astype(np.float32 if kind == "float32" else np.float64).astype(str).astype(object)
         out[~np.isfinite(a)] = null
         return out.tolist()
     if kind == "bool" and a.dtype != object:
@@ -252,8 +248,8 @@ def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
     def text(v: object) -> str:
         if v is None:
             return null
-        if kind == "str":
-            return json.dumps(v) if quote else _csv_field(v)
+        if kind == "string":
+            return json.dumps(v) if quote else _csv_field(neutralise(v))
         if kind == "bool":
             return "true" if v else "false"
         return str(v)
@@ -318,12 +314,9 @@ class ParquetSink:
     """Rows to a Parquet file (pyarrow.parquet.ParquetWriter), one row group per batch, zstd-compressed."""
 
     def __init__(self, stream: IO[bytes], cols: dict[str, str]) -> None:
-        pa = self.pa = require_pyarrow()
+        self.pa = require_pyarrow()
         self.cols = cols
-        kinds = {"str": pa.string(), "float": pa.float32(), "double": pa.float64(), "bool": pa.bool_(),
-                 "int": pa.uint32()}
-        self.schema = pa.schema([(name, pa.int64() if name in ("stamp_ns", "scan") else kinds[kind])
-                                 for name, kind in cols.items()])
+        self.schema = arrow_schema(cols)
         import pyarrow.parquet as pq
 
         self.writer = pq.ParquetWriter(stream, self.schema, compression="zstd")
@@ -379,7 +372,9 @@ class Plan:
         return sum(c.get(topic, 0) for c in self.counts)
 
 
-def _require(log: mcapio.LogContents, topic: str, msgtype: str) -> int:
+def require_channel(log: mcapio.LogContents, topic: str, msgtype: str) -> int:
+    """The number of `msgtype` messages on `topic` of `log`; MissingChannelError naming the command that writes
+    them when there are none, InputError when the channel holds another type."""
     ch = log.topics().get(topic)
     if ch is None or not ch.count:
         if topic == mcapio.TOPIC_GROUND_TRUTH:
@@ -399,12 +394,12 @@ def plan(files: list[Path], features: bool = False, ground_truth: bool = False) 
     for path in files:
         log = mcapio.summary(path)
         if ground_truth:
-            out.counts.append({mcapio.TOPIC_GROUND_TRUTH: _require(log, mcapio.TOPIC_GROUND_TRUTH,
+            out.counts.append({mcapio.TOPIC_GROUND_TRUTH: require_channel(log, mcapio.TOPIC_GROUND_TRUTH,
                                                                    types.GROUND_TRUTH)})
             continue
-        counts = {mcapio.TOPIC_TRACKS: _require(log, mcapio.TOPIC_TRACKS, types.TRACKS)}
+        counts = {mcapio.TOPIC_TRACKS: require_channel(log, mcapio.TOPIC_TRACKS, types.TRACKS)}
         if features:
-            counts[mcapio.TOPIC_FEATURES] = _require(log, mcapio.TOPIC_FEATURES, types.FEATURES)
+            counts[mcapio.TOPIC_FEATURES] = require_channel(log, mcapio.TOPIC_FEATURES, types.FEATURES)
         out.counts.append(counts)
     return out
 
@@ -423,21 +418,30 @@ def _batches(path: Path, topic: str, block: int) -> Iterator[tuple[int, list[byt
         yield first, pending
 
 
+ROWS = {mcapio.TOPIC_TRACKS: (types.TRACKS, track_batch), mcapio.TOPIC_FEATURES: (types.FEATURES, feature_batch)}
+
+
+def row_batches(path: Path, topic: str, name: str | None = None,
+                block: int = BLOCK_MESSAGES) -> Iterator[tuple[int, Batch]]:
+    """(messages read, their rows) for each block of `block` messages on `topic` (/datmo/tracks or
+    /datmo/features, a key of ROWS) of the log at `path`; `name` fills the file column (default: the path)."""
+    msgtype, rows = ROWS[topic]
+    name = os.fsdecode(path) if name is None else name
+    for first, payloads in _batches(path, topic, block):
+        yield len(payloads), rows(name, first, _decode(path, msgtype, topic, payloads, first))
+
+
 def export(p: Plan, sink: TextSink | ParquetSink, *, features: bool = False, block: int = BLOCK_MESSAGES,
            progress: Callable[[str, int], None] | None = None) -> None:
     """Write the rows of every input of `p` to `sink`, `block` messages at a time: every file's track states,
     then (with `features`) every file's features. `progress(topic, n)` after each block of n messages of
     `topic`."""
-    jobs = [(mcapio.TOPIC_TRACKS, types.TRACKS, track_batch)]
-    if features:
-        jobs.append((mcapio.TOPIC_FEATURES, types.FEATURES, feature_batch))
-    for topic, msgtype, rows in jobs:
+    for topic in [mcapio.TOPIC_TRACKS] + ([mcapio.TOPIC_FEATURES] if features else []):
         for path in p.files:
-            name = os.fsdecode(path)
-            for first, payloads in _batches(path, topic, block):
-                sink.write(rows(name, first, _decode(path, msgtype, topic, payloads, first)))
+            for n, batch in row_batches(path, topic, block=block):
+                sink.write(batch)
                 if progress is not None:
-                    progress(topic, len(payloads))
+                    progress(topic, n)
 
 
 def ground_truth_batch(path: Path, first: int, decoded: list[dict], moved: np.ndarray, *,
@@ -472,12 +476,21 @@ def export_ground_truth(path: Path, sink: TextSink | ParquetSink, *, include_occ
                         block: int = BLOCK_MESSAGES, progress: Callable[[str, int], None] | None = None) -> None:
     """Write the targets of the /datmo/ground_truth channel of the log at `path` to `sink` (of
     GROUND_TRUTH_COLUMNS), `block` messages at a time, in two passes: `progress("movers", n)` after each
-    block of the pass that finds the ids that move, `progress("targets", n)` after each block written."""
+    block of the pass that finds the ids that move (and checks that the stamps increase: InputError naming the
+    first message that does not), `progress("targets", n)` after each block written."""
     topic, msgtype = mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH
     moved = np.zeros(0, np.int64)
+    last = None
     for first, payloads in _batches(path, topic, block):
         decoded = _decode(path, msgtype, topic, payloads, first)
         moved = np.union1d(moved, moved_ids(np.concatenate([d["objects"] for d in decoded])))
+        stamps = np.array(([] if last is None else [last]) + [d["stamp_ns"] for d in decoded], np.int64)
+        back = np.flatnonzero(np.diff(stamps) <= 0)
+        if len(back):   # a frame per stamp: evaluate --gt would read two messages of one stamp as one frame
+            k = first + int(back[0]) - (last is not None) + 1
+            raise InputError(f"{path}: {topic} message {k} has stamp_ns {int(stamps[back[0] + 1])}, not after the "
+                             f"previous message's {int(stamps[back[0]])}")
+        last = int(stamps[-1])
         if progress is not None:
             progress("movers", len(payloads))
     for first, payloads in _batches(path, topic, block):

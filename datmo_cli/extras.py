@@ -1,8 +1,10 @@
 """Optional dependencies: the heavy packages a few commands need, installed with pyproject.toml's extras.
 
-Every import of one goes through `require` first, so a missing package is one line naming the extra to
-install, e.g. "datmo train-legs needs scikit-learn, which is not installed: pip install 'datmo[train]'".
-`make install` (the dev extra) installs them all.
+A plain `pip install datmo-cli` holds what record, import, segment, features, track, run, report, info and
+export (CSV, NDJSON) need. Every import of an optional package goes through `require` first, so a missing one
+is one line naming the extra to install, e.g. "training a leg model needs scikit-learn, which is not installed:
+pip install 'datmo-cli[train]'". `pip install 'datmo-cli[all]'` installs every extra; `make install` (the dev
+extra) installs them all and the test tools.
 """
 
 from __future__ import annotations
@@ -12,8 +14,14 @@ from types import ModuleType
 
 from .errors import DatmoError
 
+DISTRIBUTION = "datmo-cli"   # the name on the package index (`datmo` there is an unrelated project)
+
 # module -> (the distribution pip installs, the extra that brings it)
 EXTRAS = {
+    "motmetrics": ("motmetrics", "eval"),
+    "trackeval": ("trackeval", "eval"),
+    "scipy": ("scipy", "eval"),
+    "matplotlib": ("matplotlib", "plot"),
     "sklearn": ("scikit-learn", "train"),
     "distributed": ("dask[distributed]", "dask"),
     "dask": ("dask[distributed]", "dask"),
@@ -22,6 +30,7 @@ EXTRAS = {
     "foxglove": ("foxglove-sdk", "live"),
     "websockets": ("websockets", "live"),
     "cyclonedds": ("cyclonedds", "node"),
+    "pandas": ("pandas", "pandas"),
 }
 
 
@@ -36,5 +45,5 @@ def require(module: str, for_: str) -> ModuleType:
     try:
         return importlib.import_module(module)
     except ImportError:
-        raise MissingExtraError(f"{for_} needs {package}, which is not installed: pip install 'datmo[{extra}]'") \
-            from None
+        raise MissingExtraError(f"{for_} needs {package}, which is not installed: pip install "
+                                f"'{DISTRIBUTION}[{extra}]'") from None

@@ -266,6 +266,9 @@ def draw(data: RunData, *, kind: str = "auto", all_labels: bool = False, title: 
          max_points: int = 150_000) -> Drawn:
     """Draw `data` (a RunData with scans kept) as `kind` (KINDS; auto: all when a confirmed track moves,
     else top) into a new Figure, labels placed (place_labels)."""
+    from .extras import require
+
+    require("matplotlib", for_="drawing a run")
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

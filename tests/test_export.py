@@ -120,9 +120,9 @@ def typed(row: dict, kinds: dict[str, str]) -> dict:
         v = row[name]
         if v is None or v == "":
             out[name] = None
-        elif kind == "float":
+        elif kind == "float32":
             out[name] = f32(float(v))
-        elif kind == "int":
+        elif kind in ("int64", "uint32"):
             out[name] = int(v)
         elif kind == "bool":
             out[name] = v if isinstance(v, bool) else {"true": True, "false": False}[v]
@@ -217,7 +217,7 @@ def test_missing_pyarrow_names_the_extra(processed, tmp_path, monkeypatch):
     result = invoke(str(processed["static"]), "-o", str(out))
     assert result.exit_code == 1
     assert result.stderr.splitlines() == ["datmo: error: writing Parquet needs pyarrow, which is not installed: "
-                                          "pip install 'datmo[parquet]'"]
+                                          "pip install 'datmo-cli[parquet]'"]
     assert list(tmp_path.iterdir()) == []
     assert invoke(str(processed["static"]), "-o", str(tmp_path / "tracks.csv")).exit_code == 0   # CSV needs none
 
@@ -553,6 +553,29 @@ def test_a_target_position_that_is_not_finite_is_one_line(tmp_path):
     assert not out.exists() and not list(tmp_path.glob(".*.tmp"))
 
 
+def test_a_ground_truth_stamp_that_does_not_increase_is_one_line(tmp_path):
+    """Found by the fuzz test below: a flipped byte gave message 0 a later message's stamp, and evaluate --gt
+    then refused the CSV (one id twice in one frame). Message k here gets message k - 2's stamp; k = 128 is the
+    first of a block of 64."""
+    from datmo_cli.errors import InputError
+
+    stamps, payloads = mcapio.read_messages(SAMPLES / "hall.mcap", mcapio.TOPIC_GROUND_TRUTH)
+    for k in (200, 128):
+        msg = cdr.decode(types.GROUND_TRUTH, payloads[k])
+        log = rewritten_ground_truth(tmp_path / "back.mcap", k, cdr.encode(types.GROUND_TRUTH,
+                                                                             {**msg, "stamp_ns": int(stamps[k - 2])}))
+        line = (f"{log}: /datmo/ground_truth message {k} has stamp_ns {stamps[k - 2]}, not after the previous "
+                f"message's {stamps[k - 1]}")
+        with pytest.raises(InputError) as err:
+            export.export_ground_truth(log, export.sink_for(io.BytesIO(), "csv", cols=export.GROUND_TRUTH_COLUMNS),
+                                       block=64)
+        assert str(err.value) == line
+        out = tmp_path / "gt.csv"
+        result = invoke(str(log), "--ground-truth", "-o", str(out))
+        assert result.exit_code == 1 and result.stderr.splitlines() == [f"datmo: error: {line}"]
+        assert not out.exists()
+
+
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_damaged_ground_truth_messages_are_one_line(tmp_path, data):
@@ -580,3 +603,89 @@ def test_damaged_ground_truth_messages_are_one_line(tmp_path, data):
     tally("export --ground-truth: damaged GroundTruth messages", failed=not ok)
     assert ok, result.stderr
     assert not list(tmp_path.glob(".*.tmp"))
+
+
+# ------------------------------------------------------------------------------------- types (docs/export.md)
+
+TYPE_CASES = {"odometry": ["patrol"], "no-odometry": ["static"], "no-odometry-first": ["static", "patrol"],
+              "empty": ["empty"], "empty-first": ["empty", "static"]}
+
+
+@pytest.fixture(scope="module")
+def typed_logs(processed, tmp_path_factory) -> dict[str, Path]:
+    """The processed logs and an empty one: three scans whose Tracks and Features messages hold nothing."""
+    empty = tmp_path_factory.mktemp("empty") / "empty.mcap"
+    with mcapio.LogWriter(empty) as w:
+        for k in range(3):
+            t = 1_000_000_000 + k * 200_000_000
+            w.write(mcapio.TOPIC_TRACKS, types.TRACKS, t,
+                    cdr.encode(types.TRACKS, {"stamp_ns": t, "frame_id": "laser"}))
+            w.write(mcapio.TOPIC_FEATURES, types.FEATURES, t,
+                    cdr.encode(types.FEATURES, {"stamp_ns": t, "frame_id": "laser"}))
+    return {**processed, "empty": empty}
+
+
+def exported(logs: list[Path], out: Path, features: bool) -> Path:
+    result = invoke(*map(str, logs), "-o", str(out), *(["--features"] if features else []))
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@pytest.mark.parametrize("features", [False, True], ids=["tracks", "features"])
+@pytest.mark.parametrize("case", TYPE_CASES)
+def test_every_format_reads_back_with_the_documented_types(typed_logs, tmp_path, case, features):
+    """polars and pyarrow read CSV, NDJSON and Parquet with the schema of export.columns (given to the CSV and
+    NDJSON readers, carried by Parquet), and every format holds the same table: one log or many, with odometry
+    or without it in the first rows, with features or not, and for a log with no row at all."""
+    import polars as pl
+    import pyarrow.csv as pacsv
+    import pyarrow.json as pajson
+    import pyarrow.parquet as pq
+
+    logs = [typed_logs[name] for name in TYPE_CASES[case]]
+    paths = {fmt: exported(logs, tmp_path / f"t{SUFFIX[fmt]}", features) for fmt in export.FORMATS}
+    schema, arrow = export.polars_schema(features=features), export.arrow_schema(features=features)
+    frames = {"csv": pl.read_csv(paths["csv"], schema=schema), "ndjson": pl.read_ndjson(paths["ndjson"], schema=schema),
+              "parquet": pl.read_parquet(paths["parquet"])}
+    tables = {"csv": pacsv.read_csv(paths["csv"], convert_options=pacsv.ConvertOptions(column_types=arrow,
+                                                                                       strings_can_be_null=True)),
+              "ndjson": pajson.read_json(paths["ndjson"], parse_options=pajson.ParseOptions(explicit_schema=arrow))
+              if paths["ndjson"].stat().st_size else arrow.empty_table(),
+              "parquet": pq.read_table(paths["parquet"])}
+    for fmt in export.FORMATS:
+        assert frames[fmt].schema == pl.Schema(schema), fmt
+        assert tables[fmt].schema.equals(arrow), fmt
+        assert frames[fmt].equals(frames["parquet"]), fmt
+        assert tables[fmt].equals(tables["parquet"]), fmt
+    df = frames["parquet"]
+    assert list(df.columns) == list(export.columns(features))
+    if case == "empty":
+        assert df.height == 0 and paths["csv"].read_text() == ",".join(export.columns(features)) + "\n"
+        assert paths["ndjson"].read_bytes() == b""
+        return
+    tracks = df.filter(pl.col("kind") == "track")
+    assert tracks.height > 1000 and tracks["id"].null_count() == 0
+    world = tracks["world_x_m"].is_not_null()
+    by_file = {f: bool(world.filter(tracks["file"] == f).any()) for f in map(str, logs)}
+    assert by_file == {str(p): p.stem == "patrol" for p in logs}   # odometry only in patrol's rows
+    if features:
+        feats = df.filter(pl.col("kind") != "track")
+        assert feats.height > 1000 and feats["segment"].null_count() == 0 and feats["id"].null_count() == feats.height
+        assert set(feats["kind"]) >= {"line", "circle", "leg"}
+
+
+def test_ground_truth_reads_back_with_its_types(tmp_path):
+    import polars as pl
+    import pyarrow.parquet as pq
+
+    log = str(SAMPLES / "crowd6.mcap")
+    schema = export.polars_schema(export.GROUND_TRUTH_COLUMNS)
+    frames = {}
+    for fmt in export.FORMATS:
+        out = tmp_path / f"gt{SUFFIX[fmt]}"
+        assert invoke(log, "--ground-truth", "-o", str(out)).exit_code == 0
+        frames[fmt] = {"csv": pl.read_csv, "ndjson": pl.read_ndjson}[fmt](out, schema=schema) if fmt != "parquet" \
+            else pl.read_parquet(out)
+        assert frames[fmt].schema == pl.Schema(schema)
+    assert frames["csv"].equals(frames["parquet"]) and frames["ndjson"].equals(frames["parquet"])
+    assert pq.read_schema(tmp_path / "gt.parquet").equals(export.arrow_schema(export.GROUND_TRUTH_COLUMNS))

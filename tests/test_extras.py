@@ -35,19 +35,29 @@ def one_scan_log(path: Path) -> Path:
 # (module made missing, command words ({log}: a one-scan log, {out}: a folder for outputs), the error line)
 CASES = [
     ("sklearn", ["train-legs", "--positive", "{log}", "-o", "{out}/m.npz"],
-     "training a leg model needs scikit-learn, which is not installed: pip install 'datmo[train]'"),
+     "training a leg model needs scikit-learn, which is not installed: pip install 'datmo-cli[train]'"),
     ("distributed", ["run", "{log}", "-o", "{out}/run", "--scheduler", "tcp://127.0.0.1:1"],
-     "--scheduler needs dask[distributed], which is not installed: pip install 'datmo[dask]'"),
+     "--scheduler needs dask[distributed], which is not installed: pip install 'datmo-cli[dask]'"),
     ("pyarrow", ["export", "{log}", "-o", "{out}/tracks.parquet"],
-     "writing Parquet needs pyarrow, which is not installed: pip install 'datmo[parquet]'"),
+     "writing Parquet needs pyarrow, which is not installed: pip install 'datmo-cli[parquet]'"),
     ("foxglove", ["play", "{log}", "--port", "0"],
-     "the live view needs foxglove-sdk, which is not installed: pip install 'datmo[live]'"),
+     "the live view needs foxglove-sdk, which is not installed: pip install 'datmo-cli[live]'"),
+    ("matplotlib", ["report", "{log}", "--plot", "{out}/p.png"],
+     "--plot needs matplotlib, which is not installed: pip install 'datmo-cli[plot]'"),
+    ("matplotlib", ["run", "{log}", "-o", "{out}/run", "--plot"],
+     "--plot needs matplotlib, which is not installed: pip install 'datmo-cli[plot]'"),
+    ("motmetrics", ["evaluate", "{log}"],
+     "scoring tracks (datmo evaluate) needs motmetrics, which is not installed: pip install 'datmo-cli[eval]'"),
+    ("trackeval", ["evaluate", "{log}"],
+     "scoring tracks (datmo evaluate) needs trackeval, which is not installed: pip install 'datmo-cli[eval]'"),
+    ("scipy", ["evaluate", "{log}"],
+     "scoring tracks (datmo evaluate) needs scipy, which is not installed: pip install 'datmo-cli[eval]'"),
     ("cyclonedds", ["node", "--no-config"],
-     "datmo node needs cyclonedds, which is not installed: pip install 'datmo[node]'"),
+     "datmo node needs cyclonedds, which is not installed: pip install 'datmo-cli[node]'"),
 ]
 
 
-@pytest.mark.parametrize(("module", "args", "line"), CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize(("module", "args", "line"), CASES, ids=[f"{c[0]}-{c[1][0]}" for c in CASES])
 def test_a_missing_extra_is_one_line_naming_it(tmp_path: Path, monkeypatch, module: str, args: list[str], line: str):
     log = one_scan_log(tmp_path / "one.mcap")
     for name in [m for m in sys.modules if m == module or m.startswith(module + ".")] or [module]:
@@ -65,7 +75,7 @@ def test_require_gives_the_module_when_it_is_there():
 def test_require_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "fsspec", None)
     with pytest.raises(DatmoError, match=re.escape("reading a URL needs fsspec, which is not installed: pip install "
-                                                   "'datmo[dask]'")):
+                                                   "'datmo-cli[dask]'")):
         extras.require("fsspec", for_="reading a URL")
 
 
@@ -80,3 +90,6 @@ def test_every_extra_is_in_pyproject_and_the_dev_extra_installs_them_all():
         assert package in _names(optional[extra]), module
     for extra, requirements in optional.items():
         assert _names(requirements) <= _names(optional["dev"]), extra
+        if extra not in ("dev", "all"):
+            assert _names(requirements) <= _names(optional["all"]), extra
+    assert set(optional) - {"dev", "all"} == {extra for _, extra in extras.EXTRAS.values()}

@@ -126,12 +126,16 @@ def command(file: Path, gt_csv: Path | None, match_radius: float, include_occlud
     matches, in metres. HOTA's similarity of a track and a target d metres apart is 1 - d / --match-radius
     (0 beyond it); HOTA, DetA, AssA and LocA are means over the thresholds 0.05 to 0.95.
 
+    Needs the eval extra (motmetrics, TrackEval and scipy).
+
     Example: datmo evaluate out/hall.mcap --format json --min-mota 0.6 --min-hota 0.4
     """
     from ..errors import DatmoError
+    from ..evaluate import require_scoring
     from ..progress import bar, console
     from ..report import render_markdown, render_rich, to_json
 
+    require_scoring()   # before any work: a missing eval extra is one line
     with bar("scoring", None, unit="frames", info=True) as b:
         b.update(0, info="reading")
         result = score_file(file, gt_csv=gt_csv, match_radius=match_radius, include_occluded=include_occluded,

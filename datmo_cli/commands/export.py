@@ -16,7 +16,7 @@ FORMATS = ("csv", "ndjson", "parquet")   # as datmo_cli.export.FORMATS, which im
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
 @output_option("The table to write; '-' writes CSV or NDJSON to stdout.", dash=True)
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default=None,
-              help="csv, ndjson (one JSON object a line) or parquet (needs pip install 'datmo[parquet]') "
+              help="csv, ndjson (one JSON object a line) or parquet (needs the parquet extra, pyarrow) "
                    "[default: from OUT's suffix .csv, .ndjson/.jsonl, .parquet/.pq; csv for '-'].")
 @click.option("--features", is_flag=True,
               help="Also one row per line, circle, blob, point and leg of every scan (kind column; the feature "
@@ -35,7 +35,7 @@ def command(files: tuple[Path, ...], output: Path, fmt: str | None, features: bo
     frame_id, kind, id, class, mobility, status, x_m, y_m, vx_mps, vy_mps, world_x_m, world_y_m,
     world_vx_mps, world_vy_mps, size_m, occluded, age, hits, misses (positions and velocities in the scan's
     sensor frame, world_* in the odometry frame and empty without odometry; m, m/s, ns). The schema, with
-    the --features columns, is in datmo_cli/export.py.
+    the --features columns and their types, is in docs/export.md.
 
     FILES are logs that went through datmo track or datmo run; their rows follow one another in the order
     given (with --features: every file's track states, then every file's features). Memory stays the same

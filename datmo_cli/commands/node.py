@@ -31,7 +31,7 @@ def command(scan_topic: str, odom_topic: str | None, domain_id: int | None, cfg:
     ROS_DOMAIN_ID. Scans are processed as datmo run would, on a thread of their own; when they come faster than
     they are processed, the oldest waiting are dropped (counted). A scan of another geometry starts the tracking
     over. Ctrl-C stops (exit 130) and prints what was received and processed. Needs the node extra:
-    pip install 'datmo[node]'.
+    pip install 'datmo-cli[node]'.
 
     Example: datmo node --domain-id 7 --scan-topic /front/scan --odom-topic /odom
     """

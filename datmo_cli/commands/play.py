@@ -40,7 +40,7 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
     its odometry. Open the URL printed, or in Foxglove desktop: Open connection, Foxglove WebSocket, the
     ws:// address. The layout foxglove-layouts/datmo-layout.json of the datmo repository shows the scan,
     features and tracks and plots track velocities (Layouts, Import from file). Ctrl-C stops (exit 130).
-    Needs the live extra: pip install 'datmo[live]'.
+    Needs the live extra: pip install 'datmo-cli[live]'.
 
     Example: datmo play sample_logs/hall.mcap --rate 2 --loop
     """

@@ -113,7 +113,7 @@ class _Signals:
 @click.option("--raw", is_flag=True, help="Also store every telegram's bytes on /lms2xx/telegram.")
 @force_option()
 @click.option("--live", is_flag=True, help="Also serve the scans, features, tracks and markers to Foxglove while "
-              "recording (WebSocket; needs pip install 'datmo[live]'); the URL to open is printed.")
+              "recording (WebSocket; needs pip install 'datmo-cli[live]'); the URL to open is printed.")
 @click.option("--live-host", default="127.0.0.1", show_default=True, metavar="HOST",
               help="Address the live view serves on (0.0.0.0: every interface).")
 @option("--live-port", bound=OPTIONS["live_port"], default=8765, show_default=True,

@@ -23,11 +23,15 @@ def plot_paths(plot: Path, files: list[Path]) -> list[Path]:
 
 
 def check_plot_outputs(paths: list[Path], force: bool) -> None:
-    """Refuse a bad plot suffix or a plot path outputs.check_output refuses (an existing plot without
-    --force, a folder or device in the way, a missing or read-only folder), before any work."""
+    """Refuse a missing matplotlib (the plot extra), a bad plot suffix or a plot path outputs.check_output
+    refuses (an existing plot without --force, a folder or device in the way, a missing or read-only folder),
+    before any work."""
     from ..errors import InputError
+    from ..extras import require
     from ..outputs import check_output
 
+    if paths:
+        require("matplotlib", for_="--plot")
     for p in paths:
         if p.suffix.lower() not in PLOT_SUFFIXES:
             raise InputError(f"{p}: plot format must be one of {', '.join(PLOT_SUFFIXES)}")
@@ -76,7 +80,7 @@ def _scan_counts(files: list[Path]) -> list[int]:
               help="Report every confirmed track in full (static pieces too) and label all of them in the plot.")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also draw the run into this .png, .svg or .pdf "
-                   "(several files: one plot each, named PLOT-STEM.png).")
+                   "(several files: one plot each, named PLOT-STEM.png). Needs the plot extra (matplotlib).")
 @click.option("--plot-kind", type=click.Choice(PLOT_KINDS), default="auto", show_default=True,
               help="top: the run from above; counts: confirmed tracks per class over time; speeds: the moving "
                    "tracks' speeds over time; all: the three side by side; auto: all when something moves, "

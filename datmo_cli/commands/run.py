@@ -108,14 +108,15 @@ class _BatchProgress:
         help="Inputs processed at once, in separate processes on this machine [default: all cores].")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Run one task per input on a running Dask scheduler (tcp://host:8786), or on a local cluster of N "
-                   "worker processes started for the run (local[:N]). Needs pip install 'datmo[dask]'.")
+                   "worker processes started for the run (local[:N]). Needs pip install 'datmo-cli[dask]'.")
 @option("--retries", bound=OPTIONS["retries"], default=2, show_default=True,
         help="With --scheduler: times a task is retried after an unexpected error or the death of its worker.")
 @force_option("Redo every input and overwrite existing outputs (and plots); without it "
               "inputs the manifest lists as done with the same input and parameters are skipped.")
 @config_options("TOML file of parameters: its [features] table as for datmo features, its [track] table as "
                 "for datmo track.")
-@click.option("--plot", is_flag=True, help="Also draw each run from above into OUT_DIR/NAME.png.")
+@click.option("--plot", is_flag=True, help="Also draw each run from above into OUT_DIR/NAME.png (needs the plot "
+                                          "extra, matplotlib).")
 @click.option("--bag-dir", is_flag=True,
               help="Write each output as a ROS 2 bag folder for ros2 bag play: OUT_DIR/NAME/ holding NAME_0.mcap "
                    "(the output, as the manifest names it) and metadata.yaml.")

@@ -90,7 +90,7 @@ def command(positives: tuple[Path, ...], negatives: tuple[Path, ...], topic: str
     per empty scan, are printed beside the paper's circle rule. Then the model is trained on everything and
     written with its provenance (data files and SHA-256, parameters, threshold, figures). With a single
     --positive file there are no held-out figures: the model is trained and written all the same. Needs
-    scikit-learn: pip install 'datmo[train]'.
+    scikit-learn: pip install 'datmo-cli[train]'.
 
     \b
     Example: datmo train-legs --positive ../shared/data/legtracker/positive_*.bag \\

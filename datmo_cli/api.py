@@ -1,0 +1,231 @@
+"""datmo for Python and notebooks (docs/python.md): open a processed log and get its tracks and features as
+numpy arrays or pandas DataFrames, run the pipeline on a log, and feed scans one at a time to a tracker.
+
+    open_log(path)          a Log: .tracks() and .features() as numpy structured arrays, .tracks_dataframe() and
+                            .features_dataframe() as pandas DataFrames (the pandas extra), .read_scans() and
+                            .poses() (the scans and the scanner's poses, to feed a LiveTracker)
+    process(src, out)       `datmo run` on one MCAP log (segmentation, features, tracking), written to `out`
+    LiveTracker(...)        .update(ranges, stamp_ns, pose=None): one scan in, the tracks after it out
+
+The same code as the commands: `process` is pipeline.process_file (what `datmo run` runs per input), the tables
+are `datmo export`'s rows (export.track_batch and feature_batch; the tracks table has export.TRACK_COLUMNS),
+and LiveTracker runs pipeline.RunStages, the stages `datmo run`, `play` and `record --live` run, a block of one
+scan at a time. Units and frames as everywhere in datmo: metres, radians, seconds, int64 ns stamps; x_m, y_m
+and velocities in the scan's sensor frame (x forward, y left), world_* in the odometry frame.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from . import export
+from .errors import InputError
+from .extras import require
+from .log import cdr, mcapio, types
+
+if TYPE_CHECKING:
+    from typing import TypeAlias
+
+    import pandas
+
+    from .config import DatmoConfig
+    from .log.scan import ScanRun
+
+    Config: TypeAlias = DatmoConfig | str | os.PathLike | dict | None
+
+__all__ = ["FEATURE_COLUMNS", "TRACK_COLUMNS", "LiveTracker", "Log", "open_log", "process"]
+
+# The tables' columns (name -> type): the tracks table is the export's; the features table has the columns that
+# describe features (the export's feature rows without the track-only columns, which are null there).
+TRACK_COLUMNS: dict[str, str] = dict(export.TRACK_COLUMNS)
+FEATURE_COLUMNS: dict[str, str] = {name: export.TRACK_COLUMNS[name] for name in
+                                   ("file", "scan", "stamp_ns", "frame_id", "kind", "x_m", "y_m", "size_m")
+                                   } | export.FEATURE_COLUMNS
+_NUMPY = {"string": object, "int64": np.int64, "uint32": np.uint32, "float32": np.float32, "float64": np.float64,
+          "bool": np.bool_}
+
+
+def dtype(columns: dict[str, str]) -> np.dtype:
+    """The numpy structured dtype of a table of `columns` (strings as Python objects)."""
+    return np.dtype([(name, _NUMPY[t]) for name, t in columns.items()])
+
+
+def _table(batches: Iterator[export.Batch], columns: dict[str, str]) -> np.ndarray:
+    """The rows of `batches` as one structured array of `columns` (a float absent from a row is NaN)."""
+    parts = []
+    for b in batches:
+        if not b.n:
+            continue
+        part = np.zeros(b.n, dtype(columns))
+        for name, t in columns.items():
+            if name in b.values:
+                part[name] = b.values[name]
+            elif t in ("float32", "float64"):
+                part[name] = np.nan
+            else:
+                raise ValueError(f"column {name} missing from a batch")   # a bug: every row has it
+        parts.append(part)
+    return np.concatenate(parts) if parts else np.zeros(0, dtype(columns))
+
+
+def _dataframe(table: np.ndarray) -> pandas.DataFrame:
+    pd = require("pandas", for_="DataFrames")
+    return pd.DataFrame({name: table[name] for name in table.dtype.names})
+
+
+def _config(config: Config) -> DatmoConfig:
+    """A DatmoConfig from a DatmoConfig, a TOML file's path (its [features] and [track] tables, as --config),
+    a dict of overrides ({"features": {...}, "track": {...}}), or None (the defaults)."""
+    from .config import DatmoConfig, load
+
+    if config is None or isinstance(config, DatmoConfig):
+        return config or DatmoConfig()
+    if isinstance(config, dict):
+        return load(None, config)
+    return load(Path(config))
+
+
+class Log:
+    """A log datmo wrote (`datmo run`, `datmo track`, `process`): its tracks and features, read on demand."""
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
+        self.contents = mcapio.summary(self.path)   # InputError when it is not a readable MCAP log
+        self.name = os.fsdecode(path)
+
+    def __repr__(self) -> str:
+        return f"Log({self.name!r}: {self.scans} scans, tracks {'yes' if self.has_tracks else 'no'})"
+
+    def _count(self, topic: str) -> int:
+        ch = self.contents.topics().get(topic)
+        return ch.count if ch is not None else 0
+
+    @property
+    def scans(self) -> int:
+        """Messages on /scan."""
+        return self._count(mcapio.TOPIC_SCAN)
+
+    @property
+    def has_tracks(self) -> bool:
+        return self._count(mcapio.TOPIC_TRACKS) > 0
+
+    def read_scans(self) -> ScanRun:
+        """Every scan of /scan, whole: .stamps (N,) int64 ns, .ranges (N, n_beams) float32 m (inf: no return),
+        .geometry (angle_min, angle_increment, n_beams, range_min, range_max, frame_id)."""
+        return mcapio.read_run(self.path)
+
+    def poses(self) -> np.ndarray | None:
+        """The scanner's pose at every scan, (N, 3): x m, y m, yaw rad in the odometry frame, from /odom (and the
+        scanner's mount in /tf_static), as datmo tracks in it; None when the log has no odometry."""
+        from .streaming import LogStream
+
+        stream = LogStream(self.path)
+        if stream.odometry is None or not len(stream.odometry):
+            return None
+        return stream.odometry.at(self.read_scans().stamps)
+
+    def _rows(self, topic: str) -> Iterator[export.Batch]:
+        export.require_channel(self.contents, topic, export.ROWS[topic][0])
+        for _, batch in export.row_batches(self.path, topic, self.name):
+            yield batch
+
+    def tracks(self) -> np.ndarray:
+        """Every track's state after every scan: a structured array of TRACK_COLUMNS (the export's tracks
+        table: class, mobility and status as names; world_* NaN without odometry). MissingChannelError when
+        the log has no /datmo/tracks (run `process` or `datmo run` on it first)."""
+        return _table(self._rows(mcapio.TOPIC_TRACKS), TRACK_COLUMNS)
+
+    def features(self) -> np.ndarray:
+        """Every line, circle, blob, point and leg of every scan: a structured array of FEATURE_COLUMNS (kind says
+        which; a float that does not describe the kind is NaN). MissingChannelError without /datmo/features."""
+        return _table(self._rows(mcapio.TOPIC_FEATURES), FEATURE_COLUMNS)
+
+    def tracks_dataframe(self) -> pandas.DataFrame:
+        """tracks() as a pandas DataFrame (needs pandas: pip install 'datmo-cli[pandas]')."""
+        require("pandas", for_="DataFrames")
+        return _dataframe(self.tracks())
+
+    def features_dataframe(self) -> pandas.DataFrame:
+        """features() as a pandas DataFrame (needs pandas)."""
+        require("pandas", for_="DataFrames")
+        return _dataframe(self.features())
+
+
+def open_log(path: str | os.PathLike) -> Log:
+    """The log at `path` (an MCAP file datmo wrote or can read)."""
+    return Log(path)
+
+
+def process(src: str | os.PathLike, out: str | os.PathLike, *, config: Config = None, force: bool = False,
+            markers: bool = True) -> Log:
+    """Segment, extract features and track the MCAP log `src` into `out` (what `datmo run` does for one input,
+    without the report), and open the output. `config`: a DatmoConfig, a TOML file (as --config), a dict of
+    overrides such as {"track": {"gate": 9.0}}, or None for the defaults; `force`: replace an existing `out`;
+    `markers`: also write the Foxglove markers. Convert a bag or CARMEN log with `datmo import` first."""
+    from .pipeline import process_file
+
+    cfg = _config(config)
+    process_file(src, out, force=force, config=cfg, markers=markers,
+                 command_line=f"datmo_cli.api.process({os.fsdecode(src)!r}, {os.fsdecode(out)!r})")
+    return Log(out)
+
+
+class LiveTracker:
+    """Scans in one at a time, tracks out: segmentation, features and tracking of each scan as it comes, in the
+    sensor frame, or in the world frame when every scan comes with the scanner's pose.
+
+    `angle_min`, `angle_increment` (radians, counter-clockwise, x forward), `n_beams`, `range_min` and
+    `range_max` (metres) describe the scans, as a sensor_msgs/LaserScan does; `frame_id` names their frame.
+    `config` as for `process`; `name` fills the tables' file column. `update` returns the tracks after each
+    scan as rows of TRACK_COLUMNS (the same table as Log.tracks()), and the same tracks `datmo run` gives for
+    those scans when it runs without scan matching (a log with odometry, or a still scanner)."""
+
+    def __init__(self, angle_min: float, angle_increment: float, n_beams: int, range_min: float, range_max: float,
+                 *, frame_id: str = "laser", config: Config = None, name: str = "live") -> None:
+        from .log.scan import ScanGeometry
+
+        self.geometry = ScanGeometry(float(angle_min), float(angle_increment), int(n_beams), float(range_min),
+                                     float(range_max), frame_id=frame_id)
+        self.config = _config(config)
+        self.name = name
+        self.scans = 0
+        self._stages = None
+        self._odometry = None
+        self._last: int | None = None
+
+    def update(self, ranges: np.ndarray, stamp_ns: int, pose: tuple[float, float, float] | None = None) -> np.ndarray:
+        """Process one scan: `ranges` (n_beams,) metres (inf or NaN: no return), `stamp_ns` its time (int64 ns,
+        after the previous scan's), `pose` the scanner's (x m, y m, yaw rad) in the world frame, given with every
+        scan or with none. Returns the tracks after it (TRACK_COLUMNS; scan counts the scans given, from 0)."""
+        from .log.scan import Odometry, ScanRun
+        from .pipeline import RunStages
+        from .streaming import Block
+
+        r = np.asarray(ranges, np.float32)
+        if r.shape != (self.geometry.n_beams,):
+            raise InputError(f"{self.name}: a scan of {r.shape} ranges; this tracker's scans have "
+                             f"{self.geometry.n_beams} beams")
+        stamp = int(stamp_ns)
+        if self._last is not None and stamp <= self._last:
+            raise InputError(f"{self.name}: scan {self.scans} stamped {stamp} ns, not after the previous {self._last}")
+        if self._stages is None:
+            if pose is not None:
+                self._odometry = Odometry(np.zeros(1, np.int64), np.zeros(1), np.zeros(1), np.zeros(1))
+            self._stages = RunStages(self._odometry, self.config, markers=False)
+        if (pose is None) != (self._odometry is None):
+            raise InputError(f"{self.name}: scan {self.scans} " + ("has no pose; the first had one" if pose is None
+                             else "has a pose; the first had none") + ": give a pose with every scan or with none")
+        if pose is not None:   # the poses RunStages interpolates at this scan: this scan's
+            o = self._odometry
+            o.stamps[0], (o.x[0], o.y[0], o.theta[0]) = stamp, (float(v) for v in pose)
+        run = ScanRun(np.array([stamp], np.int64), r[None, :], self.geometry)
+        payload = self._stages(Block(self.scans, run))[mcapio.TOPIC_TRACKS][2][0]
+        decoded = cdr.decode(types.TRACKS, payload)
+        self.scans += 1
+        self._last = stamp
+        return _table(iter([export.track_batch(self.name, self.scans - 1, [decoded])]), TRACK_COLUMNS)
