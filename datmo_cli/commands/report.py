@@ -16,10 +16,30 @@ PLOT_SUFFIXES = (".png", ".svg", ".pdf")
 
 
 def plot_paths(plot: Path, files: list[Path]) -> list[Path]:
-    """Where each file's plot goes: `plot` itself for one file, else PLOT-STEM.SUFFIX per file."""
+    """Where each file's plot goes: `plot` itself for one file, else PLOT-STEM.SUFFIX per file; files of one
+    stem in different folders get their folders' names too (A/x.mcap, B/x.mcap: PLOT-A-x.png, PLOT-B-x.png), so
+    no plot is written over another. One file given twice is an InputError."""
     if len(files) == 1:
         return [plot]
-    return [plot.with_name(f"{plot.stem}-{f.stem}{plot.suffix}") for f in files]
+    import os
+
+    from ..errors import InputError
+
+    parts = [Path(os.path.abspath(f)).with_suffix("").parts[1:] for f in files]
+    depth = [1] * len(files)
+    while True:
+        names = ["-".join(p[-d:]) for p, d in zip(parts, depth, strict=True)]
+        seen: dict[str, int] = {}
+        for name in names:
+            seen[name] = seen.get(name, 0) + 1
+        clash = [i for i, name in enumerate(names) if seen[name] > 1]
+        if not clash:
+            return [plot.with_name(f"{plot.stem}-{name}{plot.suffix}") for name in names]
+        grow = [i for i in clash if depth[i] < len(parts[i])]
+        if not grow:
+            raise InputError(f"{files[clash[0]]}: given twice; with --plot each file is plotted once")
+        for i in grow:
+            depth[i] += 1
 
 
 def check_plot_outputs(paths: list[Path], force: bool) -> None:
@@ -76,7 +96,7 @@ def _scan_counts(files: list[Path]) -> list[int]:
               help="Report every confirmed track in full (static pieces too) and label all of them in the plot.")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also draw the run into this .png, .svg or .pdf "
-                   "(several files: one plot each, named PLOT-STEM.png).")
+                   "(several files: one plot each, named PLOT-STEM.png, or PLOT-FOLDER-STEM.png where stems repeat).")
 @click.option("--plot-kind", type=click.Choice(PLOT_KINDS), default="auto", show_default=True,
               help="top: the run from above; counts: confirmed tracks per class over time; speeds: the moving "
                    "tracks' speeds over time; all: the three side by side; auto: all when something moves, "
@@ -137,11 +157,19 @@ def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, track
 
 
 def _batches(paths: list[Path]) -> tuple[list[Path], list[tuple[Path, list[dict]]]]:
-    """Split FILES into files and batch folders (with their manifest lines); a batch's outputs that are done
-    and present join the files."""
+    """Split FILES into files and batch folders (with their manifest lines, batch.read_batch: only outputs
+    under the folder, each once); a batch's outputs that are done and present join the files."""
     from ..batch import DONE, SKIPPED, read_batch
+    from ..progress import say
 
-    batches = [(p, read_batch(str(p))) for p in paths if p.is_dir()]
+    batches = []
+    for p in paths:
+        if p.is_dir():
+            recs, left_out = read_batch(str(p), with_left_out=True)
+            if left_out:
+                say(f"datmo: warning: {p}: {left_out} manifest line{'s' if left_out > 1 else ''} left out (an output "
+                    "outside the folder, or one another line already names)")
+            batches.append((p, recs))
     files = [p for p in paths if not p.is_dir()]
     for _, recs in batches:
         files += [Path(r["output"]) for r in recs if r["status"] in (DONE, SKIPPED) and Path(r["output"]).exists()]
