@@ -107,8 +107,10 @@ class _BatchProgress:
 @option("-j", "--jobs", bound=OPTIONS["jobs"], default=None,
         help="Inputs processed at once, in separate processes on this machine [default: all cores].")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
-              help="Run one task per input on a running Dask scheduler (tcp://host:8786), or on a local cluster of N "
-                   "worker processes started for the run (local[:N]). Needs pip install 'datmo[dask]'.")
+              help="Run one task per input on a running Dask scheduler (tcp://host:8786: open to whoever reaches it; "
+                   "tls://host:8786 with the certificate of the Dask configuration), or on a local cluster of N "
+                   "worker processes started for the run (local[:N], N at most the cores; TLS with a temporary "
+                   "certificate). Needs pip install 'datmo[dask]'.")
 @option("--retries", bound=OPTIONS["retries"], default=2, show_default=True,
         help="With --scheduler: times a task is retried after an unexpected error or the death of its worker.")
 @force_option("Redo every input and overwrite existing outputs (and plots); without it "
