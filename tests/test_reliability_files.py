@@ -62,6 +62,8 @@ READERS = {
     "run": ["run", "X", "-o", "{out}/run", "--no-report"],
     "train-legs": ["train-legs", "--positive", "X", "--negative", "{log}", "-o", "{out}/m.npz"],
     "emulate --log": ["emulate", "--log", "X"],
+    "--leg-model": ["features", "{log}", "-o", "{out}/f.mcap", "--leg-model", "X"],
+    "simulate --scene": ["simulate", "--scene", "X", "-o", "{out}/sim.mcap"],
 }
 
 
