@@ -62,8 +62,8 @@ def local_security(address: str):
     except ImportError:
         from .extras import MissingExtraError
 
-        raise MissingExtraError(f"--scheduler {address}: the local cluster's TLS certificate needs cryptography, "
-                                "which is not installed: pip install 'datmo[dask]'") from None
+        raise MissingExtraError(f"--scheduler {address}: the local cluster's TLS certificate needs cryptography "
+                                "(part of the dask extra), which is not installed: pip install cryptography") from None
 
 
 def client_security(address: str):

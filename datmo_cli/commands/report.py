@@ -96,7 +96,7 @@ def _scan_counts(files: list[Path]) -> list[int]:
               help="Report every confirmed track in full (static pieces too) and label all of them in the plot.")
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also draw the run into this .png, .svg or .pdf "
-                   "(several files: one plot each, named PLOT-STEM.png, or PLOT-FOLDER-STEM.png where stems repeat).")
+                   "(several files: one plot each, named PLOT-STEM.png).")
 @click.option("--plot-kind", type=click.Choice(PLOT_KINDS), default="auto", show_default=True,
               help="top: the run from above; counts: confirmed tracks per class over time; speeds: the moving "
                    "tracks' speeds over time; all: the three side by side; auto: all when something moves, "
@@ -116,7 +116,9 @@ def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, track
 
     A folder is a batch of datmo run (-o DIR): its outputs that are done join FILES, and its manifest.jsonl
     gives the batch's figures (inputs done and failed, scans, tracks by class, failures): rich and markdown
-    tables before the report, json "batches".
+    tables before the report, json "batches". Only outputs inside the folder count, each once.
+
+    With several files --plot writes PLOT-STEM.png for each, PLOT-FOLDER-STEM.png where two stems are alike.
 
     Example: datmo report out/hall.mcap --plot out/hall.png
     """

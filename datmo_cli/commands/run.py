@@ -107,10 +107,8 @@ class _BatchProgress:
 @option("-j", "--jobs", bound=OPTIONS["jobs"], default=None,
         help="Inputs processed at once, in separate processes on this machine [default: all cores].")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
-              help="Run one task per input on a running Dask scheduler (tcp://host:8786: open to whoever reaches it; "
-                   "tls://host:8786 with the certificate of the Dask configuration), or on a local cluster of N "
-                   "worker processes started for the run (local[:N], N at most the cores; TLS with a temporary "
-                   "certificate). Needs pip install 'datmo[dask]'.")
+              help="Run one task per input on a running Dask scheduler (tcp://host:8786), or on a local cluster of N "
+                   "worker processes started for the run (local[:N]). Needs pip install 'datmo[dask]'.")
 @option("--retries", bound=OPTIONS["retries"], default=2, show_default=True,
         help="With --scheduler: times a task is retried after an unexpected error or the death of its worker.")
 @force_option("Redo every input and overwrite existing outputs (and plots); without it "
@@ -151,7 +149,9 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     by datmo import by the input's own task, into a temporary MCAP beside its output (removed when the task
     ends); the output is named after the bag and its provenance names the bag. Inputs run in parallel in local
     processes (--jobs) or on a Dask cluster (--scheduler); a failing input is reported and the others'
-    outputs are kept (the exit status is then 1).
+    outputs are kept (the exit status is then 1). A tcp:// scheduler lets whoever reaches it run code as its
+    user; a tls:// one takes the certificate of the Dask configuration; local[:N] (N at most the cores) speaks
+    TLS with a temporary certificate, so no other user of the machine can reach it.
 
     OUT_DIR/manifest.jsonl gets one line per input as it finishes (input SHA-256, output, status, scans,
     tracks by class, parameters' hash, which counts --topic and --odom-topic). Running the same command again
