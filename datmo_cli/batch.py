@@ -812,9 +812,11 @@ def prepare(specs: list[str], out_dir: str, *, config: DatmoConfig | None = None
 
 
 def _same_input(src: str, last: dict) -> bool:
+    from .input_files import is_regular
+
     size, mtime = input_stat(src)
-    if size is None:
-        return False
+    if size is None or not (remote(src) or os.path.isdir(local(src)) or is_regular(local(src))):
+        return False    # a FIFO or a device now: never hashed here (its task says what it is)
     if mtime is not None and size == last.get("input_size") and mtime == last.get("input_mtime_ns"):
         return True
     try:

@@ -64,6 +64,19 @@ def lines(out: Path) -> list[dict]:
     return [json.loads(x) for x in (out / "manifest.jsonl").read_text().splitlines()]
 
 
+# ------------------------------------------------------------------------- 14: special files on resume
+
+
+def test_an_input_done_before_and_now_a_fifo_is_not_hashed_on_resume(logs, tmp_path):
+    out = tmp_path / "out"
+    assert run(logs / "a.mcap", "-o", out).exit_code == 0
+    (logs / "a.mcap").unlink()
+    os.mkfifo(logs / "a.mcap")                 # hashing it to compare with the manifest would wait forever
+    r = run(logs / "a.mcap", "-o", out)
+    one_line(r, f"{logs / 'a.mcap'}: is a FIFO (named pipe), not a regular file")
+    assert batch.Manifest(str(out)).latest()[str(logs / "a.mcap")]["status"] == "failed"
+
+
 # ------------------------------------------------------------------------------ 1: no write through links
 
 
