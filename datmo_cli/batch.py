@@ -788,6 +788,8 @@ def prepare(specs: list[str], out_dir: str, *, config: DatmoConfig | None = None
     `force` redoes everything. An output that exists may be overwritten without `force` only when the
     manifest lists it for this input or it is the leftover of an interrupted batch (its provenance says
     `datmo run` of this input); any other existing output fails as its input with "use --force".
+    Call it, and run_many, inside `folder_lock(out_dir)` (as `datmo run` does): two batches at once in one
+    folder would each rewrite the other's manifest.
     """
     out_dir = out_folder(out_dir)
     options = options or RunOptions()
