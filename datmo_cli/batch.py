@@ -13,15 +13,18 @@ local paths; other fsspec URLs (`s3://...`) are staged through a local temporary
 
 from __future__ import annotations
 
+import errno
 import glob
 import hashlib
 import json
+import math
 import os
 import socket
+import stat
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -127,7 +130,7 @@ def _expand(spec: str, out_root: str | None) -> list[tuple[str, str]]:
     magic = glob.has_magic(spec.split("://", 1)[-1])
     if remote(spec):
         fs, path = _fs(spec)
-        if magic:
+        if magic and not fs.exists(path):   # a name holding [, * or ? that exists is that file, not a pattern
             found = [p for p in sorted(fs.glob(path)) if _is_log(p) and fs.isfile(p)]
             if not found:
                 raise InputError(f"{spec}: no .mcap log matches")
@@ -139,6 +142,7 @@ def _expand(spec: str, out_root: str | None) -> list[tuple[str, str]]:
             return [(fs.unstrip_protocol(p), os.path.relpath(p, path)) for p in found]
         return [(spec, os.path.basename(path))]
     path = local(spec)
+    magic = magic and not os.path.lexists(path)   # a name holding [, * or ? that exists is that file or folder
     bag = _bag_of(path)
     if bag is not None and not magic:
         return [(bag, os.path.basename(bag))]
@@ -243,7 +247,12 @@ class Manifest:
     """OUT_DIR/manifest.jsonl: one JSON object per line, one line per input each time a batch finishes it;
     the latest line of an input is its state. Lines are appended and flushed (fsync) one at a time, so a
     crash leaves at most a torn last line, which reading skips. On an fsspec URL that cannot append (object
-    stores) the whole file is rewritten, at most every few seconds and at the end."""
+    stores) the whole file is rewritten, at most every few seconds and at the end.
+
+    A local manifest is a regular file in its folder: a symbolic link there is refused, never read or written
+    through (it could point anywhere, a shell's rc file), and so is a FIFO or a device; it is read a line at a
+    time, at most MAX_MANIFEST_BYTES in all. A line whose fields have the wrong types (check_record) is an
+    InputError naming the file and the line."""
 
     def __init__(self, out_dir: str) -> None:
         self.path = join(out_dir, MANIFEST)
@@ -253,22 +262,50 @@ class Manifest:
         self._lock = threading.Lock()
 
     def read(self) -> list[dict]:
-        """Every intact line, oldest first (a torn or foreign line is skipped)."""
+        """Every intact line, oldest first (a torn or foreign line, one that is not a JSON object with an
+        input and a status, is skipped)."""
+        from .input_files import MAX_MANIFEST_BYTES
+
         if self._remote:
             fs, p = _fs(self.path)
-            text = fs.cat_file(p).decode("utf-8", "replace") if fs.exists(p) else ""
-        else:
-            p = local(self.path)
-            text = Path(p).read_text("utf-8", "replace") if os.path.exists(p) else ""
+            if not fs.exists(p):
+                return []
+            size = int(fs.info(p).get("size") or 0)
+            if size > MAX_MANIFEST_BYTES:
+                raise InputError(f"{self.path}: {size:,} bytes; a manifest is at most {MAX_MANIFEST_BYTES:,} bytes "
+                                 "(split the batch by folder)")
+            return self._parse(fs.cat_file(p).splitlines(keepends=True))
+        p = local(self.path)
+        if not os.path.lexists(p):
+            return []
+        self._refuse_link()
+        from .input_files import open_regular
+
+        with open_regular(p) as f:
+            size = os.fstat(f.fileno()).st_size
+            if size > MAX_MANIFEST_BYTES:
+                raise InputError(f"{self.path}: {size:,} bytes; a manifest is at most {MAX_MANIFEST_BYTES:,} bytes "
+                                 "(split the batch by folder)")
+            return self._parse(_lines_of(f, MAX_MANIFEST_BYTES))
+
+    def _parse(self, lines: Iterable[bytes]) -> list[dict]:
         records = []
-        for line in text.splitlines():
+        for n, line in enumerate(lines, 1):
             try:
                 rec = json.loads(line)
             except ValueError:
                 continue
             if isinstance(rec, dict) and "input" in rec and "status" in rec:
+                check_record(rec, f"{self.path}: line {n}")
                 records.append(rec)
         return records
+
+    def _refuse_link(self) -> None:
+        if not self._remote and os.path.islink(local(self.path)):
+            from .errors import OutputError
+
+            raise OutputError(f"{self.path}: is a symbolic link; datmo reads and writes a batch's manifest only as a "
+                              "regular file in its folder (remove the link)")
 
     def latest(self) -> dict[str, dict]:
         """The latest line of each input."""
@@ -283,8 +320,9 @@ class Manifest:
             self._put(force=True)
             return
         p = Path(local(self.path))
-        if not lines and not p.exists():
+        if not lines and not os.path.lexists(p):
             return
+        self._refuse_link()
         from .outputs import atomic_output
 
         with atomic_output(p, force=True, what="manifest") as f:
@@ -299,10 +337,37 @@ class Manifest:
                 return
             from .outputs import writing
 
-            with writing(local(self.path)), open(local(self.path), "a", encoding="utf-8") as f:
-                f.write(line)
+            with writing(local(self.path)), self._open_for_append() as f:
+                f.write(line.encode("utf-8"))
                 f.flush()
                 os.fsync(f.fileno())
+
+    def _open_for_append(self):
+        """The local manifest opened to append, never through a symbolic link (O_NOFOLLOW) nor into a FIFO
+        or a device (opened without blocking, then checked)."""
+        import stat
+
+        from .errors import OutputError
+
+        path = local(self.path)
+        flags = (os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+                 | getattr(os, "O_CLOEXEC", 0))
+        try:
+            fd = os.open(path, flags, 0o666)
+        except OSError as exc:
+            if os.path.islink(path):
+                self._refuse_link()
+            if exc.errno == errno.ENXIO:     # a FIFO nobody reads
+                raise OutputError(f"{self.path}: is a FIFO (named pipe), not a regular file; datmo writes a "
+                                  "batch's manifest only as a regular file") from None
+            raise
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            os.close(fd)
+            raise OutputError(f"{self.path}: is not a regular file; datmo writes a batch's manifest only as a "
+                              "regular file")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "ab")
 
     def close(self) -> None:
         if self._remote:
@@ -313,6 +378,77 @@ class Manifest:
             fs, p = _fs(self.path)
             fs.pipe_file(p, "".join(self._lines).encode())
             self._last_put = time.monotonic()
+
+
+def _lines_of(f, limit: int) -> Iterator[bytes]:
+    """The lines of binary file `f`, up to `limit` bytes in all; a line longer than MAX_MANIFEST_LINE_BYTES is
+    passed over without being held (it is no manifest line)."""
+    from .input_files import MAX_MANIFEST_LINE_BYTES
+
+    total = 0
+    while total <= limit:
+        line = f.readline(MAX_MANIFEST_LINE_BYTES + 1)
+        if not line:
+            return
+        total += len(line)
+        if len(line) > MAX_MANIFEST_LINE_BYTES and not line.endswith(b"\n"):
+            while line and not line.endswith(b"\n") and total <= limit:   # the rest of the long line
+                line = f.readline(1 << 16)
+                total += len(line)
+            continue
+        yield line
+
+
+def _count(v: object) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v >= 0
+
+
+def _figure(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
+
+
+def _text(v: object) -> bool:
+    return isinstance(v, str)
+
+
+def _or_none(test: Callable[[object], bool]) -> Callable[[object], bool]:
+    return lambda v: v is None or test(v)
+
+
+def _tracks(v: object) -> bool:
+    return isinstance(v, dict) and all(isinstance(k, str) and _count(n) for k, n in v.items())
+
+
+# a manifest line's fields: what each must be when present (input and status are always)
+RECORD_FIELDS: dict[str, tuple[Callable[[object], bool], str]] = {
+    "input": (_text, "a string"),
+    "status": (lambda v: v in (DONE, FAILED, SKIPPED), f"one of {DONE}, {FAILED}, {SKIPPED}"),
+    "output": (_text, "a string"),
+    "input_sha256": (_or_none(_text), "a string or null"),
+    "input_size": (_or_none(_count), "a whole number of bytes or null"),
+    "input_mtime_ns": (_or_none(lambda v: isinstance(v, int) and not isinstance(v, bool)),
+                       "a whole number of nanoseconds or null"),
+    "error": (_or_none(_text), "a string or null"),
+    "scans": (_count, "a whole number of scans"),
+    "seconds": (_figure, "a finite number of seconds, 0 or more"),
+    "scans_per_s": (_figure, "a finite number, 0 or more"),
+    "tracks": (_or_none(_tracks), "an object of whole numbers by class, or null"),
+    "datmo_version": (_or_none(_text), "a string or null"),
+    "params_hash": (_or_none(_text), "a string or null"),
+    "finished": (_or_none(_text), "a string or null"),
+    "worker": (_or_none(_text), "a string or null"),
+    "notes": (lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v), "a list of strings"),
+}
+
+
+def check_record(rec: dict, where: str) -> None:
+    """Refuse a manifest line (InputError naming `where`, the file and the line) whose fields have the wrong
+    types: a hand-edited or foreign line must not become a wrong resume or a wrong report."""
+    for key, (ok, what) in RECORD_FIELDS.items():
+        if key in rec and not ok(rec[key]):
+            shown = json.dumps(rec[key])
+            shown = shown if len(shown) <= 40 else shown[:37] + "..."
+            raise InputError(f"{where}: {key} must be {what}, got {shown}; correct or delete the line")
 
 
 # ----------------------------------------------------------------------------------------------- tasks
@@ -481,9 +617,10 @@ def _staged_input(path: str) -> Iterator[str]:
         if _bag_of(local(path)) == os.path.abspath(local(path)):
             yield local(path)
             return
-        if not os.path.isfile(local(path)):
-            why = "is a directory, not an MCAP log" if os.path.isdir(local(path)) else "no such file"
-            raise InputError(f"{path}: {why}")
+        from .input_files import check
+
+        if stat.S_ISDIR(check(local(path), folder_ok=True, name=path).st_mode):   # a FIFO or device: refused
+            raise InputError(f"{path}: is a directory, not an MCAP log")
         yield local(path)
         return
     fs, p = _fs(path)
@@ -493,6 +630,22 @@ def _staged_input(path: str) -> Iterator[str]:
         dst = os.path.join(tmp, os.path.basename(p))
         fs.get_file(p, dst)
         yield dst
+
+
+def _refuse_links(folder: str) -> None:
+    """Refuse an output folder reached through a symbolic link (OutputError naming the link). A batch's output
+    folder is resolved when the batch is prepared, so the folders of its outputs hold no link unless one was
+    put there: the output would land wherever it points, outside OUT_DIR."""
+    folder = os.path.abspath(folder)
+    if os.path.realpath(folder) == folder:
+        return
+    from .errors import OutputError
+
+    part = folder
+    while part != os.path.dirname(part) and not os.path.islink(part):
+        part = os.path.dirname(part)
+    raise OutputError(f"{part if os.path.islink(part) else folder}: is a symbolic link; datmo run writes its "
+                      "outputs only inside the output folder, never through a link")
 
 
 @contextmanager
@@ -508,6 +661,7 @@ def _staged_output(path: str, force: bool) -> Iterator[str]:
             from .outputs import os_error
 
             raise os_error(exc, folder, "making the output folder") from None
+        _refuse_links(folder)
         yield local(path)
         return
     fs, p = _fs(path)
@@ -541,23 +695,103 @@ class Batch:
         return len(self.tasks) + len(self.skipped)
 
 
+def out_folder(out_dir: str) -> str:
+    """The batch's output folder: an fsspec URL as it is; a local folder made when missing and resolved
+    (absolute, without links: the workers share the path). InputError when it is not a folder."""
+    if remote(out_dir):
+        return out_dir
+    d = Path(local(out_dir))
+    if d.exists() and not d.is_dir():
+        raise InputError(f"{out_dir}: exists and is not a folder")
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        from .outputs import os_error
+
+        raise os_error(exc, d, "making the output folder") from None
+    return str(d.resolve())
+
+
+LOCK = ".datmo-run.lock"
+
+
+@contextmanager
+def folder_lock(out_dir: str) -> Iterator[str]:
+    """Hold the batch's output folder for the block (yields it, as out_folder makes it): a second `datmo run`
+    on the same folder at once is refused with one line naming the process that holds it, rather than both
+    writing one manifest. The lock is an flock on OUT_DIR/.datmo-run.lock (opened without following a link),
+    which holds the holder's pid, host and start; it is released when the process ends, however it ends, and
+    the file is removed at the end of the block. An fsspec URL is not locked (object stores have no locks)."""
+    import fcntl
+
+    from .errors import OutputError
+
+    folder = out_folder(out_dir)
+    if remote(folder):
+        yield folder
+        return
+    path = os.path.join(folder, LOCK)
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) | os.O_CLOEXEC
+    while True:
+        try:
+            fd = os.open(path, flags, 0o644)
+        except OSError as exc:
+            why = "is a symbolic link" if os.path.islink(path) else None
+            if why is None:
+                from .outputs import os_error
+
+                raise os_error(exc, path, "locking the output folder") from None
+            raise OutputError(f"{path}: {why}; datmo run keeps its lock only as a regular file (remove it)") from None
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            raise OutputError(f"{path}: is not a regular file; datmo run keeps its lock only as a regular file "
+                              "(remove it)")
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 512, 0).decode("utf-8", "replace").strip() or "a process"
+            os.close(fd)
+            raise DatmoError(f"{folder}: another datmo run is writing into this folder ({holder}); wait for it to "
+                             "finish or stop it, or give another -o folder") from None
+        except OSError:     # a file system without locks (some network mounts): run unlocked, as before
+            break
+        try:            # the holder may have removed the file as it finished: hold the one at the path
+            if os.path.samestat(os.fstat(fd), os.lstat(path)):
+                break
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    started = datetime.now(UTC).isoformat(timespec="seconds")
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}, started {started}\n".encode(), 0)
+    except OSError:
+        pass
+    try:
+        yield folder
+    finally:
+        try:
+            os.unlink(path)     # while holding it: a process waiting on this file retries on the path
+        except OSError:
+            pass
+        os.close(fd)
+
+
 def prepare(specs: list[str], out_dir: str, *, config: DatmoConfig | None = None,
             options: RunOptions | None = None, force: bool = False, command_line: str | None = None,
             threads: int | None = None) -> Batch:
     """Find the inputs, read the manifest and decide what to redo.
 
-    An input is skipped when its latest manifest line is done (or skipped) with the same parameters' hash
-    and the same input SHA-256 (not rehashed when size and mtime are unchanged) and its output exists;
+    An input is skipped when its latest manifest line is done (or skipped) by this datmo version with the
+    same parameters' hash and the same input SHA-256 (not rehashed when size and mtime are unchanged) and
+    its output exists (a line of another version is redone: outputs of two versions never mix silently);
     `force` redoes everything. An output that exists may be overwritten without `force` only when the
     manifest lists it for this input or it is the leftover of an interrupted batch (its provenance says
     `datmo run` of this input); any other existing output fails as its input with "use --force".
+    Call it, and run_many, inside `folder_lock(out_dir)` (as `datmo run` does): two batches at once in one
+    folder would each rewrite the other's manifest.
     """
-    if not remote(out_dir):
-        d = Path(local(out_dir))
-        if d.exists() and not d.is_dir():
-            raise InputError(f"{out_dir}: exists and is not a folder")
-        d.mkdir(parents=True, exist_ok=True)
-        out_dir = str(d.resolve())
+    out_dir = out_folder(out_dir)
     options = options or RunOptions()
     pairs = discover(specs, out_dir, options.bag_dir)
     manifest = Manifest(out_dir)
@@ -567,7 +801,8 @@ def prepare(specs: list[str], out_dir: str, *, config: DatmoConfig | None = None
     for i, (src, dst) in enumerate(pairs):
         last = ledger.get(src)
         owned = last is not None and last.get("output") == dst and last.get("status") in (DONE, SKIPPED)
-        if not force and owned and last.get("params_hash") == phash and exists(dst) and _same_input(src, last):
+        if (not force and owned and last.get("params_hash") == phash and last.get("datmo_version") == __version__
+                and exists(dst) and _same_input(src, last)):
             skipped.append({**last, "status": SKIPPED, "error": None,
                             "finished": datetime.now(UTC).isoformat(timespec="seconds")})
             continue
@@ -579,9 +814,11 @@ def prepare(specs: list[str], out_dir: str, *, config: DatmoConfig | None = None
 
 
 def _same_input(src: str, last: dict) -> bool:
+    from .input_files import is_regular
+
     size, mtime = input_stat(src)
-    if size is None:
-        return False
+    if size is None or not (remote(src) or os.path.isdir(local(src)) or is_regular(local(src))):
+        return False    # a FIFO or a device now: never hashed here (its task says what it is)
     if mtime is not None and size == last.get("input_size") and mtime == last.get("input_mtime_ns"):
         return True
     try:
@@ -620,53 +857,125 @@ class Executor:
 
 
 class LocalExecutor(Executor):
-    """`--jobs N`: one process per job on this machine (forked after warm_up, so kernels are loaded)."""
+    """`--jobs N`: one process per job on this machine (forked after warm_up, so kernels are loaded), at most
+    one per task; each worker ends with the batch's process, however that ends (die_with_parent)."""
 
     def __init__(self, jobs: int | None = None) -> None:
         self.workers = jobs or os.cpu_count() or 1
-        self.where = f"{self.workers} local process{'es' if self.workers > 1 else ''}"
+        self.where = _processes(1)
 
     def run(self, tasks, on_record, on_scans=None) -> None:
         if not tasks:
             return
-        if min(self.workers, len(tasks)) <= 1:
+        n = min(self.workers, len(tasks))
+        self.where = _processes(n)      # what ran them, not what --jobs allowed
+        if n <= 1:
             for t in tasks:
-                on_record(run_task(t, scans=(lambda d, n, i=t.index: on_scans(i, d, n)) if on_scans else None))
+                on_record(run_task(t, scans=(lambda d, m, i=t.index: on_scans(i, d, m)) if on_scans else None))
             return
-        self._pool(tasks, on_record, on_scans)
+        self._pool(tasks, n, on_record, on_scans)
 
-    def _pool(self, tasks, on_record, on_scans) -> None:
+    def _pool(self, tasks, n, on_record, on_scans) -> None:
         import multiprocessing
         from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
         from concurrent.futures.process import BrokenProcessPool
 
         ensure_warm()
-        ctx = multiprocessing.get_context("fork") if hasattr(os, "fork") else None
-        with multiprocessing.Manager() as manager:
-            queue = manager.Queue()
-            pool = ProcessPoolExecutor(max_workers=min(self.workers, len(tasks)), mp_context=ctx)
-            try:
-                futures = {pool.submit(_queued_task, t, queue): t for t in tasks}
-                pending = set(futures)
-                while pending:
-                    done, pending = wait(pending, timeout=0.1, return_when=FIRST_COMPLETED)
-                    _drain(queue, on_scans)
-                    for fut in done:
-                        t = futures[fut]
-                        try:
-                            on_record(fut.result())
-                        except BrokenProcessPool as exc:
-                            on_record(failed(t, f"worker died ({exc})"))
+        ctx = multiprocessing.get_context("fork") if hasattr(os, "fork") else multiprocessing.get_context()
+        queue = ctx.Queue()     # (task, scans done, scans) from the workers; handed over as they start
+        pool = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_worker_started,
+                                   initargs=(os.getpid(), queue))
+        try:
+            futures = {pool.submit(_queued_task, t): t for t in tasks}
+            pending = set(futures)
+            while pending:
+                done, pending = wait(pending, timeout=0.1, return_when=FIRST_COMPLETED)
                 _drain(queue, on_scans)
-            except BaseException:
-                for p in list(getattr(pool, "_processes", {}).values()):
-                    p.terminate()     # a task still running must not finish an output after the batch stopped
-                pool.shutdown(wait=True, cancel_futures=True)
-                raise
-            pool.shutdown(wait=True)
+                for fut in done:
+                    t = futures[fut]
+                    try:
+                        on_record(fut.result())
+                    except BrokenProcessPool as exc:
+                        on_record(failed(t, f"worker died ({exc})"))
+            _drain(queue, on_scans)
+        except BaseException:
+            for p in list(getattr(pool, "_processes", {}).values()):
+                p.terminate()     # a task still running must not finish an output after the batch stopped
+            pool.shutdown(wait=True, cancel_futures=True)
+            queue.close()
+            raise
+        pool.shutdown(wait=True)
+        queue.close()
 
 
-def _queued_task(task: Task, queue) -> dict:
+def _processes(n: int) -> str:
+    return f"{n} local process{'es' if n > 1 else ''}"
+
+
+_SCANS: list = []     # in a --jobs worker: the queue its tasks report their scans on
+
+
+def _worker_started(parent: int, queue) -> None:
+    """A --jobs worker's start: end with the batch's process; keep the queue scans are reported on."""
+    _SCANS[:] = [queue]
+    die_with_parent(parent)
+
+
+def die_with_parent(parent: int) -> None:
+    """Make this process (a worker of process `parent`) end when `parent` ends, however it ends (SIGKILL
+    too): on Linux the kernel sends SIGTERM when the parent dies (prctl PR_SET_PDEATHSIG), elsewhere a thread
+    watches the parent. The worker then removes its temporary files and exits 143 at once; a SIGTERM while the
+    parent lives (the batch stopping its tasks) is handled as before."""
+    import signal
+
+    def gone() -> None:
+        from .outputs import remove_live
+
+        remove_live()
+        os._exit(128 + signal.SIGTERM)
+
+    previous = signal.getsignal(signal.SIGTERM)
+
+    def on_sigterm(signum, frame) -> None:
+        if os.getppid() != parent:
+            gone()
+        if callable(previous):
+            previous(signum, frame)
+        else:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, on_sigterm)
+    if not _death_signal(signal.SIGTERM):
+        def watch() -> None:
+            while os.getppid() == parent:
+                time.sleep(0.5)
+            gone()
+
+        threading.Thread(target=watch, name="datmo-parent-watch", daemon=True).start()
+    if os.getppid() != parent:      # it died before the watch began
+        gone()
+
+
+def _death_signal(signum: int) -> bool:
+    """Ask Linux to send `signum` to this process when its parent dies (prctl PR_SET_PDEATHSIG); False where
+    that cannot be done."""
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(1, int(signum), 0, 0, 0) == 0     # 1: PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return False
+
+
+def _queued_task(task: Task) -> dict:
+    queue = _SCANS[0]
     return run_task(task, scans=lambda d, n: queue.put((task.index, d, n)))
 
 
@@ -676,7 +985,7 @@ def _drain(queue, on_scans) -> None:
     while True:
         try:
             i, d, n = queue.get_nowait()
-        except queue_mod.Empty:
+        except (queue_mod.Empty, OSError, ValueError):
             return
         if on_scans:
             on_scans(i, d, n)
@@ -769,9 +1078,25 @@ def summary(records: list[dict]) -> dict:
             "failures": [{"input": r["input"], "error": r.get("error")} for r in records if r["status"] == FAILED]}
 
 
-def read_batch(folder: str) -> list[dict]:
-    """The latest manifest line of every input of the batch in `folder`; InputError when it has none."""
+def read_batch(folder: str, *, with_left_out: bool = False) -> list[dict] | tuple[list[dict], int]:
+    """The latest manifest line of every input of the batch in `folder`; InputError when it has none.
+
+    Only lines whose output is inside `folder` count, each output once (its latest line): a manifest can be
+    edited or copied, and a line naming a file elsewhere must not make the report read it, nor one output
+    count as many. With `with_left_out`, (the lines, how many were left out)."""
     manifest = Manifest(folder)
-    if not exists(manifest.path):
+    if not (exists(manifest.path) if remote(folder) else os.path.lexists(local(manifest.path))):
         raise InputError(f"{folder}: no {MANIFEST} (a batch folder is the -o folder of datmo run)")
-    return list(manifest.latest().values())
+    latest = list(manifest.latest().values())
+    root = folder.rstrip("/") if remote(folder) else os.path.realpath(local(folder))
+    by_output: dict[str, dict] = {}
+    for rec in latest:
+        out = rec.get("output")
+        if not isinstance(out, str):
+            continue
+        key = out if remote(folder) else os.path.realpath(local(out))
+        if _inside(key, root) and key != root:
+            by_output.pop(key, None)
+            by_output[key] = rec        # the latest line naming it, in file order
+    kept = list(by_output.values())
+    return (kept, len(latest) - len(kept)) if with_left_out else kept

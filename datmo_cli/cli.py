@@ -237,9 +237,14 @@ FILE_OUTPUTS = ("output", "plot", "link")   # option names that name one file a 
 
 
 def _guard_file_outputs(command: click.Command) -> click.Command:
+    """Outputs get _FileOutput; every other path (an input) is left to its reader, which says in one line
+    (exit 1) what is wrong with it (input_files.check), rather than Click's usage error (exit 2) for an
+    unreadable file."""
     for param in command.params:
         if isinstance(param, click.Option) and param.name in FILE_OUTPUTS and isinstance(param.type, click.Path):
             param.type = _FileOutput(param.type)
+        elif isinstance(param.type, click.Path) and not param.type.exists:
+            param.type.readable = False
     return command
 
 

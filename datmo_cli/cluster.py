@@ -28,16 +28,63 @@ CANCEL_GRACE_S = 10.0
 CONNECT_TIMEOUT = "15s"
 
 
+def cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
 def parse_local(address: str) -> int | None:
-    """N for `local[:N]` (default: the cores here), None for a scheduler address."""
+    """N for `local[:N]` (default: the cores here), None for a scheduler address. N is at most the cores here:
+    each worker is a process running one input at a time, and more would only share the cores (and memory)."""
     if address != "local" and not address.startswith("local:"):
         return None
     n = address.partition(":")[2]
     if not n:
-        return os.cpu_count() or 1
+        return cores()
     if not n.isdigit() or int(n) < 1:
         raise DatmoError(f"--scheduler {address}: expected local or local:N with N >= 1 workers")
+    if int(n) > cores():
+        raise DatmoError(f"--scheduler {address}: at most local:{cores()} here (one worker process per core)")
     return int(n)
+
+
+def local_security(address: str):
+    """A temporary TLS certificate for a run's own local cluster (distributed's Security.temporary, held in
+    memory only): the scheduler and the workers then talk TLS and accept only peers holding it, so another
+    user of this machine cannot connect to them and run code as the user running datmo."""
+    try:
+        from distributed.security import Security
+
+        return Security.temporary()
+    except ImportError:
+        from .extras import MissingExtraError
+
+        raise MissingExtraError(f"--scheduler {address}: the local cluster's TLS certificate needs cryptography "
+                                "(part of the dask extra), which is not installed: pip install cryptography") from None
+
+
+def client_security(address: str):
+    """The TLS settings of the Dask configuration for a `tls://` scheduler (None for another address);
+    DatmoError in one line when the configuration holds no usable certificate."""
+    if not address.startswith("tls://"):
+        return None
+    from distributed.security import Security
+
+    how = ("set distributed.comm.tls.ca-file, distributed.comm.tls.client.cert and distributed.comm.tls.client.key "
+           "in the Dask configuration, e.g. DASK_DISTRIBUTED__COMM__TLS__CA_FILE=ca.pem (see the README, "
+           "Many machines)")
+    try:
+        security = Security()
+        args = security.get_connection_args("client")
+    except (OSError, ValueError, TypeError) as exc:
+        raise DatmoError(f"--scheduler {address}: cannot load the TLS certificate of the Dask configuration "
+                         f"({exc}); {how}") from None
+    if args.get("ssl_context") is None:
+        raise DatmoError(f"--scheduler {address}: a tls:// scheduler needs this client's certificate: {how}")
+    return security
 
 
 def _worker_task(task: Task, cancel_event: str) -> dict:
@@ -82,14 +129,16 @@ class DaskExecutor(Executor):
                 # run's own cluster (pipeline code holds the GIL between kernels)
                 # run's own cluster (pipeline code holds the GIL between kernels); and one numba thread per worker
                 # process, as there is one worker per core
+                security = local_security(address)   # TLS: no other user of this machine can connect
                 with dask.config.set({"distributed.scheduler.allowed-failures": retries,
                                       "distributed.worker.profile.enabled": False,
                                       "distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1}):
                     self.cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                            host="127.0.0.1", protocol="tls://", security=security,
                                                             dashboard_address=None, silence_logs=logging.ERROR)
-                self.client = distributed.Client(self.cluster)
+                self.client = distributed.Client(self.cluster, security=security)
             else:
-                self.client = distributed.Client(address, timeout=CONNECT_TIMEOUT)
+                self.client = distributed.Client(address, timeout=CONNECT_TIMEOUT, security=client_security(address))
         except (OSError, TimeoutError, ValueError) as exc:
             self.close()
             raise DatmoError(f"--scheduler {address}: cannot reach the Dask scheduler ({exc})") from None

@@ -90,9 +90,11 @@ def read_tables(path: str | Path) -> dict[str, dict]:
     """The `[features]` and `[track]` tables of a TOML file, by section (an absent table: {}). Keys at the top
     level, outside any table, go to the section that declares them (features first: the home of d_max); one
     neither declares is an unknown parameter. ConfigError names the file and what is wrong."""
+    from . import input_files
+
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = tomllib.loads(input_files.read_text(path, input_files.MAX_CONFIG_BYTES, "configuration file"))
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:

@@ -181,12 +181,10 @@ def read_ground_truth_csv(path, name: str | None = None) -> Frames:
     """Ground truth from a CSV file (see parse_ground_truth_csv): UTF-8 text, a leading byte-order mark
     allowed (spreadsheets write one). A binary file, text that is not UTF-8, or a file that cannot be read
     raises InputError naming it."""
+    from .input_files import MAX_GROUND_TRUTH_BYTES, read_bytes
+
     name = name or str(path)
-    try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except OSError as exc:
-        raise InputError(f"{name}: {exc.strerror or exc}") from None
+    data = read_bytes(path, MAX_GROUND_TRUTH_BYTES, "ground-truth CSV file", name=name)
     if b"\x00" in data:
         raise InputError(f"{name}: binary data (a NUL byte at byte {data.index(0)}), not a CSV text file")
     try:

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import click
 
+from .errors import InputError
+
 
 @contextmanager
 def scan_log(src: Path, output: Path, topic: str | None = None, odom_topic: str | None = None, *,
@@ -62,8 +64,6 @@ def _bag_folder(src: Path) -> Path:
     """A ROS 2 bag's .db3 (or .mcap) file as its folder when the folder holds the bag's metadata.yaml."""
     if src.suffix == ".db3":
         if not (src.parent / "metadata.yaml").is_file():
-            from .errors import InputError
-
             raise InputError(f"{src}: a ROS 2 .db3 is read with its bag folder, and {src.parent} has no "
                              "metadata.yaml")
         return src.parent
@@ -71,10 +71,13 @@ def _bag_folder(src: Path) -> Path:
 
 
 def _is_ros1_bag(src: Path) -> bool:
+    from .input_files import is_regular, open_regular
     from .log.importers import _ROSBAG1_MAGIC
 
+    if not is_regular(src):
+        return False   # a FIFO or a device is never opened here (its reader refuses it in one line)
     try:
-        with open(src, "rb") as f:
+        with open_regular(src) as f:
             return f.read(len(_ROSBAG1_MAGIC)) == _ROSBAG1_MAGIC
-    except OSError:
+    except (OSError, InputError):
         return False

@@ -16,10 +16,30 @@ PLOT_SUFFIXES = (".png", ".svg", ".pdf")
 
 
 def plot_paths(plot: Path, files: list[Path]) -> list[Path]:
-    """Where each file's plot goes: `plot` itself for one file, else PLOT-STEM.SUFFIX per file."""
+    """Where each file's plot goes: `plot` itself for one file, else PLOT-STEM.SUFFIX per file; files of one
+    stem in different folders get their folders' names too (A/x.mcap, B/x.mcap: PLOT-A-x.png, PLOT-B-x.png), so
+    no plot is written over another. One file given twice is an InputError."""
     if len(files) == 1:
         return [plot]
-    return [plot.with_name(f"{plot.stem}-{f.stem}{plot.suffix}") for f in files]
+    import os
+
+    from ..errors import InputError
+
+    parts = [Path(os.path.abspath(f)).with_suffix("").parts[1:] for f in files]
+    depth = [1] * len(files)
+    while True:
+        names = ["-".join(p[-d:]) for p, d in zip(parts, depth, strict=True)]
+        seen: dict[str, int] = {}
+        for name in names:
+            seen[name] = seen.get(name, 0) + 1
+        clash = [i for i, name in enumerate(names) if seen[name] > 1]
+        if not clash:
+            return [plot.with_name(f"{plot.stem}-{name}{plot.suffix}") for name in names]
+        grow = [i for i in clash if depth[i] < len(parts[i])]
+        if not grow:
+            raise InputError(f"{files[clash[0]]}: given twice; with --plot each file is plotted once")
+        for i in grow:
+            depth[i] += 1
 
 
 def check_plot_outputs(paths: list[Path], force: bool) -> None:
@@ -100,7 +120,9 @@ def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, track
 
     A folder is a batch of datmo run (-o DIR): its outputs that are done join FILES, and its manifest.jsonl
     gives the batch's figures (inputs done and failed, scans, tracks by class, failures): rich and markdown
-    tables before the report, json "batches".
+    tables before the report, json "batches". Only outputs inside the folder count, each once.
+
+    With several files --plot writes PLOT-STEM.png for each, PLOT-FOLDER-STEM.png where two stems are alike.
 
     Example: datmo report out/hall.mcap --plot out/hall.png
     """
@@ -141,11 +163,19 @@ def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, track
 
 
 def _batches(paths: list[Path]) -> tuple[list[Path], list[tuple[Path, list[dict]]]]:
-    """Split FILES into files and batch folders (with their manifest lines); a batch's outputs that are done
-    and present join the files."""
+    """Split FILES into files and batch folders (with their manifest lines, batch.read_batch: only outputs
+    under the folder, each once); a batch's outputs that are done and present join the files."""
     from ..batch import DONE, SKIPPED, read_batch
+    from ..progress import say
 
-    batches = [(p, read_batch(str(p))) for p in paths if p.is_dir()]
+    batches = []
+    for p in paths:
+        if p.is_dir():
+            recs, left_out = read_batch(str(p), with_left_out=True)
+            if left_out:
+                say(f"datmo: warning: {p}: {left_out} manifest line{'s' if left_out > 1 else ''} left out (an output "
+                    "outside the folder, or one another line already names)")
+            batches.append((p, recs))
     files = [p for p in paths if not p.is_dir()]
     for _, recs in batches:
         files += [Path(r["output"]) for r in recs if r["status"] in (DONE, SKIPPED) and Path(r["output"]).exists()]

@@ -150,7 +150,9 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     by datmo import by the input's own task, into a temporary MCAP beside its output (removed when the task
     ends); the output is named after the bag and its provenance names the bag. Inputs run in parallel in local
     processes (--jobs) or on a Dask cluster (--scheduler); a failing input is reported and the others'
-    outputs are kept (the exit status is then 1).
+    outputs are kept (the exit status is then 1). A tcp:// scheduler lets whoever reaches it run code as its
+    user; a tls:// one takes the certificate of the Dask configuration; local[:N] (N at most the cores) speaks
+    TLS with a temporary certificate, so no other user of the machine can reach it.
 
     OUT_DIR/manifest.jsonl gets one line per input as it finishes (input SHA-256, output, status, scans,
     tracks by class, parameters' hash, which counts --topic and --odom-topic). Running the same command again
@@ -164,11 +166,8 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
 
     Example: datmo run 'logs/**/*.mcap' -o out --scheduler tcp://10.0.0.5:8786
     """
-    from ..batch import DONE, FAILED, SKIPPED, LocalExecutor, RunOptions, prepare, remote, run_many
-    from ..cli import invocation
-    from ..config import provenance_line
+    from ..batch import DONE, FAILED, SKIPPED, RunOptions, folder_lock, remote
     from ..errors import DatmoError
-    from ..log import bagdir
     from ..perception.threads import set_default
 
     set_default(threads)   # a run-time setting: not among the parameters (the outputs do not depend on it)
@@ -180,6 +179,35 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         raise DatmoError(f"{out_dir}: --bag-dir needs a local output folder")
     _check_leg_model(cfg)
     options = RunOptions(markers=not no_markers, topic=topic, odom_topic=odom_topic, bag_dir=bag_dir)
+    with folder_lock(out_dir):   # one batch at a time in a folder: a second is refused, naming the first
+        records, where, seconds, plot_of = _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir,
+                                                      scheduler, jobs, retries)
+        _final_table(records, seconds, where)
+        for r in records:
+            if r["status"] == FAILED:
+                click.echo(f"datmo: error: {r['error']}", err=True)
+        ok = [r for r in records if r["status"] in (DONE, SKIPPED)]
+        if ok and (not no_report or plot_of) and not remote(out_dir):
+            made = {Path(r["output"]) for r in ok if r["status"] == DONE}
+            _report([Path(r["output"]) for r in ok], [p for o, p in plot_of.items() if Path(o) in made],
+                    None if no_report else fmt, top, sort, force)
+    failed = len(records) - len(ok)
+    if failed == len(records) and failed > 1:
+        raise DatmoError(f"all {failed} inputs failed")
+    if failed and len(records) > 1:
+        raise DatmoError(f"{failed} of {len(records)} inputs failed; the other outputs are complete")
+    if failed:
+        raise SystemExit(1)  # the one error is printed above
+
+
+def _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir, scheduler, jobs, retries):
+    """Prepare the batch and run it (the output folder locked by the caller): (its manifest lines, where they
+    ran, seconds, each output's plot path)."""
+    from ..batch import LocalExecutor, prepare, run_many
+    from ..cli import invocation
+    from ..config import provenance_line
+    from ..log import bagdir
+
     batch = prepare(list(inputs), out_dir, config=cfg, options=options, force=force,
                     command_line=provenance_line(invocation("run")), threads=threads)
     plot_of = {t.output: bagdir.plot_path(t.output) if bag_dir else Path(t.output).with_suffix(".png")
@@ -205,22 +233,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
             records = run_many(batch, executor, on_record=bar.record, on_scans=bar.progress)
     finally:
         executor.close()
-    _final_table(records, time.perf_counter() - t0, executor.where)
-    for r in records:
-        if r["status"] == FAILED:
-            click.echo(f"datmo: error: {r['error']}", err=True)
-    ok = [r for r in records if r["status"] in (DONE, SKIPPED)]
-    if ok and (not no_report or plots) and not remote(out_dir):
-        made = {Path(r["output"]) for r in ok if r["status"] == DONE}
-        _report([Path(r["output"]) for r in ok], [p for o, p in plot_of.items() if Path(o) in made],
-                None if no_report else fmt, top, sort, force)
-    failed = len(records) - len(ok)
-    if failed == len(records) and failed > 1:
-        raise DatmoError(f"all {failed} inputs failed")
-    if failed and len(records) > 1:
-        raise DatmoError(f"{failed} of {len(records)} inputs failed; the other outputs are complete")
-    if failed:
-        raise SystemExit(1)  # the one error is printed above
+    return records, executor.where, time.perf_counter() - t0, plot_of
 
 
 def _check_leg_model(cfg: DatmoConfig) -> None:

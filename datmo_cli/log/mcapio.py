@@ -140,9 +140,10 @@ class LogContents:
 
 
 def _check_input(path: Path) -> Path:
+    from ..input_files import check
+
     path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: no such file")
+    check(path, folder_ok=True)   # a regular file (or a folder, refused below): a FIFO or a device never ends
     if path.is_dir():
         raise InputError(f"{path}: is a directory, not an MCAP log")
     if path.stat().st_size == 0:

@@ -303,9 +303,12 @@ class LegModel:
     def load(cls, path: str | Path) -> LegModel:
         """Read a model written by save. InputError naming the file when it is missing, corrupt or made for
         other features than FEATURE_NAMES."""
+        from ..input_files import check
+
         path = Path(path)
-        if not path.is_file():
+        if not path.exists():
             raise InputError(f"{path}: no such leg model file")
+        check(path)   # a folder, FIFO or device: one line saying what it is
         try:
             with np.load(path, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}

@@ -182,9 +182,12 @@ def load_scene(scene: str | Path) -> Scene:
     """A built-in scene by name, or a scene file (a Path, or a name ending in .toml or holding a "/")."""
     text_path = str(scene)
     if isinstance(scene, Path) or text_path.endswith(".toml") or "/" in text_path:
+        from ..input_files import check
+
         path = Path(scene)
-        if not path.is_file():
+        if not path.exists():
             raise InputError(f"{path}: scene file not found")
+        check(path)   # a folder, FIFO or device: one line saying what it is
         try:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:

@@ -57,8 +57,9 @@ class ImportResult:
 
 
 def _check_path(path: Path) -> None:
-    if not path.exists():
-        raise InputError(f"{path}: no such file")
+    from ...input_files import check
+
+    check(path, folder_ok=True)   # a regular file or a folder: a FIFO or a device would never end
     if path.is_dir():
         if (path / "metadata.yaml").exists():
             return

@@ -1,0 +1,99 @@
+"""The Dask side of `datmo run` and security (issue #25, items 2 and 18): `--scheduler local[:N]` starts a
+cluster that speaks TLS with a temporary certificate, so nobody without it (another user of the machine) can
+connect and run code as the user running datmo; `--scheduler tls://...` uses the certificate of the Dask
+configuration, and says in one line (exit 1, not 70) when there is none."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from test_batch import CALLS, fake_process
+
+from datmo_cli import batch, pipeline
+from datmo_cli.cli import cli
+
+distributed = pytest.importorskip("distributed")
+pytest.importorskip("cryptography")
+pytestmark = pytest.mark.timeout(300)
+
+
+def _refused(address: str, **kw) -> bool:
+    try:
+        client = distributed.Client(address, timeout="5s", **kw)
+    except (OSError, TimeoutError, TypeError, ValueError):
+        return True
+    client.close()
+    return False
+
+
+@pytest.mark.slow
+def test_a_runs_own_local_cluster_speaks_tls_and_refuses_strangers(tmp_path, sample_logs):
+    from distributed.security import Security
+
+    from datmo_cli.cluster import DaskExecutor
+
+    executor = DaskExecutor("local:1")
+    try:
+        address = executor.client.scheduler.address
+        workers = list(executor.client.scheduler_info()["workers"])
+        assert address.startswith("tls://127.0.0.1:") and workers and all(w.startswith("tls://") for w in workers)
+        assert _refused(address.replace("tls://", "tcp://"))                  # no TLS: no entry
+        other = Security.temporary()
+        stranger = Security(tls_ca_file=executor.cluster.security.tls_ca_file, tls_client_cert=other.tls_client_cert,
+                            tls_client_key=other.tls_client_key, require_encryption=True)
+        assert _refused(address, security=stranger)    # trusts the scheduler, but holds another certificate
+        assert not _refused(address, security=executor.cluster.security)     # the run's own certificate: in
+        src = tmp_path / "static.mcap"
+        src.write_bytes((sample_logs / "static.mcap").read_bytes())
+        plan = batch.prepare([str(src)], str(tmp_path / "out"))
+        records = batch.run_many(plan, executor)                               # and it runs the batch
+        assert [r["status"] for r in records] == ["done"] and records[0]["scans"] == 300
+    finally:
+        executor.close()
+
+
+@pytest.fixture
+def tls_scheduler(tmp_path, monkeypatch):
+    """A TLS scheduler with a worker thread in this process (so the stand-in processing reaches it), and its
+    certificate as files, as a user keeps them for the Dask configuration."""
+    from distributed.security import Security
+
+    monkeypatch.setattr(pipeline, "process_file", fake_process)
+    monkeypatch.setattr(pipeline, "warm_up", lambda: None)
+    CALLS.clear()
+    sec = Security.temporary()
+    pem = {"ca": sec.tls_ca_file, "cert": sec.tls_client_cert, "key": sec.tls_client_key}
+    files = {}
+    for name, text in pem.items():
+        files[name] = tmp_path / f"{name}.pem"
+        files[name].write_text(text)
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tls://",
+                                       host="127.0.0.1", security=sec, dashboard_address=None)
+    try:
+        yield cluster.scheduler_address, files
+    finally:
+        cluster.close()
+
+
+def test_a_tls_scheduler_with_the_certificate_of_the_dask_configuration(tls_scheduler, tmp_path):
+    import dask
+
+    address, files = tls_scheduler
+    src = tmp_path / "a.mcap"
+    src.write_bytes(b"a log")
+    args = ["run", str(src), "-o", str(tmp_path / "out"), "--scheduler", address, "--no-report"]
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code == 1 and "Traceback" not in r.output, r.output
+    assert r.output.startswith(f"datmo: error: --scheduler {address}: a tls:// scheduler needs this client's "
+                               "certificate: set distributed.comm.tls.ca-file") and len(r.output.splitlines()) == 1
+    with dask.config.set({"distributed.comm.tls.ca-file": str(files["ca"]),
+                          "distributed.comm.tls.client.cert": str(files["cert"]),
+                          "distributed.comm.tls.client.key": str(files["key"])}):
+        ok = CliRunner().invoke(cli, args)
+    assert ok.exit_code == 0, ok.output
+    assert CALLS == ["a.mcap"] and f"the Dask scheduler {address}" in ok.stderr
+    line = json.loads((tmp_path / "out" / "manifest.jsonl").read_text())
+    assert line["status"] == "done" and Path(line["output"]).exists()
