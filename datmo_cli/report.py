@@ -37,6 +37,7 @@ from .log.vocabulary import (
     MOBILITY_UNDEFINED,
     STATUS_CONFIRMED,
 )
+from .text import csv_cell, printable
 
 SORT_KEYS = ("lifetime", "distance", "speed", "first", "id")
 FORMATS = ("rich", "json", "csv", "markdown")
@@ -684,6 +685,7 @@ class Table:
 
 
 def _cell(v: object) -> str:
+    """A value as the rich and markdown tables show it (text with its control characters escaped)."""
     if v is None:
         return "-"
     if isinstance(v, bool):
@@ -692,7 +694,7 @@ def _cell(v: object) -> str:
         return f"{v:,.2f}"
     if isinstance(v, int):
         return f"{v:,}"
-    return str(v)
+    return printable(v)
 
 
 def _table(title: str, rows: list[dict], columns: dict[str, str]) -> Table:
@@ -822,17 +824,19 @@ def render_markdown(tabs: list[Table]) -> str:
         head = "| " + " | ".join(t.columns) + " |"
         rule = "|" + "|".join("---:" if i in t.numeric else "---" for i in range(len(t.columns))) + "|"
         body = ["| " + " | ".join(_cell(v).replace("|", "\\|") for v in row) + " |" for row in t.rows]
-        parts.append("\n".join([f"### {t.title}", "", head, rule, *body]))
+        parts.append("\n".join([f"### {printable(t.title)}", "", head, rule, *body]))
     return "\n\n".join(parts) + "\n"
 
 
 def render_csv(table: Table, keys: list[str] | None = None) -> str:
-    """One table as CSV with raw (unformatted) values; header = `keys` when given, else the column titles."""
+    """One table as CSV with raw (unformatted) values; header = `keys` when given, else the column titles.
+    Text cells go through text.csv_cell: control characters escaped, and one a spreadsheet would read as a
+    formula (a file name or a log's string starting with `=`, `+`, `@` or `-`) prefixed with `'`."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(keys or table.columns)
     for row in table.rows:
-        w.writerow(["" if v is None else v for v in row])
+        w.writerow(["" if v is None else csv_cell(v) for v in row])
     return buf.getvalue()
 
 

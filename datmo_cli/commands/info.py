@@ -64,10 +64,11 @@ def describe(path: Path) -> dict:
 def _print_rich(info: dict) -> None:
     from ..progress import console as make_console
     from ..progress import table as make_table
+    from ..text import markup
 
     console = make_console()
-    console.print(f"[bold]{info['file']}[/]  {info['size_bytes'] / 1e6:.2f} MB, "
-                  f"{info['duration_s']:.1f} s, profile {info['profile'] or '-'}, written by {info['library'] or '-'}")
+    console.print(f"[bold]{markup(info['file'])}[/]  {info['size_bytes'] / 1e6:.2f} MB, {info['duration_s']:.1f} s, "
+                  f"profile {markup(info['profile'] or '-')}, written by {markup(info['library'] or '-')}")
     if info["truncated"]:
         console.print("[yellow]truncated: only complete chunks were read[/]")
     if info["corrupt_chunks"]:

@@ -169,6 +169,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     from ..errors import DatmoError
     from ..log import bagdir
     from ..perception.threads import set_default
+    from ..text import printable
 
     set_default(threads)   # a run-time setting: not among the parameters (the outputs do not depend on it)
     if scheduler is not None and jobs is not None:
@@ -207,7 +208,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     _final_table(records, time.perf_counter() - t0, executor.where)
     for r in records:
         if r["status"] == FAILED:
-            click.echo(f"datmo: error: {r['error']}", err=True)
+            click.echo(f"datmo: error: {printable(r['error'])}", err=True)
     ok = [r for r in records if r["status"] in (DONE, SKIPPED)]
     if ok and (not no_report or plots) and not remote(out_dir):
         made = {Path(r["output"]) for r in ok if r["status"] == DONE}
