@@ -438,8 +438,23 @@ def _messages_of(log: LogContents, topic: str, required: bool = True) -> tuple[n
     return np.array(stamps, np.int64), payloads
 
 
+def several_channels(log: LogContents, topic: str) -> str | None:
+    """What is wrong when two channels of the log hold messages on `topic` (two streams, which a read by topic
+    would interleave), else None."""
+    on = [c for c in sorted(log.channels.values(), key=lambda c: c.id) if c.topic == topic and c.count]
+    if len(on) < 2:
+        return None
+    which = ", ".join(f"id {c.id}: {c.count} {c.msgtype}" for c in on)
+    return (f"{log.path}: {topic} is on {len(on)} channels ({which}); their messages would interleave into one "
+            "stream: keep one channel, or give each its own topic")
+
+
 def check_scan_channel(log: LogContents, topic: str = TOPIC_SCAN) -> int:
-    """The number of scans on `topic` (read or not); raises when it holds none or not CDR LaserScans."""
+    """The number of scans on `topic` (read or not); raises when it holds none or not CDR LaserScans, or when
+    two channels of the file hold messages on it (two scan streams, which a read by topic would interleave)."""
+    problem = several_channels(log, topic)
+    if problem:
+        raise InputError(problem)
     ch = log.topics().get(topic)
     if ch is not None and ch.count and ch.msgtype not in (types.LASERSCAN, "sensor_msgs/LaserScan"):
         raise InputError(f"{log.path}: {topic} holds {ch.msgtype}, not sensor_msgs/msg/LaserScan")

@@ -144,6 +144,7 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
         scan_topic = choose_topic(label, topics, topic, LASERSCAN_TYPES, "sensor_msgs/LaserScan", "--topic")
         o_topic = choose_topic(label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic",
                                required=False)
+        one_connection(label, reader, scan_topic)
         total = topics[scan_topic][1]
         survey = _survey(reader, label, scan_topic, total, max_scans, progress)
     except (InputError, GeometryError):
@@ -172,6 +173,16 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
     return ImportStream(pieces(), warnings=warns, topic=scan_topic, odom_topic=o_topic,
                         facts={"topics": {t: m for t, (m, _) in topics.items()}}, geometry=survey.geometry,
                         sort_odometry=True, closer=close, transforms=moved, tf_topics=tfs)
+
+
+def one_connection(label: str, reader, topic: str) -> None:
+    """InputError when two of the bag's connections (two publishers, as ROS 1 records them) hold messages on the
+    scan topic: two scan streams, which a read by topic would interleave."""
+    on = [c for c in reader.connections if c.topic == topic and c.msgcount]
+    if len(on) > 1:
+        who = ", ".join(f"{getattr(c.ext, 'callerid', None) or c.msgtype}: {c.msgcount} messages" for c in on)
+        raise InputError(f"{label}: {topic} is on {len(on)} connections ({who}); their scans would interleave into "
+                         "one stream: keep one connection, or give each its own topic")
 
 
 @dataclass
@@ -308,7 +319,7 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
         o_topic = choose_topic(label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic",
                                required=False)
         tfs = tuple(t for t in tf_topics(topics) if head.topics()[t].message_encoding == "cdr")
-        if head.topics()[scan_topic].count:
+        if any(c.topic == scan_topic and c.count for c in head.channels.values()):
             mcapio.check_scan_channel(head, scan_topic)
         count, inten_mode, last, n_beams = _mcap_survey(path, label, scan_topic, max_scans)
     warns += [f"{w.message}" for w in caught]
