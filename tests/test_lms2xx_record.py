@@ -85,8 +85,13 @@ def test_record_is_bit_exact(tmp_path, baud, n):
     raws = log.messages[mcapio.TOPIC_TELEGRAM][1]
     b0 = [p[16:] for p in raws if p[16:][4] == P.REPLY_SCAN]
     assert b0[:n] == [s.telegram for s in sent[:n]]
-    dt = np.diff(run.stamps) / 1e9                        # host time of first bytes: the telegram rate
-    assert np.median(dt) == pytest.approx(1 / P.telegram_rate_hz(50, baud), rel=0.25)
+    # the telegram rate, untimed (a loaded machine delays the emulator and the reads alike, issue 25): the scans
+    # the rate table lets through at this baud, each stamped (host time of its first byte) no earlier than the
+    # one before it ended on the line
+    numbers = [s.number for s in sent[:n]]
+    assert all(k % (1 + P.LOST_PER_SENT[50][baud]) == 0 for k in numbers) and numbers == sorted(set(numbers))
+    line_ns = [int(len(s.telegram) * 10e9 / baud) for s in sent[:n - 1]]
+    assert np.all(np.diff(run.stamps) >= line_ns)
 
 
 def test_record_at_9600_detects_the_scans_the_rate_table_drops(tmp_path):
