@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import GeometryError, InputError
-from ..scan import GeometryChangeError, Odometry, ScanGeometry, ScanRun
+from ..scan import GeometryChangeError, Odometry, ScanGeometry, ScanRun, geometry_problem
 
 LASERSCAN_TYPES = ("sensor_msgs/msg/LaserScan", "sensor_msgs/LaserScan")
 ODOMETRY_TYPES = ("nav_msgs/msg/Odometry", "nav_msgs/Odometry")
@@ -87,6 +87,44 @@ def scan_geometry(msg) -> ScanGeometry:
                         n_beams=len(msg.ranges), range_min=float(msg.range_min), range_max=float(msg.range_max),
                         time_increment=float(msg.time_increment), scan_time=float(msg.scan_time),
                         frame_id=msg.header.frame_id)
+
+
+def check_bag_scan(label: str, topic: str, i: int, msg) -> None:
+    """InputError naming the file, the topic, scan `i` and the field when a LaserScan read from a bag cannot be
+    what a scanner sent: bags have no checksums, so a damaged byte shows only where a message contradicts itself.
+    Checked here: the header stamp is after 1970 with nanosec below 10^9; the angles and range limits are finite,
+    0 <= range_min < range_max, the angle step is not zero, the beams span at most a turn and reach angle_max
+    (within a beam); intensities are none or one a beam. (rosbags refuses a message longer or shorter than its
+    fields.) A damaged reading itself is not seen: it is another range, or, outside the limits, not a return."""
+    problem = _scan_problem(msg)
+    if problem:
+        raise InputError(f"{label}: damaged LaserScan on {topic}, scan {i}: {problem}")
+
+
+def _scan_problem(msg) -> str | None:
+    import math
+
+    n, m = len(msg.ranges), len(msg.intensities)
+    sec, nanosec = int(msg.header.stamp.sec), int(msg.header.stamp.nanosec)
+    if sec < 0:
+        return f"header stamp before 1970 (sec = {sec})"
+    if nanosec >= 1_000_000_000:
+        return f"header stamp nanosec = {nanosec} is not below 10^9"
+    a0, a1, step = float(msg.angle_min), float(msg.angle_max), float(msg.angle_increment)
+    r0, r1 = float(msg.range_min), float(msg.range_max)
+    for name, value in (("angle_min", a0), ("angle_max", a1), ("angle_increment", step), ("range_min", r0),
+                        ("range_max", r1)):
+        if not math.isfinite(value):
+            return f"{name} is {value}"
+    problem = geometry_problem(a0, step, n, r0, r1)
+    if problem:
+        return problem
+    if n and abs(a0 + (n - 1) * step - a1) > abs(step) * 1.01 + 1e-4:
+        return (f"{n} beams from {math.degrees(a0):g}° by {math.degrees(step):g}° end at "
+                f"{math.degrees(a0 + (n - 1) * step):g}°, not at angle_max {math.degrees(a1):g}°")
+    if m not in (0, n):
+        return f"{m} intensities for {n} ranges"
+    return None
 
 
 def scan_stamp(msg, log_time: int) -> int:
@@ -202,6 +240,7 @@ def _survey(reader, label: str, topic: str, total: int, max_scans: int | None, p
         if max_scans is not None and i >= max_scans:
             break
         msg = reader.deserialize(raw, conn.msgtype)
+        check_bag_scan(label, topic, i, msg)
         g = scan_geometry(msg)
         if g0 is None:
             g0 = g
