@@ -245,9 +245,15 @@ class _CorruptChunk(Exception):
     pass
 
 
+MAX_CHUNK_BYTES = 256 << 20   # uncompressed bytes a chunk may declare: writers close a chunk at 1-4 MiB (datmo 1,
+# rosbag2 0.75) plus one message; a declared size beyond this is damage or a decompression bomb, never read
+
+
 def _chunk_records(buf, body: int, end: int) -> bytes | memoryview:
     """The records of the chunk whose body is buf[body:end], decompressed and checked against the chunk's
-    uncompressed size and CRC-32 (0: none recorded); raises _CorruptChunk saying what is wrong."""
+    uncompressed size and CRC-32 (0: none recorded); raises _CorruptChunk saying what is wrong. A chunk that
+    declares more than MAX_CHUNK_BYTES is not decompressed, and no chunk decompresses to more than it declares
+    (the memory a chunk takes is bounded before it is spent)."""
     import zstandard
 
     try:
@@ -256,13 +262,14 @@ def _chunk_records(buf, body: int, end: int) -> bytes | memoryview:
         size = _U64.unpack_from(buf, cpos)[0]
         if cpos + 8 + size > end:
             raise _CorruptChunk("its records run past its end")
+        if uncompressed > MAX_CHUNK_BYTES:
+            raise _CorruptChunk(f"declares {uncompressed:,} bytes uncompressed, more than a chunk may hold "
+                                f"({MAX_CHUNK_BYTES:,})")
         data = buf[cpos + 8:cpos + 8 + size]
         if compression == "zstd":
             data = zstandard.ZstdDecompressor().decompress(data, max_output_size=uncompressed)
         elif compression == "lz4":
-            import lz4.frame
-
-            data = lz4.frame.decompress(data)
+            data = _lz4(data, uncompressed)
         elif compression:
             raise _CorruptChunk(f"unsupported compression {compression!r}")
         else:
@@ -274,6 +281,19 @@ def _chunk_records(buf, body: int, end: int) -> bytes | memoryview:
     if crc and zlib.crc32(data) != crc:
         raise _CorruptChunk("CRC mismatch")
     return data
+
+
+def _lz4(data, uncompressed: int) -> bytes:
+    """An lz4 frame decompressed to at most `uncompressed` bytes (one more tells that it holds more)."""
+    import lz4.frame
+
+    decompressor = lz4.frame.LZ4FrameDecompressor()
+    out = decompressor.decompress(bytes(data), max_length=uncompressed + 1)
+    if len(out) > uncompressed:
+        raise _CorruptChunk(f"decompresses to more than the {uncompressed:,} bytes its header says")
+    if not decompressor.eof:
+        raise _CorruptChunk("its lz4 frame ends early")
+    return out
 
 
 class _Walk:

@@ -14,7 +14,8 @@ Messages read (one per line, fields separated by white space):
   (NEFF, SYNC, TRUEPOS, g2o's VERTEX_SE2 and EDGE_SE2, ...) are ignored; any other line, and a laser or
   ODOM line with the wrong number of fields or a non-number, or a RAWLASER/ROBOTLASER line whose beam fan
   cannot be a laser's (field of view or step zero, negative, NaN or over 360°), is malformed: skipped and
-  counted. A line holding NUL bytes is malformed too; it does not make the file "binary". A pose (the
+  counted. A line holding NUL bytes is malformed too; it does not make the file "binary"; so is a line longer
+  than MAX_LINE characters, which is never held whole. A pose (the
   laser lines' or ODOM's x, y, theta) that is NaN or infinite is left out of /odom with a warning (its
   scan is kept): one such pose would make every track's world position NaN.
 
@@ -644,15 +645,25 @@ def build(parse: CarmenParse, topic: str | None = None, label: str = "<text>"):
     return run, _cat(poses) if poses else None, p.warnings, p.facts
 
 
+MAX_LINE = 1 << 20   # characters of a line: a laser line of 10,000 beams and remissions takes under 200,000
+_TOO_LONG = "<a line longer than MAX_LINE>"   # what a longer line is read as: a malformed line (not a message name)
+
+
 def _lines(f, progress, raw, total: int, label: str, warnings: list[str]):
-    """Lines of a text stream; reports progress by compressed bytes; a truncated gzip stream ends the lines
-    with a warning instead of an error."""
+    """Lines of a text stream, each read in at most MAX_LINE characters (a longer one, skipped in pieces of that
+    size, comes out as _TOO_LONG: memory does not grow with a line's length, e.g. a gigabyte without a newline
+    in a .log.gz); reports progress by compressed bytes; a truncated gzip stream ends the lines with a warning
+    instead of an error."""
     step = 0
     try:
-        for line in f:
+        while line := f.readline(MAX_LINE):
             step += 1
             if progress is not None and step % 20000 == 0:
                 progress(raw.tell(), total)
+            if len(line) == MAX_LINE and not line.endswith("\n"):
+                while (rest := f.readline(MAX_LINE)) and not rest.endswith("\n"):
+                    pass
+                line = _TOO_LONG
             yield line
     except EOFError:
         warnings.append(f"{label}: gzip stream ends early (truncated file); read {step} lines before the cut")
