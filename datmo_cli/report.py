@@ -69,9 +69,10 @@ class Decoded:
         return np.repeat(np.arange(len(self.stamps)), self.counts(name))
 
 
-def decode_channel(msgtype: str, payloads: list[bytes]) -> Decoded:
-    """Decode every CDR payload of a flat datmo_msgs type into a Decoded."""
-    decoded = [cdr.decode(msgtype, p) for p in payloads]
+def decode_channel(msgtype: str, payloads: list[bytes], first: int = 0) -> Decoded:
+    """Decode every CDR payload of a flat datmo_msgs type into a Decoded (cdr.DecodeError names a damaged one,
+    counted from `first`: wrap the call in mcapio.decoding to name the file and topic too)."""
+    decoded = cdr.decode_many(msgtype, payloads, first)
     stamps = np.array([d["stamp_ns"] for d in decoded], np.int64)
     out = Decoded(stamps, decoded[0]["frame_id"] if decoded else "")
     if not decoded:
@@ -123,7 +124,8 @@ class RunData:
 
         def channel(topic: str, msgtype: str) -> Decoded | None:
             stamps, payloads = log.messages.get(topic, ([], []))
-            return decode_channel(msgtype, payloads) if payloads else None
+            with mcapio.decoding(log.path, topic):
+                return decode_channel(msgtype, payloads) if payloads else None
 
         return cls(name=str(log.path), metadata=log.metadata, scan_stamps=run.stamps, n_beams=run.geometry.n_beams,
                    tracks=channel(mcapio.TOPIC_TRACKS, types.TRACKS),
@@ -592,7 +594,7 @@ def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES,
     contents = mcapio.LogContents(path=Path(path))
     acc = RunAccumulator(str(Path(path)))
     pending: dict[str, list[bytes]] = {t: [] for t in SUMMARY_TOPICS}
-    state: dict = {"geometry": None, "first": 0, "error": None}
+    state: dict = {"geometry": None, "first": 0, "error": None, "seen": dict.fromkeys(SUMMARY_TOPICS, 0)}
 
     def flush() -> None:
         acc.peak_messages = max(acc.peak_messages, sum(len(p) for p in pending.values()))
@@ -609,19 +611,26 @@ def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES,
         state["first"] += len(scans)
         if progress is not None and scans:
             progress(state["first"])
+        seen = state["seen"]   # messages of each topic before this block's (to name a damaged one)
         if pending[mcapio.TOPIC_FEATURES]:
-            decoded = [cdr.decode(types.FEATURES, p) for p in pending[mcapio.TOPIC_FEATURES]]
+            with mcapio.decoding(contents.path, mcapio.TOPIC_FEATURES):
+                decoded = cdr.decode_many(types.FEATURES, pending[mcapio.TOPIC_FEATURES], seen[mcapio.TOPIC_FEATURES])
             acc.add_features(len(decoded), {k: np.array([len(d[k]) for d in decoded], np.int64)
                                             for k in FEATURE_KINDS if k in decoded[0]})
         landmarks = pending[mcapio.TOPIC_LANDMARKS]
         if landmarks:
-            frame = cdr.decode(types.LANDMARKS, landmarks[0])["frame_id"] if acc.landmark_frame is None else ""
-            acc.add_landmarks(frame, cdr.decode(types.LANDMARKS, landmarks[-1])["landmarks"])
+            k = seen[mcapio.TOPIC_LANDMARKS]
+            with mcapio.decoding(contents.path, mcapio.TOPIC_LANDMARKS):   # the first and last: frame, database
+                head, = cdr.decode_many(types.LANDMARKS, landmarks[:1], k)
+                last, = cdr.decode_many(types.LANDMARKS, landmarks[-1:], k + len(landmarks) - 1)
+            acc.add_landmarks(head["frame_id"] if acc.landmark_frame is None else "", last["landmarks"])
         if pending[mcapio.TOPIC_TRACKS]:
-            tracks = decode_channel(types.TRACKS, pending[mcapio.TOPIC_TRACKS])
+            with mcapio.decoding(contents.path, mcapio.TOPIC_TRACKS):
+                tracks = decode_channel(types.TRACKS, pending[mcapio.TOPIC_TRACKS], seen[mcapio.TOPIC_TRACKS])
             if "tracks" in tracks.items:
                 acc.add_tracks(tracks.stamps[tracks.message_index("tracks")], tracks.items["tracks"])
-        for payloads in pending.values():
+        for topic, payloads in pending.items():
+            seen[topic] += len(payloads)
             payloads.clear()
 
     held = 0

@@ -16,6 +16,7 @@ import struct
 import warnings
 import zlib
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -456,6 +457,18 @@ def _messages_of(log: LogContents, topic: str, required: bool = True) -> tuple[n
         hint = f"; run {maker} first" if maker else ""
         raise MissingChannelError(f"{log.path}: no messages on {topic}{hint}")
     return np.array(stamps, np.int64), payloads
+
+
+@contextmanager
+def decoding(path: str | Path, topic: str) -> Iterator[None]:
+    """Decode errors of `topic`'s messages (cdr.DecodeError: a damaged payload in a sound chunk) as one InputError
+    naming the file and the topic."""
+    from .cdr import DecodeError
+
+    try:
+        yield
+    except DecodeError as exc:
+        raise InputError(f"{path}: bad message on {topic}: {exc}") from None
 
 
 def several_channels(log: LogContents, topic: str) -> str | None:
