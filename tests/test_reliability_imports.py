@@ -289,3 +289,65 @@ def test_fuzz_ros1_bag_errors_or_scans_whose_fields_agree(tmp_path):
             tally("ros1 bag fuzz (8 flipped bytes)", failed=True)
             raise
         tally("ros1 bag fuzz (8 flipped bytes)")
+
+
+# ------------------------------------------------------------------------------- messages that mislead
+
+
+@pytest.mark.parametrize("field, value, said", [("nanosec", 4_000_000_000, "header stamp nanosec = 4000000000 is not "
+                                                                           "below 10^9"),
+                                                ("sec", -5, "header stamp before 1970 (sec = -5)")])
+@pytest.mark.parametrize("command", ["track", "segment", "run"])
+def test_a_stamp_that_is_not_a_time_is_not_blamed_on_the_order(tmp_path, field, value, said, command):
+    """A stamp whose nanosec is 10^9 or more (or before 1970) in mid-log was called "scan stamps go backwards or
+    repeat", with advice to `datmo import` the log, which refuses it."""
+    import struct
+
+    run = ScanRun(T0 + np.arange(8, dtype=np.int64) * 200_000_000, np.full((8, 91), 3.0, np.float32),
+                  ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, "laser"))
+    payloads = encode_scans(run)
+    raw = bytearray(payloads[3])
+    struct.pack_into("<i" if field == "sec" else "<I", raw, 4 if field == "sec" else 8, value)
+    payloads[3] = bytes(raw)
+    path = tmp_path / "in.mcap"
+    with mcapio.LogWriter(path) as w:
+        w.write_many(mcapio.TOPIC_SCAN, types.LASERSCAN, run.stamps, payloads)
+    out = tmp_path / ("out" if command == "run" else "out.mcap")
+    code, _, err = run_cli(command, path, "-o", out, *(["--jobs", "1", "--no-report"] if command == "run" else []))
+    assert code == 1 and "go backwards" not in err, err
+    assert f"{path}: bad LaserScan message on /scan: scan 3: {said}" in err.splitlines()[-1], err
+
+
+def test_a_foreign_file_in_a_bag_folder_is_the_one_named(tmp_path):
+    """A folder that is a bag but for one file was refused naming its first entry (metadata.yaml, or the bag's
+    own file), not the foreign one."""
+    from datmo_cli.errors import OutputError
+    from datmo_cli.log import bagdir
+
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  relative_file_paths: [bag_0.mcap]\n")
+    (bag / "bag_0.mcap").write_bytes(b"")
+    assert bagdir.check_output(bag, force=True) == bag   # a bag: replaced with --force
+    (bag / "notes.txt").write_text("mine")
+    with pytest.raises(OutputError, match=r"bag: a folder that is not a ROS 2 bag \(it holds 'notes.txt', which its "
+                                          r"metadata.yaml does not list\); it is never replaced"):
+        bagdir.check_output(bag, force=True)
+    (bag / "notes.txt").unlink()
+    (bag / "a_link").symlink_to(bag / "bag_0.mcap")
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  relative_file_paths: [bag_0.mcap, a_link]\n")
+    with pytest.raises(OutputError, match="it holds 'a_link', which is not a regular file"):
+        bagdir.check_output(bag, force=True)
+
+
+def test_a_warning_about_an_input_is_said_once_by_run(tmp_path):
+    """`datmo run` read each input's summary for its progress bar, which said a truncated or damaged input's
+    warning a first time before the task said it again."""
+    path = tmp_path / "cut.mcap"
+    with mcapio.LogWriter(path, chunk_size=4000) as w:
+        w.write_scans(ScanRun(T0 + np.arange(40, dtype=np.int64) * 200_000_000, np.full((40, 91), 3.0, np.float32),
+                              ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, "laser")))
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) * 2 // 3])
+    code, _, err = run_cli("run", path, "-o", tmp_path / "out", "--jobs", "1", "--no-report")
+    assert code == 0 and err.count("truncated MCAP file") == 1, err

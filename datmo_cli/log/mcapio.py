@@ -439,9 +439,13 @@ class _Walk:
                     self.out.corrupt_chunks += missing
 
 
-def summary(path: str | Path) -> LogContents:
-    """Channels (with message counts and time ranges) and metadata of a log, without payloads."""
-    return read_log(path, topics=())
+def summary(path: str | Path, *, warn: bool = True) -> LogContents:
+    """Channels (with message counts and time ranges) and metadata of a log, without payloads. `warn`: say
+    that the file is truncated or has corrupt chunks (the command that reads it next says it otherwise)."""
+    out = LogContents(path=Path(path))
+    for _ in _walk_file(path, (), out, warn):
+        pass
+    return out
 
 
 def read_messages(path: str | Path, topic: str, *, required: bool = True) -> tuple[np.ndarray, list[bytes]]:

@@ -209,6 +209,15 @@ class GeometryChangeError(ValueError):
     """Scans of one topic change geometry mid-run."""
 
 
+def stamp_problem(sec: int, nanosec: int) -> str | None:
+    """What is wrong with a header stamp that is not a time after 1970 (sec < 0, nanosec of 10^9 or more)."""
+    if sec < 0:
+        return f"header stamp before 1970 (sec = {sec})"
+    if nanosec >= _NS:
+        return f"header stamp nanosec = {nanosec} is not below 10^9"
+    return None
+
+
 def geometry_problem(angle_min: float, angle_increment: float, n_beams: int, range_min: float,
                      range_max: float) -> str | None:
     """What is wrong with a finite scan geometry no scanner has (radians, metres), or None: a negative
@@ -231,14 +240,10 @@ def _check_rows(rows: np.ndarray, first: int | None) -> None:
     """Raise ValueError ("scan K: ...", K counted from `first`; no scan named when None) for the first of
     decoded LaserScan rows whose header stamp is before 1970 or not a time, or whose geometry is not finite
     or not a scanner's (geometry_problem)."""
-    bad = np.flatnonzero(rows["sec"] < 0)
+    bad = np.flatnonzero((rows["sec"] < 0) | (rows["nanosec"] >= _NS))
     if len(bad):
-        raise ValueError(f"{_scan_label(first, bad[0])}header stamp before 1970 "
-                         f"(sec = {int(rows['sec'][bad[0]])})")
-    bad = np.flatnonzero(rows["nanosec"] >= _NS)
-    if len(bad):
-        raise ValueError(f"{_scan_label(first, bad[0])}header stamp nanosec = "
-                         f"{int(rows['nanosec'][bad[0]])} is not below 10^9")
+        r = rows[bad[0]]
+        raise ValueError(_scan_label(first, bad[0]) + stamp_problem(int(r["sec"]), int(r["nanosec"])))
     for name in GEOMETRY_FIELDS:
         bad = np.flatnonzero(~np.isfinite(rows[name]))
         if len(bad):

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import GeometryError, InputError
-from ..scan import GeometryChangeError, Odometry, ScanGeometry, ScanRun, geometry_problem
+from ..scan import GeometryChangeError, Odometry, ScanGeometry, ScanRun, geometry_problem, stamp_problem
 
 LASERSCAN_TYPES = ("sensor_msgs/msg/LaserScan", "sensor_msgs/LaserScan")
 ODOMETRY_TYPES = ("nav_msgs/msg/Odometry", "nav_msgs/Odometry")
@@ -105,11 +105,9 @@ def _scan_problem(msg) -> str | None:
     import math
 
     n, m = len(msg.ranges), len(msg.intensities)
-    sec, nanosec = int(msg.header.stamp.sec), int(msg.header.stamp.nanosec)
-    if sec < 0:
-        return f"header stamp before 1970 (sec = {sec})"
-    if nanosec >= 1_000_000_000:
-        return f"header stamp nanosec = {nanosec} is not below 10^9"
+    problem = stamp_problem(int(msg.header.stamp.sec), int(msg.header.stamp.nanosec))
+    if problem:
+        return problem
     a0, a1, step = float(msg.angle_min), float(msg.angle_max), float(msg.angle_increment)
     r0, r1 = float(msg.range_min), float(msg.range_max)
     for name, value in (("angle_min", a0), ("angle_max", a1), ("angle_increment", step), ("range_min", r0),
