@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .csvsafe import neutralise
 from .errors import InputError, MissingChannelError
 from .log import cdr, mcapio, types
 from .log.vocabulary import (
@@ -37,7 +38,7 @@ from .log.vocabulary import (
     MOBILITY_UNDEFINED,
     STATUS_CONFIRMED,
 )
-from .text import csv_cell, printable
+from .text import printable
 
 SORT_KEYS = ("lifetime", "distance", "speed", "first", "id")
 FORMATS = ("rich", "json", "csv", "markdown")
@@ -839,13 +840,14 @@ def render_markdown(tabs: list[Table]) -> str:
 
 def render_csv(table: Table, keys: list[str] | None = None) -> str:
     """One table as CSV with raw (unformatted) values; header = `keys` when given, else the column titles.
-    Text cells go through text.csv_cell: control characters escaped, and one a spreadsheet would read as a
-    formula (a file name or a log's string starting with `=`, `+`, `@` or `-`) prefixed with `'`."""
+    Text cells have their control characters escaped (text.printable: the CSV is often printed) and, when a
+    spreadsheet would run them as a formula (`=`, `+`, `@`, or `-` not a number), an apostrophe in front
+    (csvsafe.neutralise, as every CSV writer)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(keys or table.columns)
     for row in table.rows:
-        w.writerow(["" if v is None else csv_cell(v) for v in row])
+        w.writerow(["" if v is None else neutralise(printable(v)) if isinstance(v, str) else v for v in row])
     return buf.getvalue()
 
 

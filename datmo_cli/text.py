@@ -1,6 +1,6 @@
 """Text that comes from outside datmo (a log's topic, schema and frame names, its metadata, file names,
-errors naming them) made safe to show: on a terminal (`printable`), inside Rich markup (`markup`) and in a
-CSV cell a spreadsheet opens (`csv_cell`).
+errors naming them) made safe to show: on a terminal (`printable`) and inside Rich markup (`markup`). (In a
+CSV cell a spreadsheet opens: csvsafe.neutralise.)
 
 A log is data anyone can write: its strings must not move the cursor, clear the screen, open a link
 (OSC 8), set the window title or break a one-line message, and `[/]` or `[link=...]` in them must not be
@@ -33,26 +33,3 @@ def markup(text: object) -> str:
     from rich.markup import escape
 
     return escape(printable(text))
-
-
-_FORMULA_START = ("=", "+", "@", "-")   # tab and CR, which OWASP lists too, printable escapes
-
-
-def csv_cell(value: object) -> object:
-    """A value for a CSV cell: numbers (and None, bools) as they are; text made printable, and when it starts
-    as a spreadsheet formula does (`=`, `+`, `@`, or `-` not starting a number) prefixed with `'`, which
-    spreadsheets show as text (formula injection, OWASP "CSV Injection")."""
-    if not isinstance(value, str):
-        return value
-    text = printable(value)
-    if text.startswith(_FORMULA_START) and not (text.startswith("-") and _is_number(text)):
-        return "'" + text
-    return text
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True

@@ -20,7 +20,7 @@ from datmo_cli import progress
 from datmo_cli.cli import cli
 from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.log.scan import ScanGeometry, ScanRun
-from datmo_cli.text import csv_cell, markup, printable
+from datmo_cli.text import markup, printable
 
 CLEAR = "\x1b[2J"
 LINK = "\x1b]8;;http://evil.example/\x1b\\click me\x1b]8;;\x1b\\"
@@ -59,15 +59,6 @@ def test_markup_prints_as_itself():
     for text in ("[/]", "[bold]x[/bold]", "a\\", "[link=http://x]y[/link]", "\\[/]"):
         plain.print(f"[bold]{markup(text)}[/]")
     assert plain.file.getvalue().splitlines() == ["[/]", "[bold]x[/bold]", "a\\", "[link=http://x]y[/link]", "\\[/]"]
-
-
-@pytest.mark.parametrize("value, cell", [
-    ("=HYPERLINK(\"http://evil\",\"x\")", "'=HYPERLINK(\"http://evil\",\"x\")"),
-    ("+1+cmd|' /C calc'!A0", "'+1+cmd|' /C calc'!A0"),
-    ("@SUM(A1)", "'@SUM(A1)"), ("-2+3+cmd", "'-2+3+cmd"), ("-", "'-"), ("-1.5", "-1.5"), ("-3e-4", "-3e-4"),
-    ("\t=1", "\\x09=1"), ("hall.mcap", "hall.mcap"), ("a=b", "a=b"), ("", ""), (-1.5, -1.5), (3, 3), (None, None)])
-def test_csv_cell_neutralises_formulas(value, cell):
-    assert csv_cell(value) == cell
 
 
 # ------------------------------------------------------------------------------------- a hostile log
