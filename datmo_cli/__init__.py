@@ -1,3 +1,7 @@
 """datmo: detection and tracking of moving objects in 2D laser-scanner logs."""
 
 __version__ = "0.1.0"
+
+from .numba_runtime import choose_cache as _choose_cache
+
+_choose_cache()   # a writable numba cache (else a private temporary one) before any kernel is declared

@@ -147,7 +147,39 @@ def validate(section: type[Section], values: dict, where: str | None = None) -> 
             out[key] = value
     params = section(**out)
     section.combined(params, where)
+    ordered_pairs(params, where)
     return params
+
+
+def min_max_pairs(section: type[Section]) -> list[tuple[str, str]]:
+    """The (minimum, maximum) pairs of a section's numeric fields, by name: X_min and X_max, X_min_Y and
+    X_max_Y, min_X and max_X (circle_radius_min and circle_radius_max, step_min and step_max,
+    bench_min_length and bench_max_length)."""
+    numeric = bounds_of(section)
+    pairs = []
+    for name in numeric:
+        if name.endswith("_min"):
+            other = name[:-len("_min")] + "_max"
+        elif "_min_" in name:
+            other = name.replace("_min_", "_max_", 1)
+        elif name.startswith("min_"):
+            other = "max_" + name[len("min_"):]
+        else:
+            continue
+        if other in numeric:
+            pairs.append((name, other))
+    return pairs
+
+
+def ordered_pairs(params: Section, where: str) -> None:
+    """ConfigError when a minimum is above its maximum (min_max_pairs): no value could lie between them."""
+    bounds = bounds_of(type(params))
+    for lo, hi in min_max_pairs(type(params)):
+        a, b = getattr(params, lo), getattr(params, hi)
+        if a > b:
+            unit = f" {bounds[lo].unit}" if bounds[lo].unit else ""
+            raise ConfigError(f"{where}.{lo}: {_show(a)}{unit} is above {hi} = {_show(b)}{unit}; a minimum must be "
+                              f"at most its maximum")
 
 
 D_MAX = _b(0, 100, "m", NO_SENSE, open_=True)   # the paper's d_max: features.d_max, read by tracking too

@@ -47,7 +47,9 @@ def invocation(command: str) -> str:
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    click.echo(f"datmo: warning: {message}", err=True)
+    from .text import printable
+
+    click.echo(f"datmo: warning: {printable(message)}", err=True)
 
 
 def _escape(err: UnicodeEncodeError) -> tuple[str, int]:
@@ -141,7 +143,9 @@ class CleanError(click.ClickException):
         self.exit_code = exit_code
 
     def show(self, file=None) -> None:
-        click.echo(f"datmo: error: {self.format_message()}", err=True, file=file)
+        from .text import printable
+
+        click.echo(f"datmo: error: {printable(self.format_message())}", err=True, file=file)
 
 
 class LazyGroup(click.Group):

@@ -89,7 +89,8 @@ def load(path: str | Path | None = None, options: dict[str, dict] | None = None)
 def read_tables(path: str | Path) -> dict[str, dict]:
     """The `[features]` and `[track]` tables of a TOML file, by section (an absent table: {}). Keys at the top
     level, outside any table, go to the section that declares them (features first: the home of d_max); one
-    neither declares is an unknown parameter. ConfigError names the file and what is wrong."""
+    neither declares is an unknown parameter, and any other table (a misspelt `[tracks]` or `[Features]`) is
+    refused, not ignored. ConfigError names the file and what is wrong."""
     from . import input_files
 
     path = Path(path)
@@ -107,14 +108,25 @@ def read_tables(path: str | Path) -> dict[str, dict]:
                               f"got {data[stage]!r}")
     tables = {s: dict(data.get(s, {})) for s in STAGES}
     for key, value in data.items():
-        if key in STAGES or isinstance(value, dict):
-            continue   # a stage's table, or another table datmo does not read
+        if key in STAGES:
+            continue
+        if isinstance(value, dict):
+            raise ConfigError(f"{path}: [{key}]: unknown table{_did_you_mean(key)} (datmo reads "
+                              f"{' and '.join(f'[{s}]' for s in STAGES)})")
         owner = next((s for s in STAGES if s not in data and key in _names(SECTIONS[s])), None)
         if owner is None:
             raise ConfigError(f"{path}: {key}: unknown parameter at the top level (not in a [features] or [track] "
                               "table, nor a key of a section without its table)")
         tables[owner][key] = value
     return tables
+
+
+def _did_you_mean(table: str) -> str:
+    """'; did you mean [track]?' for a table name near a stage's (by case or spelling), else ''."""
+    import difflib
+
+    near = [s for s in STAGES if s == table.lower().strip()] or difflib.get_close_matches(table.lower(), STAGES, 1)
+    return f"; did you mean [{near[0]}]?" if near else ""
 
 
 def _names(section: type[Section]) -> set[str]:

@@ -26,6 +26,7 @@ def scan_log(src: Path, output: Path, topic: str | None = None, odom_topic: str 
     from . import outputs
     from .log.importers import detect_kind, open_import, write_import
     from .progress import say
+    from .text import printable
 
     src = _bag_folder(Path(src))
     if not needs_conversion(src, topic, odom_topic):
@@ -42,7 +43,7 @@ def scan_log(src: Path, output: Path, topic: str | None = None, odom_topic: str 
             stats = write_import(stream, tmp, force=True)
         finally:
             for w in stream.warnings:
-                (tell or functools.partial(click.echo, err=True))(f"datmo: warning: {w}")
+                (tell or functools.partial(click.echo, err=True))(f"datmo: warning: {printable(w)}")
         odom = f" and {stats.poses} poses from {stream.odom_topic}" if stats.poses else ""
         kind = {"ros1": "ROS 1 bag", "ros2": "ROS 2 bag"}.get(stream.kind, stream.kind)
         (tell or say)(f"datmo: converted {src} ({kind}: {stats.scans} scans from {stream.topic}{odom}) to a "

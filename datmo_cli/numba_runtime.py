@@ -1,4 +1,11 @@
-"""Getting numba ready to load cached kernels at a low fixed cost per process.
+"""Getting numba ready to load cached kernels at a low fixed cost per process, and somewhere to cache them.
+
+`choose_cache` (run when datmo_cli is imported, before numba is) finds numba a writable cache: numba caches a
+kernel beside its source (a __pycache__ folder) or in the user's cache folder (~/.cache/numba), and with
+neither writable (a read-only install run by a user without a writable HOME) every `@njit(cache=True)`
+raised "cannot cache function ...: no locator available" at import. Then the cache goes to a private folder
+in the temporary folder (NUMBA_CACHE_DIR), or, with no writable temporary folder either, kernels are compiled
+in each process and not cached.
 
 The first cached kernel a process loads makes numba import its typing and lowering registries; one of
 them, numba.np.arraymath, imports scipy.linalg (about 0.3 s, a quarter of a one-scan `datmo run`) only to
@@ -11,10 +18,97 @@ that does, and then imports scipy.linalg itself.
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+
+KERNEL_PACKAGES = ("perception", "tracking", "sim")   # the sub-packages whose modules hold cached kernels
+
+
+def choose_cache() -> str | None:
+    """Make sure numba has somewhere to cache datmo's kernels (module docstring): nothing to do when NUMBA_CACHE_DIR
+    is set, the JIT is off, every kernel package's __pycache__ is writable or the user's cache folder is; else
+    NUMBA_CACHE_DIR becomes a private folder (mode 0700, owned by this user) in the temporary folder, whose path
+    is returned; with none, caching is turned off (numba compiles in each process). A few stat calls; numba is
+    imported only in that last case."""
+    if os.environ.get("NUMBA_CACHE_DIR") or os.environ.get("NUMBA_DISABLE_JIT", "0") != "0":
+        return None
+    package = os.path.dirname(os.path.abspath(__file__))
+    if all(_usable(os.path.join(package, p, "__pycache__")) for p in KERNEL_PACKAGES) or _usable(_user_cache()):
+        return None
+    folder = _private_temp()
+    if folder is None:
+        _without_cache()
+        return None
+    os.environ["NUMBA_CACHE_DIR"] = folder
+    config = sys.modules.get("numba.core.config")
+    if config is not None:   # numba read the environment already: tell it too
+        config.CACHE_DIR = folder
+    return folder
+
+
+def _usable(path: str) -> bool:
+    """Whether a folder could be used for a cache: it is a writable folder, or the nearest part of its path that
+    exists is one (numba makes the rest)."""
+    while not os.path.lexists(path):
+        parent = os.path.dirname(path)
+        if parent == path:
+            return False
+        path = parent
+    return os.path.isdir(path) and os.access(path, os.W_OK | os.X_OK)
+
+
+def _user_cache() -> str:
+    """numba's user-wide cache folder (its appdirs' user_cache_dir for "numba")."""
+    if sys.platform == "darwin":
+        return os.path.expanduser("~/Library/Caches/numba")
+    if sys.platform.startswith("win"):
+        return os.path.join(os.environ.get("LOCALAPPDATA", os.path.expanduser("~")), "numba", "Cache")
+    return os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "numba")
+
+
+def _private_temp() -> str | None:
+    """A cache folder in the temporary folder only this user can write (numba's cache files are loaded as
+    pickles: another user's would run their code): datmo-numba-cache-UID, kept between runs, or a fresh one
+    when that name is taken by something else; None when there is no writable temporary folder."""
+    import stat
+    import tempfile
+
+    try:
+        uid = os.getuid() if hasattr(os, "getuid") else None
+        path = os.path.join(tempfile.gettempdir(), f"datmo-numba-cache-{uid if uid is not None else 'user'}")
+        try:
+            os.mkdir(path, 0o700)
+        except FileExistsError:
+            pass
+        st = os.lstat(path)
+        if (stat.S_ISDIR(st.st_mode) and (uid is None or st.st_uid == uid) and not st.st_mode & 0o077
+                and os.access(path, os.W_OK | os.X_OK)):
+            return path
+        return tempfile.mkdtemp(prefix="datmo-numba-cache-")
+    except (OSError, FileNotFoundError):
+        return None
+
+
+def _without_cache() -> None:
+    """Kernels declared with cache=True compile without a cache when numba finds nowhere to keep one."""
+    from numba.core import caching, dispatcher
+
+    original = dispatcher.Dispatcher.enable_caching
+    if getattr(original, "datmo_fallback", False):
+        return
+
+    def enable_caching(self) -> None:
+        try:
+            original(self)
+        except RuntimeError:   # "cannot cache function ...: no locator available"
+            self._cache = caching.NullCache()
+
+    enable_caching.datmo_fallback = True
+    dispatcher.Dispatcher.enable_caching = enable_caching
+
 
 _READY = False
 _LOCK = threading.Lock()

@@ -267,7 +267,9 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, config:
                 state["tracking"] = TrackStream(run.geometry, odometry=odometry, params=params, markers=markers,
                                                 learned=used != "paper")
             tracking = state["tracking"]
-            return out | tracking.channels(tracking.block(run, decode_features(block.aligned[mcapio.TOPIC_FEATURES])))
+            with mcapio.decoding(stream.path, mcapio.TOPIC_FEATURES):
+                features = decode_features(block.aligned[mcapio.TOPIC_FEATURES], block.first)
+            return out | tracking.channels(tracking.block(run, features))
 
     scans = write_derived(stream, out, command="track", params=effective, derived=derived, stage=stage, force=force,
                           command_line=command_line, aligned=() if computed else (mcapio.TOPIC_FEATURES,),
@@ -314,8 +316,17 @@ def features_file(src: str | Path, out: str | Path, config: DatmoConfig | None =
     derived = derived_topics(segments=not given, features=True, markers=markers)
 
     def stage(block) -> dict:
-        segments = decode_segments(block.aligned[mcapio.TOPIC_SEGMENTS]) if given else None
-        channels, f = features.block(block.run, segments)
+        segments = None
+        if given:
+            with mcapio.decoding(src, mcapio.TOPIC_SEGMENTS):
+                segments = decode_segments(block.aligned[mcapio.TOPIC_SEGMENTS], block.first)
+        try:
+            channels, f = features.block(block.run, segments)
+        except InputError as exc:
+            if not given:
+                raise
+            where = f" (scans {block.first}.. of it)" if block.first else ""
+            raise InputError(f"{src}: {mcapio.TOPIC_SEGMENTS}{where}: {exc}") from None
         counts.scans += len(f)
         counts.lines, counts.circles = counts.lines + len(f.lines), counts.circles + len(f.circles)
         counts.blobs, counts.legs = counts.blobs + len(f.blobs), counts.legs + len(f.legs)

@@ -41,9 +41,11 @@ def quiet_option(f: Callable) -> Callable:
 
 
 def say(message: str) -> None:
-    """An informational line on stderr, unless --quiet."""
+    """An informational line on stderr, unless --quiet (control characters escaped: text.printable)."""
+    from .text import printable
+
     if not quiet():
-        click.echo(message, err=True)
+        click.echo(printable(message), err=True)
 
 
 def console(*, stderr: bool = False):
@@ -64,12 +66,36 @@ def console(*, stderr: bool = False):
 def table(console, **kwargs):
     """A rich Table for `console`: boxed on a terminal; plain columns without borders on a console that is
     not one (see `console`), whose trimmed lines then end with their own text, not padded out to the table's
-    widest row."""
-    from rich.table import Table
+    widest row. Its title and the text of its cells are shown as they are: never read as Rich markup, control
+    characters escaped (text.printable), since they often come from a log (topics, frames, metadata)."""
+    from rich.text import Text
+
+    from .text import printable
 
     if getattr(console, "datmo_plain", False):
         kwargs.update(box=None, pad_edge=False)
-    return Table(**kwargs)
+    if isinstance(kwargs.get("title"), str):
+        kwargs["title"] = Text(printable(kwargs["title"]))
+    return _plain_table()(**kwargs)
+
+
+_PLAIN_TABLE: list[type] = []
+
+
+def _plain_table() -> type:
+    """rich's Table whose add_row takes str cells as plain text (rich is imported on first use only)."""
+    if not _PLAIN_TABLE:
+        from rich.table import Table
+        from rich.text import Text
+
+        from .text import printable
+
+        class PlainTable(Table):
+            def add_row(self, *cells, **kwargs) -> None:
+                super().add_row(*(Text(printable(c)) if isinstance(c, str) else c for c in cells), **kwargs)
+
+        _PLAIN_TABLE.append(PlainTable)
+    return _PLAIN_TABLE[0]
 
 
 class _Trimmed:
@@ -181,10 +207,12 @@ class Bar:
     def tell(self, line: str) -> None:
         """A line said while the bar runs (e.g. a worker's warning): printed above the bar when one is drawn
         (a plain print would tear the bar's line), else on stderr as `say` does, warnings even under --quiet."""
+        from .text import printable
+
         if self.progress is not None:
-            self.progress.console.print(line, markup=False, highlight=False, soft_wrap=True)
+            self.progress.console.print(printable(line), markup=False, highlight=False, soft_wrap=True)
         elif line.startswith("datmo: warning"):
-            click.echo(line, err=True)
+            click.echo(printable(line), err=True)
         else:
             say(line)
 

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .csvsafe import neutralise
 from .errors import InputError, MissingChannelError
 from .log import cdr, mcapio, types
 from .log.vocabulary import (
@@ -37,6 +38,7 @@ from .log.vocabulary import (
     MOBILITY_UNDEFINED,
     STATUS_CONFIRMED,
 )
+from .text import printable
 
 SORT_KEYS = ("lifetime", "distance", "speed", "first", "id")
 FORMATS = ("rich", "json", "csv", "markdown")
@@ -68,9 +70,10 @@ class Decoded:
         return np.repeat(np.arange(len(self.stamps)), self.counts(name))
 
 
-def decode_channel(msgtype: str, payloads: list[bytes]) -> Decoded:
-    """Decode every CDR payload of a flat datmo_msgs type into a Decoded."""
-    decoded = [cdr.decode(msgtype, p) for p in payloads]
+def decode_channel(msgtype: str, payloads: list[bytes], first: int = 0) -> Decoded:
+    """Decode every CDR payload of a flat datmo_msgs type into a Decoded (cdr.DecodeError names a damaged one,
+    counted from `first`: wrap the call in mcapio.decoding to name the file and topic too)."""
+    decoded = cdr.decode_many(msgtype, payloads, first)
     stamps = np.array([d["stamp_ns"] for d in decoded], np.int64)
     out = Decoded(stamps, decoded[0]["frame_id"] if decoded else "")
     if not decoded:
@@ -122,7 +125,8 @@ class RunData:
 
         def channel(topic: str, msgtype: str) -> Decoded | None:
             stamps, payloads = log.messages.get(topic, ([], []))
-            return decode_channel(msgtype, payloads) if payloads else None
+            with mcapio.decoding(log.path, topic):
+                return decode_channel(msgtype, payloads) if payloads else None
 
         return cls(name=str(log.path), metadata=log.metadata, scan_stamps=run.stamps, n_beams=run.geometry.n_beams,
                    tracks=channel(mcapio.TOPIC_TRACKS, types.TRACKS),
@@ -591,7 +595,7 @@ def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES,
     contents = mcapio.LogContents(path=Path(path))
     acc = RunAccumulator(str(Path(path)))
     pending: dict[str, list[bytes]] = {t: [] for t in SUMMARY_TOPICS}
-    state: dict = {"geometry": None, "first": 0, "error": None}
+    state: dict = {"geometry": None, "first": 0, "error": None, "seen": dict.fromkeys(SUMMARY_TOPICS, 0)}
 
     def flush() -> None:
         acc.peak_messages = max(acc.peak_messages, sum(len(p) for p in pending.values()))
@@ -608,19 +612,26 @@ def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES,
         state["first"] += len(scans)
         if progress is not None and scans:
             progress(state["first"])
+        seen = state["seen"]   # messages of each topic before this block's (to name a damaged one)
         if pending[mcapio.TOPIC_FEATURES]:
-            decoded = [cdr.decode(types.FEATURES, p) for p in pending[mcapio.TOPIC_FEATURES]]
+            with mcapio.decoding(contents.path, mcapio.TOPIC_FEATURES):
+                decoded = cdr.decode_many(types.FEATURES, pending[mcapio.TOPIC_FEATURES], seen[mcapio.TOPIC_FEATURES])
             acc.add_features(len(decoded), {k: np.array([len(d[k]) for d in decoded], np.int64)
                                             for k in FEATURE_KINDS if k in decoded[0]})
         landmarks = pending[mcapio.TOPIC_LANDMARKS]
         if landmarks:
-            frame = cdr.decode(types.LANDMARKS, landmarks[0])["frame_id"] if acc.landmark_frame is None else ""
-            acc.add_landmarks(frame, cdr.decode(types.LANDMARKS, landmarks[-1])["landmarks"])
+            k = seen[mcapio.TOPIC_LANDMARKS]
+            with mcapio.decoding(contents.path, mcapio.TOPIC_LANDMARKS):   # the first and last: frame, database
+                head, = cdr.decode_many(types.LANDMARKS, landmarks[:1], k)
+                last, = cdr.decode_many(types.LANDMARKS, landmarks[-1:], k + len(landmarks) - 1)
+            acc.add_landmarks(head["frame_id"] if acc.landmark_frame is None else "", last["landmarks"])
         if pending[mcapio.TOPIC_TRACKS]:
-            tracks = decode_channel(types.TRACKS, pending[mcapio.TOPIC_TRACKS])
+            with mcapio.decoding(contents.path, mcapio.TOPIC_TRACKS):
+                tracks = decode_channel(types.TRACKS, pending[mcapio.TOPIC_TRACKS], seen[mcapio.TOPIC_TRACKS])
             if "tracks" in tracks.items:
                 acc.add_tracks(tracks.stamps[tracks.message_index("tracks")], tracks.items["tracks"])
-        for payloads in pending.values():
+        for topic, payloads in pending.items():
+            seen[topic] += len(payloads)
             payloads.clear()
 
     held = 0
@@ -684,6 +695,7 @@ class Table:
 
 
 def _cell(v: object) -> str:
+    """A value as the rich and markdown tables show it (text with its control characters escaped)."""
     if v is None:
         return "-"
     if isinstance(v, bool):
@@ -692,7 +704,7 @@ def _cell(v: object) -> str:
         return f"{v:,.2f}"
     if isinstance(v, int):
         return f"{v:,}"
-    return str(v)
+    return printable(v)
 
 
 def _table(title: str, rows: list[dict], columns: dict[str, str]) -> Table:
@@ -822,17 +834,20 @@ def render_markdown(tabs: list[Table]) -> str:
         head = "| " + " | ".join(t.columns) + " |"
         rule = "|" + "|".join("---:" if i in t.numeric else "---" for i in range(len(t.columns))) + "|"
         body = ["| " + " | ".join(_cell(v).replace("|", "\\|") for v in row) + " |" for row in t.rows]
-        parts.append("\n".join([f"### {t.title}", "", head, rule, *body]))
+        parts.append("\n".join([f"### {printable(t.title)}", "", head, rule, *body]))
     return "\n\n".join(parts) + "\n"
 
 
 def render_csv(table: Table, keys: list[str] | None = None) -> str:
-    """One table as CSV with raw (unformatted) values; header = `keys` when given, else the column titles."""
+    """One table as CSV with raw (unformatted) values; header = `keys` when given, else the column titles.
+    Text cells have their control characters escaped (text.printable: the CSV is often printed) and, when a
+    spreadsheet would run them as a formula (`=`, `+`, `@`, or `-` not a number), an apostrophe in front
+    (csvsafe.neutralise, as every CSV writer)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(keys or table.columns)
     for row in table.rows:
-        w.writerow(["" if v is None else v for v in row])
+        w.writerow(["" if v is None else neutralise(printable(v)) if isinstance(v, str) else v for v in row])
     return buf.getvalue()
 
 

@@ -50,13 +50,11 @@ def iter_run_features(features) -> Iterator[ScanFeatures]:
                            legs[go[i]:go[i + 1]])
 
 
-def decode_features(payloads: list[bytes]) -> list[ScanFeatures]:
-    """ScanFeatures of datmo_msgs/msg/Features CDR payloads (a log's /datmo/features channel)."""
-    out = []
-    for p in payloads:
-        msg = cdr.decode(types.FEATURES, p)
-        out.append(ScanFeatures(msg["lines"], msg["circles"], msg["blobs"], msg["legs"]))
-    return out
+def decode_features(payloads: list[bytes], first: int = 0) -> list[ScanFeatures]:
+    """ScanFeatures of datmo_msgs/msg/Features CDR payloads (a log's /datmo/features channel, messages first..;
+    cdr.DecodeError names a damaged one)."""
+    return [ScanFeatures(msg["lines"], msg["circles"], msg["blobs"], msg["legs"])
+            for msg in cdr.decode_many(types.FEATURES, payloads, first)]
 
 
 @dataclass

@@ -27,7 +27,7 @@ import numpy as np
 
 from .errors import InputError
 from .log import mcapio, transforms
-from .log.scan import Odometry, ScanGeometry, ScanRun
+from .log.scan import Odometry, ScanGeometry, ScanRun, stamp_problem
 
 _STAMP = struct.Struct("<iI")   # a CDR header stamp: sec, nanosec
 BLOCK_SCANS = 1024   # scans per block: large enough that per-block costs vanish, small enough to stay flat
@@ -68,7 +68,7 @@ class LogStream:
             else:
                 statics.append(payload)
         self.n_scans = mcapio.check_scan_channel(self.log, scan_topic)
-        order.check(self.path)
+        order.check(self.path, scan_topic)
         self.log.messages = {mcapio.TOPIC_ODOM: odom}
         self.statics = [t for p in statics for t in _transforms(self.path, p)]
         # the tracker and the landmarks take the scanner's poses: the base's composed with its mount
@@ -147,12 +147,14 @@ class StampOrder:
 
     The stages take a log in file order and the tracker's time from the stamps, so a scan stamped before the
     one before it, or at the same instant, would make time stand still or run back. Such a log is refused
-    (`check`) before anything is written; `datmo import` rewrites it in time order without the repeats."""
+    (`check`) before anything is written; `datmo import` rewrites it in time order without the repeats. A stamp
+    that is not a time (before 1970, nanosec of 10^9 or more) is refused as what it is, not as out of order."""
 
     def __init__(self) -> None:
         self.n = 0
         self.bad = 0
         self.first_bad: int | None = None
+        self.not_a_time: str | None = None   # the first stamp that is not one, as "scan K: problem"
         self._top: int | None = None
 
     def add(self, payload: bytes) -> None:
@@ -160,6 +162,11 @@ class StampOrder:
         the decoder to refuse)."""
         if len(payload) >= 12 and payload[1] == 1:
             sec, nanosec = _STAMP.unpack_from(payload, 4)
+            problem = stamp_problem(sec, nanosec)
+            if problem:
+                self.not_a_time = self.not_a_time or f"scan {self.n}: {problem}"
+                self.n += 1
+                return
             t = sec * 1_000_000_000 + nanosec
             if self._top is not None and t <= self._top:
                 self.bad += 1
@@ -169,8 +176,11 @@ class StampOrder:
                 self._top = t
         self.n += 1
 
-    def check(self, path: Path) -> None:
-        """Raise InputError naming `path`, the count and the first scan when the stamps do not increase."""
+    def check(self, path: Path, topic: str = mcapio.TOPIC_SCAN) -> None:
+        """Raise InputError naming `path`, the count and the first scan when the stamps do not increase (or the
+        first scan whose stamp is not a time)."""
+        if self.not_a_time:
+            raise InputError(f"{path}: bad LaserScan message on {topic}: {self.not_a_time}")
         if self.bad:
             raise InputError(f"{path}: scan stamps go backwards or repeat at {self.bad} of {self.n} scans (first "
                              f"at scan {self.first_bad}); datmo import {path} -o FIXED.mcap writes them in time "

@@ -6,8 +6,8 @@ datmo_cli, at the top or inside a function, points down the layers or within its
                of the core packages' parameter sections)
     core       perception, tracking, sim, lms2xx (each importing only itself, log and base), above log
     log        datmo_cli.log.* (importing only itself and base)
-    base       errors, extras, outputs, input_files, bounds, numba_runtime, progress, csvsafe and the package
-               itself (__version__): usable by every layer, importing only base
+    base       errors, extras, outputs, input_files, bounds, numba_runtime, progress, csvsafe, text and the
+               package itself (__version__): usable by every layer, importing only base
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import pytest
 PACKAGE = "datmo_cli"
 ROOT = Path(__file__).resolve().parent.parent / PACKAGE
 
-BASE = {"errors", "extras", "outputs", "input_files", "bounds", "numba_runtime", "progress", "csvsafe"}
+BASE = {"errors", "extras", "outputs", "input_files", "bounds", "numba_runtime", "progress", "csvsafe", "text"}
 CLI = {"cli", "__main__", "commands"}
 CORE = {"perception", "tracking", "sim", "lms2xx"}
 RANK = {"base": 0, "log": 1, "core": 2, "pipeline": 3, "cli": 4}

@@ -98,3 +98,50 @@ def test_bad_settings_are_refused():
         LMS2xx("/dev/null", angle=180, resolution=0.25)
     with pytest.raises(DeviceError, match="baud"):
         LMS2xx("/dev/null", baud=115200)
+
+
+class BurstyLMS(FakeLMS):
+    """A FakeLMS whose stream comes in scripted bursts: `bursts[k]` = (host time ns when it is read, the indices
+    of the scans it holds), as a loaded machine reads a pty or a USB adapter hands over its buffer: a telegram
+    read late on its own, then the next ones all at once. `now` is the host clock (the driver's clock)."""
+
+    def __init__(self, scans: list[bytes], bursts: list[tuple[int, list[int]]]) -> None:
+        super().__init__([])
+        self.stream, self.bursts, self.now = scans, list(bursts), 10**9
+        self.pending = bytearray()
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self.out) or len(self.pending)
+
+    def read(self, n: int = 1) -> bytes:
+        if self.out or not self.hang_up:   # replies; nothing streams before the 20 24 (hang_up: it came)
+            return super().read(n)
+        if not self.pending:
+            if not self.bursts:
+                raise OSError("device disconnected")
+            self.now, which = self.bursts.pop(0)
+            self.pending += b"".join(self.stream[i] for i in which)
+        data = bytes(self.pending[:n])
+        del self.pending[:n]
+        return data
+
+
+def test_stamps_are_strictly_increasing_when_bytes_come_in_bursts():
+    """A telegram read late on its own, then two read at once 1 ms later: extrapolated back at the line's
+    byte rate, the first of those once landed before the one read alone (issue 25: 12.9 ms backwards on a
+    loaded machine). A telegram cannot start before the one before it ended."""
+    values = [np.full(361, 100 * (k + 1), np.uint16) for k in range(5)]
+    scans = [P.reply_frame(P.encode_b0(v)) for v in values]
+    ms = 1_000_000
+    port = BurstyLMS(scans, [(5_000 * ms, [0]), (5_001 * ms, [1, 2]), (9_000 * ms, [3]), (9_000 * ms + 1, [4])])
+    driver = LMS2xx(port, baud=9600, clock=lambda: port.now)
+    driver.connect()
+    driver.start()
+    got = [driver.read_scan(0.5) for _ in range(5)]
+    assert all(np.array_equal(g.values, v) for g, v in zip(got, values, strict=True))   # every scan, in order
+    stamps = np.array([g.stamp_ns for g in got])
+    line = len(scans[0]) * 10e9 / 9600     # ns a telegram takes on the line
+    assert np.all(np.diff(stamps) >= int(line)), np.diff(stamps)
+    alone = (len(scans[0]) - 1) * 10e9 / 9600   # a telegram read on its own started this long before the read
+    assert stamps[0] == int(5_000 * ms - alone) and stamps[3] == int(9_000 * ms - alone)   # their own estimates

@@ -41,7 +41,8 @@ def rosbags_scan(stamp: int, ranges: np.ndarray, inten: np.ndarray, g: ScanGeome
 )
 def test_laserscan_bytes_equal_rosbags(n_scans, n_beams, frame_len, with_intensities, seed):
     rng = np.random.default_rng(seed)
-    g = ScanGeometry(float(rng.uniform(-3, 0)), float(rng.uniform(1e-4, 0.05)), n_beams, float(rng.uniform(0, 1)),
+    step = float(rng.uniform(1e-4, min(0.05, 6.28 / max(n_beams - 1, 1))))   # the beams span at most a turn
+    g = ScanGeometry(float(rng.uniform(-3, 0)), step, n_beams, float(rng.uniform(0, 1)),
                      float(rng.uniform(1, 100)), float(rng.uniform(0, 1e-3)), float(rng.uniform(0, 0.5)),
                      "f" * frame_len)
     ranges = rng.uniform(0, 80, (n_scans, n_beams)).astype(np.float32)

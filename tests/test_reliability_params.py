@@ -37,6 +37,8 @@ COMPANIONS = {("features", "circle_radius_min", "hi"): {"circle_radius_max": 5.0
               ("features", "circle_radius_max", "lo"): {"circle_radius_min": 0.001},
               ("features", "bench_min_length", "hi"): {"bench_max_length": 20.0},
               ("features", "bench_max_length", "lo"): {"bench_min_length": 0.01},
+              ("track", "step_min", "hi"): {"step_max": 5.0},
+              ("track", "step_max", "lo"): {"step_min": 0.0},
               ("track", "confirm_window", "lo"): {"confirm_hits": 2},
               ("track", "confirm_hits", "hi"): {"confirm_window": 16}}
 

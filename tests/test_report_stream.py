@@ -386,9 +386,9 @@ def test_what_is_held_does_not_grow_with_the_log(tmp_path, monkeypatch):
     decoded_at_once = []
     decode_channel = report.decode_channel
 
-    def counting(msgtype, payloads):
+    def counting(msgtype, payloads, *first):
         decoded_at_once.append(len(payloads))
-        return decode_channel(msgtype, payloads)
+        return decode_channel(msgtype, payloads, *first)
 
     monkeypatch.setattr(report, "decode_channel", counting)
     held = {}

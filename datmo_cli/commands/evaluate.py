@@ -31,7 +31,8 @@ def score_file(path: Path, *, gt_csv: Path | None = None, match_radius: float = 
     topics = [mcapio.TOPIC_TRACKS] + ([] if gt_csv else [mcapio.TOPIC_GROUND_TRUTH])
     log = mcapio.read_log(path, topics=topics)
     require(log, mcapio.TOPIC_TRACKS)
-    tracks = decode_channel(types.TRACKS, log.messages[mcapio.TOPIC_TRACKS][1])
+    with mcapio.decoding(path, mcapio.TOPIC_TRACKS):
+        tracks = decode_channel(types.TRACKS, log.messages[mcapio.TOPIC_TRACKS][1])
     hyps = ev.track_frames(tracks.stamps, tracks.offsets["tracks"], tracks.items["tracks"],
                            include_coasting=include_occluded, exclude_static=exclude_static)
     if gt_csv is not None:
@@ -43,7 +44,8 @@ def score_file(path: Path, *, gt_csv: Path | None = None, match_radius: float = 
         if not log.has(mcapio.TOPIC_GROUND_TRUTH):
             raise MissingChannelError(f"{path}: no messages on {mcapio.TOPIC_GROUND_TRUTH}; run datmo simulate "
                                       "first, or give annotations with --gt FILE.csv (stamp_ns,id,x,y)")
-        truth = decode_channel(types.GROUND_TRUTH, log.messages[mcapio.TOPIC_GROUND_TRUTH][1])
+        with mcapio.decoding(path, mcapio.TOPIC_GROUND_TRUTH):
+            truth = decode_channel(types.GROUND_TRUTH, log.messages[mcapio.TOPIC_GROUND_TRUTH][1])
         gt, regions = ev.ground_truth_frames(truth.stamps, truth.offsets["objects"], truth.items["objects"],
                                              truth.scalars.get("sensor_theta"), include_occluded=include_occluded)
         tolerance = 0

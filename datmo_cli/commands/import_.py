@@ -46,6 +46,7 @@ def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic:
     from ..log.importers import open_import, write_import
     from ..outputs import check_output
     from ..progress import say
+    from ..text import printable
 
     check_output(output, force=force, inputs=[src])   # before reading a big input
     with _progress(src) as progress:
@@ -64,7 +65,7 @@ def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic:
             stats = write_import(stream, output, force=force, provenance=provenance, laser_pose=mount)
         finally:
             for w in stream.warnings:
-                click.echo(f"datmo: warning: {w}", err=True)
+                click.echo(f"datmo: warning: {printable(w)}", err=True)
     odom = f", {stats.poses} poses on /odom" if stats.poses else ""
     say(f"{output}: {stats.scans} scans of {stats.geometry.describe()} from {stream.kind} {stream.topic}{odom}")
 

@@ -36,7 +36,12 @@ def describe(path: Path) -> dict:
         "metadata": log.metadata,
         "scan": None,
     }
-    if log.has(mcapio.TOPIC_SCAN):
+    several = mcapio.several_channels(log, mcapio.TOPIC_SCAN)
+    if several:   # info still shows the channels; the stage commands refuse the log
+        import warnings
+
+        warnings.warn(several, stacklevel=2)
+    elif log.has(mcapio.TOPIC_SCAN):
         run = mcapio.run_from_log(log)
         g = run.geometry
         dt = np.diff(run.stamps) / 1e9
@@ -64,10 +69,11 @@ def describe(path: Path) -> dict:
 def _print_rich(info: dict) -> None:
     from ..progress import console as make_console
     from ..progress import table as make_table
+    from ..text import markup
 
     console = make_console()
-    console.print(f"[bold]{info['file']}[/]  {info['size_bytes'] / 1e6:.2f} MB, "
-                  f"{info['duration_s']:.1f} s, profile {info['profile'] or '-'}, written by {info['library'] or '-'}")
+    console.print(f"[bold]{markup(info['file'])}[/]  {info['size_bytes'] / 1e6:.2f} MB, {info['duration_s']:.1f} s, "
+                  f"profile {markup(info['profile'] or '-')}, written by {markup(info['library'] or '-')}")
     if info["truncated"]:
         console.print("[yellow]truncated: only complete chunks were read[/]")
     if info["corrupt_chunks"]:
@@ -122,7 +128,7 @@ def command(log: Path, as_json: bool) -> None:
     import warnings
 
     info = describe(log)
-    if info["scan"] is None:
+    if not any(c["topic"] == "/scan" and c["messages"] for c in info["channels"]):
         warnings.warn(f"{log}: no scans on /scan (it holds {len(info['channels'])} other channel(s))", stacklevel=1)
     if as_json:
         click.echo(json.dumps(info, indent=2))

@@ -32,7 +32,7 @@ def _scan_count(spec: str) -> int | None:
     if remote(spec):
         return None
     try:
-        return mcapio.summary(local(spec)).topics()[mcapio.TOPIC_SCAN].count or None
+        return mcapio.summary(local(spec), warn=False).topics()[mcapio.TOPIC_SCAN].count or None   # the task warns
     except Exception:  # only an estimate for the bar
         return None
 
@@ -169,6 +169,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     from ..batch import DONE, FAILED, SKIPPED, RunOptions, folder_lock, remote
     from ..errors import DatmoError
     from ..perception.threads import set_default
+    from ..text import printable
 
     set_default(threads)   # a run-time setting: not among the parameters (the outputs do not depend on it)
     if scheduler is not None and jobs is not None:
@@ -185,7 +186,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         _final_table(records, seconds, where)
         for r in records:
             if r["status"] == FAILED:
-                click.echo(f"datmo: error: {r['error']}", err=True)
+                click.echo(f"datmo: error: {printable(r['error'])}", err=True)
         ok = [r for r in records if r["status"] in (DONE, SKIPPED)]
         if ok and (not no_report or plot_of) and not remote(out_dir):
             made = {Path(r["output"]) for r in ok if r["status"] == DONE}

@@ -36,6 +36,35 @@ class _ManyFilesCommand(click.Command):
         return super().parse_args(ctx, out)
 
 
+def _labelled_or_empty(positives: tuple[Path, ...], negatives: tuple[Path, ...]) -> None:
+    """InputError when a --negative file is a --positive file too (the same file, a link to it or a copy of
+    it): its legs would be taught as both legs and not legs, and the model would find none."""
+    from ..errors import InputError
+
+    for n in negatives:
+        for p in positives:
+            if _same_data(n, p):
+                also = "" if str(n) == str(p) else f" (as {p})"
+                raise InputError(f"{n}: given as --negative and as --positive{also}; a recording is either labelled "
+                                 "or empty of people")
+
+
+def _same_data(a: Path, b: Path) -> bool:
+    """Whether two existing paths hold the same data: one file (or folder), or byte-identical copies."""
+    import os
+
+    from ..log.mcapio import sha256_of
+
+    try:
+        if os.path.samefile(a, b):
+            return True
+        if a.is_dir() != b.is_dir() or (a.is_file() and a.stat().st_size != b.stat().st_size):
+            return False
+        return sha256_of(a) == sha256_of(b)
+    except OSError:   # a missing or unreadable file: reading it says so
+        return False
+
+
 def _fmt(v: float | None, digits: int = 3) -> str:
     return "n/a" if v is None or v != v else f"{v:.{digits}f}"
 
@@ -104,6 +133,7 @@ def command(positives: tuple[Path, ...], negatives: tuple[Path, ...], topic: str
     check_output(output, force=force, inputs=[*positives, *negatives], what="model")   # before the training
     if not positives:
         raise InputError("no labelled file: give at least one with --positive")
+    _labelled_or_empty(positives, negatives)
     T.require_sklearn()
     with bar("reading", len(positives) + len(negatives), unit="steps") as shown:
         labelled, empty = [], []

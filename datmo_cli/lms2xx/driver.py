@@ -4,7 +4,8 @@ The start-up sequence is lms2xx-protocol.md §5: stop any output, ask for status
 19200 and 500000 Bd until a B1 arrives, switch to the requested baud, set the variant (3Bh) and units /
 real-time indices (77h, after installation mode) only when they differ from the device's (its EEPROM
 allows limited writes), then start continuous output (20 24). Scans are stamped with the host time of their
-first byte (int ns, `time.time_ns` clock) estimated from the read time and the byte duration.
+first byte (int ns, `time.time_ns` clock) estimated from the read time and the byte duration, and never before
+the previous frame's last byte (strictly increasing stamps, however late the bytes are read).
 
 The port is any object with read(n)/write(b)/baudrate/timeout/close (pyserial's Serial, or a fake in
 tests); `in_waiting` and `reset_input_buffer` are used when present.
@@ -124,6 +125,7 @@ class LMS2xx:
         self._parser = P.FrameParser(replies=True)
         self._items: collections.deque[tuple[P.Frame | int, int]] = collections.deque()
         self._chunks: collections.deque[tuple[int, int]] = collections.deque(maxlen=256)  # (end offset, t ns)
+        self._line_free_ns = 0   # when the last frame's last byte came (ns): the earliest the next can start
         self._prev: Scan | None = None
         self._partials: dict[int, tuple[P.Telegram, int, bytes]] = {}
         self._received = 0
@@ -214,13 +216,23 @@ class LMS2xx:
         self._chunks.append((end, t))
         for it in items:
             if isinstance(it, P.Frame):
-                stamp = self._time_of(it.start, end, t)
+                stamp = self._after_previous(self._time_of(it.start, end, t), len(it.raw))
                 if self.on_telegram is not None:
                     self.on_telegram(it, stamp)
                 self._items.append((it, stamp))
             else:
                 self._items.append((it, t))
         return len(data)
+
+    def _after_previous(self, stamp: int, n_bytes: int) -> int:
+        """A frame's stamp (ns), raised to the end of the frame before it when the estimate is earlier; the line's
+        bytes come one after another, so a frame cannot start before the one before it ended. An estimate can:
+        after a stall (a loaded machine, a USB adapter's latency timer) the port hands over a burst of bytes that
+        arrived at the line's rate but are read at once, and the frames early in a burst are extrapolated back
+        past a frame read, late, on its own just before. Stamps are strictly increasing under any load."""
+        stamp = max(stamp, self._line_free_ns)
+        self._line_free_ns = stamp + max(1, int(n_bytes * self._byte_ns()))
+        return stamp
 
     def _time_of(self, offset: int, end: int, t: int) -> int:
         """Host time (ns) at which the byte at stream `offset` arrived: extrapolated back, at the line's byte

@@ -48,22 +48,25 @@ def member_path(output: str) -> str:
 # ----------------------------------------------------------------------------------------------- checks
 
 
-def _bag_files(folder: Path, entries: list[str]) -> bool:
-    """Whether `folder` (holding `entries`) is a bag: metadata.yaml and only the regular files it lists."""
+def _not_bag(folder: Path, entries: list[str]) -> str | None:
+    """Why `folder` (holding `entries`) is not a bag, naming what is foreign in it, or None when it is one:
+    metadata.yaml and only the regular files it lists."""
     from ruamel.yaml import YAML
     from ruamel.yaml.error import YAMLError
 
     if METADATA not in entries:
-        return False
+        return f"it holds {entries[0]!r} and no {METADATA}"
     try:
         info = YAML(typ="safe").load((folder / METADATA).read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
         listed = {PurePath(str(x)).name for x in info["relative_file_paths"]}
     except (OSError, YAMLError, UnicodeDecodeError, KeyError, TypeError):
-        return False
+        return f"its {METADATA} is not a ROS 2 bag's"
     for name in entries:
-        if name != METADATA and (name not in listed or not stat.S_ISREG(os.lstat(folder / name).st_mode)):
-            return False
-    return True
+        if name != METADATA and name not in listed:
+            return f"it holds {name!r}, which its {METADATA} does not list"
+        if name != METADATA and not stat.S_ISREG(os.lstat(folder / name).st_mode):
+            return f"it holds {name!r}, which is not a regular file"
+    return None
 
 
 def _state(folder: Path, force: bool) -> str:
@@ -84,9 +87,10 @@ def _state(folder: Path, force: bool) -> str:
         raise outputs.os_error(exc, folder) from None
     if not entries:
         return "empty"
-    if not _bag_files(folder, entries):
-        raise OutputError(f"{folder}: a folder that is not a ROS 2 bag (it holds {entries[0]!r}); it is never "
-                          "replaced (even with --force)")
+    foreign = _not_bag(folder, entries)
+    if foreign:
+        raise OutputError(f"{folder}: a folder that is not a ROS 2 bag ({foreign}); it is never replaced (even "
+                          "with --force)")
     if not force:
         raise OutputExistsError(f"{folder}: exists; use --force to replace it")
     return "bag"

@@ -160,14 +160,42 @@ def _put_string(put, text: str) -> None:
     put(len(raw).to_bytes(4, "little") + raw, 4)
 
 
+class DecodeError(ValueError):
+    """A payload that is not a `msgtype` message: a length runs past its end, bytes follow its last field, a
+    string is not UTF-8, it is not little-endian CDR. The message says which (callers add the file and topic)."""
+
+
+def decode_many(msgtype: str, payloads: list, first: int = 0) -> list[dict]:
+    """`decode` of each payload; a DecodeError names the message (counted from `first`)."""
+    out = []
+    for i, p in enumerate(payloads):
+        try:
+            out.append(decode(msgtype, p))
+        except DecodeError as exc:
+            raise DecodeError(f"message {first + i}: {exc}") from None
+    return out
+
+
 def decode(msgtype: str, data: bytes | memoryview) -> dict:
     """Decode CDR bytes of a flat message into a dict (the inverse of `encode`).
 
-    Sequences come back as read-only numpy views into `data`.
+    Sequences come back as read-only numpy views into `data`. DecodeError when `data` is not such a message:
+    every length is checked against the payload's size (a damaged length is refused, never read past), and at
+    most the 3 bytes of alignment padding may follow the last field.
     """
     if bytes(data[:2]) != CDR_HEADER[:2]:
-        raise ValueError("not little-endian CDR data")
+        raise DecodeError(f"{msgtype}: not little-endian CDR data")
     buf = memoryview(data)[4:]
+    try:
+        out, pos = _decode(msgtype, buf)
+    except (ValueError, IndexError, UnicodeDecodeError) as exc:   # numpy: a length past the end of the buffer
+        raise DecodeError(f"{msgtype} of {len(buf) + 4} bytes: a length runs past its end ({exc})") from None
+    if not 0 <= len(buf) - pos <= 3:
+        raise DecodeError(f"{msgtype} of {len(buf) + 4} bytes: {len(buf) - pos} bytes after its last field")
+    return out
+
+
+def _decode(msgtype: str, buf: memoryview) -> tuple[dict, int]:
     out: dict = {}
     pos = 0
     for f in _plan(msgtype):
@@ -195,11 +223,13 @@ def decode(msgtype: str, data: bytes | memoryview) -> dict:
                 pos = _align(pos, f.align)
             out[f.name] = np.frombuffer(buf, f.dtype, n, pos)
             pos += f.dtype.itemsize * n
-    return out
+    return out, pos
 
 
 def _get_string(buf: memoryview, pos: int) -> tuple[str, int]:
     pos = _align(pos, 4)
     n = int.from_bytes(buf[pos:pos + 4], "little")
+    if pos + 4 + n > len(buf):
+        raise ValueError(f"a string of {n} bytes at byte {pos}")
     text = bytes(buf[pos + 4:pos + 4 + n - 1]).decode() if n else ""
     return text, pos + 4 + n

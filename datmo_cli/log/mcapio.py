@@ -16,6 +16,7 @@ import struct
 import warnings
 import zlib
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -246,9 +247,15 @@ class _CorruptChunk(Exception):
     pass
 
 
+MAX_CHUNK_BYTES = 256 << 20   # uncompressed bytes a chunk may declare: writers close a chunk at 1-4 MiB (datmo 1,
+# rosbag2 0.75) plus one message; a declared size beyond this is damage or a decompression bomb, never read
+
+
 def _chunk_records(buf, body: int, end: int) -> bytes | memoryview:
     """The records of the chunk whose body is buf[body:end], decompressed and checked against the chunk's
-    uncompressed size and CRC-32 (0: none recorded); raises _CorruptChunk saying what is wrong."""
+    uncompressed size and CRC-32 (0: none recorded); raises _CorruptChunk saying what is wrong. A chunk that
+    declares more than MAX_CHUNK_BYTES is not decompressed, and no chunk decompresses to more than it declares
+    (the memory a chunk takes is bounded before it is spent)."""
     import zstandard
 
     try:
@@ -257,13 +264,14 @@ def _chunk_records(buf, body: int, end: int) -> bytes | memoryview:
         size = _U64.unpack_from(buf, cpos)[0]
         if cpos + 8 + size > end:
             raise _CorruptChunk("its records run past its end")
+        if uncompressed > MAX_CHUNK_BYTES:
+            raise _CorruptChunk(f"declares {uncompressed:,} bytes uncompressed, more than a chunk may hold "
+                                f"({MAX_CHUNK_BYTES:,})")
         data = buf[cpos + 8:cpos + 8 + size]
         if compression == "zstd":
             data = zstandard.ZstdDecompressor().decompress(data, max_output_size=uncompressed)
         elif compression == "lz4":
-            import lz4.frame
-
-            data = lz4.frame.decompress(data)
+            data = _lz4(data, uncompressed)
         elif compression:
             raise _CorruptChunk(f"unsupported compression {compression!r}")
         else:
@@ -275,6 +283,19 @@ def _chunk_records(buf, body: int, end: int) -> bytes | memoryview:
     if crc and zlib.crc32(data) != crc:
         raise _CorruptChunk("CRC mismatch")
     return data
+
+
+def _lz4(data, uncompressed: int) -> bytes:
+    """An lz4 frame decompressed to at most `uncompressed` bytes (one more tells that it holds more)."""
+    import lz4.frame
+
+    decompressor = lz4.frame.LZ4FrameDecompressor()
+    out = decompressor.decompress(bytes(data), max_length=uncompressed + 1)
+    if len(out) > uncompressed:
+        raise _CorruptChunk(f"decompresses to more than the {uncompressed:,} bytes its header says")
+    if not decompressor.eof:
+        raise _CorruptChunk("its lz4 frame ends early")
+    return out
 
 
 class _Walk:
@@ -419,9 +440,13 @@ class _Walk:
                     self.out.corrupt_chunks += missing
 
 
-def summary(path: str | Path) -> LogContents:
-    """Channels (with message counts and time ranges) and metadata of a log, without payloads."""
-    return read_log(path, topics=())
+def summary(path: str | Path, *, warn: bool = True) -> LogContents:
+    """Channels (with message counts and time ranges) and metadata of a log, without payloads. `warn`: say
+    that the file is truncated or has corrupt chunks (the command that reads it next says it otherwise)."""
+    out = LogContents(path=Path(path))
+    for _ in _walk_file(path, (), out, warn):
+        pass
+    return out
 
 
 def read_messages(path: str | Path, topic: str, *, required: bool = True) -> tuple[np.ndarray, list[bytes]]:
@@ -439,8 +464,35 @@ def _messages_of(log: LogContents, topic: str, required: bool = True) -> tuple[n
     return np.array(stamps, np.int64), payloads
 
 
+@contextmanager
+def decoding(path: str | Path, topic: str) -> Iterator[None]:
+    """Decode errors of `topic`'s messages (cdr.DecodeError: a damaged payload in a sound chunk) as one InputError
+    naming the file and the topic."""
+    from .cdr import DecodeError
+
+    try:
+        yield
+    except DecodeError as exc:
+        raise InputError(f"{path}: bad message on {topic}: {exc}") from None
+
+
+def several_channels(log: LogContents, topic: str) -> str | None:
+    """What is wrong when two channels of the log hold messages on `topic` (two streams, which a read by topic
+    would interleave), else None."""
+    on = [c for c in sorted(log.channels.values(), key=lambda c: c.id) if c.topic == topic and c.count]
+    if len(on) < 2:
+        return None
+    which = ", ".join(f"id {c.id}: {c.count} {c.msgtype}" for c in on)
+    return (f"{log.path}: {topic} is on {len(on)} channels ({which}); their messages would interleave into one "
+            "stream: keep one channel, or give each its own topic")
+
+
 def check_scan_channel(log: LogContents, topic: str = TOPIC_SCAN) -> int:
-    """The number of scans on `topic` (read or not); raises when it holds none or not CDR LaserScans."""
+    """The number of scans on `topic` (read or not); raises when it holds none or not CDR LaserScans, or when
+    two channels of the file hold messages on it (two scan streams, which a read by topic would interleave)."""
+    problem = several_channels(log, topic)
+    if problem:
+        raise InputError(problem)
     ch = log.topics().get(topic)
     if ch is not None and ch.count and ch.msgtype not in (types.LASERSCAN, "sensor_msgs/LaserScan"):
         raise InputError(f"{log.path}: {topic} holds {ch.msgtype}, not sensor_msgs/msg/LaserScan")

@@ -209,21 +209,53 @@ class GeometryChangeError(ValueError):
     """Scans of one topic change geometry mid-run."""
 
 
+def stamp_problem(sec: int, nanosec: int) -> str | None:
+    """What is wrong with a header stamp that is not a time after 1970 (sec < 0, nanosec of 10^9 or more)."""
+    if sec < 0:
+        return f"header stamp before 1970 (sec = {sec})"
+    if nanosec >= _NS:
+        return f"header stamp nanosec = {nanosec} is not below 10^9"
+    return None
+
+
+def geometry_problem(angle_min: float, angle_increment: float, n_beams: int, range_min: float,
+                     range_max: float) -> str | None:
+    """What is wrong with a finite scan geometry no scanner has (radians, metres), or None: a negative
+    range_min, a range_max not above it (no reading could be a return), a zero angle step, or beams that
+    span more than a turn."""
+    import math
+
+    if range_min < 0:
+        return f"range_min is negative ({range_min:g} m)"
+    if range_max <= range_min:
+        return f"range_max {range_max:g} m is not above range_min {range_min:g} m"
+    if n_beams > 1 and angle_increment == 0:
+        return "angle_increment is 0"
+    if abs(angle_increment) * (n_beams - 1) > 2 * math.pi * 1.001:
+        return f"{n_beams} beams of {math.degrees(angle_increment):g}° span more than a turn"
+    return None
+
+
 def _check_rows(rows: np.ndarray, first: int | None) -> None:
     """Raise ValueError ("scan K: ...", K counted from `first`; no scan named when None) for the first of
-    decoded LaserScan rows whose header stamp is before 1970 or not a time, or whose geometry is not finite."""
-    bad = np.flatnonzero(rows["sec"] < 0)
+    decoded LaserScan rows whose header stamp is before 1970 or not a time, or whose geometry is not finite
+    or not a scanner's (geometry_problem)."""
+    bad = np.flatnonzero((rows["sec"] < 0) | (rows["nanosec"] >= _NS))
     if len(bad):
-        raise ValueError(f"{_scan_label(first, bad[0])}header stamp before 1970 "
-                         f"(sec = {int(rows['sec'][bad[0]])})")
-    bad = np.flatnonzero(rows["nanosec"] >= _NS)
-    if len(bad):
-        raise ValueError(f"{_scan_label(first, bad[0])}header stamp nanosec = "
-                         f"{int(rows['nanosec'][bad[0]])} is not below 10^9")
+        r = rows[bad[0]]
+        raise ValueError(_scan_label(first, bad[0]) + stamp_problem(int(r["sec"]), int(r["nanosec"])))
     for name in GEOMETRY_FIELDS:
         bad = np.flatnonzero(~np.isfinite(rows[name]))
         if len(bad):
             raise ValueError(f"{_scan_label(first, bad[0])}{name} is {float(rows[name][bad[0]])}")
+    n = rows.dtype["ranges"].shape[0] if rows.dtype["ranges"].shape else 1
+    step = np.abs(rows["angle_increment"].astype(np.float64))
+    bad = np.flatnonzero((rows["range_min"] < 0) | (rows["range_max"] <= rows["range_min"])
+                         | ((step == 0) & (n > 1)) | (step * (n - 1) > 2 * np.pi * 1.001))
+    if len(bad):
+        r = rows[bad[0]]
+        raise ValueError(_scan_label(first, bad[0]) + geometry_problem(
+            float(r["angle_min"]), float(r["angle_increment"]), n, float(r["range_min"]), float(r["range_max"])))
 
 
 def _scan_label(first: int | None, i: int) -> str:

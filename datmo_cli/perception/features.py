@@ -407,9 +407,10 @@ def landmark_payloads(f: RunFeatures) -> list[bytes]:
             for k, s in enumerate(np.asarray(f.stamps, np.int64).tolist())]
 
 
-def decode_segments(payloads: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(start, end, offsets) of datmo_msgs/msg/Segments payloads (a log's /datmo/segments)."""
-    msgs = [cdr.decode(types.SEGMENTS, p) for p in payloads]
+def decode_segments(payloads: list[bytes], first: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(start, end, offsets) of datmo_msgs/msg/Segments payloads (a log's /datmo/segments, messages first..;
+    cdr.DecodeError names a damaged one)."""
+    msgs = cdr.decode_many(types.SEGMENTS, payloads, first)
     starts = [np.asarray(m["start"], np.int64) for m in msgs]
     ends = [np.asarray(m["end"], np.int64) for m in msgs]
     offsets = _offsets(np.array([len(s) for s in starts], np.int64))

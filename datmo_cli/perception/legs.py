@@ -302,14 +302,34 @@ class LegModel:
     @classmethod
     def load(cls, path: str | Path) -> LegModel:
         """Read a model written by save. InputError naming the file when it is missing, corrupt or made for
-        other features than FEATURE_NAMES."""
+        other features than FEATURE_NAMES. Nothing is loaded before the arrays' declared shapes are read from
+        the file and found within a model's size (at most 256 MiB of arrays: a file declaring more, whatever its
+        own size, is refused before any memory is spent); then every array must have a model's type and shape
+        (integer node indices, finite thresholds and leaf values, a JSON object of provenance)."""
+        import math
+
         from ..input_files import check
 
+        most = 256 << 20   # bytes of arrays a leg model may declare (the packaged one: about 0.5 MB)
         path = Path(path)
         if not path.exists():
             raise InputError(f"{path}: no such leg model file")
         check(path)   # a folder, FIFO or device: one line saying what it is
         try:
+            declared = 0
+            with zipfile.ZipFile(path) as zf:
+                for info in zf.infolist():
+                    with zf.open(info) as member:
+                        version = np.lib.format.read_magic(member)
+                        if version not in ((1, 0), (2, 0)):
+                            raise ValueError(f"{info.filename}: .npy format {version[0]}.{version[1]}")
+                        read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                                       else np.lib.format.read_array_header_2_0)
+                        shape, _, dtype = read_header(member)
+                    declared += math.prod(shape) * dtype.itemsize
+                    if declared > most:
+                        raise InputError(f"{path}: not a leg model file ({info.filename} and the arrays before "
+                                         f"it declare {declared:,} bytes, more than a leg model takes ({most:,}))")
             with np.load(path, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
         except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, io.UnsupportedOperation) as exc:
@@ -318,6 +338,18 @@ class LegModel:
                                "base", "scale", "threshold_p", "feature_names", "provenance") if k not in data]
         if missing:
             raise InputError(f"{path}: not a leg model file (missing {', '.join(missing)})")
+        arrays = ("feature", "left", "right", "roots", "threshold", "value", "feature_names")
+        for key, kind in (("format_version", "i"), ("feature", "i"), ("left", "i"), ("right", "i"), ("roots", "i"),
+                          ("threshold", "f"), ("value", "f"), ("base", "f"), ("scale", "f"), ("threshold_p", "f"),
+                          ("kind", "U"), ("provenance", "U"), ("feature_names", "U")):
+            a, one = data[key], key not in arrays
+            if a.dtype.kind != kind and not (kind == "f" and a.dtype.kind == "i") or a.ndim != (0 if one else 1):
+                want = {"i": "integer", "f": "number", "U": "string"}[kind]
+                want = ("an " if kind == "i" else "a ") + want if one else f"a list of {want}s"
+                raise InputError(f"{path}: corrupt leg model ({key} is {a.dtype} of shape {a.shape}; a model's is "
+                                 f"{want})")
+            if kind == "f" and not np.all(np.isfinite(a)):
+                raise InputError(f"{path}: corrupt leg model ({key} holds NaN or infinite values)")
         if int(data["format_version"]) != FORMAT_VERSION:
             raise InputError(f"{path}: leg model format {int(data['format_version'])}, this datmo reads "
                              f"{FORMAT_VERSION}")
@@ -327,6 +359,22 @@ class LegModel:
                              f"this datmo computes ({', '.join(FEATURE_NAMES)}); retrain it")
         try:
             provenance = json.loads(str(data["provenance"]))
+        except ValueError as exc:
+            raise InputError(f"{path}: corrupt leg model (provenance is not JSON: {exc})") from None
+
+        def sane(clusters) -> bool:   # how model_clusters reads provenance["clusters"]
+            if not isinstance(clusters, dict) or clusters.get("method") not in ("segments", "gap"):
+                return False
+            gap, least = clusters.get("gap", GAP_M), clusters.get("min_points", GAP_MIN_POINTS)
+            return (isinstance(gap, int | float) and not isinstance(gap, bool) and math.isfinite(gap) and gap > 0
+                    and isinstance(least, int) and not isinstance(least, bool) and least > 0)
+
+        if not isinstance(provenance, dict) or not sane(provenance.get("clusters", {"method": "segments"})):
+            what = f"clusters {provenance.get('clusters')!r}" if isinstance(provenance, dict) else "not a JSON object"
+            raise InputError(f"{path}: corrupt leg model (provenance: {what}; a model's is a JSON object whose "
+                             'clusters are {"method": "segments"} or {"method": "gap", "gap": metres, '
+                             '"min_points": n})')
+        try:
             return cls(data["feature"], data["threshold"], data["left"], data["right"], data["value"],
                        data["roots"], kind=str(data["kind"]), base=float(data["base"]), scale=float(data["scale"]),
                        threshold_p=float(data["threshold_p"]), feature_names=names, provenance=provenance)

@@ -16,7 +16,9 @@ Messages read (one per line, fields separated by white space):
   line, and a laser or ODOM line with the wrong number of fields or a non-number, or a RAWLASER/ROBOTLASER
   line whose beam fan cannot be a laser's (field of view or step zero, negative, NaN or over 360°), is
   malformed: skipped and counted. A line holding NUL bytes is malformed too; it does not make the file
-  "binary".
+  "binary"; so is a line longer than MAX_LINE characters, which is never held whole. A pose (the laser lines'
+  or ODOM's x, y, theta) that is NaN or infinite is left out of /odom with a warning (its scan is kept): one
+  such pose would make every track's world position NaN.
 
 Conventions (stated in the README):
 
@@ -104,6 +106,7 @@ class _Stream:
         self.top = np.nan                      # largest reading (NaN ignored), for FLASER's no-return limit
         self.all_remissions = True             # every scan has one remission per beam
         self.posed = 0                         # scans with a laser pose
+        self.unposed = _NotANumber()           # of them, poses that are not finite numbers (left out of /odom)
         self.stamps = StampCheck()
         self.ranges: list = []                 # (in memory) arrays (n,), metres
         self.remissions: list = []             # (in memory) arrays (n,) or (0,)
@@ -170,6 +173,26 @@ class _Stream:
         return np.fromfile(self._paths[2], np.float64).reshape(-1, 4)[:, 0]
 
 
+class _NotANumber:
+    """Poses (x, y, theta) that are not finite numbers: how many, and the line of the first."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.first_line = 0
+
+    def check(self, pose, lineno: int) -> None:
+        if not all(math.isfinite(v) for v in pose):
+            self.count += 1
+            self.first_line = self.first_line or lineno
+
+    def said(self, label: str, what: str, total: int) -> str:
+        """The warning about them: which poses are left out of /odom (all: no /odom)."""
+        which = "all" if self.count == total else f"{self.count} of the {total}"
+        left = "no /odom written" if self.count == total else "left out of /odom"
+        return (f"{label}: {which} {what} poses are not finite numbers (NaN or infinite; first at line "
+                f"{self.first_line}); {left}")
+
+
 class _Odom:
     """ODOM poses (stamp_s, x, y, theta): in a list (`parse_lines`) or spooled to a file."""
 
@@ -177,6 +200,7 @@ class _Odom:
         self.rows: list = []
         self.count = 0
         self.stamps = StampCheck()
+        self.unposed = _NotANumber()   # poses that are not finite numbers (left out of /odom)
         self._path = spool / "ODOM" if spool is not None else None
         self._file = open(self._path, "wb", buffering=1 << 20) if self._path is not None else None
 
@@ -308,6 +332,7 @@ def _parse(lines: Iterable[str], out: CarmenParse, streams: dict[str, _Stream], 
                 if len(tok) < 8:
                     raise _Malformed
                 v = np.array(tok[1:8], float)
+                out.odom.unposed.check(v[:3], lineno)
                 out.odom.append((v[6], v[0], v[1], v[2]))
             elif name == "PARAM" and len(tok) >= 3:
                 out.params[tok[1]] = tok[2]
@@ -331,6 +356,8 @@ def _add_scan(s: _Stream, lineno: int, ranges, rem, ipc, pose, geom) -> None:
         now = f"{n} beams" + (f", start/resolution/max {geom}" if geom else "")
         raise GeometryError(f"{s.name} geometry changes at scan {s.count} (line {lineno}): "
                             f"{was} -> {now}; datmo does not split runs, cut the log at that line")
+    if pose is not None:
+        s.unposed.check(pose, lineno)
     s.add(ranges, rem, ipc, pose)
 
 
@@ -507,15 +534,23 @@ def plan(parse: CarmenParse, topic: str | None = None, label: str = "<text>") ->
     frame = "rear_laser" if s.name == "RLASER" else "laser"
     geometry = ScanGeometry(angle_min=float(angle_min), angle_increment=float(inc), n_beams=n,
                             range_min=0.0, range_max=float(limit), frame_id=frame)
-    if s.posed == s.count:
-        odom_source = s.name
-    elif not len(parse.odom):
+    odom = parse.odom
+    if s.posed == s.count:   # the laser lines carry the poses
+        odom_source = s.name if s.unposed.count < s.count else None
+        if s.unposed.count:
+            warnings.append(s.unposed.said(label, s.name, s.count))
+    elif not len(odom):
         odom_source = None
-    elif synthesised or parse.odom.stamps.mode != "keep":
+    elif odom.unposed.count == odom.count:
+        warnings.append(odom.unposed.said(label, "ODOM", odom.count))
+        odom_source = None
+    elif synthesised or odom.stamps.mode != "keep":
         warnings.append(f"{label}: ODOM poses not written: their stamps cannot be matched to the scans")
         odom_source = None
     else:
         odom_source = "ODOM"
+        if odom.unposed.count:
+            warnings.append(odom.unposed.said(label, "ODOM", odom.count))
     if parse.malformed:
         where = ", ".join(str(i) for i in parse.malformed_lines)
         warnings.insert(0, f"{label}: skipped {parse.malformed} malformed line{'s' if parse.malformed != 1 else ''}"
@@ -546,7 +581,8 @@ def blocks(parse: CarmenParse, p: _Plan, size: int) -> Iterator[tuple[ScanRun | 
             run = ScanRun(stamps, ranges.astype(np.float32), p.geometry, rem)
             odom = None
             if p.odometry_source == s.name:
-                odom = Odometry(stamps.copy(), poses[:, 0].copy(), poses[:, 1].copy(), poses[:, 2].copy(),
+                ok = np.isfinite(poses).all(axis=1)   # a pose that is not a number is left out (plan warns)
+                odom = Odometry(stamps[ok], poses[ok, 0], poses[ok, 1], poses[ok, 2],
                                 frame_id=p.pose_frame, child_frame_id=p.geometry.frame_id)
             yield run, odom
 
@@ -558,8 +594,9 @@ def blocks(parse: CarmenParse, p: _Plan, size: int) -> Iterator[tuple[ScanRun | 
 
     def poses() -> Iterator[Odometry]:
         for rows in parse.odom.blocks(size):
-            yield Odometry(check.apply(rows[:, 0]), rows[:, 1].copy(), rows[:, 2].copy(), rows[:, 3].copy(),
-                           frame_id=p.pose_frame)
+            stamps = check.apply(rows[:, 0])   # every row's, in order (a repair carries on from the one before)
+            ok = np.isfinite(rows[:, 1:]).all(axis=1)
+            yield Odometry(stamps[ok], rows[ok, 1], rows[ok, 2], rows[ok, 3], frame_id=p.pose_frame)
 
     yield from merge((run for run, _ in scans()), poses())
 
@@ -620,15 +657,25 @@ def build(parse: CarmenParse, topic: str | None = None, label: str = "<text>"):
     return run, _cat(poses) if poses else None, p.warnings, p.facts
 
 
+MAX_LINE = 1 << 20   # characters of a line: a laser line of 10,000 beams and remissions takes under 200,000
+_TOO_LONG = "<a line longer than MAX_LINE>"   # what a longer line is read as: a malformed line (not a message name)
+
+
 def _lines(f, progress, raw, total: int, label: str, warnings: list[str]):
-    """Lines of a text stream; reports progress by compressed bytes; a truncated gzip stream ends the lines
-    with a warning instead of an error."""
+    """Lines of a text stream, each read in at most MAX_LINE characters (a longer one, skipped in pieces of that
+    size, comes out as _TOO_LONG: memory does not grow with a line's length, e.g. a gigabyte without a newline
+    in a .log.gz); reports progress by compressed bytes; a truncated gzip stream ends the lines with a warning
+    instead of an error."""
     step = 0
     try:
-        for line in f:
+        while line := f.readline(MAX_LINE):
             step += 1
             if progress is not None and step % 20000 == 0:
                 progress(raw.tell(), total)
+            if len(line) == MAX_LINE and not line.endswith("\n"):
+                while (rest := f.readline(MAX_LINE)) and not rest.endswith("\n"):
+                    pass
+                line = _TOO_LONG
             yield line
     except EOFError:
         warnings.append(f"{label}: gzip stream ends early (truncated file); read {step} lines before the cut")

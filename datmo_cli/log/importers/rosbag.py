@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import GeometryError, InputError
-from ..scan import GeometryChangeError, Odometry, ScanGeometry, ScanRun
+from ..scan import GeometryChangeError, Odometry, ScanGeometry, ScanRun, geometry_problem, stamp_problem
 from ..transforms import ros2_frame, ros2_frames
 
 LASERSCAN_TYPES = ("sensor_msgs/msg/LaserScan", "sensor_msgs/LaserScan")
@@ -124,6 +124,42 @@ def scan_geometry(msg) -> ScanGeometry:
                         frame_id=ros2_frame(msg.header.frame_id))
 
 
+def check_bag_scan(label: str, topic: str, i: int, msg) -> None:
+    """InputError naming the file, the topic, scan `i` and the field when a LaserScan read from a bag cannot be
+    what a scanner sent: bags have no checksums, so a damaged byte shows only where a message contradicts itself.
+    Checked here: the header stamp is after 1970 with nanosec below 10^9; the angles and range limits are finite,
+    0 <= range_min < range_max, the angle step is not zero, the beams span at most a turn and reach angle_max
+    (within a beam); intensities are none or one a beam. (rosbags refuses a message longer or shorter than its
+    fields.) A damaged reading itself is not seen: it is another range, or, outside the limits, not a return."""
+    problem = _scan_problem(msg)
+    if problem:
+        raise InputError(f"{label}: damaged LaserScan on {topic}, scan {i}: {problem}")
+
+
+def _scan_problem(msg) -> str | None:
+    import math
+
+    n, m = len(msg.ranges), len(msg.intensities)
+    problem = stamp_problem(int(msg.header.stamp.sec), int(msg.header.stamp.nanosec))
+    if problem:
+        return problem
+    a0, a1, step = float(msg.angle_min), float(msg.angle_max), float(msg.angle_increment)
+    r0, r1 = float(msg.range_min), float(msg.range_max)
+    for name, value in (("angle_min", a0), ("angle_max", a1), ("angle_increment", step), ("range_min", r0),
+                        ("range_max", r1)):
+        if not math.isfinite(value):
+            return f"{name} is {value}"
+    problem = geometry_problem(a0, step, n, r0, r1)
+    if problem:
+        return problem
+    if n and abs(a0 + (n - 1) * step - a1) > abs(step) * 1.01 + 1e-4:
+        return (f"{n} beams from {math.degrees(a0):g}° by {math.degrees(step):g}° end at "
+                f"{math.degrees(a0 + (n - 1) * step):g}°, not at angle_max {math.degrees(a1):g}°")
+    if m not in (0, n):
+        return f"{m} intensities for {n} ranges"
+    return None
+
+
 def scan_stamp(msg, log_time: int) -> int:
     """The header stamp of a message (ns), or its log time when the stamp is zero."""
     return _stamp(msg.header, log_time)
@@ -179,6 +215,7 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
         scan_topic = choose_topic(label, topics, topic, LASERSCAN_TYPES, "sensor_msgs/LaserScan", "--topic")
         o_topic = choose_topic(label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic",
                                required=False)
+        one_connection(label, reader, scan_topic)
         total = topics[scan_topic][1]
         scans = _survey(reader, label, scan_topic, total, max_scans, progress)
     except (InputError, GeometryError):
@@ -218,6 +255,16 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
                         sort_odometry=True, closer=close, transforms=moved, tf_topics=tfs, tf_survey=survey)
 
 
+def one_connection(label: str, reader, topic: str) -> None:
+    """InputError when two of the bag's connections (two publishers, as ROS 1 records them) hold messages on the
+    scan topic: two scan streams, which a read by topic would interleave."""
+    on = [c for c in reader.connections if c.topic == topic and c.msgcount]
+    if len(on) > 1:
+        who = ", ".join(f"{getattr(c.ext, 'callerid', None) or c.msgtype}: {c.msgcount} messages" for c in on)
+        raise InputError(f"{label}: {topic} is on {len(on)} connections ({who}); their scans would interleave into "
+                         "one stream: keep one connection, or give each its own topic")
+
+
 @dataclass
 class _Survey:
     """What a first pass over a bag's scans found: geometry, count, intensity lengths, last stamp."""
@@ -235,6 +282,7 @@ def _survey(reader, label: str, topic: str, total: int, max_scans: int | None, p
         if max_scans is not None and i >= max_scans:
             break
         msg = reader.deserialize(raw, conn.msgtype)
+        check_bag_scan(label, topic, i, msg)
         g = scan_geometry(msg)
         if g0 is None:
             g0 = g
@@ -352,7 +400,7 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
         o_topic = choose_topic(label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic",
                                required=False)
         tfs = tuple(t for t in tf_topics(topics) if head.topics()[t].message_encoding == "cdr")
-        if head.topics()[scan_topic].count:
+        if any(c.topic == scan_topic and c.count for c in head.channels.values()):
             mcapio.check_scan_channel(head, scan_topic)
         count, inten_mode, last, n_beams = _mcap_survey(path, label, scan_topic, max_scans)
         survey = None
