@@ -261,3 +261,61 @@ def compile_notice(bar, task, delay: float = 2.0, *, armed: bool = True) -> Iter
     finally:
         with lock:
             disarm()
+
+
+# ------------------------------------------------------------------------------- what a cached kernel read
+# numba keys a cached kernel on its own source file's time and size only, but a datmo kernel also compiles in
+# the constants it imports (tracking/state.py's column and parameter indices, the message codes of log/vocabulary
+# read from msg/*.msg) and the kernels of other modules it calls. An edit there alone (a checkout that changes
+# state.py but not _kernels.py) would load code compiled against the old values: silently wrong results. So the
+# stamp of every datmo kernel also covers every file any kernel reads (KERNEL_SOURCES): one changes, all recompile.
+KERNEL_SOURCES = ("tracking/*.py", "perception/*.py", "sim/*.py", "log/vocabulary.py", "msg/*.msg")
+_KEYED = False
+_SOURCES_STAMP: tuple | None = None
+
+
+def sources_stamp(package: str | None = None) -> tuple:
+    """(relative path, mtime ns, size) of every file of KERNEL_SOURCES under the package folder, sorted; read once
+    a process."""
+    global _SOURCES_STAMP
+    if _SOURCES_STAMP is not None and package is None:
+        return _SOURCES_STAMP
+    import glob
+
+    root = package or os.path.dirname(os.path.abspath(__file__))
+    out = []
+    for pattern in KERNEL_SOURCES:
+        for path in sorted(glob.glob(os.path.join(root, pattern))):
+            st = os.stat(path)
+            out.append((os.path.relpath(path, root), st.st_mtime_ns, st.st_size))
+    stamp = tuple(out)
+    if package is None:
+        _SOURCES_STAMP = stamp
+    return stamp
+
+
+def key_kernel_cache_on_sources() -> None:
+    """Make numba's cache stamp of every kernel defined under datmo_cli cover KERNEL_SOURCES as well as its own
+    file (see above), once a process; call before the kernels are declared (each kernel module does). Other
+    packages' kernels keep numba's stamp. A numba without the hook this patches keeps its own (and datmo's
+    tests say so)."""
+    global _KEYED
+    if _KEYED:
+        return
+    _KEYED = True
+    try:
+        from numba.core import caching
+
+        mixin = caching._SourceFileBackedLocatorMixin
+        original = mixin.get_source_stamp
+    except (ImportError, AttributeError):
+        return
+    package = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+    def get_source_stamp(self):
+        stamp = original(self)
+        if not os.path.abspath(getattr(self, "_py_file", "")).startswith(package):
+            return stamp
+        return stamp, sources_stamp()
+
+    mixin.get_source_stamp = get_source_stamp

@@ -13,7 +13,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..numba_runtime import key_kernel_cache_on_sources
 from ._kernels import valid_return
+
+key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
 
 # columns of the per-scan statistics written by odometry_run
 S_RESIDUAL, S_INLIER_SHARE, S_MATCHED, S_POINTS, S_FLAGS, S_ITERATIONS = range(6)

@@ -10,6 +10,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..numba_runtime import key_kernel_cache_on_sources
+
+key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
+
 (P_C0, P_MIN_POINTS, P_THETA_RES, P_RHO_RES, P_WINDOW, P_LINE_MIN_POINTS, P_LINE_MIN_RACC, P_LINE_MIN_LENGTH,
  P_PERP_TOL, P_R_MIN, P_R_MAX, P_R_STEP, P_CELL, P_CWINDOW, P_CTOL, P_CIRCLE_MIN_POINTS, P_SMALL,
  P_MIN_SAG, P_LEG_R, P_MIN_COVER, P_RES_RATIO, P_R_MARGIN,

@@ -10,7 +10,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..numba_runtime import key_kernel_cache_on_sources
 from ._kernels import valid_return
+
+key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
 
 (F_N, F_WIDTH, F_LINEARITY, F_CIRCULARITY, F_RADIUS, F_STD, F_MEDIAN_DEV, F_BOUNDARY_LENGTH,
  F_BOUNDARY_REGULARITY, F_MEAN_CURVATURE, F_INSCRIBED_ANGLE, F_INSCRIBED_ANGLE_STD, F_DISTANCE,

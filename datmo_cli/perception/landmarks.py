@@ -24,7 +24,10 @@ from ..log.vocabulary import (
     LANDMARK_CORNER,
     LANDMARK_LINE_END,
 )
+from ..numba_runtime import key_kernel_cache_on_sources
 from .params import FeatureParams
+
+key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
 
 LANDMARK_DTYPE = cdr.element_dtype(types.LANDMARK)
 # a detection: scan index, type, x, y, orientation (rad), size (m)

@@ -12,6 +12,10 @@ import math
 import numpy as np
 from numba import njit
 
+from ..numba_runtime import key_kernel_cache_on_sources
+
+key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
+
 EPS = 1e-9
 
 
