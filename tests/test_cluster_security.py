@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 from test_batch import CALLS, fake_process
 
-from datmo_cli import batch, pipeline
+from datmo_cli import pipeline
 from datmo_cli.cli import cli
 
 distributed = pytest.importorskip("distributed")
@@ -29,30 +29,59 @@ def _refused(address: str, **kw) -> bool:
     return False
 
 
+_LOCAL_TLS_CHECK = """
+import sys
+from pathlib import Path
+
+import distributed
+from distributed.security import Security
+
+from datmo_cli import batch
+from datmo_cli.cluster import DaskExecutor
+
+
+def refused(address, **kw):
+    try:
+        client = distributed.Client(address, timeout="5s", **kw)
+    except (OSError, TimeoutError, TypeError, ValueError):
+        return True
+    client.close()
+    return False
+
+
+tmp, src = Path(sys.argv[1]), sys.argv[2]
+executor = DaskExecutor("local:1")
+try:
+    address = executor.client.scheduler.address
+    workers = list(executor.client.scheduler_info()["workers"])
+    assert address.startswith("tls://127.0.0.1:") and workers and all(w.startswith("tls://") for w in workers)
+    assert refused(address.replace("tls://", "tcp://"))                  # no TLS: no entry
+    other = Security.temporary()
+    stranger = Security(tls_ca_file=executor.cluster.security.tls_ca_file, tls_client_cert=other.tls_client_cert,
+                        tls_client_key=other.tls_client_key, require_encryption=True)
+    assert refused(address, security=stranger)    # trusts the scheduler, but holds another certificate
+    assert not refused(address, security=executor.cluster.security)     # the run's own certificate: in
+    plan = batch.prepare([src], str(tmp / "out"))
+    records = batch.run_many(plan, executor)                               # and it runs the batch
+    assert [r["status"] for r in records] == ["done"] and records[0]["scans"] == 300
+finally:
+    executor.close()
+print("ok")
+"""
+
+
 @pytest.mark.slow
 def test_a_runs_own_local_cluster_speaks_tls_and_refuses_strangers(tmp_path, sample_logs):
-    from distributed.security import Security
+    """In a process of its own: a local cluster sets NUMBA_NUM_THREADS=1 in its process's environment while it
+    spawns the workers, and this test process's numba thread pool must not start under it (as test_cluster.py)."""
+    import subprocess
+    import sys
 
-    from datmo_cli.cluster import DaskExecutor
-
-    executor = DaskExecutor("local:1")
-    try:
-        address = executor.client.scheduler.address
-        workers = list(executor.client.scheduler_info()["workers"])
-        assert address.startswith("tls://127.0.0.1:") and workers and all(w.startswith("tls://") for w in workers)
-        assert _refused(address.replace("tls://", "tcp://"))                  # no TLS: no entry
-        other = Security.temporary()
-        stranger = Security(tls_ca_file=executor.cluster.security.tls_ca_file, tls_client_cert=other.tls_client_cert,
-                            tls_client_key=other.tls_client_key, require_encryption=True)
-        assert _refused(address, security=stranger)    # trusts the scheduler, but holds another certificate
-        assert not _refused(address, security=executor.cluster.security)     # the run's own certificate: in
-        src = tmp_path / "static.mcap"
-        src.write_bytes((sample_logs / "static.mcap").read_bytes())
-        plan = batch.prepare([str(src)], str(tmp_path / "out"))
-        records = batch.run_many(plan, executor)                               # and it runs the batch
-        assert [r["status"] for r in records] == ["done"] and records[0]["scans"] == 300
-    finally:
-        executor.close()
+    src = tmp_path / "static.mcap"
+    src.write_bytes((sample_logs / "static.mcap").read_bytes())
+    result = subprocess.run([sys.executable, "-c", _LOCAL_TLS_CHECK, str(tmp_path), str(src)], capture_output=True,
+                            text=True, timeout=600)
+    assert result.returncode == 0 and result.stdout.strip().endswith("ok"), result.stderr[-2000:]
 
 
 @pytest.fixture
