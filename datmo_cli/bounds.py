@@ -99,10 +99,12 @@ def param(default: object, bound: Bound | None = None, help: str = "", *, choice
 class Section:
     """A table of a config file (`[features]`, `[track]`): a frozen dataclass whose fields are declared with
     `param`. `renamed`: keys an older datmo read, each with the key that replaces it and why (an old config
-    file using one is refused with the new name, not read with a changed meaning)."""
+    file using one is refused with the new name, not read with a changed meaning); `removed`: keys an older datmo
+    read that no longer exist, each with why (refused, saying so)."""
 
     name: ClassVar[str]
     renamed: ClassVar[dict[str, str]] = {}
+    removed: ClassVar[dict[str, str]] = {}
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -132,6 +134,8 @@ def validate(section: type[Section], values: dict, where: str | None = None) -> 
     for key, value in values.items():
         if key in section.renamed:
             raise ConfigError(f"{where}.{key}: renamed to {section.renamed[key]}")
+        if key in section.removed:
+            raise ConfigError(f"{where}.{key}: no longer a parameter: {section.removed[key]}")
         if key not in known:
             raise ConfigError(f"{where}.{key}: unknown parameter (known: {', '.join(sorted(known))})")
         meta = known[key].metadata
@@ -204,6 +208,7 @@ OPTIONS: dict[str, Bound] = {
     "play_rate": _b(0, 1000, "× the log's speed", "beyond 1000× a scan log is a blur", open_=True),
     "laser_offset": _b(-100, 100, "m", "the scanner sits on the robot"),
     "laser_yaw": _b(-360, 360, "degrees"),
+    "domain_id": _b(0, 232, "", "ROS 2's domain ids (DDS ports beyond 232 overflow)", integer=True),
 }
 
 LINE_ACCUMULATOR_CELLS = 2**25     # theta x rho cells of the HTL accumulator, int32, one per thread (128 MB)

@@ -6,6 +6,7 @@ from typing import TYPE_CHECKING
 
 import click
 
+from ..bounds import OPTIONS, option
 from .options import config_options, quiet_option
 
 if TYPE_CHECKING:
@@ -17,8 +18,8 @@ if TYPE_CHECKING:
               help="The sensor_msgs/LaserScan topic to subscribe to.")
 @click.option("--odom-topic", default=None, metavar="TOPIC",
               help="A nav_msgs/Odometry topic: tracks then also carry world (odom) positions. [default: none]")
-@click.option("--domain-id", type=click.IntRange(0, 232), default=None, metavar="ID",
-              help="The ROS 2 domain (0 to 232). [default: ROS_DOMAIN_ID, else 0]")
+@option("--domain-id", bound=OPTIONS["domain_id"], default=None, metavar="ID",
+        help="The ROS 2 domain. [default: ROS_DOMAIN_ID, else 0]")
 @config_options("TOML file with [features] and [track] tables.")
 @quiet_option
 def command(scan_topic: str, odom_topic: str | None, domain_id: int | None, cfg: DatmoConfig) -> None:
