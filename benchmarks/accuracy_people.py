@@ -22,7 +22,7 @@ from benchmarks.accuracy_tracking import LEGTRACKER, demo_figures, learned_legs,
 from benchmarks.common import print_lines
 from datmo_cli.log.vocabulary import CLASS_PERSON, STATUS_TENTATIVE
 from datmo_cli.perception.egomotion import odometry_for
-from datmo_cli.stages import run_features, track_run
+from datmo_cli.stages import leg_threshold_of, run_features, track_run
 
 NEGATIVE_TOPICS = ("/left_scan", "/right_scan", "/rear_scan")
 PERSON_RADIUS = 0.5     # m, a labelled leg this near a confirmed person track is covered
@@ -32,7 +32,8 @@ LINK_GAP = 0.5          # s
 
 
 def fold_models(folder: Path, quick: bool = False) -> tuple[dict[str, str], dict[str, str]]:
-    """Models trained as `datmo train-legs` trains the shipped one, each without one positive bag and one
+    """Models trained as `datmo train-legs` trains the shipped one, threshold included (tuned on the fold's own
+    training recordings: the tracker takes a model's threshold), each without one positive bag and one
     empty-room scanner (training.leave_one_out_folds), saved in `folder`: ({positive bag name: model path},
     {negative_2 topic: model path}; a topic held out by several folds takes the first). `quick`: ensembles of
     a quarter of the trees, for tests."""
@@ -51,7 +52,7 @@ def fold_models(folder: Path, quick: bool = False) -> tuple[dict[str, str], dict
         spec = T.EstimatorSpec()
         if quick:
             spec = dataclasses.replace(spec, n_estimators=max(10, spec.n_estimators // 4))
-        model = T.fold_model(lab, emp, fold, spec, extra=extra)
+        model = T.fold_model(lab, emp, fold, spec, extra=extra, tune=True)
         path = folder / f"fold{i}.npz"
         model.save(path)
         by_bag[positives[fold.test_labelled].name] = str(path)
@@ -60,11 +61,12 @@ def fold_models(folder: Path, quick: bool = False) -> tuple[dict[str, str], dict
 
 
 def tracked(run, leg_model: str):
-    """`datmo track` as it runs on a log without odometry (poses from scan matching when the scanner moves)."""
+    """`datmo track` as it runs on a log without odometry (poses from scan matching when the scanner moves), with
+    the leg model's own threshold."""
     params = {"leg_model": leg_model}
     odometry, _ = odometry_for(run, None, "auto")
     return track_run(run, run_features(run, odometry, params), odometry=odometry, markers=False,
-                     learned=learned_legs(params))
+                     learned=learned_legs(params), leg_threshold=leg_threshold_of(leg_model))
 
 
 def longest_person(stamps: np.ndarray, tracks: list[np.ndarray]) -> tuple[float, int]:

@@ -143,7 +143,7 @@ class RunStages:
                 "leg_model": leg_model_provenance(features.leg_model), "config": self.config.to_dict()}
 
     def __call__(self, block) -> dict[str, tuple]:
-        from .stages import TrackStream, iter_run_features
+        from .stages import TrackStream, iter_run_features, leg_threshold_of
 
         run = block.run
         out = {}
@@ -154,8 +154,10 @@ class RunStages:
             channels.pop(mcapio.TOPIC_MARKERS_FEATURES)
         out |= channels
         if self.tracking is None:
+            model = self.config.features.leg_model
             self.tracking = TrackStream(run.geometry, odometry=self.odometry, params=self.config.track,
-                                        markers=self.markers, learned=self.config.features.leg_model != "paper")
+                                        markers=self.markers, learned=model != "paper",
+                                        leg_threshold=leg_threshold_of(model))
         out |= self.tracking.channels(self.tracking.block(run, iter_run_features(features)))
         return out
 
@@ -219,6 +221,27 @@ def features_leg_model(log) -> str:
     return "paper"
 
 
+def features_leg_threshold(log, used: str) -> float:
+    """The leg threshold of the detector a log's /datmo/features were made with (`used`, features_leg_model): the
+    threshold its provenance records, else that of the model `used` names (0.5 for the paper's rule)."""
+    import json
+
+    from .stages import leg_threshold_of
+
+    if used == "paper":
+        return 0.5
+    for name in ("datmo.params", "input/datmo.params"):
+        raw = log.metadata.get(name, {}).get("leg_model")
+        if raw:
+            try:
+                value = json.loads(raw).get("threshold")
+            except (ValueError, AttributeError):
+                value = None
+            if isinstance(value, int | float) and 0.0 <= value <= 1.0:
+                return float(value)
+    return leg_threshold_of(used)
+
+
 def track_file(src: str | Path, out: str | Path, *, force: bool = False, config: DatmoConfig | None = None,
                leg_model: str | None = None, command_line: str | None = None,
                markers: bool = True, block_scans: int | None = None,
@@ -255,8 +278,10 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, config:
     else:
         state: dict = {}
         derived = derived_topics(odom=estimated, tracks=True, markers=markers)
+        threshold = features_leg_threshold(stream.log, used)
         effective = {"track": params.to_dict(),
-                     "leg_model": leg_model_provenance(used) if used == "paper" else {"model": used},
+                     "leg_model": (leg_model_provenance(used) if used == "paper"
+                                   else {"model": used, "threshold": threshold}),
                      "config": config.to_dict()}
 
         def stage(block) -> dict:
@@ -265,7 +290,8 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, config:
                 out[mcapio.TOPIC_ODOM] = odometry_channel(odometry, block)
             if "tracking" not in state:
                 state["tracking"] = TrackStream(run.geometry, odometry=odometry, params=params, markers=markers,
-                                                learned=used != "paper")
+                                                learned=used != "paper",
+                                                leg_threshold=threshold)
             tracking = state["tracking"]
             with mcapio.decoding(stream.path, mcapio.TOPIC_FEATURES):
                 features = decode_features(block.aligned[mcapio.TOPIC_FEATURES], block.first)

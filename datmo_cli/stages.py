@@ -89,13 +89,14 @@ class TrackStream:
     """Tracking of a log block by block, in order: `block(run, features)` tracks the next scans (one
     ScanFeatures each, sensor frame) and returns their TrackedRun; the tracker's state carries over, so the
     blocks' results are those of the whole run at once. `learned`: the features' legs come from a leg
-    detector (else people by the paper's rule, see Tracker); odometry, when given, puts tracking in its
-    world frame."""
+    detector whose threshold is `leg_threshold` (else people by the paper's rule, see Tracker); odometry, when
+    given, puts tracking in its world frame."""
 
     def __init__(self, geometry, *, odometry: Odometry | None = None,
-                 params: TrackingParams | None = None, markers: bool = True, learned: bool = False) -> None:
+                 params: TrackingParams | None = None, markers: bool = True, learned: bool = False,
+                 leg_threshold: float = 0.5) -> None:
         self.params = params or TrackingParams()
-        self.tracker = Tracker(self.params, geometry, learned=learned)
+        self.tracker = Tracker(self.params, geometry, learned=learned, leg_threshold=leg_threshold)
         self.odometry = odometry if odometry is not None and len(odometry) else None
         self.learned = learned
         self.markers = markers
@@ -141,12 +142,26 @@ class TrackStream:
 
 def track_run(run: ScanRun, features: list[ScanFeatures] | Iterator[ScanFeatures], *,
               odometry: Odometry | None = None, params: TrackingParams | None = None, markers: bool = True,
-              learned: bool = False, progress: Callable[[int, int], None] | None = None) -> TrackedRun:
+              learned: bool = False, leg_threshold: float | None = None,
+              progress: Callable[[int, int], None] | None = None) -> TrackedRun:
     """Track every scan of `run` given its features (one ScanFeatures per scan, sensor frame). `learned`:
-    the features' legs come from a leg detector (else people by the paper's rule, see Tracker)."""
-    stream = TrackStream(run.geometry, odometry=odometry, params=params, markers=markers, learned=learned)
+    the features' legs come from a leg detector, whose threshold is `leg_threshold` (None: the shipped model's;
+    else people by the paper's rule, see Tracker)."""
+    if leg_threshold is None:
+        leg_threshold = leg_threshold_of("default") if learned else 0.5
+    stream = TrackStream(run.geometry, odometry=odometry, params=params, markers=markers, learned=learned,
+                         leg_threshold=leg_threshold)
     n = len(run)
     return stream.block(run, features, progress=(lambda d: progress(d, n)) if progress is not None else None)
+
+
+def leg_threshold_of(leg_model: str) -> float:
+    """The leg threshold of the leg detector `leg_model` names (FeatureParams.leg_model): its model's tuned
+    threshold_p (0.5 for the paper's rule, which has none)."""
+    from .perception.legs import load_leg_model
+
+    model = load_leg_model(leg_model)
+    return 0.5 if model is None else float(model.threshold_p)
 
 
 def run_features(run: ScanRun, odometry: Odometry | None = None, params=None) -> list[ScanFeatures]:

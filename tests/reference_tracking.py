@@ -5,6 +5,9 @@ are checked against, phase by phase and run by run. Not part of the package: tes
 - People (method.md §6.1): `pair_legs`, `leg_lead`. Classification (method.md §6): `classify`, `mobility`.
   Kalman model (filterpy's): `transition`, `process_noise`; gating: `gate`; global nearest neighbour:
   `reference_gnn` (scipy's linear_sum_assignment).
+- The person life cycle with a leg detector (issue #23): `fold_evidence` (a track's leg evidence),
+  `carried_update` and `carried_beams` (beams that see a part of the robot), `cover` (which measurement a weak
+  leg candidate was measured as), `leg_stage_measurements` (tracks taking strong and weak candidates).
 - The per-scan arithmetic of the tracker before the compiled step (`cv_predict`, `joseph_update`,
   `mahalanobis2`, `gated_costs`, `apply_updates`, `life_cycle`, `kind_groups`, `classify_tracks`,
   `background_update`): loops over arrays, compiled with numba here for the speed of the run-long
@@ -218,34 +221,67 @@ def leg_stage(tx, ty, lx, ly, ls, reach, stride_max) -> tuple[np.ndarray, ...]:
     return owner, x, y, size, kind, legs, taken
 
 
-def duplicates(x, y, vx, vy, candidate, confirmed, rank, merge_distance, merge_speed) -> np.ndarray:
-    """Candidate tracks within merge_distance of a candidate of higher rank (ties: the lower index ranks
-    higher), unless both are confirmed and their velocities differ by merge_speed or more."""
+def duplicates(x, y, vx, vy, vvar, victim, candidate, confirmed, rank, merge_distance,
+               merge_speed) -> np.ndarray:
+    """`victim` tracks within merge_distance of a `candidate` track of higher rank (ties: the lower index ranks
+    higher), unless both are confirmed and their velocities differ by merge_speed plus the standard deviation of
+    that difference or more (vvar: each track's velocity variance, m²/s²; a restarted track's velocity is not
+    known and moves like anything)."""
     K = len(x)
     idx = np.arange(K)
     higher = (rank[None, :] > rank[:, None]) | ((rank[None, :] == rank[:, None]) & (idx[None, :] < idx[:, None]))
     near = np.hypot(x[:, None] - x[None, :], y[:, None] - y[None, :]) < merge_distance
+    spread = merge_speed + np.sqrt(vvar[:, None] + vvar[None, :])
     alike = ~(confirmed[:, None] & confirmed[None, :]) | (np.hypot(vx[:, None] - vx[None, :],
-                                                                   vy[:, None] - vy[None, :]) < merge_speed)
-    both = candidate[:, None] & candidate[None, :] & (idx[None, :] != idx[:, None])
+                                                                   vy[:, None] - vy[None, :]) < spread)
+    both = victim[:, None] & candidate[None, :] & (idx[None, :] != idx[:, None])
     return (both & higher & near & alike).any(axis=1)
 
 
-def leggy_tracks(votes: np.ndarray, cls: np.ndarray, confirmed: np.ndarray, person_votes: float) -> np.ndarray:
-    """The confirmed tracks of legs or people that may take leg candidates first: legs (pairs and single legs)
-    are at least person_votes of their hits, and their class is unknown or person."""
+def leggy_tracks(votes: np.ndarray, cls: np.ndarray, confirmed: np.ndarray, person: np.ndarray,
+                 leg_hits: np.ndarray, leg_score: np.ndarray, person_votes: float,
+                 person_maintain: float) -> np.ndarray:
+    """The tracks that may take leg candidates first: every person, and the confirmed tracks of legs (legs,
+    pairs and single ones, are at least person_votes of their hits, and their class is unknown or person) or
+    whose leg evidence is at least person_maintain (a person the detector was less sure of, measured as circles
+    or blobs)."""
     legs = votes[:, KIND_PERSON] + votes[:, KIND_LEG]
-    return np.flatnonzero((legs >= person_votes * np.maximum(votes.sum(axis=1), 1)) & (legs > 0)
-                          & (cls <= CLASS_PERSON) & confirmed)
+    leggy = (legs >= person_votes * np.maximum(votes.sum(axis=1), 1)) & (legs > 0) & (cls <= CLASS_PERSON)
+    evident = (leg_hits > 0) & (leg_score >= person_maintain)
+    return np.flatnonzero(person | (confirmed & (leggy | evident)))
 
 
-def duplicate_ranks(votes, hits, confirmed, mobility, cls) -> tuple[np.ndarray, np.ndarray]:
-    """Which tracks may be a duplicate (fed legs, class unknown or person) and their rank: a person before
-    anything else, then a dynamic track, then more hits, then confirmed."""
-    candidate = ((votes[:, KIND_PERSON] + votes[:, KIND_LEG]) > 0) & (cls <= CLASS_PERSON)
+def leg_stage_measurements(tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs, reach,
+                           stride_max) -> tuple[np.ndarray, ...]:
+    """Leg candidates (lx, ly, ls; `strong`: legs, else weak candidates whose measurement is mx[cover]) taken by
+    the tracks predicted at (tx, ty) (`leg_stage`), then the scan's measurements rebuilt: one per track that took
+    legs, then the strong candidates no track took paired (`legs_to_measurements`: a weak one no track took
+    stays the measurement it was made), then the measurements of other kinds (circles, boxes, blobs) but those
+    that were a taken weak candidate. Returns owner, x, y, size, kind, legs and `other`, the indices of the
+    other-kind measurements kept, in order."""
+    owner, ox, oy, osize, okind, olegs, taken = leg_stage(tx, ty, lx, ly, ls, reach, stride_max)
+    free = ~taken & strong
+    rx, ry, rsize, rkind, rlegs = legs_to_measurements(lx[free], ly[free], ls[free], stride_max)
+    dropped = np.zeros(len(mx), bool)
+    dropped[cover[taken & (cover >= 0)]] = True
+    other = np.flatnonzero((mkind > KIND_LEG) & ~dropped)
+    return (owner, np.concatenate([ox, rx, mx[other]]), np.concatenate([oy, ry, my[other]]),
+            np.concatenate([osize, rsize, msize[other]]),
+            np.concatenate([okind, rkind, mkind[other]]).astype(np.int64),
+            np.concatenate([olegs, rlegs, mlegs[other]]).reshape(-1, 4), other)
+
+
+def duplicate_ranks(votes, hits, confirmed, mobility, cls, leg_hits, leg_score, person_maintain
+                    ) -> tuple[np.ndarray, ...]:
+    """Which tracks may be a duplicate (victims: fed legs with class unknown or person, or took leg candidates),
+    which may make one (candidates: fed legs with class unknown or person, or with leg evidence of at least
+    person_maintain), and their rank: a person before anything else, then a dynamic track, then more hits, then
+    confirmed. Returns victim, candidate, rank."""
+    candidate = ((((votes[:, KIND_PERSON] + votes[:, KIND_LEG]) > 0) & (cls <= CLASS_PERSON))
+                 | ((leg_hits > 0) & (leg_score >= person_maintain)))
     rank = (hits.astype(np.int64) * 2 + confirmed + (mobility == MOBILITY_DYNAMIC) * (1 << 40)
             + (cls == CLASS_PERSON) * (1 << 41))
-    return candidate, rank
+    return candidate | (leg_hits > 0), candidate, rank
 
 
 def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, margin) -> np.ndarray:
@@ -285,6 +321,82 @@ def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, 
     return out
 
 
+# ---------------------------------------------------------------- the person life cycle (issue #23)
+# the leg probability a leg candidate on the background or on carried beams keeps: still a leg candidate (a track
+# that takes it folds it into its evidence), and no leg
+NOT_A_LEG = 1e-6
+
+
+def sure_people(person: np.ndarray) -> np.ndarray:
+    """The tracks that own their returns: the people, whatever their evidence (a person standing still, whose
+    evidence may dip at range, is not swallowed): their returns are theirs, never background, and a candidate
+    near one is their leg even on the background."""
+    return person.copy()
+
+
+def fold_evidence(leg_score: np.ndarray, leg_hits: np.ndarray, k: int, p: float, rate: float) -> None:
+    """Fold a leg-candidate hit of leg probability p into track k's evidence, in place: leg_hits[k] counts the
+    hits folded; the evidence is their plain mean over the first 1/rate of them, then a running mean of weight
+    `rate`; a candidate found on the background or carried (p = NOT_A_LEG) sets it to 0 (what fed it was no
+    leg)."""
+    leg_hits[k] += 1
+    if p == NOT_A_LEG:
+        leg_score[k] = 0.0
+        return
+    a = max(rate, 1.0 / leg_hits[k])
+    leg_score[k] = (1.0 - a) * leg_score[k] + a * p
+
+
+def carried_update(carry_ref: np.ndarray, carry_seen: np.ndarray, carry_away: np.ndarray, ranges: np.ndarray,
+                   range_min: float, range_max: float, tol: float, step: float) -> None:
+    """One scan of the carried beams, in place. Per beam: carry_ref the range (m) it keeps returning (NaN: none),
+    carry_seen how far (m) the sensor has travelled while the return was within `tol` of it, carry_away while it
+    was not (nearer, farther, or no valid return within (range_min, range_max)). The sensor moved `step` m since
+    the last scan. A beam away more than seen starts again: its reference the return (NaN if invalid), both
+    travels 0."""
+    r = np.asarray(ranges, np.float64)
+    ok = (r > range_min) & (r < range_max)
+    with np.errstate(invalid="ignore"):   # an invalid return (inf, NaN) is no return
+        seen = ok & (np.abs(r - carry_ref) <= tol)
+    carry_seen[seen] += step
+    carry_away[~seen] += step
+    again = ~seen & (carry_away > carry_seen)
+    carry_ref[again] = np.where(ok[again], r[again], np.nan)
+    carry_seen[again] = 0.0
+    carry_away[again] = 0.0
+
+
+def carried_beams(sx: np.ndarray, sy: np.ndarray, width: np.ndarray, ranges: np.ndarray, carry_ref: np.ndarray,
+                  carry_seen: np.ndarray, carry_away: np.ndarray, angle_min: float, increment: float, travel: float,
+                  tol: float) -> np.ndarray:
+    """Which leg candidates (sensor-frame centres sx, sy and widths, m) lie on carried beams: of the beams their
+    width spans either side of their bearing (at a range of at least 0.1 m), more than half are carried: they
+    return their carry_ref (within `tol`) now, after `travel` m or more of travel that saw it at least three
+    times as far as it did not (carried_update)."""
+    B = len(carry_ref)
+    with np.errstate(invalid="ignore"):
+        carried = ((carry_seen >= travel) & (carry_seen >= 3.0 * carry_away)
+                   & (np.abs(np.asarray(ranges, np.float64) - carry_ref) <= tol))
+    rng = np.maximum(np.hypot(sx, sy), 0.1)
+    beam = np.rint((np.arctan2(sy, sx) - angle_min) / increment).astype(np.int64)
+    half = np.ceil(np.arctan2(0.5 * width, rng) / abs(increment)).astype(np.int64)
+    out = np.zeros(len(sx), bool)
+    for i in range(len(sx)):
+        lo, hi = max(beam[i] - half[i], 0), min(beam[i] + half[i] + 1, B)
+        if hi > lo:
+            out[i] = 2 * int(carried[lo:hi].sum()) > hi - lo
+    return out
+
+
+def cover(cover: np.ndarray, best: np.ndarray, wfirst: np.ndarray, wlast: np.ndarray, f: int, e: int, m: int) -> None:
+    """Measurement m, made of beams f..e, covers each weak candidate (beams wfirst..wlast) it shares more beams
+    with than any measurement before (best: that count so far), in place."""
+    overlap = np.minimum(e, wlast) - np.maximum(f, wfirst) + 1
+    more = overlap > best
+    best[more] = overlap[more]
+    cover[more] = m
+
+
 # ----------------------------------------------------------------------- Kalman model and association
 def transition(dt: float) -> np.ndarray:
     """F for a step of dt seconds (4x4)."""
@@ -299,9 +411,10 @@ def process_noise(dt: float, q: float) -> np.ndarray:
     return np.array([[a, 0, b, 0], [0, a, 0, b], [b, 0, c, 0], [0, b, 0, c]])
 
 
-def param_vector(**values: float) -> np.ndarray:
-    """The kernels' parameter vector (TrackingParams.kernel_vector) of the defaults with `values` set."""
-    return replace(TrackingParams(), **values).kernel_vector()
+def param_vector(leg_threshold: float = 0.5, **values: float) -> np.ndarray:
+    """The kernels' parameter vector (TrackingParams.kernel_vector) of the defaults with `values` set, and the
+    leg detector's threshold."""
+    return replace(TrackingParams(), **values).kernel_vector(leg_threshold)
 
 
 def gate(d2: np.ndarray, dist: np.ndarray, gate: float, max_distance: float) -> np.ndarray:
@@ -350,29 +463,48 @@ def moved(m: Measurements, pose: np.ndarray | None) -> Measurements:
     return Measurements(x, y, m.size, m.kind, legs, raw, m.prob)
 
 
-def reference_measurements(features: ScanFeatures, params: TrackingParams, learned: bool = False) -> Measurements:
+def with_candidates(m: Measurements) -> tuple[Measurements, bool]:
+    """The measurements with their leg candidates as the tracker takes them, (L, 5): x, y, width, leg
+    probability (0 when the candidates carry none: the paper's rule), cover (-1: a leg, strong; else the index of
+    the measurement a weak candidate was measured as; -1 when the candidates carry none); and whether they carry a
+    probability."""
+    raw = np.asarray(m.raw_legs, np.float64)
+    out = np.zeros((len(raw), 5))
+    out[:, 4] = -1.0
+    out[:, :min(raw.shape[1], 5)] = raw[:, :5]
+    return Measurements(m.x, m.y, m.size, m.kind, m.legs, out, m.prob), raw.shape[1] >= 4
+
+
+def reference_measurements(features: ScanFeatures, params: TrackingParams, learned: bool = False,
+                           leg_threshold: float = 0.5) -> Measurements:
     """The measurements of one scan's features (the rule of measurements.py's docstring) from the compiled
-    features-to-measurements kernels, with the thresholding of learned legs done here in numpy."""
+    features-to-measurements kernels, with the thresholding of learned legs done here in numpy: a candidate of
+    probability >= leg_threshold (compared in float32, the features' type) off the beams of any circle wider
+    than leg_radius_max is a leg (strong); the others (weak) are measured as what covers their beams. raw_legs:
+    with a detector (L, 5), every candidate, strong ones first (see with_candidates); else (L, 3)."""
     c, b, li = features.circles, features.blobs, features.lines
     f8 = np.float64
     if learned:
         g = features.legs if features.legs is not None else np.zeros(0, _LEG_DTYPE)
-        strong = g["probability"] >= params.leg_probability
-        big = c[c["radius"] > params.leg_radius_max]   # a leg is no wider than this: that is a column's arc
+        strong = g["probability"].astype(np.float32) >= np.float32(leg_threshold)
+        big = c[c["radius"].astype(np.float32) > np.float32(params.leg_radius_max)]   # wider: a column's arc
         for f, e in zip(big["first"].tolist(), big["last"].tolist(), strict=True):
             strong &= (g["last"] < f) | (g["first"] > e)
         weak, g = g[~strong], g[strong]
         i8 = np.int64
-        x, y, size, kind, legs, prob = _kernels.learned_measurements(
+        x, y, size, kind, legs, prob, covers = _kernels.learned_measurements(
             c["first"].astype(i8), c["last"].astype(i8), c["x"].astype(f8), c["y"].astype(f8),
             c["radius"].astype(f8), b["first"].astype(i8), b["last"].astype(i8), b["x"].astype(f8),
             b["y"].astype(f8), b["size"].astype(f8), li["segment"].astype(i8), li["first"].astype(i8),
             li["last"].astype(i8), li["x_ini"].astype(f8), li["y_ini"].astype(f8), li["x_end"].astype(f8),
             li["y_end"].astype(f8), g["first"].astype(i8), g["last"].astype(i8), g["x"].astype(f8),
             g["y"].astype(f8), g["width"].astype(f8), weak["first"].astype(i8), weak["last"].astype(i8),
-            weak["probability"].astype(f8), params.kernel_vector())
-        raw = np.stack([g["x"].astype(f8), g["y"].astype(f8), g["width"].astype(f8), g["probability"].astype(f8)],
-                       axis=1).reshape(-1, 4)
+            weak["probability"].astype(f8), params.kernel_vector(leg_threshold))
+        raw = np.concatenate([
+            np.stack([g["x"].astype(f8), g["y"].astype(f8), g["width"].astype(f8), g["probability"].astype(f8),
+                      np.full(len(g), -1.0)], axis=1).reshape(-1, 5),
+            np.stack([weak["x"].astype(f8), weak["y"].astype(f8), weak["width"].astype(f8),
+                      weak["probability"].astype(f8), covers.astype(f8)], axis=1).reshape(-1, 5)])
         return Measurements(x, y, size, kind, legs, raw, prob)
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
         c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8), b["x"].astype(f8), b["y"].astype(f8),
@@ -530,10 +662,11 @@ def apply_updates(x, P, last, hit, votes, size, lead_left, lead_right, moving, r
 
 
 @njit(cache=True)
-def life_cycle(hit, age, hits, misses, last_hit_ns, history, confirmed, occluded, stamp_ns, mask, popcount,
-               confirm_hits, delete_after, delete_after_occluded, tentative_delete_after):
+def life_cycle(hit, age, hits, misses, last_hit_ns, history, confirmed, occluded, person, stamp_ns, mask, popcount,
+               confirm_hits, delete_after, delete_after_occluded, tentative_delete_after, person_coast):
     """Count the scan for every track (age, hits, misses, hit history, confirmation) and return which
-    tracks are past their deletion timeout (s since the last hit: tentative, seen, occluded)."""
+    tracks are past their deletion timeout (s since the last hit: tentative, seen, occluded; a confirmed
+    person lives at least person_coast s unseen)."""
     K = len(hit)
     dead = np.zeros(K, np.bool_)
     for k in range(K):
@@ -550,6 +683,8 @@ def life_cycle(hit, age, hits, misses, last_hit_ns, history, confirmed, occluded
         since = (stamp_ns - last_hit_ns[k]) * 1e-9
         if confirmed[k]:
             limit = delete_after_occluded if occluded[k] else delete_after
+            if person[k]:
+                limit = max(limit, person_coast)
         else:
             limit = tentative_delete_after
         dead[k] = since > limit + 1e-9
@@ -557,12 +692,15 @@ def life_cycle(hit, age, hits, misses, last_hit_ns, history, confirmed, occluded
 
 
 @njit(cache=True)
-def kind_groups(votes, mobility):
+def kind_groups(votes, mobility, person):
     """The kind group that fed each track most: 0 legs or people, 1 circles, 2 lines, 3 blobs, 5 a lone
-    leg never paired that is not dynamic (ties: the lower group)."""
+    leg never paired that is not dynamic (ties: the lower group); 0 for a person, whatever fed it."""
     K = len(votes)
     g = np.empty(K, np.int64)
     for k in range(K):
+        if person[k]:
+            g[k] = 0
+            continue
         legs = votes[k, 0] + votes[k, 1]
         best, arg = legs, 0
         for j, v in ((1, votes[k, 2]), (2, votes[k, 3]), (3, votes[k, 4])):
@@ -576,7 +714,7 @@ def kind_groups(votes, mobility):
 
 @njit(cache=True)
 def background_update(score, mark, active, n_active, scan, ranges, cos_a, sin_a, angle_min, increment, range_min,
-                      range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled):
+                      range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled, qx, qy, radius):
     """Update the background grid with one scan; returns the new number of active cells.
 
     score (n * n,): per cell, for how long (s) it has been hit without being seen through since; a cell is seen
@@ -584,7 +722,8 @@ def background_update(score, mark, active, n_active, scan, ranges, cos_a, sin_a,
     mark (n * n,) int64: the last scan (number `scan`) that hit the cell, or -1 when the cell is not active.
     active[:n_active]: the cells with a score (only those are tested for being seen through).
     The sensor is at (px, py) with heading cos/sin (pc, ps); cell (0, 0) has its corner at (x0, y0).
-    Cells hit for `settled` s or more (walls) are tested every fourth scan only, which saves time."""
+    Cells hit for `settled` s or more (walls) are tested every fourth scan only, which saves time.
+    Returns within `radius` of a person (tracking-frame centres qx, qy) are the person's: they add nothing."""
     B = len(ranges)
     keep = 0
     for a in range(n_active):
@@ -610,8 +749,15 @@ def background_update(score, mark, active, n_active, scan, ranges, cos_a, sin_a,
         if not (r > range_min and r < range_max):
             continue
         sx, sy = r * cos_a[j], r * sin_a[j]
-        i = int(np.floor((pc * sx - ps * sy + px - x0) / cell))
-        k = int(np.floor((ps * sx + pc * sy + py - y0) / cell))
+        wx, wy = pc * sx - ps * sy + px, ps * sx + pc * sy + py
+        mine = False
+        for q in range(len(qx)):
+            if np.hypot(wx - qx[q], wy - qy[q]) <= radius:
+                mine = True
+        if mine:
+            continue
+        i = int(np.floor((wx - x0) / cell))
+        k = int(np.floor((wy - y0) / cell))
         if i < 0 or k < 0 or i >= n or k >= n:
             continue
         c = i * n + k
@@ -697,18 +843,22 @@ TRACK_DTYPE = cdr.element_dtype(types.TRACK)
 # legs, circles, lines, blobs, -, a lone leg; see kind_groups); tentative tracks (row 4) take any
 _COMPAT = np.ones((6, N_KINDS), bool)
 _COMPAT[0, [KIND_CIRCLE, KIND_RECT]] = False
-_COMPAT[1, [KIND_PERSON, KIND_RECT]] = False   # a circle partly seen may pass for a leg
+_COMPAT[1, KIND_PERSON] = False   # a circle partly seen may pass for a leg, or for a line
 _COMPAT[2, [KIND_PERSON, KIND_LEG, KIND_CIRCLE]] = False
 _ANY, _LONE_LEG = 4, 5
 _COMPAT[_LONE_LEG, [KIND_PERSON, KIND_CIRCLE, KIND_RECT]] = False
 # with a leg detector, a leg it was less sure of is a small circle or blob: people may take those too
 _COMPAT_LEARNED = _COMPAT.copy()
 _COMPAT_LEARNED[[0, _LONE_LEG], KIND_CIRCLE] = True
-# which kinds a lost track may be reacquired on (rows as _COMPAT's): only its own, since with real perception
-# the clutter around (pieces of walls and benches as blobs, short lines and small circles) is near everywhere
+# which kinds a lost track may be reacquired on (rows as _COMPAT's): only its own (a person: two legs or one), since
+# with real perception the clutter around (pieces of walls and benches as blobs, short lines and small circles) is
+# near everywhere
 _REACQUIRE = np.zeros((6, N_KINDS), bool)
 _REACQUIRE[0, KIND_PERSON] = _REACQUIRE[1, KIND_CIRCLE] = _REACQUIRE[2, KIND_RECT] = True
 _REACQUIRE[3, KIND_BLOB] = _REACQUIRE[_ANY] = _REACQUIRE[_LONE_LEG, KIND_LEG] = True
+# with a leg detector a lost person may be taken back on one leg too (the detector vouches for it)
+_REACQUIRE_LEARNED = _REACQUIRE.copy()
+_REACQUIRE_LEARNED[0, KIND_LEG] = True
 
 
 @dataclass
@@ -738,21 +888,29 @@ class TrackArrays:
     mobility: np.ndarray    # (K,) uint8
     tail: np.ndarray        # (K, T, 2) ring buffer of positions
     tail_count: np.ndarray  # (K,) int64, positions written so far
-    leg_score: np.ndarray   # (K,) float64: running mean of the leg detector's probability of its recent hits
-    sensor_ref: np.ndarray  # (K, 2) running mean of its position in the sensor frame, m
-    pose_first: np.ndarray  # (K, 2) the sensor's position (tracking frame) when created
-    sensor_dev: np.ndarray  # (K,) running mean of its distance from sensor_ref at its hits, m
+    leg_score: np.ndarray   # (K,) float64: leg evidence, the mean leg probability of its leg-candidate hits
+    leg_hits: np.ndarray    # (K,) int64: the leg-candidate hits folded into leg_score (fold_evidence)
+    person: np.ndarray      # (K,) bool: a person (with a leg detector: set once from paired legs, kept until
+    #                         the evidence falls below person_maintain or the track dies)
+    still_time: np.ndarray  # (K,) float64, s of a speed at most moving_speed (a dynamic track this still is
+    #                         static again)
+
+    @classmethod
+    def zeros(cls, n: int, tail_length: int) -> TrackArrays:
+        """n tracks with every field zero (False, empty history)."""
+        i8 = np.int64
+        return cls(id=np.zeros(n, i8), x=np.zeros((n, 4)), P=np.zeros((n, 4, 4)), born_ns=np.zeros(n, i8),
+                   last_hit_ns=np.zeros(n, i8), age=np.zeros(n, i8), hits=np.zeros(n, i8), misses=np.zeros(n, i8),
+                   history=np.zeros(n, i8), votes=np.zeros((n, N_KINDS), i8), lead_left=np.zeros(n, bool),
+                   lead_right=np.zeros(n, bool), moving_time=np.zeros(n), size=np.zeros(n), first=np.zeros((n, 2)),
+                   last=np.zeros((n, 2)), confirmed=np.zeros(n, bool), occluded=np.zeros(n, bool),
+                   hit=np.zeros(n, bool), cls=np.zeros(n, np.uint8), mobility=np.zeros(n, np.uint8),
+                   tail=np.zeros((n, max(tail_length, 1), 2)), tail_count=np.zeros(n, i8), leg_score=np.zeros(n),
+                   leg_hits=np.zeros(n, i8), person=np.zeros(n, bool), still_time=np.zeros(n))
 
     @classmethod
     def empty(cls, tail_length: int) -> TrackArrays:
-        return cls(np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros((0, 4, 4)), np.zeros(0, np.int64),
-                   np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64),
-                   np.zeros(0, np.int64), np.zeros((0, N_KINDS), np.int64), np.zeros(0, bool), np.zeros(0, bool),
-                   np.zeros(0),
-                   np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, bool), np.zeros(0, bool),
-                   np.zeros(0, bool),
-                   np.zeros(0, np.uint8), np.zeros(0, np.uint8), np.zeros((0, max(tail_length, 1), 2)),
-                   np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
+        return cls.zeros(0, tail_length)
 
     def __len__(self) -> int:
         return len(self.id)
@@ -768,15 +926,18 @@ class TrackArrays:
         return self.lead_left & self.lead_right
 
 
-def _leg_probability(m: Measurements, cols: np.ndarray) -> np.ndarray:
-    """The leg detector's probability of measurements `cols`: a single leg's own, the mean of a pair's two,
-    the segment's for the rest (1 for legs without a probability: the paper's rule)."""
+def _leg_probability(m: Measurements, cols: np.ndarray, has_prob: bool | None = None) -> np.ndarray:
+    """The leg detector's probability of measurements `cols`: a single leg's own, the mean of a pair's two (each
+    the nearest leg candidate's), the segment's for the rest; 1 for legs when the candidates carry no probability
+    (the paper's rule; `has_prob` None: they carry one when raw_legs has a 4th column)."""
     out = np.asarray(m.prob, np.float64)[cols].copy()
     legs = np.flatnonzero(m.kind[cols] <= KIND_LEG)
     raw = m.raw_legs
+    if has_prob is None:
+        has_prob = raw.shape[1] >= 4
     if not len(legs):
         return out
-    if raw.shape[1] < 4 or not len(raw):
+    if not has_prob or not len(raw):
         out[legs] = 1.0
         return out
     c = cols[legs]
@@ -793,34 +954,50 @@ def _leg_probability(m: Measurements, cols: np.ndarray) -> np.ndarray:
 
 
 class ReferenceTracker:
-    """Tracks and classifies objects scan by scan. `step` takes one scan's measurements (sensor frame)
-    and returns the live tracks as Track elements (element_dtype(types.TRACK)).
+    """Tracks and classifies objects scan by scan. `step` takes one scan's measurements (sensor frame; their
+    raw_legs as reference_measurements gives them) and returns the live tracks as Track elements
+    (element_dtype(types.TRACK)).
 
-    People, with a leg detector (`learned`): a track is a person while the running mean of the leg
-    probability of its recent hits (two legs paired, one leg whose partner is hidden, or both legs in one
-    cluster) is at least person_evidence (moving_person_evidence once it is dynamic: clutter the detector
-    likes stays put), it has been seen with two legs person_pairs times (moving_person_pairs when dynamic:
-    a table leg is seen alone), and it is not something the moving scanner carries (a part of the robot:
-    still in the sensor frame over carried_travel). Walking is not required: a person standing, or
-    followed by a robot without odometry, is a person; class and mobility are decided apart. With the
-    paper's rule, a person needs paired legs and the walking pattern (legs leading in turn)."""
+    People, with a leg detector (`learned`; its threshold `leg_threshold` made the measurements), have a life
+    cycle with hysteresis:
+    - every leg candidate comes with its probability p; those of p >= leg_threshold are legs (strong), paired
+      into people or single; the others (weak) are the measurement made of their beams, carrying their p;
+    - candidates on the background (unless within leg_reach of a person the detector keeps confirming,
+      sure_people) or on beams the scanner carries (carried_update, whoever is near) are no legs (a strong one
+      becomes a blob, a weak one's measurement stays), their p NOT_A_LEG;
+    - every person, and the confirmed tracks of legs or of evidence at least person_maintain, take candidates
+      near them first, strong ones and weak ones of p >= person_maintain;
+    - a hit on a leg candidate (a leg, a pair, or a measurement of p > 0) folds its p into the track's
+      evidence (fold_evidence; a NOT_A_LEG one sets it to 0); other hits leave it as it is;
+    - a confirmed track becomes a person once its evidence is at least person_evidence with person_pairs
+      sightings of two legs, and stays one until its evidence falls below person_maintain or it dies;
+      mobility plays no part; a person is output as person, the other tracks by the shape of their hits;
+    - a confirmed person lives max(its limit, person_coast) s unseen, output occluded while it coasts;
+    - returns within person_radius of a person the detector keeps confirming add nothing to the background
+      grid;
+    - with a leg detector, a dynamic track still (speed at most moving_speed) for still_time s is static again (the
+      paper's rule keeps it dynamic for ever).
+    With the paper's rule, a person needs paired legs and the walking pattern (legs leading in turn)."""
 
     def __init__(self, params: TrackingParams | None = None, geometry: ScanGeometry | None = None,
-                 learned: bool = False) -> None:
+                 learned: bool = False, leg_threshold: float = 0.5) -> None:
         self.params = params or TrackingParams()
-        self.prm = self.params.kernel_vector()
+        self.prm = self.params.kernel_vector(leg_threshold)
         self.learned = learned
+        self._reacq = _REACQUIRE_LEARNED if learned else _REACQUIRE
         self.geometry = geometry
         self.tracks = TrackArrays.empty(self.params.tail_length)
         self.stamp_ns: int | None = None
         self._dt = 0.0
         self.next_id = 1
         self.pose: np.ndarray | None = None
+        self._has_prob = True
         self._compat_row = np.zeros(0, np.int64)
         self._superseded = np.zeros(0, np.int64)
         w = self.params.confirm_window
         self._mask = (1 << w) - 1
         self._popcount = np.array([bin(i).count("1") for i in range(1 << w)], np.int64)
+        self._n = 0
         if geometry is not None:
             self._angle_min, self._inc, self._n = geometry.angle_min, geometry.angle_increment, geometry.n_beams
             angles = geometry.angle_min + geometry.angle_increment * np.arange(geometry.n_beams)
@@ -828,24 +1005,35 @@ class ReferenceTracker:
         self._bg_score: np.ndarray | None = None   # background grid (see _background), made at the first scan
         self._bg_origin = (0.0, 0.0)
         self._on_bg = np.zeros(0, bool)
+        # carried beams (carried_update): per beam the range it keeps returning and the travel (m) it was seen
+        # there and away; the sensor's position at the last scan that updated them
+        self.carry_ref = np.full(self._n, np.nan)
+        self.carry_seen = np.zeros(self._n)
+        self.carry_away = np.zeros(self._n)
+        self._carry_pose: tuple[float, float] | None = None
+        self._ranges: np.ndarray | None = None   # this scan's, for the carried beams
 
     # ---------------------------------------------------------------------------------------- step
     def step(self, stamp_ns: int, meas: Measurements, ranges: np.ndarray | None = None,
              pose: np.ndarray | None = None) -> np.ndarray:
         """Advance to the scan at `stamp_ns` (ns) with its measurements `meas` (sensor frame), its ranges
-        (m, for the occlusion test; None: no missed track counts as occluded) and the sensor's world pose
-        (x, y in m, theta in rad) when tracking in the world frame. Returns the live tracks."""
+        (m, for the occlusion test, the background and the carried beams; None: no missed track counts as
+        occluded) and the sensor's world pose (x, y in m, theta in rad) when tracking in the world frame.
+        Returns the live tracks."""
         p = self.params
         dt = 0.0 if self.stamp_ns is None else max((stamp_ns - self.stamp_ns) * 1e-9, 0.0)
         self._dt = dt
         self.stamp_ns = stamp_ns
         self.pose = None if pose is None else np.asarray(pose, np.float64)
         t = self.tracks
-        group = kind_groups(t.votes, t.mobility)
+        group = kind_groups(t.votes, t.mobility, t.person)
         self._compat_row = np.where(t.confirmed, group, _ANY)
         kalman_predict(t.x, t.P, dt, np.where((group == 0) | (group == _LONE_LEG), p.person_process_noise,
                                               p.process_noise))
-        m = self._off_background(moved(meas, self.pose))
+        meas, self._has_prob = with_candidates(meas)
+        m = moved(meas, self.pose)
+        self._carried_update(ranges)
+        m = self._off_background(t, m)
         m, rows0 = self._legs(t, m)
         rows, cols = self._associate(t, m, rows0)
         self._hit_background(t, m, rows, cols)
@@ -855,9 +1043,7 @@ class ReferenceTracker:
             keep = ~np.isin(cols, cols2)   # measurements a lost track took back from tentative tracks
             self._superseded = rows[~keep]  # those tentative tracks were started on it: they go
             rows, cols = np.concatenate([rows[keep], rows2]), np.concatenate([cols[keep], cols2])
-        if len(rows):
-            a = p.leg_evidence_rate
-            t.leg_score[rows] = (1.0 - a) * t.leg_score[rows] + a * _leg_probability(m, cols)
+        self._leg_evidence(t, m, rows, cols)
         self._occlusion(t, ranges)
         self._life_cycle(t, stamp_ns)
         self._spawn(m, rows, cols, stamp_ns)
@@ -872,9 +1058,24 @@ class ReferenceTracker:
             return 0.0, 0.0, 1.0, 0.0
         return float(self.pose[0]), float(self.pose[1]), float(np.cos(self.pose[2])), float(np.sin(self.pose[2]))
 
+    def _carried_update(self, ranges: np.ndarray | None) -> None:
+        """The carried beams (carried_update) with this scan's returns, when the sensor has a pose (only a sensor
+        with a pose travels) and its ranges were given."""
+        p = self.params
+        self._ranges = None if ranges is None else np.asarray(ranges, np.float32)
+        if ranges is None or self.pose is None or self.geometry is None or len(ranges) != self._n:
+            return
+        px, py = float(self.pose[0]), float(self.pose[1])
+        step = 0.0 if self._carry_pose is None else float(np.hypot(px - self._carry_pose[0],
+                                                                   py - self._carry_pose[1]))
+        self._carry_pose = (px, py)
+        carried_update(self.carry_ref, self.carry_seen, self.carry_away, self._ranges, self.geometry.range_min,
+                       self.geometry.range_max, p.carried_radius, step)
+
     def _background(self, ranges: np.ndarray | None) -> None:
-        """Add the scan's returns to the background grid: per cell, how long it has been hit without being
-        seen through (see background_update)."""
+        """Add the scan's returns but the people's (within person_radius of a person the detector keeps
+        confirming, sure_people) to the background grid: per cell, how long it has been hit without being seen
+        through (see background_update)."""
         p = self.params
         if ranges is None or self.geometry is None or p.background_time <= 0 or len(ranges) != self._n:
             return
@@ -892,12 +1093,15 @@ class ReferenceTracker:
             self._bg_lo = float(g.range_min) if np.isfinite(g.range_min) else 0.0
             self._bg_hi = float(g.range_max) if np.isfinite(g.range_max) and g.range_max > self._bg_lo else np.inf
         self._bg_scan += 1
+        t = self.tracks
+        sure = sure_people(t.person)
         # cells hit for four background times are walls: seen-through tests on them every fourth scan suffice
         self._bg_count = background_update(
             self._bg_score, self._bg_mark, self._bg_active, self._bg_count, self._bg_scan,
             np.ascontiguousarray(ranges, np.float32), self._cos, self._sin, self._angle_min, self._inc, self._bg_lo,
             self._bg_hi, px, py, pc, ps, max(self._dt, 0.0), self._bg_origin[0], self._bg_origin[1],
-            p.background_cell, self._bg_n, p.occlusion_margin, 4.0 * p.background_time)
+            p.background_cell, self._bg_n, p.occlusion_margin, 4.0 * p.background_time,
+            np.ascontiguousarray(t.x[sure, 0]), np.ascontiguousarray(t.x[sure, 1]), p.person_radius)
 
     def _hit_background(self, t: TrackArrays, m: Measurements, rows: np.ndarray, cols: np.ndarray) -> None:
         """Which tracks take a measurement on the background this scan (their motion does not count: the
@@ -909,50 +1113,83 @@ class ReferenceTracker:
         self._on_bg = _kernels.tracks_on_background(self._bg_score, m.x, m.y, m.size, m.kind, rows, cols, len(t), px,
                                                     py, self._bg_origin[0], self._bg_origin[1], self._bg_n, self.prm)
 
-    def _off_background(self, m: Measurements) -> Measurements:
-        """The measurements with leg candidates on the background (a place hit for a long time: a wall, a
-        bench, a column) taken out of the legs: each becomes a blob, and the other legs are paired again."""
+    def _carried(self, raw: np.ndarray) -> np.ndarray:
+        """Which leg candidates (tracking frame) lie on carried beams (carried_beams); none without a pose or
+        this scan's ranges."""
+        p = self.params
+        if self.pose is None or self.geometry is None or self._ranges is None or len(self._ranges) != self._n:
+            return np.zeros(len(raw), bool)
+        sx, sy = self._to_sensor(raw[:, 0], raw[:, 1])
+        return carried_beams(sx, sy, raw[:, 2], self._ranges, self.carry_ref, self.carry_seen, self.carry_away,
+                             self._angle_min, self._inc, p.carried_travel, p.carried_radius)
+
+    def _off_background(self, t: TrackArrays, m: Measurements) -> Measurements:
+        """The leg candidates on the background (a place hit for a long time: a wall, a bench, a column), unless
+        within leg_reach of the prediction of a person the detector keeps confirming (sure_people: a person
+        standing by a wall keeps their legs), or on carried beams (a part of the robot, whoever is near) taken out
+        of the legs: a strong one becomes a blob and a weak one stays the measurement made of it, each of leg
+        probability NOT_A_LEG; the other strong ones are paired again."""
+        p = self.params
         raw = m.raw_legs
-        if self._bg_score is None or not len(raw):
+        if not len(raw):
             return m
         px, py, _, _ = self._sensor()
-        bg = _kernels.on_background(self._bg_score, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), px, py,
-                                    self._bg_origin[0], self._bg_origin[1], self._bg_n, self.prm)
+        if self._bg_score is not None:
+            bg = _kernels.on_background(self._bg_score, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), px,
+                                        py, self._bg_origin[0], self._bg_origin[1], self._bg_n, self.prm)
+        else:
+            bg = np.zeros(len(raw), bool)
+        sure = sure_people(t.person)
+        if sure.any():
+            d = np.hypot(raw[:, 0:1] - t.x[None, sure, 0], raw[:, 1:2] - t.x[None, sure, 1])
+            bg &= ~(d <= p.leg_reach).any(axis=1)
+        bg |= self._carried(raw)
         if not bg.any():
             return m
-        keep = raw[~bg]
-        lx, ly, ls, kind, legs = _kernels.legs_to_measurements(keep[:, 0].copy(), keep[:, 1].copy(),
-                                                               keep[:, 2].copy(), self.prm)
-        other = m.kind > KIND_LEG
-        n_bg = int(bg.sum())
-        return Measurements(np.concatenate([lx, raw[bg, 0], m.x[other]]), np.concatenate([ly, raw[bg, 1], m.y[other]]),
-                            np.concatenate([ls, raw[bg, 2], m.size[other]]),
-                            np.concatenate([kind, np.full(n_bg, KIND_BLOB, np.int64), m.kind[other]]),
-                            np.concatenate([legs, np.full((n_bg, 4), np.nan), m.legs[other]]), keep,
-                            np.concatenate([np.zeros(len(lx) + n_bg), m.prob[other]]))
+        strong = raw[:, 4] < 0
+        keep = strong & ~bg
+        lx, ly, ls, kind, legs = legs_to_measurements(raw[keep, 0], raw[keep, 1], raw[keep, 2], p.stride_max)
+        blob = bg & strong
+        other = np.flatnonzero(m.kind > KIND_LEG)
+        n_first = len(lx) + int(blob.sum())
+        where = np.full(len(m), -1, np.int64)   # an other-kind measurement's new index
+        where[other] = n_first + np.arange(len(other))
+        prob = np.concatenate([np.zeros(len(lx)), np.full(int(blob.sum()), NOT_A_LEG), m.prob[other]])
+        covered = raw[:, 4].astype(np.int64)
+        gone = covered[bg & ~strong & (raw[:, 4] >= 0)]
+        gone = where[gone]
+        prob[gone[gone >= 0]] = NOT_A_LEG
+        out = raw[~bg].copy()
+        c = covered[~bg]
+        out[:, 4] = np.where(c >= 0, where[np.maximum(c, 0)], out[:, 4])
+        return Measurements(np.concatenate([lx, raw[blob, 0], m.x[other]]),
+                            np.concatenate([ly, raw[blob, 1], m.y[other]]),
+                            np.concatenate([ls, raw[blob, 2], m.size[other]]),
+                            np.concatenate([kind, np.full(int(blob.sum()), KIND_BLOB, np.int64), m.kind[other]]),
+                            np.concatenate([legs, np.full((int(blob.sum()), 4), np.nan), m.legs[other]]), out, prob)
 
     def _legs(self, t: TrackArrays, m: Measurements) -> tuple[Measurements, np.ndarray]:
         """Let tracks that are legs or people take up to two leg candidates each near their prediction
-        (nearest pairs first, so two people walking side by side keep their own legs), before the
-        remaining legs are paired by distance alone. Returns the scan's measurements rebuilt, the first
-        len(rows) of them formed for tracks `rows` from their legs."""
+        (nearest pairs first, so two people walking side by side keep their own legs): strong candidates, and
+        weak ones the detector gives at least person_maintain (below it, no hit keeps a person); then the
+        remaining strong candidates are paired by distance alone (leg_stage_measurements). Returns the scan's
+        measurements rebuilt, the first len(rows) of them formed for tracks `rows` from their legs."""
         p = self.params
         none = np.zeros(0, np.int64)
         raw = m.raw_legs
         if not len(t) or not len(raw):
             return m, none
-        leggy = leggy_tracks(t.votes, t.cls, t.confirmed, p.person_votes)
+        leggy = leggy_tracks(t.votes, t.cls, t.confirmed, t.person, t.leg_hits, t.leg_score, p.person_votes,
+                             p.person_maintain)
         if not len(leggy):
             return m, none
-        owner, x, y, size, kind, legs = _kernels.leg_stage_measurements(
-            t.x[leggy, 0], t.x[leggy, 1], raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(),
-            m.x, m.y, m.size, m.kind, m.legs, self.prm)
+        c = raw[(raw[:, 4] < 0) | (raw[:, 3] >= p.person_maintain)]
+        owner, x, y, size, kind, legs, other = leg_stage_measurements(
+            t.x[leggy, 0], t.x[leggy, 1], c[:, 0], c[:, 1], c[:, 2], c[:, 4] < 0, c[:, 4].astype(np.int64), m.x,
+            m.y, m.size, m.kind, m.legs, p.leg_reach, p.stride_max)
         if not len(owner):
             return m, none
-        prob = np.zeros(len(x))
-        other = m.kind > KIND_LEG
-        if other.any():
-            prob[len(x) - int(other.sum()):] = m.prob[other]
+        prob = np.concatenate([np.zeros(len(x) - len(other)), m.prob[other]])
         return Measurements(x, y, size, kind, legs, raw, prob), leggy[owner]
 
     def _associate(self, t: TrackArrays, m: Measurements, rows0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -987,7 +1224,8 @@ class ReferenceTracker:
         lost = np.flatnonzero(~t.hit & t.confirmed & t.occluded)
         if not len(lost) or not len(m):
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        free = m.kind != KIND_LEG   # a lone leg may be someone else's second leg: reacquire on pairs
+        # a lone leg may be someone else's second leg: taken back only where the table lets a person take one
+        free = (m.kind != KIND_LEG) | self._reacq[0, KIND_LEG]
         free[taken] = False
         # a tentative track started on someone coming back into view does not keep them from their old track
         # (a mover's: a static object's track does not jump onto a new one)
@@ -1002,7 +1240,7 @@ class ReferenceTracker:
         dist = np.hypot(m.x[cand][None, :] - t.last[lost, 0:1], m.y[cand][None, :] - t.last[lost, 1:2])
         reach = np.minimum(p.reacquire_speed * (stamp_ns - t.last_hit_ns[lost]) * 1e-9 + p.max_gate_distance,
                            p.reacquire_distance)
-        allowed = (dist <= reach[:, None]) & _REACQUIRE[self._compat_row[lost]][:, m.kind[cand]]
+        allowed = (dist <= reach[:, None]) & self._reacq[self._compat_row[lost]][:, m.kind[cand]]
         allowed &= free[cand][None, :] | (t.mobility[lost] == MOBILITY_DYNAMIC)[:, None]
         r, c = gnn(dist, allowed)
         if not len(r):
@@ -1020,6 +1258,14 @@ class ReferenceTracker:
         t.votes[rows, kind] += 1
         return rows, cols
 
+    def _leg_evidence(self, t: TrackArrays, m: Measurements, rows: np.ndarray, cols: np.ndarray) -> None:
+        """Fold each hit on a leg candidate (a leg, a pair, or a measurement the detector scored above 0) into
+        its track's evidence; other hits leave it as it is. Without a detector (the paper's rule) no evidence."""
+        cand = ((m.kind[cols] <= KIND_LEG) | (m.prob[cols] > 0)) & self._has_prob
+        prob = _leg_probability(m, cols[cand], self._has_prob)
+        for k, pk in zip(rows[cand].tolist(), prob.tolist(), strict=True):
+            fold_evidence(t.leg_score, t.leg_hits, k, pk, self.params.leg_evidence_rate)
+
     def _occlusion(self, t: TrackArrays, ranges: np.ndarray | None) -> None:
         """Mark each missed track occluded when a return nearer than it covers its bearing, or when it is
         outside the field of view or the range limit."""
@@ -1033,9 +1279,9 @@ class ReferenceTracker:
 
     def _life_cycle(self, t: TrackArrays, stamp_ns: int) -> None:
         p = self.params
-        dead = life_cycle(t.hit, t.age, t.hits, t.misses, t.last_hit_ns, t.history, t.confirmed,
-                                   t.occluded, stamp_ns, self._mask, self._popcount, p.confirm_hits, p.delete_after,
-                                   p.delete_after_occluded, p.tentative_delete_after)
+        dead = life_cycle(t.hit, t.age, t.hits, t.misses, t.last_hit_ns, t.history, t.confirmed, t.occluded,
+                          t.person, stamp_ns, self._mask, self._popcount, p.confirm_hits, p.delete_after,
+                          p.delete_after_occluded, p.tentative_delete_after, p.person_coast)
         dead |= self._duplicates(t)
         if len(self._superseded):
             dead[self._superseded] = True
@@ -1046,17 +1292,23 @@ class ReferenceTracker:
                 self._on_bg = self._on_bg[~dead]
 
     def _duplicates(self, t: TrackArrays) -> np.ndarray:
-        """Tracks of legs or people closer than `merge_distance` to a higher-ranked such track, unless both
-        are confirmed and move differently: one person's two legs must not keep two tracks alive. Rank: a
-        person before anything else, then a dynamic track, then more hits (a person walking past a bench
-        keeps its track; the track on the bench's pieces its passing uncovers goes)."""
-        candidate, rank = duplicate_ranks(t.votes, t.hits, t.confirmed, t.mobility, t.cls)
+        """Tracks of legs or people, or that took leg candidates, closer than `merge_distance` to a
+        higher-ranked track of legs or people, unless both are confirmed and move differently (beyond merge_speed,
+        and with a leg detector the spread of their velocities): one person's two legs must not keep two tracks
+        alive. Rank: a person before anything else, then a dynamic track, then more hits (a person walking past a
+        bench keeps its track; the track on the bench's pieces its passing uncovers goes)."""
+        victim, candidate, rank = duplicate_ranks(t.votes, t.hits, t.confirmed, t.mobility, t.cls, t.leg_hits,
+                                                  t.leg_score, self.params.person_maintain)
         x = np.ascontiguousarray(t.x.T)
-        return _kernels.duplicates(x[0], x[1], x[2], x[3], candidate, t.confirmed, rank, self.prm)
+        vvar = t.P[:, 2, 2] + t.P[:, 3, 3] if self.learned else np.zeros(len(t))
+        return duplicates(x[0], x[1], x[2], x[3], vvar, victim, candidate, t.confirmed, rank,
+                          self.params.merge_distance, self.params.merge_speed)
 
     def _spawn(self, m: Measurements, rows: np.ndarray, cols: np.ndarray, stamp_ns: int) -> None:
-        """Start tentative tracks on measurements no track took, except legs beside a track that took a
-        leg or a person (the other leg of someone tracked) and measurements on top of an existing track."""
+        """Start tentative tracks on measurements no track took, except small ones (a leg, a blob, or what
+        the detector scored above 0) beside a track that took a leg or a person (the other leg of someone
+        tracked) and measurements on top of an existing track. A new track on a leg candidate has that
+        hit as its evidence."""
         p = self.params
         free = np.ones(len(m), bool)
         free[cols] = False
@@ -1067,30 +1319,30 @@ class ReferenceTracker:
         if len(t):
             d = np.hypot(m.x[idx, None] - t.x[None, :, 0], m.y[idx, None] - t.x[None, :, 1])
             legged = t.hit & ((t.votes[:, KIND_PERSON] + t.votes[:, KIND_LEG]) > 0)
-            small = (m.kind[idx] == KIND_LEG) | (m.kind[idx] == KIND_BLOB)
+            small = (m.kind[idx] == KIND_LEG) | (m.kind[idx] == KIND_BLOB) | (m.prob[idx] > 0)
             beside = small & (d[:, legged] <= p.leg_beside).any(axis=1)
             on_top = (d <= p.spawn_clearance).any(axis=1)
             idx = idx[~(beside | on_top)]
         n = len(idx)
         if not n:
             return
-        T = self.tracks.tail.shape[1]
-        x = np.zeros((n, 4))
-        x[:, 0], x[:, 1] = m.x[idx], m.y[idx]
-        P = np.zeros((n, 4, 4))
+        new = TrackArrays.zeros(n, self.tracks.tail.shape[1])
+        new.id = np.arange(self.next_id, self.next_id + n, dtype=np.int64)
+        new.x[:, 0], new.x[:, 1] = m.x[idx], m.y[idx]
         r = np.where(m.kind[idx] == KIND_LEG, p.leg_measurement_noise, p.measurement_noise)
-        P[:, 0, 0] = P[:, 1, 1] = r**2
-        P[:, 2, 2] = P[:, 3, 3] = p.initial_speed_sigma**2
-        votes = np.zeros((n, N_KINDS), np.int64)
-        votes[np.arange(n), m.kind[idx]] = 1
-        ones, zeros = np.ones(n, np.int64), np.zeros(n, np.int64)
-        new = TrackArrays(np.arange(self.next_id, self.next_id + n, dtype=np.int64), x, P,
-                          np.full(n, stamp_ns, np.int64), np.full(n, stamp_ns, np.int64), ones, ones, zeros, ones,
-                          votes, np.zeros(n, bool), np.zeros(n, bool), np.zeros(n), m.size[idx].astype(np.float64),
-                          x[:, :2].copy(), x[:, :2].copy(), np.zeros(n, bool), np.zeros(n, bool), np.ones(n, bool),
-                          np.zeros(n, np.uint8), np.full(n, 2, np.uint8), np.zeros((n, T, 2)), zeros,
-                          _leg_probability(m, idx), np.stack(self._to_sensor(x[:, 0], x[:, 1]), axis=1),
-                          np.tile(np.array(self._sensor()[:2]), (n, 1)), np.zeros(n))
+        new.P[:, 0, 0] = new.P[:, 1, 1] = r**2
+        new.P[:, 2, 2] = new.P[:, 3, 3] = p.initial_speed_sigma**2
+        new.born_ns[:] = new.last_hit_ns[:] = stamp_ns
+        new.age[:] = new.hits[:] = new.history[:] = 1
+        new.votes[np.arange(n), m.kind[idx]] = 1
+        new.size = m.size[idx].astype(np.float64)
+        new.first, new.last = new.x[:, :2].copy(), new.x[:, :2].copy()
+        new.hit[:] = True
+        new.mobility[:] = MOBILITY_UNDEFINED
+        cand = ((m.kind[idx] <= KIND_LEG) | (m.prob[idx] > 0)) & self._has_prob
+        prob = _leg_probability(m, idx[cand], self._has_prob)
+        for k, pk in zip(np.flatnonzero(cand).tolist(), prob.tolist(), strict=True):
+            fold_evidence(new.leg_score, new.leg_hits, k, pk, p.leg_evidence_rate)
         self.next_id += n
         self.tracks = self.tracks.extend(new)
 
@@ -1103,6 +1355,11 @@ class ReferenceTracker:
         on_bg = np.zeros(len(t), bool)
         on_bg[:len(self._on_bg)] = self._on_bg   # tracks spawned this scan come after
         t.moving_time = np.where(t.hit & ~on_bg & (speed > p.moving_speed), t.moving_time + self._dt, 0.0)
+        # a dynamic track still for still_time s stopped: static again, and must move moving_distance anew
+        t.still_time = np.where(speed > p.moving_speed, 0.0, t.still_time + self._dt)
+        stopped = (t.mobility == MOBILITY_DYNAMIC) & (t.still_time >= p.still_time) & self.learned   # paper: for ever
+        t.mobility[stopped] = MOBILITY_STATIC
+        t.first[stopped] = t.x[stopped, :2]
         speed = np.where(t.moving_time >= p.moving_time, speed, 0.0)
         moved = np.hypot(t.x[:, 0] - t.first[:, 0], t.x[:, 1] - t.first[:, 1])
         age_s = (self.stamp_ns - t.born_ns) * 1e-9
@@ -1110,26 +1367,17 @@ class ReferenceTracker:
                                               speed, t.confirmed, p.person_votes, p.d_max, p.undefined_window,
                                               p.moving_distance, p.moving_speed)
         if self.learned:
-            # a person is what the leg detector keeps seeing, walking or not; the rest by the shape of its hits
+            # the person life cycle: set once from paired legs, kept until the evidence falls below
+            # person_maintain; the rest by the shape of its hits
             shape = t.votes[:, [KIND_CIRCLE, KIND_RECT, KIND_BLOB]]
             by_shape = np.array([CLASS_CIRCLE_OBJECT, CLASS_RECTANGULAR_OBJECT, CLASS_UNKNOWN],
                                 np.uint8)[np.argmax(shape, axis=1)]
             by_shape[shape.sum(axis=1) == 0] = CLASS_UNKNOWN
-            # a thing the scanner carries (a part of the robot) keeps its place in the sensor frame as it drives
-            sx, sy = self._to_sensor(t.x[:, 0], t.x[:, 1])
-            a = np.where(t.hit, p.leg_evidence_rate, 0.0)
-            dev = np.hypot(sx - t.sensor_ref[:, 0], sy - t.sensor_ref[:, 1])
-            t.sensor_dev = (1.0 - a) * t.sensor_dev + a * dev
-            t.sensor_ref[:, 0] = (1.0 - a) * t.sensor_ref[:, 0] + a * sx
-            t.sensor_ref[:, 1] = (1.0 - a) * t.sensor_ref[:, 1] + a * sy
-            px, py, _, _ = self._sensor()
-            travel = np.hypot(px - t.pose_first[:, 0], py - t.pose_first[:, 1])
-            carried = (travel >= p.carried_travel) & (t.sensor_dev <= p.carried_radius)
-            dynamic = t.mobility == MOBILITY_DYNAMIC
-            need = np.where(dynamic, p.moving_person_evidence, p.person_evidence)
-            pairs = np.where(dynamic, p.moving_person_pairs, p.person_pairs)
-            person = (t.leg_score >= need) & (t.votes[:, KIND_PERSON] >= pairs) & ~carried
-            t.cls = np.where(person, np.uint8(CLASS_PERSON), by_shape).astype(np.uint8)
+            drop = t.person & (t.leg_score < p.person_maintain)
+            promote = (~t.person & t.confirmed & (t.leg_score >= p.person_evidence)
+                       & (t.votes[:, KIND_PERSON] >= p.person_pairs))
+            t.person = (t.person & ~drop) | promote
+            t.cls = np.where(t.person, np.uint8(CLASS_PERSON), by_shape).astype(np.uint8)
 
     def _push_tail(self) -> None:
         t = self.tracks
@@ -1148,7 +1396,8 @@ class ReferenceTracker:
         return c * dx + s * dy, -s * dx + c * dy
 
     def output(self) -> np.ndarray:
-        """The live tracks as Track elements: positions in the sensor frame and, with a pose, the world."""
+        """The live tracks as Track elements: positions in the sensor frame and, with a pose, the world; a
+        confirmed person coasting (missed) is flagged occluded."""
         t = self.tracks
         out = np.zeros(len(t), TRACK_DTYPE)
         if not len(t):
@@ -1169,5 +1418,5 @@ class ReferenceTracker:
         out["classification"] = t.cls
         out["mobility"] = t.mobility
         out["status"] = np.where(t.confirmed, np.where(t.hit, STATUS_CONFIRMED, STATUS_COASTING), STATUS_TENTATIVE)
-        out["occluded"] = t.occluded
+        out["occluded"] = t.occluded | (t.confirmed & ~t.hit & t.person)
         return out

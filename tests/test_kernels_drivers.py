@@ -12,18 +12,18 @@ from hypothesis import given, settings
 from datmo_cli.perception import _egomotion_kernels as KE
 from datmo_cli.perception import _leg_kernels as KL
 from datmo_cli.tracking import _step
-from datmo_cli.tracking.tracker import _REACQUIRE, TRACK_DTYPE, Tracker, _flat
+from datmo_cli.tracking.tracker import _REACQUIRE, _REACQUIRE_LEARNED, TRACK_DTYPE, Tracker, _flat
 from tests import reference_perception as rp
 from tests.reference_tracking import ReferenceTracker, reference_measurements
-from tests.test_tracking_step import GEOM, P, meas_arrays, scenes
+from tests.test_tracking_step import GEOM, THR, P, meas_arrays, scenes
 
 
 # ------------------------------------------------------------------------------------------------ tracking
 def _state(learned: bool) -> tuple:
     """A new tracker's state as the compiled step takes it: (table, context, prm, geometry, cos, sin,
-    background arrays, compatibility table)."""
-    t = Tracker(P, GEOM, learned=learned)
-    return t.tracks.table, t._ctx, t._prm, t._geo, t._cos, t._sin, t._bg, t._compat
+    background arrays, carried beams, compatibility table)."""
+    t = Tracker(P, GEOM, learned=learned, leg_threshold=THR)
+    return t.tracks.table, t._ctx, t._prm, t._geo, t._cos, t._sin, t._bg + t._carry, t._compat
 
 
 @settings(max_examples=6, deadline=None)
@@ -33,20 +33,21 @@ def test_track_block_step_measurements_and_track_scan(scene: tuple):
     scan, each on its own state): every scan's Track elements are the reference tracker's byte for byte."""
     stamps, feats, poses, ranges, learned = scene
     N = len(stamps)
-    ref = ReferenceTracker(P, GEOM, learned=learned)
+    ref = ReferenceTracker(P, GEOM, learned=learned, leg_threshold=THR)
     want = []
     for i, f in enumerate(feats):
-        want.append(ref.step(int(stamps[i]), reference_measurements(f, P, learned),
+        want.append(ref.step(int(stamps[i]), reference_measurements(f, P, learned, THR),
                              None if ranges is None else ranges[i], None if poses is None else poses[i]))
     rel = stamps - stamps[0]
     ranges_arg = np.zeros((N, 0), np.float32) if ranges is None else ranges
     poses_arg = np.zeros((N, 3)) if poses is None else poses
 
     tab, ctx, prm, geo, cos_a, sin_a, bg, compat = _state(learned)
+    reacq = _REACQUIRE_LEARNED if learned else _REACQUIRE
     cap, T = 4, P.tail_length
     offsets = np.zeros(N + 1, np.int64)
     _, out, _, count = _step.track_block(tab, ctx, prm, rel, *_flat(feats), learned, ranges_arg, ranges is not None,
-                                         poses_arg, poses is not None, geo, cos_a, sin_a, *bg, compat, _REACQUIRE,
+                                         poses_arg, poses is not None, geo, cos_a, sin_a, *bg, compat, reacq,
                                          np.zeros(cap, TRACK_DTYPE), True, np.zeros((cap, T, 2)),
                                          np.zeros(cap, np.int64), offsets)
     np.testing.assert_array_equal(np.diff(offsets), [len(w) for w in want])
@@ -57,17 +58,17 @@ def test_track_block_step_measurements_and_track_scan(scene: tuple):
     tab2, ctx2, prm2, geo2, cos2, sin2, bg2, compat2 = _state(learned)
     out1 = np.zeros(1, TRACK_DTYPE)
     for i, f in enumerate(feats):
-        m = reference_measurements(f, P, learned)
+        m = reference_measurements(f, P, learned, THR)
         mx, my, msize, mkind, mlegs, raw, mprob = meas_arrays(m)
         has_prob = m.raw_legs.shape[1] >= 4
         tab1, out1 = _step.step_measurements(tab1, ctx1, prm1, rel[i], mx, my, msize, mkind, mlegs, raw, mprob,
                                              has_prob, ranges_arg[i], ranges is not None, poses is not None,
-                                             poses_arg[i], geo1, cos1, sin1, *bg1, learned, compat1, _REACQUIRE, out1)
+                                             poses_arg[i], geo1, cos1, sin1, *bg1, learned, compat1, reacq, out1)
         n = int(ctx1[_step.C_N_TRACKS])
         assert out1[:n].tobytes() == want[i].tobytes(), f"step_measurements, scan {i}"
         tab2 = _step.track_scan(tab2, ctx2, prm2, rel[i], mx, my, msize, mkind, mlegs, raw, mprob, has_prob,
                                 ranges_arg[i], ranges is not None, poses is not None, poses_arg[i], geo2, cos2, sin2,
-                                *bg2, learned, compat2, _REACQUIRE)
+                                *bg2, learned, compat2, reacq)
         n2 = int(ctx2[_step.C_N_TRACKS])
         got = np.zeros(n2, TRACK_DTYPE)
         _step.write_tracks(got, 0, tab2, n2, poses is not None, poses_arg[i])

@@ -137,21 +137,40 @@ def test_leg_stage(seed: int, T: int, L: int):
     _equal(KT.leg_stage(tx, ty, lx, ly, ls, prm), rt.leg_stage(tx, ty, lx, ly, ls, 0.6, 0.8))
 
 
-def test_leg_stage_measurements():
-    rng = np.random.default_rng(3)
-    tx, ty = rng.uniform(0, 3, 3), rng.uniform(0, 3, 3)
-    lx, ly, ls = _legs(rng, 8)
-    mx, my, msize = rng.uniform(0, 3, 5), rng.uniform(0, 3, 5), rng.uniform(0, 1, 5)
-    mkind = np.array([0, 1, 2, 3, 4])
-    mlegs = np.full((5, 4), np.nan)
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), T=st.integers(0, 4), L=st.integers(0, 8))
+def test_leg_stage_measurements(seed: int, T: int, L: int):
+    """Strong and weak candidates (each weak one the measurement of other kind it was measured as) taken by
+    tracks; the measurements a taken weak candidate was are dropped, the free strong ones paired again."""
+    rng = np.random.default_rng(seed)
+    tx, ty = rng.uniform(0, 3, T), rng.uniform(0, 3, T)
+    lx, ly, ls = _legs(rng, L)
+    M = 6
+    mx, my, msize = rng.uniform(0, 3, M), rng.uniform(0, 3, M), rng.uniform(0, 1, M)
+    mkind = np.array([0, 1, 2, 3, 4, 4])
+    mlegs = np.full((M, 4), np.nan)
+    strong = rng.random(L) < 0.5
+    cover = np.where(strong, -1, rng.integers(1, M, L))   # a weak candidate on a measurement of other kind, or none
+    cover = np.where(cover == 1, -1, cover)
     prm = rt.param_vector(leg_reach=0.6, stride_max=0.8)
-    owner, x, y, size, kind, legs = KT.leg_stage_measurements(tx, ty, lx, ly, ls, mx, my, msize, mkind, mlegs, prm)
-    o, *took, taken = rt.leg_stage(tx, ty, lx, ly, ls, 0.6, 0.8)
-    free = rt.legs_to_measurements(lx[~taken], ly[~taken], ls[~taken], 0.8)
-    other = mkind > 1
-    want = [np.concatenate([a, b, c]) for a, b, c in zip(took, free, (mx[other], my[other], msize[other],
-                                                                   mkind[other], mlegs[other]), strict=True)]
-    _equal((owner, x, y, size, kind, legs), (o, *want))
+    got = KT.leg_stage_measurements(tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs, prm)
+    _equal(got, rt.leg_stage_measurements(tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs, 0.6, 0.8))
+
+
+def test_a_taken_weak_candidate_is_no_longer_its_measurement():
+    """A track takes the weak candidate at its prediction: the blob that candidate was measured as goes; the
+    weak candidate no track reaches stays its circle; strong candidates no track took are paired."""
+    lx, ly, ls = np.array([1.0, 3.0, 5.0, 5.3]), np.array([0.0, 0.0, 0.0, 0.0]), np.full(4, 0.1)
+    strong, cover = np.array([False, False, True, True]), np.array([1, 0, -1, -1])
+    mx, my, msize = np.array([3.0, 1.0, 9.0]), np.zeros(3), np.full(3, 0.1)
+    mkind, mlegs = np.array([2, 4, 3]), np.full((3, 4), np.nan)
+    owner, x, y, size, kind, legs, other = KT.leg_stage_measurements(
+        np.array([1.05]), np.array([0.0]), lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs,
+        rt.param_vector(leg_reach=0.6, stride_max=0.8))
+    np.testing.assert_array_equal(owner, [0])
+    np.testing.assert_array_equal(kind, [1, 0, 2, 3])   # the track's leg, the free pair, the circle, the box
+    np.testing.assert_array_equal(x, [1.0, 5.15, 3.0, 9.0])
+    np.testing.assert_array_equal(other, [0, 2])
 
 
 @settings(max_examples=40, deadline=None)
@@ -160,9 +179,11 @@ def test_duplicates(seed: int, K: int):
     rng = np.random.default_rng(seed)
     x, y = rng.uniform(0, 1.5, K), rng.uniform(0, 1.5, K)
     vx, vy = rng.uniform(-1, 1, K), rng.uniform(-1, 1, K)
-    candidate, confirmed = rng.random(K) < 0.8, rng.random(K) < 0.5
+    vvar = rng.uniform(0, 0.5, K) * (rng.random(K) < 0.5)
+    candidate, confirmed = rng.random(K) < 0.7, rng.random(K) < 0.5
+    victim = candidate | (rng.random(K) < 0.3)
     rank = rng.integers(0, 3, K)
-    args = (x, y, vx, vy, candidate, confirmed, rank)
+    args = (x, y, vx, vy, vvar, victim, candidate, confirmed, rank)
     got = KT.duplicates(*args, rt.param_vector(merge_distance=0.5, merge_speed=0.6))
     np.testing.assert_array_equal(got, rt.duplicates(*args, 0.5, 0.6))
 
@@ -282,27 +303,52 @@ def test_step_leggy_tracks_and_duplicates():
     from datmo_cli.tracking import _step, state
 
     rng = np.random.default_rng(24)
-    found = 0
+    found = victims = 0
     for _ in range(20):
         n = 8
-        tab, x, _ = _table(rng, n)
+        tab, x, P = _table(rng, n)
         tab[:, state.X:state.X + 2] = rng.uniform(0, 1.0, (n, 2))   # close together: some within merge_distance
         x[:, :2] = tab[:, state.X:state.X + 2]
         votes = rng.integers(0, 4, (n, 5)) * (rng.random((n, 5)) < 0.6)
         cls, mob = rng.integers(0, 4, n), rng.integers(0, 3, n)
         confirmed, hits = rng.random(n) < 0.6, rng.integers(1, 20, n)
+        person, leg_hits = rng.random(n) < 0.3, rng.integers(0, 3, n) * (rng.random(n) < 0.4)
         tab[:, state.VOTES:state.VOTES + 5] = votes
         tab[:, state.CLS], tab[:, state.MOBILITY], tab[:, state.CONFIRMED], tab[:, state.HITS] = \
             cls, mob, confirmed, hits
+        score = rng.random(n)
+        tab[:, state.IS_PERSON], tab[:, state.LEG_HITS], tab[:, state.LEG_SCORE] = person, leg_hits, score
         prm = rt.param_vector()
-        np.testing.assert_array_equal(_step.leggy_tracks(tab, n, prm),
-                                      rt.leggy_tracks(votes, cls, confirmed, prm[state.P_PERSON_VOTES]))
-        candidate, rank = rt.duplicate_ranks(votes, hits, confirmed, mob, cls)
-        want = rt.duplicates(x[:, 0], x[:, 1], x[:, 2], x[:, 3], candidate, confirmed, rank,
-                             prm[state.P_MERGE_DISTANCE], prm[state.P_MERGE_SPEED])
-        np.testing.assert_array_equal(_step.duplicates(tab, n, prm), want)
+        np.testing.assert_array_equal(
+            _step.leggy_tracks(tab, n, prm),
+            rt.leggy_tracks(votes, cls, confirmed, person, leg_hits, score, prm[state.P_PERSON_VOTES],
+                            prm[state.P_PERSON_MAINTAIN]))
+        np.testing.assert_array_equal([_step.sure_person(tab, k, prm) for k in range(n)],
+                                      rt.sure_people(person))
+        victim, candidate, rank = rt.duplicate_ranks(votes, hits, confirmed, mob, cls, leg_hits, score,
+                                                     prm[state.P_PERSON_MAINTAIN])
+        want = rt.duplicates(x[:, 0], x[:, 1], x[:, 2], x[:, 3], P[:, 2, 2] + P[:, 3, 3], victim, candidate,
+                             confirmed, rank, prm[state.P_MERGE_DISTANCE], prm[state.P_MERGE_SPEED])
+        np.testing.assert_array_equal(_step.duplicates(tab, n, True, prm), want)
         found += int(want.sum())
-    assert found > 0
+        victims += int((want & ~candidate).sum())
+    assert found > 0 and victims > 0
+
+
+def test_step_kind_group():
+    """The kind group of random tracks (votes, mobility, person) is the reference's: a person's is 0 whatever fed
+    it."""
+    from datmo_cli.tracking import _step, state
+
+    rng = np.random.default_rng(30)
+    n = 40
+    tab = np.zeros((n, state.n_columns(1)))
+    votes = rng.integers(0, 4, (n, 5)) * (rng.random((n, 5)) < 0.6)
+    mob, person = rng.integers(0, 3, n), rng.random(n) < 0.3
+    tab[:, state.VOTES:state.VOTES + 5], tab[:, state.MOBILITY], tab[:, state.IS_PERSON] = votes, mob, person
+    want = rt.kind_groups(votes, mob, person)
+    np.testing.assert_array_equal([_step.kind_group(tab, k) for k in range(n)], want)
+    assert (want[person] == 0).all() and (rt.kind_groups(votes, mob, np.zeros(n, bool))[person] != 0).any()
 
 
 def test_step_leg_probability():
@@ -346,13 +392,124 @@ def test_step_background_update():
         ranges[rng.random(B) < 0.05] = np.inf
         args = (ranges, np.cos(angles), np.sin(angles), angles[0], inc, 0.1, 8.0, *pose, 0.2, -5.0, -5.0, cell, n,
                 0.3, 0.8)
-        count = _step.background_update(score, mark, active, cache, count, scan, *args, fresh)
-        want_count = rt.background_update(want_score, want_mark, want_active, want_count, scan, *args)
+        # a person at 2.5 m then 3 m ahead: their returns add nothing
+        people = (np.array([2.5 + 0.5 * (scan > 12)]), np.array([0.1]), 0.4)
+        count = _step.background_update(score, mark, active, cache, count, scan, *args, fresh, *people)
+        want_count = rt.background_update(want_score, want_mark, want_active, want_count, scan, *args, *people)
         assert count == want_count
         np.testing.assert_array_equal(active[:count], want_active[:count])
         np.testing.assert_array_equal(score, want_score)
         np.testing.assert_array_equal(np.where(mark == 0, -1, mark), want_mark)
     assert (score >= 0.8).any()
+
+
+def test_step_carried_update_and_beams():
+    """Scan after scan, a sensor driving with some beams' returns fixed to it (a part of the robot, now and then
+    hidden), others on a wall it nears, invalid ones, and beams that return one range for a while and another
+    after: the carried beams (range kept, travel seen and away) equal the reference's, then which leg candidates
+    lie on carried beams; nothing changes without a pose."""
+    from datmo_cli.tracking import _step, state
+
+    rng = np.random.default_rng(27)
+    B = 91
+    angles = np.radians(np.linspace(-45.0, 45.0, B))
+    geo = np.array([angles[0], angles[1] - angles[0], 8.0, 1.0, 0.05])
+    prm = rt.param_vector(carried_travel=1.0, carried_radius=0.05)
+    ctx = state.new_context()
+    carry = (np.full(B, np.nan), np.zeros(B), np.zeros(B))
+    want = tuple(a.copy() for a in carry)
+    carried_seen, last = 0, None
+    for k in range(40):
+        pose = np.array([0.2 * k, 0.05 * k, 0.02 * k])
+        ranges = (6.0 - 0.15 * k + rng.normal(0, 0.01, B)).astype(np.float32)
+        ranges[10:25] = 0.7 + rng.normal(0, 0.01, 15)   # carried: within carried_radius of where they settled
+        ranges[10:25][rng.random(15) < 0.2] = rng.uniform(0.2, 0.6)   # hidden by something passing, now and then
+        ranges[30:33] = rng.choice([np.inf, np.nan, 0.01, 9.0], 3)
+        ranges[40:50] = 2.0 if k < 15 else 1.2   # one range for 3 m, then another
+        ranges[rng.random(B) < 0.05] = rng.uniform(0.5, 3.0)
+        step = 0.0 if last is None else float(np.hypot(pose[0] - last[0], pose[1] - last[1]))
+        last = pose
+        _step.carried_update(*carry, ranges, True, True, pose, geo, ctx, prm)
+        rt.carried_update(*want, ranges, 0.05, 8.0, 0.05, step)
+        for got, ref in zip(carry, want, strict=True):
+            np.testing.assert_array_equal(got, ref)
+        assert (ctx[state.C_CARRY_POSED], ctx[state.C_CARRY_PX], ctx[state.C_CARRY_PY]) == (1.0, *pose[:2])
+        raw = np.column_stack([rng.uniform(-1, 8, (12, 2)), rng.uniform(0.05, 0.4, 12), rng.random(12), -np.ones(12)])
+        raw[:4, :2] = np.column_stack(_world_frame(0.7 * np.cos(angles[[12, 17, 22, 45]]),
+                                                   0.7 * np.sin(angles[[12, 17, 22, 45]]), pose))
+        out = rng.random(12) < 0.2
+        was = out.copy()
+        _step.carried_beams(out, raw, ranges, *carry, True, pose, geo, prm)
+        sx, sy = _sensor_frame(raw[:, 0], raw[:, 1], pose)
+        expect = was | rt.carried_beams(sx, sy, raw[:, 2], ranges, *want, geo[0], geo[1], 1.0, 0.05)
+        np.testing.assert_array_equal(out, expect)
+        carried_seen += int((expect & ~was).sum())
+        still = was.copy()
+        _step.carried_beams(still, raw, ranges, *carry, False, pose, geo, prm)   # no pose: nothing is carried
+        np.testing.assert_array_equal(still, was)
+    assert (want[1][10:25] >= 1.0).sum() >= 10 and carried_seen > 0
+    # away farther than seen there: the beams took the new range as their reference
+    assert (np.abs(want[0][40:50] - 1.2) < 0.01).sum() >= 8
+    before = tuple(a.copy() for a in carry)
+    _step.carried_update(*carry, ranges, True, False, np.zeros(3), geo, ctx, prm)
+    for got, ref in zip(carry, before, strict=True):
+        np.testing.assert_array_equal(got, ref)
+
+
+def _world_frame(x: np.ndarray, y: np.ndarray, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sensor-frame points in the tracking frame of a sensor at `pose` (x, y, theta)."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    return c * x - s * y + pose[0], s * x + c * y + pose[1]
+
+
+def _sensor_frame(x: np.ndarray, y: np.ndarray, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tracking-frame points in the sensor frame of `pose` (x, y, theta)."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    return c * (x - pose[0]) + s * (y - pose[1]), -s * (x - pose[0]) + c * (y - pose[1])
+
+
+def test_step_fold_evidence():
+    """Leg-candidate hits folded one by one: the plain mean of the first 1/leg_evidence_rate, then a running mean
+    of that rate."""
+    from datmo_cli.tracking import _step, state
+
+    rng = np.random.default_rng(28)
+    prm = rt.param_vector(leg_evidence_rate=0.1)
+    tab = np.zeros((4, state.n_columns(1)))
+    score, hits = np.zeros(4), np.zeros(4, np.int64)
+    p = np.where(rng.random(40) < 0.15, _step.NOT_A_LEG, rng.random(40))   # some on the background or carried
+    assert rt.NOT_A_LEG == _step.NOT_A_LEG
+    for q in range(40):
+        k = int(rng.integers(0, 4))
+        _step.fold_evidence(tab, k, p[q], prm)
+        rt.fold_evidence(score, hits, k, p[q], 0.1)
+    np.testing.assert_array_equal(tab[:, state.LEG_SCORE], score)
+    np.testing.assert_array_equal(tab[:, state.LEG_HITS], hits)
+    first, ten = (np.zeros(1, np.int64), np.zeros(1)), rng.random(10)
+    for q in range(10):
+        rt.fold_evidence(first[1], first[0], 0, ten[q], 0.1)
+    np.testing.assert_allclose(first[1][0], ten.mean(), rtol=1e-12)   # ten hits: their plain mean
+    rt.fold_evidence(first[1], first[0], 0, rt.NOT_A_LEG, 0.1)
+    assert first[1][0] == 0.0 and first[0][0] == 11   # a candidate found on the background or carried
+
+
+def test_cover():
+    """Measurements (beam ranges) one after the other: each weak candidate is covered by the one sharing most
+    beams with it, the first on ties, -1 by none."""
+    rng = np.random.default_rng(29)
+    for _ in range(30):
+        W = int(rng.integers(0, 6))
+        wfirst = rng.integers(0, 40, W)
+        wlast = wfirst + rng.integers(0, 8, W)
+        cover, best = np.full(W, -1, np.int64), np.zeros(W, np.int64)
+        want_cover, want_best = cover.copy(), best.copy()
+        for m in range(int(rng.integers(0, 6))):
+            f = int(rng.integers(0, 45))
+            e = f + int(rng.integers(0, 10))
+            KT._cover(cover, best, wfirst, wlast, f, e, m)
+            rt.cover(want_cover, want_best, wfirst, wlast, f, e, m)
+            np.testing.assert_array_equal(cover, want_cover)
+            np.testing.assert_array_equal(best, want_best)
 
 
 def test_components():

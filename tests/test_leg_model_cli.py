@@ -40,10 +40,12 @@ def test_features_lists_the_detectors_legs_and_records_the_model(crowd, tmp_path
     legs = _legs(out)
     assert sum(len(g) for g in legs) > 0
     allg = np.concatenate(legs)
-    assert ((allg["probability"] >= 0.2) & (allg["probability"] <= 1)).all()
+    # every cluster the model scores above 0 is listed, the weak ones too (the tracker takes the threshold)
+    assert ((allg["probability"] > 0) & (allg["probability"] <= 1)).all()
     assert (allg["last"] >= allg["first"]).all() and (allg["n_points"] == allg["last"] - allg["first"] + 1).all()
     m = _model(out)
     assert m["model"] == "default" and m["path"] == str(DEFAULT_MODEL_PATH) and len(m["sha256"]) == 64
+    assert (allg["probability"] < m["threshold"]).any() and (allg["probability"] >= m["threshold"]).any()
 
 
 def test_paper_rule_lists_no_legs_and_track_keeps_the_features_rule(crowd, tmp_path):
@@ -94,6 +96,6 @@ def test_a_leg_cluster_where_no_segment_is_kept():
 
     g = ScanGeometry(-np.radians(1.0), np.radians(1.0), 3, 0.0, 8.0, 0.0, 0.2, "laser")
     f = extract_run(ScanRun(np.zeros(1, np.int64), np.ones((1, 3), np.float32), g),
-                    FeatureParams(min_points=4, leg_min_probability=1e-9))
+                    FeatureParams(min_points=4))   # every cluster the model scores above 0 is a leg candidate
     assert len(f.seg_start) == 0
     assert len(f.legs) == 1 and f.legs["segment"][0] == NO_SEGMENT

@@ -7,7 +7,7 @@ import pytest
 
 from datmo_cli.bounds import validate
 from datmo_cli.config import DatmoConfig, load
-from datmo_cli.errors import ConfigError
+from datmo_cli.errors import ConfigError, InputError
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.params import TrackingParams
 
@@ -43,7 +43,7 @@ def test_bad_toml_file(tmp_path):
     f.write_text("[track\n")
     with pytest.raises(ConfigError, match="bad.toml"):
         load(f)
-    with pytest.raises(ConfigError, match="no such file"):
+    with pytest.raises(InputError, match="missing.toml: no such file"):   # every user-named file: input_files
         load(tmp_path / "missing.toml")
 
 

@@ -16,18 +16,26 @@ from hypothesis import strategies as st
 
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry
-from datmo_cli.stages import iter_run_features, track_run
+from datmo_cli.stages import iter_run_features, leg_threshold_of, track_run
 from datmo_cli.tracking import _step, state
 from datmo_cli.tracking.markers import track_markers
 from datmo_cli.tracking.measurements import Measurements
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.synthetic import features_from_lists
-from datmo_cli.tracking.tracker import _COMPAT, _COMPAT_LEARNED, _REACQUIRE, TRACK_DTYPE, Tracker
+from datmo_cli.tracking.tracker import _COMPAT, _COMPAT_LEARNED, _REACQUIRE, _REACQUIRE_LEARNED, TRACK_DTYPE, Tracker
 from tests.conftest import SAMPLE_LOGS
-from tests.reference_tracking import ReferenceTracker, kalman_predict, kind_groups, moved, reference_measurements
+from tests.reference_tracking import (
+    ReferenceTracker,
+    kalman_predict,
+    kind_groups,
+    moved,
+    reference_measurements,
+    with_candidates,
+)
 
 P = TrackingParams()
-PRM = P.kernel_vector()
+THR = leg_threshold_of("default")   # the shipped leg model's threshold, which datmo track takes
+PRM = P.kernel_vector(THR)
 LOGS = sorted(p.name for p in SAMPLE_LOGS.glob("*.mcap"))
 EXACT = ("id", "age", "hits", "misses", "classification", "mobility", "status", "occluded")
 
@@ -64,13 +72,11 @@ def to_table(ref: ReferenceTracker, t0: int) -> np.ndarray:
                       (state.MOVING_TIME, "moving_time"), (state.SIZE, "size"), (state.CONFIRMED, "confirmed"),
                       (state.OCCLUDED, "occluded"), (state.HIT, "hit"), (state.CLS, "cls"),
                       (state.MOBILITY, "mobility"), (state.TAIL_COUNT, "tail_count"), (state.LEG_SCORE, "leg_score"),
-                      (state.SENSOR_DEV, "sensor_dev")):
+                      (state.LEG_HITS, "leg_hits"), (state.IS_PERSON, "person"), (state.STILL_TIME, "still_time")):
         tab[:K, col] = getattr(t, name)
     tab[:K, state.VOTES:state.VOTES + 5] = t.votes
     tab[:K, state.FIRST_X:state.FIRST_X + 2] = t.first
     tab[:K, state.LAST_X:state.LAST_X + 2] = t.last
-    tab[:K, state.SENSOR_REF_X:state.SENSOR_REF_X + 2] = t.sensor_ref
-    tab[:K, state.POSE_FIRST_X:state.POSE_FIRST_X + 2] = t.pose_first
     on_bg = ref._on_bg
     tab[:min(K, len(on_bg)), state.ON_BG] = on_bg[:K]
     tab[:K, state.TAIL:] = t.tail.reshape(K, 2 * T)
@@ -86,8 +92,8 @@ def same_tracks(ref: ReferenceTracker, t0: int, tab: np.ndarray, n: int, what: s
 
 
 def meas_arrays(m: Measurements) -> tuple:
-    raw = np.zeros((len(m.raw_legs), 4))
-    raw[:, :m.raw_legs.shape[1]] = m.raw_legs[:, :4]
+    """The measurements as the compiled step takes them (leg candidates (L, 5), see with_candidates)."""
+    raw = with_candidates(m)[0].raw_legs
     return (np.ascontiguousarray(m.x, np.float64), np.ascontiguousarray(m.y, np.float64),
             np.ascontiguousarray(m.size, np.float64), np.ascontiguousarray(m.kind, np.int64),
             np.ascontiguousarray(m.legs, np.float64), raw, np.ascontiguousarray(m.prob, np.float64))
@@ -100,9 +106,17 @@ def same_meas(got: tuple, m: Measurements, what: str) -> None:
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9, err_msg=what)
 
 
+def same_candidates(raw: np.ndarray, m: Measurements, what: str) -> None:
+    """The compiled step's leg candidates (L, 5) are the reference's (padded as with_candidates pads them)."""
+    np.testing.assert_array_equal(raw, with_candidates(m)[0].raw_legs, err_msg=what)
+
+
 def context(ref: ReferenceTracker) -> np.ndarray:
     ctx = state.new_context()
     ctx[state.C_NEXT_ID] = ref.next_id
+    if ref._carry_pose is not None:
+        ctx[state.C_CARRY_POSED] = 1.0
+        ctx[state.C_CARRY_PX], ctx[state.C_CARRY_PY] = ref._carry_pose
     if ref._bg_score is not None:
         ctx[state.C_BG_READY] = 1.0
         ctx[state.C_BG_X0], ctx[state.C_BG_Y0] = ref._bg_origin
@@ -122,11 +136,14 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
     has_pose = pose is not None
     pose_arr = np.zeros(3) if pose is None else np.asarray(pose, np.float64)
     bg = ref._bg_score if ref._bg_score is not None else np.zeros(0)
+    geo = np.array([0.0, 1.0, np.inf, 0.0, 0.0]) if ref.geometry is None else np.array(
+        [ref.geometry.angle_min, ref.geometry.angle_increment, ref.geometry.range_max, 1.0, ref.geometry.range_min])
+    rng = np.zeros(0, np.float32) if ranges is None else np.ascontiguousarray(ranges, np.float32)
     dt = 0.0 if ref.stamp_ns is None else max((stamp_ns - ref.stamp_ns) * 1e-9, 0.0)
     ref._dt, ref.stamp_ns, ref.pose = dt, stamp_ns, None if pose is None else pose_arr
     t = ref.tracks
     n = len(t)
-    group = kind_groups(t.votes, t.mobility)
+    group = kind_groups(t.votes, t.mobility, t.person)
     ref._compat_row = np.where(t.confirmed, group, 4)
     tab = to_table(ref, t0)
     crow = np.array([_step.kind_group(tab, k) if t.confirmed[k] else 4 for k in range(n)], np.int64)
@@ -135,21 +152,30 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
     _step.predict(tab, n, dt, PRM)
     same_tracks(ref, t0, tab, n, "predict")
     px, py, pc, ps = ref._sensor()
+    meas, ref._has_prob = with_candidates(meas)
     m = moved(meas, ref.pose)
     if has_pose:
         a = meas_arrays(meas)
         got = _step.moved(a[0], a[1], a[4], a[5], px, py, pc, ps)
         same_meas((got[0], got[1], m.size, m.kind, got[2]), m, "moved")
-        np.testing.assert_allclose(got[3][:, :2], m.raw_legs[:, :2], rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(got[3], m.raw_legs)
     ctx = context(ref)
-    got = _step.off_background(*meas_arrays(m), bg, ctx, px, py, PRM)
-    m = ref._off_background(m)
+    carry = (ref.carry_ref.copy(), ref.carry_seen.copy(), ref.carry_away.copy())
+    _step.carried_update(*carry, rng, ranges is not None, has_pose, pose_arr, geo, ctx, PRM)
+    ref._carried_update(ranges)
+    for got, want in zip(carry, (ref.carry_ref, ref.carry_seen, ref.carry_away), strict=True):
+        np.testing.assert_array_equal(got, want)
+    assert ctx[state.C_CARRY_POSED] == (ref._carry_pose is not None)
+    got = _step.off_background(tab, n, *meas_arrays(m), bg, ctx, px, py, rng, *carry, has_pose, pose_arr, geo, PRM)
+    m = ref._off_background(t, m)
     same_meas(got, m, "off background")
+    same_candidates(got[5], m, "off background")
+    np.testing.assert_array_equal(got[6], m.prob)
     got = _step.legs_stage(tab, n, *meas_arrays(m), PRM)
     m, rows0 = ref._legs(t, m)
     same_meas(got, m, "legs")
     np.testing.assert_array_equal(got[6], rows0)
-    np.testing.assert_allclose(got[5], m.prob, rtol=0, atol=0)
+    np.testing.assert_array_equal(got[5], m.prob)
     mx, my, msize, mkind, mlegs, raw, mprob = meas_arrays(m)
     compat = _COMPAT_LEARNED if learned else _COMPAT
     rows_c, cols_c = _step.associate(tab, n, mx, my, mkind, rows0, compat, crow, PRM)
@@ -164,7 +190,8 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
     _step.update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, PRM)
     same_tracks(ref, t0, tab, n, "update", on_bg=True)
     rows2, cols2 = ref._reacquire(t, m, rows, cols, stamp_ns)
-    got2 = _step.reacquire(tab, n, rows, cols, mx, my, mkind, stamp, _REACQUIRE, crow, PRM)
+    got2 = _step.reacquire(tab, n, rows, cols, mx, my, mkind, stamp, _REACQUIRE_LEARNED if learned else _REACQUIRE,
+                           crow, PRM)
     np.testing.assert_array_equal(got2[0], rows2)
     np.testing.assert_array_equal(got2[1], cols2)
     same_tracks(ref, t0, tab, n, "reacquire", on_bg=True)
@@ -177,32 +204,24 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
     np.testing.assert_array_equal(merged[1], cols)
     np.testing.assert_array_equal(merged[2], ref._superseded)
     superseded = ref._superseded.copy()
-    if len(rows):
-        a = p.leg_evidence_rate
-        from tests.reference_tracking import _leg_probability
-
-        t.leg_score[rows] = (1.0 - a) * t.leg_score[rows] + a * _leg_probability(m, cols)
-    has_prob = m.raw_legs.shape[1] >= 4
-    _step.leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, PRM)
+    ref._leg_evidence(t, m, rows, cols)
+    _step.leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, ref._has_prob, PRM)
     same_tracks(ref, t0, tab, n, "leg evidence", on_bg=True)
-    geo = np.array([0.0, 1.0, np.inf, 0.0, 0.0]) if ref.geometry is None else np.array(
-        [ref.geometry.angle_min, ref.geometry.angle_increment, ref.geometry.range_max, 1.0, ref.geometry.range_min])
-    rng = np.zeros(0, np.float32) if ranges is None else np.ascontiguousarray(ranges, np.float32)
     ref._occlusion(t, ranges)
     _step.occlusion(tab, n, rng, ranges is not None, geo, has_pose, pose_arr, PRM)
     same_tracks(ref, t0, tab, n, "occlusion", on_bg=True)
     ref._life_cycle(t, stamp_ns)
-    n = _step.life_cycle(tab, n, stamp, superseded, PRM)
+    n = _step.life_cycle(tab, n, stamp, superseded, learned, PRM)
     same_tracks(ref, t0, tab, n, "life cycle", on_bg=True)
     ctx = context(ref)
     ref._spawn(m, rows, cols, stamp_ns)
-    tab, n = _step.spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp, has_pose, pose_arr,
-                         px, py, ctx, PRM)
+    tab, n = _step.spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, ref._has_prob, stamp, has_pose,
+                         pose_arr, px, py, ctx, PRM)
     same_tracks(ref, t0, tab, n, "spawn")
     assert ctx[state.C_NEXT_ID] == ref.next_id
     tab = to_table(ref, t0)
     ref._classify()
-    _step.classify(tab, len(ref.tracks), dt, stamp, learned, has_pose, pose_arr, px, py, PRM)
+    _step.classify(tab, len(ref.tracks), dt, stamp, learned, PRM)
     same_tracks(ref, t0, tab, n, "classify")
     ref._push_tail()
     _step.push_tail(tab, n, PRM)
@@ -216,7 +235,7 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
             before = (np.zeros_like(ref._bg_score), np.zeros_like(ref._bg_mark), np.zeros_like(ref._bg_active),
                       np.zeros((65536, 2)))
         cos_a, sin_a = ref._cos, ref._sin
-        _step.background(*before, ctx, rng, ranges is not None, cos_a, sin_a, geo, px, py, pc, ps, dt, PRM)
+        _step.background(*before, ctx, rng, ranges is not None, cos_a, sin_a, geo, px, py, pc, ps, dt, tab, n, PRM)
         # inactive cells: mark -1 in the reference, 0 in the compiled grid
         for got, want in zip(before[:3], (ref._bg_score, np.maximum(ref._bg_mark, 0), ref._bg_active), strict=True):
             np.testing.assert_array_equal(got, want)
@@ -236,12 +255,13 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
 def test_every_phase_equals_the_reference_scan_by_scan(name: str, leg_model: str):
     run, feats, _, poses = sample(name, leg_model)
     learned = leg_model != "paper"
-    ref = ReferenceTracker(P, run.geometry, learned=learned)
+    ref = ReferenceTracker(P, run.geometry, learned=learned, leg_threshold=THR)
     t0 = int(run.stamps[0])
     for i, f in enumerate(feats):
-        m = reference_measurements(f, P, learned)
+        m = reference_measurements(f, P, learned, THR)
         got = _flat_measurements(f, learned)
         same_meas(got, m, f"measurements of scan {i}")
+        same_candidates(got[5], m, f"leg candidates of scan {i}")
         np.testing.assert_array_equal(got[6], m.prob)
         lockstep(ref, t0, int(run.stamps[i]), m, run.ranges[i], None if poses is None else poses[i])
 
@@ -260,10 +280,10 @@ def _flat_measurements(f, learned: bool) -> tuple:
 
 # ------------------------------------------------------------------------------------------- whole runs
 def reference_run(run, feats, poses, learned: bool, frame: str) -> tuple[list, list, ReferenceTracker]:
-    ref = ReferenceTracker(P, run.geometry, learned=learned)
+    ref = ReferenceTracker(P, run.geometry, learned=learned, leg_threshold=THR)
     tracks, markers = [], []
     for i, f in enumerate(feats):
-        out = ref.step(int(run.stamps[i]), reference_measurements(f, P, learned), run.ranges[i],
+        out = ref.step(int(run.stamps[i]), reference_measurements(f, P, learned, THR), run.ranges[i],
                        None if poses is None else poses[i])
         tracks.append(out)
         markers.append(track_markers(int(run.stamps[i]), frame, out, ref.tracks.tail, ref.tracks.tail_count,
@@ -285,7 +305,7 @@ def test_whole_runs_equal_the_reference(name: str):
         for i in range(len(run)):
             assert got.tracks[i].tobytes() == want_tracks[i].tobytes(), f"{leg_model}: tracks of scan {i}"
             assert got.markers[i] == want_markers[i], f"{leg_model}: markers of scan {i}"
-        tracker = Tracker(P, run.geometry, learned=learned)
+        tracker = Tracker(P, run.geometry, learned=learned, leg_threshold=THR)
         block = tracker.track_block(run.stamps, feats, run.ranges, poses)
         assert block.items.tobytes() == np.concatenate(want_tracks).tobytes()
         same_tracks(ref, int(run.stamps[0]), tracker.tracks.table, len(tracker.tracks), f"{leg_model}: final state")
@@ -317,10 +337,31 @@ def test_ideal_features_on_the_hall_equal_the_reference():
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0)
 
 
+def weak_legs(feats: list, rng: np.random.Generator) -> None:
+    """Give the legs of `feats` leg probabilities from the whole range, in place: about half strong (at least
+    THR), a quarter weak but at least person_maintain, a quarter below it; and each leg the blob of its own beams
+    (as a real leg's cluster is also a segment), which is what a weak candidate is measured as."""
+    from datmo_cli.tracking.synthetic import BLOB_DTYPE
+
+    for f in feats:
+        g = f.legs
+        u = rng.uniform(size=len(g))
+        g["probability"] = np.where(u < 0.5, rng.uniform(THR, 1.0, len(g)),
+                                    np.where(u < 0.75, rng.uniform(P.person_maintain, THR, len(g)),
+                                             rng.uniform(0.01, P.person_maintain, len(g))))
+        b = np.zeros(len(g), BLOB_DTYPE)
+        for name in ("x", "y", "first", "last", "segment"):
+            b[name] = g[name]
+        b["size"] = g["width"]
+        f.blobs = np.concatenate([f.blobs, b])
+
+
 @st.composite
 def scenes(draw) -> tuple:
-    """A few objects (circles, legs of people, blobs, short lines) moving straight, seen with dropouts, over
-    up to 25 scans at uneven stamps; sometimes a moving sensor's poses, sometimes ranges with a near wall."""
+    """A few objects (circles, legs of people with leg probabilities from the whole range, blobs, short lines)
+    moving straight, seen with dropouts, over up to 25 scans at uneven stamps; sometimes a moving sensor's poses;
+    sometimes ranges: a near wall, or returns on the objects with a wall the sensor nears and a pair of legs fixed
+    in the sensor frame on beams whose returns stay put (a part of the robot)."""
     seed = draw(st.integers(0, 2**32 - 1))
     n_scans = draw(st.integers(1, 25))
     rng = np.random.default_rng(seed)
@@ -329,6 +370,8 @@ def scenes(draw) -> tuple:
     vel = rng.uniform(-1.2, 1.2, (n_obj, 2))
     kind = rng.integers(0, 4, n_obj)
     stamps = np.cumsum(rng.integers(50_000_000, 400_000_000, n_scans)) + 10**18
+    ranges_kind = draw(st.integers(0, 2))
+    part = 0.6 * np.array([np.cos(-1.13), np.sin(-1.13)])   # about beam 50: something the robot carries
     scans = []
     for i in range(n_scans):
         s: dict = {"circles": [], "legs": [], "blobs": [], "lines": []}
@@ -347,15 +390,25 @@ def scenes(draw) -> tuple:
                 s["blobs"].append((x, y, rng.uniform(0.1, 0.5)))
             else:
                 s["lines"].append((x - 0.3, y, x + 0.3, y + 0.1))
+        if ranges_kind == 2:
+            s["legs"] += [(part[0], part[1] + 0.1, 0.1), (part[0], part[1] - 0.1, 0.1)]
         scans.append(s)
     feats = features_from_lists(scans)
+    weak_legs(feats, rng)
     poses = None
     if draw(st.booleans()):
         poses = np.stack([0.3 * np.arange(n_scans), 0.1 * np.arange(n_scans), 0.05 * np.arange(n_scans)], axis=1)
     ranges = None
-    if draw(st.booleans()):
+    if ranges_kind == 1:
         ranges = np.full((n_scans, GEOM.n_beams), 7.5, np.float32)
         ranges[:, 150:200] = rng.uniform(0.5, 7.5, (n_scans, 1))
+    elif ranges_kind == 2:
+        ranges = (7.5 - 0.2 * np.arange(n_scans)[:, None] + np.zeros(GEOM.n_beams)).astype(np.float32)
+        for i, s in enumerate(scans):
+            for x, y, *_ in s["circles"] + s["legs"] + s["blobs"] + s["lines"]:
+                b = int(np.rint((np.arctan2(y, x) - GEOM.angle_min) / GEOM.angle_increment))
+                r = ranges[i, max(b - 3, 0):max(b + 4, 0)]
+                r[:] = np.minimum(r, np.hypot(x, y))
     return stamps, feats, poses, ranges, draw(st.booleans())
 
 
@@ -363,19 +416,19 @@ def scenes(draw) -> tuple:
 @given(scene=scenes())
 def test_random_scenes_equal_the_reference(scene: tuple):
     stamps, feats, poses, ranges, learned = scene
-    ref = ReferenceTracker(P, GEOM, learned=learned)
-    step = Tracker(P, GEOM, learned=learned)
+    ref = ReferenceTracker(P, GEOM, learned=learned, leg_threshold=THR)
+    step = Tracker(P, GEOM, learned=learned, leg_threshold=THR)
     want = []
     for i, f in enumerate(feats):
         pose = None if poses is None else poses[i]
         rng = None if ranges is None else ranges[i]
-        m = reference_measurements(f, P, learned)
+        m = reference_measurements(f, P, learned, THR)
         a = ref.step(int(stamps[i]), m, rng, pose)
         b = step.step(int(stamps[i]), m, rng, pose)   # the Measurements form of step
         assert a.tobytes() == b.tobytes(), f"scan {i}"
         np.testing.assert_allclose(step.tracks.x, ref.tracks.x, rtol=0, atol=1e-9)
         want.append(a)
-    block = Tracker(P, GEOM, learned=learned).track_block(stamps, feats, ranges, poses)
+    block = Tracker(P, GEOM, learned=learned, leg_threshold=THR).track_block(stamps, feats, ranges, poses)
     assert block.items.tobytes() == np.concatenate(want).tobytes()
 
 
@@ -385,10 +438,13 @@ def test_every_phase_equals_the_reference_on_small_scenes(scene: tuple):
     """The lockstep of the sample logs on small random scenes (a few objects, a few scans): every compiled
     phase called directly on the reference's state, and the compiled features-to-measurements."""
     stamps, feats, poses, ranges, learned = scene
-    ref = ReferenceTracker(P, GEOM, learned=learned)
+    ref = ReferenceTracker(P, GEOM, learned=learned, leg_threshold=THR)
     for i, f in enumerate(feats):
-        m = reference_measurements(f, P, learned)
-        same_meas(_flat_measurements(f, learned), m, f"measurements of scan {i}")
+        m = reference_measurements(f, P, learned, THR)
+        got = _flat_measurements(f, learned)
+        same_meas(got, m, f"measurements of scan {i}")
+        same_candidates(got[5], m, f"leg candidates of scan {i}")
+        np.testing.assert_array_equal(got[6], m.prob)
         lockstep(ref, int(stamps[0]), int(stamps[i]), m, None if ranges is None else ranges[i],
                  None if poses is None else poses[i])
 

@@ -156,20 +156,19 @@ def _check_segments(start: np.ndarray, end: np.ndarray, offsets: np.ndarray, bea
 
 
 def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.ndarray, count: np.ndarray,
-              lo: float, hi: float, angles: np.ndarray, model, floor: float,
-              threads: int = 1) -> np.ndarray:
+              lo: float, hi: float, angles: np.ndarray, model, threads: int = 1) -> np.ndarray:
     """Rows (scan in block, segment in scan, first, last, n, x, y, width, probability) of the block's
-    clusters (those legs.LegModel `model` scores: the segments, or leg_tracker's gap clusters) whose leg
-    probability is at least `floor`; x, y the centroid (sensor frame, m); segment: the segment holding the
-    cluster's middle beam (NO_SEGMENT when none does). The detector runs on `threads` threads (the same rows
-    for any count)."""
+    clusters (those legs.LegModel `model` scores: the segments, or leg_tracker's gap clusters) it gives a leg
+    probability above 0 (every leg candidate, weak or strong: the tracker takes the model's threshold_p); x, y
+    the centroid (sensor frame, m); segment: the segment holding the cluster's middle beam (NO_SEGMENT when none
+    does). The detector runs on `threads` threads (the same rows for any count)."""
     from .legs import leg_probabilities, model_clusters
 
     seg_off = _offsets(count)
     seg_start, seg_end = seg[:seg_off[-1], 0], seg[:seg_off[-1], 1]
     start, end, off = model_clusters(block, angles, lo, hi, model, seg_start, seg_end, seg_off)
     prob = leg_probabilities(block, angles, start, end, off, lo, hi, model, threads)
-    hit = np.flatnonzero(prob >= floor)
+    hit = np.flatnonzero(prob > 0.0)
     rows = np.zeros((len(hit), 9))
     if not len(hit):
         return rows
@@ -278,7 +277,7 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
             lines, circles, blobs = np.zeros((0, 13)), np.zeros((0, 9)), np.zeros((0, 9))
         segs.append(seg)
         seg_counts.append(count)
-        legs = (_leg_rows(block, cos_a, sin_a, seg, count, lo, hi, angles, model, p.leg_min_probability, n_threads)
+        legs = (_leg_rows(block, cos_a, sin_a, seg, count, lo, hi, angles, model, n_threads)
                 if model is not None and B else None)
         for key, rows in (("l", lines), ("c", circles), ("b", blobs)):
             rows[:, 0] += a

@@ -19,7 +19,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..bounds import D_MAX, NO_SENSE, PROBABILITY, SHARE, Section, features_combined, param
+from ..bounds import D_MAX, NO_SENSE, SHARE, Section, features_combined, param
 from ..bounds import bound as _b
 
 
@@ -28,6 +28,9 @@ class FeatureParams(Section):
     """The `[features]` table of a config file: parameters of `datmo segment` and `datmo features`."""
 
     name: ClassVar[str] = "features"
+    removed: ClassVar[dict[str, str]] = {
+        "leg_min_probability": "every cluster the leg detector scores above 0 is listed with its probability, and "
+                               "the leg threshold is the leg model's own (threshold_p)"}
     renamed: ClassVar[dict[str, str]] = {
         "leg_radius_max": "column_radius_min (circles larger than it are column candidates; the largest leg is "
                           "[track] leg_radius_max)"}
@@ -108,8 +111,6 @@ class FeatureParams(Section):
     leg_model: str = param("default", help="Leg detector: 'default' (the model shipped with datmo), a model file "
                                            "from datmo train-legs, or 'paper' (no detector: legs by the paper's "
                                            "circle rule and walking pattern).", metavar="MODEL")
-    leg_min_probability: float = param(0.2, _b(0, 1, "", PROBABILITY),
-                                       "Segments with at least this leg probability are listed as legs.")
 
     @classmethod
     def combined(cls, params: FeatureParams, where: str) -> None:

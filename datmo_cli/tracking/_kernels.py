@@ -11,6 +11,7 @@ import numpy as np
 from numba import njit
 
 from ..log.vocabulary import BLOB_KIND_BLOB, CLASS_CIRCLE_OBJECT, CLASS_PERSON
+from ..numba_runtime import key_kernel_cache_on_sources
 from .state import (
     P_BACKGROUND_CELL,
     P_BACKGROUND_TIME,
@@ -23,6 +24,8 @@ from .state import (
     P_OCCLUSION_MARGIN,
     P_STRIDE_MAX,
 )
+
+key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
 
 
 @njit(cache=True)
@@ -195,7 +198,8 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
     d_max; circles, blobs and lines on a leg's beams are that leg. Beams wfirst..wlast are clusters the
     detector gave a lower leg probability wp: a measurement on them takes it (the largest it covers).
     Beam ranges are inclusive. Returns x, y, size, kind, legs (M, 4), prob (M,: 0 for the legs, whose
-    probabilities the caller has, and for what the detector gave none)."""
+    probabilities the caller has, and for what the detector gave none) and cover (W,): for each of those weaker
+    clusters the measurement on most of its beams (-1: none), which is that cluster if a track takes it as a leg."""
     nc, nb, nl, ng = len(cx), len(bx), len(lseg), len(gx)
     d_max = prm[P_D_MAX]
     top = 1
@@ -206,15 +210,20 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
     weak = _beam_marks(wfirst, wlast, wp, top)
     x, y, size, kind, legs, m = _people_first(gx, gy, gw, prm, nc + nb + nl)
     prob = np.zeros(len(x))
+    nw = len(wfirst)
+    cover = np.full(nw, -1, np.int64)
+    best = np.zeros(nw, np.int64)
     for i in range(nc):
         if _span_max(is_leg, cfirst[i], clast[i]) == 0.0:
             x[m], y[m], size[m], kind[m] = cx[i], cy[i], 2.0 * cr[i], 2
             prob[m] = _span_max(weak, cfirst[i], clast[i])
+            _cover(cover, best, wfirst, wlast, cfirst[i], clast[i], m)
             m += 1
     for i in range(nb):
         if _span_max(is_leg, bfirst[i], blast[i]) == 0.0:
             x[m], y[m], size[m], kind[m] = bx[i], by[i], bsize[i], 4
             prob[m] = _span_max(weak, bfirst[i], blast[i])
+            _cover(cover, best, wfirst, wlast, bfirst[i], blast[i], m)
             m += 1
     if nl:
         order = np.argsort(lseg, kind="mergesort")
@@ -235,14 +244,29 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
             if _span_max(is_leg, f, e) == 0.0:
                 x[m], y[m], size[m], kind[m] = 0.5 * (x0 + x1), 0.5 * (y0 + y1), np.hypot(x1 - x0, y1 - y0), 3
                 prob[m] = _span_max(weak, f, e)
+                _cover(cover, best, wfirst, wlast, f, e, m)
                 m += 1
     keep = 0
+    where = np.full(m, -1, np.int64)
     for i in range(m):
         if size[i] <= d_max:
             x[keep], y[keep], size[keep], kind[keep], prob[keep] = x[i], y[i], size[i], kind[i], prob[i]
             legs[keep] = legs[i]
+            where[i] = keep
             keep += 1
-    return x[:keep], y[:keep], size[:keep], kind[:keep], legs[:keep], prob[:keep]
+    for i in range(nw):
+        if cover[i] >= 0:
+            cover[i] = where[cover[i]]
+    return x[:keep], y[:keep], size[:keep], kind[:keep], legs[:keep], prob[:keep], cover
+
+
+@njit(cache=True)
+def _cover(cover, best, wfirst, wlast, f, e, m):
+    """Measurement m (beams f..e) covers each weaker cluster (wfirst..wlast) it overlaps more than any before."""
+    for i in range(len(wfirst)):
+        overlap = min(e, wlast[i]) - max(f, wfirst[i]) + 1
+        if overlap > best[i]:
+            best[i], cover[i] = overlap, m
 
 
 @njit(cache=True)
@@ -309,38 +333,47 @@ def leg_stage(tx, ty, lx, ly, ls, prm):
 
 
 @njit(cache=True)
-def duplicates(x, y, vx, vy, candidate, confirmed, rank, prm):
-    """Which candidate tracks lie within merge_distance of a candidate of higher rank (ties: lower index),
-    when one of the two is tentative or their velocities differ by less than merge_speed (two confirmed
-    people passing each other close are not one)."""
+def duplicates(x, y, vx, vy, vvar, victim, candidate, confirmed, rank, prm):
+    """Which `victim` tracks lie within merge_distance of a `candidate` track of higher rank (ties: lower index),
+    unless both are confirmed and their velocities differ by at least merge_speed plus the standard deviation of
+    that difference (vvar: each track's velocity variance, m²/s², the trace of its velocity covariance): two
+    confirmed people passing each other close are not one, but a track whose velocity is not known yet (just
+    restarted) moves like anything."""
     merge_distance, merge_speed = prm[P_MERGE_DISTANCE], prm[P_MERGE_SPEED]
     K = len(x)
     dup = np.zeros(K, np.bool_)
     for i in range(K):
-        if not candidate[i]:
+        if not victim[i]:
             continue
         for j in range(K):
             if j == i or not candidate[j]:
                 continue
             if rank[j] > rank[i] or (rank[j] == rank[i] and j < i):
                 if np.hypot(x[i] - x[j], y[i] - y[j]) < merge_distance and (
-                        not (confirmed[i] and confirmed[j]) or np.hypot(vx[i] - vx[j], vy[i] - vy[j]) < merge_speed):
+                        not (confirmed[i] and confirmed[j])
+                        or np.hypot(vx[i] - vx[j], vy[i] - vy[j]) < merge_speed + np.sqrt(vvar[i] + vvar[j])):
                     dup[i] = True
                     break
     return dup
 
 
 @njit(cache=True)
-def leg_stage_measurements(tx, ty, lx, ly, ls, mx, my, msize, mkind, mlegs, prm):
-    """leg_stage, then the scan's measurements rebuilt: first one per track that took legs (owner gives
-    the track), then the free legs paired (legs_to_measurements), then the measurements of other kinds
-    (mkind not 0 or 1). Returns (owner, x, y, size, kind, legs)."""
+def leg_stage_measurements(tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs, prm):
+    """leg_stage on every leg candidate (lx, ly, ls), then the scan's measurements rebuilt: first one per track
+    that took legs (owner gives the track), then the free strong candidates paired (legs_to_measurements), then
+    the measurements of other kinds (mkind not 0 or 1) but those a taken weaker candidate was measured as
+    (cover[i] >= 0: the measurement on its beams, which is that candidate). Returns (owner, x, y, size, kind,
+    legs, other): `other` the indices (into mx) of the other-kind measurements kept, in their order."""
     owner, ox, oy, osize, okind, olegs, taken = leg_stage(tx, ty, lx, ly, ls, prm)
-    free = ~taken
+    free = ~taken & strong
     rx, ry, rsize, rkind, rlegs = legs_to_measurements(lx[free], ly[free], ls[free], prm)
+    dropped = np.zeros(len(mx), np.bool_)
+    for i in range(len(lx)):
+        if taken[i] and cover[i] >= 0:
+            dropped[cover[i]] = True
     n_other = 0
     for i in range(len(mx)):
-        if mkind[i] > 1:
+        if mkind[i] > 1 and not dropped[i]:
             n_other += 1
     n = len(ox) + len(rx) + n_other
     x = np.empty(n)
@@ -348,15 +381,17 @@ def leg_stage_measurements(tx, ty, lx, ly, ls, mx, my, msize, mkind, mlegs, prm)
     size = np.empty(n)
     kind = np.empty(n, np.int64)
     legs = np.full((n, 4), np.nan)
+    other = np.empty(n_other, np.int64)
     a, b = len(ox), len(ox) + len(rx)
     x[:a], y[:a], size[:a], kind[:a], legs[:a] = ox, oy, osize, okind, olegs
     x[a:b], y[a:b], size[a:b], kind[a:b], legs[a:b] = rx, ry, rsize, rkind, rlegs
     m = b
     for i in range(len(mx)):
-        if mkind[i] > 1:
+        if mkind[i] > 1 and not dropped[i]:
             x[m], y[m], size[m], kind[m] = mx[i], my[i], msize[i], mkind[i]
+            other[m - b] = i
             m += 1
-    return owner, x, y, size, kind, legs
+    return owner, x, y, size, kind, legs, other
 
 
 @njit(cache=True)

@@ -26,6 +26,7 @@ from ..log.vocabulary import (
     CLASS_UNKNOWN,
     MOBILITY_DYNAMIC,
 )
+from ..numba_runtime import key_kernel_cache_on_sources
 from . import _assign, _kernels
 from .state import (
     AGE,
@@ -42,6 +43,9 @@ from .state import (
     C_BG_SCAN,
     C_BG_X0,
     C_BG_Y0,
+    C_CARRY_POSED,
+    C_CARRY_PX,
+    C_CARRY_PY,
     C_HAS_STAMP,
     C_N_TRACKS,
     C_NEXT_ID,
@@ -54,11 +58,13 @@ from .state import (
     HIT,
     HITS,
     ID,
+    IS_PERSON,
     LAST_HIT,
     LAST_X,
     LAST_Y,
     LEAD_LEFT,
     LEAD_RIGHT,
+    LEG_HITS,
     LEG_SCORE,
     MISSES,
     MOBILITY,
@@ -81,19 +87,21 @@ from .state import (
     P_LEG_BESIDE,
     P_LEG_EVIDENCE_RATE,
     P_LEG_MEASUREMENT_NOISE,
-    P_LEG_PROBABILITY,
     P_LEG_RADIUS_MAX,
+    P_LEG_REACH,
+    P_LEG_THRESHOLD,
     P_MAX_GATE_DISTANCE,
     P_MEASUREMENT_NOISE,
     P_MOVING_DISTANCE,
-    P_MOVING_PERSON_EVIDENCE,
-    P_MOVING_PERSON_PAIRS,
     P_MOVING_SPEED,
     P_MOVING_TIME,
     P_OCCLUSION_MARGIN,
+    P_PERSON_COAST,
     P_PERSON_EVIDENCE,
+    P_PERSON_MAINTAIN,
     P_PERSON_PAIRS,
     P_PERSON_PROCESS_NOISE,
+    P_PERSON_RADIUS,
     P_PERSON_VOTES,
     P_PROCESS_NOISE,
     P_REACQUIRE_DISTANCE,
@@ -101,16 +109,13 @@ from .state import (
     P_SPAWN_CLEARANCE,
     P_STEP_MAX,
     P_STEP_MIN,
+    P_STILL_TIME,
     P_TAIL_LENGTH,
     P_TENTATIVE_DELETE_AFTER,
     P_UNDEFINED_WINDOW,
     P_WALKING_AFTER,
-    POSE_FIRST_X,
-    POSE_FIRST_Y,
-    SENSOR_DEV,
-    SENSOR_REF_X,
-    SENSOR_REF_Y,
     SIZE,
+    STILL_TIME,
     TAIL,
     TAIL_COUNT,
     VOTES,
@@ -120,7 +125,16 @@ from .state import (
     Y,
 )
 
+key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
+
 K_PERSON, K_LEG, K_CIRCLE, K_RECT, K_BLOB = 0, 1, 2, 3, 4
+# the raw leg candidates of a scan, (L, RAW_COLS): x, y (m), width (m), leg probability (0 without a detector),
+# cover: -1 for a strong candidate (a leg), else the index of the measurement made of the weaker candidate's beams
+R_X, R_Y, R_W, R_P, R_COVER = 0, 1, 2, 3, 4
+RAW_COLS = 5
+# the leg probability of a leg candidate found on the background or carried: a candidate (its hit moves a track's
+# evidence), and not a leg
+NOT_A_LEG = 1e-6
 ANY_ROW = 4   # the compatibility row of tentative tracks (tracker._COMPAT)
 
 
@@ -128,25 +142,26 @@ ANY_ROW = 4   # the compatibility row of tentative tracks (tracker._COMPAT)
 @njit(cache=True)
 def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm):
     """One scan's measurements by the paper's rule (reference: tests/reference_tracking.reference_measurements,
-    learned=False), sensor frame: x, y, size, kind, legs (M, 4), raw leg candidates (L, 4: x, y, size, 0),
-    prob (M,: zeros)."""
+    learned=False), sensor frame: x, y, size, kind, legs (M, 4), raw leg candidates (L, RAW_COLS: x, y, size, 0,
+    -1), prob (M,: zeros)."""
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
         cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm)
-    raw = np.zeros((len(lx), 4))
+    raw = np.zeros((len(lx), RAW_COLS))
     for i in range(len(lx)):
-        raw[i, 0], raw[i, 1], raw[i, 2] = lx[i], ly[i], ls[i]
+        raw[i, R_X], raw[i, R_Y], raw[i, R_W], raw[i, R_COVER] = lx[i], ly[i], ls[i], -1.0
     return x, y, size, kind, legs, raw, np.zeros(len(x))
 
 
 @njit(cache=True)
 def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0,
                          lx1, ly1, gfirst, glast, gx, gy, gw, gp, prm):
-    """One scan's measurements with a leg detector's legs (reference_measurements, learned=True): the legs
-    of probability >= leg_probability not on the beams of a circle wider than leg_radius_max are legs, the
-    others lend their probability to what covers their beams. Returns x, y, size, kind, legs, raw (L, 4: x, y,
-    width, probability of the legs), prob. The thresholds compare in float32, as numpy compares the
-    features' float32 fields with a Python float."""
-    thr = np.float32(prm[P_LEG_PROBABILITY])
+    """One scan's measurements with a leg detector's legs (reference_measurements, learned=True): the candidates
+    of probability >= the leg threshold (P_LEG_THRESHOLD, the model's) not on the beams of a circle wider than
+    leg_radius_max are legs (strong); the others (weak) are measured as what covers their beams, which takes their
+    probability. Returns x, y, size, kind, legs, raw (L, RAW_COLS: every candidate, strong ones first, each with
+    its probability and, for a weak one, the measurement covering it), prob. The thresholds compare in float32,
+    as numpy compares the features' float32 fields with a Python float."""
+    thr = np.float32(prm[P_LEG_THRESHOLD])
     rmax = np.float32(prm[P_LEG_RADIUS_MAX])
     strong = np.empty(len(gx), np.bool_)
     for i in range(len(gx)):
@@ -156,20 +171,22 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
                 s = False
         strong[i] = s
     weak = ~strong
-    x, y, size, kind, legs, prob = _kernels.learned_measurements(
+    x, y, size, kind, legs, prob, cover = _kernels.learned_measurements(
         cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0, lx1, ly1,
         gfirst[strong], glast[strong], gx[strong], gy[strong], gw[strong], gfirst[weak], glast[weak], gp[weak],
         prm)
-    ns = 0
-    for i in range(len(gx)):
-        if strong[i]:
-            ns += 1
-    raw = np.empty((ns, 4))
+    raw = np.empty((len(gx), RAW_COLS))
     q = 0
     for i in range(len(gx)):
         if strong[i]:
-            raw[q, 0], raw[q, 1], raw[q, 2], raw[q, 3] = gx[i], gy[i], gw[i], gp[i]
+            raw[q, R_X], raw[q, R_Y], raw[q, R_W], raw[q, R_P], raw[q, R_COVER] = gx[i], gy[i], gw[i], gp[i], -1.0
             q += 1
+    w = 0
+    for i in range(len(gx)):
+        if not strong[i]:
+            raw[q, R_X], raw[q, R_Y], raw[q, R_W], raw[q, R_P], raw[q, R_COVER] = gx[i], gy[i], gw[i], gp[i], cover[w]
+            q += 1
+            w += 1
     return x, y, size, kind, legs, raw, prob
 
 
@@ -195,7 +212,9 @@ def moved(mx, my, mlegs, raw, px, py, pc, ps):
 @njit(cache=True)
 def kind_group(tab, k):
     """The kind group that fed track k most (reference_tracking.kind_groups): 0 legs, 1 circles, 2 lines, 3 blobs,
-    5 a lone leg never paired that is not dynamic."""
+    5 a lone leg never paired that is not dynamic; a person is 0 whatever fed it."""
+    if tab[k, IS_PERSON] != 0:
+        return 0
     legs = tab[k, VOTES + K_PERSON] + tab[k, VOTES + K_LEG]
     best, arg = legs, 0
     for j in range(1, 4):
@@ -205,6 +224,13 @@ def kind_group(tab, k):
     if arg == 0 and tab[k, VOTES + K_PERSON] == 0 and tab[k, MOBILITY] != MOBILITY_DYNAMIC:
         arg = 5
     return arg
+
+
+@njit(cache=True)
+def sure_person(tab, k, prm):
+    """Whether track k is a person: its returns are its own, never background, and a candidate near it is its
+    leg even on the background (a person standing still, whose evidence may dip at range, is not swallowed)."""
+    return tab[k, IS_PERSON] != 0
 
 
 @njit(cache=True)
@@ -315,22 +341,86 @@ def restart(tab, k, zx, zy, sigma, prm):
 
 # -------------------------------------------------------------------------------------------- phases
 @njit(cache=True)
-def off_background(mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ctx, px, py, prm):
-    """The measurements with leg candidates on the background made blobs and the other legs paired again
-    (tracker._off_background); the same arrays when none is."""
-    if ctx[C_BG_READY] == 0 or len(raw) == 0:
+def carried_update(carry_ref, carry_seen, carry_away, ranges, has_ranges, has_pose, pose, geo, ctx, prm):
+    """Per beam, the range carry_ref it keeps returning and how far (m) the sensor has travelled while it did
+    (carry_seen: the return within carried_radius of carry_ref) or did not (carry_away: nearer, farther or none).
+    A beam that mostly returns the same range while the sensor moves sees something the robot carries (a part of
+    the robot, carried_beams); when it has been away more than seen, its reference starts again at the return.
+    Only a sensor with a pose travels (geo: angle_min, increment, range_max, has geometry, range_min)."""
+    if not has_ranges or not has_pose or len(ranges) != len(carry_ref) or geo[3] == 0:
+        return
+    px, py = pose[0], pose[1]
+    step = np.hypot(px - ctx[C_CARRY_PX], py - ctx[C_CARRY_PY]) if ctx[C_CARRY_POSED] != 0 else 0.0
+    ctx[C_CARRY_POSED], ctx[C_CARRY_PX], ctx[C_CARRY_PY] = 1.0, px, py
+    tol = prm[P_CARRIED_RADIUS]
+    for j in range(len(ranges)):
+        r = np.float64(ranges[j])
+        ok = r > geo[4] and r < geo[2]
+        if ok and abs(r - carry_ref[j]) <= tol:
+            carry_seen[j] += step
+        else:
+            carry_away[j] += step
+            if carry_away[j] > carry_seen[j]:
+                carry_ref[j] = r if ok else np.nan
+                carry_seen[j], carry_away[j] = 0.0, 0.0
+
+
+@njit(cache=True)
+def carried_beams(out, raw, ranges, carry_ref, carry_seen, carry_away, has_pose, pose, geo, prm):
+    """Set out[i] for the leg candidates raw[i] (tracking frame: x, y, width, ...) most of whose beams are carried:
+    returning their carry_ref now, after carried_travel m of travel that saw it at least three times as far as not
+    (carried_update)."""
+    if not has_pose or len(carry_ref) == 0 or len(ranges) != len(carry_ref) or geo[3] == 0:
+        return
+    B, inc, tol = len(carry_ref), abs(geo[1]), prm[P_CARRIED_RADIUS]
+    for i in range(len(raw)):
+        sx, sy = to_sensor(raw[i, R_X], raw[i, R_Y], has_pose, pose)
+        rng = max(np.hypot(sx, sy), 0.1)
+        b = int(np.rint((np.arctan2(sy, sx) - geo[0]) / geo[1]))
+        h = int(np.ceil(np.arctan2(0.5 * raw[i, R_W], rng) / inc))
+        total = carried = 0
+        for j in range(max(b - h, 0), min(b + h + 1, B)):
+            total += 1
+            if (carry_seen[j] >= prm[P_CARRIED_TRAVEL] and carry_seen[j] >= 3.0 * carry_away[j]
+                    and abs(np.float64(ranges[j]) - carry_ref[j]) <= tol):
+                carried += 1
+        if total > 0 and 2 * carried > total:
+            out[i] = True
+
+
+@njit(cache=True)
+def off_background(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ctx, px, py, ranges, carry_ref,
+                   carry_seen, carry_away, has_pose, pose, geo, prm):
+    """The leg candidates on the background or carried (carried_beams) taken out (tracker._off_background): a
+    strong one becomes a blob, a weak one stays the measurement covering it, each of leg probability NOT_A_LEG,
+    and the other strong legs are paired again; the same arrays when none is. A candidate within leg_reach of a
+    person's prediction is that person's leg, background or not (a person standing by a wall keeps their legs), but
+    not when carried."""
+    if len(raw) == 0:
         return mx, my, msize, mkind, mlegs, raw, mprob
-    nbg = int(np.sqrt(len(bg_score)) + 0.5)
-    bg = _kernels.on_background(bg_score, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), px, py,
-                                ctx[C_BG_X0], ctx[C_BG_Y0], nbg, prm)
-    if not bg.any():
-        return mx, my, msize, mkind, mlegs, raw, mprob
-    keep = raw[~bg]
-    lx, ly, ls, kind, legs = _kernels.legs_to_measurements(keep[:, 0].copy(), keep[:, 1].copy(), keep[:, 2].copy(),
-                                                           prm)
-    n_bg = 0
+    if ctx[C_BG_READY] != 0:
+        nbg = int(np.sqrt(len(bg_score)) + 0.5)
+        bg = _kernels.on_background(bg_score, raw[:, R_X].copy(), raw[:, R_Y].copy(), raw[:, R_W].copy(), px, py,
+                                    ctx[C_BG_X0], ctx[C_BG_Y0], nbg, prm)
+    else:
+        bg = np.zeros(len(raw), np.bool_)
     for i in range(len(bg)):
         if bg[i]:
+            for k in range(n):
+                d = np.hypot(raw[i, R_X] - tab[k, X], raw[i, R_Y] - tab[k, Y])
+                if sure_person(tab, k, prm) and d <= prm[P_LEG_REACH]:
+                    bg[i] = False
+                    break
+    carried_beams(bg, raw, ranges, carry_ref, carry_seen, carry_away, has_pose, pose, geo, prm)
+    if not bg.any():
+        return mx, my, msize, mkind, mlegs, raw, mprob
+    strong = raw[:, R_COVER] < 0
+    keep = strong & ~bg
+    lx, ly, ls, kind, legs = _kernels.legs_to_measurements(raw[keep, R_X].copy(), raw[keep, R_Y].copy(),
+                                                           raw[keep, R_W].copy(), prm)
+    n_bg = 0
+    for i in range(len(bg)):
+        if bg[i] and strong[i]:
             n_bg += 1
     n_other = 0
     for j in range(len(mx)):
@@ -341,27 +431,46 @@ def off_background(mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ctx, px, p
     knd = np.empty(M, np.int64)
     lg = np.full((M, 4), np.nan)
     prob = np.zeros(M)
+    where = np.full(len(mx), -1, np.int64)   # an other-kind measurement's new index
     m = 0
     for i in range(len(lx)):
         x[m], y[m], size[m], knd[m] = lx[i], ly[i], ls[i], kind[i]
         lg[m] = legs[i]
         m += 1
     for i in range(len(bg)):
-        if bg[i]:
-            x[m], y[m], size[m], knd[m] = raw[i, 0], raw[i, 1], raw[i, 2], K_BLOB
+        if bg[i] and strong[i]:
+            x[m], y[m], size[m], knd[m], prob[m] = raw[i, R_X], raw[i, R_Y], raw[i, R_W], K_BLOB, NOT_A_LEG
             m += 1
     for j in range(len(mx)):
         if mkind[j] > K_LEG:
             x[m], y[m], size[m], knd[m], prob[m] = mx[j], my[j], msize[j], mkind[j], mprob[j]
             lg[m] = mlegs[j]
+            where[j] = m
             m += 1
-    return x, y, size, knd, lg, keep, prob
+    n_keep = 0
+    for i in range(len(bg)):
+        if not bg[i]:
+            n_keep += 1
+    out = np.empty((n_keep, RAW_COLS))
+    q = 0
+    for i in range(len(bg)):
+        c = int(raw[i, R_COVER])
+        if bg[i]:
+            if c >= 0 and where[c] >= 0:
+                prob[where[c]] = NOT_A_LEG
+            continue
+        out[q] = raw[i]
+        if c >= 0:
+            out[q, R_COVER] = where[c]
+        q += 1
+    return x, y, size, knd, lg, out, prob
 
 
 @njit(cache=True)
 def leggy_tracks(tab, n, prm):
-    """The confirmed tracks of legs or people (legs a share >= person_votes of their hits) that may take leg
-    candidates first."""
+    """The tracks that may take leg candidates first: people, and confirmed tracks of legs (legs a share >=
+    person_votes of their hits) or whose leg evidence is at least person_maintain (a person whose legs the detector
+    was less sure of, measured as circles or blobs)."""
     out = np.empty(n, np.int64)
     q = 0
     for k in range(n):
@@ -369,8 +478,9 @@ def leggy_tracks(tab, n, prm):
         total = 0.0
         for j in range(5):
             total += tab[k, VOTES + j]
-        if (legs >= prm[P_PERSON_VOTES] * max(total, 1.0) and legs > 0 and tab[k, CLS] <= CLASS_PERSON
-                and tab[k, CONFIRMED] != 0):
+        leggy = legs >= prm[P_PERSON_VOTES] * max(total, 1.0) and legs > 0 and tab[k, CLS] <= CLASS_PERSON
+        evident = tab[k, LEG_HITS] > 0 and tab[k, LEG_SCORE] >= prm[P_PERSON_MAINTAIN]
+        if tab[k, IS_PERSON] != 0 or (tab[k, CONFIRMED] != 0 and (leggy or evident)):
             out[q] = k
             q += 1
     return out[:q]
@@ -378,8 +488,9 @@ def leggy_tracks(tab, n, prm):
 
 @njit(cache=True)
 def legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm):
-    """Tracks of legs or people take up to two leg candidates each (tracker._legs). Returns the measurements
-    (rebuilt when some track took legs: theirs first) and rows0, the tracks owning the first len(rows0)."""
+    """Tracks of legs or people take up to two leg candidates each, weak ones too when the detector gives them at
+    least person_maintain (below it, no hit keeps a person) (tracker._legs). Returns the measurements (rebuilt when
+    some track took legs: theirs first) and rows0, the tracks owning the first len(rows0)."""
     none = np.zeros(0, np.int64)
     if n == 0 or len(raw) == 0:
         return mx, my, msize, mkind, mlegs, mprob, none
@@ -390,20 +501,17 @@ def legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm):
     ty = np.empty(len(leggy))
     for q in range(len(leggy)):
         tx[q], ty[q] = tab[leggy[q], X], tab[leggy[q], Y]
-    owner, x, y, size, kind, legs = _kernels.leg_stage_measurements(
-        tx, ty, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), mx, my, msize, mkind, mlegs, prm)
+    use = (raw[:, R_COVER] < 0) | (raw[:, R_P] >= prm[P_PERSON_MAINTAIN])
+    cand = raw[use]
+    owner, x, y, size, kind, legs, other = _kernels.leg_stage_measurements(
+        tx, ty, cand[:, R_X].copy(), cand[:, R_Y].copy(), cand[:, R_W].copy(), cand[:, R_COVER] < 0,
+        cand[:, R_COVER].astype(np.int64), mx, my, msize, mkind, mlegs, prm)
     if len(owner) == 0:
         return mx, my, msize, mkind, mlegs, mprob, none
     prob = np.zeros(len(x))
-    n_other = 0
-    for j in range(len(mx)):
-        if mkind[j] > K_LEG:
-            n_other += 1
-    m = len(x) - n_other
-    for j in range(len(mx)):
-        if mkind[j] > K_LEG:
-            prob[m] = mprob[j]
-            m += 1
+    m = len(x) - len(other)
+    for q in range(len(other)):
+        prob[m + q] = mprob[other[q]]
     return x, y, size, kind, legs, prob, leggy[owner]
 
 
@@ -508,9 +616,9 @@ def reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm):
     if nl == 0 or M == 0:
         return none, none
     lost = lost[:nl]
-    free = np.empty(M, np.bool_)
-    for j in range(M):
-        free[j] = mkind[j] != K_LEG
+    free = np.empty(M, np.bool_)   # a lone leg may be someone else's second leg: taken back only where reacq lets a
+    for j in range(M):              # person (row 0) take one; one beside a confirmed track just hit is never free
+        free[j] = mkind[j] != K_LEG or reacq[0, K_LEG]
     tentative = np.zeros(M, np.bool_)
     for q in range(len(cols)):
         free[cols[q]] = False
@@ -572,13 +680,29 @@ def merge_reacquired(rows, cols, rows2, cols2):
 
 
 @njit(cache=True)
+def fold_evidence(tab, k, p, prm):
+    """Fold a leg-candidate hit of leg probability p into track k's evidence LEG_SCORE: the plain mean of its
+    first 1/leg_evidence_rate such hits, then a running mean of that rate; a candidate found on the background or
+    carried (p = NOT_A_LEG) sets it to 0."""
+    tab[k, LEG_HITS] += 1
+    if p == NOT_A_LEG:   # a candidate on the background or carried: whatever fed the evidence was no leg
+        tab[k, LEG_SCORE] = 0.0
+        return
+    a = max(prm[P_LEG_EVIDENCE_RATE], 1.0 / tab[k, LEG_HITS])
+    tab[k, LEG_SCORE] = (1.0 - a) * tab[k, LEG_SCORE] + a * p
+
+
+@njit(cache=True)
 def leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, prm):
-    """Fold the leg probability of each hit (rows took cols) into the tracks' running mean LEG_SCORE."""
-    a = prm[P_LEG_EVIDENCE_RATE]
+    """Fold the leg probability of each hit (rows took cols) that was a leg candidate (a leg or pair, or a shape
+    the detector scored above 0) into the tracks' evidence; other hits leave it as it is. Without a detector
+    (`has_prob` false: the paper's rule) there is no evidence."""
+    if not has_prob:
+        return
     for q in range(len(rows)):
-        k = rows[q]
-        tab[k, LEG_SCORE] = (1.0 - a) * tab[k, LEG_SCORE] + a * leg_probability(mx, my, mkind, mlegs, mprob, raw,
-                                                                               has_prob, cols[q])
+        j = cols[q]
+        if mkind[j] <= K_LEG or mprob[j] > 0:
+            fold_evidence(tab, rows[q], leg_probability(mx, my, mkind, mlegs, mprob, raw, has_prob, j), prm)
 
 
 @njit(cache=True)
@@ -606,26 +730,33 @@ def occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm):
 
 
 @njit(cache=True)
-def duplicates(tab, n, prm):
-    """Tracks of legs or people within merge_distance of a higher-ranked such track, unless both are
-    confirmed and move differently (tracker._duplicates)."""
-    x, y, vx, vy = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+def duplicates(tab, n, learned, prm):
+    """Tracks of legs or people, or that took leg candidates, within merge_distance of a higher-ranked track of legs
+    or people or with leg evidence of at least person_maintain (two tracks on one person's two legs the detector
+    was less sure of are one), unless both are confirmed and move differently (tracker._duplicates; with a leg
+    detector, `learned`, differently beyond the spread of their velocities too: the paper's rule, whose legs are
+    every small circle, keeps two close tracks apart on merge_speed alone)."""
+    x, y, vx, vy, vvar = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     candidate = np.empty(n, np.bool_)
+    victim = np.empty(n, np.bool_)
     confirmed = np.empty(n, np.bool_)
     rank = np.empty(n, np.int64)
     for k in range(n):
         x[k], y[k], vx[k], vy[k] = tab[k, X], tab[k, Y], tab[k, VX], tab[k, VY]
+        vvar[k] = tab[k, P0 + 10] + tab[k, P0 + 15] if learned else 0.0
         legs = tab[k, VOTES + K_PERSON] + tab[k, VOTES + K_LEG]
-        candidate[k] = legs > 0 and tab[k, CLS] <= CLASS_PERSON
+        candidate[k] = ((legs > 0 and tab[k, CLS] <= CLASS_PERSON)
+                        or (tab[k, LEG_HITS] > 0 and tab[k, LEG_SCORE] >= prm[P_PERSON_MAINTAIN]))
+        victim[k] = candidate[k] or tab[k, LEG_HITS] > 0
         confirmed[k] = tab[k, CONFIRMED] != 0
         rank[k] = (np.int64(tab[k, HITS]) * 2 + np.int64(tab[k, CONFIRMED])
                    + (np.int64(1) << 40 if tab[k, MOBILITY] == MOBILITY_DYNAMIC else 0)
                    + (np.int64(1) << 41 if tab[k, CLS] == CLASS_PERSON else 0))
-    return _kernels.duplicates(x, y, vx, vy, candidate, confirmed, rank, prm)
+    return _kernels.duplicates(x, y, vx, vy, vvar, victim, candidate, confirmed, rank, prm)
 
 
 @njit(cache=True)
-def life_cycle(tab, n, stamp, superseded, prm):
+def life_cycle(tab, n, stamp, superseded, learned, prm):
     """Count the scan for every track, confirm, and delete the tracks past their timeout, the duplicates and
     the `superseded` ones, keeping the others' order. Returns the new number of tracks."""
     mask = (1 << int(prm[P_CONFIRM_WINDOW])) - 1
@@ -650,10 +781,12 @@ def life_cycle(tab, n, stamp, superseded, prm):
         since = (stamp - np.int64(tab[k, LAST_HIT])) * 1e-9
         if tab[k, CONFIRMED] != 0:
             limit = prm[P_DELETE_AFTER_OCCLUDED] if tab[k, OCCLUDED] != 0 else prm[P_DELETE_AFTER]
+            if tab[k, IS_PERSON] != 0:
+                limit = max(limit, prm[P_PERSON_COAST])
         else:
             limit = prm[P_TENTATIVE_DELETE_AFTER]
         dead[k] = since > limit + 1e-9
-    dead |= duplicates(tab, n, prm)
+    dead |= duplicates(tab, n, learned, prm)
     for q in range(len(superseded)):
         dead[superseded[q]] = True
     keep = 0
@@ -679,7 +812,7 @@ def spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp
     for j in range(M):
         if not free[j]:
             continue
-        small = mkind[j] == K_LEG or mkind[j] == K_BLOB
+        small = mkind[j] == K_LEG or mkind[j] == K_BLOB or mprob[j] > 0
         blocked = False
         for k in range(n):
             d = np.hypot(mx[j] - tab[k, X], my[j] - tab[k, Y])
@@ -711,23 +844,32 @@ def spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp
         tab[k, LAST_X], tab[k, LAST_Y] = tab[k, X], tab[k, Y]
         tab[k, HIT] = 1.0
         tab[k, MOBILITY] = 2.0
-        tab[k, LEG_SCORE] = leg_probability(mx, my, mkind, mlegs, mprob, raw, has_prob, j)
-        tab[k, SENSOR_REF_X], tab[k, SENSOR_REF_Y] = to_sensor(tab[k, X], tab[k, Y], has_pose, pose)
-        tab[k, POSE_FIRST_X], tab[k, POSE_FIRST_Y] = px, py
+        if has_prob and (mkind[j] <= K_LEG or mprob[j] > 0):
+            fold_evidence(tab, k, leg_probability(mx, my, mkind, mlegs, mprob, raw, has_prob, j), prm)
     ctx[C_NEXT_ID] += nn
     return tab, n + nn
 
 
 @njit(cache=True)
-def classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm):
+def classify(tab, n, dt, stamp, learned, prm):
     """Class and mobility of every track (references: tests/reference_tracking's ReferenceTracker._classify
-    and classify_tracks; with the leg detector, a person is what its evidence says and the scanner does not carry)."""
+    and classify_tracks). With the leg detector, the person life cycle: a confirmed track becomes a person once
+    its evidence reaches person_evidence with person_pairs sightings of two legs, and stays one until its evidence
+    falls below person_maintain; the rest are classified by the shape of their hits. Mobility apart."""
     for k in range(n):
         speed = np.hypot(tab[k, VX], tab[k, VY])
         if tab[k, HIT] != 0 and tab[k, ON_BG] == 0 and speed > prm[P_MOVING_SPEED]:
             tab[k, MOVING_TIME] = tab[k, MOVING_TIME] + dt
         else:
             tab[k, MOVING_TIME] = 0.0
+        if speed > prm[P_MOVING_SPEED]:
+            tab[k, STILL_TIME] = 0.0
+        else:
+            tab[k, STILL_TIME] = tab[k, STILL_TIME] + dt
+        if learned and tab[k, MOBILITY] == MOBILITY_DYNAMIC and tab[k, STILL_TIME] >= prm[P_STILL_TIME]:
+            # it stopped: static again (the paper's rule keeps it dynamic), and it must move moving_distance anew
+            tab[k, MOBILITY] = 0.0
+            tab[k, FIRST_X], tab[k, FIRST_Y] = tab[k, X], tab[k, Y]
         if not tab[k, MOVING_TIME] >= prm[P_MOVING_TIME]:
             speed = 0.0
         moved = np.hypot(tab[k, X] - tab[k, FIRST_X], tab[k, Y] - tab[k, FIRST_Y])
@@ -770,18 +912,12 @@ def classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm):
                 cls = CLASS_RECTANGULAR_OBJECT
             else:
                 cls = CLASS_UNKNOWN
-            sx, sy = to_sensor(tab[k, X], tab[k, Y], has_pose, pose)
-            a = prm[P_LEG_EVIDENCE_RATE] if tab[k, HIT] != 0 else 0.0
-            dev = np.hypot(sx - tab[k, SENSOR_REF_X], sy - tab[k, SENSOR_REF_Y])
-            tab[k, SENSOR_DEV] = (1.0 - a) * tab[k, SENSOR_DEV] + a * dev
-            tab[k, SENSOR_REF_X] = (1.0 - a) * tab[k, SENSOR_REF_X] + a * sx
-            tab[k, SENSOR_REF_Y] = (1.0 - a) * tab[k, SENSOR_REF_Y] + a * sy
-            travel = np.hypot(px - tab[k, POSE_FIRST_X], py - tab[k, POSE_FIRST_Y])
-            carried = travel >= prm[P_CARRIED_TRAVEL] and tab[k, SENSOR_DEV] <= prm[P_CARRIED_RADIUS]
-            dyn = mob == MOBILITY_DYNAMIC
-            need = prm[P_MOVING_PERSON_EVIDENCE] if dyn else prm[P_PERSON_EVIDENCE]
-            pairs = prm[P_MOVING_PERSON_PAIRS] if dyn else prm[P_PERSON_PAIRS]
-            if tab[k, LEG_SCORE] >= need and person >= pairs and not carried:
+            if tab[k, IS_PERSON] != 0:
+                if tab[k, LEG_SCORE] < prm[P_PERSON_MAINTAIN]:
+                    tab[k, IS_PERSON] = 0.0
+            elif (confirmed and tab[k, LEG_SCORE] >= prm[P_PERSON_EVIDENCE] and person >= prm[P_PERSON_PAIRS]):
+                tab[k, IS_PERSON] = 1.0
+            if tab[k, IS_PERSON] != 0:
                 cls = CLASS_PERSON
         tab[k, CLS] = cls
 
@@ -798,11 +934,13 @@ def push_tail(tab, n, prm):
 
 @njit(cache=True)
 def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a, sin_a, angle_min, increment,
-                      range_min, range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled, fresh):
+                      range_min, range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled, fresh, qx, qy,
+                      radius):
     """reference_tracking.background_update with each active cell's range and beam kept beside it (cache[a] = r, beam
     for active[a], beam -2: not yet computed), valid while the sensor pose does not change (`fresh`: it
     changed, compute them all again). The same arithmetic on the same numbers: the same grid. An inactive
-    cell's mark is 0 here, not -1 (scans count from 1), so a new grid is all zeros (no 5 MB to fill)."""
+    cell's mark is 0 here, not -1 (scans count from 1), so a new grid is all zeros (no 5 MB to fill). Returns
+    within `radius` of a person at (qx, qy) (tracking frame) are the person's and add nothing."""
     B = len(ranges)
     keep = 0
     for a in range(n_active):
@@ -833,8 +971,16 @@ def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a,
         if not (r > range_min and r < range_max):
             continue
         sx, sy = r * cos_a[j], r * sin_a[j]
-        i = int(np.floor((pc * sx - ps * sy + px - x0) / cell))
-        k = int(np.floor((ps * sx + pc * sy + py - y0) / cell))
+        wx, wy = pc * sx - ps * sy + px, ps * sx + pc * sy + py
+        mine = False
+        for q in range(len(qx)):
+            if np.hypot(wx - qx[q], wy - qy[q]) <= radius:
+                mine = True
+                break
+        if mine:
+            continue
+        i = int(np.floor((wx - x0) / cell))
+        k = int(np.floor((wy - y0) / cell))
         if i < 0 or k < 0 or i >= n or k >= n:
             continue
         c = i * n + k
@@ -853,9 +999,9 @@ def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a,
 
 @njit(cache=True)
 def background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, cos_a, sin_a, geo, px, py, pc, ps,
-               dt, prm):
-    """Add the scan's returns to the background grid (tracker._background; geo: angle_min, increment,
-    range_max, has geometry, range_min)."""
+               dt, tab, n, prm):
+    """Add the scan's returns but the people's (within person_radius of a person track) to the background grid
+    (tracker._background; geo: angle_min, increment, range_max, has geometry, range_min)."""
     if (not has_ranges or geo[3] == 0 or prm[P_BACKGROUND_TIME] <= 0 or len(ranges) != len(cos_a)
             or len(bg_score) == 0):
         return
@@ -871,10 +1017,21 @@ def background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, 
                  and ctx[C_BG_PS] == ps)
     ctx[C_BG_CACHED], ctx[C_BG_PX], ctx[C_BG_PY], ctx[C_BG_PC], ctx[C_BG_PS] = 1.0, px, py, pc, ps
     nbg = int(np.sqrt(len(bg_score)) + 0.5)
+    people = 0
+    for k in range(n):
+        if sure_person(tab, k, prm):
+            people += 1
+    qx, qy = np.empty(people), np.empty(people)
+    q = 0
+    for k in range(n):
+        if sure_person(tab, k, prm):
+            qx[q], qy[q] = tab[k, X], tab[k, Y]
+            q += 1
     ctx[C_BG_COUNT] = background_update(
         bg_score, bg_mark, bg_active, bg_cache, int(ctx[C_BG_COUNT]), int(ctx[C_BG_SCAN]), ranges, cos_a, sin_a,
         geo[0], geo[1], ctx[C_BG_LO], ctx[C_BG_HI], px, py, pc, ps, max(dt, 0.0), ctx[C_BG_X0], ctx[C_BG_Y0],
-        prm[P_BACKGROUND_CELL], nbg, prm[P_OCCLUSION_MARGIN], 4.0 * prm[P_BACKGROUND_TIME], fresh)
+        prm[P_BACKGROUND_CELL], nbg, prm[P_OCCLUSION_MARGIN], 4.0 * prm[P_BACKGROUND_TIME], fresh, qx, qy,
+        prm[P_PERSON_RADIUS])
 
 
 @njit(cache=True)
@@ -904,13 +1061,15 @@ def write_tracks(out, o, tab, n, has_pose, pose):
         r["mobility"] = np.uint8(tab[k, MOBILITY])
         confirmed, hit = tab[k, CONFIRMED] != 0, tab[k, HIT] != 0
         r["status"] = np.uint8((1 if hit else 2) if confirmed else 0)
-        r["occluded"] = np.uint8(tab[k, OCCLUDED])
+        coasting_person = confirmed and not hit and tab[k, IS_PERSON] != 0
+        r["occluded"] = np.uint8(1 if tab[k, OCCLUDED] != 0 or coasting_person else 0)
 
 
 # -------------------------------------------------------------------------------------------- the step
 @njit(cache=True)
 def track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
-               has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, learned, compat, reacq):
+               has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, carry_ref, carry_seen,
+               carry_away, learned, compat, reacq):
     """One scan (measurements in the sensor frame, stamp in ns since the first scan) through every phase;
     returns the table (a new one when it grew). ctx[C_N_TRACKS] holds the number of live tracks."""
     n = int(ctx[C_N_TRACKS])
@@ -925,8 +1084,10 @@ def track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, ha
     for k in range(n):
         crow[k] = kind_group(tab, k) if tab[k, CONFIRMED] != 0 else ANY_ROW
     predict(tab, n, dt, prm)
-    mx, my, msize, mkind, mlegs, raw, mprob = off_background(mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ctx,
-                                                             px, py, prm)
+    carried_update(carry_ref, carry_seen, carry_away, ranges, has_ranges, has_pose, pose, geo, ctx, prm)
+    mx, my, msize, mkind, mlegs, raw, mprob = off_background(tab, n, mx, my, msize, mkind, mlegs, raw, mprob,
+                                                             bg_score, ctx, px, py, ranges, carry_ref, carry_seen,
+                                                             carry_away, has_pose, pose, geo, prm)
     mx, my, msize, mkind, mlegs, mprob, rows0 = legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm)
     rows, cols = associate(tab, n, mx, my, mkind, rows0, compat, crow, prm)
     hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg_score, ctx, px, py, prm)
@@ -935,25 +1096,26 @@ def track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, ha
     rows, cols, superseded = merge_reacquired(rows, cols, rows2, cols2)
     leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, prm)
     occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm)
-    n = life_cycle(tab, n, stamp, superseded, prm)
+    n = life_cycle(tab, n, stamp, superseded, learned, prm)
     tab, n = spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp, has_pose, pose, px, py,
                    ctx, prm)
-    classify(tab, n, dt, stamp, learned, has_pose, pose, px, py, prm)
+    classify(tab, n, dt, stamp, learned, prm)
     push_tail(tab, n, prm)
     background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, cos_a, sin_a, geo, px, py, pc, ps, dt,
-               prm)
+               tab, n, prm)
     ctx[C_N_TRACKS] = n
     return tab
 
 
 @njit(cache=True)
 def step_measurements(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
-                      has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, learned, compat, reacq,
-                      out):
+                      has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, carry_ref, carry_seen,
+                      carry_away, learned, compat, reacq, out):
     """track_scan on one scan's measurements, then its live tracks as Track elements in `out` (a new, larger
     array when it is too small). Returns (table, out)."""
     tab = track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
-                     has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, learned, compat, reacq)
+                     has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, carry_ref, carry_seen,
+                     carry_away, learned, compat, reacq)
     n = int(ctx[C_N_TRACKS])
     if n > len(out):
         out = np.empty(2 * n, out.dtype)
@@ -963,8 +1125,8 @@ def step_measurements(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mp
 
 @njit(cache=True)
 def track_block(tab, ctx, prm, stamps, circles, blobs, lines, legs, learned, ranges, has_ranges, poses,
-                has_pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, compat, reacq, out, tails,
-                out_tail, out_tail_count, offsets):
+                has_pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, carry_ref, carry_seen, carry_away,
+                compat, reacq, out, tails, out_tail, out_tail_count, offsets):
     """Track scans 0..len(stamps)-1 of a block of features (flat per kind, with per-scan offsets) in one call.
 
     circles: (offsets, first, last, x, y, radius); blobs: (offsets, first, last, x, y, size, kind); lines:
@@ -992,7 +1154,7 @@ def track_block(tab, ctx, prm, stamps, circles, blobs, lines, legs, learned, ran
                 ly0[l0:l1], lx1[l0:l1], ly1[l0:l1], prm)
         tab = track_scan(tab, ctx, prm, stamps[i], mx, my, msize, mkind, mlegs, raw, mprob, learned, ranges[i],
                          has_ranges, has_pose, poses[i], geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache,
-                         learned, compat, reacq)
+                         carry_ref, carry_seen, carry_away, learned, compat, reacq)
         n = int(ctx[C_N_TRACKS])
         o = offsets[i]
         if o + n > len(out):

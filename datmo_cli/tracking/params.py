@@ -25,6 +25,10 @@ class TrackingParams(Section):
     """The `[track]` table of a config file: parameters of `datmo track`."""
 
     name: ClassVar[str] = "track"
+    removed: ClassVar[dict[str, str]] = {
+        "leg_probability": "the leg threshold is the leg model's own (threshold_p, chosen by datmo train-legs)",
+        "moving_person_evidence": "a person's class no longer depends on its mobility (see person_evidence)",
+        "moving_person_pairs": "a person's class no longer depends on its mobility (see person_pairs)"}
 
     # Kalman filter: constant velocity, white-noise acceleration (Kohler 1997)
     process_noise: float = param(2.0, _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
@@ -65,6 +69,9 @@ class TrackingParams(Section):
     moving_speed: float = param(0.2, _b(0, 50, "m/s"), "Filtered speed above which a track is moving.")
     moving_time: float = param(1.0, _b(0, 3600, "s", _HOUR),
                                "Seconds of moving at consecutive hits before a track is dynamic.")
+    still_time: float = param(1.0, _b(0, 3600, "s", _HOUR),
+                              "With the leg detector, seconds at a speed below moving_speed after which a dynamic "
+                              "track is static again (a person who stops; the paper's rule keeps it dynamic).")
     # people
     leg_radius_max: float = param(0.2, _b(0, 2, "m"), "Circles up to this radius may be legs.")
     leg_blob_max: float = param(0.35, _b(0, 2, "m"), "Blobs up to this size may be legs.")
@@ -81,21 +88,27 @@ class TrackingParams(Section):
                                "... when one is tentative or their velocities differ less than this.")
     person_votes: float = param(0.5, _b(0, 1, "", SHARE),
                                 "Share of a track's hits that were leg measurements for a person.")
-    # people with a leg detector: leg_score follows the leg probability of a track's recent hits
-    leg_probability: float = param(0.5, _b(0, 1, "", PROBABILITY),
-                                   "Segments the detector gives at least this are legs (paired into people).")
-    leg_evidence_rate: float = param(0.25, _b(0, 1, "", "a share; 0 would never learn", open_=True),
-                                     "Weight of each new hit in the running mean (about 1/rate hits remembered).")
+    # people with a leg detector (the person life cycle, see Tracker): evidence is the mean leg probability of a
+    # track's leg-candidate hits (other hits leave it as it is); a track becomes a person once, from paired legs,
+    # and stays one until its evidence falls below person_maintain or it dies; unseen, it coasts person_coast s
+    leg_evidence_rate: float = param(0.1, _b(0, 1, "", "a share; 0 would never learn", open_=True),
+                                     "Weight of each leg-candidate hit in the evidence (a plain mean over the first "
+                                     "1/rate such hits, then a running mean that remembers about 1/rate of them).")
     person_evidence: float = param(0.6, _b(0, 1, "", PROBABILITY),
-                                   "A track is a person while that running leg probability is at least this ...")
-    moving_person_evidence: float = param(0.35, _b(0, 1, "", PROBABILITY),
-                                          "... or this, once it is dynamic (clutter that passes for legs stays put).")
-    person_pairs: int = param(3, _b(0, 1_000_000, "scans", integer=True),
-                              "A person not dynamic has been seen with two legs this many times ...")
-    moving_person_pairs: int = param(1, _b(0, 1_000_000, "scans", integer=True), "... and a dynamic one this many.")
-    carried_travel: float = param(1.0, _b(0, 1000, "m"), "A track the sensor has carried this far ...")
-    carried_radius: float = param(0.1, _b(0, 10, "m"),
-                                  "... moving in the sensor frame less than this (running mean) is no person.")
+                                   "A confirmed track becomes a person when its evidence is at least this ...")
+    person_maintain: float = param(0.2, _b(0, 1, "", PROBABILITY),
+                                   "... and stays one until its evidence falls below this.")
+    person_pairs: int = param(1, _b(0, 1_000_000, "scans", integer=True),
+                              "... and it has been seen with two legs this many times.")
+    person_coast: float = param(3.0, _b(0, 3600, "s", _HOUR),
+                                "Seconds a person lives unseen (output flagged occluded), predicted on.")
+    person_radius: float = param(0.4, _b(0, 5, "m"),
+                                 "Returns this near a person are the person's: they never become background.")
+    # carried: a beam whose return stays put in the sensor frame while the sensor travels sees a part of the robot
+    carried_travel: float = param(1.0, _b(0, 1000, "m"),
+                                  "A beam whose return stays within carried_radius while the sensor travels this "
+                                  "far sees something the robot carries: no leg there ...")
+    carried_radius: float = param(0.05, _b(0, 10, "m"), "... (metres of range from where it first returned).")
     # background: a grid of how long each place was hit by a return (tracking frame); a leg candidate on a place
     # occupied for long (a wall, a bench, a column) is not a leg (real perception finds leg-sized pieces there)
     background_time: float = param(3.0, _b(0, 3600, "s", "0 turns the background off"),
@@ -117,9 +130,10 @@ class TrackingParams(Section):
     def combined(cls, params: TrackingParams, where: str) -> None:
         track_combined(params, where)
 
-    def kernel_vector(self) -> np.ndarray:
+    def kernel_vector(self, leg_threshold: float = 0.5) -> np.ndarray:
         """The parameters as the tracking kernels read them: one float64 vector indexed by state.P_* (in the
-        order of state.PARAM_NAMES; units as the fields; tail_length at least 1)."""
-        out = np.array([float(getattr(self, name)) for name in PARAM_NAMES], np.float64)
+        order of state.PARAM_NAMES; units as the fields; tail_length at least 1), then P_LEG_THRESHOLD: the
+        leg detector's threshold (its model's threshold_p; a leg candidate scored at least this is a leg)."""
+        out = np.array([float(getattr(self, name)) for name in PARAM_NAMES] + [float(leg_threshold)], np.float64)
         out[P_TAIL_LENGTH] = max(self.tail_length, 1)
         return out

@@ -10,7 +10,8 @@ When a scan spawns more tracks than the table holds, the compiled step returns a
 capacity (growth policy: doubling; rows are never dropped).
 
 Parameters: TrackingParams as one float64 vector (TrackingParams.kernel_vector, in the order of PARAM_NAMES),
-indexed by the P_* constants.
+indexed by the P_* constants, and after them P_LEG_THRESHOLD, the leg detector's threshold (not a [track] field: the
+leg model's own, LegModel.threshold_p).
 Context: the tracker's scalars between scans (last stamp, next id, background grid bookkeeping), one
 float64 vector indexed by the C_* constants.
 """
@@ -36,38 +37,41 @@ LAST_X, LAST_Y = 38, 39            # position after the last hit, m
 CONFIRMED, OCCLUDED, HIT = 40, 41, 42   # 0/1
 CLS, MOBILITY = 43, 44             # class and mobility (datmo_msgs/Track's classification, mobility)
 TAIL_COUNT = 45                    # positions written to the tail so far
-LEG_SCORE = 46                     # running mean of the leg detector's probability of its hits
-SENSOR_REF_X, SENSOR_REF_Y = 47, 48   # running mean of its sensor-frame position, m
-POSE_FIRST_X, POSE_FIRST_Y = 49, 50   # the sensor's position (tracking frame) when created, m
-SENSOR_DEV = 51                    # running mean of its distance from the sensor-frame reference, m
-ON_BG = 52                         # 0/1: took a measurement on the background this scan
-TAIL = 53                          # tail point i at columns TAIL + 2 i (x), TAIL + 2 i + 1 (y)
+LEG_SCORE = 46                     # leg evidence: mean of the leg detector's probability of its leg-candidate hits
+ON_BG = 47                         # 0/1: took a measurement on the background this scan
+IS_PERSON = 48                     # 0/1: a person (with a leg detector: set once from paired legs, kept until the
+                                   # evidence falls below person_maintain or the track dies)
+LEG_HITS = 49                      # leg-candidate hits folded into LEG_SCORE
+STILL_TIME = 50                    # s of a speed at most moving_speed (a dynamic track this still is static again)
+TAIL = 51                          # tail point i at columns TAIL + 2 i (x), TAIL + 2 i + 1 (y)
 N_FIXED = TAIL
 
 # ------------------------------------------------------------------------------------- parameter vector
 (P_PROCESS_NOISE, P_PERSON_PROCESS_NOISE, P_MEASUREMENT_NOISE, P_LEG_MEASUREMENT_NOISE, P_INITIAL_SPEED_SIGMA,
  P_GATE, P_MAX_GATE_DISTANCE, P_CONFIRM_HITS, P_CONFIRM_WINDOW, P_DELETE_AFTER, P_DELETE_AFTER_OCCLUDED,
  P_REACQUIRE_SPEED, P_REACQUIRE_DISTANCE, P_OCCLUSION_MARGIN, P_TENTATIVE_DELETE_AFTER, P_D_MAX,
- P_UNDEFINED_WINDOW, P_MOVING_DISTANCE, P_MOVING_SPEED, P_MOVING_TIME, P_LEG_RADIUS_MAX, P_LEG_BLOB_MAX,
+ P_UNDEFINED_WINDOW, P_MOVING_DISTANCE, P_MOVING_SPEED, P_MOVING_TIME, P_STILL_TIME, P_LEG_RADIUS_MAX, P_LEG_BLOB_MAX,
  P_STRIDE_MAX, P_LEG_REACH, P_LEG_BESIDE, P_SPAWN_CLEARANCE, P_STEP_MIN, P_WALKING_AFTER, P_STEP_MAX,
- P_MERGE_DISTANCE, P_MERGE_SPEED, P_PERSON_VOTES, P_LEG_PROBABILITY, P_LEG_EVIDENCE_RATE, P_PERSON_EVIDENCE,
- P_MOVING_PERSON_EVIDENCE, P_PERSON_PAIRS, P_MOVING_PERSON_PAIRS, P_CARRIED_TRAVEL, P_CARRIED_RADIUS,
- P_BACKGROUND_TIME, P_BACKGROUND_CELL, P_BACKGROUND_EXTENT, P_TAIL_LENGTH) = range(44)
-N_PARAMS = 44
+ P_MERGE_DISTANCE, P_MERGE_SPEED, P_PERSON_VOTES, P_LEG_EVIDENCE_RATE, P_PERSON_EVIDENCE, P_PERSON_MAINTAIN,
+ P_PERSON_PAIRS, P_PERSON_COAST, P_PERSON_RADIUS, P_CARRIED_TRAVEL, P_CARRIED_RADIUS,
+ P_BACKGROUND_TIME, P_BACKGROUND_CELL, P_BACKGROUND_EXTENT, P_TAIL_LENGTH) = range(45)
+N_PARAMS = 45
+P_LEG_THRESHOLD = N_PARAMS         # the leg model's threshold, appended by TrackingParams.kernel_vector
 PARAM_NAMES = ("process_noise", "person_process_noise", "measurement_noise", "leg_measurement_noise",
                "initial_speed_sigma", "gate", "max_gate_distance", "confirm_hits", "confirm_window",
                "delete_after", "delete_after_occluded", "reacquire_speed", "reacquire_distance",
                "occlusion_margin", "tentative_delete_after", "d_max", "undefined_window", "moving_distance",
-               "moving_speed", "moving_time", "leg_radius_max", "leg_blob_max", "stride_max", "leg_reach",
+               "moving_speed", "moving_time", "still_time", "leg_radius_max", "leg_blob_max", "stride_max", "leg_reach",
                "leg_beside", "spawn_clearance", "step_min", "walking_after", "step_max", "merge_distance",
-               "merge_speed", "person_votes", "leg_probability", "leg_evidence_rate", "person_evidence",
-               "moving_person_evidence", "person_pairs", "moving_person_pairs", "carried_travel",
+               "merge_speed", "person_votes", "leg_evidence_rate", "person_evidence", "person_maintain",
+               "person_pairs", "person_coast", "person_radius", "carried_travel",
                "carried_radius", "background_time", "background_cell", "background_extent", "tail_length")
 
 # ------------------------------------------------------------------------------------------- context
 (C_HAS_STAMP, C_STAMP, C_NEXT_ID, C_BG_READY, C_BG_COUNT, C_BG_SCAN, C_BG_X0, C_BG_Y0, C_BG_LO, C_BG_HI,
- C_N_TRACKS, C_BG_CACHED, C_BG_PX, C_BG_PY, C_BG_PC, C_BG_PS) = range(16)
-N_CONTEXT = 16
+ C_N_TRACKS, C_BG_CACHED, C_BG_PX, C_BG_PY, C_BG_PC, C_BG_PS, C_CARRY_POSED, C_CARRY_PX, C_CARRY_PY) = range(19)
+N_CONTEXT = 19
+# C_CARRY_*: the sensor position (tracking frame) at the last scan, for the carried beams (_step.carried_update)
 # C_BG_CACHED: the background's active cells carry their range and beam as seen from the sensor pose
 # (C_BG_PX, C_BG_PY, heading cos/sin C_BG_PC, C_BG_PS); a still sensor need not compute them again
 

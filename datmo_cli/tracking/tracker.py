@@ -38,18 +38,23 @@ TRACK_DTYPE = cdr.element_dtype(types.TRACK)
 # legs, circles, lines, blobs, -, a lone leg; see _step.kind_group); tentative tracks (row 4) take any
 _COMPAT = np.ones((6, N_KINDS), bool)
 _COMPAT[0, [KIND_CIRCLE, KIND_RECT]] = False
-_COMPAT[1, [KIND_PERSON, KIND_RECT]] = False   # a circle partly seen may pass for a leg
+_COMPAT[1, KIND_PERSON] = False   # a circle partly seen may pass for a leg, or for a line
 _COMPAT[2, [KIND_PERSON, KIND_LEG, KIND_CIRCLE]] = False
 _ANY, _LONE_LEG = 4, 5
 _COMPAT[_LONE_LEG, [KIND_PERSON, KIND_CIRCLE, KIND_RECT]] = False
 # with a leg detector, a leg it was less sure of is a small circle or blob: people may take those too
 _COMPAT_LEARNED = _COMPAT.copy()
 _COMPAT_LEARNED[[0, _LONE_LEG], KIND_CIRCLE] = True
-# which kinds a lost track may be reacquired on (rows as _COMPAT's): only its own, since with real perception
-# the clutter around (pieces of walls and benches as blobs, short lines and small circles) is near everywhere
+# which kinds a lost track may be reacquired on (rows as _COMPAT's): only its own (a person: two legs or one), since
+# with real perception the clutter around (pieces of walls and benches as blobs, short lines and small circles) is
+# near everywhere
 _REACQUIRE = np.zeros((6, N_KINDS), bool)
 _REACQUIRE[0, KIND_PERSON] = _REACQUIRE[1, KIND_CIRCLE] = _REACQUIRE[2, KIND_RECT] = True
 _REACQUIRE[3, KIND_BLOB] = _REACQUIRE[_ANY] = _REACQUIRE[_LONE_LEG, KIND_LEG] = True
+# with a leg detector a lost person may be taken back on one leg too (the detector vouches for it; a leg beside a
+# confirmed track just hit is never taken)
+_REACQUIRE_LEARNED = _REACQUIRE.copy()
+_REACQUIRE_LEARNED[0, KIND_LEG] = True
 
 
 _LEG_DTYPE = cdr.element_dtype(types.LEG)
@@ -115,27 +120,36 @@ class Tracker:
     and returns the live tracks as Track elements (element_dtype(types.TRACK)); `track_block` tracks many
     scans' features in one compiled call.
 
-    People, with a leg detector (`learned`): a track is a person while the running mean of the leg
-    probability of its recent hits (two legs paired, one leg whose partner is hidden, or both legs in one
-    cluster) is at least person_evidence (moving_person_evidence once it is dynamic: clutter the detector
-    likes stays put), it has been seen with two legs person_pairs times (moving_person_pairs when dynamic:
-    a table leg is seen alone), and it is not something the moving scanner carries (a part of the robot:
-    still in the sensor frame over carried_travel). Walking is not required: a person standing, or
-    followed by a robot without odometry, is a person; class and mobility are decided apart. With the
-    paper's rule, a person needs paired legs and the walking pattern (legs leading in turn)."""
+    People, with a leg detector (`learned`), have a life cycle with hysteresis:
+    - Every leg candidate (a cluster the detector scored above 0) reaches the tracker with its probability p.
+      Candidates of p >= `leg_threshold` (the model's own threshold) are legs: paired within a stride into
+      people, or single; the others are measured as their shape (circle, line or blob) carrying their p.
+    - A track's evidence is the mean p of its leg-candidate hits (a plain mean of the first 1/leg_evidence_rate,
+      then a running mean of that rate); hits on anything else leave it unchanged.
+    - A confirmed track becomes a person once its evidence is at least person_evidence and it has been seen with
+      two legs person_pairs times; it stays a person until its evidence falls below person_maintain or it dies.
+      Walking is not required (someone standing, or followed by a robot, is a person) and mobility plays no part.
+    - Unseen, a person coasts person_coast s on its prediction, output flagged occluded, and may be taken back by
+      a measurement it could have reached (as an occluded track is).
+    - Returns within person_radius of a person never feed the background grid, and a leg candidate near a person
+      is theirs even on the background. A beam whose return keeps its place in the sensor frame while the sensor
+      travels carried_travel sees a part of the robot: candidates on such beams are not legs.
+    With the paper's rule, a person needs paired legs and the walking pattern (legs leading in turn)."""
 
     def __init__(self, params: TrackingParams | None = None, geometry: ScanGeometry | None = None,
-                 learned: bool = False) -> None:
+                 learned: bool = False, leg_threshold: float = 0.5) -> None:
         self.params = params or TrackingParams()
         self.learned = learned
+        self.leg_threshold = float(leg_threshold)
         self.geometry = geometry
         self.tracks = state.TrackTable(self.params.tail_length)
         self.stamp_ns: int | None = None
         self.pose: np.ndarray | None = None
-        self._prm = self.params.kernel_vector()
+        self._prm = self.params.kernel_vector(self.leg_threshold)
         self._ctx = state.new_context()
         self._t0: int | None = None   # ns of the first scan: the table's times count from it
         self._compat = _COMPAT_LEARNED if learned else _COMPAT
+        self._reacquire = _REACQUIRE_LEARNED if learned else _REACQUIRE
         self._out = np.zeros(64, TRACK_DTYPE)
         p = self.params
         if geometry is not None:
@@ -153,6 +167,10 @@ class Tracker:
             self._bg = (np.zeros(n * n), np.zeros(n * n, np.int64), np.zeros(65536, np.int64), np.zeros((65536, 2)))
         else:
             self._bg = (np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
+        # carried beams (see _step.carried_update): per beam, the range it keeps returning and the travel (m) it
+        # was seen there and away
+        B = geometry.n_beams if geometry is not None else 0
+        self._carry = (np.full(B, np.nan), np.zeros(B), np.zeros(B))
 
     @property
     def next_id(self) -> int:
@@ -182,16 +200,17 @@ class Tracker:
         self.pose = None if pose is None else np.asarray(pose, np.float64)
         raw = np.asarray(meas.raw_legs, np.float64)
         has_prob = raw.shape[1] >= 4
-        raw4 = np.zeros((len(raw), 4))
-        raw4[:, :min(raw.shape[1], 4)] = raw[:, :4]
+        raw5 = np.zeros((len(raw), _step.RAW_COLS))
+        raw5[:, _step.R_COVER] = -1.0
+        raw5[:, :min(raw.shape[1], _step.RAW_COLS)] = raw[:, :_step.RAW_COLS]
         c8 = np.ascontiguousarray
         tab, self._out = _step.step_measurements(
             self.tracks.table, self._ctx, self._prm, np.int64(stamp), c8(meas.x, np.float64), c8(meas.y, np.float64),
-            c8(meas.size, np.float64), c8(meas.kind, np.int64), c8(meas.legs, np.float64).reshape(-1, 4), raw4,
+            c8(meas.size, np.float64), c8(meas.kind, np.int64), c8(meas.legs, np.float64).reshape(-1, 4), raw5,
             c8(meas.prob, np.float64), has_prob,
             np.zeros(0, np.float32) if ranges is None else c8(ranges, np.float32), ranges is not None,
             pose is not None, np.zeros(3) if pose is None else c8(pose, np.float64), self._geo, self._cos,
-            self._sin, *self._bg, self.learned, self._compat, _REACQUIRE, self._out)
+            self._sin, *self._bg, *self._carry, self.learned, self._compat, self._reacquire, self._out)
         self.tracks.table = tab
         self.tracks.n = n = int(self._ctx[state.C_N_TRACKS])
         return self._out[:n].copy()
@@ -224,8 +243,8 @@ class Tracker:
         tab, out, tail, count = _step.track_block(
             self.tracks.table, self._ctx, self._prm, rel, *_flat(features), self.learned, ranges_arg,
             ranges is not None, poses_arg, poses is not None, self._geo, self._cos, self._sin, *self._bg,
-            self._compat, _REACQUIRE, np.zeros(cap, TRACK_DTYPE), tails, np.zeros((cap if tails else 0, T, 2)),
-            np.zeros(cap if tails else 0, np.int64), offsets)
+            *self._carry, self._compat, self._reacquire, np.zeros(cap, TRACK_DTYPE), tails,
+            np.zeros((cap if tails else 0, T, 2)), np.zeros(cap if tails else 0, np.int64), offsets)
         self.tracks.table = tab
         self.tracks.n = int(self._ctx[state.C_N_TRACKS])
         end = offsets[-1] if tails else 0
