@@ -1,6 +1,7 @@
-"""The documents in docs/ hold (issue 26 points 5 and 6): their examples run as written, in order, in a fresh
-folder beside a copy of sample_logs/ (the ```sh blocks' `datmo` lines in-process through Click's runner, then the
-```python blocks in one namespace), and docs/export.md's column tables are the export's schema."""
+"""The documents in docs/ hold: their examples run as written, in order, in a fresh folder beside a copy of
+sample_logs/ (the ```sh blocks' `datmo` lines in-process through Click's runner, then the ```python blocks in one
+namespace), docs/export.md's column tables are the export's schema, and every `docs/NAME.md §N` that the package,
+the tests and the benchmarks cite names a page and a section that exist."""
 
 from __future__ import annotations
 
@@ -41,7 +42,10 @@ def run_document(path: Path, folder: Path, monkeypatch) -> None:
             exec(compile(text, f"{path.name} block", "exec"), namespace)
 
 
-@pytest.mark.parametrize("name", ["export.md", "python.md"])
+IN_PROCESS = ["export.md", "python.md", "method.md", "lms2xx.md"]   # the pages whose examples run here
+
+
+@pytest.mark.parametrize("name", IN_PROCESS)
 def test_the_examples_run_as_written(tmp_path, monkeypatch, name):
     run_document(DOCS / name, tmp_path, monkeypatch)
 
@@ -62,3 +66,48 @@ def test_the_documented_columns_are_the_schema():
     assert list(documented_columns("The feature columns (`--features`)").items()) == list(
         export.FEATURE_COLUMNS.items())
     assert set(export.TRACK_COLUMNS.values()) | set(export.FEATURE_COLUMNS.values()) <= set(export.TYPES)
+
+
+CITATION = re.compile(r"docs/([\w-]+\.md)((?:(?:,? and |, | )§\d+(?:\.\d+)*)*)")
+SECTION = re.compile(r"§(\d+(?:\.\d+)*)")
+HEADING_SECTION = re.compile(r"^#+ §(\d+(?:\.\d+)*) ", re.M)
+
+
+def citations() -> list[tuple[str, str, list[str]]]:
+    """(file:line, page, [section numbers]) of every `docs/PAGE.md [§N [and §M]]` in the package, the tests (but
+    this file), the benchmarks and the ROS 2 message package."""
+    out = []
+    files = [p for folder in ("datmo_cli", "tests", "benchmarks", "datmo_msgs") for p in (ROOT / folder).rglob("*")
+             if p.suffix in (".py", ".msg") and p.resolve() != Path(__file__).resolve()]
+    for path in sorted(files):
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            for page, sections in CITATION.findall(line):
+                out.append((f"{path.relative_to(ROOT)}:{number}", page, SECTION.findall(sections)))
+    return out
+
+
+def test_every_cited_page_and_section_exists():
+    cited = citations()
+    assert {page for _, page, _ in cited} >= {"method.md", "lms2xx.md"}, "the citations were not found"
+    missing = []
+    for where, page, sections in cited:
+        path = DOCS / page
+        if not path.exists():
+            missing.append(f"{where}: docs/{page} does not exist")
+            continue
+        have = set(HEADING_SECTION.findall(path.read_text(encoding="utf-8")))
+        missing += [f"{where}: docs/{page} has no section §{n}" for n in sections if n not in have]
+    assert not missing, "\n".join(missing)
+
+
+def test_no_citation_outside_the_repository():
+    """The method and the protocol are cited in the repository's docs/, never in a folder beside the clone."""
+    stale = [(where, page) for where, page, _ in citations() if page in ("lms2xx-protocol.md",)]
+    assert not stale
+    for folder in ("datmo_cli", "tests", "benchmarks"):
+        for path in (ROOT / folder).rglob("*.py"):
+            if path.resolve() == Path(__file__).resolve():
+                continue
+            text = path.read_text(encoding="utf-8")
+            assert "lms2xx-protocol" not in text and "shared/docs" not in text, path
+            assert not re.search(r"(?<![\w/])method\.md", text), f"{path}: cite docs/method.md"
