@@ -111,3 +111,94 @@ def test_no_citation_outside_the_repository():
             text = path.read_text(encoding="utf-8")
             assert "lms2xx-protocol" not in text and "shared/docs" not in text, path
             assert not re.search(r"(?<![\w/])method\.md", text), f"{path}: cite docs/method.md"
+
+
+# ------------------------------------------------------------------------------------------ every page covered
+
+
+def test_every_page_runs_somewhere():
+    """Every page of docs/ has its examples run: by tests/test_readme.py (the README's guide pages, in order after
+    the demo) or here (IN_PROCESS); CONTRIBUTING.md's by test_contributing_commands_run."""
+    from test_readme import GUIDE
+
+    guide = {page.name for page in GUIDE if page.parent == DOCS}
+    assert not guide & set(IN_PROCESS), "a page runs twice"
+    assert {page.name for page in DOCS.glob("*.md")} == guide | set(IN_PROCESS), "a page of docs/ runs nowhere"
+
+
+def make_targets() -> dict[str, str]:
+    """{target: its ## line} of the Makefile."""
+    return dict(re.findall(r"^([a-z-]+):.*?## (.+)$", (ROOT / "Makefile").read_text(), re.M))
+
+
+def test_contributing_commands_run():
+    """CONTRIBUTING.md's shell lines: the .venv/bin/ ones run from the clone's top folder and pass; a `make` line
+    names a target of the Makefile (not run: make test would run this test again)."""
+    import subprocess
+    import sys
+
+    lines = [line for language, text in blocks(ROOT / "CONTRIBUTING.md") if language == "sh"
+             for line in text.splitlines() if line.strip()]
+    assert any(line.startswith(".venv/bin/pytest tests/") for line in lines)
+    for line in lines:
+        args = shlex.split(line, comments=True)
+        if args[0] == "make":
+            assert args[1] in make_targets(), line
+            continue
+        assert args[0].startswith(".venv/bin/"), f"CONTRIBUTING.md: only .venv/bin/ and make lines: {line}"
+        args[0] = str(Path(sys.executable).with_name(args[0].removeprefix(".venv/bin/")))
+        result = subprocess.run(args, cwd=ROOT, capture_output=True, text=True, timeout=600)
+        assert result.returncode == 0, f"CONTRIBUTING.md: {line}\n{result.stdout[-2000:]}{result.stderr[-2000:]}"
+
+
+def test_make_help_lists_every_target():
+    import subprocess
+
+    result = subprocess.run(["make", "-s", "help"], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    phony = re.search(r"^\.PHONY: (.+)$", (ROOT / "Makefile").read_text(), re.M).group(1).split()
+    targets = make_targets()
+    assert set(phony) <= set(targets), f"targets without a ## line: {set(phony) - set(targets)}"
+    for target, line in targets.items():
+        assert re.search(rf"^  make {re.escape(target)} +{re.escape(line)}$", result.stdout, re.M), target
+
+
+# ----------------------------------------------------------------------------------------------- links
+
+
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+
+
+def slug(heading: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation dropped but hyphens, spaces made hyphens."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def anchors(path: Path) -> set[str]:
+    text = re.sub(r"^```.*?^```", "", path.read_text(encoding="utf-8"), flags=re.M | re.S)
+    return {slug(h) for h in re.findall(r"^#+ (.+)$", text, re.M)}
+
+
+def test_links_resolve():
+    """Every relative link of the README, CONTRIBUTING.md, CHANGELOG.md and docs/ names a file of the repository,
+    and a #section of a Markdown page that it has."""
+    pages = [ROOT / "README.md", ROOT / "CONTRIBUTING.md", ROOT / "CHANGELOG.md", *sorted(DOCS.glob("*.md"))]
+    broken = []
+    for page in pages:
+        text = re.sub(r"^```.*?^```", "", page.read_text(encoding="utf-8"), flags=re.M | re.S)
+        for target in LINK.findall(text):
+            if re.match(r"[a-z]+://", target):
+                continue
+            name, _, anchor = target.partition("#")
+            path = (page.parent / name).resolve() if name else page
+            if not path.exists():
+                broken.append(f"{page.name}: {target} (no such file)")
+            elif anchor and path.suffix == ".md" and anchor not in anchors(path):
+                broken.append(f"{page.name}: {target} (no such section)")
+    assert not broken, "\n".join(broken)
+
+
+def test_the_readme_is_short_and_shows_the_demo():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= 200, "the README's long sections belong in docs/"
+    assert "](docs/hall.png)" in text and (DOCS / "hall.png").stat().st_size > 10_000
