@@ -20,18 +20,40 @@ from .log.vocabulary import CLASS_PERSON
 
 # ------------------------------------------------------------------------------------ leg recordings
 
-# (scene, seed, people or None, resolution in degrees, duration in s)
+# (scene, seed, people or None, resolution in degrees, duration in s); a resolution that is not the LMS200's
+# (0.25, 0.5, 1) is a scanner of 270° with that step (a Hokuyo-like one, its beams = 270 / step), whose crowd
+# stands still longer (LONG_PAUSE): people who stand, seen by a scanner finer than the LMS200 and to 8 m
 SIMULATED = (("crowd", 11, 6, 0.5, 60.0), ("crowd", 12, 8, 1.0, 60.0), ("corridor", 13, None, 0.5, 60.0),
-             ("crowd", 14, 4, 0.5, 30.0))
+             ("crowd", 14, 4, 0.5, 30.0), ("crowd", 15, 6, 270 / 768, 60.0), ("crowd", 16, 5, 270 / 512, 60.0))
+LMS200_STEPS = (0.25, 0.5, 1.0)
+LONG_PAUSE = (0.5, 12.0)   # pause probability at each waypoint, longest pause in s
+
+
+def _scene_for(scene: str, resolution: float):
+    """The scene to simulate for a SIMULATED row: the built-in name, or the scene loaded with the scanner of
+    `resolution` degrees over 270° (and the crowd's LONG_PAUSE) when it is not an LMS200 step."""
+    if any(abs(resolution - s) < 1e-9 for s in LMS200_STEPS):
+        return scene, resolution
+    import dataclasses
+
+    from .sim.scene import ScannerSpec, load_scene
+
+    loaded = load_scene(scene)
+    crowd = loaded.crowd and dataclasses.replace(loaded.crowd, pause_probability=LONG_PAUSE[0],
+                                                 max_pause=LONG_PAUSE[1])
+    spec = ScannerSpec(beams=int(round(270 / resolution)), fov_deg=270.0, range_min=0.02, range_max=10.0)
+    return dataclasses.replace(loaded, scanner=spec, crowd=crowd), None
 
 
 def simulated_recording(scene: str, seed: int, people: int | None = None, resolution: float = 0.5,
                         duration: float = 60.0):
-    """One simulated LMS200 recording with every visible person's two leg centres as its labels."""
+    """One simulated recording with every visible person's two leg centres as its labels: an LMS200 at
+    `resolution` degrees, or a 270° scanner of that step (_scene_for)."""
     from .perception.training import Recording
     from .sim.simulate import simulate_scene
 
-    sim = simulate_scene(scene, seed=seed, duration=duration, people=people, resolution_deg=resolution)
+    where, lms_step = _scene_for(scene, resolution)
+    sim = simulate_scene(where, seed=seed, duration=duration, people=people, resolution_deg=lms_step)
     legs = []
     for k in range(len(sim.run)):
         o = sim.truth[sim.truth_offsets[k]:sim.truth_offsets[k + 1]]
@@ -39,7 +61,7 @@ def simulated_recording(scene: str, seed: int, people: int | None = None, resolu
         left = np.stack([o["left_leg_x"], o["left_leg_y"]], axis=1)
         right = np.stack([o["right_leg_x"], o["right_leg_y"]], axis=1)
         legs.append(np.concatenate([left, right]).astype(np.float64).reshape(-1, 2))
-    name = f"simulated {scene} seed {seed}" + (f" {people} people" if people else "") + f" {resolution:g}°"
+    name = f"simulated {scene} seed {seed}" + (f" {people} people" if people else "") + f" {resolution:.3g}°"
     return Recording(name, Path(f"simulated/{scene}-{seed}"), "/scan", sim.run, legs)
 
 

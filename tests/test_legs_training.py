@@ -140,6 +140,29 @@ def test_figures_count_clusters_within_5_m_and_false_legs_per_empty_scan():
     assert f.false_per_scan == 2 / 4 and f.legs == 2 and f.clusters == 4 and f.empty_scans == 4
 
 
+def test_recall_by_range_counts_the_legs_of_each_bin_at_the_threshold():
+    lab = _table("L", True, [1, 1, 0, 1, 1, 1], rng_m=[1.0, 1.5, 1.5, 2.5, 3.5, 6.0])
+    score = np.array([0.9, 0.2, 0.9, 0.6, 0.4, 0.99])
+    assert T.recall_by_range(lab, score, 0.5) == (0.5, 1.0, 0.0, None)   # 6 m is beyond the last bin
+
+
+def test_a_thinned_recording_keeps_every_other_beam_at_twice_the_step_and_its_labels():
+    from pathlib import Path
+
+    from datmo_cli.log.scan import ScanGeometry, ScanRun
+
+    g = ScanGeometry(-1.0, 0.01, 201, 0.02, 30.0)
+    ranges = np.arange(2 * 201, dtype=np.float32).reshape(2, 201) / 100
+    legs = [np.array([[1.0, 0.5]]), np.zeros((0, 2))]
+    rec = T.Recording("r", Path("r.bag"), "/scan", ScanRun(np.array([0, 10**8]), ranges, g), legs)
+    t = T.thinned(rec, 2)
+    assert t.run.geometry.n_beams == 101 and t.run.geometry.angle_increment == pytest.approx(0.02)
+    assert t.run.geometry.angle_min == g.angle_min
+    assert np.array_equal(t.run.ranges, ranges[:, ::2]) and t.legs is legs and t.labelled
+    assert t.run.geometry.angle_min + 100 * t.run.geometry.angle_increment == pytest.approx(
+        g.angle_min + 200 * g.angle_increment)   # the last beam keeps its direction
+
+
 def test_circle_rule_figures_call_the_small_circles_legs():
     lab = _table("L", True, [1, 1, 0, 0], circle=[1, 0, 1, 0])
     emp = _table("E", False, [0, 0, 0], n_scans=3, circle=[1, 1, 0])
@@ -243,3 +266,14 @@ def test_packaged_model_provenance_lists_every_shared_bag_with_its_sha256():
     assert model.provenance["clusters"] == T.DEFAULT_CLUSTERS
     assert model.provenance["threshold"]["value"] == model.threshold_p
     assert len(model.provenance["held_out"]["folds"]) == 6
+
+
+def test_simulated_recordings_of_a_finer_scanner_cover_270_degrees_and_people_who_stand():
+    from datmo_cli import simulated
+
+    scene, step = simulated._scene_for("crowd", 270 / 768)
+    assert step is None and scene.scanner.beams == 768 and scene.scanner.fov_deg == 270.0
+    assert (scene.crowd.pause_probability, scene.crowd.max_pause) == simulated.LONG_PAUSE
+    assert simulated._scene_for("crowd", 0.5) == ("crowd", 0.5)   # an LMS200 step: the scene as it is
+    rec = simulated.simulated_recording("crowd", 15, 3, 270 / 768, 2.0)
+    assert rec.run.geometry.n_beams == 768 and rec.labelled and sum(len(g) for g in rec.legs) > 0

@@ -70,6 +70,18 @@ class Recording:
         return self.legs is not None
 
 
+def thinned(rec: Recording, step: int = 2) -> Recording:
+    """`rec` as a scanner `step` times coarser would see it: every step-th beam (from the first), the angle
+    increment step times as wide; the labels (laser frame) are unchanged."""
+    import dataclasses
+
+    g = rec.run.geometry
+    ranges = rec.run.ranges[:, ::step]
+    geometry = dataclasses.replace(g, angle_increment=g.angle_increment * step, n_beams=ranges.shape[1])
+    return Recording(f"{rec.name} thinned {step}x", rec.path, rec.topic, ScanRun(rec.run.stamps, ranges, geometry),
+                     rec.legs)
+
+
 @dataclass
 class _Raw:
     """What a file holds on the topics read: scans (with log times) and PoseArray messages (log time, K x 2)."""
@@ -620,6 +632,8 @@ class HeldOut:
     threshold: float
     learned: Figures
     circle: Figures
+    thinned_recall: float | None = None                              # on the held-out recording thinned 2x
+    recall_by_range: tuple[float | None, ...] = ()                   # per RANGE_BINS_M bin, at the threshold
 
     def to_dict(self) -> dict:
         return {"labelled": self.labelled, "empty": self.empty, "threshold": self.threshold,
@@ -684,12 +698,27 @@ def _fits(n_lab: int, n_emp: int) -> int:
     return (n_lab if n_lab >= 2 else 1) + 1
 
 
+RANGE_BINS_M = (0.0, 2.0, 3.0, 4.0, 5.0)
+
+
+def recall_by_range(table: SegmentTable, score: np.ndarray, threshold: float) -> tuple[float | None, ...]:
+    """Recall at `threshold` of the labelled legs in each range bin of RANGE_BINS_M (None: no leg there)."""
+    r = table.range_m
+    out = []
+    for lo, hi in zip(RANGE_BINS_M[:-1], RANGE_BINS_M[1:], strict=True):
+        legs = table.label & (r >= lo) & (r < hi)
+        out.append(float(np.mean(np.asarray(score)[legs] >= threshold)) if legs.any() else None)
+    return tuple(out)
+
+
 def cross_validate(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], spec: EstimatorSpec,
                    progress: Progress | None = None, *, step: Callable[[], None] | None = None,
-                   extra: Sequence[SegmentTable] = ()) -> list[HeldOut]:
+                   extra: Sequence[SegmentTable] = (), thin: Sequence[SegmentTable] = ()) -> list[HeldOut]:
     """Leave-one-recording-out figures (see leave_one_out_folds): for each fold a model trained on the other
     recordings (and `extra`, always), its threshold tuned on them alone, scored on the held-out pair beside
-    the circle rule. Empty list with fewer than two labelled recordings."""
+    the circle rule, with its recall by range; `thin[i]`, when given, is labelled recording i thinned
+    (`thinned`): the held-out one's recall at the same threshold is scored too. Empty list with fewer than two
+    labelled recordings."""
     folds = leave_one_out_folds(len(lab), len(emp))
     if step is None:
         step = _step(progress, cv_fits(len(lab), len(emp)))
@@ -702,10 +731,14 @@ def cross_validate(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], spe
         step()
         test = lab[f.test_labelled]
         empty = emp[f.test_empty] if f.test_empty is not None else None
-        learned = figures(test, scores(model, test), threshold, empty,
-                          None if empty is None else scores(model, empty))
+        test_scores = scores(model, test)
+        learned = figures(test, test_scores, threshold, empty, None if empty is None else scores(model, empty))
+        thin_recall = None
+        if thin:
+            t = thin[f.test_labelled]
+            thin_recall = figures(t, scores(model, t), threshold).recall
         out.append(HeldOut(test.name, None if empty is None else empty.name, threshold, learned,
-                           circle_figures(test, empty)))
+                           circle_figures(test, empty), thin_recall, recall_by_range(test, test_scores, threshold)))
     return out
 
 
