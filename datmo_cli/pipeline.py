@@ -99,16 +99,15 @@ def derived_topics(*, odom: bool = False, segments: bool = False, features: bool
     return out
 
 
-def open_stages(stream, config: DatmoConfig | None = None, *, markers: bool = True,
-                block_scans: int | None = None) -> RunStages:
+def open_stages(stream, config: DatmoConfig | None = None, *, markers: bool = True) -> RunStages:
     """The stages of a streamed log (a streaming.LogStream) in the odometry it is tracked in: the log's own,
     else (ego-motion mode of config.track) poses estimated from its scans, then written to /odom (see
     streaming.stream_odometry). Every pass over a log reads its odometry here, once."""
     from .config import DatmoConfig
-    from .streaming import BLOCK_SCANS, stream_odometry
+    from .streaming import stream_odometry
 
     config = config or DatmoConfig()
-    odometry, estimated = stream_odometry(stream, config.track.ego_motion, block_scans or BLOCK_SCANS)
+    odometry, estimated = stream_odometry(stream, config.track.ego_motion)
     return RunStages(odometry, config, estimated=estimated, markers=markers)
 
 
@@ -116,10 +115,11 @@ class RunStages:
     """Segmentation, features and tracking of one log, block by block (the stages of `datmo run`): call it
     with each Block in order; it returns the block's derived channels. `config`: the DatmoConfig (None: the
     defaults); `estimated`: the odometry was estimated from the scans, and its poses are written to /odom block
-    by block; `markers`: also write the Foxglove markers."""
+    by block; `markers`: also write the Foxglove markers; `report`: a report.RunAccumulator fed each block's
+    scans, features, landmarks and tracks as they are made (the report of the output without reading it)."""
 
     def __init__(self, odometry, config: DatmoConfig | None = None, *, estimated: bool = False,
-                 markers: bool = True) -> None:
+                 markers: bool = True, report=None) -> None:
         from .config import DatmoConfig
         from .perception.features import FeatureStream
 
@@ -129,6 +129,7 @@ class RunStages:
         self.markers = markers
         self.features = FeatureStream(self.config.features, odometry)
         self.tracking = None
+        self.report = report
 
     def derived(self) -> dict[str, str]:
         """{topic: message type} of the channels the stages write, in writing order."""
@@ -158,8 +159,31 @@ class RunStages:
             self.tracking = TrackStream(run.geometry, odometry=self.odometry, params=self.config.track,
                                         markers=self.markers, learned=model != "paper",
                                         leg_threshold=leg_threshold_of(model))
-        out |= self.tracking.channels(self.tracking.block(run, iter_run_features(features)))
+        tracked = self.tracking.block(run, iter_run_features(features))
+        out |= self.tracking.channels(tracked)
+        if self.report is not None:
+            feed_report(self.report, run, features, out[mcapio.TOPIC_LANDMARKS][2], tracked)
         return out
+
+
+def feed_report(report, run, features, landmark_payloads: list[bytes], tracked) -> None:
+    """Add one block's scans, features (their counts), landmarks (the frame of the first message, the
+    database of the block's last) and track states to a report.RunAccumulator, from the arrays the stages
+    made: what report.stream_run would read back from the output's messages."""
+    import numpy as np
+
+    from .log import cdr, types
+    from .report import FEATURE_KINDS
+
+    report.add_scans(run.stamps, run.geometry.n_beams)
+    report.add_features(len(run), {k: np.diff(np.asarray(getattr(features, f"{k[:-1]}_offsets"))).astype(np.int64)
+                                   for k in FEATURE_KINDS})
+    if landmark_payloads:
+        frame = cdr.decode(types.LANDMARKS, landmark_payloads[0])["frame_id"] if report.landmark_frame is None else ""
+        report.add_landmarks(frame, cdr.decode(types.LANDMARKS, landmark_payloads[-1])["landmarks"])
+    counts = [len(t) for t in tracked.tracks]
+    if sum(counts):
+        report.add_tracks(np.repeat(np.asarray(tracked.stamps, np.int64), counts), np.concatenate(tracked.tracks))
 
 
 def derive(run, odometry, config: DatmoConfig | None = None,
@@ -184,26 +208,28 @@ def derive(run, odometry, config: DatmoConfig | None = None,
 def process_file(src: str | Path, out: str | Path, *, force: bool = False, config: DatmoConfig | None = None,
                  command_line: str | None = None, progress: Callable[[int, int], None] | None = None,
                  markers: bool = True, bag_dir: bool = False, block_scans: int | None = None,
-                 input_name: str | None = None, origin: str | Path | None = None) -> int:
+                 input_name: str | None = None, origin: str | Path | None = None, report=None) -> int:
     """Segment, extract features and track `src` in one streaming pass into `out` (see module docstring and
     streaming); returns the number of scans. `config`: the DatmoConfig (None: the defaults), recorded whole in
     the provenance; `progress(done, total)` is called as scans are processed; `markers`: also write the Foxglove
     markers; `input_name`: what the output's provenance calls the input (default its path); `origin`: the file
     or bag folder `src` was converted from (`src` a temporary copy of a bag), which provenance hashes and names
     instead. With `bag_dir`, `out` is the log file of a ROS 2 bag folder (log.bagdir.member_path), and the
-    folder is written whole."""
+    folder is written whole. `report`: a report.RunAccumulator that gathers the output's report as it is
+    written (RunStages), so the report needs no second pass over the output."""
     from .log import bagdir
     from .streaming import BLOCK_SCANS, LogStream, write_derived
 
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
-    stages = open_stages(stream, config, markers=markers, block_scans=block_scans)
+    stages = open_stages(stream, config, markers=markers)
+    stages.report = report
     origin = Path(origin) if origin is not None else src
     with bagdir.output(Path(out).parent if bag_dir else out, bag_dir, force=force, inputs=[origin]) as dst:
         return write_derived(stream, dst, command="run", params=stages.effective(), derived=stages.derived(),
                              stage=stages, force=force, command_line=command_line,
                              block_scans=block_scans or BLOCK_SCANS, progress=progress, input_name=input_name,
-                             origin=origin)
+                             origin=origin, report=report)
 
 
 def features_leg_model(log) -> str:
@@ -271,7 +297,7 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, config:
             raise InputError(f"{src}: {stream.count(mcapio.TOPIC_FEATURES)} messages on {mcapio.TOPIC_FEATURES} "
                              f"for {stream.n_scans} scans; run datmo features again")
     stages = open_stages(stream, config.replace(features={"leg_model": leg_model}) if computed else config,
-                         markers=markers, block_scans=block_scans)
+                         markers=markers)
     odometry, estimated = stages.odometry, stages.estimated
     if computed:
         derived, stage, effective = stages.derived(), stages, stages.effective()

@@ -166,7 +166,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
 
     Example: datmo run 'logs/**/*.mcap' -o out --scheduler tcp://10.0.0.5:8786
     """
-    from ..batch import DONE, FAILED, SKIPPED, RunOptions, folder_lock, remote
+    from ..batch import DONE, FAILED, SKIPPED, SUMMARY_KEY, RunOptions, folder_lock, remote
     from ..errors import DatmoError
     from ..perception.threads import set_default
     from ..text import printable
@@ -191,7 +191,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         if ok and (not no_report or plot_of) and not remote(out_dir):
             made = {Path(r["output"]) for r in ok if r["status"] == DONE}
             _report([Path(r["output"]) for r in ok], [p for o, p in plot_of.items() if Path(o) in made],
-                    None if no_report else fmt, top, sort, force)
+                    None if no_report else fmt, top, sort, force, [r.get(SUMMARY_KEY) for r in ok])
     failed = len(records) - len(ok)
     if failed == len(records) and failed > 1:
         raise DatmoError(f"all {failed} inputs failed")
@@ -306,16 +306,19 @@ def _warm_up() -> None:
 
 
 def _report(outputs: list[Path], plots: list[Path], fmt: str | None, top: int | None, sort: str,
-            force: bool = False) -> None:
-    """Draw the plots, and print the report of `outputs` in `fmt` (None: no report)."""
+            force: bool = False, made: list | None = None) -> None:
+    """Draw the plots, and print the report of `outputs` in `fmt` (None: no report). `made`: each output's
+    report as its task gathered it while writing it (report.RunSummary), None for an output not made by
+    this run (skipped: already in the manifest), which is read in one streaming pass."""
     from ..pipeline import read_run_data
     from ..report import console, render, summarise, summarise_file
 
     summaries = []
+    made = made or [None] * len(outputs)
     for i, out in enumerate(outputs):
-        if not plots:   # one streaming pass; a plot draws every scan and state, so it decodes the whole run
+        if not plots:   # a plot draws every scan and state, so it decodes the whole run
             if fmt:
-                summaries.append(summarise_file(out))
+                summaries.append(made[i] if made[i] is not None else summarise_file(out))
             continue
         from .report import save_plot
 
