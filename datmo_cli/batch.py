@@ -210,11 +210,13 @@ def remove_partial(outputs: list[str]) -> int:
 
 @dataclass(frozen=True)
 class RunOptions:
-    """The switches of `datmo run` that are not parameters of the stages: `markers` (False for --no-markers),
-    `topic` and `odom_topic` (--topic, --odom-topic: the channels a bag is converted from) and `bag_dir`
-    (--bag-dir: each output a ROS 2 bag folder)."""
+    """The switches of `datmo run` that are not parameters of the stages: `markers` (--markers: store the
+    Foxglove drawings), `covariance` (--covariance: store the tracks' covariance), `topic` and `odom_topic`
+    (--topic, --odom-topic: the channels a bag is converted from) and `bag_dir` (--bag-dir: each output a ROS 2
+    bag folder)."""
 
-    markers: bool = True
+    markers: bool = False
+    covariance: bool = False
     topic: str | None = None
     odom_topic: str | None = None
     bag_dir: bool = False
@@ -223,8 +225,9 @@ class RunOptions:
 def params_hash(config: DatmoConfig | None = None, options: RunOptions | None = None) -> str:
     """SHA-256 (first 16 hex digits) of the effective parameters: features and track tables and the leg
     model's SHA-256, so the same settings hash alike wherever they were given (defaults, TOML, options); and
-    the options that change the output (--no-markers, --topic, --odom-topic; a default run hashes without
-    them)."""
+    the options that change the output (--markers, --covariance, --topic, --odom-topic; a default run hashes
+    without them, as it did when it stored markers and covariance: an output of then holds all a lean one
+    does)."""
     from .config import DatmoConfig
     from .perception.features import leg_model_provenance
 
@@ -232,8 +235,9 @@ def params_hash(config: DatmoConfig | None = None, options: RunOptions | None = 
     model = leg_model_provenance(config.features.leg_model)
     doc = {"features": config.features.to_dict(), "track": config.track.to_dict(),
            "leg_model": model.get("sha256", model.get("model"))}
-    if not options.markers:
-        doc["markers"] = False
+    for key in ("markers", "covariance"):
+        if getattr(options, key):
+            doc[key] = True
     for key in ("topic", "odom_topic"):
         if getattr(options, key) is not None:
             doc[key] = getattr(options, key)
@@ -576,7 +580,8 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
                 origin = {} if Path(log) == Path(src) else {"origin": src}   # provenance hashes the bag, not the copy
                 report = RunAccumulator(str(Path(task.output)))
                 n = pipeline.process_file(log, out, force=task.force, config=task.config,
-                                          markers=task.options.markers, bag_dir=task.options.bag_dir,
+                                          markers=task.options.markers, covariance=task.options.covariance,
+                                          bag_dir=task.options.bag_dir,
                                           command_line=task.command_line, progress=progress,
                                           input_name=task.input if remote(task.input) else None, report=report,
                                           **origin)
