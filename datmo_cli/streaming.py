@@ -31,6 +31,11 @@ from .log.scan import Odometry, ScanRun, stamp_problem
 
 _STAMP = struct.Struct("<iI")   # a CDR header stamp: sec, nanosec
 BLOCK_SCANS = 1024   # scans per block: large enough that per-block costs vanish, small enough to stay flat
+# MCAP chunk size of the logs written here (zstd at mcap's level 3). Measured on datmo run's lean outputs of a
+# 10,000-scan simulated hall and the 4,791-scan Freiburg 079 log: 4 MiB chunks against 1 MiB give 2-3 % fewer
+# bytes for the same compression CPU (0.24 s vs 0.26 s of 2.5 s); level 1 would save another 0.1 s (4-5 % of a
+# run) for 7-11 % more bytes, so the level stays.
+CHUNK_BYTES = 4 << 20
 
 
 @dataclass
@@ -208,7 +213,7 @@ def write_derived(stream: LogStream, out: str | Path, *, command: str, params: d
     provenance = mcapio.Provenance(command, params, [origin or stream.path], command_line,
                                    names=[input_name] if input_name else None)
     total = stream.n_scans
-    with mcapio.LogWriter(out, force=force, provenance=provenance) as writer:
+    with mcapio.LogWriter(out, force=force, provenance=provenance, chunk_size=CHUNK_BYTES) as writer:
         copy_ids = writer.copy_channels(stream.log, exclude=list(derived))
         ids = {topic: writer.channel(topic, msgtype) for topic, msgtype in derived.items()}
         tf = _DerivedTf(stream, writer, mcapio.TOPIC_ODOM in derived)
