@@ -110,7 +110,7 @@ def main() -> None:
                 Row("datmo run --markers: segment, features, track, markers, write", n, t_run,
                     f"target >= {RUN_TARGET:,} scans/s"),
                 Row("datmo run (lean: no markers, no covariance)", n, t_lean, ""),
-                Row("datmo features: segment, features, landmarks, markers, write", n, t_feat,
+                Row("datmo features: segment, features, landmarks, write", n, t_feat,
                     f"target >= {FEATURES_TARGET:,} scans/s")]
         old = baseline_run_seconds(small, tmp / "old.mcap")
         if old is not None:
@@ -118,9 +118,11 @@ def main() -> None:
         print_table(f"datmo run and features on the hall tiled to {n:,} scans (361 beams), one core, warm cache", rows)
         if old is not None:
             gain = old / t_run
-            lines.append(f"datmo run: {n / t_run:,.0f} scans/s, {gain:.2f}x {BASELINE}'s {n / old:,.0f} scans/s "
-                         f"(targets >= {RUN_TARGET:,} scans/s and >= {RUN_GAIN:g}x): "
+            lines.append(f"datmo run --markers: {n / t_run:,.0f} scans/s, {gain:.2f}x {BASELINE}'s {n / old:,.0f} "
+                         f"scans/s, which stored markers too (targets >= {RUN_TARGET:,} scans/s and >= {RUN_GAIN:g}x): "
                          f"{'met' if n / t_run >= RUN_TARGET and gain >= RUN_GAIN else 'NOT met'}")
+        lines.append(f"datmo run (lean, the default): {n / t_lean:,.0f} scans/s (target >= {RUN_TARGET:,}): "
+                     f"{'met' if n / t_lean >= RUN_TARGET else 'NOT met'}")
         lines.append(f"datmo features: {n / t_feat:,.0f} scans/s (target >= {FEATURES_TARGET:,}): "
                      f"{'met' if n / t_feat >= FEATURES_TARGET else 'NOT met'}")
         size_in = small.stat().st_size
