@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 DEMO_LOG := sample_logs/hall.mcap
 
-.PHONY: install demo test test-fast test-nojit lint bench accuracy sample-logs regress regress-update run-digests clean legs-model
+.PHONY: help install demo test test-fast test-nojit lint bench accuracy sample-logs regress regress-update run-digests clean legs-model
 
 $(STAMP): pyproject.toml datmo_cli/__init__.py
 	$(PYTHON) -m venv $(VENV)
@@ -13,6 +13,10 @@ $(STAMP): pyproject.toml datmo_cli/__init__.py
 	$(BIN)/pip uninstall --quiet --disable-pip-version-check -y datmo 2>/dev/null || true
 	$(BIN)/pip install --quiet --disable-pip-version-check -e '.[dev]'
 	touch $(STAMP)
+
+help: ## list the targets, each with what it does
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/^([a-z-]+):.*## (.*)$$/\1\t\2/' | \
+		awk -F'\t' '{ printf "  make %-15s %s\n", $$1, $$2 }'
 
 install: $(STAMP) ## create .venv and install datmo (editable) with the dev extras
 
@@ -28,7 +32,7 @@ test-fast: install ## the suite without tests marked slow
 test-nojit: install ## the kernel reference checks (tests/kernel_checks.py) with the kernels as plain Python (NUMBA_DISABLE_JIT=1)
 	NUMBA_DISABLE_JIT=1 $(BIN)/pytest -q -m "kernels and not slow"
 
-lint: install
+lint: install ## ruff on the package, the tests and the benchmarks
 	$(BIN)/ruff check datmo_cli tests benchmarks
 
 bench: install ## speed figures: scans/s and µs/scan per stage beside plain MCAP read speed; a plain install's size
@@ -54,5 +58,5 @@ legs-model: install ## retrain the packaged leg model (datmo_cli/perception/mode
 sample-logs: install ## regenerate sample_logs/ bit for bit
 	PATH="$(CURDIR)/$(BIN):$$PATH" bash sample_logs/make.sh
 
-clean:
+clean: ## remove out/, .venv and the build and cache folders
 	rm -rf out $(VENV) build *.egg-info .pytest_cache .ruff_cache

@@ -74,8 +74,8 @@ def client_security(address: str):
     from distributed.security import Security
 
     how = ("set distributed.comm.tls.ca-file, distributed.comm.tls.client.cert and distributed.comm.tls.client.key "
-           "in the Dask configuration, e.g. DASK_DISTRIBUTED__COMM__TLS__CA_FILE=ca.pem (see the README, "
-           "Many machines)")
+           "in the Dask configuration, e.g. DASK_DISTRIBUTED__COMM__TLS__CA_FILE=ca.pem (see docs/batch.md, "
+           "Security of the cluster)")
     try:
         security = Security()
         args = security.get_connection_args("client")

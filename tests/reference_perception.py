@@ -1,7 +1,7 @@
 """Slow, plain references for datmo's perception kernels, written to be read, not for speed: loops over
 points and segments, numpy only for small linear algebra, scipy for the circle fit. No numba.
 
-- Features (method.md sections 4 and 5, followed literally; datmo_cli/perception/_kernels.py): segmentation,
+- Features (docs/method.md §4 and §5, followed literally; datmo_cli/perception/_kernels.py): segmentation,
   the Hough transform for lines and its refinement, circles; the scene helpers ray-cast walls and circles
   analytically, for synthetic scans of known geometry.
 - The leg detector (datmo_cli/perception/_leg_kernels.py): segment features one segment at a time, in the
@@ -432,7 +432,7 @@ def convex(a, j, b) -> bool:
 
 
 def line_candidates(rows, runs, n: int, params) -> tuple[list[int], list[int], float]:
-    """A segment's HTL lines, one candidate per run of points (method.md 5.1). rows[k]: run k's line, in
+    """A segment's HTL lines, one candidate per run of points (docs/method.md §5.1). rows[k]: run k's line, in
     line_of_run's columns LC_*; runs[k]: its points [start, end); n: the segment's points; params: FeatureParams.
     Returns
     - the HTL lines the decision rule counts: more than three points (line_min_points);
@@ -493,7 +493,7 @@ class Decision(NamedTuple):
 
 def feature_decision(x, y, s: int, e: int, rows, htl: list[int], kept: list[int], htl_racc: float, params,
                      angle_step: float, circle) -> Decision:
-    """Decision rule of method.md 5.2, as datmo extends it, for the segment of points [s, e) of x, y (sensor
+    """Decision rule of docs/method.md §5.2, as datmo extends it, for the segment of points [s, e) of x, y (sensor
     frame, m). rows: its line candidates (LC_* columns) after merge_lines; htl, kept, htl_racc: line_candidates'
     (htl: the HTL lines, in run order; kept: the kept lines left by merge_lines); params: FeatureParams;
     angle_step: the scan's (rad); circle(beat) -> (CC_* row, indices of the points fitted): the HTC fit of the

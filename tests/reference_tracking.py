@@ -2,7 +2,7 @@
 point 2), kept as the references the package's kernels (datmo_cli/tracking/_kernels.py, _step.py, _assign.py)
 are checked against, phase by phase and run by run. Not part of the package: tests only.
 
-- People (method.md §6.1): `pair_legs`, `leg_lead`. Classification (method.md §6): `classify`, `mobility`.
+- People (docs/method.md §6.1): `pair_legs`, `leg_lead`. Classification (docs/method.md §6): `classify`, `mobility`.
   Kalman model (filterpy's): `transition`, `process_noise`; gating: `gate`; global nearest neighbour:
   `reference_gnn` (scipy's linear_sum_assignment).
 - The person life cycle with a leg detector (issue #23): `fold_evidence` (a track's leg evidence),
@@ -55,7 +55,7 @@ INFEASIBLE = 1e12
 _LEG_DTYPE = cdr.element_dtype(types.LEG)
 
 
-# ------------------------------------------------------------------------------- people (method.md §6.1)
+# ------------------------------------------------------------------------------- people (docs/method.md §6.1)
 def pair_legs(x: np.ndarray, y: np.ndarray, stride_max: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pair leg candidates greedily, nearest pairs first, each leg at most once, pairs at most
     `stride_max` m apart. Returns (a, b, single): index arrays of the pairs' legs and of unpaired legs."""
@@ -91,7 +91,7 @@ def leg_lead(legs: np.ndarray, vx: np.ndarray, vy: np.ndarray) -> np.ndarray:
     return np.where(left_is_a, along, -along)
 
 
-# ------------------------------------------------------------------------- classification (method.md §6)
+# ------------------------------------------------------------------------- classification (docs/method.md §6)
 def classify(votes: np.ndarray, walking: np.ndarray, moving: np.ndarray, params: TrackingParams) -> np.ndarray:
     """Class of each track from `votes` (K, N_KINDS: hits per measurement kind), `walking` (the walking
     pattern was seen) and `moving` (mobility is dynamic).

@@ -531,7 +531,7 @@ def _mirror_segment(x, y, s: int, e: int, vec: np.ndarray, params, dalpha: float
 
 def test_extract_scan_decision_equals_the_reference():
     """Every segment of varied scans (two rooms and _feature_scenes; 0.5 and 1 degree steps; default parameters,
-    and a larger circle_min_points and line_min_racc) is what the plain decision rule of method.md 5.2
+    and a larger circle_min_points and line_min_racc) is what the plain decision rule of docs/method.md §5.2
     (rp.line_candidates, rp.merge_lines, rp.feature_decision) makes of the kernel's own HTL candidates and
     circle fit, those computed by the kernels extract_scan calls, called one by one (_mirror_segment): the same
     kind, the lines the kept and merged candidates, the circle the fit, the blob the reference's centroid and

@@ -1,4 +1,4 @@
-"""The package's imports read one way (issue 17, README "Architecture"): every import of every module under
+"""The package's imports read one way (docs/architecture.md): every import of every module under
 datmo_cli, at the top or inside a function, points down the layers or within its own layer.
 
     cli        datmo_cli.cli, datmo_cli.__main__, datmo_cli.commands.*: Click only

@@ -1,4 +1,4 @@
-"""LMS2xx protocol layer: every vector of lms2xx-protocol.md, the real capture, B0 decoding, the parser."""
+"""LMS2xx protocol layer: every vector of docs/lms2xx.md, the real capture, B0 decoding, the parser."""
 
 from __future__ import annotations
 

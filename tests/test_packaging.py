@@ -80,6 +80,7 @@ def test_licence_and_metadata():
     assert "<license>MIT</license>" in (ROOT / "datmo_msgs" / "package.xml").read_text(encoding="utf-8")
     classifiers = PROJECT["classifiers"]
     assert "Typing :: Typed" in classifiers and (ROOT / "datmo_cli" / "py.typed").exists()
+    assert "py.typed" in PYPROJECT["tool"]["setuptools"]["package-data"]["datmo_cli"]   # in the wheel (PEP 561)
     assert f"Programming Language :: Python :: {PROJECT['requires-python'].removeprefix('>=')}" in classifiers
 
 

@@ -1,5 +1,5 @@
-"""The README runs (issue #15 point 8): every ```sh block of README.md, in the README's order, in a fresh folder,
-as a user would after `make demo`.
+"""The README runs, and so do the guide pages its long sections moved to: every ```sh and ```python block of
+README.md and of each page of GUIDE, in that order, in one fresh folder, as a user would after `make demo`.
 
 The folder holds a copy of `sample_logs/` and the demo's outputs (`out/`, made first with the Makefile's demo
 command), and sits beside a `shared` link to ../shared, so `../shared/data/...` resolves as in a clone beside
@@ -10,7 +10,9 @@ CI's data. The README's conventions for lines that are not run (it states them u
 `datmo emulate` runs in the background until its block ends, then gets Ctrl-C and must exit 130; the device
 path it prints replaces the README's example path (`/dev/pts/N`) in that block's later lines. Every other
 line must exit 0 without a traceback. Lines not run are printed with their reason; the counts go to the
-"README commands" tallies of the run's summary.
+"README commands" tallies of the run's summary. A ```python block runs whole, with the venv's Python, in the same
+folder. docs/export.md, docs/python.md, docs/method.md and docs/lms2xx.md run in tests/test_docs.py instead, and
+tests/test_docs.py checks that every page of docs/ is run by one of the two.
 """
 
 from __future__ import annotations
@@ -31,6 +33,11 @@ from conftest import ROOT, SAMPLE_LOGS, SHARED_DATA, shared_path
 from fuzzing import tally
 
 README = ROOT / "README.md"
+DOCS = ROOT / "docs"
+# README.md and the pages its sections moved to, in the order their examples build on each other's outputs
+GUIDE = [README, *(DOCS / name for name in (
+    "install.md", "import.md", "simulate.md", "record.md", "processing.md", "ros2.md", "legs.md", "report.md",
+    "batch.md", "performance.md", "reliability.md", "architecture.md"))]
 MAKEFILE = ROOT / "Makefile"
 NEEDS = re.compile(r"(?:^|\s)#\s*(needs\b.*)$")   # the README's marker: a comment starting "needs"
 HEREDOC = re.compile(r"<<-?\s*['\"]?(\w+)['\"]?")   # cat > FILE <<'EOF' ... EOF
@@ -40,19 +47,26 @@ COMMAND_TIMEOUT = 600   # s, a hung command fails the test instead of hanging it
 EMULATE_START_TIMEOUT = 60   # s to print its device path
 
 
-def sh_blocks(text: str) -> list[list[str]]:
-    """The lines of every ```sh fenced block, in order (only top-level fences: indented ones are quoted data)."""
-    blocks, block = [], None
+def example_blocks(text: str, languages: tuple[str, ...] = ("sh", "python")) -> list[tuple[str, list[str]]]:
+    """(language, lines) of every fenced block in `languages`, in order (only top-level fences: indented ones are
+    quoted data)."""
+    blocks, block, language = [], None, None
     for line in text.splitlines():
-        if block is None and line.rstrip() == "```sh":
-            block = []
-        elif block is not None and line.rstrip() == "```":
-            blocks.append(block)
+        fence = line.rstrip()
+        if block is None and fence.startswith("```") and fence[3:] in languages:
+            block, language = [], fence[3:]
+        elif block is not None and fence == "```":
+            blocks.append((language, block))
             block = None
         elif block is not None:
             block.append(line)
-    assert block is None, "README.md: a ```sh block is not closed"
+    assert block is None, f"a ```{language} block is not closed"
     return blocks
+
+
+def sh_blocks(text: str) -> list[list[str]]:
+    """The lines of every ```sh fenced block, in order."""
+    return [lines for _, lines in example_blocks(text, ("sh",))]
 
 
 def logical_lines(block: list[str]) -> list[str]:
@@ -162,6 +176,18 @@ def problem(command: str, result: subprocess.CompletedProcess, cwd: Path) -> str
     return None
 
 
+def run_python(block: list[str], where: str, cwd: Path, env: dict[str, str]) -> str | None:
+    """Run a ```python block whole with the venv's Python in `cwd`; why it fails, or None."""
+    code = "\n".join(block)
+    start = time.monotonic()
+    result = subprocess.run([sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True,
+                            timeout=COMMAND_TIMEOUT)
+    print(f"  {time.monotonic() - start:6.1f} s  ({where}: a python block)")
+    why = problem(f"{where}: the python block starting {block[0]!r}", result, cwd)
+    tally("README commands", failed=why is not None)
+    return why
+
+
 def run_block(block: list[str], cwd: Path, env: dict[str, str]) -> tuple[int, list[str], list[tuple[str, str]]]:
     """Run one README block's commands in order: (commands run, failures, (command, reason) of those not run)."""
     ran, failures, skipped, emulator = 0, [], [], None
@@ -221,9 +247,10 @@ def test_outputs_named():
 
 
 def test_readme_config_example(tmp_path):
-    """The README's example datmo.toml (its ```toml block) is a config datmo takes every key of."""
-    blocks = re.findall(r"^```toml\n(.*?)^```", README.read_text(), re.M | re.S)
-    assert blocks, "README.md: no ```toml example"
+    """The example datmo.toml (the ```toml block of the README's guide pages: docs/processing.md) is a config datmo
+    takes every key of."""
+    blocks = [block for page in GUIDE for block in re.findall(r"^```toml\n(.*?)^```", page.read_text(), re.M | re.S)]
+    assert blocks, "no ```toml example in the README or its guide pages"
     for block in blocks:
         (tmp_path / "datmo.toml").write_text(block)
         result = subprocess.run([str(Path(sys.executable).with_name("datmo")), "config"], cwd=tmp_path,
@@ -235,15 +262,18 @@ def test_readme_config_example(tmp_path):
 
 
 def test_readme_fences_are_sh():
-    """Shell examples use ```sh fences only (no ```bash, ```shell or ```console): the test below sees them all."""
-    fences = re.findall(r"^```(\w+)", README.read_text(), re.M)
-    assert not {"bash", "shell", "console", "zsh"} & set(fences), fences
+    """Shell examples use ```sh fences only (no ```bash, ```shell or ```console) and Python ones ```python (no
+    ```py): the tests that run them see them all. Every page of docs/ and CONTRIBUTING.md too."""
+    for page in [*GUIDE, *sorted(DOCS.glob("*.md")), ROOT / "CONTRIBUTING.md"]:
+        fences = re.findall(r"^```(\w+)", page.read_text(), re.M)
+        assert not {"bash", "shell", "console", "zsh", "py", "python3"} & set(fences), (page.name, fences)
 
 
 @pytest.mark.slow
 @pytest.mark.shared
 def test_readme_runs(tmp_path):
-    """Every README command not marked otherwise exits 0, in order, in a fresh folder after the demo."""
+    """Every command of the README and its guide pages not marked otherwise exits 0, in order, in a fresh folder
+    after the demo; so does every python block there."""
     shared_path()   # the README reads ../shared/data: skip where absent, fail under CI=true
     (tmp_path / "shared").symlink_to(SHARED_DATA.parent, target_is_directory=True)
     work = tmp_path / "datmo"
@@ -260,11 +290,18 @@ def test_readme_runs(tmp_path):
 
     failures, ran, skipped = [], 0, []
     print()
-    for block in sh_blocks(README.read_text()):
-        block_ran, block_failures, block_skipped = run_block(block, work, env)
-        ran, failures, skipped = ran + block_ran, failures + block_failures, skipped + block_skipped
-    print(f"README: {ran} commands run, {len(skipped)} not run:")
+    for page in GUIDE:
+        where = page.relative_to(ROOT).as_posix()
+        print(where)
+        for language, block in example_blocks(page.read_text()):
+            if language == "python":
+                why = run_python(block, where, work, env)
+                ran, failures = ran + 1, failures + ([why] if why else [])
+                continue
+            block_ran, block_failures, block_skipped = run_block(block, work, env)
+            ran, failures, skipped = ran + block_ran, failures + block_failures, skipped + block_skipped
+    print(f"README and its guide pages: {ran} commands run, {len(skipped)} not run:")
     for command, reason in skipped:
         print(f"  not run ({reason}): {command}")
     assert ran > 0
-    assert not failures, "README commands that fail as written:\n" + "\n".join(failures)
+    assert not failures, "README and guide commands that fail as written:\n" + "\n".join(failures)

@@ -261,7 +261,7 @@ def test_range_limits_no_scanner_has_are_an_input_error(tmp_path, limits, said, 
 
 def test_fuzz_ros1_bag_errors_or_scans_whose_fields_agree(tmp_path):
     """Eight flipped bytes in a ROS 1 bag (no checksums): an error, or scans of the original geometry stamped
-    after 1970, no more than there were. A flipped byte among the readings is not seen (README)."""
+    after 1970, no more than there were. A flipped byte among the readings is not seen (docs/reliability.md)."""
     import random
 
     from fuzzing import tally

@@ -360,7 +360,7 @@ def reference_scans(data: bytes) -> tuple[dict[str, list[tuple]], bool]:
 
 
 def no_return_at(scans: list[tuple]) -> float:
-    """The README's no-return limit: the stated maximum, else from the largest FLASER reading."""
+    """docs/import.md's no-return limit: the stated maximum, else from the largest FLASER reading."""
     stated = scans[0][2][2] if scans[0][2] is not None else 0.0
     if stated > 0:
         return stated

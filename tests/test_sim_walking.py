@@ -1,4 +1,4 @@
-"""Paths and the walking model (method.md §6.1): step length, leg alternation, body speed, pauses, towing."""
+"""Paths and the walking model (docs/method.md §6.1): step length, leg alternation, body speed, pauses, towing."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Classification rules of method.md §6: classes from measurement kinds, and the mobility states."""
+"""Classification rules of docs/method.md §6: classes from measurement kinds, and the mobility states."""
 
 from __future__ import annotations
 

@@ -17,7 +17,7 @@ STEP, WIDTH = 2 * 0.9 * np.sin(np.radians(22)), 0.3   # 2 l sin(theta) and the l
 
 def walker_legs(t: float, start: tuple[float, float], velocity: tuple[float, float]) -> list[np.ndarray]:
     """The two leg centres (m) at time t (s) of someone walking from `start` at `velocity` (m/s): the
-    walking model of method.md §6.1 (one foot down while the other swings a step of 2 l sin theta ahead)."""
+    walking model of docs/method.md §6.1 (one foot down while the other swings a step of 2 l sin theta ahead)."""
     v = np.asarray(velocity, float)
     speed = np.hypot(*v)
     d = v / speed

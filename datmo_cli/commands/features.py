@@ -1,4 +1,4 @@
-"""`datmo features`: Hough lines and circles, blobs and landmarks of every scan (method.md sections 5, 6.2)."""
+"""`datmo features`: Hough lines and circles, blobs and landmarks of every scan (docs/method.md §5 and §6.2)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""`datmo segment`: adaptive-threshold segmentation of every scan (method.md section 4)."""
+"""`datmo segment`: adaptive-threshold segmentation of every scan (docs/method.md §4)."""
 
 from __future__ import annotations
 

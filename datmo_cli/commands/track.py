@@ -1,4 +1,4 @@
-"""`datmo track`: track and classify objects in a log (method.md §6), writing /datmo/tracks and markers."""
+"""`datmo track`: track and classify objects in a log (docs/method.md §6), writing /datmo/tracks and markers."""
 
 from __future__ import annotations
 

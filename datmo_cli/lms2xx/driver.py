@@ -1,6 +1,6 @@
 """Talk to a SICK LMS200 over a serial port: find its baud, configure it, stream scans.
 
-The start-up sequence is lms2xx-protocol.md §5: stop any output, ask for status (31h) at 9600, 38400,
+The start-up sequence is docs/lms2xx.md §5: stop any output, ask for status (31h) at 9600, 38400,
 19200 and 500000 Bd until a B1 arrives, switch to the requested baud, set the variant (3Bh) and units /
 real-time indices (77h, after installation mode) only when they differ from the device's (its EEPROM
 allows limited writes), then start continuous output (20 24). Scans are stamped with the host time of their

@@ -1,6 +1,6 @@
 """A virtual SICK LMS200 on a pseudo-terminal, for testing `datmo record` without hardware.
 
-It follows lms2xx-protocol.md: power-up at 9600 Bd in mode 25h (180°/0.5°, mm, measuring mode 00), ACK
+It follows docs/lms2xx.md: power-up at 9600 Bd in mode 25h (180°/0.5°, mm, measuring mode 00), ACK
 then reply for every good host frame, NAK on a bad CRC, baud changes acknowledged at the old baud, variant
 (3Bh) and configuration (74h/77h, installation mode first) commands, continuous (20 24) and interlaced
 (20 2A) output at the real scan period, dropping whole scans below 500 kBd as the rate table says.

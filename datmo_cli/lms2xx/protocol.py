@@ -1,6 +1,6 @@
 """The SICK LMS2xx serial protocol as pure functions: bytes in, frames and values out (no I/O).
 
-Facts from ../shared/docs/lms2xx-protocol.md (SICK's telegram listing, TL). A frame is
+Facts from docs/lms2xx.md (SICK's telegram listing, TL). A frame is
 `STX addr len_lo len_hi command data... [status] crc_lo crc_hi`; the host sends address 00h, the LMS
 replies with 80h and a status byte before the CRC. Words are little-endian. Distances are integers in mm
 or cm; `values_to_ranges` turns them into metres (float32), overflow codes into NaN or +inf.

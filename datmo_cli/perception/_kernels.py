@@ -1,4 +1,4 @@
-"""numba kernels of segmentation and Hough feature extraction (method.md sections 4 and 5).
+"""numba kernels of segmentation and Hough feature extraction (docs/method.md §4 and §5).
 
 Sensor frame: x forward, y left, metres; angles in radians. Every kernel is checked against the plain
 Python reference in tests/reference_perception.py. Parameters arrive as one float64 vector (see
@@ -610,7 +610,7 @@ def _convex(ax, ay, jx, jy, bx, by) -> bool:
 def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx, sub_s, sub_e,
                  lines, nl, circles, nc, blobs, nb, work, dalpha=0.0):
     """Features of one scan's segments (points x, y, m, sensor frame): HTL on every segment, then the
-    decision rule of method.md section 5.2, a circle kept only when well posed (circle_posed; `dalpha`: the
+    decision rule of docs/method.md §5.2, a circle kept only when well posed (circle_posed; `dalpha`: the
     scan's angle step, rad). Appends rows to lines/circles/blobs from nl/nc/nb; returns the new counts.
     `work`: the scratch arrays extract_scans makes; acc is zeroed as segments first need it (work[-1][0]: how
     many flat cells of acc are zero)."""

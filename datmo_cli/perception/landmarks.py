@@ -1,4 +1,4 @@
-"""Static landmarks (method.md section 6.2): per-scan detections and the run's landmark database.
+"""Static landmarks (docs/method.md §6.2): per-scan detections and the run's landmark database.
 
 Detections come from one scan's features in the sensor frame: corners (two perpendicular lines of a
 segment meeting), convex and concave wall deflections (two lines turning by more than `deflection_min`

@@ -1,6 +1,6 @@
 """Parameters of `datmo segment` and `datmo features` (the `[features]` table of a config file).
 
-Defaults follow Castro, Nunes and Ruano (2004) as restated in method.md where the paper gives a value
+Defaults follow Castro, Nunes and Ruano (2004) as restated in docs/method.md where the paper gives a value
 (line kept with more than 3 points, r_acc > 0.5 and length > 10 cm, legs of radius 10 cm, d_max 150 cm),
 except the minimum segment size: 3, not the paper's 5, so that legs 4-6 m away (3-5 beams of a 0.5°
 scan) are still segments and circles (tracking people MOTA on the hall log rises from 0.2 to 0.7 with it);
@@ -35,7 +35,7 @@ class FeatureParams(Section):
         "leg_radius_max": "column_radius_min (circles larger than it are column candidates; the largest leg is "
                           "[track] leg_radius_max)"}
 
-    # segmentation (method.md section 4)
+    # segmentation (docs/method.md §4)
     c0: float = param(0.08, _b(0, 5, "m", "0: the angular term alone; metres of gap would join everything"),
                       "Segmentation threshold C0 of C0 + C1·min(r_i, r_i+1), C1 from the scan's angle step.")
     min_points: int = param(3, _b(1, 10_000, "beams", "more than any scanner has in a scan", integer=True),

@@ -1,6 +1,6 @@
 """The SICK LMS200 as a measuring instrument: beam layout, range modes, noise and output quantisation.
 
-The sensor reports integer distances (lms2xx-protocol.md §6): mm with 13, 14 or 15 distance bits for the
+The sensor reports integer distances (docs/lms2xx.md §6): mm with 13, 14 or 15 distance bits for the
 8, 16 and 32 m modes, cm with 13 bits for the 80 m mode. Values from ...F7 up are codes: ...F7 "greater
 than maximum" (stored as +inf), the others (...FF no return, ...FE dazzle, ...) as NaN. Here a beam
 that hits nothing, or hits beyond the mode's reach, reports ...F7; a dropped return reports ...FF.

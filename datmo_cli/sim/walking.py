@@ -1,4 +1,4 @@
-"""The walking model of method.md §6.1 (after Alexander 2001), as leg circles at the scanner's height.
+"""The walking model of docs/method.md §6.1 (after Alexander 2001), as leg circles at the scanner's height.
 
 A person's body moves along its path at constant speed v. Feet land on footprints along the path, one
 step length s = 2 l sin(theta) apart, alternately left and right of the path by d_S / 2 (d_S: the

@@ -108,7 +108,7 @@ class Driven:
 
 
 class Towed:
-    """A circular platform pulled on a wire by a walker (method.md §7: about 2 m behind the person)."""
+    """A circular platform pulled on a wire by a walker (docs/method.md §7: about 2 m behind the person)."""
 
     def __init__(self, leader: Walker, radius: float, wire: float, start: np.ndarray | None, t_end: float) -> None:
         from ._kernels import tow

@@ -1,4 +1,4 @@
-"""Tracking and classification (method.md §6): small parts, composed per scan in one compiled step (_step).
+"""Tracking and classification (docs/method.md §6): small parts, composed per scan in one compiled step (_step).
 
 measurements  the measurement kinds, and the containers of a scan's features and measurements
 tracker       Tracker: the state between compiled steps, one call per scan (`step`) or per block of scans

@@ -1,4 +1,4 @@
-"""One scan's features turned into the tracker's measurements: a model centre per object (method.md §6).
+"""One scan's features turned into the tracker's measurements: a model centre per object (docs/method.md §6).
 
 Sensor frame of the scan (x forward, y left), metres. One measurement per segment: the circle's centre, the
 centre of the lines' bounding box (rectangular objects) or the blob's centroid; small circles, blobs and

@@ -1,4 +1,4 @@
-"""Tracking and classification parameters (method.md §6): the `[track]` section, each field declared with its
+"""Tracking and classification parameters (docs/method.md §6): the `[track]` section, each field declared with its
 default, range and help.
 
 Units: metres, seconds, m/s. Every constant of the tracker is here, none is a literal in the code.
@@ -60,7 +60,7 @@ class TrackingParams(Section):
     occlusion_margin: float = param(0.3, _b(0, 10, "m"), "A return this much nearer than a track hides it.")
     tentative_delete_after: float = param(0.5, _b(0, 3600, "s", _HOUR),
                                           "Seconds a track never confirmed lives unseen.")
-    # classification (method.md §6)
+    # classification (docs/method.md §6)
     d_max: float = param(1.5, D_MAX, "Objects larger than this are static: the paper's d_max, one parameter "
                                      "whose home is [features] d_max.", same_as="features.d_max")
     undefined_window: float = param(1.0, _b(0, 3600, "s", _HOUR), "Seconds a small circle or blob stays undefined.")

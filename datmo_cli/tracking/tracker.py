@@ -1,5 +1,5 @@
 """The multi-object tracker: one `step` per scan composes predict, associate, update, life cycle and
-classification (method.md §6; association, occlusion and life cycle are datmo's additions).
+classification (docs/method.md §6; association, occlusion and life cycle are datmo's additions).
 
 Tracking frame: the sensor frame of a still scanner, or the world (odometry) frame when each step is given
 the sensor's pose. Time comes from the scan stamps (ns), so uneven rates and dropped scans are handled.

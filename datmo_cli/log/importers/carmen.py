@@ -20,7 +20,7 @@ Messages read (one per line, fields separated by white space):
   or ODOM's x, y, theta) that is NaN or infinite is left out of /odom with a warning (its scan is kept): one
   such pose would make every track's world position NaN.
 
-Conventions (stated in the README):
+Conventions (stated in docs/import.md):
 
 - Beam angles (radians, counter-clockwise from the laser's x axis): RAWLASER/ROBOTLASER give start angle
   and resolution. FLASER/RLASER with n = 181 or 361 (or any odd n) beams span -90°..+90° inclusive; with
