@@ -117,8 +117,8 @@ class RunStages:
     with each Block in order; it returns the block's derived channels. `config`: the DatmoConfig (None: the
     defaults); `estimated`: the odometry was estimated from the scans, and its poses are written to /odom block
     by block; `markers`: also make the Foxglove markers; `covariance`: keep the tracks' covariance (else NaN);
-    `report`: a report.RunAccumulator fed each block's
-    scans, features, landmarks and tracks as they are made (the report of the output without reading it)."""
+    `report`: a report.RunAccumulator fed each block's scans, features, landmarks and tracks as they are made
+    (the report of the output without reading it; feed_report)."""
 
     def __init__(self, odometry, config: DatmoConfig | None = None, *, estimated: bool = False,
                  markers: bool = True, covariance: bool = True, report=None) -> None:

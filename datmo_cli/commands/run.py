@@ -327,7 +327,7 @@ def _report(outputs: list[Path], plots: list[Path], fmt: str | None, top: int | 
         from .report import save_plot
 
         data = read_run_data(out, keep_scans=True)
-        summaries.append(summarise(data))
+        summaries.append(made[i] if made[i] is not None else summarise(data))
         click.echo(save_plot(data, plots[i], force), err=True)
     if fmt == "rich":
         render(summaries, fmt, top=top, sort=sort, console=console())
