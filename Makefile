@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 DEMO_LOG := sample_logs/hall.mcap
 
-.PHONY: help install demo test test-fast test-nojit lint bench accuracy sample-logs regress regress-update clean legs-model
+.PHONY: help install demo test test-fast test-nojit lint bench accuracy sample-logs regress regress-update run-digests clean legs-model
 
 $(STAMP): pyproject.toml datmo_cli/__init__.py
 	$(PYTHON) -m venv $(VENV)
@@ -46,6 +46,9 @@ regress: install ## datmo run + evaluate on every sample log, compared with test
 
 regress-update: install ## rewrite tests/regress_baseline.json from the current figures (review the diff)
 	$(BIN)/python -m benchmarks.regress --update
+
+run-digests: install ## rewrite tests/run_digests.json, datmo run's outputs on the sample logs message for message (say why in the commit)
+	$(BIN)/python tests/run_cases.py
 
 legs-model: install ## retrain the packaged leg model (datmo_cli/perception/models/legs.npz) from ../shared/data/legtracker
 	$(BIN)/datmo train-legs --positive $(sort $(wildcard ../shared/data/legtracker/positive_*_extracted.bag)) \

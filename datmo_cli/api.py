@@ -162,15 +162,16 @@ def open_log(path: str | os.PathLike) -> Log:
 
 
 def process(src: str | os.PathLike, out: str | os.PathLike, *, config: Config = None, force: bool = False,
-            markers: bool = True) -> Log:
+            markers: bool = False, covariance: bool = False) -> Log:
     """Segment, extract features and track the MCAP log `src` into `out` (what `datmo run` does for one input,
     without the report), and open the output. `config`: a DatmoConfig, a TOML file (as --config), a dict of
     overrides such as {"track": {"gate": 9.0}}, or None for the defaults; `force`: replace an existing `out`;
-    `markers`: also write the Foxglove markers. Convert a bag or CARMEN log with `datmo import` first."""
+    `markers`: also write the Foxglove markers; `covariance`: store the tracks' covariance (else NaN). Convert
+    a bag or CARMEN log with `datmo import` first."""
     from .pipeline import process_file
 
     cfg = _config(config)
-    process_file(src, out, force=force, config=cfg, markers=markers,
+    process_file(src, out, force=force, config=cfg, markers=markers, covariance=covariance,
                  command_line=f"datmo_cli.api.process({os.fsdecode(src)!r}, {os.fsdecode(out)!r})")
     return Log(out)
 

@@ -210,11 +210,13 @@ def remove_partial(outputs: list[str]) -> int:
 
 @dataclass(frozen=True)
 class RunOptions:
-    """The switches of `datmo run` that are not parameters of the stages: `markers` (False for --no-markers),
-    `topic` and `odom_topic` (--topic, --odom-topic: the channels a bag is converted from) and `bag_dir`
-    (--bag-dir: each output a ROS 2 bag folder)."""
+    """The switches of `datmo run` that are not parameters of the stages: `markers` (--markers: store the
+    Foxglove drawings), `covariance` (--covariance: store the tracks' covariance), `topic` and `odom_topic`
+    (--topic, --odom-topic: the channels a bag is converted from) and `bag_dir` (--bag-dir: each output a ROS 2
+    bag folder)."""
 
-    markers: bool = True
+    markers: bool = False
+    covariance: bool = False
     topic: str | None = None
     odom_topic: str | None = None
     bag_dir: bool = False
@@ -223,8 +225,9 @@ class RunOptions:
 def params_hash(config: DatmoConfig | None = None, options: RunOptions | None = None) -> str:
     """SHA-256 (first 16 hex digits) of the effective parameters: features and track tables and the leg
     model's SHA-256, so the same settings hash alike wherever they were given (defaults, TOML, options); and
-    the options that change the output (--no-markers, --topic, --odom-topic; a default run hashes without
-    them)."""
+    the options that change the output (--markers, --covariance, --topic, --odom-topic; a default run hashes
+    without them, as it did when it stored markers and covariance: an output of then holds all a lean one
+    does)."""
     from .config import DatmoConfig
     from .perception.features import leg_model_provenance
 
@@ -232,8 +235,9 @@ def params_hash(config: DatmoConfig | None = None, options: RunOptions | None = 
     model = leg_model_provenance(config.features.leg_model)
     doc = {"features": config.features.to_dict(), "track": config.track.to_dict(),
            "leg_model": model.get("sha256", model.get("model"))}
-    if not options.markers:
-        doc["markers"] = False
+    for key in ("markers", "covariance"):
+        if getattr(options, key):
+            doc[key] = True
     for key in ("topic", "odom_topic"):
         if getattr(options, key) is not None:
             doc[key] = getattr(options, key)
@@ -469,6 +473,14 @@ class Task:
     threads: int | None = None     # --threads: perception threads on a Dask worker (None: one per task there)
 
 
+SUMMARY_KEY = "summary"   # a done line's report (report.RunSummary) as the task returns it; not in the manifest
+
+
+def manifest_line(rec: dict) -> dict:
+    """`rec` as the manifest keeps it: without the report a task returns with it."""
+    return {k: v for k, v in rec.items() if k != SUMMARY_KEY}
+
+
 def record(task: Task, status: str, **fields) -> dict:
     """A manifest line for `task` (figures default to nothing done)."""
     rec = {"input": task.input, "input_sha256": None, "input_size": None, "input_mtime_ns": None,
@@ -514,12 +526,10 @@ def input_sha256(path: str) -> str:
     return h.hexdigest()
 
 
-def headline(path: str) -> dict:
-    """The run's headline figures from its output (read in one streaming pass): confirmed tracks, by class,
-    and dynamic ones."""
-    from .report import summarise_file
-
-    row = summarise_file(path).file_row()
+def headline(summary) -> dict:
+    """The run's headline figures from its report (a report.RunSummary): confirmed tracks, by class, and
+    dynamic ones."""
+    row = summary.file_row()
     return {"confirmed": row["tracks"], **{c: row[c] for c in TRACK_CLASSES}, "dynamic": row["dynamic"]}
 
 
@@ -545,8 +555,11 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
     scans go by; when it says so the task stops, drops its partial output and returns a "cancelled" line.
     `scans(done, total)` follows the scans of this input. A bag (ROS 1 file, ROS 2 folder) and, with a topic
     in the parameters, any input is converted here first (`converted`), so a skipped input never is.
+    A done line carries the output's report (report.RunSummary, gathered as the output is written) under
+    SUMMARY_KEY, which the manifest does not keep.
     """
     from . import pipeline
+    from .report import RunAccumulator
 
     t0 = time.perf_counter()
 
@@ -565,15 +578,18 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
             notes: list[str] = []
             with converted(src, out, task, notes.append) as log:
                 origin = {} if Path(log) == Path(src) else {"origin": src}   # provenance hashes the bag, not the copy
+                report = RunAccumulator(str(Path(task.output)))
                 n = pipeline.process_file(log, out, force=task.force, config=task.config,
-                                          markers=task.options.markers, bag_dir=task.options.bag_dir,
+                                          markers=task.options.markers, covariance=task.options.covariance,
+                                          bag_dir=task.options.bag_dir,
                                           command_line=task.command_line, progress=progress,
-                                          input_name=task.input if remote(task.input) else None, **origin)
-            figures = headline(out)
+                                          input_name=task.input if remote(task.input) else None, report=report,
+                                          **origin)
+            summary = report.summary()
         seconds = time.perf_counter() - t0
         return record(task, DONE, input_sha256=sha, input_size=size, input_mtime_ns=mtime, scans=n,
                       seconds=round(seconds, 3), scans_per_s=round(n / seconds, 1) if seconds > 0 else 0.0,
-                      tracks=figures, **({"notes": notes} if notes else {}))
+                      tracks=headline(summary), **({"notes": notes} if notes else {}), **{SUMMARY_KEY: summary})
     except Cancelled:
         return record(task, CANCELLED)
     except DatmoError as exc:
@@ -1032,7 +1048,7 @@ def run_many(batch: Batch, executor: Executor, *, on_record: Callable[[dict], No
         if rec["status"] == CANCELLED:
             return
         with _interrupt_deferred():      # a line is written and counted whole, or not at all
-            batch.manifest.append(rec)
+            batch.manifest.append(manifest_line(rec))
             batch.records[rec["input"]] = rec
         if on_record:
             on_record(rec)

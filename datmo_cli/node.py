@@ -2,7 +2,8 @@
 
 It subscribes to the robot's sensor_msgs/LaserScan (and, when given, nav_msgs/Odometry) and publishes what
 `datmo run` writes to a log, as the scans arrive: /datmo/segments, /datmo/features, /datmo/landmarks,
-/datmo/tracks and the markers, each stamped with its scan's stamp, byte for byte the CDR datmo writes to MCAP.
+/datmo/tracks and the markers, each stamped with its scan's stamp, byte for byte the CDR datmo writes to MCAP
+(with --markers and --covariance: the node always publishes the markers and the tracks' covariance).
 The processing is the live pipeline of `play` and `record --live` (live.LiveFeed and its Stages, the stages of
 `datmo run`), on a thread of its own: the DDS side only takes samples, decodes them and queues the scans. A
 burst the stages cannot keep up with drops the oldest waiting scans (counted); a scan of a new geometry, or one

@@ -52,7 +52,7 @@ def warm_up() -> None:
     prepare()
     for scene in ("hall", "patrol"):
         sim = simulate_scene(scene, duration=8.0)
-        derive(sim.run, sim.odometry)
+        derive(sim.run, sim.odometry, markers=True)   # the markers' kernels too (--markers, the live view)
     odometry_for(sim.run, None, "on")   # scan matching, for logs without odometry
 
 
@@ -79,7 +79,7 @@ def odometry_channel(odometry, block) -> tuple:
 
 
 def derived_topics(*, odom: bool = False, segments: bool = False, features: bool = False, tracks: bool = False,
-                   markers: bool = True) -> dict[str, str]:
+                   markers: bool = False) -> dict[str, str]:
     """{topic: message type} of the channels the stages write, in writing order: /odom (estimated here),
     /datmo/segments, /datmo/features with /datmo/landmarks (and /datmo/markers/features), /datmo/tracks (and
     /datmo/markers/tracks)."""
@@ -100,26 +100,28 @@ def derived_topics(*, odom: bool = False, segments: bool = False, features: bool
 
 
 def open_stages(stream, config: DatmoConfig | None = None, *, markers: bool = True,
-                block_scans: int | None = None) -> RunStages:
+                covariance: bool = True) -> RunStages:
     """The stages of a streamed log (a streaming.LogStream) in the odometry it is tracked in: the log's own,
     else (ego-motion mode of config.track) poses estimated from its scans, then written to /odom (see
     streaming.stream_odometry). Every pass over a log reads its odometry here, once."""
     from .config import DatmoConfig
-    from .streaming import BLOCK_SCANS, stream_odometry
+    from .streaming import stream_odometry
 
     config = config or DatmoConfig()
-    odometry, estimated = stream_odometry(stream, config.track.ego_motion, block_scans or BLOCK_SCANS)
-    return RunStages(odometry, config, estimated=estimated, markers=markers)
+    odometry, estimated = stream_odometry(stream, config.track.ego_motion)
+    return RunStages(odometry, config, estimated=estimated, markers=markers, covariance=covariance)
 
 
 class RunStages:
     """Segmentation, features and tracking of one log, block by block (the stages of `datmo run`): call it
     with each Block in order; it returns the block's derived channels. `config`: the DatmoConfig (None: the
     defaults); `estimated`: the odometry was estimated from the scans, and its poses are written to /odom block
-    by block; `markers`: also write the Foxglove markers."""
+    by block; `markers`: also make the Foxglove markers; `covariance`: keep the tracks' covariance (else NaN);
+    `report`: a report.RunAccumulator fed each block's scans, features, landmarks and tracks as they are made
+    (the report of the output without reading it; feed_report)."""
 
     def __init__(self, odometry, config: DatmoConfig | None = None, *, estimated: bool = False,
-                 markers: bool = True) -> None:
+                 markers: bool = True, covariance: bool = True, report=None) -> None:
         from .config import DatmoConfig
         from .perception.features import FeatureStream
 
@@ -127,12 +129,15 @@ class RunStages:
         self.odometry = odometry
         self.estimated = estimated
         self.markers = markers
+        self.covariance = covariance
         self.features = FeatureStream(self.config.features, odometry)
         self.tracking = None
+        self.report = report
 
     def derived(self) -> dict[str, str]:
         """{topic: message type} of the channels the stages write, in writing order."""
-        return derived_topics(odom=self.estimated, segments=True, features=True, tracks=True, markers=self.markers)
+        return derived_topics(odom=self.estimated, segments=True, features=True, tracks=True,
+                              markers=self.markers)
 
     def effective(self) -> dict:
         """The effective parameters, as provenance records them."""
@@ -149,30 +154,52 @@ class RunStages:
         out = {}
         if self.estimated:
             out[mcapio.TOPIC_ODOM] = odometry_channel(self.odometry, block)
-        channels, features = self.features.block(run)
-        if not self.markers:
-            channels.pop(mcapio.TOPIC_MARKERS_FEATURES)
+        channels, features = self.features.block(run, markers=self.markers)
         out |= channels
         if self.tracking is None:
             model = self.config.features.leg_model
             self.tracking = TrackStream(run.geometry, odometry=self.odometry, params=self.config.track,
                                         markers=self.markers, learned=model != "paper",
-                                        leg_threshold=leg_threshold_of(model))
-        out |= self.tracking.channels(self.tracking.block(run, iter_run_features(features)))
+                                        leg_threshold=leg_threshold_of(model), covariance=self.covariance)
+        tracked = self.tracking.block(run, iter_run_features(features))
+        out |= self.tracking.channels(tracked)
+        if self.report is not None:
+            feed_report(self.report, run, features, out[mcapio.TOPIC_LANDMARKS][2], tracked)
         return out
 
 
+def feed_report(report, run, features, landmark_payloads: list[bytes], tracked) -> None:
+    """Add one block's scans, features (their counts), landmarks (the frame of the first message, the
+    database of the block's last) and track states to a report.RunAccumulator, from the arrays the stages
+    made: what report.stream_run would read back from the output's messages."""
+    import numpy as np
+
+    from .log import cdr, types
+    from .report import FEATURE_KINDS
+
+    report.add_scans(run.stamps, run.geometry.n_beams)
+    report.add_features(len(run), {k: np.diff(np.asarray(getattr(features, f"{k[:-1]}_offsets"))).astype(np.int64)
+                                   for k in FEATURE_KINDS})
+    if landmark_payloads:
+        frame = cdr.decode(types.LANDMARKS, landmark_payloads[0])["frame_id"] if report.landmark_frame is None else ""
+        report.add_landmarks(frame, cdr.decode(types.LANDMARKS, landmark_payloads[-1])["landmarks"])
+    counts = [len(t) for t in tracked.tracks]
+    if sum(counts):
+        report.add_tracks(np.repeat(np.asarray(tracked.stamps, np.int64), counts), np.concatenate(tracked.tracks))
+
+
 def derive(run, odometry, config: DatmoConfig | None = None,
-           progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], dict]:
+           progress: Callable[[int, int], None] | None = None, *, markers: bool = False,
+           covariance: bool = False) -> tuple[dict[str, tuple], dict]:
     """Every derived channel of a run held in memory, {topic: (msgtype, stamps, payloads)}, and the effective
     parameters; `config`: the DatmoConfig (None: the defaults). The same stages as process_file, on one
-    block."""
+    block (`markers`, `covariance` as there)."""
     from .config import DatmoConfig
     from .streaming import Block
 
     config = config or DatmoConfig()
     odometry, odom_channel = estimated_odometry(run, odometry, config.track.ego_motion)
-    stages = RunStages(odometry, config, estimated=bool(odom_channel))
+    stages = RunStages(odometry, config, estimated=bool(odom_channel), markers=markers, covariance=covariance)
     if progress:
         progress(0, len(run))
     derived = stages(Block(0, run))
@@ -183,27 +210,31 @@ def derive(run, odometry, config: DatmoConfig | None = None,
 
 def process_file(src: str | Path, out: str | Path, *, force: bool = False, config: DatmoConfig | None = None,
                  command_line: str | None = None, progress: Callable[[int, int], None] | None = None,
-                 markers: bool = True, bag_dir: bool = False, block_scans: int | None = None,
-                 input_name: str | None = None, origin: str | Path | None = None) -> int:
+                 markers: bool = False, covariance: bool = False, bag_dir: bool = False,
+                 block_scans: int | None = None,
+                 input_name: str | None = None, origin: str | Path | None = None, report=None) -> int:
     """Segment, extract features and track `src` in one streaming pass into `out` (see module docstring and
     streaming); returns the number of scans. `config`: the DatmoConfig (None: the defaults), recorded whole in
     the provenance; `progress(done, total)` is called as scans are processed; `markers`: also write the Foxglove
-    markers; `input_name`: what the output's provenance calls the input (default its path); `origin`: the file
-    or bag folder `src` was converted from (`src` a temporary copy of a bag), which provenance hashes and names
-    instead. With `bag_dir`, `out` is the log file of a ROS 2 bag folder (log.bagdir.member_path), and the
-    folder is written whole."""
+    markers; `covariance`: store the tracks' covariance (else NaN); `input_name`: what the output's provenance
+    calls the input (default its path); `origin`: the file or bag folder `src` was converted from (`src` a
+    temporary copy of a bag), which provenance hashes and names instead. With `bag_dir`, `out` is the log file
+    of a ROS 2 bag folder (log.bagdir.member_path), and the folder is written whole. `report`: a
+    report.RunAccumulator that gathers the output's report as it is written (RunStages), so the report needs
+    no second pass over the output."""
     from .log import bagdir
     from .streaming import BLOCK_SCANS, LogStream, write_derived
 
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
-    stages = open_stages(stream, config, markers=markers, block_scans=block_scans)
+    stages = open_stages(stream, config, markers=markers, covariance=covariance)
+    stages.report = report
     origin = Path(origin) if origin is not None else src
     with bagdir.output(Path(out).parent if bag_dir else out, bag_dir, force=force, inputs=[origin]) as dst:
         return write_derived(stream, dst, command="run", params=stages.effective(), derived=stages.derived(),
                              stage=stages, force=force, command_line=command_line,
                              block_scans=block_scans or BLOCK_SCANS, progress=progress, input_name=input_name,
-                             origin=origin)
+                             origin=origin, report=report)
 
 
 def features_leg_model(log) -> str:
@@ -244,11 +275,12 @@ def features_leg_threshold(log, used: str) -> float:
 
 def track_file(src: str | Path, out: str | Path, *, force: bool = False, config: DatmoConfig | None = None,
                leg_model: str | None = None, command_line: str | None = None,
-               markers: bool = True, block_scans: int | None = None,
+               markers: bool = False, covariance: bool = False, block_scans: int | None = None,
                progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
-    """Track `src` into `out` in one streaming pass (its channels copied, /datmo/tracks and
-    /datmo/markers/tracks added). Features come from src's /datmo/features when present (people then by
-    the rule of the leg detector they were made with; `leg_model`, when given, must be that one); else
+    """Track `src` into `out` in one streaming pass (its channels copied, /datmo/tracks added, and
+    /datmo/markers/tracks with `markers`; the tracks' covariance is stored with `covariance`, else NaN).
+    Features come from src's /datmo/features when present (people then by the rule of the leg detector they
+    were made with; `leg_model`, when given, must be that one); else
     segmentation and features run here (with `leg_model` when given) and their channels are written too,
     as datmo run writes them. `config`: the DatmoConfig (None: the defaults), recorded whole in the provenance.
     Returns (scans, whether features were computed here)."""
@@ -271,7 +303,7 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, config:
             raise InputError(f"{src}: {stream.count(mcapio.TOPIC_FEATURES)} messages on {mcapio.TOPIC_FEATURES} "
                              f"for {stream.n_scans} scans; run datmo features again")
     stages = open_stages(stream, config.replace(features={"leg_model": leg_model}) if computed else config,
-                         markers=markers, block_scans=block_scans)
+                         markers=markers, covariance=covariance)
     odometry, estimated = stages.odometry, stages.estimated
     if computed:
         derived, stage, effective = stages.derived(), stages, stages.effective()
@@ -290,8 +322,8 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, config:
                 out[mcapio.TOPIC_ODOM] = odometry_channel(odometry, block)
             if "tracking" not in state:
                 state["tracking"] = TrackStream(run.geometry, odometry=odometry, params=params, markers=markers,
-                                                learned=used != "paper",
-                                                leg_threshold=threshold)
+                                                learned=used != "paper", leg_threshold=threshold,
+                                                covariance=covariance)
             tracking = state["tracking"]
             with mcapio.decoding(stream.path, mcapio.TOPIC_FEATURES):
                 features = decode_features(block.aligned[mcapio.TOPIC_FEATURES], block.first)
@@ -319,10 +351,11 @@ class FeatureCounts:
 
 
 def features_file(src: str | Path, out: str | Path, config: DatmoConfig | None = None, *, resegment: bool = False,
-                  force: bool = False, command_line: str | None = None, markers: bool = True,
+                  force: bool = False, command_line: str | None = None, markers: bool = False,
                   block_scans: int | None = None, progress: Callable[[int, int], None] | None = None) -> FeatureCounts:
-    """Extract the features of `src` into `out` in one streaming pass: /datmo/features, /datmo/landmarks and
-    /datmo/markers/features, and /datmo/segments unless the input has its own (used unless `resegment`).
+    """Extract the features of `src` into `out` in one streaming pass: /datmo/features, /datmo/landmarks (and
+    /datmo/markers/features with `markers`), and /datmo/segments unless the input has its own (used unless
+    `resegment`).
     `config`: the DatmoConfig (None: the defaults), its features section used and the whole recorded in the
     provenance."""
     from .config import DatmoConfig
@@ -347,7 +380,7 @@ def features_file(src: str | Path, out: str | Path, config: DatmoConfig | None =
             with mcapio.decoding(src, mcapio.TOPIC_SEGMENTS):
                 segments = decode_segments(block.aligned[mcapio.TOPIC_SEGMENTS], block.first)
         try:
-            channels, f = features.block(block.run, segments)
+            channels, f = features.block(block.run, segments, markers=markers)
         except InputError as exc:
             if not given:
                 raise
@@ -357,8 +390,6 @@ def features_file(src: str | Path, out: str | Path, config: DatmoConfig | None =
         counts.lines, counts.circles = counts.lines + len(f.lines), counts.circles + len(f.circles)
         counts.blobs, counts.legs = counts.blobs + len(f.blobs), counts.legs + len(f.legs)
         counts.landmarks = len(f.landmarks.final())
-        if not markers:
-            channels.pop(mcapio.TOPIC_MARKERS_FEATURES)
         return channels
 
     from .perception.features import leg_model_provenance

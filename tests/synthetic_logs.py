@@ -140,3 +140,13 @@ def write(path, *, with_tracks: bool = True, with_truth: bool = True, with_featu
             if with_tracks:
                 w.write(mcapio.TOPIC_TRACKS, types.TRACKS, s,
                         cdr.encode(types.TRACKS, {"stamp_ns": s, "frame_id": "laser", "tracks": tracks(k)}))
+
+
+def fill_report(report, path) -> None:
+    """Give a report.RunAccumulator what the pipeline would feed it while writing the log at `path` (for the
+    stand-ins of pipeline.process_file: here it is read back from the synthetic log)."""
+    from datmo_cli.report import stream_run
+
+    name = report.name
+    report.__dict__.update(stream_run(path).__dict__)
+    report.name = name

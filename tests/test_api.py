@@ -44,9 +44,11 @@ def equal_tables(a: np.ndarray, b: np.ndarray) -> None:
 
 
 def test_process_writes_what_datmo_run_writes(made):
-    for topic in (mcapio.TOPIC_TRACKS, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS, mcapio.TOPIC_MARKERS_TRACKS):
+    for topic in (mcapio.TOPIC_TRACKS, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS):
         ours, theirs = mcapio.read_messages(made["patrol"], topic), mcapio.read_messages(made["cli"], topic)
         assert ours[0].tolist() == theirs[0].tolist() and ours[1] == theirs[1], topic
+    for path in (made["patrol"], made["cli"]):   # both lean: no markers unless asked
+        assert mcapio.TOPIC_MARKERS_TRACKS not in mcapio.summary(path).topics()
 
 
 def test_the_tables_are_the_exports_rows(made, tmp_path):

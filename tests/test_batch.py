@@ -18,8 +18,8 @@ from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 
 
-def fake_process(src, out, *, force=False, config=None, markers=True, bag_dir=False, command_line=None,
-                 progress=None, input_name=None):
+def fake_process(src, out, *, force=False, config=None, markers=False, covariance=False, bag_dir=False,
+                 command_line=None, progress=None, input_name=None, report=None):
     src = Path(src)
     if "bad" in src.name:
         raise InputError(f"{src}: not an MCAP file (bad magic bytes)")
@@ -35,6 +35,8 @@ def fake_process(src, out, *, force=False, config=None, markers=True, bag_dir=Fa
     if progress:
         progress(50, 100)
     synthetic_logs.write(out)
+    if report is not None:
+        synthetic_logs.fill_report(report, out)
     CALLS.append(src.name)
     return 50
 
@@ -111,7 +113,9 @@ def test_params_hash_follows_the_parameters():
     assert default == DEFAULT_PARAMS_HASH   # the manifests written before keep skipping default runs
     assert batch.params_hash(DatmoConfig(), batch.RunOptions(bag_dir=True)) == default   # same outputs
     assert batch.params_hash(DatmoConfig().replace(track={"gate": 10.0})) != default
-    assert batch.params_hash(None, batch.RunOptions(markers=False)) != default
+    assert batch.params_hash(None, batch.RunOptions(markers=False, covariance=False)) == default   # lean outputs
+    assert batch.params_hash(None, batch.RunOptions(markers=True)) != default
+    assert batch.params_hash(None, batch.RunOptions(covariance=True)) != default
     assert batch.params_hash(None, batch.RunOptions(topic="/front")) != default
 
 
@@ -121,9 +125,9 @@ def test_a_task_pickles_with_its_configuration():
     from datmo_cli.config import DatmoConfig
 
     cfg = DatmoConfig().replace(track={"gate": 10.0})
-    task = batch.Task(0, "a.mcap", "out/a.mcap", False, cfg, batch.RunOptions(markers=False), "h", None)
+    task = batch.Task(0, "a.mcap", "out/a.mcap", False, cfg, batch.RunOptions(markers=True), "h", None)
     back = pickle.loads(pickle.dumps(task))
-    assert back == task and back.config.track.gate == 10.0 and not back.options.markers
+    assert back == task and back.config.track.gate == 10.0 and back.options.markers
 
 
 def test_manifest_lines_then_resume_does_only_what_is_missing(logs, tmp_path):

@@ -180,15 +180,15 @@ def test_quiet_keeps_warnings_and_errors(tmp_path, small_log):
 # ------------------------------------------------------------------------------------------ piped output
 
 
-def test_piped_info_counts_every_marker_channel(tracked):
-    """`datmo info out.mcap | grep -c MarkerArray` (CliRunner's stdout is not a terminal)."""
+def test_piped_info_counts_every_datmo_channel(tracked):
+    """`datmo info out.mcap | grep -c datmo_msgs` (CliRunner's stdout is not a terminal)."""
     channels = json.loads(invoke("info", tracked, "--json").stdout)["channels"]
-    markers = [c["topic"] for c in channels if c["type"] == "visualization_msgs/msg/MarkerArray"]
-    assert len(markers) >= 2
+    ours = [c["topic"] for c in channels if c["type"].startswith("datmo_msgs/")]
+    assert len(ours) >= 4
     out = invoke("info", tracked).stdout
-    lines = [line for line in out.splitlines() if "visualization_msgs/msg/MarkerArray" in line]
-    assert len(lines) == len(markers)
-    for topic in markers:
+    lines = [line for line in out.splitlines() if "datmo_msgs" in line]
+    assert len(lines) == len(ours)
+    for topic in ours:
         assert any(topic in line for line in lines), topic   # topic and type whole, on one line
 
 

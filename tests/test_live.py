@@ -173,8 +173,41 @@ def test_a_processed_log_is_served_as_it_is_with_transforms_from_its_odometry(tm
     at_first = [m.topic for m in messages if m.stamp == int(run.stamps[0])]
     assert at_first[0] == mcapio.TOPIC_SCAN and set(at_first) == {mcapio.TOPIC_SCAN, mcapio.TOPIC_ODOM,
                                                                    mcapio.TOPIC_TRACKS, live.TOPIC_TF,
-                                                                   live.TOPIC_TF_STATIC}
+                                                                   live.TOPIC_TF_STATIC,
+                                                                   mcapio.TOPIC_MARKERS_TRACKS}   # drawn here
     assert source.transforms.topics() == {live.TOPIC_TF: live.TF_MESSAGE, live.TOPIC_TF_STATIC: live.TF_MESSAGE}
+
+
+@pytest.mark.parametrize("name", ["hall", "patrol"])
+def test_a_log_stored_without_markers_gets_them_drawn_from_its_tracks_and_features(tmp_path, name):
+    """datmo run stores no markers unless asked; played, its markers are drawn from its tracks and features as
+    the stages draw them: the features' byte for byte, the tracks' within float32 rounding (their tails come
+    from the stored positions)."""
+    from datmo_cli.pipeline import process_file
+
+    src = ROOT / "sample_logs" / f"{name}.mcap"
+    lean, fat = tmp_path / "lean.mcap", tmp_path / "fat.mcap"
+    process_file(src, lean)
+    process_file(src, fat, markers=True)
+    markers = (mcapio.TOPIC_MARKERS_FEATURES, mcapio.TOPIC_MARKERS_TRACKS)
+    source = live.LogSource(lean)
+    assert source.processed and set(source.drawn) == set(markers)
+    played: dict[str, list[live.Message]] = {}
+    for m in (m for batch in source.batches() for m in batch):
+        played.setdefault(m.topic, []).append(m)
+    stored = {t: mcapio.read_messages(fat, t) for t in markers}
+    for topic in markers:
+        assert [m.stamp for m in played[topic]] == stored[topic][0].tolist(), topic
+    assert [m.payload for m in played[mcapio.TOPIC_MARKERS_FEATURES]] == stored[mcapio.TOPIC_MARKERS_FEATURES][1]
+    store = types.typestore()
+    for m, payload in list(zip(played[mcapio.TOPIC_MARKERS_TRACKS], stored[mcapio.TOPIC_MARKERS_TRACKS][1],
+                               strict=True))[::7]:
+        a, b = (store.deserialize_cdr(p, types.MARKER_ARRAY).markers for p in (m.payload, payload))
+        assert [(x.id, x.type, x.header.frame_id, len(x.points)) for x in a] == \
+            [(x.id, x.type, x.header.frame_id, len(x.points)) for x in b]
+        for x, y in zip(a, b, strict=True):
+            assert np.allclose([(p.x, p.y) for p in x.points], [(p.x, p.y) for p in y.points], atol=1e-5)
+    assert not live.LogSource(fat).drawn          # a log with its markers plays them as they are
 
 
 def _tf_decoder():

@@ -219,15 +219,15 @@ def _wait_for(condition, what: str, timeout: float = 60.0) -> None:
 
 
 def _expected(tmp_path: Path, run: ScanRun, odom_stamps: np.ndarray) -> dict[int, bytes]:
-    """{stamp: the /datmo/tracks payload} that `datmo track --config datmo.toml` writes for `run` with the robot
-    at POSE."""
+    """{stamp: the /datmo/tracks payload} that `datmo track --config datmo.toml --covariance` writes for `run` with
+    the robot at POSE (the node publishes the covariance; a file stores it when asked)."""
     n = len(odom_stamps)
     odom = Odometry(odom_stamps, np.full(n, POSE[0]), np.full(n, POSE[1]), np.full(n, POSE[2]))
     with mcapio.LogWriter(tmp_path / "in.mcap", provenance=mcapio.Provenance("test", {})) as w:
         w.write_scans(run)
         w.write_odometry(odom)
     result = CliRunner().invoke(cli, ["track", str(tmp_path / "in.mcap"), "-o", str(tmp_path / "out.mcap"),
-                                      "--config", str(tmp_path / "datmo.toml"), "-q"])
+                                      "--config", str(tmp_path / "datmo.toml"), "--covariance", "-q"])
     assert result.exit_code == 0, result.output
     stamps, payloads = mcapio.read_messages(tmp_path / "out.mcap", mcapio.TOPIC_TRACKS)
     return dict(zip(stamps.tolist(), payloads, strict=True))

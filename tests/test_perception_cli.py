@@ -49,8 +49,11 @@ def test_segment_writes_one_message_per_scan_with_its_parameters(tmp_path, hall)
 
 
 def test_features_writes_features_landmarks_markers_and_segments(tmp_path, hall):
+    lean = tmp_path / "lean.mcap"
+    assert invoke("features", hall, "-o", lean).exit_code == 0
+    assert not mcapio.read_log(lean, topics=None).has(mcapio.TOPIC_MARKERS_FEATURES)   # markers only when asked
     out = tmp_path / "feat.mcap"
-    result = invoke("features", hall, "-o", out)
+    result = invoke("features", hall, "-o", out, "--markers")
     assert result.exit_code == 0, result.output
     assert "landmarks" in result.stderr
     log = mcapio.read_log(out, topics=None)

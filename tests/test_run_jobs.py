@@ -16,8 +16,8 @@ from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 
 
-def fake_process(src, out, *, force=False, config=None, markers=True, bag_dir=False, command_line=None,
-                 progress=None, input_name=None):
+def fake_process(src, out, *, force=False, config=None, markers=False, covariance=False, bag_dir=False,
+                 command_line=None, progress=None, input_name=None, report=None):
     src = Path(src)
     if "bad" in src.name:
         raise InputError(f"{src}: not an MCAP file (bad magic bytes)")
@@ -31,6 +31,8 @@ def fake_process(src, out, *, force=False, config=None, markers=True, bag_dir=Fa
         if progress:
             progress(done, 50)
     synthetic_logs.write(out)
+    if report is not None:
+        synthetic_logs.fill_report(report, out)
     return 50
 
 

@@ -27,12 +27,12 @@ def invoke(*args: str) -> None:
 def test_one_pass_equals_the_stages_one_by_one(tmp_path, hall_log):
     seg, feat, staged = tmp_path / "seg.mcap", tmp_path / "feat.mcap", tmp_path / "tracked.mcap"
     invoke("segment", str(hall_log), "-o", str(seg))
-    invoke("features", str(seg), "-o", str(feat))
-    invoke("track", str(feat), "-o", str(staged))
+    invoke("features", str(seg), "-o", str(feat), "--markers")
+    invoke("track", str(feat), "-o", str(staged), "--markers", "--covariance")
     direct = tmp_path / "direct.mcap"
-    invoke("track", str(hall_log), "-o", str(direct))   # track segments and extracts features itself
+    invoke("track", str(hall_log), "-o", str(direct), "--markers", "--covariance")   # segments, features itself
 
-    scans = pipeline.process_file(hall_log, tmp_path / "one-pass.mcap")
+    scans = pipeline.process_file(hall_log, tmp_path / "one-pass.mcap", markers=True, covariance=True)
     a = mcapio.read_log(staged, topics=None).messages
     b = mcapio.read_log(tmp_path / "one-pass.mcap", topics=None).messages
     c = mcapio.read_log(direct, topics=None).messages

@@ -11,6 +11,7 @@ import pytest
 from datmo_cli import streaming
 from datmo_cli.log import mcapio
 from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.perception.egomotion import EGO_SAMPLE_SCANS
 from datmo_cli.pipeline import features_file, process_file, segment_file, track_file
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
@@ -73,12 +74,14 @@ class Held:
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
         self.block = self.buffered = self.blocks = 0
+        self.sizes: list[int] = []
         decode, drain = DECODE, DRAIN
         held = self
 
         def counting_decode(path, payloads, *args, **kw):
             held.block = max(held.block, len(payloads))
             held.blocks += 1
+            held.sizes.append(len(payloads))
             return decode(path, payloads, *args, **kw)
 
         def counting_drain(writer) -> None:
@@ -98,11 +101,13 @@ def test_what_a_run_holds_does_not_grow_with_the_log(tmp_path: Path, monkeypatch
         held[n] = counter
         out = mcapio.summary(tmp_path / f"out{n}.mcap").topics()
         assert out[mcapio.TOPIC_TRACKS].count == n and out[mcapio.TOPIC_SCAN].count == n
-    # a pass over the log to see whether the scanner moves (it does not), then the run itself
-    assert held[600].blocks == 3 + 3 and held[2400].blocks == 12 + 12
-    # one block at a time: 200 scans, and the scan plus 6 derived messages of each waiting to be written
-    assert held[600].block == held[2400].block == 200
-    assert held[600].buffered == held[2400].buffered == 200 * 7
+    # the log's first scans (at most EGO_SAMPLE_SCANS) to see whether the scanner moves (it does not), then the run
+    assert held[600].blocks == 1 + 3 and held[2400].blocks == 1 + 12
+    assert held[600].sizes[0] == 600 and held[2400].sizes[0] == EGO_SAMPLE_SCANS
+    # then one block at a time: 200 scans, and the scan plus 4 derived messages of each waiting to be written
+    # (segments, features, landmarks, tracks: no markers unless asked)
+    assert max(held[600].sizes[1:]) == max(held[2400].sizes[1:]) == 200
+    assert held[600].buffered == held[2400].buffered == 200 * 5
 
 
 def test_a_geometry_change_between_blocks_is_refused(tmp_path: Path) -> None:
@@ -131,25 +136,47 @@ def test_blocks_end_before_the_scan_that_would_overflow_them(tmp_path: Path) -> 
     assert firsts == [0, 4, 8]
 
 
-def test_no_markers_leaves_out_the_drawings_and_nothing_else(tmp_path: Path) -> None:
+def test_markers_only_when_asked_and_nothing_else_changes(tmp_path: Path) -> None:
     from click.testing import CliRunner
 
     from datmo_cli.cli import cli
 
     src = SAMPLES / "corridor.mcap"
     runner = CliRunner()
-    done = runner.invoke(cli, ["run", str(src), "-o", str(tmp_path / "a"), "--no-report", "--no-markers", "-j", "1"])
+    done = runner.invoke(cli, ["run", str(src), "-o", str(tmp_path / "a"), "--no-report", "-j", "1"])
     assert done.exit_code == 0, done.output
-    process_file(src, tmp_path / "full.mcap")
+    process_file(src, tmp_path / "full.mcap", markers=True)
     lean, full = channels(tmp_path / "a" / "corridor.mcap"), channels(tmp_path / "full.mcap")
     markers = {mcapio.TOPIC_MARKERS_FEATURES, mcapio.TOPIC_MARKERS_TRACKS}
     assert markers <= full.keys() and not markers & lean.keys()
     assert {t: full[t] for t in full if t not in markers} == lean
-    for command in ("features", "track"):
-        out = tmp_path / f"{command}.mcap"
-        done = runner.invoke(cli, [command, str(src), "-o", str(out), "--no-markers"])
-        assert done.exit_code == 0, done.output
+    for command, drawn in (("features", {mcapio.TOPIC_MARKERS_FEATURES}), ("track", markers)):
+        out, fat = tmp_path / f"{command}.mcap", tmp_path / f"{command}-markers.mcap"
+        for path, extra in ((out, []), (fat, ["--markers"])):
+            done = runner.invoke(cli, [command, str(src), "-o", str(path), *extra])
+            assert done.exit_code == 0, done.output
         assert not markers & channels(out).keys() and mcapio.TOPIC_FEATURES in channels(out)
+        assert markers & channels(fat).keys() == drawn
+
+
+def test_covariance_only_when_asked_and_nothing_else_changes(tmp_path: Path) -> None:
+    from datmo_cli.log import cdr, types
+
+    src = SAMPLES / "corridor.mcap"
+    process_file(src, tmp_path / "lean.mcap")
+    process_file(src, tmp_path / "cov.mcap", covariance=True)
+    lean, cov = channels(tmp_path / "lean.mcap"), channels(tmp_path / "cov.mcap")
+    assert {t: v for t, v in lean.items() if t != mcapio.TOPIC_TRACKS} == \
+        {t: v for t, v in cov.items() if t != mcapio.TOPIC_TRACKS}
+    a = np.concatenate([cdr.decode(types.TRACKS, p)["tracks"] for p in lean[mcapio.TOPIC_TRACKS][1]])
+    b = np.concatenate([cdr.decode(types.TRACKS, p)["tracks"] for p in cov[mcapio.TOPIC_TRACKS][1]])
+    assert len(a) == len(b) > 0
+    assert np.isnan(a["covariance"]).all() and np.isfinite(b["covariance"]).all()
+    rest = [n for n in a.dtype.names if n != "covariance"]
+    from numpy.lib.recfunctions import repack_fields
+
+    assert repack_fields(a[rest]).tobytes() == repack_fields(b[rest]).tobytes()
+    assert (tmp_path / "lean.mcap").stat().st_size < (tmp_path / "cov.mcap").stat().st_size
 
 
 def test_an_input_fetched_from_an_object_store_is_named_by_its_url_in_provenance(tmp_path: Path) -> None:

@@ -45,7 +45,7 @@ def _tracks(path) -> list[dict]:
 def test_track_writes_tracks_and_markers_every_scan(tmp_path, odometry):
     src, out = tmp_path / "in.mcap", tmp_path / "out.mcap"
     make_log(src, odometry)
-    result = CliRunner().invoke(cli, ["track", str(src), "-o", str(out)])
+    result = CliRunner().invoke(cli, ["track", str(src), "-o", str(out), "--markers"])
     assert result.exit_code == 0, result.output
     log = mcapio.read_log(out, topics=None)
     assert log.has(mcapio.TOPIC_SCAN) and log.has(mcapio.TOPIC_FEATURES)

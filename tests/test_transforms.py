@@ -20,7 +20,7 @@ from datmo_cli.cli import cli
 from datmo_cli.log import transforms
 from datmo_cli.log.scan import Odometry
 
-MARKER_TOPICS = ("/datmo/markers/tracks", "/datmo/markers/features", "/datmo/landmarks")
+MARKER_TOPICS = ("/datmo/markers/tracks", "/datmo/markers/features", "/datmo/landmarks")   # runs with --markers
 DELETEALL = 3
 TOLERANCE_NS = 50_000_000   # a dynamic transform is taken up to 50 ms beyond the first or last one
 
@@ -183,7 +183,7 @@ def test_a_laser_pose_moves_the_base_and_the_chain_gives_the_scanner_back():
 def test_patrol_run_chains_resolve_and_match_the_ground_truth(tmp_path):
     from datmo_cli.log import cdr, mcapio, types
 
-    datmo("run", SAMPLE_LOGS / "patrol.mcap", "-o", tmp_path / "out")
+    datmo("run", SAMPLE_LOGS / "patrol.mcap", "-o", tmp_path / "out", "--markers")
     out = tmp_path / "out" / "patrol.mcap"
     tf, laser, frames = assert_chains_resolve(out)
     assert frames == {"odom", "laser"}      # tracks and landmarks in odom, the features' markers in the scan's frame
@@ -203,7 +203,7 @@ def test_carmen_import_with_odometry_then_run(tmp_path):
     assert counts["/tf"] == counts["/odom"] == 120 and counts["/tf_static"] == 1
     assert tf.static["laser"] == ("base_link", (0.0, 0.0, 0.0))
     assert "no laser mount (base_link -> laser)" in out and "--laser-pose X,Y,YAW" in out
-    datmo("run", tmp_path / "csail.mcap", "-o", tmp_path / "out")
+    datmo("run", tmp_path / "csail.mcap", "-o", tmp_path / "out", "--markers")
     _, laser, frames = assert_chains_resolve(tmp_path / "out" / "csail.mcap")
     assert "map" in frames and laser == "laser"       # SLAM-corrected poses: map -> base_link -> laser
 
@@ -214,7 +214,7 @@ def test_carmen_import_with_odometry_then_run(tmp_path):
 
 
 def test_still_scanner_markers_are_in_the_scan_frame(tmp_path):
-    datmo("run", SAMPLE_LOGS / "static.mcap", "-o", tmp_path / "out")
+    datmo("run", SAMPLE_LOGS / "static.mcap", "-o", tmp_path / "out", "--markers")
     _, laser, frames = assert_chains_resolve(tmp_path / "out" / "static.mcap")
     assert frames == {laser}
     _, _, _, counts = read_output(tmp_path / "out" / "static.mcap")
@@ -232,7 +232,7 @@ def test_a_laser_pose_on_a_moving_simulation_leaves_the_tracks_where_they_were(t
 
     for name, extra in (("plain", []), ("mounted", ["--laser-pose", "0.3,0.1,90"])):
         datmo("simulate", "--scene", "patrol", "--duration", "16", "-o", tmp_path / f"{name}.mcap", *extra)
-    datmo("run", tmp_path / "plain.mcap", tmp_path / "mounted.mcap", "-o", tmp_path / "out")
+    datmo("run", tmp_path / "plain.mcap", tmp_path / "mounted.mcap", "-o", tmp_path / "out", "--markers")
     tf, laser, _ = assert_chains_resolve(tmp_path / "out" / "mounted.mcap")
     assert tf.static[laser][0] == "base_link" and tf.static[laser][1] == pytest.approx((0.3, 0.1, math.pi / 2))
     plain = mcapio.read_odometry(tmp_path / "plain.mcap")
@@ -321,7 +321,7 @@ def test_ros1_bag_import_keeps_tf_and_the_run_resolves_through_it(tmp_path):
     tf, _, _, counts = read_output(tmp_path / "robot.mcap")
     assert counts["/tf"] == 120 and counts["/tf_static"] == 1 and counts["/odom"] == 60   # the bag's, none derived
     assert tf.static["laser"] == ("base_link", pytest.approx(MOUNT))
-    datmo("run", tmp_path / "robot.mcap", "-o", tmp_path / "out")
+    datmo("run", tmp_path / "robot.mcap", "-o", tmp_path / "out", "--markers")
     out = tmp_path / "out" / "robot.mcap"
     tf, laser, frames = assert_chains_resolve(out)
     assert "odom" in frames and laser == "laser"
@@ -342,7 +342,7 @@ def test_ros1_bag_without_tf_gets_tf_from_its_odometry(tmp_path):
     assert warning == [f"datmo: warning: {tmp_path / 'odom.bag'}: no laser mount (base_link -> laser) in the log; "
                        "wrote the identity: give the scanner's mounting with --laser-pose X,Y,YAW (metres, metres, "
                        "degrees)"]
-    datmo("run", tmp_path / "odom.mcap", "-o", tmp_path / "out")
+    datmo("run", tmp_path / "odom.mcap", "-o", tmp_path / "out", "--markers")
     assert_chains_resolve(tmp_path / "out" / "odom.mcap")
 
 
@@ -359,7 +359,7 @@ def test_a_ros1_mount_only_on_tf_with_slashed_names_is_taken_to_tf_static(tmp_pa
     odom = mcapio.read_odometry(tmp_path / "robot.mcap")
     assert (odom.frame_id, odom.child_frame_id) == ("odom", "base_link")
     assert mcapio.summary(tmp_path / "robot.mcap").metadata["datmo.import"]["laser_pose"] == '"/tf (constant there)"'
-    datmo("run", tmp_path / "robot.mcap", "-o", tmp_path / "out")
+    datmo("run", tmp_path / "robot.mcap", "-o", tmp_path / "out", "--markers")
     tf, laser, frames = assert_chains_resolve(tmp_path / "out" / "robot.mcap")
     assert "odom" in frames and laser == "laser"
     t = 1_600_000_000 * 10**9 + 20 * 50_000_000 + 20_000_000

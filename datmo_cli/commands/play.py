@@ -36,7 +36,8 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
     channel with its ROS 2 schema.
 
     A log without /datmo/tracks is segmented, its features extracted and tracked on the fly, as datmo run
-    would; a processed log is served as it is. Transforms come from the log's /tf and /tf_static, else from
+    would; a processed log is served as it is, its markers drawn from its tracks and features when it holds
+    none (datmo run stores them only with --markers). Transforms come from the log's /tf and /tf_static, else from
     its odometry. Open the URL printed, or in Foxglove desktop: Open connection, Foxglove WebSocket, the
     ws:// address. The layout foxglove-layouts/datmo-layout.json of the datmo repository shows the scan,
     features and tracks and plots track velocities (Layouts, Import from file). Ctrl-C stops (exit 130).

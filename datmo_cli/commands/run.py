@@ -126,8 +126,11 @@ class _BatchProgress:
 @click.option("--sort", type=click.Choice(SORT_KEYS), default="lifetime", show_default=True,
               help="Order of the report's track table.")
 @click.option("--no-report", is_flag=True, help="Do not print the report.")
-@click.option("--no-markers", is_flag=True,
-              help="Do not write /datmo/markers/* (Foxglove drawings): smaller outputs for batches never viewed.")
+@click.option("--markers/--no-markers", default=False, show_default=True,
+              help="Also store /datmo/markers/* (Foxglove drawings) in the outputs; datmo play draws them from the "
+                   "tracks and features anyway.")
+@click.option("--covariance", is_flag=True,
+              help="Store each track's covariance in /datmo/tracks (otherwise its 16 numbers are NaN).")
 @param_option("track.ego_motion")
 @param_option("features.leg_model")
 @option("--threads", bound=OPTIONS["threads"], default=None,
@@ -139,13 +142,14 @@ class _BatchProgress:
 def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: str | None, retries: int,
             force: bool, cfg: DatmoConfig, plot: bool, bag_dir: bool, fmt: str, top: int | None, sort: str,
             no_report: bool,
-            no_markers: bool, threads: int | None,
+            markers: bool, covariance: bool, threads: int | None,
             topic: str | None, odom_topic: str | None) -> None:
     """Segment, extract features and track each input in one pass, then print the report.
 
-    Each output holds the input's channels and /datmo/segments, /datmo/features, /datmo/landmarks,
-    /datmo/tracks and markers, with the same messages as datmo segment, datmo features and datmo track
-    run one after another. INPUTS are files, folders (searched recursively for .mcap logs) and globs, or
+    Each output holds the input's channels and /datmo/segments, /datmo/features, /datmo/landmarks and
+    /datmo/tracks (with --markers the Foxglove markers too, with --covariance the tracks' covariance), with
+    the same messages as datmo segment, datmo features and datmo track run one after another. The report is
+    gathered as the outputs are written. INPUTS are files, folders (searched recursively for .mcap logs) and globs, or
     fsspec URLs. ROS 1 bags and ROS 2 bag folders or their .db3 (and any input with --topic) are converted as
     by datmo import by the input's own task, into a temporary MCAP beside its output (removed when the task
     ends); the output is named after the bag and its provenance names the bag. Inputs run in parallel in local
@@ -166,7 +170,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
 
     Example: datmo run 'logs/**/*.mcap' -o out --scheduler tcp://10.0.0.5:8786
     """
-    from ..batch import DONE, FAILED, SKIPPED, RunOptions, folder_lock, remote
+    from ..batch import DONE, FAILED, SKIPPED, SUMMARY_KEY, RunOptions, folder_lock, remote
     from ..errors import DatmoError
     from ..perception.threads import set_default
     from ..text import printable
@@ -179,7 +183,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     if bag_dir and remote(out_dir):
         raise DatmoError(f"{out_dir}: --bag-dir needs a local output folder")
     _check_leg_model(cfg)
-    options = RunOptions(markers=not no_markers, topic=topic, odom_topic=odom_topic, bag_dir=bag_dir)
+    options = RunOptions(markers=markers, covariance=covariance, topic=topic, odom_topic=odom_topic, bag_dir=bag_dir)
     with folder_lock(out_dir):   # one batch at a time in a folder: a second is refused, naming the first
         records, where, seconds, plot_of = _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir,
                                                       scheduler, jobs, retries)
@@ -191,7 +195,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         if ok and (not no_report or plot_of) and not remote(out_dir):
             made = {Path(r["output"]) for r in ok if r["status"] == DONE}
             _report([Path(r["output"]) for r in ok], [p for o, p in plot_of.items() if Path(o) in made],
-                    None if no_report else fmt, top, sort, force)
+                    None if no_report else fmt, top, sort, force, [r.get(SUMMARY_KEY) for r in ok])
     failed = len(records) - len(ok)
     if failed == len(records) and failed > 1:
         raise DatmoError(f"all {failed} inputs failed")
@@ -306,21 +310,24 @@ def _warm_up() -> None:
 
 
 def _report(outputs: list[Path], plots: list[Path], fmt: str | None, top: int | None, sort: str,
-            force: bool = False) -> None:
-    """Draw the plots, and print the report of `outputs` in `fmt` (None: no report)."""
+            force: bool = False, made: list | None = None) -> None:
+    """Draw the plots, and print the report of `outputs` in `fmt` (None: no report). `made`: each output's
+    report as its task gathered it while writing it (report.RunSummary), None for an output not made by
+    this run (skipped: already in the manifest), which is read in one streaming pass."""
     from ..pipeline import read_run_data
     from ..report import console, render, summarise, summarise_file
 
     summaries = []
+    made = made or [None] * len(outputs)
     for i, out in enumerate(outputs):
-        if not plots:   # one streaming pass; a plot draws every scan and state, so it decodes the whole run
+        if not plots:   # a plot draws every scan and state, so it decodes the whole run
             if fmt:
-                summaries.append(summarise_file(out))
+                summaries.append(made[i] if made[i] is not None else summarise_file(out))
             continue
         from .report import save_plot
 
         data = read_run_data(out, keep_scans=True)
-        summaries.append(summarise(data))
+        summaries.append(made[i] if made[i] is not None else summarise(data))
         click.echo(save_plot(data, plots[i], force), err=True)
     if fmt == "rich":
         render(summaries, fmt, top=top, sort=sort, console=console())

@@ -24,10 +24,13 @@ if TYPE_CHECKING:
 
 @click.command(name="track")
 @click.argument("input", type=click.Path(path_type=Path))
-@output_option("The log to write (MCAP): the input's channels plus /datmo/tracks and /datmo/markers/tracks.",
-               file=False)
+@output_option("The log to write (MCAP): the input's channels plus /datmo/tracks (and /datmo/markers/tracks with "
+               "--markers).", file=False)
 @force_option()
-@click.option("--no-markers", is_flag=True, help="Do not write /datmo/markers/* (Foxglove drawings).")
+@click.option("--markers/--no-markers", default=False, show_default=True,
+              help="Also store /datmo/markers/* (Foxglove drawings); datmo play draws them from the tracks anyway.")
+@click.option("--covariance", is_flag=True,
+              help="Store each track's covariance in /datmo/tracks (otherwise its 16 numbers are NaN).")
 @click.option("--bag-dir", is_flag=True, is_eager=True,
               help="Write OUTPUT as a ROS 2 bag folder for ros2 bag play: OUTPUT/ holding OUTPUT_0.mcap and "
                    "metadata.yaml (--force replaces only a bag folder).")
@@ -48,16 +51,16 @@ if TYPE_CHECKING:
                    "a given MODEL must be.")
 @input_options
 @quiet_option
-def command(input: Path, output: Path, force: bool, no_markers: bool, bag_dir: bool, cfg: DatmoConfig,
+def command(input: Path, output: Path, force: bool, markers: bool, covariance: bool, bag_dir: bool, cfg: DatmoConfig,
             leg_model: str | None, topic: str | None, odom_topic: str | None) -> None:
     """Track and classify the objects of a log: Kalman filter, gating and global nearest-neighbour
     association, occlusion-aware track life cycle, people from paired legs and their walking pattern.
 
     Writes the input's channels plus /datmo/tracks (every scan: id, class, mobility, position and velocity
-    in the sensor frame and, with /odom, the world frame, covariance, age, hits, misses, occluded) and
-    /datmo/markers/tracks for Foxglove. Segmentation and features run first when the input lacks
-    /datmo/features. Options override the config file, which overrides the defaults. INPUT is a datmo log,
-    or a ROS 1/2 bag converted on the fly (--topic, --odom-topic).
+    in the sensor frame and, with /odom, the world frame, age, hits, misses, occluded; the covariance with
+    --covariance) and, with --markers, /datmo/markers/tracks for Foxglove. Segmentation and features run
+    first when the input lacks /datmo/features. Options override the config file, which overrides the
+    defaults. INPUT is a datmo log, or a ROS 1/2 bag converted on the fly (--topic, --odom-topic).
 
     Example: datmo track sample_logs/hall.mcap -o hall-tracks.mcap
 
@@ -76,6 +79,6 @@ def command(input: Path, output: Path, force: bool, no_markers: bool, bag_dir: b
         with bar("tracking", stream.n_scans) as progress, progress.compile_notice() as report:
             scans, computed = track_file(stream, out, force=force, config=cfg,
                                          leg_model=leg_model, command_line=provenance_line(invocation("track")),
-                                         markers=not no_markers, progress=report)
+                                         markers=markers, covariance=covariance, progress=report)
     how = " (segmented and extracted features first)" if computed else ""
     say(f"{output}: tracks for {scans:,} scans{how}")

@@ -668,9 +668,10 @@ class LogWriter:
                 self._channels: dict[str, int] = {}
                 self._buffer: list[tuple[np.ndarray, int, list[bytes]]] = []  # (stamps, channel id, payloads)
                 self._seq = 0
+                self.metadata: dict[str, dict[str, str]] = {}   # the metadata records written, by name
                 if provenance is not None:
                     for name, data in provenance.records().items():
-                        self._writer.add_metadata(name, data)
+                        self._metadata(name, data)
         except BaseException:
             self.abort()
             raise
@@ -727,7 +728,11 @@ class LogWriter:
         self.write_many(topic, types.ODOMETRY, odom.stamps, encode_odometry(odom))
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
-        self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+        self._metadata(name, {str(k): str(v) for k, v in data.items()})
+
+    def _metadata(self, name: str, data: dict[str, str]) -> None:
+        self._writer.add_metadata(name, data)
+        self.metadata[name] = dict(data)
 
     def copy_from(self, src: str | Path | LogContents, exclude: Iterable[str] = ()) -> None:
         """Copy `src`'s channels byte for byte (no re-encoding), except `exclude`d topics.
@@ -754,7 +759,7 @@ class LogWriter:
                                          schema_encoding=ch.schema_encoding, message_encoding=ch.message_encoding,
                                          metadata=ch.metadata)
         for name, data in log.metadata.items():
-            self._writer.add_metadata(name if name.startswith("input/") else f"input/{name}", data)
+            self._metadata(name if name.startswith("input/") else f"input/{name}", data)
         return ids
 
     def write_ids(self, cid: int, stamps_ns, payloads: list[bytes]) -> None:

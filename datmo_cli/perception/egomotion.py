@@ -214,24 +214,33 @@ def is_moving(odometry: Odometry, min_path: float = 0.3, min_turn: float = math.
 
 
 EGO_MOTION_MODES = ("auto", "on", "off")
+EGO_SAMPLE_SCANS = 1024   # "auto" judges whether the scanner moves on a log's first scans (one block), not all
+
+
+def sampled_scans(n: int) -> int:
+    """How many of a log's n first scans "auto" samples pairs from (EGO_SAMPLE_SCANS at most)."""
+    return min(n, EGO_SAMPLE_SCANS)
 
 
 def scans_move(run: ScanRun, samples: int = 100, min_step: float = 0.05, min_turn: float = math.radians(1.5),
                share: float = 0.1) -> bool:
-    """Whether a log's scanner moves, cheaply: up to `samples` pairs of consecutive scans, spread over the log,
-    are aligned by one ICP each (align_scans); it moves when at least `share` of them (and 3) are over min_step
-    (m) or min_turn (rad) apart. A still scanner's pairs agree within about 1 cm, people walking by included
-    (simulated and real still logs: 90 % of pairs within 3 cm); a robot at walking pace moves 8-13 cm a scan."""
+    """Whether a log's scanner moves, cheaply: up to `samples` pairs of consecutive scans, spread over its first
+    EGO_SAMPLE_SCANS scans (a streamed log decides before its first block is processed, without reading the
+    whole log an extra time), are aligned by one ICP each (align_scans); it moves when at least `share` of them
+    (and 3) are over min_step (m) or min_turn (rad) apart. A still scanner's pairs agree within about 1 cm,
+    people walking by included (simulated and real still logs: 90 % of pairs within 3 cm); a robot at walking
+    pace moves 8-13 cm a scan."""
     if len(run) < 2:
         return False
-    picks = pair_picks(len(run), samples)
+    n = sampled_scans(len(run))
+    picks = pair_picks(n, samples)
     order = np.stack([picks, picks + 1], axis=1).ravel()
     pairs = ScanRun(run.stamps[order], run.ranges[order], run.geometry)
-    return pairs_move(pairs, len(run), samples, min_step, min_turn, share)
+    return pairs_move(pairs, n, samples, min_step, min_turn, share)
 
 
 def pair_picks(n: int, samples: int = 100) -> np.ndarray:
-    """The first scans k of the pairs (k, k + 1) scans_move aligns in a log of n scans."""
+    """The first scans k of the pairs (k, k + 1) scans_move aligns among n scans (sampled_scans of a log)."""
     if n < 2:
         return np.zeros(0, np.int64)
     return np.unique(np.linspace(0, n - 2, min(samples, n - 1)).astype(np.int64))
@@ -239,7 +248,7 @@ def pair_picks(n: int, samples: int = 100) -> np.ndarray:
 
 def pairs_move(pairs: ScanRun, n: int, samples: int = 100, min_step: float = 0.05,
                min_turn: float = math.radians(1.5), share: float = 0.1) -> bool:
-    """scans_move's decision on its pairs already gathered (rows 2i and 2i + 1 of `pairs`, from a log of n
+    """scans_move's decision on its pairs already gathered (rows 2i and 2i + 1 of `pairs`, from n sampled
     scans; see pair_picks)."""
     if n < 2:
         return False

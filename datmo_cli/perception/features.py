@@ -331,7 +331,8 @@ class FeatureStream:
     channels of the next block of scans as datmo features writes them ({topic: (msgtype, stamps, payloads)})
     and its RunFeatures; the landmark database carries over from block to block, so the channels are those of
     the whole run at once. `segments` given with a block are used instead of segmenting (a log's own; the
-    segments channel is then not among the channels returned)."""
+    segments channel is then not among the channels returned); with `markers` False the Foxglove markers are
+    neither drawn nor among them."""
 
     def __init__(self, params: FeatureParams | None = None, odometry: Odometry | None = None) -> None:
         self.params = params or FeatureParams()
@@ -339,7 +340,8 @@ class FeatureStream:
         self.landmarks = LandmarkStream(self.params)
 
     def block(self, run: ScanRun, segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-              progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], RunFeatures]:
+              progress: Callable[[int, int], None] | None = None, *,
+              markers: bool = True) -> tuple[dict[str, tuple], RunFeatures]:
         from ..log import mcapio
         from .markers import feature_markers
 
@@ -355,8 +357,10 @@ class FeatureStream:
         channels |= {
             mcapio.TOPIC_FEATURES: (types.FEATURES, stamps, feature_payloads(f)),
             mcapio.TOPIC_LANDMARKS: (types.LANDMARKS, stamps, landmark_payloads(f)),
-            mcapio.TOPIC_MARKERS_FEATURES: (types.MARKER_ARRAY, stamps, feature_markers(run, f, self.odometry)),
         }
+        if markers:
+            drawn = feature_markers(run, f, self.odometry)
+            channels[mcapio.TOPIC_MARKERS_FEATURES] = (types.MARKER_ARRAY, stamps, drawn)
         return channels, f
 
 

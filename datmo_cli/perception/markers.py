@@ -44,37 +44,41 @@ def circle_points(circles: np.ndarray) -> np.ndarray:
 
 def feature_markers(run: ScanRun, f: RunFeatures, odometry: Odometry | None = None) -> list[bytes]:
     """MarkerArray CDR payloads, one per scan, for the features and landmarks of `f`."""
-    frame = f.frame_id
     lo, co, bo = f.line_offsets.tolist(), f.circle_offsets.tolist(), f.blob_offsets.tolist()
     lm = f.landmarks
     elems = lm.all_snapshots(f.stamps) if lm is not None else None
     lm_off = lm.snap_offsets.tolist() if lm is not None else None
     poses = odometry.at(f.stamps) if odometry is not None and len(odometry) else None
-    out = []
-    for k, stamp in enumerate(np.asarray(f.stamps, np.int64).tolist()):
-        w = MarkerArrayWriter(5, header(stamp, frame, NS))
-        w.marker(0, ARROW, DELETEALL)
-        w.marker(1, LINE_LIST, ADD, scale=(0.04, 0.0, 0.0), color=(0.1, 0.9, 0.2, 1.0),
-                 points=line_points(f.lines[lo[k]:lo[k + 1]]))
-        w.marker(2, LINE_LIST, ADD, scale=(0.02, 0.0, 0.0), color=(0.95, 0.2, 0.2, 1.0),
-                 points=circle_points(f.circles[co[k]:co[k + 1]]))
-        b = f.blobs[bo[k]:bo[k + 1]]
-        pts = np.zeros((len(b), 3))
-        pts[:, 0], pts[:, 1] = b["x"], b["y"]
-        w.marker(3, SPHERE_LIST, ADD, scale=(0.08, 0.08, 0.08), color=(1.0, 0.6, 0.0, 1.0), points=pts)
-        if elems is not None:
-            e = elems[lm_off[k]:lm_off[k + 1]]
-            pts = np.zeros((len(e), 3))
-            pts[:, 0], pts[:, 1] = e["x"], e["y"]
-            colors = LANDMARK_COLORS[e["type"].astype(np.int64)]
-            # every marker of the array shares the scan's frame: landmarks are moved there from odom
-            if poses is not None and len(e):
-                pose = poses[k]
-                c, s = np.cos(pose[2]), np.sin(pose[2])
-                dx, dy = pts[:, 0] - pose[0], pts[:, 1] - pose[1]
-                pts[:, 0], pts[:, 1] = c * dx + s * dy, -s * dx + c * dy
-            w.marker(4, CUBE_LIST, ADD, scale=(0.15, 0.15, 0.15), points=pts, colors=colors)
-        else:
-            w.marker(4, CUBE_LIST, ADD, scale=(0.15, 0.15, 0.15))
-        out.append(w.bytes())
-    return out
+    return [scan_feature_markers(stamp, f.frame_id, f.lines[lo[k]:lo[k + 1]], f.circles[co[k]:co[k + 1]],
+                                 f.blobs[bo[k]:bo[k + 1]],
+                                 elems[lm_off[k]:lm_off[k + 1]] if elems is not None else None,
+                                 poses[k] if poses is not None else None)
+            for k, stamp in enumerate(np.asarray(f.stamps, np.int64).tolist())]
+
+
+def scan_feature_markers(stamp: int, frame: str, lines: np.ndarray, circles: np.ndarray, blobs: np.ndarray,
+                         landmarks: np.ndarray | None = None, pose: np.ndarray | None = None) -> bytes:
+    """The MarkerArray CDR payload of one scan: its Line, Circle and Blob elements (sensor frame `frame`) and
+    the landmark database after it (Landmark elements; None: none drawn), brought into the sensor frame from
+    the world frame by the scanner's `pose` (x, y, theta) when given. What feature_markers draws per scan, and
+    what `datmo play` draws from a log's /datmo/features and /datmo/landmarks."""
+    w = MarkerArrayWriter(5, header(stamp, frame, NS))
+    w.marker(0, ARROW, DELETEALL)
+    w.marker(1, LINE_LIST, ADD, scale=(0.04, 0.0, 0.0), color=(0.1, 0.9, 0.2, 1.0), points=line_points(lines))
+    w.marker(2, LINE_LIST, ADD, scale=(0.02, 0.0, 0.0), color=(0.95, 0.2, 0.2, 1.0), points=circle_points(circles))
+    pts = np.zeros((len(blobs), 3))
+    pts[:, 0], pts[:, 1] = blobs["x"], blobs["y"]
+    w.marker(3, SPHERE_LIST, ADD, scale=(0.08, 0.08, 0.08), color=(1.0, 0.6, 0.0, 1.0), points=pts)
+    if landmarks is not None:
+        e = landmarks
+        pts = np.zeros((len(e), 3))
+        pts[:, 0], pts[:, 1] = e["x"], e["y"]
+        colors = LANDMARK_COLORS[e["type"].astype(np.int64)]
+        if pose is not None and len(e):
+            c, s = np.cos(pose[2]), np.sin(pose[2])
+            dx, dy = pts[:, 0] - pose[0], pts[:, 1] - pose[1]
+            pts[:, 0], pts[:, 1] = c * dx + s * dy, -s * dx + c * dy
+        w.marker(4, CUBE_LIST, ADD, scale=(0.15, 0.15, 0.15), points=pts, colors=colors)
+    else:
+        w.marker(4, CUBE_LIST, ADD, scale=(0.15, 0.15, 0.15))
+    return w.bytes()
