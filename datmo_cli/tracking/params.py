@@ -33,7 +33,7 @@ class TrackingParams(Section):
     # Kalman filter: constant velocity, white-noise acceleration (Kohler 1997)
     process_noise: float = param(2.0, _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
                                  "White-noise acceleration variance q (spectral density).")
-    person_process_noise: float = param(1.0, _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
+    person_process_noise: float = param(2.0, _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
                                         "q of tracks fed mostly by legs (people keep their pace: a low q keeps "
                                         "two people who cross apart).")
     measurement_noise: float = param(0.05, _b(0, 10, "m", _SIGMA, open_=True), "Sigma of a measured model centre.")
