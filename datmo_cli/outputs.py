@@ -80,9 +80,26 @@ def _raise_for(signum: int) -> None:
     raise Terminated(signum)
 
 
+RESEND_AFTER_S = 0.05
+
+
+def in_native_callback(frame) -> bool:
+    """Whether `frame` runs inside a callback from native code: llvmlite's object cache callbacks, which numba's
+    compiler calls while it compiles or loads a kernel. An exception raised there is ignored by ctypes and leaves
+    LLVM broken (the process then dies of SIGSEGV), so a signal must not raise there."""
+    while frame is not None:
+        if "llvmlite" in frame.f_code.co_filename:
+            return True
+        frame = frame.f_back
+    return False
+
+
 def _handler(signum: int, frame) -> None:
     if _state["depth"]:
         _PENDING.append(signum)
+        return
+    if in_native_callback(frame):   # the callback is short: the same signal again, a moment later
+        threading.Timer(RESEND_AFTER_S, os.kill, (os.getpid(), signum)).start()
         return
     _raise_for(signum)
 

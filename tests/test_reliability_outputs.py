@@ -299,3 +299,32 @@ def test_debug_flag_and_environment_show_the_original_exception(small, tmp_path,
     monkeypatch.setenv("DATMO_DEBUG", "1")
     assert isinstance(datmo("segment", small, "-o", tmp_path / "a.mcap").exception, MemoryError)
     assert not temps(tmp_path) and not outputs.live()
+
+
+def test_a_signal_inside_llvmlites_callbacks_is_sent_again_not_raised_there(monkeypatch):
+    """numba's compiler calls back into Python from LLVM (llvmlite's object cache); a stop raised there is ignored
+    by ctypes and the process dies of SIGSEGV: the handler sends the signal again a moment later instead."""
+    import signal
+    import types
+
+    from datmo_cli import outputs
+
+    sent = []
+
+    class Timer:
+        def __init__(self, delay, fn, args):
+            self.call = (delay, fn, args)
+
+        def start(self):
+            sent.append(self.call)
+
+    monkeypatch.setattr(outputs.threading, "Timer", Timer)
+    code = compile("pass", "/venv/lib/python3.11/site-packages/llvmlite/binding/executionengine.py", "exec")
+    inner = types.SimpleNamespace(f_code=types.SimpleNamespace(co_filename=__file__), f_back=None)
+    native = types.SimpleNamespace(f_code=code, f_back=None)
+    inner.f_back = native                      # a datmo frame called from inside llvmlite's callback
+    outputs._handler(signal.SIGTERM, inner)   # no raise
+    assert sent == [(outputs.RESEND_AFTER_S, os.kill, (os.getpid(), signal.SIGTERM))]
+    with pytest.raises(outputs.Terminated):
+        outputs._handler(signal.SIGTERM, types.SimpleNamespace(f_code=types.SimpleNamespace(co_filename=__file__),
+                                                               f_back=None))
