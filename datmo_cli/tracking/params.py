@@ -33,9 +33,8 @@ class TrackingParams(Section):
     # Kalman filter: constant velocity, white-noise acceleration (Kohler 1997)
     process_noise: float = param(2.0, _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
                                  "White-noise acceleration variance q (spectral density).")
-    person_process_noise: float = param(2.0, _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
-                                        "q of tracks fed mostly by legs (people keep their pace: a low q keeps "
-                                        "two people who cross apart).")
+    person_process_noise: float = param(4.0, _b(0, 1000, "(m/s²)²/Hz", _ACCELERATION, open_=True),
+                                        "q of tracks fed mostly by legs (people start and stop sharply).")
     measurement_noise: float = param(0.05, _b(0, 10, "m", _SIGMA, open_=True), "Sigma of a measured model centre.")
     leg_measurement_noise: float = param(0.2, _b(0, 10, "m", _SIGMA, open_=True),
                                          "Sigma when one leg stands for a person's centre.")
