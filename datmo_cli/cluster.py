@@ -126,16 +126,24 @@ class DaskExecutor(Executor):
                 ensure_warm()   # compile (or load) the kernels here once, so N workers do not compile them at once
 
                 # the workers' statistical profiler samples every thread's stack 100 times a second: off for a
-                # run's own cluster (pipeline code holds the GIL between kernels)
                 # run's own cluster (pipeline code holds the GIL between kernels); and one numba thread per worker
-                # process, as there is one worker per core
+                # process, as there is one worker per core. The nanny sets that variable in this process's own
+                # environment before it spawns a worker: it is put back after, or this process's numba would
+                # refuse to run kernels on its threads (NUMBA_NUM_THREADS changed after they were launched)
                 security = local_security(address)   # TLS: no other user of this machine can connect
-                with dask.config.set({"distributed.scheduler.allowed-failures": retries,
-                                      "distributed.worker.profile.enabled": False,
-                                      "distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1}):
-                    self.cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                                            host="127.0.0.1", protocol="tls://", security=security,
-                                                            dashboard_address=None, silence_logs=logging.ERROR)
+                own_threads = os.environ.get("NUMBA_NUM_THREADS")
+                try:
+                    with dask.config.set({"distributed.scheduler.allowed-failures": retries,
+                                          "distributed.worker.profile.enabled": False,
+                                          "distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1}):
+                        self.cluster = distributed.LocalCluster(
+                            n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", protocol="tls://",
+                            security=security, dashboard_address=None, silence_logs=logging.ERROR)
+                finally:
+                    if own_threads is None:
+                        os.environ.pop("NUMBA_NUM_THREADS", None)
+                    else:
+                        os.environ["NUMBA_NUM_THREADS"] = own_threads
                 self.client = distributed.Client(self.cluster, security=security)
             else:
                 self.client = distributed.Client(address, timeout=CONNECT_TIMEOUT, security=client_security(address))

@@ -50,8 +50,11 @@ def refused(address, **kw):
 
 
 tmp, src = Path(sys.argv[1]), sys.argv[2]
+import os
+os.environ.pop("NUMBA_NUM_THREADS", None)
 executor = DaskExecutor("local:1")
 try:
+    assert "NUMBA_NUM_THREADS" not in os.environ, "the workers' numba setting leaked into this process"
     address = executor.client.scheduler.address
     workers = list(executor.client.scheduler_info()["workers"])
     assert address.startswith("tls://127.0.0.1:") and workers and all(w.startswith("tls://") for w in workers)
