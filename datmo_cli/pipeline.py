@@ -237,39 +237,41 @@ def process_file(src: str | Path, out: str | Path, *, force: bool = False, confi
                              origin=origin, report=report)
 
 
+def _provenance_entries(log, key: str) -> list[dict]:
+    """The JSON objects a log's provenance records under `key`, its own datmo.params first, then its input's
+    ({} for one that does not parse as an object)."""
+    import json
+
+    out = []
+    for name in ("datmo.params", "input/datmo.params"):
+        raw = log.metadata.get(name, {}).get(key)
+        if raw:
+            try:
+                value = json.loads(raw)
+            except ValueError:
+                value = {}
+            out.append(value if isinstance(value, dict) else {})
+    return out
+
+
 def features_leg_model(log) -> str:
     """The leg detector a log's /datmo/features were made with, from its provenance ("paper" for features
     made before datmo had a detector, whose legs are the paper's circles)."""
-    import json
-
-    for name in ("datmo.params", "input/datmo.params"):
-        raw = log.metadata.get(name, {}).get("features")
-        if raw:
-            try:
-                return str(json.loads(raw).get("leg_model", "paper"))
-            except (ValueError, AttributeError):
-                return "paper"
-    return "paper"
+    entries = _provenance_entries(log, "features")
+    return str(entries[0].get("leg_model", "paper")) if entries else "paper"
 
 
 def features_leg_threshold(log, used: str) -> float:
     """The leg threshold of the detector a log's /datmo/features were made with (`used`, features_leg_model): the
     threshold its provenance records, else that of the model `used` names (0.5 for the paper's rule)."""
-    import json
-
     from .stages import leg_threshold_of
 
     if used == "paper":
         return 0.5
-    for name in ("datmo.params", "input/datmo.params"):
-        raw = log.metadata.get(name, {}).get("leg_model")
-        if raw:
-            try:
-                value = json.loads(raw).get("threshold")
-            except (ValueError, AttributeError):
-                value = None
-            if isinstance(value, int | float) and 0.0 <= value <= 1.0:
-                return float(value)
+    for entry in _provenance_entries(log, "leg_model"):
+        value = entry.get("threshold")
+        if isinstance(value, int | float) and 0.0 <= value <= 1.0:
+            return float(value)
     return leg_threshold_of(used)
 
 
