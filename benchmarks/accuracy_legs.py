@@ -54,53 +54,72 @@ def figure_lines() -> list[str]:
     clusters = T.DEFAULT_CLUSTERS if model is None else model.provenance.get("clusters", T.SEGMENT_CLUSTERS)
     lab, emp = T.tables_of(labelled, clusters=clusters), T.tables_of(empty, clusters=clusters)
     extra = []
-    if model is not None and model.provenance.get("simulated"):   # trained with --with-simulated: so here
+    if model is not None and model.provenance.get("simulated"):  # trained with --with-simulated: so here
         from datmo_cli.simulated import simulated_recordings
 
         extra = T.tables_of(simulated_recordings(), clusters=clusters)
     thin = T.tables_of([T.thinned(r, 2) for r in labelled], clusters=clusters)
     held_out = T.cross_validate(lab, emp, spec, extra=extra, thin=thin)
     seconds = time.perf_counter() - t0
-    how = ("datmo's segments" if clusters.get("method") == "segments" else
-           f"gap clusters ({clusters.get('gap')} m, >= {clusters.get('min_points')} points)")
-    lines = [f"estimator {spec.kind}, {spec.n_estimators} trees, depth {spec.max_depth}; clusters: {how}; "
-             f"threshold rule: {T.THRESHOLD_RULE}",
-             f"{'held out':26s} {'empty scanner':27s} thr   | precision     recall        AP            "
-             f"false/scan   (learned | circle rule)"]
+    how = (
+        "datmo's segments"
+        if clusters.get("method") == "segments"
+        else f"gap clusters ({clusters.get('gap')} m, >= {clusters.get('min_points')} points)"
+    )
+    lines = [
+        f"estimator {spec.kind}, {spec.n_estimators} trees, depth {spec.max_depth}; clusters: {how}; "
+        f"threshold rule: {T.THRESHOLD_RULE}",
+        f"{'held out':26s} {'empty scanner':27s} thr   | precision     recall        AP            "
+        f"false/scan   (learned | circle rule)",
+    ]
     for h in held_out:
         L, C = h.learned, h.circle
-        lines.append(f"{h.labelled:26s} {h.empty or '-':27s} {h.threshold:.2f} | {_f(L.precision)} | "
-                     f"{_f(C.precision)}  {_f(L.recall)} | {_f(C.recall)}  {_f(L.ap)} | {_f(C.ap)}  "
-                     f"{_f(L.false_per_scan, 2)} | {_f(C.false_per_scan, 2)}")
+        lines.append(
+            f"{h.labelled:26s} {h.empty or '-':27s} {h.threshold:.2f} | {_f(L.precision)} | "
+            f"{_f(C.precision)}  {_f(L.recall)} | {_f(C.recall)}  {_f(L.ap)} | {_f(C.ap)}  "
+            f"{_f(L.false_per_scan, 2)} | {_f(C.false_per_scan, 2)}"
+        )
     m = T.mean_figures(held_out)
     L, C = m["learned"], m["circle"]
-    lines.append(f"{'mean':54s} {m['threshold']:.2f} | {_f(L['precision'])} | {_f(C['precision'])}  "
-                 f"{_f(L['recall'])} | {_f(C['recall'])}  {_f(L['ap'])} | {_f(C['ap'])}  "
-                 f"{_f(L['false_per_scan'], 2)} | {_f(C['false_per_scan'], 2)}")
+    lines.append(
+        f"{'mean':54s} {m['threshold']:.2f} | {_f(L['precision'])} | {_f(C['precision'])}  "
+        f"{_f(L['recall'])} | {_f(C['recall'])}  {_f(L['ap'])} | {_f(C['ap'])}  "
+        f"{_f(L['false_per_scan'], 2)} | {_f(C['false_per_scan'], 2)}"
+    )
     ratio = L["ap"] / C["ap"] if C["ap"] > 0 else float("inf")
-    ok = (L["ap"] >= TARGETS["ap"], ratio >= TARGETS["ap_vs_circle"],
-          L["false_per_scan"] <= TARGETS["false_per_scan"])
-    lines.append(f"targets: mean AP >= {TARGETS['ap']:.2f} ({'met' if ok[0] else 'NOT met'}: {L['ap']:.3f}), "
-                 f">= {TARGETS['ap_vs_circle']:g}x the circle rule's ({'met' if ok[1] else 'NOT met'}: "
-                 f"{ratio:.2f}x), <= {TARGETS['false_per_scan']:g} false legs per empty scan "
-                 f"({'met' if ok[2] else 'NOT met'}: {L['false_per_scan']:.2f})")
+    ok = (L["ap"] >= TARGETS["ap"], ratio >= TARGETS["ap_vs_circle"], L["false_per_scan"] <= TARGETS["false_per_scan"])
+    lines.append(
+        f"targets: mean AP >= {TARGETS['ap']:.2f} ({'met' if ok[0] else 'NOT met'}: {L['ap']:.3f}), "
+        f">= {TARGETS['ap_vs_circle']:g}x the circle rule's ({'met' if ok[1] else 'NOT met'}: "
+        f"{ratio:.2f}x), <= {TARGETS['false_per_scan']:g} false legs per empty scan "
+        f"({'met' if ok[2] else 'NOT met'}: {L['false_per_scan']:.2f})"
+    )
     bins = T.RANGE_BINS_M
-    lines.append("recall at the fold's threshold by range (m) "
-                 + "  ".join(f"{lo:g}-{hi:g}" for lo, hi in zip(bins[:-1], bins[1:], strict=True))
-                 + "   | on the held-out recording thinned 2x (every other beam)")
+    lines.append(
+        "recall at the fold's threshold by range (m) "
+        + "  ".join(f"{lo:g}-{hi:g}" for lo, hi in zip(bins[:-1], bins[1:], strict=True))
+        + "   | on the held-out recording thinned 2x (every other beam)"
+    )
     for h in held_out:
-        lines.append(f"  {h.labelled:26s} " + "  ".join(_f(v) for v in h.recall_by_range)
-                     + f"   | {_f(h.thinned_recall)} (full {_f(h.learned.recall)})")
+        lines.append(
+            f"  {h.labelled:26s} "
+            + "  ".join(_f(v) for v in h.recall_by_range)
+            + f"   | {_f(h.thinned_recall)} (full {_f(h.learned.recall)})"
+        )
     full = float(np.mean([h.learned.recall for h in held_out]))
     thin_mean = float(np.mean([h.thinned_recall for h in held_out]))
     share = thin_mean / full if full > 0 else float("nan")
-    lines.append(f"target: recall on 2x-thinned held-out scans >= {TARGETS['thinned_vs_full']:g}x full "
-                 f"({'met' if share >= TARGETS['thinned_vs_full'] else 'NOT met'}: {thin_mean:.3f} / {full:.3f} "
-                 f"= {share:.2f}x)")
+    lines.append(
+        f"target: recall on 2x-thinned held-out scans >= {TARGETS['thinned_vs_full']:g}x full "
+        f"({'met' if share >= TARGETS['thinned_vs_full'] else 'NOT met'}: {thin_mean:.3f} / {full:.3f} "
+        f"= {share:.2f}x)"
+    )
     if model is not None:
         shipped = model.provenance.get("held_out", {}).get("mean", {}).get("learned", {})
-        lines.append(f"shipped model: threshold {model.threshold_p:.2f}, {model.n_trees} trees; its recorded mean "
-                     f"held-out AP {_f(shipped.get('ap'))} (this rerun: {_f(L['ap'])})")
+        lines.append(
+            f"shipped model: threshold {model.threshold_p:.2f}, {model.n_trees} trees; its recorded mean "
+            f"held-out AP {_f(shipped.get('ap'))} (this rerun: {_f(L['ap'])})"
+        )
     lines.append(f"{len(held_out)} folds, {T.cv_fits(len(lab), len(emp))} fits, {seconds:.0f} s")
     return lines
 

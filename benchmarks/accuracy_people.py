@@ -25,10 +25,10 @@ from datmo_cli.perception.egomotion import odometry_for
 from datmo_cli.stages import leg_threshold_of, run_features, track_run
 
 NEGATIVE_TOPICS = ("/left_scan", "/right_scan", "/rear_scan")
-PERSON_RADIUS = 0.5     # m, a labelled leg this near a confirmed person track is covered
-CONFIRM_TIME = 1.0      # s a person is in view before their legs count
-LINK = 0.6              # m, a label this near one of the scan before (within LINK_GAP s) is the same person's
-LINK_GAP = 0.5          # s
+PERSON_RADIUS = 0.5  # m, a labelled leg this near a confirmed person track is covered
+CONFIRM_TIME = 1.0  # s a person is in view before their legs count
+LINK = 0.6  # m, a label this near one of the scan before (within LINK_GAP s) is the same person's
+LINK_GAP = 0.5  # s
 
 
 def fold_models(folder: Path, quick: bool = False) -> tuple[dict[str, str], dict[str, str]]:
@@ -65,8 +65,14 @@ def tracked(run, leg_model: str):
     the leg model's own threshold."""
     params = {"leg_model": leg_model}
     odometry, _ = odometry_for(run, None, "auto")
-    return track_run(run, run_features(run, odometry, params), odometry=odometry, markers=False,
-                     learned=learned_legs(params), leg_threshold=leg_threshold_of(leg_model))
+    return track_run(
+        run,
+        run_features(run, odometry, params),
+        odometry=odometry,
+        markers=False,
+        learned=learned_legs(params),
+        leg_threshold=leg_threshold_of(leg_model),
+    )
 
 
 def longest_person(stamps: np.ndarray, tracks: list[np.ndarray]) -> tuple[float, int]:
@@ -140,9 +146,11 @@ def figures(folder: Path, quick: bool = False) -> dict:
     """Every figure of this module: {"negative"|"positive": {"held out"|"paper": ...}, "demo": {...}}."""
     by_bag, by_topic = fold_models(folder, quick)
     demo = LEGTRACKER / "demo_stationary_simple_environment.bag"
-    return {"negative": {"held out": negative_figures(by_topic), "paper": negative_figures("paper")},
-            "positive": {"held out": positive_figures(by_bag), "paper": positive_figures("paper")},
-            "demo": {m: demo_figures(demo, {"leg_model": m}) for m in ("default", "paper")}}
+    return {
+        "negative": {"held out": negative_figures(by_topic), "paper": negative_figures("paper")},
+        "positive": {"held out": positive_figures(by_bag), "paper": positive_figures("paper")},
+        "demo": {m: demo_figures(demo, {"leg_model": m}) for m in ("default", "paper")},
+    }
 
 
 def lines() -> list[str]:
@@ -158,15 +166,20 @@ def lines() -> list[str]:
         out.append(f"negative_2 {topic:11s} " + " | ".join(cells))
     pos = f["positive"]
     for name in pos["held out"]:
-        cells = [f"{m}: {pos[m][name][0]}/{pos[m][name][1]} ({pos[m][name][0] / max(pos[m][name][1], 1):.3f})"
-                 for m in models]
+        cells = [
+            f"{m}: {pos[m][name][0]}/{pos[m][name][1]} ({pos[m][name][0] / max(pos[m][name][1], 1):.3f})"
+            for m in models
+        ]
         out.append(f"{name:27s} legs covered " + " | ".join(cells))
     totals = {m: np.sum(list(pos[m].values()), axis=0) for m in models}
-    out.append("all positive bags: " + " | ".join(f"{m}: {totals[m][0] / max(totals[m][1], 1):.3f} of {totals[m][1]}"
-                                                 for m in models))
+    out.append(
+        "all positive bags: "
+        + " | ".join(f"{m}: {totals[m][0] / max(totals[m][1], 1):.3f} of {totals[m][1]}" for m in models)
+    )
     for m, d in f["demo"].items():
-        out.append(f"demo_stationary ({m}): {d['people']} person tracks, "
-                   f"{d['on_walls']} person/dynamic tracks on walls")
+        out.append(
+            f"demo_stationary ({m}): {d['people']} person tracks, {d['on_walls']} person/dynamic tracks on walls"
+        )
     return out
 
 
@@ -174,8 +187,11 @@ def main() -> None:
     if not Path(LEGTRACKER).exists():
         print_lines("People over time on real scans", [f"{LEGTRACKER}: absent"])
         return
-    print_lines("People over time on real scans (targets: empty rooms no person over 2 s; >= 0.85 of labelled legs "
-                "covered 1 s after the person appears; no person on a wall)", lines())
+    print_lines(
+        "People over time on real scans (targets: empty rooms no person over 2 s; >= 0.85 of labelled legs "
+        "covered 1 s after the person appears; no person on a wall)",
+        lines(),
+    )
 
 
 if __name__ == "__main__":

@@ -60,18 +60,24 @@ def simulated(name: str) -> list[str]:
     centre, radius, share = acc.leg_errors(f, truth, off)
     cols = acc.column_errors(f, truth, off)
     score = acc.landmark_score(f, truth, off, corner_scans=acc.corner_observed(run, truth, off, theta))
-    out = [f"{len(run)} scans x {run.geometry.n_beams} beams; per scan {c['segments']:.1f} segments, "
-           f"{c['lines']:.1f} lines, {c['circles']:.1f} circles, {c['blobs']:.1f} blobs"]
+    out = [
+        f"{len(run)} scans x {run.geometry.n_beams} beams; per scan {c['segments']:.1f} segments, "
+        f"{c['lines']:.1f} lines, {c['circles']:.1f} circles, {c['blobs']:.1f} blobs"
+    ]
     if len(ang):
-        out += [f"walls ({len(ang)} lines >= 0.5 m on a true wall): angle median "
-                f"{_vs(_stat(ang, 50), WALL_ANGLE_DEG, '°')}, p90 {_stat(ang, 90):.2f}°",
-                f"  rho median {_vs(_stat(rho, 50, 100), WALL_RHO * 100, 'cm')}, p90 {_stat(rho, 90, 100):.2f} cm"]
+        out += [
+            f"walls ({len(ang)} lines >= 0.5 m on a true wall): angle median "
+            f"{_vs(_stat(ang, 50), WALL_ANGLE_DEG, '°')}, p90 {_stat(ang, 90):.2f}°",
+            f"  rho median {_vs(_stat(rho, 50, 100), WALL_RHO * 100, 'cm')}, p90 {_stat(rho, 90, 100):.2f} cm",
+        ]
     else:
         out.append("walls: none matched")
     if len(centre):
-        out += [f"legs within 4 m: {share:.0%} of visible legs found as circles; centre median "
-                f"{_vs(_stat(centre, 50, 100), LEG_CENTRE * 100, 'cm')}",
-                f"  radius median {_vs(_stat(radius, 50, 100), LEG_RADIUS * 100, 'cm')}"]
+        out += [
+            f"legs within 4 m: {share:.0%} of visible legs found as circles; centre median "
+            f"{_vs(_stat(centre, 50, 100), LEG_CENTRE * 100, 'cm')}",
+            f"  radius median {_vs(_stat(radius, 50, 100), LEG_RADIUS * 100, 'cm')}",
+        ]
     else:
         out.append("legs within 4 m: none in the scene")
     if len(cols):
@@ -82,21 +88,22 @@ def simulated(name: str) -> list[str]:
     found = ", ".join(f"{k} {a}/{b}" for k, (a, b) in score.found.items())
     visible = sum(b for _, b in score.found.values())
     target = " (published targets are for hall)" if name != "hall" else ""
-    out += [f"landmarks found/visible: {found}",
-            f"  recall {_vs(100 * score.recall, 100 * LANDMARK_RECALL, '%', at_most=False) if visible else 'n/a'}"
-            f"{target}",
-            f"  spurious {score.spurious}/{score.defined} defined landmarks = "
-            f"{_vs(100 * score.spurious_share, 100 * LANDMARK_SPURIOUS, '%')}; undefined line ends "
-            f"{score.line_ends} ({score.line_ends_on_corners} on a true corner)"]
+    out += [
+        f"landmarks found/visible: {found}",
+        f"  recall {_vs(100 * score.recall, 100 * LANDMARK_RECALL, '%', at_most=False) if visible else 'n/a'}{target}",
+        f"  spurious {score.spurious}/{score.defined} defined landmarks = "
+        f"{_vs(100 * score.spurious_share, 100 * LANDMARK_SPURIOUS, '%')}; undefined line ends "
+        f"{score.line_ends} ({score.line_ends_on_corners} on a true corner)",
+    ]
     return out
 
 
 # --- synthetic scans ---------------------------------------------------------------------------------------
 
 GEOMETRY = ScanGeometry(-math.pi / 2, math.radians(0.5), 361, 0.0, 8.0, 0.0, 0.2, "laser")
-LEG = (2.0, math.radians(-30), 0.10)      # range of the centre, bearing, radius
+LEG = (2.0, math.radians(-30), 0.10)  # range of the centre, bearing, radius
 COLUMN = (3.0, math.radians(35), 0.20)
-WALLS = ((3.5, 0.0), (4.0, 25.0), (5.0, -40.0), (4.5, 70.0))   # distance (m), normal angle (deg)
+WALLS = ((3.5, 0.0), (4.0, 25.0), (5.0, -40.0), (4.5, 70.0))  # distance (m), normal angle (deg)
 N_SYNTH = 200
 
 
@@ -146,8 +153,10 @@ def circle_errors(f: RunFeatures, obj: tuple[float, float, float], match: float 
 
 
 def synthetic() -> list[str]:
-    out = [f"{N_SYNTH} scans each, 361 beams over 180°, σ = 1 cm; leg r = {LEG[2] * 100:.0f} cm at "
-           f"{LEG[0]:.0f} m, column r = {COLUMN[2] * 100:.0f} cm at {COLUMN[0]:.0f} m, in front of the wall"]
+    out = [
+        f"{N_SYNTH} scans each, 361 beams over 180°, σ = 1 cm; leg r = {LEG[2] * 100:.0f} cm at "
+        f"{LEG[0]:.0f} m, column r = {COLUMN[2] * 100:.0f} cm at {COLUMN[0]:.0f} m, in front of the wall"
+    ]
     for k, (rho, th) in enumerate(WALLS):
         f = extract_run(synthetic_run(rho, th, seed=k))
         ang, drho, wall_scans = wall_line_errors(f, rho, math.radians(th))
@@ -155,18 +164,21 @@ def synthetic() -> list[str]:
         cc, cr, col_scans = circle_errors(f, COLUMN)
         db = f.landmarks.final()
         kinds = ", ".join(f"{int((db['type'] == t).sum())} {LANDMARK_NAMES[t]}" for t in np.unique(db["type"]).tolist())
-        out += [f"wall at {rho} m, normal {th:+.0f}°: in {wall_scans}/{N_SYNTH} scans; angle median "
-                f"{_vs(_stat(ang, 50), WALL_ANGLE_DEG, '°')}, rho median {_vs(_stat(drho, 50, 100), 2, 'cm')}",
-                f"  leg at {LEG[0]} m: in {leg_scans}/{N_SYNTH} scans; centre median "
-                f"{_vs(_stat(lc, 50, 100), LEG_CENTRE * 100, 'cm')}, radius median "
-                f"{_vs(_stat(lr, 50, 100), LEG_RADIUS * 100, 'cm')}",
-                f"  column at {COLUMN[0]} m: in {col_scans}/{N_SYNTH} scans; centre median "
-                f"{_vs(_stat(cc, 50, 100), COLUMN_CENTRE * 100, 'cm')}, radius median {_stat(cr, 50, 100):.2f} cm",
-                f"  landmarks: {kinds or 'none'}"]
+        out += [
+            f"wall at {rho} m, normal {th:+.0f}°: in {wall_scans}/{N_SYNTH} scans; angle median "
+            f"{_vs(_stat(ang, 50), WALL_ANGLE_DEG, '°')}, rho median {_vs(_stat(drho, 50, 100), 2, 'cm')}",
+            f"  leg at {LEG[0]} m: in {leg_scans}/{N_SYNTH} scans; centre median "
+            f"{_vs(_stat(lc, 50, 100), LEG_CENTRE * 100, 'cm')}, radius median "
+            f"{_vs(_stat(lr, 50, 100), LEG_RADIUS * 100, 'cm')}",
+            f"  column at {COLUMN[0]} m: in {col_scans}/{N_SYNTH} scans; centre median "
+            f"{_vs(_stat(cc, 50, 100), COLUMN_CENTRE * 100, 'cm')}, radius median {_stat(cr, 50, 100):.2f} cm",
+            f"  landmarks: {kinds or 'none'}",
+        ]
     return out
 
 
 # --- real data ---------------------------------------------------------------------------------------------
+
 
 def scan_topics(bag: Path) -> list[str]:
     """Every sensor_msgs/LaserScan topic of a ROS bag."""
@@ -198,16 +210,22 @@ def real(path: Path, topic: str | None) -> str:
     per_scan = np.diff(f.landmarks.snap_offsets).mean() if len(run) else 0.0
     kinds = ", ".join(f"{int((db['type'] == t).sum())} {LANDMARK_NAMES[t]}" for t in np.unique(db["type"]).tolist())
     g = run.geometry
-    return (f"ok: {len(run)} scans x {g.n_beams} beams ({math.degrees(g.angle_increment):.2f}°), "
-            f"{len(run) / dt:,.0f} scans/s; per scan {c['lines']:.1f} lines, {c['circles']:.1f} circles, "
-            f"{c['blobs']:.1f} blobs, {per_scan:.1f} landmarks in the database; at the end {len(db)} "
-            f"({kinds or 'none'}) in the {f.landmark_frame} frame")
+    return (
+        f"ok: {len(run)} scans x {g.n_beams} beams ({math.degrees(g.angle_increment):.2f}°), "
+        f"{len(run) / dt:,.0f} scans/s; per scan {c['lines']:.1f} lines, {c['circles']:.1f} circles, "
+        f"{c['blobs']:.1f} blobs, {per_scan:.1f} landmarks in the database; at the end {len(db)} "
+        f"({kinds or 'none'}) in the {f.landmark_frame} frame"
+    )
 
 
 # the circle rule before the well-posedness tests (issue point 6): all four off
-BEFORE_CIRCLES = {"circle_min_coverage": 0, "circle_residual_ratio": 0, "circle_radius_margin": 0,
-                  "circle_lines_ratio": 0}
-BOUND = 0.005   # m; a radius within this of circle_radius_min or circle_radius_max (or beyond) is at a bound
+BEFORE_CIRCLES = {
+    "circle_min_coverage": 0,
+    "circle_residual_ratio": 0,
+    "circle_radius_margin": 0,
+    "circle_lines_ratio": 0,
+}
+BOUND = 0.005  # m; a radius within this of circle_radius_min or circle_radius_max (or beyond) is at a bound
 
 
 def circle_figures(f: RunFeatures, p: FeatureParams) -> str:
@@ -217,8 +235,10 @@ def circle_figures(f: RunFeatures, p: FeatureParams) -> str:
     if not len(c):
         return "0.00/scan"
     bound = (c["radius"] <= p.circle_radius_min + BOUND) | (c["radius"] >= p.circle_radius_max - BOUND)
-    return (f"{len(c) / max(len(f), 1):.2f}/scan, max {int(per.max())}, {np.mean(bound):.0%} at a radius bound, "
-            f"{np.mean(c['n_points'] == 3):.0%} of 3 points")
+    return (
+        f"{len(c) / max(len(f), 1):.2f}/scan, max {int(per.max())}, {np.mean(bound):.0%} at a radius bound, "
+        f"{np.mean(c['n_points'] == 3):.0%} of 3 points"
+    )
 
 
 def carmen_circles() -> list[str]:
@@ -226,9 +246,11 @@ def carmen_circles() -> list[str]:
     from datmo_cli.log.importers import import_log
 
     before, after = FeatureParams().replace(**BEFORE_CIRCLES), FeatureParams()
-    out = [f"before: {', '.join(f'{k} 0' for k in BEFORE_CIRCLES)}; after: the defaults "
-           f"({', '.join(f'{k} {getattr(after, k):g}' for k in BEFORE_CIRCLES)}); at a bound: radius within "
-           f"{BOUND * 100:g} cm of circle_radius_min/max"]
+    out = [
+        f"before: {', '.join(f'{k} 0' for k in BEFORE_CIRCLES)}; after: the defaults "
+        f"({', '.join(f'{k} {getattr(after, k):g}' for k in BEFORE_CIRCLES)}); at a bound: radius within "
+        f"{BOUND * 100:g} cm of circle_radius_min/max"
+    ]
     for path in sorted((SHARED / "carmen").glob("*.log.gz")):
         run = import_log(path, None).run
         b, a = (circle_figures(extract_run(run, p, landmarks=False), p) for p in (before, after))
@@ -243,7 +265,7 @@ def main() -> None:
     if not SHARED.is_dir():
         print_lines("Perception on real logs", [f"{SHARED} is absent: real-data figures skipped"])
         return
-    extract_run(synthetic_run(4.0, 0.0).slice(0, 5))   # warm-up before timing
+    extract_run(synthetic_run(4.0, 0.0).slice(0, 5))  # warm-up before timing
     lines, failed = [], 0
     for path, topic in real_logs():
         label = f"{path.parent.name}/{path.name}{' ' + topic if topic else ''}"

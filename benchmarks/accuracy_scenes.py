@@ -35,12 +35,19 @@ import numpy as np
 from benchmarks.common import print_lines
 from datmo_cli.log.vocabulary import CLASS_PERSON, MOBILITY_DYNAMIC, MOBILITY_STATIC, STATUS_CONFIRMED
 
-MATCH_RADIUS = 0.5    # m
-LEADER_ID = 1         # the following scene's first [[person]]
-TARGETS = {"leader person share": (">=", 0.95), "passers person share": (">=", 0.90), "people MOTA": (">=", 0.90),
-           "ID switches per person-minute": ("<=", 1.0), "longest dynamic on a static thing s": ("<=", 1.0),
-           "standing people static and person": (">=", 0.90), "walking people dynamic": (">=", 0.90),
-           "lab-drive people MOTA": (">=", 0.80), "ROS 1 bag gives the same tracks": ("==", True)}
+MATCH_RADIUS = 0.5  # m
+LEADER_ID = 1  # the following scene's first [[person]]
+TARGETS = {
+    "leader person share": (">=", 0.95),
+    "passers person share": (">=", 0.90),
+    "people MOTA": (">=", 0.90),
+    "ID switches per person-minute": ("<=", 1.0),
+    "longest dynamic on a static thing s": ("<=", 1.0),
+    "standing people static and person": (">=", 0.90),
+    "walking people dynamic": (">=", 0.90),
+    "lab-drive people MOTA": (">=", 0.80),
+    "ROS 1 bag gives the same tracks": ("==", True),
+}
 
 
 @dataclass
@@ -105,8 +112,16 @@ def load(truth_log: Path, tracked_log: Path) -> SceneRun:
     if not np.array_equal(gt.stamps, tr.stamps):
         raise ValueError(f"{tracked_log}: its tracks are not stamped like {truth_log}'s ground truth")
     period = float(np.median(np.diff(gt.stamps))) * 1e-9 if len(gt.stamps) > 1 else 0.1
-    return SceneRun(gt.offsets["objects"], gt.items["objects"], tr.offsets["tracks"], tr.items["tracks"], period,
-                    gt.stamps, gt.scalars.get("sensor_theta"), Path(tracked_log))
+    return SceneRun(
+        gt.offsets["objects"],
+        gt.items["objects"],
+        tr.offsets["tracks"],
+        tr.items["tracks"],
+        period,
+        gt.stamps,
+        gt.scalars.get("sensor_theta"),
+        Path(tracked_log),
+    )
 
 
 def scene_run(scene: str, folder: Path, *, seed: int = 0, duration: float | None = None, config=None) -> SceneRun:
@@ -137,11 +152,12 @@ def match(run: SceneRun, target) -> np.ndarray:
     out = np.full(len(run.gt), -1, np.int64)
     for k in range(run.frames):
         g0, t0 = run.gt_offsets[k], run.tr_offsets[k]
-        g, t = run.gt[g0:run.gt_offsets[k + 1]], run.tracks[t0:run.tr_offsets[k + 1]]
+        g, t = run.gt[g0 : run.gt_offsets[k + 1]], run.tracks[t0 : run.tr_offsets[k + 1]]
         gi = np.flatnonzero(target(g) & (g["visible"] == 1))
         ti = np.flatnonzero(t["status"] == STATUS_CONFIRMED)
-        r, c = _assign(t["x"][ti].astype(float), t["y"][ti].astype(float), g["x"][gi].astype(float),
-                       g["y"][gi].astype(float))
+        r, c = _assign(
+            t["x"][ti].astype(float), t["y"][ti].astype(float), g["x"][gi].astype(float), g["y"][gi].astype(float)
+        )
         out[g0 + gi[c]] = t0 + ti[r]
     return out
 
@@ -176,34 +192,55 @@ def people_mota(run: SceneRun) -> dict:
 
     n = run.frames
     stamps = run.stamps if run.stamps is not None else np.arange(n, dtype=np.int64) * int(run.period * 1e9)
-    gt = ev.Frames(np.asarray(stamps, np.int64), np.asarray(run.gt_offsets, np.int64), run.gt["id"].astype(np.int64),
-                   run.gt["x"].astype(np.float64), run.gt["y"].astype(np.float64),
-                   run.gt["classification"].astype(np.int64))
+    gt = ev.Frames(
+        np.asarray(stamps, np.int64),
+        np.asarray(run.gt_offsets, np.int64),
+        run.gt["id"].astype(np.int64),
+        run.gt["x"].astype(np.float64),
+        run.gt["y"].astype(np.float64),
+        run.gt["classification"].astype(np.int64),
+    )
     target = _people(run.gt) & (run.gt["visible"] == 1)
     theta = np.zeros(n) if run.sensor_theta is None else np.asarray(run.sensor_theta, np.float64)
     frame = np.repeat(np.arange(n), np.diff(run.gt_offsets))
     other = ~target
     counts = np.bincount(frame[other], minlength=n)
-    regions = ev.Regions(np.concatenate([[0], np.cumsum(counts)]).astype(np.int64), gt.x[other], gt.y[other],
-                         run.gt["orientation"][other].astype(np.float64) - theta[frame[other]],
-                         run.gt["length"][other].astype(np.float64) / 2, run.gt["width"][other].astype(np.float64) / 2)
+    regions = ev.Regions(
+        np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        gt.x[other],
+        gt.y[other],
+        run.gt["orientation"][other].astype(np.float64) - theta[frame[other]],
+        run.gt["length"][other].astype(np.float64) / 2,
+        run.gt["width"][other].astype(np.float64) / 2,
+    )
     hyps = ev.track_frames(stamps, run.tr_offsets, run.tracks)
     scores = ev.evaluate(gt.select(target), hyps, regions=regions, match_radius=MATCH_RADIUS)
     person = scores.get("person", {})
     minutes = float(target.sum()) * run.period / 60.0
     switches = person.get("num_switches", 0)
-    return {"mota": person.get("mota"), "switches": switches, "person_minutes": minutes,
-            "switches_per_person_minute": switches / minutes if minutes > 0 else None}
+    return {
+        "mota": person.get("mota"),
+        "switches": switches,
+        "person_minutes": minutes,
+        "switches_per_person_minute": switches / minutes if minutes > 0 else None,
+    }
 
 
-GT_CLASSES = {1: "person", 2: "circle object", 3: "rectangular object", 4: "column", 5: "bench", 6: "wall corner",
-              7: "wall"}
+GT_CLASSES = {
+    1: "person",
+    2: "circle object",
+    3: "rectangular object",
+    4: "column",
+    5: "bench",
+    6: "wall corner",
+    7: "wall",
+}
 
 
 def nearest(run: SceneRun, k: int, x: float, y: float) -> str:
     """The ground-truth object of scan k nearest to (x, y) (sensor frame; distance to its extent, an oriented
     length x width rectangle), e.g. "wall 23 at 0.04 m"."""
-    g = run.gt[run.gt_offsets[k]:run.gt_offsets[k + 1]]
+    g = run.gt[run.gt_offsets[k] : run.gt_offsets[k + 1]]
     if not len(g):
         return "nothing"
     theta = 0.0 if run.sensor_theta is None else float(run.sensor_theta[k])
@@ -225,7 +262,7 @@ def longest_dynamic_on_static(run: SceneRun) -> dict:
     on_moving = np.zeros(len(run.tracks), bool)
     on_moving[moving[moving >= 0]] = True
     best = {"seconds": 0.0, "track": None, "at_s": None, "on": None}
-    since: dict[int, tuple[int, int]] = {}       # track id -> (first scan of its run, first row)
+    since: dict[int, tuple[int, int]] = {}  # track id -> (first scan of its run, first row)
     for k in range(run.frames):
         rows = np.arange(run.tr_offsets[k], run.tr_offsets[k + 1])
         t = run.tracks[rows]
@@ -279,22 +316,31 @@ def following_figures(folder: Path, *, seed: int = 0, duration: float | None = N
     matched = match(run, _people)
     passers = [i for i in people_ids(run) if i != LEADER_ID]
     mota = people_mota(run)
-    return {"leader person share": person_share(run, [LEADER_ID], matched),
-            "passers person share": person_share(run, passers, matched), "people MOTA": mota["mota"],
-            "ID switches per person-minute": mota["switches_per_person_minute"], "_mota": mota,
-            "_scans": run.frames}
+    return {
+        "leader person share": person_share(run, [LEADER_ID], matched),
+        "passers person share": person_share(run, passers, matched),
+        "people MOTA": mota["mota"],
+        "ID switches per person-minute": mota["switches_per_person_minute"],
+        "_mota": mota,
+        "_scans": run.frames,
+    }
 
 
-def lab_drive_figures(folder: Path, *, seed: int = 0, duration: float | None = None, config=None,
-                      bag: bool = True) -> dict:
+def lab_drive_figures(
+    folder: Path, *, seed: int = 0, duration: float | None = None, config=None, bag: bool = True
+) -> dict:
     folder = Path(folder)
     run = scene_run("lab-drive", folder, seed=seed, duration=duration, config=config)
     matched = match(run, _people)
     mota = people_mota(run)
-    out = {"longest dynamic on a static thing s": longest_dynamic_on_static(run),
-           "standing people static and person": standing_static_person_share(run, matched),
-           "walking people dynamic": walking_dynamic_share(run, matched), "lab-drive people MOTA": mota["mota"],
-           "_mota": mota, "_scans": run.frames}
+    out = {
+        "longest dynamic on a static thing s": longest_dynamic_on_static(run),
+        "standing people static and person": standing_static_person_share(run, matched),
+        "walking people dynamic": walking_dynamic_share(run, matched),
+        "lab-drive people MOTA": mota["mota"],
+        "_mota": mota,
+        "_scans": run.frames,
+    }
     if bag:
         src = simulate("lab-drive", folder / "lab-drive-robot.bag", seed=seed, duration=duration)
         tracked = process(src, folder / "lab-drive-robot-tracked.mcap", config)
@@ -337,8 +383,10 @@ def lines(folder: Path) -> list[str]:
         out.append(f"  {name:38s} {text:>8s}   target {op} {target:g}   {_verdict(name, v)}")
     same, n_same, n = lab["ROS 1 bag gives the same tracks"]
     name = "ROS 1 bag gives the same tracks"
-    out.append(f"  {name:38s} {'yes' if same else 'no':>8s}   target yes   {_verdict(name, same)} "
-               f"({n_same} of {n} Tracks messages identical)")
+    out.append(
+        f"  {name:38s} {'yes' if same else 'no':>8s}   target yes   {_verdict(name, same)} "
+        f"({n_same} of {n} Tracks messages identical)"
+    )
     return out
 
 

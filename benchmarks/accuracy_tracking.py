@@ -51,21 +51,32 @@ def score_sim(name: str, source: str, feature_params: dict | None = None) -> dic
     run, odom, truth = load_sim(name)
     gt_off, gt = truth.offsets["objects"], truth.items["objects"]
     if source in ("ideal", "degraded"):
-        feats = acc.ideal_features(gt_off, gt, np.random.default_rng(0), noise=0.01 if source == "ideal" else 0.02,
-                                   degraded=source == "degraded")
+        feats = acc.ideal_features(
+            gt_off,
+            gt,
+            np.random.default_rng(0),
+            noise=0.01 if source == "ideal" else 0.02,
+            degraded=source == "degraded",
+        )
     else:
         feats = run_features(run, odom, feature_params)
     t0 = time.perf_counter()
-    tracked = track_run(run, feats, odometry=odom, markers=False,
-                        learned=source == "datmo" and learned_legs(feature_params))
+    tracked = track_run(
+        run, feats, odometry=odom, markers=False, learned=source == "datmo" and learned_legs(feature_params)
+    )
     seconds = time.perf_counter() - t0
     off, items = tracked.all_tracks()
-    g, regions, hy = ev.frames_from_channels(truth.stamps, gt_off, gt, truth.scalars.get("sensor_theta"),
-                                             tracked.stamps, off, items)
+    g, regions, hy = ev.frames_from_channels(
+        truth.stamps, gt_off, gt, truth.scalars.get("sensor_theta"), tracked.stamps, off, items
+    )
     scores = ev.evaluate(g, hy, regions=regions)
     tid, tcls, gid, gcls = acc.matched_targets(gt_off, gt, off, items)
-    out = {"scores": scores, "class_accuracy": acc.class_accuracy(tcls, gcls, gid), "seconds": seconds,
-           "scans": len(run)}
+    out = {
+        "scores": scores,
+        "class_accuracy": acc.class_accuracy(tcls, gcls, gid),
+        "seconds": seconds,
+        "scans": len(run),
+    }
     dyn = items[(items["status"] == STATUS_CONFIRMED) & (items["mobility"] == MOBILITY_DYNAMIC)]
     out["confirmed_dynamic_tracks"] = len(np.unique(dyn["id"]))
     platforms = np.unique(gt["id"][gt["classification"] == CLASS_CIRCLE_OBJECT])
@@ -90,14 +101,18 @@ def sim_lines(source: str, feature_params: dict | None = None) -> list[str]:
         r = score_sim(name, source, feature_params)
         s = r["scores"]
         people = s.get("person", {})
-        line = (f"{name:9s} people MOTA {_fmt(people.get('mota'))} IDF1 {_fmt(people.get('idf1'))} "
-                f"HOTA {_fmt(people.get('hota'))} switches {people.get('num_switches', 'n/a')} | "
-                f"all MOTA {_fmt(s['all']['mota'])} IDF1 {_fmt(s['all']['idf1'])} HOTA {_fmt(s['all']['hota'])} "
-                f"(DetA {_fmt(s['all']['deta'])}, AssA {_fmt(s['all']['assa'])}) | "
-                f"class right {_fmt(r['class_accuracy'])}")
+        line = (
+            f"{name:9s} people MOTA {_fmt(people.get('mota'))} IDF1 {_fmt(people.get('idf1'))} "
+            f"HOTA {_fmt(people.get('hota'))} switches {people.get('num_switches', 'n/a')} | "
+            f"all MOTA {_fmt(s['all']['mota'])} IDF1 {_fmt(s['all']['idf1'])} HOTA {_fmt(s['all']['hota'])} "
+            f"(DetA {_fmt(s['all']['deta'])}, AssA {_fmt(s['all']['assa'])}) | "
+            f"class right {_fmt(r['class_accuracy'])}"
+        )
         if "platform_switches" in r and name == "hall":
-            line += (f" | platform: {r['platform_switches']} id switches, circle object "
-                     f"{_fmt(r['platform_as_circle'])} of the time")
+            line += (
+                f" | platform: {r['platform_switches']} id switches, circle object "
+                f"{_fmt(r['platform_as_circle'])} of the time"
+            )
         if name == "static":
             line += f" | confirmed dynamic tracks {r['confirmed_dynamic_tracks']}"
         lines.append(line)
@@ -118,8 +133,16 @@ def read_ros1_scans(path: Path, topic: str) -> tuple[ScanRun, np.ndarray]:
             msg = reader.deserialize(raw, conn.msgtype)
             log_times.append(log_time)
             if geom is None:
-                geom = ScanGeometry(float(msg.angle_min), float(msg.angle_increment), len(msg.ranges),
-                                    float(msg.range_min), float(msg.range_max), 0.0, 0.0, msg.header.frame_id)
+                geom = ScanGeometry(
+                    float(msg.angle_min),
+                    float(msg.angle_increment),
+                    len(msg.ranges),
+                    float(msg.range_min),
+                    float(msg.range_max),
+                    0.0,
+                    0.0,
+                    msg.header.frame_id,
+                )
             stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
             ranges.append(np.asarray(msg.ranges, np.float32))
     return ScanRun(np.array(stamps, np.int64), np.stack(ranges), geom), np.array(log_times, np.int64)
@@ -162,11 +185,14 @@ def demo_figures(path: Path, feature_params: dict | None = None) -> dict:
         warnings.simplefilter("ignore", RuntimeWarning)
         background = np.nanmedian(np.where(np.isfinite(run.ranges), run.ranges, np.nan), axis=0)
     rng = np.hypot(conf["x"], conf["y"])
-    beam = np.clip(np.rint((np.arctan2(conf["y"], conf["x"]) - run.geometry.angle_min)
-                           / run.geometry.angle_increment).astype(int), 0, run.geometry.n_beams - 1)
+    beam = np.clip(
+        np.rint((np.arctan2(conf["y"], conf["x"]) - run.geometry.angle_min) / run.geometry.angle_increment).astype(int),
+        0,
+        run.geometry.n_beams - 1,
+    )
     near = np.abs(rng - background[beam]) < 0.25
     suspect = (conf["mobility"] == MOBILITY_DYNAMIC) | (conf["classification"] == CLASS_PERSON)
-    wall_dynamic = []   # tracks that stay on the background all their life: walls, not passers-by
+    wall_dynamic = []  # tracks that stay on the background all their life: walls, not passers-by
     for i in np.unique(conf["id"][suspect]).tolist():
         mine = conf["id"] == i
         span = np.hypot(np.ptp(conf["x"][mine]), np.ptp(conf["y"][mine]))
@@ -180,8 +206,10 @@ def demo_lines(feature_params: dict | None = None) -> list[str]:
     if not path.exists():
         return [f"{path}: absent"]
     f = demo_figures(path, feature_params)
-    return [f"demo_stationary: {f['scans']} scans, {f['people']} person tracks confirmed, "
-            f"{f['on_walls']} confirmed person/dynamic tracks on the walls"]
+    return [
+        f"demo_stationary: {f['scans']} scans, {f['people']} person tracks confirmed, "
+        f"{f['on_walls']} confirmed person/dynamic tracks on the walls"
+    ]
 
 
 def positive_lines(feature_params: dict | None = None) -> list[str]:
@@ -193,8 +221,9 @@ def positive_lines(feature_params: dict | None = None) -> list[str]:
         tracked = track_run(run, feats, markers=False, learned=learned_legs(feature_params))
         hit, total = acc.leg_coverage(legs, [f.circles for f in feats], tracked.tracks)
         hit_all, total_all = hit_all + hit, total_all + total
-        out.append(f"{path.name}: {hit}/{total} labelled legs in a leg circle or person track "
-                   f"({hit / max(total, 1):.3f})")
+        out.append(
+            f"{path.name}: {hit}/{total} labelled legs in a leg circle or person track ({hit / max(total, 1):.3f})"
+        )
     if total_all:
         out.append(f"all positive bags: {hit_all / total_all:.3f} of {total_all} labelled legs")
     return out
@@ -202,13 +231,16 @@ def positive_lines(feature_params: dict | None = None) -> list[str]:
 
 def main() -> None:
     print_lines("Tracking accuracy with ideal features from ground truth (the tracker alone)", sim_lines("ideal"))
-    print_lines("... with degraded ideal features (hidden and merged legs, 5 % missed, 2 cm noise)",
-                sim_lines("degraded"))
+    print_lines(
+        "... with degraded ideal features (hidden and merged legs, 5 % missed, 2 cm noise)", sim_lines("degraded")
+    )
     if not have_perception():
         print_lines("Tracking accuracy with datmo features", ["skipped: datmo_cli.perception.features is absent"])
         return
-    targets = ("targets: hall people MOTA >= 0.90, IDF1 >= 0.85; crowd6 MOTA >= 0.75; class right >= 0.95; "
-               "static: no confirmed dynamic track")
+    targets = (
+        "targets: hall people MOTA >= 0.90, IDF1 >= 0.85; crowd6 MOTA >= 0.75; class right >= 0.95; "
+        "static: no confirmed dynamic track"
+    )
     print_lines(f"Tracking accuracy with datmo features, perception defaults ({targets})", sim_lines("datmo"))
     if LEGTRACKER.exists():
         print_lines("Real data: legtracker bags, perception defaults", demo_lines() + positive_lines())

@@ -37,7 +37,7 @@ def time_batch(inputs: list[str], executor, tmp: Path) -> tuple[float, int]:
     return seconds, sum(r["scans"] for r in records)
 
 
-BUSY: list[float] = []   # per batch run: the tasks' summed seconds over the batch's wall time (tasks at once)
+BUSY: list[float] = []  # per batch run: the tasks' summed seconds over the batch's wall time (tasks at once)
 
 
 def local_batch(inputs: list[str], tmp: Path) -> tuple[float, int]:
@@ -47,12 +47,20 @@ def local_batch(inputs: list[str], tmp: Path) -> tuple[float, int]:
     import subprocess
     import sys
 
-    code = ("import json, sys; from pathlib import Path; from datmo_cli.batch import LocalExecutor, ensure_warm; "
-            "from benchmarks.bench_batch import time_batch; ensure_warm(); "
-            "print(json.dumps(time_batch(sys.argv[1:], LocalExecutor(1), Path(sys.argv[1]).parent)))")
+    code = (
+        "import json, sys; from pathlib import Path; from datmo_cli.batch import LocalExecutor, ensure_warm; "
+        "from benchmarks.bench_batch import time_batch; ensure_warm(); "
+        "print(json.dumps(time_batch(sys.argv[1:], LocalExecutor(1), Path(sys.argv[1]).parent)))"
+    )
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    done = subprocess.run([sys.executable, "-c", code, *inputs], capture_output=True, text=True, env=env, check=True,
-                          cwd=Path(__file__).resolve().parent.parent)
+    done = subprocess.run(
+        [sys.executable, "-c", code, *inputs],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+        cwd=Path(__file__).resolve().parent.parent,
+    )
     seconds, scans = json.loads(done.stdout.strip().splitlines()[-1])
     return seconds, scans
 
@@ -92,7 +100,7 @@ def main() -> None:
                 executors[n] = DaskExecutor(f"local:{n}")
                 started[n] = time.perf_counter() - t0
             noop = noop_round_trip(executors[1])
-            for _ in range(REPEAT):        # interleaved, so a busy spell of the machine hits every setting alike
+            for _ in range(REPEAT):  # interleaved, so a busy spell of the machine hits every setting alike
                 seconds, scans = local_batch(inputs, tmp)
                 best["local"] = min(best["local"], seconds)
                 for n in (1, 2):
@@ -103,19 +111,33 @@ def main() -> None:
             for ex in executors.values():
                 ex.close()
     rows = [Row("local --jobs 1", scans, best["local"], f"{best['local'] / N_INPUTS:.3f} s per input")]
-    rows += [Row(f"--scheduler local:{n}", scans, best[n],
-                 f"{best[n] / N_INPUTS:.3f} s per input; cluster start + warm-up {started[n]:.1f} s") for n in (1, 2)]
+    rows += [
+        Row(
+            f"--scheduler local:{n}",
+            scans,
+            best[n],
+            f"{best[n] / N_INPUTS:.3f} s per input; cluster start + warm-up {started[n]:.1f} s",
+        )
+        for n in (1, 2)
+    ]
     speedup = best[1] / best[2]
     overhead = (best[1] - best["local"]) / N_INPUTS
-    print_table(f"Batch throughput: {N_INPUTS} inputs of {SAMPLE.name} ({scans // N_INPUTS} scans each), "
-                f"{os.cpu_count()} cores, best of {REPEAT}", rows)
-    print_lines("Batch targets", [
-        f"2 workers / 1 worker throughput: {speedup:.2f}x (target >= 1.7x on 2 cores); tasks running at once "
-        f"(summed task time / wall time): {busy[1]:.2f} on 1 worker, {busy[2]:.2f} on 2",
-        f"scheduler overhead per input (local:1 against --jobs 1): {overhead:+.3f} s (target < 0.2 s); an empty "
-        f"task's round trip from this client: {1000 * noop:.1f} ms",
-        f"load average while measuring: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (figures need idle cores)",
-    ])
+    print_table(
+        f"Batch throughput: {N_INPUTS} inputs of {SAMPLE.name} ({scans // N_INPUTS} scans each), "
+        f"{os.cpu_count()} cores, best of {REPEAT}",
+        rows,
+    )
+    print_lines(
+        "Batch targets",
+        [
+            f"2 workers / 1 worker throughput: {speedup:.2f}x (target >= 1.7x on 2 cores); tasks running at once "
+            f"(summed task time / wall time): {busy[1]:.2f} on 1 worker, {busy[2]:.2f} on 2",
+            f"scheduler overhead per input (local:1 against --jobs 1): {overhead:+.3f} s (target < 0.2 s); an empty "
+            f"task's round trip from this client: {1000 * noop:.1f} ms",
+            f"load average while measuring: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores "
+            "(figures need idle cores)",
+        ],
+    )
 
 
 if __name__ == "__main__":

@@ -26,8 +26,17 @@ from .common import print_lines
 ROOT = Path(__file__).resolve().parent.parent
 SOURCES = ("pyproject.toml", "README.md", "LICENSE", "MANIFEST.in", "datmo_cli")
 # distributions a plain install must not pull (normalised names; "opencv" stands for every opencv-* wheel)
-HEAVY = ("opencv", "pandas", "matplotlib", "trackeval", "motmetrics", "scikit-learn", "scipy", "filterpy",
-         "pycocotools")
+HEAVY = (
+    "opencv",
+    "pandas",
+    "matplotlib",
+    "trackeval",
+    "motmetrics",
+    "scikit-learn",
+    "scipy",
+    "filterpy",
+    "pycocotools",
+)
 
 
 def normalise(name: str) -> str:
@@ -74,7 +83,7 @@ def main() -> None:
         seconds = time.perf_counter() - t0
         listed = json.loads(run([*pip, "list", "--format", "json"]).stdout)
         names = [p["name"] for p in listed]
-        size = disk_mb(d / "venv")   # as installed (the runs below add numba's cache and .pyc files)
+        size = disk_mb(d / "venv")  # as installed (the runs below add numba's cache and .pyc files)
         site = next((d / "venv" / "lib").glob("python*/site-packages"))
         site_size, llvm = disk_mb(site), disk_mb(site / "llvmlite")
         with zipfile.ZipFile(wheel) as z:
@@ -85,8 +94,7 @@ def main() -> None:
         out = d / "out"
         ok, failure = True, []
         try:
-            run([datmo, "run", str(ROOT / "sample_logs" / "hall.mcap"), "-o", str(out), "-q", "--no-report"],
-                cwd=d)
+            run([datmo, "run", str(ROOT / "sample_logs" / "hall.mcap"), "-o", str(out), "-q", "--no-report"], cwd=d)
             run([datmo, "report", str(out / "hall.mcap"), "--format", "csv"], cwd=d)
         except subprocess.CalledProcessError as exc:
             ok = False

@@ -20,11 +20,14 @@ from datmo_cli.perception.params import FeatureParams
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared" / "data"
 TARGET = 1.25
-BEFORE = FeatureParams(leg_model="paper").replace(circle_min_coverage=0, circle_residual_ratio=0,
-                                                   circle_radius_margin=0, circle_lines_ratio=0)
-CONFIGS = (("before the detector (cd981b7's rule)", BEFORE), ("well-posed circles, paper's legs",
-                                                              FeatureParams(leg_model="paper")),
-           ("  + leg detector (shipped model)", FeatureParams()))
+BEFORE = FeatureParams(leg_model="paper").replace(
+    circle_min_coverage=0, circle_residual_ratio=0, circle_radius_margin=0, circle_lines_ratio=0
+)
+CONFIGS = (
+    ("before the detector (cd981b7's rule)", BEFORE),
+    ("well-posed circles, paper's legs", FeatureParams(leg_model="paper")),
+    ("  + leg detector (shipped model)", FeatureParams()),
+)
 
 
 def logs() -> list[tuple[str, object]]:
@@ -45,7 +48,7 @@ def logs() -> list[tuple[str, object]]:
 
 def main() -> None:
     runs = logs()
-    for _, run in runs:   # warm-up: load (or compile) every kernel
+    for _, run in runs:  # warm-up: load (or compile) every kernel
         for _, p in CONFIGS:
             extract_run(ScanRun(run.stamps[:20], run.ranges[:20], run.geometry), p, landmarks=False)
     saved = one_core()
@@ -57,8 +60,10 @@ def main() -> None:
             for (label, _), t in zip(CONFIGS, times, strict=True):
                 rows.append(Row(f"{name}: {label}", n, t, f"{t / times[0]:.2f}x before"))
             ratio = times[2] / times[0]
-            verdicts.append(f"{name}: {1e6 * times[0] / n:.1f} -> {1e6 * times[2] / n:.1f} µs/scan with the detector, "
-                            f"{ratio:.2f}x (target <= {TARGET:.2f}x: {'met' if ratio <= TARGET else 'NOT met'})")
+            verdicts.append(
+                f"{name}: {1e6 * times[0] / n:.1f} -> {1e6 * times[2] / n:.1f} µs/scan with the detector, "
+                f"{ratio:.2f}x (target <= {TARGET:.2f}x: {'met' if ratio <= TARGET else 'NOT met'})"
+            )
     finally:
         if saved is not None:
             os.sched_setaffinity(0, saved)

@@ -41,14 +41,16 @@ def bench_parser(n: int = 2000, chunk: int = 4096) -> tuple[Row, float]:
 
     raw, _ = _telegram()
     rng = np.random.default_rng(1)
-    garbage = [rng.integers(0, 256, int(k), np.uint8).tobytes() if k else b""
-               for k in rng.integers(0, 2, n) * rng.integers(1, 20, n)]
+    garbage = [
+        rng.integers(0, 256, int(k), np.uint8).tobytes() if k else b""
+        for k in rng.integers(0, 2, n) * rng.integers(1, 20, n)
+    ]
     stream = b"".join(g + raw for g in garbage)
 
     def run() -> None:
         parser = P.FrameParser()
         for i in range(0, len(stream), chunk):
-            parser.feed(stream[i:i + chunk])
+            parser.feed(stream[i : i + chunk])
         assert parser.stats.frames == n
 
     seconds = best_of(run)
@@ -70,10 +72,17 @@ def bench_record(n: int, realtime: bool) -> Row:
         result = record(driver, writer, max_scans=n)
         total = time.perf_counter() - t0
         got = len(mcapio.read_run(Path(d) / "run.mcap"))
-    note = (f"scan period (37.5 Hz); {total - result.seconds:.2f} s connect+stop" if realtime
-            else "line-limited: 732 B at 50 kB/s")
-    return Row(f"record from emulator, 500 kBd, {'real time' if realtime else 'as fast as the line'}",
-               got, result.seconds, note)
+    note = (
+        f"scan period (37.5 Hz); {total - result.seconds:.2f} s connect+stop"
+        if realtime
+        else "line-limited: 732 B at 50 kB/s"
+    )
+    return Row(
+        f"record from emulator, 500 kBd, {'real time' if realtime else 'as fast as the line'}",
+        got,
+        result.seconds,
+        note,
+    )
 
 
 def bench_record_75hz(seconds: float = 30.0) -> tuple[Row, int, int, float]:
@@ -89,22 +98,45 @@ def bench_record_75hz(seconds: float = 30.0) -> tuple[Row, int, int, float]:
     from datmo_cli.simulated import SceneSource
 
     datmo = Path(sys.executable).with_name("datmo")
-    with tempfile.TemporaryDirectory() as d, \
-            Emulator(SceneSource("hall", duration=seconds + 30), resolution_deg=1.0, realtime=True) as emu:
+    with (
+        tempfile.TemporaryDirectory() as d,
+        Emulator(SceneSource("hall", duration=seconds + 30), resolution_deg=1.0, realtime=True) as emu,
+    ):
         out = Path(d) / "run.mcap"
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
-        subprocess.run([str(datmo), "record", "--port", emu.device_path, "--baud", "500000", "--resolution", "1",
-                        "--indices", "--duration", str(seconds), "-o", str(out)], check=True,
-                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        subprocess.run(
+            [
+                str(datmo),
+                "record",
+                "--port",
+                emu.device_path,
+                "--baud",
+                "500000",
+                "--resolution",
+                "1",
+                "--indices",
+                "--duration",
+                str(seconds),
+                "-o",
+                str(out),
+            ],
+            check=True,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         wall = time.perf_counter() - t0
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
         got = len(mcapio.read_run(out))
         stats = json.loads(json.dumps(mcapio.summary(out).metadata.get("lms2xx.stats", {})))
         dropped = int(stats.get("dropped", -1))
-    row = Row("record 500 kBd, 180°/1° (75 Hz), own process, real time", got, wall,
-              f"dropped {dropped}, CPU {100 * cpu / wall:.1f}% of a core (target < 10%)")
+    row = Row(
+        "record 500 kBd, 180°/1° (75 Hz), own process, real time",
+        got,
+        wall,
+        f"dropped {dropped}, CPU {100 * cpu / wall:.1f}% of a core (target < 10%)",
+    )
     return row, got, dropped, cpu / wall
 
 
@@ -114,12 +146,17 @@ def main() -> None:
     live, got, dropped, cpu = bench_record_75hz()
     rows = [decode, parser, bench_record(75, True), bench_record(150, False), live]
     print_table("LMS2xx protocol and record (one core)", rows)
-    print_lines("LMS2xx figures", [f"B0 decode: {decode.scans_per_s:,.0f} telegrams/s",
-                                   f"parser throughput: {mb_s:.2f} MB/s (500 kBd needs 0.05 MB/s)",
-                                   f"record at 500 kBd: {rows[2].scans_per_s:.1f} scans/s real time, "
-                                   f"{rows[3].scans_per_s:.1f} scans/s line-limited",
-                                   f"record 30 s at 75 Hz (1°): {got} scans, {dropped} dropped, recorder CPU "
-                                   f"{100 * cpu:.1f}% of one core (target: none lost, < 10%)"])
+    print_lines(
+        "LMS2xx figures",
+        [
+            f"B0 decode: {decode.scans_per_s:,.0f} telegrams/s",
+            f"parser throughput: {mb_s:.2f} MB/s (500 kBd needs 0.05 MB/s)",
+            f"record at 500 kBd: {rows[2].scans_per_s:.1f} scans/s real time, "
+            f"{rows[3].scans_per_s:.1f} scans/s line-limited",
+            f"record 30 s at 75 Hz (1°): {got} scans, {dropped} dropped, recorder CPU "
+            f"{100 * cpu:.1f}% of one core (target: none lost, < 10%)",
+        ],
+    )
 
 
 if __name__ == "__main__":

@@ -47,15 +47,22 @@ def main() -> None:
     rows = [
         Row("mcap iter_messages (no decoding)", N_SCANS, t_iter, "baseline"),
         Row("datmo read_run (decode to arrays)", N_SCANS, t_read, f"{t_iter / t_read:.2f}x the baseline's speed"),
-        Row("datmo write (encode + zstd MCAP)", N_SCANS, t_write,
-            f"{t_write / (N_SCANS / 10_000):.2f} s per 10,000 scans"),
+        Row(
+            "datmo write (encode + zstd MCAP)",
+            N_SCANS,
+            t_write,
+            f"{t_write / (N_SCANS / 10_000):.2f} s per 10,000 scans",
+        ),
     ]
     print_table("Log I/O, 20,000 scans x 361 beams", rows)
-    print_lines("Log I/O targets", [
-        f"decode / bare-iteration speed ratio: {t_iter / t_read:.2f} (target >= 0.80)",
-        f"write: {t_write / (N_SCANS / 10_000):.3f} s per 10,000 scans (target < 1 s)",
-        f"file size: {size / 1e6:.1f} MB ({size / N_SCANS:.0f} bytes/scan)",
-    ])
+    print_lines(
+        "Log I/O targets",
+        [
+            f"decode / bare-iteration speed ratio: {t_iter / t_read:.2f} (target >= 0.80)",
+            f"write: {t_write / (N_SCANS / 10_000):.3f} s per 10,000 scans (target < 1 s)",
+            f"file size: {size / 1e6:.1f} MB ({size / N_SCANS:.0f} bytes/scan)",
+        ],
+    )
 
 
 if __name__ == "__main__":

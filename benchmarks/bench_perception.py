@@ -24,8 +24,8 @@ from datmo_cli.stages import derive_features
 ROOT = Path(__file__).resolve().parent.parent
 HALL = ROOT / "sample_logs" / "hall.mcap"
 N_SCANS = 20_000
-SEGMENT_TARGET = 200_000     # scans/s
-FEATURES_TARGET = 20_000     # scans/s, segmentation + lines, circles, blobs and landmarks
+SEGMENT_TARGET = 200_000  # scans/s
+FEATURES_TARGET = 20_000  # scans/s, segmentation + lines, circles, blobs and landmarks
 
 # A fresh interpreter: import the perception code and extract the features of a 10-scan run.
 STARTUP_CODE = """
@@ -89,7 +89,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as cold:
         t_cold = startup_seconds(cold)
         t_second_fresh_dir = startup_seconds(cold)
-    startup_seconds()   # the project's own numba cache: filled by the first run if it was empty
+    startup_seconds()  # the project's own numba cache: filled by the first run if it was empty
     t_second = startup_seconds()
     saved = one_core()
     try:
@@ -121,19 +121,22 @@ def main() -> None:
     def verdict(rate: float, target: float) -> str:
         return "met" if rate >= target else "NOT met"
 
-    print_lines("Perception targets", [
-        f"segmentation: {n / t_seg:,.0f} scans/s, {1e6 * t_seg / n:.1f} µs/scan "
-        f"(target >= {SEGMENT_TARGET:,}: {verdict(n / t_seg, SEGMENT_TARGET)})",
-        f"segmentation + full feature extraction (landmarks included): {n / t_land:,.0f} scans/s, "
-        f"{1e6 * t_land / n:.1f} µs/scan (target >= {FEATURES_TARGET:,}: {verdict(n / t_land, FEATURES_TARGET)})",
-        f"without landmarks: {n / t_feat:,.0f} scans/s; with all channels encoded (datmo features): "
-        f"{n / t_derive:,.0f} scans/s; plain MCAP read of the same log: {n / t_iter:,.0f} scans/s",
-        f"per hall scan: {c['segments']:.1f} segments, {c['lines']:.1f} lines, {c['circles']:.1f} circles, "
-        f"{c['blobs']:.1f} blobs; {len(f.landmarks.final())} landmarks at the end",
-        f"start-up, fresh process importing datmo_cli.perception.features and extracting 10 scans: "
-        f"{t_second:.2f} s on a second run (numba cache hit, no recompilation)",
-        f"  with an empty NUMBA_CACHE_DIR: {t_cold:.2f} s first (compiles), {t_second_fresh_dir:.2f} s second",
-    ])
+    print_lines(
+        "Perception targets",
+        [
+            f"segmentation: {n / t_seg:,.0f} scans/s, {1e6 * t_seg / n:.1f} µs/scan "
+            f"(target >= {SEGMENT_TARGET:,}: {verdict(n / t_seg, SEGMENT_TARGET)})",
+            f"segmentation + full feature extraction (landmarks included): {n / t_land:,.0f} scans/s, "
+            f"{1e6 * t_land / n:.1f} µs/scan (target >= {FEATURES_TARGET:,}: {verdict(n / t_land, FEATURES_TARGET)})",
+            f"without landmarks: {n / t_feat:,.0f} scans/s; with all channels encoded (datmo features): "
+            f"{n / t_derive:,.0f} scans/s; plain MCAP read of the same log: {n / t_iter:,.0f} scans/s",
+            f"per hall scan: {c['segments']:.1f} segments, {c['lines']:.1f} lines, {c['circles']:.1f} circles, "
+            f"{c['blobs']:.1f} blobs; {len(f.landmarks.final())} landmarks at the end",
+            f"start-up, fresh process importing datmo_cli.perception.features and extracting 10 scans: "
+            f"{t_second:.2f} s on a second run (numba cache hit, no recompilation)",
+            f"  with an empty NUMBA_CACHE_DIR: {t_cold:.2f} s first (compiles), {t_second_fresh_dir:.2f} s second",
+        ],
+    )
 
 
 if __name__ == "__main__":

@@ -36,9 +36,9 @@ LOGS = ("csail", "intel", "freiburg-079")
 OLD = "cd981b7"
 TARGET, AIM = 0.65, 0.35
 SPEEDUP_TARGET = 1.7
-ROUNDS = 2      # alternating subprocess rounds per version
-PASSES = 3      # passes over a log's blocks in one subprocess
-CHUNK = 64      # scans per timed extract_run call
+ROUNDS = 2  # alternating subprocess rounds per version
+PASSES = 3  # passes over a log's blocks in one subprocess
+CHUNK = 64  # scans per timed extract_run call
 
 # One version's µs/scan per log: argv root, npz paths (comma separated), passes, threads (0: the version has
 # no such argument), legs ("1": the shipped leg detector, "0": the paper's rule).
@@ -89,8 +89,9 @@ def old_tree() -> tuple[Path | None, str]:
     if (root / "datmo_cli" / "perception" / "features.py").is_file():
         return root, ""
     try:
-        tar = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", OLD, "datmo_cli"],
-                             capture_output=True, check=True).stdout
+        tar = subprocess.run(
+            ["git", "-C", str(ROOT), "archive", "--format=tar", OLD, "datmo_cli"], capture_output=True, check=True
+        ).stdout
     except (OSError, subprocess.CalledProcessError) as exc:
         return None, f"no git export of {OLD} ({exc.__class__.__name__}: git or the commit is missing)"
     root.parent.mkdir(parents=True, exist_ok=True)
@@ -99,7 +100,7 @@ def old_tree() -> tuple[Path | None, str]:
         t.extractall(tmp, filter="data")
     try:
         os.replace(tmp, root)
-    except OSError:   # exported at once by another run
+    except OSError:  # exported at once by another run
         shutil.rmtree(tmp, ignore_errors=True)
     return root, ""
 
@@ -120,9 +121,15 @@ def log_arrays() -> tuple[list[Path], str]:
             g = run.geometry
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_suffix(".tmp.npz")
-            np.savez(tmp, ranges=run.ranges, stamps=run.stamps, name=name,
-                     geom=np.array([g.angle_min, g.angle_increment, g.n_beams, g.range_min, g.range_max,
-                                    g.time_increment, g.scan_time]))
+            np.savez(
+                tmp,
+                ranges=run.ranges,
+                stamps=run.stamps,
+                name=name,
+                geom=np.array(
+                    [g.angle_min, g.angle_increment, g.n_beams, g.range_min, g.range_max, g.time_increment, g.scan_time]
+                ),
+            )
             os.replace(tmp, path)
         out.append(path)
     return out, ""
@@ -130,9 +137,21 @@ def log_arrays() -> tuple[list[Path], str]:
 
 def time_version(root: Path, paths: list[Path], threads: int, legs: bool) -> dict[str, list[float]]:
     """[wall, CPU] µs/scan per log of the code under `root`, in a fresh subprocess."""
-    res = subprocess.run([sys.executable, "-c", TIMING_CODE, str(root), ",".join(map(str, paths)), str(PASSES),
-                          str(threads), "1" if legs else "0"], capture_output=True, text=True,
-                         cwd=tempfile.gettempdir())
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            TIMING_CODE,
+            str(root),
+            ",".join(map(str, paths)),
+            str(PASSES),
+            str(threads),
+            "1" if legs else "0",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tempfile.gettempdir(),
+    )
     if res.returncode:
         raise RuntimeError(f"timing {root} failed: {res.stderr.strip().splitlines()[-1:]}")
     return json.loads(res.stdout.strip().splitlines()[-1])
@@ -158,21 +177,27 @@ def against_old() -> list[str]:
                 wall[key][name] = min(wall[key].get(name, float("inf")), w)
                 cpu[key][name] = min(cpu[key].get(name, float("inf")), c)
     legs = {name: w for name, (w, _) in time_version(ROOT, paths, 1, True).items()}
-    lines = [f"µs/scan, segmentation + lines, circles, blobs (paper's leg rule); best of {ROUNDS} alternating "
-             f"rounds x {PASSES} passes per {CHUNK}-scan block; load average {os.getloadavg()[0]:.1f} on "
-             f"{os.cpu_count()} CPUs. CPU time: the like-for-like figure when other processes share the cores"]
+    lines = [
+        f"µs/scan, segmentation + lines, circles, blobs (paper's leg rule); best of {ROUNDS} alternating "
+        f"rounds x {PASSES} passes per {CHUNK}-scan block; load average {os.getloadavg()[0]:.1f} on "
+        f"{os.cpu_count()} CPUs. CPU time: the like-for-like figure when other processes share the cores"
+    ]
     worst_cpu = worst_wall = worst_n = 0.0
     for name in LOGS:
         o, n1, nN = (wall[k][name] for k in ("old", "new1", "newN"))
         oc, n1c = cpu["old"][name], cpu["new1"][name]
         worst_cpu, worst_wall, worst_n = max(worst_cpu, n1c / oc), max(worst_wall, n1 / o), max(worst_n, nN / o)
-        lines.append(f"{name:>13}: {OLD} {o:6.1f} (CPU {oc:6.1f})   today, 1 thread {n1:6.1f} (CPU {n1c:6.1f}): "
-                     f"{n1 / o:.2f}x (CPU {n1c / oc:.2f}x)   {cores} threads {nN:6.1f}: {nN / o:.2f}x   "
-                     f"+ leg detector, 1 thread {legs[name]:6.1f}")
+        lines.append(
+            f"{name:>13}: {OLD} {o:6.1f} (CPU {oc:6.1f})   today, 1 thread {n1:6.1f} (CPU {n1c:6.1f}): "
+            f"{n1 / o:.2f}x (CPU {n1c / oc:.2f}x)   {cores} threads {nN:6.1f}: {nN / o:.2f}x   "
+            f"+ leg detector, 1 thread {legs[name]:6.1f}"
+        )
 
     def verdict(r: float) -> str:
-        return (f"{r:.2f}x: target <= {TARGET}x {'met' if r <= TARGET else 'NOT met'}, aim {AIM}x "
-                f"{'met' if r <= AIM else 'not met'}")
+        return (
+            f"{r:.2f}x: target <= {TARGET}x {'met' if r <= TARGET else 'NOT met'}, aim {AIM}x "
+            f"{'met' if r <= AIM else 'not met'}"
+        )
 
     lines.append(f"worst log, 1 thread, CPU time (like for like): {verdict(worst_cpu)}")
     lines.append(f"worst log, 1 thread, wall time: {verdict(worst_wall)}")
@@ -195,8 +220,13 @@ def thread_speedup() -> list[str]:
         from datmo_cli.log.scan import ScanGeometry
 
         g = z["geom"]
-        run = ScanRun(z["stamps"], z["ranges"], ScanGeometry(float(g[0]), float(g[1]), int(g[2]), float(g[3]),
-                                                            float(g[4]), float(g[5]), float(g[6]), "laser"))
+        run = ScanRun(
+            z["stamps"],
+            z["ranges"],
+            ScanGeometry(
+                float(g[0]), float(g[1]), int(g[2]), float(g[3]), float(g[4]), float(g[5]), float(g[6]), "laser"
+            ),
+        )
         label = f"freiburg-079 ({len(run):,} scans x {run.geometry.n_beams} beams)"
     else:
         from benchmarks.bench_perception import HALL, tiled
@@ -213,11 +243,13 @@ def thread_speedup() -> list[str]:
             best[n] = min(best[n], time.perf_counter() - t0)
     s = best[1] / best[2]
     N = len(run)
-    return [f"features of {label}, shipped leg detector on, no landmarks; best of 5, interleaved; "
-            f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs (other processes share them)",
-            f"1 thread: {N / best[1]:,.0f} scans/s ({1e6 * best[1] / N:.1f} µs/scan); 2 threads: "
-            f"{N / best[2]:,.0f} scans/s ({1e6 * best[2] / N:.1f} µs/scan); speed-up {s:.2f}x "
-            f"(target >= {SPEEDUP_TARGET}x: {'met' if s >= SPEEDUP_TARGET else 'NOT met'})"]
+    return [
+        f"features of {label}, shipped leg detector on, no landmarks; best of 5, interleaved; "
+        f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs (other processes share them)",
+        f"1 thread: {N / best[1]:,.0f} scans/s ({1e6 * best[1] / N:.1f} µs/scan); 2 threads: "
+        f"{N / best[2]:,.0f} scans/s ({1e6 * best[2] / N:.1f} µs/scan); speed-up {s:.2f}x "
+        f"(target >= {SPEEDUP_TARGET}x: {'met' if s >= SPEEDUP_TARGET else 'NOT met'})",
+    ]
 
 
 def main() -> None:

@@ -30,7 +30,7 @@ CACHE = Path(tempfile.gettempdir()) / "datmo-bench"
 SIZES = (20_000, 80_000)
 RSS_TARGET_MB, RSS_SPREAD = 400.0, 0.10
 RUN_TARGET, RUN_GAIN, FEATURES_TARGET = 6_000, 2.4, 10_000
-BASELINE = "513f579"   # the code the second speed round started from: `datmo run`'s gain, measured in the same run
+BASELINE = "513f579"  # the code the second speed round started from: `datmo run`'s gain, measured in the same run
 
 # peak RSS of a child process: the largest resident set of any child waited for, so one child per wrapper
 RSS_WRAPPER = """
@@ -70,8 +70,11 @@ def baseline_tree() -> Path | None:
     tree = CACHE / f"datmo-{BASELINE}"
     if (tree / "datmo_cli").exists():
         return tree
-    done = subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-f", str(tree), BASELINE],
-                          capture_output=True, text=True)
+    done = subprocess.run(
+        ["git", "-C", str(ROOT), "worktree", "add", "--detach", "-f", str(tree), BASELINE],
+        capture_output=True,
+        text=True,
+    )
     return tree if done.returncode == 0 else None
 
 
@@ -81,12 +84,15 @@ def baseline_run_seconds(src: Path, out: Path) -> float | None:
     tree = baseline_tree()
     if tree is None:
         return None
-    code = ("import sys, time\nfrom datmo_cli.pipeline import process_file, warm_up\nwarm_up()\n"
-            "t0 = time.perf_counter()\nprocess_file(sys.argv[1], sys.argv[2], force=True)\n"
-            "print(time.perf_counter() - t0)\n")
+    code = (
+        "import sys, time\nfrom datmo_cli.pipeline import process_file, warm_up\nwarm_up()\n"
+        "t0 = time.perf_counter()\nprocess_file(sys.argv[1], sys.argv[2], force=True)\n"
+        "print(time.perf_counter() - t0)\n"
+    )
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    done = subprocess.run([sys.executable, "-c", code, str(src), str(out)], capture_output=True, text=True, env=env,
-                          cwd=tree)
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(src), str(out)], capture_output=True, text=True, env=env, cwd=tree
+    )
     return float(done.stdout.strip().splitlines()[-1]) if done.returncode == 0 else None
 
 
@@ -105,13 +111,23 @@ def main() -> None:
         t_run = best_of(lambda: process_file(small, tmp / "run.mcap", force=True, markers=True), repeat=2)
         t_lean = best_of(lambda: process_file(small, tmp / "lean.mcap", force=True), repeat=1)
         t_feat = best_of(lambda: features_file(small, tmp / "features.mcap", force=True), repeat=2)
-        rows = [Row("plain MCAP read (mcap's reader, /scan)", n, t_read, "the floor: reading the input"),
-                Row("datmo's streaming reader (iter_messages, /scan)", n, t_read_datmo, ""),
-                Row("datmo run --markers: segment, features, track, markers, write", n, t_run,
-                    f"target >= {RUN_TARGET:,} scans/s"),
-                Row("datmo run (lean: no markers, no covariance)", n, t_lean, ""),
-                Row("datmo features: segment, features, landmarks, write", n, t_feat,
-                    f"target >= {FEATURES_TARGET:,} scans/s")]
+        rows = [
+            Row("plain MCAP read (mcap's reader, /scan)", n, t_read, "the floor: reading the input"),
+            Row("datmo's streaming reader (iter_messages, /scan)", n, t_read_datmo, ""),
+            Row(
+                "datmo run --markers: segment, features, track, markers, write",
+                n,
+                t_run,
+                f"target >= {RUN_TARGET:,} scans/s",
+            ),
+            Row("datmo run (lean: no markers, no covariance)", n, t_lean, ""),
+            Row(
+                "datmo features: segment, features, landmarks, write",
+                n,
+                t_feat,
+                f"target >= {FEATURES_TARGET:,} scans/s",
+            ),
+        ]
         old = baseline_run_seconds(small, tmp / "old.mcap")
         if old is not None:
             rows.append(Row(f"datmo run at {BASELINE} (the code before this speed round)", n, old, "same run"))
@@ -119,20 +135,28 @@ def main() -> None:
         lines.append(f"datmo run --markers: {n / t_run:,.0f} scans/s")
         if old is not None:
             gain = old / t_lean
-            lines.append(f"datmo run (lean, the default): {n / t_lean:,.0f} scans/s, {gain:.2f}x {BASELINE}'s "
-                         f"{n / old:,.0f} scans/s (its default; targets >= {RUN_TARGET:,}/s, >= {RUN_GAIN:g}x): "
-                         f"{'met' if n / t_lean >= RUN_TARGET and gain >= RUN_GAIN else 'NOT met'}")
+            lines.append(
+                f"datmo run (lean, the default): {n / t_lean:,.0f} scans/s, {gain:.2f}x {BASELINE}'s "
+                f"{n / old:,.0f} scans/s (its default; targets >= {RUN_TARGET:,}/s, >= {RUN_GAIN:g}x): "
+                f"{'met' if n / t_lean >= RUN_TARGET and gain >= RUN_GAIN else 'NOT met'}"
+            )
         else:
-            lines.append(f"datmo run (lean, the default): {n / t_lean:,.0f} scans/s (target >= {RUN_TARGET:,}): "
-                         f"{'met' if n / t_lean >= RUN_TARGET else 'NOT met'}")
-        lines.append(f"datmo features: {n / t_feat:,.0f} scans/s (target >= {FEATURES_TARGET:,}): "
-                     f"{'met' if n / t_feat >= FEATURES_TARGET else 'NOT met'}")
+            lines.append(
+                f"datmo run (lean, the default): {n / t_lean:,.0f} scans/s (target >= {RUN_TARGET:,}): "
+                f"{'met' if n / t_lean >= RUN_TARGET else 'NOT met'}"
+            )
+        lines.append(
+            f"datmo features: {n / t_feat:,.0f} scans/s (target >= {FEATURES_TARGET:,}): "
+            f"{'met' if n / t_feat >= FEATURES_TARGET else 'NOT met'}"
+        )
         size_in = small.stat().st_size
         for name, path, target in (("--markers", tmp / "run.mcap", 2.5), ("default (lean)", tmp / "lean.mcap", 1.5)):
             size = path.stat().st_size
             verdict = "met" if size <= target * size_in else "NOT met"
-            lines.append(f"output {name}: {size / n:,.0f} bytes/scan, {size / size_in:.2f}x the input's "
-                         f"{size_in / n:,.0f} (target <= {target:g}x): {verdict}")
+            lines.append(
+                f"output {name}: {size / n:,.0f} bytes/scan, {size / size_in:.2f}x the input's "
+                f"{size_in / n:,.0f} (target <= {target:g}x): {verdict}"
+            )
         rss: dict[str, dict[int, float]] = {}
         for label, extra in (("datmo run", ("--format", "json")), ("datmo run --no-report", ("--no-report",))):
             got = rss[label] = {}
@@ -142,11 +166,22 @@ def main() -> None:
             a, b = got[SIZES[0]], got[SIZES[1]]
             spread = abs(b - a) / a
             ok = spread <= RSS_SPREAD and max(a, b) < RSS_TARGET_MB
-            lines.append(f"{label}: peak RSS {SIZES[1]:,} vs {SIZES[0]:,} scans {100 * spread:+.1f} % (target within "
-                         f"{100 * RSS_SPREAD:.0f} %, both under {RSS_TARGET_MB:,.0f} MB): {'met' if ok else 'NOT met'}")
+            lines.append(
+                f"{label}: peak RSS {SIZES[1]:,} vs {SIZES[0]:,} scans {100 * spread:+.1f} % (target within "
+                f"{100 * RSS_SPREAD:.0f} %, both under {RSS_TARGET_MB:,.0f} MB): {'met' if ok else 'NOT met'}"
+            )
     print_lines("Scale: speed, output size and memory against the issue's targets", lines)
-    print(json.dumps({"rss_mb": rss, "run_scans_per_s": n / t_run, "features_scans_per_s": n / t_feat,
-                      "read_scans_per_s": n / t_read, "time": time.strftime("%Y-%m-%d %H:%M")}))
+    print(
+        json.dumps(
+            {
+                "rss_mb": rss,
+                "run_scans_per_s": n / t_run,
+                "features_scans_per_s": n / t_feat,
+                "read_scans_per_s": n / t_read,
+                "time": time.strftime("%Y-%m-%d %H:%M"),
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

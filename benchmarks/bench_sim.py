@@ -14,12 +14,12 @@ from datmo_cli.sim.scene import load_scene
 from datmo_cli.sim.simulate import simulate_scene
 from datmo_cli.sim.world import World
 
-DURATION = 400.0   # s at 5 Hz: 2,000 scans
+DURATION = 400.0  # s at 5 Hz: 2,000 scans
 
 
 def main() -> None:
     scene = load_scene("hall")
-    simulate_scene(scene, duration=2.0)          # warm-up: numba compilation or cache load
+    simulate_scene(scene, duration=2.0)  # warm-up: numba compilation or cache load
     n = int(DURATION * 5)
     t_sim = best_of(lambda: simulate_scene(scene, duration=DURATION))
     result = simulate_scene(scene, duration=DURATION)
@@ -28,8 +28,9 @@ def main() -> None:
     def write() -> None:
         with tempfile.TemporaryDirectory() as tmp, mcapio.LogWriter(Path(tmp) / "sim.mcap") as w:
             w.write_scans(result.run)
-            w.write_many(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH, result.run.stamps,
-                         result.ground_truth_payloads())
+            w.write_many(
+                mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH, result.run.stamps, result.ground_truth_payloads()
+            )
 
     t_write = best_of(write)
 
@@ -42,10 +43,18 @@ def main() -> None:
     angles = result.sensor.angles()
     t_cast = best_of(lambda: cast(poses, angles, world.static, moving_circles=circles, moving_circle_owner=owners))
     rows = [
-        Row("simulate_scene hall (scans + ground truth)", n, t_sim,
-            f"{result.sensor.n_beams} beams, {len(result.objects)} objects"),
-        Row("  of which ray casting (numba)", n, t_cast,
-            f"{len(world.static.segments)} segments, {len(world.static.circles) + circles.shape[1]} circles"),
+        Row(
+            "simulate_scene hall (scans + ground truth)",
+            n,
+            t_sim,
+            f"{result.sensor.n_beams} beams, {len(result.objects)} objects",
+        ),
+        Row(
+            "  of which ray casting (numba)",
+            n,
+            t_cast,
+            f"{len(world.static.segments)} segments, {len(world.static.circles) + circles.shape[1]} circles",
+        ),
         Row("ground truth CDR encoding", n, t_gt, "for the log writer"),
         Row("write the log (scans + ground truth MCAP)", n, t_write, "what datmo simulate adds"),
     ]

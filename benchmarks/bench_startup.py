@@ -17,8 +17,8 @@ from pathlib import Path
 from .common import print_lines
 
 REPEAT = 5
-LIGHT, STAGE = 0.3, 0.8   # targets, s
-NUMBA_REFERENCE = 0.3     # `import numba` on the machine the targets were set on, s
+LIGHT, STAGE = 0.3, 0.8  # targets, s
+NUMBA_REFERENCE = 0.3  # `import numba` on the machine the targets were set on, s
 
 
 def datmo(*args: str) -> list[str]:
@@ -43,31 +43,42 @@ def main() -> None:
         d = Path(tmp)
         one, out = d / "one.mcap", d / "out"
         # one scan of the hall scene; its datmo run output for report (also loads or compiles every kernel used)
-        subprocess.run(datmo("simulate", "--scene", "hall", "--duration", "0.2", "-o", str(one)), check=True,
-                       capture_output=True)
-        for args in (("features", str(one), "-o", str(d / "f.mcap"), "--force"),
-                     ("track", str(one), "-o", str(d / "t.mcap"), "--force"),
-                     ("run", str(one), "-o", str(out), "--force", "--no-report")):
+        subprocess.run(
+            datmo("simulate", "--scene", "hall", "--duration", "0.2", "-o", str(one)), check=True, capture_output=True
+        )
+        for args in (
+            ("features", str(one), "-o", str(d / "f.mcap"), "--force"),
+            ("track", str(one), "-o", str(d / "t.mcap"), "--force"),
+            ("run", str(one), "-o", str(out), "--force", "--no-report"),
+        ):
             subprocess.run(datmo(*args), check=True, capture_output=True)
-        cases = [("datmo --help", LIGHT, ("--help",)),
-                 ("datmo info ONE", LIGHT, ("info", str(one))),
-                 ("datmo report DONE", LIGHT, ("report", str(out / "one.mcap"))),
-                 ("datmo features ONE", STAGE, ("features", str(one), "-o", str(d / "f.mcap"), "--force")),
-                 ("datmo track ONE", STAGE, ("track", str(one), "-o", str(d / "t.mcap"), "--force")),
-                 ("datmo run ONE", STAGE, ("run", str(one), "-o", str(out), "--force")),
-                 ("datmo run ONE --no-report", STAGE, ("run", str(one), "-o", str(out), "--force", "--no-report"))]
+        cases = [
+            ("datmo --help", LIGHT, ("--help",)),
+            ("datmo info ONE", LIGHT, ("info", str(one))),
+            ("datmo report DONE", LIGHT, ("report", str(out / "one.mcap"))),
+            ("datmo features ONE", STAGE, ("features", str(one), "-o", str(d / "f.mcap"), "--force")),
+            ("datmo track ONE", STAGE, ("track", str(one), "-o", str(d / "t.mcap"), "--force")),
+            ("datmo run ONE", STAGE, ("run", str(one), "-o", str(out), "--force")),
+            ("datmo run ONE --no-report", STAGE, ("run", str(one), "-o", str(out), "--force", "--no-report")),
+        ]
         numba_wall, numba_cpu = best_of([sys.executable, "-c", "import numba"])
         scale = max(numba_cpu / NUMBA_REFERENCE, 1.0)
         lines = [f"{'command':28s} {'wall s':>7s} {'cpu s':>6s} {'target':>7s}  {'met':5s} {'met, scaled':11s}"]
         for name, target, args in cases:
             wall, cpu = best_of(datmo(*args))
-            lines.append(f"{name:28s} {wall:7.3f} {cpu:6.3f} {target:7.1f}  {'yes' if wall <= target else 'no':5s} "
-                         f"{'yes' if cpu <= target * scale else 'no'}")
+            lines.append(
+                f"{name:28s} {wall:7.3f} {cpu:6.3f} {target:7.1f}  {'yes' if wall <= target else 'no':5s} "
+                f"{'yes' if cpu <= target * scale else 'no'}"
+            )
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    lines.append(f"import numba alone: {numba_wall:.3f} s wall, {numba_cpu:.3f} s cpu (issue's machine: "
-                 f"{NUMBA_REFERENCE} s); 'met, scaled': cpu s <= target times {scale:.2f}")
-    lines.append(f"ONE: a one-scan hall log; DONE: its datmo run output; best of {REPEAT} runs each; "
-                 f"load average {load:.2f} on {os.cpu_count()} cores")
+    lines.append(
+        f"import numba alone: {numba_wall:.3f} s wall, {numba_cpu:.3f} s cpu (issue's machine: "
+        f"{NUMBA_REFERENCE} s); 'met, scaled': cpu s <= target times {scale:.2f}"
+    )
+    lines.append(
+        f"ONE: a one-scan hall log; DONE: its datmo run output; best of {REPEAT} runs each; "
+        f"load average {load:.2f} on {os.cpu_count()} cores"
+    )
     print_lines("Start-up, warm numba cache (issue #13: 0.3 s light commands, 0.8 s stages on one scan)", lines)
 
 

@@ -18,8 +18,8 @@ from datmo_cli.tracking import accuracy as acc
 from datmo_cli.tracking.params import TrackingParams
 
 HALL = Path(__file__).resolve().parent.parent / "sample_logs" / "hall.mcap"
-TRACK_TARGET_US = 40.0   # issue #13: the whole tracking step per scan, given features
-REPEAT = 4   # the 60 s hall log is 300 scans; repeat it (later copies shifted in time) for steadier figures
+TRACK_TARGET_US = 40.0  # issue #13: the whole tracking step per scan, given features
+REPEAT = 4  # the 60 s hall log is 300 scans; repeat it (later copies shifted in time) for steadier figures
 
 
 def _repeat(run, feats):
@@ -36,28 +36,37 @@ def main() -> None:
     truth = decode_channel(types.GROUND_TRUTH, log.messages[mcapio.TOPIC_GROUND_TRUTH][1])
     params = TrackingParams()
     rows, notes = [], []
-    sources = {"ideal features": acc.ideal_features(truth.offsets["objects"], truth.items["objects"],
-                                                   np.random.default_rng(0))}
+    sources = {
+        "ideal features": acc.ideal_features(truth.offsets["objects"], truth.items["objects"], np.random.default_rng(0))
+    }
     perception = importlib.util.find_spec("datmo_cli.perception.features") is not None
     if perception:
         sources["datmo features"] = run_features(run)
     for name, feats in sources.items():
         big, bfeats = _repeat(run, feats)
-        learned = name == "datmo features"   # with the leg detector's legs, as datmo track runs them
-        track_run(big, bfeats, params=params, markers=False, learned=learned)   # warm-up: numba cache load
+        learned = name == "datmo features"  # with the leg detector's legs, as datmo track runs them
+        track_run(big, bfeats, params=params, markers=False, learned=learned)  # warm-up: numba cache load
         n = len(big)
         t_track = best_of(lambda: track_run(big, bfeats, params=params, markers=False, learned=learned))  # noqa: B023
         t_mark = best_of(lambda: track_run(big, bfeats, params=params, markers=True, learned=learned))  # noqa: B023
         tracked: TrackedRun = track_run(big, bfeats, params=params, markers=True, learned=learned)
         t_enc = best_of(tracked.track_payloads)
         mean = np.mean([len(t) for t in tracked.tracks])
-        rows += [Row(f"tracking + classification ({name})", n, t_track,
-                     f"{mean:.1f} live tracks per scan; one compiled call a block"),
-                 Row("  + track markers", n, t_mark, "MarkerArray CDR"),
-                 Row("  Tracks CDR encoding", n, t_enc, "")]
+        rows += [
+            Row(
+                f"tracking + classification ({name})",
+                n,
+                t_track,
+                f"{mean:.1f} live tracks per scan; one compiled call a block",
+            ),
+            Row("  + track markers", n, t_mark, "MarkerArray CDR"),
+            Row("  Tracks CDR encoding", n, t_enc, ""),
+        ]
         us = 1e6 * t_track / n
-        notes.append(f"tracking and classification, {name}: {us:,.1f} µs/scan (target <= {TRACK_TARGET_US:g} µs on "
-                     f"the hall with given features): {'met' if us <= TRACK_TARGET_US else 'NOT met'}")
+        notes.append(
+            f"tracking and classification, {name}: {us:,.1f} µs/scan (target <= {TRACK_TARGET_US:g} µs on "
+            f"the hall with given features): {'met' if us <= TRACK_TARGET_US else 'NOT met'}"
+        )
     from datmo_cli.log import cdr
     from datmo_cli.pipeline import track_file
 
@@ -66,16 +75,35 @@ def main() -> None:
         src = Path(tmp) / "features.mcap"
         with mcapio.LogWriter(src) as w:
             w.write_scans(big)
-            w.write_many(mcapio.TOPIC_FEATURES, types.FEATURES, big.stamps,
-                         [cdr.encode(types.FEATURES, {"stamp_ns": int(t), "frame_id": "laser", "lines": f.lines,
-                                                      "circles": f.circles, "blobs": f.blobs})
-                          for t, f in zip(big.stamps, bfeats, strict=True)])
+            w.write_many(
+                mcapio.TOPIC_FEATURES,
+                types.FEATURES,
+                big.stamps,
+                [
+                    cdr.encode(
+                        types.FEATURES,
+                        {
+                            "stamp_ns": int(t),
+                            "frame_id": "laser",
+                            "lines": f.lines,
+                            "circles": f.circles,
+                            "blobs": f.blobs,
+                        },
+                    )
+                    for t, f in zip(big.stamps, bfeats, strict=True)
+                ],
+            )
         out = Path(tmp) / "out.mcap"
         t_feat_log = best_of(lambda: track_file(src, out, force=True), repeat=2)
-    rows.append(Row("datmo track on a log that has /datmo/features (read, track, markers, write)", len(big),
-                    t_feat_log, "ideal features"))
+    rows.append(
+        Row(
+            "datmo track on a log that has /datmo/features (read, track, markers, write)",
+            len(big),
+            t_feat_log,
+            "ideal features",
+        )
+    )
     if perception:
-
         with tempfile.TemporaryDirectory() as tmp:
             src = Path(tmp) / "raw.mcap"
             with mcapio.LogWriter(src) as w:
@@ -84,8 +112,10 @@ def main() -> None:
             t_all = best_of(lambda: track_file(src, out, force=True), repeat=2)
             t_read = best_of(lambda: mcapio.read_run(src))
         n = len(run) * REPEAT
-        rows += [Row("datmo track from a raw log (read, segment, features, track, write)", n, t_all, ""),
-                 Row("  bare MCAP read of the same log", n, t_read, "")]
+        rows += [
+            Row("datmo track from a raw log (read, segment, features, track, write)", n, t_all, ""),
+            Row("  bare MCAP read of the same log", n, t_read, ""),
+        ]
         notes.append(f"datmo track end to end: {n / t_all:,.0f} scans/s (target >= 5,000)")
     else:
         notes.append("datmo track end to end: skipped, datmo_cli.perception.features is absent")

@@ -62,8 +62,9 @@ def measure(logs: list[Path], out_dir: Path, jobs: int | None = None) -> tuple[d
         if ev.returncode == 0:
             scores = json.loads(ev.stdout)["scores"]
             fig = {k: scores["all"][k] for k in FIGURES}
-            fig["per_class"] = {name: {k: s[k] for k in ("mota", "idf1")} for name, s in scores.items()
-                                if name != "all"}
+            fig["per_class"] = {
+                name: {k: s[k] for k in ("mota", "idf1")} for name, s in scores.items() if name != "all"
+            }
             figures[log.stem] = fig
         elif "no messages on /datmo/ground_truth" in ev.stderr:
             rep = subprocess.run([*datmo, "report", str(out), "--format", "json"], capture_output=True, text=True)
@@ -71,8 +72,12 @@ def measure(logs: list[Path], out_dir: Path, jobs: int | None = None) -> tuple[d
                 problems.append(f"{log.name}: datmo report failed: {rep.stderr.strip()}")
                 continue
             row = json.loads(rep.stdout)["files"][0]
-            figures[log.stem] = {"ground_truth": False, "tracks": row["tracks"], "dynamic": row["dynamic"],
-                                 "person": row["person"]}
+            figures[log.stem] = {
+                "ground_truth": False,
+                "tracks": row["tracks"],
+                "dynamic": row["dynamic"],
+                "person": row["person"],
+            }
         else:
             problems.append(f"{log.name}: datmo evaluate failed: {ev.stderr.strip()}")
     return figures, problems
@@ -103,8 +108,10 @@ def compare(baseline: dict[str, dict], current: dict[str, dict], tolerance: dict
             else:
                 worse, allowed = c - b, max(tol["count_abs"], tol["count_rel"] * b)
             if worse > allowed + 1e-12:
-                failures.append(f"{name}: {key} {_fmt(c)} is worse than the baseline {_fmt(b)} "
-                                f"by {_fmt(worse)} (tolerance {_fmt(allowed)})")
+                failures.append(
+                    f"{name}: {key} {_fmt(c)} is worse than the baseline {_fmt(b)} "
+                    f"by {_fmt(worse)} (tolerance {_fmt(allowed)})"
+                )
             elif worse < -1e-9:
                 notes.append(f"{name}: {key} improved from {_fmt(b)} to {_fmt(c)}")
     for name in sorted(set(current) - set(baseline)):
@@ -148,8 +155,9 @@ def main(argv: list[str] | None = None) -> int:
     base = json.loads(args.baseline.read_text())
     failures, notes = compare(base["logs"], current, base.get("tolerance"))
     for name, fig in sorted(current.items()):
-        shown = ", ".join(f"{k} {_fmt(fig[k])}" for k in FIGURES if fig.get(k) is not None) or \
-            ", ".join(f"{k} {fig[k]}" for k in INFO if k in fig)
+        shown = ", ".join(f"{k} {_fmt(fig[k])}" for k in FIGURES if fig.get(k) is not None) or ", ".join(
+            f"{k} {fig[k]}" for k in INFO if k in fig
+        )
         print(f"{name}: {shown}")
     for line in notes:
         print(f"note: {line}")

@@ -4,4 +4,4 @@ __version__ = "0.1.0"
 
 from .numba_runtime import choose_cache as _choose_cache
 
-_choose_cache()   # a writable numba cache (else a private temporary one) before any kernel is declared
+_choose_cache()  # a writable numba cache (else a private temporary one) before any kernel is declared

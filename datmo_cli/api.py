@@ -43,11 +43,18 @@ __all__ = ["FEATURE_COLUMNS", "TRACK_COLUMNS", "LiveTracker", "Log", "open_log",
 # The tables' columns (name -> type): the tracks table is the export's; the features table has the columns that
 # describe features (the export's feature rows without the track-only columns, which are null there).
 TRACK_COLUMNS: dict[str, str] = dict(export.TRACK_COLUMNS)
-FEATURE_COLUMNS: dict[str, str] = {name: export.TRACK_COLUMNS[name] for name in
-                                   ("file", "scan", "stamp_ns", "frame_id", "kind", "x_m", "y_m", "size_m")
-                                   } | export.FEATURE_COLUMNS
-_NUMPY = {"string": object, "int64": np.int64, "uint32": np.uint32, "float32": np.float32, "float64": np.float64,
-          "bool": np.bool_}
+FEATURE_COLUMNS: dict[str, str] = {
+    name: export.TRACK_COLUMNS[name]
+    for name in ("file", "scan", "stamp_ns", "frame_id", "kind", "x_m", "y_m", "size_m")
+} | export.FEATURE_COLUMNS
+_NUMPY = {
+    "string": object,
+    "int64": np.int64,
+    "uint32": np.uint32,
+    "float32": np.float32,
+    "float64": np.float64,
+    "bool": np.bool_,
+}
 
 
 def dtype(columns: dict[str, str]) -> np.dtype:
@@ -68,7 +75,7 @@ def _table(batches: Iterator[export.Batch], columns: dict[str, str]) -> np.ndarr
             elif t in ("float32", "float64"):
                 part[name] = np.nan
             else:
-                raise ValueError(f"column {name} missing from a batch")   # a bug: every row has it
+                raise ValueError(f"column {name} missing from a batch")  # a bug: every row has it
         parts.append(part)
     return np.concatenate(parts) if parts else np.zeros(0, dtype(columns))
 
@@ -95,7 +102,7 @@ class Log:
 
     def __init__(self, path: str | os.PathLike) -> None:
         self.path = Path(path)
-        self.contents = mcapio.summary(self.path)   # InputError when it is not a readable MCAP log
+        self.contents = mcapio.summary(self.path)  # InputError when it is not a readable MCAP log
         self.name = os.fsdecode(path)
 
     def __repr__(self) -> str:
@@ -161,8 +168,15 @@ def open_log(path: str | os.PathLike) -> Log:
     return Log(path)
 
 
-def process(src: str | os.PathLike, out: str | os.PathLike, *, config: Config = None, force: bool = False,
-            markers: bool = False, covariance: bool = False) -> Log:
+def process(
+    src: str | os.PathLike,
+    out: str | os.PathLike,
+    *,
+    config: Config = None,
+    force: bool = False,
+    markers: bool = False,
+    covariance: bool = False,
+) -> Log:
     """Segment, extract features and track the MCAP log `src` into `out` (what `datmo run` does for one input,
     without the report), and open the output. `config`: a DatmoConfig, a TOML file (as --config), a dict of
     overrides such as {"track": {"gate": 9.0}}, or None for the defaults; `force`: replace an existing `out`;
@@ -171,8 +185,15 @@ def process(src: str | os.PathLike, out: str | os.PathLike, *, config: Config = 
     from .pipeline import process_file
 
     cfg = _config(config)
-    process_file(src, out, force=force, config=cfg, markers=markers, covariance=covariance,
-                 command_line=f"datmo_cli.api.process({os.fsdecode(src)!r}, {os.fsdecode(out)!r})")
+    process_file(
+        src,
+        out,
+        force=force,
+        config=cfg,
+        markers=markers,
+        covariance=covariance,
+        command_line=f"datmo_cli.api.process({os.fsdecode(src)!r}, {os.fsdecode(out)!r})",
+    )
     return Log(out)
 
 
@@ -186,12 +207,28 @@ class LiveTracker:
     scan as rows of TRACK_COLUMNS (the same table as Log.tracks()), and the same tracks `datmo run` gives for
     those scans when it runs without scan matching (a log with odometry, or a still scanner)."""
 
-    def __init__(self, angle_min: float, angle_increment: float, n_beams: int, range_min: float, range_max: float,
-                 *, frame_id: str = "laser", config: Config = None, name: str = "live") -> None:
+    def __init__(
+        self,
+        angle_min: float,
+        angle_increment: float,
+        n_beams: int,
+        range_min: float,
+        range_max: float,
+        *,
+        frame_id: str = "laser",
+        config: Config = None,
+        name: str = "live",
+    ) -> None:
         from .log.scan import ScanGeometry
 
-        self.geometry = ScanGeometry(float(angle_min), float(angle_increment), int(n_beams), float(range_min),
-                                     float(range_max), frame_id=frame_id)
+        self.geometry = ScanGeometry(
+            float(angle_min),
+            float(angle_increment),
+            int(n_beams),
+            float(range_min),
+            float(range_max),
+            frame_id=frame_id,
+        )
         self.config = _config(config)
         self.name = name
         self.scans = 0
@@ -209,8 +246,9 @@ class LiveTracker:
 
         r = np.asarray(ranges, np.float32)
         if r.shape != (self.geometry.n_beams,):
-            raise InputError(f"{self.name}: a scan of {r.shape} ranges; this tracker's scans have "
-                             f"{self.geometry.n_beams} beams")
+            raise InputError(
+                f"{self.name}: a scan of {r.shape} ranges; this tracker's scans have {self.geometry.n_beams} beams"
+            )
         stamp = int(stamp_ns)
         if self._last is not None and stamp <= self._last:
             raise InputError(f"{self.name}: scan {self.scans} stamped {stamp} ns, not after the previous {self._last}")
@@ -219,9 +257,12 @@ class LiveTracker:
                 self._odometry = Odometry(np.zeros(1, np.int64), np.zeros(1), np.zeros(1), np.zeros(1))
             self._stages = RunStages(self._odometry, self.config, markers=False)
         if (pose is None) != (self._odometry is None):
-            raise InputError(f"{self.name}: scan {self.scans} " + ("has no pose; the first had one" if pose is None
-                             else "has a pose; the first had none") + ": give a pose with every scan or with none")
-        if pose is not None:   # the poses RunStages interpolates at this scan: this scan's
+            raise InputError(
+                f"{self.name}: scan {self.scans} "
+                + ("has no pose; the first had one" if pose is None else "has a pose; the first had none")
+                + ": give a pose with every scan or with none"
+            )
+        if pose is not None:  # the poses RunStages interpolates at this scan: this scan's
             o = self._odometry
             o.stamps[0], (o.x[0], o.y[0], o.theta[0]) = stamp, (float(v) for v in pose)
         run = ScanRun(np.array([stamp], np.int64), r[None, :], self.geometry)

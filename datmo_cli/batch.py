@@ -63,7 +63,7 @@ def remote(url: str) -> bool:
 
 def local(path: str) -> str:
     """A plain path for a local path or file:// URL."""
-    return path[len("file://"):] if path.startswith("file://") else path
+    return path[len("file://") :] if path.startswith("file://") else path
 
 
 def _fs(url: str):
@@ -130,7 +130,7 @@ def _expand(spec: str, out_root: str | None) -> list[tuple[str, str]]:
     magic = glob.has_magic(spec.split("://", 1)[-1])
     if remote(spec):
         fs, path = _fs(spec)
-        if magic and not fs.exists(path):   # a name holding [, * or ? that exists is that file, not a pattern
+        if magic and not fs.exists(path):  # a name holding [, * or ? that exists is that file, not a pattern
             found = [p for p in sorted(fs.glob(path)) if _is_log(p) and fs.isfile(p)]
             if not found:
                 raise InputError(f"{spec}: no .mcap log matches")
@@ -142,7 +142,7 @@ def _expand(spec: str, out_root: str | None) -> list[tuple[str, str]]:
             return [(fs.unstrip_protocol(p), os.path.relpath(p, path)) for p in found]
         return [(spec, os.path.basename(path))]
     path = local(spec)
-    magic = magic and not os.path.lexists(path)   # a name holding [, * or ? that exists is that file or folder
+    magic = magic and not os.path.lexists(path)  # a name holding [, * or ? that exists is that file or folder
     bag = _bag_of(path)
     if bag is not None and not magic:
         return [(bag, os.path.basename(bag))]
@@ -156,13 +156,14 @@ def _expand(spec: str, out_root: str | None) -> list[tuple[str, str]]:
         root = os.path.abspath(path)
         found = []
         for folder, dirs, files in os.walk(root):
-            dirs[:] = sorted(d for d in dirs if not d.startswith(".") and not _inside(os.path.join(folder, d),
-                                                                                      out_root))
+            dirs[:] = sorted(
+                d for d in dirs if not d.startswith(".") and not _inside(os.path.join(folder, d), out_root)
+            )
             found += [os.path.join(folder, f) for f in sorted(files) if _is_log(f)]
         if not found:
             raise InputError(f"{spec}: no .mcap logs in this folder")
         return [(p, os.path.relpath(p, root)) for p in found]
-    return [(os.path.abspath(path), os.path.basename(path))]   # a missing file fails as its own input
+    return [(os.path.abspath(path), os.path.basename(path))]  # a missing file fails as its own input
 
 
 def _bag_of(path: str) -> str | None:
@@ -181,8 +182,10 @@ def _inside(path: str, folder: str | None) -> bool:
 def tmp_pattern(output: str) -> str:
     """The glob of the temporary files a writer of `output` leaves beside it (LogWriter and remote uploads)."""
     name = os.path.basename(output.rstrip("/"))
-    return join(os.path.dirname(output.rstrip("/")) if remote(output) else str(Path(local(output)).parent),
-                f".{glob.escape(name)}.*tmp")
+    return join(
+        os.path.dirname(output.rstrip("/")) if remote(output) else str(Path(local(output)).parent),
+        f".{glob.escape(name)}.*tmp",
+    )
 
 
 def remove_partial(outputs: list[str]) -> int:
@@ -233,8 +236,11 @@ def params_hash(config: DatmoConfig | None = None, options: RunOptions | None = 
 
     config, options = config or DatmoConfig(), options or RunOptions()
     model = leg_model_provenance(config.features.leg_model)
-    doc = {"features": config.features.to_dict(), "track": config.track.to_dict(),
-           "leg_model": model.get("sha256", model.get("model"))}
+    doc = {
+        "features": config.features.to_dict(),
+        "track": config.track.to_dict(),
+        "leg_model": model.get("sha256", model.get("model")),
+    }
     for key in ("markers", "covariance"):
         if getattr(options, key):
             doc[key] = True
@@ -261,7 +267,7 @@ class Manifest:
     def __init__(self, out_dir: str) -> None:
         self.path = join(out_dir, MANIFEST)
         self._remote = remote(self.path)
-        self._lines: list[str] = []          # remote: every line, rewritten whole
+        self._lines: list[str] = []  # remote: every line, rewritten whole
         self._last_put = 0.0
         self._lock = threading.Lock()
 
@@ -276,8 +282,10 @@ class Manifest:
                 return []
             size = int(fs.info(p).get("size") or 0)
             if size > MAX_MANIFEST_BYTES:
-                raise InputError(f"{self.path}: {size:,} bytes; a manifest is at most {MAX_MANIFEST_BYTES:,} bytes "
-                                 "(split the batch by folder)")
+                raise InputError(
+                    f"{self.path}: {size:,} bytes; a manifest is at most {MAX_MANIFEST_BYTES:,} bytes "
+                    "(split the batch by folder)"
+                )
             return self._parse(fs.cat_file(p).splitlines(keepends=True))
         p = local(self.path)
         if not os.path.lexists(p):
@@ -288,8 +296,10 @@ class Manifest:
         with open_regular(p) as f:
             size = os.fstat(f.fileno()).st_size
             if size > MAX_MANIFEST_BYTES:
-                raise InputError(f"{self.path}: {size:,} bytes; a manifest is at most {MAX_MANIFEST_BYTES:,} bytes "
-                                 "(split the batch by folder)")
+                raise InputError(
+                    f"{self.path}: {size:,} bytes; a manifest is at most {MAX_MANIFEST_BYTES:,} bytes "
+                    "(split the batch by folder)"
+                )
             return self._parse(_lines_of(f, MAX_MANIFEST_BYTES))
 
     def _parse(self, lines: Iterable[bytes]) -> list[dict]:
@@ -308,8 +318,10 @@ class Manifest:
         if not self._remote and os.path.islink(local(self.path)):
             from .errors import OutputError
 
-            raise OutputError(f"{self.path}: is a symbolic link; datmo reads and writes a batch's manifest only as a "
-                              "regular file in its folder (remove the link)")
+            raise OutputError(
+                f"{self.path}: is a symbolic link; datmo reads and writes a batch's manifest only as a "
+                "regular file in its folder (remove the link)"
+            )
 
     def latest(self) -> dict[str, dict]:
         """The latest line of each input."""
@@ -354,22 +366,31 @@ class Manifest:
         from .errors import OutputError
 
         path = local(self.path)
-        flags = (os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
-                 | getattr(os, "O_CLOEXEC", 0))
+        flags = (
+            os.O_WRONLY
+            | os.O_APPEND
+            | os.O_CREAT
+            | getattr(os, "O_NOFOLLOW", 0)
+            | getattr(os, "O_NONBLOCK", 0)
+            | getattr(os, "O_CLOEXEC", 0)
+        )
         try:
             fd = os.open(path, flags, 0o666)
         except OSError as exc:
             if os.path.islink(path):
                 self._refuse_link()
-            if exc.errno == errno.ENXIO:     # a FIFO nobody reads
-                raise OutputError(f"{self.path}: is a FIFO (named pipe), not a regular file; datmo writes a "
-                                  "batch's manifest only as a regular file") from None
+            if exc.errno == errno.ENXIO:  # a FIFO nobody reads
+                raise OutputError(
+                    f"{self.path}: is a FIFO (named pipe), not a regular file; datmo writes a "
+                    "batch's manifest only as a regular file"
+                ) from None
             raise
         mode = os.fstat(fd).st_mode
         if not stat.S_ISREG(mode):
             os.close(fd)
-            raise OutputError(f"{self.path}: is not a regular file; datmo writes a batch's manifest only as a "
-                              "regular file")
+            raise OutputError(
+                f"{self.path}: is not a regular file; datmo writes a batch's manifest only as a regular file"
+            )
         os.set_blocking(fd, True)
         return os.fdopen(fd, "ab")
 
@@ -396,7 +417,7 @@ def _lines_of(f, limit: int) -> Iterator[bytes]:
             return
         total += len(line)
         if len(line) > MAX_MANIFEST_LINE_BYTES and not line.endswith(b"\n"):
-            while line and not line.endswith(b"\n") and total <= limit:   # the rest of the long line
+            while line and not line.endswith(b"\n") and total <= limit:  # the rest of the long line
                 line = f.readline(1 << 16)
                 total += len(line)
             continue
@@ -430,8 +451,10 @@ RECORD_FIELDS: dict[str, tuple[Callable[[object], bool], str]] = {
     "output": (_text, "a string"),
     "input_sha256": (_or_none(_text), "a string or null"),
     "input_size": (_or_none(_count), "a whole number of bytes or null"),
-    "input_mtime_ns": (_or_none(lambda v: isinstance(v, int) and not isinstance(v, bool)),
-                       "a whole number of nanoseconds or null"),
+    "input_mtime_ns": (
+        _or_none(lambda v: isinstance(v, int) and not isinstance(v, bool)),
+        "a whole number of nanoseconds or null",
+    ),
     "error": (_or_none(_text), "a string or null"),
     "scans": (_count, "a whole number of scans"),
     "seconds": (_figure, "a finite number of seconds, 0 or more"),
@@ -470,10 +493,10 @@ class Task:
     options: RunOptions
     params_hash: str
     command_line: str | None
-    threads: int | None = None     # --threads: perception threads on a Dask worker (None: one per task there)
+    threads: int | None = None  # --threads: perception threads on a Dask worker (None: one per task there)
 
 
-SUMMARY_KEY = "summary"   # a done line's report (report.RunSummary) as the task returns it; not in the manifest
+SUMMARY_KEY = "summary"  # a done line's report (report.RunSummary) as the task returns it; not in the manifest
 
 
 def manifest_line(rec: dict) -> dict:
@@ -483,11 +506,23 @@ def manifest_line(rec: dict) -> dict:
 
 def record(task: Task, status: str, **fields) -> dict:
     """A manifest line for `task` (figures default to nothing done)."""
-    rec = {"input": task.input, "input_sha256": None, "input_size": None, "input_mtime_ns": None,
-           "output": task.output, "status": status, "error": None, "scans": 0, "seconds": 0.0, "scans_per_s": 0.0,
-           "tracks": None, "datmo_version": __version__, "params_hash": task.params_hash,
-           "finished": datetime.now(UTC).isoformat(timespec="seconds"),
-           "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    rec = {
+        "input": task.input,
+        "input_sha256": None,
+        "input_size": None,
+        "input_mtime_ns": None,
+        "output": task.output,
+        "status": status,
+        "error": None,
+        "scans": 0,
+        "seconds": 0.0,
+        "scans_per_s": 0.0,
+        "tracks": None,
+        "datmo_version": __version__,
+        "params_hash": task.params_hash,
+        "finished": datetime.now(UTC).isoformat(timespec="seconds"),
+        "worker": f"{socket.gethostname()}:{os.getpid()}",
+    }
     rec.update(fields)
     return rec
 
@@ -546,8 +581,13 @@ def ensure_warm() -> None:
         _WARM = True
 
 
-def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
-             scans: Callable[[int, int], None] | None = None, raise_unexpected: bool = False) -> dict:
+def run_task(
+    task: Task,
+    *,
+    cancelled: Callable[[], bool] | None = None,
+    scans: Callable[[int, int], None] | None = None,
+    raise_unexpected: bool = False,
+) -> dict:
     """Process one input into its output and return its manifest line.
 
     A DatmoError (bad input, refused overwrite) gives a failed line with the one-line error; any other
@@ -577,24 +617,42 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
             sha = input_sha256(src)
             notes: list[str] = []
             with converted(src, out, task, notes.append) as log:
-                origin = {} if Path(log) == Path(src) else {"origin": src}   # provenance hashes the bag, not the copy
+                origin = {} if Path(log) == Path(src) else {"origin": src}  # provenance hashes the bag, not the copy
                 report = RunAccumulator(str(Path(task.output)))
-                n = pipeline.process_file(log, out, force=task.force, config=task.config,
-                                          markers=task.options.markers, covariance=task.options.covariance,
-                                          bag_dir=task.options.bag_dir,
-                                          command_line=task.command_line, progress=progress,
-                                          input_name=task.input if remote(task.input) else None, report=report,
-                                          **origin)
+                n = pipeline.process_file(
+                    log,
+                    out,
+                    force=task.force,
+                    config=task.config,
+                    markers=task.options.markers,
+                    covariance=task.options.covariance,
+                    bag_dir=task.options.bag_dir,
+                    command_line=task.command_line,
+                    progress=progress,
+                    input_name=task.input if remote(task.input) else None,
+                    report=report,
+                    **origin,
+                )
             summary = report.summary()
         seconds = time.perf_counter() - t0
-        return record(task, DONE, input_sha256=sha, input_size=size, input_mtime_ns=mtime, scans=n,
-                      seconds=round(seconds, 3), scans_per_s=round(n / seconds, 1) if seconds > 0 else 0.0,
-                      tracks=headline(summary), **({"notes": notes} if notes else {}), **{SUMMARY_KEY: summary})
+        return record(
+            task,
+            DONE,
+            input_sha256=sha,
+            input_size=size,
+            input_mtime_ns=mtime,
+            scans=n,
+            seconds=round(seconds, 3),
+            scans_per_s=round(n / seconds, 1) if seconds > 0 else 0.0,
+            tracks=headline(summary),
+            **({"notes": notes} if notes else {}),
+            **{SUMMARY_KEY: summary},
+        )
     except Cancelled:
         return record(task, CANCELLED)
     except DatmoError as exc:
         return failed(task, str(exc))
-    except OSError as exc:      # reading the input (a write error is an OutputError naming the output)
+    except OSError as exc:  # reading the input (a write error is an OutputError naming the output)
         if raise_unexpected:
             raise
         from .outputs import os_error
@@ -604,7 +662,7 @@ def run_task(task: Task, *, cancelled: Callable[[], bool] | None = None,
         from .outputs import interrupt_in
 
         if (stop := interrupt_in(exc)) is not None:
-            raise stop from None    # Ctrl-C or SIGTERM inside a compiled call: the batch stops, no failed line
+            raise stop from None  # Ctrl-C or SIGTERM inside a compiled call: the batch stops, no failed line
         if raise_unexpected:
             raise
         return failed(task, f"failed: {type(exc).__name__}: {exc}")
@@ -621,8 +679,7 @@ def converted(src: str, out: str, task: Task, tell: Callable[[str], None]):
 
     options = task.options
     dest = temp_path(Path(out).parent if options.bag_dir else Path(out))
-    return scan_log(Path(src), Path(out), options.topic, options.odom_topic, force=task.force,
-                    dest=dest, tell=tell)
+    return scan_log(Path(src), Path(out), options.topic, options.odom_topic, force=task.force, dest=dest, tell=tell)
 
 
 @contextmanager
@@ -635,7 +692,7 @@ def _staged_input(path: str) -> Iterator[str]:
             return
         from .input_files import check
 
-        if stat.S_ISDIR(check(local(path), folder_ok=True, name=path).st_mode):   # a FIFO or device: refused
+        if stat.S_ISDIR(check(local(path), folder_ok=True, name=path).st_mode):  # a FIFO or device: refused
             raise InputError(f"{path}: is a directory, not an MCAP log")
         yield local(path)
         return
@@ -660,8 +717,10 @@ def _refuse_links(folder: str) -> None:
     part = folder
     while part != os.path.dirname(part) and not os.path.islink(part):
         part = os.path.dirname(part)
-    raise OutputError(f"{part if os.path.islink(part) else folder}: is a symbolic link; datmo run writes its "
-                      "outputs only inside the output folder, never through a link")
+    raise OutputError(
+        f"{part if os.path.islink(part) else folder}: is a symbolic link; datmo run writes its "
+        "outputs only inside the output folder, never through a link"
+    )
 
 
 @contextmanager
@@ -704,7 +763,7 @@ class Batch:
     skipped: list[dict]
     manifest: Manifest
     outputs: list[str] = field(default_factory=list)
-    records: dict[str, dict] = field(default_factory=dict)   # input -> this batch's line
+    records: dict[str, dict] = field(default_factory=dict)  # input -> this batch's line
 
     @property
     def total(self) -> int:
@@ -760,18 +819,21 @@ def folder_lock(out_dir: str) -> Iterator[str]:
             raise OutputError(f"{path}: {why}; datmo run keeps its lock only as a regular file (remove it)") from None
         if not stat.S_ISREG(os.fstat(fd).st_mode):
             os.close(fd)
-            raise OutputError(f"{path}: is not a regular file; datmo run keeps its lock only as a regular file "
-                              "(remove it)")
+            raise OutputError(
+                f"{path}: is not a regular file; datmo run keeps its lock only as a regular file (remove it)"
+            )
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = os.pread(fd, 512, 0).decode("utf-8", "replace").strip() or "a process"
             os.close(fd)
-            raise DatmoError(f"{folder}: another datmo run is writing into this folder ({holder}); wait for it to "
-                             "finish or stop it, or give another -o folder") from None
-        except OSError:     # a file system without locks (some network mounts): run unlocked, as before
+            raise DatmoError(
+                f"{folder}: another datmo run is writing into this folder ({holder}); wait for it to "
+                "finish or stop it, or give another -o folder"
+            ) from None
+        except OSError:  # a file system without locks (some network mounts): run unlocked, as before
             break
-        try:            # the holder may have removed the file as it finished: hold the one at the path
+        try:  # the holder may have removed the file as it finished: hold the one at the path
             if os.path.samestat(os.fstat(fd), os.lstat(path)):
                 break
         except FileNotFoundError:
@@ -787,15 +849,22 @@ def folder_lock(out_dir: str) -> Iterator[str]:
         yield folder
     finally:
         try:
-            os.unlink(path)     # while holding it: a process waiting on this file retries on the path
+            os.unlink(path)  # while holding it: a process waiting on this file retries on the path
         except OSError:
             pass
         os.close(fd)
 
 
-def prepare(specs: list[str], out_dir: str, *, config: DatmoConfig | None = None,
-            options: RunOptions | None = None, force: bool = False, command_line: str | None = None,
-            threads: int | None = None) -> Batch:
+def prepare(
+    specs: list[str],
+    out_dir: str,
+    *,
+    config: DatmoConfig | None = None,
+    options: RunOptions | None = None,
+    force: bool = False,
+    command_line: str | None = None,
+    threads: int | None = None,
+) -> Batch:
     """Find the inputs, read the manifest and decide what to redo.
 
     An input is skipped when its latest manifest line is done (or skipped) by this datmo version with the
@@ -817,15 +886,22 @@ def prepare(specs: list[str], out_dir: str, *, config: DatmoConfig | None = None
     for i, (src, dst) in enumerate(pairs):
         last = ledger.get(src)
         owned = last is not None and last.get("output") == dst and last.get("status") in (DONE, SKIPPED)
-        if (not force and owned and last.get("params_hash") == phash and last.get("datmo_version") == __version__
-                and exists(dst) and _same_input(src, last)):
-            skipped.append({**last, "status": SKIPPED, "error": None,
-                            "finished": datetime.now(UTC).isoformat(timespec="seconds")})
+        if (
+            not force
+            and owned
+            and last.get("params_hash") == phash
+            and last.get("datmo_version") == __version__
+            and exists(dst)
+            and _same_input(src, last)
+        ):
+            skipped.append(
+                {**last, "status": SKIPPED, "error": None, "finished": datetime.now(UTC).isoformat(timespec="seconds")}
+            )
             continue
         overwrite = force or (exists(dst) and (owned or _leftover(dst, src)))
         tasks.append(Task(i, src, dst, overwrite, config, options, phash, command_line, threads))
     if ledger:
-        manifest.compact(ledger)   # one line per input before this batch appends its own
+        manifest.compact(ledger)  # one line per input before this batch appends its own
     return Batch(out_dir, tasks, skipped, manifest, [d for _, d in pairs])
 
 
@@ -834,7 +910,7 @@ def _same_input(src: str, last: dict) -> bool:
 
     size, mtime = input_stat(src)
     if size is None or not (remote(src) or os.path.isdir(local(src)) or is_regular(local(src))):
-        return False    # a FIFO or a device now: never hashed here (its task says what it is)
+        return False  # a FIFO or a device now: never hashed here (its task says what it is)
     if mtime is not None and size == last.get("input_size") and mtime == last.get("input_mtime_ns"):
         return True
     try:
@@ -864,8 +940,12 @@ class Executor:
     workers: int = 1
     where: str = "local"
 
-    def run(self, tasks: list[Task], on_record: Callable[[dict], None],
-            on_scans: Callable[[int, int, int], None] | None = None) -> None:
+    def run(
+        self,
+        tasks: list[Task],
+        on_record: Callable[[dict], None],
+        on_scans: Callable[[int, int, int], None] | None = None,
+    ) -> None:
         raise NotImplementedError
 
     def close(self) -> None:
@@ -884,7 +964,7 @@ class LocalExecutor(Executor):
         if not tasks:
             return
         n = min(self.workers, len(tasks))
-        self.where = _processes(n)      # what ran them, not what --jobs allowed
+        self.where = _processes(n)  # what ran them, not what --jobs allowed
         if n <= 1:
             for t in tasks:
                 on_record(run_task(t, scans=(lambda d, m, i=t.index: on_scans(i, d, m)) if on_scans else None))
@@ -898,9 +978,10 @@ class LocalExecutor(Executor):
 
         ensure_warm()
         ctx = multiprocessing.get_context("fork") if hasattr(os, "fork") else multiprocessing.get_context()
-        queue = ctx.Queue()     # (task, scans done, scans) from the workers; handed over as they start
-        pool = ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_worker_started,
-                                   initargs=(os.getpid(), queue))
+        queue = ctx.Queue()  # (task, scans done, scans) from the workers; handed over as they start
+        pool = ProcessPoolExecutor(
+            max_workers=n, mp_context=ctx, initializer=_worker_started, initargs=(os.getpid(), queue)
+        )
         try:
             futures = {pool.submit(_queued_task, t): t for t in tasks}
             pending = set(futures)
@@ -916,7 +997,7 @@ class LocalExecutor(Executor):
             _drain(queue, on_scans)
         except BaseException:
             for p in list(getattr(pool, "_processes", {}).values()):
-                p.terminate()     # a task still running must not finish an output after the batch stopped
+                p.terminate()  # a task still running must not finish an output after the batch stopped
             pool.shutdown(wait=True, cancel_futures=True)
             queue.close()
             raise
@@ -928,7 +1009,7 @@ def _processes(n: int) -> str:
     return f"{n} local process{'es' if n > 1 else ''}"
 
 
-_SCANS: list = []     # in a --jobs worker: the queue its tasks report their scans on
+_SCANS: list = []  # in a --jobs worker: the queue its tasks report their scans on
 
 
 def _worker_started(parent: int, queue) -> None:
@@ -964,13 +1045,14 @@ def die_with_parent(parent: int) -> None:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, on_sigterm)
     if not _death_signal(signal.SIGTERM):
+
         def watch() -> None:
             while os.getppid() == parent:
                 time.sleep(0.5)
             gone()
 
         threading.Thread(target=watch, name="datmo-parent-watch", daemon=True).start()
-    if os.getppid() != parent:      # it died before the watch began
+    if os.getppid() != parent:  # it died before the watch began
         gone()
 
 
@@ -985,7 +1067,7 @@ def _death_signal(signum: int) -> bool:
         import ctypes
 
         libc = ctypes.CDLL(None, use_errno=True)
-        return libc.prctl(1, int(signum), 0, 0, 0) == 0     # 1: PR_SET_PDEATHSIG
+        return libc.prctl(1, int(signum), 0, 0, 0) == 0  # 1: PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         return False
 
@@ -1007,7 +1089,7 @@ def _drain(queue, on_scans) -> None:
             on_scans(i, d, n)
 
 
-_DEFERRING: list[int] = []   # SIGINTs caught while a deferring block runs (the outermost block owns it)
+_DEFERRING: list[int] = []  # SIGINTs caught while a deferring block runs (the outermost block owns it)
 
 
 @contextmanager
@@ -1030,7 +1112,7 @@ def _interrupt_deferred() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
     if caught:
         if callable(previous) and previous is not signal.default_int_handler:
-            previous(signal.SIGINT, None)     # an executor's own Ctrl-C handler (see cluster._interrupt_flag)
+            previous(signal.SIGINT, None)  # an executor's own Ctrl-C handler (see cluster._interrupt_flag)
         else:
             raise KeyboardInterrupt
 
@@ -1038,8 +1120,13 @@ def _interrupt_deferred() -> Iterator[None]:
 _NOT_DEFERRING = _DEFERRING
 
 
-def run_many(batch: Batch, executor: Executor, *, on_record: Callable[[dict], None] | None = None,
-        on_scans: Callable[[int, int, int], None] | None = None) -> list[dict]:
+def run_many(
+    batch: Batch,
+    executor: Executor,
+    *,
+    on_record: Callable[[dict], None] | None = None,
+    on_scans: Callable[[int, int, int], None] | None = None,
+) -> list[dict]:
     """Run a prepared batch: skipped inputs' lines first, then each task's line as it finishes, all
     appended to the manifest. Returns this batch's lines in input order. Ctrl-C: the executor stops its
     tasks, partial files are removed and BatchInterrupted says what is kept."""
@@ -1047,7 +1134,7 @@ def run_many(batch: Batch, executor: Executor, *, on_record: Callable[[dict], No
     def finished(rec: dict) -> None:
         if rec["status"] == CANCELLED:
             return
-        with _interrupt_deferred():      # a line is written and counted whole, or not at all
+        with _interrupt_deferred():  # a line is written and counted whole, or not at all
             batch.manifest.append(manifest_line(rec))
             batch.records[rec["input"]] = rec
         if on_record:
@@ -1059,7 +1146,7 @@ def run_many(batch: Batch, executor: Executor, *, on_record: Callable[[dict], No
         finished(rec)
     try:
         executor.run(batch.tasks, finished, on_scans)
-    except Terminated:          # SIGTERM, SIGHUP: the same clean-up; the CLI exits 143 or 129
+    except Terminated:  # SIGTERM, SIGHUP: the same clean-up; the CLI exits 143 or 129
         remove_partial([t.output for t in batch.tasks if t.input not in batch.records])
         batch.manifest.close()
         raise
@@ -1067,9 +1154,11 @@ def run_many(batch: Batch, executor: Executor, *, on_record: Callable[[dict], No
         remove_partial([t.output for t in batch.tasks if t.input not in batch.records])
         batch.manifest.close()
         done = sum(r["status"] != FAILED for r in batch.records.values())
-        raise BatchInterrupted(f"interrupted: {done} of {batch.total} inputs done and in {batch.manifest.path}; "
-                               "run the same command again to do the rest") from None
-    remove_partial([t.output for t in batch.tasks])   # left by workers that died mid-write
+        raise BatchInterrupted(
+            f"interrupted: {done} of {batch.total} inputs done and in {batch.manifest.path}; "
+            "run the same command again to do the rest"
+        ) from None
+    remove_partial([t.output for t in batch.tasks])  # left by workers that died mid-write
     batch.manifest.close()
     index = {out: i for i, out in enumerate(batch.outputs)}
     return sorted(batch.records.values(), key=lambda r: index.get(r["output"], len(index)))
@@ -1085,13 +1174,19 @@ def summary(records: list[dict]) -> dict:
     seconds = sum(r.get("seconds") or 0.0 for r in ok)
     scans = sum(r.get("scans") or 0 for r in ok)
     tracks = {k: sum((r.get("tracks") or {}).get(k, 0) for r in ok) for k in ("confirmed", *TRACK_CLASSES, "dynamic")}
-    return {"inputs": len(records), "done": len(ok), "failed": sum(r["status"] == FAILED for r in records),
-            "scans": scans, "task_seconds": round(seconds, 3),
-            "scans_per_task_second": round(scans / seconds, 1) if seconds > 0 else None, "tracks": tracks,
-            "versions": sorted({r.get("datmo_version") or "?" for r in records}),
-            "params_hashes": sorted({r.get("params_hash") or "?" for r in records}),
-            "missing_outputs": [r["output"] for r in ok if not exists(r["output"])],
-            "failures": [{"input": r["input"], "error": r.get("error")} for r in records if r["status"] == FAILED]}
+    return {
+        "inputs": len(records),
+        "done": len(ok),
+        "failed": sum(r["status"] == FAILED for r in records),
+        "scans": scans,
+        "task_seconds": round(seconds, 3),
+        "scans_per_task_second": round(scans / seconds, 1) if seconds > 0 else None,
+        "tracks": tracks,
+        "versions": sorted({r.get("datmo_version") or "?" for r in records}),
+        "params_hashes": sorted({r.get("params_hash") or "?" for r in records}),
+        "missing_outputs": [r["output"] for r in ok if not exists(r["output"])],
+        "failures": [{"input": r["input"], "error": r.get("error")} for r in records if r["status"] == FAILED],
+    }
 
 
 def read_batch(folder: str, *, with_left_out: bool = False) -> list[dict] | tuple[list[dict], int]:
@@ -1113,6 +1208,6 @@ def read_batch(folder: str, *, with_left_out: bool = False) -> list[dict] | tupl
         key = out if remote(folder) else os.path.realpath(local(out))
         if _inside(key, root) and key != root:
             by_output.pop(key, None)
-            by_output[key] = rec        # the latest line naming it, in file order
+            by_output[key] = rec  # the latest line naming it, in file order
     kept = list(by_output.values())
     return (kept, len(latest) - len(kept)) if with_left_out else kept

@@ -65,8 +65,11 @@ def check(bound: Bound, value: object, name: str, error: type[ConfigError] = Con
     if isinstance(value, float) and not math.isfinite(value):
         raise error(f"{name}: {value} is not a finite number; {allowed}")
     if value < bound.lo or (bound.lo_open and value == bound.lo):
-        problem = ("must be positive" if bound.lo == 0 and bound.lo_open
-                   else f"must be {'above' if bound.lo_open else 'at least'} {_show(bound.lo)}")
+        problem = (
+            "must be positive"
+            if bound.lo == 0 and bound.lo_open
+            else f"must be {'above' if bound.lo_open else 'at least'} {_show(bound.lo)}"
+        )
         raise error(f"{name}: {problem}, got {_show(value)}; {allowed}")
     if value > bound.hi:
         raise error(f"{name}: must be at most {_show(bound.hi)}, got {_show(value)}; {allowed}")
@@ -77,23 +80,32 @@ def _b(lo: float, hi: float, unit: str = "", why: str = "", *, open_: bool = Fal
     return Bound(lo, hi, unit, why, open_, integer)
 
 
-bound = _b   # for the parameter sections (perception/params.py, tracking/params.py)
+bound = _b  # for the parameter sections (perception/params.py, tracking/params.py)
 # reasons a range ends where it does, shared by the sections and OPTIONS
 SHARE = "a share"
 PROBABILITY = "a probability"
 NO_SENSE = "beyond any scanner's reach"
 
 
-def param(default: object, bound: Bound | None = None, help: str = "", *, choices: tuple[str, ...] = (),
-          same_as: str = "", metavar: str | None = None) -> Any:
+def param(
+    default: object,
+    bound: Bound | None = None,
+    help: str = "",
+    *,
+    choices: tuple[str, ...] = (),
+    same_as: str = "",
+    metavar: str | None = None,
+) -> Any:
     """A field of a parameter section with its metadata: `bound` (a number's range and unit), `help` (what it
     does, as the TOML comment and the option's help say it) and, for a string, the `choices` it takes (none:
     any non-empty string). The one declaration the validator, the Click options and `datmo config` read.
     `same_as` ('section.key'): the field is that parameter, whose home is there; the configuration tree sets
     it from its home (config.DatmoConfig), and a value written in this section is read as the home's.
     `metavar`: the option's value placeholder in help (default: from the type)."""
-    return field(default=default, metadata={"bound": bound, "help": help, "choices": choices, "same_as": same_as,
-                                            "metavar": metavar})
+    return field(
+        default=default,
+        metadata={"bound": bound, "help": help, "choices": choices, "same_as": same_as, "metavar": metavar},
+    )
 
 
 class Section:
@@ -163,11 +175,11 @@ def min_max_pairs(section: type[Section]) -> list[tuple[str, str]]:
     pairs = []
     for name in numeric:
         if name.endswith("_min"):
-            other = name[:-len("_min")] + "_max"
+            other = name[: -len("_min")] + "_max"
         elif "_min_" in name:
             other = name.replace("_min_", "_max_", 1)
         elif name.startswith("min_"):
-            other = "max_" + name[len("min_"):]
+            other = "max_" + name[len("min_") :]
         else:
             continue
         if other in numeric:
@@ -182,11 +194,13 @@ def ordered_pairs(params: Section, where: str) -> None:
         a, b = getattr(params, lo), getattr(params, hi)
         if a > b:
             unit = f" {bounds[lo].unit}" if bounds[lo].unit else ""
-            raise ConfigError(f"{where}.{lo}: {_show(a)}{unit} is above {hi} = {_show(b)}{unit}; a minimum must be "
-                              f"at most its maximum")
+            raise ConfigError(
+                f"{where}.{lo}: {_show(a)}{unit} is above {hi} = {_show(b)}{unit}; a minimum must be "
+                f"at most its maximum"
+            )
 
 
-D_MAX = _b(0, 100, "m", NO_SENSE, open_=True)   # the paper's d_max: features.d_max, read by tracking too
+D_MAX = _b(0, 100, "m", NO_SENSE, open_=True)  # the paper's d_max: features.d_max, read by tracking too
 _SIM_HOUR = "an hour of scans; the world's paths are planned for the whole run up front"
 # options that are not `[features]` or `[track]` keys (and the scene files' duration and crowd size)
 OPTIONS: dict[str, Bound] = {
@@ -211,10 +225,10 @@ OPTIONS: dict[str, Bound] = {
     "domain_id": _b(0, 232, "", "ROS 2's domain ids (DDS ports beyond 232 overflow)", integer=True),
 }
 
-LINE_ACCUMULATOR_CELLS = 2**25     # theta x rho cells of the HTL accumulator, int32, one per thread (128 MB)
-LINE_RANGE_M = 100.0               # the kernels size the rho axis for ranges up to this (min(range_max, 100))
-CIRCLE_VOTES = 2**18               # radii x (a, b) cells a point votes over in the HTC (the kernel's work)
-BACKGROUND_SIDE = 2048             # cells along a side of the tracker's background grid (16 bytes a cell)
+LINE_ACCUMULATOR_CELLS = 2**25  # theta x rho cells of the HTL accumulator, int32, one per thread (128 MB)
+LINE_RANGE_M = 100.0  # the kernels size the rho axis for ranges up to this (min(range_max, 100))
+CIRCLE_VOTES = 2**18  # radii x (a, b) cells a point votes over in the HTC (the kernel's work)
+BACKGROUND_SIDE = 2048  # cells along a side of the tracker's background grid (16 bytes a cell)
 
 
 def line_accumulator_cells(theta_resolution: float, rho_resolution: float) -> int:
@@ -243,16 +257,19 @@ def features_combined(p, where: str = "features") -> None:
         raise ConfigError(f"{where}: bench_min_length must be below bench_max_length")
     cells = line_accumulator_cells(p.theta_resolution, p.rho_resolution)
     if cells > LINE_ACCUMULATOR_CELLS:
-        raise ConfigError(f"{where}: theta_resolution {p.theta_resolution:g}° and rho_resolution "
-                          f"{p.rho_resolution:g} m make a line accumulator of {cells:,} cells (at most "
-                          f"{LINE_ACCUMULATOR_CELLS:,}); raise either")
-    votes = circle_votes(p.circle_radius_min, p.circle_radius_max, p.circle_radius_step, p.circle_window,
-                         p.circle_cell)
+        raise ConfigError(
+            f"{where}: theta_resolution {p.theta_resolution:g}° and rho_resolution "
+            f"{p.rho_resolution:g} m make a line accumulator of {cells:,} cells (at most "
+            f"{LINE_ACCUMULATOR_CELLS:,}); raise either"
+        )
+    votes = circle_votes(p.circle_radius_min, p.circle_radius_max, p.circle_radius_step, p.circle_window, p.circle_cell)
     if votes > CIRCLE_VOTES:
-        raise ConfigError(f"{where}: circle_radius_step {p.circle_radius_step:g} m (radii from "
-                          f"{p.circle_radius_min:g} to {p.circle_radius_max:g} m) and circle_cell {p.circle_cell:g} m "
-                          f"(window {p.circle_window:g} m) make {votes:,} circle votes per point (at most "
-                          f"{CIRCLE_VOTES:,}); raise circle_radius_step or circle_cell")
+        raise ConfigError(
+            f"{where}: circle_radius_step {p.circle_radius_step:g} m (radii from "
+            f"{p.circle_radius_min:g} to {p.circle_radius_max:g} m) and circle_cell {p.circle_cell:g} m "
+            f"(window {p.circle_window:g} m) make {votes:,} circle votes per point (at most "
+            f"{CIRCLE_VOTES:,}); raise circle_radius_step or circle_cell"
+        )
 
 
 def track_combined(p, where: str = "track") -> None:
@@ -261,9 +278,11 @@ def track_combined(p, where: str = "track") -> None:
         raise ConfigError(f"{where}.confirm_window: must be at least confirm_hits ({p.confirm_hits})")
     side = background_side(p.background_extent, p.background_cell)
     if p.background_time > 0 and side > BACKGROUND_SIDE:
-        raise ConfigError(f"{where}: background_extent {p.background_extent:g} m and background_cell "
-                          f"{p.background_cell:g} m make a background grid {side:,} cells a side (at most "
-                          f"{BACKGROUND_SIDE:,}); raise background_cell or lower background_extent")
+        raise ConfigError(
+            f"{where}: background_extent {p.background_extent:g} m and background_cell "
+            f"{p.background_cell:g} m make a background grid {side:,} cells a side (at most "
+            f"{BACKGROUND_SIDE:,}); raise background_cell or lower background_extent"
+        )
 
 
 def option_name(param: click.Parameter | None) -> str:
@@ -301,12 +320,18 @@ def option(*decls: str, bound: Bound, help: str, **kwargs) -> click.decorators.F
     return click.option(*decls, type=Bounded(bound), help=f"{help} Range: {bound.describe()}.", **kwargs)
 
 
-def pair_option(*decls: str, bounds: tuple[Bound, Bound], names: tuple[str, str], help: str,
-                **kwargs) -> click.decorators.FC:
+def pair_option(
+    *decls: str, bounds: tuple[Bound, Bound], names: tuple[str, str], help: str, **kwargs
+) -> click.decorators.FC:
     """click.option taking two numbers (e.g. MIN MAX), each within its bound, the ranges appended to its help."""
     ranges = ", ".join(f"{n} {b.describe()}" for n, b in zip(names, bounds, strict=True))
-    return click.option(*decls, type=click.Tuple([Bounded(bounds[0]), Bounded(bounds[1])]),
-                        metavar=" ".join(names), help=f"{help} Range: {ranges}.", **kwargs)
+    return click.option(
+        *decls,
+        type=click.Tuple([Bounded(bounds[0]), Bounded(bounds[1])]),
+        metavar=" ".join(names),
+        help=f"{help} Range: {ranges}.",
+        **kwargs,
+    )
 
 
 class LaserPose(click.ParamType):
@@ -331,8 +356,9 @@ class LaserPose(click.ParamType):
             try:
                 number = float(text.strip())
             except ValueError:
-                raise OptionError(f"{name}: {part} is not a number, got {text.strip()!r}; expected X,Y,YAW "
-                                  "(metres, metres, degrees)") from None
+                raise OptionError(
+                    f"{name}: {part} is not a number, got {text.strip()!r}; expected X,Y,YAW (metres, metres, degrees)"
+                ) from None
             out.append(check(bound, number, f"{name} {part}", OptionError))
         return out[0], out[1], math.radians(out[2])
 
@@ -340,7 +366,11 @@ class LaserPose(click.ParamType):
 def laser_pose_option() -> click.decorators.FC:
     """--laser-pose X,Y,YAW (see LaserPose)."""
     ranges = ", ".join(f"{part} {bound.describe()}" for part, bound in LaserPose.parts)
-    return click.option("--laser-pose", type=LaserPose(), default=None,
-                        help="Where the scanner sits on the robot: X,Y in metres and YAW in degrees, in the base frame "
-                             f"(base_link); written to /tf_static and the metadata (datmo.laser_pose). "
-                             f"Range: {ranges}.")
+    return click.option(
+        "--laser-pose",
+        type=LaserPose(),
+        default=None,
+        help="Where the scanner sits on the robot: X,Y in metres and YAW in degrees, in the base frame "
+        f"(base_link); written to /tf_static and the metadata (datmo.laser_pose). "
+        f"Range: {ranges}.",
+    )

@@ -55,9 +55,10 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 def _escape(err: UnicodeEncodeError) -> tuple[str, int]:
     """Codec error handler: a file name's byte that is not UTF-8 (a surrogate from os.fsdecode) as \\xNN,
     any other unencodable character as \\uNNNN."""
-    bad = err.object[err.start:err.end]
-    return "".join(f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF else f"\\u{ord(c):04x}"
-                   for c in bad), err.end
+    bad = err.object[err.start : err.end]
+    return "".join(
+        f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF else f"\\u{ord(c):04x}" for c in bad
+    ), err.end
 
 
 def _safe_streams() -> None:
@@ -79,7 +80,7 @@ def _debug(ctx: click.Context) -> bool:
     return bool(ctx.params.get("debug")) or os.environ.get("DATMO_DEBUG", "") not in ("", "0")
 
 
-_DECOMPRESSION = {"ZstdError", "BadGzipFile", "LZMAError", "LZ4FrameError"}   # exception names of the codecs
+_DECOMPRESSION = {"ZstdError", "BadGzipFile", "LZMAError", "LZ4FrameError"}  # exception names of the codecs
 
 
 def _input_named(exc: BaseException) -> str | None:
@@ -131,8 +132,11 @@ def clean_error(exc: BaseException) -> CleanError | None:
     ours = [f for f in traceback.extract_tb(exc.__traceback__) if "datmo_cli" in f.filename]
     where = f" at datmo_cli{ours[-1].filename.rsplit('datmo_cli', 1)[-1]}:{ours[-1].lineno}" if ours else ""
     about = f" (input {named})" if named else ""
-    return CleanError(f"internal error{about}: {type(exc).__name__}: {exc}{where} (a bug: rerun with --debug or "
-                      "DATMO_DEBUG=1 for the traceback)", 70)
+    return CleanError(
+        f"internal error{about}: {type(exc).__name__}: {exc}{where} (a bug: rerun with --debug or "
+        "DATMO_DEBUG=1 for the traceback)",
+        70,
+    )
 
 
 class CleanError(click.ClickException):
@@ -217,7 +221,7 @@ class _FileOutput(click.ParamType):
     def convert(self, value, param, ctx):
         import os
 
-        if ctx is not None and ctx.params.get("bag_dir"):   # a folder (an eager --bag-dir; log/bagdir.py checks it)
+        if ctx is not None and ctx.params.get("bag_dir"):  # a folder (an eager --bag-dir; log/bagdir.py checks it)
             return self.inner.convert(value, param, ctx)
         if isinstance(value, (str, bytes)) and os.fsdecode(value).endswith(("/", os.sep)):
             from .errors import OutputError
@@ -237,7 +241,7 @@ class _FileOutput(click.ParamType):
         return self.inner.shell_complete(ctx, param, incomplete)
 
 
-FILE_OUTPUTS = ("output", "plot", "link")   # option names that name one file a command writes
+FILE_OUTPUTS = ("output", "plot", "link")  # option names that name one file a command writes
 
 
 def _guard_file_outputs(command: click.Command) -> click.Command:
@@ -271,11 +275,11 @@ def main(argv: list[str] | None = None) -> None:
 
     _safe_streams()
     try:
-        with outputs.handle_signals():   # as early as can be: a SIGTERM while importing still cleans up
+        with outputs.handle_signals():  # as early as can be: a SIGTERM while importing still cleans up
             cli.main(args=argv, prog_name="datmo")
     except BrokenPipeError:
         sys.exit(141)
-    except KeyboardInterrupt:   # outside a command (Click would say "Aborted!" and exit 1)
+    except KeyboardInterrupt:  # outside a command (Click would say "Aborted!" and exit 1)
         outputs.remove_live()
         sys.exit(130)
     except outputs.Terminated as exc:

@@ -62,8 +62,10 @@ def local_security(address: str):
     except ImportError:
         from .extras import MissingExtraError
 
-        raise MissingExtraError(f"--scheduler {address}: the local cluster's TLS certificate needs cryptography "
-                                "(part of the dask extra), which is not installed: pip install cryptography") from None
+        raise MissingExtraError(
+            f"--scheduler {address}: the local cluster's TLS certificate needs cryptography "
+            "(part of the dask extra), which is not installed: pip install cryptography"
+        ) from None
 
 
 def client_security(address: str):
@@ -73,15 +75,18 @@ def client_security(address: str):
         return None
     from distributed.security import Security
 
-    how = ("set distributed.comm.tls.ca-file, distributed.comm.tls.client.cert and distributed.comm.tls.client.key "
-           "in the Dask configuration, e.g. DASK_DISTRIBUTED__COMM__TLS__CA_FILE=ca.pem (see docs/batch.md, "
-           "Security of the cluster)")
+    how = (
+        "set distributed.comm.tls.ca-file, distributed.comm.tls.client.cert and distributed.comm.tls.client.key "
+        "in the Dask configuration, e.g. DASK_DISTRIBUTED__COMM__TLS__CA_FILE=ca.pem (see docs/batch.md, "
+        "Security of the cluster)"
+    )
     try:
         security = Security()
         args = security.get_connection_args("client")
     except (OSError, ValueError, TypeError) as exc:
-        raise DatmoError(f"--scheduler {address}: cannot load the TLS certificate of the Dask configuration "
-                         f"({exc}); {how}") from None
+        raise DatmoError(
+            f"--scheduler {address}: cannot load the TLS certificate of the Dask configuration ({exc}); {how}"
+        ) from None
     if args.get("ssl_context") is None:
         raise DatmoError(f"--scheduler {address}: a tls:// scheduler needs this client's certificate: {how}")
     return security
@@ -94,7 +99,7 @@ def _worker_task(task: Task, cancel_event: str) -> dict:
     from .perception.threads import set_default
 
     ensure_warm()
-    set_default(task.threads or 1)   # Dask runs one task per worker thread: perception on one thread unless told
+    set_default(task.threads or 1)  # Dask runs one task per worker thread: perception on one thread unless told
     event = Event(cancel_event)
     last = [0.0, False]
 
@@ -123,22 +128,33 @@ class DaskExecutor(Executor):
             if n is not None:
                 import logging
 
-                ensure_warm()   # compile (or load) the kernels here once, so N workers do not compile them at once
+                ensure_warm()  # compile (or load) the kernels here once, so N workers do not compile them at once
 
                 # the workers' statistical profiler samples every thread's stack 100 times a second: off for a
                 # run's own cluster (pipeline code holds the GIL between kernels); and one numba thread per worker
                 # process, as there is one worker per core. The nanny sets that variable in this process's own
                 # environment before it spawns a worker: it is put back after, or this process's numba would
                 # refuse to run kernels on its threads (NUMBA_NUM_THREADS changed after they were launched)
-                security = local_security(address)   # TLS: no other user of this machine can connect
+                security = local_security(address)  # TLS: no other user of this machine can connect
                 own_threads = os.environ.get("NUMBA_NUM_THREADS")
                 try:
-                    with dask.config.set({"distributed.scheduler.allowed-failures": retries,
-                                          "distributed.worker.profile.enabled": False,
-                                          "distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1}):
+                    with dask.config.set(
+                        {
+                            "distributed.scheduler.allowed-failures": retries,
+                            "distributed.worker.profile.enabled": False,
+                            "distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1,
+                        }
+                    ):
                         self.cluster = distributed.LocalCluster(
-                            n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", protocol="tls://",
-                            security=security, dashboard_address=None, silence_logs=logging.ERROR)
+                            n_workers=n,
+                            threads_per_worker=1,
+                            processes=True,
+                            host="127.0.0.1",
+                            protocol="tls://",
+                            security=security,
+                            dashboard_address=None,
+                            silence_logs=logging.ERROR,
+                        )
                 finally:
                     if own_threads is None:
                         os.environ.pop("NUMBA_NUM_THREADS", None)
@@ -157,12 +173,19 @@ class DaskExecutor(Executor):
         self.client.register_plugin(WarmUp(), name=WarmUp.name)  # returns once every worker has loaded them
         threads = sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values())
         self.workers = max(threads, 1)
-        self.where = (f"a local Dask cluster of {n} worker{'s' if n > 1 else ''}" if n is not None
-                      else f"the Dask scheduler {address} ({self.workers} worker threads)")
+        self.where = (
+            f"a local Dask cluster of {n} worker{'s' if n > 1 else ''}"
+            if n is not None
+            else f"the Dask scheduler {address} ({self.workers} worker threads)"
+        )
         self.window = window or max(64, 4 * self.workers)
 
-    def run(self, tasks: list[Task], on_record: Callable[[dict], None],
-            on_scans: Callable[[int, int, int], None] | None = None) -> None:
+    def run(
+        self,
+        tasks: list[Task],
+        on_record: Callable[[dict], None],
+        on_scans: Callable[[int, int, int], None] | None = None,
+    ) -> None:
         from distributed import KilledWorker, as_completed
 
         if not tasks:
@@ -170,7 +193,7 @@ class DaskExecutor(Executor):
         token = uuid.uuid4().hex[:12]
         cancel_event = f"datmo-cancel-{token}"
         queue = deque(tasks)
-        live: dict[str, tuple] = {}          # key -> (future, task)
+        live: dict[str, tuple] = {}  # key -> (future, task)
         attempts: dict[int, int] = {}
         stream = as_completed()
 
@@ -197,7 +220,7 @@ class DaskExecutor(Executor):
 
         for _ in range(min(self.window, len(queue))):
             submit(queue.popleft())
-        with _interrupt_flag() as stop:     # Ctrl-C sets a flag: no KeyboardInterrupt inside distributed's calls
+        with _interrupt_flag() as stop:  # Ctrl-C sets a flag: no KeyboardInterrupt inside distributed's calls
             while live and not stop:
                 done = stream.next_batch(block=False)
                 if not done:

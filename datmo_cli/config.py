@@ -17,8 +17,8 @@ from .perception.params import FeatureParams
 from .tracking.params import TrackingParams
 
 SECTIONS: dict[str, type[Section]] = {"features": FeatureParams, "track": TrackingParams}
-STAGES = tuple(SECTIONS)   # the tables of a config file, one per stage
-BOUNDS: dict[str, dict[str, Bound]] = {s: bounds_of(c) for s, c in SECTIONS.items()}   # section -> key -> Bound
+STAGES = tuple(SECTIONS)  # the tables of a config file, one per stage
+BOUNDS: dict[str, dict[str, Bound]] = {s: bounds_of(c) for s, c in SECTIONS.items()}  # section -> key -> Bound
 
 
 @dataclass(frozen=True)
@@ -30,7 +30,7 @@ class DatmoConfig:
     track: TrackingParams = field(default_factory=TrackingParams)
 
     def __post_init__(self) -> None:
-        for s in STAGES:   # a parameter with its home in another section takes its value from there
+        for s in STAGES:  # a parameter with its home in another section takes its value from there
             section = getattr(self, s)
             home = {name: self.get(key) for name, key in same_as(type(section)).items()}
             if any(getattr(section, name) != value for name, value in home.items()):
@@ -43,8 +43,9 @@ class DatmoConfig:
 
     def to_dict(self) -> dict[str, dict]:
         """Section -> key -> value, as a TOML file holds them (each parameter once, in its home section)."""
-        return {s: {k: v for k, v in getattr(self, s).to_dict().items() if k not in same_as(SECTIONS[s])}
-                for s in STAGES}
+        return {
+            s: {k: v for k, v in getattr(self, s).to_dict().items() if k not in same_as(SECTIONS[s])} for s in STAGES
+        }
 
     def replace(self, **sections: dict) -> DatmoConfig:
         """A copy with each given section's values changed (section -> key -> value; None values ignored)."""
@@ -67,8 +68,10 @@ def _build(sections: dict[str, Section], changes: dict[str, dict], where: str = 
                 continue
             value, (home, _, home_key) = moved[s].pop(name), key.partition(".")
             if moved[home].get(home_key) not in (None, value):
-                raise ConfigError(f"{where}{s}.{name} and {key} are one parameter (its home is {key}), given "
-                                  f"as {value!r} and {moved[home][home_key]!r}; give it once, as {key}")
+                raise ConfigError(
+                    f"{where}{s}.{name} and {key} are one parameter (its home is {key}), given "
+                    f"as {value!r} and {moved[home][home_key]!r}; give it once, as {key}"
+                )
             moved[home][home_key] = value
     return DatmoConfig(**{s: sections[s].replace(**moved[s]) for s in STAGES})
 
@@ -80,9 +83,12 @@ def load(path: str | Path | None = None, options: dict[str, dict] | None = None)
     not its home (track.d_max: features.d_max) is read as the same parameter."""
     tables = read_tables(path) if path is not None else {s: {} for s in STAGES}
     where = f"{path}: " if path is not None else ""
-    given = {s: validate(cls, tables[s], f"{where}{s}") for s, cls in SECTIONS.items()}   # each where written
-    cfg = _build({s: cls() for s, cls in SECTIONS.items()},
-                 {s: {k: getattr(given[s], k) for k in tables[s]} for s in STAGES}, where)
+    given = {s: validate(cls, tables[s], f"{where}{s}") for s, cls in SECTIONS.items()}  # each where written
+    cfg = _build(
+        {s: cls() for s, cls in SECTIONS.items()},
+        {s: {k: getattr(given[s], k) for k in tables[s]} for s in STAGES},
+        where,
+    )
     return cfg.replace(**(options or {}))
 
 
@@ -104,19 +110,22 @@ def read_tables(path: str | Path) -> dict[str, dict]:
         raise ConfigError(f"{path}: {exc}") from None
     for stage in STAGES:
         if stage in data and not isinstance(data[stage], dict):
-            raise ConfigError(f"{path}: {stage} must be a table ([{stage}] with its parameters), "
-                              f"got {data[stage]!r}")
+            raise ConfigError(f"{path}: {stage} must be a table ([{stage}] with its parameters), got {data[stage]!r}")
     tables = {s: dict(data.get(s, {})) for s in STAGES}
     for key, value in data.items():
         if key in STAGES:
             continue
         if isinstance(value, dict):
-            raise ConfigError(f"{path}: [{key}]: unknown table{_did_you_mean(key)} (datmo reads "
-                              f"{' and '.join(f'[{s}]' for s in STAGES)})")
+            raise ConfigError(
+                f"{path}: [{key}]: unknown table{_did_you_mean(key)} (datmo reads "
+                f"{' and '.join(f'[{s}]' for s in STAGES)})"
+            )
         owner = next((s for s in STAGES if s not in data and key in _names(SECTIONS[s])), None)
         if owner is None:
-            raise ConfigError(f"{path}: {key}: unknown parameter at the top level (not in a [features] or [track] "
-                              "table, nor a key of a section without its table)")
+            raise ConfigError(
+                f"{path}: {key}: unknown parameter at the top level (not in a [features] or [track] "
+                "table, nor a key of a section without its table)"
+            )
         tables[owner][key] = value
     return tables
 
@@ -133,8 +142,8 @@ def _names(section: type[Section]) -> set[str]:
     return {f.name for f in fields(section)}
 
 
-LOCAL = "datmo.toml"   # picked up from the current folder when no --config is given
-PICKED_KEY = "datmo.config_picked"   # in the Click context's meta: ./datmo.toml was picked up
+LOCAL = "datmo.toml"  # picked up from the current folder when no --config is given
+PICKED_KEY = "datmo.config_picked"  # in the Click context's meta: ./datmo.toml was picked up
 
 
 def effective_path(config: str | Path | None, no_config: bool) -> Path | None:

@@ -26,16 +26,23 @@ from .errors import ConfigError
 from .extras import require
 from .log import types
 
-DOMAIN_ID_MAX = 232             # ROS 2 domain ids: 0-232 (the DDS port mapping runs out above)
-DEFAULT_DEPTH = 10              # ROS 2's default history depth
+DOMAIN_ID_MAX = 232  # ROS 2 domain ids: 0-232 (the DDS port mapping runs out above)
+DEFAULT_DEPTH = 10  # ROS 2's default history depth
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-_PADDING = 4                    # a DDS sample's size is a multiple of this (bytes)
+_PADDING = 4  # a DDS sample's size is a multiple of this (bytes)
 
 
 def require_cyclonedds():
     """The cyclonedds module (with the parts used here loaded), or MissingExtraError naming the node extra."""
-    for module in ("cyclonedds.domain", "cyclonedds.topic", "cyclonedds.pub", "cyclonedds.sub", "cyclonedds.core",
-                   "cyclonedds.qos", "cyclonedds.idl"):
+    for module in (
+        "cyclonedds.domain",
+        "cyclonedds.topic",
+        "cyclonedds.pub",
+        "cyclonedds.sub",
+        "cyclonedds.core",
+        "cyclonedds.qos",
+        "cyclonedds.idl",
+    ):
         require(module, for_="datmo node")
     return require("cyclonedds", for_="datmo node")
 
@@ -46,8 +53,10 @@ def ros_topic(name: str, option: str = "topic") -> str:
     a digit, separated by single slashes)."""
     tokens = name.removeprefix("/").split("/")
     if not all(_NAME.fullmatch(t) for t in tokens):
-        raise ConfigError(f"{option} {name!r}: not a ROS 2 topic name (letters, digits and underscores between "
-                          "single slashes, each part not starting with a digit)")
+        raise ConfigError(
+            f"{option} {name!r}: not a ROS 2 topic name (letters, digits and underscores between "
+            "single slashes, each part not starting with a digit)"
+        )
     return "/" + "/".join(tokens)
 
 
@@ -85,9 +94,22 @@ def domain_id(value: int | None = None) -> int:
 def _base(kind: str):
     from cyclonedds.idl import types as t
 
-    return {"bool": bool, "byte": t.byte, "char": t.uint8, "int8": t.int8, "uint8": t.uint8, "int16": t.int16,
-            "uint16": t.uint16, "int32": t.int32, "uint32": t.uint32, "int64": t.int64, "uint64": t.uint64,
-            "float32": t.float32, "float64": t.float64, "string": str}[kind]
+    return {
+        "bool": bool,
+        "byte": t.byte,
+        "char": t.uint8,
+        "int8": t.int8,
+        "uint8": t.uint8,
+        "int16": t.int16,
+        "uint16": t.uint16,
+        "int32": t.int32,
+        "uint32": t.uint32,
+        "int64": t.int64,
+        "uint64": t.uint64,
+        "float32": t.float32,
+        "float64": t.float64,
+        "string": str,
+    }[kind]
 
 
 def _annotation(spec: tuple):
@@ -130,8 +152,12 @@ def publication_qos(depth: int = DEFAULT_DEPTH):
     from cyclonedds.qos import Policy, Qos
     from cyclonedds.util import duration
 
-    return Qos(Policy.Reliability.Reliable(duration(milliseconds=100)), Policy.Durability.Volatile,
-               Policy.History.KeepLast(depth), Policy.DataRepresentation(use_cdrv0_representation=True))
+    return Qos(
+        Policy.Reliability.Reliable(duration(milliseconds=100)),
+        Policy.Durability.Volatile,
+        Policy.History.KeepLast(depth),
+        Policy.DataRepresentation(use_cdrv0_representation=True),
+    )
 
 
 def subscription_qos(depth: int = DEFAULT_DEPTH):
@@ -139,8 +165,12 @@ def subscription_qos(depth: int = DEFAULT_DEPTH):
     keep last `depth`, in XCDR1."""
     from cyclonedds.qos import Policy, Qos
 
-    return Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(depth),
-               Policy.DataRepresentation(use_cdrv0_representation=True))
+    return Qos(
+        Policy.Reliability.BestEffort,
+        Policy.Durability.Volatile,
+        Policy.History.KeepLast(depth),
+        Policy.DataRepresentation(use_cdrv0_representation=True),
+    )
 
 
 class Participant:

@@ -51,32 +51,46 @@ import numpy as np
 
 from .errors import InputError
 from .extras import require
-from .log.vocabulary import (
-    CLASS_NAMES,
-    CLASS_PERSON,
-    CLASS_UNKNOWN,
-    MOBILITY_STATIC,
-    STATUS_COASTING,
-    STATUS_CONFIRMED,
-)
+from .log.vocabulary import CLASS_NAMES, CLASS_PERSON, CLASS_UNKNOWN, MOBILITY_STATIC, STATUS_COASTING, STATUS_CONFIRMED
 
 MOVER_CLASSES = {code: name for code, name in CLASS_NAMES.items() if code != CLASS_UNKNOWN}
 # a ground-truth CSV's class: the name, with underscores or its first word ("circle"), or "people"
-CLASS_BY_NAME = {"people": CLASS_PERSON, **{alias: code for code, name in MOVER_CLASSES.items()
-                                            for alias in (name, name.replace(" ", "_"), name.split()[0])}}
-METRICS = ["num_frames", "num_objects", "num_unique_objects", "num_predictions", "num_matches",
-           "num_false_positives", "num_misses", "num_switches", "num_fragmentations", "mota", "motp", "idf1",
-           "idp", "idr", "precision", "recall", "mostly_tracked", "partially_tracked", "mostly_lost"]
+CLASS_BY_NAME = {
+    "people": CLASS_PERSON,
+    **{
+        alias: code for code, name in MOVER_CLASSES.items() for alias in (name, name.replace(" ", "_"), name.split()[0])
+    },
+}
+METRICS = [
+    "num_frames",
+    "num_objects",
+    "num_unique_objects",
+    "num_predictions",
+    "num_matches",
+    "num_false_positives",
+    "num_misses",
+    "num_switches",
+    "num_fragmentations",
+    "mota",
+    "motp",
+    "idf1",
+    "idp",
+    "idr",
+    "precision",
+    "recall",
+    "mostly_tracked",
+    "partially_tracked",
+    "mostly_lost",
+]
 HOTA_METRICS = ["hota", "deta", "assa", "loca"]
 # Figures whose fall means a worse tracker (the rest: a rise is worse); used by the regression check.
-HIGHER_IS_BETTER = {"mota", "idf1", "idp", "idr", "precision", "recall", "mostly_tracked", "num_matches",
-                    *HOTA_METRICS}
-PROGRESS_EVERY = 500   # frames between progress calls
+HIGHER_IS_BETTER = {"mota", "idf1", "idp", "idr", "precision", "recall", "mostly_tracked", "num_matches", *HOTA_METRICS}
+PROGRESS_EVERY = 500  # frames between progress calls
 
 
 def require_scoring(for_: str = "scoring tracks (datmo evaluate)") -> None:
     """Import what scoring needs (the eval extra: motmetrics, TrackEval, scipy), or MissingExtraError naming it."""
-    require("scipy.optimize", for_=for_)   # first: the other two import it
+    require("scipy.optimize", for_=for_)  # first: the other two import it
     require("motmetrics", for_=for_)
     require("trackeval.metrics.hota", for_=for_)
 
@@ -85,12 +99,12 @@ def require_scoring(for_: str = "scoring tracks (datmo evaluate)") -> None:
 class Frames:
     """Positions per frame: frame k's objects are rows offsets[k]:offsets[k + 1] of ids, x, y, cls."""
 
-    stamps: np.ndarray    # (N,) int64 ns
-    offsets: np.ndarray   # (N + 1,) int64
-    ids: np.ndarray       # (M,) int64
-    x: np.ndarray         # (M,) float64, m, sensor frame
+    stamps: np.ndarray  # (N,) int64 ns
+    offsets: np.ndarray  # (N + 1,) int64
+    ids: np.ndarray  # (M,) int64
+    x: np.ndarray  # (M,) float64, m, sensor frame
     y: np.ndarray
-    cls: np.ndarray       # (M,) int64 class code; 0 when unknown
+    cls: np.ndarray  # (M,) int64 class code; 0 when unknown
 
     def select(self, keep: np.ndarray) -> Frames:
         """The same frames with only the rows where `keep` is true."""
@@ -108,7 +122,7 @@ class Regions:
     offsets: np.ndarray
     x: np.ndarray
     y: np.ndarray
-    angle: np.ndarray          # rad, of the rectangle's length axis
+    angle: np.ndarray  # rad, of the rectangle's length axis
     half_length: np.ndarray
     half_width: np.ndarray
 
@@ -125,8 +139,14 @@ class Regions:
 
 
 def _frames(stamps: np.ndarray, offsets: np.ndarray, items: np.ndarray, cls_field: str) -> Frames:
-    return Frames(np.asarray(stamps, np.int64), np.asarray(offsets, np.int64), items["id"].astype(np.int64),
-                  items["x"].astype(np.float64), items["y"].astype(np.float64), items[cls_field].astype(np.int64))
+    return Frames(
+        np.asarray(stamps, np.int64),
+        np.asarray(offsets, np.int64),
+        items["id"].astype(np.int64),
+        items["x"].astype(np.float64),
+        items["y"].astype(np.float64),
+        items[cls_field].astype(np.int64),
+    )
 
 
 def moved_ids(objects: np.ndarray) -> np.ndarray:
@@ -145,9 +165,14 @@ def target_mask(objects: np.ndarray, moved: np.ndarray, *, include_occluded: boo
     return target
 
 
-def ground_truth_frames(stamps: np.ndarray, offsets: np.ndarray, objects: np.ndarray,
-                        sensor_theta: np.ndarray | None = None, *,
-                        include_occluded: bool = False) -> tuple[Frames, Regions]:
+def ground_truth_frames(
+    stamps: np.ndarray,
+    offsets: np.ndarray,
+    objects: np.ndarray,
+    sensor_theta: np.ndarray | None = None,
+    *,
+    include_occluded: bool = False,
+) -> tuple[Frames, Regions]:
     """Targets and don't-care regions of GroundTruth messages (see the module docstring): `objects` are
     GroundTruthObject elements, message k's at offsets[k]:offsets[k + 1]; sensor_theta (rad, per message)
     turns the objects' world orientations into the sensor frame (zero when None)."""
@@ -157,14 +182,25 @@ def ground_truth_frames(stamps: np.ndarray, offsets: np.ndarray, objects: np.nda
     frame = np.repeat(np.arange(len(stamps)), np.diff(f.offsets))
     other = ~target
     counts = np.bincount(frame[other], minlength=len(stamps))
-    regions = Regions(np.concatenate([[0], np.cumsum(counts)]).astype(np.int64), f.x[other], f.y[other],
-                      objects["orientation"][other].astype(np.float64) - theta[frame[other]],
-                      objects["length"][other].astype(np.float64) / 2, objects["width"][other].astype(np.float64) / 2)
+    regions = Regions(
+        np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        f.x[other],
+        f.y[other],
+        objects["orientation"][other].astype(np.float64) - theta[frame[other]],
+        objects["length"][other].astype(np.float64) / 2,
+        objects["width"][other].astype(np.float64) / 2,
+    )
     return f.select(target), regions
 
 
-def track_frames(stamps: np.ndarray, offsets: np.ndarray, tracks: np.ndarray, *, include_coasting: bool = False,
-                 exclude_static: bool = False) -> Frames:
+def track_frames(
+    stamps: np.ndarray,
+    offsets: np.ndarray,
+    tracks: np.ndarray,
+    *,
+    include_coasting: bool = False,
+    exclude_static: bool = False,
+) -> Frames:
     """Frames of the hypotheses in Tracks messages (see the module docstring for which tracks count)."""
     f = _frames(stamps, offsets, tracks, "classification")
     status = tracks["status"]
@@ -220,21 +256,26 @@ def parse_ground_truth_csv(text: str, name: str = "ground truth") -> Frames:
     frames = np.unique(np.concatenate([st, np.array(empty, np.int64)]))
     offsets = np.searchsorted(st[order], frames, side="left")
     offsets = np.append(offsets, len(st)).astype(np.int64)
-    return Frames(frames, offsets, np.array(ids, np.int64)[order], np.array(xs)[order], np.array(ys)[order],
-                  np.array(cls, np.int64)[order])
+    return Frames(
+        frames,
+        offsets,
+        np.array(ids, np.int64)[order],
+        np.array(xs)[order],
+        np.array(ys)[order],
+        np.array(cls, np.int64)[order],
+    )
 
 
 def _csv_rows(reader: csv.DictReader, cols: dict[str, str], name: str) -> tuple[list, ...]:
     """(stamps, ids, xs, ys, classes, stamps of empty rows) of the CSV's rows, each checked."""
     stamps, ids, xs, ys, cls, empty = [], [], [], [], [], []
-    seen: dict[tuple[int, int], int] = {}   # (stamp, id) -> line
+    seen: dict[tuple[int, int], int] = {}  # (stamp, id) -> line
     for row in reader:
         line = reader.line_num
         cell = _cells(row, cols)
         stamp = _integer(cell("stamp_ns"), "stamp_ns", name, line)
         if not 0 <= stamp <= INT64_MAX:
-            raise InputError(f"{name}: line {line}: stamp_ns {stamp} is outside int64 nanoseconds "
-                             f"(0 to {INT64_MAX})")
+            raise InputError(f"{name}: line {line}: stamp_ns {stamp} is outside int64 nanoseconds (0 to {INT64_MAX})")
         raw_id = cell("id")
         if not raw_id:
             empty.append(stamp)
@@ -246,11 +287,12 @@ def _csv_rows(reader: csv.DictReader, cols: dict[str, str], name: str) -> tuple[
         c = cell("class").lower()
         code = int(c) if c.isascii() and c.isdigit() else CLASS_BY_NAME.get(c, -1) if c else 0
         if code not in MOVER_CLASSES and c:
-            raise InputError(f"{name}: line {line}: unknown class {c!r} (person, circle, rectangular, 1-3 or "
-                             "empty)")
+            raise InputError(f"{name}: line {line}: unknown class {c!r} (person, circle, rectangular, 1-3 or empty)")
         if (stamp, ident) in seen:
-            raise InputError(f"{name}: line {line}: id {ident} again at stamp_ns {stamp} (first at line "
-                             f"{seen[stamp, ident]}); one object per id and frame")
+            raise InputError(
+                f"{name}: line {line}: id {ident} again at stamp_ns {stamp} (first at line "
+                f"{seen[stamp, ident]}); one object per id and frame"
+            )
         seen[stamp, ident] = line
         stamps.append(stamp)
         ids.append(ident)
@@ -297,8 +339,9 @@ def align(gt: Frames, hyps: Frames, tolerance_ns: int = 0) -> np.ndarray:
     return np.where(ok, order[pick], -1)
 
 
-def aligned_hypotheses(gt: Frames, hyps: Frames, *, regions: Regions | None = None, match_radius: float = 0.5,
-                       stamp_tolerance_ns: int = 0) -> tuple[Frames, int]:
+def aligned_hypotheses(
+    gt: Frames, hyps: Frames, *, regions: Regions | None = None, match_radius: float = 0.5, stamp_tolerance_ns: int = 0
+) -> tuple[Frames, int]:
     """The hypotheses as one frame per ground-truth frame (empty where no Tracks message has its stamp),
     without those in don't-care regions that the frame's optimal assignment leaves unmatched; and how
     many were ignored."""
@@ -377,19 +420,31 @@ def hota(frames: HotaFrames) -> dict[str, float | None]:
     n_gt_dets, n_hyp_dets = sum(map(len, gt_ids)), sum(map(len, hyp_ids))
     if n_gt_dets == 0 and n_hyp_dets == 0:
         return dict.fromkeys(HOTA_METRICS)
-    data = {"num_gt_dets": n_gt_dets, "num_tracker_dets": n_hyp_dets, "num_gt_ids": n_gt, "num_tracker_ids": n_hyp,
-            "gt_ids": gt_ids, "tracker_ids": hyp_ids, "similarity_scores": frames.similarity}
+    data = {
+        "num_gt_dets": n_gt_dets,
+        "num_tracker_dets": n_hyp_dets,
+        "num_gt_ids": n_gt,
+        "num_tracker_ids": n_hyp,
+        "gt_ids": gt_ids,
+        "tracker_ids": hyp_ids,
+        "similarity_scores": frames.similarity,
+    }
     res = HOTA().eval_sequence(data)
     matched = bool(res["HOTA_TP"][0] > 0)
-    return {"hota": float(np.mean(res["HOTA"])), "deta": float(np.mean(res["DetA"])),
-            "assa": float(np.mean(res["AssA"])), "loca": float(np.mean(res["LocA"])) if matched else None}
+    return {
+        "hota": float(np.mean(res["HOTA"])),
+        "deta": float(np.mean(res["DetA"])),
+        "assa": float(np.mean(res["AssA"])),
+        "loca": float(np.mean(res["LocA"])) if matched else None,
+    }
 
 
-Progress = Callable[[int, int, str], None]   # (frames done, frames, stage)
+Progress = Callable[[int, int, str], None]  # (frames done, frames, stage)
 
 
-def _score(gt: Frames, hyps: Frames, radius: float, codes: list[int | None],
-           progress: Progress | None = None) -> tuple[list, list[HotaFrames]]:
+def _score(
+    gt: Frames, hyps: Frames, radius: float, codes: list[int | None], progress: Progress | None = None
+) -> tuple[list, list[HotaFrames]]:
     """A motmetrics accumulator and the HOTA frames per class code (None: every class) over frames aligned
     one to one (hyps from aligned_hypotheses); `progress(done, total, "matching")` counts frames."""
     import motmetrics as mm
@@ -410,8 +465,15 @@ def _score(gt: Frames, hyps: Frames, radius: float, codes: list[int | None],
     return accs, gathered
 
 
-def evaluate(gt: Frames, hyps: Frames, *, regions: Regions | None = None, match_radius: float = 0.5,
-             stamp_tolerance_ns: int = 0, progress: Progress | None = None) -> dict:
+def evaluate(
+    gt: Frames,
+    hyps: Frames,
+    *,
+    regions: Regions | None = None,
+    match_radius: float = 0.5,
+    stamp_tolerance_ns: int = 0,
+    progress: Progress | None = None,
+) -> dict:
     """CLEAR-MOT, identity and HOTA figures, overall ("all") and per mover class present among the targets
     or the hypotheses. Returns {name: {metric: value}} with the metrics in METRICS and HOTA_METRICS (counts
     as ints, MOTP in metres, ratios in [0, 1] except MOTA, which can be negative; None where undefined);
@@ -424,8 +486,9 @@ def evaluate(gt: Frames, hyps: Frames, *, regions: Regions | None = None, match_
     if not match_radius > 0:
         raise ValueError(f"match radius must be > 0 m, got {match_radius}")
     missing = int(np.sum(align(gt, hyps, stamp_tolerance_ns) < 0))
-    hy, ignored = aligned_hypotheses(gt, hyps, regions=regions, match_radius=match_radius,
-                                     stamp_tolerance_ns=stamp_tolerance_ns)
+    hy, ignored = aligned_hypotheses(
+        gt, hyps, regions=regions, match_radius=match_radius, stamp_tolerance_ns=stamp_tolerance_ns
+    )
     present = set(gt.cls.tolist()) | set(hy.cls.tolist())
     names = ["all"] + [name for code, name in MOVER_CLASSES.items() if code in present]
     codes = [None] + [code for code in MOVER_CLASSES if code in present]
@@ -451,13 +514,21 @@ def evaluate(gt: Frames, hyps: Frames, *, regions: Regions | None = None, match_
     return out
 
 
-def frames_from_channels(gt_stamps: np.ndarray, gt_offsets: np.ndarray, gt_objects: np.ndarray,
-                         gt_sensor_theta: np.ndarray | None, tr_stamps: np.ndarray, tr_offsets: np.ndarray,
-                         tr_items: np.ndarray, *, include_occluded: bool = False,
-                         exclude_static: bool = False) -> tuple[Frames, Regions, Frames]:
+def frames_from_channels(
+    gt_stamps: np.ndarray,
+    gt_offsets: np.ndarray,
+    gt_objects: np.ndarray,
+    gt_sensor_theta: np.ndarray | None,
+    tr_stamps: np.ndarray,
+    tr_offsets: np.ndarray,
+    tr_items: np.ndarray,
+    *,
+    include_occluded: bool = False,
+    exclude_static: bool = False,
+) -> tuple[Frames, Regions, Frames]:
     """Targets, don't-care regions and hypotheses from decoded GroundTruth and Tracks messages."""
-    gt, regions = ground_truth_frames(gt_stamps, gt_offsets, gt_objects, gt_sensor_theta,
-                                      include_occluded=include_occluded)
-    hy = track_frames(tr_stamps, tr_offsets, tr_items, include_coasting=include_occluded,
-                      exclude_static=exclude_static)
+    gt, regions = ground_truth_frames(
+        gt_stamps, gt_offsets, gt_objects, gt_sensor_theta, include_occluded=include_occluded
+    )
+    hy = track_frames(tr_stamps, tr_offsets, tr_items, include_coasting=include_occluded, exclude_static=exclude_static)
     return gt, regions, hy

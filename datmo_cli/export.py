@@ -58,26 +58,56 @@ from .log.vocabulary import BLOB_KIND_NAMES, CLASS_NAMES, MOBILITY_NAMES, STATUS
 
 FORMATS = ("csv", "ndjson", "parquet")
 SUFFIXES = {".csv": "csv", ".ndjson": "ndjson", ".jsonl": "ndjson", ".parquet": "parquet", ".pq": "parquet"}
-BLOCK_MESSAGES = 1000        # messages decoded and written at once (one batch, one Parquet row group)
+BLOCK_MESSAGES = 1000  # messages decoded and written at once (one batch, one Parquet row group)
 
 # The schema: column name -> type, in order (docs/export.md documents each column with its unit and frame).
 # Types: string, int64, uint32, float32, float64, bool; every column may be null (empty in CSV).
 TYPES = ("string", "int64", "uint32", "float32", "float64", "bool")
 TRACK_COLUMNS: dict[str, str] = {
-    "file": "string", "scan": "int64", "stamp_ns": "int64", "frame_id": "string", "kind": "string", "id": "uint32",
-    "class": "string", "mobility": "string", "status": "string", "x_m": "float32", "y_m": "float32",
-    "vx_mps": "float32", "vy_mps": "float32", "world_x_m": "float32", "world_y_m": "float32",
-    "world_vx_mps": "float32", "world_vy_mps": "float32", "size_m": "float32", "occluded": "bool", "age": "uint32",
-    "hits": "uint32", "misses": "uint32",
+    "file": "string",
+    "scan": "int64",
+    "stamp_ns": "int64",
+    "frame_id": "string",
+    "kind": "string",
+    "id": "uint32",
+    "class": "string",
+    "mobility": "string",
+    "status": "string",
+    "x_m": "float32",
+    "y_m": "float32",
+    "vx_mps": "float32",
+    "vy_mps": "float32",
+    "world_x_m": "float32",
+    "world_y_m": "float32",
+    "world_vx_mps": "float32",
+    "world_vy_mps": "float32",
+    "size_m": "float32",
+    "occluded": "bool",
+    "age": "uint32",
+    "hits": "uint32",
+    "misses": "uint32",
 }
 FEATURE_COLUMNS: dict[str, str] = {
-    "segment": "uint32", "first_beam": "uint32", "last_beam": "uint32", "n_points": "uint32", "x_end_m": "float32",
-    "y_end_m": "float32", "radius_m": "float32", "rho_m": "float32", "theta_rad": "float32", "r_acc": "float32",
+    "segment": "uint32",
+    "first_beam": "uint32",
+    "last_beam": "uint32",
+    "n_points": "uint32",
+    "x_end_m": "float32",
+    "y_end_m": "float32",
+    "radius_m": "float32",
+    "rho_m": "float32",
+    "theta_rad": "float32",
+    "r_acc": "float32",
     "probability": "float32",
 }
 
-GROUND_TRUTH_COLUMNS: dict[str, str] = {"stamp_ns": "int64", "id": "uint32", "x": "float64", "y": "float64",
-                                        "class": "string"}
+GROUND_TRUTH_COLUMNS: dict[str, str] = {
+    "stamp_ns": "int64",
+    "id": "uint32",
+    "x": "float64",
+    "y": "float64",
+    "class": "string",
+}
 
 
 def columns(features: bool = False) -> dict[str, str]:
@@ -90,8 +120,14 @@ def arrow_schema(cols: dict[str, str] | None = None, *, features: bool = False):
     """The pyarrow.Schema of a table of `cols` (default: columns(features)), as Parquet files carry it and as
     pyarrow's CSV and JSON readers take it (column_types, explicit_schema). Needs pyarrow (the parquet extra)."""
     pa = require_pyarrow()
-    types_ = {"string": pa.string(), "int64": pa.int64(), "uint32": pa.uint32(), "float32": pa.float32(),
-              "float64": pa.float64(), "bool": pa.bool_()}
+    types_ = {
+        "string": pa.string(),
+        "int64": pa.int64(),
+        "uint32": pa.uint32(),
+        "float32": pa.float32(),
+        "float64": pa.float64(),
+        "bool": pa.bool_(),
+    }
     return pa.schema([(name, types_[t]) for name, t in (cols or columns(features)).items()])
 
 
@@ -100,8 +136,14 @@ def polars_schema(cols: dict[str, str] | None = None, *, features: bool = False)
     (`schema=`): CSV and NDJSON carry no types, and polars infers them from the first rows only. Needs polars."""
     import polars as pl
 
-    types_ = {"string": pl.String, "int64": pl.Int64, "uint32": pl.UInt32, "float32": pl.Float32,
-              "float64": pl.Float64, "bool": pl.Boolean}
+    types_ = {
+        "string": pl.String,
+        "int64": pl.Int64,
+        "uint32": pl.UInt32,
+        "float32": pl.Float32,
+        "float64": pl.Float64,
+        "bool": pl.Boolean,
+    }
     return {name: types_[t] for name, t in (cols or columns(features)).items()}
 
 
@@ -114,8 +156,10 @@ def format_for(output: Path, fmt: str | None) -> str:
         return "csv"
     found = SUFFIXES.get(output.suffix.lower())
     if found is None:
-        raise ConfigError(f"{output}: cannot tell the format from the suffix {output.suffix or '(none)'!r}; name it "
-                          f"{', '.join(SUFFIXES)} or give --format {'/'.join(FORMATS)}")
+        raise ConfigError(
+            f"{output}: cannot tell the format from the suffix {output.suffix or '(none)'!r}; name it "
+            f"{', '.join(SUFFIXES)} or give --format {'/'.join(FORMATS)}"
+        )
     return found
 
 
@@ -138,7 +182,7 @@ def _constant(value: object, n: int) -> np.ndarray:
 
 
 def _names(codes: np.ndarray, names: dict[int, str], fallback: str) -> np.ndarray:
-    table = np.array([names.get(c, fallback) for c in range(256)], object)   # codes are uint8
+    table = np.array([names.get(c, fallback) for c in range(256)], object)  # codes are uint8
     return table[codes]
 
 
@@ -160,9 +204,12 @@ def _per_message(file: str, first: int, decoded: list[dict], seq: str) -> tuple[
     dtype = parts[0].dtype if parts else np.dtype(np.float32)
     items = np.frombuffer(b"".join(p.tobytes() for p in parts), dtype) if n else np.zeros(0, dtype)
     index = np.repeat(np.arange(len(decoded)), counts)
-    common = {"file": _constant(file, n), "scan": (first + index).astype(np.int64),
-              "stamp_ns": np.array([d["stamp_ns"] for d in decoded], np.int64)[index],
-              "frame_id": np.array([d["frame_id"] for d in decoded], object)[index]}
+    common = {
+        "file": _constant(file, n),
+        "scan": (first + index).astype(np.int64),
+        "stamp_ns": np.array([d["stamp_ns"] for d in decoded], np.int64)[index],
+        "frame_id": np.array([d["frame_id"] for d in decoded], object)[index],
+    }
     return items, common
 
 
@@ -172,14 +219,27 @@ def track_batch(file: str, first: int, decoded: list[dict]) -> Batch:
     n = len(t)
     if not n:
         return Batch(0, {})
-    values = {**common, "kind": _constant("track", n), "id": t["id"],
-              "class": _names(t["classification"], CLASS_NAMES, "unknown"),
-              "mobility": _names(t["mobility"], MOBILITY_NAMES, "undefined"),
-              "status": _names(t["status"], STATUS_NAMES, "unknown"),
-              "x_m": t["x"], "y_m": t["y"], "vx_mps": t["vx"], "vy_mps": t["vy"], "world_x_m": t["world_x"],
-              "world_y_m": t["world_y"], "world_vx_mps": t["world_vx"], "world_vy_mps": t["world_vy"],
-              "size_m": t["size"], "occluded": t["occluded"] != 0, "age": t["age"], "hits": t["hits"],
-              "misses": t["misses"]}
+    values = {
+        **common,
+        "kind": _constant("track", n),
+        "id": t["id"],
+        "class": _names(t["classification"], CLASS_NAMES, "unknown"),
+        "mobility": _names(t["mobility"], MOBILITY_NAMES, "undefined"),
+        "status": _names(t["status"], STATUS_NAMES, "unknown"),
+        "x_m": t["x"],
+        "y_m": t["y"],
+        "vx_mps": t["vx"],
+        "vy_mps": t["vy"],
+        "world_x_m": t["world_x"],
+        "world_y_m": t["world_y"],
+        "world_vx_mps": t["world_vx"],
+        "world_vy_mps": t["world_vy"],
+        "size_m": t["size"],
+        "occluded": t["occluded"] != 0,
+        "age": t["age"],
+        "hits": t["hits"],
+        "misses": t["misses"],
+    }
     return Batch(n, values)
 
 
@@ -188,11 +248,19 @@ def _feature_part(file: str, first: int, decoded: list[dict], seq: str) -> Batch
     n = len(f)
     if not n:
         return Batch(0, {})
-    v = {**common, "segment": f["segment"], "first_beam": f["first"], "last_beam": f["last"],
-         "n_points": f["n_points"]}
+    v = {**common, "segment": f["segment"], "first_beam": f["first"], "last_beam": f["last"], "n_points": f["n_points"]}
     if seq == "lines":
-        v.update(kind=_constant("line", n), x_m=f["x_ini"], y_m=f["y_ini"], x_end_m=f["x_end"], y_end_m=f["y_end"],
-                 size_m=f["length"], rho_m=f["rho"], theta_rad=f["theta"], r_acc=f["r_acc"])
+        v.update(
+            kind=_constant("line", n),
+            x_m=f["x_ini"],
+            y_m=f["y_ini"],
+            x_end_m=f["x_end"],
+            y_end_m=f["y_end"],
+            size_m=f["length"],
+            rho_m=f["rho"],
+            theta_rad=f["theta"],
+            r_acc=f["r_acc"],
+        )
     elif seq == "circles":
         v.update(kind=_constant("circle", n), x_m=f["x"], y_m=f["y"], radius_m=f["radius"], r_acc=f["r_acc"])
     elif seq == "blobs":
@@ -225,8 +293,9 @@ def feature_batch(file: str, first: int, decoded: list[dict]) -> Batch:
                 filled.append(np.full(p.n, np.nan, np.float32))
             else:
                 filled.append(_constant(None, p.n))
-        values[name] = np.concatenate([a.astype(object) if any(x.dtype == object for x in filled) else a
-                                       for a in filled])
+        values[name] = np.concatenate(
+            [a.astype(object) if any(x.dtype == object for x in filled) else a for a in filled]
+        )
     return Batch(sum(p.n for p in parts), values)
 
 
@@ -255,7 +324,7 @@ def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
         return str(v)
 
     values = a.tolist()
-    texts = {v: text(v) for v in set(values)}   # few distinct values: file names, classes, kinds
+    texts = {v: text(v) for v in set(values)}  # few distinct values: file names, classes, kinds
     return list(map(texts.__getitem__, values))
 
 
@@ -267,8 +336,10 @@ def _csv_field(text: str) -> str:
 
 
 def _text_columns(cols: dict[str, str], batch: Batch, null: str, quote: bool) -> list[list[str]]:
-    return [_text_column(kind, batch.values[name], null, quote) if name in batch.values else [null] * batch.n
-            for name, kind in cols.items()]
+    return [
+        _text_column(kind, batch.values[name], null, quote) if name in batch.values else [null] * batch.n
+        for name, kind in cols.items()
+    ]
 
 
 class TextSink:
@@ -290,12 +361,14 @@ class TextSink:
         if not batch.n:
             return
         if self.fmt == "csv":
-            self._write("".join(",".join(row) + "\n" for row in zip(*_text_columns(self.cols, batch, "", False),
-                                                                      strict=True)))
+            self._write(
+                "".join(",".join(row) + "\n" for row in zip(*_text_columns(self.cols, batch, "", False), strict=True))
+            )
         else:
             template = self._template
-            self._write("".join(template % row for row in zip(*_text_columns(self.cols, batch, "null", True),
-                                                               strict=True)))
+            self._write(
+                "".join(template % row for row in zip(*_text_columns(self.cols, batch, "null", True), strict=True))
+            )
         self.rows += batch.n
         self.batches += 1
         self.peak_rows = max(self.peak_rows, batch.n)
@@ -329,12 +402,12 @@ class ParquetSink:
         if a.dtype == object:
             values = [None if v is None or (isinstance(v, float) and np.isnan(v)) else v for v in a.tolist()]
             if pa.types.is_string(typ):
-                values = [v if v is None else v.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
-                          for v in values]
+                values = [
+                    v if v is None else v.encode("utf-8", "surrogateescape").decode("utf-8", "replace") for v in values
+                ]
             return pa.array(values, typ)
         if pa.types.is_floating(typ):
-            return pa.array(a.astype(np.float64 if pa.types.is_float64(typ) else np.float32), typ,
-                            mask=np.isnan(a))
+            return pa.array(a.astype(np.float64 if pa.types.is_float64(typ) else np.float32), typ, mask=np.isnan(a))
         return pa.array(a, typ)
 
     def write(self, batch: Batch) -> None:
@@ -350,8 +423,9 @@ class ParquetSink:
         self.writer.close()
 
 
-def sink_for(stream: IO[bytes], fmt: str, features: bool = False,
-             cols: dict[str, str] | None = None) -> TextSink | ParquetSink:
+def sink_for(
+    stream: IO[bytes], fmt: str, features: bool = False, cols: dict[str, str] | None = None
+) -> TextSink | ParquetSink:
     """The writer of `fmt` rows to the binary `stream`: of `cols` when given (GROUND_TRUTH_COLUMNS), else of
     columns(features)."""
     cols = cols or columns(features)
@@ -378,8 +452,10 @@ def require_channel(log: mcapio.LogContents, topic: str, msgtype: str) -> int:
     ch = log.topics().get(topic)
     if ch is None or not ch.count:
         if topic == mcapio.TOPIC_GROUND_TRUTH:
-            raise MissingChannelError(f"{log.path}: no messages on {topic}; only {mcapio.PRODUCER[topic]} writes "
-                                      "ground truth (annotate a real log as a stamp_ns,id,x,y CSV instead)")
+            raise MissingChannelError(
+                f"{log.path}: no messages on {topic}; only {mcapio.PRODUCER[topic]} writes "
+                "ground truth (annotate a real log as a stamp_ns,id,x,y CSV instead)"
+            )
         raise MissingChannelError(f"{log.path}: no messages on {topic}; run {mcapio.PRODUCER[topic]} first")
     if ch.msgtype != msgtype or ch.message_encoding != "cdr":
         raise InputError(f"{log.path}: {topic} holds {ch.message_encoding} {ch.msgtype}, not CDR {msgtype}")
@@ -394,8 +470,9 @@ def plan(files: list[Path], features: bool = False, ground_truth: bool = False) 
     for path in files:
         log = mcapio.summary(path)
         if ground_truth:
-            out.counts.append({mcapio.TOPIC_GROUND_TRUTH: require_channel(log, mcapio.TOPIC_GROUND_TRUTH,
-                                                                   types.GROUND_TRUTH)})
+            out.counts.append(
+                {mcapio.TOPIC_GROUND_TRUTH: require_channel(log, mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH)}
+            )
             continue
         counts = {mcapio.TOPIC_TRACKS: require_channel(log, mcapio.TOPIC_TRACKS, types.TRACKS)}
         if features:
@@ -421,8 +498,9 @@ def _batches(path: Path, topic: str, block: int) -> Iterator[tuple[int, list[byt
 ROWS = {mcapio.TOPIC_TRACKS: (types.TRACKS, track_batch), mcapio.TOPIC_FEATURES: (types.FEATURES, feature_batch)}
 
 
-def row_batches(path: Path, topic: str, name: str | None = None,
-                block: int = BLOCK_MESSAGES) -> Iterator[tuple[int, Batch]]:
+def row_batches(
+    path: Path, topic: str, name: str | None = None, block: int = BLOCK_MESSAGES
+) -> Iterator[tuple[int, Batch]]:
     """(messages read, their rows) for each block of `block` messages on `topic` (/datmo/tracks or
     /datmo/features, a key of ROWS) of the log at `path`; `name` fills the file column (default: the path)."""
     msgtype, rows = ROWS[topic]
@@ -431,8 +509,14 @@ def row_batches(path: Path, topic: str, name: str | None = None,
         yield len(payloads), rows(name, first, _decode(path, msgtype, topic, payloads, first))
 
 
-def export(p: Plan, sink: TextSink | ParquetSink, *, features: bool = False, block: int = BLOCK_MESSAGES,
-           progress: Callable[[str, int], None] | None = None) -> None:
+def export(
+    p: Plan,
+    sink: TextSink | ParquetSink,
+    *,
+    features: bool = False,
+    block: int = BLOCK_MESSAGES,
+    progress: Callable[[str, int], None] | None = None,
+) -> None:
     """Write the rows of every input of `p` to `sink`, `block` messages at a time: every file's track states,
     then (with `features`) every file's features. `progress(topic, n)` after each block of n messages of
     `topic`."""
@@ -444,8 +528,9 @@ def export(p: Plan, sink: TextSink | ParquetSink, *, features: bool = False, blo
                     progress(topic, n)
 
 
-def ground_truth_batch(path: Path, first: int, decoded: list[dict], moved: np.ndarray, *,
-                       include_occluded: bool = False) -> Batch:
+def ground_truth_batch(
+    path: Path, first: int, decoded: list[dict], moved: np.ndarray, *, include_occluded: bool = False
+) -> Batch:
     """The rows of decoded GroundTruth messages (messages first, first + 1, ... of the log at `path`): each
     message's targets in its order (`moved`: the run's moved_ids), or one row with only the stamp when it has
     none. A target position that is not finite is refused (InputError naming the message)."""
@@ -457,23 +542,29 @@ def ground_truth_batch(path: Path, first: int, decoded: list[dict], moved: np.nd
     bad = ~(np.isfinite(t["x"]) & np.isfinite(t["y"]))
     if bad.any():
         k = first + int(frame[keep][np.argmax(bad)])
-        raise InputError(f"{path}: {mcapio.TOPIC_GROUND_TRUTH} message {k} holds a target position that is not a "
-                         "finite number")
+        raise InputError(
+            f"{path}: {mcapio.TOPIC_GROUND_TRUTH} message {k} holds a target position that is not a finite number"
+        )
     empty = np.flatnonzero(np.bincount(frame[keep], minlength=len(decoded)) == 0)
-    order = np.argsort(np.concatenate([frame[keep], empty]), kind="stable")   # each message's rows in place
+    order = np.argsort(np.concatenate([frame[keep], empty]), kind="stable")  # each message's rows in place
     n = len(order)
     ids, cls = np.empty(n, object), np.empty(n, object)
-    ids[:len(t)] = t["id"].tolist()
-    cls[:len(t)] = [MOVER_CLASSES[c] for c in t["classification"].tolist()]
+    ids[: len(t)] = t["id"].tolist()
+    cls[: len(t)] = [MOVER_CLASSES[c] for c in t["classification"].tolist()]
     x = np.concatenate([t["x"].astype(np.float64), np.full(len(empty), np.nan)])
     y = np.concatenate([t["y"].astype(np.float64), np.full(len(empty), np.nan)])
     stamps = np.array([d["stamp_ns"] for d in decoded], np.int64)[np.concatenate([frame[keep], empty])]
-    return Batch(n, {"stamp_ns": stamps[order], "id": ids[order], "x": x[order], "y": y[order],
-                     "class": cls[order]})
+    return Batch(n, {"stamp_ns": stamps[order], "id": ids[order], "x": x[order], "y": y[order], "class": cls[order]})
 
 
-def export_ground_truth(path: Path, sink: TextSink | ParquetSink, *, include_occluded: bool = False,
-                        block: int = BLOCK_MESSAGES, progress: Callable[[str, int], None] | None = None) -> None:
+def export_ground_truth(
+    path: Path,
+    sink: TextSink | ParquetSink,
+    *,
+    include_occluded: bool = False,
+    block: int = BLOCK_MESSAGES,
+    progress: Callable[[str, int], None] | None = None,
+) -> None:
     """Write the targets of the /datmo/ground_truth channel of the log at `path` to `sink` (of
     GROUND_TRUTH_COLUMNS), `block` messages at a time, in two passes: `progress("movers", n)` after each
     block of the pass that finds the ids that move (and checks that the stamps increase: InputError naming the
@@ -486,10 +577,12 @@ def export_ground_truth(path: Path, sink: TextSink | ParquetSink, *, include_occ
         moved = np.union1d(moved, moved_ids(np.concatenate([d["objects"] for d in decoded])))
         stamps = np.array(([] if last is None else [last]) + [d["stamp_ns"] for d in decoded], np.int64)
         back = np.flatnonzero(np.diff(stamps) <= 0)
-        if len(back):   # a frame per stamp: evaluate --gt would read two messages of one stamp as one frame
+        if len(back):  # a frame per stamp: evaluate --gt would read two messages of one stamp as one frame
             k = first + int(back[0]) - (last is not None) + 1
-            raise InputError(f"{path}: {topic} message {k} has stamp_ns {int(stamps[back[0] + 1])}, not after the "
-                             f"previous message's {int(stamps[back[0]])}")
+            raise InputError(
+                f"{path}: {topic} message {k} has stamp_ns {int(stamps[back[0] + 1])}, not after the "
+                f"previous message's {int(stamps[back[0]])}"
+            )
         last = int(stamps[-1])
         if progress is not None:
             progress("movers", len(payloads))

@@ -14,7 +14,7 @@ from types import ModuleType
 
 from .errors import DatmoError
 
-DISTRIBUTION = "datmo-cli"   # the name on the package index (`datmo` there is an unrelated project)
+DISTRIBUTION = "datmo-cli"  # the name on the package index (`datmo` there is an unrelated project)
 
 # module -> (the distribution pip installs, the extra that brings it)
 EXTRAS = {
@@ -45,5 +45,6 @@ def require(module: str, for_: str) -> ModuleType:
     try:
         return importlib.import_module(module)
     except ImportError:
-        raise MissingExtraError(f"{for_} needs {package}, which is not installed: pip install "
-                                f"'{DISTRIBUTION}[{extra}]'") from None
+        raise MissingExtraError(
+            f"{for_} needs {package}, which is not installed: pip install '{DISTRIBUTION}[{extra}]'"
+        ) from None

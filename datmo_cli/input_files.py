@@ -20,15 +20,19 @@ from typing import BinaryIO
 
 from .errors import InputError
 
-MAX_CONFIG_BYTES = 1 << 20              # a TOML file of parameters: two tables of a few dozen keys
-MAX_GROUND_TRUTH_BYTES = 256 << 20      # a ground-truth CSV: ~6 million rows of about 40 bytes
-MAX_MANIFEST_BYTES = 4 << 30            # a batch's manifest: ~5 million lines of about 800 bytes
-MAX_MANIFEST_LINE_BYTES = 1 << 20       # one manifest line (under a kilobyte; notes can add a few)
+MAX_CONFIG_BYTES = 1 << 20  # a TOML file of parameters: two tables of a few dozen keys
+MAX_GROUND_TRUTH_BYTES = 256 << 20  # a ground-truth CSV: ~6 million rows of about 40 bytes
+MAX_MANIFEST_BYTES = 4 << 30  # a batch's manifest: ~5 million lines of about 800 bytes
+MAX_MANIFEST_LINE_BYTES = 1 << 20  # one manifest line (under a kilobyte; notes can add a few)
 
 
 def _kind(mode: int) -> str:
-    for test, name in ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
+    for test, name in (
+        (stat.S_ISFIFO, "a FIFO (named pipe)"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+    ):
         if test(mode):
             return name
     return "a special file"
@@ -61,10 +65,11 @@ def check(path: str | os.PathLike, *, folder_ok: bool = False, name: str | None 
         st = os.stat(path)
     except OSError as exc:
         if exc.errno == errno.ENOENT and os.path.islink(path):
-            raise InputError(f"{shown}: a symbolic link to {os.fsdecode(os.readlink(path))}, which does not "
-                             "exist") from None
+            raise InputError(
+                f"{shown}: a symbolic link to {os.fsdecode(os.readlink(path))}, which does not exist"
+            ) from None
         raise InputError(f"{shown}: {_reason(exc)}") from None
-    except ValueError as exc:   # a NUL byte in the name
+    except ValueError as exc:  # a NUL byte in the name
         raise InputError(f"{shown}: not a usable file name ({exc})") from None
     if stat.S_ISDIR(st.st_mode):
         if folder_ok:
@@ -129,5 +134,14 @@ def is_regular(path: str | os.PathLike) -> bool:
         return False
 
 
-__all__ = ["MAX_CONFIG_BYTES", "MAX_GROUND_TRUTH_BYTES", "MAX_MANIFEST_BYTES", "MAX_MANIFEST_LINE_BYTES", "check",
-           "is_regular", "open_regular", "read_bytes", "read_text"]
+__all__ = [
+    "MAX_CONFIG_BYTES",
+    "MAX_GROUND_TRUTH_BYTES",
+    "MAX_MANIFEST_BYTES",
+    "MAX_MANIFEST_LINE_BYTES",
+    "check",
+    "is_regular",
+    "open_regular",
+    "read_bytes",
+    "read_text",
+]

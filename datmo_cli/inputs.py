@@ -14,9 +14,16 @@ from .errors import InputError
 
 
 @contextmanager
-def scan_log(src: Path, output: Path, topic: str | None = None, odom_topic: str | None = None, *,
-             force: bool = False, dest: Path | None = None,
-             tell: Callable[[str], None] | None = None) -> Iterator[Path]:
+def scan_log(
+    src: Path,
+    output: Path,
+    topic: str | None = None,
+    odom_topic: str | None = None,
+    *,
+    force: bool = False,
+    dest: Path | None = None,
+    tell: Callable[[str], None] | None = None,
+) -> Iterator[Path]:
     """The datmo log to read for `src`: `src` itself when it is an MCAP file and no topic is chosen; otherwise
     (a ROS 1 or ROS 2 bag, a CARMEN log, or a topic chosen) `src` converted as by `datmo import` into a
     temporary MCAP beside `output`, said on stderr and removed when the block ends (or on any way out).
@@ -30,9 +37,9 @@ def scan_log(src: Path, output: Path, topic: str | None = None, odom_topic: str 
 
     src = _bag_folder(Path(src))
     if not needs_conversion(src, topic, odom_topic):
-        yield src   # an MCAP (or not a log at all: the reader says what is wrong with it)
+        yield src  # an MCAP (or not a log at all: the reader says what is wrong with it)
         return
-    detect_kind(src)   # a missing file, a folder without metadata.yaml: one line
+    detect_kind(src)  # a missing file, a folder without metadata.yaml: one line
     outputs.check_output(output, force=force, inputs=[src])
     tmp = dest if dest is not None else outputs.temp_path(Path(output))
     outputs.track(tmp)
@@ -46,8 +53,9 @@ def scan_log(src: Path, output: Path, topic: str | None = None, odom_topic: str 
                 (tell or functools.partial(click.echo, err=True))(f"datmo: warning: {printable(w)}")
         odom = f" and {stats.poses} poses from {stream.odom_topic}" if stats.poses else ""
         kind = {"ros1": "ROS 1 bag", "ros2": "ROS 2 bag"}.get(stream.kind, stream.kind)
-        (tell or say)(f"datmo: converted {src} ({kind}: {stats.scans} scans from {stream.topic}{odom}) to a "
-                      "temporary MCAP")
+        (tell or say)(
+            f"datmo: converted {src} ({kind}: {stats.scans} scans from {stream.topic}{odom}) to a temporary MCAP"
+        )
         yield tmp
     finally:
         outputs.discard(tmp)
@@ -57,16 +65,14 @@ def needs_conversion(src: Path, topic: str | None = None, odom_topic: str | None
     """Whether `src` is read through the importers: a bag (ROS 1 file, ROS 2 folder or its .db3) or a topic
     chosen; a datmo MCAP is read as it is."""
     src = Path(src)
-    return (topic is not None or odom_topic is not None or src.is_dir() or src.suffix == ".db3"
-            or _is_ros1_bag(src))
+    return topic is not None or odom_topic is not None or src.is_dir() or src.suffix == ".db3" or _is_ros1_bag(src)
 
 
 def _bag_folder(src: Path) -> Path:
     """A ROS 2 bag's .db3 (or .mcap) file as its folder when the folder holds the bag's metadata.yaml."""
     if src.suffix == ".db3":
         if not (src.parent / "metadata.yaml").is_file():
-            raise InputError(f"{src}: a ROS 2 .db3 is read with its bag folder, and {src.parent} has no "
-                             "metadata.yaml")
+            raise InputError(f"{src}: a ROS 2 .db3 is read with its bag folder, and {src.parent} has no metadata.yaml")
         return src.parent
     return src
 
@@ -76,7 +82,7 @@ def _is_ros1_bag(src: Path) -> bool:
     from .log.importers import _ROSBAG1_MAGIC
 
     if not is_regular(src):
-        return False   # a FIFO or a device is never opened here (its reader refuses it in one line)
+        return False  # a FIFO or a device is never opened here (its reader refuses it in one line)
     try:
         with open_regular(src) as f:
             return f.read(len(_ROSBAG1_MAGIC)) == _ROSBAG1_MAGIC

@@ -49,11 +49,11 @@ if TYPE_CHECKING:
 TOPIC_TF = "/tf"
 TOPIC_TF_STATIC = "/tf_static"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
-STATIC_EVERY_NS = 1_000_000_000    # static transforms are sent again after this much log time
-SUBPROTOCOL = "foxglove.sdk.v1"     # what the SDK's server speaks (the app's WebSocket data source)
-PUBLIC_SUBPROTOCOL = "foxglove.websocket.v1"   # the public spec's name for the same protocol
-SUBPROTOCOLS = (SUBPROTOCOL, PUBLIC_SUBPROTOCOL)   # what the front accepts, the first preferred
-MIN_LOOP_PASS_S = 1.0               # play --loop: a pass of the log lasts at least this long (s, wall time)
+STATIC_EVERY_NS = 1_000_000_000  # static transforms are sent again after this much log time
+SUBPROTOCOL = "foxglove.sdk.v1"  # what the SDK's server speaks (the app's WebSocket data source)
+PUBLIC_SUBPROTOCOL = "foxglove.websocket.v1"  # the public spec's name for the same protocol
+SUBPROTOCOLS = (SUBPROTOCOL, PUBLIC_SUBPROTOCOL)  # what the front accepts, the first preferred
+MIN_LOOP_PASS_S = 1.0  # play --loop: a pass of the log lasts at least this long (s, wall time)
 _APP = "https://app.foxglove.dev/"
 
 
@@ -73,7 +73,7 @@ def ws_url(host: str, port: int) -> str:
     if host in ("", "0.0.0.0", "::"):
         host = socket.gethostname()
     if ":" in host and not host.startswith("["):
-        host = f"[{host}]"   # an IPv6 address
+        host = f"[{host}]"  # an IPv6 address
     return f"ws://{host}:{port}"
 
 
@@ -125,13 +125,21 @@ class Transforms:
         out = []
         static = o.child_frame_id != self.scan_frame
         for stamp, (x, y, yaw) in zip(stamps.tolist(), o.at(stamps).tolist(), strict=True):
-            if static and (self._static_at is None or stamp - self._static_at >= STATIC_EVERY_NS
-                           or stamp < self._static_at):
-                out.append(Message(stamp, TOPIC_TF_STATIC, TF_MESSAGE,
-                                   tf_payload(stamp, [(o.child_frame_id, self.scan_frame, 0.0, 0.0, 0.0)])))
+            if static and (
+                self._static_at is None or stamp - self._static_at >= STATIC_EVERY_NS or stamp < self._static_at
+            ):
+                out.append(
+                    Message(
+                        stamp,
+                        TOPIC_TF_STATIC,
+                        TF_MESSAGE,
+                        tf_payload(stamp, [(o.child_frame_id, self.scan_frame, 0.0, 0.0, 0.0)]),
+                    )
+                )
                 self._static_at = stamp
-            out.append(Message(stamp, TOPIC_TF, TF_MESSAGE,
-                               tf_payload(stamp, [(o.frame_id, o.child_frame_id, x, y, yaw)])))
+            out.append(
+                Message(stamp, TOPIC_TF, TF_MESSAGE, tf_payload(stamp, [(o.frame_id, o.child_frame_id, x, y, yaw)]))
+            )
         return out
 
 
@@ -158,8 +166,14 @@ class LiveServer:
         self.static: dict[str, Message] = {}
         self.sent = 0
         try:
-            self.server = foxglove.start_server(name=name, host="127.0.0.1", port=0, capabilities=[Capability.Time],
-                                                server_listener=_Listener(self.subscribed), context=self.context)
+            self.server = foxglove.start_server(
+                name=name,
+                host="127.0.0.1",
+                port=0,
+                capabilities=[Capability.Time],
+                server_listener=_Listener(self.subscribed),
+                context=self.context,
+            )
         except Exception as exc:  # the SDK raises its own errors
             raise ConfigError(f"{option} {port}: cannot start the live view's server ({_reason(exc)})") from None
         try:
@@ -183,8 +197,11 @@ class LiveServer:
             return
         data = schema if schema else types.schema_text(msgtype).encode()
         self.channels[topic] = self._foxglove.Channel(
-            topic, schema=self._foxglove.Schema(name=msgtype, encoding=encoding, data=data),
-            message_encoding="cdr", context=self.context)
+            topic,
+            schema=self._foxglove.Schema(name=msgtype, encoding=encoding, data=data),
+            message_encoding="cdr",
+            context=self.context,
+        )
 
     def declare_log(self, log: mcapio.LogContents, exclude: Iterable[str] = ()) -> None:
         """Advertise every channel of `log` that holds messages (but `exclude`), with the log's own schemas."""
@@ -236,7 +253,7 @@ class _Listener:
         pass
 
 
-_QUIET = logging.getLogger("datmo.live.front")   # the front's connection log: kept off the terminal
+_QUIET = logging.getLogger("datmo.live.front")  # the front's connection log: kept off the terminal
 _QUIET.addHandler(logging.NullHandler())
 _QUIET.propagate = False
 
@@ -253,8 +270,9 @@ class _Front:
         self.loop = asyncio.new_event_loop()
         self._server = None
         started: concurrent.futures.Future = concurrent.futures.Future()
-        self._thread = threading.Thread(target=self._run, args=(host, port, started), name="datmo-live-front",
-                                        daemon=True)
+        self._thread = threading.Thread(
+            target=self._run, args=(host, port, started), name="datmo-live-front", daemon=True
+        )
         self._thread.start()
         self.port = started.result()
 
@@ -262,8 +280,9 @@ class _Front:
         from websockets.asyncio.server import serve
 
         async def listen():
-            return await serve(self._relay, host, port, subprotocols=list(SUBPROTOCOLS), compression=None,
-                               max_size=None, logger=_QUIET)
+            return await serve(
+                self._relay, host, port, subprotocols=list(SUBPROTOCOLS), compression=None, max_size=None, logger=_QUIET
+            )
 
         asyncio.set_event_loop(self.loop)
         try:
@@ -282,13 +301,14 @@ class _Front:
         from websockets.asyncio.client import connect
 
         try:
-            async with connect(self.backend, subprotocols=[SUBPROTOCOL], compression=None, max_size=None,
-                               logger=_QUIET) as backend:
+            async with connect(
+                self.backend, subprotocols=[SUBPROTOCOL], compression=None, max_size=None, logger=_QUIET
+            ) as backend:
                 pipes = [asyncio.create_task(_pipe(client, backend)), asyncio.create_task(_pipe(backend, client))]
                 _, pending = await asyncio.wait(pipes, return_when=asyncio.FIRST_COMPLETED)
                 for task in pending:
                     task.cancel()
-                await asyncio.gather(*pipes, return_exceptions=True)   # each outcome taken: none is logged
+                await asyncio.gather(*pipes, return_exceptions=True)  # each outcome taken: none is logged
         except Exception:  # the client or the SDK's server went away: nothing to tell
             pass
 
@@ -329,8 +349,14 @@ class Stages:
     """Segmentation, features and tracking of scans as they come (pipeline.RunStages, its state carried from
     call to call): `messages(run)` gives the derived messages of the next scans, with the transforms."""
 
-    def __init__(self, odometry: Odometry | None, config: DatmoConfig | None = None, estimated: bool = False,
-                 has_tf: bool = False, scan_frame: str = "laser") -> None:
+    def __init__(
+        self,
+        odometry: Odometry | None,
+        config: DatmoConfig | None = None,
+        estimated: bool = False,
+        has_tf: bool = False,
+        scan_frame: str = "laser",
+    ) -> None:
         from .pipeline import RunStages
 
         self.stages = RunStages(odometry, config, estimated=estimated)
@@ -361,12 +387,13 @@ class DrawnMarkers:
         self.path = stream.path
         self.odometry = odometry if odometry is not None and len(odometry) else None
         self.tail_length = max(int(tail_length), 1)
-        self.tails: dict[int, tuple[np.ndarray, int]] = {}   # track id: (ring of positions (T, 2), positions written)
+        self.tails: dict[int, tuple[np.ndarray, int]] = {}  # track id: (ring of positions (T, 2), positions written)
 
     def topics(self) -> dict[str, str]:
         """{topic: message type} of what `messages` gives."""
-        return ({mcapio.TOPIC_MARKERS_FEATURES: types.MARKER_ARRAY} if self.features else {}) | \
-            ({mcapio.TOPIC_MARKERS_TRACKS: types.MARKER_ARRAY} if self.tracks else {})
+        return ({mcapio.TOPIC_MARKERS_FEATURES: types.MARKER_ARRAY} if self.features else {}) | (
+            {mcapio.TOPIC_MARKERS_TRACKS: types.MARKER_ARRAY} if self.tracks else {}
+        )
 
     def messages(self, copies: dict[str, tuple[list[int], list[bytes]]]) -> list[Message]:
         """The markers of a block's messages ({topic: (log times, payloads)}, as streaming.Block.copies)."""
@@ -386,8 +413,15 @@ class DrawnMarkers:
                 lm = landmarks.get(stamp)
                 with mcapio.decoding(self.path, mcapio.TOPIC_LANDMARKS):
                     elems = cdr.decode(types.LANDMARKS, lm)["landmarks"] if lm is not None else None
-                drawn = scan_feature_markers(f["stamp_ns"], f["frame_id"], f["lines"], f["circles"], f["blobs"], elems,
-                                             poses[k] if poses is not None and elems is not None else None)
+                drawn = scan_feature_markers(
+                    f["stamp_ns"],
+                    f["frame_id"],
+                    f["lines"],
+                    f["circles"],
+                    f["blobs"],
+                    elems,
+                    poses[k] if poses is not None and elems is not None else None,
+                )
                 out.append(Message(int(stamp), mcapio.TOPIC_MARKERS_FEATURES, types.MARKER_ARRAY, drawn))
         if self.tracks and mcapio.TOPIC_TRACKS in copies:
             from .tracking.markers import track_markers
@@ -447,12 +481,14 @@ class LogSource:
         else:
             self.odometry = self.stream.odometry
         self.drawn = self._drawn().topics() if self.processed else {}
-        self.transforms = Transforms(self.odometry, self._scan_frame(), self.stream.has(TOPIC_TF)
-                                     or TOPIC_TF in self.derived)
+        self.transforms = Transforms(
+            self.odometry, self._scan_frame(), self.stream.has(TOPIC_TF) or TOPIC_TF in self.derived
+        )
         topics = [c.topic for c in self.stream.log.topics().values() if c.count and c.topic not in self.derived]
         self.copied = topics
-        self.order = {t: i for i, t in enumerate([self.stream.scan_topic] + topics + list(self.derived)
-                                                 + list(self.drawn))}
+        self.order = {
+            t: i for i, t in enumerate([self.stream.scan_topic] + topics + list(self.derived) + list(self.drawn))
+        }
 
     def _drawn(self) -> DrawnMarkers:
         from .config import DatmoConfig
@@ -510,8 +546,15 @@ class Pace:
             sleep(delay)
 
 
-def play(source: LogSource, server: LiveServer, *, rate: float = 1.0, loop: bool = False,
-         sleep: Callable[[float], None] = time.sleep, clock: Callable[[], float] = time.monotonic) -> int:
+def play(
+    source: LogSource,
+    server: LiveServer,
+    *,
+    rate: float = 1.0,
+    loop: bool = False,
+    sleep: Callable[[float], None] = time.sleep,
+    clock: Callable[[], float] = time.monotonic,
+) -> int:
     """Publish `source` on `server` at `rate` times the log's speed, from the start again after the end with
     `loop` (a new session each time, each pass lasting at least MIN_LOOP_PASS_S, so that a log of one scan
     does not spin); returns the number of scans sent. `sleep` and `clock`: time.sleep and time.monotonic."""
@@ -552,9 +595,18 @@ class LiveFeed:
     view; `datmo node` does not, the robot has it). A failure stops the feed, not its source (`failure` says
     what it was)."""
 
-    def __init__(self, server, config: DatmoConfig | None = None, backlog: int = 256, batch: int = 16, *,
-                 odometry: PoseBuffer | None = None, drop_oldest: bool = False, scans: bool = True,
-                 on_restart: Callable[[str], None] | None = None) -> None:
+    def __init__(
+        self,
+        server,
+        config: DatmoConfig | None = None,
+        backlog: int = 256,
+        batch: int = 16,
+        *,
+        odometry: PoseBuffer | None = None,
+        drop_oldest: bool = False,
+        scans: bool = True,
+        on_restart: Callable[[str], None] | None = None,
+    ) -> None:
         self.server = server
         self.config = config
         self.batch = batch
@@ -574,8 +626,9 @@ class LiveFeed:
     def warm_up(self) -> None:
         """Load the stages' compiled kernels now, on a made-up scan: loading them takes the interpreter for
         a second or so, which must happen before the scanner streams, not while its bytes arrive."""
-        geometry = ScanGeometry(angle_min=-math.pi / 2, angle_increment=math.pi / 360, n_beams=361, range_min=0.0,
-                                range_max=8.0)
+        geometry = ScanGeometry(
+            angle_min=-math.pi / 2, angle_increment=math.pi / 360, n_beams=361, range_min=0.0, range_max=8.0
+        )
         run = ScanRun(np.array([0, 100_000_000]), np.full((2, geometry.n_beams), 3.0, np.float32), geometry)
         Stages(None, self.config).messages(run)
 
@@ -591,18 +644,18 @@ class LiveFeed:
                 return
             try:
                 self.queue.get_nowait()
-            except queue.Empty:   # the feed took them all meanwhile
+            except queue.Empty:  # the feed took them all meanwhile
                 pass
             try:
                 self.queue.put_nowait(item)
-            except queue.Full:    # another caller filled it again: this one goes
+            except queue.Full:  # another caller filled it again: this one goes
                 pass
 
     def close(self, timeout: float = 5.0) -> None:
         """Stop the thread (after the queued scans, waiting at most `timeout` seconds)."""
         try:
             self.queue.put(None, timeout=timeout)
-        except queue.Full:   # the thread has stopped (a failure) with the queue full
+        except queue.Full:  # the thread has stopped (a failure) with the queue full
             return
         self._thread.join(timeout)
 
@@ -633,8 +686,9 @@ class LiveFeed:
                         if self.on_restart is not None:
                             self.on_restart(why)
                     if stages is None:
-                        stages = Stages(self.odometry, self.config, has_tf=self.odometry is not None,
-                                        scan_frame=geometry.frame_id)
+                        stages = Stages(
+                            self.odometry, self.config, has_tf=self.odometry is not None, scan_frame=geometry.frame_id
+                        )
                     run.append(item)
                     last = (stamp, geometry)
                 self._publish(stages, run)
@@ -666,9 +720,11 @@ def _why_restart(last: tuple[int, ScanGeometry], stamp: int, geometry: ScanGeome
     of the stages: a sentence; "" when it repeats the last scan's stamp; None when it follows."""
     before, g = last
     if not geometry.same_beams(g) or geometry.frame_id != g.frame_id:
-        return (f"the scans' geometry changed ({g.n_beams} beams from {math.degrees(g.angle_min):g} deg in "
-                f"{g.frame_id!r}, now {geometry.n_beams} from {math.degrees(geometry.angle_min):g} deg in "
-                f"{geometry.frame_id!r})")
+        return (
+            f"the scans' geometry changed ({g.n_beams} beams from {math.degrees(g.angle_min):g} deg in "
+            f"{g.frame_id!r}, now {geometry.n_beams} from {math.degrees(geometry.angle_min):g} deg in "
+            f"{geometry.frame_id!r})"
+        )
     if stamp == before:
         return ""
     if stamp < before:
@@ -695,7 +751,7 @@ class PoseBuffer:
                 return
             self._poses.append((int(stamp), float(x), float(y), float(theta)))
             if len(self._poses) > 2 * self.keep:
-                del self._poses[:-self.keep]
+                del self._poses[: -self.keep]
             self.frame_id = frame_id or self.frame_id
             self.child_frame_id = child_frame_id or self.child_frame_id
 
@@ -706,7 +762,7 @@ class PoseBuffer:
     def at(self, stamps: np.ndarray) -> np.ndarray:
         """Poses (K x 3: x, y, theta) at `stamps` (ns), interpolated; the latest held past the end."""
         with self._lock:
-            recent = self._poses[-self.keep:]
+            recent = self._poses[-self.keep :]
         if not recent:
             raise ValueError("no odometry has arrived")
         xyt = np.array([p[1:] for p in recent], np.float64)

@@ -28,9 +28,9 @@ from .log.scan import decode_scan
 if TYPE_CHECKING:
     from .config import DatmoConfig
 
-SCAN_DEPTH = 256      # scans DDS keeps for the node between two takes (history depth of the subscription)
-BACKLOG = 64          # scans waiting for the stages; beyond, the oldest is dropped
-WAIT_S = 0.2          # longest wait for data, s (Ctrl-C is seen between waits)
+SCAN_DEPTH = 256  # scans DDS keeps for the node between two takes (history depth of the subscription)
+BACKLOG = 64  # scans waiting for the stages; beyond, the oldest is dropped
+WAIT_S = 0.2  # longest wait for data, s (Ctrl-C is seen between waits)
 
 
 def published_topics() -> dict[str, str]:
@@ -78,9 +78,15 @@ class Node:
     change, the first scan that does not decode). Raises ConfigError (bad topic names, a domain it cannot join)
     and MissingExtraError (no cyclonedds)."""
 
-    def __init__(self, domain: int, scan_topic: str = "/scan", odom_topic: str | None = None,
-                 config: DatmoConfig | None = None, say: Callable[[str], None] = lambda line: None,
-                 backlog: int = BACKLOG) -> None:
+    def __init__(
+        self,
+        domain: int,
+        scan_topic: str = "/scan",
+        odom_topic: str | None = None,
+        config: DatmoConfig | None = None,
+        say: Callable[[str], None] = lambda line: None,
+        backlog: int = BACKLOG,
+    ) -> None:
         dds.require_cyclonedds()
         self.scan_topic = dds.ros_topic(scan_topic, "--scan-topic")
         self.odom_topic = dds.ros_topic(odom_topic, "--odom-topic") if odom_topic else None
@@ -90,9 +96,16 @@ class Node:
         self.topics = published_topics()
         self.sink = DdsSink(self.participant, self.topics)
         self.odometry = PoseBuffer() if self.odom_topic else None
-        self.feed = LiveFeed(self.sink, config, backlog=backlog, odometry=self.odometry, drop_oldest=True,
-                             scans=False, on_restart=lambda why: say(f"datmo node: {why}: tracking starts over"))
-        self.feed.warm_up()   # the compiled stages load now, not while the first scans arrive
+        self.feed = LiveFeed(
+            self.sink,
+            config,
+            backlog=backlog,
+            odometry=self.odometry,
+            drop_oldest=True,
+            scans=False,
+            on_restart=lambda why: say(f"datmo node: {why}: tracking starts over"),
+        )
+        self.feed.warm_up()  # the compiled stages load now, not while the first scans arrive
         self.scans = self.participant.reader(self.scan_topic, types.LASERSCAN, depth=SCAN_DEPTH)
         self.poses = self.participant.reader(self.odom_topic, types.ODOMETRY) if self.odom_topic else None
         self.waitset = self.participant.waitset([r for r in (self.scans, self.poses) if r is not None])
@@ -144,18 +157,22 @@ class Node:
         except Exception as exc:  # rosbags raises several kinds for a payload that does not decode
             c.bad_poses += 1
             if c.bad_poses == 1:
-                self.say(f"datmo node: an odometry message on {self.odom_topic} does not decode ({exc}); "
-                         "such messages are skipped")
+                self.say(
+                    f"datmo node: an odometry message on {self.odom_topic} does not decode ({exc}); "
+                    "such messages are skipped"
+                )
             return
         c.poses += 1
-        self.odometry.add(stamp.sec * 1_000_000_000 + stamp.nanosec, *values, msg.header.frame_id,
-                          msg.child_frame_id)
+        self.odometry.add(stamp.sec * 1_000_000_000 + stamp.nanosec, *values, msg.header.frame_id, msg.child_frame_id)
 
     def summary(self) -> str:
         """One line: scans received, processed, dropped behind, and what else was skipped."""
         c, f = self.counts, self.feed
-        parts = [f"{c.scans:,} scans received", f"{f.published:,} processed",
-                 f"{f.dropped:,} dropped (the stages were behind)"]
+        parts = [
+            f"{c.scans:,} scans received",
+            f"{f.published:,} processed",
+            f"{f.dropped:,} dropped (the stages were behind)",
+        ]
         if f.restarts:
             parts.append(f"{f.restarts:,} restarts")
         if c.bad_scans:

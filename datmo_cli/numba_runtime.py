@@ -24,7 +24,7 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
-KERNEL_PACKAGES = ("perception", "tracking", "sim")   # the sub-packages whose modules hold cached kernels
+KERNEL_PACKAGES = ("perception", "tracking", "sim")  # the sub-packages whose modules hold cached kernels
 
 
 def choose_cache() -> str | None:
@@ -44,7 +44,7 @@ def choose_cache() -> str | None:
         return None
     os.environ["NUMBA_CACHE_DIR"] = folder
     config = sys.modules.get("numba.core.config")
-    if config is not None:   # numba read the environment already: tell it too
+    if config is not None:  # numba read the environment already: tell it too
         config.CACHE_DIR = folder
     return folder
 
@@ -84,8 +84,12 @@ def _private_temp() -> str | None:
         except FileExistsError:
             pass
         st = os.lstat(path)
-        if (stat.S_ISDIR(st.st_mode) and (uid is None or st.st_uid == uid) and not st.st_mode & 0o077
-                and os.access(path, os.W_OK | os.X_OK)):
+        if (
+            stat.S_ISDIR(st.st_mode)
+            and (uid is None or st.st_uid == uid)
+            and not st.st_mode & 0o077
+            and os.access(path, os.W_OK | os.X_OK)
+        ):
             return path
         return tempfile.mkdtemp(prefix="datmo-numba-cache-")
     except (OSError, FileNotFoundError):
@@ -103,7 +107,7 @@ def _without_cache() -> None:
     def enable_caching(self) -> None:
         try:
             original(self)
-        except RuntimeError:   # "cannot cache function ...: no locator available"
+        except RuntimeError:  # "cannot cache function ...: no locator available"
             self._cache = caching.NullCache()
 
     enable_caching.datmo_fallback = True
@@ -120,7 +124,7 @@ def prepare() -> None:
     global _READY
     if _READY:
         return
-    with _LOCK:   # threads of one Dask worker may start stages at once
+    with _LOCK:  # threads of one Dask worker may start stages at once
         if _READY:
             return
         loaded = None if "scipy.linalg" in sys.modules else _load_blas_alone()
@@ -173,7 +177,7 @@ def cache_looks_stale() -> bool:
     if os.environ.get("NUMBA_DISABLE_JIT", "0") != "0":
         return False
     if os.environ.get("NUMBA_CACHE_DIR"):
-        return True   # not judged: as stale
+        return True  # not judged: as stale
     package = os.path.dirname(os.path.abspath(__file__))
     newest: dict[str, float] = {}
     for folder in [package, *(e.path for e in os.scandir(package) if e.is_dir() and not e.name.startswith("_"))]:

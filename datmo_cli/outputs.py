@@ -31,9 +31,9 @@ from typing import IO
 
 from .errors import OutputError, OutputExistsError
 
-NAME_MAX = 255   # bytes in one file name on Linux file systems (used when pathconf cannot say)
+NAME_MAX = 255  # bytes in one file name on Linux file systems (used when pathconf cannot say)
 
-_LIVE: dict[str, int] = {}          # temporary file -> pid of the process that made it
+_LIVE: dict[str, int] = {}  # temporary file -> pid of the process that made it
 _LOCK = threading.Lock()
 _COUNTER = [0]
 
@@ -98,7 +98,7 @@ def _handler(signum: int, frame) -> None:
     if _state["depth"]:
         _PENDING.append(signum)
         return
-    if in_native_callback(frame):   # the callback is short: the same signal again, a moment later
+    if in_native_callback(frame):  # the callback is short: the same signal again, a moment later
         threading.Timer(RESEND_AFTER_S, os.kill, (os.getpid(), signum)).start()
         return
     _raise_for(signum)
@@ -145,8 +145,13 @@ def handle_signals() -> Iterator[None]:
 
 
 def _kind(mode: int) -> str:
-    for test, name in ((stat.S_ISDIR, "directory"), (stat.S_ISFIFO, "FIFO"), (stat.S_ISCHR, "character device"),
-                       (stat.S_ISBLK, "block device"), (stat.S_ISSOCK, "socket")):
+    for test, name in (
+        (stat.S_ISDIR, "directory"),
+        (stat.S_ISFIFO, "FIFO"),
+        (stat.S_ISCHR, "character device"),
+        (stat.S_ISBLK, "block device"),
+        (stat.S_ISSOCK, "socket"),
+    ):
         if test(mode):
             return name
     return "special file"
@@ -186,8 +191,9 @@ def check_replaceable(path: Path, force: bool, what: str = "output") -> None:
         return
     if stat.S_ISDIR(st.st_mode):
         raise OutputError(f"{path}: is a directory; give a file name for the {what}")
-    raise OutputError(f"{path}: is a {_kind(st.st_mode)}, not a regular file; datmo replaces only regular files "
-                      "(even with --force)")
+    raise OutputError(
+        f"{path}: is a {_kind(st.st_mode)}, not a regular file; datmo replaces only regular files (even with --force)"
+    )
 
 
 def check_folder(folder: Path) -> None:
@@ -213,8 +219,9 @@ def _why_not_writable(folder: Path) -> str:
     return "permission denied"
 
 
-def check_output(path: str | Path, *, force: bool = False, inputs: Iterable[str | Path] = (),
-                 what: str = "output") -> Path:
+def check_output(
+    path: str | Path, *, force: bool = False, inputs: Iterable[str | Path] = (), what: str = "output"
+) -> Path:
     """`path` as a Path when it may be written (see the module docstring); else OutputError (or
     OutputExistsError) naming it. `inputs`: files the output must not be."""
     raw = os.fspath(path)
@@ -307,7 +314,7 @@ def temp_path(path: Path) -> Path:
         n = _COUNTER[0]
     tail = f".{os.getpid()}.{n}.tmp"
     budget = name_max(folder_of(path)) - 1 - len(tail)
-    name = os.fsencode(path.name)[:max(budget, 1)]
+    name = os.fsencode(path.name)[: max(budget, 1)]
     return folder_of(path) / os.fsdecode(b"." + name + tail.encode())
 
 
@@ -402,8 +409,9 @@ atexit.register(remove_live)
 
 
 @contextmanager
-def atomic_output(path: str | Path, *, force: bool = False, mode: str = "wb",
-                  inputs: Iterable[str | Path] = (), what: str = "output") -> Iterator[IO]:
+def atomic_output(
+    path: str | Path, *, force: bool = False, mode: str = "wb", inputs: Iterable[str | Path] = (), what: str = "output"
+) -> Iterator[IO]:
     """An open temporary file for `path` (checked by check_output); renamed over `path` when the block ends
     without an error, removed otherwise. Write errors become one-line OutputErrors naming `path`."""
     p = check_output(path, force=force, inputs=inputs, what=what)

@@ -20,8 +20,13 @@ if TYPE_CHECKING:
     from .config import DatmoConfig
     from .report import RunData
 
-REPORT_TOPICS = (mcapio.TOPIC_SCAN, mcapio.TOPIC_ODOM, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS,
-                 mcapio.TOPIC_TRACKS)
+REPORT_TOPICS = (
+    mcapio.TOPIC_SCAN,
+    mcapio.TOPIC_ODOM,
+    mcapio.TOPIC_FEATURES,
+    mcapio.TOPIC_LANDMARKS,
+    mcapio.TOPIC_TRACKS,
+)
 
 
 def read_run_data(path: str | Path, *, keep_scans: bool = False, ground_truth: bool = False) -> RunData:
@@ -52,8 +57,8 @@ def warm_up() -> None:
     prepare()
     for scene in ("hall", "patrol"):
         sim = simulate_scene(scene, duration=8.0)
-        derive(sim.run, sim.odometry, markers=True)   # the markers' kernels too (--markers, the live view)
-    odometry_for(sim.run, None, "on")   # scan matching, for logs without odometry
+        derive(sim.run, sim.odometry, markers=True)  # the markers' kernels too (--markers, the live view)
+    odometry_for(sim.run, None, "on")  # scan matching, for logs without odometry
 
 
 def estimated_odometry(run, odometry, mode: str) -> tuple:
@@ -78,8 +83,9 @@ def odometry_channel(odometry, block) -> tuple:
     return types.ODOMETRY, part.stamps, mcapio.encode_odometry(part)
 
 
-def derived_topics(*, odom: bool = False, segments: bool = False, features: bool = False, tracks: bool = False,
-                   markers: bool = False) -> dict[str, str]:
+def derived_topics(
+    *, odom: bool = False, segments: bool = False, features: bool = False, tracks: bool = False, markers: bool = False
+) -> dict[str, str]:
     """{topic: message type} of the channels the stages write, in writing order: /odom (estimated here),
     /datmo/segments, /datmo/features with /datmo/landmarks (and /datmo/markers/features), /datmo/tracks (and
     /datmo/markers/tracks)."""
@@ -99,8 +105,9 @@ def derived_topics(*, odom: bool = False, segments: bool = False, features: bool
     return out
 
 
-def open_stages(stream, config: DatmoConfig | None = None, *, markers: bool = True,
-                covariance: bool = True) -> RunStages:
+def open_stages(
+    stream, config: DatmoConfig | None = None, *, markers: bool = True, covariance: bool = True
+) -> RunStages:
     """The stages of a streamed log (a streaming.LogStream) in the odometry it is tracked in: the log's own,
     else (ego-motion mode of config.track) poses estimated from its scans, then written to /odom (see
     streaming.stream_odometry). Every pass over a log reads its odometry here, once."""
@@ -120,8 +127,16 @@ class RunStages:
     `report`: a report.RunAccumulator fed each block's scans, features, landmarks and tracks as they are made
     (the report of the output without reading it; feed_report)."""
 
-    def __init__(self, odometry, config: DatmoConfig | None = None, *, estimated: bool = False,
-                 markers: bool = True, covariance: bool = True, report=None) -> None:
+    def __init__(
+        self,
+        odometry,
+        config: DatmoConfig | None = None,
+        *,
+        estimated: bool = False,
+        markers: bool = True,
+        covariance: bool = True,
+        report=None,
+    ) -> None:
         from .config import DatmoConfig
         from .perception.features import FeatureStream
 
@@ -136,16 +151,19 @@ class RunStages:
 
     def derived(self) -> dict[str, str]:
         """{topic: message type} of the channels the stages write, in writing order."""
-        return derived_topics(odom=self.estimated, segments=True, features=True, tracks=True,
-                              markers=self.markers)
+        return derived_topics(odom=self.estimated, segments=True, features=True, tracks=True, markers=self.markers)
 
     def effective(self) -> dict:
         """The effective parameters, as provenance records them."""
         from .perception.features import leg_model_provenance
 
         features, track = self.config.features, self.config.track
-        return {"features": features.to_dict(), "track": track.to_dict(),
-                "leg_model": leg_model_provenance(features.leg_model), "config": self.config.to_dict()}
+        return {
+            "features": features.to_dict(),
+            "track": track.to_dict(),
+            "leg_model": leg_model_provenance(features.leg_model),
+            "config": self.config.to_dict(),
+        }
 
     def __call__(self, block) -> dict[str, tuple]:
         from .stages import TrackStream, iter_run_features, leg_threshold_of
@@ -158,9 +176,15 @@ class RunStages:
         out |= channels
         if self.tracking is None:
             model = self.config.features.leg_model
-            self.tracking = TrackStream(run.geometry, odometry=self.odometry, params=self.config.track,
-                                        markers=self.markers, learned=model != "paper",
-                                        leg_threshold=leg_threshold_of(model), covariance=self.covariance)
+            self.tracking = TrackStream(
+                run.geometry,
+                odometry=self.odometry,
+                params=self.config.track,
+                markers=self.markers,
+                learned=model != "paper",
+                leg_threshold=leg_threshold_of(model),
+                covariance=self.covariance,
+            )
         tracked = self.tracking.block(run, iter_run_features(features))
         out |= self.tracking.channels(tracked)
         if self.report is not None:
@@ -178,8 +202,10 @@ def feed_report(report, run, features, landmark_payloads: list[bytes], tracked) 
     from .report import FEATURE_KINDS
 
     report.add_scans(run.stamps, run.geometry.n_beams)
-    report.add_features(len(run), {k: np.diff(np.asarray(getattr(features, f"{k[:-1]}_offsets"))).astype(np.int64)
-                                   for k in FEATURE_KINDS})
+    report.add_features(
+        len(run),
+        {k: np.diff(np.asarray(getattr(features, f"{k[:-1]}_offsets"))).astype(np.int64) for k in FEATURE_KINDS},
+    )
     if landmark_payloads:
         frame = cdr.decode(types.LANDMARKS, landmark_payloads[0])["frame_id"] if report.landmark_frame is None else ""
         report.add_landmarks(frame, cdr.decode(types.LANDMARKS, landmark_payloads[-1])["landmarks"])
@@ -188,9 +214,15 @@ def feed_report(report, run, features, landmark_payloads: list[bytes], tracked) 
         report.add_tracks(np.repeat(np.asarray(tracked.stamps, np.int64), counts), np.concatenate(tracked.tracks))
 
 
-def derive(run, odometry, config: DatmoConfig | None = None,
-           progress: Callable[[int, int], None] | None = None, *, markers: bool = False,
-           covariance: bool = False) -> tuple[dict[str, tuple], dict]:
+def derive(
+    run,
+    odometry,
+    config: DatmoConfig | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    *,
+    markers: bool = False,
+    covariance: bool = False,
+) -> tuple[dict[str, tuple], dict]:
     """Every derived channel of a run held in memory, {topic: (msgtype, stamps, payloads)}, and the effective
     parameters; `config`: the DatmoConfig (None: the defaults). The same stages as process_file, on one
     block (`markers`, `covariance` as there)."""
@@ -208,11 +240,22 @@ def derive(run, odometry, config: DatmoConfig | None = None,
     return derived, stages.effective()
 
 
-def process_file(src: str | Path, out: str | Path, *, force: bool = False, config: DatmoConfig | None = None,
-                 command_line: str | None = None, progress: Callable[[int, int], None] | None = None,
-                 markers: bool = False, covariance: bool = False, bag_dir: bool = False,
-                 block_scans: int | None = None,
-                 input_name: str | None = None, origin: str | Path | None = None, report=None) -> int:
+def process_file(
+    src: str | Path,
+    out: str | Path,
+    *,
+    force: bool = False,
+    config: DatmoConfig | None = None,
+    command_line: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    markers: bool = False,
+    covariance: bool = False,
+    bag_dir: bool = False,
+    block_scans: int | None = None,
+    input_name: str | None = None,
+    origin: str | Path | None = None,
+    report=None,
+) -> int:
     """Segment, extract features and track `src` in one streaming pass into `out` (see module docstring and
     streaming); returns the number of scans. `config`: the DatmoConfig (None: the defaults), recorded whole in
     the provenance; `progress(done, total)` is called as scans are processed; `markers`: also write the Foxglove
@@ -231,10 +274,21 @@ def process_file(src: str | Path, out: str | Path, *, force: bool = False, confi
     stages.report = report
     origin = Path(origin) if origin is not None else src
     with bagdir.output(Path(out).parent if bag_dir else out, bag_dir, force=force, inputs=[origin]) as dst:
-        return write_derived(stream, dst, command="run", params=stages.effective(), derived=stages.derived(),
-                             stage=stages, force=force, command_line=command_line,
-                             block_scans=block_scans or BLOCK_SCANS, progress=progress, input_name=input_name,
-                             origin=origin, report=report)
+        return write_derived(
+            stream,
+            dst,
+            command="run",
+            params=stages.effective(),
+            derived=stages.derived(),
+            stage=stages,
+            force=force,
+            command_line=command_line,
+            block_scans=block_scans or BLOCK_SCANS,
+            progress=progress,
+            input_name=input_name,
+            origin=origin,
+            report=report,
+        )
 
 
 def _provenance_entries(log, key: str) -> list[dict]:
@@ -275,10 +329,19 @@ def features_leg_threshold(log, used: str) -> float:
     return leg_threshold_of(used)
 
 
-def track_file(src: str | Path, out: str | Path, *, force: bool = False, config: DatmoConfig | None = None,
-               leg_model: str | None = None, command_line: str | None = None,
-               markers: bool = False, covariance: bool = False, block_scans: int | None = None,
-               progress: Callable[[int, int], None] | None = None) -> tuple[int, bool]:
+def track_file(
+    src: str | Path,
+    out: str | Path,
+    *,
+    force: bool = False,
+    config: DatmoConfig | None = None,
+    leg_model: str | None = None,
+    command_line: str | None = None,
+    markers: bool = False,
+    covariance: bool = False,
+    block_scans: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[int, bool]:
     """Track `src` into `out` in one streaming pass (its channels copied, /datmo/tracks added, and
     /datmo/markers/tracks with `markers`; the tracks' covariance is stored with `covariance`, else NaN).
     Features come from src's /datmo/features when present (people then by the rule of the leg detector they
@@ -299,13 +362,21 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, config:
     if not computed:
         used = features_leg_model(stream.log)
         if leg_model is not None and leg_model != used:
-            raise InputError(f"{src}: its features were made with leg model {used!r}, not {leg_model!r}; run "
-                             f"datmo features --leg-model {leg_model} on it first, or drop --leg-model")
+            raise InputError(
+                f"{src}: its features were made with leg model {used!r}, not {leg_model!r}; run "
+                f"datmo features --leg-model {leg_model} on it first, or drop --leg-model"
+            )
         if stream.count(mcapio.TOPIC_FEATURES) != stream.n_scans:
-            raise InputError(f"{src}: {stream.count(mcapio.TOPIC_FEATURES)} messages on {mcapio.TOPIC_FEATURES} "
-                             f"for {stream.n_scans} scans; run datmo features again")
-    stages = open_stages(stream, config.replace(features={"leg_model": leg_model}) if computed else config,
-                         markers=markers, covariance=covariance)
+            raise InputError(
+                f"{src}: {stream.count(mcapio.TOPIC_FEATURES)} messages on {mcapio.TOPIC_FEATURES} "
+                f"for {stream.n_scans} scans; run datmo features again"
+            )
+    stages = open_stages(
+        stream,
+        config.replace(features={"leg_model": leg_model}) if computed else config,
+        markers=markers,
+        covariance=covariance,
+    )
     odometry, estimated = stages.odometry, stages.estimated
     if computed:
         derived, stage, effective = stages.derived(), stages, stages.effective()
@@ -313,27 +384,44 @@ def track_file(src: str | Path, out: str | Path, *, force: bool = False, config:
         state: dict = {}
         derived = derived_topics(odom=estimated, tracks=True, markers=markers)
         threshold = features_leg_threshold(stream.log, used)
-        effective = {"track": params.to_dict(),
-                     "leg_model": (leg_model_provenance(used) if used == "paper"
-                                   else {"model": used, "threshold": threshold}),
-                     "config": config.to_dict()}
+        effective = {
+            "track": params.to_dict(),
+            "leg_model": (leg_model_provenance(used) if used == "paper" else {"model": used, "threshold": threshold}),
+            "config": config.to_dict(),
+        }
 
         def stage(block) -> dict:
             run, out = block.run, {}
             if estimated:
                 out[mcapio.TOPIC_ODOM] = odometry_channel(odometry, block)
             if "tracking" not in state:
-                state["tracking"] = TrackStream(run.geometry, odometry=odometry, params=params, markers=markers,
-                                                learned=used != "paper", leg_threshold=threshold,
-                                                covariance=covariance)
+                state["tracking"] = TrackStream(
+                    run.geometry,
+                    odometry=odometry,
+                    params=params,
+                    markers=markers,
+                    learned=used != "paper",
+                    leg_threshold=threshold,
+                    covariance=covariance,
+                )
             tracking = state["tracking"]
             with mcapio.decoding(stream.path, mcapio.TOPIC_FEATURES):
                 features = decode_features(block.aligned[mcapio.TOPIC_FEATURES], block.first)
             return out | tracking.channels(tracking.block(run, features))
 
-    scans = write_derived(stream, out, command="track", params=effective, derived=derived, stage=stage, force=force,
-                          command_line=command_line, aligned=() if computed else (mcapio.TOPIC_FEATURES,),
-                          block_scans=block_scans or BLOCK_SCANS, progress=progress)
+    scans = write_derived(
+        stream,
+        out,
+        command="track",
+        params=effective,
+        derived=derived,
+        stage=stage,
+        force=force,
+        command_line=command_line,
+        aligned=() if computed else (mcapio.TOPIC_FEATURES,),
+        block_scans=block_scans or BLOCK_SCANS,
+        progress=progress,
+    )
     return scans, computed
 
 
@@ -352,9 +440,18 @@ class FeatureCounts:
         return getattr(self, name) / max(self.scans, 1)
 
 
-def features_file(src: str | Path, out: str | Path, config: DatmoConfig | None = None, *, resegment: bool = False,
-                  force: bool = False, command_line: str | None = None, markers: bool = False,
-                  block_scans: int | None = None, progress: Callable[[int, int], None] | None = None) -> FeatureCounts:
+def features_file(
+    src: str | Path,
+    out: str | Path,
+    config: DatmoConfig | None = None,
+    *,
+    resegment: bool = False,
+    force: bool = False,
+    command_line: str | None = None,
+    markers: bool = False,
+    block_scans: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> FeatureCounts:
     """Extract the features of `src` into `out` in one streaming pass: /datmo/features, /datmo/landmarks (and
     /datmo/markers/features with `markers`), and /datmo/segments unless the input has its own (used unless
     `resegment`).
@@ -370,8 +467,10 @@ def features_file(src: str | Path, out: str | Path, config: DatmoConfig | None =
     src = stream.path
     given = stream.has(mcapio.TOPIC_SEGMENTS) and not resegment
     if given and stream.count(mcapio.TOPIC_SEGMENTS) != stream.n_scans:
-        raise InputError(f"{src}: {stream.count(mcapio.TOPIC_SEGMENTS)} messages on {mcapio.TOPIC_SEGMENTS} for "
-                         f"{stream.n_scans} scans; run datmo segment again or pass --resegment")
+        raise InputError(
+            f"{src}: {stream.count(mcapio.TOPIC_SEGMENTS)} messages on {mcapio.TOPIC_SEGMENTS} for "
+            f"{stream.n_scans} scans; run datmo segment again or pass --resegment"
+        )
     features = FeatureStream(params, stream.odometry)
     counts = FeatureCounts()
     derived = derived_topics(segments=not given, features=True, markers=markers)
@@ -396,17 +495,37 @@ def features_file(src: str | Path, out: str | Path, config: DatmoConfig | None =
 
     from .perception.features import leg_model_provenance
 
-    effective = {"features": params.to_dict(), "leg_model": leg_model_provenance(params.leg_model),
-                 "config": config.to_dict()}
-    write_derived(stream, out, command="features", params=effective, derived=derived, stage=stage, force=force,
-                  command_line=command_line, aligned=(mcapio.TOPIC_SEGMENTS,) if given else (),
-                  block_scans=block_scans or BLOCK_SCANS, progress=progress)
+    effective = {
+        "features": params.to_dict(),
+        "leg_model": leg_model_provenance(params.leg_model),
+        "config": config.to_dict(),
+    }
+    write_derived(
+        stream,
+        out,
+        command="features",
+        params=effective,
+        derived=derived,
+        stage=stage,
+        force=force,
+        command_line=command_line,
+        aligned=(mcapio.TOPIC_SEGMENTS,) if given else (),
+        block_scans=block_scans or BLOCK_SCANS,
+        progress=progress,
+    )
     return counts
 
 
-def segment_file(src: str | Path, out: str | Path, config: DatmoConfig | None = None, *, force: bool = False,
-                 command_line: str | None = None, block_scans: int | None = None,
-                 progress: Callable[[int, int], None] | None = None) -> int:
+def segment_file(
+    src: str | Path,
+    out: str | Path,
+    config: DatmoConfig | None = None,
+    *,
+    force: bool = False,
+    command_line: str | None = None,
+    block_scans: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> int:
     """Segment every scan of `src` into `out` (its channels plus /datmo/segments) in one streaming pass;
     returns the number of scans. `config`: the DatmoConfig (None: the defaults), its features' c0 and
     min_points used and the whole recorded in the provenance."""
@@ -419,6 +538,15 @@ def segment_file(src: str | Path, out: str | Path, config: DatmoConfig | None = 
     stream = src if isinstance(src, LogStream) else LogStream(src)
     src = stream.path
     effective = {"features": params.to_dict(), "config": config.to_dict()}
-    return write_derived(stream, out, command="segment", params=effective, derived=derived_topics(segments=True),
-                         stage=lambda block: derive_segments(block.run, params), force=force,
-                         command_line=command_line, block_scans=block_scans or BLOCK_SCANS, progress=progress)
+    return write_derived(
+        stream,
+        out,
+        command="segment",
+        params=effective,
+        derived=derived_topics(segments=True),
+        stage=lambda block: derive_segments(block.run, params),
+        force=force,
+        command_line=command_line,
+        block_scans=block_scans or BLOCK_SCANS,
+        progress=progress,
+    )

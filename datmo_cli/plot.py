@@ -39,17 +39,37 @@ from .log.vocabulary import (
 )
 from .report import RunData, TrackHistory, track_history
 
-CLASS_COLOURS = {CLASS_UNKNOWN: "tab:gray", CLASS_PERSON: "tab:red", CLASS_CIRCLE_OBJECT: "tab:blue",
-                 CLASS_RECTANGULAR_OBJECT: "tab:green"}
-LANDMARK_MARKERS = {LANDMARK_CORNER: "v", LANDMARK_CONVEX_DEFLECTION: "^", LANDMARK_CONCAVE_DEFLECTION: "<",
-                    LANDMARK_LINE_END: "x", LANDMARK_COLUMN: "o", LANDMARK_BENCH: "s"}
+CLASS_COLOURS = {
+    CLASS_UNKNOWN: "tab:gray",
+    CLASS_PERSON: "tab:red",
+    CLASS_CIRCLE_OBJECT: "tab:blue",
+    CLASS_RECTANGULAR_OBJECT: "tab:green",
+}
+LANDMARK_MARKERS = {
+    LANDMARK_CORNER: "v",
+    LANDMARK_CONVEX_DEFLECTION: "^",
+    LANDMARK_CONCAVE_DEFLECTION: "<",
+    LANDMARK_LINE_END: "x",
+    LANDMARK_COLUMN: "o",
+    LANDMARK_BENCH: "s",
+}
 FORMATS = (".png", ".svg", ".pdf")
 KINDS = ("auto", "top", "counts", "speeds", "all")
 # label offsets from the point (points) and the text's alignment there: the four diagonals first
-LABEL_SPOTS = [(dx * r, dy * r, ha, va) for r in (3, 9)
-               for dx, dy, ha, va in ((1, 1, "left", "bottom"), (1, -1, "left", "top"), (-1, 1, "right", "bottom"),
-                                      (-1, -1, "right", "top"), (2, 0, "left", "center"), (-2, 0, "right", "center"),
-                                      (0, 2, "center", "bottom"), (0, -2, "center", "top"))]
+LABEL_SPOTS = [
+    (dx * r, dy * r, ha, va)
+    for r in (3, 9)
+    for dx, dy, ha, va in (
+        (1, 1, "left", "bottom"),
+        (1, -1, "left", "top"),
+        (-1, 1, "right", "bottom"),
+        (-1, -1, "right", "top"),
+        (2, 0, "left", "center"),
+        (-2, 0, "right", "center"),
+        (0, 2, "center", "bottom"),
+        (0, -2, "center", "top"),
+    )
+]
 
 
 @dataclass
@@ -69,10 +89,10 @@ class TrackLines:
     """Each confirmed track of a TrackHistory: its slice, class, whether it moves (a person or dynamic, by
     its last state, as the report says) and its confirmed states."""
 
-    groups: list[tuple[int, int, int]]     # (track id, start, end) rows of the history
+    groups: list[tuple[int, int, int]]  # (track id, start, end) rows of the history
     classes: list[int]
     moving: list[bool]
-    confirmed: list[np.ndarray]            # bool per state of the slice
+    confirmed: list[np.ndarray]  # bool per state of the slice
 
 
 def track_lines(hist: TrackHistory) -> TrackLines:
@@ -124,8 +144,9 @@ def _sensor_marker(ax, x: float, y: float, theta: float, size: float) -> None:
     ax.add_patch(Polygon(pts, closed=True, facecolor="black", edgecolor="black", zorder=6, label="scanner"))
 
 
-def _top_view(ax, data: RunData, hist: TrackHistory, lines: TrackLines, max_points: int,
-              all_labels: bool) -> list[tuple[int, float, float, str]]:
+def _top_view(
+    ax, data: RunData, hist: TrackHistory, lines: TrackLines, max_points: int, all_labels: bool
+) -> list[tuple[int, float, float, str]]:
     """Draw the run from above into `ax`; return the labels to place (id, x, y, colour), most important first."""
     from matplotlib.lines import Line2D
 
@@ -135,15 +156,16 @@ def _top_view(ax, data: RunData, hist: TrackHistory, lines: TrackLines, max_poin
     handles = [Line2D([], [], marker=".", ls="", color="0.55", label="scan points")]
     if data.landmarks is not None and len(data.landmarks) and "landmarks" in data.landmarks.items:
         off = data.landmarks.offsets["landmarks"]
-        db = data.landmarks.items["landmarks"][off[-2]:off[-1]]
+        db = data.landmarks.items["landmarks"][off[-2] : off[-1]]
         for typ in sorted(set(db["type"].tolist())):
             sel = db[db["type"] == typ]
             m = LANDMARK_MARKERS.get(typ, "*")
             hollow = m in "os^v<D"
             style = {"facecolors": "none", "edgecolors": "black"} if hollow else {"c": "black"}
             ax.scatter(sel["x"], sel["y"], marker=m, s=70, linewidths=1.3, zorder=4, **style)
-            handles.append(Line2D([], [], marker=m, ls="", mfc="none", mec="black",
-                                  label=LANDMARK_NAMES.get(typ, str(typ))))
+            handles.append(
+                Line2D([], [], marker=m, ls="", mfc="none", mec="black", label=LANDMARK_NAMES.get(typ, str(typ)))
+            )
 
     labels = []
     for (tid, a, b), cls, moves, conf in zip(lines.groups, lines.classes, lines.moving, lines.confirmed, strict=True):
@@ -151,7 +173,7 @@ def _top_view(ax, data: RunData, hist: TrackHistory, lines: TrackLines, max_poin
         # confirmed states only, the line broken where the track coasted (predictions, not observations)
         x, y = np.where(conf, hist.x[a:b], np.nan), np.where(conf, hist.y[a:b], np.nan)
         first, last = np.flatnonzero(conf)[[0, -1]]
-        x, y = x[first:last + 1], y[first:last + 1]
+        x, y = x[first : last + 1], y[first : last + 1]
         if moves:
             ax.plot(x, y, "-", color=colour, lw=1.4, alpha=0.9, zorder=3)
             ax.plot(x[0], y[0], "o", ms=3, color=colour, zorder=3)
@@ -196,12 +218,18 @@ def _counts(ax, data: RunData, hist: TrackHistory, lines: TrackLines) -> None:
     for (_, a, b), cls, moves in zip(lines.groups, lines.classes, lines.moving, strict=True):
         key = (moves, cls if moves else -1)
         counts = series.setdefault(key, np.zeros(len(stamps), np.int64))
-        alive = hist.states["status"][a:b] != STATUS_TENTATIVE     # confirmed or coasting: still followed
+        alive = hist.states["status"][a:b] != STATUS_TENTATIVE  # confirmed or coasting: still followed
         np.add.at(counts, np.searchsorted(stamps, hist.stamps[a:b][alive]), 1)
     for (moves, cls), counts in sorted(series.items(), key=lambda kv: (not kv[0][0], kv[0][1])):
         if moves:
-            ax.step(t, counts, where="post", color=CLASS_COLOURS.get(cls, "tab:gray"), lw=1.2,
-                    label=f"{CLASS_NAMES[cls]}, moving")
+            ax.step(
+                t,
+                counts,
+                where="post",
+                color=CLASS_COLOURS.get(cls, "tab:gray"),
+                lw=1.2,
+                label=f"{CLASS_NAMES[cls]}, moving",
+            )
         else:
             ax.step(t, counts, where="post", color="0.4", lw=1.0, ls=":", label="static pieces")
     ax.set_ylabel("confirmed tracks")
@@ -218,8 +246,15 @@ def _speeds(ax, data: RunData, hist: TrackHistory, lines: TrackLines) -> None:
         if not moves:
             continue
         speed = np.where(conf, hist.speed[a:b], np.nan)
-        ax.plot(_seconds(data, hist.stamps[a:b]), speed, "-", lw=0.9, alpha=0.8,
-                color=CLASS_COLOURS.get(cls, "tab:gray"), label=None if cls in drawn else CLASS_NAMES[cls])
+        ax.plot(
+            _seconds(data, hist.stamps[a:b]),
+            speed,
+            "-",
+            lw=0.9,
+            alpha=0.8,
+            color=CLASS_COLOURS.get(cls, "tab:gray"),
+            label=None if cls in drawn else CLASS_NAMES[cls],
+        )
         drawn.add(cls)
     ax.set_xlabel("time (s) from the first scan")
     ax.set_ylabel("speed (m/s)")
@@ -242,8 +277,18 @@ def place_labels(ax, labels: list[tuple[int, float, float, str]]) -> tuple[list,
         text = None
         for dx, dy, ha, va in LABEL_SPOTS:
             if text is None:
-                text = ax.annotate(str(tid), (x, y), xytext=(dx, dy), textcoords="offset points", fontsize=7,
-                                   color=colour, ha=ha, va=va, zorder=5, annotation_clip=True)
+                text = ax.annotate(
+                    str(tid),
+                    (x, y),
+                    xytext=(dx, dy),
+                    textcoords="offset points",
+                    fontsize=7,
+                    color=colour,
+                    ha=ha,
+                    va=va,
+                    zorder=5,
+                    annotation_clip=True,
+                )
                 text.set_in_layout(False)
             else:
                 text.set_position((dx, dy))
@@ -262,8 +307,9 @@ def place_labels(ax, labels: list[tuple[int, float, float, str]]) -> tuple[list,
     return placed, dropped
 
 
-def draw(data: RunData, *, kind: str = "auto", all_labels: bool = False, title: str | None = None,
-         max_points: int = 150_000) -> Drawn:
+def draw(
+    data: RunData, *, kind: str = "auto", all_labels: bool = False, title: str | None = None, max_points: int = 150_000
+) -> Drawn:
     """Draw `data` (a RunData with scans kept) as `kind` (KINDS; auto: all when a confirmed track moves,
     else top) into a new Figure, labels placed (place_labels)."""
     from .extras import require
@@ -306,15 +352,23 @@ def draw(data: RunData, *, kind: str = "auto", all_labels: bool = False, title: 
     else:
         fig.set_size_inches(17, max(height, 6.0))
     top.set_title(name)
-    fig.draw_without_rendering()      # the layout and the equal aspect's limits, before labels are measured
+    fig.draw_without_rendering()  # the layout and the equal aspect's limits, before labels are measured
     placed, dropped = place_labels(top, labels)
     if dropped:
         top.set_title(f"{name} ({dropped} of {dropped + len(placed)} labels left out: no room without overlap)")
     return Drawn(fig, kind, placed, len(placed), dropped)
 
 
-def plot_run(data: RunData, out: str | Path | BinaryIO, *, kind: str = "auto", all_labels: bool = False,
-             title: str | None = None, max_points: int = 150_000, dpi: int = 150) -> Drawn:
+def plot_run(
+    data: RunData,
+    out: str | Path | BinaryIO,
+    *,
+    kind: str = "auto",
+    all_labels: bool = False,
+    title: str | None = None,
+    max_points: int = 150_000,
+    dpi: int = 150,
+) -> Drawn:
     """Draw `data` (see `draw`) into `out` (.png, .svg or .pdf; or an open file, in the format
     rcParams["savefig.format"] says)."""
     drawn = draw(data, kind=kind, all_labels=all_labels, title=title, max_points=max_points)

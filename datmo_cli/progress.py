@@ -19,8 +19,8 @@ from contextlib import contextmanager
 
 import click
 
-QUIET_KEY = "datmo.quiet"   # in the Click context's meta, shared by a command and its group
-PIPE_WIDTH = 10_000         # columns of a console that is not a terminal: wide enough never to wrap a row
+QUIET_KEY = "datmo.quiet"  # in the Click context's meta, shared by a command and its group
+PIPE_WIDTH = 10_000  # columns of a console that is not a terminal: wide enough never to wrap a row
 
 
 def quiet() -> bool:
@@ -36,8 +36,15 @@ def _set_quiet(ctx: click.Context, _param: click.Parameter, value: bool) -> None
 def quiet_option(f: Callable) -> Callable:
     """The `-q/--quiet` option: no progress bars and no informational lines; warnings and errors are still
     printed on stderr, and a command's result (tables, JSON, CSV on stdout) is still printed."""
-    return click.option("-q", "--quiet", is_flag=True, expose_value=False, is_eager=True, callback=_set_quiet,
-                        help="No progress and no informational output (warnings and errors still go to stderr).")(f)
+    return click.option(
+        "-q",
+        "--quiet",
+        is_flag=True,
+        expose_value=False,
+        is_eager=True,
+        callback=_set_quiet,
+        help="No progress and no informational output (warnings and errors still go to stderr).",
+    )(f)
 
 
 def say(message: str) -> None:
@@ -162,8 +169,9 @@ class Panel:
         if self.live is None:
             from rich.live import Live
 
-            self.live = Live(renderable, console=_progress_console(), refresh_per_second=self.refresh_per_second,
-                             transient=True)
+            self.live = Live(
+                renderable, console=_progress_console(), refresh_per_second=self.refresh_per_second, transient=True
+            )
             self.live.start()
         else:
             self.live.update(renderable)

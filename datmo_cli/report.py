@@ -52,7 +52,7 @@ class Decoded:
     """One channel decoded into arrays: message k's elements of sequence field f are
     `items[f][offsets[f][k]:offsets[f][k + 1]]`; `scalars[name][k]` are its numeric scalar fields."""
 
-    stamps: np.ndarray                              # (N,) int64, header stamps, ns
+    stamps: np.ndarray  # (N,) int64, header stamps, ns
     frame_id: str
     scalars: dict[str, np.ndarray] = field(default_factory=dict)
     items: dict[str, np.ndarray] = field(default_factory=dict)
@@ -82,7 +82,7 @@ def decode_channel(msgtype: str, payloads: list[bytes], first: int = 0) -> Decod
         if name in ("stamp_ns", "frame_id") or isinstance(value, str):
             continue
         if isinstance(value, np.ndarray) and value.dtype.names:
-            parts = [d[name] for d in decoded]   # joined as bytes: np.concatenate promotes the dtype per part
+            parts = [d[name] for d in decoded]  # joined as bytes: np.concatenate promotes the dtype per part
             out.items[name] = np.frombuffer(b"".join([p.tobytes() for p in parts]), value.dtype).copy()
             out.offsets[name] = np.concatenate([[0], np.cumsum([len(p) for p in parts])]).astype(np.int64)
         elif not isinstance(value, np.ndarray):
@@ -104,14 +104,14 @@ class RunData:
 
     name: str
     metadata: dict[str, dict[str, str]]
-    scan_stamps: np.ndarray                 # (N,) int64 ns
+    scan_stamps: np.ndarray  # (N,) int64 ns
     n_beams: int
     tracks: Decoded
     features: Decoded | None = None
     landmarks: Decoded | None = None
     ground_truth: Decoded | None = None
-    scans: object | None = None             # log.scan.ScanRun, for the plot
-    odometry: object | None = None          # log.scan.Odometry or None
+    scans: object | None = None  # log.scan.ScanRun, for the plot
+    odometry: object | None = None  # log.scan.Odometry or None
 
     @classmethod
     def from_log(cls, log: mcapio.LogContents, *, keep_scans: bool = False) -> RunData:
@@ -128,12 +128,18 @@ class RunData:
             with mcapio.decoding(log.path, topic):
                 return decode_channel(msgtype, payloads) if payloads else None
 
-        return cls(name=str(log.path), metadata=log.metadata, scan_stamps=run.stamps, n_beams=run.geometry.n_beams,
-                   tracks=channel(mcapio.TOPIC_TRACKS, types.TRACKS),
-                   features=channel(mcapio.TOPIC_FEATURES, types.FEATURES),
-                   landmarks=channel(mcapio.TOPIC_LANDMARKS, types.LANDMARKS),
-                   ground_truth=channel(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH),
-                   scans=run if keep_scans else None, odometry=mcapio.odometry_from_log(log))
+        return cls(
+            name=str(log.path),
+            metadata=log.metadata,
+            scan_stamps=run.stamps,
+            n_beams=run.geometry.n_beams,
+            tracks=channel(mcapio.TOPIC_TRACKS, types.TRACKS),
+            features=channel(mcapio.TOPIC_FEATURES, types.FEATURES),
+            landmarks=channel(mcapio.TOPIC_LANDMARKS, types.LANDMARKS),
+            ground_truth=channel(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH),
+            scans=run if keep_scans else None,
+            odometry=mcapio.odometry_from_log(log),
+        )
 
 
 # -------------------------------------------------------------------------------------------- summary
@@ -144,14 +150,14 @@ class TrackHistory:
     """Every reported state of every track, sorted by track id then stamp; track ids[g] is rows
     starts[g]:starts[g + 1] of the per-state arrays below."""
 
-    ids: np.ndarray          # (G,) track ids
-    starts: np.ndarray       # (G + 1,)
-    stamps: np.ndarray       # (M,) ns
-    x: np.ndarray            # (M,) m, world frame when finite for the whole run, else sensor frame
+    ids: np.ndarray  # (G,) track ids
+    starts: np.ndarray  # (G + 1,)
+    stamps: np.ndarray  # (M,) ns
+    x: np.ndarray  # (M,) m, world frame when finite for the whole run, else sensor frame
     y: np.ndarray
-    speed: np.ndarray        # (M,) m/s, |velocity| in the same frame
-    states: np.ndarray       # (M,) Track elements
-    world: bool              # True when x, y are world-frame
+    speed: np.ndarray  # (M,) m/s, |velocity| in the same frame
+    states: np.ndarray  # (M,) Track elements
+    world: bool  # True when x, y are world-frame
 
 
 def track_history(tracks: Decoded, *, world: bool = True) -> TrackHistory:
@@ -165,8 +171,16 @@ def track_history(tracks: Decoded, *, world: bool = True) -> TrackHistory:
     world = world and bool(len(t)) and bool(np.isfinite(t["world_x"]).all() and np.isfinite(t["world_y"]).all())
     px, py, vx, vy = ("world_x", "world_y", "world_vx", "world_vy") if world else ("x", "y", "vx", "vy")
     ids, starts = np.unique(t["id"], return_index=True)
-    return TrackHistory(ids, np.append(starts, len(t)).astype(np.int64), stamps, t[px].astype(np.float64),
-                        t[py].astype(np.float64), np.hypot(t[vx], t[vy]).astype(np.float64), t, world)
+    return TrackHistory(
+        ids,
+        np.append(starts, len(t)).astype(np.int64),
+        stamps,
+        t[px].astype(np.float64),
+        t[py].astype(np.float64),
+        np.hypot(t[vx], t[vy]).astype(np.float64),
+        t,
+        world,
+    )
 
 
 def class_rows(tracks: list[dict]) -> list[dict]:
@@ -180,12 +194,19 @@ def class_rows(tracks: list[dict]) -> list[dict]:
     out = []
     for (cls, mob), rs in sorted(groups.items(), key=lambda kv: (order[kv[0][0]], morder[kv[0][1]])):
         life = np.array([r["lifetime_s"] for r in rs])
-        out.append({"class": cls, "mobility": mob, "tracks": len(rs),
-                    "mean_lifetime_s": round(float(life.mean()), 3), "max_lifetime_s": round(float(life.max()), 3),
-                    "distance_m": round(float(sum(r["distance_m"] for r in rs)), 3),
-                    "mean_speed_mps": round(float(np.mean([r["mean_speed_mps"] for r in rs])), 3),
-                    "max_speed_mps": round(float(max(r["max_speed_mps"] for r in rs)), 3),
-                    "occlusions": int(sum(r["occlusions"] for r in rs))})
+        out.append(
+            {
+                "class": cls,
+                "mobility": mob,
+                "tracks": len(rs),
+                "mean_lifetime_s": round(float(life.mean()), 3),
+                "max_lifetime_s": round(float(life.max()), 3),
+                "distance_m": round(float(sum(r["distance_m"] for r in rs)), 3),
+                "mean_speed_mps": round(float(np.mean([r["mean_speed_mps"] for r in rs])), 3),
+                "max_speed_mps": round(float(max(r["max_speed_mps"] for r in rs)), 3),
+                "occlusions": int(sum(r["occlusions"] for r in rs)),
+            }
+        )
     return out
 
 
@@ -206,14 +227,22 @@ def static_rows(tracks: list[dict]) -> list[dict]:
     out = []
     static = MOBILITY_NAMES[MOBILITY_STATIC]
     for (cls, mob), rs in sorted(groups.items(), key=lambda kv: (order[kv[0][0]], kv[0][1] != static)):
-        xy = np.array([(r["x_m"], r["y_m"]) for r in rs if r["x_m"] is not None and r["y_m"] is not None],
-                      np.float64).reshape(-1, 2)
+        xy = np.array(
+            [(r["x_m"], r["y_m"]) for r in rs if r["x_m"] is not None and r["y_m"] is not None], np.float64
+        ).reshape(-1, 2)
         where = dict.fromkeys(("centroid_x_m", "centroid_y_m", "x_min_m", "x_max_m", "y_min_m", "y_max_m"))
         if len(xy):
             (cx, cy), (x0, y0), (x1, y1) = xy.mean(0), xy.min(0), xy.max(0)
             where = {k: round(float(v), 3) for k, v in zip(where, (cx, cy, x0, x1, y0, y1), strict=True)}
-        out.append({"class": cls, "mobility": mob, "tracks": len(rs),
-                    "mean_lifetime_s": round(float(np.mean([r["lifetime_s"] for r in rs])), 3), **where})
+        out.append(
+            {
+                "class": cls,
+                "mobility": mob,
+                "tracks": len(rs),
+                "mean_lifetime_s": round(float(np.mean([r["lifetime_s"] for r in rs])), 3),
+                **where,
+            }
+        )
     return out
 
 
@@ -225,8 +254,8 @@ class RunSummary:
     features: dict | None
     landmarks: list[dict] | None
     classes: list[dict]
-    tracks: list[dict]          # every track, confirmed or not
-    frame: str                  # "world" or "sensor": the frame of track positions and distances
+    tracks: list[dict]  # every track, confirmed or not
+    frame: str  # "world" or "sensor": the frame of track positions and distances
 
     def confirmed(self) -> list[dict]:
         return [r for r in self.tracks if r["confirmed"]]
@@ -239,10 +268,17 @@ class RunSummary:
 
     def to_dict(self, top: int | None = None, sort: str = "lifetime") -> dict:
         """The file's entry of the JSON report: its file_row, then its details (see REPORT_SCHEMA)."""
-        return {**self.file_row(), "run": self.run, "features": self.features, "landmark_list": self.landmarks,
-                "frame": self.frame, "tentative_only": len(self.tracks) - len(self.confirmed()),
-                "classes": self.classes, "moving_tracks": self.shown(top, sort),
-                "static_by_class": static_rows(self.tracks)}
+        return {
+            **self.file_row(),
+            "run": self.run,
+            "features": self.features,
+            "landmark_list": self.landmarks,
+            "frame": self.frame,
+            "tentative_only": len(self.tracks) - len(self.confirmed()),
+            "classes": self.classes,
+            "moving_tracks": self.shown(top, sort),
+            "static_by_class": static_rows(self.tracks),
+        }
 
     def file_row(self) -> dict:
         """The file's row of the report (FILE_COLUMNS' keys, in order)."""
@@ -262,7 +298,7 @@ class RunSummary:
         return row
 
 
-FRAMES = (("x", "y", "vx", "vy"), ("world_x", "world_y", "world_vx", "world_vy"))   # sensor, world
+FRAMES = (("x", "y", "vx", "vy"), ("world_x", "world_y", "world_vx", "world_vy"))  # sensor, world
 _I64_MIN, _I64_MAX = np.iinfo(np.int64).min, np.iinfo(np.int64).max
 
 
@@ -298,13 +334,28 @@ class TrackStats:
         self.speed_max = np.zeros((2, 0))
         self.last_x = np.zeros((2, 0))
         self.last_y = np.zeros((2, 0))
-        self.n_states = 0               # every state of every track
-        self.late = 0                   # states added after a later-stamped state of their track's (a block before)
-        self.world_finite = True        # every state so far has finite world_x, world_y
+        self.n_states = 0  # every state of every track
+        self.late = 0  # states added after a later-stamped state of their track's (a block before)
+        self.world_finite = True  # every state so far has finite world_x, world_y
 
     _FILL = {"first_ns": _I64_MAX, "last_ns": _I64_MIN, "speed_max": -np.inf, "last_x": np.nan, "last_y": np.nan}
-    _PER_TRACK = ("ids", "first_ns", "last_ns", "classification", "mobility", "states", "occluded", "occlusions",
-                  "last_occluded", "confirmed", "distance", "speed_sum", "speed_max", "last_x", "last_y")
+    _PER_TRACK = (
+        "ids",
+        "first_ns",
+        "last_ns",
+        "classification",
+        "mobility",
+        "states",
+        "occluded",
+        "occlusions",
+        "last_occluded",
+        "confirmed",
+        "distance",
+        "speed_sum",
+        "speed_max",
+        "last_x",
+        "last_y",
+    )
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -328,8 +379,9 @@ class TrackStats:
         if not len(states):
             return
         self.n_states += len(states)
-        self.world_finite = self.world_finite and bool(np.isfinite(states["world_x"]).all()
-                                                       and np.isfinite(states["world_y"]).all())
+        self.world_finite = self.world_finite and bool(
+            np.isfinite(states["world_x"]).all() and np.isfinite(states["world_y"]).all()
+        )
         slot = self._slots(states["id"].astype(np.int64))
         n = len(self.ids)
         self.states += np.bincount(slot, minlength=n)
@@ -360,7 +412,7 @@ class TrackStats:
             return
         first = np.r_[True, s[1:] != s[:-1]]
         last = np.r_[s[1:] != s[:-1], True]
-        step = ~first                                   # a step from the track's previous confirmed position
+        step = ~first  # a step from the track's previous confirmed position
         step[first] = self.confirmed[s[first]] > 0
         self.confirmed += np.bincount(s, minlength=n)
         for f, (px, py, vx, vy) in enumerate(FRAMES):
@@ -368,7 +420,7 @@ class TrackStats:
             x0, y0 = np.r_[np.nan, x[:-1]], np.r_[np.nan, y[:-1]]
             x0[first], y0[first] = self.last_x[f, s[first]], self.last_y[f, s[first]]
             speed = np.hypot(st[vx], st[vy]).astype(np.float64)
-            with np.errstate(invalid="ignore"):         # NaN world states of a log without odometry
+            with np.errstate(invalid="ignore"):  # NaN world states of a log without odometry
                 np.add.at(self.distance[f], s[step], np.hypot(x[step] - x0[step], y[step] - y0[step]))
                 np.add.at(self.speed_sum[f], s, speed)
                 np.maximum.at(self.speed_max[f], s, speed)
@@ -391,17 +443,25 @@ class TrackStats:
         for g, tid in enumerate(self.ids.tolist()):
             t_first, t_last = (self.first_ns[g] - t0_ns) / 1e9, (self.last_ns[g] - t0_ns) / 1e9
             n_conf = int(self.confirmed[g])
-            rows.append({
-                "id": tid, "class": CLASS_NAMES.get(int(self.classification[g]), "unknown"),
-                "mobility": MOBILITY_NAMES.get(int(self.mobility[g]), "undefined"),
-                "first_s": round(float(t_first), 3), "last_s": round(float(t_last), 3),
-                "lifetime_s": round(float(t_last - t_first), 3), "scans": int(self.states[g]),
-                "distance_m": round(float(self.distance[f, g]), 3),
-                "mean_speed_mps": round(float(self.speed_sum[f, g] / n_conf), 3) if n_conf else 0.0,
-                "max_speed_mps": round(float(self.speed_max[f, g]), 3) if n_conf else 0.0,
-                "occlusions": int(self.occlusions[g]), "occluded_scans": int(self.occluded[g]),
-                "confirmed": bool(n_conf), "x_m": _metres(self.last_x[f, g]), "y_m": _metres(self.last_y[f, g]),
-            })
+            rows.append(
+                {
+                    "id": tid,
+                    "class": CLASS_NAMES.get(int(self.classification[g]), "unknown"),
+                    "mobility": MOBILITY_NAMES.get(int(self.mobility[g]), "undefined"),
+                    "first_s": round(float(t_first), 3),
+                    "last_s": round(float(t_last), 3),
+                    "lifetime_s": round(float(t_last - t_first), 3),
+                    "scans": int(self.states[g]),
+                    "distance_m": round(float(self.distance[f, g]), 3),
+                    "mean_speed_mps": round(float(self.speed_sum[f, g] / n_conf), 3) if n_conf else 0.0,
+                    "max_speed_mps": round(float(self.speed_max[f, g]), 3) if n_conf else 0.0,
+                    "occlusions": int(self.occlusions[g]),
+                    "occluded_scans": int(self.occluded[g]),
+                    "confirmed": bool(n_conf),
+                    "x_m": _metres(self.last_x[f, g]),
+                    "y_m": _metres(self.last_y[f, g]),
+                }
+            )
         return rows
 
 
@@ -420,7 +480,7 @@ class ScanStats:
         self.count = 0
         self.first_ns = self.last_ns = 0
         self.n_beams = 0
-        self.periods = np.zeros(0, np.int64)       # distinct stamp differences, ns, ascending
+        self.periods = np.zeros(0, np.int64)  # distinct stamp differences, ns, ascending
         self.period_counts = np.zeros(0, np.int64)
 
     def add(self, stamps: np.ndarray, n_beams: int) -> None:
@@ -452,9 +512,14 @@ class ScanStats:
             period = float(np.mean(dt[np.searchsorted(ends, middle, side="right")]))
         dropped = int(np.sum(self.period_counts * np.maximum(np.round(dt / period) - 1, 0))) if period > 0 else 0
         duration = (np.int64(self.last_ns) - np.int64(self.first_ns)) / 1e9
-        return {"duration_s": round(float(duration), 3) if self.count else 0.0, "scans": self.count,
-                "rate_hz": round(1 / period, 3) if period > 0 else None, "beams": self.n_beams,
-                "dropped_scans": dropped, "start_ns": self.first_ns if self.count else 0}
+        return {
+            "duration_s": round(float(duration), 3) if self.count else 0.0,
+            "scans": self.count,
+            "rate_hz": round(1 / period, 3) if period > 0 else None,
+            "beams": self.n_beams,
+            "dropped_scans": dropped,
+            "start_ns": self.first_ns if self.count else 0,
+        }
 
 
 FEATURE_KINDS = ("lines", "circles", "blobs")
@@ -472,12 +537,12 @@ class RunAccumulator:
         self.metadata = metadata or {}
         self.scans = ScanStats()
         self.tracks = TrackStats()
-        self.feature_scans: int | None = None          # None: no /datmo/features message
+        self.feature_scans: int | None = None  # None: no /datmo/features message
         self.feature_total = dict.fromkeys(FEATURE_KINDS, 0)
         self.feature_max = dict.fromkeys(FEATURE_KINDS, 0)
-        self.landmark_frame: str | None = None         # frame of the first /datmo/landmarks message
-        self.landmarks: np.ndarray | None = None       # the database of the last one (Landmark elements)
-        self.peak_messages = 0                         # most messages held at once (stream_run)
+        self.landmark_frame: str | None = None  # frame of the first /datmo/landmarks message
+        self.landmarks: np.ndarray | None = None  # the database of the last one (Landmark elements)
+        self.peak_messages = 0  # most messages held at once (stream_run)
 
     def add_scans(self, stamps: np.ndarray, n_beams: int) -> None:
         """Scan header stamps (ns, file order) and the scans' beam count."""
@@ -515,16 +580,30 @@ class RunAccumulator:
                 params[k] = json.loads(v)
             except ValueError:
                 params[k] = v
-        return {"file": self.name, **self.scans.facts(), "version": meta.get("version"),
-                "command": meta.get("command_line") or meta.get("command"), "parameters": params}
+        return {
+            "file": self.name,
+            **self.scans.facts(),
+            "version": meta.get("version"),
+            "command": meta.get("command_line") or meta.get("command"),
+            "parameters": params,
+        }
 
     def feature_facts(self) -> dict | None:
         """Lines, circles and blobs: totals, mean and max per scan; None when the log has no features."""
         n = self.feature_scans
         if n is None:
             return None
-        return {"scans": n, **{k: {"total": self.feature_total[k], "per_scan": round(self.feature_total[k] / n, 3),
-                                   "max_per_scan": self.feature_max[k]} for k in FEATURE_KINDS}}
+        return {
+            "scans": n,
+            **{
+                k: {
+                    "total": self.feature_total[k],
+                    "per_scan": round(self.feature_total[k] / n, 3),
+                    "max_per_scan": self.feature_max[k],
+                }
+                for k in FEATURE_KINDS
+            },
+        }
 
     def landmark_rows(self, t0_ns: int) -> list[dict] | None:
         """The landmark database after the last scan: id, type, position (m, in the channel's frame), first
@@ -535,19 +614,34 @@ class RunAccumulator:
         def secs(t: np.ndarray) -> float:
             return round((int(t["sec"]) * 1_000_000_000 + int(t["nanosec"]) - t0_ns) / 1e9, 3)
 
-        return [{"id": int(lm["id"]), "type": LANDMARK_NAMES.get(int(lm["type"]), str(int(lm["type"]))),
-                 "x_m": round(float(lm["x"]), 3), "y_m": round(float(lm["y"]), 3),
-                 "size_m": round(float(lm["size"]), 3), "first_seen_s": secs(lm["first_seen"]),
-                 "last_seen_s": secs(lm["last_seen"]), "scans": int(lm["count"]), "frame": self.landmark_frame}
-                for lm in self.landmarks]
+        return [
+            {
+                "id": int(lm["id"]),
+                "type": LANDMARK_NAMES.get(int(lm["type"]), str(int(lm["type"]))),
+                "x_m": round(float(lm["x"]), 3),
+                "y_m": round(float(lm["y"]), 3),
+                "size_m": round(float(lm["size"]), 3),
+                "first_seen_s": secs(lm["first_seen"]),
+                "last_seen_s": secs(lm["last_seen"]),
+                "scans": int(lm["count"]),
+                "frame": self.landmark_frame,
+            }
+            for lm in self.landmarks
+        ]
 
     def summary(self) -> RunSummary:
         """The report of what was added."""
         facts = self.run_facts()
         t0 = facts["start_ns"]
         tracks = self.tracks.rows(t0)
-        return RunSummary(facts, self.feature_facts(), self.landmark_rows(t0), class_rows(tracks), tracks,
-                          "world" if self.tracks.world else "sensor")
+        return RunSummary(
+            facts,
+            self.feature_facts(),
+            self.landmark_rows(t0),
+            class_rows(tracks),
+            tracks,
+            "world" if self.tracks.world else "sensor",
+        )
 
 
 def summarise(data: RunData) -> RunSummary:
@@ -560,20 +654,25 @@ def summarise(data: RunData) -> RunSummary:
     lm = data.landmarks
     if lm is not None:
         off = lm.offsets.get("landmarks")
-        acc.add_landmarks(lm.frame_id, lm.items["landmarks"][off[-2]:off[-1]] if off is not None and len(lm)
-                          else np.zeros(0, cdr.element_dtype(types.LANDMARK)))
+        acc.add_landmarks(
+            lm.frame_id,
+            lm.items["landmarks"][off[-2] : off[-1]]
+            if off is not None and len(lm)
+            else np.zeros(0, cdr.element_dtype(types.LANDMARK)),
+        )
     t = data.tracks.items.get("tracks")
     if t is not None and len(t):
         acc.add_tracks(data.tracks.stamps[data.tracks.message_index("tracks")], t)
     return acc.summary()
 
 
-BLOCK_MESSAGES = 1000      # messages decoded at once by summarise_file
+BLOCK_MESSAGES = 1000  # messages decoded at once by summarise_file
 SUMMARY_TOPICS = (mcapio.TOPIC_SCAN, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS, mcapio.TOPIC_TRACKS)
 
 
-def summarise_file(path: str | Path, *, block: int = BLOCK_MESSAGES,
-                   progress: Callable[[int], None] | None = None) -> RunSummary:
+def summarise_file(
+    path: str | Path, *, block: int = BLOCK_MESSAGES, progress: Callable[[int], None] | None = None
+) -> RunSummary:
     """The report of the processed log at `path`, read in one streaming pass (see `stream_run`) in memory
     that does not grow with the log's length: the same RunSummary as `summarise(RunData.from_log(...))`
     (but where a track's header stamps go back across blocks, never in a log datmo writes: see TrackStats).
@@ -584,8 +683,9 @@ def summarise_file(path: str | Path, *, block: int = BLOCK_MESSAGES,
     return stream_run(path, block=block, progress=progress).summary()
 
 
-def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES,
-               progress: Callable[[int], None] | None = None) -> RunAccumulator:
+def stream_run(
+    path: str | Path, *, block: int = BLOCK_MESSAGES, progress: Callable[[int], None] | None = None
+) -> RunAccumulator:
     """Walk the log at `path` once (mcapio.iter_messages, file order) and feed a RunAccumulator its /scan,
     /datmo/features, /datmo/landmarks and /datmo/tracks messages, `block` messages at a time: it holds at
     most `block` payloads and their decoded forms at once (`peak_messages` says how many it held), so
@@ -604,7 +704,7 @@ def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES,
             try:
                 mcapio.check_scan_channel(contents)
                 run = mcapio.decode_scan_block(contents.path, scans, state["first"], state["geometry"])
-            except InputError as exc:      # raised after the channel checks, as RunData.from_log orders them
+            except InputError as exc:  # raised after the channel checks, as RunData.from_log orders them
                 state["error"] = exc
             else:
                 state["geometry"] = run.geometry
@@ -612,18 +712,20 @@ def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES,
         state["first"] += len(scans)
         if progress is not None and scans:
             progress(state["first"])
-        seen = state["seen"]   # messages of each topic before this block's (to name a damaged one)
+        seen = state["seen"]  # messages of each topic before this block's (to name a damaged one)
         if pending[mcapio.TOPIC_FEATURES]:
             with mcapio.decoding(contents.path, mcapio.TOPIC_FEATURES):
                 decoded = cdr.decode_many(types.FEATURES, pending[mcapio.TOPIC_FEATURES], seen[mcapio.TOPIC_FEATURES])
-            acc.add_features(len(decoded), {k: np.array([len(d[k]) for d in decoded], np.int64)
-                                            for k in FEATURE_KINDS if k in decoded[0]})
+            acc.add_features(
+                len(decoded),
+                {k: np.array([len(d[k]) for d in decoded], np.int64) for k in FEATURE_KINDS if k in decoded[0]},
+            )
         landmarks = pending[mcapio.TOPIC_LANDMARKS]
         if landmarks:
             k = seen[mcapio.TOPIC_LANDMARKS]
-            with mcapio.decoding(contents.path, mcapio.TOPIC_LANDMARKS):   # the first and last: frame, database
-                head, = cdr.decode_many(types.LANDMARKS, landmarks[:1], k)
-                last, = cdr.decode_many(types.LANDMARKS, landmarks[-1:], k + len(landmarks) - 1)
+            with mcapio.decoding(contents.path, mcapio.TOPIC_LANDMARKS):  # the first and last: frame, database
+                (head,) = cdr.decode_many(types.LANDMARKS, landmarks[:1], k)
+                (last,) = cdr.decode_many(types.LANDMARKS, landmarks[-1:], k + len(landmarks) - 1)
             acc.add_landmarks(head["frame_id"] if acc.landmark_frame is None else "", last["landmarks"])
         if pending[mcapio.TOPIC_TRACKS]:
             with mcapio.decoding(contents.path, mcapio.TOPIC_TRACKS):
@@ -649,17 +751,26 @@ def stream_run(path: str | Path, *, block: int = BLOCK_MESSAGES,
     if acc.tracks.late:
         import warnings
 
-        warnings.warn(f"{contents.path}: {acc.tracks.late} track state(s) come in the file after a later-stamped "
-                      "state of their track, blocks before; the report takes them in file order (occlusions, "
-                      "distances)", UserWarning, stacklevel=2)
+        warnings.warn(
+            f"{contents.path}: {acc.tracks.late} track state(s) come in the file after a later-stamped "
+            "state of their track, blocks before; the report takes them in file order (occlusions, "
+            "distances)",
+            UserWarning,
+            stacklevel=2,
+        )
     acc.metadata = contents.metadata
     return acc
 
 
 def sort_tracks(rows: list[dict], key: str) -> list[dict]:
     """Tracks ordered by `key` (one of SORT_KEYS): longest, farthest, fastest first; `first` and `id` ascending."""
-    col = {"lifetime": "lifetime_s", "distance": "distance_m", "speed": "max_speed_mps", "first": "first_s",
-           "id": "id"}[key]
+    col = {
+        "lifetime": "lifetime_s",
+        "distance": "distance_m",
+        "speed": "max_speed_mps",
+        "first": "first_s",
+        "id": "id",
+    }[key]
     descending = key in ("lifetime", "distance", "speed")
     return sorted(rows, key=lambda r: ((-r[col] if descending else r[col]), r["id"]))
 
@@ -710,25 +821,69 @@ def _cell(v: object) -> str:
 def _table(title: str, rows: list[dict], columns: dict[str, str]) -> Table:
     keys = list(columns)
     values = [[r.get(k) for k in keys] for r in rows]
-    numeric = {i for i, k in enumerate(keys)
-               if any(isinstance(v[i], int | float) and not isinstance(v[i], bool) for v in values)}
+    numeric = {
+        i
+        for i, k in enumerate(keys)
+        if any(isinstance(v[i], int | float) and not isinstance(v[i], bool) for v in values)
+    }
     return Table(title, [columns[k] for k in keys], values, numeric)
 
 
 SCHEMA = "datmo.report/1"
-TRACK_COLUMNS = {"id": "id", "class": "class", "mobility": "mobility", "first_s": "first s", "last_s": "last s",
-                 "lifetime_s": "lifetime s", "distance_m": "distance m", "mean_speed_mps": "mean m/s",
-                 "max_speed_mps": "max m/s", "occlusions": "occlusions", "x_m": "last x m", "y_m": "last y m"}
-STATIC_COLUMNS = {"class": "class", "mobility": "mobility", "tracks": "tracks", "mean_lifetime_s": "mean lifetime s",
-                  "centroid_x_m": "centroid x m", "centroid_y_m": "centroid y m", "x_min_m": "x min m",
-                  "x_max_m": "x max m", "y_min_m": "y min m", "y_max_m": "y max m"}
-LANDMARK_COLUMNS = {"id": "id", "type": "type", "x_m": "x m", "y_m": "y m", "size_m": "size m",
-                    "first_seen_s": "first seen s", "last_seen_s": "last seen s", "scans": "scans"}
-FILE_COLUMNS = {"file": "file", "duration_s": "duration s", "scans": "scans", "lines_per_scan": "lines/scan",
-                "circles_per_scan": "circles/scan", "blobs_per_scan": "blobs/scan", "landmarks": "landmarks",
-                "tracks": "tracks", "moving": "moving", "static_pieces": "static pieces", "person": "people",
-                "circle_object": "circle obj.", "rectangular_object": "rect. obj.", "unknown": "unknown",
-                "dynamic": "dynamic", "distance_m": "distance m"}
+TRACK_COLUMNS = {
+    "id": "id",
+    "class": "class",
+    "mobility": "mobility",
+    "first_s": "first s",
+    "last_s": "last s",
+    "lifetime_s": "lifetime s",
+    "distance_m": "distance m",
+    "mean_speed_mps": "mean m/s",
+    "max_speed_mps": "max m/s",
+    "occlusions": "occlusions",
+    "x_m": "last x m",
+    "y_m": "last y m",
+}
+STATIC_COLUMNS = {
+    "class": "class",
+    "mobility": "mobility",
+    "tracks": "tracks",
+    "mean_lifetime_s": "mean lifetime s",
+    "centroid_x_m": "centroid x m",
+    "centroid_y_m": "centroid y m",
+    "x_min_m": "x min m",
+    "x_max_m": "x max m",
+    "y_min_m": "y min m",
+    "y_max_m": "y max m",
+}
+LANDMARK_COLUMNS = {
+    "id": "id",
+    "type": "type",
+    "x_m": "x m",
+    "y_m": "y m",
+    "size_m": "size m",
+    "first_seen_s": "first seen s",
+    "last_seen_s": "last seen s",
+    "scans": "scans",
+}
+FILE_COLUMNS = {
+    "file": "file",
+    "duration_s": "duration s",
+    "scans": "scans",
+    "lines_per_scan": "lines/scan",
+    "circles_per_scan": "circles/scan",
+    "blobs_per_scan": "blobs/scan",
+    "landmarks": "landmarks",
+    "tracks": "tracks",
+    "moving": "moving",
+    "static_pieces": "static pieces",
+    "person": "people",
+    "circle_object": "circle obj.",
+    "rectangular_object": "rect. obj.",
+    "unknown": "unknown",
+    "dynamic": "dynamic",
+    "distance_m": "distance m",
+}
 # `--format csv --tracks`: one row per track of every file
 TRACK_CSV_KEYS = ["file", *TRACK_COLUMNS, "occluded_scans", "scans"]
 REPORT_SCHEMA = f"""The report's shapes, the same for one file, several files, batch folders and datmo run's report:
@@ -749,7 +904,7 @@ Moving: a person, or a track whose mobility is dynamic. Times in s from the file
 in m in the world frame when every track state has one, else the sensor frame; speeds in m/s."""
 
 
-PARAM_WIDTH = 160   # characters of a parameter's value in the run table; `datmo info FILE --json` has it whole
+PARAM_WIDTH = 160  # characters of a parameter's value in the run table; `datmo info FILE --json` has it whole
 
 
 def param_text(name: str, value) -> str:
@@ -760,40 +915,68 @@ def param_text(name: str, value) -> str:
         about = f", threshold {threshold:.2f}" if isinstance(threshold, float) else ""
         return f"{value.get('model') or value.get('path')} (sha256 {str(value['sha256'])[:12]}{about})"
     text = value if isinstance(value, str) else json.dumps(value)
-    return text if len(text) <= PARAM_WIDTH else text[:PARAM_WIDTH - 1] + "…"
+    return text if len(text) <= PARAM_WIDTH else text[: PARAM_WIDTH - 1] + "…"
 
 
-def file_tables(summary: RunSummary, top: int | None = 20, sort: str = "lifetime",
-                all_tracks: bool = False) -> list[Table]:
+def file_tables(
+    summary: RunSummary, top: int | None = 20, sort: str = "lifetime", all_tracks: bool = False
+) -> list[Table]:
     """The tables of one file: run facts, features, landmarks, the tracks in full (the moving ones, or every
     confirmed one with `all_tracks`) and the static pieces per class."""
     r = summary.run
     name = Path(r["file"]).name
-    facts = [["file", r["file"]], ["duration", f"{r['duration_s']:.1f} s"], ["scans", r["scans"]],
-             ["rate", f"{r['rate_hz']:.2f} Hz" if r["rate_hz"] else "-"], ["beams", r["beams"]],
-             ["dropped scans", r["dropped_scans"]], ["datmo version", r["version"]], ["command", r["command"]]]
+    facts = [
+        ["file", r["file"]],
+        ["duration", f"{r['duration_s']:.1f} s"],
+        ["scans", r["scans"]],
+        ["rate", f"{r['rate_hz']:.2f} Hz" if r["rate_hz"] else "-"],
+        ["beams", r["beams"]],
+        ["dropped scans", r["dropped_scans"]],
+        ["datmo version", r["version"]],
+        ["command", r["command"]],
+    ]
     facts += [[f"param {k}", param_text(k, v)] for k, v in r["parameters"].items()]
     out = [Table(f"{name}: run", ["what", "value"], facts)]
     f = summary.features
     if f is not None:
-        out.append(Table(f"{name}: features ({f['scans']:,} scans)", ["feature", "total", "per scan", "max per scan"],
-                         [[n, f[n]["total"], f[n]["per_scan"], f[n]["max_per_scan"]]
-                          for n in ("lines", "circles", "blobs")], {1, 2, 3}))
+        out.append(
+            Table(
+                f"{name}: features ({f['scans']:,} scans)",
+                ["feature", "total", "per scan", "max per scan"],
+                [[n, f[n]["total"], f[n]["per_scan"], f[n]["max_per_scan"]] for n in ("lines", "circles", "blobs")],
+                {1, 2, 3},
+            )
+        )
     if summary.landmarks is not None:
         frame = summary.landmarks[0]["frame"] if summary.landmarks else ""
-        out.append(_table(f"{name}: landmarks ({len(summary.landmarks)}, frame {frame or '-'})", summary.landmarks,
-                          LANDMARK_COLUMNS))
+        out.append(
+            _table(
+                f"{name}: landmarks ({len(summary.landmarks)}, frame {frame or '-'})",
+                summary.landmarks,
+                LANDMARK_COLUMNS,
+            )
+        )
     conf = summary.confirmed()
     n_moving = sum(moving(t) for t in conf)
     shown = summary.shown(top, sort, all_tracks)
     what = "confirmed tracks" if all_tracks else "people and dynamic tracks"
     of = len(conf) if all_tracks else n_moving
-    out.append(_table(f"{name}: {what} ({len(shown)} of {of}, by {sort}; {len(conf)} confirmed, "
-                      f"{len(summary.tracks) - len(conf)} never confirmed; {summary.frame} frame)", shown,
-                      TRACK_COLUMNS))
+    out.append(
+        _table(
+            f"{name}: {what} ({len(shown)} of {of}, by {sort}; {len(conf)} confirmed, "
+            f"{len(summary.tracks) - len(conf)} never confirmed; {summary.frame} frame)",
+            shown,
+            TRACK_COLUMNS,
+        )
+    )
     statics = static_rows(summary.tracks)
-    out.append(_table(f"{name}: static pieces by class ({len(conf) - n_moving} tracks; where they were last seen)",
-                      statics, STATIC_COLUMNS))
+    out.append(
+        _table(
+            f"{name}: static pieces by class ({len(conf) - n_moving} tracks; where they were last seen)",
+            statics,
+            STATIC_COLUMNS,
+        )
+    )
     return out
 
 
@@ -853,6 +1036,7 @@ def render_csv(table: Table, keys: list[str] | None = None) -> str:
 
 def to_json(obj: object) -> str:
     """JSON text; NaN and infinities become null."""
+
     def clean(o: object) -> object:
         if isinstance(o, float):
             return o if np.isfinite(o) else None
@@ -872,23 +1056,40 @@ def to_json(obj: object) -> str:
 def track_rows(summaries: list[RunSummary], top: int | None, sort: str) -> list[dict]:
     """The `--tracks` rows, TRACK_CSV_KEYS: every confirmed track of each file (a table for scripts, which
     filter on class and mobility themselves), ordered by `sort`, the first `top` of each file."""
-    return [{"file": s.run["file"], **{k: t[k] for k in TRACK_CSV_KEYS[1:]}}
-            for s in summaries for t in s.shown(top, sort, True)]
+    return [
+        {"file": s.run["file"], **{k: t[k] for k in TRACK_CSV_KEYS[1:]}}
+        for s in summaries
+        for t in s.shown(top, sort, True)
+    ]
 
 
-def report_dict(summaries: list[RunSummary], *, top: int | None, sort: str, tracks: bool = False,
-                batches: list[dict] | None = None) -> dict:
+def report_dict(
+    summaries: list[RunSummary], *, top: int | None, sort: str, tracks: bool = False, batches: list[dict] | None = None
+) -> dict:
     """The JSON report (REPORT_SCHEMA): schema, files, total, batches and, with `tracks`, tracks."""
-    out = {"schema": SCHEMA, "files": [s.to_dict(top, sort) for s in summaries],
-           "total": total_row([s.file_row() for s in summaries]), "batches": batches or []}
+    out = {
+        "schema": SCHEMA,
+        "files": [s.to_dict(top, sort) for s in summaries],
+        "total": total_row([s.file_row() for s in summaries]),
+        "batches": batches or [],
+    }
     if tracks:
         out["tracks"] = track_rows(summaries, top, sort)
     return out
 
 
-def render(summaries: list[RunSummary], fmt: str, *, top: int | None, sort: str, tracks: bool = False,
-           all_tracks: bool = False, batches: list[dict] | None = None, console=None,
-           before: list[Table] | None = None) -> str | None:
+def render(
+    summaries: list[RunSummary],
+    fmt: str,
+    *,
+    top: int | None,
+    sort: str,
+    tracks: bool = False,
+    all_tracks: bool = False,
+    batches: list[dict] | None = None,
+    console=None,
+    before: list[Table] | None = None,
+) -> str | None:
     """The report of any number of runs in `fmt` (one of FORMATS), in the shapes REPORT_SCHEMA gives.
     Returns the text, or prints to `console` (rich). `top` limits each file's track table (None: 20 for rich
     and markdown, all for json and csv); rich and markdown show the files table, then each file's tables,

@@ -23,10 +23,16 @@ from .log.vocabulary import CLASS_PERSON
 # (scene, seed, people or None, resolution in degrees, duration in s); a resolution that is not the LMS200's
 # (0.25, 0.5, 1) is a scanner of 270° with that step (a Hokuyo-like one, its beams = 270 / step), whose crowd
 # stands still longer (LONG_PAUSE): people who stand, seen by a scanner finer than the LMS200 and to 8 m
-SIMULATED = (("crowd", 11, 6, 0.5, 60.0), ("crowd", 12, 8, 1.0, 60.0), ("corridor", 13, None, 0.5, 60.0),
-             ("crowd", 14, 4, 0.5, 30.0), ("crowd", 15, 6, 270 / 768, 60.0), ("crowd", 16, 5, 270 / 512, 60.0))
+SIMULATED = (
+    ("crowd", 11, 6, 0.5, 60.0),
+    ("crowd", 12, 8, 1.0, 60.0),
+    ("corridor", 13, None, 0.5, 60.0),
+    ("crowd", 14, 4, 0.5, 30.0),
+    ("crowd", 15, 6, 270 / 768, 60.0),
+    ("crowd", 16, 5, 270 / 512, 60.0),
+)
 LMS200_STEPS = (0.25, 0.5, 1.0)
-LONG_PAUSE = (0.5, 12.0)   # pause probability at each waypoint, longest pause in s
+LONG_PAUSE = (0.5, 12.0)  # pause probability at each waypoint, longest pause in s
 
 
 def _scene_for(scene: str, resolution: float):
@@ -39,14 +45,14 @@ def _scene_for(scene: str, resolution: float):
     from .sim.scene import ScannerSpec, load_scene
 
     loaded = load_scene(scene)
-    crowd = loaded.crowd and dataclasses.replace(loaded.crowd, pause_probability=LONG_PAUSE[0],
-                                                 max_pause=LONG_PAUSE[1])
+    crowd = loaded.crowd and dataclasses.replace(loaded.crowd, pause_probability=LONG_PAUSE[0], max_pause=LONG_PAUSE[1])
     spec = ScannerSpec(beams=int(round(270 / resolution)), fov_deg=270.0, range_min=0.02, range_max=10.0)
     return dataclasses.replace(loaded, scanner=spec, crowd=crowd), None
 
 
-def simulated_recording(scene: str, seed: int, people: int | None = None, resolution: float = 0.5,
-                        duration: float = 60.0):
+def simulated_recording(
+    scene: str, seed: int, people: int | None = None, resolution: float = 0.5, duration: float = 60.0
+):
     """One simulated recording with every visible person's two leg centres as its labels: an LMS200 at
     `resolution` degrees, or a 270° scanner of that step (_scene_for)."""
     from .perception.training import Recording
@@ -56,7 +62,7 @@ def simulated_recording(scene: str, seed: int, people: int | None = None, resolu
     sim = simulate_scene(where, seed=seed, duration=duration, people=people, resolution_deg=lms_step)
     legs = []
     for k in range(len(sim.run)):
-        o = sim.truth[sim.truth_offsets[k]:sim.truth_offsets[k + 1]]
+        o = sim.truth[sim.truth_offsets[k] : sim.truth_offsets[k + 1]]
         o = o[(o["classification"] == CLASS_PERSON) & (o["visible"] == 1)]
         left = np.stack([o["left_leg_x"], o["left_leg_y"]], axis=1)
         right = np.stack([o["right_leg_x"], o["right_leg_y"]], axis=1)
@@ -87,9 +93,17 @@ class SceneSource(ScanSource):
         bits = distance_bits(measuring_mode)
         range_m = 80 if units == "cm" and bits == 13 else {13: 8, 14: 16, 15: 32, 16: 32}[bits]
         res = resolution_cdeg / 100
-        return Simulation(self.scene, seed=self.seed, duration=self.duration, rate=MAX_RATE_HZ[res],
-                          fov_deg=angle_deg, resolution_deg=res, range_mode_m=range_m, units=units,
-                          noise_sigma=self.noise)
+        return Simulation(
+            self.scene,
+            seed=self.seed,
+            duration=self.duration,
+            rate=MAX_RATE_HZ[res],
+            fov_deg=angle_deg,
+            resolution_deg=res,
+            range_mode_m=range_m,
+            units=units,
+            noise_sigma=self.noise,
+        )
 
     def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):
         while True:
@@ -98,8 +112,9 @@ class SceneSource(ScanSource):
                 yield from chunk.codes
 
 
-def scan_source(*, log: str | Path | None = None, scene: str | None = None, seed: int = 0,
-                duration: float | None = None) -> ScanSource:
+def scan_source(
+    *, log: str | Path | None = None, scene: str | None = None, seed: int = 0, duration: float | None = None
+) -> ScanSource:
     """A LogSource for `log`, else a SceneSource for `scene` (default: the hall scene); ConfigError for a scene
     with a scanner of its own (the emulator is an LMS200)."""
     if log is not None:
@@ -113,8 +128,9 @@ def scan_source(*, log: str | Path | None = None, scene: str | None = None, seed
     return SceneSource(scene or "hall", seed=seed, duration=duration)
 
 
-def write_simulation(writer, sim, laser_pose: tuple[float, float, float] | None = None,
-                     progress: Callable[[int], None] | None = None) -> None:
+def write_simulation(
+    writer, sim, laser_pose: tuple[float, float, float] | None = None, progress: Callable[[int], None] | None = None
+) -> None:
     """Write simulation `sim` (sim.simulate.Simulation) block by block into `writer` (an open mcapio.LogWriter):
     /scan, /odom and /tf for a moving sensor (unless its scene leaves the odometry out), /datmo/ground_truth,
     /tf_static for a log with /odom or a laser pose, and the scene as metadata. `laser_pose` (x m, y m, yaw rad:
@@ -137,8 +153,9 @@ def write_simulation(writer, sim, laser_pose: tuple[float, float, float] | None 
         writer.add_metadata(transforms.LASER_POSE_RECORD, mount.record(base, laser))
     if mount is not None or odom_cid is not None:
         t0 = int(sim.stamps[0])
-        writer.write_transforms([t0], [transforms.mount_tf(t0, base, laser, mount or transforms.LaserPose())],
-                                static=True)
+        writer.write_transforms(
+            [t0], [transforms.mount_tf(t0, base, laser, mount or transforms.LaserPose())], static=True
+        )
     for c in sim.chunks():
         run = ScanRun(c.stamps, c.ranges, sim.geometry)
         writer.write_ids(scan_cid, c.stamps, mcapio.encode_scans(run))
@@ -149,15 +166,22 @@ def write_simulation(writer, sim, laser_pose: tuple[float, float, float] | None 
                 odom = transforms.base_odometry(odom, mount, base)
             writer.write_ids(odom_cid, c.stamps, mcapio.encode_odometry(odom))
             writer.write_transforms(c.stamps, transforms.odometry_tf(odom))
-        writer.write_ids(truth_cid, c.stamps, ground_truth_payloads(c.stamps, c.sensor_poses, c.truth,
-                                                                    sim.geometry.frame_id))
+        writer.write_ids(
+            truth_cid, c.stamps, ground_truth_payloads(c.stamps, c.sensor_poses, c.truth, sim.geometry.frame_id)
+        )
         writer.drain()
         if progress is not None:
             progress(c.start + len(c.stamps))
 
 
-def write_simulation_bag(path, sim, laser_pose: tuple[float, float, float] | None = None, *, force: bool = False,
-                         progress: Callable[[int], None] | None = None) -> None:
+def write_simulation_bag(
+    path,
+    sim,
+    laser_pose: tuple[float, float, float] | None = None,
+    *,
+    force: bool = False,
+    progress: Callable[[int], None] | None = None,
+) -> None:
     """Write simulation `sim` as a ROS 1 bag at `path`, as a ROS 1 robot records it: /scan, /odom when the log
     gets odometry (the base's poses, as write_simulation), and /tf holding `/odom -> /base_link` for each pose
     and the mount `/base_link -> /laser` repeated with every scan (the identity when there is odometry but no

@@ -31,9 +31,14 @@ def derive_segments(run: ScanRun, params: FeatureParams | None = None) -> dict[s
     return {mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, run.stamps, segment_payloads(run, start, end, offsets))}
 
 
-def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: FeatureParams | None = None,
-                    segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                    progress: Callable[[int, int], None] | None = None) -> tuple[dict[str, tuple], RunFeatures]:
+def derive_features(
+    run: ScanRun,
+    *,
+    odometry: Odometry | None = None,
+    params: FeatureParams | None = None,
+    segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[dict[str, tuple], RunFeatures]:
     """The channels `datmo features` adds ({topic: (msgtype, stamps, payloads)}: segments, features,
     landmarks and feature markers) and the RunFeatures they came from. Given `segments` (a log's own),
     they are used and /datmo/segments is not among the channels returned."""
@@ -42,35 +47,44 @@ def derive_features(run: ScanRun, *, odometry: Odometry | None = None, params: F
 
 def iter_run_features(features) -> Iterator[ScanFeatures]:
     """Scan by scan views of a RunFeatures (lines/circles/blobs with line_/circle_/blob_offsets)."""
-    lo, co, bo, go = (np.asarray(features.line_offsets), np.asarray(features.circle_offsets),
-                      np.asarray(features.blob_offsets), np.asarray(features.leg_offsets))
+    lo, co, bo, go = (
+        np.asarray(features.line_offsets),
+        np.asarray(features.circle_offsets),
+        np.asarray(features.blob_offsets),
+        np.asarray(features.leg_offsets),
+    )
     lines, circles, blobs, legs = features.lines, features.circles, features.blobs, features.legs
     for i in range(len(lo) - 1):
-        yield ScanFeatures(lines[lo[i]:lo[i + 1]], circles[co[i]:co[i + 1]], blobs[bo[i]:bo[i + 1]],
-                           legs[go[i]:go[i + 1]])
+        yield ScanFeatures(
+            lines[lo[i] : lo[i + 1]], circles[co[i] : co[i + 1]], blobs[bo[i] : bo[i + 1]], legs[go[i] : go[i + 1]]
+        )
 
 
 def decode_features(payloads: list[bytes], first: int = 0) -> list[ScanFeatures]:
     """ScanFeatures of datmo_msgs/msg/Features CDR payloads (a log's /datmo/features channel, messages first..;
     cdr.DecodeError names a damaged one)."""
-    return [ScanFeatures(msg["lines"], msg["circles"], msg["blobs"], msg["legs"])
-            for msg in cdr.decode_many(types.FEATURES, payloads, first)]
+    return [
+        ScanFeatures(msg["lines"], msg["circles"], msg["blobs"], msg["legs"])
+        for msg in cdr.decode_many(types.FEATURES, payloads, first)
+    ]
 
 
 @dataclass
 class TrackedRun:
     """What tracking a run gave: per scan, the live tracks (Track elements) and the markers payload."""
 
-    stamps: np.ndarray                    # (N,) int64 ns
-    frame_id: str                         # the scans' sensor frame
-    world: bool                           # tracks carry world positions (the log had odometry)
+    stamps: np.ndarray  # (N,) int64 ns
+    frame_id: str  # the scans' sensor frame
+    world: bool  # tracks carry world positions (the log had odometry)
     tracks: list[np.ndarray] = field(default_factory=list)
     markers: list[bytes] = field(default_factory=list)
 
     def track_payloads(self) -> list[bytes]:
         """datmo_msgs/msg/Tracks CDR payloads, one per scan."""
-        return [cdr.encode(types.TRACKS, {"stamp_ns": int(s), "frame_id": self.frame_id, "tracks": t})
-                for s, t in zip(self.stamps.tolist(), self.tracks, strict=True)]
+        return [
+            cdr.encode(types.TRACKS, {"stamp_ns": int(s), "frame_id": self.frame_id, "tracks": t})
+            for s, t in zip(self.stamps.tolist(), self.tracks, strict=True)
+        ]
 
     def all_tracks(self) -> tuple[np.ndarray, np.ndarray]:
         """(offsets (N+1,), every scan's tracks concatenated), as evaluate.track_frames takes them."""
@@ -94,9 +108,17 @@ class TrackStream:
     track's covariance (else NaN: a file stores it only when asked, and sixteen NaN cost next to nothing
     compressed)."""
 
-    def __init__(self, geometry, *, odometry: Odometry | None = None,
-                 params: TrackingParams | None = None, markers: bool = True, learned: bool = False,
-                 leg_threshold: float = 0.5, covariance: bool = True) -> None:
+    def __init__(
+        self,
+        geometry,
+        *,
+        odometry: Odometry | None = None,
+        params: TrackingParams | None = None,
+        markers: bool = True,
+        learned: bool = False,
+        leg_threshold: float = 0.5,
+        covariance: bool = True,
+    ) -> None:
         self.params = params or TrackingParams()
         self.tracker = Tracker(self.params, geometry, learned=learned, leg_threshold=leg_threshold)
         self.odometry = odometry if odometry is not None and len(odometry) else None
@@ -106,8 +128,13 @@ class TrackStream:
         self.frame = geometry.frame_id
         self.marker_frame = self.odometry.frame_id if self.odometry is not None else self.frame
 
-    def block(self, run: ScanRun, features: list[ScanFeatures] | Iterator[ScanFeatures], *,
-              progress: Callable[[int], None] | None = None) -> TrackedRun:
+    def block(
+        self,
+        run: ScanRun,
+        features: list[ScanFeatures] | Iterator[ScanFeatures],
+        *,
+        progress: Callable[[int], None] | None = None,
+    ) -> TrackedRun:
         """Track the scans of `run` (the next block of the log) given their features. `progress(i)` is
         called now and then with the scans of this block done."""
         tracker = self.tracker
@@ -119,20 +146,28 @@ class TrackStream:
             raise ValueError(f"features for {len(feats)} scans, the run has {n}")
         stamps = run.stamps.tolist()
         step = min(max(n // 10, _CHUNK), _CHUNK_MAX)
-        for a in range(0, n, step):   # one compiled call per chunk of scans (Tracker.track_block)
+        for a in range(0, n, step):  # one compiled call per chunk of scans (Tracker.track_block)
             b = min(a + step, n)
-            block = tracker.track_block(run.stamps[a:b], feats[a:b], run.ranges[a:b],
-                                        None if poses is None else poses[a:b], tails=self.markers)
+            block = tracker.track_block(
+                run.stamps[a:b], feats[a:b], run.ranges[a:b], None if poses is None else poses[a:b], tails=self.markers
+            )
             if not self.covariance:
                 block.items["covariance"] = np.nan
             o = block.offsets.tolist()
             for i in range(b - a):
-                tracks = block.items[o[i]:o[i + 1]]
+                tracks = block.items[o[i] : o[i + 1]]
                 out.tracks.append(tracks)
                 if self.markers:
-                    out.markers.append(track_markers(stamps[a + i], self.marker_frame, tracks,
-                                                     block.tail[o[i]:o[i + 1]], block.tail_count[o[i]:o[i + 1]],
-                                                     world=poses is not None))
+                    out.markers.append(
+                        track_markers(
+                            stamps[a + i],
+                            self.marker_frame,
+                            tracks,
+                            block.tail[o[i] : o[i + 1]],
+                            block.tail_count[o[i] : o[i + 1]],
+                            world=poses is not None,
+                        )
+                    )
             if progress is not None:
                 progress(b)
         return out
@@ -145,17 +180,25 @@ class TrackStream:
         return out
 
 
-def track_run(run: ScanRun, features: list[ScanFeatures] | Iterator[ScanFeatures], *,
-              odometry: Odometry | None = None, params: TrackingParams | None = None, markers: bool = True,
-              learned: bool = False, leg_threshold: float | None = None,
-              progress: Callable[[int, int], None] | None = None) -> TrackedRun:
+def track_run(
+    run: ScanRun,
+    features: list[ScanFeatures] | Iterator[ScanFeatures],
+    *,
+    odometry: Odometry | None = None,
+    params: TrackingParams | None = None,
+    markers: bool = True,
+    learned: bool = False,
+    leg_threshold: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> TrackedRun:
     """Track every scan of `run` given its features (one ScanFeatures per scan, sensor frame). `learned`:
     the features' legs come from a leg detector, whose threshold is `leg_threshold` (None: the shipped model's;
     else people by the paper's rule, see Tracker)."""
     if leg_threshold is None:
         leg_threshold = leg_threshold_of("default") if learned else 0.5
-    stream = TrackStream(run.geometry, odometry=odometry, params=params, markers=markers, learned=learned,
-                         leg_threshold=leg_threshold)
+    stream = TrackStream(
+        run.geometry, odometry=odometry, params=params, markers=markers, learned=learned, leg_threshold=leg_threshold
+    )
     n = len(run)
     return stream.block(run, features, progress=(lambda d: progress(d, n)) if progress is not None else None)
 
@@ -175,4 +218,3 @@ def run_features(run: ScanRun, odometry: Odometry | None = None, params=None) ->
     if isinstance(params, dict):
         params = FeatureParams().replace(**params)
     return list(iter_run_features(extract_run(run, params=params, odometry=odometry)))
-

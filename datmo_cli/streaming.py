@@ -29,8 +29,8 @@ from .errors import InputError
 from .log import mcapio, transforms
 from .log.scan import Odometry, ScanRun, stamp_problem
 
-_STAMP = struct.Struct("<iI")   # a CDR header stamp: sec, nanosec
-BLOCK_SCANS = 1024   # scans per block: large enough that per-block costs vanish, small enough to stay flat
+_STAMP = struct.Struct("<iI")  # a CDR header stamp: sec, nanosec
+BLOCK_SCANS = 1024  # scans per block: large enough that per-block costs vanish, small enough to stay flat
 # MCAP chunk size of the logs written here (zstd at mcap's level 3). Measured on datmo run's lean outputs of a
 # 10,000-scan simulated hall and the 4,791-scan Freiburg 079 log: 4 MiB chunks against 1 MiB give 2-3 % fewer
 # bytes for the same compression CPU (0.24 s vs 0.26 s of 2.5 s); level 1 would save another 0.1 s (4-5 % of a
@@ -43,7 +43,7 @@ class Block:
     """One block of a log: its scans, the payloads of the topics aligned with them (one per scan), and the
     input's messages of the block to copy ({topic: (stamps, payloads)}, file order)."""
 
-    first: int                     # index of the block's first scan in the log
+    first: int  # index of the block's first scan in the log
     run: ScanRun
     aligned: dict[str, list[bytes]] = field(default_factory=dict)
     copies: dict[str, tuple[list[int], list[bytes]]] = field(default_factory=dict)
@@ -61,8 +61,9 @@ class LogStream:
         order = StampOrder()
         statics: list[bytes] = []
         self.scan_frame = ""
-        for topic, stamp, payload in mcapio.iter_messages(self.path, [mcapio.TOPIC_ODOM, mcapio.TOPIC_TF_STATIC,
-                                                                      scan_topic], self.log):
+        for topic, stamp, payload in mcapio.iter_messages(
+            self.path, [mcapio.TOPIC_ODOM, mcapio.TOPIC_TF_STATIC, scan_topic], self.log
+        ):
             if topic == scan_topic:
                 if not order.n:
                     self.scan_frame = _frame(payload)
@@ -78,7 +79,7 @@ class LogStream:
         self.statics = [t for p in statics for t in _transforms(self.path, p)]
         # the tracker and the landmarks take the scanner's poses: the base's composed with its mount
         self.odometry = transforms.sensor_odometry(mcapio.odometry_from_log(self.log), self.statics, self.scan_frame)
-        self.log.messages = {}   # every channel is copied block by block
+        self.log.messages = {}  # every channel is copied block by block
 
     def has(self, topic: str) -> bool:
         return self.log.has(topic)
@@ -87,8 +88,9 @@ class LogStream:
         ch = self.log.topics().get(topic)
         return ch.count if ch is not None else 0
 
-    def blocks(self, size: int = BLOCK_SCANS, aligned: tuple[str, ...] = (),
-               copy: set[str] | None = None) -> Iterator[Block]:
+    def blocks(
+        self, size: int = BLOCK_SCANS, aligned: tuple[str, ...] = (), copy: set[str] | None = None
+    ) -> Iterator[Block]:
         """The log's blocks of up to `size` scans. `aligned` topics must have one message per scan in each
         block (else InputError naming the command to run again); `copy`: the topics whose messages the
         blocks carry for copying (None: none)."""
@@ -105,8 +107,10 @@ class LogStream:
             geometry = run.geometry
             for t, payloads in lined.items():
                 if len(payloads) != len(scans):
-                    raise InputError(f"{path}: {len(payloads)} messages on {t} for the {len(scans)} scans from scan "
-                                     f"{first}; run {mcapio.PRODUCER.get(t, 'the stage that made it')} again")
+                    raise InputError(
+                        f"{path}: {len(payloads)} messages on {t} for the {len(scans)} scans from scan "
+                        f"{first}; run {mcapio.PRODUCER.get(t, 'the stage that made it')} again"
+                    )
             return Block(first, run, dict(lined), copies)
 
         for topic, stamp, payload in mcapio.iter_messages(path, None, warn=False):
@@ -136,7 +140,7 @@ def _frame(payload: bytes) -> str:
     try:
         return transforms.header_frame(payload)
     except (ValueError, struct.error):
-        return ""   # the scan decoder names what is wrong with it
+        return ""  # the scan decoder names what is wrong with it
 
 
 def _transforms(path: Path, payload: bytes) -> list[transforms.Transform]:
@@ -159,7 +163,7 @@ class StampOrder:
         self.n = 0
         self.bad = 0
         self.first_bad: int | None = None
-        self.not_a_time: str | None = None   # the first stamp that is not one, as "scan K: problem"
+        self.not_a_time: str | None = None  # the first stamp that is not one, as "scan K: problem"
         self._top: int | None = None
 
     def add(self, payload: bytes) -> None:
@@ -187,19 +191,33 @@ class StampOrder:
         if self.not_a_time:
             raise InputError(f"{path}: bad LaserScan message on {topic}: {self.not_a_time}")
         if self.bad:
-            raise InputError(f"{path}: scan stamps go backwards or repeat at {self.bad} of {self.n} scans (first "
-                             f"at scan {self.first_bad}); datmo import {path} -o FIXED.mcap writes them in time "
-                             "order without the repeats")
+            raise InputError(
+                f"{path}: scan stamps go backwards or repeat at {self.bad} of {self.n} scans (first "
+                f"at scan {self.first_bad}); datmo import {path} -o FIXED.mcap writes them in time "
+                "order without the repeats"
+            )
 
 
 Stage = Callable[[Block], dict[str, tuple[str, np.ndarray, list]]]
 
 
-def write_derived(stream: LogStream, out: str | Path, *, command: str, params: dict, derived: dict[str, str],
-                  stage: Stage, force: bool = False, command_line: str | None = None,
-                  aligned: tuple[str, ...] = (), block_scans: int = BLOCK_SCANS,
-                  progress: Callable[[int, int], None] | None = None, input_name: str | None = None,
-                  origin: str | Path | None = None, report=None) -> int:
+def write_derived(
+    stream: LogStream,
+    out: str | Path,
+    *,
+    command: str,
+    params: dict,
+    derived: dict[str, str],
+    stage: Stage,
+    force: bool = False,
+    command_line: str | None = None,
+    aligned: tuple[str, ...] = (),
+    block_scans: int = BLOCK_SCANS,
+    progress: Callable[[int, int], None] | None = None,
+    input_name: str | None = None,
+    origin: str | Path | None = None,
+    report=None,
+) -> int:
     """Write `out`: the input's channels (those in `derived` replaced) and the `derived` channels ({topic:
     message type}, in this order) that `stage(block)` gives block by block ({topic: (msgtype, stamps,
     payloads)}), with provenance (`command`, its effective `params`). Returns the number of scans.
@@ -209,9 +227,10 @@ def write_derived(stream: LogStream, out: str | Path, *, command: str, params: d
     (pipeline.RunStages), given the output's metadata records once it is complete."""
     from .numba_runtime import prepare
 
-    prepare()   # the stages load numba kernels: numba's set-up without its scipy.linalg import
-    provenance = mcapio.Provenance(command, params, [origin or stream.path], command_line,
-                                   names=[input_name] if input_name else None)
+    prepare()  # the stages load numba kernels: numba's set-up without its scipy.linalg import
+    provenance = mcapio.Provenance(
+        command, params, [origin or stream.path], command_line, names=[input_name] if input_name else None
+    )
     total = stream.n_scans
     with mcapio.LogWriter(out, force=force, provenance=provenance, chunk_size=CHUNK_BYTES) as writer:
         copy_ids = writer.copy_channels(stream.log, exclude=list(derived))
@@ -226,8 +245,11 @@ def write_derived(stream: LogStream, out: str | Path, *, command: str, params: d
             out_channels = stage(block)
             for topic, (_, stamps, payloads) in out_channels.items():
                 writer.write_ids(ids[topic], stamps, payloads)
-            odom = out_channels[mcapio.TOPIC_ODOM][1:] if mcapio.TOPIC_ODOM in out_channels else \
-                block.copies.get(mcapio.TOPIC_ODOM)
+            odom = (
+                out_channels[mcapio.TOPIC_ODOM][1:]
+                if mcapio.TOPIC_ODOM in out_channels
+                else block.copies.get(mcapio.TOPIC_ODOM)
+            )
             tf.block(block, odom)
             writer.drain()
             done += len(block.run)
@@ -248,7 +270,7 @@ class _DerivedTf:
         self.stream, self.writer = stream, writer
         self.on = not stream.has(mcapio.TOPIC_TF) and (estimated or stream.has(mcapio.TOPIC_ODOM))
         self.static = self.on and not stream.has(mcapio.TOPIC_TF_STATIC)
-        self.joined = {stream.scan_frame}   # child frames given a static transform (the scan's own needs none)
+        self.joined = {stream.scan_frame}  # child frames given a static transform (the scan's own needs none)
 
     def block(self, block: Block, odom: tuple | None) -> None:
         if not self.on or odom is None or not len(odom[1]):
@@ -263,8 +285,9 @@ class _DerivedTf:
         if self.static and child not in self.joined:
             self.joined.add(child)
             at = int(min(block.run.stamps[0], np.min(stamps)))
-            self.writer.write_transforms([at], [transforms.mount_tf(at, child, self.stream.scan_frame,
-                                                                    transforms.LaserPose())], static=True)
+            self.writer.write_transforms(
+                [at], [transforms.mount_tf(at, child, self.stream.scan_frame, transforms.LaserPose())], static=True
+            )
 
 
 # ------------------------------------------------------------------------------------------- odometry
@@ -285,7 +308,7 @@ def stream_odometry(stream: LogStream, mode: str) -> tuple[Odometry | None, bool
         return odometry, False
     from .numba_runtime import prepare
 
-    prepare()   # scan matching loads numba kernels
+    prepare()  # scan matching loads numba kernels
     if mode == "auto":
         pairs = sample_pairs(stream)
         if not pairs_move(pairs, sampled_scans(n)):
@@ -307,6 +330,6 @@ def sample_pairs(stream: LogStream, samples: int = 100) -> ScanRun:
     try:
         first = next(blocks).run
     finally:
-        blocks.close()   # the rest of the log is not read
+        blocks.close()  # the rest of the log is not read
     order = np.stack([picks, picks + 1], axis=1).ravel()
     return ScanRun(first.stamps[order], first.ranges[order], first.geometry)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 
-COUNTS: dict[str, list[int]] = defaultdict(lambda: [0, 0])   # name -> [cases tried, failures]
+COUNTS: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # name -> [cases tried, failures]
 
 
 def tally(name: str, *, failed: bool = False) -> None:

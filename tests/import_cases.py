@@ -32,15 +32,19 @@ def synthetic_inputs(tmp: Path) -> dict[str, tuple[Path, list[str]]]:
     beams = [1.0 + 0.01 * k for k in range(178)] + [81.9, 51.0]
     lines = [flaser([b + 0.001 * i for b in beams], 100.0 + 0.2 * i, pose=(0.1 * i, 0, 0.01 * i)) for i in range(30)]
     out["flaser"] = write(tmp, "flaser.log", ["PARAM robot_front_laser_max 50"] + lines), []
-    out["flaser_gz_malformed"] = write(tmp, "flaser.log.gz", lines[:7] + ["FLASER 3 1 2", "@@@", "ODOM x"]
-                                       + lines[7:], gz=True), []
+    out["flaser_gz_malformed"] = (
+        write(tmp, "flaser.log.gz", lines[:7] + ["FLASER 3 1 2", "@@@", "ODOM x"] + lines[7:], gz=True),
+        [],
+    )
     out["flaser_max_scans"] = out["flaser"][0], ["--max-scans", "11"]
     back = [flaser(beams, 100.0 + 0.2 * i - (0.5 if i == 9 else 0.0)) for i in range(40)]
     out["flaser_repaired"] = write(tmp, "back.log", back), []
     out["flaser_synthesised"] = write(tmp, "synth.log", [flaser(beams, 1.13486e9) for _ in range(12)]), []
     out["flaser_flipped"] = write(tmp, "flip.log", ["PARAM laser_front_laser_flipped on"] + lines[:9]), []
-    out["flaser_odd_beams"] = write(tmp, "odd.log", [flaser([2.0 + 0.1 * k for k in range(11)], 5.0 + i)
-                                                     for i in range(6)]), []
+    out["flaser_odd_beams"] = (
+        write(tmp, "odd.log", [flaser([2.0 + 0.1 * k for k in range(11)], 5.0 + i) for i in range(6)]),
+        [],
+    )
     raw = []
     for i in range(25):
         raw.append(odom_line(0.1 * i, 50.0 + 0.1 * i - 0.03))
@@ -48,8 +52,10 @@ def synthetic_inputs(tmp: Path) -> dict[str, tuple[Path, list[str]]]:
     raw.append(odom_line(9.0, 60.0))
     out["rawlaser_odom"] = write(tmp, "raw.log", raw), []
     out["rawlaser_odom_max_scans"] = out["rawlaser_odom"][0], ["--max-scans", "7", "--topic", "RAWLASER1"]
-    robot = [robotlaser([2.0 + 0.01 * ((i * k) % 13) for k in range(90)], 7.0 + i,
-                        rem=[0.5] * 90 if i % 3 else ()) for i in range(14)]
+    robot = [
+        robotlaser([2.0 + 0.01 * ((i * k) % 13) for k in range(90)], 7.0 + i, rem=[0.5] * 90 if i % 3 else ())
+        for i in range(14)
+    ]
     out["robotlaser_g2o"] = write(tmp, "k.g2o", ["VERTEX_SE2 0 0 0 0"] + robot), []
     two = [ln for i in range(10) for ln in (flaser(beams, 10.0 + i), flaser(beams[:90], 10.05 + i, name="RLASER"))]
     out["two_lasers_topic"] = write(tmp, "two.log", two), ["--topic", "RLASER"]
@@ -86,8 +92,10 @@ def shared_inputs(root: Path) -> dict[str, tuple[Path, list[str]]]:
                 out[f"legtracker/{p.name}{t}"] = p, ["--topic", t]
         else:
             out[f"legtracker/{p.name}"] = p, []
-    out["carmen/intel-corrected.log.gz --max-scans 300"] = root / "carmen" / "intel-corrected.log.gz", \
-        ["--max-scans", "300"]
+    out["carmen/intel-corrected.log.gz --max-scans 300"] = (
+        root / "carmen" / "intel-corrected.log.gz",
+        ["--max-scans", "300"],
+    )
     return out
 
 
@@ -101,8 +109,20 @@ def digest(out: Path, src: Path) -> str:
     for topic, stamp, payload in mcapio.iter_messages(out, None, log):
         h.update(f"{topic} {stamp} ".encode() + hashlib.sha256(payload).digest())
     for ch in sorted(log.channels.values(), key=lambda c: c.id):
-        h.update(repr((ch.id, ch.topic, ch.msgtype, ch.message_encoding, ch.schema_encoding, ch.schema_data,
-                       sorted(ch.metadata.items()), ch.count)).encode())
+        h.update(
+            repr(
+                (
+                    ch.id,
+                    ch.topic,
+                    ch.msgtype,
+                    ch.message_encoding,
+                    ch.schema_encoding,
+                    ch.schema_data,
+                    sorted(ch.metadata.items()),
+                    ch.count,
+                )
+            ).encode()
+        )
     for name in sorted(log.metadata):
         if name in ("datmo", "datmo.inputs"):
             continue
@@ -122,10 +142,26 @@ def import_digest(src: Path, extra: list[str], out: Path) -> tuple[int, str, str
     return result.exit_code, text, digest(out, src) if result.exit_code == 0 else ""
 
 
-SIMULATE_CASES = {"hall": ["--scene", "hall", "--duration", "110"],
-                  "patrol": ["--scene", "patrol", "--duration", "9", "--rate", "10"],
-                  "crowd": ["--scene", "crowd", "--people", "4", "--seed", "2", "--duration", "6", "--angle", "100",
-                            "--resolution", "0.25", "--range", "80"]}
+SIMULATE_CASES = {
+    "hall": ["--scene", "hall", "--duration", "110"],
+    "patrol": ["--scene", "patrol", "--duration", "9", "--rate", "10"],
+    "crowd": [
+        "--scene",
+        "crowd",
+        "--people",
+        "4",
+        "--seed",
+        "2",
+        "--duration",
+        "6",
+        "--angle",
+        "100",
+        "--resolution",
+        "0.25",
+        "--range",
+        "80",
+    ],
+}
 
 
 def simulate_digest(args: list[str], out: Path) -> tuple[int, str, str]:

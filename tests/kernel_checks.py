@@ -84,8 +84,9 @@ CHECKS: dict[str, str] = {
     "perception._kernels.circle_posed": "test_perception_circles.py::test_circle_posed_equals_the_reference",
     "perception._kernels.gather_rows": "test_perception_speedups.py::test_gather_rows_keeps_each_scans_rows_in_order",
     "perception._kernels.normal_cells": "test_perception_reference.py::test_full_accumulator_peak_equals_the_reference",
-    "perception._kernels.line_subsegments":
-        "test_perception_reference.py::test_full_accumulator_peak_equals_the_reference",
+    "perception._kernels.line_subsegments": (
+        "test_perception_reference.py::test_full_accumulator_peak_equals_the_reference"
+    ),
     "perception._kernels.line_of_run": "test_perception_kernels.py::test_noisy_wall_is_one_line_near_the_truth",
     "perception._kernels.circle_of_run": "test_perception_kernels.py::test_circle_votes_equal_the_reference_window",
     "perception._kernels.segment_block": f"{HERE}::test_segment_block",

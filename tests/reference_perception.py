@@ -50,7 +50,7 @@ from datmo_cli.perception.legs import (
 )
 
 MIN_MATCHES = 12
-CONVERGED_STEP, CONVERGED_TURN = 2e-4, 5e-5   # m, rad
+CONVERGED_STEP, CONVERGED_TURN = 2e-4, 5e-5  # m, rad
 
 
 # ----------------------------------------------------------------------------------------------- section 4
@@ -71,8 +71,9 @@ def point_distance(r_i: float, r_j: float, angle_increment: float) -> float:
     return math.sqrt(max(r_j * r_j + r_i * r_i - 2.0 * r_j * r_i * math.cos(angle_increment), 0.0))
 
 
-def segment(ranges, angle_increment: float, c0: float, range_min: float, range_max: float,
-            min_points: int) -> list[tuple[int, int]]:
+def segment(
+    ranges, angle_increment: float, c0: float, range_min: float, range_max: float, min_points: int
+) -> list[tuple[int, int]]:
     """Segments [start, end) of one scan. P_i+1 joins P_i's segment when both are valid returns and
     d(P_i, P_i+1) <= C0 + C1 min(r_i, r_i+1); segments of fewer than min_points points are dropped."""
     c1 = c1_of(angle_increment)
@@ -126,8 +127,9 @@ def box_rho_offsets(x, y, n_theta: int, rho_res: float) -> tuple[list[float], in
     return lo, width
 
 
-def htl_accumulator(x, y, n_theta: int, rho_res: float,
-                    windows=None) -> tuple[dict[tuple[int, int], int], tuple[int, int, int]]:
+def htl_accumulator(
+    x, y, n_theta: int, rho_res: float, windows=None
+) -> tuple[dict[tuple[int, int], int], tuple[int, int, int]]:
     """Full Hough accumulator for lines: every point votes in every theta cell (or, with `windows`, point i
     in the theta cells windows[i] in that order), in the rho cell of rho = x cos(theta) + y sin(theta)
     counted from the box's smallest rho. Returns the accumulator {(theta cell, rho cell): votes} and its
@@ -139,7 +141,7 @@ def htl_accumulator(x, y, n_theta: int, rho_res: float,
     peak = (0, 0, 0)
     thetas = theta_table(n_theta)
     for i, (px, py) in enumerate(zip(x, y, strict=True)):
-        for t in (range(n_theta) if windows is None else windows[i]):
+        for t in range(n_theta) if windows is None else windows[i]:
             th = thetas[t]
             k = int((px * math.cos(th) + py * math.sin(th) - lo[t]) * inv)
             k = min(max(k, 0), width - 1)
@@ -181,12 +183,13 @@ def one_line(x, y, tol: float, tail: int) -> bool:
     """The points hold one line: their total-least-squares line lies within tol (m) of 90 % of them and of
     each of the last `tail` points."""
     d = line_distances(x, y)
-    return sum(di <= tol for di in d) >= 0.9 * len(d) and all(di <= tol for di in d[len(d) - tail:])
+    return sum(di <= tol for di in d) >= 0.9 * len(d) and all(di <= tol for di in d[len(d) - tail :])
 
 
 def refine_line(x, y, theta_p: float, rho_p: float, rho_res: float) -> tuple[float, float, list[int]]:
     """The HTL peak line refined by least squares: the points within a rho cell of the peak line are fitted;
     the points within a rho cell of that fit, when more, are fitted again. Returns (theta, rho, points used)."""
+
     def near(theta, rho):
         c, s = math.cos(theta), math.sin(theta)
         return [i for i in range(len(x)) if abs(x[i] * c + y[i] * s - rho) <= rho_res]
@@ -227,8 +230,14 @@ def fit_circle(x, y, guess: tuple[float, float, float]) -> tuple[float, float, f
     """Geometric least squares circle (a, b, r): minimise sum (|p - c| - r)^2 (scipy)."""
     x = np.asarray(x, float)
     y = np.asarray(y, float)
-    res = least_squares(lambda q: np.hypot(x - q[0], y - q[1]) - q[2], np.asarray(guess, float),
-                        xtol=1e-14, ftol=1e-14, gtol=1e-14, method="lm")
+    res = least_squares(
+        lambda q: np.hypot(x - q[0], y - q[1]) - q[2],
+        np.asarray(guess, float),
+        xtol=1e-14,
+        ftol=1e-14,
+        gtol=1e-14,
+        method="lm",
+    )
     return float(res.x[0]), float(res.x[1]), float(res.x[2])
 
 
@@ -253,8 +262,9 @@ def chord_centre(x0: float, y0: float, x1: float, y1: float, radius: float) -> t
     return mx + nx * h, my + ny * h
 
 
-def htc_window(x, y, ca: float, cb: float, radius: float, w: int, cell: float,
-               tol: float) -> tuple[list[list[int]], tuple[int, int, int]]:
+def htc_window(
+    x, y, ca: float, cb: float, radius: float, w: int, cell: float, tol: float
+) -> tuple[list[list[int]], tuple[int, int, int]]:
     """HTC with known radius in a window of (2w + 1)^2 centre cells of size `cell` around (ca, cb): a point
     votes for a centre when its distance to it is within `tol` of the radius. Returns the votes
     (votes[ia][ib], centre ca + (ia - w) cell, cb + (ib - w) cell) and the peak (votes, ia, ib); of equal
@@ -281,8 +291,9 @@ def htc_window(x, y, ca: float, cb: float, radius: float, w: int, cell: float,
     return votes, best
 
 
-def htc_peak(x, y, r_min: float, r_max: float, r_step: float, w: int, cell: float, tol: float,
-             min_sagitta: float) -> int:
+def htc_peak(
+    x, y, r_min: float, r_max: float, r_step: float, w: int, cell: float, tol: float, min_sagitta: float
+) -> int:
     """HTC over every radius the arc allows, each voted in full (htc_window): the peak's votes (0: no radius).
     The radii are r_min + k r_step within [r_lo, r_hi]: no smaller than half the chord (less tol), than the
     circle through the chord's ends and P_near (the point nearest the scanner) pushed tol further out, no larger
@@ -348,8 +359,8 @@ def ray_segment(angles, p0, p1) -> np.ndarray:
         den = ux * ey - uy * ex
         if abs(den) < 1e-12:
             continue
-        t = (x0 * ey - y0 * ex) / den          # distance along the beam
-        s = (x0 * uy - y0 * ux) / den          # position along the wall, 0..1
+        t = (x0 * ey - y0 * ex) / den  # distance along the beam
+        s = (x0 * uy - y0 * ux) / den  # position along the wall, 0..1
         if t > 0 and 0.0 <= s <= 1.0:
             out[i] = t
     return out
@@ -376,8 +387,9 @@ def points(ranges, angles) -> tuple[np.ndarray, np.ndarray]:
 # ----------------------------------------------------------------------------------------------- well-posed arcs
 
 
-def circle_well_posed(x, y, circle: tuple[float, float, float], params, angle_step: float,
-                      lines: list[tuple[float, float]] | None = None) -> bool:
+def circle_well_posed(
+    x, y, circle: tuple[float, float, float], params, angle_step: float, lines: list[tuple[float, float]] | None = None
+) -> bool:
     """Whether the circle (a, b, r) fitted to the points is a well-posed arc (FeatureParams `params`; a test
     whose parameter is 0 is off): at least 3 points, and
     - a radius more than circle_radius_margin inside [circle_radius_min, circle_radius_max];
@@ -406,8 +418,10 @@ def circle_well_posed(x, y, circle: tuple[float, float, float], params, angle_st
             return False
     if params.circle_lines_ratio > 0 and lines:
         circle_rss = sum((math.hypot(px - a, py - b) - r) ** 2 for px, py in zip(x, y, strict=True))
-        lines_rss = sum(min(abs(px * math.cos(t) + py * math.sin(t) - rho) for t, rho in lines) ** 2
-                        for px, py in zip(x, y, strict=True))
+        lines_rss = sum(
+            min(abs(px * math.cos(t) + py * math.sin(t) - rho) for t, rho in lines) ** 2
+            for px, py in zip(x, y, strict=True)
+        )
         if math.sqrt(circle_rss) > params.circle_lines_ratio * math.sqrt(lines_rss):
             return False
     return True
@@ -469,10 +483,8 @@ def merge_lines(rows, runs, kept: list[int], rho_res: float, refit):
             a = left[-1]
             dt, drho = same_line(rows[a][LC_THETA], rows[a][LC_RHO], rows[b][LC_THETA], rows[b][LC_RHO])
             if dt < math.radians(3.0) and drho < 2 * rho_res and b == a + 1:
-                votes = (rows[a][LC_RACC] * (runs[a][1] - runs[a][0])
-                         + rows[b][LC_RACC] * (runs[b][1] - runs[b][0]))
-                rows[a] = np.array(refit(runs[a][0], runs[b][1], rows[a][LC_THETA], rows[a][LC_RHO], votes),
-                                   np.float64)
+                votes = rows[a][LC_RACC] * (runs[a][1] - runs[a][0]) + rows[b][LC_RACC] * (runs[b][1] - runs[b][0])
+                rows[a] = np.array(refit(runs[a][0], runs[b][1], rows[a][LC_THETA], rows[a][LC_RHO], votes), np.float64)
                 runs[a][1] = runs[b][1]
                 merged.append((a, b))
                 continue
@@ -482,17 +494,19 @@ def merge_lines(rows, runs, kept: list[int], rho_res: float, refit):
 
 class Decision(NamedTuple):
     """What feature_decision makes of a segment, and why."""
-    kind: str                  # "circle", "lines" or "blob"
-    lines: list[int]           # the candidates that are its lines (kind "lines"), in scan order
+
+    kind: str  # "circle", "lines" or "blob"
+    lines: list[int]  # the candidates that are its lines (kind "lines"), in scan order
     circle: np.ndarray | None  # the circle fit's output (CC_* columns) when HTC ran on the segment
-    ncand: int                 # HTL lines
-    tried: bool                # HTC applies (whether or not the segment has circle_min_points)
-    leg_only: bool             # a case the paper does not test as a circle: a failed circle leaves the lines
-    convex: int | None         # convex junctions (three HTL lines or more, small enough for a circle)
+    ncand: int  # HTL lines
+    tried: bool  # HTC applies (whether or not the segment has circle_min_points)
+    leg_only: bool  # a case the paper does not test as a circle: a failed circle leaves the lines
+    convex: int | None  # convex junctions (three HTL lines or more, small enough for a circle)
 
 
-def feature_decision(x, y, s: int, e: int, rows, htl: list[int], kept: list[int], htl_racc: float, params,
-                     angle_step: float, circle) -> Decision:
+def feature_decision(
+    x, y, s: int, e: int, rows, htl: list[int], kept: list[int], htl_racc: float, params, angle_step: float, circle
+) -> Decision:
     """Decision rule of docs/method.md §5.2, as datmo extends it, for the segment of points [s, e) of x, y (sensor
     frame, m). rows: its line candidates (LC_* columns) after merge_lines; htl, kept, htl_racc: line_candidates'
     (htl: the HTL lines, in run order; kept: the kept lines left by merge_lines); params: FeatureParams;
@@ -533,8 +547,9 @@ def feature_decision(x, y, s: int, e: int, rows, htl: list[int], kept: list[int]
             leg_only = rows[htl[0]][LC_PEAK_RACC] >= params.line_min_racc
         elif ncand == 2:
             tried = True
-            leg_only = perpendicular(rows[htl[0]][LC_THETA], rows[htl[1]][LC_THETA],
-                                     math.radians(params.perpendicular_tolerance))
+            leg_only = perpendicular(
+                rows[htl[0]][LC_THETA], rows[htl[1]][LC_THETA], math.radians(params.perpendicular_tolerance)
+            )
         else:
             n_convex = 0
             for a, b in zip(htl[:-1], htl[1:], strict=True):
@@ -549,8 +564,11 @@ def feature_decision(x, y, s: int, e: int, rows, htl: list[int], kept: list[int]
             fit = np.array(fit, np.float64)
             lines = [(rows[k][LC_THETA], rows[k][LC_RHO]) for k in htl] if ncand >= 2 else None
             px, py = [x[i] for i in used], [y[i] for i in used]
-            if (fit[CC_RACC] > beat and fit[CC_N] >= params.circle_min_points
-                    and circle_well_posed(px, py, (fit[CC_X], fit[CC_Y], fit[CC_R]), params, angle_step, lines)):
+            if (
+                fit[CC_RACC] > beat
+                and fit[CC_N] >= params.circle_min_points
+                and circle_well_posed(px, py, (fit[CC_X], fit[CC_Y], fit[CC_R]), params, angle_step, lines)
+            ):
                 return Decision("circle", [], fit, ncand, tried, leg_only, n_convex)
         if not leg_only:
             kept = []
@@ -590,7 +608,7 @@ def circle_fit(p: np.ndarray) -> tuple[float, np.ndarray] | None:
         return None
     # |q - c|^2 = r^2  <=>  2 q.c + (r^2 - |c|^2) = |q|^2
     A = np.column_stack([2 * q, np.ones(len(q))])
-    sol = np.linalg.lstsq(A, (q ** 2).sum(axis=1), rcond=None)[0]
+    sol = np.linalg.lstsq(A, (q**2).sum(axis=1), rcond=None)[0]
     c = sol[:2]
     return math.sqrt(sol[2] + c @ c), c + p.mean(axis=0)
 
@@ -619,8 +637,9 @@ def signed_curvature(a: np.ndarray, p: np.ndarray, b: np.ndarray) -> float:
     return k if same_side else -k
 
 
-def segment_features(r: np.ndarray, angles: np.ndarray, start: int, end: int, range_min: float,
-                     range_max: float) -> np.ndarray:
+def segment_features(
+    r: np.ndarray, angles: np.ndarray, start: int, end: int, range_min: float, range_max: float
+) -> np.ndarray:
     """The feature vector of beams [start, end) of one scan r (invalid returns skipped)."""
     beams = [i for i in range(start, end) if is_valid(float(r[i]), range_min, range_max)]
     f = dict.fromkeys(FEATURE_NAMES, 0.0)
@@ -659,10 +678,16 @@ def segment_features(r: np.ndarray, angles: np.ndarray, start: int, end: int, ra
     first, last = beams[0], beams[-1]
     f["subtended_angle"] = abs(angles[last] - angles[first])
     before, after = first - 1, last + 1
-    f["occluded_start"] = float(before >= 0 and is_valid(float(r[before]), range_min, range_max)
-                                and float(r[before]) < float(r[first]) - OCCLUSION_MARGIN)
-    f["occluded_end"] = float(after < len(r) and is_valid(float(r[after]), range_min, range_max)
-                              and float(r[after]) < float(r[last]) - OCCLUSION_MARGIN)
+    f["occluded_start"] = float(
+        before >= 0
+        and is_valid(float(r[before]), range_min, range_max)
+        and float(r[before]) < float(r[first]) - OCCLUSION_MARGIN
+    )
+    f["occluded_end"] = float(
+        after < len(r)
+        and is_valid(float(r[after]), range_min, range_max)
+        and float(r[after]) < float(r[last]) - OCCLUSION_MARGIN
+    )
     f["jump_start"] = jump(r, first, -1, range_min, range_max)
     f["jump_end"] = jump(r, last, +1, range_min, range_max)
     step = abs(float(angles[-1]) - float(angles[0])) / (len(angles) - 1) if len(angles) > 1 else 0.0
@@ -690,12 +715,16 @@ def centroid(r: np.ndarray, angles: np.ndarray, start: int, end: int, range_min:
 def cluster_features(ranges, angles, seg_start, seg_end, seg_offsets, range_min, range_max) -> np.ndarray:
     rows = []
     for k in range(len(ranges)):
-        scan = [segment_features(ranges[k], angles, int(seg_start[g]), int(seg_end[g]), range_min, range_max)
-                for g in range(seg_offsets[k], seg_offsets[k + 1])]
+        scan = [
+            segment_features(ranges[k], angles, int(seg_start[g]), int(seg_end[g]), range_min, range_max)
+            for g in range(seg_offsets[k], seg_offsets[k + 1])
+        ]
         # the neighbour distance: to the nearest other candidate (>= 3 points, <= 0.8 m wide) of the scan
         cand = [f[0] >= CANDIDATE_MIN_POINTS and f[1] <= CANDIDATE_MAX_WIDTH for f in scan]
-        cents = [centroid(ranges[k], angles, int(seg_start[g]), int(seg_end[g]), range_min, range_max)
-                 if f[0] > 0 else None for g, f in zip(range(seg_offsets[k], seg_offsets[k + 1]), scan, strict=True)]
+        cents = [
+            centroid(ranges[k], angles, int(seg_start[g]), int(seg_end[g]), range_min, range_max) if f[0] > 0 else None
+            for g, f in zip(range(seg_offsets[k], seg_offsets[k + 1]), scan, strict=True)
+        ]
         for a, f in enumerate(scan):
             if f[0] == 0:
                 continue
@@ -819,7 +848,7 @@ def beam_normal(r, angles, range_min, range_max, b, normal_radius, max_gap, max_
         return math.nan, math.nan
     cov = np.cov(np.array(pts).T, bias=True)
     w, v = np.linalg.eigh(cov)
-    if w[1] > 0 and w[0] <= planarity ** 2 * w[1]:
+    if w[1] > 0 and w[0] <= planarity**2 * w[1]:
         return float(v[0, 0]), float(v[1, 0])
     if far <= 2 * normal_radius:
         return 0.0, 0.0
@@ -864,7 +893,7 @@ def nearest(q, map_xy, max_dist):
     """Index of the nearest map point within max_dist (lowest index on ties), or -1."""
     d2 = ((map_xy - q) ** 2).sum(axis=1)
     j = int(np.argmin(d2))
-    return j if d2[j] <= max_dist ** 2 else -1
+    return j if d2[j] <= max_dist**2 else -1
 
 
 def add_to_map(points, normals, pose, min_spacing, map_xy, map_n, capacity):
@@ -985,7 +1014,7 @@ def benches(circles, lines, dmin, dmax, bench_type):
     (at least 0.9 of its length)."""
     out = []
     for u, (su, xu, yu, ru) in enumerate(circles):
-        for sv, xv, yv, rv in circles[u + 1:]:
+        for sv, xv, yv, rv in circles[u + 1 :]:
             if sv != su:
                 continue
             d = math.hypot(xv - xu, yv - yu)
@@ -999,13 +1028,14 @@ def benches(circles, lines, dmin, dmax, bench_type):
                 along, across = mid @ axis, abs(axis[0] * mid[1] - axis[1] * mid[0])
                 run = np.array([x1 - x0, y1 - y0])
                 if 0 < along < d and across < 0.4 and abs(run @ axis) >= 0.9 * np.linalg.norm(run):
-                    out.append((su, bench_type, 0.5 * (xu + xv), 0.5 * (yu + yv), math.atan2(axis[1], axis[0]),
-                                d + ru + rv))
+                    out.append(
+                        (su, bench_type, 0.5 * (xu + xv), 0.5 * (yu + yv), math.atan2(axis[1], axis[0]), d + ru + rv)
+                    )
                     break
     return np.array(out).reshape(-1, 6)
 
 
-COLUMN, BENCH = 4, 5   # landmark types (Landmark.msg)
+COLUMN, BENCH = 4, 5  # landmark types (Landmark.msg)
 
 
 def bench_support_hides(column, bench, support_radius) -> bool:
@@ -1079,11 +1109,15 @@ def landmark_database(det, stamps, match, min_count, max_drift, column_time, for
                 continue
             for b in confirmed:
                 bench = rows[b]
-                if bench[0] == BENCH and bench[5] >= min_count and \
-                        bench_support_hides(rows[q][1:3], bench[1:5], support_radius):
+                if (
+                    bench[0] == BENCH
+                    and bench[5] >= min_count
+                    and bench_support_hides(rows[q][1:3], bench[1:5], support_radius)
+                ):
                     rows[q][12] = 1.0
-        snapshots.append([(q, *rows[q][1:6], rows[q][7], last_ns[q]) for q in confirmed
-                          if rows[q][10] == 0 and rows[q][12] == 0])
+        snapshots.append(
+            [(q, *rows[q][1:6], rows[q][7], last_ns[q]) for q in confirmed if rows[q][10] == 0 and rows[q][12] == 0]
+        )
     return np.array(rows).reshape(-1, 13), np.array(first_ns, np.int64), snapshots
 
 
@@ -1143,8 +1177,12 @@ def odometry(ranges, dt, angles, range_min, range_max, p, max_window):
         if new_kf:
             newest, n_kf = (newest + 1) % slots, min(n_kf + 1, slots)
             kx, ky, beams = scan_points(r, angles, range_min, range_max, p.map_spacing, len(r))
-            normals = np.array([beam_normal(r, angles, range_min, range_max, b, p.normal_radius, p.max_gap,
-                                            max_window, p.planarity) for b in beams]).reshape(-1, 2)
+            normals = np.array(
+                [
+                    beam_normal(r, angles, range_min, range_max, b, p.normal_radius, p.max_gap, max_window, p.planarity)
+                    for b in beams
+                ]
+            ).reshape(-1, 2)
             ring[newest] = (np.column_stack([kx, ky]).reshape(-1, 2), normals, poses[k].copy())
             map_xy, map_n = rebuild_map(ring, newest, n_kf, p.map_spacing, slots * len(r))
             flags |= FLAG_KEYFRAME

@@ -87,7 +87,7 @@ def leg_lead(legs: np.ndarray, vx: np.ndarray, vy: np.ndarray) -> np.ndarray:
         ux, uy = vx / speed, vy / speed
     dx, dy = legs[:, 0] - legs[:, 2], legs[:, 1] - legs[:, 3]  # a minus b
     along = dx * ux + dy * uy
-    left_is_a = (ux * dy - uy * dx) > 0                          # a lies left of b
+    left_is_a = (ux * dy - uy * dx) > 0  # a lies left of b
     return np.where(left_is_a, along, -along)
 
 
@@ -106,24 +106,34 @@ def classify(votes: np.ndarray, walking: np.ndarray, moving: np.ndarray, params:
     by_shape = np.array([CLASS_CIRCLE_OBJECT, CLASS_RECTANGULAR_OBJECT, CLASS_UNKNOWN])[np.argmax(shape, axis=1)]
     by_shape = np.where(shape.sum(axis=1) > 0, by_shape, CLASS_UNKNOWN)
     lone_static_leg = (votes[:, KIND_PERSON] == 0) & ~moving
-    leg_class = np.where(walking & (votes[:, KIND_PERSON] > 0), CLASS_PERSON,
-                         np.where(lone_static_leg, CLASS_CIRCLE_OBJECT, CLASS_UNKNOWN))
+    leg_class = np.where(
+        walking & (votes[:, KIND_PERSON] > 0),
+        CLASS_PERSON,
+        np.where(lone_static_leg, CLASS_CIRCLE_OBJECT, CLASS_UNKNOWN),
+    )
     return np.where(leggy, leg_class, by_shape).astype(np.uint8)
 
 
-def mobility(previous: np.ndarray, age_s: np.ndarray, size: np.ndarray, displacement: np.ndarray,
-             speed: np.ndarray, confirmed: np.ndarray, params: TrackingParams) -> np.ndarray:
+def mobility(
+    previous: np.ndarray,
+    age_s: np.ndarray,
+    size: np.ndarray,
+    displacement: np.ndarray,
+    speed: np.ndarray,
+    confirmed: np.ndarray,
+    params: TrackingParams,
+) -> np.ndarray:
     """New mobility of each track: `previous` mobility, age (s), largest extent seen (m), distance from
     where it was first seen (m), filtered speed (m/s), and whether it is confirmed."""
-    dynamic = (previous == MOBILITY_DYNAMIC) | (confirmed & (displacement > params.moving_distance)
-                                                & (speed > params.moving_speed))
+    dynamic = (previous == MOBILITY_DYNAMIC) | (
+        confirmed & (displacement > params.moving_distance) & (speed > params.moving_speed)
+    )
     static = (size > params.d_max) | (age_s >= params.undefined_window)
     out = np.where(static, MOBILITY_STATIC, MOBILITY_UNDEFINED)
     return np.where(dynamic, MOBILITY_DYNAMIC, out).astype(np.uint8)
 
 
-def legs_to_measurements(lx: np.ndarray, ly: np.ndarray, ls: np.ndarray,
-                         stride_max: float) -> tuple[np.ndarray, ...]:
+def legs_to_measurements(lx: np.ndarray, ly: np.ndarray, ls: np.ndarray, stride_max: float) -> tuple[np.ndarray, ...]:
     """Leg candidates (x, y, extent; m) as measurements: each pair of `pair_legs` a person (kind KIND_PERSON)
     at the centre of its legs, its size their distance plus their mean extent; each unpaired leg a single leg
     (KIND_LEG). People first, in pairing order, then single legs. Returns x, y, size, kind, legs (M, 4: the
@@ -134,12 +144,13 @@ def legs_to_measurements(lx: np.ndarray, ly: np.ndarray, ls: np.ndarray,
     size = np.concatenate([np.hypot(lx[a] - lx[b], ly[a] - ly[b]) + 0.5 * (ls[a] + ls[b]), ls[single]])
     kind = np.concatenate([np.full(len(a), KIND_PERSON), np.full(len(single), KIND_LEG)]).astype(np.int64)
     legs = np.full((len(x), 4), np.nan)
-    legs[:len(a)] = np.stack([lx[a], ly[a], lx[b], ly[b]], axis=1)
+    legs[: len(a)] = np.stack([lx[a], ly[a], lx[b], ly[b]], axis=1)
     return x, y, size, kind, legs
 
 
-def line_boxes(lseg: np.ndarray, lx0: np.ndarray, ly0: np.ndarray, lx1: np.ndarray,
-               ly1: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def line_boxes(
+    lseg: np.ndarray, lx0: np.ndarray, ly0: np.ndarray, lx1: np.ndarray, ly1: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Rectangular objects: per segment (in segment order) the centre and diagonal (m) of the bounding box
     of its lines' end points. Returns the segments, x, y, size."""
     segs = np.unique(lseg)
@@ -152,8 +163,9 @@ def line_boxes(lseg: np.ndarray, lx0: np.ndarray, ly0: np.ndarray, lx1: np.ndarr
     return segs, x, y, size
 
 
-def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, leg_radius_max,
-                       leg_blob_max, stride_max, d_max) -> tuple[np.ndarray, ...]:
+def paper_measurements(
+    cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, leg_radius_max, leg_blob_max, stride_max, d_max
+) -> tuple[np.ndarray, ...]:
     """The paper's rule for one scan's features (measurements.py's docstring): leg candidates are circles of
     radius <= leg_radius_max (extent: the diameter), blobs of kind 0 no larger than leg_blob_max, and
     segments whose lines' box is no larger than leg_blob_max; they become people and single legs
@@ -171,8 +183,14 @@ def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly
     x = np.concatenate([px, cx[~c_leg], bx[~b_leg], ox[~o_leg]])
     y = np.concatenate([py, cy[~c_leg], by[~b_leg], oy[~o_leg]])
     size = np.concatenate([psize, 2.0 * cr[~c_leg], bsize[~b_leg], osize[~o_leg]])
-    kind = np.concatenate([pkind, np.full((~c_leg).sum(), KIND_CIRCLE), np.full((~b_leg).sum(), KIND_BLOB),
-                           np.full((~o_leg).sum(), KIND_RECT)]).astype(np.int64)
+    kind = np.concatenate(
+        [
+            pkind,
+            np.full((~c_leg).sum(), KIND_CIRCLE),
+            np.full((~b_leg).sum(), KIND_BLOB),
+            np.full((~o_leg).sum(), KIND_RECT),
+        ]
+    ).astype(np.int64)
     legs = np.concatenate([plegs, np.full((len(x) - len(px), 4), np.nan)])
     keep = size <= d_max
     return x[keep], y[keep], size[keep], kind[keep], legs[keep], lx, ly, ls
@@ -221,8 +239,7 @@ def leg_stage(tx, ty, lx, ly, ls, reach, stride_max) -> tuple[np.ndarray, ...]:
     return owner, x, y, size, kind, legs, taken
 
 
-def duplicates(x, y, vx, vy, vvar, victim, candidate, confirmed, rank, merge_distance,
-               merge_speed) -> np.ndarray:
+def duplicates(x, y, vx, vy, vvar, victim, candidate, confirmed, rank, merge_distance, merge_speed) -> np.ndarray:
     """`victim` tracks within merge_distance of a `candidate` track of higher rank (ties: the lower index ranks
     higher), unless both are confirmed and their velocities differ by merge_speed plus the standard deviation of
     that difference or more (vvar: each track's velocity variance, m²/s²; a restarted track's velocity is not
@@ -232,15 +249,23 @@ def duplicates(x, y, vx, vy, vvar, victim, candidate, confirmed, rank, merge_dis
     higher = (rank[None, :] > rank[:, None]) | ((rank[None, :] == rank[:, None]) & (idx[None, :] < idx[:, None]))
     near = np.hypot(x[:, None] - x[None, :], y[:, None] - y[None, :]) < merge_distance
     spread = merge_speed + np.sqrt(vvar[:, None] + vvar[None, :])
-    alike = ~(confirmed[:, None] & confirmed[None, :]) | (np.hypot(vx[:, None] - vx[None, :],
-                                                                   vy[:, None] - vy[None, :]) < spread)
+    alike = ~(confirmed[:, None] & confirmed[None, :]) | (
+        np.hypot(vx[:, None] - vx[None, :], vy[:, None] - vy[None, :]) < spread
+    )
     both = victim[:, None] & candidate[None, :] & (idx[None, :] != idx[:, None])
     return (both & higher & near & alike).any(axis=1)
 
 
-def leggy_tracks(votes: np.ndarray, cls: np.ndarray, confirmed: np.ndarray, person: np.ndarray,
-                 leg_hits: np.ndarray, leg_score: np.ndarray, person_votes: float,
-                 person_maintain: float) -> np.ndarray:
+def leggy_tracks(
+    votes: np.ndarray,
+    cls: np.ndarray,
+    confirmed: np.ndarray,
+    person: np.ndarray,
+    leg_hits: np.ndarray,
+    leg_score: np.ndarray,
+    person_votes: float,
+    person_maintain: float,
+) -> np.ndarray:
     """The tracks that may take leg candidates first: every person, and the confirmed tracks of legs (legs,
     pairs and single ones, are at least person_votes of their hits, and their class is unknown or person) or
     whose leg evidence is at least person_maintain (a person the detector was less sure of, measured as circles
@@ -251,8 +276,9 @@ def leggy_tracks(votes: np.ndarray, cls: np.ndarray, confirmed: np.ndarray, pers
     return np.flatnonzero(person | (confirmed & (leggy | evident)))
 
 
-def leg_stage_measurements(tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs, reach,
-                           stride_max) -> tuple[np.ndarray, ...]:
+def leg_stage_measurements(
+    tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs, reach, stride_max
+) -> tuple[np.ndarray, ...]:
     """Leg candidates (lx, ly, ls; `strong`: legs, else weak candidates whose measurement is mx[cover]) taken by
     the tracks predicted at (tx, ty) (`leg_stage`), then the scan's measurements rebuilt: one per track that took
     legs, then the strong candidates no track took paired (`legs_to_measurements`: a weak one no track took
@@ -265,22 +291,33 @@ def leg_stage_measurements(tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mki
     dropped = np.zeros(len(mx), bool)
     dropped[cover[taken & (cover >= 0)]] = True
     other = np.flatnonzero((mkind > KIND_LEG) & ~dropped)
-    return (owner, np.concatenate([ox, rx, mx[other]]), np.concatenate([oy, ry, my[other]]),
-            np.concatenate([osize, rsize, msize[other]]),
-            np.concatenate([okind, rkind, mkind[other]]).astype(np.int64),
-            np.concatenate([olegs, rlegs, mlegs[other]]).reshape(-1, 4), other)
+    return (
+        owner,
+        np.concatenate([ox, rx, mx[other]]),
+        np.concatenate([oy, ry, my[other]]),
+        np.concatenate([osize, rsize, msize[other]]),
+        np.concatenate([okind, rkind, mkind[other]]).astype(np.int64),
+        np.concatenate([olegs, rlegs, mlegs[other]]).reshape(-1, 4),
+        other,
+    )
 
 
-def duplicate_ranks(votes, hits, confirmed, mobility, cls, leg_hits, leg_score, person_maintain
-                    ) -> tuple[np.ndarray, ...]:
+def duplicate_ranks(
+    votes, hits, confirmed, mobility, cls, leg_hits, leg_score, person_maintain
+) -> tuple[np.ndarray, ...]:
     """Which tracks may be a duplicate (victims: fed legs with class unknown or person, or took leg candidates),
     which may make one (candidates: fed legs with class unknown or person, or with leg evidence of at least
     person_maintain), and their rank: a person before anything else, then a dynamic track, then more hits, then
     confirmed. Returns victim, candidate, rank."""
-    candidate = ((((votes[:, KIND_PERSON] + votes[:, KIND_LEG]) > 0) & (cls <= CLASS_PERSON))
-                 | ((leg_hits > 0) & (leg_score >= person_maintain)))
-    rank = (hits.astype(np.int64) * 2 + confirmed + (mobility == MOBILITY_DYNAMIC) * (1 << 40)
-            + (cls == CLASS_PERSON) * (1 << 41))
+    candidate = (((votes[:, KIND_PERSON] + votes[:, KIND_LEG]) > 0) & (cls <= CLASS_PERSON)) | (
+        (leg_hits > 0) & (leg_score >= person_maintain)
+    )
+    rank = (
+        hits.astype(np.int64) * 2
+        + confirmed
+        + (mobility == MOBILITY_DYNAMIC) * (1 << 40)
+        + (cls == CLASS_PERSON) * (1 << 41)
+    )
     return candidate | (leg_hits > 0), candidate, rank
 
 
@@ -293,7 +330,7 @@ def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, mar
     out = missed & ((beam < 0) | (beam >= len(ranges)) | (rng >= range_max))
     half = np.ceil(np.arctan2(np.maximum(size, 0.2) / 2, np.maximum(rng, 0.1)) / abs(increment)).astype(np.int64)
     for k in np.flatnonzero(missed & ~out):
-        near = ranges[max(beam[k] - half[k], 0):beam[k] + half[k] + 1]
+        near = ranges[max(beam[k] - half[k], 0) : beam[k] + half[k] + 1]
         out[k] = bool((near < rng[k] - margin).any())
     return out
 
@@ -307,12 +344,18 @@ def on_background(score, lx, ly, ls, px, py, x0, y0, cell, n, threshold) -> np.n
     ci = np.floor((lx - 0.5 * ls * dx / d - x0) / cell).astype(np.int64)
     ck = np.floor((ly - 0.5 * ls * dy / d - y0) / cell).astype(np.int64)
     grid = score.reshape(n, n) >= threshold
-    return np.array([grid[max(i - 1, 0):min(i + 2, n), max(k - 1, 0):min(k + 2, n)].any()
-                     for i, k in zip(ci.tolist(), ck.tolist(), strict=True)], bool)
+    return np.array(
+        [
+            grid[max(i - 1, 0) : min(i + 2, n), max(k - 1, 0) : min(k + 2, n)].any()
+            for i, k in zip(ci.tolist(), ck.tolist(), strict=True)
+        ],
+        bool,
+    )
 
 
-def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, py, x0, y0, cell, n,
-                         threshold) -> np.ndarray:
+def tracks_on_background(
+    score, mx, my, msize, mkind, rows, cols, n_tracks, px, py, x0, y0, cell, n, threshold
+) -> np.ndarray:
     """Which of n_tracks tracks took (rows, cols) a measurement on the background: single legs and circles
     tested on their side facing the sensor, other kinds at their centre (`on_background`)."""
     front = np.where((mkind[cols] == KIND_LEG) | (mkind[cols] == KIND_CIRCLE), msize[cols], 0.0)
@@ -347,8 +390,16 @@ def fold_evidence(leg_score: np.ndarray, leg_hits: np.ndarray, k: int, p: float,
     leg_score[k] = (1.0 - a) * leg_score[k] + a * p
 
 
-def carried_update(carry_ref: np.ndarray, carry_seen: np.ndarray, carry_away: np.ndarray, ranges: np.ndarray,
-                   range_min: float, range_max: float, tol: float, step: float) -> None:
+def carried_update(
+    carry_ref: np.ndarray,
+    carry_seen: np.ndarray,
+    carry_away: np.ndarray,
+    ranges: np.ndarray,
+    range_min: float,
+    range_max: float,
+    tol: float,
+    step: float,
+) -> None:
     """One scan of the carried beams, in place. Per beam: carry_ref the range (m) it keeps returning (NaN: none),
     carry_seen how far (m) the sensor has travelled while the return was within `tol` of it, carry_away while it
     was not (nearer, farther, or no valid return within (range_min, range_max)). The sensor moved `step` m since
@@ -356,7 +407,7 @@ def carried_update(carry_ref: np.ndarray, carry_seen: np.ndarray, carry_away: np
     travels 0."""
     r = np.asarray(ranges, np.float64)
     ok = (r > range_min) & (r < range_max)
-    with np.errstate(invalid="ignore"):   # an invalid return (inf, NaN) is no return
+    with np.errstate(invalid="ignore"):  # an invalid return (inf, NaN) is no return
         seen = ok & (np.abs(r - carry_ref) <= tol)
     carry_seen[seen] += step
     carry_away[~seen] += step
@@ -366,17 +417,30 @@ def carried_update(carry_ref: np.ndarray, carry_seen: np.ndarray, carry_away: np
     carry_away[again] = 0.0
 
 
-def carried_beams(sx: np.ndarray, sy: np.ndarray, width: np.ndarray, ranges: np.ndarray, carry_ref: np.ndarray,
-                  carry_seen: np.ndarray, carry_away: np.ndarray, angle_min: float, increment: float, travel: float,
-                  tol: float) -> np.ndarray:
+def carried_beams(
+    sx: np.ndarray,
+    sy: np.ndarray,
+    width: np.ndarray,
+    ranges: np.ndarray,
+    carry_ref: np.ndarray,
+    carry_seen: np.ndarray,
+    carry_away: np.ndarray,
+    angle_min: float,
+    increment: float,
+    travel: float,
+    tol: float,
+) -> np.ndarray:
     """Which leg candidates (sensor-frame centres sx, sy and widths, m) lie on carried beams: of the beams their
     width spans either side of their bearing (at a range of at least 0.1 m), more than half are carried: they
     return their carry_ref (within `tol`) now, after `travel` m or more of travel that saw it at least three
     times as far as it did not (carried_update)."""
     B = len(carry_ref)
     with np.errstate(invalid="ignore"):
-        carried = ((carry_seen >= travel) & (carry_seen >= 3.0 * carry_away)
-                   & (np.abs(np.asarray(ranges, np.float64) - carry_ref) <= tol))
+        carried = (
+            (carry_seen >= travel)
+            & (carry_seen >= 3.0 * carry_away)
+            & (np.abs(np.asarray(ranges, np.float64) - carry_ref) <= tol)
+        )
     rng = np.maximum(np.hypot(sx, sy), 0.1)
     beam = np.rint((np.arctan2(sy, sx) - angle_min) / increment).astype(np.int64)
     half = np.ceil(np.arctan2(0.5 * width, rng) / abs(increment)).astype(np.int64)
@@ -421,8 +485,6 @@ def gate(d2: np.ndarray, dist: np.ndarray, gate: float, max_distance: float) -> 
     """Boolean (K, M): pairs whose squared Mahalanobis distance is within `gate` and whose Euclidean
     distance (m) is within `max_distance`."""
     return (d2 <= gate) & (dist <= max_distance)
-
-
 
 
 def reference_gnn(cost: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -471,12 +533,13 @@ def with_candidates(m: Measurements) -> tuple[Measurements, bool]:
     raw = np.asarray(m.raw_legs, np.float64)
     out = np.zeros((len(raw), 5))
     out[:, 4] = -1.0
-    out[:, :min(raw.shape[1], 5)] = raw[:, :5]
+    out[:, : min(raw.shape[1], 5)] = raw[:, :5]
     return Measurements(m.x, m.y, m.size, m.kind, m.legs, out, m.prob), raw.shape[1] >= 4
 
 
-def reference_measurements(features: ScanFeatures, params: TrackingParams, learned: bool = False,
-                           leg_threshold: float = 0.5) -> Measurements:
+def reference_measurements(
+    features: ScanFeatures, params: TrackingParams, learned: bool = False, leg_threshold: float = 0.5
+) -> Measurements:
     """The measurements of one scan's features (the rule of measurements.py's docstring) from the compiled
     features-to-measurements kernels, with the thresholding of learned legs done here in numpy: a candidate of
     probability >= leg_threshold (compared in float32, the features' type) off the beams of any circle wider
@@ -487,33 +550,84 @@ def reference_measurements(features: ScanFeatures, params: TrackingParams, learn
     if learned:
         g = features.legs if features.legs is not None else np.zeros(0, _LEG_DTYPE)
         strong = g["probability"].astype(np.float32) >= np.float32(leg_threshold)
-        big = c[c["radius"].astype(np.float32) > np.float32(params.leg_radius_max)]   # wider: a column's arc
+        big = c[c["radius"].astype(np.float32) > np.float32(params.leg_radius_max)]  # wider: a column's arc
         for f, e in zip(big["first"].tolist(), big["last"].tolist(), strict=True):
             strong &= (g["last"] < f) | (g["first"] > e)
         weak, g = g[~strong], g[strong]
         i8 = np.int64
         x, y, size, kind, legs, prob, covers = _kernels.learned_measurements(
-            c["first"].astype(i8), c["last"].astype(i8), c["x"].astype(f8), c["y"].astype(f8),
-            c["radius"].astype(f8), b["first"].astype(i8), b["last"].astype(i8), b["x"].astype(f8),
-            b["y"].astype(f8), b["size"].astype(f8), li["segment"].astype(i8), li["first"].astype(i8),
-            li["last"].astype(i8), li["x_ini"].astype(f8), li["y_ini"].astype(f8), li["x_end"].astype(f8),
-            li["y_end"].astype(f8), g["first"].astype(i8), g["last"].astype(i8), g["x"].astype(f8),
-            g["y"].astype(f8), g["width"].astype(f8), weak["first"].astype(i8), weak["last"].astype(i8),
-            weak["probability"].astype(f8), params.kernel_vector(leg_threshold))
-        raw = np.concatenate([
-            np.stack([g["x"].astype(f8), g["y"].astype(f8), g["width"].astype(f8), g["probability"].astype(f8),
-                      np.full(len(g), -1.0)], axis=1).reshape(-1, 5),
-            np.stack([weak["x"].astype(f8), weak["y"].astype(f8), weak["width"].astype(f8),
-                      weak["probability"].astype(f8), covers.astype(f8)], axis=1).reshape(-1, 5)])
+            c["first"].astype(i8),
+            c["last"].astype(i8),
+            c["x"].astype(f8),
+            c["y"].astype(f8),
+            c["radius"].astype(f8),
+            b["first"].astype(i8),
+            b["last"].astype(i8),
+            b["x"].astype(f8),
+            b["y"].astype(f8),
+            b["size"].astype(f8),
+            li["segment"].astype(i8),
+            li["first"].astype(i8),
+            li["last"].astype(i8),
+            li["x_ini"].astype(f8),
+            li["y_ini"].astype(f8),
+            li["x_end"].astype(f8),
+            li["y_end"].astype(f8),
+            g["first"].astype(i8),
+            g["last"].astype(i8),
+            g["x"].astype(f8),
+            g["y"].astype(f8),
+            g["width"].astype(f8),
+            weak["first"].astype(i8),
+            weak["last"].astype(i8),
+            weak["probability"].astype(f8),
+            params.kernel_vector(leg_threshold),
+        )
+        raw = np.concatenate(
+            [
+                np.stack(
+                    [
+                        g["x"].astype(f8),
+                        g["y"].astype(f8),
+                        g["width"].astype(f8),
+                        g["probability"].astype(f8),
+                        np.full(len(g), -1.0),
+                    ],
+                    axis=1,
+                ).reshape(-1, 5),
+                np.stack(
+                    [
+                        weak["x"].astype(f8),
+                        weak["y"].astype(f8),
+                        weak["width"].astype(f8),
+                        weak["probability"].astype(f8),
+                        covers.astype(f8),
+                    ],
+                    axis=1,
+                ).reshape(-1, 5),
+            ]
+        )
         return Measurements(x, y, size, kind, legs, raw, prob)
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
-        c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8), b["x"].astype(f8), b["y"].astype(f8),
-        b["size"].astype(f8), b["kind"].astype(np.int64), li["segment"].astype(np.int64), li["x_ini"].astype(f8),
-        li["y_ini"].astype(f8), li["x_end"].astype(f8), li["y_end"].astype(f8), params.kernel_vector())
+        c["x"].astype(f8),
+        c["y"].astype(f8),
+        c["radius"].astype(f8),
+        b["x"].astype(f8),
+        b["y"].astype(f8),
+        b["size"].astype(f8),
+        b["kind"].astype(np.int64),
+        li["segment"].astype(np.int64),
+        li["x_ini"].astype(f8),
+        li["y_ini"].astype(f8),
+        li["x_end"].astype(f8),
+        li["y_end"].astype(f8),
+        params.kernel_vector(),
+    )
     return Measurements(x, y, size, kind, legs, np.stack([lx, ly, ls], axis=1))
 
 
 # ------------------------------------------------ the per-scan arithmetic of the tracker before _step
+
 
 @njit(cache=True)
 def mahalanobis2(x, P, zx, zy, sigma):
@@ -593,16 +707,28 @@ def cv_predict(x, P, dt, q):
 
 
 @njit(cache=True)
-def classify_tracks(votes, walking, previous, age_s, size, displacement, speed, confirmed, person_votes, d_max,
-             undefined_window, moving_distance, moving_speed):
+def classify_tracks(
+    votes,
+    walking,
+    previous,
+    age_s,
+    size,
+    displacement,
+    speed,
+    confirmed,
+    person_votes,
+    d_max,
+    undefined_window,
+    moving_distance,
+    moving_speed,
+):
     """Class and mobility of every track: the rules of `classify` and `mobility` above, fused
     into one pass."""
     K = len(votes)
     cls = np.empty(K, np.uint8)
     mob = np.empty(K, np.uint8)
     for k in range(K):
-        dynamic = previous[k] == 1 or (confirmed[k] and displacement[k] > moving_distance
-                                       and speed[k] > moving_speed)
+        dynamic = previous[k] == 1 or (confirmed[k] and displacement[k] > moving_distance and speed[k] > moving_speed)
         if dynamic:
             mob[k] = 1
         elif size[k] > d_max or age_s[k] >= undefined_window:
@@ -630,8 +756,28 @@ def classify_tracks(votes, walking, previous, age_s, size, displacement, speed, 
 
 
 @njit(cache=True)
-def apply_updates(x, P, last, hit, votes, size, lead_left, lead_right, moving, rows, zx, zy, zkind, zsize,
-                  zlegs, sigma, sigma_leg, moving_speed, step_min, step_max):
+def apply_updates(
+    x,
+    P,
+    last,
+    hit,
+    votes,
+    size,
+    lead_left,
+    lead_right,
+    moving,
+    rows,
+    zx,
+    zy,
+    zkind,
+    zsize,
+    zlegs,
+    sigma,
+    sigma_leg,
+    moving_speed,
+    step_min,
+    step_max,
+):
     """Kalman-update tracks `rows` with measurements (zx, zy) of kinds zkind, and record the hit: last
     position, kind votes, largest size, and for people that have been `moving` which leg leads along the
     velocity (the walking pattern; noise on a still pair of posts would fake it)."""
@@ -653,7 +799,7 @@ def apply_updates(x, P, last, hit, votes, size, lead_left, lead_right, moving, r
                 ux, uy = vx / speed, vy / speed
                 dx, dy = zlegs[n, 0] - zlegs[n, 2], zlegs[n, 1] - zlegs[n, 3]
                 along = dx * ux + dy * uy
-                lead = along if (ux * dy - uy * dx) > 0 else -along   # left leg minus right leg
+                lead = along if (ux * dy - uy * dx) > 0 else -along  # left leg minus right leg
                 if abs(lead) <= step_max:
                     if lead > step_min:
                         lead_left[k] = True
@@ -662,8 +808,25 @@ def apply_updates(x, P, last, hit, votes, size, lead_left, lead_right, moving, r
 
 
 @njit(cache=True)
-def life_cycle(hit, age, hits, misses, last_hit_ns, history, confirmed, occluded, person, stamp_ns, mask, popcount,
-               confirm_hits, delete_after, delete_after_occluded, tentative_delete_after, person_coast):
+def life_cycle(
+    hit,
+    age,
+    hits,
+    misses,
+    last_hit_ns,
+    history,
+    confirmed,
+    occluded,
+    person,
+    stamp_ns,
+    mask,
+    popcount,
+    confirm_hits,
+    delete_after,
+    delete_after_occluded,
+    tentative_delete_after,
+    person_coast,
+):
     """Count the scan for every track (age, hits, misses, hit history, confirmation) and return which
     tracks are past their deletion timeout (s since the last hit: tentative, seen, occluded; a confirmed
     person lives at least person_coast s unseen)."""
@@ -713,8 +876,34 @@ def kind_groups(votes, mobility, person):
 
 
 @njit(cache=True)
-def background_update(score, mark, active, n_active, scan, ranges, cos_a, sin_a, angle_min, increment, range_min,
-                      range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled, qx, qy, radius):
+def background_update(
+    score,
+    mark,
+    active,
+    n_active,
+    scan,
+    ranges,
+    cos_a,
+    sin_a,
+    angle_min,
+    increment,
+    range_min,
+    range_max,
+    px,
+    py,
+    pc,
+    ps,
+    dt,
+    x0,
+    y0,
+    cell,
+    n,
+    margin,
+    settled,
+    qx,
+    qy,
+    radius,
+):
     """Update the background grid with one scan; returns the new number of active cells.
 
     score (n * n,): per cell, for how long (s) it has been hit without being seen through since; a cell is seen
@@ -798,7 +987,6 @@ def gated_costs(x, P, zx, zy, zkind, sigma, sigma_leg, gate, max_distance, compa
     return cost, ok
 
 
-
 def kalman_predict(x: np.ndarray, P: np.ndarray, dt: float, q: float | np.ndarray) -> None:
     """Predict every track dt seconds ahead, in place: x (K, 4), P (K, 4, 4) float64 C-contiguous;
     q the white-noise acceleration variance, one for all tracks or one per track."""
@@ -810,9 +998,14 @@ def kalman_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, r: np.ndarray) ->
     """Update every track with position measurements z (K, 2), sigmas r (K,) in m, in place (Joseph form)."""
     z = np.asarray(z, np.float64)
     if len(x):
-        joseph_update(x, P, np.arange(len(x)), np.ascontiguousarray(z[:, 0]), np.ascontiguousarray(z[:, 1]),
-                      np.ascontiguousarray(np.broadcast_to(np.asarray(r, np.float64), (len(x),))))
-
+        joseph_update(
+            x,
+            P,
+            np.arange(len(x)),
+            np.ascontiguousarray(z[:, 0]),
+            np.ascontiguousarray(z[:, 1]),
+            np.ascontiguousarray(np.broadcast_to(np.asarray(r, np.float64), (len(x),))),
+        )
 
 
 def components(allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -827,7 +1020,7 @@ def components(allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
             continue
         rows = np.zeros(nr, bool)
         rows[start] = True
-        while True:   # grow the component until no allowed pair adds to it
+        while True:  # grow the component until no allowed pair adds to it
             cols = allowed[rows].any(axis=0)
             more = rows | allowed[:, cols].any(axis=1)
             if (more == rows).all():
@@ -843,7 +1036,7 @@ TRACK_DTYPE = cdr.element_dtype(types.TRACK)
 # legs, circles, lines, blobs, -, a lone leg; see kind_groups); tentative tracks (row 4) take any
 _COMPAT = np.ones((6, N_KINDS), bool)
 _COMPAT[0, [KIND_CIRCLE, KIND_RECT]] = False
-_COMPAT[1, KIND_PERSON] = False   # a circle partly seen may pass for a leg, or for a line
+_COMPAT[1, KIND_PERSON] = False  # a circle partly seen may pass for a leg, or for a line
 _COMPAT[2, [KIND_PERSON, KIND_LEG, KIND_CIRCLE]] = False
 _ANY, _LONE_LEG = 4, 5
 _COMPAT[_LONE_LEG, [KIND_PERSON, KIND_CIRCLE, KIND_RECT]] = False
@@ -865,32 +1058,32 @@ _REACQUIRE_LEARNED[0, KIND_LEG] = True
 class TrackArrays:
     """The state of K tracks as arrays (tracking frame, m, m/s, ns)."""
 
-    id: np.ndarray          # (K,) int64
-    x: np.ndarray           # (K, 4) float64: x, y, vx, vy
-    P: np.ndarray           # (K, 4, 4)
-    born_ns: np.ndarray     # (K,) int64
+    id: np.ndarray  # (K,) int64
+    x: np.ndarray  # (K, 4) float64: x, y, vx, vy
+    P: np.ndarray  # (K, 4, 4)
+    born_ns: np.ndarray  # (K,) int64
     last_hit_ns: np.ndarray
-    age: np.ndarray         # (K,) int64, scans
+    age: np.ndarray  # (K,) int64, scans
     hits: np.ndarray
     misses: np.ndarray
-    history: np.ndarray     # (K,) int64 bit mask of hits in the last confirm_window scans
-    votes: np.ndarray       # (K, N_KINDS) int64
-    lead_left: np.ndarray   # (K,) bool: the left leg was seen leading
+    history: np.ndarray  # (K,) int64 bit mask of hits in the last confirm_window scans
+    votes: np.ndarray  # (K, N_KINDS) int64
+    lead_left: np.ndarray  # (K,) bool: the left leg was seen leading
     lead_right: np.ndarray
     moving_time: np.ndarray  # (K,) float64, s of consecutive hits with a speed above moving_speed
-    size: np.ndarray        # (K,) float64, largest extent seen, m
-    first: np.ndarray       # (K, 2) position when created
-    last: np.ndarray        # (K, 2) position after the last hit
-    confirmed: np.ndarray   # (K,) bool
+    size: np.ndarray  # (K,) float64, largest extent seen, m
+    first: np.ndarray  # (K, 2) position when created
+    last: np.ndarray  # (K, 2) position after the last hit
+    confirmed: np.ndarray  # (K,) bool
     occluded: np.ndarray
-    hit: np.ndarray         # (K,) bool: matched in the last step
-    cls: np.ndarray         # (K,) uint8
-    mobility: np.ndarray    # (K,) uint8
-    tail: np.ndarray        # (K, T, 2) ring buffer of positions
+    hit: np.ndarray  # (K,) bool: matched in the last step
+    cls: np.ndarray  # (K,) uint8
+    mobility: np.ndarray  # (K,) uint8
+    tail: np.ndarray  # (K, T, 2) ring buffer of positions
     tail_count: np.ndarray  # (K,) int64, positions written so far
-    leg_score: np.ndarray   # (K,) float64: leg evidence, the mean leg probability of its leg-candidate hits
-    leg_hits: np.ndarray    # (K,) int64: the leg-candidate hits folded into leg_score (fold_evidence)
-    person: np.ndarray      # (K,) bool: a person (with a leg detector: set once from paired legs, kept until
+    leg_score: np.ndarray  # (K,) float64: leg evidence, the mean leg probability of its leg-candidate hits
+    leg_hits: np.ndarray  # (K,) int64: the leg-candidate hits folded into leg_score (fold_evidence)
+    person: np.ndarray  # (K,) bool: a person (with a leg detector: set once from paired legs, kept until
     #                         the evidence falls below person_maintain or the track dies)
     still_time: np.ndarray  # (K,) float64, s of a speed at most moving_speed (a dynamic track this still is
     #                         static again)
@@ -899,14 +1092,35 @@ class TrackArrays:
     def zeros(cls, n: int, tail_length: int) -> TrackArrays:
         """n tracks with every field zero (False, empty history)."""
         i8 = np.int64
-        return cls(id=np.zeros(n, i8), x=np.zeros((n, 4)), P=np.zeros((n, 4, 4)), born_ns=np.zeros(n, i8),
-                   last_hit_ns=np.zeros(n, i8), age=np.zeros(n, i8), hits=np.zeros(n, i8), misses=np.zeros(n, i8),
-                   history=np.zeros(n, i8), votes=np.zeros((n, N_KINDS), i8), lead_left=np.zeros(n, bool),
-                   lead_right=np.zeros(n, bool), moving_time=np.zeros(n), size=np.zeros(n), first=np.zeros((n, 2)),
-                   last=np.zeros((n, 2)), confirmed=np.zeros(n, bool), occluded=np.zeros(n, bool),
-                   hit=np.zeros(n, bool), cls=np.zeros(n, np.uint8), mobility=np.zeros(n, np.uint8),
-                   tail=np.zeros((n, max(tail_length, 1), 2)), tail_count=np.zeros(n, i8), leg_score=np.zeros(n),
-                   leg_hits=np.zeros(n, i8), person=np.zeros(n, bool), still_time=np.zeros(n))
+        return cls(
+            id=np.zeros(n, i8),
+            x=np.zeros((n, 4)),
+            P=np.zeros((n, 4, 4)),
+            born_ns=np.zeros(n, i8),
+            last_hit_ns=np.zeros(n, i8),
+            age=np.zeros(n, i8),
+            hits=np.zeros(n, i8),
+            misses=np.zeros(n, i8),
+            history=np.zeros(n, i8),
+            votes=np.zeros((n, N_KINDS), i8),
+            lead_left=np.zeros(n, bool),
+            lead_right=np.zeros(n, bool),
+            moving_time=np.zeros(n),
+            size=np.zeros(n),
+            first=np.zeros((n, 2)),
+            last=np.zeros((n, 2)),
+            confirmed=np.zeros(n, bool),
+            occluded=np.zeros(n, bool),
+            hit=np.zeros(n, bool),
+            cls=np.zeros(n, np.uint8),
+            mobility=np.zeros(n, np.uint8),
+            tail=np.zeros((n, max(tail_length, 1), 2)),
+            tail_count=np.zeros(n, i8),
+            leg_score=np.zeros(n),
+            leg_hits=np.zeros(n, i8),
+            person=np.zeros(n, bool),
+            still_time=np.zeros(n),
+        )
 
     @classmethod
     def empty(cls, tail_length: int) -> TrackArrays:
@@ -979,8 +1193,13 @@ class ReferenceTracker:
       paper's rule keeps it dynamic for ever).
     With the paper's rule, a person needs paired legs and the walking pattern (legs leading in turn)."""
 
-    def __init__(self, params: TrackingParams | None = None, geometry: ScanGeometry | None = None,
-                 learned: bool = False, leg_threshold: float = 0.5) -> None:
+    def __init__(
+        self,
+        params: TrackingParams | None = None,
+        geometry: ScanGeometry | None = None,
+        learned: bool = False,
+        leg_threshold: float = 0.5,
+    ) -> None:
         self.params = params or TrackingParams()
         self.prm = self.params.kernel_vector(leg_threshold)
         self.learned = learned
@@ -1002,7 +1221,7 @@ class ReferenceTracker:
             self._angle_min, self._inc, self._n = geometry.angle_min, geometry.angle_increment, geometry.n_beams
             angles = geometry.angle_min + geometry.angle_increment * np.arange(geometry.n_beams)
             self._cos, self._sin = np.cos(angles), np.sin(angles)
-        self._bg_score: np.ndarray | None = None   # background grid (see _background), made at the first scan
+        self._bg_score: np.ndarray | None = None  # background grid (see _background), made at the first scan
         self._bg_origin = (0.0, 0.0)
         self._on_bg = np.zeros(0, bool)
         # carried beams (carried_update): per beam the range it keeps returning and the travel (m) it was seen
@@ -1011,11 +1230,12 @@ class ReferenceTracker:
         self.carry_seen = np.zeros(self._n)
         self.carry_away = np.zeros(self._n)
         self._carry_pose: tuple[float, float] | None = None
-        self._ranges: np.ndarray | None = None   # this scan's, for the carried beams
+        self._ranges: np.ndarray | None = None  # this scan's, for the carried beams
 
     # ---------------------------------------------------------------------------------------- step
-    def step(self, stamp_ns: int, meas: Measurements, ranges: np.ndarray | None = None,
-             pose: np.ndarray | None = None) -> np.ndarray:
+    def step(
+        self, stamp_ns: int, meas: Measurements, ranges: np.ndarray | None = None, pose: np.ndarray | None = None
+    ) -> np.ndarray:
         """Advance to the scan at `stamp_ns` (ns) with its measurements `meas` (sensor frame), its ranges
         (m, for the occlusion test, the background and the carried beams; None: no missed track counts as
         occluded) and the sensor's world pose (x, y in m, theta in rad) when tracking in the world frame.
@@ -1028,8 +1248,9 @@ class ReferenceTracker:
         t = self.tracks
         group = kind_groups(t.votes, t.mobility, t.person)
         self._compat_row = np.where(t.confirmed, group, _ANY)
-        kalman_predict(t.x, t.P, dt, np.where((group == 0) | (group == _LONE_LEG), p.person_process_noise,
-                                              p.process_noise))
+        kalman_predict(
+            t.x, t.P, dt, np.where((group == 0) | (group == _LONE_LEG), p.person_process_noise, p.process_noise)
+        )
         meas, self._has_prob = with_candidates(meas)
         m = moved(meas, self.pose)
         self._carried_update(ranges)
@@ -1040,7 +1261,7 @@ class ReferenceTracker:
         self._update(t, m, rows, cols)
         rows2, cols2 = self._reacquire(t, m, rows, cols, stamp_ns)
         if len(rows2):
-            keep = ~np.isin(cols, cols2)   # measurements a lost track took back from tentative tracks
+            keep = ~np.isin(cols, cols2)  # measurements a lost track took back from tentative tracks
             self._superseded = rows[~keep]  # those tentative tracks were started on it: they go
             rows, cols = np.concatenate([rows[keep], rows2]), np.concatenate([cols[keep], cols2])
         self._leg_evidence(t, m, rows, cols)
@@ -1066,11 +1287,18 @@ class ReferenceTracker:
         if ranges is None or self.pose is None or self.geometry is None or len(ranges) != self._n:
             return
         px, py = float(self.pose[0]), float(self.pose[1])
-        step = 0.0 if self._carry_pose is None else float(np.hypot(px - self._carry_pose[0],
-                                                                   py - self._carry_pose[1]))
+        step = 0.0 if self._carry_pose is None else float(np.hypot(px - self._carry_pose[0], py - self._carry_pose[1]))
         self._carry_pose = (px, py)
-        carried_update(self.carry_ref, self.carry_seen, self.carry_away, self._ranges, self.geometry.range_min,
-                       self.geometry.range_max, p.carried_radius, step)
+        carried_update(
+            self.carry_ref,
+            self.carry_seen,
+            self.carry_away,
+            self._ranges,
+            self.geometry.range_min,
+            self.geometry.range_max,
+            p.carried_radius,
+            step,
+        )
 
     def _background(self, ranges: np.ndarray | None) -> None:
         """Add the scan's returns but the people's (within person_radius of a person the detector keeps
@@ -1097,11 +1325,33 @@ class ReferenceTracker:
         sure = sure_people(t.person)
         # cells hit for four background times are walls: seen-through tests on them every fourth scan suffice
         self._bg_count = background_update(
-            self._bg_score, self._bg_mark, self._bg_active, self._bg_count, self._bg_scan,
-            np.ascontiguousarray(ranges, np.float32), self._cos, self._sin, self._angle_min, self._inc, self._bg_lo,
-            self._bg_hi, px, py, pc, ps, max(self._dt, 0.0), self._bg_origin[0], self._bg_origin[1],
-            p.background_cell, self._bg_n, p.occlusion_margin, 4.0 * p.background_time,
-            np.ascontiguousarray(t.x[sure, 0]), np.ascontiguousarray(t.x[sure, 1]), p.person_radius)
+            self._bg_score,
+            self._bg_mark,
+            self._bg_active,
+            self._bg_count,
+            self._bg_scan,
+            np.ascontiguousarray(ranges, np.float32),
+            self._cos,
+            self._sin,
+            self._angle_min,
+            self._inc,
+            self._bg_lo,
+            self._bg_hi,
+            px,
+            py,
+            pc,
+            ps,
+            max(self._dt, 0.0),
+            self._bg_origin[0],
+            self._bg_origin[1],
+            p.background_cell,
+            self._bg_n,
+            p.occlusion_margin,
+            4.0 * p.background_time,
+            np.ascontiguousarray(t.x[sure, 0]),
+            np.ascontiguousarray(t.x[sure, 1]),
+            p.person_radius,
+        )
 
     def _hit_background(self, t: TrackArrays, m: Measurements, rows: np.ndarray, cols: np.ndarray) -> None:
         """Which tracks take a measurement on the background this scan (their motion does not count: the
@@ -1110,8 +1360,22 @@ class ReferenceTracker:
             self._on_bg = np.zeros(len(t), bool)
             return
         px, py, _, _ = self._sensor()
-        self._on_bg = _kernels.tracks_on_background(self._bg_score, m.x, m.y, m.size, m.kind, rows, cols, len(t), px,
-                                                    py, self._bg_origin[0], self._bg_origin[1], self._bg_n, self.prm)
+        self._on_bg = _kernels.tracks_on_background(
+            self._bg_score,
+            m.x,
+            m.y,
+            m.size,
+            m.kind,
+            rows,
+            cols,
+            len(t),
+            px,
+            py,
+            self._bg_origin[0],
+            self._bg_origin[1],
+            self._bg_n,
+            self.prm,
+        )
 
     def _carried(self, raw: np.ndarray) -> np.ndarray:
         """Which leg candidates (tracking frame) lie on carried beams (carried_beams); none without a pose or
@@ -1120,8 +1384,19 @@ class ReferenceTracker:
         if self.pose is None or self.geometry is None or self._ranges is None or len(self._ranges) != self._n:
             return np.zeros(len(raw), bool)
         sx, sy = self._to_sensor(raw[:, 0], raw[:, 1])
-        return carried_beams(sx, sy, raw[:, 2], self._ranges, self.carry_ref, self.carry_seen, self.carry_away,
-                             self._angle_min, self._inc, p.carried_travel, p.carried_radius)
+        return carried_beams(
+            sx,
+            sy,
+            raw[:, 2],
+            self._ranges,
+            self.carry_ref,
+            self.carry_seen,
+            self.carry_away,
+            self._angle_min,
+            self._inc,
+            p.carried_travel,
+            p.carried_radius,
+        )
 
     def _off_background(self, t: TrackArrays, m: Measurements) -> Measurements:
         """The leg candidates on the background (a place hit for a long time: a wall, a bench, a column), unless
@@ -1135,8 +1410,18 @@ class ReferenceTracker:
             return m
         px, py, _, _ = self._sensor()
         if self._bg_score is not None:
-            bg = _kernels.on_background(self._bg_score, raw[:, 0].copy(), raw[:, 1].copy(), raw[:, 2].copy(), px,
-                                        py, self._bg_origin[0], self._bg_origin[1], self._bg_n, self.prm)
+            bg = _kernels.on_background(
+                self._bg_score,
+                raw[:, 0].copy(),
+                raw[:, 1].copy(),
+                raw[:, 2].copy(),
+                px,
+                py,
+                self._bg_origin[0],
+                self._bg_origin[1],
+                self._bg_n,
+                self.prm,
+            )
         else:
             bg = np.zeros(len(raw), bool)
         sure = sure_people(t.person)
@@ -1152,7 +1437,7 @@ class ReferenceTracker:
         blob = bg & strong
         other = np.flatnonzero(m.kind > KIND_LEG)
         n_first = len(lx) + int(blob.sum())
-        where = np.full(len(m), -1, np.int64)   # an other-kind measurement's new index
+        where = np.full(len(m), -1, np.int64)  # an other-kind measurement's new index
         where[other] = n_first + np.arange(len(other))
         prob = np.concatenate([np.zeros(len(lx)), np.full(int(blob.sum()), NOT_A_LEG), m.prob[other]])
         covered = raw[:, 4].astype(np.int64)
@@ -1162,11 +1447,15 @@ class ReferenceTracker:
         out = raw[~bg].copy()
         c = covered[~bg]
         out[:, 4] = np.where(c >= 0, where[np.maximum(c, 0)], out[:, 4])
-        return Measurements(np.concatenate([lx, raw[blob, 0], m.x[other]]),
-                            np.concatenate([ly, raw[blob, 1], m.y[other]]),
-                            np.concatenate([ls, raw[blob, 2], m.size[other]]),
-                            np.concatenate([kind, np.full(int(blob.sum()), KIND_BLOB, np.int64), m.kind[other]]),
-                            np.concatenate([legs, np.full((int(blob.sum()), 4), np.nan), m.legs[other]]), out, prob)
+        return Measurements(
+            np.concatenate([lx, raw[blob, 0], m.x[other]]),
+            np.concatenate([ly, raw[blob, 1], m.y[other]]),
+            np.concatenate([ls, raw[blob, 2], m.size[other]]),
+            np.concatenate([kind, np.full(int(blob.sum()), KIND_BLOB, np.int64), m.kind[other]]),
+            np.concatenate([legs, np.full((int(blob.sum()), 4), np.nan), m.legs[other]]),
+            out,
+            prob,
+        )
 
     def _legs(self, t: TrackArrays, m: Measurements) -> tuple[Measurements, np.ndarray]:
         """Let tracks that are legs or people take up to two leg candidates each near their prediction
@@ -1179,14 +1468,28 @@ class ReferenceTracker:
         raw = m.raw_legs
         if not len(t) or not len(raw):
             return m, none
-        leggy = leggy_tracks(t.votes, t.cls, t.confirmed, t.person, t.leg_hits, t.leg_score, p.person_votes,
-                             p.person_maintain)
+        leggy = leggy_tracks(
+            t.votes, t.cls, t.confirmed, t.person, t.leg_hits, t.leg_score, p.person_votes, p.person_maintain
+        )
         if not len(leggy):
             return m, none
         c = raw[(raw[:, 4] < 0) | (raw[:, 3] >= p.person_maintain)]
         owner, x, y, size, kind, legs, other = leg_stage_measurements(
-            t.x[leggy, 0], t.x[leggy, 1], c[:, 0], c[:, 1], c[:, 2], c[:, 4] < 0, c[:, 4].astype(np.int64), m.x,
-            m.y, m.size, m.kind, m.legs, p.leg_reach, p.stride_max)
+            t.x[leggy, 0],
+            t.x[leggy, 1],
+            c[:, 0],
+            c[:, 1],
+            c[:, 2],
+            c[:, 4] < 0,
+            c[:, 4].astype(np.int64),
+            m.x,
+            m.y,
+            m.size,
+            m.kind,
+            m.legs,
+            p.leg_reach,
+            p.stride_max,
+        )
         if not len(owner):
             return m, none
         prob = np.concatenate([np.zeros(len(x) - len(other)), m.prob[other]])
@@ -1199,9 +1502,19 @@ class ReferenceTracker:
         cols0 = np.arange(n0, dtype=np.int64)
         if not len(t) or len(m) == n0:
             return rows0, cols0
-        d2, allowed = gated_costs(t.x, t.P, m.x, m.y, m.kind, p.measurement_noise,
-                                               p.leg_measurement_noise, p.gate, p.max_gate_distance,
-                                               _COMPAT_LEARNED if self.learned else _COMPAT, self._compat_row)
+        d2, allowed = gated_costs(
+            t.x,
+            t.P,
+            m.x,
+            m.y,
+            m.kind,
+            p.measurement_noise,
+            p.leg_measurement_noise,
+            p.gate,
+            p.max_gate_distance,
+            _COMPAT_LEARNED if self.learned else _COMPAT,
+            self._compat_row,
+        )
         if n0:
             allowed[rows0, :] = False
             allowed[:, :n0] = False
@@ -1211,12 +1524,32 @@ class ReferenceTracker:
     def _update(self, t: TrackArrays, m: Measurements, rows: np.ndarray, cols: np.ndarray) -> None:
         p = self.params
         moving = t.moving_time >= p.walking_after
-        apply_updates(t.x, t.P, t.last, t.hit, t.votes, t.size, t.lead_left, t.lead_right, moving, rows,
-                               m.x[cols], m.y[cols], m.kind[cols], m.size[cols], m.legs[cols], p.measurement_noise,
-                               p.leg_measurement_noise, p.moving_speed, p.step_min, p.step_max)
+        apply_updates(
+            t.x,
+            t.P,
+            t.last,
+            t.hit,
+            t.votes,
+            t.size,
+            t.lead_left,
+            t.lead_right,
+            moving,
+            rows,
+            m.x[cols],
+            m.y[cols],
+            m.kind[cols],
+            m.size[cols],
+            m.legs[cols],
+            p.measurement_noise,
+            p.leg_measurement_noise,
+            p.moving_speed,
+            p.step_min,
+            p.step_max,
+        )
 
-    def _reacquire(self, t: TrackArrays, m: Measurements, taken_by: np.ndarray, taken: np.ndarray,
-                   stamp_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    def _reacquire(
+        self, t: TrackArrays, m: Measurements, taken_by: np.ndarray, taken: np.ndarray, stamp_ns: int
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Give a confirmed track lost while occluded or out of view the nearest free measurement it could
         have reached since its last hit (at `reacquire_speed`), restarting its filter there; a prediction at
         constant velocity does not follow someone who turned while hidden."""
@@ -1231,15 +1564,17 @@ class ReferenceTracker:
         # (a mover's: a static object's track does not jump onto a new one)
         tentative = np.zeros(len(m), bool)
         tentative[taken[~t.confirmed[taken_by]]] = True
-        near = (t.hit & t.confirmed)[:, None] & (np.hypot(m.x[None, :] - t.x[:, 0:1], m.y[None, :] - t.x[:, 1:2])
-                                 <= p.leg_beside)
+        near = (t.hit & t.confirmed)[:, None] & (
+            np.hypot(m.x[None, :] - t.x[:, 0:1], m.y[None, :] - t.x[:, 1:2]) <= p.leg_beside
+        )
         free &= ~near.any(axis=0)
         cand = np.flatnonzero(free | (tentative & ~near.any(axis=0)))
         if not len(cand):
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         dist = np.hypot(m.x[cand][None, :] - t.last[lost, 0:1], m.y[cand][None, :] - t.last[lost, 1:2])
-        reach = np.minimum(p.reacquire_speed * (stamp_ns - t.last_hit_ns[lost]) * 1e-9 + p.max_gate_distance,
-                           p.reacquire_distance)
+        reach = np.minimum(
+            p.reacquire_speed * (stamp_ns - t.last_hit_ns[lost]) * 1e-9 + p.max_gate_distance, p.reacquire_distance
+        )
         allowed = (dist <= reach[:, None]) & self._reacq[self._compat_row[lost]][:, m.kind[cand]]
         allowed &= free[cand][None, :] | (t.mobility[lost] == MOBILITY_DYNAMIC)[:, None]
         r, c = gnn(dist, allowed)
@@ -1273,15 +1608,39 @@ class ReferenceTracker:
         if ranges is None or self.geometry is None or t.hit.all():
             return
         sx, sy = self._to_sensor(t.x[:, 0], t.x[:, 1])
-        t.occluded = _kernels.occlusion(np.ascontiguousarray(sx), np.ascontiguousarray(sy), t.size, ~t.hit,
-                                        np.ascontiguousarray(ranges, np.float32), self._angle_min, self._inc,
-                                        self.geometry.range_max, self.prm)
+        t.occluded = _kernels.occlusion(
+            np.ascontiguousarray(sx),
+            np.ascontiguousarray(sy),
+            t.size,
+            ~t.hit,
+            np.ascontiguousarray(ranges, np.float32),
+            self._angle_min,
+            self._inc,
+            self.geometry.range_max,
+            self.prm,
+        )
 
     def _life_cycle(self, t: TrackArrays, stamp_ns: int) -> None:
         p = self.params
-        dead = life_cycle(t.hit, t.age, t.hits, t.misses, t.last_hit_ns, t.history, t.confirmed, t.occluded,
-                          t.person, stamp_ns, self._mask, self._popcount, p.confirm_hits, p.delete_after,
-                          p.delete_after_occluded, p.tentative_delete_after, p.person_coast)
+        dead = life_cycle(
+            t.hit,
+            t.age,
+            t.hits,
+            t.misses,
+            t.last_hit_ns,
+            t.history,
+            t.confirmed,
+            t.occluded,
+            t.person,
+            stamp_ns,
+            self._mask,
+            self._popcount,
+            p.confirm_hits,
+            p.delete_after,
+            p.delete_after_occluded,
+            p.tentative_delete_after,
+            p.person_coast,
+        )
         dead |= self._duplicates(t)
         if len(self._superseded):
             dead[self._superseded] = True
@@ -1297,12 +1656,24 @@ class ReferenceTracker:
         and with a leg detector the spread of their velocities): one person's two legs must not keep two tracks
         alive. Rank: a person before anything else, then a dynamic track, then more hits (a person walking past a
         bench keeps its track; the track on the bench's pieces its passing uncovers goes)."""
-        victim, candidate, rank = duplicate_ranks(t.votes, t.hits, t.confirmed, t.mobility, t.cls, t.leg_hits,
-                                                  t.leg_score, self.params.person_maintain)
+        victim, candidate, rank = duplicate_ranks(
+            t.votes, t.hits, t.confirmed, t.mobility, t.cls, t.leg_hits, t.leg_score, self.params.person_maintain
+        )
         x = np.ascontiguousarray(t.x.T)
         vvar = t.P[:, 2, 2] + t.P[:, 3, 3] if self.learned else np.zeros(len(t))
-        return duplicates(x[0], x[1], x[2], x[3], vvar, victim, candidate, t.confirmed, rank,
-                          self.params.merge_distance, self.params.merge_speed)
+        return duplicates(
+            x[0],
+            x[1],
+            x[2],
+            x[3],
+            vvar,
+            victim,
+            candidate,
+            t.confirmed,
+            rank,
+            self.params.merge_distance,
+            self.params.merge_speed,
+        )
 
     def _spawn(self, m: Measurements, rows: np.ndarray, cols: np.ndarray, stamp_ns: int) -> None:
         """Start tentative tracks on measurements no track took, except small ones (a leg, a blob, or what
@@ -1353,29 +1724,46 @@ class ReferenceTracker:
         speed = np.hypot(t.x[:, 2], t.x[:, 3])
         # motion must be sustained: segment ends that come and go make a static object's centre jump
         on_bg = np.zeros(len(t), bool)
-        on_bg[:len(self._on_bg)] = self._on_bg   # tracks spawned this scan come after
+        on_bg[: len(self._on_bg)] = self._on_bg  # tracks spawned this scan come after
         t.moving_time = np.where(t.hit & ~on_bg & (speed > p.moving_speed), t.moving_time + self._dt, 0.0)
         # a dynamic track still for still_time s stopped: static again, and must move moving_distance anew
         t.still_time = np.where(speed > p.moving_speed, 0.0, t.still_time + self._dt)
-        stopped = (t.mobility == MOBILITY_DYNAMIC) & (t.still_time >= p.still_time) & self.learned   # paper: for ever
+        stopped = (t.mobility == MOBILITY_DYNAMIC) & (t.still_time >= p.still_time) & self.learned  # paper: for ever
         t.mobility[stopped] = MOBILITY_STATIC
         t.first[stopped] = t.x[stopped, :2]
         speed = np.where(t.moving_time >= p.moving_time, speed, 0.0)
         moved = np.hypot(t.x[:, 0] - t.first[:, 0], t.x[:, 1] - t.first[:, 1])
         age_s = (self.stamp_ns - t.born_ns) * 1e-9
-        t.cls, t.mobility = classify_tracks(t.votes, t.lead_left & t.lead_right, t.mobility, age_s, t.size, moved,
-                                              speed, t.confirmed, p.person_votes, p.d_max, p.undefined_window,
-                                              p.moving_distance, p.moving_speed)
+        t.cls, t.mobility = classify_tracks(
+            t.votes,
+            t.lead_left & t.lead_right,
+            t.mobility,
+            age_s,
+            t.size,
+            moved,
+            speed,
+            t.confirmed,
+            p.person_votes,
+            p.d_max,
+            p.undefined_window,
+            p.moving_distance,
+            p.moving_speed,
+        )
         if self.learned:
             # the person life cycle: set once from paired legs, kept until the evidence falls below
             # person_maintain; the rest by the shape of its hits
             shape = t.votes[:, [KIND_CIRCLE, KIND_RECT, KIND_BLOB]]
-            by_shape = np.array([CLASS_CIRCLE_OBJECT, CLASS_RECTANGULAR_OBJECT, CLASS_UNKNOWN],
-                                np.uint8)[np.argmax(shape, axis=1)]
+            by_shape = np.array([CLASS_CIRCLE_OBJECT, CLASS_RECTANGULAR_OBJECT, CLASS_UNKNOWN], np.uint8)[
+                np.argmax(shape, axis=1)
+            ]
             by_shape[shape.sum(axis=1) == 0] = CLASS_UNKNOWN
             drop = t.person & (t.leg_score < p.person_maintain)
-            promote = (~t.person & t.confirmed & (t.leg_score >= p.person_evidence)
-                       & (t.votes[:, KIND_PERSON] >= p.person_pairs))
+            promote = (
+                ~t.person
+                & t.confirmed
+                & (t.leg_score >= p.person_evidence)
+                & (t.votes[:, KIND_PERSON] >= p.person_pairs)
+            )
             t.person = (t.person & ~drop) | promote
             t.cls = np.where(t.person, np.uint8(CLASS_PERSON), by_shape).astype(np.uint8)
 

@@ -92,8 +92,9 @@ def run_outputs(out_dir: Path, *extra: str) -> dict[str, Path]:
     from datmo_cli.cli import cli
 
     logs = sample_logs()
-    result = CliRunner().invoke(cli, ["run", *map(str, logs), "-o", str(out_dir), "--force", "--jobs", "1",
-                                      "--no-report", "-q", *extra])
+    result = CliRunner().invoke(
+        cli, ["run", *map(str, logs), "-o", str(out_dir), "--force", "--jobs", "1", "--no-report", "-q", *extra]
+    )
     if result.exit_code != 0:
         raise RuntimeError(f"datmo run failed ({result.exit_code}): {result.output}")
     return {log.name: out_dir / log.name for log in logs}

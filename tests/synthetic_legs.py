@@ -54,22 +54,37 @@ def scene(n_scans: int, seed: int = 0, people: bool = True) -> tuple[np.ndarray,
 def _scan_msg(store, t_ns: int, ranges: np.ndarray):
     T = store.types
     stamp = T["builtin_interfaces/msg/Time"](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
-    header = (T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id="laser") if store is STORE1
-              else T["std_msgs/msg/Header"](stamp=stamp, frame_id="laser"))
-    return T[SCAN](header=header, angle_min=ANGLE_MIN, angle_max=ANGLE_MIN + ANGLE_INC * (BEAMS - 1),
-                   angle_increment=ANGLE_INC, time_increment=0.0, scan_time=0.1, range_min=0.02, range_max=8.0,
-                   ranges=np.asarray(ranges, np.float32), intensities=np.zeros(0, np.float32))
+    header = (
+        T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id="laser")
+        if store is STORE1
+        else T["std_msgs/msg/Header"](stamp=stamp, frame_id="laser")
+    )
+    return T[SCAN](
+        header=header,
+        angle_min=ANGLE_MIN,
+        angle_max=ANGLE_MIN + ANGLE_INC * (BEAMS - 1),
+        angle_increment=ANGLE_INC,
+        time_increment=0.0,
+        scan_time=0.1,
+        range_min=0.02,
+        range_max=8.0,
+        ranges=np.asarray(ranges, np.float32),
+        intensities=np.zeros(0, np.float32),
+    )
 
 
 def _poses_msg(store, xy: np.ndarray):
     T = store.types
-    header = (T["std_msgs/msg/Header"](seq=0, stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0),
-                                       frame_id="laser") if store is STORE1
-              else T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0),
-                                            frame_id="laser"))
+    header = (
+        T["std_msgs/msg/Header"](seq=0, stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="laser")
+        if store is STORE1
+        else T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="laser")
+    )
     q = T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
-    poses = [T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0),
-                                         orientation=q) for x, y in xy]
+    poses = [
+        T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0), orientation=q)
+        for x, y in xy
+    ]
     return T[POSES](header=header, poses=poses)
 
 
@@ -83,8 +98,15 @@ def _messages(ranges: np.ndarray, legs: list[np.ndarray] | None, scan_topic: str
     return out
 
 
-def write_bag(path: Path, ranges: np.ndarray, legs: list[np.ndarray] | None = None, *, scan_topic: str = "/scan",
-              labels_topic: str = "/leg_cluster_positions", extra_scan_topics: tuple[str, ...] = ()) -> Path:
+def write_bag(
+    path: Path,
+    ranges: np.ndarray,
+    legs: list[np.ndarray] | None = None,
+    *,
+    scan_topic: str = "/scan",
+    labels_topic: str = "/leg_cluster_positions",
+    extra_scan_topics: tuple[str, ...] = (),
+) -> Path:
     """A ROS 1 bag of the scans (and labels, 3 ms after each scan, when given); extra scan topics repeat them."""
     from rosbags.rosbag1 import Writer
 
@@ -101,8 +123,14 @@ def write_bag(path: Path, ranges: np.ndarray, legs: list[np.ndarray] | None = No
     return path
 
 
-def write_mcap(folder: Path, ranges: np.ndarray, legs: list[np.ndarray] | None = None, *, scan_topic: str = "/scan",
-               labels_topic: str = "/leg_cluster_positions") -> Path:
+def write_mcap(
+    folder: Path,
+    ranges: np.ndarray,
+    legs: list[np.ndarray] | None = None,
+    *,
+    scan_topic: str = "/scan",
+    labels_topic: str = "/leg_cluster_positions",
+) -> Path:
     """A single MCAP file (ROS 2 CDR) of the scans and labels, written by rosbags' ROS 2 writer in `folder`."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 

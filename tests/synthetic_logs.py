@@ -29,8 +29,16 @@ T0 = 1_600_000_000_000_000_000
 STAMPS = T0 + np.arange(N, dtype=np.int64) * 200_000_000
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0, 0.0, 0.2, "laser")
 OFFSET = np.array([0.03, 0.04])
-EXPECTED = {"objects": 145, "matches": 133, "misses": 12, "false_positives": 10, "switches": 1,
-            "mota": 1 - 23 / 145, "motp": 0.05, "ignored": 50}
+EXPECTED = {
+    "objects": 145,
+    "matches": 133,
+    "misses": 12,
+    "false_positives": 10,
+    "switches": 1,
+    "mota": 1 - 23 / 145,
+    "motp": 0.05,
+    "ignored": 50,
+}
 
 
 def room_ranges() -> np.ndarray:
@@ -38,8 +46,9 @@ def room_ranges() -> np.ndarray:
     a = GEOM.angles()
     c, s = np.cos(a), np.sin(a)
     with np.errstate(divide="ignore"):
-        candidates = np.stack([np.where(c > 0, 8 / c, np.inf), np.where(s > 0, 4 / s, np.inf),
-                               np.where(s < 0, -4 / s, np.inf)])
+        candidates = np.stack(
+            [np.where(c > 0, 8 / c, np.inf), np.where(s > 0, 4 / s, np.inf), np.where(s < 0, -4 / s, np.inf)]
+        )
     r = np.minimum(candidates.min(0), 7.99).astype(np.float32)
     return np.tile(r, (N, 1))
 
@@ -119,27 +128,51 @@ def landmarks(k: int) -> np.ndarray:
     return out
 
 
-def write(path, *, with_tracks: bool = True, with_truth: bool = True, with_features: bool = True,
-          drop_scans: tuple[int, ...] = ()) -> None:
+def write(
+    path,
+    *,
+    with_tracks: bool = True,
+    with_truth: bool = True,
+    with_features: bool = True,
+    drop_scans: tuple[int, ...] = (),
+) -> None:
     """Write the synthetic processed log to `path` (optionally without some channels or some scans)."""
     keep = np.array([k for k in range(N) if k not in drop_scans])
     run = ScanRun(STAMPS[keep], room_ranges()[keep], GEOM)
-    with mcapio.LogWriter(path, provenance=mcapio.Provenance("track", {"gate_m": 1.5, "c0": 0.05},
-                                                            command_line="datmo track in.mcap -o x")) as w:
+    with mcapio.LogWriter(
+        path,
+        provenance=mcapio.Provenance("track", {"gate_m": 1.5, "c0": 0.05}, command_line="datmo track in.mcap -o x"),
+    ) as w:
         w.write_scans(run)
         for k in keep.tolist():
             s = int(STAMPS[k])
             if with_truth:
-                w.write(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH,
-                        s, cdr.encode(types.GROUND_TRUTH, {"stamp_ns": s, "frame_id": "laser", "objects": truth(k)}))
+                w.write(
+                    mcapio.TOPIC_GROUND_TRUTH,
+                    types.GROUND_TRUTH,
+                    s,
+                    cdr.encode(types.GROUND_TRUTH, {"stamp_ns": s, "frame_id": "laser", "objects": truth(k)}),
+                )
             if with_features:
-                w.write(mcapio.TOPIC_FEATURES, types.FEATURES, s,
-                        cdr.encode(types.FEATURES, {"stamp_ns": s, "frame_id": "laser", **features(k)}))
-                w.write(mcapio.TOPIC_LANDMARKS, types.LANDMARKS, s,
-                        cdr.encode(types.LANDMARKS, {"stamp_ns": s, "frame_id": "laser", "landmarks": landmarks(k)}))
+                w.write(
+                    mcapio.TOPIC_FEATURES,
+                    types.FEATURES,
+                    s,
+                    cdr.encode(types.FEATURES, {"stamp_ns": s, "frame_id": "laser", **features(k)}),
+                )
+                w.write(
+                    mcapio.TOPIC_LANDMARKS,
+                    types.LANDMARKS,
+                    s,
+                    cdr.encode(types.LANDMARKS, {"stamp_ns": s, "frame_id": "laser", "landmarks": landmarks(k)}),
+                )
             if with_tracks:
-                w.write(mcapio.TOPIC_TRACKS, types.TRACKS, s,
-                        cdr.encode(types.TRACKS, {"stamp_ns": s, "frame_id": "laser", "tracks": tracks(k)}))
+                w.write(
+                    mcapio.TOPIC_TRACKS,
+                    types.TRACKS,
+                    s,
+                    cdr.encode(types.TRACKS, {"stamp_ns": s, "frame_id": "laser", "tracks": tracks(k)}),
+                )
 
 
 def fill_report(report, path) -> None:

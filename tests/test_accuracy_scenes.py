@@ -60,8 +60,10 @@ def hand_made():
     gt, tr = [], []
     for k in range(4):
         gt.append([(1, P, 1.0 + 0.1 * k, 0.5, 0 if k == 3 else 1, 1), (2, P, 2.0, -1.0, 1, 0), WALL])
-        rows = [(7, 1.0 + 0.1 * k, 0.55, P if k < 2 else CLASS_UNKNOWN, D, C if k < 3 else T),
-                (8, 2.05, -1.0, P, S if k < 3 else D, C)]
+        rows = [
+            (7, 1.0 + 0.1 * k, 0.55, P if k < 2 else CLASS_UNKNOWN, D, C if k < 3 else T),
+            (8, 2.05, -1.0, P, S if k < 3 else D, C),
+        ]
         if k:
             rows.append((9, 3.0, 0.1, CLASS_UNKNOWN, D, C))
         if k == 0:
@@ -73,18 +75,18 @@ def hand_made():
 def test_matching_is_one_to_one_within_half_a_metre(hand_made):
     m = A.match(hand_made, lambda g: g["classification"] == CLASS_PERSON)
     walker = np.flatnonzero(hand_made.gt["id"] == 1)
-    assert hand_made.tracks["id"][m[walker[:3]]].tolist() == [7, 7, 7] and m[walker[3]] == -1   # hidden: no match
-    assert (m[hand_made.gt["id"] == 9] == -1).all()                                               # not a target
+    assert hand_made.tracks["id"][m[walker[:3]]].tolist() == [7, 7, 7] and m[walker[3]] == -1  # hidden: no match
+    assert (m[hand_made.gt["id"] == 9] == -1).all()  # not a target
 
 
 def test_person_share_counts_the_frames_in_view(hand_made):
-    assert A.person_share(hand_made, [1]) == pytest.approx(2 / 3)     # person, person, unknown; scan 3 not in view
+    assert A.person_share(hand_made, [1]) == pytest.approx(2 / 3)  # person, person, unknown; scan 3 not in view
     assert A.person_share(hand_made, [2]) == 1.0
     assert A.person_share(hand_made, [5]) is None
 
 
 def test_standing_and_walking_shares(hand_made):
-    assert A.standing_static_person_share(hand_made) == pytest.approx(3 / 4)   # dynamic in scan 3
+    assert A.standing_static_person_share(hand_made) == pytest.approx(3 / 4)  # dynamic in scan 3
     assert A.walking_dynamic_share(hand_made) == 1.0
 
 
@@ -106,8 +108,9 @@ def test_people_mota_and_switches(hand_made):
     # scan 0 (0.7 m from the walker, away from the wall's don't-care region); no switch
     assert m["mota"] == pytest.approx(1 - 2 / 7) and m["switches"] == 0
     assert m["person_minutes"] == pytest.approx(7 * 0.1 / 60)
-    swap = scene_run([[(1, P, 1.0, 0.0, 1, 1)]] * 4, [[(7, 1.0, 0.0, P, D, C)]] * 2 + [[(8, 1.0, 0.0, P, D, C)]] * 2,
-                     period=15.0)
+    swap = scene_run(
+        [[(1, P, 1.0, 0.0, 1, 1)]] * 4, [[(7, 1.0, 0.0, P, D, C)]] * 2 + [[(8, 1.0, 0.0, P, D, C)]] * 2, period=15.0
+    )
     m = A.people_mota(swap)
     assert m["switches"] == 1 and m["switches_per_person_minute"] == pytest.approx(1.0)
 

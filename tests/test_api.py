@@ -26,10 +26,12 @@ def made(tmp_path_factory) -> dict[str, Path]:
     """api.process of patrol (odometry), static and hall (a still scanner, none; people walking in the hall), and
     datmo run's output of patrol."""
     d = tmp_path_factory.mktemp("api")
-    out = {name: api.process(SAMPLES / f"{name}.mcap", d / f"{name}.mcap").path
-           for name in ("patrol", "static", "hall")}
-    result = CliRunner().invoke(cli, ["run", str(SAMPLES / "patrol.mcap"), "-o", str(d / "cli"), "--no-report",
-                                      "--jobs", "1"])
+    out = {
+        name: api.process(SAMPLES / f"{name}.mcap", d / f"{name}.mcap").path for name in ("patrol", "static", "hall")
+    }
+    result = CliRunner().invoke(
+        cli, ["run", str(SAMPLES / "patrol.mcap"), "-o", str(d / "cli"), "--no-report", "--jobs", "1"]
+    )
     assert result.exit_code == 0, result.output
     return out | {"cli": d / "cli" / "patrol.mcap"}
 
@@ -38,7 +40,7 @@ def equal_tables(a: np.ndarray, b: np.ndarray) -> None:
     assert a.dtype == b.dtype and len(a) == len(b)
     for name in a.dtype.names:
         if a.dtype[name].kind == "f":
-            np.testing.assert_array_equal(a[name], b[name], err_msg=name)   # NaN where NaN
+            np.testing.assert_array_equal(a[name], b[name], err_msg=name)  # NaN where NaN
         else:
             assert a[name].tolist() == b[name].tolist(), name
 
@@ -47,7 +49,7 @@ def test_process_writes_what_datmo_run_writes(made):
     for topic in (mcapio.TOPIC_TRACKS, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS):
         ours, theirs = mcapio.read_messages(made["patrol"], topic), mcapio.read_messages(made["cli"], topic)
         assert ours[0].tolist() == theirs[0].tolist() and ours[1] == theirs[1], topic
-    for path in (made["patrol"], made["cli"]):   # both lean: no markers unless asked
+    for path in (made["patrol"], made["cli"]):  # both lean: no markers unless asked
         assert mcapio.TOPIC_MARKERS_TRACKS not in mcapio.summary(path).topics()
 
 
@@ -70,7 +72,7 @@ def test_the_tables_are_the_exports_rows(made, tmp_path):
         want = [v for v, r in zip(table[name], rows, strict=True) if not r]
         got = features[name].tolist()
         assert [None if isinstance(v, float) and np.isnan(v) else v for v in got] == want, name
-    assert np.isnan(api.open_log(made["static"]).tracks()["world_x_m"]).all()   # no odometry: NaN
+    assert np.isnan(api.open_log(made["static"]).tracks()["world_x_m"]).all()  # no odometry: NaN
 
 
 def test_dataframes_hold_the_tables(made):
@@ -84,8 +86,11 @@ def test_dataframes_hold_the_tables(made):
 
 def test_dataframes_without_pandas_name_the_extra(made, monkeypatch):
     monkeypatch.setitem(sys.modules, "pandas", None)
-    with pytest.raises(MissingExtraError, match=r"^DataFrames needs pandas, which is not installed: pip install "
-                                                r"'datmo-cli\[pandas\]'$"):
+    with pytest.raises(
+        MissingExtraError,
+        match=r"^DataFrames needs pandas, which is not installed: pip install "
+        r"'datmo-cli\[pandas\]'$",
+    ):
         api.open_log(made["patrol"]).tracks_dataframe()
 
 
@@ -112,8 +117,9 @@ def live(log: api.Log, poses: bool) -> np.ndarray:
     """The tracks a LiveTracker gives for the scans of `log`, fed one at a time."""
     scans = log.read_scans()
     g = scans.geometry
-    tracker = api.LiveTracker(g.angle_min, g.angle_increment, g.n_beams, g.range_min, g.range_max,
-                              frame_id=g.frame_id, name=log.name)
+    tracker = api.LiveTracker(
+        g.angle_min, g.angle_increment, g.n_beams, g.range_min, g.range_max, frame_id=g.frame_id, name=log.name
+    )
     given = log.poses() if poses else [None] * len(scans)
     return np.concatenate([tracker.update(r, s, p) for r, s, p in zip(scans.ranges, scans.stamps, given, strict=True)])
 
@@ -135,7 +141,8 @@ def test_a_live_tracker_refuses_bad_scans():
         t.update(np.full(200, 3.0), 2_000)
     with pytest.raises(InputError, match="^front: scan 1 stamped 1000 ns, not after the previous 1000$"):
         t.update(np.full(201, 3.0), 1_000)
-    with pytest.raises(InputError, match="^front: scan 1 has a pose; the first had none: give a pose with every "
-                                         "scan or with none$"):
+    with pytest.raises(
+        InputError, match="^front: scan 1 has a pose; the first had none: give a pose with every scan or with none$"
+    ):
         t.update(np.full(201, 3.0), 2_000, pose=(0.0, 0.0, 0.0))
     assert t.update(np.full(201, 3.0), 2_000).dtype == api.dtype(api.TRACK_COLUMNS) and t.scans == 2

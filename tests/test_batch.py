@@ -18,16 +18,29 @@ from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 
 
-def fake_process(src, out, *, force=False, config=None, markers=False, covariance=False, bag_dir=False,
-                 command_line=None, progress=None, input_name=None, report=None):
+def fake_process(
+    src,
+    out,
+    *,
+    force=False,
+    config=None,
+    markers=False,
+    covariance=False,
+    bag_dir=False,
+    command_line=None,
+    progress=None,
+    input_name=None,
+    report=None,
+):
     src = Path(src)
     if "bad" in src.name:
         raise InputError(f"{src}: not an MCAP file (bad magic bytes)")
     if "stop" in src.name:
         raise KeyboardInterrupt
-    if "boxed" in src.name:     # how CPython reports a Ctrl-C whose handler ran while a numba call returned
-        raise SystemError("CPUDispatcher(<function track_block>) returned a result with an exception set") \
-            from KeyboardInterrupt()
+    if "boxed" in src.name:  # how CPython reports a Ctrl-C whose handler ran while a numba call returned
+        raise SystemError(
+            "CPUDispatcher(<function track_block>) returned a result with an exception set"
+        ) from KeyboardInterrupt()
     if Path(out).exists():
         if not force:
             raise InputError(f"{out}: exists; use --force to overwrite it")
@@ -47,7 +60,7 @@ CALLS: list[str] = []
 @pytest.fixture
 def logs(tmp_path, monkeypatch):
     monkeypatch.setattr(pipeline, "process_file", fake_process)
-    monkeypatch.setattr(pipeline, "warm_up", lambda: None)   # the stand-in needs no kernels
+    monkeypatch.setattr(pipeline, "warm_up", lambda: None)  # the stand-in needs no kernels
     CALLS.clear()
     d = tmp_path / "logs"
     (d / "site" / "day2").mkdir(parents=True)
@@ -67,11 +80,19 @@ def manifest(out: Path) -> list[dict]:
 def test_discover_files_folders_globs(logs, tmp_path):
     out = str(tmp_path / "out")
     pairs = batch.discover([str(logs)], out)
-    assert [Path(s).relative_to(logs).as_posix() for s, _ in pairs] == ["a.mcap", "b.mcap", "site/c.mcap",
-                                                                       "site/day2/d.mcap"]
-    assert [Path(o).relative_to(out).as_posix() for _, o in pairs] == ["a.mcap", "b.mcap", "site/c.mcap",
-                                                                      "site/day2/d.mcap"]
-    globbed = batch.discover([f"{logs}/**/*.mcap", str(logs / "a.mcap")], out)   # repeats are dropped
+    assert [Path(s).relative_to(logs).as_posix() for s, _ in pairs] == [
+        "a.mcap",
+        "b.mcap",
+        "site/c.mcap",
+        "site/day2/d.mcap",
+    ]
+    assert [Path(o).relative_to(out).as_posix() for _, o in pairs] == [
+        "a.mcap",
+        "b.mcap",
+        "site/c.mcap",
+        "site/day2/d.mcap",
+    ]
+    globbed = batch.discover([f"{logs}/**/*.mcap", str(logs / "a.mcap")], out)  # repeats are dropped
     assert [Path(o).name for _, o in globbed] == ["a.mcap", "b.mcap", "c.mcap", "d.mcap"]
     assert all(os.path.isabs(s) for s, _ in globbed)
     with pytest.raises(InputError, match=r"nothing\*\.mcap: no \.mcap log matches"):
@@ -86,7 +107,7 @@ def test_a_folder_without_logs_and_the_output_folder_left_out(tmp_path, logs):
     empty.mkdir()
     with pytest.raises(InputError, match=f"{empty}: no .mcap logs in this folder"):
         batch.discover([str(empty)], str(tmp_path / "out"))
-    inside = logs / "out"          # outputs written inside the searched folder are not inputs next time
+    inside = logs / "out"  # outputs written inside the searched folder are not inputs next time
     inside.mkdir()
     (inside / "a.mcap").write_bytes(b"x")
     assert not any("/out/" in s for s, _ in batch.discover([str(logs)], str(inside)))
@@ -97,23 +118,23 @@ def test_manifest_tolerates_a_torn_last_line_and_compacts(tmp_path):
     m.append({"input": "a", "status": "failed"})
     m.append({"input": "a", "status": "done"})
     with open(tmp_path / "manifest.jsonl", "a") as f:
-        f.write('{"input": "b", "status": "do')          # a crash mid-write
+        f.write('{"input": "b", "status": "do')  # a crash mid-write
     assert m.latest() == {"a": {"input": "a", "status": "done"}}
     m.compact()
     assert (tmp_path / "manifest.jsonl").read_text() == '{"input": "a", "status": "done"}\n'
 
 
-DEFAULT_PARAMS_HASH = "c7ad10d0d1a137e6"   # the defaults' hash since the person life cycle changed [track]
+DEFAULT_PARAMS_HASH = "c7ad10d0d1a137e6"  # the defaults' hash since the person life cycle changed [track]
 
 
 def test_params_hash_follows_the_parameters():
     from datmo_cli.config import DatmoConfig
 
     default = batch.params_hash()
-    assert default == DEFAULT_PARAMS_HASH   # the manifests written before keep skipping default runs
-    assert batch.params_hash(DatmoConfig(), batch.RunOptions(bag_dir=True)) == default   # same outputs
+    assert default == DEFAULT_PARAMS_HASH  # the manifests written before keep skipping default runs
+    assert batch.params_hash(DatmoConfig(), batch.RunOptions(bag_dir=True)) == default  # same outputs
     assert batch.params_hash(DatmoConfig().replace(track={"gate": 10.0})) != default
-    assert batch.params_hash(None, batch.RunOptions(markers=False, covariance=False)) == default   # lean outputs
+    assert batch.params_hash(None, batch.RunOptions(markers=False, covariance=False)) == default  # lean outputs
     assert batch.params_hash(None, batch.RunOptions(markers=True)) != default
     assert batch.params_hash(None, batch.RunOptions(covariance=True)) != default
     assert batch.params_hash(None, batch.RunOptions(topic="/front")) != default
@@ -135,23 +156,32 @@ def test_manifest_lines_then_resume_does_only_what_is_missing(logs, tmp_path):
     first = run(logs / "a.mcap", logs / "bad.mcap", logs / "b.mcap", "-o", out, "--jobs", "1")
     assert first.exit_code == 1, first.output
     lines = manifest(out)
-    assert [(Path(r["input"]).name, r["status"]) for r in lines] == [("a.mcap", "done"), ("bad.mcap", "failed"),
-                                                                    ("b.mcap", "done")]
+    assert [(Path(r["input"]).name, r["status"]) for r in lines] == [
+        ("a.mcap", "done"),
+        ("bad.mcap", "failed"),
+        ("b.mcap", "done"),
+    ]
     a = lines[0]
     assert a["input_sha256"] == batch.input_sha256(str(logs / "a.mcap")) and a["scans"] == 50
     assert a["output"] == str(out / "a.mcap") and a["datmo_version"] and len(a["params_hash"]) == 16
-    assert a["tracks"] == {"confirmed": 6, "person": 3, "circle_object": 1, "rectangular_object": 2, "unknown": 0,
-                           "dynamic": 5}
+    assert a["tracks"] == {
+        "confirmed": 6,
+        "person": 3,
+        "circle_object": 1,
+        "rectangular_object": 2,
+        "unknown": 0,
+        "dynamic": 5,
+    }
     assert lines[1]["error"] == f"{logs / 'bad.mcap'}: no such file"
     (logs / "bad.mcap").write_bytes(b"now it exists")
     CALLS.clear()
     again = run(logs / "a.mcap", logs / "bad.mcap", logs / "b.mcap", "-o", out, "--jobs", "1")
-    assert again.exit_code == 1 and CALLS == []                  # bad.mcap redone, and fails again
+    assert again.exit_code == 1 and CALLS == []  # bad.mcap redone, and fails again
     assert "2 skipped" in again.stderr and "not an MCAP file" in again.stderr
     assert [r["status"] for r in batch.Manifest(str(out)).latest().values()] == ["skipped", "failed", "skipped"]
-    assert len(manifest(out)) == 6      # the earlier lines compacted to one per input, then this batch's
-    os.utime(logs / "a.mcap", ns=(1, 1))                          # touched, same bytes: still skipped
-    (logs / "b.mcap").write_bytes(b"changed")                     # changed: redone
+    assert len(manifest(out)) == 6  # the earlier lines compacted to one per input, then this batch's
+    os.utime(logs / "a.mcap", ns=(1, 1))  # touched, same bytes: still skipped
+    (logs / "b.mcap").write_bytes(b"changed")  # changed: redone
     third = run(logs / "a.mcap", logs / "b.mcap", "-o", out, "--jobs", "1")
     assert third.exit_code == 0 and CALLS == ["b.mcap"], third.output
     CALLS.clear()
@@ -164,7 +194,7 @@ def test_other_parameters_redo_the_inputs(logs, tmp_path):
     assert run(logs / "a.mcap", "-o", out, "--jobs", "1").exit_code == 0
     CALLS.clear()
     other = run(logs / "a.mcap", "-o", out, "--jobs", "1", "--ego-motion", "off")
-    assert other.exit_code == 0 and CALLS == ["a.mcap"], other.output   # its own output: overwritten
+    assert other.exit_code == 0 and CALLS == ["a.mcap"], other.output  # its own output: overwritten
 
 
 def test_an_output_that_is_not_the_batchs_is_never_overwritten(logs, tmp_path):
@@ -198,7 +228,7 @@ def test_ctrl_c_keeps_finished_outputs_and_a_consistent_manifest(logs, tmp_path)
     (logs / "stop.mcap").write_bytes(b"x")
     names = [logs / "a.mcap", logs / "b.mcap", logs / "stop.mcap", logs / "site" / "c.mcap"]
     (out).mkdir()
-    (out / ".stop.mcap.123.tmp").write_bytes(b"partial")          # as a writer killed mid-file leaves it
+    (out / ".stop.mcap.123.tmp").write_bytes(b"partial")  # as a writer killed mid-file leaves it
     r = run(*names, "-o", out, "--jobs", "1")
     assert r.exit_code == 130, r.output
     assert "interrupted: 2 of 4 inputs done" in r.stderr and "Traceback" not in r.output
@@ -235,9 +265,11 @@ def test_fsspec_urls_for_inputs_and_outputs(logs, tmp_path):
         lines = [json.loads(x) for x in mem.cat("/datmo-test/out/manifest.jsonl").decode().splitlines()]
         assert {x["status"] for x in lines} == {"done"} and len(lines) == 3
         inputs = sorted(x["input"] for x in lines)
-        assert inputs[0] == str(logs / "a.mcap")                               # file:// is a local path
-        assert [i.startswith("memory://") and i.endswith(n) for i, n in zip(inputs[1:], ("sub/y.mcap", "x.mcap"),
-                                                                             strict=True)] == [True, True]
+        assert inputs[0] == str(logs / "a.mcap")  # file:// is a local path
+        assert [
+            i.startswith("memory://") and i.endswith(n)
+            for i, n in zip(inputs[1:], ("sub/y.mcap", "x.mcap"), strict=True)
+        ] == [True, True]
         again = run("memory://datmo-test/in", "-o", "memory://datmo-test/out", "--jobs", "1")
         assert again.exit_code == 0 and "2 skipped" in again.stderr
     finally:
@@ -259,8 +291,11 @@ def test_report_of_a_batch_folder(logs, tmp_path):
     rich = CliRunner().invoke(cli, ["report", str(out)])
     assert rich.exit_code == 0 and "Failed inputs" in rich.stdout
     missing = CliRunner().invoke(cli, ["report", str(logs)])
-    assert missing.exit_code == 1 and missing.output.strip() == f"datmo: error: {logs}: no manifest.jsonl " \
-        "(a batch folder is the -o folder of datmo run)"
+    assert (
+        missing.exit_code == 1
+        and missing.output.strip()
+        == f"datmo: error: {logs}: no manifest.jsonl (a batch folder is the -o folder of datmo run)"
+    )
 
 
 def test_an_unreachable_scheduler_is_one_line(logs, tmp_path, monkeypatch):

@@ -37,8 +37,19 @@ def test_every_available_command_has_help_ending_in_an_example():
 
 
 def test_command_table_points_at_modules():
-    assert set(COMMANDS) >= {"import", "info", "simulate", "record", "emulate", "segment", "features",
-                             "track", "run", "report", "evaluate"}
+    assert set(COMMANDS) >= {
+        "import",
+        "info",
+        "simulate",
+        "record",
+        "emulate",
+        "segment",
+        "features",
+        "track",
+        "run",
+        "report",
+        "evaluate",
+    }
 
 
 def test_info_tables(log):
@@ -59,11 +70,14 @@ def test_info_json(log):
     assert info["duration_s"] == pytest.approx(4.8)
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda p: None, "no such file"),
-    (lambda p: p.write_bytes(b""), "empty file"),
-    (lambda p: p.write_text("# CARMEN\n"), "not an MCAP file"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda p: None, "no such file"),
+        (lambda p: p.write_bytes(b""), "empty file"),
+        (lambda p: p.write_text("# CARMEN\n"), "not an MCAP file"),
+    ],
+)
 def test_info_bad_input_one_line_no_traceback(tmp_path, make, message):
     path = tmp_path / "x.mcap"
     make(path)

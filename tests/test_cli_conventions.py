@@ -33,7 +33,7 @@ from datmo_cli.tracking.params import TrackingParams
 ROOT = Path(__file__).resolve().parents[1]
 DATMO = Path(sys.executable).with_name("datmo")
 SAMPLE = ROOT / "sample_logs" / "static.mcap"
-N_SCANS = 30   # scans of the small logs made here
+N_SCANS = 30  # scans of the small logs made here
 
 
 @contextlib.contextmanager
@@ -189,7 +189,7 @@ def test_piped_info_counts_every_datmo_channel(tracked):
     lines = [line for line in out.splitlines() if "datmo_msgs" in line]
     assert len(lines) == len(ours)
     for topic in ours:
-        assert any(topic in line for line in lines), topic   # topic and type whole, on one line
+        assert any(topic in line for line in lines), topic  # topic and type whole, on one line
 
 
 def test_piped_run_table_keeps_the_output_path_whole(tmp_path, small_log):
@@ -198,8 +198,8 @@ def test_piped_run_table_keeps_the_output_path_whole(tmp_path, small_log):
     assert result.exit_code == 0, result.output
     lines = result.stderr.splitlines()
     assert lines[0].split() == ["input", "status", "scans", "scans/s", "tracks", "people", "output", "or", "error"]
-    assert str(deep / "hall.mcap") in lines[1]   # the first row of the table, plain (no borders) when piped
-    assert all(line == line.rstrip() for line in lines)   # not padded out to the widest row
+    assert str(deep / "hall.mcap") in lines[1]  # the first row of the table, plain (no borders) when piped
+    assert all(line == line.rstrip() for line in lines)  # not padded out to the widest row
 
 
 # ------------------------------------------------------------------------------------------ progress bars
@@ -208,7 +208,7 @@ def test_piped_run_table_keeps_the_output_path_whole(tmp_path, small_log):
 def on_terminal(args: list[str], cwd: Path, timeout: float = 120.0) -> str:
     """What `datmo ARGS` writes to a pseudo-terminal (stdout and stderr are the terminal), without escape codes."""
     pid, fd = pty.fork()
-    if pid == 0:   # the child: datmo on the terminal
+    if pid == 0:  # the child: datmo on the terminal
         os.chdir(cwd)
         os.environ.update(COLUMNS="160", LINES="40", TERM="xterm")
         os.environ.pop("NO_COLOR", None)
@@ -227,7 +227,7 @@ def on_terminal(args: list[str], cwd: Path, timeout: float = 120.0) -> str:
             break
         chunks.append(data)
     os.waitpid(pid, 0)
-    return re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", b"".join(chunks).decode("utf-8", "replace"))   # colours, cursor
+    return re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", b"".join(chunks).decode("utf-8", "replace"))  # colours, cursor
 
 
 def test_simulate_draws_a_bar_with_its_total_and_quiet_draws_none(tmp_path):
@@ -249,8 +249,7 @@ def test_record_draws_its_panel_on_a_terminal_and_quiet_draws_none(tmp_path):
 
     with Emulator(SceneSource("hall", seed=3, duration=10)) as emu:
         shown = on_terminal(["record", "--port", emu.device_path, "-o", "a.mcap", "--scans", "40"], tmp_path)
-        silent = on_terminal(["record", "--port", emu.device_path, "-o", "b.mcap", "--scans", "40", "-q"],
-                             tmp_path)
+        silent = on_terminal(["record", "--port", emu.device_path, "-o", "b.mcap", "--scans", "40", "-q"], tmp_path)
     assert "recording" in shown and "crc errors" in shown
     assert "recording" not in silent and "crc errors" not in silent
     assert mcapio.summary(tmp_path / "b.mcap").topics()[mcapio.TOPIC_SCAN].count == 40
@@ -261,7 +260,7 @@ def test_a_panel_is_drawn_only_on_a_terminal_and_not_under_quiet(monkeypatch):
 
     from datmo_cli import progress
 
-    assert not progress.Panel().shown   # pytest's stderr is not a terminal
+    assert not progress.Panel().shown  # pytest's stderr is not a terminal
     monkeypatch.setattr(progress, "_isatty", lambda stream: True)
     panel = progress.Panel()
     panel.show(Text("first"))
@@ -279,10 +278,17 @@ def test_a_panel_is_drawn_only_on_a_terminal_and_not_under_quiet(monkeypatch):
 # ------------------------------------------------------------------------------------------------ -o -
 
 
-@pytest.mark.parametrize("args", [
-    ["simulate", "--duration", "1"], ["import", SAMPLE], ["segment", SAMPLE], ["features", SAMPLE],
-    ["track", SAMPLE], ["record", "--port", "/dev/null"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["simulate", "--duration", "1"],
+        ["import", SAMPLE],
+        ["segment", SAMPLE],
+        ["features", SAMPLE],
+        ["track", SAMPLE],
+        ["record", "--port", "/dev/null"],
+    ],
+)
 def test_dash_output_is_refused_for_logs(tmp_path, args):
     with inside(tmp_path):
         result = CliRunner().invoke(cli, [*map(str, args), "-o", "-"])
@@ -296,8 +302,9 @@ def test_dash_is_refused_for_a_model_and_an_output_folder(tmp_path):
         model = CliRunner().invoke(cli, ["train-legs", "--positive", str(SAMPLE), "-o", "-"])
         assert model.exit_code == 1 and "cannot write a model to stdout" in model.stderr
         run = CliRunner().invoke(cli, ["run", str(SAMPLE), "-o", "-"])
-        assert run.exit_code == 1 and run.stderr == ("datmo: error: --output-dir -: cannot write outputs to stdout; "
-                                                     "give a folder\n")
+        assert run.exit_code == 1 and run.stderr == (
+            "datmo: error: --output-dir -: cannot write outputs to stdout; give a folder\n"
+        )
         assert os.listdir(".") == []
 
 
@@ -316,7 +323,7 @@ def test_config_prints_every_key_with_its_source_and_reads_back(tmp_path):
         features, track = _tables(result.stdout)
         assert features == FeatureParams() and track == TrackingParams()
         body = [line for line in result.stdout.splitlines() if " = " in line]
-        assert len(body) == len(FeatureParams().to_dict()) + len(TrackingParams().to_dict()) - 1   # d_max once
+        assert len(body) == len(FeatureParams().to_dict()) + len(TrackingParams().to_dict()) - 1  # d_max once
         assert all(line.split("#", 1)[1].strip().startswith("default") for line in body)
         Path("mine.toml").write_text(result.stdout)
         assert load("mine.toml") == DatmoConfig(features, track)
@@ -331,7 +338,7 @@ def test_local_config_is_picked_up_said_and_overridden(tmp_path):
         assert "c0 = 0.12" in picked.stdout and "# from datmo.toml" in picked.stdout
         features, track = _tables(picked.stdout)
         assert (features.c0, track.gate) == (0.12, 9.5) and features.min_points == FeatureParams().min_points
-        Path("effective.toml").write_text(picked.stdout)   # read back identically
+        Path("effective.toml").write_text(picked.stdout)  # read back identically
         again = CliRunner().invoke(cli, ["config", "--config", "effective.toml"])
         assert _tables(again.stdout) == (features, track) and again.stderr == ""
         other = CliRunner().invoke(cli, ["config", "--config", "other.toml"])
@@ -359,7 +366,7 @@ def test_local_config_reaches_the_output_and_its_provenance(tmp_path, small_log)
         assert used.exit_code == 0 and used.stderr.startswith("datmo: using ./datmo.toml\n")
         meta = mcapio.summary("a.mcap").metadata
         assert json.loads(meta["datmo.params"]["features"])["c0"] == 0.12
-        assert json.loads(meta["datmo.params"]["config"]) == load("datmo.toml").to_dict()   # the whole tree
+        assert json.loads(meta["datmo.params"]["config"]) == load("datmo.toml").to_dict()  # the whole tree
         assert meta["datmo"]["command_line"].endswith("--config datmo.toml")
         ignored = CliRunner().invoke(cli, ["segment", str(small_log), "-o", "b.mcap", "--no-config"])
         assert ignored.exit_code == 0 and "datmo.toml" not in ignored.stderr
@@ -425,10 +432,24 @@ def write_ros1_bag(path: Path, topic: str) -> Path:
             m = ros2.deserialize_cdr(payload, scan)
             T = ros1.types
             header = T["std_msgs/msg/Header"](seq=seq, stamp=m.header.stamp, frame_id=m.header.frame_id)
-            fields = {k: getattr(m, k) for k in ("angle_min", "angle_max", "angle_increment", "time_increment",
-                                                  "scan_time", "range_min", "range_max")}
-            msg = T[scan](header=header, ranges=np.asarray(m.ranges, np.float32),
-                          intensities=np.asarray(m.intensities, np.float32), **fields)
+            fields = {
+                k: getattr(m, k)
+                for k in (
+                    "angle_min",
+                    "angle_max",
+                    "angle_increment",
+                    "time_increment",
+                    "scan_time",
+                    "range_min",
+                    "range_max",
+                )
+            }
+            msg = T[scan](
+                header=header,
+                ranges=np.asarray(m.ranges, np.float32),
+                intensities=np.asarray(m.intensities, np.float32),
+                **fields,
+            )
             w.write(conn, int(stamp), ros1.serialize_ros1(msg, scan))
     return path
 
@@ -441,8 +462,12 @@ def _left_over(folder: Path) -> list[str]:
 def bags(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("bags")
     folder = write_ros2_bag(root / "lab", "/base_scan")
-    return {"ros1": write_ros1_bag(root / "legs.bag", "/scan"), "ros2": folder,
-            "db3": next(folder.glob("*.db3")), "ros2-mcap": write_ros2_bag(root / "lab2", "/scan", "mcap")}
+    return {
+        "ros1": write_ros1_bag(root / "legs.bag", "/scan"),
+        "ros2": folder,
+        "db3": next(folder.glob("*.db3")),
+        "ros2-mcap": write_ros2_bag(root / "lab2", "/scan", "mcap"),
+    }
 
 
 @pytest.mark.parametrize("kind", ["ros1", "ros2", "db3", "ros2-mcap"])
@@ -469,7 +494,7 @@ def test_run_takes_a_ros1_bag_and_names_the_output_after_it(tmp_path, bags):
     assert result.exit_code == 0, result.output
     assert "converted" in result.stderr and "legs.bag" in result.stderr
     assert mcapio.summary(out / "legs.mcap").topics()[mcapio.TOPIC_TRACKS].count == N_SCANS
-    assert _left_over(out) == []   # the converted copy is gone
+    assert _left_over(out) == []  # the converted copy is gone
 
 
 # ---------------------------------------------------------------------------------------- completion

@@ -48,17 +48,31 @@ class Cluster:
 
     def _start(self, name: str, *args: str) -> None:
         log = open(self.logs / f"{name}.log", "w")
-        self.procs[name] = subprocess.Popen([*self.dask, *args], stdout=log, stderr=subprocess.STDOUT,
-                                            start_new_session=True)
+        self.procs[name] = subprocess.Popen(
+            [*self.dask, *args], stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+        )
 
     def start_worker(self, name: str) -> None:
-        self._start(name, "worker", self.address, "--nworkers", "1", "--nthreads", "1", "--no-nanny",
-                    "--no-dashboard", "--name", name, "--local-directory", str(self.logs / name))
+        self._start(
+            name,
+            "worker",
+            self.address,
+            "--nworkers",
+            "1",
+            "--nthreads",
+            "1",
+            "--no-nanny",
+            "--no-dashboard",
+            "--name",
+            name,
+            "--local-directory",
+            str(self.logs / name),
+        )
 
     def connect(self, workers: int) -> None:
         if self.client is None:
             self.client = distributed.Client(self.address, timeout="60s")
-        self.client.wait_for_workers(workers, timeout=300)   # a worker loads (or compiles) the kernels first
+        self.client.wait_for_workers(workers, timeout=300)  # a worker loads (or compiles) the kernels first
 
     def address_of(self, name: str) -> str:
         return next(a for a, w in self.client.scheduler_info()["workers"].items() if w.get("name") == name)
@@ -81,7 +95,7 @@ class Cluster:
 def cluster(tmp_path_factory):
     from datmo_cli.batch import ensure_warm
 
-    ensure_warm()   # the numba cache complete before the workers load it (a fresh clone compiles here, once)
+    ensure_warm()  # the numba cache complete before the workers load it (a fresh clone compiles here, once)
     c = Cluster(tmp_path_factory.mktemp("dask"))
     try:
         for name in ("w0", "w1"):
@@ -103,8 +117,7 @@ def inputs(tmp_path, sample_logs):
 
 
 def datmo(*args, timeout=600, **kw):
-    return subprocess.run([str(BIN / "datmo"), *map(str, args)], capture_output=True, text=True, timeout=timeout,
-                          **kw)
+    return subprocess.run([str(BIN / "datmo"), *map(str, args)], capture_output=True, text=True, timeout=timeout, **kw)
 
 
 def lines(out: Path) -> list[dict]:
@@ -114,8 +127,9 @@ def lines(out: Path) -> list[dict]:
 def same_messages(a: Path, b: Path) -> None:
     """Every channel of a and b: same topics, types, stamps and payloads; metadata equal but the command line."""
     la, lb = mcapio.read_log(a, topics=None), mcapio.read_log(b, topics=None)
-    assert sorted((c.topic, c.msgtype) for c in la.channels.values()) == \
-        sorted((c.topic, c.msgtype) for c in lb.channels.values())
+    assert sorted((c.topic, c.msgtype) for c in la.channels.values()) == sorted(
+        (c.topic, c.msgtype) for c in lb.channels.values()
+    )
     assert sorted(la.messages) == sorted(lb.messages)
     for topic, (stamps, payloads) in la.messages.items():
         assert list(stamps) == list(lb.messages[topic][0]), (a, topic)
@@ -127,21 +141,23 @@ def same_messages(a: Path, b: Path) -> None:
 
 def test_cluster_outputs_equal_a_local_run(cluster, inputs, tmp_path):
     on_cluster, here = tmp_path / "cluster", tmp_path / "local"
-    r = CliRunner().invoke(cli, ["run", str(inputs), "-o", str(on_cluster), "--scheduler", cluster.address,
-                                 "--no-report"])
+    r = CliRunner().invoke(
+        cli, ["run", str(inputs), "-o", str(on_cluster), "--scheduler", cluster.address, "--no-report"]
+    )
     assert r.exit_code == 0, r.output
     assert "6 done, 0 skipped" in r.stderr and f"the Dask scheduler {cluster.address}" in r.stderr
-    local = datmo("run", inputs, "-o", here, "--jobs", "2", "--no-report")    # a process of its own, as a user runs it
+    local = datmo("run", inputs, "-o", here, "--jobs", "2", "--no-report")  # a process of its own, as a user runs it
     assert local.returncode == 0, local.stderr[-3000:]
     outs = sorted(p.relative_to(on_cluster) for p in on_cluster.rglob("*.mcap"))
-    assert len(outs) == 6 and any(len(p.parts) == 2 for p in outs)     # the subfolder is kept
+    assert len(outs) == 6 and any(len(p.parts) == 2 for p in outs)  # the subfolder is kept
     assert outs == sorted(p.relative_to(here) for p in here.rglob("*.mcap"))
     for rel in outs:
         same_messages(on_cluster / rel, here / rel)
     ledger = lines(on_cluster)
     assert {x["status"] for x in ledger} == {"done"} and len({x["worker"] for x in ledger}) == 2
-    assert [x["tracks"] for x in sorted(ledger, key=lambda x: x["input"])] == \
-        [x["tracks"] for x in sorted(lines(here), key=lambda x: x["input"])]
+    assert [x["tracks"] for x in sorted(ledger, key=lambda x: x["input"])] == [
+        x["tracks"] for x in sorted(lines(here), key=lambda x: x["input"])
+    ]
 
 
 def test_a_corrupt_input_among_good_ones(cluster, sample_logs, tmp_path):
@@ -149,8 +165,10 @@ def test_a_corrupt_input_among_good_ones(cluster, sample_logs, tmp_path):
     bad = tmp_path / "corrupt.mcap"
     bad.write_bytes(b"\x89MCAP0\r\n" + os.urandom(5000))
     out = tmp_path / "out"
-    r = CliRunner().invoke(cli, ["run", str(good[0]), str(bad), str(good[1]), "-o", str(out),
-                                 "--scheduler", cluster.address, "--no-report"])
+    r = CliRunner().invoke(
+        cli,
+        ["run", str(good[0]), str(bad), str(good[1]), "-o", str(out), "--scheduler", cluster.address, "--no-report"],
+    )
     assert r.exit_code == 1 and "Traceback" not in r.output
     assert r.stderr.rstrip().endswith("datmo: error: 1 of 3 inputs failed; the other outputs are complete")
     by_name = {Path(x["input"]).name: x for x in lines(out)}
@@ -161,7 +179,7 @@ def test_a_corrupt_input_among_good_ones(cluster, sample_logs, tmp_path):
 
 
 def test_resume_after_an_interrupted_batch_does_only_the_missing_inputs(cluster, inputs, tmp_path):
-    for p in list(inputs.rglob("*.mcap")):        # 12 inputs: the batch is still running when it is stopped
+    for p in list(inputs.rglob("*.mcap")):  # 12 inputs: the batch is still running when it is stopped
         shutil.copy(p, p.with_name(f"copy-{p.name}"))
     out = tmp_path / "out"
     args = [str(BIN / "datmo"), "run", str(inputs), "-o", str(out), "--scheduler", cluster.address, "--no-report"]
@@ -172,11 +190,11 @@ def test_resume_after_an_interrupted_batch_does_only_the_missing_inputs(cluster,
         if manifest.exists() and manifest.read_text().count("\n") >= 2:
             break
         time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)                 # Ctrl-C
+    proc.send_signal(signal.SIGINT)  # Ctrl-C
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err[-3000:]
     assert "interrupted:" in err and "Traceback" not in err
-    first = lines(out)                              # every line whole
+    first = lines(out)  # every line whole
     assert first and all(x["status"] == "done" for x in first) and len(first) < 12
     assert not [p for p in out.rglob("*") if p.name.endswith(".tmp")]
     assert all(Path(x["output"]).exists() for x in first)
@@ -194,13 +212,17 @@ def test_a_worker_killed_mid_task_has_its_task_done_elsewhere(cluster, inputs, t
     cluster.connect(3)
     victim = cluster.address_of("victim")
     out = tmp_path / "out"
-    proc = subprocess.Popen([str(BIN / "datmo"), "run", str(inputs), "-o", str(out), "--scheduler",
-                             cluster.address, "--no-report"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [str(BIN / "datmo"), "run", str(inputs), "-o", str(out), "--scheduler", cluster.address, "--no-report"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     killed = False
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and proc.poll() is None and not killed:
         if any(str(k).startswith("datmo-run-") for k in cluster.client.processing().get(victim, ())):
-            time.sleep(0.3)                          # well into the task
+            time.sleep(0.3)  # well into the task
             cluster.procs["victim"].kill()
             killed = True
         time.sleep(0.02)

@@ -82,8 +82,9 @@ def test_a_runs_own_local_cluster_speaks_tls_and_refuses_strangers(tmp_path, sam
 
     src = tmp_path / "static.mcap"
     src.write_bytes((sample_logs / "static.mcap").read_bytes())
-    result = subprocess.run([sys.executable, "-c", _LOCAL_TLS_CHECK, str(tmp_path), str(src)], capture_output=True,
-                            text=True, timeout=600)
+    result = subprocess.run(
+        [sys.executable, "-c", _LOCAL_TLS_CHECK, str(tmp_path), str(src)], capture_output=True, text=True, timeout=600
+    )
     assert result.returncode == 0 and result.stdout.strip().endswith("ok"), result.stderr[-2000:]
 
 
@@ -102,8 +103,15 @@ def tls_scheduler(tmp_path, monkeypatch):
     for name, text in pem.items():
         files[name] = tmp_path / f"{name}.pem"
         files[name].write_text(text)
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tls://",
-                                       host="127.0.0.1", security=sec, dashboard_address=None)
+    cluster = distributed.LocalCluster(
+        n_workers=1,
+        threads_per_worker=1,
+        processes=False,
+        protocol="tls://",
+        host="127.0.0.1",
+        security=sec,
+        dashboard_address=None,
+    )
     try:
         yield cluster.scheduler_address, files
     finally:
@@ -119,11 +127,20 @@ def test_a_tls_scheduler_with_the_certificate_of_the_dask_configuration(tls_sche
     args = ["run", str(src), "-o", str(tmp_path / "out"), "--scheduler", address, "--no-report"]
     r = CliRunner().invoke(cli, args)
     assert r.exit_code == 1 and "Traceback" not in r.output, r.output
-    assert r.output.startswith(f"datmo: error: --scheduler {address}: a tls:// scheduler needs this client's "
-                               "certificate: set distributed.comm.tls.ca-file") and len(r.output.splitlines()) == 1
-    with dask.config.set({"distributed.comm.tls.ca-file": str(files["ca"]),
-                          "distributed.comm.tls.client.cert": str(files["cert"]),
-                          "distributed.comm.tls.client.key": str(files["key"])}):
+    assert (
+        r.output.startswith(
+            f"datmo: error: --scheduler {address}: a tls:// scheduler needs this client's "
+            "certificate: set distributed.comm.tls.ca-file"
+        )
+        and len(r.output.splitlines()) == 1
+    )
+    with dask.config.set(
+        {
+            "distributed.comm.tls.ca-file": str(files["ca"]),
+            "distributed.comm.tls.client.cert": str(files["cert"]),
+            "distributed.comm.tls.client.key": str(files["key"]),
+        }
+    ):
         ok = CliRunner().invoke(cli, args)
     assert ok.exit_code == 0, ok.output
     assert CALLS == ["a.mcap"] and f"the Dask scheduler {address}" in ok.stderr

@@ -46,13 +46,13 @@ def test_a_prompt_first_report_says_nothing():
 def test_each_stage_started_with_zero_done_is_watched():
     bar = FakeBar("reading")
     with compile_notice(bar, 0, delay=0.05, armed=False) as report:
-        time.sleep(0.15)                  # not armed: reading the input says nothing
+        time.sleep(0.15)  # not armed: reading the input says nothing
         bar.update(0, description="features")
         report(0, 10)
-        report(10, 10)                    # prompt: nothing
+        report(10, 10)  # prompt: nothing
         bar.update(0, description="tracking")
         report(0, 10)
-        time.sleep(0.3)                   # late: compiling
+        time.sleep(0.3)  # late: compiling
         report(1, 10)
     assert bar.descriptions == ["features", "tracking", f"tracking: {NOTICE}", "tracking"]
 

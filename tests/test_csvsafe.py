@@ -17,23 +17,26 @@ from datmo_cli.csvsafe import neutralise, neutralise_row
 from datmo_cli.log import cdr, mcapio, types
 
 
-@pytest.mark.parametrize(("text", "written"), [
-    ("=1+2", "'=1+2"),
-    ('=HYPERLINK("http://example.org","x")', '\'=HYPERLINK("http://example.org","x")'),
-    ("+1", "'+1"),
-    ("@SUM(A1)", "'@SUM(A1)"),
-    ("-2+3", "'-2+3"),
-    ("-cmd|' /C calc'!A0", "'-cmd|' /C calc'!A0"),
-    ("-inf", "'-inf"),
-    ("\t=1", "'\t=1"),
-    ("\r=1", "'\r=1"),
-    ("-1.5", "-1.5"),
-    ("-2e3", "-2e3"),
-    ("-.5", "-.5"),
-    ("laser", "laser"),
-    ("a=b", "a=b"),
-    ("", ""),
-])
+@pytest.mark.parametrize(
+    ("text", "written"),
+    [
+        ("=1+2", "'=1+2"),
+        ('=HYPERLINK("http://example.org","x")', '\'=HYPERLINK("http://example.org","x")'),
+        ("+1", "'+1"),
+        ("@SUM(A1)", "'@SUM(A1)"),
+        ("-2+3", "'-2+3"),
+        ("-cmd|' /C calc'!A0", "'-cmd|' /C calc'!A0"),
+        ("-inf", "'-inf"),
+        ("\t=1", "'\t=1"),
+        ("\r=1", "'\r=1"),
+        ("-1.5", "-1.5"),
+        ("-2e3", "-2e3"),
+        ("-.5", "-.5"),
+        ("laser", "laser"),
+        ("a=b", "a=b"),
+        ("", ""),
+    ],
+)
 def test_neutralise(text, written):
     assert neutralise(text) == written
 
@@ -52,8 +55,12 @@ def formula_log(path: Path) -> Path:
     with mcapio.LogWriter(path) as w:
         for k in range(2):
             stamp = 1_000_000_000 + k * 200_000_000
-            w.write(mcapio.TOPIC_TRACKS, types.TRACKS, stamp,
-                    cdr.encode(types.TRACKS, {"stamp_ns": stamp, "frame_id": FORMULA_FRAME, "tracks": track}))
+            w.write(
+                mcapio.TOPIC_TRACKS,
+                types.TRACKS,
+                stamp,
+                cdr.encode(types.TRACKS, {"stamp_ns": stamp, "frame_id": FORMULA_FRAME, "tracks": track}),
+            )
     return path
 
 

@@ -42,7 +42,7 @@ def run_document(path: Path, folder: Path, monkeypatch) -> None:
             exec(compile(text, f"{path.name} block", "exec"), namespace)
 
 
-IN_PROCESS = ["export.md", "python.md", "method.md", "lms2xx.md"]   # the pages whose examples run here
+IN_PROCESS = ["export.md", "python.md", "method.md", "lms2xx.md"]  # the pages whose examples run here
 
 
 @pytest.mark.parametrize("name", IN_PROCESS)
@@ -64,7 +64,8 @@ def documented_columns(section: str) -> dict[str, str]:
 def test_the_documented_columns_are_the_schema():
     assert list(documented_columns("The tracks table").items()) == list(export.TRACK_COLUMNS.items())
     assert list(documented_columns("The feature columns (`--features`)").items()) == list(
-        export.FEATURE_COLUMNS.items())
+        export.FEATURE_COLUMNS.items()
+    )
     assert set(export.TRACK_COLUMNS.values()) | set(export.FEATURE_COLUMNS.values()) <= set(export.TYPES)
 
 
@@ -77,8 +78,12 @@ def citations() -> list[tuple[str, str, list[str]]]:
     """(file:line, page, [section numbers]) of every `docs/PAGE.md [§N [and §M]]` in the package, the tests (but
     this file), the benchmarks and the ROS 2 message package."""
     out = []
-    files = [p for folder in ("datmo_cli", "tests", "benchmarks", "datmo_msgs") for p in (ROOT / folder).rglob("*")
-             if p.suffix in (".py", ".msg") and p.resolve() != Path(__file__).resolve()]
+    files = [
+        p
+        for folder in ("datmo_cli", "tests", "benchmarks", "datmo_msgs")
+        for p in (ROOT / folder).rglob("*")
+        if p.suffix in (".py", ".msg") and p.resolve() != Path(__file__).resolve()
+    ]
     for path in sorted(files):
         for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
             for page, sections in CITATION.findall(line):
@@ -137,8 +142,13 @@ def test_contributing_commands_run():
     import subprocess
     import sys
 
-    lines = [line for language, text in blocks(ROOT / "CONTRIBUTING.md") if language == "sh"
-             for line in text.splitlines() if line.strip()]
+    lines = [
+        line
+        for language, text in blocks(ROOT / "CONTRIBUTING.md")
+        if language == "sh"
+        for line in text.splitlines()
+        if line.strip()
+    ]
     assert any(line.startswith(".venv/bin/pytest tests/") for line in lines)
     for line in lines:
         args = shlex.split(line, comments=True)

@@ -23,9 +23,20 @@ from datmo_cli.perception.egomotion import (
 )
 
 # A 10 x 6 m room (world frame, m) with a pillar, a cabinet and a recess, so that no direction is free.
-ROOM = [((-3, -2), (7, -2)), ((7, -2), (7, 4)), ((7, 4), (2, 4)), ((2, 4), (2, 4.6)), ((2, 4.6), (0.8, 4.6)),
-        ((0.8, 4.6), (0.8, 4)), ((0.8, 4), (-3, 4)), ((-3, 4), (-3, -2)),
-        ((4, 1), (4.6, 1)), ((4.6, 1), (4.6, 1.4)), ((4.6, 1.4), (4, 1.4)), ((4, 1.4), (4, 1))]
+ROOM = [
+    ((-3, -2), (7, -2)),
+    ((7, -2), (7, 4)),
+    ((7, 4), (2, 4)),
+    ((2, 4), (2, 4.6)),
+    ((2, 4.6), (0.8, 4.6)),
+    ((0.8, 4.6), (0.8, 4)),
+    ((0.8, 4), (-3, 4)),
+    ((-3, 4), (-3, -2)),
+    ((4, 1), (4.6, 1)),
+    ((4.6, 1), (4.6, 1.4)),
+    ((4.6, 1.4), (4, 1.4)),
+    ((4, 1.4), (4, 1)),
+]
 PILLARS = [(-1.0, 2.0, 0.2)]
 
 
@@ -51,7 +62,7 @@ def cast(pose, angles, circles=(), noise=0.0, rng=None, range_max=30.0) -> np.nd
         best = np.where(hit & (s < best), s, best)
     for cx, cy, rad in list(PILLARS) + list(circles):
         along = d[:, 0] * (cx - x) + d[:, 1] * (cy - y)
-        disc = along ** 2 - ((cx - x) ** 2 + (cy - y) ** 2 - rad ** 2)
+        disc = along**2 - ((cx - x) ** 2 + (cy - y) ** 2 - rad**2)
         with np.errstate(invalid="ignore"):
             s = along - np.sqrt(disc)
         hit = (disc > 0) & (s > 0)
@@ -92,8 +103,21 @@ def room_map(geom: ScanGeometry, ranges: np.ndarray, p: IcpParams = DEFAULTS):
     px, py, beams = np.zeros(b), np.zeros(b), np.zeros(b, np.int64)
     m = K.scan_points(ranges, c, s, geom.range_min, geom.range_max, p.map_spacing, b, px, py, beams)
     nx, ny = np.zeros(b), np.zeros(b)
-    K.scan_normals(ranges, c, s, geom.range_min, geom.range_max, beams, m, p.normal_radius, p.max_gap,
-                   _max_window(geom), p.planarity, nx, ny)
+    K.scan_normals(
+        ranges,
+        c,
+        s,
+        geom.range_min,
+        geom.range_max,
+        beams,
+        m,
+        p.normal_radius,
+        p.max_gap,
+        _max_window(geom),
+        p.planarity,
+        nx,
+        ny,
+    )
     mx, my, mnx, mny = (np.zeros(b) for _ in range(4))
     nxt = np.full(b, K.EMPTY, np.int64)
     head = np.full(4096, K.EMPTY, np.int64)
@@ -105,12 +129,14 @@ def source_points(geom: ScanGeometry, ranges: np.ndarray, p: IcpParams = DEFAULT
     a = geom.angles()
     b = geom.n_beams
     sx, sy, beams = np.zeros(b), np.zeros(b), np.zeros(b, np.int64)
-    n = K.scan_points(ranges, np.cos(a), np.sin(a), geom.range_min, geom.range_max, p.source_spacing, p.max_points,
-                      sx, sy, beams)
+    n = K.scan_points(
+        ranges, np.cos(a), np.sin(a), geom.range_min, geom.range_max, p.source_spacing, p.max_points, sx, sy, beams
+    )
     return sx[:n].copy(), sy[:n].copy()
 
 
 # --- kernels against the references ------------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize(("spacing", "max_points"), [(0.0, 10_000), (0.05, 10_000), (0.05, 40), (0.2, 17)])
 def test_scan_points_match_reference(spacing, max_points):
@@ -119,8 +145,8 @@ def test_scan_points_match_reference(spacing, max_points):
     bad = rng.choice(len(r), 60, replace=False)
     r[bad[:15]] = np.nan
     r[bad[15:30]] = np.inf
-    r[bad[30:45]] = 0.01                 # under range_min
-    r[bad[45:]] = G361.range_max         # at range_max: no return
+    r[bad[30:45]] = 0.01  # under range_min
+    r[bad[45:]] = G361.range_max  # at range_max: no return
     a = G361.angles()
     x, y, beams = np.zeros(361), np.zeros(361), np.zeros(361, np.int64)
     n = K.scan_points(r, np.cos(a), np.sin(a), G361.range_min, G361.range_max, spacing, max_points, x, y, beams)
@@ -142,19 +168,33 @@ def test_normals_match_reference(geom):
     win = _max_window(geom)
     valid = np.flatnonzero(np.isfinite(r) & (r > geom.range_min))
     nx, ny = np.zeros(len(valid)), np.zeros(len(valid))
-    K.scan_normals(r, np.cos(a), np.sin(a), geom.range_min, geom.range_max, valid, len(valid), p.normal_radius,
-                   p.max_gap, win, p.planarity, nx, ny)
+    K.scan_normals(
+        r,
+        np.cos(a),
+        np.sin(a),
+        geom.range_min,
+        geom.range_max,
+        valid,
+        len(valid),
+        p.normal_radius,
+        p.max_gap,
+        win,
+        p.planarity,
+        nx,
+        ny,
+    )
     kinds = {"line": 0, "point": 0, "none": 0}
     for i, b in enumerate(valid):
-        ex, ey = reference.beam_normal(r, a, geom.range_min, geom.range_max, b, p.normal_radius, p.max_gap, win,
-                                       p.planarity)
+        ex, ey = reference.beam_normal(
+            r, a, geom.range_min, geom.range_max, b, p.normal_radius, p.max_gap, win, p.planarity
+        )
         if math.isnan(ex):
             assert math.isnan(nx[i])
             kinds["none"] += 1
         elif ex == 0 and ey == 0:
             assert nx[i] == 0 and ny[i] == 0
             kinds["point"] += 1
-        else:   # same line up to the normal's sign
+        else:  # same line up to the normal's sign
             assert abs(nx[i] * ex + ny[i] * ey) == pytest.approx(1.0, abs=1e-9)
             kinds["line"] += 1
     assert kinds["line"] > 0.8 * len(valid)
@@ -180,10 +220,10 @@ def test_icp_step_matches_reference(pose, redescend):
     (mx, my, mnx, mny), head, nxt = room_map(G361, ref)
     sx, sy = source_points(G361, cur)
     hess, grad = np.zeros((3, 3)), np.zeros(3)
-    got = K.icp_step(sx, sy, len(sx), *pose, mx, my, mnx, mny, 0.25, head, nxt, 0.25, 0.05, redescend, 0.05,
-                     hess, grad)
-    H, g, matched, abs_sum, inliers = reference.icp_step(np.stack([sx, sy], 1), pose, np.stack([mx, my], 1),
-                                                         np.stack([mnx, mny], 1), 0.25, 0.05, redescend, 0.05)
+    got = K.icp_step(sx, sy, len(sx), *pose, mx, my, mnx, mny, 0.25, head, nxt, 0.25, 0.05, redescend, 0.05, hess, grad)
+    H, g, matched, abs_sum, inliers = reference.icp_step(
+        np.stack([sx, sy], 1), pose, np.stack([mx, my], 1), np.stack([mnx, mny], 1), 0.25, 0.05, redescend, 0.05
+    )
     assert got[0] == matched and got[2] == inliers and matched > 50
     assert got[1] == pytest.approx(abs_sum, rel=1e-9)
     np.testing.assert_allclose(hess, H, rtol=1e-9, atol=1e-9)
@@ -199,10 +239,10 @@ def test_icp_align_matches_reference(init):
     (mx, my, mnx, mny), head, nxt = room_map(G361, ref)
     sx, sy = source_points(G361, cur)
     pose = np.zeros(3)
-    got = K.icp_align(sx, sy, len(sx), *init, mx, my, mnx, mny, 0.25, head, nxt, 0.5, 0.25, 0.05, 0.05, 30, 1.0,
-                      pose)
-    want, stats = reference.icp_align(np.stack([sx, sy], 1), init, np.stack([mx, my], 1), np.stack([mnx, mny], 1),
-                                      0.5, 0.25, 0.05, 0.05, 30, 1.0)
+    got = K.icp_align(sx, sy, len(sx), *init, mx, my, mnx, mny, 0.25, head, nxt, 0.5, 0.25, 0.05, 0.05, 30, 1.0, pose)
+    want, stats = reference.icp_align(
+        np.stack([sx, sy], 1), init, np.stack([mx, my], 1), np.stack([mnx, mny], 1), 0.5, 0.25, 0.05, 0.05, 30, 1.0
+    )
     np.testing.assert_allclose(pose, want, atol=1e-9)
     assert got[0] == stats[0] and got[2] == stats[2] and got[3] == stats[3]
     assert got[1] == pytest.approx(stats[1], rel=1e-9)
@@ -217,19 +257,26 @@ def test_grid_nearest_matches_brute_force():
         K.grid_insert(x, y, i, 0.25, head, nxt)
     for q in rng.uniform(-3.5, 3.5, (300, 2)):
         for dist in (0.1, 0.25, 0.6):
-            assert K.grid_nearest(q[0], q[1], pts[:, 0].copy(), pts[:, 1].copy(), 0.25, head, nxt, dist) \
-                == reference.nearest(q, pts, dist)
+            assert K.grid_nearest(
+                q[0], q[1], pts[:, 0].copy(), pts[:, 1].copy(), 0.25, head, nxt, dist
+            ) == reference.nearest(q, pts, dist)
 
 
 # --- known motions in the hand-made room -------------------------------------------------------------------------
 
-GEOMETRIES = [geometry(181, 180.0), geometry(361, 180.0), geometry(768, 270.0), geometry(721, 180.0),
-              geometry(1081, 270.0)]
+GEOMETRIES = [
+    geometry(181, 180.0),
+    geometry(361, 180.0),
+    geometry(768, 270.0),
+    geometry(721, 180.0),
+    geometry(1081, 270.0),
+]
 
 
 @pytest.mark.parametrize("geom", GEOMETRIES, ids=lambda g: f"{g.n_beams}x{math.degrees(g.angle_increment):.2f}")
-@pytest.mark.parametrize("move", [(0.2, 0.0, 0.0), (0.0, -0.15, 0.0), (0.0, 0.0, math.radians(8)),
-                                  (0.25, 0.1, math.radians(-6))])
+@pytest.mark.parametrize(
+    "move", [(0.2, 0.0, 0.0), (0.0, -0.15, 0.0), (0.0, 0.0, math.radians(8)), (0.25, 0.1, math.radians(-6))]
+)
 def test_align_recovers_a_known_motion(geom, move):
     """Translate and turn: recovered within 1 cm and 0.2 degrees from a zero initial guess."""
     rng = np.random.default_rng(6)
@@ -245,8 +292,9 @@ def test_align_recovers_a_known_motion(geom, move):
 
 def room_run(geom, poses, circles_at=None, noise=0.01, seed=7, rate=10.0, corrupt=0.0) -> ScanRun:
     rng = np.random.default_rng(seed)
-    ranges = np.stack([cast(p, geom.angles(), circles_at(k) if circles_at else (), noise, rng)
-                       for k, p in enumerate(poses)])
+    ranges = np.stack(
+        [cast(p, geom.angles(), circles_at(k) if circles_at else (), noise, rng) for k, p in enumerate(poses)]
+    )
     if corrupt:
         mask = rng.random(ranges.shape) < corrupt
         ranges[mask] = rng.choice(np.array([np.nan, np.inf, 0.0, -1.0, geom.range_max], np.float32), mask.sum())
@@ -292,8 +340,12 @@ def test_run_follows_a_known_drive(geom):
 def test_walking_people_do_not_spoil_it():
     """Four people (two legs of 6 cm radius each) walk across the room, two of them beside the scanner."""
     truth = drive(60)
-    walkers = [((-1.0, 1.5), (0.6, 0.1)), ((3.0, -1.0), (-0.3, 0.5)), ((2.0, 2.5), (-0.8, -0.2)),
-               ((0.0, -1.5), (0.9, 0.0))]
+    walkers = [
+        ((-1.0, 1.5), (0.6, 0.1)),
+        ((3.0, -1.0), (-0.3, 0.5)),
+        ((2.0, 2.5), (-0.8, -0.2)),
+        ((0.0, -1.5), (0.9, 0.0)),
+    ]
 
     def legs(k):
         t = k / 10.0
@@ -331,7 +383,7 @@ def test_a_still_scanner_stays_at_the_origin():
     run = room_run(geometry(361, 180.0), [START] * 50)
     odom = estimate_odometry(run)
     jitter = float(np.hypot(odom.x, odom.y).max())
-    assert jitter < 0.01, f"{jitter:.4f} m"       # 1 cm range noise: a few mm of jitter
+    assert jitter < 0.01, f"{jitter:.4f} m"  # 1 cm range noise: a few mm of jitter
     assert np.abs(odom.theta).max() < math.radians(0.1)
     assert not is_moving(odom)
 
@@ -378,6 +430,7 @@ def test_one_scan_and_empty_scans():
 
 # --- the simulator ---------------------------------------------------------------------------------------------
 
+
 def test_patrol_follows_the_ground_truth():
     """The patrol robot drives a 12 m corridor and back (about 26 m, two turns on the spot at 90 deg/s) past
     two walking people and one standing: within 10 cm and 1 degree of the truth all along (at this commit:
@@ -413,6 +466,7 @@ def test_hall_still_scanner_with_walking_people_stays_put():
 
 # --- real logs (../shared/data) ----------------------------------------------------------------------------------
 
+
 @pytest.mark.shared
 def test_negative_2_three_scanners_agree():
     """leg_tracker's negative_2: a robot driving through rooms (no odometry), three rigidly mounted Hokuyos
@@ -434,7 +488,7 @@ def test_negative_2_three_scanners_agree():
         assert not e.failed.any() and is_moving(e.odometry)
         headings.append(np.unwrap(p[:, 2]))
     n = min(len(h) for h in headings)
-    assert np.degrees(np.abs(headings[0][-1])) > 90    # it turns well beyond jitter
+    assert np.degrees(np.abs(headings[0][-1])) > 90  # it turns well beyond jitter
     for h in headings[1:]:
         assert np.degrees(np.abs(h[:n] - headings[0][:n]).max()) < 15
 

@@ -28,8 +28,9 @@ def frames(**kw):
     def off(parts):
         return np.concatenate([[0], np.cumsum([len(p) for p in parts])])
 
-    gt, regions, hyps = ev.frames_from_channels(syn.STAMPS, off(gt), np.concatenate(gt), None, syn.STAMPS,
-                                                off(tr), np.concatenate(tr), **kw)
+    gt, regions, hyps = ev.frames_from_channels(
+        syn.STAMPS, off(gt), np.concatenate(gt), None, syn.STAMPS, off(tr), np.concatenate(tr), **kw
+    )
     return gt, hyps, regions
 
 
@@ -78,11 +79,11 @@ def test_static_tracks_elsewhere_count_and_exclude_static_drops_them():
 def test_dont_care_regions():
     objs = np.zeros(4, cdr.element_dtype(types.GROUND_TRUTH_OBJECT))
     objs["id"] = [1, 2, 3, 4]
-    objs["classification"] = [1, 3, 7, 1]         # walking person, parked box, wall, person hidden
+    objs["classification"] = [1, 3, 7, 1]  # walking person, parked box, wall, person hidden
     objs["moving"] = [1, 0, 0, 1]
     objs["visible"] = [1, 1, 1, 0]
     objs["x"], objs["y"] = [2.0, 4.0, 6.0, 3.0], [0.0, 2.0, 0.0, -2.0]
-    objs["orientation"] = [0, 0, np.pi / 2, 0]      # the wall runs along y through (6, 0), 4 m long
+    objs["orientation"] = [0, 0, np.pi / 2, 0]  # the wall runs along y through (6, 0), 4 m long
     objs["length"], objs["width"] = [0.5, 0.8, 4.0, 0.5], [0.5, 0.4, 0.0, 0.5]
     gt, regions = ev.ground_truth_frames(np.array([0]), np.array([0, 4]), objs)
     assert gt.ids.tolist() == [1]
@@ -101,8 +102,14 @@ def test_match_radius():
 
 
 def test_select_keeps_empty_frames():
-    f = ev.Frames(np.array([1, 2, 3, 4]), np.array([0, 0, 2, 2, 3]), np.array([1, 2, 3]), np.zeros(3), np.zeros(3),
-                  np.array([1, 5, 1]))
+    f = ev.Frames(
+        np.array([1, 2, 3, 4]),
+        np.array([0, 0, 2, 2, 3]),
+        np.array([1, 2, 3]),
+        np.zeros(3),
+        np.zeros(3),
+        np.array([1, 5, 1]),
+    )
     g = f.select(f.cls == 1)
     assert g.offsets.tolist() == [0, 0, 1, 1, 2] and g.ids.tolist() == [1, 3]
 
@@ -128,8 +135,12 @@ def test_csv_ground_truth_gives_the_channel_figures(tmp_path, log):
     path = tmp_path / "gt.csv"
     path.write_text(gt_csv_text(round_to_ms=True))
     # CSV has no don't-care regions: without --exclude-static the static track on the column is false
-    assert json.loads(invoke("evaluate", log, "--gt", path, "--format", "json").output)[
-        "scores"]["all"]["num_false_positives"] == 60
+    assert (
+        json.loads(invoke("evaluate", log, "--gt", path, "--format", "json").output)["scores"]["all"][
+            "num_false_positives"
+        ]
+        == 60
+    )
     from_csv = json.loads(invoke("evaluate", log, "--gt", path, "--format", "json", "--exclude-static").output)
     from_channel = json.loads(invoke("evaluate", log, "--format", "json").output)
     assert from_csv["ground_truth"] == str(path) and from_channel["ground_truth"] == "/datmo/ground_truth"
@@ -143,11 +154,14 @@ def test_csv_empty_id_marks_an_annotated_scan_with_nothing():
     assert f.stamps.tolist() == [10, 20] and f.offsets.tolist() == [0, 0, 1] and f.cls.tolist() == [0]
 
 
-@pytest.mark.parametrize("text, message", [
-    ("stamp,id,x,y\n1,1,0,0\n", "missing stamp_ns"),
-    ("stamp_ns,id,x,y\n1,1,zero,0\n", "line 2"),
-    ("stamp_ns,id,x,y\n", "no ground-truth rows"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("stamp,id,x,y\n1,1,0,0\n", "missing stamp_ns"),
+        ("stamp_ns,id,x,y\n1,1,zero,0\n", "line 2"),
+        ("stamp_ns,id,x,y\n", "no ground-truth rows"),
+    ],
+)
 def test_csv_errors(tmp_path, log, text, message):
     path = tmp_path / "bad.csv"
     path.write_text(text)
@@ -172,7 +186,7 @@ def test_min_mota_gates_ci(log):
     low = invoke("evaluate", log, "--min-mota", "0.9", "--format", "json")
     assert low.exit_code == 1
     assert low.output.endswith(f"datmo: error: {log}: MOTA 0.841 is below --min-mota 0.9\n")
-    assert json.loads(low.output[:low.output.rindex("}") + 1])["scores"]["all"]["num_switches"] == 1
+    assert json.loads(low.output[: low.output.rindex("}") + 1])["scores"]["all"]["num_switches"] == 1
 
 
 def test_cli_text_csv_and_json_carry_hota(log):
@@ -207,8 +221,7 @@ def test_min_hota_gates_ci(log):
     assert low.exit_code == 1 and "Traceback" not in low.output
     assert low.output.endswith(f"datmo: error: {log}: HOTA {hota:.3f} is below --min-hota {hota + 0.01:.4f}\n")
     both = invoke("evaluate", log, "--format", "csv", "--min-hota", "0.99", "--min-mota", "0.9")
-    assert both.output.endswith("MOTA 0.841 is below --min-mota 0.9; HOTA "
-                                f"{hota:.3f} is below --min-hota 0.99\n")
+    assert both.output.endswith(f"MOTA 0.841 is below --min-mota 0.9; HOTA {hota:.3f} is below --min-hota 0.99\n")
     for bad in ("1.5", "-0.1", "nan"):
         result = invoke("evaluate", log, "--min-hota", bad)
         assert result.exit_code == 2 and "--min-hota" in result.output, bad
@@ -230,11 +243,16 @@ def test_quiet_prints_only_the_result(log):
     assert result.exit_code == 0 and json.loads(result.output)["scores"]["all"]["num_switches"] == 1
 
 
-@pytest.mark.parametrize("channels, needle", [
-    ({"with_tracks": False}, "no messages on /datmo/tracks; run datmo track (or datmo run) first"),
-    ({"with_truth": False}, "no messages on /datmo/ground_truth; run datmo simulate first, or give annotations "
-                            "with --gt"),
-])
+@pytest.mark.parametrize(
+    "channels, needle",
+    [
+        ({"with_tracks": False}, "no messages on /datmo/tracks; run datmo track (or datmo run) first"),
+        (
+            {"with_truth": False},
+            "no messages on /datmo/ground_truth; run datmo simulate first, or give annotations with --gt",
+        ),
+    ],
+)
 def test_missing_channels_name_the_command(tmp_path, channels, needle):
     path = tmp_path / "partial.mcap"
     syn.write(path, **channels)
@@ -250,7 +268,7 @@ def oracle_tracks(log):
     objs, off = truth.items["objects"], truth.offsets["objects"]
     out = []
     for k in range(len(truth)):
-        o = objs[off[k]:off[k + 1]]
+        o = objs[off[k] : off[k + 1]]
         o = o[np.isin(o["classification"], [1, 2, 3]) & (o["visible"] == 1)]
         t = np.zeros(len(o), cdr.element_dtype(types.TRACK))
         for f in ("id", "x", "y", "vx", "vy"):
@@ -270,8 +288,14 @@ def test_a_perfect_tracker_scores_perfectly_on_the_sample_logs(sample_logs, name
     truth, tracks = oracle_tracks(mcapio.read_log(path, topics=["/datmo/ground_truth"]))
     off = np.concatenate([[0], np.cumsum([len(t) for t in tracks])])
     gt, regions, hyps = ev.frames_from_channels(
-        truth.stamps, truth.offsets["objects"], truth.items["objects"], truth.scalars["sensor_theta"],
-        truth.stamps, off, np.concatenate(tracks))
+        truth.stamps,
+        truth.offsets["objects"],
+        truth.items["objects"],
+        truth.scalars["sensor_theta"],
+        truth.stamps,
+        off,
+        np.concatenate(tracks),
+    )
     s = ev.evaluate(gt, hyps, regions=regions)["all"]
     assert s["num_objects"] > 100
     assert (s["mota"], s["idf1"], s["num_false_positives"], s["num_switches"]) == (1.0, 1.0, 0, 0)

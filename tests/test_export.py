@@ -29,11 +29,43 @@ SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
 CLASSES = {0: "unknown", 1: "person", 2: "circle object", 3: "rectangular object"}
 MOBILITIES = {0: "static", 1: "dynamic", 2: "undefined"}
 STATUSES = {0: "tentative", 1: "confirmed", 2: "coasting"}
-HEADER = ["file", "scan", "stamp_ns", "frame_id", "kind", "id", "class", "mobility", "status", "x_m", "y_m", "vx_mps",
-          "vy_mps", "world_x_m", "world_y_m", "world_vx_mps", "world_vy_mps", "size_m", "occluded", "age", "hits",
-          "misses"]
-FEATURE_HEADER = ["segment", "first_beam", "last_beam", "n_points", "x_end_m", "y_end_m", "radius_m", "rho_m",
-                  "theta_rad", "r_acc", "probability"]
+HEADER = [
+    "file",
+    "scan",
+    "stamp_ns",
+    "frame_id",
+    "kind",
+    "id",
+    "class",
+    "mobility",
+    "status",
+    "x_m",
+    "y_m",
+    "vx_mps",
+    "vy_mps",
+    "world_x_m",
+    "world_y_m",
+    "world_vx_mps",
+    "world_vy_mps",
+    "size_m",
+    "occluded",
+    "age",
+    "hits",
+    "misses",
+]
+FEATURE_HEADER = [
+    "segment",
+    "first_beam",
+    "last_beam",
+    "n_points",
+    "x_end_m",
+    "y_end_m",
+    "radius_m",
+    "rho_m",
+    "theta_rad",
+    "r_acc",
+    "probability",
+]
 SUFFIX = {"csv": ".csv", "ndjson": ".ndjson", "parquet": ".parquet"}
 
 
@@ -70,13 +102,32 @@ def reference_tracks(path: Path, name: str) -> list[dict]:
     for scan, m in enumerate(read_ros2_messages(str(path), topics=[mcapio.TOPIC_TRACKS])):
         msg = m.ros_msg
         for t in msg.tracks:
-            rows.append({
-                "file": name, "scan": scan, "stamp_ns": stamp(msg.header), "frame_id": msg.header.frame_id,
-                "kind": "track", "id": t.id, "class": CLASSES[t.classification], "mobility": MOBILITIES[t.mobility],
-                "status": STATUSES[t.status], "x_m": f32(t.x), "y_m": f32(t.y), "vx_mps": f32(t.vx),
-                "vy_mps": f32(t.vy), "world_x_m": f32(t.world_x), "world_y_m": f32(t.world_y),
-                "world_vx_mps": f32(t.world_vx), "world_vy_mps": f32(t.world_vy), "size_m": f32(t.size),
-                "occluded": bool(t.occluded), "age": t.age, "hits": t.hits, "misses": t.misses})
+            rows.append(
+                {
+                    "file": name,
+                    "scan": scan,
+                    "stamp_ns": stamp(msg.header),
+                    "frame_id": msg.header.frame_id,
+                    "kind": "track",
+                    "id": t.id,
+                    "class": CLASSES[t.classification],
+                    "mobility": MOBILITIES[t.mobility],
+                    "status": STATUSES[t.status],
+                    "x_m": f32(t.x),
+                    "y_m": f32(t.y),
+                    "vx_mps": f32(t.vx),
+                    "vy_mps": f32(t.vy),
+                    "world_x_m": f32(t.world_x),
+                    "world_y_m": f32(t.world_y),
+                    "world_vx_mps": f32(t.world_vx),
+                    "world_vy_mps": f32(t.world_vy),
+                    "size_m": f32(t.size),
+                    "occluded": bool(t.occluded),
+                    "age": t.age,
+                    "hits": t.hits,
+                    "misses": t.misses,
+                }
+            )
     return rows
 
 
@@ -87,29 +138,70 @@ def reference_features(path: Path, name: str) -> list[dict]:
     empty = dict.fromkeys(HEADER[5:] + FEATURE_HEADER)
     for scan, m in enumerate(read_ros2_messages(str(path), topics=[mcapio.TOPIC_FEATURES])):
         msg = m.ros_msg
-        common = {**empty, "file": name, "scan": scan, "stamp_ns": stamp(msg.header),
-                  "frame_id": msg.header.frame_id}
+        common = {**empty, "file": name, "scan": scan, "stamp_ns": stamp(msg.header), "frame_id": msg.header.frame_id}
         for f in msg.lines:
-            per_kind["lines"].append({
-                **common, "kind": "line", "segment": f.segment, "first_beam": f.first, "last_beam": f.last,
-                "n_points": f.n_points, "x_m": f32(f.x_ini), "y_m": f32(f.y_ini), "x_end_m": f32(f.x_end),
-                "y_end_m": f32(f.y_end), "size_m": f32(f.length), "rho_m": f32(f.rho), "theta_rad": f32(f.theta),
-                "r_acc": f32(f.r_acc)})
+            per_kind["lines"].append(
+                {
+                    **common,
+                    "kind": "line",
+                    "segment": f.segment,
+                    "first_beam": f.first,
+                    "last_beam": f.last,
+                    "n_points": f.n_points,
+                    "x_m": f32(f.x_ini),
+                    "y_m": f32(f.y_ini),
+                    "x_end_m": f32(f.x_end),
+                    "y_end_m": f32(f.y_end),
+                    "size_m": f32(f.length),
+                    "rho_m": f32(f.rho),
+                    "theta_rad": f32(f.theta),
+                    "r_acc": f32(f.r_acc),
+                }
+            )
         for f in msg.circles:
-            per_kind["circles"].append({
-                **common, "kind": "circle", "segment": f.segment, "first_beam": f.first, "last_beam": f.last,
-                "n_points": f.n_points, "x_m": f32(f.x), "y_m": f32(f.y), "radius_m": f32(f.radius),
-                "r_acc": f32(f.r_acc)})
+            per_kind["circles"].append(
+                {
+                    **common,
+                    "kind": "circle",
+                    "segment": f.segment,
+                    "first_beam": f.first,
+                    "last_beam": f.last,
+                    "n_points": f.n_points,
+                    "x_m": f32(f.x),
+                    "y_m": f32(f.y),
+                    "radius_m": f32(f.radius),
+                    "r_acc": f32(f.r_acc),
+                }
+            )
         for f in msg.blobs:
-            per_kind["blobs"].append({
-                **common, "kind": "point" if f.kind == 1 else "blob", "segment": f.segment, "first_beam": f.first,
-                "last_beam": f.last, "n_points": f.n_points, "x_m": f32(f.x), "y_m": f32(f.y),
-                "size_m": f32(f.size)})
+            per_kind["blobs"].append(
+                {
+                    **common,
+                    "kind": "point" if f.kind == 1 else "blob",
+                    "segment": f.segment,
+                    "first_beam": f.first,
+                    "last_beam": f.last,
+                    "n_points": f.n_points,
+                    "x_m": f32(f.x),
+                    "y_m": f32(f.y),
+                    "size_m": f32(f.size),
+                }
+            )
         for f in msg.legs:
-            per_kind["legs"].append({
-                **common, "kind": "leg", "segment": f.segment, "first_beam": f.first, "last_beam": f.last,
-                "n_points": f.n_points, "x_m": f32(f.x), "y_m": f32(f.y), "size_m": f32(f.width),
-                "probability": f32(f.probability)})
+            per_kind["legs"].append(
+                {
+                    **common,
+                    "kind": "leg",
+                    "segment": f.segment,
+                    "first_beam": f.first,
+                    "last_beam": f.last,
+                    "n_points": f.n_points,
+                    "x_m": f32(f.x),
+                    "y_m": f32(f.y),
+                    "size_m": f32(f.width),
+                    "probability": f32(f.probability),
+                }
+            )
     return [r for rows in per_kind.values() for r in rows]
 
 
@@ -206,20 +298,22 @@ def test_parquet_to_stdout_is_refused_before_any_work(processed, monkeypatch):
     result = invoke(str(processed["static"]), "-o", "-", "--format", "parquet")
     assert result.exit_code == 1
     assert result.stdout == ""
-    assert result.stderr.splitlines() == ["datmo: error: -o -: Parquet is not written to stdout; give a file name "
-                                          "(or --format csv or ndjson)"]
+    assert result.stderr.splitlines() == [
+        "datmo: error: -o -: Parquet is not written to stdout; give a file name (or --format csv or ndjson)"
+    ]
 
 
 def test_missing_pyarrow_names_the_extra(processed, tmp_path, monkeypatch):
-    monkeypatch.setitem(sys.modules, "pyarrow", None)   # `import pyarrow` now raises ImportError
+    monkeypatch.setitem(sys.modules, "pyarrow", None)  # `import pyarrow` now raises ImportError
     monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)
     out = tmp_path / "tracks.parquet"
     result = invoke(str(processed["static"]), "-o", str(out))
     assert result.exit_code == 1
-    assert result.stderr.splitlines() == ["datmo: error: writing Parquet needs pyarrow, which is not installed: "
-                                          "pip install 'datmo-cli[parquet]'"]
+    assert result.stderr.splitlines() == [
+        "datmo: error: writing Parquet needs pyarrow, which is not installed: pip install 'datmo-cli[parquet]'"
+    ]
     assert list(tmp_path.iterdir()) == []
-    assert invoke(str(processed["static"]), "-o", str(tmp_path / "tracks.csv")).exit_code == 0   # CSV needs none
+    assert invoke(str(processed["static"]), "-o", str(tmp_path / "tracks.csv")).exit_code == 0  # CSV needs none
 
 
 def test_progress_counts_every_scan_once(processed):
@@ -260,8 +354,10 @@ class Recorder(io.RawIOBase):
 
 
 def test_memory_does_not_grow_with_the_log(processed, tmp_path):
-    per_scan = max(len(cdr.decode(types.TRACKS, p)["tracks"])
-                   for p in mcapio.read_messages(processed["patrol"], mcapio.TOPIC_TRACKS)[1])
+    per_scan = max(
+        len(cdr.decode(types.TRACKS, p)["tracks"])
+        for p in mcapio.read_messages(processed["patrol"], mcapio.TOPIC_TRACKS)[1]
+    )
     peaks, rows = {}, {}
     for times in (1, 5):
         log = tiled(processed["patrol"], tmp_path / f"tiled{times}.mcap", times)
@@ -272,12 +368,12 @@ def test_memory_does_not_grow_with_the_log(processed, tmp_path):
         export.export(plan, sink, block=30)
         peaks[times] = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
-        assert sink.batches == len(stream.sizes) == 10 * times   # one write per batch of 30 of the 300 scans
-        assert sink.peak_rows <= 30 * per_scan                  # rows held at once: one batch's
+        assert sink.batches == len(stream.sizes) == 10 * times  # one write per batch of 30 of the 300 scans
+        assert sink.peak_rows <= 30 * per_scan  # rows held at once: one batch's
         rows[times] = sink.rows
         assert stream.lines == sink.rows
     assert rows[5] == 5 * rows[1]
-    assert peaks[5] < 1.5 * peaks[1]   # what the rows of the whole log would hold grows fivefold
+    assert peaks[5] < 1.5 * peaks[1]  # what the rows of the whole log would hold grows fivefold
 
 
 def test_parquet_writes_a_row_group_per_batch(processed, tmp_path):
@@ -298,8 +394,9 @@ def test_inputs_checked_before_anything_is_written(processed, tmp_path):
     raw = SAMPLES / "hall.mcap"
     result = invoke(str(processed["static"]), str(raw), "-o", str(out))
     assert result.exit_code == 1
-    assert result.stderr.splitlines() == [f"datmo: error: {raw}: no messages on /datmo/tracks; run datmo track (or "
-                                          "datmo run) first"]
+    assert result.stderr.splitlines() == [
+        f"datmo: error: {raw}: no messages on /datmo/tracks; run datmo track (or datmo run) first"
+    ]
     assert list(tmp_path.iterdir()) == []
     tracks_only = tmp_path / "tracks-only.mcap"
     with mcapio.LogWriter(tracks_only) as w:
@@ -309,12 +406,15 @@ def test_inputs_checked_before_anything_is_written(processed, tmp_path):
     assert not out.exists()
 
 
-@pytest.mark.parametrize("args, message", [
-    (["-o", "{dir}/t.txt"], "{dir}/t.txt: cannot tell the format from the suffix '.txt'"),
-    (["-o", "{static}", "--format", "csv", "--force"], "{static}: the output would overwrite the input"),
-    (["-o", "{dir}/exists.csv"], "{dir}/exists.csv: exists; use --force to overwrite it"),
-    (["-o", "{dir}/none/t.csv"], "{dir}/none: output folder does not exist"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["-o", "{dir}/t.txt"], "{dir}/t.txt: cannot tell the format from the suffix '.txt'"),
+        (["-o", "{static}", "--format", "csv", "--force"], "{static}: the output would overwrite the input"),
+        (["-o", "{dir}/exists.csv"], "{dir}/exists.csv: exists; use --force to overwrite it"),
+        (["-o", "{dir}/none/t.csv"], "{dir}/none: output folder does not exist"),
+    ],
+)
 def test_bad_outputs_are_one_line(processed, tmp_path, args, message):
     (tmp_path / "exists.csv").write_text("keep")
     fill = {"dir": tmp_path, "static": processed["static"]}
@@ -338,7 +438,7 @@ def damaged(data, payload: bytes) -> bytearray:
     p = bytearray(payload)
     how = data.draw(st.sampled_from(["cut", "flip", "random"]))
     if how == "cut":
-        return p[:data.draw(st.integers(0, len(p) - 1))]
+        return p[: data.draw(st.integers(0, len(p) - 1))]
     if how == "flip":
         for _ in range(data.draw(st.integers(1, 8))):
             p[data.draw(st.integers(0, len(p) - 1))] ^= data.draw(st.integers(1, 255))
@@ -357,12 +457,16 @@ def test_damaged_tracks_messages_are_one_line(processed, tmp_path, data):
     log, out = tmp_path / "damaged.mcap", tmp_path / "damaged.csv"
     out.unlink(missing_ok=True)
     with mcapio.LogWriter(log, force=True) as w:
-        w.write_many(mcapio.TOPIC_TRACKS, types.TRACKS, stamps, payloads[:k] + [bytes(p)] + payloads[k + 1:])
+        w.write_many(mcapio.TOPIC_TRACKS, types.TRACKS, stamps, payloads[:k] + [bytes(p)] + payloads[k + 1 :])
     result = invoke(str(log), "-o", str(out))
     lines = result.stderr.splitlines()
     ok = (result.exit_code == 0 and out.exists()) or (
-        result.exit_code == 1 and len(lines) == 1 and lines[0].startswith(f"datmo: error: {log}: bad ")
-        and f"message {k} on /datmo/tracks" in lines[0] and not out.exists())
+        result.exit_code == 1
+        and len(lines) == 1
+        and lines[0].startswith(f"datmo: error: {log}: bad ")
+        and f"message {k} on /datmo/tracks" in lines[0]
+        and not out.exists()
+    )
     tally("export: damaged Tracks messages", failed=not ok)
     assert ok, result.stderr
     assert not list(tmp_path.glob(".*.tmp"))
@@ -373,11 +477,28 @@ def test_damaged_tracks_messages_are_one_line(processed, tmp_path, data):
 GT_HEADER = ["stamp_ns", "id", "x", "y", "class"]
 SIMULATED = ("hall", "crowd6", "corridor", "patrol")
 # Figures that depend on the tracks in don't-care regions, which the CSV cannot carry (see datmo_cli/export.py).
-REGION_FIGURES = {"num_predictions", "num_false_positives", "mota", "idf1", "idp", "precision", "hota", "deta",
-                  "assa", "ignored_hypotheses"}
+REGION_FIGURES = {
+    "num_predictions",
+    "num_false_positives",
+    "mota",
+    "idf1",
+    "idp",
+    "precision",
+    "hota",
+    "deta",
+    "assa",
+    "ignored_hypotheses",
+}
 # counts and the figures made of them that motmetrics' continuity may move by a frame or two (see the test below)
-CONTINUITY_COUNTS = {"num_matches", "num_misses", "num_switches", "num_fragmentations", "mostly_tracked",
-                     "partially_tracked", "mostly_lost"}
+CONTINUITY_COUNTS = {
+    "num_matches",
+    "num_misses",
+    "num_switches",
+    "num_fragmentations",
+    "mostly_tracked",
+    "partially_tracked",
+    "mostly_lost",
+}
 CONTINUITY_FIGURES = CONTINUITY_COUNTS | {"recall", "idr", "motp", "loca"}
 
 
@@ -388,8 +509,13 @@ def channel_targets(path: Path, include_occluded: bool = False):
 
     stamps, payloads = mcapio.read_messages(path, mcapio.TOPIC_GROUND_TRUTH)
     truth = decode_channel(types.GROUND_TRUTH, payloads)
-    return ev.ground_truth_frames(truth.stamps, truth.offsets["objects"], truth.items["objects"],
-                                  truth.scalars.get("sensor_theta"), include_occluded=include_occluded)
+    return ev.ground_truth_frames(
+        truth.stamps,
+        truth.offsets["objects"],
+        truth.items["objects"],
+        truth.scalars.get("sensor_theta"),
+        include_occluded=include_occluded,
+    )
 
 
 def ground_truth_rows(path: Path, fmt: str) -> list[dict]:
@@ -402,9 +528,16 @@ def ground_truth_rows(path: Path, fmt: str) -> list[dict]:
         import pyarrow.parquet as pq
 
         rows = pq.read_table(path).to_pylist()
-    return [{"stamp_ns": int(r["stamp_ns"]), "id": None if r["id"] in (None, "") else int(r["id"]),
-             "x": None if r["x"] in (None, "") else float(r["x"]),
-             "y": None if r["y"] in (None, "") else float(r["y"]), "class": r["class"] or None} for r in rows]
+    return [
+        {
+            "stamp_ns": int(r["stamp_ns"]),
+            "id": None if r["id"] in (None, "") else int(r["id"]),
+            "x": None if r["x"] in (None, "") else float(r["x"]),
+            "y": None if r["y"] in (None, "") else float(r["y"]),
+            "class": r["class"] or None,
+        }
+        for r in rows
+    ]
 
 
 @pytest.mark.parametrize("include_occluded", [False, True])
@@ -461,11 +594,12 @@ def test_evaluate_scores_the_exported_csv_as_the_channel_but_for_dont_care_regio
     exported = score_file(log, gt_csv=gt, match_radius=0.3)["scores"]
     # a class whose only tracks the regions took out gets a row of its own, with no targets
     assert set(channel) <= set(exported)
-    assert all(exported[cls]["num_objects"] == 0 < exported[cls]["num_false_positives"]
-               for cls in set(exported) - set(channel))
+    assert all(
+        exported[cls]["num_objects"] == 0 < exported[cls]["num_false_positives"] for cls in set(exported) - set(channel)
+    )
     for cls in channel:
         same = set(channel[cls]) - REGION_FIGURES
-        for k in same:   # motmetrics sums the same distances in another order when the regions took tracks out
+        for k in same:  # motmetrics sums the same distances in another order when the regions took tracks out
             want = channel[cls][k]
             if k in CONTINUITY_COUNTS and want is not None:
                 assert abs(exported[cls][k] - want) <= 0.01 * channel[cls]["num_objects"], (cls, k)
@@ -519,21 +653,34 @@ def test_ground_truth_to_stdout_is_the_same_table(tmp_path):
 def test_ground_truth_streams_in_two_passes_each_scan_once():
     seen: dict[str, int] = {}
     sink = export.sink_for(io.BytesIO(), "csv", cols=export.GROUND_TRUTH_COLUMNS)
-    export.export_ground_truth(SAMPLES / "hall.mcap", sink, block=64,
-                               progress=lambda stage, n: seen.__setitem__(stage, seen.get(stage, 0) + n))
+    export.export_ground_truth(
+        SAMPLES / "hall.mcap", sink, block=64, progress=lambda stage, n: seen.__setitem__(stage, seen.get(stage, 0) + n)
+    )
     assert seen == {"movers": 300, "targets": 300}
-    assert sink.batches == 5 and sink.peak_rows < sink.rows   # 300 scans, 64 at a time
+    assert sink.batches == 5 and sink.peak_rows < sink.rows  # 300 scans, 64 at a time
 
 
-@pytest.mark.parametrize("args, message", [
-    (["{hall}", "--ground-truth", "--features"], "--ground-truth with --features: the ground truth is a table of "
-                                                 "its own (stamp_ns,id,x,y,class); export it and the tracks with "
-                                                 "two commands"),
-    (["{hall}", "{crowd6}", "--ground-truth"], "--ground-truth: give one FILE (evaluate --gt scores one log), not 2"),
-    (["{hall}", "--include-occluded"], "--include-occluded: only with --ground-truth (the targets no beam hits)"),
-    (["{csail}", "--ground-truth"], "{csail}: no messages on /datmo/ground_truth; only datmo simulate writes ground "
-                                    "truth (annotate a real log as a stamp_ns,id,x,y CSV instead)"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["{hall}", "--ground-truth", "--features"],
+            "--ground-truth with --features: the ground truth is a table of "
+            "its own (stamp_ns,id,x,y,class); export it and the tracks with "
+            "two commands",
+        ),
+        (
+            ["{hall}", "{crowd6}", "--ground-truth"],
+            "--ground-truth: give one FILE (evaluate --gt scores one log), not 2",
+        ),
+        (["{hall}", "--include-occluded"], "--include-occluded: only with --ground-truth (the targets no beam hits)"),
+        (
+            ["{csail}", "--ground-truth"],
+            "{csail}: no messages on /datmo/ground_truth; only datmo simulate writes ground "
+            "truth (annotate a real log as a stamp_ns,id,x,y CSV instead)",
+        ),
+    ],
+)
 def test_ground_truth_refusals_are_one_line(tmp_path, args, message):
     fill = {name: SAMPLES / f"{name}.mcap" for name in ("hall", "crowd6")} | {"csail": SAMPLES / "csail-excerpt.mcap"}
     result = invoke(*[a.format(**fill) for a in args], "-o", str(tmp_path / "gt.csv"))
@@ -546,7 +693,9 @@ def rewritten_ground_truth(path: Path, k: int, payload: bytes) -> Path:
     """hall.mcap's /datmo/ground_truth with message k's payload replaced, as the log at `path`."""
     stamps, payloads = mcapio.read_messages(SAMPLES / "hall.mcap", mcapio.TOPIC_GROUND_TRUTH)
     with mcapio.LogWriter(path, force=True) as w:
-        w.write_many(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH, stamps, payloads[:k] + [payload] + payloads[k + 1:])
+        w.write_many(
+            mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH, stamps, payloads[:k] + [payload] + payloads[k + 1 :]
+        )
     return path
 
 
@@ -560,8 +709,9 @@ def test_a_target_position_that_is_not_finite_is_one_line(tmp_path):
     out = tmp_path / "gt.csv"
     result = invoke(str(log), "--ground-truth", "-o", str(out))
     assert result.exit_code == 1
-    assert result.stderr.splitlines() == [f"datmo: error: {log}: /datmo/ground_truth message 7 holds a target "
-                                          "position that is not a finite number"]
+    assert result.stderr.splitlines() == [
+        f"datmo: error: {log}: /datmo/ground_truth message 7 holds a target position that is not a finite number"
+    ]
     assert not out.exists() and not list(tmp_path.glob(".*.tmp"))
 
 
@@ -574,13 +724,17 @@ def test_a_ground_truth_stamp_that_does_not_increase_is_one_line(tmp_path):
     stamps, payloads = mcapio.read_messages(SAMPLES / "hall.mcap", mcapio.TOPIC_GROUND_TRUTH)
     for k in (200, 128):
         msg = cdr.decode(types.GROUND_TRUTH, payloads[k])
-        log = rewritten_ground_truth(tmp_path / "back.mcap", k, cdr.encode(types.GROUND_TRUTH,
-                                                                             {**msg, "stamp_ns": int(stamps[k - 2])}))
-        line = (f"{log}: /datmo/ground_truth message {k} has stamp_ns {stamps[k - 2]}, not after the previous "
-                f"message's {stamps[k - 1]}")
+        log = rewritten_ground_truth(
+            tmp_path / "back.mcap", k, cdr.encode(types.GROUND_TRUTH, {**msg, "stamp_ns": int(stamps[k - 2])})
+        )
+        line = (
+            f"{log}: /datmo/ground_truth message {k} has stamp_ns {stamps[k - 2]}, not after the previous "
+            f"message's {stamps[k - 1]}"
+        )
         with pytest.raises(InputError) as err:
-            export.export_ground_truth(log, export.sink_for(io.BytesIO(), "csv", cols=export.GROUND_TRUTH_COLUMNS),
-                                       block=64)
+            export.export_ground_truth(
+                log, export.sink_for(io.BytesIO(), "csv", cols=export.GROUND_TRUTH_COLUMNS), block=64
+            )
         assert str(err.value) == line
         out = tmp_path / "gt.csv"
         result = invoke(str(log), "--ground-truth", "-o", str(out))
@@ -610,8 +764,13 @@ def test_damaged_ground_truth_messages_are_one_line(tmp_path, data):
         except InputError:
             ok = False
     else:
-        ok = (result.exit_code == 1 and len(lines) == 1 and lines[0].startswith(f"datmo: error: {log}: ")
-              and "/datmo/ground_truth" in lines[0] and not out.exists())
+        ok = (
+            result.exit_code == 1
+            and len(lines) == 1
+            and lines[0].startswith(f"datmo: error: {log}: ")
+            and "/datmo/ground_truth" in lines[0]
+            and not out.exists()
+        )
     tally("export --ground-truth: damaged GroundTruth messages", failed=not ok)
     assert ok, result.stderr
     assert not list(tmp_path.glob(".*.tmp"))
@@ -619,8 +778,13 @@ def test_damaged_ground_truth_messages_are_one_line(tmp_path, data):
 
 # ------------------------------------------------------------------------------------- types (docs/export.md)
 
-TYPE_CASES = {"odometry": ["patrol"], "no-odometry": ["static"], "no-odometry-first": ["static", "patrol"],
-              "empty": ["empty"], "empty-first": ["empty", "static"]}
+TYPE_CASES = {
+    "odometry": ["patrol"],
+    "no-odometry": ["static"],
+    "no-odometry-first": ["static", "patrol"],
+    "empty": ["empty"],
+    "empty-first": ["empty", "static"],
+}
 
 
 @pytest.fixture(scope="module")
@@ -630,10 +794,15 @@ def typed_logs(processed, tmp_path_factory) -> dict[str, Path]:
     with mcapio.LogWriter(empty) as w:
         for k in range(3):
             t = 1_000_000_000 + k * 200_000_000
-            w.write(mcapio.TOPIC_TRACKS, types.TRACKS, t,
-                    cdr.encode(types.TRACKS, {"stamp_ns": t, "frame_id": "laser"}))
-            w.write(mcapio.TOPIC_FEATURES, types.FEATURES, t,
-                    cdr.encode(types.FEATURES, {"stamp_ns": t, "frame_id": "laser"}))
+            w.write(
+                mcapio.TOPIC_TRACKS, types.TRACKS, t, cdr.encode(types.TRACKS, {"stamp_ns": t, "frame_id": "laser"})
+            )
+            w.write(
+                mcapio.TOPIC_FEATURES,
+                types.FEATURES,
+                t,
+                cdr.encode(types.FEATURES, {"stamp_ns": t, "frame_id": "laser"}),
+            )
     return {**processed, "empty": empty}
 
 
@@ -657,13 +826,20 @@ def test_every_format_reads_back_with_the_documented_types(typed_logs, tmp_path,
     logs = [typed_logs[name] for name in TYPE_CASES[case]]
     paths = {fmt: exported(logs, tmp_path / f"t{SUFFIX[fmt]}", features) for fmt in export.FORMATS}
     schema, arrow = export.polars_schema(features=features), export.arrow_schema(features=features)
-    frames = {"csv": pl.read_csv(paths["csv"], schema=schema), "ndjson": pl.read_ndjson(paths["ndjson"], schema=schema),
-              "parquet": pl.read_parquet(paths["parquet"])}
-    tables = {"csv": pacsv.read_csv(paths["csv"], convert_options=pacsv.ConvertOptions(column_types=arrow,
-                                                                                       strings_can_be_null=True)),
-              "ndjson": pajson.read_json(paths["ndjson"], parse_options=pajson.ParseOptions(explicit_schema=arrow))
-              if paths["ndjson"].stat().st_size else arrow.empty_table(),
-              "parquet": pq.read_table(paths["parquet"])}
+    frames = {
+        "csv": pl.read_csv(paths["csv"], schema=schema),
+        "ndjson": pl.read_ndjson(paths["ndjson"], schema=schema),
+        "parquet": pl.read_parquet(paths["parquet"]),
+    }
+    tables = {
+        "csv": pacsv.read_csv(
+            paths["csv"], convert_options=pacsv.ConvertOptions(column_types=arrow, strings_can_be_null=True)
+        ),
+        "ndjson": pajson.read_json(paths["ndjson"], parse_options=pajson.ParseOptions(explicit_schema=arrow))
+        if paths["ndjson"].stat().st_size
+        else arrow.empty_table(),
+        "parquet": pq.read_table(paths["parquet"]),
+    }
     for fmt in export.FORMATS:
         assert frames[fmt].schema == pl.Schema(schema), fmt
         assert tables[fmt].schema.equals(arrow), fmt
@@ -679,7 +855,7 @@ def test_every_format_reads_back_with_the_documented_types(typed_logs, tmp_path,
     assert tracks.height > 1000 and tracks["id"].null_count() == 0
     world = tracks["world_x_m"].is_not_null()
     by_file = {f: bool(world.filter(tracks["file"] == f).any()) for f in map(str, logs)}
-    assert by_file == {str(p): p.stem == "patrol" for p in logs}   # odometry only in patrol's rows
+    assert by_file == {str(p): p.stem == "patrol" for p in logs}  # odometry only in patrol's rows
     if features:
         feats = df.filter(pl.col("kind") != "track")
         assert feats.height > 1000 and feats["segment"].null_count() == 0 and feats["id"].null_count() == feats.height
@@ -696,8 +872,11 @@ def test_ground_truth_reads_back_with_its_types(tmp_path):
     for fmt in export.FORMATS:
         out = tmp_path / f"gt{SUFFIX[fmt]}"
         assert invoke(log, "--ground-truth", "-o", str(out)).exit_code == 0
-        frames[fmt] = {"csv": pl.read_csv, "ndjson": pl.read_ndjson}[fmt](out, schema=schema) if fmt != "parquet" \
+        frames[fmt] = (
+            {"csv": pl.read_csv, "ndjson": pl.read_ndjson}[fmt](out, schema=schema)
+            if fmt != "parquet"
             else pl.read_parquet(out)
+        )
         assert frames[fmt].schema == pl.Schema(schema)
     assert frames["csv"].equals(frames["parquet"]) and frames["ndjson"].equals(frames["parquet"])
     assert pq.read_schema(tmp_path / "gt.parquet").equals(export.arrow_schema(export.GROUND_TRUTH_COLUMNS))

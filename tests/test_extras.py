@@ -27,33 +27,64 @@ def one_scan_log(path: Path) -> Path:
     stamp = 1_000_000_000
     with mcapio.LogWriter(path) as w:
         w.write(mcapio.TOPIC_SCAN, types.LASERSCAN, stamp, encode_scan(stamp, np.full(361, 3.0, np.float32), g))
-        w.write(mcapio.TOPIC_TRACKS, types.TRACKS, stamp,
-                cdr.encode(types.TRACKS, {"stamp_ns": stamp, "frame_id": "laser"}))
+        w.write(
+            mcapio.TOPIC_TRACKS, types.TRACKS, stamp, cdr.encode(types.TRACKS, {"stamp_ns": stamp, "frame_id": "laser"})
+        )
     return path
 
 
 # (module made missing, command words ({log}: a one-scan log, {out}: a folder for outputs), the error line)
 CASES = [
-    ("sklearn", ["train-legs", "--positive", "{log}", "-o", "{out}/m.npz"],
-     "training a leg model needs scikit-learn, which is not installed: pip install 'datmo-cli[train]'"),
-    ("distributed", ["run", "{log}", "-o", "{out}/run", "--scheduler", "tcp://127.0.0.1:1"],
-     "--scheduler needs dask[distributed], which is not installed: pip install 'datmo-cli[dask]'"),
-    ("pyarrow", ["export", "{log}", "-o", "{out}/tracks.parquet"],
-     "writing Parquet needs pyarrow, which is not installed: pip install 'datmo-cli[parquet]'"),
-    ("foxglove", ["play", "{log}", "--port", "0"],
-     "the live view needs foxglove-sdk, which is not installed: pip install 'datmo-cli[live]'"),
-    ("matplotlib", ["report", "{log}", "--plot", "{out}/p.png"],
-     "--plot needs matplotlib, which is not installed: pip install 'datmo-cli[plot]'"),
-    ("matplotlib", ["run", "{log}", "-o", "{out}/run", "--plot"],
-     "--plot needs matplotlib, which is not installed: pip install 'datmo-cli[plot]'"),
-    ("motmetrics", ["evaluate", "{log}"],
-     "scoring tracks (datmo evaluate) needs motmetrics, which is not installed: pip install 'datmo-cli[eval]'"),
-    ("trackeval", ["evaluate", "{log}"],
-     "scoring tracks (datmo evaluate) needs trackeval, which is not installed: pip install 'datmo-cli[eval]'"),
-    ("scipy", ["evaluate", "{log}"],
-     "scoring tracks (datmo evaluate) needs scipy, which is not installed: pip install 'datmo-cli[eval]'"),
-    ("cyclonedds", ["node", "--no-config"],
-     "datmo node needs cyclonedds, which is not installed: pip install 'datmo-cli[node]'"),
+    (
+        "sklearn",
+        ["train-legs", "--positive", "{log}", "-o", "{out}/m.npz"],
+        "training a leg model needs scikit-learn, which is not installed: pip install 'datmo-cli[train]'",
+    ),
+    (
+        "distributed",
+        ["run", "{log}", "-o", "{out}/run", "--scheduler", "tcp://127.0.0.1:1"],
+        "--scheduler needs dask[distributed], which is not installed: pip install 'datmo-cli[dask]'",
+    ),
+    (
+        "pyarrow",
+        ["export", "{log}", "-o", "{out}/tracks.parquet"],
+        "writing Parquet needs pyarrow, which is not installed: pip install 'datmo-cli[parquet]'",
+    ),
+    (
+        "foxglove",
+        ["play", "{log}", "--port", "0"],
+        "the live view needs foxglove-sdk, which is not installed: pip install 'datmo-cli[live]'",
+    ),
+    (
+        "matplotlib",
+        ["report", "{log}", "--plot", "{out}/p.png"],
+        "--plot needs matplotlib, which is not installed: pip install 'datmo-cli[plot]'",
+    ),
+    (
+        "matplotlib",
+        ["run", "{log}", "-o", "{out}/run", "--plot"],
+        "--plot needs matplotlib, which is not installed: pip install 'datmo-cli[plot]'",
+    ),
+    (
+        "motmetrics",
+        ["evaluate", "{log}"],
+        "scoring tracks (datmo evaluate) needs motmetrics, which is not installed: pip install 'datmo-cli[eval]'",
+    ),
+    (
+        "trackeval",
+        ["evaluate", "{log}"],
+        "scoring tracks (datmo evaluate) needs trackeval, which is not installed: pip install 'datmo-cli[eval]'",
+    ),
+    (
+        "scipy",
+        ["evaluate", "{log}"],
+        "scoring tracks (datmo evaluate) needs scipy, which is not installed: pip install 'datmo-cli[eval]'",
+    ),
+    (
+        "cyclonedds",
+        ["node", "--no-config"],
+        "datmo node needs cyclonedds, which is not installed: pip install 'datmo-cli[node]'",
+    ),
 ]
 
 
@@ -61,11 +92,11 @@ CASES = [
 def test_a_missing_extra_is_one_line_naming_it(tmp_path: Path, monkeypatch, module: str, args: list[str], line: str):
     log = one_scan_log(tmp_path / "one.mcap")
     for name in [m for m in sys.modules if m == module or m.startswith(module + ".")] or [module]:
-        monkeypatch.setitem(sys.modules, name, None)   # `import name` now raises ImportError
+        monkeypatch.setitem(sys.modules, name, None)  # `import name` now raises ImportError
     result = CliRunner().invoke(cli, [a.format(log=log, out=tmp_path) for a in args])
     assert result.exit_code == 1, result.output
     assert result.output.splitlines() == [f"datmo: error: {line}"]
-    assert [p for p in tmp_path.rglob("*") if p.is_file()] == [log]   # nothing written
+    assert [p for p in tmp_path.rglob("*") if p.is_file()] == [log]  # nothing written
 
 
 def test_require_gives_the_module_when_it_is_there():
@@ -74,8 +105,9 @@ def test_require_gives_the_module_when_it_is_there():
 
 def test_require_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "fsspec", None)
-    with pytest.raises(DatmoError, match=re.escape("reading a URL needs fsspec, which is not installed: pip install "
-                                                   "'datmo-cli[dask]'")):
+    with pytest.raises(
+        DatmoError, match=re.escape("reading a URL needs fsspec, which is not installed: pip install 'datmo-cli[dask]'")
+    ):
         extras.require("fsspec", for_="reading a URL")
 
 
@@ -84,8 +116,7 @@ def _names(requirements: list[str]) -> set[str]:
 
 
 def test_every_extra_is_in_pyproject_and_the_dev_extra_installs_them_all():
-    optional = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"][
-        "optional-dependencies"]
+    optional = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]["optional-dependencies"]
     for module, (package, extra) in extras.EXTRAS.items():
         assert package in _names(optional[extra]), module
     for extra, requirements in optional.items():

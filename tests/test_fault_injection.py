@@ -62,9 +62,14 @@ def logs(tmp_path_factory) -> dict[str, Path]:
     k = 4
     long = folder / "long.mcap"
     with mcapio.LogWriter(long) as w:
-        w.write_scans(ScanRun(np.concatenate([run.stamps + i * span for i in range(k)]),
-                              np.concatenate([run.ranges] * k), run.geometry,
-                              None if run.intensities is None else np.concatenate([run.intensities] * k)))
+        w.write_scans(
+            ScanRun(
+                np.concatenate([run.stamps + i * span for i in range(k)]),
+                np.concatenate([run.ranges] * k),
+                run.geometry,
+                None if run.intensities is None else np.concatenate([run.intensities] * k),
+            )
+        )
     return {"small": small, "tracked": tracked, "long": long}
 
 
@@ -96,7 +101,7 @@ COMMANDS = {
     "run": lambda L, o: ["run", L["small"], "-o", o.parent / "batch", "--no-report", "--jobs", "1"],
     "export": lambda L, o: ["export", L["tracked"], "--features", "-o", o.with_suffix(".csv")],
 }
-ROOM = [0, 64, 700, 5_000, 40_000, 150_000]     # bytes the disk takes before it is full
+ROOM = [0, 64, 700, 5_000, 40_000, 150_000]  # bytes the disk takes before it is full
 
 
 @pytest.mark.parametrize("name", list(COMMANDS))
@@ -114,11 +119,17 @@ def test_write_failures_at_seeded_points_of_every_writing_command(logs, tmp_path
         monkeypatch.setattr(outputs, "_file_for", real)
         made = [p for p in folder.rglob("*") if p.is_file() and p.name != "manifest.jsonl"]
         last = res.stderr.strip().splitlines()[-1] if res.stderr.strip() else ""
-        if res.exit_code == 0:       # the whole output fitted in `room`: it must then be complete
+        if res.exit_code == 0:  # the whole output fitted in `room`: it must then be complete
             ok = bool(made) and not temps(folder)
         else:
-            ok = (last.startswith("datmo: error: ") and "no space left on the device" in last
-                  and "Traceback" not in res.output and not made and not temps(folder) and not outputs.live())
+            ok = (
+                last.startswith("datmo: error: ")
+                and "no space left on the device" in last
+                and "Traceback" not in res.output
+                and not made
+                and not temps(folder)
+                and not outputs.live()
+            )
         ok = ok and {k: digest(p) for k, p in logs.items()} == before
         tally("write failures", failed=not ok)
         assert ok, (name, room, res.exit_code, res.output[-2000:], made, temps(folder))
@@ -133,18 +144,19 @@ def _record_case(emu, folder: Path, room: int) -> tuple[bool, str]:
     """`datmo record` from `emu` into a disk with `room` bytes: (promise kept, what happened)."""
     out = folder / "run.mcap"
     before = len(emu.sent)
-    res = CliRunner().invoke(cli, ["record", "--port", emu.device_path, "-o", str(out), "--baud", "500000",
-                                   "--scans", str(RECORD_SCANS)])
+    res = CliRunner().invoke(
+        cli, ["record", "--port", emu.device_path, "-o", str(out), "--baud", "500000", "--scans", str(RECORD_SCANS)]
+    )
     sent = [s for s in emu.sent[before:] if s.good]
     err = res.stderr.strip()
     last = err.splitlines()[-1] if err else ""
     clean = "Traceback" not in res.output and not temps(folder) and not outputs.live()
-    if res.exit_code == 0:           # everything fitted: the whole recording, finished
+    if res.exit_code == 0:  # everything fitted: the whole recording, finished
         run = mcapio.read_run(out)
         return clean and len(run) == RECORD_SCANS and _exact(run, sent), "complete"
     ok = clean and last.startswith("datmo: error: ") and "no space left on the device" in last
     kept = KEPT.search(last)
-    if kept is None:                 # full before the first flush (or before recording began): no output at all
+    if kept is None:  # full before the first flush (or before recording began): no output at all
         return ok and not out.exists(), "nothing kept"
     n = int(kept.group(1))
     with warnings.catch_warnings(record=True) as caught:
@@ -159,7 +171,7 @@ def _record_case(emu, folder: Path, room: int) -> tuple[bool, str]:
 
 
 def _exact(run: ScanRun, sent) -> bool:
-    expected = np.stack([s.ranges() for s in sent[:len(run)]])
+    expected = np.stack([s.ranges() for s in sent[: len(run)]])
     return np.array_equal(run.ranges.view(np.uint32), np.ascontiguousarray(expected, np.float32).view(np.uint32))
 
 
@@ -176,7 +188,7 @@ def test_write_failures_at_seeded_points_of_record(tmp_path, monkeypatch):
 
     rng = random.Random("write failures record")
     rooms = RECORD_ROOM + [rng.randrange(1_000, 20_000) for _ in range(2)]
-    monkeypatch.setattr(recorder, "FLUSH_EVERY_S", 0.05)   # many flushes in a short recording
+    monkeypatch.setattr(recorder, "FLUSH_EVERY_S", 0.05)  # many flushes in a short recording
     values = (np.arange(361, dtype=np.uint16)[None] * 7 + np.arange(16, dtype=np.uint16)[:, None] * 13) % 8000
     real = outputs._file_for
     outcomes = []
@@ -189,7 +201,7 @@ def test_write_failures_at_seeded_points_of_record(tmp_path, monkeypatch):
                 ok, what = _record_case(emu, folder, room)
             finally:
                 monkeypatch.setattr(outputs, "_file_for", real)
-            ok = ok and (room < 12_000 or what != "nothing kept")   # room for a first flush: scans kept
+            ok = ok and (room < 12_000 or what != "nothing kept")  # room for a first flush: scans kept
             tally("write failures", failed=not ok)
             outcomes.append((room, what))
             assert ok, (room, what, list(folder.iterdir()))
@@ -232,11 +244,17 @@ def test_write_failures_at_seeded_points_of_train_legs(tmp_path, monkeypatch):
         monkeypatch.setattr(outputs, "_file_for", real)
         made = [p for p in folder.rglob("*") if p.is_file()]
         last = res.stderr.strip().splitlines()[-1] if res.stderr.strip() else ""
-        if res.exit_code == 0:       # the model fitted in `room`: it must then be whole
+        if res.exit_code == 0:  # the model fitted in `room`: it must then be whole
             ok = made == [out] and LegModel.load(out).n_trees > 0
         else:
-            ok = (res.exit_code != 0 and last.startswith("datmo: error: ") and "no space left on the device" in last
-                  and "Traceback" not in res.output and not made and not outputs.live())
+            ok = (
+                res.exit_code != 0
+                and last.startswith("datmo: error: ")
+                and "no space left on the device" in last
+                and "Traceback" not in res.output
+                and not made
+                and not outputs.live()
+            )
         ok = ok and not temps(folder) and digest(positive) == before and (room != 0 or res.exit_code != 0)
         tally("write failures", failed=not ok)
         assert ok, (room, res.exit_code, res.output[-2000:], made)
@@ -267,10 +285,14 @@ def test_signals_at_seeded_moments_leave_no_partial_output(logs, tmp_path, comma
         folder = tmp_path / signal.Signals(sig).name
         folder.mkdir()
         out = folder / "out.mcap"
-        args = ["run", str(long), "-o", str(folder), "--no-report", "--jobs", "1"] if command == "run" else \
-            [command, str(long), "-o", str(out)]
-        proc = subprocess.Popen([sys.executable, "-m", "datmo_cli", *args], stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True)
+        args = (
+            ["run", str(long), "-o", str(folder), "--no-report", "--jobs", "1"]
+            if command == "run"
+            else [command, str(long), "-o", str(out)]
+        )
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "datmo_cli", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
         try:
             writing = _wait_for_temp(folder, proc)
             time.sleep(rng.uniform(0.0, 1.5))
@@ -281,7 +303,7 @@ def test_signals_at_seeded_moments_leave_no_partial_output(logs, tmp_path, comma
             if proc.poll() is None:
                 proc.kill()
         result = folder / long.name if command == "run" else out
-        if proc.returncode == 0:     # finished before the signal: the output is then whole
+        if proc.returncode == 0:  # finished before the signal: the output is then whole
             ok = len(mcapio.read_run(result)) == 1200
         elif proc.returncode == -sig:
             # the signal came after the work was done and datmo's handlers were gone, as the interpreter exited:
@@ -289,8 +311,12 @@ def test_signals_at_seeded_moments_leave_no_partial_output(logs, tmp_path, comma
             ok = "Traceback" not in err and len(mcapio.read_run(result)) == 1200
         else:
             last = err.strip().splitlines()[-1] if err.strip() else ""
-            ok = (proc.returncode == 128 + sig and last.startswith("datmo: error: ") and "Traceback" not in err
-                  and (not result.exists() or len(mcapio.read_run(result)) == 1200))   # nothing, or the whole
+            ok = (
+                proc.returncode == 128 + sig
+                and last.startswith("datmo: error: ")
+                and "Traceback" not in err
+                and (not result.exists() or len(mcapio.read_run(result)) == 1200)
+            )  # nothing, or the whole
         ok = ok and writing and not temps(folder) and digest(long) == before
         tally("signals", failed=not ok)
         assert ok, (command, signal.Signals(sig).name, proc.returncode, err[-2000:])

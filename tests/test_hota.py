@@ -24,9 +24,14 @@ def frames(rows: list[list[tuple[int, float, float]]], cls: int = 1) -> ev.Frame
     """Frames with stamps 0, 1, ...; rows[k] = frame k's (id, x, y)."""
     flat = [r for frame in rows for r in frame]
     offsets = np.concatenate([[0], np.cumsum([len(f) for f in rows])]).astype(np.int64)
-    return ev.Frames(np.arange(len(rows), dtype=np.int64), offsets, np.array([r[0] for r in flat], np.int64),
-                     np.array([r[1] for r in flat], float), np.array([r[2] for r in flat], float),
-                     np.full(len(flat), cls, np.int64))
+    return ev.Frames(
+        np.arange(len(rows), dtype=np.int64),
+        offsets,
+        np.array([r[0] for r in flat], np.int64),
+        np.array([r[1] for r in flat], float),
+        np.array([r[2] for r in flat], float),
+        np.full(len(flat), cls, np.int64),
+    )
 
 
 def scores(gt_rows, hyp_rows, radius: float = 0.5) -> dict:
@@ -45,8 +50,12 @@ def assert_figures(s: dict, expected: dict) -> None:
 # (d = 0, S = 1, so every alpha gives the same figures): track 10 follows A in frames 0-1, track 11 takes A
 # over in frames 2-3 (an identity switch), track 20 follows B in frames 0-2 and B is missed in frame 3.
 SWITCH_AND_MISS_GT = [[(1, 0.0, 0.0), (2, FAR, 0.0)]] * 4
-SWITCH_AND_MISS_HYPS = [[(10, 0.0, 0.0), (20, FAR, 0.0)], [(10, 0.0, 0.0), (20, FAR, 0.0)],
-                        [(11, 0.0, 0.0), (20, FAR, 0.0)], [(11, 0.0, 0.0)]]
+SWITCH_AND_MISS_HYPS = [
+    [(10, 0.0, 0.0), (20, FAR, 0.0)],
+    [(10, 0.0, 0.0), (20, FAR, 0.0)],
+    [(11, 0.0, 0.0), (20, FAR, 0.0)],
+    [(11, 0.0, 0.0)],
+]
 
 
 def test_an_identity_switch_and_a_miss():
@@ -97,7 +106,7 @@ def test_per_class_figures():
     gt = frames([[(1, 0.0, 0.0)], [(1, 0.0, 0.0)]])
     gt.cls[:] = 1
     hyps = frames([[(5, 0.0, 0.0), (6, FAR, 0.0)], [(5, 0.0, 0.0), (6, FAR, 0.0)]])
-    hyps.cls[:] = [1, 3, 1, 3]   # a person on the target, a false rectangular object elsewhere
+    hyps.cls[:] = [1, 3, 1, 3]  # a person on the target, a false rectangular object elsewhere
     s = ev.evaluate(gt, hyps)
     # all: TP 2, FP 2 -> DetA 1/2, AssA 1, HOTA sqrt(1/2); person: perfect; rectangular object: only FPs
     assert_figures(s["all"], {"deta": 0.5, "assa": 1.0, "hota": math.sqrt(0.5)})
@@ -108,5 +117,5 @@ def test_per_class_figures():
 def test_similarity_is_one_minus_distance_over_radius():
     hf = ev.HotaFrames()
     hf.add(np.array([1]), np.array([2, 3]), np.array([[0.1, 0.7]]), 0.5)
-    hf.add(np.array([], np.int64), np.array([], np.int64), np.zeros((0, 0)), 0.5)   # empty: left out
+    hf.add(np.array([], np.int64), np.array([], np.int64), np.zeros((0, 0)), 0.5)  # empty: left out
     assert len(hf.similarity) == 1 and hf.similarity[0] == pytest.approx(np.array([[0.8, 0.0]]))

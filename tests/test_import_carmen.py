@@ -22,8 +22,10 @@ def robotlaser(ranges, t: float, start=-1.570796, fov=3.141593, res=0.017453, ma
     r = " ".join(f"{v:g}" for v in ranges)
     rm = " ".join(f"{v:g}" for v in rem)
     rem_part = f"{len(rem)} {rm}".strip()
-    return (f"ROBOTLASER1 0 {start} {fov} {res} {max_range} 0.1 0 {len(ranges)} {r} {rem_part} "
-            f"3 4 0.25 3 4 0.25 0 0 0 0 0 {t:.6f} host {t:.6f}")
+    return (
+        f"ROBOTLASER1 0 {start} {fov} {res} {max_range} 0.1 0 {len(ranges)} {r} {rem_part} "
+        f"3 4 0.25 3 4 0.25 0 0 0 0 0 {t:.6f} host {t:.6f}"
+    )
 
 
 def write(tmp_path, name: str, lines: list[str], gz: bool = False):
@@ -37,8 +39,7 @@ def write(tmp_path, name: str, lines: list[str], gz: bool = False):
     return path
 
 
-@pytest.mark.parametrize(("n", "first", "last"), [(180, -90, 89), (181, -90, 90), (360, -90, 89.5),
-                                                    (361, -90, 90)])
+@pytest.mark.parametrize(("n", "first", "last"), [(180, -90, 89), (181, -90, 90), (360, -90, 89.5), (361, -90, 90)])
 def test_flaser_angle_convention(n, first, last):
     a0, inc = flaser_angles(n)
     angles = np.degrees(a0 + inc * np.arange(n))
@@ -70,8 +71,7 @@ def test_stamps_kept_repaired_or_synthesised():
 
 
 def test_flaser_log_to_run_and_odometry(tmp_path):
-    lines = ["# a comment", "PARAM robot_front_laser_max 50 nohost 0",
-             "ODOM 0 0 0 0 0 0 0.5 host 0.5"]
+    lines = ["# a comment", "PARAM robot_front_laser_max 50 nohost 0", "ODOM 0 0 0 0 0 0 0.5 host 0.5"]
     lines += [flaser([1.0, 2.0, 81.91, 3.0] + [4.0] * 357, 10.0 + i, pose=(i, 2 * i, 0.1 * i)) for i in range(5)]
     lines += ["NEFF 1 2 3"]
     res = import_log(write(tmp_path, "a.log", lines))
@@ -99,8 +99,16 @@ def test_gzipped_equals_plain(tmp_path):
 
 def test_malformed_lines_are_skipped_and_counted(tmp_path):
     good = [flaser([1.0] * 181, 1.0 + i) for i in range(4)]
-    lines = [good[0], "FLASER 181 1 2 3", good[1], "FLASER 181 " + "x " * 192, "garbage here", good[2],
-             "ODOM 1 2", good[3]]
+    lines = [
+        good[0],
+        "FLASER 181 1 2 3",
+        good[1],
+        "FLASER 181 " + "x " * 192,
+        "garbage here",
+        good[2],
+        "ODOM 1 2",
+        good[3],
+    ]
     res = import_log(write(tmp_path, "m.log", lines))
     assert len(res.run) == 4
     assert res.warnings[0].endswith("skipped 4 malformed lines (first at line 2, 4, 5)")
@@ -108,8 +116,11 @@ def test_malformed_lines_are_skipped_and_counted(tmp_path):
 
 
 def test_robotlaser_geometry_poses_and_remissions(tmp_path):
-    lines = ["VERTEX_SE2 0 1 2 3"] + [robotlaser([1.0, 60.0, 2.0], 5.0 + i, start=-0.5, res=0.5, max_range=50.0,
-                                                 rem=(7, 8, 9)) for i in range(3)] + ["EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1"]
+    lines = (
+        ["VERTEX_SE2 0 1 2 3"]
+        + [robotlaser([1.0, 60.0, 2.0], 5.0 + i, start=-0.5, res=0.5, max_range=50.0, rem=(7, 8, 9)) for i in range(3)]
+        + ["EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1"]
+    )
     path = write(tmp_path, "k.g2o", lines)
     assert detect_kind(path) == "g2o"
     res = import_log(path)
@@ -131,8 +142,11 @@ def test_rawlaser_takes_poses_from_odom_lines(tmp_path):
 def test_several_laser_streams_need_topic(tmp_path):
     lines = [flaser([1.0] * 180, 1.0), flaser([2.0] * 180, 1.5, name="RLASER"), flaser([1.0] * 180, 2.0)]
     path = write(tmp_path, "two.log", lines)
-    with pytest.raises(InputError, match=r"several laser streams, choose one with --topic: FLASER \(2 scans\), "
-                                         r"RLASER \(1 scans\)"):
+    with pytest.raises(
+        InputError,
+        match=r"several laser streams, choose one with --topic: FLASER \(2 scans\), "
+        r"RLASER \(1 scans\)",
+    ):
         import_log(path)
     assert len(import_log(path, "RLASER").run) == 1
     with pytest.raises(InputError, match="no ROBOTLASER1 scans; it has FLASER"):
@@ -141,8 +155,11 @@ def test_several_laser_streams_need_topic(tmp_path):
 
 def test_geometry_change_is_refused_with_scan_index(tmp_path):
     lines = [flaser([1.0] * 180, 1.0), flaser([1.0] * 180, 2.0), flaser([1.0] * 181, 3.0)]
-    with pytest.raises(GeometryError, match=r"x.log: FLASER geometry changes at scan 2 \(line 3\): "
-                                            r"180 beams -> 181 beams"):
+    with pytest.raises(
+        GeometryError,
+        match=r"x.log: FLASER geometry changes at scan 2 \(line 3\): "
+        r"180 beams -> 181 beams",
+    ):
         import_log(write(tmp_path, "x.log", lines))
 
 
@@ -164,14 +181,19 @@ def test_truncated_gzip_keeps_what_was_read(tmp_path):
     assert any("truncated" in w for w in res.warnings)
 
 
-@pytest.mark.parametrize(("content", "problem"), [
-    (b"", "empty file"),
-    (b"\x00\x01\x02garbage\xff" * 100, "unknown kind of file"),
-    (b"hello world\nthis is not a log\n", "unknown kind of file"),
-    (b"# only comments\nPARAM a 1 nohost 0\n", "no laser scans"),
-    (b"FLASER 3 1 2\nFLASER x\n", "no laser scans (no valid FLASER, RLASER, RAWLASER1-4 or ROBOTLASER1-2 lines; "
-                                   "skipped 2 malformed lines)"),
-])
+@pytest.mark.parametrize(
+    ("content", "problem"),
+    [
+        (b"", "empty file"),
+        (b"\x00\x01\x02garbage\xff" * 100, "unknown kind of file"),
+        (b"hello world\nthis is not a log\n", "unknown kind of file"),
+        (b"# only comments\nPARAM a 1 nohost 0\n", "no laser scans"),
+        (
+            b"FLASER 3 1 2\nFLASER x\n",
+            "no laser scans (no valid FLASER, RLASER, RAWLASER1-4 or ROBOTLASER1-2 lines; skipped 2 malformed lines)",
+        ),
+    ],
+)
 def test_bad_inputs_raise_one_line_errors(tmp_path, content, problem):
     path = tmp_path / "bad.log"
     path.write_bytes(content)

@@ -84,8 +84,10 @@ def test_bag_topic_choice_through_the_cli(tmp_path):
     out = tmp_path / "b.mcap"
     result = run_cli(bag, "-o", out)
     assert result.exit_code == 1
-    assert result.output == (f"datmo: error: {bag}: several sensor_msgs/LaserScan topics, choose one with "
-                             "--topic: /front (5 messages), /rear (5 messages)\n")
+    assert result.output == (
+        f"datmo: error: {bag}: several sensor_msgs/LaserScan topics, choose one with "
+        "--topic: /front (5 messages), /rear (5 messages)\n"
+    )
     assert not out.exists()
     result = run_cli(bag, "-o", out, "--topic", "/rear", "--odom-topic", "/odom")
     assert result.exit_code == 0, result.output
@@ -94,14 +96,19 @@ def test_bag_topic_choice_through_the_cli(tmp_path):
     assert np.allclose(mcapio.read_odometry(out).x, [0, 0.5, 1, 1.5, 2])
 
 
-@pytest.mark.parametrize(("make", "problem"), [
-    (lambda d: d / "missing.log", "no such file"),
-    (lambda d: d, "is a directory, not a log"),
-    (lambda d: (d / "empty.log").write_bytes(b"") and None or d / "empty.log", "empty file"),
-    (lambda d: (d / "junk.bin").write_bytes(bytes(range(256)) * 40) and None or d / "junk.bin",
-     "unknown kind of file"),
-    (lambda d: write_ros1(d / "odom.bag", messages(), topics={"/odom"}), "no sensor_msgs/LaserScan topic"),
-])
+@pytest.mark.parametrize(
+    ("make", "problem"),
+    [
+        (lambda d: d / "missing.log", "no such file"),
+        (lambda d: d, "is a directory, not a log"),
+        (lambda d: (d / "empty.log").write_bytes(b"") and None or d / "empty.log", "empty file"),
+        (
+            lambda d: (d / "junk.bin").write_bytes(bytes(range(256)) * 40) and None or d / "junk.bin",
+            "unknown kind of file",
+        ),
+        (lambda d: write_ros1(d / "odom.bag", messages(), topics={"/odom"}), "no sensor_msgs/LaserScan topic"),
+    ],
+)
 def test_bad_inputs_give_one_line_errors(tmp_path, make, problem):
     src_dir = tmp_path / "src"
     src_dir.mkdir()

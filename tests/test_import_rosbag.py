@@ -18,28 +18,47 @@ ODOM = "nav_msgs/msg/Odometry"
 def _scan(store, t_ns: int, n: int, frame: str, value: float, intensities: bool = False, angle_min: float = -1.0):
     T = store.types
     stamp = T["builtin_interfaces/msg/Time"](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
-    header = (T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame) if store is STORE1
-              else T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame))
-    return T[SCAN](header=header, angle_min=angle_min, angle_max=angle_min + 0.01 * (n - 1), angle_increment=0.01,
-                   time_increment=0.0, scan_time=0.1, range_min=0.05, range_max=10.0,
-                   ranges=np.full(n, value, np.float32),
-                   intensities=np.arange(n, dtype=np.float32) if intensities else np.zeros(0, np.float32))
+    header = (
+        T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame)
+        if store is STORE1
+        else T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+    )
+    return T[SCAN](
+        header=header,
+        angle_min=angle_min,
+        angle_max=angle_min + 0.01 * (n - 1),
+        angle_increment=0.01,
+        time_increment=0.0,
+        scan_time=0.1,
+        range_min=0.05,
+        range_max=10.0,
+        ranges=np.full(n, value, np.float32),
+        intensities=np.arange(n, dtype=np.float32) if intensities else np.zeros(0, np.float32),
+    )
 
 
 def _odom(store, t_ns: int, x: float, yaw: float):
     T = store.types
     stamp = T["builtin_interfaces/msg/Time"](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
-    header = (T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id="odom") if store is STORE1
-              else T["std_msgs/msg/Header"](stamp=stamp, frame_id="odom"))
-    pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=0.0, z=0.0),
-                                       orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=np.sin(yaw / 2),
-                                                                                     w=np.cos(yaw / 2)))
+    header = (
+        T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id="odom")
+        if store is STORE1
+        else T["std_msgs/msg/Header"](stamp=stamp, frame_id="odom")
+    )
+    pose = T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=x, y=0.0, z=0.0),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=np.sin(yaw / 2), w=np.cos(yaw / 2)),
+    )
     cov = np.zeros(36)
     zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
-    return T[ODOM](header=header, child_frame_id="base_link",
-                   pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
-                   twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                       twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=cov))
+    return T[ODOM](
+        header=header,
+        child_frame_id="base_link",
+        pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
+        twist=T["geometry_msgs/msg/TwistWithCovariance"](
+            twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=cov
+        ),
+    )
 
 
 def messages(n_scans: int = 5, zero_stamp_at: int | None = None, change_at: int | None = None):
@@ -103,8 +122,10 @@ def test_several_scan_topics_are_listed(bag):
     _, path = bag
     with pytest.raises(InputError) as err:
         import_log(path)
-    assert str(err.value) == (f"{path}: several sensor_msgs/LaserScan topics, choose one with --topic: "
-                              "/front (5 messages), /rear (5 messages)")
+    assert str(err.value) == (
+        f"{path}: several sensor_msgs/LaserScan topics, choose one with --topic: "
+        "/front (5 messages), /rear (5 messages)"
+    )
 
 
 def test_topic_picks_one_and_keeps_stamps_frames_intensities_odometry(bag):

@@ -15,15 +15,30 @@ from datmo_cli.log.importers import import_log
 
 # file -> (FLASER scans, beams); angles: 181/361 span -90..+90 inclusive, 180/360 step 180/n from -90.
 CARMEN = {
-    "acapulco": (861, 181), "aces": (440, 180), "belgioioso": (395, 361), "csail": (406, 361),
-    "edmonton": (340, 180), "fhw": (488, 180), "freiburg-079": (4791, 360), "freiburg-101": (292, 360),
-    "freiburg-campus": (2008, 360), "infinite-corridor": (1941, 180), "intel": (910, 180),
-    "orebro": (237, 181), "seattle": (241, 361),
+    "acapulco": (861, 181),
+    "aces": (440, 180),
+    "belgioioso": (395, 361),
+    "csail": (406, 361),
+    "edmonton": (340, 180),
+    "fhw": (488, 180),
+    "freiburg-079": (4791, 360),
+    "freiburg-101": (292, 360),
+    "freiburg-campus": (2008, 360),
+    "infinite-corridor": (1941, 180),
+    "intel": (910, 180),
+    "orebro": (237, 181),
+    "seattle": (241, 361),
 }
 LAST_ANGLE = {180: 89.0, 181: 90.0, 360: 89.5, 361: 90.0}
 # file -> {topic: scans}; all /training_scan are 768 beams over 270°.
-POSITIVE = {"positive_1": 197, "positive_2": 83, "positive_3": 175, "positive_4": 295, "positive_6": 187,
-            "positive_7": 267}
+POSITIVE = {
+    "positive_1": 197,
+    "positive_2": 83,
+    "positive_3": 175,
+    "positive_4": 295,
+    "positive_6": 187,
+    "positive_7": 267,
+}
 
 pytestmark = pytest.mark.shared
 
@@ -93,9 +108,11 @@ def test_legtracker_negative_bag_has_three_scanners():
 
 def test_cli_import_of_real_logs_keeps_inputs(tmp_path):
     runner = CliRunner()
-    for src, extra in [(shared_path("carmen", "csail-corrected.log.gz"), []),
-                       (shared_path("killian", "killian.g2o.gz"), []),
-                       (shared_path("legtracker", "negative_2.bag"), ["--topic", "/rear_scan"])]:
+    for src, extra in [
+        (shared_path("carmen", "csail-corrected.log.gz"), []),
+        (shared_path("killian", "killian.g2o.gz"), []),
+        (shared_path("legtracker", "negative_2.bag"), ["--topic", "/rear_scan"]),
+    ]:
         before = hashlib.sha256(src.read_bytes()).hexdigest()
         out = tmp_path / f"{src.name}.mcap"
         result = runner.invoke(cli, ["import", str(src), "-o", str(out), *extra])

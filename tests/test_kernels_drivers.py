@@ -36,8 +36,14 @@ def test_track_block_step_measurements_and_track_scan(scene: tuple):
     ref = ReferenceTracker(P, GEOM, learned=learned, leg_threshold=THR)
     want = []
     for i, f in enumerate(feats):
-        want.append(ref.step(int(stamps[i]), reference_measurements(f, P, learned, THR),
-                             None if ranges is None else ranges[i], None if poses is None else poses[i]))
+        want.append(
+            ref.step(
+                int(stamps[i]),
+                reference_measurements(f, P, learned, THR),
+                None if ranges is None else ranges[i],
+                None if poses is None else poses[i],
+            )
+        )
     rel = stamps - stamps[0]
     ranges_arg = np.zeros((N, 0), np.float32) if ranges is None else ranges
     poses_arg = np.zeros((N, 3)) if poses is None else poses
@@ -46,13 +52,32 @@ def test_track_block_step_measurements_and_track_scan(scene: tuple):
     reacq = _REACQUIRE_LEARNED if learned else _REACQUIRE
     cap, T = 4, P.tail_length
     offsets = np.zeros(N + 1, np.int64)
-    _, out, _, count = _step.track_block(tab, ctx, prm, rel, *_flat(feats), learned, ranges_arg, ranges is not None,
-                                         poses_arg, poses is not None, geo, cos_a, sin_a, *bg, compat, reacq,
-                                         np.zeros(cap, TRACK_DTYPE), True, np.zeros((cap, T, 2)),
-                                         np.zeros(cap, np.int64), offsets)
+    _, out, _, count = _step.track_block(
+        tab,
+        ctx,
+        prm,
+        rel,
+        *_flat(feats),
+        learned,
+        ranges_arg,
+        ranges is not None,
+        poses_arg,
+        poses is not None,
+        geo,
+        cos_a,
+        sin_a,
+        *bg,
+        compat,
+        reacq,
+        np.zeros(cap, TRACK_DTYPE),
+        True,
+        np.zeros((cap, T, 2)),
+        np.zeros(cap, np.int64),
+        offsets,
+    )
     np.testing.assert_array_equal(np.diff(offsets), [len(w) for w in want])
-    assert out[:offsets[-1]].tobytes() == np.concatenate(want).tobytes()
-    assert (count[:offsets[-1]] >= 1).all()
+    assert out[: offsets[-1]].tobytes() == np.concatenate(want).tobytes()
+    assert (count[: offsets[-1]] >= 1).all()
 
     tab1, ctx1, prm1, geo1, cos1, sin1, bg1, compat1 = _state(learned)
     tab2, ctx2, prm2, geo2, cos2, sin2, bg2, compat2 = _state(learned)
@@ -61,14 +86,59 @@ def test_track_block_step_measurements_and_track_scan(scene: tuple):
         m = reference_measurements(f, P, learned, THR)
         mx, my, msize, mkind, mlegs, raw, mprob = meas_arrays(m)
         has_prob = m.raw_legs.shape[1] >= 4
-        tab1, out1 = _step.step_measurements(tab1, ctx1, prm1, rel[i], mx, my, msize, mkind, mlegs, raw, mprob,
-                                             has_prob, ranges_arg[i], ranges is not None, poses is not None,
-                                             poses_arg[i], geo1, cos1, sin1, *bg1, learned, compat1, reacq, out1)
+        tab1, out1 = _step.step_measurements(
+            tab1,
+            ctx1,
+            prm1,
+            rel[i],
+            mx,
+            my,
+            msize,
+            mkind,
+            mlegs,
+            raw,
+            mprob,
+            has_prob,
+            ranges_arg[i],
+            ranges is not None,
+            poses is not None,
+            poses_arg[i],
+            geo1,
+            cos1,
+            sin1,
+            *bg1,
+            learned,
+            compat1,
+            reacq,
+            out1,
+        )
         n = int(ctx1[_step.C_N_TRACKS])
         assert out1[:n].tobytes() == want[i].tobytes(), f"step_measurements, scan {i}"
-        tab2 = _step.track_scan(tab2, ctx2, prm2, rel[i], mx, my, msize, mkind, mlegs, raw, mprob, has_prob,
-                                ranges_arg[i], ranges is not None, poses is not None, poses_arg[i], geo2, cos2, sin2,
-                                *bg2, learned, compat2, reacq)
+        tab2 = _step.track_scan(
+            tab2,
+            ctx2,
+            prm2,
+            rel[i],
+            mx,
+            my,
+            msize,
+            mkind,
+            mlegs,
+            raw,
+            mprob,
+            has_prob,
+            ranges_arg[i],
+            ranges is not None,
+            poses is not None,
+            poses_arg[i],
+            geo2,
+            cos2,
+            sin2,
+            *bg2,
+            learned,
+            compat2,
+            reacq,
+        )
         n2 = int(ctx2[_step.C_N_TRACKS])
         got = np.zeros(n2, TRACK_DTYPE)
         _step.write_tracks(got, 0, tab2, n2, poses is not None, poses_arg[i])
@@ -83,7 +153,7 @@ def test_gather():
     angles = np.radians(np.linspace(-60.0, 60.0, 121))
     r = (2.0 + 0.3 * np.sin(angles * 5) + rng.normal(0, 0.01, 121)).astype(np.float32)
     r[rng.random(121) < 0.1] = np.nan
-    r[40:44] = 1.2   # a near object: the walk stops at its edge
+    r[40:44] = 1.2  # a near object: the walk stops at its edge
     cos_a, sin_a = np.cos(angles), np.sin(angles)
     for b in np.flatnonzero(np.isfinite(r)).tolist():
         for direction in (-1, 1):
@@ -115,12 +185,17 @@ def test_rebuild_map():
         nrm = np.column_stack([np.cos(ang), np.sin(ang)])
         nrm[rng.random(m) < 0.2] = np.nan
         pose = rng.uniform(-0.3, 0.3, 3)
-        kf_x[newest, :m], kf_y[newest, :m], kf_nx[newest, :m], kf_ny[newest, :m] = pts[:, 0], pts[:, 1], \
-            nrm[:, 0], nrm[:, 1]
+        kf_x[newest, :m], kf_y[newest, :m], kf_nx[newest, :m], kf_ny[newest, :m] = (
+            pts[:, 0],
+            pts[:, 1],
+            nrm[:, 0],
+            nrm[:, 1],
+        )
         kf_n[newest], kf_pose[newest] = m, pose
         ring[newest] = (pts, nrm, pose)
-        count = KE.rebuild_map(kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose, newest, n_kf, 0.2, cell, head, nxt, mx, my,
-                               mnx, mny)
+        count = KE.rebuild_map(
+            kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose, newest, n_kf, 0.2, cell, head, nxt, mx, my, mnx, mny
+        )
         want_xy, want_n = rp.rebuild_map(ring, newest, n_kf, 0.2, cap)
         assert count == len(want_xy)
         np.testing.assert_allclose(np.column_stack([mx, my])[:count], want_xy, atol=1e-12)
@@ -135,12 +210,23 @@ def test_segment_features():
 
     rng = np.random.default_rng(33)
     angles = np.radians(np.linspace(-40.0, 40.0, 60))
-    context = [legs.FEATURE_NAMES.index(n) for n in ("subtended_angle", "occluded_start", "occluded_end",
-                                                      "jump_start", "jump_end", "density", "relative_curvature")]
+    context = [
+        legs.FEATURE_NAMES.index(n)
+        for n in (
+            "subtended_angle",
+            "occluded_start",
+            "occluded_end",
+            "jump_start",
+            "jump_end",
+            "density",
+            "relative_curvature",
+        )
+    ]
     shape = np.setdiff1d(np.arange(KL.N_FEATURES), context)
     for _ in range(20):
-        r = (rng.uniform(1.0, 3.0) + 0.05 * np.cos(np.linspace(-1, 1, 60)) * rng.uniform(0, 1)
-             + rng.normal(0, 0.01, 60)).astype(np.float32)
+        r = (
+            rng.uniform(1.0, 3.0) + 0.05 * np.cos(np.linspace(-1, 1, 60)) * rng.uniform(0, 1) + rng.normal(0, 0.01, 60)
+        ).astype(np.float32)
         s = int(rng.integers(0, 50))
         e = s + int(rng.integers(1, 60 - s + 1))
         x = r[s:e].astype(np.float64) * np.cos(angles[s:e])
@@ -183,7 +269,7 @@ def test_benches():
             x0, y0 = rng.uniform(-2, 2, 2)
             a, n = rng.uniform(-np.pi, np.pi), rng.uniform(0.2, 2.0)
             lines.append((k, x0, y0, x0 + n * np.cos(a), y0 + n * np.sin(a)))
-        if k % 2 == 0:   # a bench: two supports and a seat between them
+        if k % 2 == 0:  # a bench: two supports and a seat between them
             cx, cy = rng.uniform(-1, 1, 2)
             circles += [(k, cx - 0.7, cy, 0.15), (k, cx + 0.7, cy, 0.15)]
             lines.append((k, cx - 0.5, cy + 0.05, cx + 0.5, cy + 0.1))
@@ -191,8 +277,20 @@ def test_benches():
     lines = np.array(sorted(lines, key=lambda ln: ln[0]))
     line_offsets = np.searchsorted(lines[:, 0], np.arange(n_scans + 1)).astype(np.int64)
     out = np.zeros((len(circles) ** 2, 6))
-    n = landmarks._benches(circles[:, 0].astype(np.int64), circles[:, 1], circles[:, 2], circles[:, 3],
-                           lines[:, 1], lines[:, 2], lines[:, 3], lines[:, 4], line_offsets, 0.6, 2.5, out)
+    n = landmarks._benches(
+        circles[:, 0].astype(np.int64),
+        circles[:, 1],
+        circles[:, 2],
+        circles[:, 3],
+        lines[:, 1],
+        lines[:, 2],
+        lines[:, 3],
+        lines[:, 4],
+        line_offsets,
+        0.6,
+        2.5,
+        out,
+    )
     want = rp.benches(circles, lines, 0.6, 2.5, LANDMARK_BENCH)
     assert n == len(want) >= n_scans // 2
     np.testing.assert_allclose(out[:n], want, rtol=1e-12, atol=1e-12)
@@ -205,7 +303,7 @@ def _landmark_scene(rng: np.random.Generator, n_scans: int) -> np.ndarray:
 
     still = [(t, *rng.uniform(-5, 5, 2), rng.uniform(-np.pi, np.pi), rng.uniform(0.1, 0.5)) for t in range(6)]
     still += [(LANDMARK_BENCH, 1.0, 2.0, 0.3, 1.6)]
-    for sgn in (-1, 1):   # columns where the bench's supports stand (0.13 m in from its ends)
+    for sgn in (-1, 1):  # columns where the bench's supports stand (0.13 m in from its ends)
         half = 0.5 * (1.6 - 2 * 0.13)
         still.append((LANDMARK_COLUMN, 1.0 + sgn * half * np.cos(0.3), 2.0 + sgn * half * np.sin(0.3), 0.0, 0.15))
     det = []
@@ -213,7 +311,7 @@ def _landmark_scene(rng: np.random.Generator, n_scans: int) -> np.ndarray:
         for t, x, y, a, size in still:
             if rng.random() < 0.8:
                 det.append((k, t, x + rng.normal(0, 0.02), y + rng.normal(0, 0.02), a, size * rng.uniform(0.9, 1)))
-        det.append((k, LANDMARK_COLUMN, -3.0 + 0.02 * k, 1.0, 0.0, 0.2))   # drifts away
+        det.append((k, LANDMARK_COLUMN, -3.0 + 0.02 * k, 1.0, 0.0, 0.2))  # drifts away
         if rng.random() < 0.5:
             det.append((k, rng.integers(0, 6), *rng.uniform(-6, 6, 2), 0.0, 0.3))
     return np.array(det, np.float64)
@@ -238,22 +336,43 @@ def test_accumulate_and_hide_bench_supports():
         size = (k1 - k0) * cap
         snap_idx, snap_vals = np.zeros(size, np.int64), np.zeros((size, 6))
         snap_last, snap_count = np.zeros(size, np.int64), np.zeros(k1 - k0, np.int64)
-        ns = LM.accumulate(part, stamps[k0:k1], k0, match, min_count, drift, column_time, forget, support, db,
-                           first_ns, last_ns, live, confirmed, counters, snap_idx, snap_vals, snap_last, snap_count)
+        ns = LM.accumulate(
+            part,
+            stamps[k0:k1],
+            k0,
+            match,
+            min_count,
+            drift,
+            column_time,
+            forget,
+            support,
+            db,
+            first_ns,
+            last_ns,
+            live,
+            confirmed,
+            counters,
+            snap_idx,
+            snap_vals,
+            snap_last,
+            snap_count,
+        )
         assert ns == snap_count.sum()
         offsets = np.concatenate([[0], np.cumsum(snap_count)])
         for a, b in zip(offsets[:-1], offsets[1:], strict=True):
             snaps.append([(snap_idx[q], *snap_vals[q], snap_last[q]) for q in range(a, b)])
-    rows, want_first, want_snaps = rp.landmark_database(det, stamps, match, min_count, drift, column_time, forget,
-                                                        support)
+    rows, want_first, want_snaps = rp.landmark_database(
+        det, stamps, match, min_count, drift, column_time, forget, support
+    )
     n = counters[LM.C_ROWS]
     assert n == len(rows)
     np.testing.assert_allclose(db[:n], rows, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(first_ns[:n], want_first)
     for k in range(n_scans):
         assert [s[0] for s in snaps[k]] == [s[0] for s in want_snaps[k]], f"scan {k}"
-        np.testing.assert_allclose(np.array(snaps[k]).reshape(-1, 8), np.array(want_snaps[k]).reshape(-1, 8),
-                                   rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(
+            np.array(snaps[k]).reshape(-1, 8), np.array(want_snaps[k]).reshape(-1, 8), rtol=1e-12, atol=1e-12
+        )
     assert rows[:, LM.DB_MOVED].any() and rows[:, LM.DB_HIDDEN].sum() == 2 and len(want_snaps[-1]) >= 6
     # the hiding rule on its own: a confirmed column by a confirmed bench's support end, and one farther off
     db2 = np.zeros((3, LM.DB_COLUMNS))
@@ -293,14 +412,44 @@ def _extract_scan_rows(x, y, segs: list, k: int, vec, acc, cos_t, sin_t, inc: fl
     starts = np.array([s for s, _ in segs] + [0], np.int64)
     ends = np.array([e for _, e in segs] + [0], np.int64)
     out = [np.zeros((B, c)) for c in (13, 9, 9)]
-    work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
-            np.empty((KP.MAX_SUB, 3), np.int64), np.empty((KP.MAX_SUB, 12)), np.empty(KP.MAX_SUB, np.int64),
-            np.empty(KP.MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64), np.empty(4),
-            np.zeros(1, np.int64))
-    nl, nc, nb = KP.extract_scan(x, y, starts, ends, len(segs), k, vec, acc,
-                                 np.zeros((2 * w + 1, 2 * w + 1), np.int32), cos_t, sin_t, np.empty(B, np.int64),
-                                 np.empty(KP.MAX_SUB, np.int64), np.empty(KP.MAX_SUB, np.int64), out[0], 0, out[1],
-                                 0, out[2], 0, work, inc)
+    work = (
+        np.empty(12),
+        np.empty(nt),
+        np.empty(B, np.int64),
+        np.zeros(nt, np.bool_),
+        np.empty((KP.MAX_SUB, 3), np.int64),
+        np.empty((KP.MAX_SUB, 12)),
+        np.empty(KP.MAX_SUB, np.int64),
+        np.empty(KP.MAX_SUB, np.int64),
+        np.empty(5),
+        np.empty((B, 3), np.int64),
+        np.empty(4),
+        np.zeros(1, np.int64),
+    )
+    nl, nc, nb = KP.extract_scan(
+        x,
+        y,
+        starts,
+        ends,
+        len(segs),
+        k,
+        vec,
+        acc,
+        np.zeros((2 * w + 1, 2 * w + 1), np.int32),
+        cos_t,
+        sin_t,
+        np.empty(B, np.int64),
+        np.empty(KP.MAX_SUB, np.int64),
+        np.empty(KP.MAX_SUB, np.int64),
+        out[0],
+        0,
+        out[1],
+        0,
+        out[2],
+        0,
+        work,
+        inc,
+    )
     return [out[0][:nl], out[1][:nc], out[2][:nb]]
 
 
@@ -325,8 +474,9 @@ def test_extract_scan_scans_and_parallel():
     none_given, none_off = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
 
     def rows() -> list:
-        return [np.zeros((N * B, c), np.int64 if c == 2 else np.float64) for c in (2, 13, 9, 9)] + \
-            [np.zeros((N, 4), np.int64)]
+        return [np.zeros((N * B, c), np.int64 if c == 2 else np.float64) for c in (2, 13, 9, 9)] + [
+            np.zeros((N, 4), np.int64)
+        ]
 
     whole, parallel = rows(), rows()
     KP.extract_scans(ranges, 0, N, *args, *whole, none_given, none_off)
@@ -334,17 +484,17 @@ def test_extract_scan_scans_and_parallel():
     for a, b in zip(whole, parallel, strict=True):
         np.testing.assert_array_equal(a, b)
     seg, lines, circles, blobs, counts = whole
-    assert (counts[:, 1:].sum(axis=0) > 0).all()   # lines, circles and blobs
+    assert (counts[:, 1:].sum(axis=0) > 0).all()  # lines, circles and blobs
 
     for k in range(N):
         want_seg = rp.segment(ranges[k], inc, vec[KP.P_C0], 0.05, 8.0, int(vec[KP.P_MIN_POINTS]))
-        assert [tuple(s) for s in seg[k * B:k * B + counts[k, 0]].tolist()] == want_seg
+        assert [tuple(s) for s in seg[k * B : k * B + counts[k, 0]].tolist()] == want_seg
         r = np.where(np.isfinite(ranges[k]), ranges[k], 0.0).astype(np.float64)
         x, y = r * cos_a, r * sin_a
         acc = np.zeros((nt, int(2 * 8.0 / vec[KP.P_RHO_RES]) + 3), np.int32)
         got = _extract_scan_rows(x, y, want_seg, k, vec, acc, cos_t, sin_t, inc)
         for j, (g, table) in enumerate(zip(got, (lines, circles, blobs), strict=True)):
-            np.testing.assert_array_equal(g, table[k * B:k * B + counts[k, j + 1]])
+            np.testing.assert_array_equal(g, table[k * B : k * B + counts[k, j + 1]])
         kinds = [set() for _ in want_seg]
         for j, g in enumerate(got):
             for row in g:
@@ -354,7 +504,7 @@ def test_extract_scan_scans_and_parallel():
         assert all(len(kind) == 1 for kind in kinds)
         for row in got[2]:
             s, e = int(row[KP.B_FIRST]), int(row[KP.B_LAST]) + 1
-            np.testing.assert_allclose(row[KP.B_X:KP.B_SIZE + 1], rp.blob(x[s:e], y[s:e]), rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(row[KP.B_X : KP.B_SIZE + 1], rp.blob(x[s:e], y[s:e]), rtol=1e-12, atol=1e-12)
 
 
 def test_odometry_run():
@@ -365,19 +515,43 @@ def test_odometry_run():
 
     geom, p = geometry(181, 180.0), IcpParams()
     truth = drive(14)
-    truth[9:] = [(x, y, t + 0.5) for x, y, t in truth[9:]]   # a sudden turn on the spot
+    truth[9:] = [(x, y, t + 0.5) for x, y, t in truth[9:]]  # a sudden turn on the spot
     rng = np.random.default_rng(39)
     ranges = np.stack([cast(pose, geom.angles(), noise=0.005, rng=rng) for pose in truth])
-    ranges[5] = np.inf   # nothing seen
+    ranges[5] = np.inf  # nothing seen
     dt = np.full(len(ranges), 0.1)
     dt[0], dt[7] = 0.0, 0.2
     angles = geom.angles().astype(np.float64)
     poses, stats = np.zeros((len(ranges), 3)), np.zeros((len(ranges), KE.N_STATS))
-    KE.odometry_run(ranges, dt, np.cos(angles), np.sin(angles), geom.range_min, geom.range_max, p.max_points,
-                    p.source_spacing, p.map_spacing, p.normal_radius, p.max_gap, _max_window(geom), p.planarity,
-                    p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight,
-                    p.keyframe_dist, p.keyframe_angle, p.keyframe_share, p.n_keyframes, p.min_inlier_share,
-                    np.asarray(p.recovery_moves, np.float64).reshape(-1, 3), poses, stats)
+    KE.odometry_run(
+        ranges,
+        dt,
+        np.cos(angles),
+        np.sin(angles),
+        geom.range_min,
+        geom.range_max,
+        p.max_points,
+        p.source_spacing,
+        p.map_spacing,
+        p.normal_radius,
+        p.max_gap,
+        _max_window(geom),
+        p.planarity,
+        p.max_dist0,
+        p.max_dist,
+        p.robust_scale,
+        p.inlier_tol,
+        p.max_iter,
+        p.prior_weight,
+        p.keyframe_dist,
+        p.keyframe_angle,
+        p.keyframe_share,
+        p.n_keyframes,
+        p.min_inlier_share,
+        np.asarray(p.recovery_moves, np.float64).reshape(-1, 3),
+        poses,
+        stats,
+    )
     want_poses, want_stats = rp.odometry(ranges, dt, angles, geom.range_min, geom.range_max, p, _max_window(geom))
     np.testing.assert_allclose(poses, want_poses, rtol=0, atol=1e-9)
     exact = [KE.S_MATCHED, KE.S_POINTS, KE.S_FLAGS, KE.S_ITERATIONS]
@@ -409,56 +583,118 @@ def _feature_scenes(angles: np.ndarray) -> list[np.ndarray]:
         """An ellipse of half axes a and b centred d m away at `bearing`, its a axis `turn` from the x axis."""
         phi = np.linspace(0.0, 2 * np.pi, 49)
         u, v = a * np.cos(phi), b * np.sin(phi)
-        return polyline(*zip(d * np.cos(bearing) + u * np.cos(turn) - v * np.sin(turn),
-                             d * np.sin(bearing) + u * np.sin(turn) + v * np.cos(turn), strict=True))
+        return polyline(
+            *zip(
+                d * np.cos(bearing) + u * np.cos(turn) - v * np.sin(turn),
+                d * np.sin(bearing) + u * np.sin(turn) + v * np.cos(turn),
+                strict=True,
+            )
+        )
 
     def circles(*rings: tuple[float, float, float]) -> np.ndarray:
         return np.min([rp.ray_circle(angles, d * np.cos(b), d * np.sin(b), rad) for d, b, rad in rings], axis=0)
 
     scenes = [
         # legs (r 6 and 10 cm) and columns (15 to 35 cm) from 0.8 m to 7 m
-        circles((0.8, -1.2, 0.06), (1.5, -0.8, 0.06), (2.5, -0.45, 0.06), (3.5, -0.3, 0.06), (4.0, -0.2, 0.06),
-                (4.5, -0.1, 0.06), (5.0, -0.05, 0.06), (6.0, 0.0, 0.06), (7.0, 0.12, 0.06), (1.2, 0.5, 0.15),
-                (2.5, 0.85, 0.25), (4.0, 1.1, 0.35), (1.8, 1.4, 0.35), (5.0, 0.25, 0.1), (6.0, 0.35, 0.15),
-                (7.0, -0.6, 0.2), (6.5, 0.7, 0.1)),
+        circles(
+            (0.8, -1.2, 0.06),
+            (1.5, -0.8, 0.06),
+            (2.5, -0.45, 0.06),
+            (3.5, -0.3, 0.06),
+            (4.0, -0.2, 0.06),
+            (4.5, -0.1, 0.06),
+            (5.0, -0.05, 0.06),
+            (6.0, 0.0, 0.06),
+            (7.0, 0.12, 0.06),
+            (1.2, 0.5, 0.15),
+            (2.5, 0.85, 0.25),
+            (4.0, 1.1, 0.35),
+            (1.8, 1.4, 0.35),
+            (5.0, 0.25, 0.1),
+            (6.0, 0.35, 0.15),
+            (7.0, -0.6, 0.2),
+            (6.5, 0.7, 0.1),
+        ),
         # box corners (small boxes, a large one), triangles (wedges), an octagonal pillar
-        np.min([polygon(1.2, -1.1, 0.2, 4, 0.0), polygon(2.0, -0.6, 0.25, 4, 0.3), polygon(3.0, -0.2, 0.7, 4, 0.0),
-                polygon(1.5, 0.4, 0.22, 3, 0.0), polygon(2.2, 0.9, 0.3, 3, 0.2), polygon(1.0, 1.3, 0.35, 8, 0.1)],
-               axis=0),
+        np.min(
+            [
+                polygon(1.2, -1.1, 0.2, 4, 0.0),
+                polygon(2.0, -0.6, 0.25, 4, 0.3),
+                polygon(3.0, -0.2, 0.7, 4, 0.0),
+                polygon(1.5, 0.4, 0.22, 3, 0.0),
+                polygon(2.2, 0.9, 0.3, 3, 0.2),
+                polygon(1.0, 1.3, 0.35, 8, 0.1),
+            ],
+            axis=0,
+        ),
         # octagonal and hexagonal pillars with a side facing the scanner (three lines, convex); a zigzag
-        np.min([polygon(1.0, -0.9, 0.33, 8, np.pi + np.pi / 8), polygon(1.6, -0.2, 0.36, 8, np.pi + np.pi / 8),
+        np.min(
+            [
+                polygon(1.0, -0.9, 0.33, 8, np.pi + np.pi / 8),
+                polygon(1.6, -0.2, 0.36, 8, np.pi + np.pi / 8),
                 polygon(1.3, 0.5, 0.3, 6, np.pi + np.pi / 6),
-                polyline(*[(1.0 * np.cos(1.1) + off * np.cos(1.1) - v * np.sin(1.1),
-                            1.0 * np.sin(1.1) + off * np.sin(1.1) + v * np.cos(1.1))
-                           for v, off in ((-0.33, 0.0), (-0.11, -0.15), (0.11, 0.0), (0.33, -0.15))])], axis=0),
+                polyline(
+                    *[
+                        (
+                            1.0 * np.cos(1.1) + off * np.cos(1.1) - v * np.sin(1.1),
+                            1.0 * np.sin(1.1) + off * np.sin(1.1) + v * np.cos(1.1),
+                        )
+                        for v, off in ((-0.33, 0.0), (-0.11, -0.15), (0.11, 0.0), (0.33, -0.15))
+                    ]
+                ),
+            ],
+            axis=0,
+        ),
         # shallow arcs (large radii, or a column far away) before a far wall
-        np.minimum(rp.ray_wall(angles, 6.5, 0.0), circles((4.4, -0.82, 1.0), (2.0, 0.3, 0.5), (5.5, 0.7, 0.38),
-                                                           (3.5, -0.3, 0.9))),
+        np.minimum(
+            rp.ray_wall(angles, 6.5, 0.0),
+            circles((4.4, -0.82, 1.0), (2.0, 0.3, 0.5), (5.5, 0.7, 0.38), (3.5, -0.3, 0.9)),
+        ),
         # ellipses (a torso, a bag), and legs and columns, seen with a noise of 1.5 cm: close decisions
-        np.min([ellipse(1.0, -1.0, 0.2, 0.1, 0.3), ellipse(1.5, -0.5, 0.3, 0.18, 1.2), ellipse(2.0, 0.0, 0.25, 0.1, 0),
-                ellipse(1.2, 0.6, 0.15, 0.1, 0.8), ellipse(2.5, 1.0, 0.35, 0.18, 2.0), circles((1.3, -1.3, 0.1),
-                (2.0, -0.75, 0.1), (3.0, -0.25, 0.1), (1.8, 0.3, 0.3), (3.0, 1.25, 0.2))], axis=0),
+        np.min(
+            [
+                ellipse(1.0, -1.0, 0.2, 0.1, 0.3),
+                ellipse(1.5, -0.5, 0.3, 0.18, 1.2),
+                ellipse(2.0, 0.0, 0.25, 0.1, 0),
+                ellipse(1.2, 0.6, 0.15, 0.1, 0.8),
+                ellipse(2.5, 1.0, 0.35, 0.18, 2.0),
+                circles((1.3, -1.3, 0.1), (2.0, -0.75, 0.1), (3.0, -0.25, 0.1), (1.8, 0.3, 0.3), (3.0, 1.25, 0.2)),
+            ],
+            axis=0,
+        ),
     ]
     sigma = [0.004] * 4 + [0.015]
-    bumps: list[list[tuple[float, int, float, float]]] = [[]] * 5   # (bearing, beams, depth from, to)
+    bumps: list[list[tuple[float, int, float, float]]] = [[]] * 5  # (bearing, beams, depth from, to)
 
     def wall(bearing: float, d: float, bend: float, step: float, half: float = 0.6) -> np.ndarray:
         """A wall facing the scanner d m away, bent by `bend` (degrees) or stepped back `step` (m) where the
         scanner's perpendicular meets it."""
         n, v = np.array([np.cos(bearing), np.sin(bearing)]), np.array([-np.sin(bearing), np.cos(bearing)])
         v2 = np.cos(np.radians(bend)) * v + np.sin(np.radians(bend)) * n
-        return np.minimum(rp.ray_segment(angles, d * n - half * v, d * n),
-                          rp.ray_segment(angles, (d + step) * n, (d + step) * n + half * v2))
+        return np.minimum(
+            rp.ray_segment(angles, d * n - half * v, d * n),
+            rp.ray_segment(angles, (d + step) * n, (d + step) * n + half * v2),
+        )
 
     # walls cut by HTL at a group of points proud of them, near the merge's limits: bent by 2.5 and 3.5 degrees,
     # stepped back by 3 and 5 cm; then walls seen with 1 cm of noise (a merged line's r_acc is its votes) and a
     # board short enough for a circle (cut and merged, it still counts as two lines: see rp.feature_decision)
-    scenes.append(np.min([wall(-1.1, 2.0, 2.5, 0.0), wall(-0.35, 2.2, 3.5, 0.0), wall(0.35, 2.0, 0.0, 0.03),
-                          wall(1.1, 2.2, 0.0, 0.05)], axis=0))
+    scenes.append(
+        np.min(
+            [
+                wall(-1.1, 2.0, 2.5, 0.0),
+                wall(-0.35, 2.2, 3.5, 0.0),
+                wall(0.35, 2.0, 0.0, 0.03),
+                wall(1.1, 2.2, 0.0, 0.05),
+            ],
+            axis=0,
+        )
+    )
     sigma.append(0.004)
     bumps.append([(b, 6, 0.06, 0.08) for b in (-1.1, -0.35, 0.35, 1.1)])
-    scenes.append(np.min([wall(-0.8, 2.0, 0.0, 0.0), wall(0.6, 2.5, 0.0, 0.0), wall(1.3, 1.5, 0.0, 0.0, 0.375)],
-                         axis=0))
+    scenes.append(
+        np.min([wall(-0.8, 2.0, 0.0, 0.0), wall(0.6, 2.5, 0.0, 0.0), wall(1.3, 1.5, 0.0, 0.0, 0.375)], axis=0)
+    )
     sigma.append(0.01)
     bumps.append([(-0.8, 6, 0.07, 0.07), (0.6, 6, 0.07, 0.07), (1.3, 6, 0.06, 0.08)])
     # a wall with three groups of seven beams 6.5 to 7.5 cm proud of it (HTL often cuts it in three, two merged)
@@ -468,8 +704,19 @@ def _feature_scenes(angles: np.ndarray) -> list[np.ndarray]:
         bumps.append([(np.radians(a), 7, 0.065, 0.075) for a in (42.5, 57.5, 72.5)])
     # legs and columns seen with a noise of 2 and 2.5 cm: circles near line_min_racc, or under circle_min_points
     for noise in (0.02, 0.025):
-        scenes.append(circles((1.0, -1.2, 0.1), (1.5, -0.8, 0.1), (2.0, -0.4, 0.1), (3.0, -0.1, 0.1), (1.5, 0.3, 0.2),
-                              (2.0, 0.8, 0.3), (1.2, 1.3, 0.15), (4.0, 0.5, 0.1), (5.0, 0.1, 0.15)))
+        scenes.append(
+            circles(
+                (1.0, -1.2, 0.1),
+                (1.5, -0.8, 0.1),
+                (2.0, -0.4, 0.1),
+                (3.0, -0.1, 0.1),
+                (1.5, 0.3, 0.2),
+                (2.0, 0.8, 0.3),
+                (1.2, 1.3, 0.15),
+                (4.0, 0.5, 0.1),
+                (5.0, 0.1, 0.15),
+            )
+        )
         sigma.append(noise)
         bumps.append([])
     out = []
@@ -478,7 +725,7 @@ def _feature_scenes(angles: np.ndarray) -> list[np.ndarray]:
             r = base + rng.normal(0, noise, len(base))
             for bearing, beams, lo, hi in groups:
                 i = int(np.searchsorted(angles, bearing)) - beams // 2
-                r[i:i + beams] -= rng.uniform(lo, hi, beams)
+                r[i : i + beams] -= rng.uniform(lo, hi, beams)
             out.append(r.astype(np.float32))
             # the same with clutter: single points and pairs
             clutter = rng.random(len(r)) < 0.02
@@ -503,15 +750,41 @@ def _mirror_segment(x, y, s: int, e: int, vec: np.ndarray, params, dalpha: float
         KP.normal_cells(x, y, s, e, nt, st["cell"])
         used = nt * KP._bounding_box(x, y, s, e, rho_res, acc.shape[1], st["box"])
         if used > st["zeroed"]:
-            acc.reshape(-1)[st["zeroed"]:used] = 0
+            acc.reshape(-1)[st["zeroed"] : used] = 0
             st["zeroed"] = used
-        nsub = KP.line_subsegments(x, y, s, e, acc, toff, cos_t, sin_t, rho_res, int(vec[KP.P_WINDOW] / (np.pi / nt)),
-                                   st["cell"], st["touched"], sub_s, sub_e, peaks, st["hist"])
+        nsub = KP.line_subsegments(
+            x,
+            y,
+            s,
+            e,
+            acc,
+            toff,
+            cos_t,
+            sin_t,
+            rho_res,
+            int(vec[KP.P_WINDOW] / (np.pi / nt)),
+            st["cell"],
+            st["touched"],
+            sub_s,
+            sub_e,
+            peaks,
+            st["hist"],
+        )
     rows, runs = [], []
     for k in range(nsub):
         t = peaks[k, 1]
-        KP.line_of_run(x, y, sub_s[k], sub_e[k], t * (np.pi / nt), toff[t] + (peaks[k, 2] + 0.5) * rho_res,
-                       peaks[k, 0], rho_res, idx, lo)
+        KP.line_of_run(
+            x,
+            y,
+            sub_s[k],
+            sub_e[k],
+            t * (np.pi / nt),
+            toff[t] + (peaks[k, 2] + 0.5) * rho_res,
+            peaks[k, 0],
+            rho_res,
+            idx,
+            lo,
+        )
         rows.append(lo.copy())
         runs.append((int(sub_s[k]), int(sub_e[k])))
     htl, kept, htl_racc = rp.line_candidates(rows, runs, e - s, params)
@@ -522,7 +795,7 @@ def _mirror_segment(x, y, s: int, e: int, vec: np.ndarray, params, dalpha: float
 
     def circle(beat: float) -> tuple[np.ndarray, np.ndarray]:
         KP.circle_of_run(x, y, s, e, vec, st["cacc"], idx, st["cout"], beat)
-        return st["cout"].copy(), idx[:int(st["cout"][KP.CC_N])].copy()
+        return st["cout"].copy(), idx[: int(st["cout"][KP.CC_N])].copy()
 
     kept, rows, _, merged = rp.merge_lines(rows, runs, kept, rho_res, refit)
     decision = rp.feature_decision(x, y, s, e, rows, htl, kept, htl_racc, params, dalpha, circle)
@@ -551,38 +824,76 @@ def test_extract_scan_decision_equals_the_reference():
         w = int(round(vec[KP.P_CWINDOW] / vec[KP.P_CELL]))
         width = int(2 * 8.0 / vec[KP.P_RHO_RES]) + 3
         for k, ranges in enumerate(list(_room_scans(2, angles)) + _feature_scenes(angles)):
-            segs = rp.segment(ranges, inc, vec[KP.P_C0], 0.05, 8.0, 1)   # single points and pairs too
+            segs = rp.segment(ranges, inc, vec[KP.P_C0], 0.05, 8.0, 1)  # single points and pairs too
             r = np.where(np.isfinite(ranges), ranges, 0.0).astype(np.float64)
             x, y = r * np.cos(angles), r * np.sin(angles)
             # the accumulator as extract_scans leaves it uninitialised: extract_scan zeroes what it uses
             acc = np.full((nt, width), 7, np.int32)
             lines, circles, blobs = _extract_scan_rows(x, y, segs, k, vec, acc, cos_t, sin_t, inc)
-            st = {"cos_t": cos_t, "sin_t": sin_t, "acc": np.full((nt, width), 7, np.int32), "zeroed": 0,
-                  "toff": np.empty(nt), "idx": np.empty(B, np.int64), "lo": np.empty(12),
-                  "sub_s": np.empty(KP.MAX_SUB, np.int64), "sub_e": np.empty(KP.MAX_SUB, np.int64),
-                  "peaks": np.empty((KP.MAX_SUB, 3), np.int64), "cell": np.empty(B, np.int64),
-                  "touched": np.zeros(nt, np.bool_), "hist": np.empty((B, 3), np.int64), "box": np.empty(4),
-                  "cacc": np.zeros((2 * w + 1, 2 * w + 1), np.int32), "cout": np.empty(5)}
+            st = {
+                "cos_t": cos_t,
+                "sin_t": sin_t,
+                "acc": np.full((nt, width), 7, np.int32),
+                "zeroed": 0,
+                "toff": np.empty(nt),
+                "idx": np.empty(B, np.int64),
+                "lo": np.empty(12),
+                "sub_s": np.empty(KP.MAX_SUB, np.int64),
+                "sub_e": np.empty(KP.MAX_SUB, np.int64),
+                "peaks": np.empty((KP.MAX_SUB, 3), np.int64),
+                "cell": np.empty(B, np.int64),
+                "touched": np.zeros(nt, np.bool_),
+                "hist": np.empty((B, 3), np.int64),
+                "box": np.empty(4),
+                "cacc": np.zeros((2 * w + 1, 2 * w + 1), np.int32),
+                "cout": np.empty(5),
+            }
             n_lines = n_circles = n_blobs = 0
             for g, (s, e) in enumerate(segs):
                 d, rows, merged, kept, beat = _mirror_segment(x, y, s, e, vec, params, inc, st)
                 where = f"scan {k} at {np.degrees(inc):.1f} deg, segment {g} [{s}, {e}): {d}"
                 got_l, got_c, got_b = (t[t[:, 1] == g] for t in (lines, circles, blobs))
-                assert (len(got_c), len(got_l) > 0, len(got_b)) == \
-                    (d.kind == "circle", d.kind == "lines", d.kind == "blob"), where
+                assert (len(got_c), len(got_l) > 0, len(got_b)) == (
+                    d.kind == "circle",
+                    d.kind == "lines",
+                    d.kind == "blob",
+                ), where
                 if d.kind == "circle":
                     c = d.circle
-                    np.testing.assert_array_equal(got_c[0], [k, g, s, e - 1, c[KP.CC_N], c[KP.CC_X], c[KP.CC_Y],
-                                                             c[KP.CC_R], c[KP.CC_RACC]], err_msg=where)
+                    np.testing.assert_array_equal(
+                        got_c[0],
+                        [k, g, s, e - 1, c[KP.CC_N], c[KP.CC_X], c[KP.CC_Y], c[KP.CC_R], c[KP.CC_RACC]],
+                        err_msg=where,
+                    )
                 elif d.kind == "lines":
-                    want = [[k, g, *rows[q][[KP.LC_FIRST, KP.LC_LAST, KP.LC_N, KP.LC_X0, KP.LC_Y0, KP.LC_X1,
-                                             KP.LC_Y1, KP.LC_RHO, KP.LC_THETA, KP.LC_LEN, KP.LC_RACC]]]
-                            for q in d.lines]
+                    want = [
+                        [
+                            k,
+                            g,
+                            *rows[q][
+                                [
+                                    KP.LC_FIRST,
+                                    KP.LC_LAST,
+                                    KP.LC_N,
+                                    KP.LC_X0,
+                                    KP.LC_Y0,
+                                    KP.LC_X1,
+                                    KP.LC_Y1,
+                                    KP.LC_RHO,
+                                    KP.LC_THETA,
+                                    KP.LC_LEN,
+                                    KP.LC_RACC,
+                                ]
+                            ],
+                        ]
+                        for q in d.lines
+                    ]
                     np.testing.assert_array_equal(got_l, want, err_msg=where)
                 else:
                     np.testing.assert_array_equal(got_b[0][:5], [k, g, s, e - 1, e - s], err_msg=where)
-                    np.testing.assert_allclose(got_b[0][KP.B_X:KP.B_SIZE + 1], rp.blob(x[s:e], y[s:e]),
-                                               rtol=1e-12, atol=1e-12, err_msg=where)
+                    np.testing.assert_allclose(
+                        got_b[0][KP.B_X : KP.B_SIZE + 1], rp.blob(x[s:e], y[s:e]), rtol=1e-12, atol=1e-12, err_msg=where
+                    )
                     assert got_b[0][KP.B_KIND] == (e - s < 3), where
                 n_lines += len(d.lines)
                 n_circles += d.kind == "circle"
@@ -590,25 +901,30 @@ def test_extract_scan_decision_equals_the_reference():
                 # the branches taken
                 lost = d.tried and d.kind != "circle"
                 fitted = d.circle is not None and d.circle[KP.CC_N] >= params.circle_min_points
-                voted = d.circle is not None and d.circle[KP.CC_RACC] > 0   # refined or not (see circle_of_run)
+                voted = d.circle is not None and d.circle[KP.CC_RACC] > 0  # refined or not (see circle_of_run)
                 for branch, taken in (
-                        ("circle, no line", d.kind == "circle" and d.ncand == 0),
-                        ("circle, one line", d.kind == "circle" and d.ncand == 1),
-                        ("circle, two lines", d.kind == "circle" and d.ncand == 2),
-                        ("one line left after a failed circle", lost and d.kind == "lines" and d.ncand == 1),
-                        ("perpendicular lines left after a failed circle", lost and d.kind == "lines" and d.ncand == 2),
-                        ("lines dropped after a failed circle: a blob", lost and d.kind == "blob" and bool(kept)),
-                        ("three lines or more, convex: HTC", d.convex is not None and d.convex >= 2),
-                        ("three lines or more, not convex: lines", d.convex is not None and d.convex < 2),
-                        ("lines too far apart for a circle", not d.tried and d.kind == "lines"),
-                        ("lines merged", bool(merged)),
-                        ("blob", d.kind == "blob"),
-                        ("under line_min_points", e - s < params.line_min_points),
-                        ("under circle_min_points, HTC not run", d.tried and e - s < params.circle_min_points),
-                        ("close: the circle's r_acc within 0.05 of what it must beat, ties included",
-                         voted and abs(d.circle[KP.CC_RACC] - beat) <= 0.05),
-                        ("close: the circle beat the lines, not well posed",
-                         lost and fitted and d.circle[KP.CC_RACC] > beat)):
+                    ("circle, no line", d.kind == "circle" and d.ncand == 0),
+                    ("circle, one line", d.kind == "circle" and d.ncand == 1),
+                    ("circle, two lines", d.kind == "circle" and d.ncand == 2),
+                    ("one line left after a failed circle", lost and d.kind == "lines" and d.ncand == 1),
+                    ("perpendicular lines left after a failed circle", lost and d.kind == "lines" and d.ncand == 2),
+                    ("lines dropped after a failed circle: a blob", lost and d.kind == "blob" and bool(kept)),
+                    ("three lines or more, convex: HTC", d.convex is not None and d.convex >= 2),
+                    ("three lines or more, not convex: lines", d.convex is not None and d.convex < 2),
+                    ("lines too far apart for a circle", not d.tried and d.kind == "lines"),
+                    ("lines merged", bool(merged)),
+                    ("blob", d.kind == "blob"),
+                    ("under line_min_points", e - s < params.line_min_points),
+                    ("under circle_min_points, HTC not run", d.tried and e - s < params.circle_min_points),
+                    (
+                        "close: the circle's r_acc within 0.05 of what it must beat, ties included",
+                        voted and abs(d.circle[KP.CC_RACC] - beat) <= 0.05,
+                    ),
+                    (
+                        "close: the circle beat the lines, not well posed",
+                        lost and fitted and d.circle[KP.CC_RACC] > beat,
+                    ),
+                ):
                     counts[branch] = counts.get(branch, 0) + bool(taken)
             assert (len(lines), len(circles), len(blobs)) == (n_lines, n_circles, n_blobs), f"scan {k}"
     assert all(v > 0 for v in counts.values()), {k: v for k, v in counts.items() if not v}

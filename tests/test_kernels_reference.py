@@ -35,6 +35,8 @@ from tests.kernel_checks import CHECKS
 
 pytestmark = pytest.mark.kernels
 TESTS = Path(__file__).parent
+
+
 @cache
 def dispatchers() -> frozenset[str]:
     """Every numba-compiled function defined in a datmo_cli module, as 'package.module.name' (no datmo_cli.).
@@ -106,8 +108,12 @@ def test_people_first():
 def test_paper_measurements(seed: int, nc: int, nb: int, nl: int):
     rng = np.random.default_rng(seed)
     cx, cy, cr = rng.uniform(0, 4, nc), rng.uniform(0, 4, nc), rng.uniform(0.02, 0.4, nc)
-    bx, by, bsize, bkind = rng.uniform(0, 4, nb), rng.uniform(0, 4, nb), rng.uniform(0.02, 0.6, nb), \
-        rng.integers(0, 2, nb)
+    bx, by, bsize, bkind = (
+        rng.uniform(0, 4, nb),
+        rng.uniform(0, 4, nb),
+        rng.uniform(0.02, 0.6, nb),
+        rng.integers(0, 2, nb),
+    )
     lseg = rng.integers(0, 3, nl)
     lx0, ly0 = rng.uniform(0, 4, nl), rng.uniform(0, 4, nl)
     lx1, ly1 = lx0 + rng.uniform(-0.3, 0.3, nl), ly0 + rng.uniform(-0.3, 0.3, nl)
@@ -124,7 +130,7 @@ def test_beam_marks_and_span_max():
     marks = KT._beam_marks(first, last, value, 30)
     np.testing.assert_array_equal(marks, rt.beam_marks(first, last, value, 30))
     for a, b in [(0, 0), (3, 9), (10, 29), (25, 29)]:
-        assert KT._span_max(marks, a, b) == rt.beam_marks(first, last, value, 30)[a:b + 1].max()
+        assert KT._span_max(marks, a, b) == rt.beam_marks(first, last, value, 30)[a : b + 1].max()
 
 
 @settings(max_examples=40, deadline=None)
@@ -150,7 +156,7 @@ def test_leg_stage_measurements(seed: int, T: int, L: int):
     mkind = np.array([0, 1, 2, 3, 4, 4])
     mlegs = np.full((M, 4), np.nan)
     strong = rng.random(L) < 0.5
-    cover = np.where(strong, -1, rng.integers(1, M, L))   # a weak candidate on a measurement of other kind, or none
+    cover = np.where(strong, -1, rng.integers(1, M, L))  # a weak candidate on a measurement of other kind, or none
     cover = np.where(cover == 1, -1, cover)
     prm = rt.param_vector(leg_reach=0.6, stride_max=0.8)
     got = KT.leg_stage_measurements(tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs, prm)
@@ -165,10 +171,22 @@ def test_a_taken_weak_candidate_is_no_longer_its_measurement():
     mx, my, msize = np.array([3.0, 1.0, 9.0]), np.zeros(3), np.full(3, 0.1)
     mkind, mlegs = np.array([2, 4, 3]), np.full((3, 4), np.nan)
     owner, x, y, size, kind, legs, other = KT.leg_stage_measurements(
-        np.array([1.05]), np.array([0.0]), lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs,
-        rt.param_vector(leg_reach=0.6, stride_max=0.8))
+        np.array([1.05]),
+        np.array([0.0]),
+        lx,
+        ly,
+        ls,
+        strong,
+        cover,
+        mx,
+        my,
+        msize,
+        mkind,
+        mlegs,
+        rt.param_vector(leg_reach=0.6, stride_max=0.8),
+    )
     np.testing.assert_array_equal(owner, [0])
-    np.testing.assert_array_equal(kind, [1, 0, 2, 3])   # the track's leg, the free pair, the circle, the box
+    np.testing.assert_array_equal(kind, [1, 0, 2, 3])  # the track's leg, the free pair, the circle, the box
     np.testing.assert_array_equal(x, [1.0, 5.15, 3.0, 9.0])
     np.testing.assert_array_equal(other, [0, 2])
 
@@ -214,7 +232,7 @@ def test_on_background(seed: int, L: int):
     rng = np.random.default_rng(seed)
     n, cell = 20, 0.25
     score = _grid(rng, n)
-    lx, ly = rng.uniform(-3, 3, L), rng.uniform(-3, 3, L)   # some off the grid
+    lx, ly = rng.uniform(-3, 3, L), rng.uniform(-3, 3, L)  # some off the grid
     ls = rng.uniform(0, 0.4, L)
     prm = rt.param_vector(background_cell=cell, background_time=3.0)
     got = KT.on_background(score, lx, ly, ls, 0.2, -0.1, -2.5, -2.5, n, prm)
@@ -244,8 +262,8 @@ def _table(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray, np
     x = rng.normal(0, 2, (n, 4))
     A = rng.normal(size=(n, 4, 4))
     P = 0.1 * A @ A.transpose(0, 2, 1) + 0.01 * np.eye(4)
-    tab[:, state.X:state.X + 4] = x
-    tab[:, state.P0:state.P0 + 16] = P.reshape(n, 16)
+    tab[:, state.X : state.X + 4] = x
+    tab[:, state.P0 : state.P0 + 16] = P.reshape(n, 16)
     return tab, x, P
 
 
@@ -260,13 +278,13 @@ def test_step_kalman_update_and_restart():
     for q, k in enumerate(rows.tolist()):
         _step.kalman_update(tab, k, zx[q], zy[q], sigma[q], scratch)
     rt.joseph_update(x, P, rows, zx, zy, sigma)
-    np.testing.assert_array_equal(tab[:, state.X:state.X + 4], x)
-    np.testing.assert_array_equal(tab[:, state.P0:state.P0 + 16], P.reshape(5, 16))
+    np.testing.assert_array_equal(tab[:, state.X : state.X + 4], x)
+    np.testing.assert_array_equal(tab[:, state.P0 : state.P0 + 16], P.reshape(5, 16))
     prm = rt.param_vector(initial_speed_sigma=0.7)
     _step.restart(tab, 4, 1.5, -0.5, 0.1, prm)
     want = np.diag([0.1**2, 0.1**2, 0.7**2, 0.7**2])
-    np.testing.assert_array_equal(tab[4, state.X:state.X + 4], [1.5, -0.5, 0.0, 0.0])
-    np.testing.assert_array_equal(tab[4, state.P0:state.P0 + 16], want.reshape(16))
+    np.testing.assert_array_equal(tab[4, state.X : state.X + 4], [1.5, -0.5, 0.0, 0.0])
+    np.testing.assert_array_equal(tab[4, state.P0 : state.P0 + 16], want.reshape(16))
 
 
 def test_step_to_sensor():
@@ -292,8 +310,9 @@ def test_step_gated_costs():
     row = rng.integers(0, 6, 6)
     p = TrackingParams()
     cost, ok = _step.gated_costs(tab, 6, mx, my, kind, compat, row, rt.param_vector())
-    want_cost, want_ok = rt.gated_costs(x, P, mx, my, kind, p.measurement_noise, p.leg_measurement_noise, p.gate,
-                                        p.max_gate_distance, compat, row)
+    want_cost, want_ok = rt.gated_costs(
+        x, P, mx, my, kind, p.measurement_noise, p.leg_measurement_noise, p.gate, p.max_gate_distance, compat, row
+    )
     np.testing.assert_array_equal(ok, want_ok)
     np.testing.assert_array_equal(cost[ok], want_cost[ok])
     assert np.isinf(cost[~ok]).all() and ok.any() and not ok.all()
@@ -307,28 +326,45 @@ def test_step_leggy_tracks_and_duplicates():
     for _ in range(20):
         n = 8
         tab, x, P = _table(rng, n)
-        tab[:, state.X:state.X + 2] = rng.uniform(0, 1.0, (n, 2))   # close together: some within merge_distance
-        x[:, :2] = tab[:, state.X:state.X + 2]
+        tab[:, state.X : state.X + 2] = rng.uniform(0, 1.0, (n, 2))  # close together: some within merge_distance
+        x[:, :2] = tab[:, state.X : state.X + 2]
         votes = rng.integers(0, 4, (n, 5)) * (rng.random((n, 5)) < 0.6)
         cls, mob = rng.integers(0, 4, n), rng.integers(0, 3, n)
         confirmed, hits = rng.random(n) < 0.6, rng.integers(1, 20, n)
         person, leg_hits = rng.random(n) < 0.3, rng.integers(0, 3, n) * (rng.random(n) < 0.4)
-        tab[:, state.VOTES:state.VOTES + 5] = votes
-        tab[:, state.CLS], tab[:, state.MOBILITY], tab[:, state.CONFIRMED], tab[:, state.HITS] = \
-            cls, mob, confirmed, hits
+        tab[:, state.VOTES : state.VOTES + 5] = votes
+        tab[:, state.CLS], tab[:, state.MOBILITY], tab[:, state.CONFIRMED], tab[:, state.HITS] = (
+            cls,
+            mob,
+            confirmed,
+            hits,
+        )
         score = rng.random(n)
         tab[:, state.IS_PERSON], tab[:, state.LEG_HITS], tab[:, state.LEG_SCORE] = person, leg_hits, score
         prm = rt.param_vector()
         np.testing.assert_array_equal(
             _step.leggy_tracks(tab, n, prm),
-            rt.leggy_tracks(votes, cls, confirmed, person, leg_hits, score, prm[state.P_PERSON_VOTES],
-                            prm[state.P_PERSON_MAINTAIN]))
-        np.testing.assert_array_equal([_step.sure_person(tab, k, prm) for k in range(n)],
-                                      rt.sure_people(person))
-        victim, candidate, rank = rt.duplicate_ranks(votes, hits, confirmed, mob, cls, leg_hits, score,
-                                                     prm[state.P_PERSON_MAINTAIN])
-        want = rt.duplicates(x[:, 0], x[:, 1], x[:, 2], x[:, 3], P[:, 2, 2] + P[:, 3, 3], victim, candidate,
-                             confirmed, rank, prm[state.P_MERGE_DISTANCE], prm[state.P_MERGE_SPEED])
+            rt.leggy_tracks(
+                votes, cls, confirmed, person, leg_hits, score, prm[state.P_PERSON_VOTES], prm[state.P_PERSON_MAINTAIN]
+            ),
+        )
+        np.testing.assert_array_equal([_step.sure_person(tab, k, prm) for k in range(n)], rt.sure_people(person))
+        victim, candidate, rank = rt.duplicate_ranks(
+            votes, hits, confirmed, mob, cls, leg_hits, score, prm[state.P_PERSON_MAINTAIN]
+        )
+        want = rt.duplicates(
+            x[:, 0],
+            x[:, 1],
+            x[:, 2],
+            x[:, 3],
+            P[:, 2, 2] + P[:, 3, 3],
+            victim,
+            candidate,
+            confirmed,
+            rank,
+            prm[state.P_MERGE_DISTANCE],
+            prm[state.P_MERGE_SPEED],
+        )
         np.testing.assert_array_equal(_step.duplicates(tab, n, True, prm), want)
         found += int(want.sum())
         victims += int((want & ~candidate).sum())
@@ -345,7 +381,7 @@ def test_step_kind_group():
     tab = np.zeros((n, state.n_columns(1)))
     votes = rng.integers(0, 4, (n, 5)) * (rng.random((n, 5)) < 0.6)
     mob, person = rng.integers(0, 3, n), rng.random(n) < 0.3
-    tab[:, state.VOTES:state.VOTES + 5], tab[:, state.MOBILITY], tab[:, state.IS_PERSON] = votes, mob, person
+    tab[:, state.VOTES : state.VOTES + 5], tab[:, state.MOBILITY], tab[:, state.IS_PERSON] = votes, mob, person
     want = rt.kind_groups(votes, mob, person)
     np.testing.assert_array_equal([_step.kind_group(tab, k) for k in range(n)], want)
     assert (want[person] == 0).all() and (rt.kind_groups(votes, mob, np.zeros(n, bool))[person] != 0).any()
@@ -362,8 +398,15 @@ def test_step_leg_probability():
         kind = np.array([0, 0, 1, 1, 2, 3, 4])
         legs = np.full((M, 4), np.nan)
         legs[:2] = raw[[0, 2]][:, :2].reshape(1, 4) + rng.normal(0, 0.02, (2, 4))
-        m = Measurements(rng.uniform(0, 3, M), rng.uniform(0, 3, M), rng.uniform(0.1, 1, M), kind, legs,
-                         raw if with_prob else raw[:, :3], rng.uniform(0, 1, M))
+        m = Measurements(
+            rng.uniform(0, 3, M),
+            rng.uniform(0, 3, M),
+            rng.uniform(0.1, 1, M),
+            kind,
+            legs,
+            raw if with_prob else raw[:, :3],
+            rng.uniform(0, 1, M),
+        )
         want = rt._leg_probability(m, np.arange(M))
         got = [_step.leg_probability(m.x, m.y, m.kind, m.legs, m.prob, raw, with_prob, j) for j in range(M)]
         np.testing.assert_array_equal(got, want)
@@ -390,8 +433,23 @@ def test_step_background_update():
         ranges = np.full(B, 3.0, np.float32)
         ranges[rng.random(B) < 0.3] = rng.uniform(0.5, 4.5)
         ranges[rng.random(B) < 0.05] = np.inf
-        args = (ranges, np.cos(angles), np.sin(angles), angles[0], inc, 0.1, 8.0, *pose, 0.2, -5.0, -5.0, cell, n,
-                0.3, 0.8)
+        args = (
+            ranges,
+            np.cos(angles),
+            np.sin(angles),
+            angles[0],
+            inc,
+            0.1,
+            8.0,
+            *pose,
+            0.2,
+            -5.0,
+            -5.0,
+            cell,
+            n,
+            0.3,
+            0.8,
+        )
         # a person at 2.5 m then 3 m ahead: their returns add nothing
         people = (np.array([2.5 + 0.5 * (scan > 12)]), np.array([0.1]), 0.4)
         count = _step.background_update(score, mark, active, cache, count, scan, *args, fresh, *people)
@@ -422,10 +480,10 @@ def test_step_carried_update_and_beams():
     for k in range(40):
         pose = np.array([0.2 * k, 0.05 * k, 0.02 * k])
         ranges = (6.0 - 0.15 * k + rng.normal(0, 0.01, B)).astype(np.float32)
-        ranges[10:25] = 0.7 + rng.normal(0, 0.01, 15)   # carried: within carried_radius of where they settled
-        ranges[10:25][rng.random(15) < 0.2] = rng.uniform(0.2, 0.6)   # hidden by something passing, now and then
+        ranges[10:25] = 0.7 + rng.normal(0, 0.01, 15)  # carried: within carried_radius of where they settled
+        ranges[10:25][rng.random(15) < 0.2] = rng.uniform(0.2, 0.6)  # hidden by something passing, now and then
         ranges[30:33] = rng.choice([np.inf, np.nan, 0.01, 9.0], 3)
-        ranges[40:50] = 2.0 if k < 15 else 1.2   # one range for 3 m, then another
+        ranges[40:50] = 2.0 if k < 15 else 1.2  # one range for 3 m, then another
         ranges[rng.random(B) < 0.05] = rng.uniform(0.5, 3.0)
         step = 0.0 if last is None else float(np.hypot(pose[0] - last[0], pose[1] - last[1]))
         last = pose
@@ -435,8 +493,9 @@ def test_step_carried_update_and_beams():
             np.testing.assert_array_equal(got, ref)
         assert (ctx[state.C_CARRY_POSED], ctx[state.C_CARRY_PX], ctx[state.C_CARRY_PY]) == (1.0, *pose[:2])
         raw = np.column_stack([rng.uniform(-1, 8, (12, 2)), rng.uniform(0.05, 0.4, 12), rng.random(12), -np.ones(12)])
-        raw[:4, :2] = np.column_stack(_world_frame(0.7 * np.cos(angles[[12, 17, 22, 45]]),
-                                                   0.7 * np.sin(angles[[12, 17, 22, 45]]), pose))
+        raw[:4, :2] = np.column_stack(
+            _world_frame(0.7 * np.cos(angles[[12, 17, 22, 45]]), 0.7 * np.sin(angles[[12, 17, 22, 45]]), pose)
+        )
         out = rng.random(12) < 0.2
         was = out.copy()
         _step.carried_beams(out, raw, ranges, *carry, True, pose, geo, prm)
@@ -445,7 +504,7 @@ def test_step_carried_update_and_beams():
         np.testing.assert_array_equal(out, expect)
         carried_seen += int((expect & ~was).sum())
         still = was.copy()
-        _step.carried_beams(still, raw, ranges, *carry, False, pose, geo, prm)   # no pose: nothing is carried
+        _step.carried_beams(still, raw, ranges, *carry, False, pose, geo, prm)  # no pose: nothing is carried
         np.testing.assert_array_equal(still, was)
     assert (want[1][10:25] >= 1.0).sum() >= 10 and carried_seen > 0
     # away farther than seen there: the beams took the new range as their reference
@@ -477,7 +536,7 @@ def test_step_fold_evidence():
     prm = rt.param_vector(leg_evidence_rate=0.1)
     tab = np.zeros((4, state.n_columns(1)))
     score, hits = np.zeros(4), np.zeros(4, np.int64)
-    p = np.where(rng.random(40) < 0.15, _step.NOT_A_LEG, rng.random(40))   # some on the background or carried
+    p = np.where(rng.random(40) < 0.15, _step.NOT_A_LEG, rng.random(40))  # some on the background or carried
     assert rt.NOT_A_LEG == _step.NOT_A_LEG
     for q in range(40):
         k = int(rng.integers(0, 4))
@@ -488,9 +547,9 @@ def test_step_fold_evidence():
     first, ten = (np.zeros(1, np.int64), np.zeros(1)), rng.random(10)
     for q in range(10):
         rt.fold_evidence(first[1], first[0], 0, ten[q], 0.1)
-    np.testing.assert_allclose(first[1][0], ten.mean(), rtol=1e-12)   # ten hits: their plain mean
+    np.testing.assert_allclose(first[1][0], ten.mean(), rtol=1e-12)  # ten hits: their plain mean
     rt.fold_evidence(first[1], first[0], 0, rt.NOT_A_LEG, 0.1)
-    assert first[1][0] == 0.0 and first[0][0] == 11   # a candidate found on the background or carried
+    assert first[1][0] == 0.0 and first[0][0] == 11  # a candidate found on the background or carried
 
 
 def test_cover():
@@ -549,8 +608,9 @@ def test_cast_batch():
     own_seg_s, own_circ_s = np.arange(5, dtype=np.int32), np.arange(5, 9, dtype=np.int32)
     own_seg_d, own_circ_d = np.arange(9, 11, dtype=np.int32), np.arange(11, 14, dtype=np.int32)
     out_t, out_owner = np.empty((2, len(angles))), np.empty((2, len(angles)), np.int32)
-    KS.cast_batch(poses, angles, seg_s, own_seg_s, circ_s, own_circ_s, seg_d, own_seg_d, circ_d, own_circ_d,
-                  out_t, out_owner)
+    KS.cast_batch(
+        poses, angles, seg_s, own_seg_s, circ_s, own_circ_s, seg_d, own_seg_d, circ_d, own_circ_d, out_t, out_owner
+    )
     owners = np.concatenate([own_seg_s, own_seg_d, own_circ_s, own_circ_d])
     compared = 0
     for k in range(2):
@@ -616,8 +676,11 @@ def test_scatter():
     cx, cy, sxx, syy, sxy = KP.scatter(x, y, idx, 12)
     px, py = x[idx[:12]], y[idx[:12]]
     np.testing.assert_allclose([cx, cy], [px.mean(), py.mean()], rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose([sxx, syy, sxy], [((px - px.mean()) ** 2).sum(), ((py - py.mean()) ** 2).sum(),
-                                                 ((px - px.mean()) * (py - py.mean())).sum()], rtol=1e-12)
+    np.testing.assert_allclose(
+        [sxx, syy, sxy],
+        [((px - px.mean()) ** 2).sum(), ((py - py.mean()) ** 2).sum(), ((px - px.mean()) * (py - py.mean())).sum()],
+        rtol=1e-12,
+    )
 
 
 def test_one_line():
@@ -629,11 +692,11 @@ def test_one_line():
         theta = rng.uniform(0, np.pi)
         x = 2 * np.cos(theta) - t * np.sin(theta) + rng.normal(0, 0.01, n)
         y = 2 * np.sin(theta) + t * np.cos(theta) + rng.normal(0, 0.01, n)
-        if rng.random() < 0.5:   # a bend at the end
+        if rng.random() < 0.5:  # a bend at the end
             x[-3:] += rng.uniform(0, 0.2)
         tol, tail = float(rng.choice([0.01, 0.02, 0.05])), int(rng.integers(1, 4))
         if min(abs(d - tol) for d in rp.line_distances(x, y)) < 1e-9:
-            continue   # a point on the tolerance itself: rounding decides
+            continue  # a point on the tolerance itself: rounding decides
         want = rp.one_line(x, y, tol, tail)
         assert KP._one_line(np.concatenate([[9.0], x]), np.concatenate([[9.0], y]), 1, n + 1, tol, tail) == want
         seen.add(want)
@@ -671,8 +734,7 @@ def test_compose_and_between():
     for _ in range(50):
         a, b = rng.uniform(-3, 3, 3), rng.uniform(-3, 3, 3)
         np.testing.assert_allclose(rp.se2(*KE.compose(*a, *b)), rp.se2(*a) @ rp.se2(*b), atol=1e-12)
-        np.testing.assert_allclose(KE.between(*a, *b), rp.pose_of(np.linalg.inv(rp.se2(*a)) @ rp.se2(*b)),
-                                   atol=1e-12)
+        np.testing.assert_allclose(KE.between(*a, *b), rp.pose_of(np.linalg.inv(rp.se2(*a)) @ rp.se2(*b)), atol=1e-12)
 
 
 def test_add_to_map():
@@ -681,19 +743,34 @@ def test_add_to_map():
     mx, my, mnx, mny = np.zeros(cap), np.zeros(cap), np.zeros(cap), np.zeros(cap)
     head, nxt = np.full(256, KE.EMPTY, np.int64), np.full(cap, KE.EMPTY, np.int64)
     ref_xy, ref_n, count = np.zeros((0, 2)), np.zeros((0, 2)), 0
-    for scan in range(4):   # the later scans overlap the earlier ones: their points near the map are skipped
+    for scan in range(4):  # the later scans overlap the earlier ones: their points near the map are skipped
         pts = rng.uniform(-2, 2, (50, 2))
         ang = rng.uniform(-np.pi, np.pi, 50)
         nrm = np.column_stack([np.cos(ang), np.sin(ang)])
         nrm[rng.random(50) < 0.2] = np.nan
         pose = rng.uniform(-0.3, 0.3, 3)
-        count = KE.add_to_map(pts[:, 0].copy(), pts[:, 1].copy(), nrm[:, 0].copy(), nrm[:, 1].copy(), 50, *pose,
-                              0.2 if scan else 0.0, cell, head, nxt, mx, my, mnx, mny, count)
+        count = KE.add_to_map(
+            pts[:, 0].copy(),
+            pts[:, 1].copy(),
+            nrm[:, 0].copy(),
+            nrm[:, 1].copy(),
+            50,
+            *pose,
+            0.2 if scan else 0.0,
+            cell,
+            head,
+            nxt,
+            mx,
+            my,
+            mnx,
+            mny,
+            count,
+        )
         ref_xy, ref_n = rp.add_to_map(pts, nrm, pose, 0.2 if scan else 0.0, ref_xy, ref_n, cap)
         assert count == len(ref_xy)
         np.testing.assert_allclose(np.column_stack([mx, my])[:count], ref_xy, atol=1e-12)
         np.testing.assert_allclose(np.column_stack([mnx, mny])[:count], ref_n, atol=1e-12)
-    assert count == cap   # the map filled up
+    assert count == cap  # the map filled up
 
 
 def test_cell_of_and_hash():
@@ -709,7 +786,7 @@ def _scan(seed: int, N: int = 2, B: int = 40) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     ranges = rng.uniform(0.5, 4.0, (N, B)).astype(np.float32)
     ranges[rng.random((N, B)) < 0.1] = np.nan
-    ranges[rng.random((N, B)) < 0.05] = 0.01   # under range_min
+    ranges[rng.random((N, B)) < 0.05] = 0.01  # under range_min
     return ranges, np.radians(np.linspace(-40.0, 40.0, B))
 
 
@@ -730,16 +807,39 @@ def test_gap_pass_and_block_features():
         assert [start.tolist(), end.tolist(), offsets.tolist()] == [w.tolist() for w in want]
         assert KL.check_segments(start, end, offsets, B) == rp.check_segments(start, end, offsets, B) == 0
         out = np.zeros((len(start), KL.N_FEATURES))
-        KL.block_features(ranges, cos_a, sin_a, angles, start, end, offsets, 0.05, 30.0, legs.RADIUS_CLIP,
-                          legs.OCCLUSION_MARGIN, legs.CANDIDATE_MAX_WIDTH, legs.CANDIDATE_MIN_POINTS, False,
-                          abs(angles[1] - angles[0]), out)
-        np.testing.assert_allclose(out, rp.cluster_features(ranges, angles, start, end, offsets, 0.05, 30.0),
-                                   rtol=1e-6, atol=1e-7)
+        KL.block_features(
+            ranges,
+            cos_a,
+            sin_a,
+            angles,
+            start,
+            end,
+            offsets,
+            0.05,
+            30.0,
+            legs.RADIUS_CLIP,
+            legs.OCCLUSION_MARGIN,
+            legs.CANDIDATE_MAX_WIDTH,
+            legs.CANDIDATE_MIN_POINTS,
+            False,
+            abs(angles[1] - angles[0]),
+            out,
+        )
+        np.testing.assert_allclose(
+            out, rp.cluster_features(ranges, angles, start, end, offsets, 0.05, 30.0), rtol=1e-6, atol=1e-7
+        )
 
 
 def test_check_segments():
-    cases = [([0, 5], [4, 9], [0, 1, 2], 10), ([0], [11], [0, 1], 10), ([3], [2], [0, 1], 10),
-             ([0, 5], [4, 9], [0, 2, 1], 10), ([0], [4], [1, 1], 10), ([], [], [0, 0], 10), ([], [], [], 10)]
+    cases = [
+        ([0, 5], [4, 9], [0, 1, 2], 10),
+        ([0], [11], [0, 1], 10),
+        ([3], [2], [0, 1], 10),
+        ([0, 5], [4, 9], [0, 2, 1], 10),
+        ([0], [4], [1, 1], 10),
+        ([], [], [0, 0], 10),
+        ([], [], [], 10),
+    ]
     for s, e, o, B in cases:
         s, e, o = np.array(s, np.int64), np.array(e, np.int64), np.array(o, np.int64)
         assert KL.check_segments(s, e, o, B) == rp.check_segments(s, e, o, B)
@@ -753,7 +853,7 @@ def test_median_and_jump():
         assert KL._median(v, n, work) == np.median(v)
     ranges, _ = _scan(12, 1, 30)
     r = ranges[0]
-    for i in np.flatnonzero([rp.is_valid(float(v), 0.05, 30.0) for v in r]).tolist():   # the ends of segments
+    for i in np.flatnonzero([rp.is_valid(float(v), 0.05, 30.0) for v in r]).tolist():  # the ends of segments
         for d in (1, -1):
             assert KL._jump(r, i, d, 30, 0.05, 30.0) == rp.jump(r, i, d, 0.05, 30.0)
 
@@ -792,23 +892,38 @@ def test_block_probabilities():
     model = legs.load_leg_model("default")
     rng = np.random.default_rng(20)
     angles = np.radians(np.linspace(-40.0, 40.0, 120))
-    ranges = (3.0 + rng.normal(0, 0.005, (4, 120))).astype(np.float32)   # a wall: wide, not a candidate
-    for k in range(4):   # two legs in front of it: short arcs 1.2-2 m away
+    ranges = (3.0 + rng.normal(0, 0.005, (4, 120))).astype(np.float32)  # a wall: wide, not a candidate
+    for k in range(4):  # two legs in front of it: short arcs 1.2-2 m away
         for i in rng.choice(np.arange(5, 110, 12), 2, replace=False):
             d = rng.uniform(1.2, 2.0)
-            ranges[k, i:i + 6] = d + 0.06 * (1 - np.cos(np.linspace(-1.2, 1.2, 6)))
+            ranges[k, i : i + 6] = d + 0.06 * (1 - np.cos(np.linspace(-1.2, 1.2, 6)))
     start, end, offsets = rp.gap_clusters(ranges, angles, 0.05, 30.0, 0.13, 1)
-    args = (np.cos(angles), np.sin(angles), angles, start, end, offsets, 0.05, 30.0, legs.RADIUS_CLIP,
-            legs.OCCLUSION_MARGIN, legs.CANDIDATE_MAX_WIDTH, legs.CANDIDATE_MIN_POINTS, abs(angles[1] - angles[0]),
-            *model._kernel_args())
+    args = (
+        np.cos(angles),
+        np.sin(angles),
+        angles,
+        start,
+        end,
+        offsets,
+        0.05,
+        30.0,
+        legs.RADIUS_CLIP,
+        legs.OCCLUSION_MARGIN,
+        legs.CANDIDATE_MAX_WIDTH,
+        legs.CANDIDATE_MIN_POINTS,
+        abs(angles[1] - angles[0]),
+        *model._kernel_args(),
+    )
     feats, out = np.empty((len(start), KL.N_FEATURES)), np.empty(len(start))
     KL.block_probabilities(ranges, *args, feats, out)
     want_feats = rp.cluster_features(ranges, angles, start, end, offsets, 0.05, 30.0)
     candidate = np.array([rp.is_candidate(x) for x in want_feats])
     assert candidate.any() and not candidate.all()
     np.testing.assert_allclose(feats[candidate], want_feats[candidate], rtol=1e-6, atol=1e-7)
-    want = [rp.ensemble_probability(model, [rp.tree_leaf(model, root, x) for root in model.roots]) if c else 0.0
-            for x, c in zip(feats, candidate, strict=True)]
+    want = [
+        rp.ensemble_probability(model, [rp.tree_leaf(model, root, x) for root in model.roots]) if c else 0.0
+        for x, c in zip(feats, candidate, strict=True)
+    ]
     np.testing.assert_allclose(out, want, rtol=1e-12, atol=1e-15)
     feats2, out2 = np.empty_like(feats), np.empty_like(out)
     KL.block_probabilities_parallel(ranges, 2, *args, feats2, out2)

@@ -71,7 +71,7 @@ def imports(path: Path, root: Path, modules: set[str]) -> list[tuple[str, int]]:
             out += [(a.name, node.lineno) for a in node.names if a.name.split(".")[0] == root.name]
         elif isinstance(node, ast.ImportFrom):
             if node.level:
-                base = package.split(".")[:len(package.split(".")) - (node.level - 1)]
+                base = package.split(".")[: len(package.split(".")) - (node.level - 1)]
                 target = ".".join(base + ([node.module] if node.module else []))
             else:
                 target = node.module or ""
@@ -80,7 +80,7 @@ def imports(path: Path, root: Path, modules: set[str]) -> list[tuple[str, int]]:
             for a in node.names:
                 sub = f"{target}.{a.name}"
                 out.append((sub if sub in modules else target, node.lineno))
-    return list(dict.fromkeys(out))   # one per module imported and line
+    return list(dict.fromkeys(out))  # one per module imported and line
 
 
 def arrows(root: Path = ROOT) -> list[tuple[str, int, str, str]]:
@@ -114,13 +114,16 @@ def test_the_known_exceptions_are_still_needed():
     assert KNOWN <= {(src, dst) for src, _, dst, _ in arrows(ROOT)}, KNOWN - {(s, d) for s, _, d, _ in arrows()}
 
 
-@pytest.mark.parametrize("where, code, rule", [
-    ("log/bad.py", "from ..cli import invocation\n", "log may not import cli"),
-    ("tracking/bad.py", "def f():\n    from datmo_cli.perception import features\n", "sideways"),
-    ("perception/bad.py", "import datmo_cli.sim.simulate\n", "sideways"),
-    ("progress.py", "def f():\n    from .commands import compiling\n", "base may not import cli"),
-    ("sim/bad.py", "from .. import pipeline\n", "core may not import pipeline"),
-])
+@pytest.mark.parametrize(
+    "where, code, rule",
+    [
+        ("log/bad.py", "from ..cli import invocation\n", "log may not import cli"),
+        ("tracking/bad.py", "def f():\n    from datmo_cli.perception import features\n", "sideways"),
+        ("perception/bad.py", "import datmo_cli.sim.simulate\n", "sideways"),
+        ("progress.py", "def f():\n    from .commands import compiling\n", "base may not import cli"),
+        ("sim/bad.py", "from .. import pipeline\n", "core may not import pipeline"),
+    ],
+)
 def test_a_planted_bad_import_is_reported(tmp_path, where, code, rule):
     root = tmp_path / PACKAGE
     for folder in ("", "log", "tracking", "perception", "sim", "commands"):
@@ -139,8 +142,10 @@ def test_imports_down_and_within_a_layer_pass(tmp_path):
     (root / "tracking").mkdir()
     for name in ("__init__.py", "log/__init__.py", "tracking/__init__.py", "errors.py", "log/scan.py"):
         (root / name).write_text("")
-    (root / "tracking/kalman.py").write_text("from ..log import scan\nfrom ..errors import InputError\n"
-                                             "from . import kalman\nfrom datmo_cli import __version__\n")
+    (root / "tracking/kalman.py").write_text(
+        "from ..log import scan\nfrom ..errors import InputError\n"
+        "from . import kalman\nfrom datmo_cli import __version__\n"
+    )
     (root / "stages.py").write_text("from .tracking import kalman\nfrom . import errors\n")
     (root / "cli.py").write_text("def main():\n    from . import stages\n")
     assert violations(root) == []

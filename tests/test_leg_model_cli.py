@@ -69,9 +69,11 @@ def test_a_bad_model_is_a_one_line_error(crowd, tmp_path, bad, why):
     model = tmp_path / bad
     if why == "garbage":
         model.write_bytes(b"not a model at all")
-    for cmd in (["features", str(crowd), "-o", str(tmp_path / "o.mcap")],
-                ["track", str(crowd), "-o", str(tmp_path / "o.mcap")],
-                ["run", str(crowd), "-o", str(tmp_path / "out"), "--no-report"]):
+    for cmd in (
+        ["features", str(crowd), "-o", str(tmp_path / "o.mcap")],
+        ["track", str(crowd), "-o", str(tmp_path / "o.mcap")],
+        ["run", str(crowd), "-o", str(tmp_path / "out"), "--no-report"],
+    ):
         r = CliRunner().invoke(cli, [*cmd, "--leg-model", str(model)])
         assert r.exit_code != 0, cmd
         assert str(model) in r.output and "Traceback" not in r.output, r.output
@@ -80,8 +82,9 @@ def test_a_bad_model_is_a_one_line_error(crowd, tmp_path, bad, why):
 
 def test_a_model_file_is_used_and_recorded(crowd, tmp_path):
     out = tmp_path / "run"
-    r = CliRunner().invoke(cli, ["run", str(crowd), "-o", str(out), "--no-report", "--leg-model",
-                                 str(DEFAULT_MODEL_PATH)])
+    r = CliRunner().invoke(
+        cli, ["run", str(crowd), "-o", str(out), "--no-report", "--leg-model", str(DEFAULT_MODEL_PATH)]
+    )
     assert r.exit_code == 0, r.output
     m = _model(out / "crowd.mcap")
     assert m["model"] == str(DEFAULT_MODEL_PATH) and m["threshold"] > 0
@@ -95,7 +98,8 @@ def test_a_leg_cluster_where_no_segment_is_kept():
     from datmo_cli.perception.params import FeatureParams
 
     g = ScanGeometry(-np.radians(1.0), np.radians(1.0), 3, 0.0, 8.0, 0.0, 0.2, "laser")
-    f = extract_run(ScanRun(np.zeros(1, np.int64), np.ones((1, 3), np.float32), g),
-                    FeatureParams(min_points=4))   # every cluster the model scores above 0 is a leg candidate
+    f = extract_run(
+        ScanRun(np.zeros(1, np.int64), np.ones((1, 3), np.float32), g), FeatureParams(min_points=4)
+    )  # every cluster the model scores above 0 is a leg candidate
     assert len(f.seg_start) == 0
     assert len(f.legs) == 1 and f.legs["segment"][0] == NO_SEGMENT

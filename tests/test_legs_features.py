@@ -22,7 +22,7 @@ def circle_ranges(angles: np.ndarray, cx: float, cy: float, radius: float) -> np
     """Ranges (m) of beams at angles hitting a circle (centre cx, cy, m); +inf where they miss."""
     c, s = np.cos(angles), np.sin(angles)
     along = c * cx + s * cy
-    disc = along ** 2 - (cx * cx + cy * cy - radius ** 2)
+    disc = along**2 - (cx * cx + cy * cy - radius**2)
     with np.errstate(invalid="ignore"):
         r = along - np.sqrt(disc)
     return np.where(disc > 0, r, np.inf).astype(np.float32)
@@ -42,7 +42,7 @@ def test_circle_of_known_radius():
     assert f[COL["n_points"]] == len(hit) >= 3
     assert f[COL["radius"]] == pytest.approx(0.06, abs=1e-4)
     assert f[COL["circularity"]] < 1e-5
-    assert f[COL["mean_curvature"]] == pytest.approx(1 / 0.06, rel=0.05)   # convex toward the sensor: positive
+    assert f[COL["mean_curvature"]] == pytest.approx(1 / 0.06, rel=0.05)  # convex toward the sensor: positive
     assert f[COL["distance"]] == pytest.approx(math.hypot(1.5, 0.2) - 0.06, abs=0.03)
     assert f[COL["occluded_start"]] == f[COL["occluded_end"]] == 0.0
 
@@ -50,7 +50,7 @@ def test_circle_of_known_radius():
 def test_hollow_circle_has_negative_curvature():
     # the inside of a round room around the sensor, seen off-centre: concave, so the curvature is negative
     angles = np.radians(np.linspace(-20.0, 20.0, 41))
-    r = (np.sqrt(3.0 ** 2 - (0.5 * np.sin(angles)) ** 2) + 0.5 * np.cos(angles)).astype(np.float32)
+    r = (np.sqrt(3.0**2 - (0.5 * np.sin(angles)) ** 2) + 0.5 * np.cos(angles)).astype(np.float32)
     f = features_of(r, [(0, 41)], angles)[0]
     assert f[COL["radius"]] == RADIUS_CLIP
     assert f[COL["circularity"]] < 1e-5
@@ -73,19 +73,19 @@ def test_straight_wall():
 
 def test_occlusion_flags():
     r = np.full(20, 3.0, np.float32)
-    r[4] = 1.0       # nearer than the segment's first point: occludes it
-    r[15] = 2.95     # nearer, but by less than the margin
+    r[4] = 1.0  # nearer than the segment's first point: occludes it
+    r[15] = 2.95  # nearer, but by less than the margin
     f = features_of(r, [(5, 15)])[0]
     assert (f[COL["occluded_start"]], f[COL["occluded_end"]]) == (1.0, 0.0)
     r[15] = 1.0
-    r[4] = np.inf    # no return: not an occluder
+    r[4] = np.inf  # no return: not an occluder
     f = features_of(r, [(5, 15)])[0]
     assert (f[COL["occluded_start"]], f[COL["occluded_end"]]) == (0.0, 1.0)
-    r[4] = 5.0       # farther: background, not an occluder
-    r[15] = 0.01     # below range_min: invalid
+    r[4] = 5.0  # farther: background, not an occluder
+    r[15] = 0.01  # below range_min: invalid
     f = features_of(r, [(5, 15)], lo=0.05)[0]
     assert (f[COL["occluded_start"]], f[COL["occluded_end"]]) == (0.0, 0.0)
-    f = features_of(np.full(20, 3.0, np.float32), [(0, 20)])[0]      # beams out of the scan
+    f = features_of(np.full(20, 3.0, np.float32), [(0, 20)])[0]  # beams out of the scan
     assert (f[COL["occluded_start"]], f[COL["occluded_end"]]) == (0.0, 0.0)
 
 
@@ -149,8 +149,9 @@ def test_noisy_circles_match_naive(dist, bearing, radius, seed):
     hit = np.flatnonzero(r < 7.0)
     if len(hit) == 0:
         return
-    assert_matches_naive(r[None, :], ANGLES_361, np.array([hit[0], 0]), np.array([hit[-1] + 1, 361]),
-                         np.array([0, 2]), 0.0, 7.5)
+    assert_matches_naive(
+        r[None, :], ANGLES_361, np.array([hit[0], 0]), np.array([hit[-1] + 1, 361]), np.array([0, 2]), 0.0, 7.5
+    )
 
 
 def test_sample_log_matches_naive(sample_logs):
@@ -167,20 +168,23 @@ def test_kernel_constants_match_the_documented_ones():
     from datmo_cli.perception import _leg_kernels as LK
 
     assert LK.N_FEATURES == len(FEATURE_NAMES)
-    assert (LK.JUMP_CLIP, LK.NEIGHBOUR_CLIP, LK.DENSITY_CLIP) == (legs.JUMP_CLIP, legs.NEIGHBOUR_CLIP,
-                                                                  legs.DENSITY_CLIP)
+    assert (LK.JUMP_CLIP, LK.NEIGHBOUR_CLIP, LK.DENSITY_CLIP) == (
+        legs.JUMP_CLIP,
+        legs.NEIGHBOUR_CLIP,
+        legs.DENSITY_CLIP,
+    )
 
 
 def test_range_jumps_skip_invalid_returns():
     r = np.full(20, 3.0, np.float32)
     r[4] = np.inf
-    r[3] = 4.5       # the nearest valid return before the segment: 1.5 m behind it
-    r[15] = 1.0      # after it: 2 m in front
+    r[3] = 4.5  # the nearest valid return before the segment: 1.5 m behind it
+    r[15] = 1.0  # after it: 2 m in front
     f = features_of(r, [(5, 15)])[0]
     assert f[COL["jump_start"]] == pytest.approx(1.5)
     assert f[COL["jump_end"]] == pytest.approx(-2.0)
     r[15:] = np.nan  # no valid return beyond the end
-    r[0] = 9.0       # far behind: clipped
+    r[0] = 9.0  # far behind: clipped
     r[1:5] = np.inf
     f = features_of(r, [(5, 15)])[0]
     assert (f[COL["jump_start"]], f[COL["jump_end"]]) == (legs.JUMP_CLIP, legs.JUMP_CLIP)
@@ -189,7 +193,7 @@ def test_range_jumps_skip_invalid_returns():
 def test_neighbour_distance_and_density():
     angles = np.radians(np.linspace(-30.0, 30.0, 121))
     r = np.full(121, 4.0, np.float32)
-    segs = [(10, 15), (17, 22), (100, 105), (40, 95)]   # two close blobs, a lone one, a wide wall (not a candidate)
+    segs = [(10, 15), (17, 22), (100, 105), (40, 95)]  # two close blobs, a lone one, a wide wall (not a candidate)
     f = features_of(r, segs, angles)
     x = 4.0 * np.cos(angles)
     y = 4.0 * np.sin(angles)
@@ -197,7 +201,7 @@ def test_neighbour_distance_and_density():
     d01 = np.linalg.norm(cent[0] - cent[1])
     assert f[0, COL["neighbour_distance"]] == pytest.approx(d01)
     assert f[1, COL["neighbour_distance"]] == pytest.approx(d01)
-    assert f[2, COL["neighbour_distance"]] == legs.NEIGHBOUR_CLIP          # the wall is no candidate
+    assert f[2, COL["neighbour_distance"]] == legs.NEIGHBOUR_CLIP  # the wall is no candidate
     assert not candidate_mask(f)[3]
     assert f[3, COL["neighbour_distance"]] == pytest.approx(min(np.linalg.norm(cent[3] - c) for c in cent[:3]))
     # an arc of the circle around the sensor: n points span (n - 1) steps, so the density is n / (n - 1)
@@ -219,9 +223,9 @@ def test_relative_curvature_is_scale_free():
 def test_gap_clusters_known_scan():
     angles = np.radians(np.linspace(-10.0, 10.0, 21))
     r = np.full(21, 2.0, np.float32)
-    r[5] = 3.0           # a jump of 1 m: ends the first cluster (beams 0..4), beam 5 alone is dropped
-    r[12] = np.inf       # an invalid return ends the cluster of beams 6..11
-    r[19] = 0.01         # below range_min; 13..18 form one cluster, beam 20 alone is dropped
+    r[5] = 3.0  # a jump of 1 m: ends the first cluster (beams 0..4), beam 5 alone is dropped
+    r[12] = np.inf  # an invalid return ends the cluster of beams 6..11
+    r[19] = 0.01  # below range_min; 13..18 form one cluster, beam 20 alone is dropped
     start, end, offsets = legs.gap_clusters(r[None, :], angles, 0.05, 30.0)
     assert start.tolist() == [0, 6, 13] and end.tolist() == [5, 12, 19] and offsets.tolist() == [0, 3]
     start, end, offsets = legs.gap_clusters(np.zeros((2, 21), np.float32), angles, 0.05, 30.0)
@@ -246,14 +250,16 @@ def test_model_clusters_follow_the_provenance():
     segs = (np.array([0]), np.array([21]), np.array([0, 1]))
 
     def model(prov):
-        return legs.LegModel(np.array([-1]), np.zeros(1), np.array([-1]), np.array([-1]), np.ones(1),
-                             np.array([0]), provenance=prov)
+        return legs.LegModel(
+            np.array([-1]), np.zeros(1), np.array([-1]), np.array([-1]), np.ones(1), np.array([0]), provenance=prov
+        )
 
     for m in (None, model({}), model({"clusters": {"method": "segments"}})):
         got = legs.model_clusters(r, angles, 0.0, 30.0, m, *segs)
         assert [a.tolist() for a in got] == [[0], [21], [0, 1]]
-    got = legs.model_clusters(r, angles, 0.0, 30.0, model({"clusters": {"method": "gap", "gap": 0.13,
-                                                                        "min_points": 3}}), *segs)
+    got = legs.model_clusters(
+        r, angles, 0.0, 30.0, model({"clusters": {"method": "gap", "gap": 0.13, "min_points": 3}}), *segs
+    )
     assert [a.tolist() for a in got] == [[0, 11], [10, 21], [0, 2]]
     with pytest.raises(ValueError, match="cluster method"):
         legs.model_clusters(r, angles, 0.0, 30.0, model({"clusters": {"method": "dbscan"}}), *segs)

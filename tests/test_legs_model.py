@@ -52,8 +52,7 @@ def test_probabilities_equal_predict_proba(estimator):
     # values on the thresholds themselves: the float32 comparison decides which way they go
     inner = np.flatnonzero(model.feature >= 0)[:100]
     X_test[np.arange(len(inner)), model.feature[inner]] = model.threshold[inner]
-    np.testing.assert_allclose(model.probabilities(X_test), estimator.predict_proba(X_test)[:, 1], atol=1e-6,
-                               rtol=0)
+    np.testing.assert_allclose(model.probabilities(X_test), estimator.predict_proba(X_test)[:, 1], atol=1e-6, rtol=0)
 
 
 def test_ensemble_matches_naive_walk():
@@ -66,8 +65,8 @@ def test_ensemble_matches_naive_walk():
 def test_non_candidates_get_zero():
     X, y = random_features(200, 5)
     model = from_sklearn(RandomForestClassifier(n_estimators=3, random_state=0).fit(X, y), 0.5, {})
-    X[:20, 1] = 0.9        # too wide
-    X[20:40, 0] = 2        # too few points
+    X[:20, 1] = 0.9  # too wide
+    X[20:40, 0] = 2  # too few points
     p = model.probabilities(X)
     assert not candidate_mask(X)[:40].any() and candidate_mask(X)[40:].all()
     assert np.all(p[:40] == 0)
@@ -105,7 +104,7 @@ def test_a_model_file_read_before_and_unchanged_is_not_read_again(tmp_path):
     first = load_leg_model(str(path))
     assert load_leg_model(str(path)) is first and load_leg_model("default") is load_leg_model("default")
     from_sklearn(GradientBoostingClassifier(n_estimators=3, random_state=0).fit(X, y), 0.5, {}).save(path, force=True)
-    again = load_leg_model(str(path))     # rewritten: another size (and mtime), so read anew
+    again = load_leg_model(str(path))  # rewritten: another size (and mtime), so read anew
     assert again is not first and (again.n_trees, again.threshold_p) == (3, 0.5)
 
 

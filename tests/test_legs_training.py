@@ -20,10 +20,10 @@ from tests.synthetic_legs import scene, write_bag, write_mcap
 
 def test_each_scan_takes_the_label_message_nearest_in_log_time_within_50_ms():
     labels = [np.array([[1.0, 0.0]]), np.array([[2.0, 0.0]]), np.array([[3.0, 0.0]])]
-    times = np.array([1_000, 1_100, 1_200]) * 1_000_000                   # ms -> ns, out of order below
+    times = np.array([1_000, 1_100, 1_200]) * 1_000_000  # ms -> ns, out of order below
     scans = np.array([1_010, 1_140, 1_160, 1_260, 900]) * 1_000_000
     got = T.match_labels(scans, times[[2, 0, 1]], [labels[2], labels[0], labels[1]])
-    assert [g[:, 0].tolist() for g in got] == [[1.0], [2.0], [3.0], [], []]   # 1260 and 900: more than 50 ms
+    assert [g[:, 0].tolist() for g in got] == [[1.0], [2.0], [3.0], [], []]  # 1260 and 900: more than 50 ms
 
 
 def test_no_label_message_gives_no_legs():
@@ -67,11 +67,21 @@ def _table(name: str, labelled: bool, label, score=None, n_scans: int = 2, rng_m
     label = np.asarray(label, bool)
     m = len(label)
     feats = np.zeros((m, len(FEATURE_NAMES)))
-    feats[:, 0] = 5 if score is None else np.asarray(score) * 10 + 3   # a feature that orders the segments
+    feats[:, 0] = 5 if score is None else np.asarray(score) * 10 + 3  # a feature that orders the segments
     r = np.full(m, 1.0) if rng_m is None else np.asarray(rng_m, float)
     circle = np.zeros(m, bool) if circle is None else np.asarray(circle, bool)
-    return T.SegmentTable(name, labelled, n_scans, feats, label, np.ones(m, bool), np.arange(m) % n_scans,
-                          np.c_[r, np.zeros(m)], circle, np.where(circle, 0.9, 0.0))
+    return T.SegmentTable(
+        name,
+        labelled,
+        n_scans,
+        feats,
+        label,
+        np.ones(m, bool),
+        np.arange(m) % n_scans,
+        np.c_[r, np.zeros(m)],
+        circle,
+        np.where(circle, 0.9, 0.0),
+    )
 
 
 def test_no_held_out_recording_ever_trains_its_own_fold_or_threshold(monkeypatch):
@@ -109,7 +119,7 @@ def test_no_held_out_recording_ever_trains_its_own_fold_or_threshold(monkeypatch
     assert len(trained) == T.cv_fits(4, 3) == 4 * (3 + 1)
     # each outer fold's fits come in a block: 3 inner + 1 outer, none with the held-out pair
     for i, h in enumerate(held):
-        for names in trained[4 * i:4 * i + 4]:
+        for names in trained[4 * i : 4 * i + 4]:
             assert h.labelled not in names and h.empty not in names
         assert trained[4 * i + 3] == {f"L{k}" for k in range(4) if k != i} | {f"E{j}" for j in range(3)} - {h.empty}
 
@@ -126,12 +136,12 @@ def test_average_precision_on_a_hand_made_case_and_against_scikit_learn():
     rng = np.random.default_rng(1)
     for _ in range(20):
         y = rng.random(50) < 0.3
-        s = np.round(rng.random(50), 1)        # ties
+        s = np.round(rng.random(50), 1)  # ties
         assert T.average_precision(y, s) == pytest.approx(sk.average_precision_score(y, s))
 
 
 def test_figures_count_clusters_within_5_m_and_false_legs_per_empty_scan():
-    lab = _table("L", True, [1, 1, 0, 0, 1], rng_m=[1, 2, 3, 4, 6])    # the last (a leg) is beyond 5 m
+    lab = _table("L", True, [1, 1, 0, 0, 1], rng_m=[1, 2, 3, 4, 6])  # the last (a leg) is beyond 5 m
     score = np.array([0.9, 0.2, 0.8, 0.1, 0.0])
     emp = _table("E", False, [0, 0, 0, 0], n_scans=4, rng_m=[1, 1, 1, 7])
     f = T.figures(lab, score, 0.5, emp, np.array([0.6, 0.4, 0.7, 0.99]))
@@ -143,7 +153,7 @@ def test_figures_count_clusters_within_5_m_and_false_legs_per_empty_scan():
 def test_recall_by_range_counts_the_legs_of_each_bin_at_the_threshold():
     lab = _table("L", True, [1, 1, 0, 1, 1, 1], rng_m=[1.0, 1.5, 1.5, 2.5, 3.5, 6.0])
     score = np.array([0.9, 0.2, 0.9, 0.6, 0.4, 0.99])
-    assert T.recall_by_range(lab, score, 0.5) == (0.5, 1.0, 0.0, None)   # 6 m is beyond the last bin
+    assert T.recall_by_range(lab, score, 0.5) == (0.5, 1.0, 0.0, None)  # 6 m is beyond the last bin
 
 
 def test_a_thinned_recording_keeps_every_other_beam_at_twice_the_step_and_its_labels():
@@ -160,7 +170,8 @@ def test_a_thinned_recording_keeps_every_other_beam_at_twice_the_step_and_its_la
     assert t.run.geometry.angle_min == g.angle_min
     assert np.array_equal(t.run.ranges, ranges[:, ::2]) and t.legs is legs and t.labelled
     assert t.run.geometry.angle_min + 100 * t.run.geometry.angle_increment == pytest.approx(
-        g.angle_min + 200 * g.angle_increment)   # the last beam keeps its direction
+        g.angle_min + 200 * g.angle_increment
+    )  # the last beam keeps its direction
 
 
 def test_circle_rule_figures_call_the_small_circles_legs():
@@ -173,7 +184,7 @@ def test_circle_rule_figures_call_the_small_circles_legs():
 def test_threshold_maximises_f1_within_the_empty_scan_budget():
     y = np.array([1, 1, 1, 0, 0, 0], bool)
     s = np.array([0.9, 0.8, 0.4, 0.7, 0.3, 0.2])
-    assert T.choose_threshold(y, s) == pytest.approx(0.4)    # all three legs, one false: F1 6/7
+    assert T.choose_threshold(y, s) == pytest.approx(0.4)  # all three legs, one false: F1 6/7
     empty = np.array([0.85, 0.5, 0.45])
     # at 0.4 three false legs in 2 empty scans (1.5 > 0.25), at 0.8 one: 0.5; only 0.9 and 1.0 are within
     assert T.choose_threshold(y, s, empty, 2, budget=0.25) == pytest.approx(0.9)
@@ -185,13 +196,12 @@ def test_threshold_maximises_f1_within_the_empty_scan_budget():
 @pytest.mark.parametrize("kind", ["ros1", "mcap"])
 def test_labelled_files_read_with_their_labels(tmp_path, kind):
     ranges, legs = scene(12, seed=3)
-    path = (write_bag(tmp_path / "p.bag", ranges, legs) if kind == "ros1"
-            else write_mcap(tmp_path / "p", ranges, legs))
+    path = write_bag(tmp_path / "p.bag", ranges, legs) if kind == "ros1" else write_mcap(tmp_path / "p", ranges, legs)
     rec = T.read_labelled(path)
     assert rec.labelled and rec.topic == "/scan" and rec.run.ranges.shape == ranges.shape
     assert [x.tolist() for x in rec.legs] == [x.tolist() for x in legs]
     table = T.segment_table(rec)
-    assert table.label.sum() >= 2 * 12 - 2        # both legs of (nearly) every scan
+    assert table.label.sum() >= 2 * 12 - 2  # both legs of (nearly) every scan
     assert not table.label[table.range_m > 4.0].any()
 
 
@@ -201,8 +211,9 @@ def test_a_file_without_labels_is_refused(tmp_path):
     with pytest.raises(InputError, match=r"u\.bag: no leg labels: no topic /leg_cluster_positions"):
         T.read_labelled(path)
     with pytest.raises(InputError, match="no labelled leg on /legs within 50 ms"):
-        T.read_labelled(write_bag(tmp_path / "e.bag", ranges, [np.zeros((0, 2))] * 5, labels_topic="/legs"),
-                        labels_topic="/legs")
+        T.read_labelled(
+            write_bag(tmp_path / "e.bag", ranges, [np.zeros((0, 2))] * 5, labels_topic="/legs"), labels_topic="/legs"
+        )
 
 
 def test_every_scan_topic_of_an_empty_file_is_a_recording(tmp_path):
@@ -243,8 +254,9 @@ def test_tables_tabulate_the_clusters_asked_for(tmp_path, clusters):
         start, end, offsets = segment_run(run)
     table = T.segment_table(rec, clusters=clusters)
     assert len(table) == len(start) and table.scan.tolist() == np.repeat(np.arange(6), np.diff(offsets)).tolist()
-    np.testing.assert_array_equal(table.features, cluster_features(run.ranges, run.geometry.angles(), start, end,
-                                                                   offsets, lo, hi))
+    np.testing.assert_array_equal(
+        table.features, cluster_features(run.ranges, run.geometry.angles(), start, end, offsets, lo, hi)
+    )
     assert table.label.any()
     with pytest.raises(ValueError, match="cluster method"):
         T.recording_clusters(run, clusters={"method": "dbscan"})
@@ -274,6 +286,6 @@ def test_simulated_recordings_of_a_finer_scanner_cover_270_degrees_and_people_wh
     scene, step = simulated._scene_for("crowd", 270 / 768)
     assert step is None and scene.scanner.beams == 768 and scene.scanner.fov_deg == 270.0
     assert (scene.crowd.pause_probability, scene.crowd.max_pause) == simulated.LONG_PAUSE
-    assert simulated._scene_for("crowd", 0.5) == ("crowd", 0.5)   # an LMS200 step: the scene as it is
+    assert simulated._scene_for("crowd", 0.5) == ("crowd", 0.5)  # an LMS200 step: the scene as it is
     rec = simulated.simulated_recording("crowd", 15, 3, 270 / 768, 2.0)
     assert rec.run.geometry.n_beams == 768 and rec.labelled and sum(len(g) for g in rec.legs) > 0

@@ -39,8 +39,12 @@ def _datmo(*args: str) -> list[str]:
 
 
 def _decoder(channel: dict):
-    schema = Schema(id=channel["id"], name=channel["schemaName"], encoding=channel["schemaEncoding"],
-                    data=channel["schema"].encode())
+    schema = Schema(
+        id=channel["id"],
+        name=channel["schemaName"],
+        encoding=channel["schemaEncoding"],
+        data=channel["schema"].encode(),
+    )
     return DecoderFactory().decoder_for(channel["encoding"], schema)
 
 
@@ -57,12 +61,13 @@ async def _subscribe(url: str, topics: list[str], want: int, timeout: float = 60
             if m["op"] == "advertise":
                 channels |= {c["topic"]: c for c in m["channels"]}
         subs = {k: channels[t] for k, t in enumerate(topics, 1)}
-        await ws.send(json.dumps({"op": "subscribe",
-                                  "subscriptions": [{"id": k, "channelId": c["id"]} for k, c in subs.items()]}))
+        await ws.send(
+            json.dumps({"op": "subscribe", "subscriptions": [{"id": k, "channelId": c["id"]} for k, c in subs.items()]})
+        )
         decoders = {k: _decoder(c) for k, c in subs.items()}
         while min(len(v) for v in got.values()) < want:
             m = await asyncio.wait_for(ws.recv(), timeout)
-            if isinstance(m, bytes) and m[0] == 1:   # message data: op, subscription id, timestamp, payload
+            if isinstance(m, bytes) and m[0] == 1:  # message data: op, subscription id, timestamp, payload
                 sub, stamp = struct.unpack_from("<IQ", m, 1)
                 got[subs[sub]["topic"]].append((stamp, decoders[sub](m[13:])))
     return got
@@ -122,15 +127,16 @@ def test_play_serves_a_processed_log_to_a_client_that_decodes_it(tmp_path):
 
 @pytest.mark.slow
 def test_play_serves_scans_and_tracks_made_on_the_fly_and_stops_on_ctrl_c():
-    got = _play_and_stop([str(HALL), "--port", "0", "--rate", "10", "--loop"],
-                         [mcapio.TOPIC_SCAN, mcapio.TOPIC_TRACKS], want=25)
+    got = _play_and_stop(
+        [str(HALL), "--port", "0", "--rate", "10", "--loop"], [mcapio.TOPIC_SCAN, mcapio.TOPIC_TRACKS], want=25
+    )
     log_stamps = set(mcapio.read_messages(HALL, mcapio.TOPIC_SCAN)[0].tolist())
     scans = got[mcapio.TOPIC_SCAN]
     for stamp, scan in scans:
         assert _stamp(scan.header) == stamp and stamp in log_stamps
         assert scan.header.frame_id == "laser" and len(scan.ranges) == 361
         assert math.isclose(scan.angle_increment, math.radians(0.5), rel_tol=1e-6)
-    assert [s for s, _ in scans] == sorted({s for s, _ in scans})          # in the log's order, none twice
+    assert [s for s, _ in scans] == sorted({s for s, _ in scans})  # in the log's order, none twice
     seen = 0
     for stamp, msg in got[mcapio.TOPIC_TRACKS]:
         assert _stamp(msg.header) == stamp and stamp in log_stamps and msg.header.frame_id == "laser"
@@ -140,13 +146,14 @@ def test_play_serves_scans_and_tracks_made_on_the_fly_and_stops_on_ctrl_c():
             assert math.hypot(t.x, t.y) < 8.5 and math.isfinite(t.vx) and math.isfinite(t.vy)
             assert t.classification <= 3 and t.mobility <= 2 and t.status <= 2
         seen += len(msg.tracks)
-    assert seen > 0                                                        # the hall has people and columns
+    assert seen > 0  # the hall has people and columns
 
 
 def _processed_log(path: Path, n: int = 40) -> tuple[ScanRun, list[bytes]]:
     """A small log with /scan and a hand-made /datmo/tracks (one track walking along x) and /odom."""
-    geometry = ScanGeometry(angle_min=-math.pi / 2, angle_increment=math.radians(1.0), n_beams=181,
-                            range_min=0.0, range_max=8.0)
+    geometry = ScanGeometry(
+        angle_min=-math.pi / 2, angle_increment=math.radians(1.0), n_beams=181, range_min=0.0, range_max=8.0
+    )
     stamps = 1_700_000_000_000_000_000 + np.arange(n, dtype=np.int64) * 100_000_000
     run = ScanRun(stamps, np.full((n, 181), 5.0, np.float32), geometry)
     track = np.zeros(1, cdr.element_dtype(types.TRACK))
@@ -168,13 +175,17 @@ def test_a_processed_log_is_served_as_it_is_with_transforms_from_its_odometry(tm
     assert source.processed and not source.derived
     messages = [m for batch in source.batches() for m in batch]
     tracks = [m for m in messages if m.topic == mcapio.TOPIC_TRACKS]
-    assert [m.payload for m in tracks] == payloads                         # byte for byte
+    assert [m.payload for m in tracks] == payloads  # byte for byte
     assert [m.stamp for m in messages] == sorted(m.stamp for m in messages)
     at_first = [m.topic for m in messages if m.stamp == int(run.stamps[0])]
-    assert at_first[0] == mcapio.TOPIC_SCAN and set(at_first) == {mcapio.TOPIC_SCAN, mcapio.TOPIC_ODOM,
-                                                                   mcapio.TOPIC_TRACKS, live.TOPIC_TF,
-                                                                   live.TOPIC_TF_STATIC,
-                                                                   mcapio.TOPIC_MARKERS_TRACKS}   # drawn here
+    assert at_first[0] == mcapio.TOPIC_SCAN and set(at_first) == {
+        mcapio.TOPIC_SCAN,
+        mcapio.TOPIC_ODOM,
+        mcapio.TOPIC_TRACKS,
+        live.TOPIC_TF,
+        live.TOPIC_TF_STATIC,
+        mcapio.TOPIC_MARKERS_TRACKS,
+    }  # drawn here
     assert source.transforms.topics() == {live.TOPIC_TF: live.TF_MESSAGE, live.TOPIC_TF_STATIC: live.TF_MESSAGE}
 
 
@@ -200,19 +211,28 @@ def test_a_log_stored_without_markers_gets_them_drawn_from_its_tracks_and_featur
         assert [m.stamp for m in played[topic]] == stored[topic][0].tolist(), topic
     assert [m.payload for m in played[mcapio.TOPIC_MARKERS_FEATURES]] == stored[mcapio.TOPIC_MARKERS_FEATURES][1]
     store = types.typestore()
-    for m, payload in list(zip(played[mcapio.TOPIC_MARKERS_TRACKS], stored[mcapio.TOPIC_MARKERS_TRACKS][1],
-                               strict=True))[::7]:
+    for m, payload in list(
+        zip(played[mcapio.TOPIC_MARKERS_TRACKS], stored[mcapio.TOPIC_MARKERS_TRACKS][1], strict=True)
+    )[::7]:
         a, b = (store.deserialize_cdr(p, types.MARKER_ARRAY).markers for p in (m.payload, payload))
-        assert [(x.id, x.type, x.header.frame_id, len(x.points)) for x in a] == \
-            [(x.id, x.type, x.header.frame_id, len(x.points)) for x in b]
+        assert [(x.id, x.type, x.header.frame_id, len(x.points)) for x in a] == [
+            (x.id, x.type, x.header.frame_id, len(x.points)) for x in b
+        ]
         for x, y in zip(a, b, strict=True):
             assert np.allclose([(p.x, p.y) for p in x.points], [(p.x, p.y) for p in y.points], atol=1e-5)
-    assert not live.LogSource(fat).drawn          # a log with its markers plays them as they are
+    assert not live.LogSource(fat).drawn  # a log with its markers plays them as they are
 
 
 def _tf_decoder():
-    return _decoder({"id": 1, "schemaName": live.TF_MESSAGE, "schemaEncoding": "ros2msg",
-                     "schema": types.schema_text(live.TF_MESSAGE), "encoding": "cdr"})
+    return _decoder(
+        {
+            "id": 1,
+            "schemaName": live.TF_MESSAGE,
+            "schemaEncoding": "ros2msg",
+            "schema": types.schema_text(live.TF_MESSAGE),
+            "encoding": "cdr",
+        }
+    )
 
 
 def test_transforms_from_odometry_at_every_stamp_and_the_static_one_every_second():
@@ -224,7 +244,7 @@ def test_transforms_from_odometry_at_every_stamp_and_the_static_one_every_second
     dynamic = [m for m in messages if m.topic == live.TOPIC_TF]
     static = [m for m in messages if m.topic == live.TOPIC_TF_STATIC]
     assert [m.stamp for m in dynamic] == stamps.tolist()
-    assert [m.stamp for m in static] == stamps[::10].tolist()             # every second of log time
+    assert [m.stamp for m in static] == stamps[::10].tolist()  # every second of log time
     for m, (x, y, yaw) in zip(dynamic, odom.at(stamps).tolist(), strict=True):
         (t,) = decode(m.payload).transforms
         assert (t.header.frame_id, t.child_frame_id, _stamp(t.header)) == ("odom", "base_link", m.stamp)
@@ -245,8 +265,10 @@ def test_tf_payloads_are_rosbags_bytes():
         data = live.tf_payload(1_700_000_000_987_654_321, frames)
         msg = store.deserialize_cdr(data, live.TF_MESSAGE)
         assert bytes(store.serialize_cdr(msg, live.TF_MESSAGE)) == data
-        assert [(t.header.frame_id, t.child_frame_id, t.transform.translation.x, t.transform.translation.y)
-                for t in msg.transforms] == [(p, c, float(x), float(y)) for p, c, x, y, _ in frames]
+        assert [
+            (t.header.frame_id, t.child_frame_id, t.transform.translation.x, t.transform.translation.y)
+            for t in msg.transforms
+        ] == [(p, c, float(x), float(y)) for p, c, x, y, _ in frames]
 
 
 def test_pace_plays_at_the_rate_given():
@@ -260,8 +282,8 @@ def test_pace_plays_at_the_rate_given():
 
     for stamp in (10**9, 3 * 10**9, 3 * 10**9, 11 * 10**9):
         pace.wait(stamp, sleep)
-    assert slept == [0.5, 2.0]                                             # 2 s and 8 s of log at 4x
-    now[0] += 10.0                                                         # processing fell behind: no sleep
+    assert slept == [0.5, 2.0]  # 2 s and 8 s of log at 4x
+    now[0] += 10.0  # processing fell behind: no sleep
     pace.wait(12 * 10**9, sleep)
     assert len(slept) == 2
 
@@ -314,12 +336,12 @@ def test_live_feed_drops_scans_rather_than_waiting(monkeypatch):
     run = mcapio.read_run(HALL).slice(0, 11)
     gate = threading.Event()
     server = _Recorder()
-    server.time = lambda stamp: gate.wait(60)      # the view is stuck on its first scan
+    server.time = lambda stamp: gate.wait(60)  # the view is stuck on its first scan
     feed = live.LiveFeed(server, backlog=2)
     feed.scan(int(run.stamps[0]), run.ranges[0], run.geometry)
     while not feed.queue.empty():
         threading.Event().wait(0.01)
-    for i in range(1, len(run)):                    # the recording goes on: two wait, the others are dropped
+    for i in range(1, len(run)):  # the recording goes on: two wait, the others are dropped
         feed.scan(int(run.stamps[i]), run.ranges[i], run.geometry)
     assert feed.dropped == 8
     gate.set()
@@ -339,8 +361,7 @@ def test_record_calls_on_scan_with_each_scan_written(tmp_path):
     with Emulator(SceneSource("hall", seed=3, duration=10)) as emu:
         driver = LMS2xx(emu.device_path, baud=500000)
         writer = mcapio.LogWriter(tmp_path / "r.mcap", provenance=mcapio.Provenance("record", {}), streaming=True)
-        record(driver, writer, max_scans=8,
-               on_scan=lambda stamp, ranges, g: seen.append((stamp, np.array(ranges), g)))
+        record(driver, writer, max_scans=8, on_scan=lambda stamp, ranges, g: seen.append((stamp, np.array(ranges), g)))
     run = mcapio.read_run(tmp_path / "r.mcap")
     assert [s for s, _, _ in seen] == run.stamps.tolist()
     assert np.array_equal(np.stack([r for _, r, _ in seen]), run.ranges)
@@ -358,8 +379,15 @@ def test_a_busy_port_is_one_line_naming_the_option():
     assert len(lines) == 1 and lines[0].startswith(f"datmo: error: --port {port}: cannot serve on 127.0.0.1:{port} (")
 
 
-@pytest.mark.parametrize("args, name", [(["--port", "70000"], "--port"), (["--port", "-1"], "--port"),
-                                        (["--rate", "0"], "--rate"), (["--rate", "nan"], "--rate")])
+@pytest.mark.parametrize(
+    "args, name",
+    [
+        (["--port", "70000"], "--port"),
+        (["--port", "-1"], "--port"),
+        (["--rate", "0"], "--rate"),
+        (["--rate", "nan"], "--rate"),
+    ],
+)
 def test_bad_port_or_rate_is_one_line(args, name):
     result = CliRunner().invoke(cli, ["play", str(HALL), *args])
     assert result.exit_code == 2 and result.output.startswith(f"datmo: error: {name}: "), result.output
@@ -369,8 +397,9 @@ def test_urls():
     assert live.ws_url("127.0.0.1", 8765) == "ws://127.0.0.1:8765"
     assert live.ws_url("::1", 9) == "ws://[::1]:9"
     assert live.ws_url("0.0.0.0", 1) == f"ws://{socket.gethostname()}:1"
-    assert live.app_url("127.0.0.1", 8765) == ("https://app.foxglove.dev/?ds=foxglove-websocket"
-                                               "&ds.url=ws%3A%2F%2F127.0.0.1%3A8765")
+    assert live.app_url("127.0.0.1", 8765) == (
+        "https://app.foxglove.dev/?ds=foxglove-websocket&ds.url=ws%3A%2F%2F127.0.0.1%3A8765"
+    )
 
 
 def _tree_leaves(node) -> list[str]:
@@ -383,16 +412,19 @@ def test_the_foxglove_layout_shows_scan_features_tracks_and_a_plot_of_track_velo
     layout = json.loads(LAYOUT.read_text(encoding="utf-8"))
     assert set(layout) >= {"configById", "layout", "globalVariables", "userNodes"}
     panels = layout["configById"]
-    assert sorted(_tree_leaves(layout["layout"])) == sorted(panels)        # every panel placed, none missing
+    assert sorted(_tree_leaves(layout["layout"])) == sorted(panels)  # every panel placed, none missing
     (three_d,) = [v for k, v in panels.items() if k.startswith("3D!")]
-    assert three_d["followTf"] == "laser"                                 # the scan's frame; odom is the root
+    assert three_d["followTf"] == "laser"  # the scan's frame; odom is the root
     for topic in (mcapio.TOPIC_SCAN, mcapio.TOPIC_MARKERS_FEATURES, mcapio.TOPIC_MARKERS_TRACKS):
         assert three_d["topics"][topic]["visible"] is True
     (plot,) = [v for k, v in panels.items() if k.startswith("Plot!")]
     paths = [p["value"] for p in plot["paths"]]
     assert paths and all(p.startswith(mcapio.TOPIC_TRACKS + ".tracks[:]") for p in paths)
-    track_fields = {line.split()[1] for line in types.datmo_msg_files()[types.TRACK].splitlines()
-                    if line and not line.startswith("#") and "=" not in line}
+    track_fields = {
+        line.split()[1]
+        for line in types.datmo_msg_files()[types.TRACK].splitlines()
+        if line and not line.startswith("#") and "=" not in line
+    }
     for p in paths:
         fields = re.findall(r"\{(\w+)==\d+\}|\.(\w+)$", p)
         assert {f for pair in fields for f in pair if f} <= track_fields, p
@@ -455,8 +487,9 @@ async def _spec_client(url: str, subprotocol: str, topics: list[str], want: int,
             if m["op"] == "advertise":
                 out["channels"] |= {c["topic"]: c for c in m["channels"]}
         subs = {k: out["channels"][t]["id"] for k, t in enumerate(topics, 1)}
-        await ws.send(json.dumps({"op": "subscribe",
-                                  "subscriptions": [{"id": k, "channelId": c} for k, c in subs.items()]}))
+        await ws.send(
+            json.dumps({"op": "subscribe", "subscriptions": [{"id": k, "channelId": c} for k, c in subs.items()]})
+        )
         got = out["messages"]
         while min(len(v) for v in got.values()) < want:
             m = await asyncio.wait_for(ws.recv(), timeout)
@@ -478,8 +511,11 @@ async def _vanish(url: str) -> None:
         while not channels:
             m = json.loads(await asyncio.wait_for(ws.recv(), 60))
             channels = [c["id"] for c in m.get("channels", [])]
-        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": i, "channelId": c}
-                                                                       for i, c in enumerate(channels)]}))
+        await ws.send(
+            json.dumps(
+                {"op": "subscribe", "subscriptions": [{"id": i, "channelId": c} for i, c in enumerate(channels)]}
+            )
+        )
         while not isinstance(await asyncio.wait_for(ws.recv(), 60), bytes):
             pass
         ws.transport.abort()
@@ -497,16 +533,19 @@ def test_play_serves_clients_of_either_subprotocol_and_says_nothing_when_they_le
             assert info["op"] == "serverInfo" and info["name"] == "datmo" and "time" in info["capabilities"]
             tracks = got["channels"][mcapio.TOPIC_TRACKS]
             assert (tracks["encoding"], tracks["schemaName"], tracks["schemaEncoding"]) == (
-                "cdr", types.TRACKS, "ros2msg")
+                "cdr",
+                types.TRACKS,
+                "ros2msg",
+            )
             for stamp, payload in got["messages"][mcapio.TOPIC_TRACKS]:
-                assert payload == by_stamp[stamp]                          # the log's bytes, at the log's time
+                assert payload == by_stamp[stamp]  # the log's bytes, at the log's time
             for stamp, payload in got["messages"][mcapio.TOPIC_SCAN]:
                 assert stamp in by_stamp and payload[:4] == cdr.CDR_HEADER
             assert got["times"] and set(got["times"]) <= set(by_stamp)
         import websockets
 
         asyncio.run(_vanish(url))
-        with pytest.raises(websockets.InvalidStatus, match="400"):           # as foxglove-sdk's server answers
+        with pytest.raises(websockets.InvalidStatus, match="400"):  # as foxglove-sdk's server answers
             asyncio.run(_spec_client(url, "some.other.v1", [mcapio.TOPIC_SCAN], want=1))
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)

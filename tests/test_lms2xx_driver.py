@@ -115,7 +115,7 @@ class BurstyLMS(FakeLMS):
         return len(self.out) or len(self.pending)
 
     def read(self, n: int = 1) -> bytes:
-        if self.out or not self.hang_up:   # replies; nothing streams before the 20 24 (hang_up: it came)
+        if self.out or not self.hang_up:  # replies; nothing streams before the 20 24 (hang_up: it came)
             return super().read(n)
         if not self.pending:
             if not self.bursts:
@@ -139,9 +139,9 @@ def test_stamps_are_strictly_increasing_when_bytes_come_in_bursts():
     driver.connect()
     driver.start()
     got = [driver.read_scan(0.5) for _ in range(5)]
-    assert all(np.array_equal(g.values, v) for g, v in zip(got, values, strict=True))   # every scan, in order
+    assert all(np.array_equal(g.values, v) for g, v in zip(got, values, strict=True))  # every scan, in order
     stamps = np.array([g.stamp_ns for g in got])
-    line = len(scans[0]) * 10e9 / 9600     # ns a telegram takes on the line
+    line = len(scans[0]) * 10e9 / 9600  # ns a telegram takes on the line
     assert np.all(np.diff(stamps) >= int(line)), np.diff(stamps)
-    alone = (len(scans[0]) - 1) * 10e9 / 9600   # a telegram read on its own started this long before the read
-    assert stamps[0] == int(5_000 * ms - alone) and stamps[3] == int(9_000 * ms - alone)   # their own estimates
+    alone = (len(scans[0]) - 1) * 10e9 / 9600  # a telegram read on its own started this long before the read
+    assert stamps[0] == int(5_000 * ms - alone) and stamps[3] == int(9_000 * ms - alone)  # their own estimates

@@ -22,8 +22,12 @@ def test_fault_spec_parsing():
     f = Faults.parse("garbage:0.1, crc:0.05,truncate:0.02,drop:0.01,disconnect:200,nak:1")
     assert (f.garbage, f.crc, f.truncate, f.drop, f.disconnect, f.nak) == (0.1, 0.05, 0.02, 0.01, 200, 1)
     assert Faults.parse(None) == Faults()
-    for bad, msg in [("crc:2", "probability"), ("boom:1", "unknown"), ("disconnect:-1", "count"),
-                     ("crc:0.6,drop:0.6", "at most 1")]:
+    for bad, msg in [
+        ("crc:2", "probability"),
+        ("boom:1", "unknown"),
+        ("disconnect:-1", "count"),
+        ("crc:0.6,drop:0.6", "at most 1"),
+    ]:
         with pytest.raises(ConfigError, match=msg):
             Faults.parse(bad)
 
@@ -40,20 +44,24 @@ def _exchange(port: serial.Serial, frame: bytes, n: int = 200, wait: float = 0.3
 
 
 def test_power_up_state_handshake_nak_and_wrong_baud():
-    with Emulator(ArraySource(np.full(361, 1000))) as emu, \
-            serial.Serial(emu.device_path, 9600, timeout=0.02) as port:
+    with Emulator(ArraySource(np.full(361, 1000))) as emu, serial.Serial(emu.device_path, 9600, timeout=0.02) as port:
         items = _exchange(port, P.cmd_status())
         assert items[0] == P.ACK and items[1].command == P.REPLY_STATUS
         status = P.parse_status(items[1].data)
         assert (status.baud, status.angle_deg, status.resolution_cdeg, status.units, status.operating_mode) == (
-            9600, 180, 50, "mm", 0x25)
+            9600,
+            180,
+            50,
+            "mm",
+            0x25,
+        )
         bad = P.cmd_status()[:-1] + b"\x00"
         assert _exchange(port, bad) == [P.NAK]
         assert _exchange(port, P.host_frame(b"\x55"))[1].command == P.REPLY_INVALID
         # baud change: A0 at the old baud; then the host must follow
         items = _exchange(port, P.cmd_baud(38400))
         assert items[1].command == P.REPLY_MODE and items[1].data == b"\x00"
-        assert _exchange(port, P.cmd_status()) == []          # still at 9600: the LMS does not hear us
+        assert _exchange(port, P.cmd_status()) == []  # still at 9600: the LMS does not hear us
         assert emu.stats.wrong_speed_bytes > 0
         port.baudrate = 38400
         assert _exchange(port, P.cmd_status())[1].command == P.REPLY_STATUS
@@ -76,37 +84,64 @@ def test_power_up_state_handshake_nak_and_wrong_baud():
 
 
 def test_output_is_paced_by_the_baud():
-    with Emulator(ArraySource(np.full(361, 1000))) as emu, \
-            serial.Serial(emu.device_path, 9600, timeout=0.02) as port:
+    with Emulator(ArraySource(np.full(361, 1000))) as emu, serial.Serial(emu.device_path, 9600, timeout=0.02) as port:
         port.write(P.cmd_one_scan())
         buf = b""
         while not buf:
             buf = port.read(1)
         t0 = time.monotonic()
-        while len(buf) < 1 + 732:                     # ACK + the B0 frame
+        while len(buf) < 1 + 732:  # ACK + the B0 frame
             buf += port.read(1000)
         elapsed = time.monotonic() - t0
-    assert elapsed == pytest.approx(732 / 960, rel=0.1)   # 9600 Bd: 960 bytes per second
+    assert elapsed == pytest.approx(732 / 960, rel=0.1)  # 9600 Bd: 960 bytes per second
 
 
 def test_emulate_command_serves_record(tmp_path):
-    emu = subprocess.Popen([sys.executable, "-c", "from datmo_cli.cli import main; main()", "emulate",
-                            "--scene", "static", "--link", str(tmp_path / "lms")],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    emu = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "from datmo_cli.cli import main; main()",
+            "emulate",
+            "--scene",
+            "static",
+            "--link",
+            str(tmp_path / "lms"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         path = emu.stdout.readline().strip()
         assert path.startswith("/dev/pts/")
         out = tmp_path / "run.mcap"
-        rec = subprocess.run([sys.executable, "-c", "from datmo_cli.cli import main; main()", "record", "--port",
-                              str(tmp_path / "lms"), "-o", str(out), "--baud", "500000", "--scans", "10"],
-                             capture_output=True, text=True, timeout=30)
+        rec = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                "from datmo_cli.cli import main; main()",
+                "record",
+                "--port",
+                str(tmp_path / "lms"),
+                "-o",
+                str(out),
+                "--baud",
+                "500000",
+                "--scans",
+                "10",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
         assert rec.returncode == 0, rec.stderr
         assert "10 scans" in rec.stderr
         assert len(mcapio.read_run(out)) == 10
     finally:
         emu.send_signal(signal.SIGINT)
         _, err = emu.communicate(timeout=10)
-    assert emu.returncode == 130                 # Ctrl-C, after the summary and the link's removal
+    assert emu.returncode == 130  # Ctrl-C, after the summary and the link's removal
     assert "baud 500000" in err and "sent" in err
     assert "Traceback" not in err and not (tmp_path / "lms").exists()
 
@@ -114,9 +149,21 @@ def test_emulate_command_serves_record(tmp_path):
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
 def test_emulate_exits_128_plus_the_signal_after_cleaning_up(tmp_path, sig):
     link = tmp_path / "lms"
-    emu = subprocess.Popen([sys.executable, "-c", "from datmo_cli.cli import main; main()", "emulate",
-                            "--scene", "static", "--link", str(link)],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    emu = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "from datmo_cli.cli import main; main()",
+            "emulate",
+            "--scene",
+            "static",
+            "--link",
+            str(link),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert emu.stdout.readline().strip().startswith("/dev/pts/")
         assert link.is_symlink()

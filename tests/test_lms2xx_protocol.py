@@ -73,14 +73,14 @@ def test_real_capture():
     assert tel.scan_index is None
     dist, flags = P.split_values(tel.values, 0)
     assert dist.min() == 407
-    assert (flags != 0).any()                       # e.g. 0x232F: field A bit set, distance 0x32F
+    assert (flags != 0).any()  # e.g. 0x232F: field A bit set, distance 0x32F
     ranges = P.values_to_ranges(tel.values, tel.units, 0)
     assert ranges.dtype == np.float32 and np.isfinite(ranges).all()
     assert ranges.min() == np.float32(0.407) and ranges.max() < 8.0
     # the incremental parser finds it in any chunking, after garbage
     parser = P.FrameParser()
     stream = b"\x11\x22\x02\x33" + raw + raw[:100]
-    got = [f for i in range(0, len(stream), 37) for f in parser.feed(stream[i:i + 37])]
+    got = [f for i in range(0, len(stream), 37) for f in parser.feed(stream[i : i + 37])]
     assert [f.raw for f in got] == [raw] and parser.stats.resyncs == 1 and parser.stats.discarded == 4
 
 
@@ -135,9 +135,9 @@ def test_measuring_modes_distance_and_flags(mode, bits):
     top = (1 << bits) - 1
     codes = np.array([top, top - 1, top - 2, top - 4, top - 5, top - 8, top - 9], np.uint16) | np.uint16(flag)
     r = P.values_to_ranges(codes, "mm", mode)
-    assert np.isnan(r[:5]).all()                    # invalid, dazzle, overflow, SNR, channel error
-    assert r[5] == np.inf                           # greater than maximum (...F7)
-    assert r[6] == np.float32((top - 9) * 0.001)    # the largest valid value
+    assert np.isnan(r[:5]).all()  # invalid, dazzle, overflow, SNR, channel error
+    assert r[5] == np.inf  # greater than maximum (...F7)
+    assert r[6] == np.float32((top - 9) * 0.001)  # the largest valid value
     assert P.range_max_m(mode, "mm") == {13: 8.0, 14: 16.0, 15: 32.0}[bits]
 
 
@@ -176,7 +176,7 @@ def test_parser_counts_crc_and_length_errors_and_handshake():
     good = P.reply_frame(b"\xa0\x00")
     bad_crc = good[:-1] + bytes([good[-1] ^ 0xFF])
     scan = P.reply_frame(P.encode_b0(np.arange(181, dtype=np.uint16)))
-    bad_len = scan[:2] + (2 * 181 + 8).to_bytes(2, "little") + scan[4:]   # length disagrees with the info word
+    bad_len = scan[:2] + (2 * 181 + 8).to_bytes(2, "little") + scan[4:]  # length disagrees with the info word
     parser = P.FrameParser()
     items = parser.feed(bytes([P.ACK]) + bad_crc + good + bad_len + scan + bytes([P.NAK]))
     assert items[0] == P.ACK and items[-1] == P.NAK
@@ -185,7 +185,9 @@ def test_parser_counts_crc_and_length_errors_and_handshake():
     assert parser.stats.crc_errors == 1 and parser.stats.length_errors == 1
     host = P.FrameParser(replies=False)
     assert [f.command for f in host.feed(P.cmd_status() + b"\x02\x00\x01\x00\x31\x00\x00" + P.cmd_stop())] == [
-        0x31, 0x20]
+        0x31,
+        0x20,
+    ]
     assert host.stats.crc_errors == 1
 
 
@@ -201,37 +203,51 @@ def test_build_parse_round_trip(payload, status, reply):
     assert f.payload == payload and f.status == (status if reply else None)
 
 
-frames_st = st.lists(st.one_of(
-    st.builds(lambda n, seed: P.reply_frame(P.encode_b0(
-        np.random.default_rng(seed).integers(0, 0xFFFF, n).astype(np.uint16))),
-        st.integers(0, 401), st.integers(0, 1000)),
-    st.builds(lambda code, data: P.reply_frame(bytes([code]) + data),
-              st.sampled_from([0xA0, 0xB1, 0xBB, 0xF4, 0xF7, 0x92]), st.binary(max_size=60)),
-), min_size=1, max_size=8)
+frames_st = st.lists(
+    st.one_of(
+        st.builds(
+            lambda n, seed: P.reply_frame(
+                P.encode_b0(np.random.default_rng(seed).integers(0, 0xFFFF, n).astype(np.uint16))
+            ),
+            st.integers(0, 401),
+            st.integers(0, 1000),
+        ),
+        st.builds(
+            lambda code, data: P.reply_frame(bytes([code]) + data),
+            st.sampled_from([0xA0, 0xB1, 0xBB, 0xF4, 0xF7, 0x92]),
+            st.binary(max_size=60),
+        ),
+    ),
+    min_size=1,
+    max_size=8,
+)
 
 
 @settings(max_examples=150, deadline=None)
-@given(frames=frames_st, garbage=st.lists(st.binary(max_size=40), min_size=9, max_size=9),
-       cuts=st.lists(st.integers(1, 300), max_size=40))
+@given(
+    frames=frames_st,
+    garbage=st.lists(st.binary(max_size=40), min_size=9, max_size=9),
+    cuts=st.lists(st.integers(1, 300), max_size=40),
+)
 def test_parser_recovers_every_frame_from_any_chunking(frames, garbage, cuts):
     stream = b"".join(g + f for g, f in zip(garbage, frames + [b""], strict=False)) + garbage[-1]
     parser = P.FrameParser()
     got, pos = [], 0
     for c in cuts:
-        got += parser.feed(stream[pos:pos + c])
+        got += parser.feed(stream[pos : pos + c])
         pos += c
     got += parser.feed(stream[pos:])
     assert [f.raw for f in got if isinstance(f, P.Frame)] == frames
     one = P.FrameParser()
     assert [f.raw for f in one.feed(stream) if isinstance(f, P.Frame)] == frames
-    assert one.stats == parser.stats                  # counts do not depend on the chunking
+    assert one.stats == parser.stats  # counts do not depend on the chunking
 
 
 def test_parser_says_how_many_bytes_a_started_frame_still_needs():
     frame = P.reply_frame(P.encode_b0(np.arange(361, dtype=np.uint16)))
     parser = P.FrameParser(replies=True)
     assert parser.needed == 0
-    parser.feed(b"\x11" + frame[:3])          # garbage, then too little of a header to read its length
+    parser.feed(b"\x11" + frame[:3])  # garbage, then too little of a header to read its length
     assert parser.needed == 0
     parser.feed(frame[3:100])
     assert parser.needed == len(frame) - 100

@@ -69,7 +69,7 @@ def test_record_is_bit_exact(tmp_path, baud, n):
     with Emulator(scene(), seed=1) as emu:
         result, driver = run_record(emu, tmp_path / "run.mcap", baud=baud, scans=n, raw=True)
         sent = emu.good_scans()
-        assert settled(lambda: emu.baud == 9600)          # record switched back on exit
+        assert settled(lambda: emu.baud == 9600)  # record switched back on exit
         assert emu.stats.variant_changes == 0 and emu.stats.config_writes == 0
     assert result.scans == n and result.reason == "scans"
     run = mcapio.read_run(tmp_path / "run.mcap")
@@ -90,7 +90,7 @@ def test_record_is_bit_exact(tmp_path, baud, n):
     # one before it ended on the line
     numbers = [s.number for s in sent[:n]]
     assert all(k % (1 + P.LOST_PER_SENT[50][baud]) == 0 for k in numbers) and numbers == sorted(set(numbers))
-    line_ns = [int(len(s.telegram) * 10e9 / baud) for s in sent[:n - 1]]
+    line_ns = [int(len(s.telegram) * 10e9 / baud) for s in sent[: n - 1]]
     assert np.all(np.diff(run.stamps) >= line_ns)
 
 
@@ -100,8 +100,8 @@ def test_record_at_9600_detects_the_scans_the_rate_table_drops(tmp_path):
         sent = emu.good_scans()
     run = mcapio.read_run(tmp_path / "run.mcap")
     assert len(run) == 3
-    assert_bit_exact(run, sent[:3])                       # what does arrive is exact
-    assert [s.number for s in sent[:3]] == [0, 30, 60]    # 29 lost per scan sent at 0.5°
+    assert_bit_exact(run, sent[:3])  # what does arrive is exact
+    assert [s.number for s in sent[:3]] == [0, 30, 60]  # 29 lost per scan sent at 0.5°
     assert result.stats["dropped"] == 2 * 29
     assert np.diff(run.stamps) / 1e9 == pytest.approx([30 * 0.02664] * 2, rel=0.15)
 
@@ -123,7 +123,7 @@ def test_faults_give_the_right_counts_and_keep_every_good_scan(tmp_path, kind):
     bad = [s for s in sent if s.fault]
     assert len(bad) >= 3 or kind == "garbage"
     run = mcapio.read_run(tmp_path / "run.mcap")
-    assert_bit_exact(run, good)                            # every good scan, in order, nothing extra
+    assert_bit_exact(run, good)  # every good scan, in order, nothing extra
     st = result.stats
     if kind == "garbage":
         bursts = [s.garbage for s in sent if s.garbage]
@@ -152,7 +152,7 @@ def test_variant_units_and_indices_written_only_when_different(tmp_path):
         assert (emu.angle, emu.res, emu.units) == (100, 25, "cm")
         before = len(emu.sent)
         run_record(emu, tmp_path / "b.mcap", scans=5, angle=100, resolution=0.25, units="cm", indices=True)
-        assert (emu.stats.variant_changes, emu.stats.config_writes) == (1, 1)   # nothing written again
+        assert (emu.stats.variant_changes, emu.stats.config_writes) == (1, 1)  # nothing written again
         sent = [s for s in emu.sent[before:] if s.good]
     run = mcapio.read_run(tmp_path / "b.mcap")
     g = run.geometry
@@ -200,12 +200,12 @@ def test_streaming_file_is_readable_after_a_power_cut(tmp_path):
         t.start()
         try:
             deadline = time.monotonic() + 15
-            while len(emu.sent) < 60 and time.monotonic() < deadline:   # ~1.6 s of scans
+            while len(emu.sent) < 60 and time.monotonic() < deadline:  # ~1.6 s of scans
                 time.sleep(0.05)
             tmp = next(tmp_path.glob(".run.mcap.*.tmp"))
             sent_at_cut = len(emu.sent)
             cut = tmp_path / "cut.mcap"
-            shutil.copyfile(tmp, cut)                     # what a power cut now would leave on disk
+            shutil.copyfile(tmp, cut)  # what a power cut now would leave on disk
         finally:
             stop.set()
             t.join(10)
@@ -215,9 +215,9 @@ def test_streaming_file_is_readable_after_a_power_cut(tmp_path):
         log = mcapio.read_log(cut, topics=[mcapio.TOPIC_SCAN])
     assert log.truncated and any(issubclass(w.category, mcapio.TruncatedLogWarning) for w in caught)
     run = mcapio.run_from_log(log)
-    assert sent_at_cut - len(run) <= 1.0 * 37.5 + 2       # at most about a second lost
-    assert_bit_exact(run, sent[:len(run)])
-    assert len(mcapio.read_run(out)) >= sent_at_cut - 1   # the finished file has everything
+    assert sent_at_cut - len(run) <= 1.0 * 37.5 + 2  # at most about a second lost
+    assert_bit_exact(run, sent[: len(run)])
+    assert len(mcapio.read_run(out)) >= sent_at_cut - 1  # the finished file has everything
 
 
 # ------------------------------------------------------------------------------------ CLI and errors
@@ -245,8 +245,12 @@ def _datmo(*args: str) -> list[str]:
 def test_signal_stops_the_stream_and_finishes_the_file(tmp_path, sig):
     out = tmp_path / "run.mcap"
     with Emulator(scene()) as emu:
-        proc = subprocess.Popen(_datmo("record", "--port", emu.device_path, "-o", str(out), "--baud", "500000"),
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(
+            _datmo("record", "--port", emu.device_path, "-o", str(out), "--baud", "500000"),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         try:
             deadline = time.monotonic() + 20
             while len(emu.sent) < 30 and time.monotonic() < deadline and proc.poll() is None:
@@ -256,15 +260,15 @@ def test_signal_stops_the_stream_and_finishes_the_file(tmp_path, sig):
         finally:
             if proc.poll() is None:
                 proc.kill()
-        assert settled(lambda: emu.mode == P.MODE_STOP and emu.baud == 9600)   # stream stopped, baud restored
+        assert settled(lambda: emu.mode == P.MODE_STOP and emu.baud == 9600)  # stream stopped, baud restored
         sent = emu.good_scans()
-    assert proc.returncode == 128 + sig, err                                 # 130 Ctrl-C, 143 SIGTERM
+    assert proc.returncode == 128 + sig, err  # 130 Ctrl-C, 143 SIGTERM
     last = err.strip().splitlines()[-1]
     assert last.startswith(f"{out}: ") and f"(interrupted: {signal.Signals(sig).name})" in last, err
     assert "Traceback" not in err
     run = mcapio.read_run(out)
     assert len(run) >= 20
-    assert_bit_exact(run, sent[:len(run)])
+    assert_bit_exact(run, sent[: len(run)])
     assert not mcapio.read_log(out).truncated
     assert not list(tmp_path.glob(".*.tmp"))
 
@@ -272,8 +276,12 @@ def test_signal_stops_the_stream_and_finishes_the_file(tmp_path, sig):
 def test_a_second_ctrl_c_gives_up_at_once_keeping_what_reached_the_disk(tmp_path):
     out = tmp_path / "run.mcap"
     with Emulator(scene()) as emu:
-        proc = subprocess.Popen(_datmo("record", "--port", emu.device_path, "-o", str(out), "--baud", "500000"),
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(
+            _datmo("record", "--port", emu.device_path, "-o", str(out), "--baud", "500000"),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         try:
             deadline = time.monotonic() + 20
             while len(emu.sent) < 40 and time.monotonic() < deadline and proc.poll() is None:
@@ -291,10 +299,10 @@ def test_a_second_ctrl_c_gives_up_at_once_keeping_what_reached_the_disk(tmp_path
     assert proc.returncode in (130, -signal.SIGINT), err
     assert "Traceback" not in err
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", mcapio.TruncatedLogWarning)   # cut at its last flush, if it came to that
+        warnings.simplefilter("ignore", mcapio.TruncatedLogWarning)  # cut at its last flush, if it came to that
         run = mcapio.read_run(out)
     assert len(run) >= 10
-    assert_bit_exact(run, sent[:len(run)])
+    assert_bit_exact(run, sent[: len(run)])
     assert not list(tmp_path.glob(".*.tmp"))
 
 
@@ -313,8 +321,9 @@ class _StoppedAfter(LMS2xx):
         return scan
 
 
-@pytest.mark.parametrize("exc, code", [(KeyboardInterrupt(), 130), (outputs.Terminated(signal.SIGTERM), 143),
-                                       (ValueError("a bug"), 70)])
+@pytest.mark.parametrize(
+    "exc, code", [(KeyboardInterrupt(), 130), (outputs.Terminated(signal.SIGTERM), 143), (ValueError("a bug"), 70)]
+)
 def test_a_failure_while_recording_keeps_the_flushed_scans(tmp_path, monkeypatch, exc, code):
     monkeypatch.setattr(recorder, "FLUSH_EVERY_S", 0.05)
     out = tmp_path / "run.mcap"
@@ -322,8 +331,8 @@ def test_a_failure_while_recording_keeps_the_flushed_scans(tmp_path, monkeypatch
         driver = _StoppedAfter(emu.device_path, baud=500000, n=25, exc=exc)
         writer = mcapio.LogWriter(out, streaming=True)
         with pytest.raises(recorder.RecordingCut) as caught:
-            record(driver, writer, describe=record_cmd.failure)   # a bug said as datmo record says it
-        assert settled(lambda: emu.mode == P.MODE_STOP) == isinstance(exc, Exception)   # stopped after a bug
+            record(driver, writer, describe=record_cmd.failure)  # a bug said as datmo record says it
+        assert settled(lambda: emu.mode == P.MODE_STOP) == isinstance(exc, Exception)  # stopped after a bug
         sent = emu.good_scans()
     message = str(caught.value)
     kept = int(re.search(r"keeps the (\d+) scans? that reached the disk", message).group(1))
@@ -346,9 +355,13 @@ def test_the_file_size_limit_while_recording_keeps_the_scans_on_disk(tmp_path):
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
     with Emulator(ArraySource(values)) as emu:
-        proc = subprocess.run(_datmo("record", "--port", emu.device_path, "-o", str(out), "--baud", "500000",
-                                     "--scans", "500"), capture_output=True, text=True, timeout=60,
-                              preexec_fn=limited)
+        proc = subprocess.run(
+            _datmo("record", "--port", emu.device_path, "-o", str(out), "--baud", "500000", "--scans", "500"),
+            capture_output=True,
+            text=True,
+            timeout=60,
+            preexec_fn=limited,
+        )
         sent = emu.good_scans()
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 1 and len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
@@ -368,7 +381,7 @@ def _flushed_writer(path, n: int = 5) -> mcapio.LogWriter:
     for i in range(n):
         writer.write_scan(i * 10**8, np.full(361, 1.0 + i, np.float32), g)
     writer.flush()
-    writer.write_scan(n * 10**8, np.full(361, 9.0, np.float32), g)   # after the flush: not kept
+    writer.write_scan(n * 10**8, np.full(361, 9.0, np.float32), g)  # after the flush: not kept
     return writer
 
 
@@ -402,13 +415,13 @@ def test_a_recording_that_cannot_be_renamed_is_left_in_its_temporary_file(tmp_pa
     assert message.startswith(f"{writer.tmp}: holds the data written so far") and "read-only file system" in message
     assert "rename it yourself" in message and "\n" not in message
     assert not (tmp_path / "run.mcap").exists() and writer.tmp.exists() and not outputs.live()
-    with pytest.raises(OutputError):   # asked again, it says so again: never "nothing kept"
+    with pytest.raises(OutputError):  # asked again, it says so again: never "nothing kept"
         writer.keep_flushed()
     with warnings.catch_warnings(record=True) as caught_warnings:
         warnings.simplefilter("always")
         run = mcapio.read_run(writer.tmp)
     assert len(run) == (6 if finished else 5)
-    assert bool(caught_warnings) != finished              # the finished file is whole, the other one cut
+    assert bool(caught_warnings) != finished  # the finished file is whole, the other one cut
     writer.tmp.unlink()
 
 

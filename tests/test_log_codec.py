@@ -8,14 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from datmo_cli.log import cdr, types
-from datmo_cli.log.scan import (
-    GeometryChangeError,
-    ScanGeometry,
-    ScanRun,
-    decode_scan,
-    decode_scans,
-    encode_scans,
-)
+from datmo_cli.log.scan import GeometryChangeError, ScanGeometry, ScanRun, decode_scan, decode_scans, encode_scans
 
 STORE = types.typestore()
 SPECIALS = np.array([np.nan, np.inf, -np.inf, 0.0, -0.0, 1e-30, 3.4e38], np.float32)
@@ -25,10 +18,18 @@ def rosbags_scan(stamp: int, ranges: np.ndarray, inten: np.ndarray, g: ScanGeome
     T = STORE.types
     return T[types.LASERSCAN](
         header=T["std_msgs/msg/Header"](
-            stamp=T["builtin_interfaces/msg/Time"](sec=stamp // 10**9, nanosec=stamp % 10**9), frame_id=g.frame_id),
-        angle_min=g.angle_min, angle_max=g.angle_max, angle_increment=g.angle_increment,
-        time_increment=g.time_increment, scan_time=g.scan_time, range_min=g.range_min, range_max=g.range_max,
-        ranges=ranges, intensities=inten)
+            stamp=T["builtin_interfaces/msg/Time"](sec=stamp // 10**9, nanosec=stamp % 10**9), frame_id=g.frame_id
+        ),
+        angle_min=g.angle_min,
+        angle_max=g.angle_max,
+        angle_increment=g.angle_increment,
+        time_increment=g.time_increment,
+        scan_time=g.scan_time,
+        range_min=g.range_min,
+        range_max=g.range_max,
+        ranges=ranges,
+        intensities=inten,
+    )
 
 
 @settings(max_examples=60, deadline=None)
@@ -41,10 +42,17 @@ def rosbags_scan(stamp: int, ranges: np.ndarray, inten: np.ndarray, g: ScanGeome
 )
 def test_laserscan_bytes_equal_rosbags(n_scans, n_beams, frame_len, with_intensities, seed):
     rng = np.random.default_rng(seed)
-    step = float(rng.uniform(1e-4, min(0.05, 6.28 / max(n_beams - 1, 1))))   # the beams span at most a turn
-    g = ScanGeometry(float(rng.uniform(-3, 0)), step, n_beams, float(rng.uniform(0, 1)),
-                     float(rng.uniform(1, 100)), float(rng.uniform(0, 1e-3)), float(rng.uniform(0, 0.5)),
-                     "f" * frame_len)
+    step = float(rng.uniform(1e-4, min(0.05, 6.28 / max(n_beams - 1, 1))))  # the beams span at most a turn
+    g = ScanGeometry(
+        float(rng.uniform(-3, 0)),
+        step,
+        n_beams,
+        float(rng.uniform(0, 1)),
+        float(rng.uniform(1, 100)),
+        float(rng.uniform(0, 1e-3)),
+        float(rng.uniform(0, 0.5)),
+        "f" * frame_len,
+    )
     ranges = rng.uniform(0, 80, (n_scans, n_beams)).astype(np.float32)
     ranges[rng.random(ranges.shape) < 0.2] = rng.choice(SPECIALS, size=1)[0]
     inten = rng.uniform(0, 1e4, (n_scans, n_beams if with_intensities else 0)).astype(np.float32)
@@ -107,8 +115,10 @@ def _random_struct(msgtype: str, n: int, rng) -> np.ndarray:
 
 
 def _fill(msgtype: str, rng, n: int) -> dict:
-    values = {"stamp_ns": int(rng.integers(0, 2**31 - 1)) * 10**9 + int(rng.integers(0, 10**9)),
-              "frame_id": "laser_frame"[: int(rng.integers(0, 12))]}
+    values = {
+        "stamp_ns": int(rng.integers(0, 2**31 - 1)) * 10**9 + int(rng.integers(0, 10**9)),
+        "frame_id": "laser_frame"[: int(rng.integers(0, 12))],
+    }
     for f in cdr._plan(msgtype):
         if f.kind == "structseq":
             _, fields = STORE.fielddefs[msgtype]
@@ -121,8 +131,7 @@ def _fill(msgtype: str, rng, n: int) -> dict:
     return values
 
 
-@pytest.mark.parametrize("msgtype", [types.SEGMENTS, types.FEATURES, types.LANDMARKS, types.TRACKS,
-                                     types.GROUND_TRUTH])
+@pytest.mark.parametrize("msgtype", [types.SEGMENTS, types.FEATURES, types.LANDMARKS, types.TRACKS, types.GROUND_TRUTH])
 @pytest.mark.parametrize("n", [0, 1, 7])
 def test_datmo_msgs_round_trip_and_match_rosbags(msgtype, n):
     rng = np.random.default_rng(n)
@@ -163,6 +172,11 @@ def test_layout_check_rejects_non_c_layouts():
 
 def test_msg_files_ship_in_the_package():
     files = types.datmo_msg_files()
-    assert {"datmo_msgs/msg/Segments", "datmo_msgs/msg/Features", "datmo_msgs/msg/Tracks",
-            "datmo_msgs/msg/Landmarks", "datmo_msgs/msg/GroundTruth"} <= set(files)
+    assert {
+        "datmo_msgs/msg/Segments",
+        "datmo_msgs/msg/Features",
+        "datmo_msgs/msg/Tracks",
+        "datmo_msgs/msg/Landmarks",
+        "datmo_msgs/msg/GroundTruth",
+    } <= set(files)
     assert "MSG: datmo_msgs/Line" in types.schema_text(types.FEATURES)

@@ -14,15 +14,28 @@ from datmo_cli.log import markers, types
 PACKAGE = Path(datmo_cli.__file__).parent
 
 
-@pytest.mark.parametrize("frame_id", ["", "l", "laser", "base_laser_link"])   # every alignment of what follows
+@pytest.mark.parametrize("frame_id", ["", "l", "laser", "base_laser_link"])  # every alignment of what follows
 def test_the_writer_gives_rosbags_bytes(frame_id: str):
     rng = np.random.default_rng(1)
     w = markers.MarkerArrayWriter(6, markers.header(1_600_000_000_123_456_789, frame_id, "datmo/test"))
     w.marker(0, markers.ARROW, markers.DELETEALL)
-    w.marker(1, markers.SPHERE_LIST, markers.ADD, scale=(0.5, 0.5, 0.5), points=rng.normal(size=(3, 3)),
-             colors=rng.random((3, 4)).astype(np.float32))
-    w.marker(2, markers.LINE_LIST, markers.ADD, pose=(1.0, 2.0, 0.0), scale=(0.03, 0.0, 0.0),
-             color=(1.0, 0.8, 0.0, 1.0), points=rng.normal(size=(4, 3)))
+    w.marker(
+        1,
+        markers.SPHERE_LIST,
+        markers.ADD,
+        scale=(0.5, 0.5, 0.5),
+        points=rng.normal(size=(3, 3)),
+        colors=rng.random((3, 4)).astype(np.float32),
+    )
+    w.marker(
+        2,
+        markers.LINE_LIST,
+        markers.ADD,
+        pose=(1.0, 2.0, 0.0),
+        scale=(0.03, 0.0, 0.0),
+        color=(1.0, 0.8, 0.0, 1.0),
+        points=rng.normal(size=(4, 3)),
+    )
     w.text(103, "3", 1.5, -2.0, z=0.5, height=0.3)
     w.marker(4, markers.CUBE_LIST, markers.ADD, text="odd")
     w.text(1012, "twelve", 0.25, 4.0, z=1.0, height=0.2)
@@ -40,8 +53,19 @@ def test_the_writer_gives_rosbags_bytes(frame_id: str):
 
 def test_the_codes_are_the_type_stores():
     marker = types.typestore().types["visualization_msgs/msg/Marker"]
-    for name in ("ARROW", "CUBE", "SPHERE", "CYLINDER", "LINE_STRIP", "LINE_LIST", "CUBE_LIST", "SPHERE_LIST",
-                 "TEXT_VIEW_FACING", "ADD", "DELETEALL"):
+    for name in (
+        "ARROW",
+        "CUBE",
+        "SPHERE",
+        "CYLINDER",
+        "LINE_STRIP",
+        "LINE_LIST",
+        "CUBE_LIST",
+        "SPHERE_LIST",
+        "TEXT_VIEW_FACING",
+        "ADD",
+        "DELETEALL",
+    ):
         assert getattr(markers, name) == getattr(marker, name), name
 
 

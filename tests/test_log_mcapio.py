@@ -58,8 +58,10 @@ def test_linear_reader_agrees_with_mcap_reader(tmp_path):
     run = make_run(300)
     with mcapio.LogWriter(path, chunk_size=20_000) as w:
         w.write_scans(run)
-        seg = cdr.encode(types.SEGMENTS, {"stamp_ns": int(run.stamps[3]), "start": np.array([1], np.uint32),
-                                          "end": np.array([9], np.uint32)})
+        seg = cdr.encode(
+            types.SEGMENTS,
+            {"stamp_ns": int(run.stamps[3]), "start": np.array([1], np.uint32), "end": np.array([9], np.uint32)},
+        )
         w.write(mcapio.TOPIC_SEGMENTS, types.SEGMENTS, int(run.stamps[3]), seg)
     log = mcapio.read_log(path, topics=None)
     assert log.chunks > 5
@@ -136,8 +138,9 @@ def test_copy_from_is_byte_exact_and_keeps_input_metadata(tmp_path):
 
 def test_odometry_round_trip(tmp_path):
     path = tmp_path / "odom.mcap"
-    odom = Odometry(np.arange(5, dtype=np.int64) * 10**8, np.linspace(0, 1, 5), np.zeros(5),
-                    np.array([0, 0.5, 3.0, -3.0, -0.1]))
+    odom = Odometry(
+        np.arange(5, dtype=np.int64) * 10**8, np.linspace(0, 1, 5), np.zeros(5), np.array([0, 0.5, 3.0, -3.0, -0.1])
+    )
     with mcapio.LogWriter(path) as w:
         w.write_scans(make_run(5))
         w.write_odometry(odom)
@@ -163,11 +166,10 @@ def test_truncated_log_yields_complete_chunks_with_warning(tmp_path):
     np.testing.assert_array_equal(part.ranges, run.ranges[: len(part)])
 
 
-@pytest.mark.parametrize("content, message", [
-    (None, "no such file"),
-    (b"", "empty file"),
-    (b"hello, this is not mcap at all", "not an MCAP file"),
-])
+@pytest.mark.parametrize(
+    "content, message",
+    [(None, "no such file"), (b"", "empty file"), (b"hello, this is not mcap at all", "not an MCAP file")],
+)
 def test_bad_inputs_are_named(tmp_path, content, message):
     path = tmp_path / "bad.mcap"
     if content is not None:
@@ -211,9 +213,19 @@ def test_rosbags_reads_datmo_logs_as_ros2_bags(tmp_path):
     with mcapio.LogWriter(path) as w:
         w.write_scans(run)
         w.write_odometry(Odometry(run.stamps, np.ones(4), np.zeros(4), np.zeros(4)))
-        w.write(mcapio.TOPIC_TRACKS, types.TRACKS, int(run.stamps[0]),
-                cdr.encode(types.TRACKS, {"stamp_ns": int(run.stamps[0]), "frame_id": "laser",
-                                          "tracks": np.zeros(2, cdr.element_dtype(types.TRACK))}))
+        w.write(
+            mcapio.TOPIC_TRACKS,
+            types.TRACKS,
+            int(run.stamps[0]),
+            cdr.encode(
+                types.TRACKS,
+                {
+                    "stamp_ns": int(run.stamps[0]),
+                    "frame_id": "laser",
+                    "tracks": np.zeros(2, cdr.element_dtype(types.TRACK)),
+                },
+            ),
+        )
     with AnyReader([path], default_typestore=types.typestore()) as reader:
         assert {c.msgtype for c in reader.connections} == {types.LASERSCAN, types.ODOMETRY, types.TRACKS}
         decoded = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()]

@@ -42,7 +42,7 @@ from cyclonedds.util import duration  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 HALL = ROOT / "sample_logs" / "hall.mcap"
 N_SCANS = 100
-POSE = (1.5, -0.5, 0.3)   # where the (still) robot stands in odom: x m, y m, yaw rad
+POSE = (1.5, -0.5, 0.3)  # where the (still) robot stands in odom: x m, y m, yaw rad
 
 # The ROS 2 messages as IDL, written here from their .msg definitions (ROS 2 Humble; datmo_msgs/msg/*.msg)
 
@@ -171,16 +171,30 @@ def _ns(header: Header) -> int:
 
 
 def _scan_msg(stamp: int, ranges: np.ndarray, g: ScanGeometry) -> LaserScan:
-    return LaserScan(Header(_stamp(stamp), g.frame_id), g.angle_min, g.angle_max, g.angle_increment,
-                     g.time_increment, g.scan_time, g.range_min, g.range_max, ranges.tolist(), [])
+    return LaserScan(
+        Header(_stamp(stamp), g.frame_id),
+        g.angle_min,
+        g.angle_max,
+        g.angle_increment,
+        g.time_increment,
+        g.scan_time,
+        g.range_min,
+        g.range_max,
+        ranges.tolist(),
+        [],
+    )
 
 
 def _odom_msg(stamp: int) -> OdometryMsg:
     x, y, yaw = POSE
     pose = Pose(Point(x, y, 0.0), Quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)))
     zero = Vector3(0.0, 0.0, 0.0)
-    return OdometryMsg(Header(_stamp(stamp), "odom"), "base_link", PoseWithCovariance(pose, [0.0] * 36),
-                       TwistWithCovariance(Twist(zero, zero), [0.0] * 36))
+    return OdometryMsg(
+        Header(_stamp(stamp), "odom"),
+        "base_link",
+        PoseWithCovariance(pose, [0.0] * 36),
+        TwistWithCovariance(Twist(zero, zero), [0.0] * 36),
+    )
 
 
 # ------------------------------------------------------------------------ a domain of this run's own, loopback
@@ -201,10 +215,12 @@ def _free_domain() -> int:
     raise RuntimeError("no free DDS domain")
 
 
-LOOPBACK = ("<CycloneDDS><Domain id='any'><General><Interfaces><NetworkInterface address='127.0.0.1'/>"
-            "</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery>"
-            "<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>20</MaxAutoParticipantIndex>"
-            "<Peers><Peer address='127.0.0.1'/></Peers></Discovery></Domain></CycloneDDS>")
+LOOPBACK = (
+    "<CycloneDDS><Domain id='any'><General><Interfaces><NetworkInterface address='127.0.0.1'/>"
+    "</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery>"
+    "<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>20</MaxAutoParticipantIndex>"
+    "<Peers><Peer address='127.0.0.1'/></Peers></Discovery></Domain></CycloneDDS>"
+)
 
 
 def _wait_for(condition, what: str, timeout: float = 60.0) -> None:
@@ -226,8 +242,19 @@ def _expected(tmp_path: Path, run: ScanRun, odom_stamps: np.ndarray) -> dict[int
     with mcapio.LogWriter(tmp_path / "in.mcap", provenance=mcapio.Provenance("test", {})) as w:
         w.write_scans(run)
         w.write_odometry(odom)
-    result = CliRunner().invoke(cli, ["track", str(tmp_path / "in.mcap"), "-o", str(tmp_path / "out.mcap"),
-                                      "--config", str(tmp_path / "datmo.toml"), "--covariance", "-q"])
+    result = CliRunner().invoke(
+        cli,
+        [
+            "track",
+            str(tmp_path / "in.mcap"),
+            "-o",
+            str(tmp_path / "out.mcap"),
+            "--config",
+            str(tmp_path / "datmo.toml"),
+            "--covariance",
+            "-q",
+        ],
+    )
     assert result.exit_code == 0, result.output
     stamps, payloads = mcapio.read_messages(tmp_path / "out.mcap", mcapio.TOPIC_TRACKS)
     return dict(zip(stamps.tolist(), payloads, strict=True))
@@ -240,29 +267,53 @@ def test_an_independent_ros2_peer_gets_tracks_from_datmo_node(tmp_path, monkeypa
     monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
     run = mcapio.read_run(HALL).slice(0, N_SCANS)
     odom_stamps = np.concatenate([[run.stamps[0] - 10_000_000], run.stamps])
-    (tmp_path / "datmo.toml").write_text("[track]\nconfirm_hits = 2\ngate = 11.0\n")   # the node reads it too
+    (tmp_path / "datmo.toml").write_text("[track]\nconfirm_hits = 2\ngate = 11.0\n")  # the node reads it too
     expected = _expected(tmp_path, run, odom_stamps)
     # then 10 scans of another geometry (every other beam), later
-    g181 = ScanGeometry(angle_min=run.geometry.angle_min, angle_increment=2 * run.geometry.angle_increment,
-                        n_beams=181, range_min=run.geometry.range_min, range_max=run.geometry.range_max,
-                        frame_id=run.geometry.frame_id)
+    g181 = ScanGeometry(
+        angle_min=run.geometry.angle_min,
+        angle_increment=2 * run.geometry.angle_increment,
+        n_beams=181,
+        range_min=run.geometry.range_min,
+        range_max=run.geometry.range_max,
+        frame_id=run.geometry.frame_id,
+    )
     later = run.stamps[-1] + 200_000_000 * np.arange(1, 11)
 
-    node = subprocess.Popen([sys.executable, "-c", "from datmo_cli.cli import main; main()", "node",
-                             "--odom-topic", "/odom", "--config", str(tmp_path / "datmo.toml")], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=os.environ | {"PYTHONUNBUFFERED": "1"})
+    node = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "from datmo_cli.cli import main; main()",
+            "node",
+            "--odom-topic",
+            "/odom",
+            "--config",
+            str(tmp_path / "datmo.toml"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=os.environ | {"PYTHONUNBUFFERED": "1"},
+    )
     try:
         ready = node.stdout.readline()
         assert ready.startswith(f"datmo node: ROS 2 domain {domain}: /scan and /odom in, "), (ready, node.stderr.read())
         assert "/datmo/tracks" in ready and "/datmo/features" in ready and "/datmo/markers/tracks" in ready
 
         dp = DomainParticipant(domain)
-        reliable = Qos(Policy.Reliability.Reliable(duration(milliseconds=100)), Policy.Durability.Volatile,
-                       Policy.History.KeepLast(10))
+        reliable = Qos(
+            Policy.Reliability.Reliable(duration(milliseconds=100)),
+            Policy.Durability.Volatile,
+            Policy.History.KeepLast(10),
+        )
         scans = DataWriter(dp, Topic(dp, "rt/scan", LaserScan), reliable)
         odom = DataWriter(dp, Topic(dp, "rt/odom", OdometryMsg), reliable)
-        tracks = DataReader(dp, Topic(dp, "rt/datmo/tracks", Tracks),
-                            Qos(Policy.Reliability.Reliable(duration(milliseconds=100)), Policy.History.KeepLast(500)))
+        tracks = DataReader(
+            dp,
+            Topic(dp, "rt/datmo/tracks", Tracks),
+            Qos(Policy.Reliability.Reliable(duration(milliseconds=100)), Policy.History.KeepLast(500)),
+        )
         got: list[Tracks] = []
         done = threading.Event()
 
@@ -273,21 +324,27 @@ def test_an_independent_ros2_peer_gets_tracks_from_datmo_node(tmp_path, monkeypa
 
         taker = threading.Thread(target=take, daemon=True)
         taker.start()
-        _wait_for(lambda: scans.get_matched_subscriptions() and odom.get_matched_subscriptions()
-                  and tracks.get_matched_publications(), "the node's endpoints to match")
+        _wait_for(
+            lambda: (
+                scans.get_matched_subscriptions()
+                and odom.get_matched_subscriptions()
+                and tracks.get_matched_publications()
+            ),
+            "the node's endpoints to match",
+        )
         odom.write(_odom_msg(int(odom_stamps[0])))
-        time.sleep(0.3)            # a pose before the first scan (the node takes poses before scans anyway)
+        time.sleep(0.3)  # a pose before the first scan (the node takes poses before scans anyway)
         for i in range(N_SCANS):
             odom.write(_odom_msg(int(run.stamps[i])))
             scans.write(_scan_msg(int(run.stamps[i]), run.ranges[i], run.geometry))
-            time.sleep(0.02)       # 50 Hz
+            time.sleep(0.02)  # 50 Hz
         for stamp in later.tolist():
             scans.write(_scan_msg(stamp, run.ranges[N_SCANS - 1][::2], g181))
             time.sleep(0.02)
         try:
             _wait_for(lambda: len(got) >= N_SCANS + 10, "the tracks of every scan", timeout=30)
         except AssertionError:
-            pass                   # the checks below say what is missing
+            pass  # the checks below say what is missing
         done.set()
         taker.join()
         node.send_signal(signal.SIGINT)
@@ -298,13 +355,18 @@ def test_an_independent_ros2_peer_gets_tracks_from_datmo_node(tmp_path, monkeypa
 
     assert node.returncode == 130, err
     lines = err.strip().splitlines()
-    summary = re.fullmatch(r"datmo node: stopped \(Ctrl-C\); 110 scans received, (\d+) processed, (\d+) dropped "
-                           r"\(the stages were behind\), 1 restarts", lines[-1])
+    summary = re.fullmatch(
+        r"datmo node: stopped \(Ctrl-C\); 110 scans received, (\d+) processed, (\d+) dropped "
+        r"\(the stages were behind\), 1 restarts",
+        lines[-1],
+    )
     assert summary, err
     processed, dropped = int(summary.group(1)), int(summary.group(2))
-    assert processed + dropped == 110 and processed == len(got)          # a Tracks for each scan processed
-    assert any(re.search(r"the scans' geometry changed \(361 beams .*now 181 .*: tracking starts over$", line)
-               for line in lines), err
+    assert processed + dropped == 110 and processed == len(got)  # a Tracks for each scan processed
+    assert any(
+        re.search(r"the scans' geometry changed \(361 beams .*now 181 .*: tracking starts over$", line)
+        for line in lines
+    ), err
 
     stamps = [_ns(m.header) for m in got]
     hall = [m for m in got if _ns(m.header) in expected]
@@ -314,11 +376,11 @@ def test_an_independent_ros2_peer_gets_tracks_from_datmo_node(tmp_path, monkeypa
     first_gap = next((i for i, m in enumerate(hall) if _ns(m.header) != run.stamps[i]), len(hall))
     assert first_gap >= 50
     for m in hall[:first_gap]:
-        wire = m.cdr[:len(expected[_ns(m.header)])]
-        assert wire == expected[_ns(m.header)] and not any(m.cdr[len(wire):])
+        wire = m.cdr[: len(expected[_ns(m.header)])]
+        assert wire == expected[_ns(m.header)] and not any(m.cdr[len(wire) :])
     for m in hall:
         assert m.header.frame_id == "laser"
-        assert all(math.isfinite(t.world_x) and math.isfinite(t.world_y) for t in m.tracks)   # with odometry
+        assert all(math.isfinite(t.world_x) and math.isfinite(t.world_y) for t in m.tracks)  # with odometry
     assert sum(len(m.tracks) for m in hall) > 0
     after = [s for s in stamps if s not in expected]
     assert len(after) >= 8 and set(after) <= set(later.tolist())
@@ -334,7 +396,7 @@ def test_dds_types_and_names_follow_rmw_cyclonedds():
     for msgtype, ours in [(types.LASERSCAN, LaserScan), (types.ODOMETRY, OdometryMsg), (types.TRACKS, Tracks)]:
         theirs = dds.idl_class(msgtype)
         assert theirs.__idl_typename__ == ours.__idl_typename__
-        a, b = theirs.__idl__.get_type_info(), ours.__idl__.get_type_info()   # XTypes: the same type, by hash
+        a, b = theirs.__idl__.get_type_info(), ours.__idl__.get_type_info()  # XTypes: the same type, by hash
         assert a.minimal.typeid_with_size.type_id == b.minimal.typeid_with_size.type_id, msgtype
         assert a.complete.typeid_with_size.type_id == b.complete.typeid_with_size.type_id, msgtype
     assert dds.dds_topic(dds.ros_topic("scan")) == "rt/scan" and dds.ros_topic("/a/b_2") == "/a/b_2"
@@ -358,7 +420,7 @@ def test_dds_types_encode_as_datmo_writes_to_mcap(tmp_path):
         assert cls.deserialize(m.payload).serialize() == m.payload, m.topic
     scan = mcapio.encode_scans(run.slice(0, 1))[0]
     assert dds.idl_class(types.LASERSCAN).deserialize(scan).serialize() == scan
-    assert LaserScan.deserialize(scan).serialize() == scan                 # the test's own type agrees
+    assert LaserScan.deserialize(scan).serialize() == scan  # the test's own type agrees
 
 
 class _Stuck:
@@ -392,21 +454,27 @@ def test_a_burst_drops_the_oldest_waiting_scans_and_counts_them(monkeypatch):
     feed = live.LiveFeed(sink, backlog=3, drop_oldest=True, scans=False)
     feed.scan(int(run.stamps[0]), run.ranges[0], run.geometry)
     _wait_for(feed.queue.empty, "the feed to take the first scan")
-    for i in range(1, len(run)):          # the feed is stuck on scan 0: three wait, the oldest give way
+    for i in range(1, len(run)):  # the feed is stuck on scan 0: three wait, the oldest give way
         feed.scan(int(run.stamps[i]), run.ranges[i], run.geometry)
     assert feed.queue.qsize() == 3 and feed.dropped == 8
     sink.gate.set()
     feed.close(timeout=60)
     assert feed.failure is None and feed.published == 4
-    assert sink.stamps == run.stamps[[0, 9, 10, 11]].tolist()            # the latest kept
-    assert sink.messages == []                                             # scans=False: /scan not echoed
+    assert sink.stamps == run.stamps[[0, 9, 10, 11]].tolist()  # the latest kept
+    assert sink.messages == []  # scans=False: /scan not echoed
 
 
 def test_a_new_geometry_or_time_going_back_starts_the_stages_over():
     run = mcapio.read_run(HALL).slice(0, 12)
     g = run.geometry
-    g181 = ScanGeometry(angle_min=g.angle_min, angle_increment=2 * g.angle_increment, n_beams=181,
-                        range_min=g.range_min, range_max=g.range_max, frame_id=g.frame_id)
+    g181 = ScanGeometry(
+        angle_min=g.angle_min,
+        angle_increment=2 * g.angle_increment,
+        n_beams=181,
+        range_min=g.range_min,
+        range_max=g.range_max,
+        frame_id=g.frame_id,
+    )
     published: list[live.Message] = []
 
     class Sink:
@@ -421,19 +489,20 @@ def test_a_new_geometry_or_time_going_back_starts_the_stages_over():
     s = run.stamps.tolist()
     for i in range(6):
         feed.scan(s[i], run.ranges[i], g)
-    feed.scan(s[5], run.ranges[5], g)                                     # a repeat: skipped
+    feed.scan(s[5], run.ranges[5], g)  # a repeat: skipped
     for i in range(3):
-        feed.scan(s[i], run.ranges[i], g)                                 # back in time (a bag played again)
+        feed.scan(s[i], run.ranges[i], g)  # back in time (a bag played again)
     for i in range(6, 9):
-        feed.scan(s[i], run.ranges[i][::2], g181)                         # another geometry: over again
+        feed.scan(s[i], run.ranges[i][::2], g181)  # another geometry: over again
     feed.close(timeout=120)
     assert feed.failure is None and (feed.published, feed.skipped, feed.restarts) == (12, 1, 2)
     assert why[0] == "the scans' time went back by 1.000 s"
-    assert why[1] == ("the scans' geometry changed (361 beams from -90 deg in 'laser', now 181 from -90 deg in "
-                      "'laser')")
+    assert why[1] == (
+        "the scans' geometry changed (361 beams from -90 deg in 'laser', now 181 from -90 deg in 'laser')"
+    )
     tracks = [m for m in published if m.topic == mcapio.TOPIC_TRACKS]
     assert [m.stamp for m in tracks] == s[:6] + s[:3] + s[6:9]
-    assert [m.payload for m in tracks[:3]] == [m.payload for m in tracks[6:9]]   # the same scans, fresh stages
+    assert [m.payload for m in tracks[:3]] == [m.payload for m in tracks[6:9]]  # the same scans, fresh stages
 
 
 def test_pose_buffer_reads_as_odometry():
@@ -442,19 +511,22 @@ def test_pose_buffer_reads_as_odometry():
         poses.at(np.array([0]))
     for k in range(10):
         poses.add(1_000_000_000 * k, float(k), 2.0 * k, 0.1, "map", "base")
-    poses.add(3_000_000_000, 0.0, 0.0, 0.0)                                # stale: not kept
+    poses.add(3_000_000_000, 0.0, 0.0, 0.0)  # stale: not kept
     assert poses.stale == 1 and (poses.frame_id, poses.child_frame_id) == ("map", "base")
     got = poses.at(np.array([7_500_000_000, 20_000_000_000]))
     assert np.allclose(got, [[7.5, 15.0, 0.1], [9.0, 18.0, 0.1]])
     assert len(poses) <= 8
 
 
-@pytest.mark.parametrize("args, env, line", [
-    (["--scan-topic", "front scan"], {}, "datmo: error: --scan-topic 'front scan': not a ROS 2 topic name"),
-    (["--odom-topic", "/odom/"], {}, "datmo: error: --odom-topic '/odom/': not a ROS 2 topic name"),
-    ([], {"ROS_DOMAIN_ID": "x"}, "datmo: error: ROS_DOMAIN_ID 'x': not an integer (0 to 232)"),
-    ([], {"ROS_DOMAIN_ID": "300"}, "datmo: error: ROS_DOMAIN_ID 300: a ROS 2 domain id is 0 to 232"),
-])
+@pytest.mark.parametrize(
+    "args, env, line",
+    [
+        (["--scan-topic", "front scan"], {}, "datmo: error: --scan-topic 'front scan': not a ROS 2 topic name"),
+        (["--odom-topic", "/odom/"], {}, "datmo: error: --odom-topic '/odom/': not a ROS 2 topic name"),
+        ([], {"ROS_DOMAIN_ID": "x"}, "datmo: error: ROS_DOMAIN_ID 'x': not an integer (0 to 232)"),
+        ([], {"ROS_DOMAIN_ID": "300"}, "datmo: error: ROS_DOMAIN_ID 300: a ROS 2 domain id is 0 to 232"),
+    ],
+)
 def test_bad_topics_and_domains_are_one_line(monkeypatch, args, env, line):
     for k, v in env.items():
         monkeypatch.setenv(k, v)
@@ -477,10 +549,10 @@ def test_a_feed_whose_stages_failed_closes_even_with_its_queue_full(monkeypatch)
     feed = live.LiveFeed(object(), backlog=2)
     feed.scan(int(run.stamps[0]), run.ranges[0], run.geometry)
     _wait_for(lambda: feed.failure is not None, "the stages to fail")
-    feed.scan(int(run.stamps[0]) + 1, run.ranges[0], run.geometry)        # ignored once failed
+    feed.scan(int(run.stamps[0]) + 1, run.ranges[0], run.geometry)  # ignored once failed
     while not feed.queue.full():
         feed.queue.put_nowait(("filler", None, None))
-    feed.close(timeout=0.1)                                                # returns: nothing takes from the queue
+    feed.close(timeout=0.1)  # returns: nothing takes from the queue
     assert feed.failure == "ValueError: a bug in the stages"
 
 
@@ -515,7 +587,7 @@ def test_scans_and_poses_that_do_not_decode_are_counted_and_said_once(monkeypatc
     assert (node.scan_topic, node.odom_topic) == ("/front/scan", "/odom")
     run = mcapio.read_run(HALL).slice(0, 3)
     good = [encode_scan(int(s), r, run.geometry) for s, r in zip(run.stamps, run.ranges, strict=True)]
-    assert node._scan(good[0]) == 0 and node.counts.before_odometry == 1     # no pose yet: skipped
+    assert node._scan(good[0]) == 0 and node.counts.before_odometry == 1  # no pose yet: skipped
     for bad in (good[1][:40], good[1] + b"\x00" * 8):
         assert node._scan(bad) == 0
     node._pose(b"\x00\x01\x00\x00" + b"\x01" * 10)
@@ -528,6 +600,8 @@ def test_scans_and_poses_that_do_not_decode_are_counted_and_said_once(monkeypatc
     assert [line.split(" (")[0] for line in said] == [
         "datmo node: no odometry on /odom yet; scans are skipped until it comes",
         "datmo node: a scan on /front/scan does not decode",
-        "datmo node: an odometry message on /odom does not decode"]
-    assert node.summary() == ("4 scans received, 1 processed, 0 dropped (the stages were behind), "
-                              "2 did not decode, 1 before any odometry")
+        "datmo node: an odometry message on /odom does not decode",
+    ]
+    assert node.summary() == (
+        "4 scans received, 1 processed, 0 dropped (the stages were behind), 2 did not decode, 1 before any odometry"
+    )

@@ -31,7 +31,8 @@ def test_outputs_match_the_stored_digests(reference):
     for name in sorted(reference):
         assert reference[name] == stored.get(name), (
             f"{name}: datmo run's output differs from {DIGESTS.name}; if the change is meant (a tracker or "
-            "perception change), run `make run-digests` and give the reason in the commit")
+            "perception change), run `make run-digests` and give the reason in the commit"
+        )
     assert set(stored) == set(reference)
 
 

@@ -30,8 +30,17 @@ ROOT = Path(__file__).resolve().parent.parent
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
 PROJECT = PYPROJECT["project"]
 # what the heavy distributions are imported as
-HEAVY_MODULES = ("cv2", "pandas", "matplotlib", "trackeval", "motmetrics", "sklearn", "scipy", "filterpy",
-                 "pycocotools")
+HEAVY_MODULES = (
+    "cv2",
+    "pandas",
+    "matplotlib",
+    "trackeval",
+    "motmetrics",
+    "sklearn",
+    "scipy",
+    "filterpy",
+    "pycocotools",
+)
 
 
 def closure(requirements: list[str]) -> dict[str, importlib.metadata.Distribution]:
@@ -61,16 +70,18 @@ def closure(requirements: list[str]) -> dict[str, importlib.metadata.Distributio
 def test_the_distribution_is_datmo_cli():
     assert PROJECT["name"] == extras.DISTRIBUTION == "datmo-cli"
     assert PROJECT["scripts"] == {"datmo": "datmo_cli.cli:main"}
-    assert importlib.metadata.distribution("datmo-cli").entry_points.select(group="console_scripts")["datmo"].value \
+    assert (
+        importlib.metadata.distribution("datmo-cli").entry_points.select(group="console_scripts")["datmo"].value
         == "datmo_cli.cli:main"
+    )
 
 
 def test_the_version_is_written_once():
     assert "version" not in PROJECT and "version" in PROJECT["dynamic"]
     assert PYPROJECT["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "datmo_cli.__version__"}
-    assert importlib.metadata.version("datmo-cli") == datmo_cli.__version__   # after make install
+    assert importlib.metadata.version("datmo-cli") == datmo_cli.__version__  # after make install
     assert CliRunner().invoke(cli, ["--version"]).output == f"datmo, version {datmo_cli.__version__}\n"
-    package_xml = (ROOT / "datmo_msgs" / "package.xml").read_text(encoding="utf-8")   # the ROS 2 package's own
+    package_xml = (ROOT / "datmo_msgs" / "package.xml").read_text(encoding="utf-8")  # the ROS 2 package's own
     assert re.search(r"<version>(.*?)</version>", package_xml).group(1) == datmo_cli.__version__
 
 
@@ -80,7 +91,7 @@ def test_licence_and_metadata():
     assert "<license>MIT</license>" in (ROOT / "datmo_msgs" / "package.xml").read_text(encoding="utf-8")
     classifiers = PROJECT["classifiers"]
     assert "Typing :: Typed" in classifiers and (ROOT / "datmo_cli" / "py.typed").exists()
-    assert "py.typed" in PYPROJECT["tool"]["setuptools"]["package-data"]["datmo_cli"]   # in the wheel (PEP 561)
+    assert "py.typed" in PYPROJECT["tool"]["setuptools"]["package-data"]["datmo_cli"]  # in the wheel (PEP 561)
     assert f"Programming Language :: Python :: {PROJECT['requires-python'].removeprefix('>=')}" in classifiers
 
 
@@ -91,15 +102,19 @@ def test_every_sample_log_has_its_licence_and_none_is_packaged():
     assert set(licences) == {p.name for p in (ROOT / "sample_logs").glob("*.mcap")}
     assert licences["csail-excerpt.mcap"].startswith("**GPL-3.0**")
     assert all(v.startswith("MIT") for k, v in licences.items() if k != "csail-excerpt.mcap")
-    assert PYPROJECT["tool"]["setuptools"]["packages"]["find"]["include"] == ["datmo_cli*"]   # the wheel
-    assert "prune sample_logs" in (ROOT / "MANIFEST.in").read_text(encoding="utf-8").splitlines()   # the sdist
+    assert PYPROJECT["tool"]["setuptools"]["packages"]["find"]["include"] == ["datmo_cli*"]  # the wheel
+    assert "prune sample_logs" in (ROOT / "MANIFEST.in").read_text(encoding="utf-8").splitlines()  # the sdist
 
 
 def install_lines() -> list[tuple[str, str, str]]:
     """(file, distribution, extras) of every `pip install 'NAME[EXTRAS]'` in the README, the docs, the code's
     help and messages and the benchmarks."""
-    files = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "datmo_cli").rglob("*.py")),
-             *sorted((ROOT / "benchmarks").glob("*.py"))]
+    files = [
+        ROOT / "README.md",
+        *sorted((ROOT / "docs").glob("*.md")),
+        *sorted((ROOT / "datmo_cli").rglob("*.py")),
+        *sorted((ROOT / "benchmarks").glob("*.py")),
+    ]
     found = []
     for f in files:
         for name, extra in re.findall(r"pip install '([^'\[]+)\[([^\]]+)\]'", f.read_text(encoding="utf-8")):
@@ -122,7 +137,8 @@ def test_a_plain_install_pulls_no_heavy_package():
     assert heavy(list(plain)) == []
     # the same reading follows extras: the eval extra pulls most of them
     assert {"matplotlib", "motmetrics", "pandas", "pycocotools", "scipy", "trackeval"} <= set(
-        heavy(list(closure(["datmo-cli[eval]"]))))
+        heavy(list(closure(["datmo-cli[eval]"])))
+    )
 
 
 def plain_site(folder: Path) -> Path:
@@ -165,18 +181,26 @@ def test_run_and_report_work_with_the_plain_install_alone(tmp_path):
     (work / "hall.mcap").symlink_to(ROOT / "sample_logs" / "hall.mcap")
     boot = f"import sys; sys.path[:0] = [{str(site)!r}, {str(ROOT)!r}]\n"
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
-    proc = subprocess.run([sys.executable, "-I", "-S", "-c", boot + SCRIPT, ",".join(HEAVY_MODULES)], cwd=work,
-                          capture_output=True, text=True, env=env, timeout=600)
+    proc = subprocess.run(
+        [sys.executable, "-I", "-S", "-c", boot + SCRIPT, ",".join(HEAVY_MODULES)],
+        cwd=work,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
     assert proc.returncode == 0, proc.stderr
     got = json.loads(proc.stdout.splitlines()[-1])
-    assert got["present"] == [] and got["loaded"] == []   # none of them there, none imported
+    assert got["present"] == [] and got["loaded"] == []  # none of them there, none imported
     runs = got["runs"]
     assert runs["run"]["exit"] == 0, runs["run"]["stderr"]
     assert json.loads(runs["run"]["stdout"])["files"][0]["scans"] == 300
     assert runs["report"]["exit"] == 0 and runs["report"]["stdout"].startswith("file,")
     assert runs["plot"]["exit"] == 1 and runs["plot"]["stderr"] == (
-        "datmo: error: --plot needs matplotlib, which is not installed: pip install 'datmo-cli[plot]'\n")
+        "datmo: error: --plot needs matplotlib, which is not installed: pip install 'datmo-cli[plot]'\n"
+    )
     assert runs["evaluate"]["exit"] == 1 and runs["evaluate"]["stderr"] == (
         "datmo: error: scoring tracks (datmo evaluate) needs scipy, which is not installed: "
-        "pip install 'datmo-cli[eval]'\n")
+        "pip install 'datmo-cli[eval]'\n"
+    )
     assert not (work / "hall.png").exists()

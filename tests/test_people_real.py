@@ -14,9 +14,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.shared]
 # measured with the quick fold models (a quarter of the trees): longest 7.5 / 8.9 / 27.8 s (left, right, rear
 # scanner), covered 0.827, 0 on walls. The targets are 2 s, 0.90 and 0: the empty rooms and the cover are not met
 # (a static pair of leg-like objects seen from the start is promoted before the background could know it)
-LONGEST_EMPTY = {"/left_scan": 10.0, "/right_scan": 12.0, "/rear_scan": 30.0}    # s
+LONGEST_EMPTY = {"/left_scan": 10.0, "/right_scan": 12.0, "/rear_scan": 30.0}  # s
 COVERED = 0.80
-PAPER_SHARE = 0.95     # measured 1,271 legs covered against the paper rule's 1,291 (0.98x): not ahead of it
+PAPER_SHARE = 0.95  # measured 1,271 legs covered against the paper rule's 1,291 (0.98x): not ahead of it
 ON_WALLS = 0
 
 
@@ -29,7 +29,7 @@ def people(tmp_path_factory):
         sys.path.insert(0, str(ROOT))
     from benchmarks.accuracy_people import figures
 
-    return figures(tmp_path_factory.mktemp("folds"), quick=True)   # fold models of a quarter of the trees
+    return figures(tmp_path_factory.mktemp("folds"), quick=True)  # fold models of a quarter of the trees
 
 
 def test_no_person_lasts_in_empty_rooms(people):

@@ -52,7 +52,7 @@ def score(name: str) -> acc.LandmarkScore:
 def test_walls(name):
     c = case(name)
     ang, rho = acc.wall_errors(c.f, c.truth, c.offsets, c.sensor_theta)
-    assert len(ang) > len(c.run)   # more than one wall line per scan on average
+    assert len(ang) > len(c.run)  # more than one wall line per scan on average
     assert np.median(ang) < 1.5, f"median wall angle error {np.median(ang):.2f}°"
     assert np.median(rho) < 0.03, f"median wall distance error {100 * np.median(rho):.2f} cm"
 
@@ -71,7 +71,7 @@ def test_legs_within_4m(name):
 def test_columns(name):
     c = case(name)
     cols = acc.column_errors(c.f, c.truth, c.offsets)
-    assert len(cols) >= len(c.run)   # every column in (nearly) every scan
+    assert len(cols) >= len(c.run)  # every column in (nearly) every scan
     assert np.median(cols) < 0.04, f"median column centre error {100 * np.median(cols):.2f} cm"
 
 

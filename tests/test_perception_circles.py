@@ -18,8 +18,9 @@ from datmo_cli.perception import _kernels as K
 from datmo_cli.perception.features import extract_run
 from datmo_cli.perception.params import FeatureParams
 
-OFF = FeatureParams().replace(circle_min_coverage=0, circle_residual_ratio=0, circle_radius_margin=0,
-                              circle_lines_ratio=0)   # the rule before the well-posedness tests
+OFF = FeatureParams().replace(
+    circle_min_coverage=0, circle_residual_ratio=0, circle_radius_margin=0, circle_lines_ratio=0
+)  # the rule before the well-posedness tests
 
 
 def run_of(clean: np.ndarray, inc: float, n: int = 40, sigma: float = 0.01, seed: int = 1) -> ScanRun:
@@ -40,12 +41,24 @@ def circles_near(f, x: float, y: float, within: float) -> int:
 
 
 @settings(max_examples=150, deadline=None)
-@given(st.floats(0.03, 0.5), st.floats(0.5, 5.0), st.floats(-1.2, 1.2), st.floats(0.2, 3.0), st.integers(3, 25),
-       st.floats(0.0, 0.02), st.integers(0, 2**31), st.sampled_from([0.0, 0.4, 0.6, 1.0]),
-       st.sampled_from([0.0, 0.5, 0.8, 1.2]), st.sampled_from([0.0, 0.005, 0.01, 0.03]),
-       st.sampled_from([0.0, 1.0]), st.sampled_from([0.25, 0.5, 1.0]), st.integers(0, 2))
-def test_circle_posed_equals_the_reference(radius, dist, bearing, half_arc, n, sigma, seed, cover, ratio, margin,
-                                           lines_ratio, step_deg, n_lines):
+@given(
+    st.floats(0.03, 0.5),
+    st.floats(0.5, 5.0),
+    st.floats(-1.2, 1.2),
+    st.floats(0.2, 3.0),
+    st.integers(3, 25),
+    st.floats(0.0, 0.02),
+    st.integers(0, 2**31),
+    st.sampled_from([0.0, 0.4, 0.6, 1.0]),
+    st.sampled_from([0.0, 0.5, 0.8, 1.2]),
+    st.sampled_from([0.0, 0.005, 0.01, 0.03]),
+    st.sampled_from([0.0, 1.0]),
+    st.sampled_from([0.25, 0.5, 1.0]),
+    st.integers(0, 2),
+)
+def test_circle_posed_equals_the_reference(
+    radius, dist, bearing, half_arc, n, sigma, seed, cover, ratio, margin, lines_ratio, step_deg, n_lines
+):
     rng = np.random.default_rng(seed)
     cx, cy = dist * math.cos(bearing), dist * math.sin(bearing)
     phi = math.atan2(-cy, -cx) + np.linspace(-half_arc / 2, half_arc / 2, n)
@@ -53,8 +66,12 @@ def test_circle_posed_equals_the_reference(radius, dist, bearing, half_arc, n, s
     y = cy + radius * np.sin(phi) + rng.normal(0, sigma, n)
     circle = (cx + rng.normal(0, 0.01), cy + rng.normal(0, 0.01), radius * rng.uniform(0.8, 1.2))
     lines = [(float(rng.uniform(0, math.pi)), float(rng.uniform(-1, 5))) for _ in range(n_lines)]
-    p = FeatureParams().replace(circle_min_coverage=cover, circle_residual_ratio=ratio, circle_radius_margin=margin,
-                                circle_lines_ratio=lines_ratio)
+    p = FeatureParams().replace(
+        circle_min_coverage=cover,
+        circle_residual_ratio=ratio,
+        circle_radius_margin=margin,
+        circle_lines_ratio=lines_ratio,
+    )
     vec = p.kernel_vector()
     # keep away from ties at a threshold, where float rounding decides
     d = math.hypot(circle[0], circle[1])
@@ -65,8 +82,14 @@ def test_circle_posed_equals_the_reference(radius, dist, bearing, half_arc, n, s
     t, rho = ref.fit_line(list(x), list(y))
     rss_l = float(np.sum((x * math.cos(t) + y * math.sin(t) - rho) ** 2))
     assume(abs(math.sqrt(rss_c) - ratio * math.sqrt(rss_l)) > 1e-7)
-    rss_h = sum(min(abs(px * math.cos(a) + py * math.sin(a) - r) for a, r in lines) ** 2
-                for px, py in zip(x, y, strict=True)) if lines else -1.0
+    rss_h = (
+        sum(
+            min(abs(px * math.cos(a) + py * math.sin(a) - r) for a, r in lines) ** 2
+            for px, py in zip(x, y, strict=True)
+        )
+        if lines
+        else -1.0
+    )
     if lines:
         assume(abs(math.sqrt(rss_c) - lines_ratio * math.sqrt(rss_h)) > 1e-7)
     got = K.circle_posed(x, y, np.arange(n), n, *circle, vec, math.radians(step_deg), rss_h)
@@ -79,8 +102,9 @@ def test_every_test_is_off_at_zero():
     vec = OFF.kernel_vector()
     # pinned at the floor, three points for a wide circle, worse than a line: all allowed when off
     assert K.circle_posed(x, y, np.arange(3), 3, 2.05, 0.0, 0.05, vec, math.radians(0.1), 0.0)
-    assert not K.circle_posed(x, y, np.arange(3), 3, 2.05, 0.0, 0.05, FeatureParams().kernel_vector(),
-                              math.radians(0.1), 0.0)
+    assert not K.circle_posed(
+        x, y, np.arange(3), 3, 2.05, 0.0, 0.05, FeatureParams().kernel_vector(), math.radians(0.1), 0.0
+    )
 
 
 # ----------------------------------------------------------------------------------------------- whole scans
@@ -94,12 +118,13 @@ def test_a_3_point_arc_at_the_radius_floor_is_no_circle():
     run = run_of(clean, math.radians(0.5))
     before = extract_run(run, OFF, landmarks=False)
     after = extract_run(run, landmarks=False)
-    assert circles_near(before, 1.5, 0.3, 0.1) >= 5          # 10 of 40 scans with the old rule
+    assert circles_near(before, 1.5, 0.3, 0.1) >= 5  # 10 of 40 scans with the old rule
     assert circles_near(after, 1.5, 0.3, 0.1) == 0
 
 
-@pytest.mark.parametrize("arm, dist, rot", [(0.25, 1.0, 0.0), (0.25, 1.0, 0.3), (0.25, 2.0, 0.0), (0.25, 2.0, 0.3),
-                                            (0.3, 1.5, 0.0)])
+@pytest.mark.parametrize(
+    "arm, dist, rot", [(0.25, 1.0, 0.0), (0.25, 1.0, 0.3), (0.25, 2.0, 0.0), (0.25, 2.0, 0.3), (0.3, 1.5, 0.0)]
+)
 def test_a_wall_corner_is_no_circle(arm, dist, rot):
     """A convex corner (two 25-30 cm walls at 90°, its vertex towards the scanner) in a 0.5° scan: two HTL
     lines fit it better than a circle."""
@@ -120,6 +145,6 @@ def test_a_well_sampled_leg_or_column_is_still_a_circle(step_deg, radius, dist):
     clean = np.minimum(ref.ray_wall(a, 6.0, math.pi / 2 + 0.1), ref.ray_circle(a, dist, 0.3, radius))
     run = run_of(clean, math.radians(step_deg))
     f = extract_run(run, landmarks=False)
-    assert circles_near(f, dist, 0.3, 0.1) == len(run)       # in every scan, as with the old rule
+    assert circles_near(f, dist, 0.3, 0.1) == len(run)  # in every scan, as with the old rule
     near = np.hypot(f.circles["x"] - dist, f.circles["y"] - 0.3) < 0.1
     assert abs(float(np.median(f.circles["radius"][near])) - radius) < 0.02

@@ -51,19 +51,24 @@ def test_segment_writes_one_message_per_scan_with_its_parameters(tmp_path, hall)
 def test_features_writes_features_landmarks_markers_and_segments(tmp_path, hall):
     lean = tmp_path / "lean.mcap"
     assert invoke("features", hall, "-o", lean).exit_code == 0
-    assert not mcapio.read_log(lean, topics=None).has(mcapio.TOPIC_MARKERS_FEATURES)   # markers only when asked
+    assert not mcapio.read_log(lean, topics=None).has(mcapio.TOPIC_MARKERS_FEATURES)  # markers only when asked
     out = tmp_path / "feat.mcap"
     result = invoke("features", hall, "-o", out, "--markers")
     assert result.exit_code == 0, result.output
     assert "landmarks" in result.stderr
     log = mcapio.read_log(out, topics=None)
     n = len(mcapio.run_from_log(log))
-    for topic in (mcapio.TOPIC_SEGMENTS, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS,
-                  mcapio.TOPIC_MARKERS_FEATURES, mcapio.TOPIC_GROUND_TRUTH):
+    for topic in (
+        mcapio.TOPIC_SEGMENTS,
+        mcapio.TOPIC_FEATURES,
+        mcapio.TOPIC_LANDMARKS,
+        mcapio.TOPIC_MARKERS_FEATURES,
+        mcapio.TOPIC_GROUND_TRUTH,
+    ):
         assert len(log.messages[topic][1]) == n, topic
     feats = [cdr.decode(types.FEATURES, p) for p in log.messages[mcapio.TOPIC_FEATURES][1]]
-    assert sum(len(f["lines"]) for f in feats) > n      # walls in every scan
-    assert sum(len(f["circles"]) for f in feats) > n    # two columns in view
+    assert sum(len(f["lines"]) for f in feats) > n  # walls in every scan
+    assert sum(len(f["circles"]) for f in feats) > n  # two columns in view
     last = cdr.decode(types.LANDMARKS, log.messages[mcapio.TOPIC_LANDMARKS][1][-1])
     assert len(last["landmarks"]) >= 2 and last["frame_id"] == "laser"
     store = types.typestore()
@@ -96,12 +101,15 @@ def test_config_file_then_options_override_the_defaults(tmp_path, hall):
     assert p["rho_resolution"] == 0.05 and p["min_points"] == 6 and p["c0"] == FeatureParams().c0
 
 
-@pytest.mark.parametrize("text, names", [
-    ("[features]\nrho_resoluton = 0.05\n", "features.rho_resoluton: unknown parameter"),
-    ("[features]\nmin_points = 0\n", "features.min_points"),
-    ("[features]\nc0 = 'wide'\n", "features.c0"),
-    ("[features\n", "datmo.toml"),
-])
+@pytest.mark.parametrize(
+    "text, names",
+    [
+        ("[features]\nrho_resoluton = 0.05\n", "features.rho_resoluton: unknown parameter"),
+        ("[features]\nmin_points = 0\n", "features.min_points"),
+        ("[features]\nc0 = 'wide'\n", "features.c0"),
+        ("[features\n", "datmo.toml"),
+    ],
+)
 def test_a_bad_config_is_one_line_naming_the_key(tmp_path, hall, text, names):
     config = tmp_path / "datmo.toml"
     config.write_text(text)
@@ -123,7 +131,7 @@ def test_existing_output_is_kept_and_input_untouched(tmp_path, hall):
     assert invoke("features", hall, "-o", out, "--force").exit_code == 0
     assert mcapio.summary(out).metadata["datmo"]["command"] == "features"
     assert hashlib.sha256(hall.read_bytes()).hexdigest() == before
-    assert [p.name for p in tmp_path.iterdir()] == ["feat.mcap"]   # no temporary file left behind
+    assert [p.name for p in tmp_path.iterdir()] == ["feat.mcap"]  # no temporary file left behind
 
 
 def test_a_log_without_scans_is_a_clear_error(tmp_path):

@@ -17,7 +17,7 @@ from datmo_cli.perception import _kernels as K
 from datmo_cli.perception.params import FeatureParams
 
 INC = math.radians(0.5)
-N_THETA = 120          # 1.5 degree theta cells, the default
+N_THETA = 120  # 1.5 degree theta cells, the default
 RHO_RES = 0.02
 
 
@@ -46,8 +46,24 @@ def kernel_runs(x, y, n_theta=N_THETA, rho_res=RHO_RES, window_deg=10.0):
     sub_s, sub_e = np.empty(K.MAX_SUB, np.int64), np.empty(K.MAX_SUB, np.int64)
     peaks = np.empty((K.MAX_SUB, 3), np.int64)
     kwin = int(math.radians(window_deg) / (np.pi / n_theta))
-    m = K.line_subsegments(x, y, 0, n, acc, toff, cos_t, sin_t, rho_res, kwin, cell, np.zeros(n_theta, np.bool_),
-                           sub_s, sub_e, peaks, np.empty((n, 3), np.int64))
+    m = K.line_subsegments(
+        x,
+        y,
+        0,
+        n,
+        acc,
+        toff,
+        cos_t,
+        sin_t,
+        rho_res,
+        kwin,
+        cell,
+        np.zeros(n_theta, np.bool_),
+        sub_s,
+        sub_e,
+        peaks,
+        np.empty((n, 3), np.int64),
+    )
     runs = list(zip(sub_s[:m].tolist(), sub_e[:m].tolist(), strict=True))
     return runs, [tuple(int(v) for v in peaks[k]) for k in range(m)], toff, acc
 
@@ -85,16 +101,19 @@ def wall_scan(theta, rho, a0, a1, inc=INC, sigma=0.0, seed=0):
 
 def test_segmentation_by_hand():
     r = np.full(30, 2.0, np.float32)
-    r[5] = np.nan              # invalid returns break a segment
+    r[5] = np.nan  # invalid returns break a segment
     r[9] = np.inf
-    r[12:20] = 4.0             # a jump of 2 m breaks it too
-    r[25] = 0.0                # <= range_min
-    r[27] = 8.0                # >= range_max
+    r[12:20] = 4.0  # a jump of 2 m breaks it too
+    r[25] = 0.0  # <= range_min
+    r[27] = 8.0  # >= range_max
     want = [(0, 5), (12, 20), (20, 25)]
     assert ref.segment(r, INC, 0.08, 0.0, 8.0, 5) == want
     assert kernel_segments(r) == want
-    assert kernel_segments(r, min_points=1) == ref.segment(r, INC, 0.08, 0.0, 8.0, 1) == [
-        (0, 5), (6, 9), (10, 12), (12, 20), (20, 25), (26, 27), (28, 30)]
+    assert (
+        kernel_segments(r, min_points=1)
+        == ref.segment(r, INC, 0.08, 0.0, 8.0, 1)
+        == [(0, 5), (6, 9), (10, 12), (12, 20), (20, 25), (26, 27), (28, 30)]
+    )
 
 
 def test_threshold_is_c0_plus_c1_min_range():
@@ -111,13 +130,21 @@ def test_threshold_is_c0_plus_c1_min_range():
 
 
 SPECIAL = st.sampled_from([np.nan, np.inf, -np.inf, 0.0, 1e6, 8.0, -1.0])
-RANGES = arrays(np.float32, st.integers(1, 300),
-                elements=st.one_of(st.floats(0.0, 9.0, width=32), SPECIAL, st.floats(2.0, 2.25, width=32)))
+RANGES = arrays(
+    np.float32,
+    st.integers(1, 300),
+    elements=st.one_of(st.floats(0.0, 9.0, width=32), SPECIAL, st.floats(2.0, 2.25, width=32)),
+)
 
 
 @settings(max_examples=100, deadline=None)
-@given(RANGES, st.sampled_from([0.25, 0.5, 1.0, 0.352]), st.floats(0.0, 0.3), st.integers(1, 8),
-       st.sampled_from([(0.0, 8.0), (0.05, 30.0), (0.0, math.inf)]))
+@given(
+    RANGES,
+    st.sampled_from([0.25, 0.5, 1.0, 0.352]),
+    st.floats(0.0, 0.3),
+    st.integers(1, 8),
+    st.sampled_from([(0.0, 8.0), (0.05, 30.0), (0.0, math.inf)]),
+)
 def test_segment_boundaries_equal_the_reference(r, inc_deg, c0, min_points, limits):
     inc = math.radians(inc_deg)
     lo, hi = limits
@@ -140,15 +167,20 @@ def test_segment_boundaries_equal_the_reference_on_smooth_scenes(seed, n):
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.floats(0, math.pi, exclude_max=True), st.floats(-6.0, 6.0), st.integers(3, 80), st.integers(0, 2**31),
-       st.sampled_from([0.0, 0.001, 0.01, 0.05]))
+@given(
+    st.floats(0, math.pi, exclude_max=True),
+    st.floats(-6.0, 6.0),
+    st.integers(3, 80),
+    st.integers(0, 2**31),
+    st.sampled_from([0.0, 0.001, 0.01, 0.05]),
+)
 def test_fit_line_equals_total_least_squares(theta, rho, n, seed, sigma):
     rng = np.random.default_rng(seed)
     t = rng.uniform(-2, 2, n)
     x, y = line_points(theta, rho, t)
     x = x + rng.normal(0, sigma, n)
     y = y + rng.normal(0, sigma, n)
-    idx = rng.permutation(n + 5)[:n]                 # fit_line reads x[idx[k]]: scatter the points
+    idx = rng.permutation(n + 5)[:n]  # fit_line reads x[idx[k]]: scatter the points
     bx, by = np.zeros(n + 5), np.zeros(n + 5)
     bx[idx], by[idx] = x, y
     th, rh = K.fit_line(bx, by, idx, n)
@@ -167,8 +199,14 @@ def test_fit_line_of_exact_points_is_the_line():
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.floats(0.05, 0.4), st.floats(0.7, 5.0), st.floats(-1.5, 1.5), st.floats(0.6, 1.5), st.integers(6, 40),
-       st.integers(0, 2**31))
+@given(
+    st.floats(0.05, 0.4),
+    st.floats(0.7, 5.0),
+    st.floats(-1.5, 1.5),
+    st.floats(0.6, 1.5),
+    st.integers(6, 40),
+    st.integers(0, 2**31),
+)
 def test_fit_circle_equals_the_geometric_fit(radius, dist, bearing, half_arc, n, seed):
     # well posed only where the arc bulges well beyond the noise (3 mm) over its points: a flatter arc has
     # no distinct best circle, and the kernel (which then says not ok) and the reference stop anywhere
@@ -190,9 +228,9 @@ def test_fit_circle_equals_the_geometric_fit(radius, dist, bearing, half_arc, n,
 def test_fit_circle_refuses_degenerate_input():
     x = np.array([1.0, 1.0, 1.0])
     y = np.array([0.0, 0.0, 0.0])
-    *_, ok = K.fit_circle(x, y, np.arange(3), 3, 1.0, 0.0, 0.1)     # the start at a point: no gradient
+    *_, ok = K.fit_circle(x, y, np.arange(3), 3, 1.0, 0.0, 0.1)  # the start at a point: no gradient
     assert not ok
-    x, y = line_points(0.4, 2.0, np.linspace(-0.3, 0.3, 9))        # collinear points: no finite circle
+    x, y = line_points(0.4, 2.0, np.linspace(-0.3, 0.3, 9))  # collinear points: no finite circle
     a, b, r, ok = K.fit_circle(x, y, np.arange(9), 9, 2.0 * math.cos(0.4) + 0.2, 2.0 * math.sin(0.4), 0.2)
     assert not ok or r > 10
 
@@ -208,8 +246,13 @@ def test_reference_accumulator_by_hand():
 
 
 @settings(max_examples=50, deadline=None)
-@given(st.floats(0.0, math.pi, exclude_max=True), st.floats(0.8, 6.0), st.integers(6, 50), st.integers(0, 2**31),
-       st.sampled_from([0.0, 0.003, 0.008]))
+@given(
+    st.floats(0.0, math.pi, exclude_max=True),
+    st.floats(0.8, 6.0),
+    st.integers(6, 50),
+    st.integers(0, 2**31),
+    st.sampled_from([0.0, 0.003, 0.008]),
+)
 def test_full_window_voting_peak_equals_the_full_accumulator(theta, rho, n, seed, sigma):
     """vote_window = 90 degrees: every point votes in every theta cell, the paper's HTL."""
     rng = np.random.default_rng(seed)
@@ -218,7 +261,7 @@ def test_full_window_voting_peak_equals_the_full_accumulator(theta, rho, n, seed
     x = x + rng.normal(0, sigma, n)
     y = y + rng.normal(0, sigma, n)
     runs, peaks, toff, acc = kernel_runs(x, y, window_deg=90.0)
-    assert not acc.any()                                  # the accumulator is left clean for the next segment
+    assert not acc.any()  # the accumulator is left clean for the next segment
     assert runs == [(0, n)]
     _, peak = ref.htl_accumulator(list(x), list(y), N_THETA, RHO_RES)
     assert peaks[0] == peak
@@ -243,8 +286,9 @@ def test_windowed_voting_peak_is_a_full_accumulator_cell(theta, rho, n, seed):
     assert votes <= acc.get((tc, kc), 0) <= peak[0]
 
 
-@pytest.mark.parametrize("theta_deg, rho", [(0.0, 2.0), (30.0, 3.0), (89.0, 1.5), (90.0, 2.5), (135.0, 1.0),
-                                            (179.0, 4.0)])
+@pytest.mark.parametrize(
+    "theta_deg, rho", [(0.0, 2.0), (30.0, 3.0), (89.0, 1.5), (90.0, 2.5), (135.0, 1.0), (179.0, 4.0)]
+)
 def test_noise_free_straight_segment_is_one_line(theta_deg, rho):
     theta = math.radians(theta_deg)
     x, y = wall_scan(theta, rho, theta - 0.5, theta + 0.5)
@@ -304,7 +348,7 @@ def test_l_shaped_corner_second_line_starts_at_the_corner():
 def test_box_corner_with_a_short_second_side_gives_two_lines(short):
     x, y, corner = l_corner(0.0, 2.0, short, dist=2.5)
     lines = [o for o in kernel_lines(x, y) if o[0] > 3 and o[9] > 0.1 and o[10] > 0.5]
-    assert len(lines) == 2    # got one line: the 2 m wall, whose r_acc (0.91) still passes
+    assert len(lines) == 2  # got one line: the 2 m wall, whose r_acc (0.91) still passes
 
 
 @settings(max_examples=40, deadline=None)
@@ -321,8 +365,9 @@ def test_noisy_wall_is_one_line_near_the_truth(theta, rho, seed):
     k = max(range(len(runs)), key=lambda j: runs[j][1] - runs[j][0])
     (s, e), (_votes, t, c) = runs[k], peaks[k]
     o = kernel_lines(x, y)[k]
-    th_ref, rh_ref, used = ref.refine_line(list(x[s:e]), list(y[s:e]), t * math.pi / N_THETA,
-                                           toff[t] + (c + 0.5) * RHO_RES, RHO_RES)
+    th_ref, rh_ref, used = ref.refine_line(
+        list(x[s:e]), list(y[s:e]), t * math.pi / N_THETA, toff[t] + (c + 0.5) * RHO_RES, RHO_RES
+    )
     assert len(used) == o[0]
     dth, drho = ref.same_line(o[8], o[7], th_ref, rh_ref)
     assert dth < 1e-9 and drho < 1e-9
@@ -334,10 +379,11 @@ def test_line_end_points_are_those_of_the_fitted_points():
     runs, peaks, toff, _ = kernel_runs(x, y)
     (s, e), (_votes, t, c) = runs[0], peaks[0]
     o = kernel_lines(x, y)[0]
-    _, _, used = ref.refine_line(list(x[s:e]), list(y[s:e]), t * math.pi / N_THETA, toff[t] + (c + 0.5) * RHO_RES,
-                                 RHO_RES)
+    _, _, used = ref.refine_line(
+        list(x[s:e]), list(y[s:e]), t * math.pi / N_THETA, toff[t] + (c + 0.5) * RHO_RES, RHO_RES
+    )
     assert len(used) == o[0] == 76
-    assert (s + used[0], s + used[-1]) == (o[1], o[2])    # got last = 79, a point of the unused second pass
+    assert (s + used[0], s + used[-1]) == (o[1], o[2])  # got last = 79, a point of the unused second pass
 
 
 @pytest.mark.parametrize("seed", [433, 1449])
@@ -346,7 +392,7 @@ def test_a_line_never_has_more_points_than_beams_it_spans(seed):
     theta, rho = rng.uniform(0, math.pi), rng.uniform(1, 5)
     x, y = wall_scan(theta, rho, theta - 0.2, theta + 0.2, sigma=0.01, seed=seed)
     for o in kernel_lines(x, y):
-        assert o[0] <= o[2] - o[1] + 1      # got 46 points on beams 1..45 (433), 45 on beams 2..45 (1449)
+        assert o[0] <= o[2] - o[1] + 1  # got 46 points on beams 1..45 (433), 45 on beams 2..45 (1449)
 
 
 # ----------------------------------------------------------------------------------------------- HTC
@@ -359,8 +405,9 @@ def kernel_circle(x, y, p=PVEC, beat=-1.0) -> np.ndarray:
     y = np.ascontiguousarray(y, np.float64)
     w = int(round(p[K.P_CWINDOW] / p[K.P_CELL]))
     out = np.zeros(5)
-    K.circle_of_run(x, y, 0, len(x), p, np.zeros((2 * w + 1, 2 * w + 1), np.int32), np.empty(len(x), np.int64), out,
-                    beat)
+    K.circle_of_run(
+        x, y, 0, len(x), p, np.zeros((2 * w + 1, 2 * w + 1), np.int32), np.empty(len(x), np.int64), out, beat
+    )
     return out
 
 
@@ -405,7 +452,7 @@ def test_circle_votes_equal_the_reference_window(radius, dist, bearing, seed):
     p[K.P_R_MAX] = radius + 0.001
     out = kernel_circle(x, y, p)
     if out[4] == 0.0:
-        return   # the arc's chord and sagitta rule the radius out: nothing voted
+        return  # the arc's chord and sagitta rule the radius out: nothing voted
     ca, cb = ref.chord_centre(x[0], y[0], x[-1], y[-1], radius)
     w = int(round(p[K.P_CWINDOW] / p[K.P_CELL]))
     _, (votes, ia, ib) = ref.htc_window(list(x), list(y), ca, cb, radius, w, p[K.P_CELL], p[K.P_CTOL])
@@ -414,7 +461,7 @@ def test_circle_votes_equal_the_reference_window(radius, dist, bearing, seed):
 
 def test_circle_of_run_rejects_a_flat_wall_and_too_few_points():
     x, y = wall_scan(0.3, 2.0, 0.1, 0.4)
-    assert kernel_circle(x, y)[4] == 0.0         # no sagitta: not an arc
+    assert kernel_circle(x, y)[4] == 0.0  # no sagitta: not an arc
     assert kernel_circle(x[:2], y[:2])[4] == 0.0  # under three points
 
 

@@ -16,10 +16,31 @@ from datmo_cli.stages import derive_features
 
 pytestmark = pytest.mark.shared
 
-CARMEN = ["acapulco", "aces", "belgioioso", "csail", "edmonton", "fhw", "freiburg-079", "freiburg-101",
-          "freiburg-campus", "infinite-corridor", "intel", "orebro", "seattle"]
-BAGS = ["demo_stationary_simple_environment", "negative_2", "positive_1_extracted", "positive_2_extracted",
-        "positive_3_extracted", "positive_4_extracted", "positive_6_extracted", "positive_7_extracted"]
+CARMEN = [
+    "acapulco",
+    "aces",
+    "belgioioso",
+    "csail",
+    "edmonton",
+    "fhw",
+    "freiburg-079",
+    "freiburg-101",
+    "freiburg-campus",
+    "infinite-corridor",
+    "intel",
+    "orebro",
+    "seattle",
+]
+BAGS = [
+    "demo_stationary_simple_environment",
+    "negative_2",
+    "positive_1_extracted",
+    "positive_2_extracted",
+    "positive_3_extracted",
+    "positive_4_extracted",
+    "positive_6_extracted",
+    "positive_7_extracted",
+]
 LASERSCAN_TYPES = ("sensor_msgs/msg/LaserScan", "sensor_msgs/LaserScan")
 
 
@@ -61,7 +82,7 @@ def check(path, topic=None, walls=True):
     counts = f.counts()
     assert all(np.isfinite(v) and v >= 0 for v in counts.values())
     if walls:
-        assert counts["lines"] > 1.0   # indoor logs: walls in nearly every scan
+        assert counts["lines"] > 1.0  # indoor logs: walls in nearly every scan
     db = f.landmarks.final()
     assert np.all(np.isfinite(db["x"])) and np.all(np.isfinite(db["y"]))
     check_offsets(f.landmarks.snap_offsets, n, len(f.landmarks.snap_idx))
@@ -72,8 +93,12 @@ def check(path, topic=None, walls=True):
     # the channels `datmo features` writes, on the first scans
     head = run.slice(0, min(n, 50))
     channels, _ = derive_features(head, odometry=odom)
-    for topic_name in (mcapio.TOPIC_SEGMENTS, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS,
-                       mcapio.TOPIC_MARKERS_FEATURES):
+    for topic_name in (
+        mcapio.TOPIC_SEGMENTS,
+        mcapio.TOPIC_FEATURES,
+        mcapio.TOPIC_LANDMARKS,
+        mcapio.TOPIC_MARKERS_FEATURES,
+    ):
         _, stamps, payloads = channels[topic_name]
         assert len(stamps) == len(payloads) == len(head)
     return f

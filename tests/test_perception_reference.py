@@ -32,21 +32,24 @@ def run_of(ranges, inc: float = INC, range_max: float = 8.0) -> ScanRun:
 def kernel_segments(r, inc=INC, c0=0.08, rmin=0.0, rmax=8.0, min_points=5) -> list[tuple[int, int]]:
     r = np.asarray(r, np.float32)
     starts, ends = np.empty(len(r) + 1, np.int64), np.empty(len(r) + 1, np.int64)
-    n = K.segment_scan(r, math.cos(inc), c0, math.sqrt(2 * (1 - math.cos(inc))), rmin, rmax, min_points, starts,
-                       ends)
+    n = K.segment_scan(r, math.cos(inc), c0, math.sqrt(2 * (1 - math.cos(inc))), rmin, rmax, min_points, starts, ends)
     return list(zip(starts[:n].tolist(), ends[:n].tolist(), strict=True))
 
 
-ranges_strategy = arrays(np.float32, st.integers(1, 400),
-                         elements=st.one_of(st.floats(0.0, 9.0, width=32), st.sampled_from([np.nan, np.inf, 0.0])))
+ranges_strategy = arrays(
+    np.float32,
+    st.integers(1, 400),
+    elements=st.one_of(st.floats(0.0, 9.0, width=32), st.sampled_from([np.nan, np.inf, 0.0])),
+)
 
 
 # --------------------------------------------------------------------------------------------- segmentation
 
+
 def test_segmentation_by_hand():
     r = np.full(20, 2.0, np.float32)
-    r[5] = np.nan            # an invalid return breaks the segment
-    r[12:] = 4.0             # a jump of 2 m breaks it too
+    r[5] = np.nan  # an invalid return breaks the segment
+    r[12:] = 4.0  # a jump of 2 m breaks it too
     assert kernel_segments(r, min_points=3) == ref.segment(r, INC, 0.08, 0.0, 8.0, 3) == [(0, 5), (6, 12), (12, 20)]
     assert kernel_segments(r, min_points=7) == [(12, 20)]
 
@@ -65,6 +68,7 @@ def test_segment_run_uses_each_scans_geometry():
 
 
 # --------------------------------------------------------------------------------------------- fits
+
 
 @settings(max_examples=60, deadline=None)
 @given(st.floats(0, math.pi - 1e-6), st.floats(0.5, 6.0), st.integers(5, 80), st.integers(0, 2**31))
@@ -97,6 +101,7 @@ def test_circle_fit_equals_the_reference(radius, dist, bearing, seed):
 
 # --------------------------------------------------------------------------------------------- HTL accumulator
 
+
 def htl_kernel_peak(x, y, n_theta: int, rho_res: float, window: int) -> tuple[int, int]:
     """(runs, votes of the first run's peak) from line_subsegments with a full or windowed accumulator."""
     n = len(x)
@@ -105,9 +110,25 @@ def htl_kernel_peak(x, y, n_theta: int, rho_res: float, window: int) -> tuple[in
     cell = np.empty(n, np.int64)
     K.normal_cells(x, y, 0, n, n_theta, cell)
     sub_s, sub_e, peaks = np.empty(256, np.int64), np.empty(256, np.int64), np.empty((256, 3), np.int64)
-    runs = K.line_subsegments(x, y, 0, n, acc, np.empty(n_theta), cos_t, sin_t, rho_res, window, cell,
-                              np.zeros(n_theta, np.bool_), sub_s, sub_e, peaks, np.empty((n, 3), np.int64))
-    assert not acc.any()   # the accumulator is left clean for the next segment
+    runs = K.line_subsegments(
+        x,
+        y,
+        0,
+        n,
+        acc,
+        np.empty(n_theta),
+        cos_t,
+        sin_t,
+        rho_res,
+        window,
+        cell,
+        np.zeros(n_theta, np.bool_),
+        sub_s,
+        sub_e,
+        peaks,
+        np.empty((n, 3), np.int64),
+    )
+    assert not acc.any()  # the accumulator is left clean for the next segment
     return runs, int(peaks[0, 0])
 
 
@@ -118,7 +139,7 @@ def test_full_accumulator_peak_equals_the_reference(theta, rho, n, seed):
     t = np.sort(rng.uniform(-1.5, 1.5, n))
     x = rho * math.cos(theta) - t * math.sin(theta) + rng.normal(0, 0.005, n)
     y = rho * math.sin(theta) + t * math.cos(theta) + rng.normal(0, 0.005, n)
-    runs, votes = htl_kernel_peak(x, y, 120, 0.02, 60)   # window of the whole half turn: the paper's HTL
+    runs, votes = htl_kernel_peak(x, y, 120, 0.02, 60)  # window of the whole half turn: the paper's HTL
     assert runs == 1
     assert votes == ref.htl_peak_line(x, y, 120, 0.02)[2]
 
@@ -133,6 +154,7 @@ def test_corner_gives_two_runs_that_meet_at_the_corner():
 
 # --------------------------------------------------------------------------------------------- whole scans
 
+
 def noisy(r: np.ndarray, sigma: float, seed: int) -> np.ndarray:
     return (r + np.random.default_rng(seed).normal(0, sigma, r.shape)).astype(np.float32)
 
@@ -144,8 +166,10 @@ def test_a_wall_is_one_line_within_a_degree_and_two_centimetres():
     scans = np.stack([noisy(clean, 0.01, s) for s in range(30)])
     f = extract_run(run_of(scans), landmarks=False)
     assert np.all(np.diff(f.line_offsets) >= 1)
-    longest = [f.lines[a:b][np.argmax(f.lines[a:b]["length"])] for a, b in zip(f.line_offsets[:-1],
-                                                                                  f.line_offsets[1:], strict=True)]
+    longest = [
+        f.lines[a:b][np.argmax(f.lines[a:b]["length"])]
+        for a, b in zip(f.line_offsets[:-1], f.line_offsets[1:], strict=True)
+    ]
     ang = [abs((ln["theta"] - theta + math.pi / 2) % math.pi - math.pi / 2) for ln in longest]
     dist = [abs(ln["rho"] - rho) for ln in longest]
     assert math.degrees(np.median(ang)) < 1.0 and np.median(dist) < 0.02
@@ -162,15 +186,15 @@ def test_circles_in_front_of_a_wall(radius, dist, min_points):
     cx, cy = dist * math.cos(0.2), dist * math.sin(0.2)
     d = np.hypot(f.circles["x"] - cx, f.circles["y"] - cy)
     near = f.circles[d < 0.1]
-    assert len(near) >= 25                            # found in nearly every scan, as a circle
+    assert len(near) >= 25  # found in nearly every scan, as a circle
     assert np.median(d[d < 0.1]) < 0.03
     assert np.median(np.abs(near["radius"] - radius)) < 0.02
 
 
 def test_the_decision_rule_keeps_flat_walls_as_lines_and_clutter_as_blobs():
     r = np.full(361, np.inf, np.float32)
-    r[100:160] = ref.ray_wall(ANGLES[100:160], 2.5, math.radians(-20)).astype(np.float32)   # a wall
-    r[200:206] = [3.0, 3.3, 3.0, 3.3, 3.0, 3.3]   # a saw-tooth: no line of more than 3 points, no circle
+    r[100:160] = ref.ray_wall(ANGLES[100:160], 2.5, math.radians(-20)).astype(np.float32)  # a wall
+    r[200:206] = [3.0, 3.3, 3.0, 3.3, 3.0, 3.3]  # a saw-tooth: no line of more than 3 points, no circle
     f = extract_run(run_of(r), FeatureParams(c0=0.5), landmarks=False)
     assert len(f.lines) == 1 and f.lines[0]["first"] >= 100 and f.lines[0]["last"] < 160
     assert len(f.circles) == 0
@@ -186,7 +210,8 @@ def test_a_free_standing_column_is_one_landmark_and_a_moving_circle_none():
     db = f.landmarks.final()
     cols = db[db["type"] == LANDMARK_COLUMN]
     assert len(cols) == 1 and math.hypot(cols[0]["x"] - 3.0, cols[0]["y"] - 1.0) < 0.03
-    moving = np.stack([noisy(np.minimum(wall, ref.ray_circle(ANGLES, 3.0, -1.5 + 0.2 * k, 0.25)), 0.01, k)
-                       for k in range(40)])
+    moving = np.stack(
+        [noisy(np.minimum(wall, ref.ray_circle(ANGLES, 3.0, -1.5 + 0.2 * k, 0.25)), 0.01, k) for k in range(40)]
+    )
     f = extract_run(run_of(moving))
     assert not np.any(f.landmarks.final()["type"] == LANDMARK_COLUMN)

@@ -31,10 +31,17 @@ STEPS_DEG = [1.0, 0.5, 0.25, -0.5, -1.0]
 
 def run_of(ranges: np.ndarray, inc: float, range_max: float = 8.0, range_min: float = 0.0) -> ScanRun:
     n, b = ranges.shape
-    g = ScanGeometry(angle_min=-inc * (b - 1) / 2, angle_increment=inc, n_beams=b, range_min=range_min,
-                     range_max=range_max, frame_id="laser")
-    return ScanRun(np.arange(n, dtype=np.int64) * 100_000_000, ranges.astype(np.float32), g,
-                   np.zeros((n, 0), np.float32))
+    g = ScanGeometry(
+        angle_min=-inc * (b - 1) / 2,
+        angle_increment=inc,
+        n_beams=b,
+        range_min=range_min,
+        range_max=range_max,
+        frame_id="laser",
+    )
+    return ScanRun(
+        np.arange(n, dtype=np.int64) * 100_000_000, ranges.astype(np.float32), g, np.zeros((n, 0), np.float32)
+    )
 
 
 @st.composite
@@ -48,14 +55,14 @@ def scans(draw):
         r = np.full((n, beams), draw(SPECIAL), np.float32)
     elif kind == "equal":
         r = np.full((n, beams), draw(st.floats(0.01, 7.99)), np.float32)
-    else:   # walls, corners, arcs and clutter with noise and dropouts
+    else:  # walls, corners, arcs and clutter with noise and dropouts
         rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
         a = np.linspace(0, 2 * np.pi, beams)
         r = 3 + np.sin(rng.integers(1, 6) * a)[None, :] * rng.uniform(0, 2) + rng.normal(0, 0.01, (n, beams))
         for _ in range(rng.integers(0, 6)):
             c = rng.integers(0, beams)
             w = rng.integers(1, 30)
-            r[:, c:c + w] = rng.uniform(0.3, 7.5) + 0.1 * np.sin(np.linspace(0, np.pi, len(r[0, c:c + w])))
+            r[:, c : c + w] = rng.uniform(0.3, 7.5) + 0.1 * np.sin(np.linspace(0, np.pi, len(r[0, c : c + w])))
         r[rng.random(r.shape) < draw(st.sampled_from([0.0, 0.02, 0.3]))] = draw(SPECIAL)
         r = r.astype(np.float32)
     inc = math.radians(draw(st.sampled_from(STEPS_DEG)))
@@ -63,26 +70,30 @@ def scans(draw):
 
 
 def check_invariants(f, n_scans: int, n_beams: int, min_points: int) -> None:
-    for off, items in ((f.seg_offsets, f.seg_start), (f.line_offsets, f.lines), (f.circle_offsets, f.circles),
-                       (f.blob_offsets, f.blobs)):
+    for off, items in (
+        (f.seg_offsets, f.seg_start),
+        (f.line_offsets, f.lines),
+        (f.circle_offsets, f.circles),
+        (f.blob_offsets, f.blobs),
+    ):
         assert len(off) == n_scans + 1 and off[0] == 0 and off[-1] == len(items)
         assert np.all(np.diff(off) >= 0)
     assert len(f.seg_end) == len(f.seg_start) and len(f.stamps) == n_scans
     assert np.all(f.seg_end.astype(np.int64) - f.seg_start.astype(np.int64) >= min_points)
     assert np.all(f.seg_end <= n_beams)
-    for k in range(n_scans):   # a scan's segments are ordered and disjoint
-        s = f.seg_start[f.seg_offsets[k]:f.seg_offsets[k + 1]].astype(np.int64)
-        e = f.seg_end[f.seg_offsets[k]:f.seg_offsets[k + 1]].astype(np.int64)
+    for k in range(n_scans):  # a scan's segments are ordered and disjoint
+        s = f.seg_start[f.seg_offsets[k] : f.seg_offsets[k + 1]].astype(np.int64)
+        e = f.seg_end[f.seg_offsets[k] : f.seg_offsets[k + 1]].astype(np.int64)
         assert np.all(s[1:] >= e[:-1])
     for items, offsets in ((f.lines, f.line_offsets), (f.circles, f.circle_offsets), (f.blobs, f.blob_offsets)):
         for k in range(n_scans):
-            part = items[offsets[k]:offsets[k + 1]]
+            part = items[offsets[k] : offsets[k + 1]]
             nseg = f.seg_offsets[k + 1] - f.seg_offsets[k]
             assert np.all(part["segment"] < nseg)
             g = f.seg_offsets[k] + part["segment"].astype(np.int64)
             assert np.all(part["first"] >= f.seg_start[g]) and np.all(part["last"] < f.seg_end[g])
             assert np.all(part["first"] <= part["last"])
-            if items is not f.lines:   # lines: see test_perception_kernels (line_of_run's idx reuse)
+            if items is not f.lines:  # lines: see test_perception_kernels (line_of_run's idx reuse)
                 assert np.all(part["n_points"] <= part["last"].astype(np.int64) - part["first"] + 1)
         for name in items.dtype.names:
             if items.dtype[name].kind == "f":
@@ -112,8 +123,9 @@ def test_extract_run_never_crashes_and_keeps_its_invariants(scan, min_points):
     assert np.array_equal(offsets, f.seg_offsets)
     # the segments are the naive reference's, scan by scan
     for k in range(len(r)):
-        got = list(zip(start[offsets[k]:offsets[k + 1]].tolist(), end[offsets[k]:offsets[k + 1]].tolist(),
-                       strict=True))
+        got = list(
+            zip(start[offsets[k] : offsets[k + 1]].tolist(), end[offsets[k] : offsets[k + 1]].tolist(), strict=True)
+        )
         assert got == ref.segment(r[k], inc, params.c0, 0.0, 8.0, min_points)
     # the landmark database is consistent with the scans
     snaps = f.landmarks.snap_offsets
@@ -129,8 +141,17 @@ def test_given_segments_give_the_same_features(scan):
     run = run_of(r, inc)
     f = extract_run(run, landmarks=False)
     g = extract_run(run, landmarks=False, segments=segment_run(run))
-    for name in ("seg_start", "seg_end", "seg_offsets", "lines", "line_offsets", "circles", "circle_offsets",
-                 "blobs", "blob_offsets"):
+    for name in (
+        "seg_start",
+        "seg_end",
+        "seg_offsets",
+        "lines",
+        "line_offsets",
+        "circles",
+        "circle_offsets",
+        "blobs",
+        "blob_offsets",
+    ):
         assert np.array_equal(getattr(f, name), getattr(g, name)), name
 
 
@@ -160,7 +181,7 @@ def test_huge_range_limit_and_huge_ranges():
     r[:, 100:200] = 3.0
     f = extract_run(run_of(r, math.radians(0.5), range_max=math.inf))
     check_invariants(f, 2, 361, FeatureParams().min_points)
-    assert np.diff(f.seg_offsets).tolist() == [3, 3]   # 1e6 m returns are valid without a range limit
+    assert np.diff(f.seg_offsets).tolist() == [3, 3]  # 1e6 m returns are valid without a range limit
 
 
 def test_an_empty_run_and_no_beams():
@@ -194,14 +215,16 @@ def test_a_negative_step_sees_the_same_scene():
     h = extract_run(ScanRun(np.zeros(1, np.int64), r[:, ::-1], g_neg), landmarks=False)
     check_invariants(h, 1, 361, FeatureParams().min_points)
     assert sorted(zip(f.seg_start.tolist(), f.seg_end.tolist(), strict=True)) == sorted(
-        zip((361 - h.seg_end).tolist(), (361 - h.seg_start).tolist(), strict=True))
+        zip((361 - h.seg_end).tolist(), (361 - h.seg_start).tolist(), strict=True)
+    )
     assert len(h.circles) == len(f.circles) == 2
     for c in f.circles:
         assert np.min(np.hypot(h.circles["x"] - c["x"], h.circles["y"] - c["y"])) < 0.01
     wall_f = f.lines[np.argmax(f.lines["length"])]
     wall_h = h.lines[np.argmax(h.lines["length"])]
-    dth, drho = ref.same_line(float(wall_f["theta"]), float(wall_f["rho"]), float(wall_h["theta"]),
-                              float(wall_h["rho"]))
+    dth, drho = ref.same_line(
+        float(wall_f["theta"]), float(wall_f["rho"]), float(wall_h["theta"]), float(wall_h["rho"])
+    )
     assert dth < math.radians(0.5) and drho < 0.01
 
 
@@ -217,8 +240,9 @@ def run_isolated(code: str) -> subprocess.CompletedProcess:
         from datmo_cli.perception.features import extract_run, segment_run
         from datmo_cli.perception.params import FeatureParams
     """)
-    return subprocess.run([sys.executable, "-c", prelude + textwrap.dedent(code)], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-c", prelude + textwrap.dedent(code)], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
 
 
 def test_min_points_two_fills_the_segment_buffer_safely():

@@ -22,16 +22,18 @@ def kernel_circle(x, y, beat=-1.0) -> np.ndarray:
     y = np.ascontiguousarray(y, np.float64)
     w = int(round(PVEC[K.P_CWINDOW] / PVEC[K.P_CELL]))
     out = np.zeros(5)
-    K.circle_of_run(x, y, 0, len(x), PVEC, np.zeros((2 * w + 1, 2 * w + 1), np.int32), np.empty(len(x), np.int64),
-                    out, beat)
+    K.circle_of_run(
+        x, y, 0, len(x), PVEC, np.zeros((2 * w + 1, 2 * w + 1), np.int32), np.empty(len(x), np.int64), out, beat
+    )
     return out
 
 
 def reference_votes(x, y) -> int:
     p = PVEC
     w = int(round(p[K.P_CWINDOW] / p[K.P_CELL]))
-    return ref.htc_peak(list(x), list(y), p[K.P_R_MIN], p[K.P_R_MAX], p[K.P_R_STEP], w, p[K.P_CELL], p[K.P_CTOL],
-                        p[K.P_MIN_SAG])
+    return ref.htc_peak(
+        list(x), list(y), p[K.P_R_MIN], p[K.P_R_MAX], p[K.P_R_STEP], w, p[K.P_CELL], p[K.P_CTOL], p[K.P_MIN_SAG]
+    )
 
 
 INC = math.radians(0.5)
@@ -49,10 +51,17 @@ def noisy_arc(radius, dist, bearing, sigma, seed, span=0.5, inc=INC):
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.floats(0.06, 0.38), st.floats(0.6, 4.0), st.floats(-1.5, 1.5), st.sampled_from([0.0, 0.004, 0.015, 0.04]),
-       st.integers(0, 2**31), st.sampled_from([-1.0, 0.3, 0.5, 0.8, 0.95]))
-def test_htc_peak_equals_the_full_vote_and_beat_only_drops_circles_it_could_not_keep(radius, dist, bearing, sigma,
-                                                                                   seed, beat):
+@given(
+    st.floats(0.06, 0.38),
+    st.floats(0.6, 4.0),
+    st.floats(-1.5, 1.5),
+    st.sampled_from([0.0, 0.004, 0.015, 0.04]),
+    st.integers(0, 2**31),
+    st.sampled_from([-1.0, 0.3, 0.5, 0.8, 0.95]),
+)
+def test_htc_peak_equals_the_full_vote_and_beat_only_drops_circles_it_could_not_keep(
+    radius, dist, bearing, sigma, seed, beat
+):
     """Radii whose points cannot reach the peak so far, or r_acc above `beat`, are not voted: the peak of
     every radius voted in full (the reference) is the kernel's, and with `beat` the kernel returns the very
     same circle when its r_acc is above `beat`, none otherwise."""
@@ -79,15 +88,23 @@ def test_a_beat_of_one_or_more_skips_the_vote():
 def test_wrap_pi_is_the_float_modulo(a):
     expected = a % math.pi
     got = K._wrap_pi(a)
-    if a == 0.0:   # -0.0 stays -0.0 where the modulo gives 0.0: the same theta cell
+    if a == 0.0:  # -0.0 stays -0.0 where the modulo gives 0.0: the same theta cell
         assert got == expected
     else:
         assert got == expected and math.copysign(1.0, got) == math.copysign(1.0, expected)
 
 
 def test_wrap_pi_edges():
-    for a in (-math.pi, -1e-300, -1e-17, 0.0, math.pi, math.nextafter(math.pi, 0), 3 * math.pi / 2,
-              math.nextafter(2 * math.pi, 0)):
+    for a in (
+        -math.pi,
+        -1e-300,
+        -1e-17,
+        0.0,
+        math.pi,
+        math.nextafter(math.pi, 0),
+        3 * math.pi / 2,
+        math.nextafter(2 * math.pi, 0),
+    ):
         assert K._wrap_pi(a) == a % math.pi, a
 
 
@@ -97,8 +114,8 @@ def test_gather_rows_keeps_each_scans_rows_in_order():
     counts = np.array([[2, 0], [0, 1], [3, 4]], np.int64)
     out = np.empty((5, 2))
     K.gather_rows(rows, counts, 0, B, out)
-    expected = np.concatenate([rows[0:2], rows[2 * B:2 * B + 3]])
+    expected = np.concatenate([rows[0:2], rows[2 * B : 2 * B + 3]])
     assert np.array_equal(out, expected)
     out = np.empty((5, 2))
     K.gather_rows(rows, counts, 1, B, out)
-    assert np.array_equal(out, np.concatenate([rows[B:B + 1], rows[2 * B:3 * B]]))
+    assert np.array_equal(out, np.concatenate([rows[B : B + 1], rows[2 * B : 3 * B]]))

@@ -24,10 +24,21 @@ N_SCANS = 30
 
 def run_of(ranges: np.ndarray, inc: float = INC, angle_min: float = ANGLE_MIN, dt_ns: int = 200_000_000) -> ScanRun:
     ranges = np.atleast_2d(np.asarray(ranges, np.float32))
-    g = ScanGeometry(angle_min=angle_min, angle_increment=inc, n_beams=ranges.shape[1], range_min=0.0,
-                     range_max=RANGE_MAX, scan_time=0.2, frame_id="laser")
-    return ScanRun(stamps=np.arange(len(ranges), dtype=np.int64) * dt_ns, ranges=ranges, geometry=g,
-                   intensities=np.zeros((len(ranges), 0), np.float32))
+    g = ScanGeometry(
+        angle_min=angle_min,
+        angle_increment=inc,
+        n_beams=ranges.shape[1],
+        range_min=0.0,
+        range_max=RANGE_MAX,
+        scan_time=0.2,
+        frame_id="laser",
+    )
+    return ScanRun(
+        stamps=np.arange(len(ranges), dtype=np.int64) * dt_ns,
+        ranges=ranges,
+        geometry=g,
+        intensities=np.zeros((len(ranges), 0), np.float32),
+    )
 
 
 def noisy_scans(clean: np.ndarray, n: int = N_SCANS, sigma: float = 0.01, seed: int = 1234) -> np.ndarray:
@@ -39,22 +50,21 @@ def noisy_scans(clean: np.ndarray, n: int = N_SCANS, sigma: float = 0.01, seed: 
 
 
 def scan_lines(f, k: int) -> np.ndarray:
-    return f.lines[f.line_offsets[k]:f.line_offsets[k + 1]]
+    return f.lines[f.line_offsets[k] : f.line_offsets[k + 1]]
 
 
 def scan_circles(f, k: int) -> np.ndarray:
-    return f.circles[f.circle_offsets[k]:f.circle_offsets[k + 1]]
+    return f.circles[f.circle_offsets[k] : f.circle_offsets[k + 1]]
 
 
 def scan_blobs(f, k: int) -> np.ndarray:
-    return f.blobs[f.blob_offsets[k]:f.blob_offsets[k + 1]]
+    return f.blobs[f.blob_offsets[k] : f.blob_offsets[k + 1]]
 
 
 # ----------------------------------------------------------------------------------------------- walls
 
 
-@pytest.mark.parametrize("theta_deg, rho", [(0.0, 3.0), (70.0, 2.5), (-40.0 % 180.0, 4.0), (100.0, 1.5),
-                                            (35.0, 6.0)])
+@pytest.mark.parametrize("theta_deg, rho", [(0.0, 3.0), (70.0, 2.5), (-40.0 % 180.0, 4.0), (100.0, 1.5), (35.0, 6.0)])
 def test_a_wall_is_found_within_1_5_degrees_and_3_cm(theta_deg, rho):
     theta = math.radians(theta_deg)
     f = extract_run(run_of(noisy_scans(ref.ray_wall(ANGLES, rho, theta))), landmarks=False)
@@ -72,8 +82,8 @@ def test_a_wall_is_found_within_1_5_degrees_and_3_cm(theta_deg, rho):
 
 def test_two_perpendicular_walls_give_two_lines_meeting_at_the_corner():
     corner = (3.0, 0.5)
-    a = ref.ray_segment(ANGLES, corner, (1.5, 2.0))     # 2.1 m of wall to the left
-    b = ref.ray_segment(ANGLES, corner, (1.8, -0.7))    # 1.7 m of wall to the right, perpendicular
+    a = ref.ray_segment(ANGLES, corner, (1.5, 2.0))  # 2.1 m of wall to the left
+    b = ref.ray_segment(ANGLES, corner, (1.8, -0.7))  # 1.7 m of wall to the right, perpendicular
     f = extract_run(run_of(noisy_scans(np.minimum(a, b))), landmarks=False)
     hits = 0
     for k in range(N_SCANS):
@@ -82,7 +92,7 @@ def test_two_perpendicular_walls_give_two_lines_meeting_at_the_corner():
         if len(big) != 2:
             continue
         hits += 1
-        assert big[0]["segment"] == big[1]["segment"]    # one segment, two lines
+        assert big[0]["segment"] == big[1]["segment"]  # one segment, two lines
         t0, t1 = float(big[0]["theta"]), float(big[1]["theta"])
         assert abs(abs(ref.angle_diff(t0, t1)) - math.pi / 2) < math.radians(3)
         px, py = ref.intersect(t0, float(big[0]["rho"]), t1, float(big[1]["rho"]))
@@ -96,7 +106,7 @@ def test_a_box_with_a_short_side_gives_two_lines():
     short_side = ref.ray_segment(ANGLES, corner, (2.5 - 0.3 * math.cos(math.pi / 4), 0.3 * math.sin(math.pi / 4)))
     f = extract_run(run_of(noisy_scans(np.minimum(long_side, short_side), sigma=0.003)), landmarks=False)
     two = sum(len(scan_lines(f, k)) == 2 for k in range(N_SCANS))
-    assert two >= 0.8 * N_SCANS      # got 0 of 30: one line per scan
+    assert two >= 0.8 * N_SCANS  # got 0 of 30: one line per scan
 
 
 # ----------------------------------------------------------------------------------------------- circles
@@ -215,7 +225,7 @@ def test_every_segment_is_exactly_one_kind_of_feature():
 
 def test_a_free_standing_column_is_one_landmark_at_its_place():
     cx, cy = 3.0, 0.8
-    clean = ref.ray_circle(ANGLES, cx, cy, 0.25)        # open space behind it: nothing else in range
+    clean = ref.ray_circle(ANGLES, cx, cy, 0.25)  # open space behind it: nothing else in range
     f = extract_run(run_of(noisy_scans(clean, n=20)))
     db = f.landmarks.final()
     cols = db[db["type"] == LANDMARK_COLUMN]
@@ -240,11 +250,12 @@ def test_a_circle_moving_20_cm_per_scan_is_no_landmark():
         clean = ref.ray_circle(ANGLES, 3.0, -2.0 + 0.2 * k, 0.25)
         scans.append(noisy_scans(clean, n=1, seed=k)[0])
     f = extract_run(run_of(np.stack(scans)))
-    assert len(f.circles) >= 15                               # it is seen, as a circle, in most scans
+    assert len(f.circles) >= 15  # it is seen, as a circle, in most scans
     assert not np.any(f.landmarks.final()["type"] == LANDMARK_COLUMN)
     assert not np.any(f.landmarks.rows[:, 0] == LANDMARK_COLUMN) or np.all(
         (f.landmarks.rows[f.landmarks.rows[:, 0] == LANDMARK_COLUMN, 5] < 3)
-        | (f.landmarks.rows[f.landmarks.rows[:, 0] == LANDMARK_COLUMN, 10] != 0))
+        | (f.landmarks.rows[f.landmarks.rows[:, 0] == LANDMARK_COLUMN, 10] != 0)
+    )
 
 
 @pytest.mark.parametrize("dropouts", [[150], [140, 141], [175, 176, 177, 210]])
@@ -254,8 +265,8 @@ def test_dropouts_on_a_wall_make_no_line_ends_benches_or_columns(dropouts):
     clean = ref.ray_wall(ANGLES, 3.0, 0.0)
     scans = noisy_scans(clean, n=20)
     scans[:, dropouts] = np.nan
-    scans[:, 195] = 0.0                       # an invalid return of another kind (below range_min)
+    scans[:, 195] = 0.0  # an invalid return of another kind (below range_min)
     f = extract_run(run_of(scans))
-    assert len(f.lines) >= 3 * 20             # the pieces are seen as lines
+    assert len(f.lines) >= 3 * 20  # the pieces are seen as lines
     types = f.landmarks.final()["type"]
     assert not np.isin(types, [LANDMARK_LINE_END, LANDMARK_BENCH, LANDMARK_COLUMN]).any(), types

@@ -18,8 +18,19 @@ from datmo_cli.perception import threads as T
 from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
 
-ARRAYS = ("seg_start", "seg_end", "seg_offsets", "lines", "line_offsets", "circles", "circle_offsets", "blobs",
-          "blob_offsets", "legs", "leg_offsets")
+ARRAYS = (
+    "seg_start",
+    "seg_end",
+    "seg_offsets",
+    "lines",
+    "line_offsets",
+    "circles",
+    "circle_offsets",
+    "blobs",
+    "blob_offsets",
+    "legs",
+    "leg_offsets",
+)
 
 
 @pytest.fixture(autouse=True)
@@ -33,7 +44,7 @@ def assert_same(a, b) -> None:
     for name in ARRAYS:
         x, y = getattr(a, name), getattr(b, name)
         assert x.dtype == y.dtype and x.shape == y.shape, name
-        assert x.tobytes() == y.tobytes(), name   # bit for bit (NaN-safe)
+        assert x.tobytes() == y.tobytes(), name  # bit for bit (NaN-safe)
 
 
 @pytest.mark.parametrize("log", ["hall", "crowd6", "csail-excerpt", "static"])
@@ -89,7 +100,7 @@ def test_a_few_scans_run_on_one_thread():
 
 def test_a_process_forked_after_the_pool_started_runs_one_thread(monkeypatch):
     """GNU OpenMP's pool cannot serve a forked child (numba terminates it): such a child runs one thread."""
-    monkeypatch.setattr(T, "_POOL_PID", os.getpid() + 1)   # as if this process had been forked from it
+    monkeypatch.setattr(T, "_POOL_PID", os.getpid() + 1)  # as if this process had been forked from it
     assert T.resolve(2) == 1
     monkeypatch.setattr(T, "_POOL_PID", os.getpid())
     assert T.resolve(2) == min(2, T.available())
@@ -113,7 +124,8 @@ def test_features_threads_option_changes_nothing_but_speed(tmp_path):
 
 
 def test_run_accepts_threads(tmp_path):
-    result = CliRunner().invoke(cli, ["run", str(SAMPLE_LOGS / "static.mcap"), "-o", str(tmp_path), "--threads", "1",
-                                      "--no-report"])
+    result = CliRunner().invoke(
+        cli, ["run", str(SAMPLE_LOGS / "static.mcap"), "-o", str(tmp_path), "--threads", "1", "--no-report"]
+    )
     assert result.exit_code == 0, result.output
     assert (tmp_path / "static.mcap").exists()

@@ -35,16 +35,33 @@ from fuzzing import tally
 README = ROOT / "README.md"
 DOCS = ROOT / "docs"
 # README.md and the pages its sections moved to, in the order their examples build on each other's outputs
-GUIDE = [README, *(DOCS / name for name in (
-    "install.md", "import.md", "simulate.md", "record.md", "processing.md", "ros2.md", "legs.md", "report.md",
-    "batch.md", "performance.md", "reliability.md", "architecture.md"))]
+GUIDE = [
+    README,
+    *(
+        DOCS / name
+        for name in (
+            "install.md",
+            "import.md",
+            "simulate.md",
+            "record.md",
+            "processing.md",
+            "ros2.md",
+            "legs.md",
+            "report.md",
+            "batch.md",
+            "performance.md",
+            "reliability.md",
+            "architecture.md",
+        )
+    ),
+]
 MAKEFILE = ROOT / "Makefile"
-NEEDS = re.compile(r"(?:^|\s)#\s*(needs\b.*)$")   # the README's marker: a comment starting "needs"
-HEREDOC = re.compile(r"<<-?\s*['\"]?(\w+)['\"]?")   # cat > FILE <<'EOF' ... EOF
-OUTPUT = re.compile(r"(?:\s-o\s+|\s>\s*)([^\s;|&<>]+)")   # -o PATH, > PATH
+NEEDS = re.compile(r"(?:^|\s)#\s*(needs\b.*)$")  # the README's marker: a comment starting "needs"
+HEREDOC = re.compile(r"<<-?\s*['\"]?(\w+)['\"]?")  # cat > FILE <<'EOF' ... EOF
+OUTPUT = re.compile(r"(?:\s-o\s+|\s>\s*)([^\s;|&<>]+)")  # -o PATH, > PATH
 EXAMPLE_PTY = re.compile(r"/dev/pts/\d+")
-COMMAND_TIMEOUT = 600   # s, a hung command fails the test instead of hanging it
-EMULATE_START_TIMEOUT = 60   # s to print its device path
+COMMAND_TIMEOUT = 600  # s, a hung command fails the test instead of hanging it
+EMULATE_START_TIMEOUT = 60  # s to print its device path
 
 
 def example_blocks(text: str, languages: tuple[str, ...] = ("sh", "python")) -> list[tuple[str, list[str]]]:
@@ -124,14 +141,16 @@ def demo_command() -> str:
 
 def run(command: str, cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess:
     """Run one README command with bash in `cwd`."""
-    return subprocess.run(["bash", "-c", command], cwd=cwd, env=env, capture_output=True, text=True,
-                          timeout=COMMAND_TIMEOUT)
+    return subprocess.run(
+        ["bash", "-c", command], cwd=cwd, env=env, capture_output=True, text=True, timeout=COMMAND_TIMEOUT
+    )
 
 
 def start_emulator(command: str, cwd: Path, env: dict[str, str]) -> tuple[subprocess.Popen, str]:
     """Start `datmo emulate` in the background; return it and the device path it prints on its first line."""
-    proc = subprocess.Popen(["bash", "-c", "exec " + command], cwd=cwd, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        ["bash", "-c", "exec " + command], cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     sel = selectors.DefaultSelector()
     sel.register(proc.stdout, selectors.EVENT_READ)
     if not sel.select(EMULATE_START_TIMEOUT):
@@ -180,8 +199,9 @@ def run_python(block: list[str], where: str, cwd: Path, env: dict[str, str]) -> 
     """Run a ```python block whole with the venv's Python in `cwd`; why it fails, or None."""
     code = "\n".join(block)
     start = time.monotonic()
-    result = subprocess.run([sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True,
-                            timeout=COMMAND_TIMEOUT)
+    result = subprocess.run(
+        [sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True, timeout=COMMAND_TIMEOUT
+    )
     print(f"  {time.monotonic() - start:6.1f} s  ({where}: a python block)")
     why = problem(f"{where}: the python block starting {block[0]!r}", result, cwd)
     tally("README commands", failed=why is not None)
@@ -208,12 +228,12 @@ def run_block(block: list[str], cwd: Path, env: dict[str, str]) -> tuple[int, li
             print(f"  {time.monotonic() - start:6.1f} s  {command}")
             tally("README commands", failed=why is not None)
             failures += [why] if why else []
-        if emulator is not None:   # counted here: its exit after Ctrl-C is part of its promise
+        if emulator is not None:  # counted here: its exit after Ctrl-C is part of its promise
             why = stop_emulator(emulator[0], emulator[2])
             tally("README commands", failed=why is not None)
             failures += [why] if why else []
     finally:
-        if emulator is not None and emulator[0].poll() is None:   # a command of its block raised
+        if emulator is not None and emulator[0].poll() is None:  # a command of its block raised
             emulator[0].kill()
             emulator[0].wait()
     return ran, failures, skipped
@@ -221,13 +241,33 @@ def run_block(block: list[str], cwd: Path, env: dict[str, str]) -> tuple[int, li
 
 def test_sh_blocks_and_markers():
     """The extraction itself: continued lines join, markers skip a block or a line, make lines are skipped."""
-    text = "\n".join([
-        "```sh", "make demo    # a comment", "datmo a \\", "    --b c", "datmo d   # needs an LMS200", "```",
-        "  ```sh", "  indented: quoted data", "  ```",
-        "```toml", "x = 1", "```",
-        "```sh", "# needs ROS 2", "ros2 bag play x", "```",
-        "```sh", "cat > a.toml <<'EOF'", "# not a comment line here", "x = 1", "EOF", "datmo e", "```",
-    ])
+    text = "\n".join(
+        [
+            "```sh",
+            "make demo    # a comment",
+            "datmo a \\",
+            "    --b c",
+            "datmo d   # needs an LMS200",
+            "```",
+            "  ```sh",
+            "  indented: quoted data",
+            "  ```",
+            "```toml",
+            "x = 1",
+            "```",
+            "```sh",
+            "# needs ROS 2",
+            "ros2 bag play x",
+            "```",
+            "```sh",
+            "cat > a.toml <<'EOF'",
+            "# not a comment line here",
+            "x = 1",
+            "EOF",
+            "datmo e",
+            "```",
+        ]
+    )
     blocks = sh_blocks(text)
     assert len(blocks) == 3
     first, second, third = (commands(block) for block in blocks)
@@ -253,8 +293,13 @@ def test_readme_config_example(tmp_path):
     assert blocks, "no ```toml example in the README or its guide pages"
     for block in blocks:
         (tmp_path / "datmo.toml").write_text(block)
-        result = subprocess.run([str(Path(sys.executable).with_name("datmo")), "config"], cwd=tmp_path,
-                                capture_output=True, text=True, timeout=120)
+        result = subprocess.run(
+            [str(Path(sys.executable).with_name("datmo")), "config"],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert result.returncode == 0, result.stderr
         keys = [key for table in tomllib.loads(block).values() for key in table]
         taken = [key for key in keys if re.search(rf"^{key} = .*# from datmo\.toml", result.stdout, re.M)]
@@ -274,7 +319,7 @@ def test_readme_fences_are_sh():
 def test_readme_runs(tmp_path):
     """Every command of the README and its guide pages not marked otherwise exits 0, in order, in a fresh folder
     after the demo; so does every python block there."""
-    shared_path()   # the README reads ../shared/data: skip where absent, fail under CI=true
+    shared_path()  # the README reads ../shared/data: skip where absent, fail under CI=true
     (tmp_path / "shared").symlink_to(SHARED_DATA.parent, target_is_directory=True)
     work = tmp_path / "datmo"
     work.mkdir()

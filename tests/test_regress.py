@@ -9,13 +9,24 @@ from pathlib import Path
 import pytest
 
 _spec = importlib.util.spec_from_file_location(
-    "regress", Path(__file__).resolve().parent.parent / "benchmarks" / "regress.py")
+    "regress", Path(__file__).resolve().parent.parent / "benchmarks" / "regress.py"
+)
 regress = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(regress)
 
-BASE = {"hall": {"mota": 0.80, "motp": 0.10, "idf1": 0.70, "precision": 0.9, "recall": 0.85,
-                 "num_false_positives": 40, "num_misses": 60, "num_switches": 2},
-        "csail-excerpt": {"ground_truth": False, "tracks": 12, "dynamic": 3, "person": 2}}
+BASE = {
+    "hall": {
+        "mota": 0.80,
+        "motp": 0.10,
+        "idf1": 0.70,
+        "precision": 0.9,
+        "recall": 0.85,
+        "num_false_positives": 40,
+        "num_misses": 60,
+        "num_switches": 2,
+    },
+    "csail-excerpt": {"ground_truth": False, "tracks": 12, "dynamic": 3, "person": 2},
+}
 
 
 def with_(**changes):
@@ -26,21 +37,25 @@ def test_same_figures_pass():
     assert regress.compare(BASE, with_()) == ([], [])
 
 
-@pytest.mark.parametrize("changes, figure", [
-    ({"mota": 0.779}, "mota"),
-    ({"idf1": 0.67}, "idf1"),
-    ({"motp": 0.125}, "motp"),
-    ({"num_false_positives": 45}, "num_false_positives"),  # tolerance max(3, 10% of 40) = 4
-    ({"num_switches": 6}, "num_switches"),                 # tolerance 3
-    ({"mota": None}, "mota is undefined"),
-])
+@pytest.mark.parametrize(
+    "changes, figure",
+    [
+        ({"mota": 0.779}, "mota"),
+        ({"idf1": 0.67}, "idf1"),
+        ({"motp": 0.125}, "motp"),
+        ({"num_false_positives": 45}, "num_false_positives"),  # tolerance max(3, 10% of 40) = 4
+        ({"num_switches": 6}, "num_switches"),  # tolerance 3
+        ({"mota": None}, "mota is undefined"),
+    ],
+)
 def test_a_figure_worse_than_its_tolerance_fails(changes, figure):
     failures, _ = regress.compare(BASE, with_(**changes))
     assert len(failures) == 1 and failures[0].startswith("hall: ") and figure in failures[0]
 
 
-@pytest.mark.parametrize("changes", [{"mota": 0.781}, {"motp": 0.119}, {"num_false_positives": 44},
-                                     {"num_switches": 5}])
+@pytest.mark.parametrize(
+    "changes", [{"mota": 0.781}, {"motp": 0.119}, {"num_false_positives": 44}, {"num_switches": 5}]
+)
 def test_within_tolerance_passes(changes):
     assert regress.compare(BASE, with_(**changes))[0] == []
 

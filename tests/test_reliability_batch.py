@@ -71,7 +71,7 @@ def test_an_input_done_before_and_now_a_fifo_is_not_hashed_on_resume(logs, tmp_p
     out = tmp_path / "out"
     assert run(logs / "a.mcap", "-o", out).exit_code == 0
     (logs / "a.mcap").unlink()
-    os.mkfifo(logs / "a.mcap")                 # hashing it to compare with the manifest would wait forever
+    os.mkfifo(logs / "a.mcap")  # hashing it to compare with the manifest would wait forever
     r = run(logs / "a.mcap", "-o", out)
     one_line(r, f"{logs / 'a.mcap'}: is a FIFO (named pipe), not a regular file")
     assert batch.Manifest(str(out)).latest()[str(logs / "a.mcap")]["status"] == "failed"
@@ -93,7 +93,7 @@ def test_a_manifest_that_is_a_symlink_is_neither_written_nor_read_through(logs, 
     m = batch.Manifest(str(out))
     m.append({"input": "x", "status": "failed"})
     os.replace(out / "manifest.jsonl", tmp_path / "moved")
-    (out / "manifest.jsonl").symlink_to(rc)             # put there while a batch runs: its next line is refused
+    (out / "manifest.jsonl").symlink_to(rc)  # put there while a batch runs: its next line is refused
     with pytest.raises(OutputError, match="is a symbolic link"):
         m.append({"input": "y", "status": "failed"})
     assert rc.read_text() == "# a shell's rc file\n"
@@ -109,8 +109,10 @@ def test_an_output_folder_reached_through_a_symlink_fails_its_input_and_writes_n
     by_name = {Path(x["input"]).name: x for x in lines(out)}
     assert by_name["a.mcap"]["status"] == by_name["b.mcap"]["status"] == "done"
     assert by_name["c.mcap"]["status"] == "failed"
-    assert by_name["c.mcap"]["error"] == f"{logs / 'site' / 'c.mcap'}: {out / 'site'}: is a symbolic link; datmo " \
+    assert (
+        by_name["c.mcap"]["error"] == f"{logs / 'site' / 'c.mcap'}: {out / 'site'}: is a symbolic link; datmo "
         "run writes its outputs only inside the output folder, never through a link"
+    )
     assert list(elsewhere.iterdir()) == []
 
 
@@ -133,9 +135,11 @@ def test_report_of_a_folder_reads_only_its_own_outputs_each_once(logs, tmp_path)
     outside = tmp_path / "outside.mcap"
     synthetic_logs.write(outside)
     a = lines(out)[0]
-    extra = [{**a, "input": "/elsewhere/x.mcap", "output": str(outside)},
-             {**a, "input": "/elsewhere/y.mcap", "output": str(out / ".." / "outside.mcap")}]
-    extra += [{**a, "input": f"/copies/{i}.mcap"} for i in range(2000)]    # 2,000 lines naming one output
+    extra = [
+        {**a, "input": "/elsewhere/x.mcap", "output": str(outside)},
+        {**a, "input": "/elsewhere/y.mcap", "output": str(out / ".." / "outside.mcap")},
+    ]
+    extra += [{**a, "input": f"/copies/{i}.mcap"} for i in range(2000)]  # 2,000 lines naming one output
     with open(out / "manifest.jsonl", "a") as f:
         f.writelines(json.dumps(x) + "\n" for x in extra)
     r = invoke("report", out, "--format", "json")
@@ -155,9 +159,9 @@ def test_a_line_of_another_datmo_version_is_redone(logs, tmp_path, monkeypatch):
     assert run(logs / "a.mcap", "-o", out).exit_code == 0
     CALLS.clear()
     assert "1 skipped" in run(logs / "a.mcap", "-o", out).stderr and CALLS == []
-    monkeypatch.setattr(batch, "__version__", "99.0.0")     # an upgrade
+    monkeypatch.setattr(batch, "__version__", "99.0.0")  # an upgrade
     again = run(logs / "a.mcap", "-o", out)
-    assert again.exit_code == 0 and CALLS == ["a.mcap"], again.output    # its own output: overwritten
+    assert again.exit_code == 0 and CALLS == ["a.mcap"], again.output  # its own output: overwritten
     assert batch.Manifest(str(out)).latest()[str(logs / "a.mcap")]["datmo_version"] == "99.0.0"
 
 
@@ -180,8 +184,18 @@ def test_report_plots_two_files_of_one_name_into_two_plots(tmp_path):
     for d in ("A", "B"):
         (tmp_path / d).mkdir()
         synthetic_logs.write(tmp_path / d / "x.mcap")
-    r = invoke("report", tmp_path / "A" / "x.mcap", tmp_path / "B" / "x.mcap", "--plot", tmp_path / "q.png",
-               "--plot-kind", "counts", "--force", "--format", "json")
+    r = invoke(
+        "report",
+        tmp_path / "A" / "x.mcap",
+        tmp_path / "B" / "x.mcap",
+        "--plot",
+        tmp_path / "q.png",
+        "--plot-kind",
+        "counts",
+        "--force",
+        "--format",
+        "json",
+    )
     assert r.exit_code == 0, r.output
     assert sorted(p.name for p in tmp_path.glob("q*.png")) == ["q-A-x.png", "q-B-x.png"]
 
@@ -194,7 +208,7 @@ def test_a_path_with_glob_characters_that_exists_is_that_file(logs, tmp_path):
     (logs / "ab.mcap").write_bytes(b"what the pattern [a]b matches")
     out = str(tmp_path / "out")
     assert batch.discover([str(logs / "[a]b.mcap")], out) == [(str(logs / "[a]b.mcap"), str(Path(out) / "[a]b.mcap"))]
-    assert [Path(s).name for s, _ in batch.discover([str(logs / "[a]?.mcap")], out)] == ["ab.mcap"]   # a pattern
+    assert [Path(s).name for s, _ in batch.discover([str(logs / "[a]?.mcap")], out)] == ["ab.mcap"]  # a pattern
     r = run(logs / "[a]b.mcap", "-o", out)
     assert r.exit_code == 0 and CALLS == ["[a]b.mcap"], r.output
 
@@ -207,12 +221,14 @@ def test_a_second_run_on_a_locked_folder_is_refused_naming_the_first(logs, tmp_p
     assert run(logs / "a.mcap", "-o", out).exit_code == 0
     before = (out / "manifest.jsonl").read_text()
     CALLS.clear()
-    with batch.folder_lock(str(out)):        # as a first `datmo run` holds it while it runs
-        line = one_line(run(logs / "a.mcap", logs / "b.mcap", "-o", out),
-                        f"{out}: another datmo run is writing into this folder (pid {os.getpid()} on ")
+    with batch.folder_lock(str(out)):  # as a first `datmo run` holds it while it runs
+        line = one_line(
+            run(logs / "a.mcap", logs / "b.mcap", "-o", out),
+            f"{out}: another datmo run is writing into this folder (pid {os.getpid()} on ",
+        )
         assert "wait for it to finish or stop it, or give another -o folder" in line
     assert CALLS == [] and (out / "manifest.jsonl").read_text() == before
-    r = run(logs / "a.mcap", logs / "b.mcap", "-o", out)      # released: the next run goes ahead
+    r = run(logs / "a.mcap", logs / "b.mcap", "-o", out)  # released: the next run goes ahead
     assert r.exit_code == 0 and CALLS == ["b.mcap"], r.output
     assert not (out / batch.LOCK).exists()
 
@@ -229,7 +245,7 @@ def test_the_lock_is_taken_again_when_its_file_was_replaced_meanwhile(tmp_path, 
 
     def flock(fd, op):
         calls.append(op)
-        if len(calls) == 1:           # the holder finishes between this run's open and its lock
+        if len(calls) == 1:  # the holder finishes between this run's open and its lock
             os.unlink(out / batch.LOCK)
             (out / batch.LOCK).write_text("")
         return real(fd, op)
@@ -301,10 +317,17 @@ def test_jobs_workers_end_when_the_batch_process_is_killed(logs, tmp_path):
     pids = tmp_path / "pids"
     pids.mkdir()
     here = Path(__file__).resolve().parent
-    script = WORKERS_SCRIPT.format(root=str(here.parent), tests=str(here), pids=str(pids), a=str(logs / "a.mcap"),
-                                   b=str(logs / "b.mcap"), out=str(tmp_path / "out"))
-    parent = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                              start_new_session=True)
+    script = WORKERS_SCRIPT.format(
+        root=str(here.parent),
+        tests=str(here),
+        pids=str(pids),
+        a=str(logs / "a.mcap"),
+        b=str(logs / "b.mcap"),
+        out=str(tmp_path / "out"),
+    )
+    parent = subprocess.Popen(
+        [sys.executable, "-c", script], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True
+    )
     try:
         deadline = time.monotonic() + 120
         while len(list(pids.iterdir())) < 2 and time.monotonic() < deadline and parent.poll() is None:
@@ -319,7 +342,7 @@ def test_jobs_workers_end_when_the_batch_process_is_killed(logs, tmp_path):
         assert _session(parent.pid) == []
     finally:
         try:
-            os.killpg(parent.pid, signal.SIGKILL)    # the group this test started, should anything be left
+            os.killpg(parent.pid, signal.SIGKILL)  # the group this test started, should anything be left
         except ProcessLookupError:
             pass
         parent.wait()

@@ -35,16 +35,32 @@ def text(s: str) -> bytes:
 def mcap_with_chunk(compression: str, compressed: bytes, declared: int, crc: int = 0) -> bytes:
     """An MCAP whose scan messages lie in one chunk of `compressed` bytes that declares `declared` bytes
     uncompressed; its schema and channel at the top level, before it."""
-    run = ScanRun(T0 + np.arange(3, dtype=np.int64) * 200_000_000, np.full((3, 91), 3.0, np.float32),
-                  ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, "laser"))
-    schema = record(0x03, struct.pack("<H", 1) + text(types.LASERSCAN) + text("ros2msg")
-                    + text(types.schema_text(types.LASERSCAN)))
+    run = ScanRun(
+        T0 + np.arange(3, dtype=np.int64) * 200_000_000,
+        np.full((3, 91), 3.0, np.float32),
+        ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, "laser"),
+    )
+    schema = record(
+        0x03, struct.pack("<H", 1) + text(types.LASERSCAN) + text("ros2msg") + text(types.schema_text(types.LASERSCAN))
+    )
     channel = record(0x04, struct.pack("<HH", 1, 1) + text(mcapio.TOPIC_SCAN) + text("cdr") + struct.pack("<I", 0))
-    chunk = record(0x06, struct.pack("<QQQI", T0, T0, declared, crc) + text(compression)
-                   + struct.pack("<Q", len(compressed)) + compressed)
-    return (mcapio.MAGIC + record(0x01, text("ros2") + text("test")) + schema + channel + chunk
-            + record(0x0F, struct.pack("<I", 0)) + record(0x02, struct.pack("<QQI", 0, 0, 0)) + mcapio.MAGIC
-            ), encode_scans(run)
+    chunk = record(
+        0x06,
+        struct.pack("<QQQI", T0, T0, declared, crc)
+        + text(compression)
+        + struct.pack("<Q", len(compressed))
+        + compressed,
+    )
+    return (
+        mcapio.MAGIC
+        + record(0x01, text("ros2") + text("test"))
+        + schema
+        + channel
+        + chunk
+        + record(0x0F, struct.pack("<I", 0))
+        + record(0x02, struct.pack("<QQI", 0, 0, 0))
+        + mcapio.MAGIC
+    ), encode_scans(run)
 
 
 def messages(payloads: list[bytes]) -> bytes:
@@ -76,8 +92,11 @@ def test_a_zstd_chunk_declaring_2_gib_is_skipped_before_decompressing(tmp_path, 
 
     monkeypatch.setattr(zstandard.ZstdDecompressor, "decompress", spent)
     try:
-        with pytest.warns(mcapio.CorruptLogWarning, match=r"declares 2,147,483,648 bytes uncompressed, more than a "
-                                                          r"chunk may hold \(268,435,456\)"):
+        with pytest.warns(
+            mcapio.CorruptLogWarning,
+            match=r"declares 2,147,483,648 bytes uncompressed, more than a "
+            r"chunk may hold \(268,435,456\)",
+        ):
             log = mcapio.read_log(path, topics=None)
         assert log.corrupt_chunks == 1 and not log.has(mcapio.TOPIC_SCAN)
         result = CliRunner().invoke(cli, ["info", str(path)])
@@ -91,7 +110,7 @@ def test_a_zstd_chunk_declaring_2_gib_is_skipped_before_decompressing(tmp_path, 
 def test_an_lz4_chunk_is_decompressed_no_further_than_it_declares(tmp_path):
     import lz4.frame
 
-    bomb = lz4.frame.compress(bytes(64 << 20))     # 64 MiB of zeros in about 260 kB
+    bomb = lz4.frame.compress(bytes(64 << 20))  # 64 MiB of zeros in about 260 kB
     data, _ = mcap_with_chunk("lz4", bomb, 1000)
     path = tmp_path / "bomb.mcap"
     path.write_bytes(data)
@@ -129,7 +148,7 @@ def test_a_leg_model_declaring_a_3_gb_array_is_refused_before_loading(tmp_path, 
     with zipfile.ZipFile(good) as src, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as dst:
         for info in src.infolist():
             data = src.read(info)
-            if info.filename == "threshold.npy":   # declares 400 million floats; holds eight
+            if info.filename == "threshold.npy":  # declares 400 million floats; holds eight
                 data = npy_header((400_000_000,)) + bytes(64)
             dst.writestr(info.filename, data)
 
@@ -138,8 +157,11 @@ def test_a_leg_model_declaring_a_3_gb_array_is_refused_before_loading(tmp_path, 
 
     monkeypatch.setattr(np, "load", spent)
     try:
-        with pytest.raises(InputError, match=r"bomb.npz: not a leg model file \(threshold.npy and the arrays before it "
-                                             r"declare [\d,]+ bytes, more than a leg model takes \(268,435,456\)\)"):
+        with pytest.raises(
+            InputError,
+            match=r"bomb.npz: not a leg model file \(threshold.npy and the arrays before it "
+            r"declare [\d,]+ bytes, more than a leg model takes \(268,435,456\)\)",
+        ):
             legs.LegModel.load(path)
     except BaseException:
         tally("decompression bombs", failed=True)
@@ -161,7 +183,7 @@ def test_a_long_line_in_a_gzipped_carmen_log_is_never_held_whole(tmp_path):
     try:
         res = import_log(path)
         peak = tracemalloc.get_traced_memory()[1]
-        assert len(res.run) == 10 and peak < 12 << 20, peak   # the 16 MB line never held (nor split into words)
+        assert len(res.run) == 10 and peak < 12 << 20, peak  # the 16 MB line never held (nor split into words)
         assert f"{path}: skipped 1 malformed line (first at line 6)" in res.warnings
     except BaseException:
         tally("decompression bombs", failed=True)

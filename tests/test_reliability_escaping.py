@@ -25,7 +25,7 @@ from datmo_cli.text import markup, printable
 CLEAR = "\x1b[2J"
 LINK = "\x1b]8;;http://evil.example/\x1b\\click me\x1b]8;;\x1b\\"
 HOSTILE = f"[/]{CLEAR}[link=http://evil.example/]x[/link]{LINK}\u202eevil\n"
-SHOWN = "[/]\\x1b[2J[link=http://evil.example/]x[/link]"   # how the start of HOSTILE must be shown
+SHOWN = "[/]\\x1b[2J[link=http://evil.example/]x[/link]"  # how the start of HOSTILE must be shown
 
 
 def run_cli(*args) -> tuple[int, str, str]:
@@ -44,12 +44,14 @@ def assert_shown_safely(text: str) -> None:
 
 
 def test_printable_escapes_controls_and_keeps_ordinary_text():
-    assert printable(HOSTILE) == ("[/]\\x1b[2J[link=http://evil.example/]x[/link]\\x1b]8;;http://evil.example/"
-                                  "\\x1b\\click me\\x1b]8;;\\x1b\\\\u202eevil\\x0a")
+    assert printable(HOSTILE) == (
+        "[/]\\x1b[2J[link=http://evil.example/]x[/link]\\x1b]8;;http://evil.example/"
+        "\\x1b\\click me\\x1b]8;;\\x1b\\\\u202eevil\\x0a"
+    )
     assert printable("a\tb\rc\x7f\x9b\u2028") == "a\\x09b\\x0dc\\x7f\\x9b\\u2028"
     ordinary = "hall: 90.0° to -90.0°, café, 走廊, /datmo/markers/tracks"
     assert printable(ordinary) == ordinary
-    assert printable(printable(HOSTILE)) == printable(HOSTILE)   # idempotent
+    assert printable(printable(HOSTILE)) == printable(HOSTILE)  # idempotent
 
 
 def test_markup_prints_as_itself():
@@ -85,12 +87,24 @@ def write_hostile(path, *, processed: bool) -> None:
         w.add_metadata("datmo.params", {HOSTILE: json.dumps(HOSTILE), "features": json.dumps({"frame": HOSTILE})})
         for k in range(syn.N):
             s = int(syn.STAMPS[k])
-            w.write(mcapio.TOPIC_FEATURES, types.FEATURES, s,
-                    cdr.encode(types.FEATURES, {"stamp_ns": s, "frame_id": HOSTILE, **syn.features(k)}))
-            w.write(mcapio.TOPIC_LANDMARKS, types.LANDMARKS, s,
-                    cdr.encode(types.LANDMARKS, {"stamp_ns": s, "frame_id": HOSTILE, "landmarks": syn.landmarks(k)}))
-            w.write(mcapio.TOPIC_TRACKS, types.TRACKS, s,
-                    cdr.encode(types.TRACKS, {"stamp_ns": s, "frame_id": HOSTILE, "tracks": syn.tracks(k)}))
+            w.write(
+                mcapio.TOPIC_FEATURES,
+                types.FEATURES,
+                s,
+                cdr.encode(types.FEATURES, {"stamp_ns": s, "frame_id": HOSTILE, **syn.features(k)}),
+            )
+            w.write(
+                mcapio.TOPIC_LANDMARKS,
+                types.LANDMARKS,
+                s,
+                cdr.encode(types.LANDMARKS, {"stamp_ns": s, "frame_id": HOSTILE, "landmarks": syn.landmarks(k)}),
+            )
+            w.write(
+                mcapio.TOPIC_TRACKS,
+                types.TRACKS,
+                s,
+                cdr.encode(types.TRACKS, {"stamp_ns": s, "frame_id": HOSTILE, "tracks": syn.tracks(k)}),
+            )
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +119,7 @@ def hostile(tmp_path_factory):
 def as_terminal(monkeypatch) -> None:
     """Tables printed as on a terminal (boxed, styled), not as on a pipe (plain columns)."""
     monkeypatch.setattr(progress, "_isatty", lambda stream: True)
-    monkeypatch.setenv("COLUMNS", "2000")   # wide enough that no cell is folded
+    monkeypatch.setenv("COLUMNS", "2000")  # wide enough that no cell is folded
 
 
 @pytest.fixture(params=["pipe", "terminal"])
@@ -121,11 +135,12 @@ def test_info_shows_a_hostile_log_as_it_is(hostile, terminal):
     assert_shown_safely(out)
     for what in ("\\u202eevil\\x0a", "sensor_msgs/msg/LaserScan"):
         assert what in out
-    assert out.count(SHOWN) >= 6   # the frame, a topic, a schema name, a metadata record's name, key and value
+    assert out.count(SHOWN) >= 6  # the frame, a topic, a schema name, a metadata record's name, key and value
 
 
-@pytest.mark.parametrize("fmt, on_terminal", [("rich", False), ("rich", True), ("markdown", False), ("csv", False),
-                                              ("json", False)])
+@pytest.mark.parametrize(
+    "fmt, on_terminal", [("rich", False), ("rich", True), ("markdown", False), ("csv", False), ("json", False)]
+)
 def test_report_shows_a_hostile_log_as_it_is(hostile, monkeypatch, fmt, on_terminal):
     if on_terminal:
         as_terminal(monkeypatch)
@@ -133,9 +148,9 @@ def test_report_shows_a_hostile_log_as_it_is(hostile, monkeypatch, fmt, on_termi
     assert code == 0, err
     assert "\x1b" not in out and "\u202e" not in out
     if fmt == "json":
-        assert json.loads(out)["files"][0]["run"]["command"] == HOSTILE   # JSON keeps the string, escaped by JSON
+        assert json.loads(out)["files"][0]["run"]["command"] == HOSTILE  # JSON keeps the string, escaped by JSON
     elif fmt != "csv":
-        assert_shown_safely(out)   # the command line, the version, a parameter's name and value, the landmark frame
+        assert_shown_safely(out)  # the command line, the version, a parameter's name and value, the landmark frame
 
 
 def test_run_report_and_errors_of_a_hostile_input(tmp_path, hostile, monkeypatch):
@@ -177,5 +192,5 @@ def test_report_csv_neutralises_a_file_name_like_a_formula(tmp_path, monkeypatch
     assert rows and all(r["file"] in ("'" + name, "total") for r in rows)
     assert not any(v.startswith(("=", "+", "@")) for r in rows for v in r.values())
     negative = [v for r in rows for k, v in r.items() if k != "file" and v.startswith("-")]
-    assert all(float(v) < 0 for v in negative)   # negative numbers (the tracks' last positions) stay numbers
+    assert all(float(v) < 0 for v in negative)  # negative numbers (the tracks' last positions) stay numbers
     assert bool(negative) == tracks

@@ -19,7 +19,7 @@ from datmo_cli import input_files
 from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 
-pytestmark = pytest.mark.timeout(120)   # a reader that blocks on a FIFO fails here instead of hanging the suite
+pytestmark = pytest.mark.timeout(120)  # a reader that blocks on a FIFO fails here instead of hanging the suite
 
 
 def invoke(*args):
@@ -42,8 +42,13 @@ def files(tmp_path_factory, sample_logs):
     d = tmp_path_factory.mktemp("special")
     os.mkfifo(d / "pipe")
     synthetic_logs.write(d / "tracked.mcap")
-    return {"fifo": d / "pipe", "zero": Path("/dev/zero"), "tracked": d / "tracked.mcap",
-            "log": sample_logs / "static.mcap", "dir": d}
+    return {
+        "fifo": d / "pipe",
+        "zero": Path("/dev/zero"),
+        "tracked": d / "tracked.mcap",
+        "log": sample_logs / "static.mcap",
+        "dir": d,
+    }
 
 
 # every reader of a user-named file: the arguments with X where the special file goes
@@ -71,8 +76,10 @@ READERS = {
 @pytest.mark.parametrize("reader", list(READERS))
 def test_a_fifo_or_device_is_refused_by_every_reader_in_one_line(files, tmp_path, reader, kind):
     special = files[kind]
-    args = [str(special) if a == "X" else a.format(out=tmp_path, tracked=files["tracked"], log=files["log"])
-            for a in READERS[reader]]
+    args = [
+        str(special) if a == "X" else a.format(out=tmp_path, tracked=files["tracked"], log=files["log"])
+        for a in READERS[reader]
+    ]
     result = invoke(*args)
     ok = False
     try:
@@ -101,9 +108,12 @@ def test_a_manifest_that_is_a_fifo_or_a_device_is_refused(files, tmp_path):
 def test_text_inputs_are_refused_past_their_size_before_being_read(tmp_path, monkeypatch):
     big = tmp_path / "big.toml"
     with open(big, "wb") as f:
-        f.truncate(input_files.MAX_CONFIG_BYTES + 1)     # sparse: nothing is written, nothing should be read
-    line = one_line(invoke("config", "--config", big), f"{big}: {input_files.MAX_CONFIG_BYTES + 1:,} bytes",
-                    f"a configuration file is at most {input_files.MAX_CONFIG_BYTES:,} bytes")
+        f.truncate(input_files.MAX_CONFIG_BYTES + 1)  # sparse: nothing is written, nothing should be read
+    line = one_line(
+        invoke("config", "--config", big),
+        f"{big}: {input_files.MAX_CONFIG_BYTES + 1:,} bytes",
+        f"a configuration file is at most {input_files.MAX_CONFIG_BYTES:,} bytes",
+    )
     assert "TOML" not in line
     gt = tmp_path / "gt.csv"
     gt.write_text("stamp_ns,id,x,y\n" + "1,1,0.0,0.0\n" * 100)
@@ -119,7 +129,7 @@ def test_a_special_file_swapped_in_after_the_check_is_refused_when_opened(tmp_pa
     (and the open itself does not wait for a writer)."""
     fifo = tmp_path / "pipe"
     os.mkfifo(fifo)
-    monkeypatch.setattr(input_files, "check", lambda path, **kw: os.stat(tmp_path))   # the check saw a file
+    monkeypatch.setattr(input_files, "check", lambda path, **kw: os.stat(tmp_path))  # the check saw a file
     with pytest.raises(InputError, match="is a FIFO"):
         input_files.open_regular(fifo)
 
@@ -156,8 +166,9 @@ def test_an_unreadable_input_is_one_line_and_exit_1_not_a_usage_error(files, tmp
     locked = tmp_path / "locked.mcap"
     locked.write_bytes(files["log"].read_bytes())
     real_access = os.access
-    monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if os.fspath(p) == str(locked)
-                        else real_access(p, mode, **kw))
+    monkeypatch.setattr(
+        os, "access", lambda p, mode, **kw: False if os.fspath(p) == str(locked) else real_access(p, mode, **kw)
+    )
     args = [str(locked) if a == "X" else a.format(out=tmp_path) for a in UNREADABLE[reader]]
     ok = False
     try:

@@ -49,17 +49,20 @@ def flaser_log(path, poses: dict[int, str], n: int = 30) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-@pytest.mark.parametrize("bad, kept", [({3: "nan 2 0.5", 7: "1 inf 0.5", 8: "1 2 -nan"}, 27),
-                                       ({k: "nan nan nan" for k in range(30)}, 0)])
+@pytest.mark.parametrize(
+    "bad, kept", [({3: "nan 2 0.5", 7: "1 inf 0.5", 8: "1 2 -nan"}, 27), ({k: "nan nan nan" for k in range(30)}, 0)]
+)
 def test_carmen_poses_that_are_not_numbers_are_left_out_with_one_warning(tmp_path, bad, kept):
     path = tmp_path / "in.log"
     flaser_log(path, bad)
     res = import_log(path)
-    assert len(res.run) == 30   # every scan kept
+    assert len(res.run) == 30  # every scan kept
     said = [w for w in res.warnings if "not finite" in w]
     which = "all" if not kept else f"{len(bad)} of the 30"
-    assert said == [f"{path}: {which} FLASER poses are not finite numbers (NaN or infinite; first at line "
-                    f"{min(bad) + 1}); {'no /odom written' if not kept else 'left out of /odom'}"]
+    assert said == [
+        f"{path}: {which} FLASER poses are not finite numbers (NaN or infinite; first at line "
+        f"{min(bad) + 1}); {'no /odom written' if not kept else 'left out of /odom'}"
+    ]
     if kept:
         assert len(res.odometry) == kept and np.isfinite(res.odometry.x).all() and np.isfinite(res.odometry.y).all()
         assert res.odom_topic == "FLASER"
@@ -69,14 +72,21 @@ def test_carmen_poses_that_are_not_numbers_are_left_out_with_one_warning(tmp_pat
 
 def test_carmen_odom_lines_that_are_not_numbers_are_left_out(tmp_path):
     raw = "RAWLASER1 0 -1.5708 3.14159 0.0174533 81.9 0.01 0 3 1 2 3 0 {t} host {t}"
-    lines = ["ODOM 0 0 0 0 0 0 0.5 h 0.5", raw.format(t=1.0), "ODOM nan 0 0 0 0 0 1.5 h 1.5", raw.format(t=2.0),
-             "ODOM 2 0 0 0 0 0 2.5 h 2.5"]
+    lines = [
+        "ODOM 0 0 0 0 0 0 0.5 h 0.5",
+        raw.format(t=1.0),
+        "ODOM nan 0 0 0 0 0 1.5 h 1.5",
+        raw.format(t=2.0),
+        "ODOM 2 0 0 0 0 0 2.5 h 2.5",
+    ]
     path = tmp_path / "raw.log"
     path.write_text("\n".join(lines) + "\n")
     res = import_log(path)
     assert res.odometry.x.tolist() == [0, 2] and res.odom_topic == "ODOM"
-    assert f"{path}: 1 of the 3 ODOM poses are not finite numbers (NaN or infinite; first at line 3); left out of " \
-           "/odom" in res.warnings
+    assert (
+        f"{path}: 1 of the 3 ODOM poses are not finite numbers (NaN or infinite; first at line 3); left out of "
+        "/odom" in res.warnings
+    )
 
 
 def test_carmen_nan_poses_never_make_nan_tracks(tmp_path):
@@ -115,7 +125,7 @@ def two_channel_mcap(path, frames=("laser", "laser")) -> None:
             cid = w.register_channel(mcapio.TOPIC_SCAN, "cdr", sid, {"publisher": frame})
             g = ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, frame)
             streams.append((cid, stamps + i * 50_000_000, encode_scans(ScanRun(stamps + i * 50_000_000, ranges, g))))
-        for k in range(n):   # in time order, as a recorder writes them: read by topic they interleave
+        for k in range(n):  # in time order, as a recorder writes them: read by topic they interleave
             for cid, times, payloads in streams:
                 w.add_message(cid, int(times[k]), payloads[k], int(times[k]))
         w.finish()
@@ -127,11 +137,15 @@ def test_two_laserscan_channels_on_one_topic_are_refused(tmp_path, command):
     two_channel_mcap(path)
     out = tmp_path / ("out" if command == "run" else "out.mcap")
     code, _, err = run_cli(command, path, "-o", out, *(["--jobs", "1", "--no-report"] if command == "run" else []))
-    if command == "run":   # the input fails, said in its error line
+    if command == "run":  # the input fails, said in its error line
         assert code == 1 and f"datmo: error: {path}: /scan is on 2 channels (id 1: 20" in err, err
         return
-    one_error(code, err, f"{path}: /scan is on 2 channels (id 1: 20 sensor_msgs/msg/LaserScan, id 2: 20 "
-                         "sensor_msgs/msg/LaserScan); their messages would interleave")
+    one_error(
+        code,
+        err,
+        f"{path}: /scan is on 2 channels (id 1: 20 sensor_msgs/msg/LaserScan, id 2: 20 "
+        "sensor_msgs/msg/LaserScan); their messages would interleave",
+    )
     assert not out.exists()
 
 
@@ -149,17 +163,26 @@ def test_two_connections_on_the_scan_topic_of_a_ros1_bag_are_refused(tmp_path):
     path = tmp_path / "two.bag"
     T = STORE1.types
     with Writer(path) as w:
-        conns = [w.add_connection("/scan", types.LASERSCAN, typestore=STORE1, callerid=f"/{name}")
-                 for name in ("front_driver", "rear_driver")]
+        conns = [
+            w.add_connection("/scan", types.LASERSCAN, typestore=STORE1, callerid=f"/{name}")
+            for name in ("front_driver", "rear_driver")
+        ]
         for k in range(6):
             for i, conn in enumerate(conns):
                 t = 1_000_000_000 + k * 100_000_000 + i * 10_000_000
                 stamp = T["builtin_interfaces/msg/Time"](sec=t // 10**9, nanosec=t % 10**9)
                 msg = T[types.LASERSCAN](
                     header=T["std_msgs/msg/Header"](seq=k, stamp=stamp, frame_id=["front", "rear"][i]),
-                    angle_min=-1.0, angle_max=-0.93, angle_increment=0.01, time_increment=0.0, scan_time=0.1,
-                    range_min=0.05, range_max=10.0, ranges=np.full(8, 1.0 + i, np.float32),
-                    intensities=np.zeros(0, np.float32))
+                    angle_min=-1.0,
+                    angle_max=-0.93,
+                    angle_increment=0.01,
+                    time_increment=0.0,
+                    scan_time=0.1,
+                    range_min=0.05,
+                    range_max=10.0,
+                    ranges=np.full(8, 1.0 + i, np.float32),
+                    intensities=np.zeros(0, np.float32),
+                )
                 w.write(conn, t, STORE1.serialize_ros1(msg, types.LASERSCAN))
     code, _, err = run_cli("import", path, "-o", tmp_path / "out.mcap")
     one_error(code, err, f"{path}: /scan is on 2 connections (/front_driver: 6 messages, /rear_driver: 6 messages)")
@@ -172,8 +195,11 @@ def test_two_connections_on_the_scan_topic_of_a_ros1_bag_are_refused(tmp_path):
 def test_train_legs_refuses_one_recording_as_positive_and_negative(tmp_path, monkeypatch, how):
     positive = tmp_path / "legs.mcap"
     positive.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 4)
-    negative = {"same path": positive, "another name": tmp_path / "sub" / ".." / "legs.mcap",
-                "a copy": tmp_path / "copy.mcap"}[how]
+    negative = {
+        "same path": positive,
+        "another name": tmp_path / "sub" / ".." / "legs.mcap",
+        "a copy": tmp_path / "copy.mcap",
+    }[how]
     (tmp_path / "sub").mkdir()
     if how == "a copy":
         negative.write_bytes(positive.read_bytes())
@@ -192,10 +218,18 @@ def ros1_scan(k: int, *, n: int = 60, frame: str = "laser", range_min: float = 0
     T = STORE1.types
     t = 1_000_000_000 + k * 100_000_000
     stamp = T["builtin_interfaces/msg/Time"](sec=t // 10**9, nanosec=t % 10**9)
-    msg = T[types.LASERSCAN](header=T["std_msgs/msg/Header"](seq=k, stamp=stamp, frame_id=frame), angle_min=-0.5,
-                             angle_max=np.float32(-0.5 + 0.0175 * (n - 1)), angle_increment=0.0175,
-                             time_increment=0.0, scan_time=0.1, range_min=range_min, range_max=range_max,
-                             ranges=np.linspace(1, 5, n).astype(np.float32), intensities=np.zeros(0, np.float32))
+    msg = T[types.LASERSCAN](
+        header=T["std_msgs/msg/Header"](seq=k, stamp=stamp, frame_id=frame),
+        angle_min=-0.5,
+        angle_max=np.float32(-0.5 + 0.0175 * (n - 1)),
+        angle_increment=0.0175,
+        time_increment=0.0,
+        scan_time=0.1,
+        range_min=range_min,
+        range_max=range_max,
+        ranges=np.linspace(1, 5, n).astype(np.float32),
+        intensities=np.zeros(0, np.float32),
+    )
     return bytes(STORE1.serialize_ros1(msg, types.LASERSCAN))
 
 
@@ -214,17 +248,27 @@ DAMAGE = {
     "one byte more": (lambda raw: raw + b"\0", "cannot read bag (AnyReaderError: ROS1 message size mismatch"),
     "ranges length": (lambda raw: raw[:49] + (59).to_bytes(4, "little") + raw[53:], "cannot read bag ("),
     "stamp before 1970": (lambda raw: raw[:4] + b"\xff\xff\xff\xff" + raw[8:], "scan 2: header stamp before 1970"),
-    "nanosec": (lambda raw: raw[:8] + (2_000_000_000).to_bytes(4, "little") + raw[12:],
-                "scan 2: header stamp nanosec = 2000000000 is not below 10^9"),
+    "nanosec": (
+        lambda raw: raw[:8] + (2_000_000_000).to_bytes(4, "little") + raw[12:],
+        "scan 2: header stamp nanosec = 2000000000 is not below 10^9",
+    ),
     "angle_min NaN": (lambda raw: raw[:21] + np.float32(np.nan).tobytes() + raw[25:], "scan 2: angle_min is nan"),
-    "angle_max": (lambda raw: raw[:25] + np.float32(2.5).tobytes() + raw[29:],
-                  "scan 2: 60 beams from -28.6479° by 1.00268° end at 30.51°, not at angle_max 143.239°"),
-    "negative range_min": (lambda raw: raw[:41] + np.float32(-1).tobytes() + raw[45:],
-                           "scan 2: range_min is negative (-1 m)"),
-    "range_max below range_min": (lambda raw: raw[:45] + np.float32(0.01).tobytes() + raw[49:],
-                                  "scan 2: range_max 0.01 m is not above range_min 0.05 m"),
-    "intensities": (lambda raw: raw[:-4] + (3).to_bytes(4, "little") + b"\0" * 12,
-                    "scan 2: 3 intensities for 60 ranges"),
+    "angle_max": (
+        lambda raw: raw[:25] + np.float32(2.5).tobytes() + raw[29:],
+        "scan 2: 60 beams from -28.6479° by 1.00268° end at 30.51°, not at angle_max 143.239°",
+    ),
+    "negative range_min": (
+        lambda raw: raw[:41] + np.float32(-1).tobytes() + raw[45:],
+        "scan 2: range_min is negative (-1 m)",
+    ),
+    "range_max below range_min": (
+        lambda raw: raw[:45] + np.float32(0.01).tobytes() + raw[49:],
+        "scan 2: range_max 0.01 m is not above range_min 0.05 m",
+    ),
+    "intensities": (
+        lambda raw: raw[:-4] + (3).to_bytes(4, "little") + b"\0" * 12,
+        "scan 2: 3 intensities for 60 ranges",
+    ),
 }
 
 
@@ -242,10 +286,15 @@ def test_a_damaged_scan_in_a_ros1_bag_is_refused_naming_it(tmp_path, damage):
         assert not (tmp_path / "out.mcap").exists()
 
 
-@pytest.mark.parametrize("limits, said", [((-1.0, 8.0), "range_min is negative (-1 m)"),
-                                          ((-3.0, -1.0), "range_min is negative (-3 m)"),
-                                          ((0.0, -5.0), "range_max -5 m is not above range_min 0 m"),
-                                          ((5.0, 1.0), "range_max 1 m is not above range_min 5 m")])
+@pytest.mark.parametrize(
+    "limits, said",
+    [
+        ((-1.0, 8.0), "range_min is negative (-1 m)"),
+        ((-3.0, -1.0), "range_min is negative (-3 m)"),
+        ((0.0, -5.0), "range_max -5 m is not above range_min 0 m"),
+        ((5.0, 1.0), "range_max 1 m is not above range_min 5 m"),
+    ],
+)
 @pytest.mark.parametrize("command", ["info", "track", "features", "import"])
 def test_range_limits_no_scanner_has_are_an_input_error(tmp_path, limits, said, command):
     """Negative range limits once ended in exit 70 (a numpy error deep in the features); a range_max not above
@@ -296,17 +345,24 @@ def test_fuzz_ros1_bag_errors_or_scans_whose_fields_agree(tmp_path):
 # ------------------------------------------------------------------------------- messages that mislead
 
 
-@pytest.mark.parametrize("field, value, said", [("nanosec", 4_000_000_000, "header stamp nanosec = 4000000000 is not "
-                                                                           "below 10^9"),
-                                                ("sec", -5, "header stamp before 1970 (sec = -5)")])
+@pytest.mark.parametrize(
+    "field, value, said",
+    [
+        ("nanosec", 4_000_000_000, "header stamp nanosec = 4000000000 is not below 10^9"),
+        ("sec", -5, "header stamp before 1970 (sec = -5)"),
+    ],
+)
 @pytest.mark.parametrize("command", ["track", "segment", "run"])
 def test_a_stamp_that_is_not_a_time_is_not_blamed_on_the_order(tmp_path, field, value, said, command):
     """A stamp whose nanosec is 10^9 or more (or before 1970) in mid-log was called "scan stamps go backwards or
     repeat", with advice to `datmo import` the log, which refuses it."""
     import struct
 
-    run = ScanRun(T0 + np.arange(8, dtype=np.int64) * 200_000_000, np.full((8, 91), 3.0, np.float32),
-                  ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, "laser"))
+    run = ScanRun(
+        T0 + np.arange(8, dtype=np.int64) * 200_000_000,
+        np.full((8, 91), 3.0, np.float32),
+        ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, "laser"),
+    )
     payloads = encode_scans(run)
     raw = bytearray(payloads[3])
     struct.pack_into("<i" if field == "sec" else "<I", raw, 4 if field == "sec" else 8, value)
@@ -330,10 +386,13 @@ def test_a_foreign_file_in_a_bag_folder_is_the_one_named(tmp_path):
     bag.mkdir()
     (bag / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  relative_file_paths: [bag_0.mcap]\n")
     (bag / "bag_0.mcap").write_bytes(b"")
-    assert bagdir.check_output(bag, force=True) == bag   # a bag: replaced with --force
+    assert bagdir.check_output(bag, force=True) == bag  # a bag: replaced with --force
     (bag / "notes.txt").write_text("mine")
-    with pytest.raises(OutputError, match=r"bag: a folder that is not a ROS 2 bag \(it holds 'notes.txt', which its "
-                                          r"metadata.yaml does not list\); it is never replaced"):
+    with pytest.raises(
+        OutputError,
+        match=r"bag: a folder that is not a ROS 2 bag \(it holds 'notes.txt', which its "
+        r"metadata.yaml does not list\); it is never replaced",
+    ):
         bagdir.check_output(bag, force=True)
     (bag / "notes.txt").unlink()
     (bag / "a_link").symlink_to(bag / "bag_0.mcap")
@@ -347,9 +406,14 @@ def test_a_warning_about_an_input_is_said_once_by_run(tmp_path):
     warning a first time before the task said it again."""
     path = tmp_path / "cut.mcap"
     with mcapio.LogWriter(path, chunk_size=4000) as w:
-        w.write_scans(ScanRun(T0 + np.arange(40, dtype=np.int64) * 200_000_000, np.full((40, 91), 3.0, np.float32),
-                              ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, "laser")))
+        w.write_scans(
+            ScanRun(
+                T0 + np.arange(40, dtype=np.int64) * 200_000_000,
+                np.full((40, 91), 3.0, np.float32),
+                ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, "laser"),
+            )
+        )
     data = path.read_bytes()
-    path.write_bytes(data[:len(data) * 2 // 3])
+    path.write_bytes(data[: len(data) * 2 // 3])
     code, _, err = run_cli("run", path, "-o", tmp_path / "out", "--jobs", "1", "--no-report")
     assert code == 0 and err.count("truncated MCAP file") == 1, err

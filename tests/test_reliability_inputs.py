@@ -83,12 +83,16 @@ def disordered_log(path: Path) -> tuple[np.ndarray, np.ndarray]:
     stamps = (np.arange(N_SCANS) * 100_000_000 + 10**9).astype(np.int64)
     stamps[10] = stamps[5]
     stamps[20], stamps[21] = stamps[21], stamps[20]
-    ranges = (np.linspace(1, 5, 181, dtype=np.float32)[None, :]
-              + np.arange(N_SCANS, dtype=np.float32)[:, None] * np.float32(0.01))
+    ranges = np.linspace(1, 5, 181, dtype=np.float32)[None, :] + np.arange(N_SCANS, dtype=np.float32)[
+        :, None
+    ] * np.float32(0.01)
     with mcapio.LogWriter(path) as w:
         cid = w.channel(mcapio.TOPIC_SCAN, types.LASERSCAN)
-        w.write_ids(cid, (np.arange(N_SCANS) * 100_000_000 + 10**9).astype(np.int64),
-                    mcapio.encode_scans(ScanRun(stamps, ranges, GEOMETRY)))
+        w.write_ids(
+            cid,
+            (np.arange(N_SCANS) * 100_000_000 + 10**9).astype(np.int64),
+            mcapio.encode_scans(ScanRun(stamps, ranges, GEOMETRY)),
+        )
     return stamps, ranges
 
 
@@ -99,29 +103,34 @@ def test_import_writes_scans_in_time_order_and_drops_repeated_stamps(tmp_path):
     result = invoke("import", src, "-o", out)
     assert result.exit_code == 0, result.output
     warnings = [line for line in result.output.splitlines() if line.startswith("datmo: warning: ")]
-    assert warnings == [f"datmo: warning: {src}: scan stamps not increasing: of 30 scans, 1 stamped before an "
-                        "earlier one (first at scan 21), written in time order; 1 repeat the stamp of another "
-                        "(first at scan 10), dropped"]
+    assert warnings == [
+        f"datmo: warning: {src}: scan stamps not increasing: of 30 scans, 1 stamped before an "
+        "earlier one (first at scan 21), written in time order; 1 repeat the stamp of another "
+        "(first at scan 10), dropped"
+    ]
     run = mcapio.read_run(out)
     assert len(run) == N_SCANS - 1 and np.all(np.diff(run.stamps) > 0)
     assert run.stamps.tolist() == sorted(set(stamps.tolist()))
     for stamp, row in zip(run.stamps.tolist(), run.ranges, strict=True):
-        first = int(np.flatnonzero(stamps == stamp)[0])          # a repeated stamp keeps the first scan
+        first = int(np.flatnonzero(stamps == stamp)[0])  # a repeated stamp keeps the first scan
         np.testing.assert_array_equal(row, ranges[first])
     assert sha(src) == digest
 
 
 def test_bag_import_orders_scans_the_same_way(tmp_path):
-    order = [0, 1, 2, 4, 3, 5, 5, 6]      # scan 4 before 3; 5 twice
-    msgs = [("/scan", SCAN, 10**9 + k * 10**8,
-             lambda s, k=k, i=i: _scan(s, 10**9 + order[i] * 10**8, 8, "laser", 1.0 + i))
-            for k, i in enumerate(range(len(order)))]
+    order = [0, 1, 2, 4, 3, 5, 5, 6]  # scan 4 before 3; 5 twice
+    msgs = [
+        ("/scan", SCAN, 10**9 + k * 10**8, lambda s, k=k, i=i: _scan(s, 10**9 + order[i] * 10**8, 8, "laser", 1.0 + i))
+        for k, i in enumerate(range(len(order)))
+    ]
     result = import_log(write_ros1(tmp_path / "b.bag", msgs))
     assert result.run.stamps.tolist() == [10**9 + k * 10**8 for k in range(7)]
-    assert result.run.ranges[:, 0].tolist() == [1, 2, 3, 5, 4, 6, 8]   # scan 6 (the second 5) dropped
-    assert result.warnings == [f"{tmp_path / 'b.bag'}: scan stamps not increasing: of 8 scans, 1 stamped before "
-                               "an earlier one (first at scan 4), written in time order; 1 repeat the stamp of "
-                               "another (first at scan 6), dropped"]
+    assert result.run.ranges[:, 0].tolist() == [1, 2, 3, 5, 4, 6, 8]  # scan 6 (the second 5) dropped
+    assert result.warnings == [
+        f"{tmp_path / 'b.bag'}: scan stamps not increasing: of 8 scans, 1 stamped before "
+        "an earlier one (first at scan 4), written in time order; 1 repeat the stamp of "
+        "another (first at scan 6), dropped"
+    ]
 
 
 @pytest.mark.parametrize("command", ["segment", "features", "track", "run"])
@@ -133,8 +142,9 @@ def test_stages_refuse_a_log_whose_scan_stamps_go_backwards(tmp_path, command):
     digest = sha(src)
     out = tmp_path / ("out" if command == "run" else "out.mcap")
     result = invoke(command, src, "-o", out)
-    one_line_error(result, f"{src}: scan stamps go backwards or repeat at 2 of 30 scans (first at scan 10)",
-                   "datmo import")
+    one_line_error(
+        result, f"{src}: scan stamps go backwards or repeat at 2 of 30 scans (first at scan 10)", "datmo import"
+    )
     assert sha(src) == digest
     assert not [name for name in leftovers(tmp_path, src) if name.endswith((".mcap", ".tmp"))]
 
@@ -161,27 +171,33 @@ def tracked(tmp_path_factory):
 S0 = int(syn.STAMPS[0])
 
 
-@pytest.mark.parametrize("text, needles", [
-    (f"stamp_ns,id,x,y\n{S0},1,nan,0\n", ["line 2", "x is nan", "finite"]),
-    (f"stamp_ns,id,x,y\n{S0},1,0,0\n{S0},2,1,-inf\n", ["line 3", "y is -inf"]),
-    (f"stamp_ns,id,x,y\n{S0},1,0,0\n{S0},1,2,2\n", ["line 3", "id 1 again at stamp_ns", "first at line 2"]),
-    (f"stamp_ns,id,x,y,class\n{S0},1,0,0,dog\n", ["line 2", "unknown class 'dog'"]),
-    (f"stamp_ns,id,x,y,class\n{S0},1,0,0,7\n", ["line 2", "unknown class '7'"]),
-    ("stamp_ns,id,x,y\n99999999999999999999,1,0,0\n", ["line 2", "outside int64"]),
-    ("stamp_ns,id,x,y\n-5,1,0,0\n", ["line 2", "outside int64"]),
-    ("stamp_ns,id,x,y\n1.5e9,1,0,0\n", ["line 2", "stamp_ns '1.5e9' is not an integer"]),
-])
+@pytest.mark.parametrize(
+    "text, needles",
+    [
+        (f"stamp_ns,id,x,y\n{S0},1,nan,0\n", ["line 2", "x is nan", "finite"]),
+        (f"stamp_ns,id,x,y\n{S0},1,0,0\n{S0},2,1,-inf\n", ["line 3", "y is -inf"]),
+        (f"stamp_ns,id,x,y\n{S0},1,0,0\n{S0},1,2,2\n", ["line 3", "id 1 again at stamp_ns", "first at line 2"]),
+        (f"stamp_ns,id,x,y,class\n{S0},1,0,0,dog\n", ["line 2", "unknown class 'dog'"]),
+        (f"stamp_ns,id,x,y,class\n{S0},1,0,0,7\n", ["line 2", "unknown class '7'"]),
+        ("stamp_ns,id,x,y\n99999999999999999999,1,0,0\n", ["line 2", "outside int64"]),
+        ("stamp_ns,id,x,y\n-5,1,0,0\n", ["line 2", "outside int64"]),
+        ("stamp_ns,id,x,y\n1.5e9,1,0,0\n", ["line 2", "stamp_ns '1.5e9' is not an integer"]),
+    ],
+)
 def test_ground_truth_csv_refused_with_its_line(tmp_path, tracked, text, needles):
     path = tmp_path / "gt.csv"
     path.write_text(text)
     one_line_error(invoke("evaluate", tracked, "--gt", path), f"{path}: ", *needles)
 
 
-@pytest.mark.parametrize("data, needle", [
-    (bytes(range(256)) * 8, "binary data (a NUL byte at byte 0)"),
-    (b"stamp_ns,id,x,y\n1,1,\xff\xfe,0\n", "not UTF-8 text (byte 20)"),
-    (b"stamp_ns,id,x,y\n1,1,\"0\n" + b"9" * 200_000 + b"\n", "not CSV"),
-])
+@pytest.mark.parametrize(
+    "data, needle",
+    [
+        (bytes(range(256)) * 8, "binary data (a NUL byte at byte 0)"),
+        (b"stamp_ns,id,x,y\n1,1,\xff\xfe,0\n", "not UTF-8 text (byte 20)"),
+        (b'stamp_ns,id,x,y\n1,1,"0\n' + b"9" * 200_000 + b"\n", "not CSV"),
+    ],
+)
 def test_ground_truth_that_is_not_csv_text_refused(tmp_path, tracked, data, needle):
     path = tmp_path / "gt.csv"
     path.write_bytes(data)
@@ -247,8 +263,9 @@ def test_rawlaser_field_of_view_of_zero_is_a_malformed_line(tmp_path):
 def test_rawlaser_with_only_zero_fields_of_view_is_refused(tmp_path):
     src = tmp_path / "raw.log"
     src.write_text("\n".join(rawlaser_line([1.0] * 9, 10.0 + i, fov="0") for i in range(3)) + "\n")
-    one_line_error(invoke("import", src, "-o", tmp_path / "out.mcap"), f"{src}: no laser scans",
-                   "skipped 3 malformed lines")
+    one_line_error(
+        invoke("import", src, "-o", tmp_path / "out.mcap"), f"{src}: no laser scans", "skipped 3 malformed lines"
+    )
     assert leftovers(tmp_path, src) == []
 
 
@@ -258,8 +275,9 @@ def test_rawlaser_with_only_zero_fields_of_view_is_refused(tmp_path):
 def mutations(size: int):
     """Byte flips (1-3), a truncation, or random bytes in place of a file of `size` bytes."""
     return st.one_of(
-        st.tuples(st.just("flip"), st.lists(st.tuples(st.integers(0, size - 1), st.integers(0, 7)),
-                                            min_size=1, max_size=3)),
+        st.tuples(
+            st.just("flip"), st.lists(st.tuples(st.integers(0, size - 1), st.integers(0, 7)), min_size=1, max_size=3)
+        ),
         st.tuples(st.just("cut"), st.integers(0, size - 1)),
         st.tuples(st.just("random"), st.binary(max_size=3000)),
     )
@@ -294,7 +312,7 @@ def carmen_text(kind: str) -> tuple[bytes, list[tuple[int, int, np.ndarray, floa
     head = ["# a CARMEN log made by the test", "PARAM laser_front_laser_flipped off", "PARAM robot_length 0.5"]
     body, scans = [], []
     for i in range(10):
-        r = np.array([float(f"{v:.2f}") for v in rng.uniform(0.5, 30.0, 24)])   # the numbers the text holds
+        r = np.array([float(f"{v:.2f}") for v in rng.uniform(0.5, 30.0, 24)])  # the numbers the text holds
         t = 1000.0 + 0.2 * i
         if kind == "FLASER":
             r[3] = 81.91
@@ -304,8 +322,10 @@ def carmen_text(kind: str) -> tuple[bytes, list[tuple[int, int, np.ndarray, floa
             body.append(rawlaser_line(r, t, fov="3.14159", res="0.136591"))
         else:
             rr = " ".join(f"{v:g}" for v in r)
-            body.append(f"ROBOTLASER1 0 -1.570796 3.141593 0.136591 25.000000 0.1 0 24 {rr} 0 "
-                        f"3 4 0.25 3 4 0.25 0 0 0 0 0 {t:.6f} host {t:.6f}")
+            body.append(
+                f"ROBOTLASER1 0 -1.570796 3.141593 0.136591 25.000000 0.1 0 24 {rr} 0 "
+                f"3 4 0.25 3 4 0.25 0 0 0 0 0 {t:.6f} host {t:.6f}"
+            )
         scans.append((r, t))
     lines = head + body + ["SYNC 1 2 3"]
     data = ("\n".join(lines) + "\n").encode()
@@ -337,22 +357,28 @@ def reference_scans(data: bytes) -> tuple[dict[str, list[tuple]], bool]:
                 n = int(tok[1])
                 if not (n >= 1 and n + 9 <= len(tok) <= n + 11):
                     continue
-                v = np.array(tok[2:n + 9], float)
+                v = np.array(tok[2 : n + 9], float)
                 out.setdefault(name, []).append((v[:n], float(v[n + 6]), None))
             elif name in ("RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4", "ROBOTLASER1", "ROBOTLASER2"):
                 start, fov, res, top = (float(x) for x in tok[2:6])
                 n = int(tok[8])
-                if not (n >= 1 and len(tok) >= 10 + n and math.isfinite(start) and math.isfinite(top)
-                        and 0 < fov <= 2 * math.pi * 1.001 and 0 < res <= fov * 1.001):
+                if not (
+                    n >= 1
+                    and len(tok) >= 10 + n
+                    and math.isfinite(start)
+                    and math.isfinite(top)
+                    and 0 < fov <= 2 * math.pi * 1.001
+                    and 0 < res <= fov * 1.001
+                ):
                     continue
-                ranges = np.array(tok[9:9 + n], float)
+                ranges = np.array(tok[9 : 9 + n], float)
                 n_rem = int(tok[9 + n])
-                rest = tok[10 + n + n_rem:]
+                rest = tok[10 + n + n_rem :]
                 extra = 11 if name.startswith("ROBOT") else 0
                 if n_rem < 0 or not (extra + 1 <= len(rest) <= extra + 3):
                     continue
-                np.array(tok[10 + n:10 + n + n_rem], float)
-                nums = np.array(rest[:extra + 1], float)
+                np.array(tok[10 + n : 10 + n + n_rem], float)
+                nums = np.array(rest[: extra + 1], float)
                 out.setdefault(name, []).append((ranges, float(nums[extra]), (start, res, top)))
         except (ValueError, IndexError):
             continue
@@ -364,7 +390,7 @@ def no_return_at(scans: list[tuple]) -> float:
     stated = scans[0][2][2] if scans[0][2] is not None else 0.0
     if stated > 0:
         return stated
-    top = float(np.fmax.reduce([np.fmax.reduce(r) for r, _, _ in scans]))   # NaN readings ignored
+    top = float(np.fmax.reduce([np.fmax.reduce(r) for r, _, _ in scans]))  # NaN readings ignored
     return 81.83 if top >= 81.83 - 1e-6 else 50.0 if top >= 50 else 32.767 if abs(top - 32.767) < 1e-6 else 81.83
 
 
@@ -379,7 +405,7 @@ def test_fuzz_carmen_parser(kind):
     folder = Path(tempfile.mkdtemp(prefix="datmo-fuzz-"))
     try:
         base = import_log(_write(folder, data))
-        assert len(base.run) == len(spans)                                 # the intact text reads whole
+        assert len(base.run) == len(spans)  # the intact text reads whole
         assert not [w for w in base.warnings if "malformed" in w or "timestamps" in w]
 
         @FUZZ
@@ -409,15 +435,18 @@ def _carmen_case(path: Path, mutated: bytes, changed: set[int], spans) -> bool:
     try:
         result = import_log(path)
     except DatmoError:
-        return not expect_scans        # refused only when no single laser stream of one layout is left
+        return not expect_scans  # refused only when no single laser stream of one layout is left
     if not expect_scans:
         return False
     scans = ref[streams[0]]
     limit = no_return_at(scans)
     flipped = flipped and streams[0] in ("FLASER", "RLASER")
     want = np.array([as_imported(r, limit, flipped) for r, _, _ in scans])
-    if not (result.run.geometry.range_max == pytest.approx(limit) and result.run.ranges.shape == want.shape
-            and np.array_equal(result.run.ranges, want, equal_nan=True)):
+    if not (
+        result.run.geometry.range_max == pytest.approx(limit)
+        and result.run.ranges.shape == want.shape
+        and np.array_equal(result.run.ranges, want, equal_nan=True)
+    ):
         return False
     if not any("timestamps" in w for w in result.warnings):
         if result.run.stamps.tolist() != [round(t * 1e9) for _, t, _ in scans]:
@@ -461,8 +490,7 @@ def original_scans(kind: str, data: bytes) -> list[tuple[int, np.ndarray, np.nda
         raw = bytes(STORE1.serialize_ros1(msg, SCAN) if kind == "ros1" else STORE2.serialize_cdr(msg, SCAN))
         at = data.find(raw)
         assert at >= 0 and data.find(raw, at + 1) < 0
-        out.append((t, np.asarray(msg.ranges, np.float32), np.asarray(msg.intensities, np.float32), at,
-                    at + len(raw)))
+        out.append((t, np.asarray(msg.ranges, np.float32), np.asarray(msg.intensities, np.float32), at, at + len(raw)))
     return out
 
 
@@ -482,7 +510,7 @@ def test_fuzz_rosbag_importer(kind):
             mutated, changed = mutate(data, mutation)
             work = folder / "case"
             shutil.rmtree(work, ignore_errors=True)
-            shutil.copytree(src.parent, work)     # the bag (file, or folder with metadata.yaml) alone
+            shutil.copytree(src.parent, work)  # the bag (file, or folder with metadata.yaml) alone
             (work / target.relative_to(src.parent)).write_bytes(mutated)
             ok = _bag_case(work / src.name, originals, changed, mutation[0])
             tally("rosbag fuzz", failed=not ok)
@@ -504,9 +532,13 @@ def _bag_case(path: Path, originals, changed: set[int], kind: str) -> bool:
     hit = {i for i, (*_, a, b) in enumerate(originals) if kind == "flip" and changed & set(range(a, b))}
     used, changed_scans = set(), 0
     for k in range(len(run)):
-        same = [i for i, (t, r, it, _, _) in enumerate(originals)
-                if t == run.stamps[k] and np.array_equal(r, run.ranges[k], equal_nan=True)
-                and (run.intensities.shape[1] == 0 or np.array_equal(it, run.intensities[k], equal_nan=True))]
+        same = [
+            i
+            for i, (t, r, it, _, _) in enumerate(originals)
+            if t == run.stamps[k]
+            and np.array_equal(r, run.ranges[k], equal_nan=True)
+            and (run.intensities.shape[1] == 0 or np.array_equal(it, run.intensities[k], equal_nan=True))
+        ]
         if same and same[0] not in used:
             used.add(same[0])
         else:

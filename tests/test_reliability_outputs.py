@@ -33,8 +33,9 @@ HALL = ROOT / "sample_logs" / "hall.mcap"
 def small(tmp_path_factory) -> Path:
     """The first 20 scans of the hall sample log."""
     run = mcapio.read_run(HALL)
-    run = ScanRun(run.stamps[:20], run.ranges[:20], run.geometry,
-                  None if run.intensities is None else run.intensities[:20])
+    run = ScanRun(
+        run.stamps[:20], run.ranges[:20], run.geometry, None if run.intensities is None else run.intensities[:20]
+    )
     path = tmp_path_factory.mktemp("in") / "small.mcap"
     with mcapio.LogWriter(path) as w:
         w.write_scans(run)
@@ -85,7 +86,7 @@ def test_row1_link_replaces_only_a_file_or_link_and_leaves_what_is_not_its_own(t
     made = make_link("/dev/null", link, force=True)
     assert os.readlink(link) == "/dev/null" and not temps(tmp_path)
     os.unlink(link)
-    link.write_text("someone else's file")      # replaced after the emulator made its link
+    link.write_text("someone else's file")  # replaced after the emulator made its link
     remove_link(link, made)
     assert link.read_text() == "someone else's file"
     os.unlink(link)
@@ -132,13 +133,21 @@ def _limited(limit: int):
     return lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
 
-@pytest.mark.parametrize("args", [["import", str(HALL)], ["simulate", "--scene", "hall", "--duration", "20"],
-                                  ["segment", str(HALL)]], ids=["import", "simulate", "segment"])
+@pytest.mark.parametrize(
+    "args",
+    [["import", str(HALL)], ["simulate", "--scene", "hall", "--duration", "20"], ["segment", str(HALL)]],
+    ids=["import", "simulate", "segment"],
+)
 def test_row3_file_size_limit_is_one_line_and_leaves_nothing(tmp_path, args):
     out = tmp_path / "out.mcap"
     before = digest(HALL)
-    proc = subprocess.run([sys.executable, "-m", "datmo_cli", *args, "-o", str(out)], capture_output=True,
-                          text=True, preexec_fn=_limited(100_000), timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "datmo_cli", *args, "-o", str(out)],
+        capture_output=True,
+        text=True,
+        preexec_fn=_limited(100_000),
+        timeout=120,
+    )
     assert proc.returncode == 1, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert lines[-1] == f"datmo: error: {out}: file too large for the file-size limit (ulimit -f) (writing it)"
@@ -169,7 +178,7 @@ def test_row4_a_signal_inside_a_critical_section_is_held_until_it_ends():
     with outputs.handle_signals(), pytest.raises(outputs.Terminated) as info:
         with outputs.critical():
             os.kill(os.getpid(), 15)
-            for _ in range(1000):        # the handler runs between bytecodes: it must only record the signal
+            for _ in range(1000):  # the handler runs between bytecodes: it must only record the signal
                 pass
             held = True
     assert held and info.value.exit_code == 143
@@ -208,9 +217,13 @@ def test_row14_read_only_folder_is_one_line_naming_it(small, tmp_path, monkeypat
     monkeypatch.setattr(os, "open", refuse)
     out = tmp_path / "sub" / "out.mcap"
     out.parent.mkdir()
-    for args in (["segment", small, "-o", out], ["track", small, "-o", out], ["import", small, "-o", out],
-                 ["simulate", "--scene", "hall", "--duration", "1", "-o", out],
-                 ["report", tracked, "--plot", out.with_suffix(".png")]):
+    for args in (
+        ["segment", small, "-o", out],
+        ["track", small, "-o", out],
+        ["import", small, "-o", out],
+        ["simulate", "--scene", "hall", "--duration", "1", "-o", out],
+        ["report", tracked, "--plot", out.with_suffix(".png")],
+    ):
         line = one_line_error(datmo(*args), f"{out.parent}: ", "creating a file there")
         assert outputs.reason(OSError(code, "")) in line
     assert not list(out.parent.iterdir())
@@ -272,12 +285,16 @@ def test_a_signal_reported_as_a_system_error_by_a_compiled_call_is_the_signal(sm
     def boxed(signal_exc):
         def raise_it(*args, **kwargs):
             # CPython's wording when a signal handler raised while a numba dispatcher boxed its result
-            raise SystemError("CPUDispatcher(<function track_block>) returned a result with an exception set") \
-                from signal_exc
+            raise SystemError(
+                "CPUDispatcher(<function track_block>) returned a result with an exception set"
+            ) from signal_exc
+
         return raise_it
 
-    for exc, code, needle in ((KeyboardInterrupt(), 130, "interrupted (Ctrl-C)"),
-                              (outputs.Terminated(15), 143, "stopped by SIGTERM")):
+    for exc, code, needle in (
+        (KeyboardInterrupt(), 130, "interrupted (Ctrl-C)"),
+        (outputs.Terminated(15), 143, "stopped by SIGTERM"),
+    ):
         monkeypatch.setattr(outputs, "_file_for", boxed(exc))
         res = datmo("segment", small, "-o", tmp_path / "a.mcap")
         one_line_error(res, needle, code=code)
@@ -286,7 +303,7 @@ def test_a_signal_reported_as_a_system_error_by_a_compiled_call_is_the_signal(sm
     try:
         raise ValueError("a real bug") from KeyboardInterrupt()
     except ValueError as bug:
-        assert outputs.interrupt_in(bug) is None    # only the SystemError wrapping is unwrapped
+        assert outputs.interrupt_in(bug) is None  # only the SystemError wrapping is unwrapped
     assert clean_error(SystemError("returned NULL without setting an exception")).exit_code == 70
 
 
@@ -322,9 +339,10 @@ def test_a_signal_inside_llvmlites_callbacks_is_sent_again_not_raised_there(monk
     code = compile("pass", "/venv/lib/python3.11/site-packages/llvmlite/binding/executionengine.py", "exec")
     inner = types.SimpleNamespace(f_code=types.SimpleNamespace(co_filename=__file__), f_back=None)
     native = types.SimpleNamespace(f_code=code, f_back=None)
-    inner.f_back = native                      # a datmo frame called from inside llvmlite's callback
-    outputs._handler(signal.SIGTERM, inner)   # no raise
+    inner.f_back = native  # a datmo frame called from inside llvmlite's callback
+    outputs._handler(signal.SIGTERM, inner)  # no raise
     assert sent == [(outputs.RESEND_AFTER_S, os.kill, (os.getpid(), signal.SIGTERM))]
     with pytest.raises(outputs.Terminated):
-        outputs._handler(signal.SIGTERM, types.SimpleNamespace(f_code=types.SimpleNamespace(co_filename=__file__),
-                                                               f_back=None))
+        outputs._handler(
+            signal.SIGTERM, types.SimpleNamespace(f_code=types.SimpleNamespace(co_filename=__file__), f_back=None)
+        )

@@ -33,14 +33,16 @@ TABLES = {s: (BOUNDS[s], SECTIONS[s]) for s in SECTIONS}
 KEYS = [(table, key) for table, (b, _) in TABLES.items() for key in sorted(b)]
 
 # a key at a bound contradicts another key's default: the other key set so that the pair is consistent
-COMPANIONS = {("features", "circle_radius_min", "hi"): {"circle_radius_max": 5.0},
-              ("features", "circle_radius_max", "lo"): {"circle_radius_min": 0.001},
-              ("features", "bench_min_length", "hi"): {"bench_max_length": 20.0},
-              ("features", "bench_max_length", "lo"): {"bench_min_length": 0.01},
-              ("track", "step_min", "hi"): {"step_max": 5.0},
-              ("track", "step_max", "lo"): {"step_min": 0.0},
-              ("track", "confirm_window", "lo"): {"confirm_hits": 2},
-              ("track", "confirm_hits", "hi"): {"confirm_window": 16}}
+COMPANIONS = {
+    ("features", "circle_radius_min", "hi"): {"circle_radius_max": 5.0},
+    ("features", "circle_radius_max", "lo"): {"circle_radius_min": 0.001},
+    ("features", "bench_min_length", "hi"): {"bench_max_length": 20.0},
+    ("features", "bench_max_length", "lo"): {"bench_min_length": 0.01},
+    ("track", "step_min", "hi"): {"step_max": 5.0},
+    ("track", "step_max", "lo"): {"step_min": 0.0},
+    ("track", "confirm_window", "lo"): {"confirm_hits": 2},
+    ("track", "confirm_hits", "hi"): {"confirm_window": 16},
+}
 
 
 def numeric_fields(cls: type) -> set[str]:
@@ -89,7 +91,7 @@ def test_bad_values_of_every_key_are_refused_naming_it_and_the_range(table, key)
             validate(cls, {key: value})
         message = str(exc.value)
         assert message.startswith(f"{table}.{key}: ") and "\n" not in message, message
-        if not (b.integer and isinstance(value, float)):   # a float for an int key is a type error
+        if not (b.integer and isinstance(value, float)):  # a float for an int key is a type error
             assert b.describe() in message, message
     for value in ("1", True, [1]):
         with pytest.raises(ConfigError, match=f"{table}.{key}: expected"):
@@ -129,11 +131,17 @@ def test_a_stage_name_that_is_not_a_table_is_said_so(tmp_path, table, other):
         load(config)
 
 
-@pytest.mark.parametrize("values, names", [
-    ({"theta_resolution": 0.1, "rho_resolution": 0.001}, ("theta_resolution", "rho_resolution", "line accumulator")),
-    ({"circle_radius_step": 0.001, "circle_cell": 0.001}, ("circle_radius_step", "circle_cell", "circle votes")),
-    ({"circle_radius_max": 5, "circle_window": 0.5}, ("circle_radius_step", "circle_cell", "circle votes")),
-])
+@pytest.mark.parametrize(
+    "values, names",
+    [
+        (
+            {"theta_resolution": 0.1, "rho_resolution": 0.001},
+            ("theta_resolution", "rho_resolution", "line accumulator"),
+        ),
+        ({"circle_radius_step": 0.001, "circle_cell": 0.001}, ("circle_radius_step", "circle_cell", "circle votes")),
+        ({"circle_radius_max": 5, "circle_window": 0.5}, ("circle_radius_step", "circle_cell", "circle votes")),
+    ],
+)
 def test_feature_parameters_that_combine_into_too_big_a_kernel_are_refused_naming_both(values, names):
     with pytest.raises(ConfigError) as exc:
         validate(FeatureParams, values)
@@ -141,8 +149,10 @@ def test_feature_parameters_that_combine_into_too_big_a_kernel_are_refused_namin
 
 
 def test_a_background_grid_too_big_is_refused_naming_both_and_off_it_allocates_nothing():
-    with pytest.raises(ConfigError, match="background_extent 100 m and background_cell 0.05 m make a background grid "
-                                          "4,000 cells a side"):
+    with pytest.raises(
+        ConfigError,
+        match="background_extent 100 m and background_cell 0.05 m make a background grid 4,000 cells a side",
+    ):
         validate(TrackingParams, {"background_extent": 100, "background_cell": 0.05})
     assert validate(TrackingParams, {"background_extent": 100, "background_cell": 0.05, "background_time": 0})
 
@@ -154,17 +164,27 @@ def test_the_background_limit_is_what_the_tracker_allocates():
     from datmo_cli.tracking.tracker import Tracker
 
     t = validate(TrackingParams, {"background_extent": 100.0, "background_cell": 0.1})
-    geometry = ScanGeometry(angle_min=-np.pi / 2, angle_increment=np.radians(0.5), n_beams=361, range_min=0.0,
-                            range_max=80.0, scan_time=0.2, frame_id="laser")
+    geometry = ScanGeometry(
+        angle_min=-np.pi / 2,
+        angle_increment=np.radians(0.5),
+        n_beams=361,
+        range_min=0.0,
+        range_max=80.0,
+        scan_time=0.2,
+        frame_id="laser",
+    )
     grid = Tracker(t, geometry)._bg[0]
-    assert len(grid) == bounds.background_side(100.0, 0.1) ** 2 <= bounds.BACKGROUND_SIDE ** 2
+    assert len(grid) == bounds.background_side(100.0, 0.1) ** 2 <= bounds.BACKGROUND_SIDE**2
 
 
-@pytest.mark.parametrize("values", [
-    {"rho_resolution": 0.001},                                    # the largest line accumulator accepted
-    {"theta_resolution": 0.1, "rho_resolution": 0.011},
-    {"circle_radius_step": 0.001, "circle_cell": 0.003, "circle_window": 0.03},   # the most circle votes
-])
+@pytest.mark.parametrize(
+    "values",
+    [
+        {"rho_resolution": 0.001},  # the largest line accumulator accepted
+        {"theta_resolution": 0.1, "rho_resolution": 0.011},
+        {"circle_radius_step": 0.001, "circle_cell": 0.003, "circle_window": 0.03},  # the most circle votes
+    ],
+)
 def test_features_run_at_the_largest_settings_accepted(values):
     """The kernels allocate and finish at the corners of the accepted ranges (no MemoryError, no hang)."""
     from datmo_cli.log import mcapio
@@ -172,8 +192,9 @@ def test_features_run_at_the_largest_settings_accepted(values):
 
     p = validate(FeatureParams, {**values, "leg_model": "paper"})
     cells = bounds.line_accumulator_cells(p.theta_resolution, p.rho_resolution)
-    votes = bounds.circle_votes(p.circle_radius_min, p.circle_radius_max, p.circle_radius_step, p.circle_window,
-                                p.circle_cell)
+    votes = bounds.circle_votes(
+        p.circle_radius_min, p.circle_radius_max, p.circle_radius_step, p.circle_window, p.circle_cell
+    )
     assert cells <= bounds.LINE_ACCUMULATOR_CELLS and votes <= bounds.CIRCLE_VOTES
     assert max(cells / bounds.LINE_ACCUMULATOR_CELLS, votes / bounds.CIRCLE_VOTES) > 0.5
     run = mcapio.read_run(HALL)
@@ -182,9 +203,12 @@ def test_features_run_at_the_largest_settings_accepted(values):
     assert len(f.line_offsets) == len(f.circle_offsets) == 4
 
 
-@given(key=st.sampled_from(KEYS),
-       value=st.one_of(st.floats(), st.integers(min_value=-2**80, max_value=2**80), st.booleans(), st.text(max_size=4),
-                       st.none()))
+@given(
+    key=st.sampled_from(KEYS),
+    value=st.one_of(
+        st.floats(), st.integers(min_value=-(2**80), max_value=2**80), st.booleans(), st.text(max_size=4), st.none()
+    ),
+)
 def test_fuzz_any_value_is_either_in_range_or_one_clean_error(key, value):
     table, name = key
     table_bounds, cls = TABLES[table]
@@ -195,15 +219,24 @@ def test_fuzz_any_value_is_either_in_range_or_one_clean_error(key, value):
         tally("params: random values through the validator")
         assert "\n" not in str(exc) and name in str(exc)
         return
-    ok = (not isinstance(value, bool) and isinstance(value, int | float) and b.lo <= value <= b.hi
-          and not (b.lo_open and value == b.lo) and (isinstance(value, int) or not b.integer))
+    ok = (
+        not isinstance(value, bool)
+        and isinstance(value, int | float)
+        and b.lo <= value <= b.hi
+        and not (b.lo_open and value == b.lo)
+        and (isinstance(value, int) or not b.integer)
+    )
     tally("params: random values through the validator", failed=not ok)
     assert ok, (key, value)
     assert getattr(p, name) == value
     f = p if table == "features" else FeatureParams()
     assert bounds.line_accumulator_cells(f.theta_resolution, f.rho_resolution) <= bounds.LINE_ACCUMULATOR_CELLS
-    assert bounds.circle_votes(f.circle_radius_min, f.circle_radius_max, f.circle_radius_step, f.circle_window,
-                               f.circle_cell) <= bounds.CIRCLE_VOTES
+    assert (
+        bounds.circle_votes(
+            f.circle_radius_min, f.circle_radius_max, f.circle_radius_step, f.circle_window, f.circle_cell
+        )
+        <= bounds.CIRCLE_VOTES
+    )
 
 
 # ------------------------------------------------------------------------------------ command-line options
@@ -276,7 +309,7 @@ def test_every_numeric_option_refuses_bad_values_naming_it_and_the_range(command
         assert ptype.convert(param.default, param, None) == param.default
 
 
-@given(text=st.one_of(st.text(max_size=12), st.floats().map(repr), st.integers(-2**70, 2**70).map(str)))
+@given(text=st.one_of(st.text(max_size=12), st.floats().map(repr), st.integers(-(2**70), 2**70).map(str)))
 def test_fuzz_any_option_text_is_a_number_in_range_or_one_clean_error(text):
     for _, param, t in bounded_options()[:40]:
         tally("params: random option texts")
@@ -311,29 +344,37 @@ def refused(tmp_path, args: list[str], *names: str) -> str:
     return lines[0]
 
 
-@pytest.mark.parametrize("args, names", [
-    (["track", HALL, "--measurement-noise", "nan"], ["--measurement-noise", "0 < x ≤ 10 m"]),        # row 6
-    (["track", HALL, "--process-noise", "1e308"], ["--process-noise", "at most 1000"]),
-    (["track", HALL, "--process-noise", "inf"], ["--process-noise", "not a finite number"]),
-    (["track", HALL, "--gate", "nan"], ["--gate"]),
-    (["track", HALL, "--d-max", "nan"], ["--d-max"]),
-    (["track", HALL, "--delete-after", "nan"], ["--delete-after"]),
-    (["track", HALL, "--confirm", "3", "nan"], ["--confirm", "expected a whole number"]),
-    (["features", HALL, "--rho-resolution", "1e-9"], ["--rho-resolution", "0.001 ≤ x ≤ 1 m"]),         # row 16
-    (["features", HALL, "--circle-radius", "0.05", "inf"], ["--circle-radius"]),
-    (["segment", HALL, "--c0", "-inf"], ["--c0"]),
-    (["run", HALL, "--threads", "0"], ["--threads"]),
-    (["evaluate", HALL, "--min-mota", "nan"], ["--min-mota", "-100 ≤ x ≤ 1"]),                       # row 8
-    (["evaluate", HALL, "--match-radius", "nan"], ["--match-radius"]),                               # row 17
-    (["import", HALL, "--max-scans", "0"], ["--max-scans"]),
-])
+@pytest.mark.parametrize(
+    "args, names",
+    [
+        (["track", HALL, "--measurement-noise", "nan"], ["--measurement-noise", "0 < x ≤ 10 m"]),  # row 6
+        (["track", HALL, "--process-noise", "1e308"], ["--process-noise", "at most 1000"]),
+        (["track", HALL, "--process-noise", "inf"], ["--process-noise", "not a finite number"]),
+        (["track", HALL, "--gate", "nan"], ["--gate"]),
+        (["track", HALL, "--d-max", "nan"], ["--d-max"]),
+        (["track", HALL, "--delete-after", "nan"], ["--delete-after"]),
+        (["track", HALL, "--confirm", "3", "nan"], ["--confirm", "expected a whole number"]),
+        (["features", HALL, "--rho-resolution", "1e-9"], ["--rho-resolution", "0.001 ≤ x ≤ 1 m"]),  # row 16
+        (["features", HALL, "--circle-radius", "0.05", "inf"], ["--circle-radius"]),
+        (["segment", HALL, "--c0", "-inf"], ["--c0"]),
+        (["run", HALL, "--threads", "0"], ["--threads"]),
+        (["evaluate", HALL, "--min-mota", "nan"], ["--min-mota", "-100 ≤ x ≤ 1"]),  # row 8
+        (["evaluate", HALL, "--match-radius", "nan"], ["--match-radius"]),  # row 17
+        (["import", HALL, "--max-scans", "0"], ["--max-scans"]),
+    ],
+)
 def test_bad_options_on_the_command_line(tmp_path, args, names):
-    out = ["-o", tmp_path / "out"] if args[0] in ("run",) else [] if args[0] == "evaluate" else \
-        ["-o", tmp_path / "out.mcap"]
+    out = (
+        ["-o", tmp_path / "out"]
+        if args[0] in ("run",)
+        else []
+        if args[0] == "evaluate"
+        else ["-o", tmp_path / "out.mcap"]
+    )
     refused(tmp_path, [*args, *out], *names)
 
 
-def test_simulate_a_billion_seconds_is_refused(tmp_path):                                          # row 16
+def test_simulate_a_billion_seconds_is_refused(tmp_path):  # row 16
     refused(tmp_path, ["simulate", "--duration", "1e9", "-o", tmp_path / "x.mcap"], "--duration", "0 < x ≤ 3600 s")
     scene = tmp_path / "long.toml"
     scene.write_text("duration = 1e9\n")
@@ -341,15 +382,18 @@ def test_simulate_a_billion_seconds_is_refused(tmp_path):                       
     assert "0 < x ≤ 3600 s" in line
 
 
-@pytest.mark.parametrize("command, toml, names", [
-    ("track", "[track]\nprocess_noise = nan\n", ["track.process_noise", "not a finite number"]),     # row 6
-    ("features", "[features]\ncircle_radius_step = 1e-7\n", ["features.circle_radius_step"]),       # row 9
-    ("features", "[features]\ncircle_cell = 1e-6\n", ["features.circle_cell"]),                     # row 16
-    ("track", "[track]\nbackground_cell = 1e-6\n", ["track.background_cell"]),
-    ("track", "[track]\nbackground_extent = 1e12\n", ["track.background_extent"]),
-    ("run", "[track]\nbackground_extent = 100\nbackground_cell = 0.05\n", ["background_extent", "background_cell"]),
-    ("track", "features = 3\n", ["features must be a table"]),                                        # row 21
-])
+@pytest.mark.parametrize(
+    "command, toml, names",
+    [
+        ("track", "[track]\nprocess_noise = nan\n", ["track.process_noise", "not a finite number"]),  # row 6
+        ("features", "[features]\ncircle_radius_step = 1e-7\n", ["features.circle_radius_step"]),  # row 9
+        ("features", "[features]\ncircle_cell = 1e-6\n", ["features.circle_cell"]),  # row 16
+        ("track", "[track]\nbackground_cell = 1e-6\n", ["track.background_cell"]),
+        ("track", "[track]\nbackground_extent = 1e12\n", ["track.background_extent"]),
+        ("run", "[track]\nbackground_extent = 100\nbackground_cell = 0.05\n", ["background_extent", "background_cell"]),
+        ("track", "features = 3\n", ["features must be a table"]),  # row 21
+    ],
+)
 def test_bad_config_files_on_the_command_line(tmp_path, command, toml, names):
     config = tmp_path / "c.toml"
     config.write_text(toml)

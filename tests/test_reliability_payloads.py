@@ -46,9 +46,12 @@ def processed(tmp_path_factory):
     return path, segmented
 
 
-DAMAGE = {"cut": lambda p: p[:len(p) // 2], "bytes after": lambda p: p + b"\0" * 8,
-          "big endian": lambda p: b"\x00\x00" + p[2:],
-          "the frame's length": lambda p: p[:12] + b"\xff\xff\xff\x0f" + p[16:]}   # after the CDR header and stamp
+DAMAGE = {
+    "cut": lambda p: p[: len(p) // 2],
+    "bytes after": lambda p: p + b"\0" * 8,
+    "big endian": lambda p: b"\x00\x00" + p[2:],
+    "the frame's length": lambda p: p[:12] + b"\xff\xff\xff\x0f" + p[16:],
+}  # after the CDR header and stamp
 
 
 def rewrite(src, dst, topic: str, damage, k: int = 7) -> None:
@@ -63,10 +66,14 @@ def rewrite(src, dst, topic: str, damage, k: int = 7) -> None:
             w.write_ids(cid, stamps, payloads)
 
 
-CASES = [(mcapio.TOPIC_TRACKS, "report", types.TRACKS), (mcapio.TOPIC_TRACKS, "evaluate", types.TRACKS),
-         (mcapio.TOPIC_FEATURES, "report", types.FEATURES), (mcapio.TOPIC_FEATURES, "track", types.FEATURES),
-         (mcapio.TOPIC_GROUND_TRUTH, "evaluate", types.GROUND_TRUTH),
-         (mcapio.TOPIC_SEGMENTS, "features", types.SEGMENTS)]
+CASES = [
+    (mcapio.TOPIC_TRACKS, "report", types.TRACKS),
+    (mcapio.TOPIC_TRACKS, "evaluate", types.TRACKS),
+    (mcapio.TOPIC_FEATURES, "report", types.FEATURES),
+    (mcapio.TOPIC_FEATURES, "track", types.FEATURES),
+    (mcapio.TOPIC_GROUND_TRUTH, "evaluate", types.GROUND_TRUTH),
+    (mcapio.TOPIC_SEGMENTS, "features", types.SEGMENTS),
+]
 
 
 @pytest.mark.parametrize("damage", list(DAMAGE))
@@ -86,8 +93,9 @@ def test_given_segments_no_scan_could_have_name_the_file(tmp_path, processed):
         m = cdr.decode(types.SEGMENTS, p)
         start, end = np.array(m["start"]), np.array(m["end"])
         start[0], end[0] = 10**6, 10**6 + 5
-        return cdr.encode(types.SEGMENTS, {"stamp_ns": m["stamp_ns"], "frame_id": m["frame_id"], "start": start,
-                                           "end": end})
+        return cdr.encode(
+            types.SEGMENTS, {"stamp_ns": m["stamp_ns"], "frame_id": m["frame_id"], "start": start, "end": end}
+        )
 
     bad = tmp_path / "bad.mcap"
     rewrite(processed[1], bad, mcapio.TOPIC_SEGMENTS, beyond)
@@ -95,15 +103,18 @@ def test_given_segments_no_scan_could_have_name_the_file(tmp_path, processed):
     one_error(code, err, f"{bad}: {mcapio.TOPIC_SEGMENTS}: segment [")
 
 
-@pytest.mark.parametrize("msgtype", [types.TRACKS, types.FEATURES, types.LANDMARKS, types.GROUND_TRUTH,
-                                     types.SEGMENTS])
+@pytest.mark.parametrize("msgtype", [types.TRACKS, types.FEATURES, types.LANDMARKS, types.GROUND_TRUTH, types.SEGMENTS])
 def test_fuzz_datmo_payloads_decode_or_say_why(processed, msgtype):
     """Flipped, cut and extended payloads of every datmo_msgs type: cdr.decode gives a message or DecodeError,
     never another exception (which the CLI would call an internal error)."""
     src = processed[1] if msgtype == types.SEGMENTS else processed[0]
-    topic = {types.TRACKS: mcapio.TOPIC_TRACKS, types.FEATURES: mcapio.TOPIC_FEATURES,
-             types.LANDMARKS: mcapio.TOPIC_LANDMARKS, types.GROUND_TRUTH: mcapio.TOPIC_GROUND_TRUTH,
-             types.SEGMENTS: mcapio.TOPIC_SEGMENTS}[msgtype]
+    topic = {
+        types.TRACKS: mcapio.TOPIC_TRACKS,
+        types.FEATURES: mcapio.TOPIC_FEATURES,
+        types.LANDMARKS: mcapio.TOPIC_LANDMARKS,
+        types.GROUND_TRUTH: mcapio.TOPIC_GROUND_TRUTH,
+        types.SEGMENTS: mcapio.TOPIC_SEGMENTS,
+    }[msgtype]
     _, payloads = mcapio.read_messages(src, topic)
     rng = random.Random(msgtype)
     for case in range(80):
@@ -113,7 +124,7 @@ def test_fuzz_datmo_payloads_decode_or_say_why(processed, msgtype):
             for _ in range(rng.randint(1, 4)):
                 p[rng.randrange(len(p))] ^= rng.randrange(1, 256)
         elif how == 1:
-            p = p[:rng.randrange(len(p))]
+            p = p[: rng.randrange(len(p))]
         else:
             p += bytes(rng.randrange(256) for _ in range(rng.randint(1, 40)))
         try:
@@ -158,9 +169,19 @@ def bad_model(path, kind: str) -> None:
     np.savez_compressed(path, **z)
 
 
-@pytest.mark.parametrize("kind", ["provenance a list", "provenance a number", "provenance clusters a string",
-                                  "provenance gap not a number", "NaN feature index", "NaN threshold",
-                                  "kind an array", "names numbers"])
+@pytest.mark.parametrize(
+    "kind",
+    [
+        "provenance a list",
+        "provenance a number",
+        "provenance clusters a string",
+        "provenance gap not a number",
+        "NaN feature index",
+        "NaN threshold",
+        "kind an array",
+        "names numbers",
+    ],
+)
 def test_a_corrupt_leg_model_is_one_line(tmp_path, kind):
     from datmo_cli.perception.legs import LegModel
 

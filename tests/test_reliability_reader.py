@@ -111,8 +111,9 @@ def scans_of(path: Path) -> ScanRun:
 def test_corrupt_chunk_is_skipped_counted_and_warned(tmp_path, log, where, which):
     data = log.read_bytes()
     start, cdata, size = chunks(data)[which]
-    at = {"data": cdata + size // 2, "zstd header": cdata, "crc field": start + 9 + 24,
-          "size field": start + 9 + 16}[where]
+    at = {"data": cdata + size // 2, "zstd header": cdata, "crc field": start + 9 + 24, "size field": start + 9 + 16}[
+        where
+    ]
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(flipped(data, at, 0xFF if where == "zstd header" else 0x01))
     with pytest.warns(mcapio.CorruptLogWarning, match=r"bad.mcap: skipped 1 corrupt chunk\(s\)"):
@@ -120,7 +121,7 @@ def test_corrupt_chunk_is_skipped_counted_and_warned(tmp_path, log, where, which
     assert contents.corrupt_chunks == 1 and contents.chunks == len(chunks(data)) - 1
     intact = {int(t): r.tobytes() for t, r in zip(*_stamps_ranges(scans_of(log)), strict=True)}
     got = mcapio.run_from_log(contents)
-    assert 0 < len(got) < N_SCANS   # the skipped chunk held scans; the others are read (channels from the summary)
+    assert 0 < len(got) < N_SCANS  # the skipped chunk held scans; the others are read (channels from the summary)
     for t, r in zip(*_stamps_ranges(got), strict=True):
         assert intact[int(t)] == r.tobytes()
 
@@ -147,7 +148,7 @@ def test_row5_flipped_byte_in_zstd_chunk_cli(tmp_path, log):
     assert code == 0 and sum("corrupt chunk" in line for line in lines) == 1
     imported, sound = scans_of(tmp_path / "imported.mcap"), scans_of(bad)
     assert np.array_equal(imported.stamps, sound.stamps) and imported.ranges.tobytes() == sound.ranges.tobytes()
-    assert bad.read_bytes() == flipped(data, cdata + size // 3)   # the input untouched
+    assert bad.read_bytes() == flipped(data, cdata + size // 3)  # the input untouched
 
 
 @pytest.mark.parametrize("command", ["info", "track", "import"])
@@ -160,8 +161,9 @@ def test_row10_corrupt_zstd_frame_header_cli(tmp_path, log, command):
     args = [command, bad] + ([] if command == "info" else ["-o", out])
     code, lines, _ = run_cli(*args)
     assert code == 0, lines
-    assert any(line.startswith("datmo: warning: ") and str(bad) in line and "does not decompress" in line
-               for line in lines), lines
+    assert any(
+        line.startswith("datmo: warning: ") and str(bad) in line and "does not decompress" in line for line in lines
+    ), lines
     if command != "info":
         assert 0 < len(scans_of(out)) < N_SCANS
 
@@ -182,7 +184,7 @@ def test_record_length_past_the_end_of_a_whole_file_is_called_corrupt(tmp_path, 
     data = log.read_bytes()
     start, _, _ = chunks(data)[1]
     bad = tmp_path / "bad.mcap"
-    bad.write_bytes(flipped(data, start + 8, 0x40))   # the chunk's length: 2^62 more
+    bad.write_bytes(flipped(data, start + 8, 0x40))  # the chunk's length: 2^62 more
     with pytest.warns(mcapio.CorruptLogWarning, match=f"record at byte {start} runs past the end"):
         contents = mcapio.read_log(bad, topics=[mcapio.TOPIC_SCAN])
     assert contents.chunks == 1 and contents.bad_length_at == start
@@ -192,7 +194,7 @@ def test_chunk_whose_opcode_is_damaged_is_counted_from_the_summary(tmp_path, log
     data = log.read_bytes()
     start, _, _ = chunks(data)[0]
     bad = tmp_path / "bad.mcap"
-    bad.write_bytes(flipped(data, start, 0x06 ^ 0x07))   # read as a message index record: skipped
+    bad.write_bytes(flipped(data, start, 0x06 ^ 0x07))  # read as a message index record: skipped
     with pytest.warns(mcapio.CorruptLogWarning, match="1 of the .* chunks the summary lists were not found"):
         contents = mcapio.read_log(bad, topics=[mcapio.TOPIC_SCAN])
     assert contents.corrupt_chunks == 1 and contents.chunks == len(chunks(data)) - 1
@@ -204,7 +206,7 @@ def test_message_log_time_beyond_int64_is_one_line(tmp_path):
         w.write_scans(make_run(3))
     from mcap.writer import Writer
 
-    with open(bad, "wb") as f:   # the same scans with a log time past 2262 (a valid uint64)
+    with open(bad, "wb") as f:  # the same scans with a log time past 2262 (a valid uint64)
         writer = Writer(f)
         writer.start(profile="ros2", library="test")
         sid = writer.register_schema(types.LASERSCAN, "ros2msg", types.schema_text(types.LASERSCAN).encode())
@@ -240,12 +242,16 @@ def test_row11_absurd_frame_id_length(tmp_path, scan, n):
     assert leftovers(tmp_path, {"in.mcap"}) == []
 
 
-@pytest.mark.parametrize("field, at, message", [
-    ("ranges", 24 + 28, "4294967280 ranges run past the end"),
-    ("intensities", 24 + 32 + 4 * GEOM.n_beams, "4294967280 intensities run past the end")])
+@pytest.mark.parametrize(
+    "field, at, message",
+    [
+        ("ranges", 24 + 28, "4294967280 ranges run past the end"),
+        ("intensities", 24 + 32 + 4 * GEOM.n_beams, "4294967280 intensities run past the end"),
+    ],
+)
 def test_row11_absurd_sequence_lengths(tmp_path, field, at, message):
     def patch(raw):
-        raw[at:at + 4] = struct.pack("<I", 0xFFFFFFF0)
+        raw[at : at + 4] = struct.pack("<I", 0xFFFFFFF0)
 
     path = _bad_log(tmp_path, 1, patch)
     code, lines, _ = run_cli("info", path)
@@ -256,14 +262,14 @@ def test_row11_absurd_sequence_lengths(tmp_path, field, at, message):
 @pytest.mark.parametrize("command, scan", [("track", 0), ("import", 2), ("info", 2)])
 def test_row12_stamp_before_1970(tmp_path, command, scan):
     def patch(raw):
-        raw[4:8] = struct.pack("<i", -2 ** 31)
+        raw[4:8] = struct.pack("<i", -(2**31))
 
     path = _bad_log(tmp_path, scan, patch)
     before = path.read_bytes()
     extra = [] if command == "info" else ["-o", tmp_path / "out.mcap"]
     code, lines, _ = run_cli(command, path, *extra)
     assert_one_error(code, lines, str(path), "header stamp before 1970 (sec = -2147483648)")
-    if command != "import":   # the importer surveys the first scan of each size without counting
+    if command != "import":  # the importer surveys the first scan of each size without counting
         assert f"scan {scan}" in lines[0]
     assert leftovers(tmp_path, {"in.mcap"}) == [] and path.read_bytes() == before
 
@@ -272,20 +278,21 @@ def test_row12_nanosec_out_of_range(tmp_path):
     def patch(raw):
         raw[8:12] = struct.pack("<I", 4_000_000_000)
 
-    path = _bad_log(tmp_path, 7, patch)   # the last scan: its later stamp makes none go back in time
+    path = _bad_log(tmp_path, 7, patch)  # the last scan: its later stamp makes none go back in time
     code, lines, _ = run_cli("track", path, "-o", tmp_path / "out.mcap")
     assert_one_error(code, lines, str(path), "scan 7: header stamp nanosec = 4000000000 is not below 10^9")
 
 
-@pytest.mark.parametrize("field, value", [("angle_increment", np.nan), ("angle_min", np.nan),
-                                          ("range_max", np.nan), ("range_min", -np.inf)])
+@pytest.mark.parametrize(
+    "field, value", [("angle_increment", np.nan), ("angle_min", np.nan), ("range_max", np.nan), ("range_min", -np.inf)]
+)
 @pytest.mark.parametrize("scan", [0, 4])
 def test_row19_non_finite_geometry_names_the_field(tmp_path, field, value, scan):
     # after the 4-byte CDR header, stamp, frame_id length and "laser\0" padded to 8 bytes: 7 float32s from byte 24
     at = 24 + {"angle_min": 0, "angle_increment": 8, "range_min": 20, "range_max": 24}[field]
 
     def patch(raw):
-        raw[at:at + 4] = struct.pack("<f", value)
+        raw[at : at + 4] = struct.pack("<f", value)
 
     path = _bad_log(tmp_path, scan, patch)
     code, lines, _ = run_cli("track", path, "-o", tmp_path / "out.mcap")
@@ -333,8 +340,9 @@ def _mutations():
     data, _ = base_log()
     size = len(data)
     flips = st.lists(st.tuples(st.integers(0, size - 1), st.integers(1, 255)), min_size=1, max_size=4)
-    chunk_flips = st.lists(st.sampled_from([c[1] + k for c in chunks(data) for k in range(0, c[2], 7)]),
-                           min_size=1, max_size=2).map(lambda ps: [(p, 0x10) for p in ps])
+    chunk_flips = st.lists(
+        st.sampled_from([c[1] + k for c in chunks(data) for k in range(0, c[2], 7)]), min_size=1, max_size=2
+    ).map(lambda ps: [(p, 0x10) for p in ps])
     return st.one_of(
         flips.map(lambda f: ("flip", f)),
         chunk_flips.map(lambda f: ("flip", f)),
@@ -355,7 +363,7 @@ def mutate(kind: str, arg) -> bytes:
     if kind == "cut":
         return data[:arg]
     if kind == "flip+cut":
-        return mutate("flip", arg[0])[:arg[1]]
+        return mutate("flip", arg[0])[: arg[1]]
     return arg if kind == "random" else mcapio.MAGIC + arg
 
 
@@ -403,8 +411,9 @@ def _payloads(path: Path, intact: dict[int, bytes]) -> None:
         check_scans(run.stamps, run.ranges, intact, -1)
 
 
-@settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                                                   HealthCheck.too_slow])
+@settings(
+    max_examples=250, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(mutation=_mutations())
 def test_fuzz_mcap_reader_errors_or_intact_scans(tmp_path, mutation):
     _, intact = base_log()
@@ -418,8 +427,9 @@ def test_fuzz_mcap_reader_errors_or_intact_scans(tmp_path, mutation):
     tally("mcap reader fuzz")
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                                                  HealthCheck.too_slow])
+@settings(
+    max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(at=st.integers(0, 10**9), mask=st.integers(1, 255), command=st.sampled_from(["info", "track"]))
 def test_fuzz_cli_on_flipped_logs_no_traceback(tmp_path, at, mask, command):
     data, _ = base_log()

@@ -76,8 +76,12 @@ def test_track_rows(summary):
 
 def test_class_rows_count_confirmed_tracks(summary):
     got = {(r["class"], r["mobility"]): r for r in summary.classes}
-    assert list(got) == [("person", "dynamic"), ("circle object", "dynamic"), ("rectangular object", "dynamic"),
-                         ("rectangular object", "static")]
+    assert list(got) == [
+        ("person", "dynamic"),
+        ("circle object", "dynamic"),
+        ("rectangular object", "dynamic"),
+        ("rectangular object", "static"),
+    ]
     people = got[("person", "dynamic")]
     assert (people["tracks"], people["occlusions"]) == (3, 1)
     assert people["max_lifetime_s"] == pytest.approx(9.8)
@@ -92,7 +96,7 @@ def test_sort_and_top(summary):
 
 
 def test_moving_tracks_in_full_static_pieces_summarised(summary):
-    assert [r["id"] for r in summary.shown(None, "id")] == [1, 2, 3, 4, 7]    # 5 is a static rectangle
+    assert [r["id"] for r in summary.shown(None, "id")] == [1, 2, 3, 4, 7]  # 5 is a static rectangle
     five = next(r for r in summary.tracks if r["id"] == 5)
     (static,) = report.static_rows(summary.tracks)
     assert (static["class"], static["mobility"], static["tracks"]) == ("rectangular object", "static", 1)
@@ -105,9 +109,19 @@ def test_moving_tracks_in_full_static_pieces_summarised(summary):
 def test_cli_rich(log):
     result = invoke("report", log)
     assert result.exit_code == 0, result.output
-    for text in ("1 file", "run.mcap: run", "5.00 Hz", "dropped scans", "features (50 scans)", "landmarks (2",
-                 "column", "people and dynamic tracks (5 of 5, by lifetime; 6 confirmed, 1 never confirmed",
-                 "person", "circle object", "static pieces by class (1 tracks"):
+    for text in (
+        "1 file",
+        "run.mcap: run",
+        "5.00 Hz",
+        "dropped scans",
+        "features (50 scans)",
+        "landmarks (2",
+        "column",
+        "people and dynamic tracks (5 of 5, by lifetime; 6 confirmed, 1 never confirmed",
+        "person",
+        "circle object",
+        "static pieces by class (1 tracks",
+    ):
         assert text in result.output, text
 
 
@@ -168,9 +182,9 @@ def test_plot_rejects_unknown_format(tmp_path, log):
     assert result.exit_code == 1 and "plot format must be one of .png, .svg, .pdf" in result.output
 
 
-@pytest.mark.parametrize("channels, missing, command", [
-    ({"with_tracks": False}, "/datmo/tracks", "run datmo track (or datmo run) first"),
-])
+@pytest.mark.parametrize(
+    "channels, missing, command", [({"with_tracks": False}, "/datmo/tracks", "run datmo track (or datmo run) first")]
+)
 def test_missing_channel_names_the_command(tmp_path, channels, missing, command):
     path = tmp_path / "partial.mcap"
     write(path, **channels)

@@ -54,7 +54,7 @@ def hall(tmp_path_factory):
 
 def test_hall_labels_do_not_overlap(hall):
     default, _ = check_labels(hall)
-    assert default.kind == "all" and default.placed >= 5    # two people, a platform: something moves
+    assert default.kind == "all" and default.placed >= 5  # two people, a platform: something moves
 
 
 @pytest.mark.slow
@@ -68,9 +68,9 @@ def test_demo_bag_labels_do_not_overlap(tmp_path):
     data = pipeline.read_run_data(out, keep_scans=True)
     summary = report.summarise(data)
     static = len(summary.confirmed()) - sum(report.moving(r) for r in summary.confirmed())
-    assert static > 100                  # the walls' and furniture's pieces the issue saw labelled
+    assert static > 100  # the walls' and furniture's pieces the issue saw labelled
     default, every = check_labels(data)
-    assert every.dropped > 0             # too many to label them all near the walls: some left out, said
+    assert every.dropped > 0  # too many to label them all near the walls: some left out, said
     assert default.placed >= 4
 
 
@@ -96,8 +96,11 @@ def test_auto_draws_all_when_something_moves_else_top(log, tmp_path):
     assert drawn.kind == "all" and len(drawn.figure.axes) == 3
     counts, speeds = drawn.figure.axes[1:]
     assert counts.get_legend() is not None and {t.get_text() for t in speeds.get_legend().get_texts()} == {
-        "person", "circle object", "rectangular object"}
-    assert plot.draw(only_track(data, 5)).kind == "top"      # a static rectangle alone: nothing moves
+        "person",
+        "circle object",
+        "rectangular object",
+    }
+    assert plot.draw(only_track(data, 5)).kind == "top"  # a static rectangle alone: nothing moves
 
 
 def only_track(data: report.RunData, tid: int) -> report.RunData:
@@ -109,6 +112,9 @@ def only_track(data: report.RunData, tid: int) -> report.RunData:
     t = data.tracks
     keep = t.items["tracks"]["id"] == tid
     per_message = np.bincount(t.message_index("tracks")[keep], minlength=len(t))
-    tracks = dataclasses.replace(t, items={"tracks": t.items["tracks"][keep]},
-                                 offsets={"tracks": np.r_[0, np.cumsum(per_message)].astype(np.int64)})
+    tracks = dataclasses.replace(
+        t,
+        items={"tracks": t.items["tracks"][keep]},
+        offsets={"tracks": np.r_[0, np.cumsum(per_message)].astype(np.int64)},
+    )
     return dataclasses.replace(data, tracks=tracks)

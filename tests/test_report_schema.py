@@ -14,15 +14,37 @@ from synthetic_logs import write
 from datmo_cli import report
 from datmo_cli.cli import cli
 
-FILE_HEADER = ("file,duration_s,scans,lines_per_scan,circles_per_scan,blobs_per_scan,landmarks,tracks,moving,"
-               "static_pieces,person,circle_object,rectangular_object,unknown,dynamic,distance_m")
-TRACK_HEADER = ("file,id,class,mobility,first_s,last_s,lifetime_s,distance_m,mean_speed_mps,max_speed_mps,"
-                "occlusions,x_m,y_m,occluded_scans,scans")
+FILE_HEADER = (
+    "file,duration_s,scans,lines_per_scan,circles_per_scan,blobs_per_scan,landmarks,tracks,moving,"
+    "static_pieces,person,circle_object,rectangular_object,unknown,dynamic,distance_m"
+)
+TRACK_HEADER = (
+    "file,id,class,mobility,first_s,last_s,lifetime_s,distance_m,mean_speed_mps,max_speed_mps,"
+    "occlusions,x_m,y_m,occluded_scans,scans"
+)
 TOP_KEYS = ["schema", "files", "total", "batches"]
-FILE_KEYS = FILE_HEADER.split(",") + ["run", "features", "landmark_list", "frame", "tentative_only", "classes",
-                                      "moving_tracks", "static_by_class"]
-STATIC_KEYS = ["class", "mobility", "tracks", "mean_lifetime_s", "centroid_x_m", "centroid_y_m", "x_min_m",
-               "x_max_m", "y_min_m", "y_max_m"]
+FILE_KEYS = FILE_HEADER.split(",") + [
+    "run",
+    "features",
+    "landmark_list",
+    "frame",
+    "tentative_only",
+    "classes",
+    "moving_tracks",
+    "static_by_class",
+]
+STATIC_KEYS = [
+    "class",
+    "mobility",
+    "tracks",
+    "mean_lifetime_s",
+    "centroid_x_m",
+    "centroid_y_m",
+    "x_min_m",
+    "x_max_m",
+    "y_min_m",
+    "y_max_m",
+]
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +68,7 @@ def test_csv_header_is_the_same_for_one_file_and_many(logs):
     assert one[0] == many[0] == FILE_HEADER
     assert [r.split(",")[0] for r in one[1:]] == [str(logs[0]), "total"]
     assert [r.split(",")[0] for r in many[1:]] == [*map(str, logs), "total"]
-    assert one[1].split(",")[1:] == one[2].split(",")[1:]      # the total of one file is that file
+    assert one[1].split(",")[1:] == one[2].split(",")[1:]  # the total of one file is that file
 
 
 def test_csv_tracks_header_is_the_same_for_one_file_and_many(logs):
@@ -88,8 +110,9 @@ def test_batch_folder_and_run_report_have_the_same_shapes(logs, tmp_path):
     run = CliRunner().invoke(cli, ["run", str(logs[0]), "-o", str(out), "--jobs", "1", "--format", "csv"])
     assert run.exit_code == 0, run.output
     assert run.stdout.splitlines()[0] == FILE_HEADER
-    run_json = json.loads(CliRunner().invoke(cli, ["run", str(logs[0]), "-o", str(out), "--jobs", "1",
-                                                   "--format", "json"]).stdout)
+    run_json = json.loads(
+        CliRunner().invoke(cli, ["run", str(logs[0]), "-o", str(out), "--jobs", "1", "--format", "json"]).stdout
+    )
     assert list(run_json) == TOP_KEYS and list(run_json["files"][0]) == FILE_KEYS
     doc = json.loads(invoke("report", out, "--format", "json"))
     assert list(doc) == TOP_KEYS and [list(f) for f in doc["files"]] == [FILE_KEYS]
@@ -115,7 +138,7 @@ def test_piped_tables_keep_long_names_whole(tmp_path):
     write(path)
     out = invoke("report", path, "--format", "rich")
     assert any(str(path) in line for line in out.splitlines())
-    assert all(len(line) < 1000 for line in out.splitlines())        # plain, unlimited: no padding to 10,000
+    assert all(len(line) < 1000 for line in out.splitlines())  # plain, unlimited: no padding to 10,000
 
 
 def test_progress_counts_scans_to_the_total(logs, monkeypatch):

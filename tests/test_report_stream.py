@@ -36,19 +36,25 @@ def ref_track_rows(h: report.TrackHistory, t0_ns: int) -> list[dict]:
         x, y, speed = h.x[a:b][conf], h.y[a:b][conf], h.speed[a:b][conf]
         occ = s["occluded"].astype(bool)
         t_first, t_last = (h.stamps[a] - t0_ns) / 1e9, (h.stamps[b - 1] - t0_ns) / 1e9
-        rows.append({
-            "id": tid, "class": vocabulary.CLASS_NAMES.get(int(s["classification"][-1]), "unknown"),
-            "mobility": vocabulary.MOBILITY_NAMES.get(int(s["mobility"][-1]), "undefined"),
-            "first_s": round(float(t_first), 3), "last_s": round(float(t_last), 3),
-            "lifetime_s": round(float(t_last - t_first), 3), "scans": b - a,
-            "distance_m": round(float(np.hypot(np.diff(x), np.diff(y)).sum()), 3),
-            "mean_speed_mps": round(float(speed.mean()), 3) if len(speed) else 0.0,
-            "max_speed_mps": round(float(speed.max()), 3) if len(speed) else 0.0,
-            "occlusions": int(occ[0]) + int(np.sum(occ[1:] & ~occ[:-1])), "occluded_scans": int(occ.sum()),
-            "confirmed": bool(conf.any()),
-            "x_m": round(float(x[-1]), 3) if len(x) and np.isfinite(x[-1]) else None,
-            "y_m": round(float(y[-1]), 3) if len(y) and np.isfinite(y[-1]) else None,
-        })
+        rows.append(
+            {
+                "id": tid,
+                "class": vocabulary.CLASS_NAMES.get(int(s["classification"][-1]), "unknown"),
+                "mobility": vocabulary.MOBILITY_NAMES.get(int(s["mobility"][-1]), "undefined"),
+                "first_s": round(float(t_first), 3),
+                "last_s": round(float(t_last), 3),
+                "lifetime_s": round(float(t_last - t_first), 3),
+                "scans": b - a,
+                "distance_m": round(float(np.hypot(np.diff(x), np.diff(y)).sum()), 3),
+                "mean_speed_mps": round(float(speed.mean()), 3) if len(speed) else 0.0,
+                "max_speed_mps": round(float(speed.max()), 3) if len(speed) else 0.0,
+                "occlusions": int(occ[0]) + int(np.sum(occ[1:] & ~occ[:-1])),
+                "occluded_scans": int(occ.sum()),
+                "confirmed": bool(conf.any()),
+                "x_m": round(float(x[-1]), 3) if len(x) and np.isfinite(x[-1]) else None,
+                "y_m": round(float(y[-1]), 3) if len(y) and np.isfinite(y[-1]) else None,
+            }
+        )
     return rows
 
 
@@ -64,11 +70,18 @@ def ref_run_facts(data: report.RunData) -> dict:
             params[k] = json.loads(v)
         except ValueError:
             params[k] = v
-    return {"file": data.name, "duration_s": round(float((s[-1] - s[0]) / 1e9), 3) if len(s) else 0.0,
-            "scans": int(len(s)), "rate_hz": round(1 / period, 3) if period > 0 else None,
-            "beams": int(data.n_beams), "dropped_scans": dropped, "start_ns": int(s[0]) if len(s) else 0,
-            "version": meta.get("version"), "command": meta.get("command_line") or meta.get("command"),
-            "parameters": params}
+    return {
+        "file": data.name,
+        "duration_s": round(float((s[-1] - s[0]) / 1e9), 3) if len(s) else 0.0,
+        "scans": int(len(s)),
+        "rate_hz": round(1 / period, 3) if period > 0 else None,
+        "beams": int(data.n_beams),
+        "dropped_scans": dropped,
+        "start_ns": int(s[0]) if len(s) else 0,
+        "version": meta.get("version"),
+        "command": meta.get("command_line") or meta.get("command"),
+        "parameters": params,
+    }
 
 
 def ref_feature_facts(features: report.Decoded | None) -> dict | None:
@@ -77,8 +90,11 @@ def ref_feature_facts(features: report.Decoded | None) -> dict | None:
     out = {"scans": len(features)}
     for name in ("lines", "circles", "blobs"):
         c = features.counts(name) if name in features.offsets else np.zeros(len(features), np.int64)
-        out[name] = {"total": int(c.sum()), "per_scan": round(float(c.mean()), 3) if len(c) else 0.0,
-                     "max_per_scan": int(c.max()) if len(c) else 0}
+        out[name] = {
+            "total": int(c.sum()),
+            "per_scan": round(float(c.mean()), 3) if len(c) else 0.0,
+            "max_per_scan": int(c.max()) if len(c) else 0,
+        }
     return out
 
 
@@ -92,10 +108,20 @@ def ref_landmark_rows(landmarks: report.Decoded | None, t0_ns: int) -> list[dict
     def secs(t: np.ndarray) -> float:
         return round((int(t["sec"]) * 1_000_000_000 + int(t["nanosec"]) - t0_ns) / 1e9, 3)
 
-    return [{"id": int(lm["id"]), "type": vocabulary.LANDMARK_NAMES.get(int(lm["type"]), str(int(lm["type"]))),
-             "x_m": round(float(lm["x"]), 3), "y_m": round(float(lm["y"]), 3), "size_m": round(float(lm["size"]), 3),
-             "first_seen_s": secs(lm["first_seen"]), "last_seen_s": secs(lm["last_seen"]), "scans": int(lm["count"]),
-             "frame": landmarks.frame_id} for lm in landmarks.items["landmarks"][off[-2]:off[-1]]]
+    return [
+        {
+            "id": int(lm["id"]),
+            "type": vocabulary.LANDMARK_NAMES.get(int(lm["type"]), str(int(lm["type"]))),
+            "x_m": round(float(lm["x"]), 3),
+            "y_m": round(float(lm["y"]), 3),
+            "size_m": round(float(lm["size"]), 3),
+            "first_seen_s": secs(lm["first_seen"]),
+            "last_seen_s": secs(lm["last_seen"]),
+            "scans": int(lm["count"]),
+            "frame": landmarks.frame_id,
+        }
+        for lm in landmarks.items["landmarks"][off[-2] : off[-1]]
+    ]
 
 
 def reference(data: report.RunData) -> report.RunSummary:
@@ -104,8 +130,14 @@ def reference(data: report.RunData) -> report.RunSummary:
     t0 = facts["start_ns"]
     hist = report.track_history(data.tracks)
     tracks = ref_track_rows(hist, t0)
-    return report.RunSummary(facts, ref_feature_facts(data.features), ref_landmark_rows(data.landmarks, t0),
-                             report.class_rows(tracks), tracks, "world" if hist.world else "sensor")
+    return report.RunSummary(
+        facts,
+        ref_feature_facts(data.features),
+        ref_landmark_rows(data.landmarks, t0),
+        report.class_rows(tracks),
+        tracks,
+        "world" if hist.world else "sensor",
+    )
 
 
 def text(s: report.RunSummary) -> str:
@@ -197,12 +229,21 @@ def track_states(k: int, world: bool, rng: np.random.Generator) -> np.ndarray:
     t["x"], t["y"] = np.array(ids) + 0.05 * k + rng.normal(0, 0.02, len(ids)), rng.normal(0, 1, len(ids))
     t["vx"], t["vy"] = rng.normal(0, 1, (2, len(ids)))
     t["world_x"], t["world_y"], t["world_vx"], t["world_vy"] = (
-        (t["x"] + 10, t["y"] - 3, t["vx"], t["vy"]) if world else (np.nan,) * 4)
+        (t["x"] + 10, t["y"] - 3, t["vx"], t["vy"]) if world else (np.nan,) * 4
+    )
     return t
 
 
-def write_log(path: Path, stamps: np.ndarray, *, tracks: str = "some", features: bool = True,
-              landmarks: bool = True, world: bool = False, geometry_change_at: int | None = None) -> Path:
+def write_log(
+    path: Path,
+    stamps: np.ndarray,
+    *,
+    tracks: str = "some",
+    features: bool = True,
+    landmarks: bool = True,
+    world: bool = False,
+    geometry_change_at: int | None = None,
+) -> Path:
     """A processed log with one scan per stamp; `tracks`: "some", "none" (a channel of empty messages) or
     "absent"; features and landmarks channels optional."""
     rng = np.random.default_rng(len(stamps))
@@ -212,21 +253,36 @@ def write_log(path: Path, stamps: np.ndarray, *, tracks: str = "some", features:
             g = other if geometry_change_at is not None and k >= geometry_change_at else GEOM
             w.write_scans(ScanRun(np.array([s], np.int64), np.full((1, g.n_beams), 5.0, np.float32), g))
             if features:
-                f = {n: np.zeros((k * m) % 4, cdr.element_dtype(t))
-                     for n, m, t in (("lines", 1, types.LINE), ("circles", 3, types.CIRCLE), ("blobs", 2, types.BLOB))}
-                w.write(mcapio.TOPIC_FEATURES, types.FEATURES, s,
-                        cdr.encode(types.FEATURES, {"stamp_ns": s, "frame_id": "laser", **f}))
+                f = {
+                    n: np.zeros((k * m) % 4, cdr.element_dtype(t))
+                    for n, m, t in (("lines", 1, types.LINE), ("circles", 3, types.CIRCLE), ("blobs", 2, types.BLOB))
+                }
+                w.write(
+                    mcapio.TOPIC_FEATURES,
+                    types.FEATURES,
+                    s,
+                    cdr.encode(types.FEATURES, {"stamp_ns": s, "frame_id": "laser", **f}),
+                )
             if landmarks:
                 db = np.zeros(k % 3, LANDMARK)
                 db["id"], db["type"], db["x"], db["count"] = np.arange(len(db)), 4, 1.5, k
                 db["first_seen"]["sec"], db["last_seen"]["sec"] = s // 1_000_000_000, s // 1_000_000_000
-                w.write(mcapio.TOPIC_LANDMARKS, types.LANDMARKS, s,
-                        cdr.encode(types.LANDMARKS, {"stamp_ns": s, "frame_id": "odom" if k == 0 else "laser",
-                                                     "landmarks": db}))
+                w.write(
+                    mcapio.TOPIC_LANDMARKS,
+                    types.LANDMARKS,
+                    s,
+                    cdr.encode(
+                        types.LANDMARKS, {"stamp_ns": s, "frame_id": "odom" if k == 0 else "laser", "landmarks": db}
+                    ),
+                )
             if tracks != "absent":
                 t = track_states(k, world, rng) if tracks == "some" else np.zeros(0, TRACK)
-                w.write(mcapio.TOPIC_TRACKS, types.TRACKS, s,
-                        cdr.encode(types.TRACKS, {"stamp_ns": s, "frame_id": "laser", "tracks": t}))
+                w.write(
+                    mcapio.TOPIC_TRACKS,
+                    types.TRACKS,
+                    s,
+                    cdr.encode(types.TRACKS, {"stamp_ns": s, "frame_id": "laser", "tracks": t}),
+                )
     return path
 
 
@@ -256,7 +312,8 @@ EDGES = {
     "jittered stamps, even count": lambda p: write_log(p, regular(81) + jitter(81)),
     "repeated stamps": lambda p: write_log(p, np.repeat(regular(20), 2)),
     "two runs interleaved (the writer orders them by time)": lambda p: write_log(
-        p, np.r_[regular(20), regular(10) + 5_000_000]),
+        p, np.r_[regular(20), regular(10) + 5_000_000]
+    ),
 }
 
 
@@ -288,8 +345,12 @@ def test_track_stamps_out_of_file_order(tmp_path):
     with mcapio.LogWriter(path) as w:
         w.write_scans(ScanRun(stamps, np.full((40, GEOM.n_beams), 5.0, np.float32), GEOM))
         for k, (s, h) in enumerate(zip(stamps.tolist(), header.tolist(), strict=True)):
-            w.write(mcapio.TOPIC_TRACKS, types.TRACKS, s, cdr.encode(
-                types.TRACKS, {"stamp_ns": h, "frame_id": "laser", "tracks": track_states(k, False, rng)}))
+            w.write(
+                mcapio.TOPIC_TRACKS,
+                types.TRACKS,
+                s,
+                cdr.encode(types.TRACKS, {"stamp_ns": h, "frame_id": "laser", "tracks": track_states(k, False, rng)}),
+            )
     want = text(reference(pipeline.read_run_data(path)))
     assert text(report.summarise_file(path)) == want
     assert text(report.summarise(pipeline.read_run_data(path))) == want
@@ -323,9 +384,9 @@ def track_runs(draw) -> tuple[np.ndarray, np.ndarray, list[int]]:
     seed = draw(st.integers(0, 2**32 - 1))
     rng = np.random.default_rng(seed)
     world = draw(st.sampled_from(["finite", "nan", "some nan"]))
-    gaps = rng.choice([0, 1, 1, 2, 7], n_msgs)          # repeated stamps too
+    gaps = rng.choice([0, 1, 1, 2, 7], n_msgs)  # repeated stamps too
     msg_stamps = T0 + np.cumsum(gaps).astype(np.int64) * 50_000_000
-    if draw(st.booleans()):                             # messages out of stamp order (not a log datmo writes)
+    if draw(st.booleans()):  # messages out of stamp order (not a log datmo writes)
         msg_stamps = rng.permutation(msg_stamps)
     stamps, states = [], []
     for s in msg_stamps.tolist():
@@ -350,8 +411,9 @@ def track_runs(draw) -> tuple[np.ndarray, np.ndarray, list[int]]:
 def test_track_figures_equal_the_reference_however_the_states_are_split(run):
     stamps, states, cuts = run
     # the reference's Decoded: one message per state (track_history only needs each state's stamp)
-    decoded = report.Decoded(stamps, "laser", items={"tracks": states},
-                             offsets={"tracks": np.arange(len(stamps) + 1, dtype=np.int64)})
+    decoded = report.Decoded(
+        stamps, "laser", items={"tracks": states}, offsets={"tracks": np.arange(len(stamps) + 1, dtype=np.int64)}
+    )
     hist = report.track_history(decoded)
     want = report.to_json(ref_track_rows(hist, T0))
     whole = report.TrackStats()
@@ -363,7 +425,7 @@ def test_track_figures_equal_the_reference_however_the_states_are_split(run):
     assert len(acc) == len(np.unique(states["id"])) and acc.world == hist.world
     if np.all(np.diff(stamps) >= 0):
         assert acc.late == 0
-    if acc.late == 0:   # else states come after later ones of their track, blocks before: taken in file order
+    if acc.late == 0:  # else states come after later ones of their track, blocks before: taken in file order
         assert report.to_json(acc.rows(T0)) == want
 
 
@@ -396,11 +458,12 @@ def test_what_is_held_does_not_grow_with_the_log(tmp_path, monkeypatch):
         path = write_log(tmp_path / f"long{n}.mcap", np.delete(regular(n), [7, 8, 100]))
         decoded_at_once.clear()
         acc = report.stream_run(path, block=100)
-        assert acc.peak_messages == 100           # one block of payloads (and their decoded forms) at a time
+        assert acc.peak_messages == 100  # one block of payloads (and their decoded forms) at a time
         assert max(decoded_at_once) <= 100
-        assert len(acc.tracks) == 8 and all(v.shape[-1] == 8 for v in vars(acc.tracks).values()
-                                            if isinstance(v, np.ndarray))
-        assert len(acc.scans.periods) == 3        # the regular period, two and three periods across the drops
+        assert len(acc.tracks) == 8 and all(
+            v.shape[-1] == 8 for v in vars(acc.tracks).values() if isinstance(v, np.ndarray)
+        )
+        assert len(acc.scans.periods) == 3  # the regular period, two and three periods across the drops
         held[n] = held_numbers(acc)
         assert report.to_json(vars(acc.summary())) == report.to_json(vars(reference(pipeline.read_run_data(path))))
     assert held[300] == held[3000]

@@ -27,20 +27,95 @@ SOURCE = ROOT / "datmo_cli" / "msg"
 HALL = ROOT / "sample_logs" / "hall.mcap"
 RESYNC = "cp datmo_cli/msg/*.msg datmo_msgs/msg/"
 
-PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32", "uint32",
-              "int64", "uint64", "string", "wstring"}
+PRIMITIVES = {
+    "bool",
+    "byte",
+    "char",
+    "float32",
+    "float64",
+    "int8",
+    "uint8",
+    "int16",
+    "uint16",
+    "int32",
+    "uint32",
+    "int64",
+    "uint64",
+    "string",
+    "wstring",
+}
 # rosidl_adapter's rules (msg names PascalCase; fields lower_case without '__' or a trailing '_'; constants
 # UPPER_CASE), and names the generated C++ and Python code cannot take.
 MSG_NAME = re.compile(r"^[A-Z][A-Za-z0-9]*$")
 FIELD_NAME = re.compile(r"^(?!.*__)(?!.*_$)[a-z][a-z0-9_]*$")
 CONSTANT_NAME = re.compile(r"^[A-Z]([A-Z0-9_]?[A-Z0-9]+)*$")
 PACKAGE_NAME = re.compile(r"^(?!.*__)(?!.*_$)[a-z][a-z0-9_]*$")
-RESERVED = {"and", "as", "assert", "async", "await", "break", "class", "continue", "def", "del", "elif", "else",
-            "except", "finally", "for", "from", "global", "if", "import", "in", "is", "lambda", "nonlocal", "not",
-            "or", "pass", "raise", "return", "try", "while", "with", "yield", "auto", "bool", "case", "char", "const",
-            "default", "delete", "double", "enum", "float", "int", "long", "namespace", "new", "operator", "private",
-            "public", "short", "signed", "sizeof", "static", "struct", "switch", "template", "this", "throw",
-            "typedef", "union", "unsigned", "virtual", "void", "volatile"}
+RESERVED = {
+    "and",
+    "as",
+    "assert",
+    "async",
+    "await",
+    "break",
+    "class",
+    "continue",
+    "def",
+    "del",
+    "elif",
+    "else",
+    "except",
+    "finally",
+    "for",
+    "from",
+    "global",
+    "if",
+    "import",
+    "in",
+    "is",
+    "lambda",
+    "nonlocal",
+    "not",
+    "or",
+    "pass",
+    "raise",
+    "return",
+    "try",
+    "while",
+    "with",
+    "yield",
+    "auto",
+    "bool",
+    "case",
+    "char",
+    "const",
+    "default",
+    "delete",
+    "double",
+    "enum",
+    "float",
+    "int",
+    "long",
+    "namespace",
+    "new",
+    "operator",
+    "private",
+    "public",
+    "short",
+    "signed",
+    "sizeof",
+    "static",
+    "struct",
+    "switch",
+    "template",
+    "this",
+    "throw",
+    "typedef",
+    "union",
+    "unsigned",
+    "virtual",
+    "void",
+    "volatile",
+}
 
 
 def msg_files(folder: Path) -> dict[str, bytes]:
@@ -126,8 +201,12 @@ def test_package_xml_is_a_format_3_interface_package():
     assert root.findtext("name") == "datmo_msgs" and root.findtext("version") == __version__
     assert root.find("maintainer").get("email") and root.findtext("license") and root.findtext("description")
     tags = {(e.tag, e.text) for e in root}
-    assert {("buildtool_depend", "ament_cmake"), ("buildtool_depend", "rosidl_default_generators"),
-            ("exec_depend", "rosidl_default_runtime"), ("member_of_group", "rosidl_interface_packages")} <= tags
+    assert {
+        ("buildtool_depend", "ament_cmake"),
+        ("buildtool_depend", "rosidl_default_generators"),
+        ("exec_depend", "rosidl_default_runtime"),
+        ("member_of_group", "rosidl_interface_packages"),
+    } <= tags
     assert {t for kind, t in tags if kind == "depend"} == referenced_packages()
     assert root.find("export").findtext("build_type") == "ament_cmake"
 
@@ -142,15 +221,24 @@ def test_msg_files_parse_and_follow_rosidl_rules():
     for name in msg_files(PACKAGE / "msg"):
         for _, (node, spec) in store.fielddefs[f"datmo_msgs/msg/{name[:-4]}"][1]:
             inner = spec[0] if node in (3, 4) else (node, spec)
-            if inner[0] == 2:   # a named type: the store knows it
+            if inner[0] == 2:  # a named type: the store knows it
                 assert inner[1] in store.fielddefs, (name, inner)
 
 
-@pytest.mark.parametrize("line, what", [
-    ("float32 myField", "field name"), ("float32 x__y", "field name"), ("float32 x_", "field name"),
-    ("uint8 class", "field name"), ("uint8 Lower=1", "constant"), ("uint8[2] FOO=1", "non-primitive"),
-    ("foo_msgs/Bar bar", "unknown type"), ("datmo_msgs/NoSuch x", "unknown type"), ("Float33 x", "unknown type"),
-])
+@pytest.mark.parametrize(
+    "line, what",
+    [
+        ("float32 myField", "field name"),
+        ("float32 x__y", "field name"),
+        ("float32 x_", "field name"),
+        ("uint8 class", "field name"),
+        ("uint8 Lower=1", "constant"),
+        ("uint8[2] FOO=1", "non-primitive"),
+        ("foo_msgs/Bar bar", "unknown type"),
+        ("datmo_msgs/NoSuch x", "unknown type"),
+        ("Float33 x", "unknown type"),
+    ],
+)
 def test_the_rosidl_checker_catches_what_rosidl_refuses(line, what):
     problems = rosidl_problems("Good", f"# a comment\n{line}\n", {"datmo_msgs/Track"})
     assert len(problems) == 1 and what in problems[0], problems
@@ -224,9 +312,10 @@ def check_bag(folder: Path) -> dict[str, int]:
         assert reader.start_time == info["starting_time"]["nanoseconds_since_epoch"]
     summary = mcapio.summary(bagdir.member(folder))
     assert counts == {c.topic: c.count for c in summary.channels.values()}
-    assert {t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
-            for t in info["topics_with_message_count"]} == {
-        c.topic: c.metadata["offered_qos_profiles"] for c in summary.channels.values()}
+    assert {
+        t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
+        for t in info["topics_with_message_count"]
+    } == {c.topic: c.metadata["offered_qos_profiles"] for c in summary.channels.values()}
     return counts
 
 
@@ -251,7 +340,8 @@ def test_run_bag_dir_writes_one_bag_per_input_and_resumes(small, tmp_path):
     from datmo_cli.batch import read_batch
 
     assert sorted(r["output"] for r in read_batch(str(out))) == sorted(
-        str(out / n / f"{n}_0.mcap") for n in ("small", "other"))
+        str(out / n / f"{n}_0.mcap") for n in ("small", "other")
+    )
     before = (out / "small" / "small_0.mcap").stat().st_mtime_ns
     again = datmo("run", small, "-o", out, "--bag-dir", "--no-report")
     assert again.exit_code == 0 and "1 skipped" in again.stderr, again.output
@@ -273,7 +363,7 @@ def test_bag_dir_replaces_only_a_bag_and_only_with_force(small, tmp_path):
     assert "/datmo/markers/tracks" not in check_bag(bag)
 
     one_line_error(datmo("track", bag / "bag_0.mcap", "-o", bag, "--bag-dir", "--force"), "replace the input")
-    (bag / "notes.txt").write_text("mine")   # no longer only a bag: never replaced
+    (bag / "notes.txt").write_text("mine")  # no longer only a bag: never replaced
     one_line_error(datmo("track", small, "-o", bag, "--bag-dir", "--force"), "not a ROS 2 bag", "never replaced")
     assert (bag / "notes.txt").read_text() == "mine"
     plain = tmp_path / "plain.txt"
@@ -282,7 +372,7 @@ def test_bag_dir_replaces_only_a_bag_and_only_with_force(small, tmp_path):
     one_line_error(datmo("track", small, "-o", tmp_path / "x.mcap", "--bag-dir"), "name it without .mcap")
     empty = tmp_path / "empty"
     empty.mkdir()
-    assert datmo("track", small, "-o", empty, "--bag-dir").exit_code == 0   # an empty folder holds nothing to lose
+    assert datmo("track", small, "-o", empty, "--bag-dir").exit_code == 0  # an empty folder holds nothing to lose
     check_bag(empty)
     assert hidden(tmp_path) == []
 

@@ -59,14 +59,14 @@ def test_a_bag_done_is_skipped_without_converting_it(tmp_path, bags, conversions
     assert first.exit_code == 0, first.output
     assert conversions == [bags["ros1"], bags["ros2"]]
     rec = latest(out)
-    assert sorted(rec) == sorted(str(b) for b in bags.values())   # keyed by the bags, not temporary copies
+    assert sorted(rec) == sorted(str(b) for b in bags.values())  # keyed by the bags, not temporary copies
     assert all(r["status"] == "done" and r["scans"] == N_SCANS for r in rec.values())
     assert {Path(r["output"]).name for r in rec.values()} == {"legs.mcap", "lab.mcap"}
     assert hidden(out) == []
 
     again = invoke(bags["ros1"], bags["ros2"], "-o", out, "-j", "1")
     assert again.exit_code == 0, again.output
-    assert conversions == [bags["ros1"], bags["ros2"]]   # nothing converted the second time
+    assert conversions == [bags["ros1"], bags["ros2"]]  # nothing converted the second time
     assert {r["status"] for r in latest(out).values()} == {"skipped"}
     assert hidden(out) == []
 
@@ -132,6 +132,7 @@ def _failing(name: str, exc: BaseException, bad: Path):
         if name == "write_import":
             real(first, *args, **kwargs)
         raise exc
+
     return call
 
 
@@ -160,14 +161,21 @@ def test_a_failing_conversion_fails_its_input_alone(tmp_path, bags, monkeypatch,
     result = invoke(bad, bags["ros2"], "-o", out, "-j", "1")
     errors = [line for line in result.stderr.splitlines() if str(bad) in line]
     rec = latest(out)
-    broke = not (result.exit_code == 1 and len(errors) == 1 and errors[0].startswith(f"datmo: error: {bad}: ")
-                 and "Traceback" not in result.output and rec[str(bad)]["status"] == "failed"
-                 and rec[str(bags["ros2"])]["status"] == "done" and (out / "lab.mcap").exists()
-                 and not (out / "bad.mcap").exists() and hidden(out) == [])
+    broke = not (
+        result.exit_code == 1
+        and len(errors) == 1
+        and errors[0].startswith(f"datmo: error: {bad}: ")
+        and "Traceback" not in result.output
+        and rec[str(bad)]["status"] == "failed"
+        and rec[str(bags["ros2"])]["status"] == "done"
+        and (out / "lab.mcap").exists()
+        and not (out / "bad.mcap").exists()
+        and hidden(out) == []
+    )
     tally("run: bag conversion faults", failed=broke)
     assert not broke, (result.output, rec, hidden(out))
     monkeypatch.undo()
-    if FAULTS[fault] is not None:   # the bag itself is fine: the next run does it, and skips the other
+    if FAULTS[fault] is not None:  # the bag itself is fine: the next run does it, and skips the other
         again = invoke(bad, bags["ros2"], "-o", out, "-j", "1")
         assert again.exit_code == 0, again.output
         assert [latest(out)[str(p)]["status"] for p in (bad, bags["ros2"])] == ["done", "skipped"]
@@ -193,8 +201,9 @@ def test_a_bag_dir_output_from_a_bag(tmp_path, bags, conversions):
     result = invoke(bags["ros1"], "-o", out, "-j", "1", "--bag-dir")
     assert result.exit_code == 0, result.output
     assert sorted(p.name for p in (out / "legs").iterdir()) == ["legs_0.mcap", "metadata.yaml"]
-    assert mcapio.summary(out / "legs" / "legs_0.mcap").metadata["datmo.inputs"] == \
-        {str(bags["ros1"]): mcapio.sha256_of(bags["ros1"])}
+    assert mcapio.summary(out / "legs" / "legs_0.mcap").metadata["datmo.inputs"] == {
+        str(bags["ros1"]): mcapio.sha256_of(bags["ros1"])
+    }
     assert hidden(out) == []
     assert invoke(bags["ros1"], "-o", out, "-j", "1", "--bag-dir").exit_code == 0
     assert latest(out)[str(bags["ros1"])]["status"] == "skipped" and len(conversions) == 1
@@ -241,12 +250,17 @@ def test_dask_workers_convert_their_own_bags(tmp_path, bags):
     # in a process of its own: a local Dask cluster sets NUMBA_NUM_THREADS=1 in this process's environment while
     # it spawns its workers, and numba's thread pool must not start here under that setting (as test_cluster.py)
     datmo = Path(sys.executable).with_name("datmo")
-    result = subprocess.run([str(datmo), "run", str(bags["ros1"]), str(bags["ros2"]), "-o", str(out), "--scheduler",
-                             "local:2", "-q"], capture_output=True, text=True, timeout=600)
+    result = subprocess.run(
+        [str(datmo), "run", str(bags["ros1"]), str(bags["ros2"]), "-o", str(out), "--scheduler", "local:2", "-q"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert result.returncode == 0, result.stderr
     rec = latest(out)
     assert {r["status"] for r in rec.values()} == {"done"} and hidden(out) == []
-    assert mcapio.summary(out / "lab.mcap").metadata["datmo.inputs"] == {str(bags["ros2"]):
-                                                                         mcapio.sha256_of(bags["ros2"])}
+    assert mcapio.summary(out / "lab.mcap").metadata["datmo.inputs"] == {
+        str(bags["ros2"]): mcapio.sha256_of(bags["ros2"])
+    }
     again = invoke(bags["ros1"], bags["ros2"], "-o", out, "-j", "1")
     assert again.exit_code == 0 and {r["status"] for r in latest(out).values()} == {"skipped"}

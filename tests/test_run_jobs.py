@@ -16,8 +16,20 @@ from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 
 
-def fake_process(src, out, *, force=False, config=None, markers=False, covariance=False, bag_dir=False,
-                 command_line=None, progress=None, input_name=None, report=None):
+def fake_process(
+    src,
+    out,
+    *,
+    force=False,
+    config=None,
+    markers=False,
+    covariance=False,
+    bag_dir=False,
+    command_line=None,
+    progress=None,
+    input_name=None,
+    report=None,
+):
     src = Path(src)
     if "bad" in src.name:
         raise InputError(f"{src}: not an MCAP file (bad magic bytes)")
@@ -77,7 +89,7 @@ def test_cli_single_input_prints_its_report_and_plot(tmp_path, inputs):
     assert "people and dynamic tracks" in result.stdout
     assert (out / "a.png").stat().st_size > 10_000
     again = CliRunner().invoke(cli, ["run", str(inputs[0]), "-o", str(out), "--plot"])
-    assert again.exit_code == 0 and "0 done, 1 skipped" in again.stderr   # the manifest says it is done
+    assert again.exit_code == 0 and "0 done, 1 skipped" in again.stderr  # the manifest says it is done
     (out / "manifest.jsonl").unlink()
     again = CliRunner().invoke(cli, ["run", str(inputs[0]), "-o", str(out), "--plot"])
     assert again.exit_code == 1 and "a.png: exists; use --force" in again.stderr

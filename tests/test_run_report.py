@@ -86,8 +86,9 @@ def test_ego_motion_auto_reads_only_the_first_block(tmp_path, monkeypatch):
     n = 3 * EGO_SAMPLE_SCANS
     period = int(np.median(np.diff(hall.stamps)))
     reps = -(-n // len(hall))
-    long = ScanRun(hall.stamps[0] + np.arange(n, dtype=np.int64) * period, np.tile(hall.ranges, (reps, 1))[:n],
-                   hall.geometry)
+    long = ScanRun(
+        hall.stamps[0] + np.arange(n, dtype=np.int64) * period, np.tile(hall.ranges, (reps, 1))[:n], hall.geometry
+    )
     path = tmp_path / "long.mcap"
     with mcapio.LogWriter(path) as w:
         w.write_scans(long)
@@ -102,5 +103,5 @@ def test_ego_motion_auto_reads_only_the_first_block(tmp_path, monkeypatch):
 
     monkeypatch.setattr(mcapio, "iter_messages", counting)
     odometry, estimated = streaming.stream_odometry(stream, "auto")
-    assert odometry is None and not estimated          # the hall's scanner stands still
-    assert read.count(mcapio.TOPIC_SCAN) <= EGO_SAMPLE_SCANS + 1    # the first block (and the scan after it)
+    assert odometry is None and not estimated  # the hall's scanner stands still
+    assert read.count(mcapio.TOPIC_SCAN) <= EGO_SAMPLE_SCANS + 1  # the first block (and the scan after it)

@@ -30,7 +30,7 @@ def test_one_pass_equals_the_stages_one_by_one(tmp_path, hall_log):
     invoke("features", str(seg), "-o", str(feat), "--markers")
     invoke("track", str(feat), "-o", str(staged), "--markers", "--covariance")
     direct = tmp_path / "direct.mcap"
-    invoke("track", str(hall_log), "-o", str(direct), "--markers", "--covariance")   # segments, features itself
+    invoke("track", str(hall_log), "-o", str(direct), "--markers", "--covariance")  # segments, features itself
 
     scans = pipeline.process_file(hall_log, tmp_path / "one-pass.mcap", markers=True, covariance=True)
     a = mcapio.read_log(staged, topics=None).messages
@@ -38,8 +38,14 @@ def test_one_pass_equals_the_stages_one_by_one(tmp_path, hall_log):
     c = mcapio.read_log(direct, topics=None).messages
     assert scans == 60
     assert sorted(a) == sorted(b) == sorted(c)
-    for topic in (mcapio.TOPIC_SEGMENTS, mcapio.TOPIC_FEATURES, mcapio.TOPIC_LANDMARKS, mcapio.TOPIC_TRACKS,
-                  mcapio.TOPIC_MARKERS_FEATURES, mcapio.TOPIC_MARKERS_TRACKS):
+    for topic in (
+        mcapio.TOPIC_SEGMENTS,
+        mcapio.TOPIC_FEATURES,
+        mcapio.TOPIC_LANDMARKS,
+        mcapio.TOPIC_TRACKS,
+        mcapio.TOPIC_MARKERS_FEATURES,
+        mcapio.TOPIC_MARKERS_TRACKS,
+    ):
         assert topic in b
     for topic in a:
         assert a[topic] == b[topic] == c[topic], topic
@@ -77,9 +83,25 @@ def test_first_parallel_run_with_an_empty_numba_cache(tmp_path, hall_log):
     other = tmp_path / "copy.mcap"
     other.write_bytes(hall_log.read_bytes())
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
-    done = subprocess.run([sys.executable, "-m", "datmo_cli", "run", str(hall_log), str(other), "-o",
-                           str(tmp_path / "out"), "--jobs", "2", "--no-report"],
-                          env=env, capture_output=True, text=True, timeout=600)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "datmo_cli",
+            "run",
+            str(hall_log),
+            str(other),
+            "-o",
+            str(tmp_path / "out"),
+            "--jobs",
+            "2",
+            "--no-report",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     assert (tmp_path / "out" / "hall.mcap").exists() and (tmp_path / "out" / "copy.mcap").exists()
     assert any((tmp_path / "numba-cache").rglob("*.nbi"))
@@ -95,6 +117,7 @@ def test_derive_and_the_streamed_stages_take_one_configuration(tmp_path, hall_lo
     derived, effective = pipeline.derive(run, odometry, cfg)
     default, _ = pipeline.derive(run, odometry)
     assert effective["config"] == cfg.to_dict() and effective["track"]["confirm_hits"] == 5
+
     def payloads(channels: dict, topic: str) -> list[bytes]:
         return [bytes(p) for p in channels[topic][-1]]
 

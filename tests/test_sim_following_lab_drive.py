@@ -51,13 +51,13 @@ def test_following_trails_the_leader_and_stops_behind_them(following):
     gt = sim.truth.reshape(len(sim.run), -1)
     leader = gt[:, 0]
     gap = np.hypot(leader["x"], leader["y"])
-    assert gap.min() > 1.49 and gap.max() < 2.51                 # 1.5-2.5 m all along
-    assert np.all(np.abs(np.degrees(np.arctan2(leader["y"], leader["x"]))) < 1.0)   # it faces the leader
+    assert gap.min() > 1.49 and gap.max() < 2.51  # 1.5-2.5 m all along
+    assert np.all(np.abs(np.degrees(np.arctan2(leader["y"], leader["x"]))) < 1.0)  # it faces the leader
     stands = ~leader["moving"].astype(bool)
     robot_speed = np.hypot(*np.diff(sim.sensor_poses[:, :2], axis=0).T) * 10.0
     paused = np.flatnonzero(stands[1:] & stands[:-1])
     settled = paused[gap[paused + 1] < 1.53]
-    assert len(settled) > 50 and robot_speed[settled].max() < 0.05        # it stops, the gap shrinks and holds
+    assert len(settled) > 50 and robot_speed[settled].max() < 0.05  # it stops, the gap shrinks and holds
     walking = np.flatnonzero(~stands[1:])
     assert np.median(gap[walking + 1]) == pytest.approx(2.27, abs=0.05)
     assert leader["visible"].mean() > 0.95
@@ -72,10 +72,10 @@ def test_following_people_pass_the_robot_on_either_side(following):
     for k in passers:
         x, y = gt["x"][:, k], gt["y"][:, k]
         seen = gt["visible"][:, k].astype(bool)
-        assert seen.sum() > 30 and (gt["vx"][seen, k] < 0).mean() > 0.9     # coming towards the robot
+        assert seen.sum() > 30 and (gt["vx"][seen, k] < 0).mean() > 0.9  # coming towards the robot
         beside = np.flatnonzero(seen & (np.abs(x) < 1.0))
         sides.add(int(np.sign(np.median(y[beside]))))
-        assert np.hypot(x, y).min() > 0.7                                     # past it, not through it
+        assert np.hypot(x, y).min() > 0.7  # past it, not through it
     assert sides == {-1, 1}
 
 
@@ -88,8 +88,9 @@ def test_lab_drive_scanner_mount_and_odometry(lab):
     # /odom holds the base; the laser is the base composed with the mount, as the ground truth's sensor pose says
     mount = transforms.LaserPose(0.85, 0.0, math.radians(40.0))
     base = transforms.base_odometry(sim.odometry, mount)
-    laser = transforms.sensor_odometry(base, [transforms.Transform.planar(0, "base_link", "laser", mount.x, mount.y,
-                                                                          mount.yaw)], "laser")
+    laser = transforms.sensor_odometry(
+        base, [transforms.Transform.planar(0, "base_link", "laser", mount.x, mount.y, mount.yaw)], "laser"
+    )
     assert np.allclose(laser.x, sim.sensor_poses[:, 0]) and np.allclose(laser.y, sim.sensor_poses[:, 1])
     speed = np.hypot(*np.diff(np.c_[base.x, base.y], axis=0).T) * 10.0
     assert 0.5 <= speed.max() <= 1.0 + 1e-9
@@ -108,9 +109,10 @@ def test_ground_truth_velocities_of_a_mounted_turning_scanner_are_the_derivative
     gt = lab.truth.reshape(len(lab.run), -1)
     k = next(i for i, o in enumerate(lab.objects) if o.name == "column1")
     dx, dy = np.gradient(gt["x"][:, k].astype(float), 0.1), np.gradient(gt["y"][:, k].astype(float), 0.1)
-    smooth = np.abs(np.gradient(np.gradient(gt["x"][:, k].astype(float)))) < 1e-3   # away from the starts and stops
-    assert np.allclose(gt["vx"][smooth, k], dx[smooth], atol=0.02) and np.allclose(gt["vy"][smooth, k], dy[smooth],
-                                                                                     atol=0.02)
+    smooth = np.abs(np.gradient(np.gradient(gt["x"][:, k].astype(float)))) < 1e-3  # away from the starts and stops
+    assert np.allclose(gt["vx"][smooth, k], dx[smooth], atol=0.02) and np.allclose(
+        gt["vy"][smooth, k], dy[smooth], atol=0.02
+    )
     assert np.abs(gt["vx"][:, k]).max() > 0.5
 
 
@@ -122,31 +124,34 @@ def test_the_lab_drive_bag_imports_to_the_same_log_and_runs_to_the_same_tracks(t
     a, b = (mcapio.read_log(tmp_path / n, topics=None) for n in ("lab.mcap", "imported.mcap"))
     assert mcapio.TOPIC_GROUND_TRUTH not in b.messages and mcapio.TOPIC_TF_STATIC in b.messages
     for topic in (mcapio.TOPIC_SCAN, mcapio.TOPIC_TF_STATIC):
-        assert a.messages[topic][1] == b.messages[topic][1], topic      # byte for byte: frames, stamps, mount
+        assert a.messages[topic][1] == b.messages[topic][1], topic  # byte for byte: frames, stamps, mount
     odom_a, odom_b = mcapio.odometry_from_log(a), mcapio.odometry_from_log(b)
     assert (odom_b.frame_id, odom_b.child_frame_id) == ("odom", "base_link")
     assert np.array_equal(odom_a.stamps, odom_b.stamps) and np.array_equal(odom_a.x, odom_b.x)
-    assert np.allclose(odom_a.theta, odom_b.theta, rtol=0, atol=1e-15)   # the yaw through one more quaternion
+    assert np.allclose(odom_a.theta, odom_b.theta, rtol=0, atol=1e-15)  # the yaw through one more quaternion
     invoke("run", tmp_path / "lab.mcap", tmp_path / "robot.bag", "-o", tmp_path / "out", "--no-report")
     mcap, bag = (mcapio.read_messages(tmp_path / "out" / n, mcapio.TOPIC_TRACKS) for n in ("lab.mcap", "robot.mcap"))
     assert len(mcap[1]) == 120 and mcap[1] == bag[1]
 
 
-@pytest.mark.parametrize("text,message", [
-    ("[sensor]\nfollow = 'ghost'\n", "no [[person]] is named 'ghost'"),
-    ("[[person]]\nname = 'a'\nposition = [1, 1]\n[sensor]\nfollow = 'a'\n", "'a' stands still"),
-    ("[[person]]\nname = 'a'\npath = [[0, 0], [5, 0]]\nspeed = 1.5\n[sensor]\nfollow = 'a'\n", "key 'speed'"),
-    ("[[person]]\nname = 'a'\npath = [[0, 0], [5, 0]]\n[sensor]\nfollow = 'a'\ngap = [2.5, 1.5]\n", "key 'gap'"),
-    ("[sensor]\npose = [0, 0, 0]\ngap = [1, 2]\n", "only applies with 'follow'"),
-    ("[[person]]\nname = 'a'\npath = [[0, 0], [5, 0]]\n[sensor]\nfollow = 'a'\nloop = true\n", "key 'loop'"),
-    ("[sensor]\nlaser_pose = [0.85, 0]\n", "key 'laser_pose'"),
-    ("[sensor]\nodometry = 1\n", "key 'odometry'"),
-    ("[scanner]\nbeams = 768\nfov_deg = 270\n", "missing key 'range'"),
-    ("[scanner]\nbeams = 1\nfov_deg = 270\nrange = [0.02, 10]\n", "key 'beams'"),
-    ("[scanner]\nbeams = 768\nfov_deg = 400\nrange = [0.02, 10]\n", "key 'fov_deg'"),
-    ("[scanner]\nbeams = 768\nfov_deg = 270\nrange = [10, 1]\n", "key 'range'"),
-    ("rate = 0\n", "top level, key 'rate'"),
-])
+@pytest.mark.parametrize(
+    "text,message",
+    [
+        ("[sensor]\nfollow = 'ghost'\n", "no [[person]] is named 'ghost'"),
+        ("[[person]]\nname = 'a'\nposition = [1, 1]\n[sensor]\nfollow = 'a'\n", "'a' stands still"),
+        ("[[person]]\nname = 'a'\npath = [[0, 0], [5, 0]]\nspeed = 1.5\n[sensor]\nfollow = 'a'\n", "key 'speed'"),
+        ("[[person]]\nname = 'a'\npath = [[0, 0], [5, 0]]\n[sensor]\nfollow = 'a'\ngap = [2.5, 1.5]\n", "key 'gap'"),
+        ("[sensor]\npose = [0, 0, 0]\ngap = [1, 2]\n", "only applies with 'follow'"),
+        ("[[person]]\nname = 'a'\npath = [[0, 0], [5, 0]]\n[sensor]\nfollow = 'a'\nloop = true\n", "key 'loop'"),
+        ("[sensor]\nlaser_pose = [0.85, 0]\n", "key 'laser_pose'"),
+        ("[sensor]\nodometry = 1\n", "key 'odometry'"),
+        ("[scanner]\nbeams = 768\nfov_deg = 270\n", "missing key 'range'"),
+        ("[scanner]\nbeams = 1\nfov_deg = 270\nrange = [0.02, 10]\n", "key 'beams'"),
+        ("[scanner]\nbeams = 768\nfov_deg = 400\nrange = [0.02, 10]\n", "key 'fov_deg'"),
+        ("[scanner]\nbeams = 768\nfov_deg = 270\nrange = [10, 1]\n", "key 'range'"),
+        ("rate = 0\n", "top level, key 'rate'"),
+    ],
+)
 def test_broken_new_keys_name_the_key(text, message):
     with pytest.raises(ConfigError) as err:
         parse_scene(text, "my.toml")

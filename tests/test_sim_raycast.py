@@ -18,8 +18,9 @@ ANGLES = np.radians(-90 + 0.5 * np.arange(361))
 def prims(segments=(), circles=()) -> Primitives:
     segs = np.array(segments, float).reshape(-1, 4)
     circ = np.array(circles, float).reshape(-1, 3)
-    return Primitives(segs, np.arange(len(segs), dtype=np.int32), circ,
-                      np.arange(len(segs), len(segs) + len(circ), dtype=np.int32))
+    return Primitives(
+        segs, np.arange(len(segs), dtype=np.int32), circ, np.arange(len(segs), len(segs) + len(circ), dtype=np.int32)
+    )
 
 
 def test_wall_at_known_distance_and_angle():
@@ -36,8 +37,7 @@ def test_wall_at_known_distance_and_angle():
 
 
 def test_wall_seen_from_a_turned_and_moved_sensor():
-    t, _ = cast(np.array([[1.0, 2.0, math.pi / 2]]), np.array([0.0, math.radians(45)]),
-                prims([[-10, 5.0, 10, 5.0]]))
+    t, _ = cast(np.array([[1.0, 2.0, math.pi / 2]]), np.array([0.0, math.radians(45)]), prims([[-10, 5.0, 10, 5.0]]))
     np.testing.assert_allclose(t[0], [3.0, 3.0 * math.sqrt(2)], rtol=1e-12)
 
 
@@ -81,8 +81,9 @@ def test_nearer_object_occludes_farther_one():
 def test_moving_primitives_per_pose():
     poses = np.zeros((2, 3))
     circles = np.array([[[3.0, 0.0, 0.5]], [[6.0, 0.0, 0.5]]])
-    t, owner = cast(poses, np.array([0.0]), Primitives.empty(), moving_circles=circles,
-                    moving_circle_owner=np.array([7]))
+    t, owner = cast(
+        poses, np.array([0.0]), Primitives.empty(), moving_circles=circles, moving_circle_owner=np.array([7])
+    )
     np.testing.assert_allclose(t[:, 0], [2.5, 5.5])
     assert list(owner[:, 0]) == [7, 7]
 
@@ -128,8 +129,10 @@ coord = st.floats(-6, 6, allow_nan=False)
 
 
 @settings(max_examples=40, deadline=None)
-@given(pose=st.tuples(coord, coord, st.floats(-math.pi, math.pi)),
-       segments=st.lists(st.tuples(coord, coord, coord, coord), max_size=6),
-       circles=st.lists(st.tuples(coord, coord, st.floats(0.05, 2.0)), max_size=6))
+@given(
+    pose=st.tuples(coord, coord, st.floats(-math.pi, math.pi)),
+    segments=st.lists(st.tuples(coord, coord, coord, coord), max_size=6),
+    circles=st.lists(st.tuples(coord, coord, st.floats(0.05, 2.0)), max_size=6),
+)
 def test_kernel_matches_naive_on_random_scenes(pose, segments, circles):
     compare_with_naive(pose, segments, circles, ANGLES[::8])

@@ -20,8 +20,12 @@ def commands() -> list[list[str]]:
 
 def test_the_script_makes_the_four_required_logs():
     outputs = {args[args.index("-o") + 1] for args in commands()}
-    assert {"sample_logs/hall.mcap", "sample_logs/corridor.mcap", "sample_logs/crowd6.mcap",
-            "sample_logs/static.mcap"} <= outputs
+    assert {
+        "sample_logs/hall.mcap",
+        "sample_logs/corridor.mcap",
+        "sample_logs/crowd6.mcap",
+        "sample_logs/static.mcap",
+    } <= outputs
 
 
 @pytest.mark.parametrize("args", commands(), ids=lambda a: a[a.index("-o") + 1])

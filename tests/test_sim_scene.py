@@ -66,23 +66,26 @@ def test_hall_people_are_mostly_visible_and_the_platform_briefly_occluded():
     assert corners.sum() >= 6 and gt["visible"][:, corners].any(axis=0).sum() >= 4
 
 
-@pytest.mark.parametrize("text,message", [
-    ("name = \"x\n", "line 1"),
-    ("[[person]]\nname = 'a'\npath = [[0, 0], [1, 1]]\nsped = 2\n", "[[person]] 1: unknown key 'sped'"),
-    ("[[person]]\npath = [[0, 0], [1, 1]]\nspeed = -1\n", "[[person]] 1, key 'speed': must be > 0"),
-    ("[[column]]\ncenter = [1, 2]\n", "[[column]] 1: missing key 'radius'"),
-    ("[[column]]\ncenter = [1, 'a']\nradius = 1\n", "key 'center': must be a list of 2 numbers"),
-    ("[[wall]]\npoints = [[0, 0]]\n", "[[wall]] 1, key 'points'"),
-    ("[[wall]]\npoints = [[0, 0], [0, 0], [1, 1]]\n", "consecutive points are equal"),
-    ("[[platform]]\npulled_by = 'ghost'\n", "no person is named 'ghost'"),
-    ("[[person]]\nposition = [1, 1]\npath = [[0, 0], [1, 1]]\n", "either 'path'"),
-    ("[[person]]\npath = [[0, 0], [1, 1]]\npauses = [[5, 1.0]]\n", "key 'pauses'"),
-    ("duration = 'long'\n", "top level, key 'duration'"),
-    ("wall = 3\n", "'wall' must be an array of tables"),
-    ("[crowd]\narea = [[5, 5], [1, 1]]\n", "[crowd], key 'area'"),
-    ("bogus = 1\n", "unknown key 'bogus'"),
-    ("[sensor]\npose = [0, 0, 0]\npath = [[0, 0], [1, 0]]\n", "not both"),
-])
+@pytest.mark.parametrize(
+    "text,message",
+    [
+        ('name = "x\n', "line 1"),
+        ("[[person]]\nname = 'a'\npath = [[0, 0], [1, 1]]\nsped = 2\n", "[[person]] 1: unknown key 'sped'"),
+        ("[[person]]\npath = [[0, 0], [1, 1]]\nspeed = -1\n", "[[person]] 1, key 'speed': must be > 0"),
+        ("[[column]]\ncenter = [1, 2]\n", "[[column]] 1: missing key 'radius'"),
+        ("[[column]]\ncenter = [1, 'a']\nradius = 1\n", "key 'center': must be a list of 2 numbers"),
+        ("[[wall]]\npoints = [[0, 0]]\n", "[[wall]] 1, key 'points'"),
+        ("[[wall]]\npoints = [[0, 0], [0, 0], [1, 1]]\n", "consecutive points are equal"),
+        ("[[platform]]\npulled_by = 'ghost'\n", "no person is named 'ghost'"),
+        ("[[person]]\nposition = [1, 1]\npath = [[0, 0], [1, 1]]\n", "either 'path'"),
+        ("[[person]]\npath = [[0, 0], [1, 1]]\npauses = [[5, 1.0]]\n", "key 'pauses'"),
+        ("duration = 'long'\n", "top level, key 'duration'"),
+        ("wall = 3\n", "'wall' must be an array of tables"),
+        ("[crowd]\narea = [[5, 5], [1, 1]]\n", "[crowd], key 'area'"),
+        ("bogus = 1\n", "unknown key 'bogus'"),
+        ("[sensor]\npose = [0, 0, 0]\npath = [[0, 0], [1, 0]]\n", "not both"),
+    ],
+)
 def test_broken_scene_files_name_the_key_or_line(text, message):
     with pytest.raises(ConfigError) as err:
         parse_scene(text, "my.toml")

@@ -8,8 +8,10 @@ import pytest
 from datmo_cli.sim.sensor import Sensor
 
 
-@pytest.mark.parametrize("fov,res,n,first", [(180, 1.0, 181, -90), (180, 0.5, 361, -90), (100, 1.0, 101, -50),
-                                             (100, 0.5, 201, -50), (100, 0.25, 401, -50)])
+@pytest.mark.parametrize(
+    "fov,res,n,first",
+    [(180, 1.0, 181, -90), (180, 0.5, 361, -90), (100, 1.0, 101, -50), (100, 0.5, 201, -50), (100, 0.25, 401, -50)],
+)
 def test_beam_layouts(fov, res, n, first):
     s = Sensor(fov, res, rate_hz=5.0)
     a = s.angles()
@@ -21,10 +23,18 @@ def test_beam_layouts(fov, res, n, first):
     assert g.range_max == 8.0 and g.scan_time == pytest.approx(0.2)
 
 
-@pytest.mark.parametrize("kwargs", [dict(fov_deg=180, resolution_deg=0.25), dict(fov_deg=90),
-                                    dict(range_mode_m=80, units="mm"), dict(rate_hz=40.0),
-                                    dict(resolution_deg=1.0, rate_hz=76.0), dict(noise_sigma=-1.0),
-                                    dict(units="m")])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(fov_deg=180, resolution_deg=0.25),
+        dict(fov_deg=90),
+        dict(range_mode_m=80, units="mm"),
+        dict(rate_hz=40.0),
+        dict(resolution_deg=1.0, rate_hz=76.0),
+        dict(noise_sigma=-1.0),
+        dict(units="m"),
+    ],
+)
 def test_impossible_settings_are_refused(kwargs):
     with pytest.raises(ValueError):
         Sensor(**kwargs)
@@ -39,7 +49,7 @@ def test_mm_quantisation_without_noise():
     d = np.array([0.0004, 1.23449, 1.2346, 7.5, 8.1824, 8.183, 9.0, np.inf])
     codes = s.measure(d, np.random.default_rng(0))
     assert list(codes[:5]) == [0, 1234, 1235, 7500, 8182]
-    assert list(codes[5:]) == [0x1FF7] * 3            # greater than maximum
+    assert list(codes[5:]) == [0x1FF7] * 3  # greater than maximum
     r = s.ranges(codes)
     assert r.dtype == np.float32
     np.testing.assert_allclose(r[:5], [0.0, 1.234, 1.235, 7.5, 8.182], atol=1e-6)
@@ -59,7 +69,7 @@ def test_cm_units_and_the_80_m_mode():
     codes = s.measure(np.array([1.234, 50.004, 79.0, 85.0]), np.random.default_rng(0))
     assert list(codes) == [123, 5000, 7900, 0x1FF7]
     np.testing.assert_allclose(s.ranges(codes)[:3], [1.23, 50.0, 79.0], atol=1e-5)
-    s8 = Sensor(range_mode_m=8, units="cm", noise_sigma=0.0)   # cm in the 8 m mode: 8 m is still the limit
+    s8 = Sensor(range_mode_m=8, units="cm", noise_sigma=0.0)  # cm in the 8 m mode: 8 m is still the limit
     assert list(s8.measure(np.array([7.9, 8.3]), np.random.default_rng(0))) == [790, 0x1FF7]
 
 
@@ -85,7 +95,7 @@ def test_noise_statistics(sigma):
     err = r - true
     # sigma of the sum of Gaussian noise and uniform 1 mm rounding error
     assert err.mean() == pytest.approx(0.0, abs=3 * sigma / np.sqrt(len(err)) + 1e-4)
-    assert err.std() == pytest.approx(np.sqrt(sigma ** 2 + 0.001 ** 2 / 12), rel=0.01)
+    assert err.std() == pytest.approx(np.sqrt(sigma**2 + 0.001**2 / 12), rel=0.01)
     assert np.allclose(np.round(r * 1000), r * 1000, atol=1e-3)  # whole millimetres
 
 

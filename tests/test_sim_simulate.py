@@ -87,8 +87,7 @@ def test_visible_flags_follow_occlusion():
     assert np.all(gt["n_beams"][vis, person] > 0) and np.all(gt["n_beams"][~vis, person] == 0)
     # the legs in the ground truth sit where the scan sees them
     k = int(np.flatnonzero(np.abs(y + 2.0) < 0.06)[0])
-    pts = r.run.ranges[k, :, None] * np.stack([np.cos(r.run.geometry.angles()),
-                                                np.sin(r.run.geometry.angles())], 1)
+    pts = r.run.ranges[k, :, None] * np.stack([np.cos(r.run.geometry.angles()), np.sin(r.run.geometry.angles())], 1)
     for side in ("left", "right"):
         leg = np.array([gt[f"{side}_leg_x"][k, person], gt[f"{side}_leg_y"][k, person]])
         d = np.hypot(*(pts - leg).T)
@@ -101,7 +100,7 @@ def test_moving_sensor_writes_odometry_and_relative_velocities():
     np.testing.assert_allclose(r.odometry.x[:5], [0.0, 0.1, 0.2, 0.3, 0.4])
     gt = r.truth.reshape(len(r.run), -1)
     col = int(np.flatnonzero(gt["classification"][0] == CLASS_COLUMN)[0])
-    np.testing.assert_allclose(gt["vx"][1:5, col], -0.5, atol=1e-6)   # a static column seen from a moving robot
+    np.testing.assert_allclose(gt["vx"][1:5, col], -0.5, atol=1e-6)  # a static column seen from a moving robot
     np.testing.assert_allclose(gt["world_vx"][:, col], 0.0)
     # sensor-frame positions follow the pose
     k = 40
@@ -114,14 +113,13 @@ def test_moving_sensor_writes_odometry_and_relative_velocities():
 
 def test_moving_sensor_turns_on_the_spot_and_velocities_are_derivatives():
     rate = 75.0
-    r = simulate_scene(parse_scene(MOVING, "moving.toml"), duration=9.0, rate=rate, resolution_deg=1.0,
-                       noise_sigma=0.0)
+    r = simulate_scene(parse_scene(MOVING, "moving.toml"), duration=9.0, rate=rate, resolution_deg=1.0, noise_sigma=0.0)
     th = np.unwrap(r.sensor_poses[:, 2])
-    assert np.abs(np.diff(th)).max() <= np.pi / 2 / rate + 1e-9       # 90°/s, no jumps
+    assert np.abs(np.diff(th)).max() <= np.pi / 2 / rate + 1e-9  # 90°/s, no jumps
     assert th[-1] == pytest.approx(np.pi / 2)
     turning = np.flatnonzero(np.abs(np.diff(th)) > 1e-9)
-    assert len(turning) == pytest.approx(rate, abs=2)                  # a 90° turn takes 1 s
-    assert np.ptp(r.sensor_poses[turning, :2], axis=0).max() < 1e-9   # on the spot
+    assert len(turning) == pytest.approx(rate, abs=2)  # a 90° turn takes 1 s
+    assert np.ptp(r.sensor_poses[turning, :2], axis=0).max() < 1e-9  # on the spot
     gt = r.truth.reshape(len(r.run), -1)
     col = int(np.flatnonzero(gt["classification"][0] == CLASS_COLUMN)[0])
     for axis in ("x", "y"):
@@ -170,11 +168,13 @@ def test_cli_errors_are_one_line(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[[column]]\ncenter = [1, 2]\n")
     runner = CliRunner()
-    cases = [(["--scene", str(bad)], "bad.toml: [[column]] 1: missing key 'radius'"),
-             (["--scene", "nowhere"], "unknown scene 'nowhere'"),
-             (["--rate", "50"], "at most 37.5 Hz"),
-             (["--angle", "180", "--resolution", "0.25"], "not available at 180°"),
-             (["--people", "4"], "[crowd]")]
+    cases = [
+        (["--scene", str(bad)], "bad.toml: [[column]] 1: missing key 'radius'"),
+        (["--scene", "nowhere"], "unknown scene 'nowhere'"),
+        (["--rate", "50"], "at most 37.5 Hz"),
+        (["--angle", "180", "--resolution", "0.25"], "not available at 180°"),
+        (["--people", "4"], "[crowd]"),
+    ]
     for extra, text in cases:
         result = runner.invoke(cli, ["simulate", "-o", str(tmp_path / "x.mcap"), *extra])
         assert result.exit_code == 1, (extra, result.output)

@@ -16,10 +16,12 @@ def test_path_timing_pauses_and_velocity():
     spec = PathSpec(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0]]), speed=2.0, pauses={1: 1.5}, start_time=1.0)
     tl = Timeline(spec, 100.0)
     t = np.array([0.0, 0.9, 2.0, 3.0, 3.5, 4.5, 5.25, 6.0, 50.0])
-    np.testing.assert_allclose(tl.position(t), [[0, 0], [0, 0], [2, 0], [4, 0], [4, 0], [4, 0], [4, 1.5],
-                                                [4, 3], [4, 3]])
-    np.testing.assert_allclose(tl.velocity(t), [[0, 0], [0, 0], [2, 0], [0, 0], [0, 0], [0, 2], [0, 2],
-                                                [0, 0], [0, 0]], atol=1e-12)
+    np.testing.assert_allclose(
+        tl.position(t), [[0, 0], [0, 0], [2, 0], [4, 0], [4, 0], [4, 0], [4, 1.5], [4, 3], [4, 3]]
+    )
+    np.testing.assert_allclose(
+        tl.velocity(t), [[0, 0], [0, 0], [2, 0], [0, 0], [0, 0], [0, 2], [0, 2], [0, 0], [0, 0]], atol=1e-12
+    )
     np.testing.assert_allclose(tl.heading(np.array([0.0, 3.5, 5.0, 50.0])), [0, 0, np.pi / 2, np.pi / 2])
 
 
@@ -42,7 +44,7 @@ def test_step_length_is_two_l_sin_theta():
     assert g.step_length == pytest.approx(2 * 0.9 * np.sin(np.radians(25.0)))
     tl = Timeline(STRAIGHT, 80.0)
     f = footprints(tl, g, np.arange(10))
-    np.testing.assert_allclose(np.diff(f[:, 0]), g.step_length)           # along the path
+    np.testing.assert_allclose(np.diff(f[:, 0]), g.step_length)  # along the path
     np.testing.assert_allclose(np.abs(np.diff(f[:, 1])), g.shoulder_width)  # alternately left and right
     assert np.all(f[::2, 1] > 0) and np.all(f[1::2, 1] < 0)
 
@@ -55,9 +57,9 @@ def test_legs_alternate_between_stance_and_swing():
     left, right = legs(tl, g, t)
     vl = np.hypot(*np.diff(left, axis=0).T) / dt
     vr = np.hypot(*np.diff(right, axis=0).T) / dt
-    assert not np.any((vl > 1e-6) & (vr > 1e-6))   # never both feet off the ground
+    assert not np.any((vl > 1e-6) & (vr > 1e-6))  # never both feet off the ground
     both_down = (vl < 1e-6) & (vr < 1e-6)
-    assert 0.05 < both_down.mean() < 0.3           # short double-support phases
+    assert 0.05 < both_down.mean() < 0.3  # short double-support phases
     moving = np.where(vl > 1e-6, 1, np.where(vr > 1e-6, 2, 0))
     swings = moving[moving > 0]
     changes = swings[np.flatnonzero(np.diff(swings)) + 1]
@@ -85,7 +87,7 @@ def test_feet_come_together_during_a_pause_and_at_the_ends():
     spec = PathSpec(np.array([[0.0, 0.0], [3.0, 0.0], [6.0, 0.0]]), speed=1.0, pauses={1: 2.0}, start_time=1.0)
     tl = Timeline(spec, 20.0)
     g = Gait(shoulder_width=0.3, settle=0.5)
-    t = np.array([0.0, 0.4, 4.5, 5.0, 5.5, 12.0])   # before the start, standing at waypoint 1, after the end
+    t = np.array([0.0, 0.4, 4.5, 5.0, 5.5, 12.0])  # before the start, standing at waypoint 1, after the end
     left, right = legs(tl, g, t)
     np.testing.assert_allclose(left, tl.position(t) + [0.0, 0.15], atol=1e-12)
     np.testing.assert_allclose(right, tl.position(t) - [0.0, 0.15], atol=1e-12)
@@ -108,5 +110,5 @@ def test_towed_load_keeps_the_wire_length():
     track = tow(leader, np.array([-2.0, 0.0]), 2.0)
     dist = np.hypot(*(leader - track).T)
     assert np.all(dist <= 2.0 + 1e-9) and dist[100:].min() > 1.99
-    still = tow(np.zeros((5, 2)), np.array([1.0, 0.0]), 2.0)   # slack wire: the load stays put
+    still = tow(np.zeros((5, 2)), np.array([1.0, 0.0]), 2.0)  # slack wire: the load stays put
     np.testing.assert_allclose(still, [[1.0, 0.0]] * 5)

@@ -31,8 +31,13 @@ print("\\nPROBE " + json.dumps({{"code": code, "heavy": [m for m in {heavy!r} if
 
 def imported(args: list[str], cwd: Path) -> tuple[int, list[str]]:
     """(exit code, HEAVY modules in sys.modules) after `datmo ARGS` in a fresh interpreter."""
-    out = subprocess.run([sys.executable, "-c", PROBE.format(args=args, heavy=HEAVY)], capture_output=True,
-                         text=True, cwd=cwd, check=True).stdout
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE.format(args=args, heavy=HEAVY)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        check=True,
+    ).stdout
     result = json.loads(out.rsplit("\nPROBE ", 1)[1])
     return result["code"], result["heavy"]
 
@@ -44,13 +49,26 @@ def one_scan_log(path: Path, tracks: bool = False) -> Path:
     with mcapio.LogWriter(path) as w:
         w.write(mcapio.TOPIC_SCAN, types.LASERSCAN, stamp, encode_scan(stamp, np.full(361, 3.0, np.float32), g))
         if tracks:
-            w.write(mcapio.TOPIC_TRACKS, types.TRACKS, stamp,
-                    cdr.encode(types.TRACKS, {"stamp_ns": stamp, "frame_id": "laser"}))
+            w.write(
+                mcapio.TOPIC_TRACKS,
+                types.TRACKS,
+                stamp,
+                cdr.encode(types.TRACKS, {"stamp_ns": stamp, "frame_id": "laser"}),
+            )
     return path
 
 
-@pytest.mark.parametrize("args", [["--help"], ["info", "{log}"], ["info", "{log}", "--json"], ["report", "{done}"],
-                                  ["report", "{done}", "--format", "json"], ["export", "{done}", "-o", "-"]])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--help"],
+        ["info", "{log}"],
+        ["info", "{log}", "--json"],
+        ["report", "{done}"],
+        ["report", "{done}", "--format", "json"],
+        ["export", "{done}", "-o", "-"],
+    ],
+)
 def test_light_commands_import_neither_numba_nor_scipy_nor_the_type_store(tmp_path: Path, args: list[str]):
     log, done = one_scan_log(tmp_path / "one.mcap"), one_scan_log(tmp_path / "done.mcap", tracks=True)
     code, heavy = imported([a.format(log=log, done=done) for a in args], tmp_path)
@@ -59,9 +77,17 @@ def test_light_commands_import_neither_numba_nor_scipy_nor_the_type_store(tmp_pa
 
 
 def test_the_command_group_alone_imports_no_numpy(tmp_path: Path):
-    out = subprocess.run([sys.executable, "-c", "import sys; import datmo_cli.cli; "
-                          "print([m for m in ('numpy', 'rich', 'mcap') if m in sys.modules])"],
-                         capture_output=True, text=True, cwd=tmp_path, check=True).stdout
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys; import datmo_cli.cli; print([m for m in ('numpy', 'rich', 'mcap') if m in sys.modules])",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        check=True,
+    ).stdout
     assert out.strip() == "[]"
 
 
@@ -71,7 +97,7 @@ def test_stage_commands_load_numba_without_scipy_linalg_or_the_type_store(tmp_pa
     out = ["-o", str(tmp_path / "out"), "--no-report"] if command == "run" else ["-o", str(tmp_path / "out.mcap")]
     code, heavy = imported([command, str(log), *out], tmp_path)
     assert code == 0
-    assert heavy == ["numba", "scipy"]   # scipy's package only (numba's BLAS check), not scipy.linalg
+    assert heavy == ["numba", "scipy"]  # scipy's package only (numba's BLAS check), not scipy.linalg
 
 
 def test_the_field_definitions_read_from_the_msg_files_are_the_type_stores():
@@ -101,8 +127,7 @@ from scipy.linalg import cython_blas
 f = numba.njit(lambda a, b: np.dot(a, b))
 print(before, arraymath._HAVE_BLAS, scipy.linalg.cython_blas is cython_blas, f(np.ones(3), np.ones(3)))
 """
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
-                         check=True).stdout
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, check=True).stdout
     assert out.strip() == "[] True True 3.0"
 
 
@@ -117,13 +142,13 @@ def test_the_cache_looks_stale_without_index_files_or_after_an_edit(tmp_path: Pa
     source = tmp_path / "perception" / "_kernels.py"
     (source.parent / "__pycache__").mkdir(parents=True)
     source.write_text("")
-    assert numba_runtime.cache_looks_stale()   # nothing cached: a first run
+    assert numba_runtime.cache_looks_stale()  # nothing cached: a first run
     index = source.parent / "__pycache__" / "_kernels.segment-12.py311.nbi"
     index.write_bytes(b"")
     os.utime(source, (1_000, 1_000))
     os.utime(index, (2_000, 2_000))
     assert not numba_runtime.cache_looks_stale()
-    os.utime(source, (3_000, 3_000))         # edited after its kernels were cached
+    os.utime(source, (3_000, 3_000))  # edited after its kernels were cached
     assert numba_runtime.cache_looks_stale()
     monkeypatch.setenv("NUMBA_DISABLE_JIT", "1")
     assert not numba_runtime.cache_looks_stale()

@@ -54,13 +54,20 @@ def test_stage_commands_give_the_same_messages_whatever_the_block_size(tmp_path:
 
 def long_log(path: Path, n: int) -> Path:
     """A synthetic log of n scans (181 beams, 5 Hz): a room 6 m across with a blob walking to and fro."""
-    g = ScanGeometry(angle_min=-np.pi / 2, angle_increment=np.pi / 180, n_beams=181, range_min=0.05,
-                     range_max=30.0, scan_time=0.2, frame_id="laser")
+    g = ScanGeometry(
+        angle_min=-np.pi / 2,
+        angle_increment=np.pi / 180,
+        n_beams=181,
+        range_min=0.05,
+        range_max=30.0,
+        scan_time=0.2,
+        frame_id="laser",
+    )
     angles = g.angles()
     room = np.minimum(3.0 / np.maximum(np.abs(np.sin(angles)), 1e-3), 5.0 / np.maximum(np.cos(angles), 1e-3))
     k = np.arange(n)
     ranges = np.tile(room, (n, 1)).astype(np.float32)
-    beam = (60 + (np.abs((k % 100) - 50))).astype(np.int64)   # the walker's bearing sweeps 50 beams and back
+    beam = (60 + (np.abs((k % 100) - 50))).astype(np.int64)  # the walker's bearing sweeps 50 beams and back
     for d in range(-2, 3):
         ranges[k, beam + d] = 2.0 + 0.02 * abs(d)
     run = ScanRun(1_700_000_000_000_000_000 + k.astype(np.int64) * 200_000_000, ranges, g)
@@ -113,8 +120,11 @@ def test_what_a_run_holds_does_not_grow_with_the_log(tmp_path: Path, monkeypatch
 def test_a_geometry_change_between_blocks_is_refused(tmp_path: Path) -> None:
     a = long_log(tmp_path / "a.mcap", 30)
     run = mcapio.read_run(a)
-    wide = ScanRun(run.stamps + 10_000_000_000, np.pad(run.ranges, ((0, 0), (0, 1)), constant_values=4.0),
-                   ScanGeometry(**{**run.geometry.__dict__, "n_beams": run.geometry.n_beams + 1}))
+    wide = ScanRun(
+        run.stamps + 10_000_000_000,
+        np.pad(run.ranges, ((0, 0), (0, 1)), constant_values=4.0),
+        ScanGeometry(**{**run.geometry.__dict__, "n_beams": run.geometry.n_beams + 1}),
+    )
     both = tmp_path / "both.mcap"
     with mcapio.LogWriter(both) as w:
         w.write_scans(run)
@@ -166,8 +176,9 @@ def test_covariance_only_when_asked_and_nothing_else_changes(tmp_path: Path) -> 
     process_file(src, tmp_path / "lean.mcap")
     process_file(src, tmp_path / "cov.mcap", covariance=True)
     lean, cov = channels(tmp_path / "lean.mcap"), channels(tmp_path / "cov.mcap")
-    assert {t: v for t, v in lean.items() if t != mcapio.TOPIC_TRACKS} == \
-        {t: v for t, v in cov.items() if t != mcapio.TOPIC_TRACKS}
+    assert {t: v for t, v in lean.items() if t != mcapio.TOPIC_TRACKS} == {
+        t: v for t, v in cov.items() if t != mcapio.TOPIC_TRACKS
+    }
     a = np.concatenate([cdr.decode(types.TRACKS, p)["tracks"] for p in lean[mcapio.TOPIC_TRACKS][1]])
     b = np.concatenate([cdr.decode(types.TRACKS, p)["tracks"] for p in cov[mcapio.TOPIC_TRACKS][1]])
     assert len(a) == len(b) > 0
@@ -188,8 +199,9 @@ def test_an_input_fetched_from_an_object_store_is_named_by_its_url_in_provenance
     mem = fsspec.filesystem("memory")
     mem.pipe("/datmo-prov/in/corridor.mcap", (SAMPLES / "corridor.mcap").read_bytes())
     try:
-        done = CliRunner().invoke(cli, ["run", "memory://datmo-prov/in/corridor.mcap", "-o", str(tmp_path / "out"),
-                                        "--no-report", "-j", "1"])
+        done = CliRunner().invoke(
+            cli, ["run", "memory://datmo-prov/in/corridor.mcap", "-o", str(tmp_path / "out"), "--no-report", "-j", "1"]
+        )
         assert done.exit_code == 0, done.output
         meta = mcapio.summary(tmp_path / "out" / "corridor.mcap").metadata["datmo.inputs"]
         assert list(meta) == ["memory://datmo-prov/in/corridor.mcap"]

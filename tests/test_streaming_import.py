@@ -78,9 +78,15 @@ def test_import_of_shared_logs_equals_the_whole_run_import(name, tmp_path):
 
 
 @pytest.mark.shared
-@pytest.mark.parametrize("name", ["carmen/freiburg-079-corrected.log.gz", "killian",
-                                  "legtracker/demo_stationary_simple_environment.bag",
-                                  "legtracker/negative_2.bag/right_scan"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "carmen/freiburg-079-corrected.log.gz",
+        "killian",
+        "legtracker/demo_stationary_simple_environment.bag",
+        "legtracker/negative_2.bag/right_scan",
+    ],
+)
 def test_import_of_shared_logs_in_small_blocks(name, tmp_path, monkeypatch):
     _sizes(monkeypatch, 97, 150)
     src, extra = shared_inputs(shared_path())[name]
@@ -110,16 +116,27 @@ def test_simulate_of_a_moving_sensor_over_several_blocks_equals_the_whole_run(tm
     res = simulate_scene(scene, seed=3, duration=60.0, rate=10.0)
     assert len(res.run) > CHUNK and res.odometry is not None
     ref = tmp_path / "ref.mcap"
-    params = {"scene": "patrol", "seed": 3, "duration": 60.0, "rate": 10.0, "people": None, "angle": 180,
-              "resolution": 0.5, "range": 8, "units": "mm", "noise": 0.01}
+    params = {
+        "scene": "patrol",
+        "seed": 3,
+        "duration": 60.0,
+        "rate": 10.0,
+        "people": None,
+        "angle": 180,
+        "resolution": 0.5,
+        "range": 8,
+        "units": "mm",
+        "noise": 0.01,
+    }
     with mcapio.LogWriter(ref, provenance=mcapio.Provenance("simulate", params, [])) as writer:
         writer.add_metadata("datmo.scene", {"name": scene.name, "source": Path(scene.source).name, "toml": scene.text})
         writer.write_scans(res.run)
         writer.write_odometry(res.odometry)
         writer.write_many(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH, res.run.stamps, res.ground_truth_payloads())
-        t0 = int(res.run.stamps[0])   # the transforms: base_link -> laser (the identity), odom -> base_link a pose
-        writer.write_transforms([t0], [transforms.mount_tf(t0, "base_link", "laser", transforms.LaserPose())],
-                                static=True)
+        t0 = int(res.run.stamps[0])  # the transforms: base_link -> laser (the identity), odom -> base_link a pose
+        writer.write_transforms(
+            [t0], [transforms.mount_tf(t0, "base_link", "laser", transforms.LaserPose())], static=True
+        )
         writer.write_transforms(res.odometry.stamps, transforms.odometry_tf(res.odometry))
     assert digest(out, out) == digest(ref, ref)
 
@@ -147,7 +164,7 @@ def test_carmen_import_holds_one_block_whatever_the_length(tmp_path):
     assert (short.scans, long.scans) == (2_500, 10_000)
     assert (short.poses, long.poses) == (2_500, 10_000)
     assert short.peak_scans == long.peak_scans == 100
-    assert short.peak_messages == long.peak_messages <= 2 * 300 + 3 * 100   # a block: scans, poses and their /tf
+    assert short.peak_messages == long.peak_messages <= 2 * 300 + 3 * 100  # a block: scans, poses and their /tf
     assert short.late == long.late == 0
     assert not list(tmp_path.glob(".datmo-import-*"))
 
@@ -159,7 +176,7 @@ def test_carmen_import_memory_does_not_grow_with_the_log(tmp_path):
     peaks = []
     for lines in (4_000, 16_000):
         src = _carmen_log(tmp_path, lines)
-        open_import(src, spool_dir=tmp_path).close()   # modules imported, caches filled
+        open_import(src, spool_dir=tmp_path).close()  # modules imported, caches filled
         tracemalloc.start()
         try:
             _held(src, tmp_path / f"{lines}.mcap")
@@ -193,7 +210,7 @@ def test_bag_import_holds_one_block_whatever_the_length(tmp_path):
     long = _held(_bag(tmp_path, 4_000), tmp_path / "long.mcap")
     assert (short.scans, long.scans) == (1_000, 4_000)
     assert short.peak_scans == long.peak_scans == 100
-    assert short.peak_messages == long.peak_messages <= 2 * 300 + 3 * 100   # a block: scans, poses and their /tf
+    assert short.peak_messages == long.peak_messages <= 2 * 300 + 3 * 100  # a block: scans, poses and their /tf
 
 
 def test_simulate_holds_one_block_whatever_the_duration(tmp_path, monkeypatch):
@@ -223,7 +240,7 @@ def test_simulate_holds_one_block_whatever_the_duration(tmp_path, monkeypatch):
         args = ["simulate", "--scene", "hall", "--duration", duration, "-o", str(tmp_path / f"{duration}.mcap")]
         assert CliRunner().invoke(cli, args).exit_code == 0
         peaks.append((max(held), max(drained)))
-    assert peaks[0] == peaks[1] == (64, 2 * 64)   # a block's scans; its scans and ground truth (no /odom)
+    assert peaks[0] == peaks[1] == (64, 2 * 64)  # a block's scans; its scans and ground truth (no /odom)
 
 
 # ------------------------------------------------------------------------------------ order and stamps
@@ -234,7 +251,7 @@ def test_ordered_sink_writes_the_whole_run_order_when_messages_come_within_the_w
     n = 3000
     stamps = np.sort(rng.integers(0, 500, n)) * 1000
     cids = rng.integers(1, 3, n)
-    arrival = np.argsort(np.arange(n) + rng.uniform(0, 40, n), kind="stable")   # each at most ~40 late
+    arrival = np.argsort(np.arange(n) + rng.uniform(0, 40, n), kind="stable")  # each at most ~40 late
     paths = {}
     for name, window in (("whole", None), ("window", 64)):
         out = tmp_path / f"{name}.mcap"
@@ -301,15 +318,18 @@ def _stamps_ns_whole(t: np.ndarray) -> tuple[np.ndarray, str | None]:
 
 
 @settings(max_examples=200, deadline=None)
-@given(steps=st.lists(st.one_of(st.floats(0.001, 2.0), st.sampled_from([0.0, -0.5, -3.0])), min_size=1, max_size=120),
-       start=st.sampled_from([0.0, 1.13486e9, 100.25, -1.0, float("nan")]), block=st.integers(1, 50))
+@given(
+    steps=st.lists(st.one_of(st.floats(0.001, 2.0), st.sampled_from([0.0, -0.5, -3.0])), min_size=1, max_size=120),
+    start=st.sampled_from([0.0, 1.13486e9, 100.25, -1.0, float("nan")]),
+    block=st.integers(1, 50),
+)
 def test_stamp_check_block_by_block_equals_the_whole_run_rule(steps, start, block):
     t = start + np.concatenate([[0.0], np.cumsum(steps[1:])])
     check = StampCheck()
     for v in t.tolist():
         check.add(v)
     note = check.note(lambda: t)
-    ns = np.concatenate([check.apply(t[a:a + block]) for a in range(0, len(t), block)])
+    ns = np.concatenate([check.apply(t[a : a + block]) for a in range(0, len(t), block)])
     want_ns, want_note = _stamps_ns_whole(t)
     assert note == want_note
     np.testing.assert_array_equal(ns, want_ns)
@@ -320,4 +340,4 @@ def test_a_spool_that_cannot_be_made_is_a_one_line_error(tmp_path):
 
     src = write(tmp_path, "a.log", [flaser([1.0] * 10, 1.0 + i) for i in range(5)])
     with pytest.raises(DatmoError, match="cannot make a temporary folder for the parsed scans"):
-        open_import(src, spool_dir=src)   # a file, not a folder
+        open_import(src, spool_dir=src)  # a file, not a folder

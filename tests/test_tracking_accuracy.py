@@ -28,29 +28,38 @@ def _score(sample_logs, name: str, source: str) -> dict:
     if source in ("datmo", "paper"):
         feats = run_features(run, odom, None if source == "datmo" else {"leg_model": "paper"})
     else:
-        feats = acc.ideal_features(off, gt, np.random.default_rng(0), noise=0.01 if source == "ideal" else 0.02,
-                                   degraded=source == "degraded")
+        feats = acc.ideal_features(
+            off, gt, np.random.default_rng(0), noise=0.01 if source == "ideal" else 0.02, degraded=source == "degraded"
+        )
     tracked = track_run(run, feats, odometry=odom, markers=False, learned=source == "datmo")
     toff, items = tracked.all_tracks()
-    g, regions, hy = ev.frames_from_channels(truth.stamps, off, gt, truth.scalars.get("sensor_theta"),
-                                             tracked.stamps, toff, items)
+    g, regions, hy = ev.frames_from_channels(
+        truth.stamps, off, gt, truth.scalars.get("sensor_theta"), tracked.stamps, toff, items
+    )
     tid, tcls, gid, gcls = acc.matched_targets(off, gt, toff, items)
     platform = np.unique(gt["id"][gt["classification"] == CLASS_CIRCLE_OBJECT])
-    return {"scores": ev.evaluate(g, hy, regions=regions), "class": acc.class_accuracy(tcls, gcls, gid),
-            "platform_switches": acc.id_switches(tid, gid, int(platform[0])) if len(platform) else 0,
-            "dynamic": len(np.unique(items["id"][(items["status"] == 1) & (items["mobility"] == 1)])),
-            "people": len(np.unique(items["id"][(items["status"] == STATUS_CONFIRMED)
-                                                & (items["classification"] == CLASS_PERSON)]))}
+    return {
+        "scores": ev.evaluate(g, hy, regions=regions),
+        "class": acc.class_accuracy(tcls, gcls, gid),
+        "platform_switches": acc.id_switches(tid, gid, int(platform[0])) if len(platform) else 0,
+        "dynamic": len(np.unique(items["id"][(items["status"] == 1) & (items["mobility"] == 1)])),
+        "people": len(
+            np.unique(items["id"][(items["status"] == STATUS_CONFIRMED) & (items["classification"] == CLASS_PERSON)])
+        ),
+    }
 
 
 SOURCES = ["ideal", "degraded", "datmo", "paper"]
 # (people MOTA, people IDF1, class right, platform id switches, circle object switches) bounds per source:
 # the tracker alone must do better
-HALL = {"ideal": (0.90, 0.90, 0.95, 0, 0), "degraded": (0.85, 0.85, 0.93, 0, 0),
-        "datmo": (0.75, 0.42, 0.91, 14, 14),   # now 0.797/0.470, class 0.940, platform 11 switches
-        "paper": (0.68, 0.55, 0.87, 6, 6)}     # now 0.728/0.603, class 0.902, platform 4 switches
-CROWD = {"ideal": 0.85, "degraded": 0.80, "datmo": 0.86, "paper": 0.82}   # datmo now 0.899
-STATIC_DYNAMIC = {"ideal": 0, "degraded": 0, "datmo": 0, "paper": 0}   # confirmed dynamic or person tracks
+HALL = {
+    "ideal": (0.90, 0.90, 0.95, 0, 0),
+    "degraded": (0.85, 0.85, 0.93, 0, 0),
+    "datmo": (0.75, 0.42, 0.91, 14, 14),  # now 0.797/0.470, class 0.940, platform 11 switches
+    "paper": (0.68, 0.55, 0.87, 6, 6),
+}  # now 0.728/0.603, class 0.902, platform 4 switches
+CROWD = {"ideal": 0.85, "degraded": 0.80, "datmo": 0.86, "paper": 0.82}  # datmo now 0.899
+STATIC_DYNAMIC = {"ideal": 0, "degraded": 0, "datmo": 0, "paper": 0}  # confirmed dynamic or person tracks
 
 
 @pytest.mark.slow

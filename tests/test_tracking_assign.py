@@ -26,8 +26,13 @@ def test_lsap_is_scipys_assignment(seed: int, R: int, C: int, integer: bool):
 
 
 @settings(max_examples=200, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), K=st.integers(0, 10), M=st.integers(0, 10),
-       share=st.floats(0.0, 1.0), integer=st.booleans())
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    K=st.integers(0, 10),
+    M=st.integers(0, 10),
+    share=st.floats(0.0, 1.0),
+    integer=st.booleans(),
+)
 def test_gnn_is_the_reference_gnn_on_gated_matrices(seed: int, K: int, M: int, share: float, integer: bool):
     """The reference's pairs; with exact ties (integer costs) an assignment as good: as many pairs, the same
     summed cost (which of the tied ones is taken may differ: gnn solves the rows and columns that have an

@@ -23,12 +23,17 @@ STAMPS = 1_700_000_000_000_000_000 + np.arange(N, dtype=np.int64) * 200_000_000
 
 def make_log(path, odometry: bool = False) -> None:
     run = ScanRun(STAMPS, np.full((N, 361), 7.5, np.float32), GEOM)
-    scans = [{"circles": legs_as_circles(walker_legs(0.2 * k, (1, -3), (0.3, 1.0))) + [(5.0, 2.0, 0.25)]}
-             for k in range(N)]
+    scans = [
+        {"circles": legs_as_circles(walker_legs(0.2 * k, (1, -3), (0.3, 1.0))) + [(5.0, 2.0, 0.25)]} for k in range(N)
+    ]
     feats = features_from_lists(scans)
-    payloads = [cdr.encode(types.FEATURES, {"stamp_ns": int(s), "frame_id": "laser", "lines": f.lines,
-                                            "circles": f.circles, "blobs": f.blobs})
-                for s, f in zip(STAMPS, feats, strict=True)]
+    payloads = [
+        cdr.encode(
+            types.FEATURES,
+            {"stamp_ns": int(s), "frame_id": "laser", "lines": f.lines, "circles": f.circles, "blobs": f.blobs},
+        )
+        for s, f in zip(STAMPS, feats, strict=True)
+    ]
     with mcapio.LogWriter(path) as w:
         w.write_scans(run)
         w.write_many(mcapio.TOPIC_FEATURES, types.FEATURES, STAMPS, payloads)
@@ -72,15 +77,16 @@ def test_track_options_and_config(tmp_path):
     make_log(src)
     cfg = tmp_path / "c.toml"
     cfg.write_text("[track]\nconfirm_hits = 4\nconfirm_window = 4\n")
-    result = CliRunner().invoke(cli, ["track", str(src), "-o", str(out), "--config", str(cfg), "--gate", "9.2",
-                                       "--d-max", "2.0"])
+    result = CliRunner().invoke(
+        cli, ["track", str(src), "-o", str(out), "--config", str(cfg), "--gate", "9.2", "--d-max", "2.0"]
+    )
     assert result.exit_code == 0, result.output
     msgs = _tracks(out)
-    assert all((m["tracks"]["status"] == 0).all() for m in msgs[:3])   # 4 hits needed
+    assert all((m["tracks"]["status"] == 0).all() for m in msgs[:3])  # 4 hits needed
     params = mcapio.summary(out).metadata["datmo.params"]
     assert json.loads(params["track"])["confirm_hits"] == 4
     assert json.loads(params["track"])["gate"] == 9.2 and json.loads(params["track"])["d_max"] == 2.0
-    assert "features" not in params   # the log had /datmo/features: no feature extraction ran
+    assert "features" not in params  # the log had /datmo/features: no feature extraction ran
 
 
 def test_track_errors(tmp_path):
@@ -140,12 +146,12 @@ def test_raw_log_is_segmented_and_tracked(tmp_path):
     confirmed = last[last["status"] != 0]
     column = confirmed[np.hypot(confirmed["x"] - 5.0, confirmed["y"] - 2.0) < 0.1]
     assert len(column) == 1 and column["classification"][0] == 2
-    assert (confirmed["classification"] == 1).sum() == 1   # the walker
+    assert (confirmed["classification"] == 1).sum() == 1  # the walker
     params = log.metadata["datmo.params"]
     assert set(params) == {"track", "features", "leg_model", "config"}
     assert json.loads(params["config"]) == DatmoConfig(features=FeatureParams(leg_model="default")).to_dict()
     assert json.loads(params["track"])["confirm_hits"] == 3 and "min_points" in json.loads(params["features"])
-    model = json.loads(params["leg_model"])   # the detector that found the legs, with its file's hash
+    model = json.loads(params["leg_model"])  # the detector that found the legs, with its file's hash
     assert model["model"] == "default" and len(model["sha256"]) == 64 and 0 < model["threshold"] < 1
 
 

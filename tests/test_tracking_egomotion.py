@@ -32,9 +32,9 @@ def test_moving_scanner_gets_estimated_poses_and_a_still_one_none(patrol, hall):
     assert abs(np.hypot(odom.x[-1] - odom.x[0], odom.y[-1] - odom.y[0]) - moved) < 0.1
     assert odometry_for(hall.run, None, "auto") == (None, False)
     forced, estimated = odometry_for(hall.run, None, "on")
-    assert estimated and np.hypot(forced.x, forced.y).max() < 0.05   # a still scanner stays put
+    assert estimated and np.hypot(forced.x, forced.y).max() < 0.05  # a still scanner stays put
     assert odometry_for(patrol.run, None, "off") == (None, False)
-    assert odometry_for(patrol.run, patrol.odometry, "on") == (patrol.odometry, False)   # the log's own wins
+    assert odometry_for(patrol.run, patrol.odometry, "on") == (patrol.odometry, False)  # the log's own wins
     with pytest.raises(ValueError, match="not one of"):
         odometry_for(patrol.run, None, "sometimes")
 
@@ -43,7 +43,7 @@ def test_track_writes_the_estimated_odometry_and_world_positions(patrol, hall, t
     for name, sim, moving in (("patrol", patrol, True), ("hall", hall, False)):
         src, out = tmp_path / f"{name}.mcap", tmp_path / f"{name}-tracks.mcap"
         with mcapio.LogWriter(src) as w:
-            w.write_scans(sim.run)   # no /odom
+            w.write_scans(sim.run)  # no /odom
         r = CliRunner().invoke(cli, ["track", str(src), "-o", str(out)])
         assert r.exit_code == 0, r.output
         log = mcapio.read_log(out, topics=None)
@@ -51,7 +51,8 @@ def test_track_writes_the_estimated_odometry_and_world_positions(patrol, hall, t
         if moving:
             odom = mcapio.odometry_from_log(log)
             assert odom.frame_id == FRAME_ID and len(odom) == len(sim.run)
-        r = CliRunner().invoke(cli, ["track", str(src), "-o", str(tmp_path / f"{name}-off.mcap"), "--ego-motion",
-                                     "off"])
+        r = CliRunner().invoke(
+            cli, ["track", str(src), "-o", str(tmp_path / f"{name}-off.mcap"), "--ego-motion", "off"]
+        )
         assert r.exit_code == 0, r.output
         assert not mcapio.read_log(tmp_path / f"{name}-off.mcap", topics=None).has(mcapio.TOPIC_ODOM)

@@ -38,11 +38,11 @@ def test_matches_filterpy_on_random_sequences(seed: int, n_tracks: int, steps: i
     filters = [_oracle(x[k], P[k]) for k in range(n_tracks)]
     q = float(rng.uniform(0.01, 5))
     for _ in range(steps):
-        dt = float(rng.choice([0.0, rng.uniform(0.001, 2.0)]))   # repeated stamps and uneven rates
+        dt = float(rng.choice([0.0, rng.uniform(0.001, 2.0)]))  # repeated stamps and uneven rates
         kalman.kalman_predict(x, P, dt, q)
         for f in filters:
             f.predict(F=kalman.transition(dt), Q=Q_discrete_white_noise(2, dt, q, block_size=2, order_by_dim=False))
-        measured = rng.random(n_tracks) < 0.7                     # some tracks miss the scan
+        measured = rng.random(n_tracks) < 0.7  # some tracks miss the scan
         if measured.any():
             z = x[measured, :2] + rng.normal(0, 0.5, (int(measured.sum()), 2))
             r = rng.uniform(0.01, 0.5, int(measured.sum()))

@@ -32,7 +32,7 @@ from tests.reference_tracking import param_vector
 from tests.reference_tracking import reference_measurements as measurements
 
 P = TrackingParams()
-THR = 0.8   # the leg threshold of these scenes (about the shipped model's)
+THR = 0.8  # the leg threshold of these scenes (about the shipped model's)
 
 
 # ------------------------------------------------------------------------------------- measurements
@@ -50,14 +50,25 @@ def reference_measurements(circles, blobs, lines, legs, weak, stride_max, d_max)
     the measurement sharing most beams with it (the first made on ties: circles, blobs, then segments in
     order), None when none does or that one is larger than d_max."""
     rows = []
-    pairs = sorted((np.hypot(legs[i][2] - legs[j][2], legs[i][3] - legs[j][3]), i, j)
-                   for i in range(len(legs)) for j in range(len(legs)) if i < j)
+    pairs = sorted(
+        (np.hypot(legs[i][2] - legs[j][2], legs[i][3] - legs[j][3]), i, j)
+        for i in range(len(legs))
+        for j in range(len(legs))
+        if i < j
+    )
     used = set()
     for d, i, j in pairs:
         if d <= stride_max and i not in used and j not in used:
             used |= {i, j}
-            rows.append((KIND_PERSON, 0.5 * (legs[i][2] + legs[j][2]), 0.5 * (legs[i][3] + legs[j][3]),
-                         d + 0.5 * (legs[i][4] + legs[j][4]), 0.0))
+            rows.append(
+                (
+                    KIND_PERSON,
+                    0.5 * (legs[i][2] + legs[j][2]),
+                    0.5 * (legs[i][3] + legs[j][3]),
+                    d + 0.5 * (legs[i][4] + legs[j][4]),
+                    0.0,
+                )
+            )
     rows += [(KIND_LEG, g[2], g[3], g[4], 0.0) for i, g in enumerate(legs) if i not in used]
     shapes = [((f, e), (KIND_CIRCLE, x, y, 2 * r)) for f, e, x, y, r in circles]
     shapes += [((f, e), (KIND_BLOB, x, y, size)) for f, e, x, y, size in blobs]
@@ -94,7 +105,7 @@ def test_learned_measurements_match_the_reference():
     for _ in range(60):
         n = rng.integers(0, 12)
         segs = rng.permutation(30)[:n]
-        kinds = rng.integers(0, 4, n)   # 0 circle, 1 blob, 2 line(s), 3 a detected leg (sometimes also a circle)
+        kinds = rng.integers(0, 4, n)  # 0 circle, 1 blob, 2 line(s), 3 a detected leg (sometimes also a circle)
         circles, blobs, lines, legs = [], [], [], []
         for seg, kind in zip(segs.tolist(), kinds.tolist(), strict=True):
             x, y = rng.uniform(-5, 5, 2)
@@ -112,22 +123,45 @@ def test_learned_measurements_match_the_reference():
                     circles.append((f, e, x, y, 0.08))
                 legs.append((f, e, x, y, rng.uniform(0.05, 0.2)))
         near = [10 * seg for seg in segs.tolist()] or [0]
-        wf = np.where(rng.random(6) < 0.8, rng.choice(near, 6), rng.integers(0, 300, 6))[:rng.integers(0, 7)]
-        wf = wf + rng.integers(-6, 8, len(wf))   # on a segment's beams, across two, or on none
+        wf = np.where(rng.random(6) < 0.8, rng.choice(near, 6), rng.integers(0, 300, 6))[: rng.integers(0, 7)]
+        wf = wf + rng.integers(-6, 8, len(wf))  # on a segment's beams, across two, or on none
         weak = [(int(a), int(a + rng.integers(0, 12)), float(rng.uniform(0.05, 0.8))) for a in np.maximum(wf, 0)]
 
         def col(rows, k, t=f8):
             return np.array([r[k] for r in rows], t).reshape(-1)
 
         got = _kernels.learned_measurements(
-            col(circles, 0, i8), col(circles, 1, i8), col(circles, 2), col(circles, 3), col(circles, 4),
-            col(blobs, 0, i8), col(blobs, 1, i8), col(blobs, 2), col(blobs, 3), col(blobs, 4),
-            col(lines, 0, i8), col(lines, 1, i8), col(lines, 2, i8), col(lines, 3), col(lines, 4), col(lines, 5),
-            col(lines, 6), col(legs, 0, i8), col(legs, 1, i8), col(legs, 2), col(legs, 3), col(legs, 4),
-            col(weak, 0, i8), col(weak, 1, i8), col(weak, 2), param_vector(stride_max=0.9, d_max=1.5))
+            col(circles, 0, i8),
+            col(circles, 1, i8),
+            col(circles, 2),
+            col(circles, 3),
+            col(circles, 4),
+            col(blobs, 0, i8),
+            col(blobs, 1, i8),
+            col(blobs, 2),
+            col(blobs, 3),
+            col(blobs, 4),
+            col(lines, 0, i8),
+            col(lines, 1, i8),
+            col(lines, 2, i8),
+            col(lines, 3),
+            col(lines, 4),
+            col(lines, 5),
+            col(lines, 6),
+            col(legs, 0, i8),
+            col(legs, 1, i8),
+            col(legs, 2),
+            col(legs, 3),
+            col(legs, 4),
+            col(weak, 0, i8),
+            col(weak, 1, i8),
+            col(weak, 2),
+            param_vector(stride_max=0.9, d_max=1.5),
+        )
         x, y, size, kind, _, prob, cover = got
-        rows = sorted(_key(k, a, b, s) + (round(float(p), 9),) for k, a, b, s, p in zip(kind, x, y, size, prob,
-                                                                                        strict=True))
+        rows = sorted(
+            _key(k, a, b, s) + (round(float(p), 9),) for k, a, b, s, p in zip(kind, x, y, size, prob, strict=True)
+        )
         want_rows, want_covers = reference_measurements(circles, blobs, lines, legs, weak, 0.9, 1.5)
         assert rows == want_rows
         assert [None if c < 0 else _key(kind[c], x[c], y[c], size[c]) for c in cover] == want_covers
@@ -138,7 +172,7 @@ def test_learned_measurements_match_the_reference():
 # ---------------------------------------------------------------------- scenes with beams and ranges
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0)
 ANGLES = GEOM.angle_min + GEOM.angle_increment * np.arange(GEOM.n_beams)
-LEG_R = 0.06   # m, a leg's radius
+LEG_R = 0.06  # m, a leg's radius
 
 
 def _beams(x: float, y: float, r: float) -> tuple[int, int]:
@@ -218,10 +252,10 @@ def test_a_person_is_promoted_once_and_kept_until_the_evidence_falls_below_perso
     first = classes.index(CLASS_PERSON)
     assert first <= 5 and len(set(ids[first:])) == 1
     low = np.array(classes[15:65])
-    assert (low == CLASS_PERSON).all()   # kept through 5 s of weak legs: settled at 0.35 < person_evidence
+    assert (low == CLASS_PERSON).all()  # kept through 5 s of weak legs: settled at 0.35 < person_evidence
     evidence = tracker.tracks.column(state.LEG_SCORE)[0]
     assert evidence < P.person_maintain
-    assert classes[-1] != CLASS_PERSON and classes[65:].count(CLASS_PERSON) < 25   # dropped, not promoted back
+    assert classes[-1] != CLASS_PERSON and classes[65:].count(CLASS_PERSON) < 25  # dropped, not promoted back
 
 
 def test_hits_that_are_no_leg_candidate_leave_the_evidence_as_it_is():
@@ -242,7 +276,7 @@ def test_hits_that_are_no_leg_candidate_leave_the_evidence_as_it_is():
 
 
 def test_a_person_coasts_person_coast_seconds_flagged_occluded_while_a_non_person_dies_after_delete_after():
-    tracker = new_tracker(geometry=None)   # no ranges: nothing unseen counts as hidden
+    tracker = new_tracker(geometry=None)  # no ranges: nothing unseen counts as hidden
     for k in range(15):
         tracker.step(k * 100_000_000, scan(standing(2.0, 0.5, 0.95, k), circles=[(3.0, -1.5, 0.3)]))
     out = tracker.output()
@@ -250,11 +284,10 @@ def test_a_person_coasts_person_coast_seconds_flagged_occluded_while_a_non_perso
     other = out[out["classification"] == CLASS_CIRCLE_OBJECT]
     assert len(person) == 1 and len(other) == 1 and (out["status"] != 0).all()
     seen = {}
-    for k in range(15, 60):   # both leave the scanner's sight at 1.4 s
+    for k in range(15, 60):  # both leave the scanner's sight at 1.4 s
         out = tracker.step(k * 100_000_000, scan())
         for r in out:
-            seen.setdefault(int(r["id"]), []).append((round(0.1 * (k - 14), 1), int(r["occluded"]),
-                                                      int(r["status"])))
+            seen.setdefault(int(r["id"]), []).append((round(0.1 * (k - 14), 1), int(r["occluded"]), int(r["status"])))
     gone = {i: v[-1][0] for i, v in seen.items()}
     assert P.delete_after <= gone[int(other["id"][0])] <= P.delete_after + 0.1
     assert P.person_coast <= gone[int(person["id"][0])] <= P.person_coast + 0.1
@@ -270,17 +303,28 @@ def test_a_person_standing_longer_than_background_time_stays_a_person_off_the_ba
     legs = [(2.0, 0.5 + d) for d in (0.15, -0.15)]
     classes = []
     for k in range(80):
-        out = tracker.step(k * 100_000_000, scan([(x, y, 0.95) for x, y in legs]),
-                           ranges([(x, y, LEG_R) for x, y in legs], wall=5.0))
+        out = tracker.step(
+            k * 100_000_000, scan([(x, y, 0.95) for x, y in legs]), ranges([(x, y, LEG_R) for x, y in legs], wall=5.0)
+        )
         classes.append(tracked(out, (2.0, 0.5))["classification"].tolist())
     assert all(c == [CLASS_PERSON] for c in classes[5:])
     score, _, _, _ = tracker._bg
     n = int(np.sqrt(len(score)) + 0.5)
     ctx = tracker._ctx
     prm = P.kernel_vector(THR)
-    places = np.array([[x - LEG_R, y] for x, y in legs] + [[5.0, 0.5]])   # the legs' fronts, the wall behind
-    on = _kernels.on_background(score, places[:, 0].copy(), places[:, 1].copy(), np.zeros(3), 0.0, 0.0,
-                                ctx[state.C_BG_X0], ctx[state.C_BG_Y0], n, prm)
+    places = np.array([[x - LEG_R, y] for x, y in legs] + [[5.0, 0.5]])  # the legs' fronts, the wall behind
+    on = _kernels.on_background(
+        score,
+        places[:, 0].copy(),
+        places[:, 1].copy(),
+        np.zeros(3),
+        0.0,
+        0.0,
+        ctx[state.C_BG_X0],
+        ctx[state.C_BG_Y0],
+        n,
+        prm,
+    )
     np.testing.assert_array_equal(on, [False, False, True])
 
 
@@ -300,8 +344,12 @@ def _driving(swinging: bool, n: int = 45) -> list[list[int]]:
             legs = [(float(q[0] - t), float(q[1])) for q in walker_legs(t, (1.5, 0.0), (1.0, 0.0))]
         else:
             legs = part
-        out = tracker.step(k * 100_000_000, scan([(x, y, 0.95) for x, y in legs]),
-                           ranges([(x, y, LEG_R) for x, y in legs], wall=7.5 - t), pose)
+        out = tracker.step(
+            k * 100_000_000,
+            scan([(x, y, 0.95) for x, y in legs]),
+            ranges([(x, y, LEG_R) for x, y in legs], wall=7.5 - t),
+            pose,
+        )
         classes.append(out[out["status"] != 0]["classification"].tolist())
     return classes
 
@@ -312,7 +360,7 @@ def test_a_part_of_the_robot_on_beams_that_keep_their_range_while_it_drives_is_n
     legs however sure the detector is: no person any more, tracked all the same."""
     classes = _driving(swinging=False)
     assert CLASS_PERSON in classes[5]
-    after = classes[int(10 * (P.carried_travel + 0.3)):]
+    after = classes[int(10 * (P.carried_travel + 0.3)) :]
     assert not any(CLASS_PERSON in c for c in after) and all(len(c) >= 1 for c in after)
 
 
@@ -335,8 +383,8 @@ def test_a_person_track_takes_weak_legs_above_person_maintain_and_not_below():
         assert k < 2 or (len(out) == 1 and int(out["id"][0]) == 1)
         counts.append(tracker.tracks.votes[0].copy())
     pairs = [int(v[KIND_PERSON]) for v in counts]
-    assert pairs[24] - pairs[14] == 10          # each weak pair above person_maintain taken as a pair
-    assert pairs[34] == pairs[24]               # none below it
+    assert pairs[24] - pairs[14] == 10  # each weak pair above person_maintain taken as a pair
+    assert pairs[34] == pairs[24]  # none below it
     assert counts[34][KIND_CIRCLE] - counts[24][KIND_CIRCLE] == 10
     assert counts[24][KIND_CIRCLE] == counts[14][KIND_CIRCLE] == 0
 
@@ -351,14 +399,30 @@ def _features_log(path, threshold: float) -> list[ScanFeatures]:
     it records as `threshold`: someone standing whose legs it scored 0.6."""
     run = ScanRun(STAMPS, np.full((N_CLI, GEOM.n_beams), 7.5, np.float32), GEOM)
     feats = [scan(standing(2.0, 0.5, 0.6, k)) for k in range(N_CLI)]
-    payloads = [cdr.encode(types.FEATURES, {"stamp_ns": int(s), "frame_id": "laser", "lines": f.lines,
-                                            "circles": f.circles, "blobs": f.blobs, "legs": f.legs})
-                for s, f in zip(STAMPS, feats, strict=True)]
+    payloads = [
+        cdr.encode(
+            types.FEATURES,
+            {
+                "stamp_ns": int(s),
+                "frame_id": "laser",
+                "lines": f.lines,
+                "circles": f.circles,
+                "blobs": f.blobs,
+                "legs": f.legs,
+            },
+        )
+        for s, f in zip(STAMPS, feats, strict=True)
+    ]
     with mcapio.LogWriter(path) as w:
         w.write_scans(run)
         w.write_many(mcapio.TOPIC_FEATURES, types.FEATURES, STAMPS, payloads)
-        w.add_metadata("datmo.params", {"features": json.dumps({"leg_model": "default"}),
-                                        "leg_model": json.dumps({"model": "default", "threshold": threshold})})
+        w.add_metadata(
+            "datmo.params",
+            {
+                "features": json.dumps({"leg_model": "default"}),
+                "leg_model": json.dumps({"model": "default", "threshold": threshold}),
+            },
+        )
     return feats
 
 
@@ -374,11 +438,13 @@ def test_track_takes_the_leg_threshold_its_features_log_records(tmp_path, thresh
     assert result.exit_code == 0, result.output
     _, payloads = mcapio.read_messages(out, mcapio.TOPIC_TRACKS)
     got = [cdr.decode(types.TRACKS, p)["tracks"] for p in payloads]
-    want = track_run(mcapio.run_from_log(mcapio.read_log(src, topics=None)), feats, learned=True,
-                     leg_threshold=threshold)
+    want = track_run(
+        mcapio.run_from_log(mcapio.read_log(src, topics=None)), feats, learned=True, leg_threshold=threshold
+    )
     assert [g.tobytes() for g in got] == [w.tobytes() for w in want.tracks]
-    other = track_run(mcapio.run_from_log(mcapio.read_log(src, topics=None)), feats, learned=True,
-                      leg_threshold=1.4 - threshold)
+    other = track_run(
+        mcapio.run_from_log(mcapio.read_log(src, topics=None)), feats, learned=True, leg_threshold=1.4 - threshold
+    )
     assert [g.tobytes() for g in got] != [w.tobytes() for w in other.tracks]
     if threshold == 0.5:
         assert (got[-1]["classification"] == CLASS_PERSON).sum() == 1
@@ -386,8 +452,15 @@ def test_track_takes_the_leg_threshold_its_features_log_records(tmp_path, thresh
     assert recorded["threshold"] == threshold
 
 
-@pytest.mark.parametrize(("table", "key"), [("track", "leg_probability"), ("track", "moving_person_evidence"),
-                                            ("track", "moving_person_pairs"), ("features", "leg_min_probability")])
+@pytest.mark.parametrize(
+    ("table", "key"),
+    [
+        ("track", "leg_probability"),
+        ("track", "moving_person_evidence"),
+        ("track", "moving_person_pairs"),
+        ("features", "leg_min_probability"),
+    ],
+)
 def test_removed_keys_are_refused_in_one_line_naming_the_key(tmp_path, table, key):
     cfg = tmp_path / "old.toml"
     cfg.write_text(f"[{table}]\n{key} = 0.5\n")
@@ -412,8 +485,9 @@ def _final(outs: list[np.ndarray]) -> np.ndarray:
 
 def test_a_person_standing_still_is_a_static_person_with_a_detector():
     rng = np.random.default_rng(0)
-    scans = [{"legs": [(2.0 + rng.normal(0, 0.01), 0.15, 0.12), (2.0 + rng.normal(0, 0.01), -0.15, 0.12)]}
-             for _ in range(30)]
+    scans = [
+        {"legs": [(2.0 + rng.normal(0, 0.01), 0.15, 0.12), (2.0 + rng.normal(0, 0.01), -0.15, 0.12)]} for _ in range(30)
+    ]
     out = _final(_run(scans, learned=True))
     assert len(out) == 1
     assert out["classification"][0] == CLASS_PERSON
@@ -437,8 +511,10 @@ def test_a_lone_still_leg_never_seen_with_its_partner_is_not_a_person():
 
 
 def test_a_walking_person_is_a_dynamic_person():
-    scans = [{"legs": [(float(p[0]), float(p[1]), 0.12) for p in walker_legs(0.1 * k, (1.0, -3.0), (0.3, 1.0))]}
-             for k in range(60)]
+    scans = [
+        {"legs": [(float(p[0]), float(p[1]), 0.12) for p in walker_legs(0.1 * k, (1.0, -3.0), (0.3, 1.0))]}
+        for k in range(60)
+    ]
     out = _final(_run(scans, learned=True))
     people = out[out["classification"] == CLASS_PERSON]
     assert len(people) == 1 and people["mobility"][0] == MOBILITY_DYNAMIC

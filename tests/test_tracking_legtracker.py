@@ -15,7 +15,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.shared]
 def _accuracy_module():
     import sys
 
-    if str(ROOT) not in sys.path:   # accuracy_tracking imports benchmarks.common
+    if str(ROOT) not in sys.path:  # accuracy_tracking imports benchmarks.common
         sys.path.insert(0, str(ROOT))
     spec = importlib.util.spec_from_file_location("accuracy_tracking", ROOT / "benchmarks" / "accuracy_tracking.py")
     module = importlib.util.module_from_spec(spec)
@@ -26,7 +26,7 @@ def _accuracy_module():
 def test_demo_bag_people_and_no_walls():
     path = shared_path("legtracker", "demo_stationary_simple_environment.bag")
     figures = _accuracy_module().demo_figures(path, {"leg_model": "paper"})
-    assert figures["people"] >= 3     # 4 now
+    assert figures["people"] >= 3  # 4 now
     assert figures["on_walls"] == 0
 
 

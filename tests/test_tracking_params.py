@@ -25,14 +25,17 @@ def test_toml_track_table(tmp_path):
     assert (p.process_noise, p.confirm_hits, p.confirm_window) == (3.5, 4, 6)
 
 
-@pytest.mark.parametrize("values, message", [
-    ({"nope": 1}, "track.nope: unknown parameter"),
-    ({"gate": "x"}, "track.gate: expected float"),
-    ({"confirm_hits": 2.5}, "track.confirm_hits: expected int"),
-    ({"confirm_hits": 1}, "no track confirmed from one scan"),
-    ({"confirm_hits": 4, "confirm_window": 3}, "confirm_window: must be at least"),
-    ({"d_max": 0}, "track.d_max: must be positive"),
-])
+@pytest.mark.parametrize(
+    "values, message",
+    [
+        ({"nope": 1}, "track.nope: unknown parameter"),
+        ({"gate": "x"}, "track.gate: expected float"),
+        ({"confirm_hits": 2.5}, "track.confirm_hits: expected int"),
+        ({"confirm_hits": 1}, "no track confirmed from one scan"),
+        ({"confirm_hits": 4, "confirm_window": 3}, "confirm_window: must be at least"),
+        ({"d_max": 0}, "track.d_max: must be positive"),
+    ],
+)
 def test_bad_values_name_the_key(values, message):
     with pytest.raises(ConfigError, match=message):
         validate(TrackingParams, values)
@@ -43,7 +46,7 @@ def test_bad_toml_file(tmp_path):
     f.write_text("[track\n")
     with pytest.raises(ConfigError, match="bad.toml"):
         load(f)
-    with pytest.raises(InputError, match="missing.toml: no such file"):   # every user-named file: input_files
+    with pytest.raises(InputError, match="missing.toml: no such file"):  # every user-named file: input_files
         load(tmp_path / "missing.toml")
 
 
@@ -64,8 +67,11 @@ def test_d_max_is_one_parameter_at_home_in_features_and_read_from_track_for_old_
     """The paper's d_max: lines and objects larger are static, for landmarks and tracking alike."""
     assert FeatureParams().d_max == TrackingParams().d_max == 1.5
     f = tmp_path / "c.toml"
-    for text in ("[features]\nd_max = 2.5\n", "[track]\nd_max = 2.5\n",
-                 "[features]\nd_max = 2.5\n[track]\nd_max = 2.5\n"):
+    for text in (
+        "[features]\nd_max = 2.5\n",
+        "[track]\nd_max = 2.5\n",
+        "[features]\nd_max = 2.5\n[track]\nd_max = 2.5\n",
+    ):
         f.write_text(text)
         cfg = load(f)
         assert (cfg.features.d_max, cfg.track.d_max) == (2.5, 2.5), text

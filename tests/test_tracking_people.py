@@ -12,7 +12,7 @@ from datmo_cli.tracking.tracker import Tracker
 from tests.reference_tracking import leg_lead, pair_legs, param_vector
 from tests.reference_tracking import reference_measurements as measurements
 
-STEP, WIDTH = 2 * 0.9 * np.sin(np.radians(22)), 0.3   # 2 l sin(theta) and the legs' path distance, m
+STEP, WIDTH = 2 * 0.9 * np.sin(np.radians(22)), 0.3  # 2 l sin(theta) and the legs' path distance, m
 
 
 def walker_legs(t: float, start: tuple[float, float], velocity: tuple[float, float]) -> list[np.ndarray]:
@@ -41,8 +41,10 @@ def run_scene(n_scans: int, objects, params: TrackingParams | None = None, dt: f
     outs = []
     for k in range(n_scans):
         scan = objects(k * dt)
-        scan = {key: [tuple(np.asarray(v, float) + np.r_[rng.normal(0, 0.01, 2), np.zeros(len(v) - 2)])
-                      for v in vals] for key, vals in scan.items()}
+        scan = {
+            key: [tuple(np.asarray(v, float) + np.r_[rng.normal(0, 0.01, 2), np.zeros(len(v) - 2)]) for v in vals]
+            for key, vals in scan.items()
+        }
         feats = features_from_lists([scan])[0]
         outs.append(tracker.step(int(round(k * dt * 1e9)), measurements(feats, params)))
     return tracker, outs
@@ -106,7 +108,7 @@ def test_legs_standing_still_are_not_a_walking_person():
 def test_one_visible_leg_keeps_the_person_alive():
     def scene(t: float) -> dict:
         legs = walker_legs(t, (1, -3), (0, 1.0))
-        if 3.0 <= t < 5.0:   # for 2 s one leg hides the other: only one leg is seen
+        if 3.0 <= t < 5.0:  # for 2 s one leg hides the other: only one leg is seen
             legs = legs[:1]
         return {"circles": legs_as_circles(legs)}
 
@@ -131,16 +133,20 @@ def test_pairing_kernel_matches_the_reference():
 def test_side_by_side_walkers_keep_their_own_legs_and_ids():
     """Two people 0.9 m apart walking the same way: nearest-first pairing alone would often pair one's
     leg with the other's; tracks take their own legs first, so each keeps one id."""
+
     def scene(t: float) -> dict:
-        return {"circles": legs_as_circles(walker_legs(t, (1, 0.0), (0.0, 1.0)) + walker_legs(t + 0.3, (1.9, 0.0),
-                                                                                          (0.0, 1.0)))}
+        return {
+            "circles": legs_as_circles(
+                walker_legs(t, (1, 0.0), (0.0, 1.0)) + walker_legs(t + 0.3, (1.9, 0.0), (0.0, 1.0))
+            )
+        }
 
     _, outs = run_scene(40, scene)
     conf = [out[out["status"] != 0] for out in outs[6:]]
     ids = {int(i) for c in conf for i in c["id"]}
     assert len(ids) == 2
     assert all(len(c) == 2 and (c["classification"] == CLASS_PERSON).all() for c in conf[5:])
-    for i in ids:   # each id stays on its own walker's line, x = 1.0 or 1.9
+    for i in ids:  # each id stays on its own walker's line, x = 1.0 or 1.9
         xs = np.concatenate([c["x"][c["id"] == i] for c in conf])
         lane = 1.0 if xs[0] < 1.45 else 1.9
         assert np.all(np.abs(xs - lane) < 0.3)
@@ -149,8 +155,15 @@ def test_side_by_side_walkers_keep_their_own_legs_and_ids():
 def test_measurement_kinds_and_sizes():
     from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_RECT
 
-    feats = features_from_lists([{"circles": [(5.0, 0.0, 0.3)], "blobs": [(2.0, 3.0, 0.6)],
-                                  "lines": [(1.0, -1.0, 1.5, -1.0), (3.0, 3.0, 3.1, 3.05), (0.0, 4.0, 3.0, 4.0)]}])[0]
+    feats = features_from_lists(
+        [
+            {
+                "circles": [(5.0, 0.0, 0.3)],
+                "blobs": [(2.0, 3.0, 0.6)],
+                "lines": [(1.0, -1.0, 1.5, -1.0), (3.0, 3.0, 3.1, 3.05), (0.0, 4.0, 3.0, 4.0)],
+            }
+        ]
+    )[0]
     m = measurements(feats, TrackingParams())
     got = sorted(zip(m.kind.tolist(), np.round(m.x, 3).tolist(), np.round(m.y, 3).tolist(), strict=True))
     # the 3 m wall is larger than d_max: no measurement; the 0.11 m line is a leg candidate

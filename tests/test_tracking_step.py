@@ -34,7 +34,7 @@ from tests.reference_tracking import (
 )
 
 P = TrackingParams()
-THR = leg_threshold_of("default")   # the shipped leg model's threshold, which datmo track takes
+THR = leg_threshold_of("default")  # the shipped leg model's threshold, which datmo track takes
 PRM = P.kernel_vector(THR)
 LOGS = sorted(p.name for p in SAMPLE_LOGS.glob("*.mcap"))
 EXACT = ("id", "age", "hits", "misses", "classification", "mobility", "status", "occluded")
@@ -50,8 +50,9 @@ def sample(name: str, leg_model: str) -> tuple:
     log = mcapio.read_log(SAMPLE_LOGS / name, topics=None)
     run = mcapio.run_from_log(log)
     odometry, _ = estimated_odometry(run, mcapio.odometry_from_log(log), P.ego_motion)
-    feats = list(iter_run_features(extract_run(run, params=FeatureParams().replace(leg_model=leg_model),
-                                               odometry=odometry)))
+    feats = list(
+        iter_run_features(extract_run(run, params=FeatureParams().replace(leg_model=leg_model), odometry=odometry))
+    )
     poses = odometry.at(run.stamps) if odometry is not None and len(odometry) else None
     return run, feats, odometry, poses
 
@@ -63,23 +64,37 @@ def to_table(ref: ReferenceTracker, t0: int) -> np.ndarray:
     K, T = len(t), P.tail_length
     tab = np.zeros((max(K, 1), state.n_columns(T)))
     tab[:K, state.ID] = t.id
-    tab[:K, state.X:state.X + 4] = t.x
-    tab[:K, state.P0:state.P0 + 16] = t.P.reshape(K, 16)
+    tab[:K, state.X : state.X + 4] = t.x
+    tab[:K, state.P0 : state.P0 + 16] = t.P.reshape(K, 16)
     tab[:K, state.BORN] = t.born_ns - t0
     tab[:K, state.LAST_HIT] = t.last_hit_ns - t0
-    for col, name in ((state.AGE, "age"), (state.HITS, "hits"), (state.MISSES, "misses"),
-                      (state.HISTORY, "history"), (state.LEAD_LEFT, "lead_left"), (state.LEAD_RIGHT, "lead_right"),
-                      (state.MOVING_TIME, "moving_time"), (state.SIZE, "size"), (state.CONFIRMED, "confirmed"),
-                      (state.OCCLUDED, "occluded"), (state.HIT, "hit"), (state.CLS, "cls"),
-                      (state.MOBILITY, "mobility"), (state.TAIL_COUNT, "tail_count"), (state.LEG_SCORE, "leg_score"),
-                      (state.LEG_HITS, "leg_hits"), (state.IS_PERSON, "person"), (state.STILL_TIME, "still_time")):
+    for col, name in (
+        (state.AGE, "age"),
+        (state.HITS, "hits"),
+        (state.MISSES, "misses"),
+        (state.HISTORY, "history"),
+        (state.LEAD_LEFT, "lead_left"),
+        (state.LEAD_RIGHT, "lead_right"),
+        (state.MOVING_TIME, "moving_time"),
+        (state.SIZE, "size"),
+        (state.CONFIRMED, "confirmed"),
+        (state.OCCLUDED, "occluded"),
+        (state.HIT, "hit"),
+        (state.CLS, "cls"),
+        (state.MOBILITY, "mobility"),
+        (state.TAIL_COUNT, "tail_count"),
+        (state.LEG_SCORE, "leg_score"),
+        (state.LEG_HITS, "leg_hits"),
+        (state.IS_PERSON, "person"),
+        (state.STILL_TIME, "still_time"),
+    ):
         tab[:K, col] = getattr(t, name)
-    tab[:K, state.VOTES:state.VOTES + 5] = t.votes
-    tab[:K, state.FIRST_X:state.FIRST_X + 2] = t.first
-    tab[:K, state.LAST_X:state.LAST_X + 2] = t.last
+    tab[:K, state.VOTES : state.VOTES + 5] = t.votes
+    tab[:K, state.FIRST_X : state.FIRST_X + 2] = t.first
+    tab[:K, state.LAST_X : state.LAST_X + 2] = t.last
     on_bg = ref._on_bg
-    tab[:min(K, len(on_bg)), state.ON_BG] = on_bg[:K]
-    tab[:K, state.TAIL:] = t.tail.reshape(K, 2 * T)
+    tab[: min(K, len(on_bg)), state.ON_BG] = on_bg[:K]
+    tab[:K, state.TAIL :] = t.tail.reshape(K, 2 * T)
     return tab
 
 
@@ -87,16 +102,22 @@ def same_tracks(ref: ReferenceTracker, t0: int, tab: np.ndarray, n: int, what: s
     want = to_table(ref, t0)
     assert n == len(ref.tracks), what
     cols = np.ones(want.shape[1], bool)
-    cols[state.ON_BG] = on_bg   # the reference keeps it apart, for this scan only
+    cols[state.ON_BG] = on_bg  # the reference keeps it apart, for this scan only
     np.testing.assert_allclose(tab[:n][:, cols], want[:n][:, cols], rtol=0, atol=1e-9, err_msg=what)
 
 
 def meas_arrays(m: Measurements) -> tuple:
     """The measurements as the compiled step takes them (leg candidates (L, 5), see with_candidates)."""
     raw = with_candidates(m)[0].raw_legs
-    return (np.ascontiguousarray(m.x, np.float64), np.ascontiguousarray(m.y, np.float64),
-            np.ascontiguousarray(m.size, np.float64), np.ascontiguousarray(m.kind, np.int64),
-            np.ascontiguousarray(m.legs, np.float64), raw, np.ascontiguousarray(m.prob, np.float64))
+    return (
+        np.ascontiguousarray(m.x, np.float64),
+        np.ascontiguousarray(m.y, np.float64),
+        np.ascontiguousarray(m.size, np.float64),
+        np.ascontiguousarray(m.kind, np.int64),
+        np.ascontiguousarray(m.legs, np.float64),
+        raw,
+        np.ascontiguousarray(m.prob, np.float64),
+    )
 
 
 def same_meas(got: tuple, m: Measurements, what: str) -> None:
@@ -126,8 +147,14 @@ def context(ref: ReferenceTracker) -> np.ndarray:
 
 
 # -------------------------------------------------------------------------------------------- lockstep
-def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, ranges: np.ndarray | None,
-             pose: np.ndarray | None) -> None:
+def lockstep(
+    ref: ReferenceTracker,
+    t0: int,
+    stamp_ns: int,
+    meas: Measurements,
+    ranges: np.ndarray | None,
+    pose: np.ndarray | None,
+) -> None:
     """ReferenceTracker.step, phase by phase, each compiled phase run on the reference's state just before
     that phase and compared with the reference's state just after it."""
     p = ref.params
@@ -136,8 +163,13 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
     has_pose = pose is not None
     pose_arr = np.zeros(3) if pose is None else np.asarray(pose, np.float64)
     bg = ref._bg_score if ref._bg_score is not None else np.zeros(0)
-    geo = np.array([0.0, 1.0, np.inf, 0.0, 0.0]) if ref.geometry is None else np.array(
-        [ref.geometry.angle_min, ref.geometry.angle_increment, ref.geometry.range_max, 1.0, ref.geometry.range_min])
+    geo = (
+        np.array([0.0, 1.0, np.inf, 0.0, 0.0])
+        if ref.geometry is None
+        else np.array(
+            [ref.geometry.angle_min, ref.geometry.angle_increment, ref.geometry.range_max, 1.0, ref.geometry.range_min]
+        )
+    )
     rng = np.zeros(0, np.float32) if ranges is None else np.ascontiguousarray(ranges, np.float32)
     dt = 0.0 if ref.stamp_ns is None else max((stamp_ns - ref.stamp_ns) * 1e-9, 0.0)
     ref._dt, ref.stamp_ns, ref.pose = dt, stamp_ns, None if pose is None else pose_arr
@@ -190,8 +222,9 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
     _step.update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, PRM)
     same_tracks(ref, t0, tab, n, "update", on_bg=True)
     rows2, cols2 = ref._reacquire(t, m, rows, cols, stamp_ns)
-    got2 = _step.reacquire(tab, n, rows, cols, mx, my, mkind, stamp, _REACQUIRE_LEARNED if learned else _REACQUIRE,
-                           crow, PRM)
+    got2 = _step.reacquire(
+        tab, n, rows, cols, mx, my, mkind, stamp, _REACQUIRE_LEARNED if learned else _REACQUIRE, crow, PRM
+    )
     np.testing.assert_array_equal(got2[0], rows2)
     np.testing.assert_array_equal(got2[1], cols2)
     same_tracks(ref, t0, tab, n, "reacquire", on_bg=True)
@@ -215,8 +248,26 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
     same_tracks(ref, t0, tab, n, "life cycle", on_bg=True)
     ctx = context(ref)
     ref._spawn(m, rows, cols, stamp_ns)
-    tab, n = _step.spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, ref._has_prob, stamp, has_pose,
-                         pose_arr, px, py, ctx, PRM)
+    tab, n = _step.spawn(
+        tab,
+        n,
+        cols,
+        mx,
+        my,
+        msize,
+        mkind,
+        mlegs,
+        mprob,
+        raw,
+        ref._has_prob,
+        stamp,
+        has_pose,
+        pose_arr,
+        px,
+        py,
+        ctx,
+        PRM,
+    )
     same_tracks(ref, t0, tab, n, "spawn")
     assert ctx[state.C_NEXT_ID] == ref.next_id
     tab = to_table(ref, t0)
@@ -231,9 +282,13 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
         ctx = context(ref)
     ref._background(ranges)
     if ref._bg_score is not None:
-        if ctx[state.C_BG_READY] == 0:   # the grid was made this scan
-            before = (np.zeros_like(ref._bg_score), np.zeros_like(ref._bg_mark), np.zeros_like(ref._bg_active),
-                      np.zeros((65536, 2)))
+        if ctx[state.C_BG_READY] == 0:  # the grid was made this scan
+            before = (
+                np.zeros_like(ref._bg_score),
+                np.zeros_like(ref._bg_mark),
+                np.zeros_like(ref._bg_active),
+                np.zeros((65536, 2)),
+            )
         cos_a, sin_a = ref._cos, ref._sin
         _step.background(*before, ctx, rng, ranges is not None, cos_a, sin_a, geo, px, py, pc, ps, dt, tab, n, PRM)
         # inactive cells: mark -1 in the reference, 0 in the compiled grid
@@ -250,8 +305,9 @@ def lockstep(ref: ReferenceTracker, t0: int, stamp_ns: int, meas: Measurements, 
         np.testing.assert_allclose(out[name], want[name], rtol=1e-6, atol=1e-6)
 
 
-@pytest.mark.parametrize(("name", "leg_model"), [("hall.mcap", "default"), ("patrol.mcap", "default"),
-                                                 ("crowd6.mcap", "paper")])
+@pytest.mark.parametrize(
+    ("name", "leg_model"), [("hall.mcap", "default"), ("patrol.mcap", "default"), ("crowd6.mcap", "paper")]
+)
 def test_every_phase_equals_the_reference_scan_by_scan(name: str, leg_model: str):
     run, feats, _, poses = sample(name, leg_model)
     learned = leg_model != "paper"
@@ -270,11 +326,16 @@ def _flat_measurements(f, learned: bool) -> tuple:
     """The compiled features-to-measurements of one scan."""
     from datmo_cli.tracking.tracker import _flat
 
-    (co, cf, cl, cx, cy, cr), (bo, bf, bl, bx, by, bs, bk), (lo, ls, lf, ll, lx0, ly0, lx1, ly1), \
-        (go, gf, gl, gx, gy, gw, gp) = _flat([f])
+    (
+        (co, cf, cl, cx, cy, cr),
+        (bo, bf, bl, bx, by, bs, bk),
+        (lo, ls, lf, ll, lx0, ly0, lx1, ly1),
+        (go, gf, gl, gx, gy, gw, gp),
+    ) = _flat([f])
     if learned:
-        return _step.learned_measurements(cf, cl, cx, cy, cr, bf, bl, bx, by, bs, ls, lf, ll, lx0, ly0, lx1, ly1, gf,
-                                          gl, gx, gy, gw, gp, PRM)
+        return _step.learned_measurements(
+            cf, cl, cx, cy, cr, bf, bl, bx, by, bs, ls, lf, ll, lx0, ly0, lx1, ly1, gf, gl, gx, gy, gw, gp, PRM
+        )
     return _step.paper_measurements(cx, cy, cr, bx, by, bs, bk, ls, lx0, ly0, lx1, ly1, PRM)
 
 
@@ -283,11 +344,18 @@ def reference_run(run, feats, poses, learned: bool, frame: str) -> tuple[list, l
     ref = ReferenceTracker(P, run.geometry, learned=learned, leg_threshold=THR)
     tracks, markers = [], []
     for i, f in enumerate(feats):
-        out = ref.step(int(run.stamps[i]), reference_measurements(f, P, learned, THR), run.ranges[i],
-                       None if poses is None else poses[i])
+        out = ref.step(
+            int(run.stamps[i]),
+            reference_measurements(f, P, learned, THR),
+            run.ranges[i],
+            None if poses is None else poses[i],
+        )
         tracks.append(out)
-        markers.append(track_markers(int(run.stamps[i]), frame, out, ref.tracks.tail, ref.tracks.tail_count,
-                                     world=poses is not None))
+        markers.append(
+            track_markers(
+                int(run.stamps[i]), frame, out, ref.tracks.tail, ref.tracks.tail_count, world=poses is not None
+            )
+        )
     return tracks, markers, ref
 
 
@@ -322,12 +390,14 @@ def test_ideal_features_on_the_hall_equal_the_reference():
     feats = acc.ideal_features(truth.offsets["objects"], truth.items["objects"], np.random.default_rng(0))
     ref = ReferenceTracker(P, run.geometry)
     tracker = Tracker(P, run.geometry)
-    want = [ref.step(int(s), reference_measurements(f, P), run.ranges[i]) for i, (s, f) in
-            enumerate(zip(run.stamps, feats, strict=True))]
+    want = [
+        ref.step(int(s), reference_measurements(f, P), run.ranges[i])
+        for i, (s, f) in enumerate(zip(run.stamps, feats, strict=True))
+    ]
     block = tracker.track_block(run.stamps, feats, run.ranges)
     assert block.items.tobytes() == np.concatenate(want).tobytes()
     assert (np.diff(block.offsets) == [len(w) for w in want]).all()
-    ref2, tracker2 = ReferenceTracker(P), Tracker(P)   # no geometry: no occlusion, no background
+    ref2, tracker2 = ReferenceTracker(P), Tracker(P)  # no geometry: no occlusion, no background
     for s, f in zip(run.stamps[:100], feats[:100], strict=True):
         a, b = ref2.step(int(s), reference_measurements(f, P)), tracker2.step(int(s), f)
         assert a.tobytes() == b.tobytes()
@@ -346,9 +416,13 @@ def weak_legs(feats: list, rng: np.random.Generator) -> None:
     for f in feats:
         g = f.legs
         u = rng.uniform(size=len(g))
-        g["probability"] = np.where(u < 0.5, rng.uniform(THR, 1.0, len(g)),
-                                    np.where(u < 0.75, rng.uniform(P.person_maintain, THR, len(g)),
-                                             rng.uniform(0.01, P.person_maintain, len(g))))
+        g["probability"] = np.where(
+            u < 0.5,
+            rng.uniform(THR, 1.0, len(g)),
+            np.where(
+                u < 0.75, rng.uniform(P.person_maintain, THR, len(g)), rng.uniform(0.01, P.person_maintain, len(g))
+            ),
+        )
         b = np.zeros(len(g), BLOB_DTYPE)
         for name in ("x", "y", "first", "last", "segment"):
             b[name] = g[name]
@@ -371,7 +445,7 @@ def scenes(draw) -> tuple:
     kind = rng.integers(0, 4, n_obj)
     stamps = np.cumsum(rng.integers(50_000_000, 400_000_000, n_scans)) + 10**18
     ranges_kind = draw(st.integers(0, 2))
-    part = 0.6 * np.array([np.cos(-1.13), np.sin(-1.13)])   # about beam 50: something the robot carries
+    part = 0.6 * np.array([np.cos(-1.13), np.sin(-1.13)])  # about beam 50: something the robot carries
     scans = []
     for i in range(n_scans):
         s: dict = {"circles": [], "legs": [], "blobs": [], "lines": []}
@@ -382,7 +456,7 @@ def scenes(draw) -> tuple:
             x, y = start[o] + vel[o] * tt + rng.normal(0, 0.02, 2)
             if kind[o] == 0:
                 s["circles"].append((x, y, rng.uniform(0.05, 0.4)))
-            elif kind[o] == 1:   # a person's legs, sometimes one hidden
+            elif kind[o] == 1:  # a person's legs, sometimes one hidden
                 s["legs"].append((x, y + 0.15, 0.12))
                 if rng.uniform() < 0.8:
                     s["legs"].append((x + 0.1 * np.sin(3 * tt), y - 0.15, 0.12))
@@ -407,7 +481,7 @@ def scenes(draw) -> tuple:
         for i, s in enumerate(scans):
             for x, y, *_ in s["circles"] + s["legs"] + s["blobs"] + s["lines"]:
                 b = int(np.rint((np.arctan2(y, x) - GEOM.angle_min) / GEOM.angle_increment))
-                r = ranges[i, max(b - 3, 0):max(b + 4, 0)]
+                r = ranges[i, max(b - 3, 0) : max(b + 4, 0)]
                 r[:] = np.minimum(r, np.hypot(x, y))
     return stamps, feats, poses, ranges, draw(st.booleans())
 
@@ -424,7 +498,7 @@ def test_random_scenes_equal_the_reference(scene: tuple):
         rng = None if ranges is None else ranges[i]
         m = reference_measurements(f, P, learned, THR)
         a = ref.step(int(stamps[i]), m, rng, pose)
-        b = step.step(int(stamps[i]), m, rng, pose)   # the Measurements form of step
+        b = step.step(int(stamps[i]), m, rng, pose)  # the Measurements form of step
         assert a.tobytes() == b.tobytes(), f"scan {i}"
         np.testing.assert_allclose(step.tracks.x, ref.tracks.x, rtol=0, atol=1e-9)
         want.append(a)
@@ -445,8 +519,14 @@ def test_every_phase_equals_the_reference_on_small_scenes(scene: tuple):
         same_meas(got, m, f"measurements of scan {i}")
         same_candidates(got[5], m, f"leg candidates of scan {i}")
         np.testing.assert_array_equal(got[6], m.prob)
-        lockstep(ref, int(stamps[0]), int(stamps[i]), m, None if ranges is None else ranges[i],
-                 None if poses is None else poses[i])
+        lockstep(
+            ref,
+            int(stamps[0]),
+            int(stamps[i]),
+            m,
+            None if ranges is None else ranges[i],
+            None if poses is None else poses[i],
+        )
 
 
 def test_the_table_grows_past_its_capacity():

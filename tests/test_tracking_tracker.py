@@ -24,7 +24,7 @@ def meas(*circles):
 
 
 NONE = meas()
-NO_PEOPLE = np.zeros(0)   # no person's returns to leave out of the background grid
+NO_PEOPLE = np.zeros(0)  # no person's returns to leave out of the background grid
 
 
 def free_ranges() -> np.ndarray:
@@ -40,7 +40,7 @@ def test_never_confirmed_before_m_hits_in_the_window(hits: list[bool]):
     for k, hit in enumerate(hits):
         out = tracker.step(k * 200_000_000, meas((3.0, 0.0, 0.3)) if hit or k == 0 else NONE, free_ranges())
         seen += hit or k == 0
-        window = (window + [hit or k == 0])[-P.confirm_window:]
+        window = (window + [hit or k == 0])[-P.confirm_window :]
         if len(out) and out[0]["status"] != STATUS_TENTATIVE:
             assert seen >= P.confirm_hits
 
@@ -64,7 +64,7 @@ def _lifetime(occluder: bool) -> float:
         tracker.step(k * 200_000_000, meas((4.0, 0.0, 0.3)), free_ranges())
     ranges = free_ranges()
     if occluder:
-        ranges[175:186] = 2.0   # something at 2 m straight ahead
+        ranges[175:186] = 2.0  # something at 2 m straight ahead
     k = 5
     while True:
         out = tracker.step(k * 200_000_000, NONE, ranges)
@@ -86,14 +86,14 @@ def test_occluded_tracks_live_longer_than_missed_ones():
 def test_out_of_view_counts_as_occluded():
     tracker = Tracker(P, GEOM)
     for k in range(5):
-        tracker.step(k * 200_000_000, meas((-2.0, 0.5, 0.3)), free_ranges())   # behind the scanner
+        tracker.step(k * 200_000_000, meas((-2.0, 0.5, 0.3)), free_ranges())  # behind the scanner
     out = tracker.step(5 * 200_000_000, NONE, free_ranges())
     assert out["occluded"].tolist() == [1]
 
 
 def test_time_comes_from_stamps_uneven_rates_and_dropped_scans():
     rng = np.random.default_rng(1)
-    times = np.cumsum(rng.choice([0.05, 0.1, 0.2, 0.6], 60))   # uneven, with gaps like dropped scans
+    times = np.cumsum(rng.choice([0.05, 0.1, 0.2, 0.6], 60))  # uneven, with gaps like dropped scans
     tracker = Tracker(P, GEOM)
     for t in times:
         out = tracker.step(int(t * 1e9), meas((1.0 + 0.5 * t, -2.0 + 0.25 * t, 0.3)), free_ranges())
@@ -117,7 +117,7 @@ def test_world_frame_with_a_moving_sensor():
     assert np.allclose([tr["world_x"], tr["world_y"]], obj, atol=0.02)
     assert np.hypot(tr["world_vx"], tr["world_vy"]) < 0.05
     assert np.allclose([tr["x"], tr["y"]], local, atol=0.02)
-    assert tr["mobility"] == 0   # static
+    assert tr["mobility"] == 0  # static
 
 
 def test_no_world_fields_without_odometry():
@@ -138,7 +138,7 @@ def test_two_crossing_tracks_keep_their_ids():
             first = {int(i): float(y) for i, y in zip(out["id"], out["y"], strict=True)}
     final = {int(i): float(y) for i, y in zip(out["id"], out["y"], strict=True)}
     assert set(final) == set(first)
-    for i in first:   # each id kept its side's motion through the crossing at t = 4 s
+    for i in first:  # each id kept its side's motion through the crossing at t = 4 s
         assert np.sign(final[i]) == -np.sign(first[i])
 
 
@@ -147,15 +147,15 @@ def test_a_track_lost_out_of_view_is_reacquired_with_its_id():
     elsewhere: constant-velocity prediction cannot follow, reacquisition by reachable distance does."""
     tracker = Tracker(P, GEOM)
     t = 0.0
-    for _ in range(10):        # walking -x at y = 2 towards the edge of view (x = 0)
+    for _ in range(10):  # walking -x at y = 2 towards the edge of view (x = 0)
         out = tracker.step(int(t * 1e9), meas((1.5 - 0.8 * t, 2.0, 0.3)), free_ranges())
         t += 0.2
     first = int(out["id"][out["status"] != STATUS_TENTATIVE][0])
-    for _ in range(15):        # 3 s out of view (x < 0)
+    for _ in range(15):  # 3 s out of view (x < 0)
         out = tracker.step(int(t * 1e9), NONE, free_ranges())
         t += 0.2
     assert out["occluded"].all()
-    for k in range(5):         # reappears 1.5 m from where it was lost, walking +x
+    for k in range(5):  # reappears 1.5 m from where it was lost, walking +x
         out = tracker.step(int(t * 1e9), meas((0.2 + 0.16 * k, 0.5, 0.3)), free_ranges())
         t += 0.2
     assert [int(i) for i in out["id"]] == [first]
@@ -178,19 +178,19 @@ def test_a_lost_person_takes_back_a_tentative_track_started_on_them():
     must take them back, keeping its id."""
     tracker = Tracker(P, GEOM)
     t = 0.0
-    for _ in range(15):        # walking -x at y = 2 towards the edge of view (x = 0)
+    for _ in range(15):  # walking -x at y = 2 towards the edge of view (x = 0)
         x = 2.5 - 0.8 * t
         out = tracker.step(int(t * 1e9), meas((x, 1.85, 0.1), (x - 0.3 * np.cos(6 * t), 2.15, 0.1)), free_ranges())
         t += 0.2
     first = out[out["status"] != STATUS_TENTATIVE]
     assert len(first) == 1 and first["mobility"][0] == 1
-    for _ in range(10):        # 2 s out of view
+    for _ in range(10):  # 2 s out of view
         out = tracker.step(int(t * 1e9), NONE, free_ranges())
         t += 0.2
-    out = tracker.step(int(t * 1e9), meas((0.3, 1.0, 0.25)), free_ranges())   # one wide arc: a tentative track
+    out = tracker.step(int(t * 1e9), meas((0.3, 1.0, 0.25)), free_ranges())  # one wide arc: a tentative track
     t += 0.2
     assert len(out) == 2
-    for k in range(5):         # then both legs, walking +x
+    for k in range(5):  # then both legs, walking +x
         x = 0.35 + 0.16 * k
         out = tracker.step(int(t * 1e9), meas((x, 0.85, 0.1), (x + 0.2, 1.15, 0.1)), free_ranges())
         t += 0.2
@@ -207,19 +207,89 @@ def test_background_grid_marks_long_hit_places_and_forgets_places_seen_through()
     angles = np.radians([-1.0, 0.0, 1.0])
     wall = np.array([3.0, 3.0, 3.0], np.float32)
     count = 0
-    for scan in range(1, 21):   # 4 s at 5 Hz
-        count = background_update(score, mark, active, count, scan, wall, np.cos(angles), np.sin(angles),
-                                           angles[0], angles[1] - angles[0], 0.0, 8.0, 0.0, 0.0, 1.0, 0.0, 0.2,
-                                           -5.0, -5.0, cell, n, 0.3, 6.0, NO_PEOPLE, NO_PEOPLE, 0.4)
-    on = _kernels.on_background(score, np.array([3.0]), np.array([0.0]), np.array([0.0]), 0.0, 0.0, -5.0, -5.0,
-                                n, param_vector(background_cell=cell, background_time=3.0))
+    for scan in range(1, 21):  # 4 s at 5 Hz
+        count = background_update(
+            score,
+            mark,
+            active,
+            count,
+            scan,
+            wall,
+            np.cos(angles),
+            np.sin(angles),
+            angles[0],
+            angles[1] - angles[0],
+            0.0,
+            8.0,
+            0.0,
+            0.0,
+            1.0,
+            0.0,
+            0.2,
+            -5.0,
+            -5.0,
+            cell,
+            n,
+            0.3,
+            6.0,
+            NO_PEOPLE,
+            NO_PEOPLE,
+            0.4,
+        )
+    on = _kernels.on_background(
+        score,
+        np.array([3.0]),
+        np.array([0.0]),
+        np.array([0.0]),
+        0.0,
+        0.0,
+        -5.0,
+        -5.0,
+        n,
+        param_vector(background_cell=cell, background_time=3.0),
+    )
     assert on[0]
-    gone = np.array([6.0, 6.0, 6.0], np.float32)   # the object left: the beams now reach 6 m
-    count = background_update(score, mark, active, count, 21, gone, np.cos(angles), np.sin(angles),
-                                       angles[0], angles[1] - angles[0], 0.0, 8.0, 0.0, 0.0, 1.0, 0.0, 0.2,
-                                       -5.0, -5.0, cell, n, 0.3, 6.0, NO_PEOPLE, NO_PEOPLE, 0.4)
-    on = _kernels.on_background(score, np.array([3.0]), np.array([0.0]), np.array([0.0]), 0.0, 0.0, -5.0, -5.0,
-                                n, param_vector(background_cell=cell, background_time=3.0))
+    gone = np.array([6.0, 6.0, 6.0], np.float32)  # the object left: the beams now reach 6 m
+    count = background_update(
+        score,
+        mark,
+        active,
+        count,
+        21,
+        gone,
+        np.cos(angles),
+        np.sin(angles),
+        angles[0],
+        angles[1] - angles[0],
+        0.0,
+        8.0,
+        0.0,
+        0.0,
+        1.0,
+        0.0,
+        0.2,
+        -5.0,
+        -5.0,
+        cell,
+        n,
+        0.3,
+        6.0,
+        NO_PEOPLE,
+        NO_PEOPLE,
+        0.4,
+    )
+    on = _kernels.on_background(
+        score,
+        np.array([3.0]),
+        np.array([0.0]),
+        np.array([0.0]),
+        0.0,
+        0.0,
+        -5.0,
+        -5.0,
+        n,
+        param_vector(background_cell=cell, background_time=3.0),
+    )
     assert not on[0]
 
 
@@ -235,7 +305,7 @@ def test_a_duplicate_yields_to_the_person_whatever_its_hits():
         t = state.TrackTable(P.tail_length, capacity=2)
         t.n = 2
         tab = t.table
-        tab[:, state.X:state.X + 4] = [[2.0, 1.0, 0.8, 0.0], [2.0, 1.0 + 0.5 * P.merge_distance, 0.8, 0.0]]
+        tab[:, state.X : state.X + 4] = [[2.0, 1.0, 0.8, 0.0], [2.0, 1.0 + 0.5 * P.merge_distance, 0.8, 0.0]]
         tab[:, state.VOTES + KIND_PERSON] = 5
         tab[:, state.VOTES + KIND_LEG] = 5
         tab[:, state.CONFIRMED] = 1

@@ -36,11 +36,15 @@ def test_a_positive_file_with_only_empty_label_messages_is_refused(tmp_path):
 
 def test_an_empty_file_is_refused(tmp_path):
     (tmp_path / "empty.bag").write_bytes(b"")
-    _one_line_error(_run("--positive", str(tmp_path / "empty.bag"), "-o", str(tmp_path / "m.npz")),
-                    f"{tmp_path / 'empty.bag'}: empty file")
+    _one_line_error(
+        _run("--positive", str(tmp_path / "empty.bag"), "-o", str(tmp_path / "m.npz")),
+        f"{tmp_path / 'empty.bag'}: empty file",
+    )
     good = write_bag(tmp_path / "p.bag", *scene(5))
-    _one_line_error(_run("--positive", str(good), "--negative", str(tmp_path / "empty.bag"), "-o",
-                         str(tmp_path / "m.npz")), "empty file")
+    _one_line_error(
+        _run("--positive", str(good), "--negative", str(tmp_path / "empty.bag"), "-o", str(tmp_path / "m.npz")),
+        "empty file",
+    )
 
 
 def test_no_positive_file_is_refused(tmp_path):
@@ -54,8 +58,10 @@ def test_writes_a_model_from_synthetic_labelled_files_and_refuses_to_overwrite(t
     pytest.importorskip("sklearn")
     from datmo_cli.perception.legs import LegModel
 
-    positives = [str(write_bag(tmp_path / "p0.bag", *scene(20, seed=0))),
-                 str(write_mcap(tmp_path / "p1", *scene(20, seed=1)))]
+    positives = [
+        str(write_bag(tmp_path / "p0.bag", *scene(20, seed=0))),
+        str(write_mcap(tmp_path / "p1", *scene(20, seed=1))),
+    ]
     negative = str(write_bag(tmp_path / "n.bag", scene(15, seed=5, people=False)[0], extra_scan_topics=("/rear",)))
     out = tmp_path / "legs.npz"
     result = _run("--positive", *positives, "--negative", negative, "-o", str(out))
@@ -82,13 +88,15 @@ def test_with_simulated_recordings_always_in_training(tmp_path, monkeypatch):
     from datmo_cli import simulated
     from datmo_cli.perception.legs import LegModel
 
-    monkeypatch.setattr(simulated, "SIMULATED", (("crowd", 21, 3, 0.5, 4.0),))   # a short one, for speed
-    positives = [str(write_bag(tmp_path / "p0.bag", *scene(20, seed=0))),
-                 str(write_bag(tmp_path / "p1.bag", *scene(20, seed=1)))]
+    monkeypatch.setattr(simulated, "SIMULATED", (("crowd", 21, 3, 0.5, 4.0),))  # a short one, for speed
+    positives = [
+        str(write_bag(tmp_path / "p0.bag", *scene(20, seed=0))),
+        str(write_bag(tmp_path / "p1.bag", *scene(20, seed=1))),
+    ]
     out = tmp_path / "legs.npz"
     result = _run("--positive", *positives, "-o", str(out), "--with-simulated")
     assert result.exit_code == 0, result.output
     prov = LegModel.load(out).provenance
     assert [s["name"] for s in prov["simulated"]] == ["simulated crowd seed 21 3 people 0.5°"]
     assert prov["simulated"][0]["legs"] > 0
-    assert [f["labelled"] for f in prov["held_out"]["folds"]] == ["p0.bag", "p1.bag"]   # real ones only
+    assert [f["labelled"] for f in prov["held_out"]["folds"]] == ["p0.bag", "p1.bag"]  # real ones only

@@ -37,7 +37,7 @@ def test_every_msg_constant_is_in_the_vocabulary_with_the_files_value():
     for stem, table in consts.items():
         for name, value in table.items():
             assert getattr(vocabulary, PREFIX[stem] + name) == value, (stem, name)
-            assert type(getattr(vocabulary, PREFIX[stem] + name)) is int   # a numba compile-time constant
+            assert type(getattr(vocabulary, PREFIX[stem] + name)) is int  # a numba compile-time constant
 
 
 def test_every_vocabulary_constant_comes_from_a_msg_file():
@@ -57,19 +57,41 @@ def test_the_name_tables_are_what_the_outputs_print():
     assert vocabulary.CLASS_NAMES == {0: "unknown", 1: "person", 2: "circle object", 3: "rectangular object"}
     assert vocabulary.MOBILITY_NAMES == {0: "static", 1: "dynamic", 2: "undefined"}
     assert vocabulary.STATUS_NAMES == {0: "tentative", 1: "confirmed", 2: "coasting"}
-    assert vocabulary.LANDMARK_NAMES == {0: "corner", 1: "convex deflection", 2: "concave deflection",
-                                         3: "line end", 4: "column", 5: "bench"}
+    assert vocabulary.LANDMARK_NAMES == {
+        0: "corner",
+        1: "convex deflection",
+        2: "concave deflection",
+        3: "line end",
+        4: "column",
+        5: "bench",
+    }
     assert vocabulary.BLOB_KIND_NAMES == {0: "blob", 1: "point"}
 
 
 # Names that would declare the vocabulary again: its own, the .msg files' bare ones (CORNER, ...), the
 # class and mobility codes without their prefix (PERSON, DYNAMIC, ...), and the tables and short forms once
 # used (not STATUS_*'s bare names: tracking.state names its columns CONFIRMED, ...).
-FORBIDDEN = ({*vocabulary_constants(), "CLASS_NAMES", "MOBILITY_NAMES", "STATUS_NAMES", "LANDMARK_NAMES",
-              "BLOB_KIND_NAMES", "TYPE_NAMES", "CLASS_CIRCLE", "CLASS_RECT", "TRACK_STATIC"}
-             | set(msg_constants()["Landmark"])
-             | {k.split("_", 1)[1] for stem in ("Track", "GroundTruthObject") for k in msg_constants()[stem]
-                if not k.startswith("STATUS_")})
+FORBIDDEN = (
+    {
+        *vocabulary_constants(),
+        "CLASS_NAMES",
+        "MOBILITY_NAMES",
+        "STATUS_NAMES",
+        "LANDMARK_NAMES",
+        "BLOB_KIND_NAMES",
+        "TYPE_NAMES",
+        "CLASS_CIRCLE",
+        "CLASS_RECT",
+        "TRACK_STATIC",
+    }
+    | set(msg_constants()["Landmark"])
+    | {
+        k.split("_", 1)[1]
+        for stem in ("Track", "GroundTruthObject")
+        for k in msg_constants()[stem]
+        if not k.startswith("STATUS_")
+    }
+)
 # Modules another part of issue #17 rewrites (the tracking kernels and the classification reference); they
 # still declare Track.msg's codes until then.
 
@@ -78,8 +100,13 @@ def assigned_names(tree: ast.AST) -> set[str]:
     """Names bound by assignments anywhere in `tree` (tuple targets included)."""
     out = set()
     for node in ast.walk(tree):
-        targets = (node.targets if isinstance(node, ast.Assign)
-                   else [node.target] if isinstance(node, ast.AnnAssign | ast.AugAssign) else [])
+        targets = (
+            node.targets
+            if isinstance(node, ast.Assign)
+            else [node.target]
+            if isinstance(node, ast.AnnAssign | ast.AugAssign)
+            else []
+        )
         for t in targets:
             out |= {n.id for n in ast.walk(t) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Store)}
     return out

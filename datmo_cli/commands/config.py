@@ -28,14 +28,16 @@ def sources(cfg: DatmoConfig, config: Path | None) -> dict[str, dict[str, str]]:
     out = {}
     for stage, table in cfg.to_dict().items():
         bounds = BOUNDS[stage]
-        out[stage] = {key: (f"from {config}" if key in given[stage] else "default")
-                      + (f"; {bounds[key].unit}" if key in bounds and bounds[key].unit else "") for key in table}
+        out[stage] = {
+            key: (f"from {config}" if key in given[stage] else "default")
+            + (f"; {bounds[key].unit}" if key in bounds and bounds[key].unit else "")
+            for key in table
+        }
     return out
 
 
 @click.command(name="config")
-@config_options("TOML file of parameters ([features] and [track] tables) to show merged with the defaults.",
-                path=True)
+@config_options("TOML file of parameters ([features] and [track] tables) to show merged with the defaults.", path=True)
 @output_option("Where to write the TOML ('-': stdout).", dash=True, default=STDOUT, show_default=True)
 @force_option()
 @quiet_option
@@ -49,8 +51,11 @@ def command(cfg: DatmoConfig, config: Path | None, output: Path, force: bool) ->
     """
     from ..config import to_toml
 
-    header = (f"datmo's effective configuration: the defaults, overridden by {config}" if config is not None
-              else "datmo's effective configuration: the defaults (no config file)")
+    header = (
+        f"datmo's effective configuration: the defaults, overridden by {config}"
+        if config is not None
+        else "datmo's effective configuration: the defaults (no config file)"
+    )
     text = to_toml(cfg.to_dict(), sources(cfg, config), header)
     if str(output) == STDOUT:
         click.echo(text, nl=False)

@@ -12,40 +12,84 @@ import click
 from ..bounds import OPTIONS, option
 from .options import force_option, quiet_option
 
-FAULT_HELP = ("Faults to inject, comma-separated: garbage:P (a burst of random bytes before a scan), crc:P (corrupt "
-              "a scan's CRC), truncate:P (cut a scan short), drop:P (leave out one byte of a scan), with P the "
-              "probability per scan telegram; disconnect:N (hang up after N scan telegrams); nak:N (answer the "
-              "first N host commands with NAK). E.g. garbage:0.1,crc:0.05,disconnect:500.")
+FAULT_HELP = (
+    "Faults to inject, comma-separated: garbage:P (a burst of random bytes before a scan), crc:P (corrupt "
+    "a scan's CRC), truncate:P (cut a scan short), drop:P (leave out one byte of a scan), with P the "
+    "probability per scan telegram; disconnect:N (hang up after N scan telegrams); nak:N (answer the "
+    "first N host commands with NAK). E.g. garbage:0.1,crc:0.05,disconnect:500."
+)
 
 
 @click.command(name="emulate")
-@click.option("--scene", metavar="NAME|PATH", default=None,
-              help="Serve scans of a simulated scene (hall, corridor, crowd, static, patrol or a .toml) "
-                   "[default: hall].")
-@click.option("--log", "log_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Serve the scans of this log instead (repeated; beams mapped by angle onto the variant).")
-@option("--seed", bound=OPTIONS["seed"], default=0, show_default=True,
-        help="Random seed of the scene and of the faults.")
-@option("--duration", bound=OPTIONS["sim_duration"], default=None,
-        help="Seconds of scene to simulate before it repeats [default: the scene's].")
-@click.option("--baud", type=click.Choice(["9600", "19200", "38400", "500000"]), default="9600", show_default=True,
-              help="Baud at power-up (a real LMS200 starts at 9600).")
-@click.option("--angle", type=click.Choice(["180", "100"]), default="180", show_default=True,
-              help="Field of view at power-up, degrees.")
-@click.option("--resolution", type=click.Choice(["1", "0.5", "0.25"]), default="0.5", show_default=True,
-              help="Resolution at power-up, degrees.")
-@click.option("--units", type=click.Choice(["mm", "cm"]), default="mm", show_default=True,
-              help="Units at power-up.")
+@click.option(
+    "--scene",
+    metavar="NAME|PATH",
+    default=None,
+    help="Serve scans of a simulated scene (hall, corridor, crowd, static, patrol or a .toml) [default: hall].",
+)
+@click.option(
+    "--log",
+    "log_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Serve the scans of this log instead (repeated; beams mapped by angle onto the variant).",
+)
+@option(
+    "--seed", bound=OPTIONS["seed"], default=0, show_default=True, help="Random seed of the scene and of the faults."
+)
+@option(
+    "--duration",
+    bound=OPTIONS["sim_duration"],
+    default=None,
+    help="Seconds of scene to simulate before it repeats [default: the scene's].",
+)
+@click.option(
+    "--baud",
+    type=click.Choice(["9600", "19200", "38400", "500000"]),
+    default="9600",
+    show_default=True,
+    help="Baud at power-up (a real LMS200 starts at 9600).",
+)
+@click.option(
+    "--angle",
+    type=click.Choice(["180", "100"]),
+    default="180",
+    show_default=True,
+    help="Field of view at power-up, degrees.",
+)
+@click.option(
+    "--resolution",
+    type=click.Choice(["1", "0.5", "0.25"]),
+    default="0.5",
+    show_default=True,
+    help="Resolution at power-up, degrees.",
+)
+@click.option("--units", type=click.Choice(["mm", "cm"]), default="mm", show_default=True, help="Units at power-up.")
 @click.option("--indices", is_flag=True, help="Send real-time scan indices from power-up.")
 @click.option("--fault", "fault_spec", default=None, metavar="SPEC", help=FAULT_HELP)
-@click.option("--link", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Also make a symlink at this path to the pseudo-terminal (removed on exit). An existing path is "
-                   "refused unless --force, which replaces only a symlink or a regular file.")
+@click.option(
+    "--link",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also make a symlink at this path to the pseudo-terminal (removed on exit). An existing path is "
+    "refused unless --force, which replaces only a symlink or a regular file.",
+)
 @force_option("Let --link replace an existing symlink or regular file.")
 @quiet_option
-def command(scene: str | None, log_path: Path | None, seed: int, duration: float | None, baud: str, angle: str,
-            resolution: str, units: str, indices: bool, fault_spec: str | None, link: Path | None,
-            force: bool) -> None:
+def command(
+    scene: str | None,
+    log_path: Path | None,
+    seed: int,
+    duration: float | None,
+    baud: str,
+    angle: str,
+    resolution: str,
+    units: str,
+    indices: bool,
+    fault_spec: str | None,
+    link: Path | None,
+    force: bool,
+) -> None:
     """Run a virtual SICK LMS200 on a pseudo-terminal until Ctrl-C (exit 130; SIGTERM 143, SIGHUP 129).
 
     Prints the device path to give `datmo record --port`. The device follows the LMS2xx serial protocol
@@ -61,7 +105,7 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
     from ..progress import quiet
     from ..simulated import scan_source
 
-    silent = quiet()   # read here: the emulator's thread, which also says things, has no Click context
+    silent = quiet()  # read here: the emulator's thread, which also says things, has no Click context
 
     def say(text: str) -> None:
         if not silent:
@@ -74,12 +118,20 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
     if link is not None:
         from ..outputs import check_output
 
-        check_output(link, force=force, what="link")   # before the device starts
+        check_output(link, force=force, what="link")  # before the device starts
     faults = Faults.parse(fault_spec)
     source = scan_source(log=log_path, scene=scene, seed=seed, duration=duration)
-    emu = Emulator(source, faults=faults, seed=seed, baud=int(baud), angle_deg=int(angle),
-                   resolution_deg=float(resolution), units=units, indices=indices,
-                   on_event=lambda text: say(f"emulate: {text}"))
+    emu = Emulator(
+        source,
+        faults=faults,
+        seed=seed,
+        baud=int(baud),
+        angle_deg=int(angle),
+        resolution_deg=float(resolution),
+        units=units,
+        indices=indices,
+        on_event=lambda text: say(f"emulate: {text}"),
+    )
     done = threading.Event()
     stopped_by: list[int] = []
 
@@ -108,9 +160,9 @@ def command(scene: str | None, log_path: Path | None, seed: int, duration: float
             signal.signal(sig, h)
     try:
         say(f"emulate: sent {len(emu.sent)} scans; faults {dict(emu.stats.faults) or 'none'}")
-    except OSError:   # the terminal hung up (SIGHUP)
+    except OSError:  # the terminal hung up (SIGHUP)
         pass
-    if stopped_by:   # stopping is how an emulator ends, but the status says how: 130, 143 or 129
+    if stopped_by:  # stopping is how an emulator ends, but the status says how: 130, 143 or 129
         raise click.exceptions.Exit(128 + stopped_by[0])
 
 

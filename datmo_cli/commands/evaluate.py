@@ -9,16 +9,37 @@ import click
 from ..bounds import OPTIONS, option
 from ..progress import quiet_option
 
-COLUMNS = {"mota": "MOTA", "motp": "MOTP m", "idf1": "IDF1", "hota": "HOTA", "deta": "DetA", "assa": "AssA",
-           "loca": "LocA", "num_objects": "objects", "num_matches": "matches",
-           "num_false_positives": "false pos.", "num_misses": "misses", "num_switches": "ID switches",
-           "precision": "precision", "recall": "recall", "mostly_tracked": "mostly tracked",
-           "mostly_lost": "mostly lost", "num_unique_objects": "objects (unique)",
-           "ignored_hypotheses": "ignored tracks"}
+COLUMNS = {
+    "mota": "MOTA",
+    "motp": "MOTP m",
+    "idf1": "IDF1",
+    "hota": "HOTA",
+    "deta": "DetA",
+    "assa": "AssA",
+    "loca": "LocA",
+    "num_objects": "objects",
+    "num_matches": "matches",
+    "num_false_positives": "false pos.",
+    "num_misses": "misses",
+    "num_switches": "ID switches",
+    "precision": "precision",
+    "recall": "recall",
+    "mostly_tracked": "mostly tracked",
+    "mostly_lost": "mostly lost",
+    "num_unique_objects": "objects (unique)",
+    "ignored_hypotheses": "ignored tracks",
+}
 
 
-def score_file(path: Path, *, gt_csv: Path | None = None, match_radius: float = 0.5, include_occluded: bool = False,
-               exclude_static: bool = False, progress=None) -> dict:
+def score_file(
+    path: Path,
+    *,
+    gt_csv: Path | None = None,
+    match_radius: float = 0.5,
+    include_occluded: bool = False,
+    exclude_static: bool = False,
+    progress=None,
+) -> dict:
     """Read `path` (and the CSV) and score it: {"file", "ground_truth", "match_radius_m", "scores": {...}};
     `progress(done, total, stage)` as evaluate.evaluate calls it."""
     import numpy as np
@@ -33,8 +54,13 @@ def score_file(path: Path, *, gt_csv: Path | None = None, match_radius: float = 
     require(log, mcapio.TOPIC_TRACKS)
     with mcapio.decoding(path, mcapio.TOPIC_TRACKS):
         tracks = decode_channel(types.TRACKS, log.messages[mcapio.TOPIC_TRACKS][1])
-    hyps = ev.track_frames(tracks.stamps, tracks.offsets["tracks"], tracks.items["tracks"],
-                           include_coasting=include_occluded, exclude_static=exclude_static)
+    hyps = ev.track_frames(
+        tracks.stamps,
+        tracks.offsets["tracks"],
+        tracks.items["tracks"],
+        include_coasting=include_occluded,
+        exclude_static=exclude_static,
+    )
     if gt_csv is not None:
         gt, regions = ev.read_ground_truth_csv(gt_csv), None
         dt = np.diff(np.sort(tracks.stamps))
@@ -42,22 +68,36 @@ def score_file(path: Path, *, gt_csv: Path | None = None, match_radius: float = 
         source = str(gt_csv)
     else:
         if not log.has(mcapio.TOPIC_GROUND_TRUTH):
-            raise MissingChannelError(f"{path}: no messages on {mcapio.TOPIC_GROUND_TRUTH}; run datmo simulate "
-                                      "first, or give annotations with --gt FILE.csv (stamp_ns,id,x,y)")
+            raise MissingChannelError(
+                f"{path}: no messages on {mcapio.TOPIC_GROUND_TRUTH}; run datmo simulate "
+                "first, or give annotations with --gt FILE.csv (stamp_ns,id,x,y)"
+            )
         with mcapio.decoding(path, mcapio.TOPIC_GROUND_TRUTH):
             truth = decode_channel(types.GROUND_TRUTH, log.messages[mcapio.TOPIC_GROUND_TRUTH][1])
-        gt, regions = ev.ground_truth_frames(truth.stamps, truth.offsets["objects"], truth.items["objects"],
-                                             truth.scalars.get("sensor_theta"), include_occluded=include_occluded)
+        gt, regions = ev.ground_truth_frames(
+            truth.stamps,
+            truth.offsets["objects"],
+            truth.items["objects"],
+            truth.scalars.get("sensor_theta"),
+            include_occluded=include_occluded,
+        )
         tolerance = 0
         source = mcapio.TOPIC_GROUND_TRUTH
         if not (np.isfinite(gt.x).all() and np.isfinite(gt.y).all()):
             raise InputError(f"{path}: {source} holds positions that are not finite numbers")
-    scores = ev.evaluate(gt, hyps, regions=regions, match_radius=match_radius, stamp_tolerance_ns=tolerance,
-                         progress=progress)
+    scores = ev.evaluate(
+        gt, hyps, regions=regions, match_radius=match_radius, stamp_tolerance_ns=tolerance, progress=progress
+    )
     if scores["all"]["frames_without_tracks"] == len(gt.stamps):
         raise InputError(f"{path}: no Tracks message has the stamp of any ground-truth frame of {source}")
-    return {"file": str(path), "ground_truth": source, "match_radius_m": match_radius,
-            "include_occluded": include_occluded, "exclude_static": exclude_static, "scores": scores}
+    return {
+        "file": str(path),
+        "ground_truth": source,
+        "match_radius_m": match_radius,
+        "include_occluded": include_occluded,
+        "exclude_static": exclude_static,
+        "scores": scores,
+    }
 
 
 def _table(result: dict, by_metric: bool = False):
@@ -65,8 +105,10 @@ def _table(result: dict, by_metric: bool = False):
     from ..report import Table
 
     scores = result["scores"]
-    title = (f"{result['file']} against {result['ground_truth']} "
-             f"(match radius {result['match_radius_m']:g} m, {scores['all']['num_frames']:,} frames)")
+    title = (
+        f"{result['file']} against {result['ground_truth']} "
+        f"(match radius {result['match_radius_m']:g} m, {scores['all']['num_frames']:,} frames)"
+    )
 
     def value(v: object) -> object:
         return f"{v:.3f}" if isinstance(v, float) else v
@@ -100,24 +142,56 @@ def _gate(file: Path, scores: dict, name: str, key: str, minimum: float | None) 
 
 @click.command(name="evaluate")
 @click.argument("file", type=click.Path(path_type=Path))
-@click.option("--gt", "gt_csv", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Ground truth as CSV (stamp_ns,id,x,y in the sensor frame, metres; optional class column) "
-                   "instead of the log's /datmo/ground_truth channel.")
-@option("--match-radius", bound=OPTIONS["match_radius"], default=0.5, show_default=True,
-        help="Largest distance, metres, at which a track can match a ground-truth object.")
-@click.option("--include-occluded", is_flag=True,
-              help="Also score movers no beam hits, with coasting tracks as hypotheses.")
+@click.option(
+    "--gt",
+    "gt_csv",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Ground truth as CSV (stamp_ns,id,x,y in the sensor frame, metres; optional class column) "
+    "instead of the log's /datmo/ground_truth channel.",
+)
+@option(
+    "--match-radius",
+    bound=OPTIONS["match_radius"],
+    default=0.5,
+    show_default=True,
+    help="Largest distance, metres, at which a track can match a ground-truth object.",
+)
+@click.option(
+    "--include-occluded", is_flag=True, help="Also score movers no beam hits, with coasting tracks as hypotheses."
+)
 @click.option("--exclude-static", is_flag=True, help="Do not count tracks the tracker classifies static.")
-@click.option("--format", "fmt", type=click.Choice(["rich", "json", "csv", "markdown"]), default="rich",
-              show_default=True, help="rich tables for a terminal; json, csv (a row per class) or markdown for "
-                                      "scripts and CI.")
-@option("--min-mota", bound=OPTIONS["min_mota"], default=None,
-        help="Exit with status 1 when the overall MOTA is below this (for CI).")
-@option("--min-hota", bound=OPTIONS["min_hota"], default=None,
-        help="Exit with status 1 when the overall HOTA is below this (for CI).")
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["rich", "json", "csv", "markdown"]),
+    default="rich",
+    show_default=True,
+    help="rich tables for a terminal; json, csv (a row per class) or markdown for scripts and CI.",
+)
+@option(
+    "--min-mota",
+    bound=OPTIONS["min_mota"],
+    default=None,
+    help="Exit with status 1 when the overall MOTA is below this (for CI).",
+)
+@option(
+    "--min-hota",
+    bound=OPTIONS["min_hota"],
+    default=None,
+    help="Exit with status 1 when the overall HOTA is below this (for CI).",
+)
 @quiet_option
-def command(file: Path, gt_csv: Path | None, match_radius: float, include_occluded: bool, exclude_static: bool,
-            fmt: str, min_mota: float | None, min_hota: float | None) -> None:
+def command(
+    file: Path,
+    gt_csv: Path | None,
+    match_radius: float,
+    include_occluded: bool,
+    exclude_static: bool,
+    fmt: str,
+    min_mota: float | None,
+    min_hota: float | None,
+) -> None:
     """Score FILE's tracks against ground truth: MOTA, MOTP, IDF1, false positives, misses and identity
     switches (py-motmetrics), and HOTA with DetA, AssA and LocA (TrackEval), overall and per class.
 
@@ -137,12 +211,17 @@ def command(file: Path, gt_csv: Path | None, match_radius: float, include_occlud
     from ..progress import bar, console
     from ..report import render_markdown, render_rich, to_json
 
-    require_scoring()   # before any work: a missing eval extra is one line
+    require_scoring()  # before any work: a missing eval extra is one line
     with bar("scoring", None, unit="frames", info=True) as b:
         b.update(0, info="reading")
-        result = score_file(file, gt_csv=gt_csv, match_radius=match_radius, include_occluded=include_occluded,
-                            exclude_static=exclude_static,
-                            progress=lambda done, total, stage: b.update(done, total, info=stage))
+        result = score_file(
+            file,
+            gt_csv=gt_csv,
+            match_radius=match_radius,
+            include_occluded=include_occluded,
+            exclude_static=exclude_static,
+            progress=lambda done, total, stage: b.update(done, total, info=stage),
+        )
     if fmt == "json":
         click.echo(to_json(result))
     elif fmt == "csv":
@@ -151,7 +230,13 @@ def command(file: Path, gt_csv: Path | None, match_radius: float, include_occlud
         click.echo(render_markdown([_table(result)]), nl=False)
     else:
         render_rich([_table(result, by_metric=True)], console())
-    failed = [g for g in (_gate(file, result["scores"], "MOTA", "mota", min_mota),
-                          _gate(file, result["scores"], "HOTA", "hota", min_hota)) if g]
+    failed = [
+        g
+        for g in (
+            _gate(file, result["scores"], "MOTA", "mota", min_mota),
+            _gate(file, result["scores"], "HOTA", "hota", min_hota),
+        )
+        if g
+    ]
     if failed:
         raise DatmoError(f"{file}: {'; '.join(failed)}")

@@ -9,28 +9,49 @@ import click
 
 from .options import force_option, output_option, quiet_option
 
-FORMATS = ("csv", "ndjson", "parquet")   # as datmo_cli.export.FORMATS, which imports numpy
+FORMATS = ("csv", "ndjson", "parquet")  # as datmo_cli.export.FORMATS, which imports numpy
 
 
 @click.command(name="export")
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
 @output_option("The table to write; '-' writes CSV or NDJSON to stdout.", dash=True)
-@click.option("--format", "fmt", type=click.Choice(FORMATS), default=None,
-              help="csv, ndjson (one JSON object a line) or parquet (needs the parquet extra, pyarrow) "
-                   "[default: from OUT's suffix .csv, .ndjson/.jsonl, .parquet/.pq; csv for '-'].")
-@click.option("--features", is_flag=True,
-              help="Also one row per line, circle, blob, point and leg of every scan (kind column; the feature "
-                   "columns follow the track columns). Needs /datmo/features (datmo features or datmo run).")
-@click.option("--ground-truth", is_flag=True,
-              help="Instead of tracks, the log's /datmo/ground_truth (datmo simulate) as the stamp_ns,id,x,y,class "
-                   "table datmo evaluate --gt reads: the targets evaluate scores (movers that move, in the scans "
-                   "a beam hits them), sensor frame, m. One FILE.")
-@click.option("--include-occluded", is_flag=True,
-              help="With --ground-truth: also the targets no beam hits (what evaluate --include-occluded scores).")
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(FORMATS),
+    default=None,
+    help="csv, ndjson (one JSON object a line) or parquet (needs the parquet extra, pyarrow) "
+    "[default: from OUT's suffix .csv, .ndjson/.jsonl, .parquet/.pq; csv for '-'].",
+)
+@click.option(
+    "--features",
+    is_flag=True,
+    help="Also one row per line, circle, blob, point and leg of every scan (kind column; the feature "
+    "columns follow the track columns). Needs /datmo/features (datmo features or datmo run).",
+)
+@click.option(
+    "--ground-truth",
+    is_flag=True,
+    help="Instead of tracks, the log's /datmo/ground_truth (datmo simulate) as the stamp_ns,id,x,y,class "
+    "table datmo evaluate --gt reads: the targets evaluate scores (movers that move, in the scans "
+    "a beam hits them), sensor frame, m. One FILE.",
+)
+@click.option(
+    "--include-occluded",
+    is_flag=True,
+    help="With --ground-truth: also the targets no beam hits (what evaluate --include-occluded scores).",
+)
 @force_option()
 @quiet_option
-def command(files: tuple[Path, ...], output: Path, fmt: str | None, features: bool, ground_truth: bool,
-            include_occluded: bool, force: bool) -> None:
+def command(
+    files: tuple[Path, ...],
+    output: Path,
+    fmt: str | None,
+    features: bool,
+    ground_truth: bool,
+    include_occluded: bool,
+    force: bool,
+) -> None:
     """Write every track's state after every scan of processed logs as one table: file, scan, stamp_ns,
     frame_id, kind, id, class, mobility, status, x_m, y_m, vx_mps, vy_mps, world_x_m, world_y_m,
     world_vx_mps, world_vy_mps, size_m, occluded, age, hits, misses (positions and velocities in the scan's
@@ -67,7 +88,7 @@ def command(files: tuple[Path, ...], output: Path, fmt: str | None, features: bo
         shown = {"topic": export.mcapio.TOPIC_TRACKS}
 
         def progress(topic: str, n: int) -> None:
-            if topic != shown["topic"]:   # the features pass, after every file's tracks: its own count of scans
+            if topic != shown["topic"]:  # the features pass, after every file's tracks: its own count of scans
                 shown["topic"] = topic
                 b.update(0, p.total(topic), description="features")
             b.advance(n)
@@ -82,12 +103,22 @@ def command(files: tuple[Path, ...], output: Path, fmt: str | None, features: bo
                 sink = export.sink_for(f, fmt, features)
                 write(sink)
                 sink.close()
-    say(f"{'stdout' if stdout else output}: {sink.rows:,} rows ({fmt}) from {scans:,} scans of {len(files)} "
-        f"file{'s' if len(files) != 1 else ''}")
+    say(
+        f"{'stdout' if stdout else output}: {sink.rows:,} rows ({fmt}) from {scans:,} scans of {len(files)} "
+        f"file{'s' if len(files) != 1 else ''}"
+    )
 
 
-def _ground_truth(files: tuple[Path, ...], output: Path, fmt: str, features: bool, ground_truth: bool,
-                  include_occluded: bool, force: bool, stream) -> None:
+def _ground_truth(
+    files: tuple[Path, ...],
+    output: Path,
+    fmt: str,
+    features: bool,
+    ground_truth: bool,
+    include_occluded: bool,
+    force: bool,
+    stream,
+) -> None:
     """`--ground-truth`: one log's targets as the table evaluate --gt reads."""
     from .. import export
     from ..errors import ConfigError
@@ -97,8 +128,10 @@ def _ground_truth(files: tuple[Path, ...], output: Path, fmt: str, features: boo
     if not ground_truth:
         raise ConfigError("--include-occluded: only with --ground-truth (the targets no beam hits)")
     if features:
-        raise ConfigError("--ground-truth with --features: the ground truth is a table of its own "
-                          "(stamp_ns,id,x,y,class); export it and the tracks with two commands")
+        raise ConfigError(
+            "--ground-truth with --features: the ground truth is a table of its own "
+            "(stamp_ns,id,x,y,class); export it and the tracks with two commands"
+        )
     if len(files) != 1:
         raise ConfigError(f"--ground-truth: give one FILE (evaluate --gt scores one log), not {len(files)}")
     p = export.plan(list(files), ground_truth=True)
@@ -107,7 +140,7 @@ def _ground_truth(files: tuple[Path, ...], output: Path, fmt: str, features: boo
         shown = {"stage": "movers"}
 
         def progress(stage: str, n: int) -> None:
-            if stage != shown["stage"]:   # the second pass: the rows
+            if stage != shown["stage"]:  # the second pass: the rows
                 shown["stage"] = stage
                 b.update(0, scans, description="ground truth")
             b.advance(n)
@@ -123,8 +156,10 @@ def _ground_truth(files: tuple[Path, ...], output: Path, fmt: str, features: boo
                 sink = export.sink_for(f, fmt, cols=cols)
                 write(sink)
                 sink.close()
-    say(f"{'stdout' if stream is not None else output}: {sink.rows:,} rows ({fmt}) of ground truth from {scans:,} "
-        f"scans of {files[0]}")
+    say(
+        f"{'stdout' if stream is not None else output}: {sink.rows:,} rows ({fmt}) of ground truth from {scans:,} "
+        f"scans of {files[0]}"
+    )
 
 
 def _to_stdout(stream, sink, write):
@@ -137,6 +172,6 @@ def _to_stdout(stream, sink, write):
         write(sink)
         sink.close()
     except BrokenPipeError:
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # no second error flushing at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error flushing at exit
         raise SystemExit(141) from None
     return sink

@@ -16,17 +16,32 @@ from .options import force_option, output_option, quiet_option
 @click.argument("src", type=click.Path(path_type=Path))
 @output_option("The log to write (MCAP with /scan and, when the source has poses, /odom).")
 @force_option()
-@click.option("--topic", default=None,
-              help="The scan stream to take when there are several: a LaserScan topic of a bag or MCAP, "
-                   "or a CARMEN message name (FLASER, RLASER, RAWLASER1-4, ROBOTLASER1).")
-@click.option("--odom-topic", default=None,
-              help="The nav_msgs/Odometry topic of a bag or MCAP [default: the only one, if any].")
-@option("--max-scans", bound=OPTIONS["scans"], default=None,
-        help="Keep only the first N scans (and the poses up to the last of them).")
+@click.option(
+    "--topic",
+    default=None,
+    help="The scan stream to take when there are several: a LaserScan topic of a bag or MCAP, "
+    "or a CARMEN message name (FLASER, RLASER, RAWLASER1-4, ROBOTLASER1).",
+)
+@click.option(
+    "--odom-topic", default=None, help="The nav_msgs/Odometry topic of a bag or MCAP [default: the only one, if any]."
+)
+@option(
+    "--max-scans",
+    bound=OPTIONS["scans"],
+    default=None,
+    help="Keep only the first N scans (and the poses up to the last of them).",
+)
 @laser_pose_option()
 @quiet_option
-def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic: str | None,
-            max_scans: int | None, laser_pose: tuple | None) -> None:
+def command(
+    src: Path,
+    output: Path,
+    force: bool,
+    topic: str | None,
+    odom_topic: str | None,
+    max_scans: int | None,
+    laser_pose: tuple | None,
+) -> None:
     """Convert a CARMEN log, g2o file, ROS 1/2 bag or MCAP file to a datmo scan log.
 
     SRC is a CARMEN text log (FLASER, RLASER, RAWLASER1-4, ROBOTLASER1; plain or gzipped), a g2o file with
@@ -48,12 +63,17 @@ def command(src: Path, output: Path, force: bool, topic: str | None, odom_topic:
     from ..progress import say
     from ..text import printable
 
-    check_output(output, force=force, inputs=[src])   # before reading a big input
+    check_output(output, force=force, inputs=[src])  # before reading a big input
     with _progress(src) as progress:
-        stream = open_import(src, topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress,
-                             spool_dir=output.parent if output.parent.is_dir() else None)
-        params = {"topic": stream.topic, "odom_topic": stream.odom_topic, "max_scans": max_scans,
-                  "kind": stream.kind}
+        stream = open_import(
+            src,
+            topic,
+            odom_topic=odom_topic,
+            max_scans=max_scans,
+            progress=progress,
+            spool_dir=output.parent if output.parent.is_dir() else None,
+        )
+        params = {"topic": stream.topic, "odom_topic": stream.odom_topic, "max_scans": max_scans, "kind": stream.kind}
         mount = None
         if laser_pose is not None:
             from ..log.transforms import LaserPose

@@ -37,7 +37,7 @@ def describe(path: Path) -> dict:
         "scan": None,
     }
     several = mcapio.several_channels(log, mcapio.TOPIC_SCAN)
-    if several:   # info still shows the channels; the stage commands refuse the log
+    if several:  # info still shows the channels; the stage commands refuse the log
         import warnings
 
         warnings.warn(several, stacklevel=2)
@@ -72,13 +72,17 @@ def _print_rich(info: dict) -> None:
     from ..text import markup
 
     console = make_console()
-    console.print(f"[bold]{markup(info['file'])}[/]  {info['size_bytes'] / 1e6:.2f} MB, {info['duration_s']:.1f} s, "
-                  f"profile {markup(info['profile'] or '-')}, written by {markup(info['library'] or '-')}")
+    console.print(
+        f"[bold]{markup(info['file'])}[/]  {info['size_bytes'] / 1e6:.2f} MB, {info['duration_s']:.1f} s, "
+        f"profile {markup(info['profile'] or '-')}, written by {markup(info['library'] or '-')}"
+    )
     if info["truncated"]:
         console.print("[yellow]truncated: only complete chunks were read[/]")
     if info["corrupt_chunks"]:
-        console.print(f"[yellow]corrupt: {info['corrupt_chunks']} chunk(s) ({info['corrupt_bytes']:,} bytes) failed "
-                      "their CRC or did not decompress and were skipped; counts and scans leave them out[/]")
+        console.print(
+            f"[yellow]corrupt: {info['corrupt_chunks']} chunk(s) ({info['corrupt_bytes']:,} bytes) failed "
+            "their CRC or did not decompress and were skipped; counts and scans leave them out[/]"
+        )
     table = make_table(console, title="Channels", title_justify="left")
     for col in ("topic", "type", "encoding", "messages"):
         table.add_column(col, justify="right" if col == "messages" else "left")

@@ -14,12 +14,26 @@ if TYPE_CHECKING:
 
 
 @click.command(name="node")
-@click.option("--scan-topic", default="/scan", show_default=True, metavar="TOPIC",
-              help="The sensor_msgs/LaserScan topic to subscribe to.")
-@click.option("--odom-topic", default=None, metavar="TOPIC",
-              help="A nav_msgs/Odometry topic: tracks then also carry world (odom) positions. [default: none]")
-@option("--domain-id", bound=OPTIONS["domain_id"], default=None, metavar="ID",
-        help="The ROS 2 domain. [default: ROS_DOMAIN_ID, else 0]")
+@click.option(
+    "--scan-topic",
+    default="/scan",
+    show_default=True,
+    metavar="TOPIC",
+    help="The sensor_msgs/LaserScan topic to subscribe to.",
+)
+@click.option(
+    "--odom-topic",
+    default=None,
+    metavar="TOPIC",
+    help="A nav_msgs/Odometry topic: tracks then also carry world (odom) positions. [default: none]",
+)
+@option(
+    "--domain-id",
+    bound=OPTIONS["domain_id"],
+    default=None,
+    metavar="ID",
+    help="The ROS 2 domain. [default: ROS_DOMAIN_ID, else 0]",
+)
 @config_options("TOML file with [features] and [track] tables.")
 @quiet_option
 def command(scan_topic: str, odom_topic: str | None, domain_id: int | None, cfg: DatmoConfig) -> None:
@@ -48,7 +62,7 @@ def command(scan_topic: str, odom_topic: str | None, domain_id: int | None, cfg:
         say("  Ctrl-C to stop")
         while node.feed.failure is None:
             node.spin()
-        raise RuntimeError(f"the stages stopped: {node.feed.failure}")   # a bug: exit 70, one line
+        raise RuntimeError(f"the stages stopped: {node.feed.failure}")  # a bug: exit 70, one line
     except (KeyboardInterrupt, outputs.Terminated) as exc:
         code = 130 if isinstance(exc, KeyboardInterrupt) else exc.exit_code
         node.close()

@@ -12,21 +12,31 @@ import click
 
 from ..progress import quiet_option
 
-__all__ = ["config_options", "force_option", "input_options", "no_stdout", "output_option", "param_option",
-           "param_pair_option", "quiet_option"]
+__all__ = [
+    "config_options",
+    "force_option",
+    "input_options",
+    "no_stdout",
+    "output_option",
+    "param_option",
+    "param_pair_option",
+    "quiet_option",
+]
 
 STDOUT = "-"
-OPTIONS_KEY = "datmo.param_options"   # in the Click context's meta: section -> key -> value given as an option
+OPTIONS_KEY = "datmo.param_options"  # in the Click context's meta: section -> key -> value given as an option
 
 
 def no_stdout(what: str = "an MCAP log", give: str = "a file name") -> Callable:
     """An option callback refusing `-` (stdout) for an output that cannot go to a stream."""
+
     def callback(ctx: click.Context, param: click.Parameter, value):
         if value is not None and str(value) == STDOUT:
             from ..errors import OutputError
 
             raise OutputError(f"{param.opts[-1]} -: cannot write {what} to stdout; give {give}")
         return value
+
     return callback
 
 
@@ -51,6 +61,7 @@ def config_options(help: str, *, path: bool = False) -> Callable:
     with: the defaults, overridden by --config (else ./datmo.toml when present, said on stderr; see
     config.effective_path), overridden by the parameter options given (param_option); with `path`, also
     `config`, the file read (None: none)."""
+
     def decorate(f: Callable) -> Callable:
         @functools.wraps(f)
         def wrapper(*args, config: Path | None = None, no_config: bool = False, **kwargs):
@@ -61,10 +72,16 @@ def config_options(help: str, *, path: bool = False) -> Callable:
             cfg = configuration.load(file, ctx.meta.get(OPTIONS_KEY))
             return f(*args, cfg=cfg, **({"config": file} if path else {}), **kwargs)
 
-        wrapper = click.option("--no-config", is_flag=True,
-                               help="Ignore ./datmo.toml: defaults and options only.")(wrapper)
-        return click.option("--config", type=click.Path(dir_okay=False, path_type=Path), default=None,
-                            help=f"{help} [default: ./datmo.toml when present]")(wrapper)
+        wrapper = click.option("--no-config", is_flag=True, help="Ignore ./datmo.toml: defaults and options only.")(
+            wrapper
+        )
+        return click.option(
+            "--config",
+            type=click.Path(dir_okay=False, path_type=Path),
+            default=None,
+            help=f"{help} [default: ./datmo.toml when present]",
+        )(wrapper)
+
     return decorate
 
 
@@ -80,6 +97,7 @@ def _field(key: str):
 def _keep(*keys: str) -> Callable:
     """An option callback keeping its value (a tuple for several keys) for config_options; the value is
     returned as well, for an option the command also receives (param_option's `expose`)."""
+
     def callback(ctx: click.Context, _param: click.Parameter, value):
         if value is None:
             return None
@@ -87,6 +105,7 @@ def _keep(*keys: str) -> Callable:
             section, f = _field(key)
             ctx.meta.setdefault(OPTIONS_KEY, {}).setdefault(section, {})[f.name] = v
         return value
+
     return callback
 
 
@@ -112,8 +131,16 @@ def param_option(key: str, *decls: str, help: str | None = None, expose: bool = 
         kind, text = click.Choice(meta["choices"]), f"{text}."
     else:
         kind, text = str, f"{text}."
-    return click.option(*decls, f.name, type=kind, default=None, expose_value=expose, callback=_keep(key),
-                        help=text, metavar=meta["metavar"])
+    return click.option(
+        *decls,
+        f.name,
+        type=kind,
+        default=None,
+        expose_value=expose,
+        callback=_keep(key),
+        help=text,
+        metavar=meta["metavar"],
+    )
 
 
 def param_pair_option(decl: str, first: str, second: str, names: tuple[str, str], help: str) -> Callable:
@@ -124,16 +151,25 @@ def param_pair_option(decl: str, first: str, second: str, names: tuple[str, str]
     (_, a), (_, b) = _field(first), _field(second)
     bounds = (a.metadata["bound"], b.metadata["bound"])
     ranges = ", ".join(f"{n} {bd.describe()}" for n, bd in zip(names, bounds, strict=True))
-    return click.option(decl, type=click.Tuple([Bounded(bounds[0]), Bounded(bounds[1])]), metavar=" ".join(names),
-                        default=None, expose_value=False, callback=_keep(first, second),
-                        help=f"{help.rstrip('.')} [default: {_default(a.default)} {_default(b.default)}]. "
-                             f"Range: {ranges}.")
+    return click.option(
+        decl,
+        type=click.Tuple([Bounded(bounds[0]), Bounded(bounds[1])]),
+        metavar=" ".join(names),
+        default=None,
+        expose_value=False,
+        callback=_keep(first, second),
+        help=f"{help.rstrip('.')} [default: {_default(a.default)} {_default(b.default)}]. Range: {ranges}.",
+    )
 
 
 def input_options(f: Callable) -> Callable:
     """`--topic` and `--odom-topic`, for inputs that are bags (see scan_log)."""
-    f = click.option("--odom-topic", default=None,
-                     help="With a bag: its nav_msgs/Odometry topic [default: the only one, if any].")(f)
-    return click.option("--topic", default=None,
-                        help="With a bag (ROS 1 .bag, ROS 2 folder or .db3) or a foreign MCAP: the LaserScan topic to "
-                             "take when there are several (the input is converted as by datmo import).")(f)
+    f = click.option(
+        "--odom-topic", default=None, help="With a bag: its nav_msgs/Odometry topic [default: the only one, if any]."
+    )(f)
+    return click.option(
+        "--topic",
+        default=None,
+        help="With a bag (ROS 1 .bag, ROS 2 folder or .db3) or a foreign MCAP: the LaserScan topic to "
+        "take when there are several (the input is converted as by datmo import).",
+    )(f)

@@ -21,13 +21,27 @@ def host_option(*decls: str, help_: str = "Address to serve on (0.0.0.0: every i
 @click.command(name="play")
 @click.argument("input", type=click.Path(path_type=Path))
 @host_option("--host")
-@option("--port", bound=OPTIONS["live_port"], default=8765, show_default=True,
-        help="WebSocket port to serve on (0: any free port; the URL printed says which).")
-@option("--rate", bound=OPTIONS["play_rate"], default=1.0, show_default=True,
-        help="Play at this multiple of the log's speed.")
+@option(
+    "--port",
+    bound=OPTIONS["live_port"],
+    default=8765,
+    show_default=True,
+    help="WebSocket port to serve on (0: any free port; the URL printed says which).",
+)
+@option(
+    "--rate",
+    bound=OPTIONS["play_rate"],
+    default=1.0,
+    show_default=True,
+    help="Play at this multiple of the log's speed.",
+)
 @click.option("--loop", is_flag=True, help="Start over at the end of the log (until Ctrl-C).")
-@click.option("--wait/--no-wait", default=True, show_default=True,
-              help="Start playing when a client subscribes to a channel (else at once).")
+@click.option(
+    "--wait/--no-wait",
+    default=True,
+    show_default=True,
+    help="Start playing when a client subscribes to a channel (else at once).",
+)
 @config_options("TOML file with [features] and [track] tables, for a log that is processed on the fly.")
 @quiet_option
 def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bool, cfg: DatmoConfig) -> None:
@@ -48,7 +62,7 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
     from .. import live, outputs
     from ..progress import say
 
-    server = live.LiveServer(host, port)   # the package and the port are checked before the log is read
+    server = live.LiveServer(host, port)  # the package and the port are checked before the log is read
     try:
         source = live.LogSource(input, cfg)
         source.declare(server)
@@ -68,4 +82,3 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
         raise click.exceptions.Exit(code) from None
     finally:
         server.close()
-

@@ -92,37 +92,90 @@ class _Signals:
 
 
 @click.command(name="record")
-@click.option("--port", required=True, metavar="PORT",
-              help="Serial device of the LMS200 (e.g. /dev/ttyUSB0, or the path `datmo emulate` prints).")
+@click.option(
+    "--port",
+    required=True,
+    metavar="PORT",
+    help="Serial device of the LMS200 (e.g. /dev/ttyUSB0, or the path `datmo emulate` prints).",
+)
 @output_option("The log to write (MCAP).")
-@click.option("--baud", type=click.Choice(["9600", "19200", "38400", "500000"]), default="38400", show_default=True,
-              help="Baud to record at; the device's current baud is found automatically. 500000 needs RS-422.")
-@click.option("--angle", type=click.Choice(["180", "100"]), default="180", show_default=True,
-              help="Field of view, degrees.")
-@click.option("--resolution", type=click.Choice(["1", "0.5", "0.25"]), default="0.5", show_default=True,
-              help="Angular resolution, degrees (0.25 only with --angle 100).")
-@click.option("--units", type=click.Choice(["mm", "cm"]), default="mm", show_default=True,
-              help="Distance units the device reports (changed in its EEPROM only when different).")
+@click.option(
+    "--baud",
+    type=click.Choice(["9600", "19200", "38400", "500000"]),
+    default="38400",
+    show_default=True,
+    help="Baud to record at; the device's current baud is found automatically. 500000 needs RS-422.",
+)
+@click.option(
+    "--angle", type=click.Choice(["180", "100"]), default="180", show_default=True, help="Field of view, degrees."
+)
+@click.option(
+    "--resolution",
+    type=click.Choice(["1", "0.5", "0.25"]),
+    default="0.5",
+    show_default=True,
+    help="Angular resolution, degrees (0.25 only with --angle 100).",
+)
+@click.option(
+    "--units",
+    type=click.Choice(["mm", "cm"]),
+    default="mm",
+    show_default=True,
+    help="Distance units the device reports (changed in its EEPROM only when different).",
+)
 @option("--duration", bound=OPTIONS["record_duration"], default=None, help="Stop after this many seconds.")
 @option("--scans", "max_scans", bound=OPTIONS["scans"], default=None, help="Stop after this many scans.")
-@click.option("--indices", is_flag=True,
-              help="Have the device send real-time scan indices (exact dropped-scan counts; one EEPROM write "
-                   "if it does not send them yet).")
-@click.option("--interlaced", is_flag=True,
-              help="Interlaced output (20 2A): partial scans merged into complete ones by the host.")
+@click.option(
+    "--indices",
+    is_flag=True,
+    help="Have the device send real-time scan indices (exact dropped-scan counts; one EEPROM write "
+    "if it does not send them yet).",
+)
+@click.option(
+    "--interlaced", is_flag=True, help="Interlaced output (20 2A): partial scans merged into complete ones by the host."
+)
 @click.option("--raw", is_flag=True, help="Also store every telegram's bytes on /lms2xx/telegram.")
 @force_option()
-@click.option("--live", is_flag=True, help="Also serve the scans, features, tracks and markers to Foxglove while "
-              "recording (WebSocket; needs pip install 'datmo-cli[live]'); the URL to open is printed.")
-@click.option("--live-host", default="127.0.0.1", show_default=True, metavar="HOST",
-              help="Address the live view serves on (0.0.0.0: every interface).")
-@option("--live-port", bound=OPTIONS["live_port"], default=8765, show_default=True,
-        help="WebSocket port of the live view (0: any free port).")
+@click.option(
+    "--live",
+    is_flag=True,
+    help="Also serve the scans, features, tracks and markers to Foxglove while "
+    "recording (WebSocket; needs pip install 'datmo-cli[live]'); the URL to open is printed.",
+)
+@click.option(
+    "--live-host",
+    default="127.0.0.1",
+    show_default=True,
+    metavar="HOST",
+    help="Address the live view serves on (0.0.0.0: every interface).",
+)
+@option(
+    "--live-port",
+    bound=OPTIONS["live_port"],
+    default=8765,
+    show_default=True,
+    help="WebSocket port of the live view (0: any free port).",
+)
 @laser_pose_option()
 @quiet_option
-def command(port: str, output: Path, baud: str, angle: str, resolution: str, units: str, duration: float | None,
-            max_scans: int | None, indices: bool, interlaced: bool, raw: bool, force: bool, live: bool,
-            live_host: str, live_port: int, laser_pose: tuple | None = None) -> None:
+def command(
+    port: str,
+    output: Path,
+    baud: str,
+    angle: str,
+    resolution: str,
+    units: str,
+    duration: float | None,
+    max_scans: int | None,
+    indices: bool,
+    interlaced: bool,
+    raw: bool,
+    force: bool,
+    live: bool,
+    live_host: str,
+    live_port: int,
+    laser_pose: tuple | None = None,
+) -> None:
     """Record a SICK LMS200 over a serial port into a log.
 
     Finds the scanner's baud, switches to --baud, sets the variant and units only when they differ,
@@ -145,23 +198,49 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
 
     if angle == "180" and resolution == "0.25":
         raise click.BadParameter("0.25° is available only with --angle 100", param_hint="--resolution")
-    params = {"port": port, "baud": int(baud), "angle": int(angle), "resolution": float(resolution), "units": units,
-              "duration": duration, "scans": max_scans, "indices": indices, "interlaced": interlaced, "raw": raw}
+    params = {
+        "port": port,
+        "baud": int(baud),
+        "angle": int(angle),
+        "resolution": float(resolution),
+        "units": units,
+        "duration": duration,
+        "scans": max_scans,
+        "indices": indices,
+        "interlaced": interlaced,
+        "raw": raw,
+    }
     if laser_pose is not None:
         params["laser_pose"] = {"x_m": laser_pose[0], "y_m": laser_pose[1], "yaw_deg": math.degrees(laser_pose[2])}
     provenance = mcapio.Provenance("record", params, [], invocation("record"))
     writer = mcapio.LogWriter(output, force=force, provenance=provenance, streaming=True)
     if laser_pose is not None:
         write_mount(writer, laser_pose)
-    driver = LMS2xx(port, baud=int(baud), angle=int(angle), resolution=float(resolution), units=units,
-                    indices=indices, interlaced=interlaced)
+    driver = LMS2xx(
+        port,
+        baud=int(baud),
+        angle=int(angle),
+        resolution=float(resolution),
+        units=units,
+        indices=indices,
+        interlaced=interlaced,
+    )
     stop = threading.Event()
     feed = _live_feed(live_host, live_port) if live else None
     panel = _Panel(driver.name, driver.baud)
     try:
         with _Signals(stop) as signals:
-            result = record(driver, writer, duration=duration, max_scans=max_scans, raw=raw, stop=stop,
-                            on_scan=feed.scan if feed is not None else None, progress=panel, describe=failure)
+            result = record(
+                driver,
+                writer,
+                duration=duration,
+                max_scans=max_scans,
+                raw=raw,
+                stop=stop,
+                on_scan=feed.scan if feed is not None else None,
+                progress=panel,
+                describe=failure,
+            )
     finally:
         panel.stop()
         if feed is not None:
@@ -170,14 +249,15 @@ def command(port: str, output: Path, baud: str, angle: str, resolution: str, uni
     rate = result.scans / result.seconds if result.seconds > 0 else 0.0
     why = "" if signals.signum is None else f" (interrupted: {signal.Signals(signals.signum).name})"
     try:
-        say(f"{output}: {result.scans} scans in {result.seconds:.1f} s ({rate:.2f} Hz); "
+        say(
+            f"{output}: {result.scans} scans in {result.seconds:.1f} s ({rate:.2f} Hz); "
             f"crc errors {s.get('crc_errors', 0)}, length errors {s.get('length_errors', 0)}, "
-            f"resyncs {s.get('resyncs', 0)}, dropped scans {s.get('dropped', 0)}" + why)
-    except OSError:   # the terminal that would show it hung up (SIGHUP): the file is complete all the same
+            f"resyncs {s.get('resyncs', 0)}, dropped scans {s.get('dropped', 0)}" + why
+        )
+    except OSError:  # the terminal that would show it hung up (SIGHUP): the file is complete all the same
         pass
     if result.disconnect is not None:
-        raise DeviceError(f"{result.disconnect}; {output} is complete up to the last good scan "
-                          f"({result.scans} scans)")
+        raise DeviceError(f"{result.disconnect}; {output} is complete up to the last good scan ({result.scans} scans)")
     if signals.signum is not None:
         raise click.exceptions.Exit(128 + signals.signum)
 
@@ -202,5 +282,8 @@ def _close_live(feed) -> None:
     if feed.failure is not None:
         warnings.warn(f"the live view stopped ({feed.failure}); the recording went on", stacklevel=2)
     elif feed.dropped:
-        warnings.warn(f"the live view fell behind and skipped {feed.dropped} of {feed.published + feed.dropped} "
-                      "scans (all are in the recording)", stacklevel=2)
+        warnings.warn(
+            f"the live view fell behind and skipped {feed.dropped} of {feed.published + feed.dropped} "
+            "scans (all are in the recording)",
+            stacklevel=2,
+        )

@@ -66,11 +66,16 @@ def save_plot(data, path: Path, force: bool, kind: str = "auto", all_labels: boo
     from ..outputs import atomic_output
     from ..plot import plot_run
 
-    with atomic_output(path, force=force, what="plot") as f, \
-            matplotlib.rc_context({"savefig.format": path.suffix.lower().lstrip(".")}):
+    with (
+        atomic_output(path, force=force, what="plot") as f,
+        matplotlib.rc_context({"savefig.format": path.suffix.lower().lstrip(".")}),
+    ):
         drawn = plot_run(data, f, kind=kind, all_labels=all_labels)
-    note = f" ({drawn.dropped} of {drawn.dropped + drawn.placed} labels left out: no room without overlap)" \
-        if drawn.dropped else ""
+    note = (
+        f" ({drawn.dropped} of {drawn.dropped + drawn.placed} labels left out: no room without overlap)"
+        if drawn.dropped
+        else ""
+    )
     return f"{path}: plot written, {drawn.kind}{note}"
 
 
@@ -87,28 +92,68 @@ def _scan_counts(files: list[Path]) -> list[int]:
 
 @click.command(name="report")
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--format", "fmt", type=click.Choice(FORMATS), default="rich", show_default=True,
-              help="rich tables for a terminal; json, csv or markdown for scripts and CI.")
-@option("--top", bound=OPTIONS["top"], default=None,
-        help="Tracks in each file's track table (0: all) [default: 20 for rich and markdown, all for json, csv].")
-@click.option("--sort", type=click.Choice(SORT_KEYS), default="lifetime", show_default=True,
-              help="Order of the track tables (lifetime, distance and speed: largest first).")
-@click.option("--tracks", "track_table", is_flag=True,
-              help="csv: one row per confirmed track (with a file column) instead of one per file; json: add that "
-                   "tracks list.")
-@click.option("--all", "all_tracks", is_flag=True,
-              help="Report every confirmed track in full (static pieces too) and label all of them in the plot.")
-@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Also draw the run into this .png, .svg or .pdf "
-                   "(several files: one plot each, named PLOT-STEM.png). Needs the plot extra (matplotlib).")
-@click.option("--plot-kind", type=click.Choice(PLOT_KINDS), default="auto", show_default=True,
-              help="top: the run from above; counts: confirmed tracks per class over time; speeds: the moving "
-                   "tracks' speeds over time; all: the three side by side; auto: all when something moves, "
-                   "else top.")
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(FORMATS),
+    default="rich",
+    show_default=True,
+    help="rich tables for a terminal; json, csv or markdown for scripts and CI.",
+)
+@option(
+    "--top",
+    bound=OPTIONS["top"],
+    default=None,
+    help="Tracks in each file's track table (0: all) [default: 20 for rich and markdown, all for json, csv].",
+)
+@click.option(
+    "--sort",
+    type=click.Choice(SORT_KEYS),
+    default="lifetime",
+    show_default=True,
+    help="Order of the track tables (lifetime, distance and speed: largest first).",
+)
+@click.option(
+    "--tracks",
+    "track_table",
+    is_flag=True,
+    help="csv: one row per confirmed track (with a file column) instead of one per file; json: add that tracks list.",
+)
+@click.option(
+    "--all",
+    "all_tracks",
+    is_flag=True,
+    help="Report every confirmed track in full (static pieces too) and label all of them in the plot.",
+)
+@click.option(
+    "--plot",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also draw the run into this .png, .svg or .pdf "
+    "(several files: one plot each, named PLOT-STEM.png). Needs the plot extra (matplotlib).",
+)
+@click.option(
+    "--plot-kind",
+    type=click.Choice(PLOT_KINDS),
+    default="auto",
+    show_default=True,
+    help="top: the run from above; counts: confirmed tracks per class over time; speeds: the moving "
+    "tracks' speeds over time; all: the three side by side; auto: all when something moves, "
+    "else top.",
+)
 @force_option("Overwrite existing plots.")
 @quiet_option
-def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, track_table: bool, all_tracks: bool,
-            plot: Path | None, plot_kind: str, force: bool) -> None:
+def command(
+    files: tuple[Path, ...],
+    fmt: str,
+    top: int | None,
+    sort: str,
+    track_table: bool,
+    all_tracks: bool,
+    plot: Path | None,
+    plot_kind: str,
+    force: bool,
+) -> None:
     """Summarise what processed runs saw, leading with what moves: run facts, features, landmarks, people
     and dynamic tracks in full (lifetimes, distance travelled, speeds, occlusions, last position), and the
     static pieces (walls, furniture) per class: how many and where.
@@ -138,11 +183,11 @@ def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, track
     with bar("report", sum(counts)) as progress:
         done = 0
         for i, path in enumerate(files):
-            if plot:   # the plot draws every scan and state, so it decodes the whole run
+            if plot:  # the plot draws every scan and state, so it decodes the whole run
                 data = read_run_data(path, keep_scans=True)
                 summaries.append(summarise(data))
                 written.append(save_plot(data, plots[i], force, plot_kind, all_tracks))
-            else:      # one streaming pass
+            else:  # one streaming pass
                 summaries.append(summarise_file(path, progress=lambda n, d=done: progress.update(d + n)))
             done += counts[i]
             progress.update(done)
@@ -150,8 +195,14 @@ def command(files: tuple[Path, ...], fmt: str, top: int | None, sort: str, track
     if fmt == "json":
         from ..batch import summary
 
-        click.echo(render(summaries, fmt, **options, batches=[{"folder": str(d), "summary": summary(recs),
-                                                                 "inputs": recs} for d, recs in batches]))
+        click.echo(
+            render(
+                summaries,
+                fmt,
+                **options,
+                batches=[{"folder": str(d), "summary": summary(recs), "inputs": recs} for d, recs in batches],
+            )
+        )
     elif fmt == "rich":
         from ..report import console
 
@@ -173,8 +224,10 @@ def _batches(paths: list[Path]) -> tuple[list[Path], list[tuple[Path, list[dict]
         if p.is_dir():
             recs, left_out = read_batch(str(p), with_left_out=True)
             if left_out:
-                say(f"datmo: warning: {p}: {left_out} manifest line{'s' if left_out > 1 else ''} left out (an output "
-                    "outside the folder, or one another line already names)")
+                say(
+                    f"datmo: warning: {p}: {left_out} manifest line{'s' if left_out > 1 else ''} left out (an output "
+                    "outside the folder, or one another line already names)"
+                )
             batches.append((p, recs))
     files = [p for p in paths if not p.is_dir()]
     for _, recs in batches:
@@ -190,21 +243,38 @@ def _batch_tables(batches: list[tuple[Path, list[dict]]]) -> list:
     if not batches:
         return []
     sums = [(d, summary(recs)) for d, recs in batches]
-    figures = Table("Batches (from each folder's manifest.jsonl)",
-                    ["folder", "inputs", "done", "failed", "scans", "task s", "scans/s per task", "datmo",
-                     "parameters"],
-                    [[str(d), s["inputs"], s["done"], s["failed"], s["scans"], s["task_seconds"],
-                      s["scans_per_task_second"], ", ".join(s["versions"]), ", ".join(s["params_hashes"])]
-                     for d, s in sums], numeric={1, 2, 3, 4, 5, 6})
+    figures = Table(
+        "Batches (from each folder's manifest.jsonl)",
+        ["folder", "inputs", "done", "failed", "scans", "task s", "scans/s per task", "datmo", "parameters"],
+        [
+            [
+                str(d),
+                s["inputs"],
+                s["done"],
+                s["failed"],
+                s["scans"],
+                s["task_seconds"],
+                s["scans_per_task_second"],
+                ", ".join(s["versions"]),
+                ", ".join(s["params_hashes"]),
+            ]
+            for d, s in sums
+        ],
+        numeric={1, 2, 3, 4, 5, 6},
+    )
     keys = ("confirmed", *TRACK_CLASSES, "dynamic")
-    tracks = Table("Confirmed tracks by class, every input of the batch",
-                   ["folder", *(k.replace("_", " ") for k in keys)],
-                   [[str(d), *(s["tracks"][k] for k in keys)] for d, s in sums], numeric=set(range(1, len(keys) + 1)))
+    tracks = Table(
+        "Confirmed tracks by class, every input of the batch",
+        ["folder", *(k.replace("_", " ") for k in keys)],
+        [[str(d), *(s["tracks"][k] for k in keys)] for d, s in sums],
+        numeric=set(range(1, len(keys) + 1)),
+    )
     out = [figures, tracks]
     failures = [[str(d), f["input"], f["error"]] for d, s in sums for f in s["failures"]]
     if failures:
-        out.append(Table("Failed inputs (run the same command again to retry them)", ["folder", "input", "error"],
-                         failures))
+        out.append(
+            Table("Failed inputs (run the same command again to retry them)", ["folder", "input", "error"], failures)
+        )
     missing = [[str(d), m] for d, s in sums for m in s["missing_outputs"]]
     if missing:
         out.append(Table("Done in the manifest but missing", ["folder", "output"], missing))

@@ -9,15 +9,7 @@ import click
 
 from ..bounds import OPTIONS, option
 from ..report import FORMATS, SORT_KEYS
-from .options import (
-    config_options,
-    force_option,
-    input_options,
-    no_stdout,
-    output_option,
-    param_option,
-    quiet_option,
-)
+from .options import config_options, force_option, input_options, no_stdout, output_option, param_option, quiet_option
 
 if TYPE_CHECKING:
     from ..config import DatmoConfig
@@ -32,7 +24,7 @@ def _scan_count(spec: str) -> int | None:
     if remote(spec):
         return None
     try:
-        return mcapio.summary(local(spec), warn=False).topics()[mcapio.TOPIC_SCAN].count or None   # the task warns
+        return mcapio.summary(local(spec), warn=False).topics()[mcapio.TOPIC_SCAN].count or None  # the task warns
     except Exception:  # only an estimate for the bar
         return None
 
@@ -71,8 +63,9 @@ class _BatchProgress:
 
         scans = self.scans + sum(self.running.values())
         rate = scans / max(time.perf_counter() - self.t0, 1e-9)
-        info = (f"inputs {self.inputs}/{self.n_inputs}  {rate:,.0f} scans/s"
-                + (f"  {self.failed} failed" if self.failed else ""))
+        info = f"inputs {self.inputs}/{self.n_inputs}  {rate:,.0f} scans/s" + (
+            f"  {self.failed} failed" if self.failed else ""
+        )
         self.bar.update(scans, self._total(), info=info)
 
     def record(self, rec: dict) -> None:
@@ -86,7 +79,7 @@ class _BatchProgress:
         if rec["status"] == DONE:
             self.scans += rec["scans"]
             self.totals[i] = rec["scans"]
-        elif i in self.totals:   # failed or cancelled: what it did is all it will do
+        elif i in self.totals:  # failed or cancelled: what it did is all it will do
             self.scans += done
             self.totals[i] = done
         self.inputs += 1
@@ -101,49 +94,115 @@ class _BatchProgress:
 
 @click.command(name="run")
 @click.argument("inputs", nargs=-1, required=True)
-@output_option("Folder (or fsspec URL) for the outputs: OUT_DIR/NAME.mcap per input file, the relative path "
-               "for logs found in a folder; and OUT_DIR/manifest.jsonl, the batch's ledger (created if missing).",
-               "-o", "--output-dir", "out_dir", type=str, callback=no_stdout("outputs", "a folder"))
-@option("-j", "--jobs", bound=OPTIONS["jobs"], default=None,
-        help="Inputs processed at once, in separate processes on this machine [default: all cores].")
-@click.option("--scheduler", metavar="ADDRESS", default=None,
-              help="Run one task per input on a running Dask scheduler (tcp://host:8786), or on a local cluster of N "
-                   "worker processes started for the run (local[:N]). Needs pip install 'datmo-cli[dask]'.")
-@option("--retries", bound=OPTIONS["retries"], default=2, show_default=True,
-        help="With --scheduler: times a task is retried after an unexpected error or the death of its worker.")
-@force_option("Redo every input and overwrite existing outputs (and plots); without it "
-              "inputs the manifest lists as done with the same input and parameters are skipped.")
-@config_options("TOML file of parameters: its [features] table as for datmo features, its [track] table as "
-                "for datmo track.")
-@click.option("--plot", is_flag=True, help="Also draw each run from above into OUT_DIR/NAME.png (needs the plot "
-                                          "extra, matplotlib).")
-@click.option("--bag-dir", is_flag=True,
-              help="Write each output as a ROS 2 bag folder for ros2 bag play: OUT_DIR/NAME/ holding NAME_0.mcap "
-                   "(the output, as the manifest names it) and metadata.yaml.")
-@click.option("--format", "fmt", type=click.Choice(FORMATS), default="rich", show_default=True,
-              help="Format of the report printed at the end (see datmo report).")
+@output_option(
+    "Folder (or fsspec URL) for the outputs: OUT_DIR/NAME.mcap per input file, the relative path "
+    "for logs found in a folder; and OUT_DIR/manifest.jsonl, the batch's ledger (created if missing).",
+    "-o",
+    "--output-dir",
+    "out_dir",
+    type=str,
+    callback=no_stdout("outputs", "a folder"),
+)
+@option(
+    "-j",
+    "--jobs",
+    bound=OPTIONS["jobs"],
+    default=None,
+    help="Inputs processed at once, in separate processes on this machine [default: all cores].",
+)
+@click.option(
+    "--scheduler",
+    metavar="ADDRESS",
+    default=None,
+    help="Run one task per input on a running Dask scheduler (tcp://host:8786), or on a local cluster of N "
+    "worker processes started for the run (local[:N]). Needs pip install 'datmo-cli[dask]'.",
+)
+@option(
+    "--retries",
+    bound=OPTIONS["retries"],
+    default=2,
+    show_default=True,
+    help="With --scheduler: times a task is retried after an unexpected error or the death of its worker.",
+)
+@force_option(
+    "Redo every input and overwrite existing outputs (and plots); without it "
+    "inputs the manifest lists as done with the same input and parameters are skipped."
+)
+@config_options(
+    "TOML file of parameters: its [features] table as for datmo features, its [track] table as for datmo track."
+)
+@click.option(
+    "--plot",
+    is_flag=True,
+    help="Also draw each run from above into OUT_DIR/NAME.png (needs the plot extra, matplotlib).",
+)
+@click.option(
+    "--bag-dir",
+    is_flag=True,
+    help="Write each output as a ROS 2 bag folder for ros2 bag play: OUT_DIR/NAME/ holding NAME_0.mcap "
+    "(the output, as the manifest names it) and metadata.yaml.",
+)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(FORMATS),
+    default="rich",
+    show_default=True,
+    help="Format of the report printed at the end (see datmo report).",
+)
 @option("--top", bound=OPTIONS["top"], default=None, help="Tracks in the report's track table (0: all).")
-@click.option("--sort", type=click.Choice(SORT_KEYS), default="lifetime", show_default=True,
-              help="Order of the report's track table.")
+@click.option(
+    "--sort",
+    type=click.Choice(SORT_KEYS),
+    default="lifetime",
+    show_default=True,
+    help="Order of the report's track table.",
+)
 @click.option("--no-report", is_flag=True, help="Do not print the report.")
-@click.option("--markers/--no-markers", default=False, show_default=True,
-              help="Also store /datmo/markers/* (Foxglove drawings) in the outputs; datmo play draws them from the "
-                   "tracks and features anyway.")
-@click.option("--covariance", is_flag=True,
-              help="Store each track's covariance in /datmo/tracks (otherwise its 16 numbers are NaN).")
+@click.option(
+    "--markers/--no-markers",
+    default=False,
+    show_default=True,
+    help="Also store /datmo/markers/* (Foxglove drawings) in the outputs; datmo play draws them from the "
+    "tracks and features anyway.",
+)
+@click.option(
+    "--covariance",
+    is_flag=True,
+    help="Store each track's covariance in /datmo/tracks (otherwise its 16 numbers are NaN).",
+)
 @param_option("track.ego_motion")
 @param_option("features.leg_model")
-@option("--threads", bound=OPTIONS["threads"], default=None,
-        help="Threads for each input's per-scan perception (segmentation, features, leg detector) [default: "
-             "all cores; one in each of several local jobs at once, and in each task on a Dask worker]; the "
-             "results are the same for any number.")
+@option(
+    "--threads",
+    bound=OPTIONS["threads"],
+    default=None,
+    help="Threads for each input's per-scan perception (segmentation, features, leg detector) [default: "
+    "all cores; one in each of several local jobs at once, and in each task on a Dask worker]; the "
+    "results are the same for any number.",
+)
 @input_options
 @quiet_option
-def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: str | None, retries: int,
-            force: bool, cfg: DatmoConfig, plot: bool, bag_dir: bool, fmt: str, top: int | None, sort: str,
-            no_report: bool,
-            markers: bool, covariance: bool, threads: int | None,
-            topic: str | None, odom_topic: str | None) -> None:
+def command(
+    inputs: tuple[str, ...],
+    out_dir: str,
+    jobs: int | None,
+    scheduler: str | None,
+    retries: int,
+    force: bool,
+    cfg: DatmoConfig,
+    plot: bool,
+    bag_dir: bool,
+    fmt: str,
+    top: int | None,
+    sort: str,
+    no_report: bool,
+    markers: bool,
+    covariance: bool,
+    threads: int | None,
+    topic: str | None,
+    odom_topic: str | None,
+) -> None:
     """Segment, extract features and track each input in one pass, then print the report.
 
     Each output holds the input's channels and /datmo/segments, /datmo/features, /datmo/landmarks and
@@ -175,7 +234,7 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
     from ..perception.threads import set_default
     from ..text import printable
 
-    set_default(threads)   # a run-time setting: not among the parameters (the outputs do not depend on it)
+    set_default(threads)  # a run-time setting: not among the parameters (the outputs do not depend on it)
     if scheduler is not None and jobs is not None:
         raise DatmoError("--jobs is for local runs; with --scheduler the cluster's workers run the inputs")
     if plot and remote(out_dir):
@@ -184,9 +243,10 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         raise DatmoError(f"{out_dir}: --bag-dir needs a local output folder")
     _check_leg_model(cfg)
     options = RunOptions(markers=markers, covariance=covariance, topic=topic, odom_topic=odom_topic, bag_dir=bag_dir)
-    with folder_lock(out_dir):   # one batch at a time in a folder: a second is refused, naming the first
-        records, where, seconds, plot_of = _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir,
-                                                      scheduler, jobs, retries)
+    with folder_lock(out_dir):  # one batch at a time in a folder: a second is refused, naming the first
+        records, where, seconds, plot_of = _run_batch(
+            inputs, out_dir, cfg, options, force, threads, plot, bag_dir, scheduler, jobs, retries
+        )
         _final_table(records, seconds, where)
         for r in records:
             if r["status"] == FAILED:
@@ -194,8 +254,15 @@ def command(inputs: tuple[str, ...], out_dir: str, jobs: int | None, scheduler: 
         ok = [r for r in records if r["status"] in (DONE, SKIPPED)]
         if ok and (not no_report or plot_of) and not remote(out_dir):
             made = {Path(r["output"]) for r in ok if r["status"] == DONE}
-            _report([Path(r["output"]) for r in ok], [p for o, p in plot_of.items() if Path(o) in made],
-                    None if no_report else fmt, top, sort, force, [r.get(SUMMARY_KEY) for r in ok])
+            _report(
+                [Path(r["output"]) for r in ok],
+                [p for o, p in plot_of.items() if Path(o) in made],
+                None if no_report else fmt,
+                top,
+                sort,
+                force,
+                [r.get(SUMMARY_KEY) for r in ok],
+            )
     failed = len(records) - len(ok)
     if failed == len(records) and failed > 1:
         raise DatmoError(f"all {failed} inputs failed")
@@ -213,10 +280,20 @@ def _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir, sch
     from ..config import provenance_line
     from ..log import bagdir
 
-    batch = prepare(list(inputs), out_dir, config=cfg, options=options, force=force,
-                    command_line=provenance_line(invocation("run")), threads=threads)
-    plot_of = {t.output: bagdir.plot_path(t.output) if bag_dir else Path(t.output).with_suffix(".png")
-               for t in batch.tasks} if plot else {}
+    batch = prepare(
+        list(inputs),
+        out_dir,
+        config=cfg,
+        options=options,
+        force=force,
+        command_line=provenance_line(invocation("run")),
+        threads=threads,
+    )
+    plot_of = (
+        {t.output: bagdir.plot_path(t.output) if bag_dir else Path(t.output).with_suffix(".png") for t in batch.tasks}
+        if plot
+        else {}
+    )
     plots = list(plot_of.values())
     if plots:
         from .report import check_plot_outputs
@@ -229,7 +306,7 @@ def _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir, sch
     else:
         executor = LocalExecutor(jobs)
         if batch.tasks and (min(executor.workers, len(batch.tasks)) > 1 or _compiling()):
-            _warm_up()   # a pool, or a first run to say; else one process loads just the kernels it uses
+            _warm_up()  # a pool, or a first run to say; else one process loads just the kernels it uses
     import time
 
     t0 = time.perf_counter()
@@ -268,20 +345,29 @@ def _final_table(records: list[dict], seconds: float, where: str) -> None:
         err = console(stderr=True)
         table = make_table(err, title_justify="left")
         for col in ("input", "status", "scans", "scans/s", "tracks", "people", "output or error"):
-            table.add_column(col, justify="right" if col in ("scans", "scans/s", "tracks", "people") else "left",
-                             overflow="fold")
+            table.add_column(
+                col, justify="right" if col in ("scans", "scans/s", "tracks", "people") else "left", overflow="fold"
+            )
         for r in shown:
             t = r.get("tracks") or {}
-            table.add_row(Path(r["input"]).name, r["status"], f"{r['scans']:,}" if r["status"] != FAILED else "",
-                          f"{r['scans_per_s']:,.0f}" if r["status"] == DONE else "",
-                          str(t.get("confirmed", "")), str(t.get("person", "")),
-                          r["error"] if r["status"] == FAILED else r["output"])
+            table.add_row(
+                Path(r["input"]).name,
+                r["status"],
+                f"{r['scans']:,}" if r["status"] != FAILED else "",
+                f"{r['scans_per_s']:,.0f}" if r["status"] == DONE else "",
+                str(t.get("confirmed", "")),
+                str(t.get("person", "")),
+                r["error"] if r["status"] == FAILED else r["output"],
+            )
         err.print(table)
     counts = {s: sum(r["status"] == s for r in records) for s in (DONE, SKIPPED, FAILED)}
     rate = scans / seconds if seconds > 0 else 0.0
-    click.echo(f"{len(records)} input{'s' if len(records) != 1 else ''}: {counts[DONE]} done, {counts[SKIPPED]} "
-               f"skipped (already in the manifest), {counts[FAILED]} failed; {scans:,} scans in {seconds:.1f} s on "
-               f"{where} ({rate:,.0f} scans/s)", err=True)
+    click.echo(
+        f"{len(records)} input{'s' if len(records) != 1 else ''}: {counts[DONE]} done, {counts[SKIPPED]} "
+        f"skipped (already in the manifest), {counts[FAILED]} failed; {scans:,} scans in {seconds:.1f} s on "
+        f"{where} ({rate:,.0f} scans/s)",
+        err=True,
+    )
 
 
 def _compiling() -> bool:
@@ -302,15 +388,21 @@ def _warm_up() -> None:
 
     t0 = time.perf_counter()
     with said_if_slow():
-        ensure_warm()   # once per process: the --jobs pool forks after it
+        ensure_warm()  # once per process: the --jobs pool forks after it
     seconds = time.perf_counter() - t0
     if seconds > 2.0:
-        say(f"compiled the numba kernels in {seconds:.0f} s (first run after an install; cached for the next "
-            "runs)")
+        say(f"compiled the numba kernels in {seconds:.0f} s (first run after an install; cached for the next runs)")
 
 
-def _report(outputs: list[Path], plots: list[Path], fmt: str | None, top: int | None, sort: str,
-            force: bool = False, made: list | None = None) -> None:
+def _report(
+    outputs: list[Path],
+    plots: list[Path],
+    fmt: str | None,
+    top: int | None,
+    sort: str,
+    force: bool = False,
+    made: list | None = None,
+) -> None:
     """Draw the plots, and print the report of `outputs` in `fmt` (None: no report). `made`: each output's
     report as its task gathered it while writing it (report.RunSummary), None for an output not made by
     this run (skipped: already in the manifest), which is read in one streaming pass."""
@@ -320,7 +412,7 @@ def _report(outputs: list[Path], plots: list[Path], fmt: str | None, top: int | 
     summaries = []
     made = made or [None] * len(outputs)
     for i, out in enumerate(outputs):
-        if not plots:   # a plot draws every scan and state, so it decodes the whole run
+        if not plots:  # a plot draws every scan and state, so it decodes the whole run
             if fmt:
                 summaries.append(made[i] if made[i] is not None else summarise_file(out))
             continue

@@ -23,8 +23,9 @@ if TYPE_CHECKING:
 @param_option("features.min_points")
 @input_options
 @quiet_option
-def command(input: Path, output: Path, force: bool, cfg: DatmoConfig, topic: str | None,
-            odom_topic: str | None) -> None:
+def command(
+    input: Path, output: Path, force: bool, cfg: DatmoConfig, topic: str | None, odom_topic: str | None
+) -> None:
     """Split each scan into segments: consecutive points join while their distance is at most
     C0 + C1·min(r_i, r_i+1), C1 = sqrt(2(1 − cos Δα)) from the scan's angle step; invalid returns (NaN,
     inf, at or beyond the range limits) break segments. Writes /datmo/segments: each scan's beam index
@@ -39,8 +40,9 @@ def command(input: Path, output: Path, force: bool, cfg: DatmoConfig, topic: str
     from ..streaming import LogStream
 
     with scan_log(input, output, topic, odom_topic, force=force) as src:
-        stream = LogStream(src)   # a bad input is said before the progress bar starts
+        stream = LogStream(src)  # a bad input is said before the progress bar starts
         with bar("segmenting", stream.n_scans) as progress:
-            scans = segment_file(stream, output, cfg, force=force, progress=progress,
-                                 command_line=provenance_line(invocation("segment")))
+            scans = segment_file(
+                stream, output, cfg, force=force, progress=progress, command_line=provenance_line(invocation("segment"))
+            )
     say(f"{output}: segments of {scans:,} scans")

@@ -10,8 +10,10 @@ import click
 from ..bounds import OPTIONS, OptionError, laser_pose_option, option
 from .options import force_option, output_option, quiet_option
 
-SCENE_HELP = ("Built-in scene name (hall, corridor, crowd, static, patrol, following, lab-drive; see --list-scenes) "
-              "or the path of a .toml scene file.")
+SCENE_HELP = (
+    "Built-in scene name (hall, corridor, crowd, static, patrol, following, lab-drive; see --list-scenes) "
+    "or the path of a .toml scene file."
+)
 LMS_OPTIONS = ("angle", "resolution", "range_m", "units")
 
 
@@ -29,30 +31,75 @@ def _list_scenes(ctx: click.Context, _param: click.Parameter, value: bool) -> No
 @click.option("--scene", metavar="NAME|PATH", default="hall", show_default=True, help=SCENE_HELP)
 @output_option("The log to write: MCAP, or a ROS 1 bag when it ends in .bag (no ground truth there).")
 @force_option()
-@option("--seed", bound=OPTIONS["seed"], default=0, show_default=True,
-        help="Random seed (crowd paths, range noise); a seed always gives the same file.")
-@option("--duration", bound=OPTIONS["sim_duration"], default=None,
-        help="Seconds to simulate [default: the scene's, 60 s].")
-@option("--rate", bound=OPTIONS["sim_rate"], default=None,
-        help="Scans per second [default: the scene's, else 5] (an LMS200: at most 75 Hz at 1°, 37.5 Hz at 0.5°, "
-             "18.75 Hz at 0.25°).")
+@option(
+    "--seed",
+    bound=OPTIONS["seed"],
+    default=0,
+    show_default=True,
+    help="Random seed (crowd paths, range noise); a seed always gives the same file.",
+)
+@option(
+    "--duration", bound=OPTIONS["sim_duration"], default=None, help="Seconds to simulate [default: the scene's, 60 s]."
+)
+@option(
+    "--rate",
+    bound=OPTIONS["sim_rate"],
+    default=None,
+    help="Scans per second [default: the scene's, else 5] (an LMS200: at most 75 Hz at 1°, 37.5 Hz at 0.5°, "
+    "18.75 Hz at 0.25°).",
+)
 @option("--people", bound=OPTIONS["people"], default=None, help="Walkers in a crowd scene [default: the scene's].")
-@click.option("--angle", type=click.Choice(["180", "100"]), default="180", show_default=True,
-              help="The LMS200's field of view, degrees (a scene with its own [scanner] refuses the LMS200 options).")
-@click.option("--resolution", type=click.Choice(["1", "0.5", "0.25"]), default="0.5", show_default=True,
-              help="Angular resolution, degrees (0.25 only with --angle 100).")
-@click.option("--range", "range_m", type=click.Choice(["8", "16", "32", "80"]), default="8", show_default=True,
-              help="Range mode, metres.")
-@click.option("--units", type=click.Choice(["mm", "cm"]), default=None,
-              help="Output units [default: mm, or cm with --range 80].")
+@click.option(
+    "--angle",
+    type=click.Choice(["180", "100"]),
+    default="180",
+    show_default=True,
+    help="The LMS200's field of view, degrees (a scene with its own [scanner] refuses the LMS200 options).",
+)
+@click.option(
+    "--resolution",
+    type=click.Choice(["1", "0.5", "0.25"]),
+    default="0.5",
+    show_default=True,
+    help="Angular resolution, degrees (0.25 only with --angle 100).",
+)
+@click.option(
+    "--range",
+    "range_m",
+    type=click.Choice(["8", "16", "32", "80"]),
+    default="8",
+    show_default=True,
+    help="Range mode, metres.",
+)
+@click.option(
+    "--units", type=click.Choice(["mm", "cm"]), default=None, help="Output units [default: mm, or cm with --range 80]."
+)
 @option("--noise", bound=OPTIONS["sim_noise"], default=0.01, show_default=True, help="Range noise sigma, metres.")
-@click.option("--list-scenes", is_flag=True, expose_value=False, is_eager=True, callback=_list_scenes,
-              help="List the built-in scenes and exit.")
+@click.option(
+    "--list-scenes",
+    is_flag=True,
+    expose_value=False,
+    is_eager=True,
+    callback=_list_scenes,
+    help="List the built-in scenes and exit.",
+)
 @laser_pose_option()
 @quiet_option
-def command(scene: str, output: Path, force: bool, seed: int, duration: float | None, rate: float | None,
-            people: int | None, angle: str, resolution: str, range_m: str, units: str | None, noise: float,
-            laser_pose: tuple | None) -> None:
+def command(
+    scene: str,
+    output: Path,
+    force: bool,
+    seed: int,
+    duration: float | None,
+    rate: float | None,
+    people: int | None,
+    angle: str,
+    resolution: str,
+    range_m: str,
+    units: str | None,
+    noise: float,
+    laser_pose: tuple | None,
+) -> None:
     """Simulate a SICK LMS200 in a scene and write a log with ground truth.
 
     The log holds /scan (sensor_msgs/LaserScan), /datmo/ground_truth (one message per scan: every
@@ -80,18 +127,29 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
     loaded = load_scene(scene)
     if loaded.scanner is not None and given:
         names = ", ".join("--" + k.replace("range_m", "range") for k in given)
-        raise OptionError(f"{loaded.source}: the scene sets its own scanner ([scanner]); {names} "
-                          f"appl{'ies' if len(given) == 1 else 'y'} to the LMS200")
+        raise OptionError(
+            f"{loaded.source}: the scene sets its own scanner ([scanner]); {names} "
+            f"appl{'ies' if len(given) == 1 else 'y'} to the LMS200"
+        )
     if laser_pose is not None and loaded.sensor.mount is not None:
-        raise OptionError(f"{loaded.source}: the scene mounts its scanner ([sensor] laser_pose); --laser-pose "
-                          "would place it twice")
+        raise OptionError(
+            f"{loaded.source}: the scene mounts its scanner ([sensor] laser_pose); --laser-pose would place it twice"
+        )
     if units is None:
         units = "cm" if range_m == "80" else "mm"
-    lms = {} if loaded.scanner is not None else {"fov_deg": int(angle), "resolution_deg": float(resolution),
-                                                 "range_mode_m": int(range_m), "units": units}
+    lms = (
+        {}
+        if loaded.scanner is not None
+        else {"fov_deg": int(angle), "resolution_deg": float(resolution), "range_mode_m": int(range_m), "units": units}
+    )
     sim = Simulation(loaded, seed=seed, duration=duration, rate=rate, noise_sigma=noise, people=people, **lms)
-    params = {"scene": scene, "seed": seed, "duration": duration if duration is not None else loaded.duration,
-              "rate": sim.sensor.rate_hz, "people": people}
+    params = {
+        "scene": scene,
+        "seed": seed,
+        "duration": duration if duration is not None else loaded.duration,
+        "rate": sim.sensor.rate_hz,
+        "people": people,
+    }
     if loaded.scanner is None:
         params |= {"angle": int(angle), "resolution": float(resolution), "range": int(range_m), "units": units}
     else:
@@ -112,4 +170,3 @@ def command(scene: str, output: Path, force: bool, seed: int, duration: float | 
         with bar("simulating", len(sim)) as done:
             write_simulation(writer, sim, laser_pose, progress=done)
     say(f"{output}: {n} scans of {geometry.describe()}, {n_objects} ground-truth objects")
-

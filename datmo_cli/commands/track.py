@@ -24,35 +24,64 @@ if TYPE_CHECKING:
 
 @click.command(name="track")
 @click.argument("input", type=click.Path(path_type=Path))
-@output_option("The log to write (MCAP): the input's channels plus /datmo/tracks (and /datmo/markers/tracks with "
-               "--markers).", file=False)
+@output_option(
+    "The log to write (MCAP): the input's channels plus /datmo/tracks (and /datmo/markers/tracks with --markers).",
+    file=False,
+)
 @force_option()
-@click.option("--markers/--no-markers", default=False, show_default=True,
-              help="Also store /datmo/markers/* (Foxglove drawings); datmo play draws them from the tracks anyway.")
-@click.option("--covariance", is_flag=True,
-              help="Store each track's covariance in /datmo/tracks (otherwise its 16 numbers are NaN).")
-@click.option("--bag-dir", is_flag=True, is_eager=True,
-              help="Write OUTPUT as a ROS 2 bag folder for ros2 bag play: OUTPUT/ holding OUTPUT_0.mcap and "
-                   "metadata.yaml (--force replaces only a bag folder).")
-@config_options("TOML file with a [track] table of parameters (names as in the options below and more), and "
-                "a [features] table used when the input has no features.")
+@click.option(
+    "--markers/--no-markers",
+    default=False,
+    show_default=True,
+    help="Also store /datmo/markers/* (Foxglove drawings); datmo play draws them from the tracks anyway.",
+)
+@click.option(
+    "--covariance",
+    is_flag=True,
+    help="Store each track's covariance in /datmo/tracks (otherwise its 16 numbers are NaN).",
+)
+@click.option(
+    "--bag-dir",
+    is_flag=True,
+    is_eager=True,
+    help="Write OUTPUT as a ROS 2 bag folder for ros2 bag play: OUTPUT/ holding OUTPUT_0.mcap and "
+    "metadata.yaml (--force replaces only a bag folder).",
+)
+@config_options(
+    "TOML file with a [track] table of parameters (names as in the options below and more), and "
+    "a [features] table used when the input has no features."
+)
 @param_option("track.process_noise")
 @param_option("track.measurement_noise")
 @param_option("track.gate")
-@param_pair_option("--confirm", "track.confirm_hits", "track.confirm_window", ("M", "N"),
-                   "Confirm a track after M hits in N scans.")
+@param_pair_option(
+    "--confirm", "track.confirm_hits", "track.confirm_window", ("M", "N"), "Confirm a track after M hits in N scans."
+)
 @param_option("track.delete_after")
 @param_option("track.delete_after_occluded")
 @param_option("track.d_max")
 @param_option("track.ego_motion")
-@param_option("features.leg_model", expose=True,
-              help="Leg detector for inputs without features: 'default' (shipped), a file from datmo train-legs, or "
-                   "'paper' (the paper's circle rule and walking pattern). Inputs with features keep theirs, which "
-                   "a given MODEL must be.")
+@param_option(
+    "features.leg_model",
+    expose=True,
+    help="Leg detector for inputs without features: 'default' (shipped), a file from datmo train-legs, or "
+    "'paper' (the paper's circle rule and walking pattern). Inputs with features keep theirs, which "
+    "a given MODEL must be.",
+)
 @input_options
 @quiet_option
-def command(input: Path, output: Path, force: bool, markers: bool, covariance: bool, bag_dir: bool, cfg: DatmoConfig,
-            leg_model: str | None, topic: str | None, odom_topic: str | None) -> None:
+def command(
+    input: Path,
+    output: Path,
+    force: bool,
+    markers: bool,
+    covariance: bool,
+    bag_dir: bool,
+    cfg: DatmoConfig,
+    leg_model: str | None,
+    topic: str | None,
+    odom_topic: str | None,
+) -> None:
     """Track and classify the objects of a log: Kalman filter, gating and global nearest-neighbour
     association, occlusion-aware track life cycle, people from paired legs and their walking pattern.
 
@@ -73,12 +102,22 @@ def command(input: Path, output: Path, force: bool, markers: bool, covariance: b
     from ..progress import bar, say
     from ..streaming import LogStream
 
-    with (bagdir.output(output, bag_dir, force=force, inputs=[input]) as out,
-          scan_log(input, out, topic, odom_topic, force=force) as src):
-        stream = LogStream(src)   # a bad input is said before the progress bar starts
+    with (
+        bagdir.output(output, bag_dir, force=force, inputs=[input]) as out,
+        scan_log(input, out, topic, odom_topic, force=force) as src,
+    ):
+        stream = LogStream(src)  # a bad input is said before the progress bar starts
         with bar("tracking", stream.n_scans) as progress, progress.compile_notice() as report:
-            scans, computed = track_file(stream, out, force=force, config=cfg,
-                                         leg_model=leg_model, command_line=provenance_line(invocation("track")),
-                                         markers=markers, covariance=covariance, progress=report)
+            scans, computed = track_file(
+                stream,
+                out,
+                force=force,
+                config=cfg,
+                leg_model=leg_model,
+                command_line=provenance_line(invocation("track")),
+                markers=markers,
+                covariance=covariance,
+                progress=report,
+            )
     how = " (segmented and extracted features first)" if computed else ""
     say(f"{output}: tracks for {scans:,} scans{how}")

@@ -45,8 +45,10 @@ def _labelled_or_empty(positives: tuple[Path, ...], negatives: tuple[Path, ...])
         for p in positives:
             if _same_data(n, p):
                 also = "" if str(n) == str(p) else f" (as {p})"
-                raise InputError(f"{n}: given as --negative and as --positive{also}; a recording is either labelled "
-                                 "or empty of people")
+                raise InputError(
+                    f"{n}: given as --negative and as --positive{also}; a recording is either labelled "
+                    "or empty of people"
+                )
 
 
 def _same_data(a: Path, b: Path) -> bool:
@@ -61,7 +63,7 @@ def _same_data(a: Path, b: Path) -> bool:
         if a.is_dir() != b.is_dir() or (a.is_file() and a.stat().st_size != b.stat().st_size):
             return False
         return sha256_of(a) == sha256_of(b)
-    except OSError:   # a missing or unreadable file: reading it says so
+    except OSError:  # a missing or unreadable file: reading it says so
         return False
 
 
@@ -73,8 +75,9 @@ def print_figures(held_out: list, mean: dict, console) -> None:
     """The held-out figures as a rich table: learned detector beside the paper's circle rule."""
     from ..progress import table as make_table
 
-    table = make_table(console, title="Held-out figures (clusters within 5 m; learned | circle rule)",
-                       title_justify="left")
+    table = make_table(
+        console, title="Held-out figures (clusters within 5 m; learned | circle rule)", title_justify="left"
+    )
     for col in ("held out", "empty scanner", "threshold", "precision", "recall", "AP", "false legs / empty scan"):
         table.add_column(col, justify="left" if col in ("held out", "empty scanner") else "right")
 
@@ -83,32 +86,72 @@ def print_figures(held_out: list, mean: dict, console) -> None:
 
     for h in held_out:
         L, C = h.learned, h.circle
-        table.add_row(h.labelled, h.empty or "-", f"{h.threshold:.2f}", pair(L.precision, C.precision),
-                      pair(L.recall, C.recall), pair(L.ap, C.ap), pair(L.false_per_scan, C.false_per_scan, 2))
+        table.add_row(
+            h.labelled,
+            h.empty or "-",
+            f"{h.threshold:.2f}",
+            pair(L.precision, C.precision),
+            pair(L.recall, C.recall),
+            pair(L.ap, C.ap),
+            pair(L.false_per_scan, C.false_per_scan, 2),
+        )
     L, C = mean["learned"], mean["circle"]
-    table.add_row("mean", "", f"{mean['threshold']:.2f}", pair(L["precision"], C["precision"]),
-                  pair(L["recall"], C["recall"]), pair(L["ap"], C["ap"]),
-                  pair(L.get("false_per_scan"), C.get("false_per_scan"), 2), style="bold")
+    table.add_row(
+        "mean",
+        "",
+        f"{mean['threshold']:.2f}",
+        pair(L["precision"], C["precision"]),
+        pair(L["recall"], C["recall"]),
+        pair(L["ap"], C["ap"]),
+        pair(L.get("false_per_scan"), C.get("false_per_scan"), 2),
+        style="bold",
+    )
     console.print(table)
 
 
 @click.command(name="train-legs", cls=_ManyFilesCommand)
-@click.option("--positive", "positives", multiple=True, type=click.Path(path_type=Path), metavar="FILE...",
-              help="Labelled files: ROS 1 bags, ROS 2 bag folders or MCAP files with LaserScans and a "
-                   "geometry_msgs/PoseArray of the legs in each scan (laser frame).")
-@click.option("--negative", "negatives", multiple=True, type=click.Path(path_type=Path), metavar="FILE...",
-              help="Files of rooms with no people: every LaserScan topic is one empty recording.")
+@click.option(
+    "--positive",
+    "positives",
+    multiple=True,
+    type=click.Path(path_type=Path),
+    metavar="FILE...",
+    help="Labelled files: ROS 1 bags, ROS 2 bag folders or MCAP files with LaserScans and a "
+    "geometry_msgs/PoseArray of the legs in each scan (laser frame).",
+)
+@click.option(
+    "--negative",
+    "negatives",
+    multiple=True,
+    type=click.Path(path_type=Path),
+    metavar="FILE...",
+    help="Files of rooms with no people: every LaserScan topic is one empty recording.",
+)
 @click.option("--topic", default=None, help="The LaserScan topic of the labelled files [default: the only one].")
-@click.option("--labels-topic", default=LABELS_TOPIC, show_default=True,
-              help="The geometry_msgs/PoseArray topic of the labelled legs.")
+@click.option(
+    "--labels-topic",
+    default=LABELS_TOPIC,
+    show_default=True,
+    help="The geometry_msgs/PoseArray topic of the labelled legs.",
+)
 @output_option("The model to write (.npz).", callback=no_stdout("a model"))
 @force_option()
-@click.option("--with-simulated", is_flag=True,
-              help="Also train on simulated LMS200 recordings with exact leg positions (datmo's simulator; never "
-                   "held out): for scanners like the LMS200 (0.5°-1° steps, legs to 8 m). The shipped model uses it.")
+@click.option(
+    "--with-simulated",
+    is_flag=True,
+    help="Also train on simulated LMS200 recordings with exact leg positions (datmo's simulator; never "
+    "held out): for scanners like the LMS200 (0.5°-1° steps, legs to 8 m). The shipped model uses it.",
+)
 @quiet_option
-def command(positives: tuple[Path, ...], negatives: tuple[Path, ...], topic: str | None, labels_topic: str,
-            output: Path, force: bool, with_simulated: bool) -> None:
+def command(
+    positives: tuple[Path, ...],
+    negatives: tuple[Path, ...],
+    topic: str | None,
+    labels_topic: str,
+    output: Path,
+    force: bool,
+    with_simulated: bool,
+) -> None:
     """Train the learned leg detector (a tree ensemble over per-segment shape features) and estimate how it
     does on recordings it has not seen.
 
@@ -130,7 +173,7 @@ def command(positives: tuple[Path, ...], negatives: tuple[Path, ...], topic: str
     from ..perception import training as T
     from ..progress import bar, console, say
 
-    check_output(output, force=force, inputs=[*positives, *negatives], what="model")   # before the training
+    check_output(output, force=force, inputs=[*positives, *negatives], what="model")  # before the training
     if not positives:
         raise InputError("no labelled file: give at least one with --positive")
     _labelled_or_empty(positives, negatives)
@@ -157,10 +200,14 @@ def command(positives: tuple[Path, ...], negatives: tuple[Path, ...], topic: str
     if result.held_out:
         print_figures(result.held_out, result.mean, console())
     else:
-        say("datmo: no held-out figures: they need two or more --positive files (one is held out while "
-            "the others train)")
-    result.model.save(output, force=force)   # checked again: it may have appeared while training
+        say(
+            "datmo: no held-out figures: they need two or more --positive files (one is held out while "
+            "the others train)"
+        )
+    result.model.save(output, force=force)  # checked again: it may have appeared while training
     n_legs = sum(int(t.label.sum()) for t in result.tables)
     n_seg = sum(len(t) for t in result.tables)
-    say(f"{output}: {result.model.n_trees} trees, threshold {result.threshold:.2f}; trained on {n_seg:,} "
-        f"segments ({n_legs:,} legs) of {len(labelled)} labelled and {len(empty)} empty recordings")
+    say(
+        f"{output}: {result.model.n_trees} trees, threshold {result.threshold:.2f}; trained on {n_seg:,} "
+        f"segments ({n_legs:,} legs) of {len(labelled)} labelled and {len(empty)} empty recordings"
+    )

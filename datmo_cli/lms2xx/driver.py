@@ -25,11 +25,11 @@ from ..log.scan import ScanGeometry
 from . import protocol as P
 
 DETECT_ORDER = (9600, 38400, 19200, 500000)
-READ_TIMEOUT_S = 0.02          # port timeout: how long one read waits for a first byte
-MODE_TIMEOUT_S = 3.5           # a mode change (20h) can take up to 3 s (TL §4.3)
+READ_TIMEOUT_S = 0.02  # port timeout: how long one read waits for a first byte
+MODE_TIMEOUT_S = 3.5  # a mode change (20h) can take up to 3 s (TL §4.3)
 REPLY_TIMEOUT_S = 0.3
-MIN_WAIT_S, MAX_WAIT_S = 0.001, 0.02   # waits for the rest of a telegram: shorter ones are not worth a sleep
-PACE_S = 60e-6                 # gap between host bytes at 500 kBd (>= 55 us, TL §4.3)
+MIN_WAIT_S, MAX_WAIT_S = 0.001, 0.02  # waits for the rest of a telegram: shorter ones are not worth a sleep
+PACE_S = 60e-6  # gap between host bytes at 500 kBd (>= 55 us, TL §4.3)
 
 
 class DeviceDisconnected(DeviceError):
@@ -55,7 +55,7 @@ class DriverStats:
     dropped: int = 0
     naks: int = 0
     retries: int = 0
-    incomplete: int = 0       # interlaced sets missing a partial scan
+    incomplete: int = 0  # interlaced sets missing a partial scan
 
     def as_dict(self) -> dict[str, int]:
         return dict(self.__dict__)
@@ -88,8 +88,19 @@ def open_port(path: str, baud: int = 9600):
     if not os.path.exists(path):
         raise DeviceError(f"{path}: cannot open serial port (no such device)")
     try:
-        return serial.Serial(path, baud, bytesize=8, parity="N", stopbits=1, timeout=READ_TIMEOUT_S,
-                             write_timeout=2.0, xonxoff=False, rtscts=False, dsrdtr=False, exclusive=True)
+        return serial.Serial(
+            path,
+            baud,
+            bytesize=8,
+            parity="N",
+            stopbits=1,
+            timeout=READ_TIMEOUT_S,
+            write_timeout=2.0,
+            xonxoff=False,
+            rtscts=False,
+            dsrdtr=False,
+            exclusive=True,
+        )
     except (serial.SerialException, OSError, ValueError) as exc:
         raise DeviceError(f"{path}: cannot open serial port ({exc})") from None
 
@@ -98,10 +109,20 @@ class LMS2xx:
     """A SICK LMS200 on a serial port. `connect()`, `start()`, then `read_scan()` until done; `stop()`,
     `close()`. Angle in degrees (180 or 100), resolution in degrees (1, 0.5, 0.25), units "mm" or "cm"."""
 
-    def __init__(self, port, *, baud: int = 38400, angle: int = 180, resolution: float = 0.5,
-                 units: str = "mm", indices: bool = False, interlaced: bool = False, name: str | None = None,
-                 clock: Callable[[], int] = time.time_ns,
-                 on_telegram: Callable[[P.Frame, int], None] | None = None) -> None:
+    def __init__(
+        self,
+        port,
+        *,
+        baud: int = 38400,
+        angle: int = 180,
+        resolution: float = 0.5,
+        units: str = "mm",
+        indices: bool = False,
+        interlaced: bool = False,
+        name: str | None = None,
+        clock: Callable[[], int] = time.time_ns,
+        on_telegram: Callable[[P.Frame, int], None] | None = None,
+    ) -> None:
         if baud not in P.BAUD_CODES:
             raise DeviceError(f"baud {baud} not supported (choose 9600, 19200, 38400 or 500000)")
         res = P.RESOLUTIONS.get(float(resolution))
@@ -125,7 +146,7 @@ class LMS2xx:
         self._parser = P.FrameParser(replies=True)
         self._items: collections.deque[tuple[P.Frame | int, int]] = collections.deque()
         self._chunks: collections.deque[tuple[int, int]] = collections.deque(maxlen=256)  # (end offset, t ns)
-        self._line_free_ns = 0   # when the last frame's last byte came (ns): the earliest the next can start
+        self._line_free_ns = 0  # when the last frame's last byte came (ns): the earliest the next can start
         self._prev: Scan | None = None
         self._partials: dict[int, tuple[P.Telegram, int, bytes]] = {}
         self._received = 0
@@ -166,7 +187,7 @@ class LMS2xx:
         try:
             if self.baud >= 500000:
                 for i in range(len(data)):
-                    self.port.write(data[i:i + 1])
+                    self.port.write(data[i : i + 1])
                     t = time.perf_counter() + PACE_S
                     while time.perf_counter() < t:
                         pass
@@ -237,14 +258,15 @@ class LMS2xx:
     def _time_of(self, offset: int, end: int, t: int) -> int:
         """Host time (ns) at which the byte at stream `offset` arrived: extrapolated back, at the line's byte
         time, from the end of the first chunk read that held it."""
-        for c_end, c_t in reversed(self._chunks):   # the chunks that end past `offset` are the newest
+        for c_end, c_t in reversed(self._chunks):  # the chunks that end past `offset` are the newest
             if c_end <= offset:
                 break
             end, t = c_end, c_t
         return int(t - (end - 1 - offset) * self._byte_ns())
 
-    def _transact(self, frame: bytes, expect: int, *, timeout: float = REPLY_TIMEOUT_S, retries: int = 3,
-                  flush: bool = True) -> P.Frame:
+    def _transact(
+        self, frame: bytes, expect: int, *, timeout: float = REPLY_TIMEOUT_S, retries: int = 3, flush: bool = True
+    ) -> P.Frame:
         """Send `frame`, return the reply with code `expect`. Retries on NAK (after 30 ms) or silence."""
         nak = False
         for attempt in range(retries):
@@ -284,8 +306,9 @@ class LMS2xx:
         self.open()
         status = self._detect()
         if self.baud != self.want_baud:
-            reply = self._command(P.cmd_baud(self.want_baud), P.REPLY_MODE, f"the switch to {self.want_baud} Bd",
-                                  timeout=MODE_TIMEOUT_S)
+            reply = self._command(
+                P.cmd_baud(self.want_baud), P.REPLY_MODE, f"the switch to {self.want_baud} Bd", timeout=MODE_TIMEOUT_S
+            )
             if reply.data[:1] != b"\x00":
                 raise DeviceError(f"{self.name}: the LMS refused {self.want_baud} Bd (A0 {reply.data.hex()})")
             self._set_baud(self.want_baud)
@@ -293,15 +316,19 @@ class LMS2xx:
             try:
                 status = P.parse_status(self._transact(P.cmd_status(), P.REPLY_STATUS).data)
             except _NoReply:
-                raise DeviceError(f"{self.name}: no answer after switching to {self.want_baud} Bd "
-                                  "(500000 Bd needs an RS-422 adapter that supports it)") from None
+                raise DeviceError(
+                    f"{self.name}: no answer after switching to {self.want_baud} Bd "
+                    "(500000 Bd needs an RS-422 adapter that supports it)"
+                ) from None
         if (status.angle_deg, status.resolution_cdeg) != (self.angle, self.res):
-            reply = self._command(P.cmd_variant(self.angle, self.res), P.REPLY_VARIANT,
-                                  f"the variant {self.angle}°/{self.res / 100:g}°")
+            reply = self._command(
+                P.cmd_variant(self.angle, self.res), P.REPLY_VARIANT, f"the variant {self.angle}°/{self.res / 100:g}°"
+            )
             if reply.data[:1] != b"\x01":
                 raise DeviceError(f"{self.name}: the LMS refused the variant {self.angle}°/{self.res / 100:g}°")
-        self.config = P.parse_config(self._command(P.cmd_read_config(), P.REPLY_READ_CONFIG,
-                                                   "the configuration request").data)
+        self.config = P.parse_config(
+            self._command(P.cmd_read_config(), P.REPLY_READ_CONFIG, "the configuration request").data
+        )
         if self.config.units != self.units or (self.want_indices and not self.config.indices):
             self._write_config()
         self.measuring_mode = self.config.measuring_mode
@@ -329,20 +356,25 @@ class LMS2xx:
             return P.parse_status(reply.data)
         tried = ", ".join(map(str, DETECT_ORDER))
         if received == 0:
-            raise DeviceError(f"{self.name}: no answer from an LMS2xx at {tried} Bd "
-                              "(is it powered, connected and on this port?)")
-        raise DeviceError(f"{self.name}: the device answers garbage at every baud ({tried} Bd; {received} bytes, "
-                          "no valid LMS2xx telegram); check the wiring and the RS-232/RS-422 setting")
+            raise DeviceError(
+                f"{self.name}: no answer from an LMS2xx at {tried} Bd (is it powered, connected and on this port?)"
+            )
+        raise DeviceError(
+            f"{self.name}: the device answers garbage at every baud ({tried} Bd; {received} bytes, "
+            "no valid LMS2xx telegram); check the wiring and the RS-232/RS-422 setting"
+        )
 
     def _write_config(self) -> None:
         """Installation mode, 77h with the changed units/indices, back to mode 25h (one EEPROM write)."""
         reply = self._command(P.cmd_installation(), P.REPLY_MODE, "installation mode", timeout=MODE_TIMEOUT_S)
         if reply.data[:1] != b"\x00":
-            raise DeviceError(f"{self.name}: the LMS refused installation mode (A0 {reply.data.hex()}: "
-                              "01 = bad password, 02 = fault)")
+            raise DeviceError(
+                f"{self.name}: the LMS refused installation mode (A0 {reply.data.hex()}: 01 = bad password, 02 = fault)"
+            )
         block = P.with_config(self.config.raw, units=self.units, indices=True if self.want_indices else None)
-        reply = self._command(P.cmd_write_config(block), P.REPLY_WRITE_CONFIG, "the configuration write",
-                              timeout=MODE_TIMEOUT_S)
+        reply = self._command(
+            P.cmd_write_config(block), P.REPLY_WRITE_CONFIG, "the configuration write", timeout=MODE_TIMEOUT_S
+        )
         if reply.data[:1] != b"\x01":
             raise DeviceError(f"{self.name}: the LMS refused the configuration (units {self.units})")
         self._command(P.cmd_stop(), P.REPLY_MODE, "the return to mode 25h", timeout=MODE_TIMEOUT_S)
@@ -362,11 +394,16 @@ class LMS2xx:
         """LaserScan geometry: beams counter-clockwise from -angle/2; range_max by measuring mode and units;
         scan_time: seconds between scans sent at this baud (rate table)."""
         lost = P.LOST_PER_SENT[self.res][self.baud]
-        return ScanGeometry(angle_min=float(np.radians(-self.angle / 2)),
-                            angle_increment=float(np.radians(self.res / 100)),
-                            n_beams=P.VARIANTS[(self.angle, self.res)], range_min=0.0,
-                            range_max=P.range_max_m(self.measuring_mode, self.units), time_increment=0.0,
-                            scan_time=P.scan_period_s(self.res) * (1 + lost), frame_id=frame_id)
+        return ScanGeometry(
+            angle_min=float(np.radians(-self.angle / 2)),
+            angle_increment=float(np.radians(self.res / 100)),
+            n_beams=P.VARIANTS[(self.angle, self.res)],
+            range_min=0.0,
+            range_max=P.range_max_m(self.measuring_mode, self.units),
+            time_increment=0.0,
+            scan_time=P.scan_period_s(self.res) * (1 + lost),
+            frame_id=frame_id,
+        )
 
     def start(self) -> None:
         """Start continuous (or interlaced) output."""
@@ -384,8 +421,12 @@ class LMS2xx:
     def _update_stats(self) -> None:
         s = self._parser.stats
         st = self.stats
-        st.crc_errors, st.length_errors, st.resyncs, st.discarded_bytes = (s.crc_errors, s.length_errors,
-                                                                           s.resyncs, s.discarded)
+        st.crc_errors, st.length_errors, st.resyncs, st.discarded_bytes = (
+            s.crc_errors,
+            s.length_errors,
+            s.resyncs,
+            s.discarded,
+        )
 
     def read_scan(self, timeout: float = 0.2) -> Scan | None:
         """The next complete scan, or None when none arrived within `timeout` seconds.
@@ -420,8 +461,17 @@ class LMS2xx:
         if len(tel.values) != P.VARIANTS[(self.angle, self.res)]:
             self.stats.length_errors += 1
             return None
-        return self._emit(Scan(stamp, end, tel.values, P.values_to_ranges(tel.values, tel.units, self.measuring_mode),
-                               tel, frame.raw, dropped))
+        return self._emit(
+            Scan(
+                stamp,
+                end,
+                tel.values,
+                P.values_to_ranges(tel.values, tel.units, self.measuring_mode),
+                tel,
+                frame.raw,
+                dropped,
+            )
+        )
 
     def _dropped(self, tel: P.Telegram, stamp: int) -> int:
         """Telegrams lost since the previous one: by scan index when sent, else by the time gap."""
@@ -471,8 +521,11 @@ class LMS2xx:
         raws = b"".join(r for _, _, r in self._partials.values())
         self._partials.clear()
         merged = P.Telegram(values, first.units, False, 0, first.status, first.scan_index, first.telegram_index)
-        return self._emit(Scan(first_stamp, end, values, P.values_to_ranges(values, first.units, self.measuring_mode),
-                               merged, raws, 0))
+        return self._emit(
+            Scan(
+                first_stamp, end, values, P.values_to_ranges(values, first.units, self.measuring_mode), merged, raws, 0
+            )
+        )
 
     def stop(self, restore_baud: bool = True) -> None:
         """Stop the output (20 25; B0 frames before the A0 are skipped); optionally go back to 9600 Bd."""

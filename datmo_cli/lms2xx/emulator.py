@@ -32,8 +32,12 @@ import numpy as np
 from ..errors import ConfigError, InputError
 from . import protocol as P
 
-SPEEDS = {9600: termios.B9600, 19200: termios.B19200, 38400: termios.B38400,
-          500000: getattr(termios, "B500000", 0x1005)}
+SPEEDS = {
+    9600: termios.B9600,
+    19200: termios.B19200,
+    38400: termios.B38400,
+    500000: getattr(termios, "B500000", 0x1005),
+}
 GARBAGE_BYTES = np.array([b for b in range(256) if b not in (P.STX, P.ACK, P.NAK)], np.uint8)
 
 
@@ -126,8 +130,11 @@ class LogSource(ScanSource):
         n = P.VARIANTS[(angle_deg, resolution_cdeg)]
         want = np.radians(-angle_deg / 2 + resolution_cdeg / 100 * np.arange(n))
         pos = np.rint((want - g.angle_min) / g.angle_increment).astype(np.int64)
-        inside = (pos >= 0) & (pos < g.n_beams) & (np.abs(g.angle_min + pos * g.angle_increment - want)
-                                                   <= abs(g.angle_increment))
+        inside = (
+            (pos >= 0)
+            & (pos < g.n_beams)
+            & (np.abs(g.angle_min + pos * g.angle_increment - want) <= abs(g.angle_increment))
+        )
         pos = np.clip(pos, 0, g.n_beams - 1)
         ranges = self.run.ranges[:, pos]
         ranges[:, ~inside] = np.nan
@@ -198,10 +205,22 @@ class Emulator:
     realtime=False sends scans as fast as the paced line allows (for benchmarks), ignoring the scan period.
     """
 
-    def __init__(self, source: ScanSource, *, faults: Faults | None = None, seed: int = 0, baud: int = 9600,
-                 angle_deg: int = 180, resolution_deg: float = 0.5, units: str = "mm", measuring_mode: int = 0,
-                 indices: bool = False, status: int = P.STATUS_OK, realtime: bool = True,
-                 on_event: Callable[[str], None] | None = None) -> None:
+    def __init__(
+        self,
+        source: ScanSource,
+        *,
+        faults: Faults | None = None,
+        seed: int = 0,
+        baud: int = 9600,
+        angle_deg: int = 180,
+        resolution_deg: float = 0.5,
+        units: str = "mm",
+        measuring_mode: int = 0,
+        indices: bool = False,
+        status: int = P.STATUS_OK,
+        realtime: bool = True,
+        on_event: Callable[[str], None] | None = None,
+    ) -> None:
         if baud not in P.BAUD_CODES:
             raise ConfigError(f"baud {baud} not supported (choose {', '.join(map(str, P.BAUDS))})")
         res = P.RESOLUTIONS.get(float(resolution_deg))
@@ -361,7 +380,7 @@ class Emulator:
             if item.scan is not None and item.pos < len(item.data) and item.scan.fault is None:
                 item.scan.fault = "cut"
             if item.done is not None and item.scan is None:
-                item.done()     # a pending baud change still takes effect
+                item.done()  # a pending baud change still takes effect
 
     def _send(self, data: bytes, done: Callable[[], None] | None = None, scan: SentScan | None = None) -> None:
         self._queue.append(_Out(bytes(data), 0, done, scan))
@@ -374,7 +393,7 @@ class Emulator:
         while self._queue and bucket >= 1.0:
             item = self._queue[0]
             n = min(int(bucket), len(item.data) - item.pos)
-            chunk = item.data[item.pos:item.pos + n]
+            chunk = item.data[item.pos : item.pos + n]
             if self.host_baud() != self.baud:
                 chunk = self._garble.integers(0, 256, len(chunk), np.uint8).tobytes()
             try:
@@ -425,9 +444,17 @@ class Emulator:
             else:
                 self._reply(bytes([P.REPLY_INVALID]))
         elif cmd == P.CMD_STATUS:
-            self._reply(bytes([P.REPLY_STATUS]) + P.build_status(
-                operating_mode=self.mode, measuring_mode=self.measuring_mode, angle_deg=self.angle,
-                resolution_cdeg=self.res, baud=self.baud, units=self.units))
+            self._reply(
+                bytes([P.REPLY_STATUS])
+                + P.build_status(
+                    operating_mode=self.mode,
+                    measuring_mode=self.measuring_mode,
+                    angle_deg=self.angle,
+                    resolution_cdeg=self.res,
+                    baud=self.baud,
+                    units=self.units,
+                )
+            )
         elif cmd == P.CMD_VARIANT and len(data) == 4:
             angle, res = int.from_bytes(data[0:2], "little"), int.from_bytes(data[2:4], "little")
             ok = (angle, res) in P.VARIANTS
@@ -464,7 +491,7 @@ class Emulator:
         if key != self._key:
             self._scans = iter(self.source.scans(*key))
             self._key = key
-            self._complete = next(self._scans)      # prepare the first scan now (simulation set-up)
+            self._complete = next(self._scans)  # prepare the first scan now (simulation set-up)
             self._first_pending = True
         return self._scans
 
@@ -495,7 +522,7 @@ class Emulator:
             due = self._rotation + (0 if self._queue else 1)
         else:
             due = int((now - self._stream_t0) / period) + 1
-            if due - self._rotation > 200:          # far behind (host not reading): skip ahead
+            if due - self._rotation > 200:  # far behind (host not reading): skip ahead
                 self._rotation = due - 1
         interlaced = self.mode == P.MODE_INTERLACED and self.res != 100
         offsets = P.partial_offsets(self.res) if interlaced else (0,)
@@ -503,7 +530,7 @@ class Emulator:
         hang_up_after = self.faults.disconnect
         while self._rotation < due and self.mode in (P.MODE_STREAM, P.MODE_INTERLACED):
             if hang_up_after is not None and self._scan_telegrams >= hang_up_after:
-                return                      # the last telegram before the hang-up is on its way
+                return  # the last telegram before the hang-up is on its way
             k = self._rotation
             self._rotation += 1
             self.stats.scans_measured += 1
@@ -515,7 +542,7 @@ class Emulator:
             if k % (1 + lost):
                 continue
             if sum(len(o.data) - o.pos for o in self._queue) > 65536:
-                continue                    # nobody reads: drop like the LMS does when the line is busy
+                continue  # nobody reads: drop like the LMS does when the line is busy
             if interlaced:
                 off = offsets[phase]
                 values = full[P.partial_positions(self.angle, self.res, off)]
@@ -527,8 +554,9 @@ class Emulator:
 
     def _scan_telegram(self, values: np.ndarray, partial: bool, offset: int, number: int) -> None:
         indices = (number, self._telegrams) if P.parse_config(self.config).indices else None
-        frame = P.reply_frame(P.encode_b0(values, self.units, partial=partial, offset=offset, indices=indices),
-                              self.status_byte)
+        frame = P.reply_frame(
+            P.encode_b0(values, self.units, partial=partial, offset=offset, indices=indices), self.status_byte
+        )
         self._telegrams += 1
         scan = SentScan(number, np.array(values, np.uint16), self.units, self.measuring_mode, partial, offset, frame)
         f = self.faults
@@ -544,11 +572,11 @@ class Emulator:
             data = frame[:-1] + bytes([frame[-1] ^ int(rng.integers(1, 256))])
             scan.fault = "crc"
         elif u < f.crc + f.truncate:
-            data = frame[:int(rng.integers(7, len(frame) - 2))]
+            data = frame[: int(rng.integers(7, len(frame) - 2))]
             scan.fault = "truncate"
         elif u < f.crc + f.truncate + f.drop:
             i = int(rng.integers(7, len(frame) - 1))
-            data = frame[:i] + frame[i + 1:]
+            data = frame[:i] + frame[i + 1 :]
             scan.fault = "drop"
         if scan.fault:
             self.stats.faults[scan.fault] += 1

@@ -16,26 +16,28 @@ import numpy as np
 
 STX, ACK, NAK = 0x02, 0x06, 0x15
 HOST_ADDRESS, REPLY_ADDRESS = 0x00, 0x80
-MAX_FRAME_LENGTH = 812            # largest Length field (command + data + status) an LMS sends (TL p.22)
+MAX_FRAME_LENGTH = 812  # largest Length field (command + data + status) an LMS sends (TL p.22)
 MAX_FRAME_BYTES = MAX_FRAME_LENGTH + 6
-PASSWORD = b"SICK_LMS"            # installation mode password (TL T7-12)
-STATUS_OK = 0x10                  # normal status byte: LMS type 6, no error (TL p.106)
+PASSWORD = b"SICK_LMS"  # installation mode password (TL T7-12)
+STATUS_OK = 0x10  # normal status byte: LMS type 6, no error (TL p.106)
 
 BAUDS = (9600, 19200, 38400, 500000)
-BAUD_CODES = {38400: 0x40, 19200: 0x41, 9600: 0x42, 500000: 0x48}       # 20h + code
+BAUD_CODES = {38400: 0x40, 19200: 0x41, 9600: 0x42, 500000: 0x48}  # 20h + code
 CODE_BAUDS = {v: k for k, v in BAUD_CODES.items()}
-STATUS_BAUD_WORDS = {500000: 0x8001, 38400: 0x8019, 19200: 0x8033, 9600: 0x8067}   # B1 bytes 116-117
+STATUS_BAUD_WORDS = {500000: 0x8001, 38400: 0x8019, 19200: 0x8033, 9600: 0x8067}  # B1 bytes 116-117
 STATUS_WORD_BAUDS = {v: k for k, v in STATUS_BAUD_WORDS.items()}
 
 # Variants: (scan angle degrees, resolution in 1/100 degree) -> values per scan
 VARIANTS = {(180, 100): 181, (180, 50): 361, (100, 100): 101, (100, 50): 201, (100, 25): 401}
-RESOLUTIONS = {1.0: 100, 0.5: 50, 0.25: 25}             # degrees -> 1/100 degree
-ROTATION_S = 0.01332                                    # one mirror turn, s (TL p.19)
-ROTATIONS_PER_SCAN = {100: 1, 50: 2, 25: 4}             # interlaced rotations per complete scan
+RESOLUTIONS = {1.0: 100, 0.5: 50, 0.25: 25}  # degrees -> 1/100 degree
+ROTATION_S = 0.01332  # one mirror turn, s (TL p.19)
+ROTATIONS_PER_SCAN = {100: 1, 50: 2, 25: 4}  # interlaced rotations per complete scan
 # Scans lost per scan sent, by resolution (1/100 degree) and baud (TL T10-17, best case)
-LOST_PER_SENT = {100: {9600: 30, 19200: 15, 38400: 8, 500000: 0},
-                 50: {9600: 29, 19200: 15, 38400: 8, 500000: 0},
-                 25: {9600: 16, 19200: 8, 38400: 4, 500000: 0}}
+LOST_PER_SENT = {
+    100: {9600: 30, 19200: 15, 38400: 8, 500000: 0},
+    50: {9600: 29, 19200: 15, 38400: 8, 500000: 0},
+    25: {9600: 16, 19200: 8, 38400: 4, 500000: 0},
+}
 
 # Host commands (first payload byte) and the LMS's reply codes
 CMD_MODE, CMD_REQUEST, CMD_STATUS, CMD_ERRORS = 0x20, 0x30, 0x31, 0x32
@@ -45,8 +47,8 @@ REPLY_MODE, REPLY_SCAN, REPLY_STATUS, REPLY_VARIANT = 0xA0, 0xB0, 0xB1, 0xBB
 REPLY_READ_CONFIG, REPLY_WRITE_CONFIG, REPLY_INVALID = 0xF4, 0xF7, 0x92
 REPLY_CODES = frozenset({0x90, 0x91, 0x92, 0xA0, 0xB0, 0xB1, 0xB2, 0xBA, 0xBB, 0xF4, 0xF7})
 
-CONFIG_BYTES = 34                  # 74h/77h configuration block (older firmware: 32)
-STATUS_BYTES = 152                 # B1 data after the reply code
+CONFIG_BYTES = 34  # 74h/77h configuration block (older firmware: 32)
+STATUS_BYTES = 152  # B1 data after the reply code
 # Distance bits by measuring mode (TL p.98); 0Fh: all 16 bits, no flags
 DISTANCE_BITS = {0x00: 13, 0x01: 13, 0x02: 13, 0x03: 14, 0x04: 14, 0x05: 15, 0x06: 15, 0x0F: 16}
 UNITS_M = {"mm": 0.001, "cm": 0.01}
@@ -221,11 +223,18 @@ class Status:
 
     def as_metadata(self) -> dict[str, str]:
         """String fields for a log's metadata record."""
-        return {"version": self.version, "operating_mode": f"0x{self.operating_mode:02X}",
-                "defective": str(self.defective), "measuring_mode": f"0x{self.measuring_mode:02X}",
-                "angle_deg": str(self.angle_deg), "resolution_deg": f"{self.resolution_cdeg / 100:g}",
-                "baud": str(self.baud), "keep_baud": str(self.keep_baud), "units": self.units,
-                "raw_hex": self.raw.hex()}
+        return {
+            "version": self.version,
+            "operating_mode": f"0x{self.operating_mode:02X}",
+            "defective": str(self.defective),
+            "measuring_mode": f"0x{self.measuring_mode:02X}",
+            "angle_deg": str(self.angle_deg),
+            "resolution_deg": f"{self.resolution_cdeg / 100:g}",
+            "baud": str(self.baud),
+            "keep_baud": str(self.keep_baud),
+            "units": self.units,
+            "raw_hex": self.raw.hex(),
+        }
 
 
 def _at(data: bytes, index: int) -> int:
@@ -238,16 +247,31 @@ def parse_status(data: bytes) -> Status:
     if len(data) < 122:
         raise ProtocolError(f"status block of {len(data)} bytes, expected {STATUS_BYTES}")
     word = lambda i: _at(data, i) | (_at(data, i + 1) << 8)  # noqa: E731
-    return Status(version=bytes(data[0:7]).decode("ascii", "replace").strip("\x00 "),
-                  operating_mode=_at(data, 8), defective=_at(data, 9), measuring_mode=_at(data, 102),
-                  angle_deg=word(107), resolution_cdeg=word(109), baud=STATUS_WORD_BAUDS.get(word(116)),
-                  keep_baud=bool(_at(data, 119)), units=CONFIG_UNITS.get(_at(data, 122), "reserved"),
-                  raw=bytes(data))
+    return Status(
+        version=bytes(data[0:7]).decode("ascii", "replace").strip("\x00 "),
+        operating_mode=_at(data, 8),
+        defective=_at(data, 9),
+        measuring_mode=_at(data, 102),
+        angle_deg=word(107),
+        resolution_cdeg=word(109),
+        baud=STATUS_WORD_BAUDS.get(word(116)),
+        keep_baud=bool(_at(data, 119)),
+        units=CONFIG_UNITS.get(_at(data, 122), "reserved"),
+        raw=bytes(data),
+    )
 
 
-def build_status(*, operating_mode: int = MODE_STOP, defective: int = 0, measuring_mode: int = 0,
-                 angle_deg: int = 180, resolution_cdeg: int = 50, baud: int = 9600, units: str = "mm",
-                 version: bytes = b"V02.30 ") -> bytes:
+def build_status(
+    *,
+    operating_mode: int = MODE_STOP,
+    defective: int = 0,
+    measuring_mode: int = 0,
+    angle_deg: int = 180,
+    resolution_cdeg: int = 50,
+    baud: int = 9600,
+    units: str = "mm",
+    version: bytes = b"V02.30 ",
+) -> bytes:
     """A B1 block (152 bytes) with the given fields, the rest zero (for the emulator)."""
     out = bytearray(STATUS_BYTES)
     out[0:7] = version[:7].ljust(7)
@@ -269,7 +293,7 @@ def build_status(*, operating_mode: int = MODE_STOP, defective: int = 0, measuri
 class Config:
     """The fields of the 74h/77h configuration block that record uses (TL p.96-101)."""
 
-    indices: bool             # availability bit 1: real-time indices in B0
+    indices: bool  # availability bit 1: real-time indices in B0
     measuring_mode: int
     units: str
     raw: bytes
@@ -338,8 +362,14 @@ def decode_b0(data: bytes, status: int = STATUS_OK) -> Telegram:
     return Telegram(values, units, bool(info & 0x2000), (info >> 11) & 0x3, status, si, ti)
 
 
-def encode_b0(values: np.ndarray, units: str = "mm", *, partial: bool = False, offset: int = 0,
-              indices: tuple[int, int] | None = None) -> bytes:
+def encode_b0(
+    values: np.ndarray,
+    units: str = "mm",
+    *,
+    partial: bool = False,
+    offset: int = 0,
+    indices: tuple[int, int] | None = None,
+) -> bytes:
     """B0 payload (code, info word, values, optional indices) for `values` (uint16)."""
     v = np.ascontiguousarray(values, "<u2")
     if len(v) > 0x3FF:
@@ -468,8 +498,8 @@ class FrameParser:
         self.handshake = replies if handshake is None else handshake
         self._sync = bytes([STX, REPLY_ADDRESS if replies else HOST_ADDRESS])
         self._buf = bytearray()
-        self._base = 0            # stream offset of _buf[0]
-        self._skipping = 0        # bytes skipped since the last frame candidate
+        self._base = 0  # stream offset of _buf[0]
+        self._skipping = 0  # bytes skipped since the last frame candidate
         self.stats = ParserStats()
 
     @property
@@ -545,10 +575,10 @@ class FrameParser:
             length = buf[pos + 2] | (buf[pos + 3] << 8)
             cmd = buf[pos + 4]
             verdict = self._check_header(buf, pos, n, length, cmd)
-            if verdict is None:          # need more bytes to judge
+            if verdict is None:  # need more bytes to judge
                 break
             if verdict == "garbage":
-                self._skip(buf[pos:pos + 1], out)
+                self._skip(buf[pos : pos + 1], out)
                 pos += 1
                 continue
             if verdict == "length":

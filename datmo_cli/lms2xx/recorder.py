@@ -46,10 +46,18 @@ class RecordingCut(DatmoError):
         self.exit_code = exit_code
 
 
-def record(driver, writer, *, duration: float | None = None, max_scans: int | None = None,
-           raw: bool = False, stop: threading.Event | None = None, on_scan=None,
-           progress: Callable[[int, float, DriverStats], None] | None = None,
-           describe: Callable[[BaseException], tuple[str, int]] | None = None) -> RecordResult:
+def record(
+    driver,
+    writer,
+    *,
+    duration: float | None = None,
+    max_scans: int | None = None,
+    raw: bool = False,
+    stop: threading.Event | None = None,
+    on_scan=None,
+    progress: Callable[[int, float, DriverStats], None] | None = None,
+    describe: Callable[[BaseException], tuple[str, int]] | None = None,
+) -> RecordResult:
     """Connect `driver` (an LMS2xx), stream scans into `writer` (a streaming LogWriter) until `duration`
     seconds, `max_scans`, `stop` or a disconnect; stop the scanner and close the writer (also after a
     disconnect). An error before the scanner streams aborts the writer and propagates; any failure after
@@ -62,6 +70,7 @@ def record(driver, writer, *, duration: float | None = None, max_scans: int | No
     stop = stop or threading.Event()
     result = RecordResult(writer.path)
     if raw:
+
         def on_telegram(frame, stamp: int) -> None:
             writer.write(mcapio.TOPIC_TELEGRAM, TELEGRAM, stamp, encode_telegram(frame.raw))
 
@@ -69,9 +78,12 @@ def record(driver, writer, *, duration: float | None = None, max_scans: int | No
     try:
         status = driver.connect()
         meta = status.as_metadata()
-        meta.update(port=str(driver.name), recorded_baud=str(driver.baud),
-                    config_hex=driver.config.raw.hex() if driver.config else "",
-                    indices=str(bool(driver.config and driver.config.indices)))
+        meta.update(
+            port=str(driver.name),
+            recorded_baud=str(driver.baud),
+            config_hex=driver.config.raw.hex() if driver.config else "",
+            indices=str(bool(driver.config and driver.config.indices)),
+        )
         writer.add_metadata("lms2xx.status", meta)
         geometry = driver.geometry()
         driver.start()
@@ -81,7 +93,7 @@ def record(driver, writer, *, duration: float | None = None, max_scans: int | No
         raise
     t0 = time.monotonic()
     last_flush = t0
-    flushed = 0   # scans on disk at the last flush
+    flushed = 0  # scans on disk at the last flush
     last_view = t0
     try:
         if progress is not None:
@@ -127,8 +139,8 @@ def record(driver, writer, *, duration: float | None = None, max_scans: int | No
         cut = _cut(writer, result, flushed, exc, (describe or _message)(exc) if _failure(exc) else _signalled(exc))
         if isinstance(exc, Exception) and result.disconnect is None:
             try:
-                _stop_scanner(driver)   # the disk full: the scanner need not stream on
-            except (KeyboardInterrupt, Terminated):   # not waited for; the data is kept already
+                _stop_scanner(driver)  # the disk full: the scanner need not stream on
+            except (KeyboardInterrupt, Terminated):  # not waited for; the data is kept already
                 pass
         raise cut from exc
     finally:
@@ -187,6 +199,9 @@ def _cut(writer, result: RecordResult, flushed: int, exc: BaseException, cause: 
         return RecordingCut(f"{what}; {writer.path} is complete ({result.scans} scans)", code)
     if writer.kept:
         lost = result.scans - flushed
-        return RecordingCut(f"{what}; {writer.path} keeps the {_scans(flushed)} that reached the disk before that "
-                            f"(readable, cut after its last complete chunk; later scans lost: {lost})", code)
+        return RecordingCut(
+            f"{what}; {writer.path} keeps the {_scans(flushed)} that reached the disk before that "
+            f"(readable, cut after its last complete chunk; later scans lost: {lost})",
+            code,
+        )
     return RecordingCut(f"{what}; no scan had reached the disk, so no {writer.path} was written", code)

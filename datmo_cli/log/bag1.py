@@ -89,8 +89,9 @@ class Ros1BagWriter:
     def _header(self, stamp_ns: int, frame: str):
         T = self.store.types
         self.seq += 1
-        stamp = T["builtin_interfaces/msg/Time"](sec=int(stamp_ns // 1_000_000_000),
-                                                 nanosec=int(stamp_ns % 1_000_000_000))
+        stamp = T["builtin_interfaces/msg/Time"](
+            sec=int(stamp_ns // 1_000_000_000), nanosec=int(stamp_ns % 1_000_000_000)
+        )
         return T["std_msgs/msg/Header"](seq=self.seq, stamp=stamp, frame_id=frame)
 
     def scans(self, run: ScanRun, topic: str = "/scan") -> None:
@@ -100,12 +101,18 @@ class Ros1BagWriter:
         empty = np.zeros(0, np.float32)
         for k, stamp in enumerate(run.stamps.tolist()):
             inten = run.intensities[k] if run.intensities is not None and run.intensities.shape[1] else empty
-            msg = T[SCAN](header=self._header(stamp, g.frame_id), angle_min=float(g.angle_min),
-                          angle_max=g.angle_max, angle_increment=float(g.angle_increment),
-                          time_increment=float(g.time_increment), scan_time=float(g.scan_time),
-                          range_min=float(g.range_min), range_max=float(g.range_max),
-                          ranges=np.ascontiguousarray(run.ranges[k], np.float32),
-                          intensities=np.ascontiguousarray(inten, np.float32))
+            msg = T[SCAN](
+                header=self._header(stamp, g.frame_id),
+                angle_min=float(g.angle_min),
+                angle_max=g.angle_max,
+                angle_increment=float(g.angle_increment),
+                time_increment=float(g.time_increment),
+                scan_time=float(g.scan_time),
+                range_min=float(g.range_min),
+                range_max=float(g.range_max),
+                ranges=np.ascontiguousarray(run.ranges[k], np.float32),
+                intensities=np.ascontiguousarray(inten, np.float32),
+            )
             self._write(topic, SCAN, stamp, msg)
 
     def odometry(self, odom: Odometry, topic: str = "/odom") -> None:
@@ -116,12 +123,18 @@ class Ros1BagWriter:
         for t, x, y, th in zip(odom.stamps, odom.x, odom.y, odom.theta, strict=True):
             pose = T["geometry_msgs/msg/Pose"](
                 position=T["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0),
-                orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=float(np.sin(th / 2)),
-                                                              w=float(np.cos(th / 2))))
-            msg = T[ODOMETRY](header=self._header(int(t), odom.frame_id), child_frame_id=odom.child_frame_id,
-                              pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
-                              twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                                  twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=cov))
+                orientation=T["geometry_msgs/msg/Quaternion"](
+                    x=0.0, y=0.0, z=float(np.sin(th / 2)), w=float(np.cos(th / 2))
+                ),
+            )
+            msg = T[ODOMETRY](
+                header=self._header(int(t), odom.frame_id),
+                child_frame_id=odom.child_frame_id,
+                pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
+                twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                    twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=cov
+                ),
+            )
             self._write(topic, ODOMETRY, int(t), msg)
 
     def transforms(self, stamp_ns: int, transforms: list[Transform], topic: str = "/tf") -> None:
@@ -129,9 +142,14 @@ class Ros1BagWriter:
         T = self.store.types
         out = []
         for tr in transforms:
-            out.append(T["geometry_msgs/msg/TransformStamped"](
-                header=self._header(tr.stamp_ns, tr.parent), child_frame_id=tr.child,
-                transform=T["geometry_msgs/msg/Transform"](
-                    translation=T["geometry_msgs/msg/Vector3"](x=tr.x, y=tr.y, z=tr.z),
-                    rotation=T["geometry_msgs/msg/Quaternion"](x=tr.qx, y=tr.qy, z=tr.qz, w=tr.qw))))
+            out.append(
+                T["geometry_msgs/msg/TransformStamped"](
+                    header=self._header(tr.stamp_ns, tr.parent),
+                    child_frame_id=tr.child,
+                    transform=T["geometry_msgs/msg/Transform"](
+                        translation=T["geometry_msgs/msg/Vector3"](x=tr.x, y=tr.y, z=tr.z),
+                        rotation=T["geometry_msgs/msg/Quaternion"](x=tr.qx, y=tr.qy, z=tr.qz, w=tr.qw),
+                    ),
+                )
+            )
         self._write(topic, TF, stamp_ns, T[TF](transforms=out))

@@ -70,7 +70,7 @@ def _not_bag(folder: Path, entries: list[str]) -> str | None:
 
 
 def _state(folder: Path, force: bool) -> str:
-    """"missing", "empty" or "bag" (which `force` allows replacing); else OutputError saying why not."""
+    """ "missing", "empty" or "bag" (which `force` allows replacing); else OutputError saying why not."""
     try:
         st = os.lstat(folder)
     except FileNotFoundError:
@@ -89,8 +89,9 @@ def _state(folder: Path, force: bool) -> str:
         return "empty"
     foreign = _not_bag(folder, entries)
     if foreign:
-        raise OutputError(f"{folder}: a folder that is not a ROS 2 bag ({foreign}); it is never replaced (even "
-                          "with --force)")
+        raise OutputError(
+            f"{folder}: a folder that is not a ROS 2 bag ({foreign}); it is never replaced (even with --force)"
+        )
     if not force:
         raise OutputExistsError(f"{folder}: exists; use --force to replace it")
     return "bag"
@@ -109,14 +110,17 @@ def check_output(folder: str | Path, *, force: bool = False, inputs: Iterable[st
     if p.name in ("", ".", ".."):
         raise OutputError(f"{raw}: give the bag folder a name")
     if p.suffix.lower() == ".mcap":
-        raise OutputError(f"{raw}: with --bag-dir the output is a folder (holding {member(p.with_suffix('')).name} "
-                          f"and {METADATA}); name it without .mcap, e.g. {p.with_suffix('')}")
+        raise OutputError(
+            f"{raw}: with --bag-dir the output is a folder (holding {member(p.with_suffix('')).name} "
+            f"and {METADATA}); name it without .mcap, e.g. {p.with_suffix('')}"
+        )
     parent = outputs.folder_of(p)
     size = len(os.fsencode(member(p).name))
     limit = outputs.name_max(parent if parent.is_dir() else Path("."))
     if size > limit:
-        raise OutputError(f"{raw}: name too long for a bag folder (its file {member(p).name} takes {size} bytes; at "
-                          f"most {limit})")
+        raise OutputError(
+            f"{raw}: name too long for a bag folder (its file {member(p).name} takes {size} bytes; at most {limit})"
+        )
     _state(p, force)
     for inp in inputs:
         if os.path.lexists(inp) and _inside(inp, p):
@@ -141,19 +145,39 @@ def metadata_text(log: mcapio.LogContents, file_name: str) -> str:
     count = sum(c.count for c in channels)
     start = log.start_ns if count else 0
     duration = log.end_ns - start if count else 0
-    lines = ["rosbag2_bagfile_information:", f"  version: {VERSION}", f"  storage_identifier: {STORAGE}",
-             "  duration:", f"    nanoseconds: {duration}", "  starting_time:",
-             f"    nanoseconds_since_epoch: {start}", f"  message_count: {count}",
-             "  topics_with_message_count:" + ("" if channels else " []")]
+    lines = [
+        "rosbag2_bagfile_information:",
+        f"  version: {VERSION}",
+        f"  storage_identifier: {STORAGE}",
+        "  duration:",
+        f"    nanoseconds: {duration}",
+        "  starting_time:",
+        f"    nanoseconds_since_epoch: {start}",
+        f"  message_count: {count}",
+        "  topics_with_message_count:" + ("" if channels else " []"),
+    ]
     for c in channels:
-        lines += ["    - topic_metadata:", f"        name: {_scalar(c.topic)}", f"        type: {_scalar(c.msgtype)}",
-                  f"        serialization_format: {_scalar(c.message_encoding)}",
-                  f"        offered_qos_profiles: {_scalar(c.metadata.get('offered_qos_profiles', ''))}",
-                  f"      message_count: {c.count}"]
-    lines += ['  compression_format: ""', '  compression_mode: ""', "  relative_file_paths:",
-              f"    - {_scalar(file_name)}", "  files:", f"    - path: {_scalar(file_name)}", "      starting_time:",
-              f"        nanoseconds_since_epoch: {start}", "      duration:", f"        nanoseconds: {duration}",
-              f"      message_count: {count}"]
+        lines += [
+            "    - topic_metadata:",
+            f"        name: {_scalar(c.topic)}",
+            f"        type: {_scalar(c.msgtype)}",
+            f"        serialization_format: {_scalar(c.message_encoding)}",
+            f"        offered_qos_profiles: {_scalar(c.metadata.get('offered_qos_profiles', ''))}",
+            f"      message_count: {c.count}",
+        ]
+    lines += [
+        '  compression_format: ""',
+        '  compression_mode: ""',
+        "  relative_file_paths:",
+        f"    - {_scalar(file_name)}",
+        "  files:",
+        f"    - path: {_scalar(file_name)}",
+        "      starting_time:",
+        f"        nanoseconds_since_epoch: {start}",
+        "      duration:",
+        f"        nanoseconds: {duration}",
+        f"      message_count: {count}",
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -181,7 +205,7 @@ def _commit(tmp: Path, dest: Path, force: bool) -> None:
             if aside is not None:
                 os.rename(dest, aside)
             try:
-                os.replace(tmp, dest)   # a missing name or an empty folder
+                os.replace(tmp, dest)  # a missing name or an empty folder
             except OSError:
                 if aside is not None:
                     os.rename(aside, dest)
@@ -209,7 +233,7 @@ def writing(folder: str | Path, *, force: bool = False, inputs: Iterable[str | P
         yield log_file
         _write_metadata(tmp, log_file, dest)
         _commit(tmp, dest, force)
-    except OutputError as exc:   # a write error names the bag folder, not the temporary one
+    except OutputError as exc:  # a write error names the bag folder, not the temporary one
         _remove(tmp)
         text = str(exc).replace(os.fspath(log_file), os.fspath(dest)).replace(os.fspath(tmp), os.fspath(dest))
         raise type(exc)(text) from exc

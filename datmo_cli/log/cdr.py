@@ -18,9 +18,19 @@ from .types import fields as msg_fields
 CDR_HEADER = b"\x00\x01\x00\x00"  # CDR, little endian
 HEADER_TYPE = "std_msgs/msg/Header"
 _NUMERIC = {
-    "bool": "u1", "byte": "u1", "char": "u1", "int8": "i1", "uint8": "u1",
-    "int16": "<i2", "uint16": "<u2", "int32": "<i4", "uint32": "<u4",
-    "int64": "<i8", "uint64": "<u8", "float32": "<f4", "float64": "<f8",
+    "bool": "u1",
+    "byte": "u1",
+    "char": "u1",
+    "int8": "i1",
+    "uint8": "u1",
+    "int16": "<i2",
+    "uint16": "<u2",
+    "int32": "<i4",
+    "uint32": "<u4",
+    "int64": "<i8",
+    "uint64": "<u8",
+    "float32": "<f4",
+    "float64": "<f8",
 }
 
 
@@ -70,8 +80,7 @@ def _struct_layout(msgtype: str) -> tuple[np.dtype, int]:
     first_align = formats[0].alignment if formats else 1
     if _align(pos, first_align) != _align(pos, max_align):
         raise TypeError(f"{msgtype}: CDR layout of consecutive elements is not a C layout; reorder fields")
-    dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets,
-                      "itemsize": _align(pos, max_align)})
+    dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": _align(pos, max_align)})
     return dtype, max_align
 
 
@@ -188,7 +197,7 @@ def decode(msgtype: str, data: bytes | memoryview) -> dict:
     buf = memoryview(data)[4:]
     try:
         out, pos = _decode(msgtype, buf)
-    except (ValueError, IndexError, UnicodeDecodeError) as exc:   # numpy: a length past the end of the buffer
+    except (ValueError, IndexError, UnicodeDecodeError) as exc:  # numpy: a length past the end of the buffer
         raise DecodeError(f"{msgtype} of {len(buf) + 4} bytes: a length runs past its end ({exc})") from None
     if not 0 <= len(buf) - pos <= 3:
         raise DecodeError(f"{msgtype} of {len(buf) + 4} bytes: {len(buf) - pos} bytes after its last field")
@@ -217,7 +226,7 @@ def _decode(msgtype: str, buf: memoryview) -> tuple[dict, int]:
             pos += f.dtype.itemsize * f.count
         else:
             pos = _align(pos, 4)
-            n = int.from_bytes(buf[pos:pos + 4], "little")
+            n = int.from_bytes(buf[pos : pos + 4], "little")
             pos += 4
             if n:
                 pos = _align(pos, f.align)
@@ -228,8 +237,8 @@ def _decode(msgtype: str, buf: memoryview) -> tuple[dict, int]:
 
 def _get_string(buf: memoryview, pos: int) -> tuple[str, int]:
     pos = _align(pos, 4)
-    n = int.from_bytes(buf[pos:pos + 4], "little")
+    n = int.from_bytes(buf[pos : pos + 4], "little")
     if pos + 4 + n > len(buf):
         raise ValueError(f"a string of {n} bytes at byte {pos}")
-    text = bytes(buf[pos + 4:pos + 4 + n - 1]).decode() if n else ""
+    text = bytes(buf[pos + 4 : pos + 4 + n - 1]).decode() if n else ""
     return text, pos + 4 + n

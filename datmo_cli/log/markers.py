@@ -47,8 +47,9 @@ _AFTER_TEXT = _EMPTY + _EMPTY + b"\x00" * 4 + b"\x00"
 def header(stamp_ns: int, frame_id: str, ns: str) -> bytes:
     """The bytes every marker of an array starts with: its header (stamp `stamp_ns` in ns, `frame_id`) and
     namespace `ns` (4-aligned, of 4-aligned length)."""
-    return _STAMP.pack(stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000) + _string(_cstr(frame_id)) + _string(
-        _cstr(ns))
+    return (
+        _STAMP.pack(stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000) + _string(_cstr(frame_id)) + _string(_cstr(ns))
+    )
 
 
 class MarkerArrayWriter:
@@ -60,14 +61,23 @@ class MarkerArrayWriter:
         self.pos = 4
         self.head = head
 
-    def marker(self, mid: int, mtype: int, action: int, pose: tuple = (0.0, 0.0, 0.0),
-               scale: tuple = (1.0, 1.0, 1.0), color: tuple = WHITE, points: np.ndarray | None = None,
-               colors: np.ndarray | None = None, text: str = "") -> None:
+    def marker(
+        self,
+        mid: int,
+        mtype: int,
+        action: int,
+        pose: tuple = (0.0, 0.0, 0.0),
+        scale: tuple = (1.0, 1.0, 1.0),
+        color: tuple = WHITE,
+        points: np.ndarray | None = None,
+        colors: np.ndarray | None = None,
+        text: str = "",
+    ) -> None:
         """Append marker `mid` of type `mtype` doing `action`: at position `pose` (m, no rotation), of
         `scale` (m), `color` (RGBA) or per-point `colors` (n, 4), with `points` (n, 3) m and `text`; lifetime 0
         (for ever), not frame-locked."""
         parts = self.parts
-        pos = self.pos + (-self.pos % 4)   # a Marker starts 4-aligned (its header's stamp)
+        pos = self.pos + (-self.pos % 4)  # a Marker starts 4-aligned (its header's stamp)
         if pos != self.pos:
             parts.append(b"\x00" * (pos - self.pos))
         parts.append(self.head)
@@ -77,9 +87,12 @@ class MarkerArrayWriter:
         fixed = _FIXED.get(key)
         if fixed is None:
             pad = -(pos + 12) % 8
-            raw = (_I3.pack(mid, mtype, action) + b"\x00" * pad
-                   + _POSE_SCALE.pack(pose[0], pose[1], pose[2], 0.0, 0.0, 0.0, 1.0, *scale)
-                   + _COLOR_LIFE.pack(*color, 0, 0, 0))
+            raw = (
+                _I3.pack(mid, mtype, action)
+                + b"\x00" * pad
+                + _POSE_SCALE.pack(pose[0], pose[1], pose[2], 0.0, 0.0, 0.0, 1.0, *scale)
+                + _COLOR_LIFE.pack(*color, 0, 0, 0)
+            )
             fixed = raw + b"\x00" * (-(pos + len(raw)) % 4)
             if len(_FIXED) > 4096:
                 _FIXED.clear()
@@ -127,8 +140,8 @@ class MarkerArrayWriter:
             probe.parts, probe.pos = [], start
             probe.marker(mid, TEXT_VIEW_FACING, ADD, pose=(0.0, 0.0, z), scale=(0.0, 0.0, height), text=text)
             raw = b"".join(probe.parts)
-            cut = len(self.head) + 12 + (-(start + len(self.head) + 12) % 8)   # where the pose begins
-            cached = _LABELS[key] = (raw[:cut], raw[cut + 16:], len(raw))
+            cut = len(self.head) + 12 + (-(start + len(self.head) + 12) % 8)  # where the pose begins
+            cached = _LABELS[key] = (raw[:cut], raw[cut + 16 :], len(raw))
         pre, post, n = cached
         if start != self.pos:
             self.parts.append(b"\x00" * (start - self.pos))

@@ -46,11 +46,13 @@ MAGIC = b"\x89MCAP0\r\n"
 def _qos_yaml(durability: int) -> str:
     """An offered QoS profile as rosbag2 records it in a channel's metadata (rmw's enums: history 3 and depth 0
     are what an offer reports; reliability 1 reliable; durability 1 transient-local, 2 volatile)."""
-    return (f"- history: 3\n  depth: 0\n  reliability: 1\n  durability: {durability}\n"
-            "  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n"
-            "  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n"
-            "  liveliness: 1\n  liveliness_lease_duration:\n    sec: 2147483647\n    nsec: 4294967295\n"
-            "  avoid_ros_namespace_conventions: false\n")
+    return (
+        f"- history: 3\n  depth: 0\n  reliability: 1\n  durability: {durability}\n"
+        "  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n"
+        "  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n"
+        "  liveliness: 1\n  liveliness_lease_duration:\n    sec: 2147483647\n    nsec: 4294967295\n"
+        "  avoid_ros_namespace_conventions: false\n"
+    )
 
 
 # Reliable and volatile, as rosbag2 records a topic of an ordinary publisher (a driver's /scan, /tf): `ros2 bag
@@ -118,10 +120,10 @@ class LogContents:
     chunks: int = 0
     truncated: bool = False
     size: int = 0
-    corrupt_chunks: int = 0      # chunks skipped: CRC mismatch, bad size or compressed data that does not decode
-    corrupt_bytes: int = 0       # bytes of the file those chunks took
-    corrupt_problem: str = ""    # what was wrong with the first of them, and where
-    bad_length_at: int = 0       # byte of a record whose length runs past the end of a file that ends whole
+    corrupt_chunks: int = 0  # chunks skipped: CRC mismatch, bad size or compressed data that does not decode
+    corrupt_bytes: int = 0  # bytes of the file those chunks took
+    corrupt_problem: str = ""  # what was wrong with the first of them, and where
+    bad_length_at: int = 0  # byte of a record whose length runs past the end of a file that ends whole
 
     def topics(self) -> dict[str, Channel]:
         return {c.topic: c for c in self.channels.values()}
@@ -144,7 +146,7 @@ def _check_input(path: Path) -> Path:
     from ..input_files import check
 
     path = Path(path)
-    check(path, folder_ok=True)   # a regular file (or a folder, refused below): a FIFO or a device never ends
+    check(path, folder_ok=True)  # a regular file (or a folder, refused below): a FIFO or a device never ends
     if path.is_dir():
         raise InputError(f"{path}: is a directory, not an MCAP log")
     if path.stat().st_size == 0:
@@ -154,7 +156,7 @@ def _check_input(path: Path) -> Path:
 
 def _string(buf, pos: int) -> tuple[str, int]:
     n = _U32.unpack_from(buf, pos)[0]
-    return bytes(buf[pos + 4:pos + 4 + n]).decode("utf-8", "replace"), pos + 4 + n
+    return bytes(buf[pos + 4 : pos + 4 + n]).decode("utf-8", "replace"), pos + 4 + n
 
 
 def _map(buf, pos: int) -> tuple[dict[str, str], int]:
@@ -185,8 +187,9 @@ def read_log(path: str | Path, topics: Iterable[str] = ()) -> LogContents:
     return out
 
 
-def iter_messages(path: str | Path, topics: Iterable[str] | None = None, contents: LogContents | None = None, *,
-                  warn: bool = True) -> Iterator[tuple[str, int, bytes]]:
+def iter_messages(
+    path: str | Path, topics: Iterable[str] | None = None, contents: LogContents | None = None, *, warn: bool = True
+) -> Iterator[tuple[str, int, bytes]]:
     """(topic, log time ns, payload) of every message on `topics` (all when None), in file order, one chunk
     in memory at a time: how commands stream a log of any length. `contents`, when given, is filled with
     the channels and metadata met on the way (as read_log fills them). Errors as read_log; the warning of
@@ -195,8 +198,9 @@ def iter_messages(path: str | Path, topics: Iterable[str] | None = None, content
     yield from _walk_file(path, topics, out, warn)
 
 
-def _walk_file(path: str | Path, topics: Iterable[str] | None, out: LogContents,
-               warn: bool = True) -> Iterator[tuple[str, int, bytes]]:
+def _walk_file(
+    path: str | Path, topics: Iterable[str] | None, out: LogContents, warn: bool = True
+) -> Iterator[tuple[str, int, bytes]]:
     path = _check_input(Path(path))
     out.path, out.size = path, path.stat().st_size
     with open(path, "rb") as f:
@@ -215,28 +219,40 @@ def _walk_file(path: str | Path, topics: Iterable[str] | None, out: LogContents,
                     walk.count_missing_chunks()
             except _Truncated as exc:
                 out.truncated = True
-                if len(buf) >= 16 and buf[-8:] == MAGIC:   # the file ends as a whole one does: a corrupt length
+                if len(buf) >= 16 and buf[-8:] == MAGIC:  # the file ends as a whole one does: a corrupt length
                     out.bad_length_at = exc.args[0]
             except struct.error:
-                raise InputError(f"{path}: corrupt MCAP data (a record's fields run past the end of the file or "
-                                 "chunk)") from None
+                raise InputError(
+                    f"{path}: corrupt MCAP data (a record's fields run past the end of the file or chunk)"
+                ) from None
             except (UnicodeDecodeError, ValueError) as exc:
                 raise InputError(f"{path}: corrupt MCAP data ({exc})") from None
     if out.corrupt_chunks and warn:
-        warnings.warn(f"{path}: skipped {out.corrupt_chunks} corrupt chunk(s) ({out.corrupt_bytes:,} bytes; first: "
-                      f"{out.corrupt_problem}); read the {out.chunks} sound chunk(s)", CorruptLogWarning, stacklevel=3)
+        warnings.warn(
+            f"{path}: skipped {out.corrupt_chunks} corrupt chunk(s) ({out.corrupt_bytes:,} bytes; first: "
+            f"{out.corrupt_problem}); read the {out.chunks} sound chunk(s)",
+            CorruptLogWarning,
+            stacklevel=3,
+        )
     if out.bad_length_at and warn:
-        warnings.warn(f"{path}: the record at byte {out.bad_length_at} runs past the end of the file (a corrupt "
-                      f"length); read the {out.chunks} complete chunk(s) before it", CorruptLogWarning, stacklevel=3)
+        warnings.warn(
+            f"{path}: the record at byte {out.bad_length_at} runs past the end of the file (a corrupt "
+            f"length); read the {out.chunks} complete chunk(s) before it",
+            CorruptLogWarning,
+            stacklevel=3,
+        )
     elif out.truncated and warn:
-        warnings.warn(f"{path}: truncated MCAP file; read the {out.chunks} complete chunk(s) before the cut",
-                      TruncatedLogWarning, stacklevel=3)
+        warnings.warn(
+            f"{path}: truncated MCAP file; read the {out.chunks} complete chunk(s) before the cut",
+            TruncatedLogWarning,
+            stacklevel=3,
+        )
 
 
-_RELEASE = 8 << 20   # give back the pages of a mapped file every 8 MB read
-_MAX_LOG_TIME = (1 << 63) - 1   # ns; datmo keeps log times as int64 (a later time is a corrupt record)
-_FOOTER = struct.Struct("<BQQQI")   # opcode, record length, summary start, summary offset start, summary CRC
-_STATS_CHUNKS = struct.Struct("<QHIIII")   # a Statistics record's counts up to chunk_count
+_RELEASE = 8 << 20  # give back the pages of a mapped file every 8 MB read
+_MAX_LOG_TIME = (1 << 63) - 1  # ns; datmo keeps log times as int64 (a later time is a corrupt record)
+_FOOTER = struct.Struct("<BQQQI")  # opcode, record length, summary start, summary offset start, summary CRC
+_STATS_CHUNKS = struct.Struct("<QHIIII")  # a Statistics record's counts up to chunk_count
 
 
 class _Truncated(Exception):
@@ -247,7 +263,7 @@ class _CorruptChunk(Exception):
     pass
 
 
-MAX_CHUNK_BYTES = 256 << 20   # uncompressed bytes a chunk may declare: writers close a chunk at 1-4 MiB (datmo 1,
+MAX_CHUNK_BYTES = 256 << 20  # uncompressed bytes a chunk may declare: writers close a chunk at 1-4 MiB (datmo 1,
 # rosbag2 0.75) plus one message; a declared size beyond this is damage or a decompression bomb, never read
 
 
@@ -265,9 +281,10 @@ def _chunk_records(buf, body: int, end: int) -> bytes | memoryview:
         if cpos + 8 + size > end:
             raise _CorruptChunk("its records run past its end")
         if uncompressed > MAX_CHUNK_BYTES:
-            raise _CorruptChunk(f"declares {uncompressed:,} bytes uncompressed, more than a chunk may hold "
-                                f"({MAX_CHUNK_BYTES:,})")
-        data = buf[cpos + 8:cpos + 8 + size]
+            raise _CorruptChunk(
+                f"declares {uncompressed:,} bytes uncompressed, more than a chunk may hold ({MAX_CHUNK_BYTES:,})"
+            )
+        data = buf[cpos + 8 : cpos + 8 + size]
         if compression == "zstd":
             data = zstandard.ZstdDecompressor().decompress(data, max_output_size=uncompressed)
         elif compression == "lz4":
@@ -275,7 +292,7 @@ def _chunk_records(buf, body: int, end: int) -> bytes | memoryview:
         elif compression:
             raise _CorruptChunk(f"unsupported compression {compression!r}")
         else:
-            data = bytes(data)   # a copy: no view may outlive the mapped file
+            data = bytes(data)  # a copy: no view may outlive the mapped file
     except (struct.error, zstandard.ZstdError, RuntimeError, MemoryError, OverflowError, ValueError) as exc:
         raise _CorruptChunk(f"does not decompress ({exc})") from None
     if len(data) != uncompressed:
@@ -306,7 +323,7 @@ class _Walk:
         self.file, self.out, self.want = file, out, want
         self.schemas: dict[int, tuple[str, str, bytes]] = {}
         self.wanted_ids: set[int] = set()
-        self.released = 0    # bytes of the mapped file given back to the system (see _RELEASE)
+        self.released = 0  # bytes of the mapped file given back to the system (see _RELEASE)
         self._summary: list[tuple[int, int]] | None = None
         self._recovered = False
 
@@ -336,7 +353,7 @@ class _Walk:
                 ch.count += 1
                 ch.last_ns = log_time
                 if cid in self.wanted_ids:
-                    yield ch.topic, log_time, bytes(buf[body + 22:pos])
+                    yield ch.topic, log_time, bytes(buf[body + 22 : pos])
             elif op == _OP_CHUNK:
                 try:
                     data = _chunk_records(buf, body, pos)
@@ -349,8 +366,10 @@ class _Walk:
                     try:
                         yield from self.scan(memoryview(data), 0, len(data), top=False)
                     except _Truncated as exc:
-                        raise ValueError(f"the record at byte {exc.args[0]} of the chunk at byte {body - 9} runs "
-                                         "past the chunk's end") from None
+                        raise ValueError(
+                            f"the record at byte {exc.args[0]} of the chunk at byte {body - 9} runs "
+                            "past the chunk's end"
+                        ) from None
                     out.chunks += 1
                 if top and isinstance(buf, mmap.mmap) and pos - self.released >= _RELEASE:
                     # pages of the file read so far leave this process's memory (a long log is not held whole)
@@ -376,7 +395,7 @@ class _Walk:
             name, p = _string(buf, body + 2)
             encoding, p = _string(buf, p)
             n = _U32.unpack_from(buf, p)[0]
-            self.schemas[sid] = (name, encoding, bytes(buf[p + 4:p + 4 + n]))
+            self.schemas[sid] = (name, encoding, bytes(buf[p + 4 : p + 4 + n]))
             return
         cid, sid = struct.unpack_from("<HH", buf, body)
         topic, p = _string(buf, body + 4)
@@ -414,7 +433,7 @@ class _Walk:
             op, length, start, _, crc = _FOOTER.unpack_from(buf, foot)
             if op != _OP_FOOTER or length != _FOOTER.size - 9 or not 8 <= start <= foot:
                 return self._summary
-            if crc and zlib.crc32(buf[start:foot + _FOOTER.size - 4]) != crc:
+            if crc and zlib.crc32(buf[start : foot + _FOOTER.size - 4]) != crc:
                 return self._summary
             records, pos = [], start
             while pos + 9 <= foot:
@@ -435,8 +454,10 @@ class _Walk:
                 missing = expected - self.out.chunks - self.out.corrupt_chunks
                 if missing > 0:
                     if not self.out.corrupt_chunks:
-                        self.out.corrupt_problem = (f"{missing} of the {expected} chunks the summary lists were not "
-                                                    "found (a damaged record header)")
+                        self.out.corrupt_problem = (
+                            f"{missing} of the {expected} chunks the summary lists were not "
+                            "found (a damaged record header)"
+                        )
                     self.out.corrupt_chunks += missing
 
 
@@ -483,8 +504,10 @@ def several_channels(log: LogContents, topic: str) -> str | None:
     if len(on) < 2:
         return None
     which = ", ".join(f"id {c.id}: {c.count} {c.msgtype}" for c in on)
-    return (f"{log.path}: {topic} is on {len(on)} channels ({which}); their messages would interleave into one "
-            "stream: keep one channel, or give each its own topic")
+    return (
+        f"{log.path}: {topic} is on {len(on)} channels ({which}); their messages would interleave into one "
+        "stream: keep one channel, or give each its own topic"
+    )
 
 
 def check_scan_channel(log: LogContents, topic: str = TOPIC_SCAN) -> int:
@@ -504,8 +527,9 @@ def check_scan_channel(log: LogContents, topic: str = TOPIC_SCAN) -> int:
     return ch.count
 
 
-def decode_scan_block(path: Path, payloads: list[bytes], first: int = 0, geometry: ScanGeometry | None = None,
-                      topic: str = TOPIC_SCAN) -> ScanRun:
+def decode_scan_block(
+    path: Path, payloads: list[bytes], first: int = 0, geometry: ScanGeometry | None = None, topic: str = TOPIC_SCAN
+) -> ScanRun:
     """The ScanRun of a block of LaserScan payloads, scans first.. of the log at `path`; refuses a geometry
     that changes within the block or from `geometry` (the blocks' before)."""
     try:
@@ -515,8 +539,10 @@ def decode_scan_block(path: Path, payloads: list[bytes], first: int = 0, geometr
     except ValueError as exc:
         raise InputError(f"{path}: bad LaserScan message on {topic}: {exc}") from None
     if geometry is not None and not run.geometry.same_beams(geometry):
-        raise GeometryError(f"{path}: scan geometry changes at scan {first}: {geometry.describe()} -> "
-                            f"{run.geometry.describe()}; split the log before processing it")
+        raise GeometryError(
+            f"{path}: scan geometry changes at scan {first}: {geometry.describe()} -> "
+            f"{run.geometry.describe()}; split the log before processing it"
+        )
     return run
 
 
@@ -573,14 +599,19 @@ def encode_odometry(odom: Odometry) -> list[bytes]:
         header = T["std_msgs/msg/Header"](stamp=stamp, frame_id=odom.frame_id)
         pose = T["geometry_msgs/msg/Pose"](
             position=T["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0),
-            orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=float(np.sin(th / 2)),
-                                                          w=float(np.cos(th / 2))))
+            orientation=T["geometry_msgs/msg/Quaternion"](
+                x=0.0, y=0.0, z=float(np.sin(th / 2)), w=float(np.cos(th / 2))
+            ),
+        )
         zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
         msg = T[types.ODOMETRY](
-            header=header, child_frame_id=odom.child_frame_id,
+            header=header,
+            child_frame_id=odom.child_frame_id,
             pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
             twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=cov))
+                twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=cov
+            ),
+        )
         out.append(bytes(store.serialize_cdr(msg, types.ODOMETRY)))
     return out
 
@@ -611,16 +642,16 @@ class Provenance:
     params: dict = field(default_factory=dict)
     inputs: list = field(default_factory=list)
     command_line: str | None = None
-    names: list | None = None   # what the inputs are called in the records (e.g. the URL a local copy came from)
+    names: list | None = None  # what the inputs are called in the records (e.g. the URL a local copy came from)
 
     def records(self) -> dict[str, dict[str, str]]:
         line = self.command_line if self.command_line is not None else f"datmo {self.command}"
         return {
-            "datmo": {"tool": "datmo", "version": __version__, "command": self.command,
-                      "command_line": _text(line)},
+            "datmo": {"tool": "datmo", "version": __version__, "command": self.command, "command_line": _text(line)},
             "datmo.params": {str(k): json.dumps(v, sort_keys=True, default=str) for k, v in self.params.items()},
-            "datmo.inputs": {_text(str(name)): sha256_of(p)
-                             for name, p in zip(self.names or self.inputs, self.inputs, strict=True)},
+            "datmo.inputs": {
+                _text(str(name)): sha256_of(p) for name, p in zip(self.names or self.inputs, self.inputs, strict=True)
+            },
         }
 
 
@@ -644,8 +675,15 @@ class LogWriter:
     mode a failed `close()` leaves the temporary file for `keep_flushed` (removed at exit if not kept).
     """
 
-    def __init__(self, path: str | Path, *, force: bool = False, provenance: Provenance | None = None,
-                 streaming: bool = False, chunk_size: int = 1 << 20) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        force: bool = False,
+        provenance: Provenance | None = None,
+        streaming: bool = False,
+        chunk_size: int = 1 << 20,
+    ) -> None:
         from mcap.writer import CompressionType, Writer
 
         from .. import outputs
@@ -653,12 +691,12 @@ class LogWriter:
         self.path = outputs.check_output(path, force=force, inputs=provenance.inputs if provenance else ())
         self.force = force
         self._closed = False
-        self.flushed = 0   # bytes of the temporary file known to be on disk, ending after a complete record
-        self.kept = 0      # bytes kept in `path` by keep_flushed
+        self.flushed = 0  # bytes of the temporary file known to be on disk, ending after a complete record
+        self.kept = 0  # bytes kept in `path` by keep_flushed
         self._whole = False
         self._left: Exception | None = None
         self.tmp, file = outputs.open_temp(self.path)
-        self._file = outputs.Guarded(file, self.path)   # a write error names the output, not the temporary file
+        self._file = outputs.Guarded(file, self.path)  # a write error names the output, not the temporary file
         try:
             with outputs.writing(self.path):
                 self._writer = Writer(self._file, chunk_size=chunk_size, compression=CompressionType.ZSTD)
@@ -668,7 +706,7 @@ class LogWriter:
                 self._channels: dict[str, int] = {}
                 self._buffer: list[tuple[np.ndarray, int, list[bytes]]] = []  # (stamps, channel id, payloads)
                 self._seq = 0
-                self.metadata: dict[str, dict[str, str]] = {}   # the metadata records written, by name
+                self.metadata: dict[str, dict[str, str]] = {}  # the metadata records written, by name
                 if provenance is not None:
                     for name, data in provenance.records().items():
                         self._metadata(name, data)
@@ -677,9 +715,16 @@ class LogWriter:
             raise
 
     # -- channels
-    def channel(self, topic: str, msgtype: str, *, schema_text: str | None = None,
-                schema_encoding: str = "ros2msg", message_encoding: str = "cdr",
-                metadata: dict[str, str] | None = None) -> int:
+    def channel(
+        self,
+        topic: str,
+        msgtype: str,
+        *,
+        schema_text: str | None = None,
+        schema_encoding: str = "ros2msg",
+        message_encoding: str = "cdr",
+        metadata: dict[str, str] | None = None,
+    ) -> int:
         """The id of `topic`'s channel, registering it (and its schema) on first use."""
         if topic in self._channels:
             return self._channels[topic]
@@ -718,8 +763,9 @@ class LogWriter:
         """Every scan of `run` as sensor_msgs/msg/LaserScan."""
         self.write_many(topic, types.LASERSCAN, run.stamps, encode_scans(run))
 
-    def write_scan(self, stamp_ns: int, ranges, geometry: ScanGeometry, intensities=None,
-                   topic: str = TOPIC_SCAN) -> None:
+    def write_scan(
+        self, stamp_ns: int, ranges, geometry: ScanGeometry, intensities=None, topic: str = TOPIC_SCAN
+    ) -> None:
         """One scan (ranges in metres, float32) as sensor_msgs/msg/LaserScan."""
         self.write(topic, types.LASERSCAN, stamp_ns, encode_scan(stamp_ns, ranges, geometry, intensities))
 
@@ -755,9 +801,14 @@ class LogWriter:
         for ch in sorted(log.channels.values(), key=lambda c: c.id):
             if ch.topic in skip or not ch.count or ch.topic in ids:
                 continue
-            ids[ch.topic] = self.channel(ch.topic, ch.msgtype, schema_text=ch.schema_data.decode("utf-8", "replace"),
-                                         schema_encoding=ch.schema_encoding, message_encoding=ch.message_encoding,
-                                         metadata=ch.metadata)
+            ids[ch.topic] = self.channel(
+                ch.topic,
+                ch.msgtype,
+                schema_text=ch.schema_data.decode("utf-8", "replace"),
+                schema_encoding=ch.schema_encoding,
+                message_encoding=ch.message_encoding,
+                metadata=ch.metadata,
+            )
         for name, data in log.metadata.items():
             self._metadata(name if name.startswith("input/") else f"input/{name}", data)
         return ids
@@ -820,7 +871,7 @@ class LogWriter:
                 outputs.commit(self.tmp, self.path, self.force)
         except BaseException:
             if self._streaming:
-                self._release()   # keep_flushed keeps what reached the disk (remove_live drops it otherwise)
+                self._release()  # keep_flushed keeps what reached the disk (remove_live drops it otherwise)
             else:
                 self.abort()
             raise
@@ -860,7 +911,7 @@ class LogWriter:
         if self.flushed <= 0:
             outputs.discard(self.tmp)
             return 0
-        with outputs.critical():   # a signal waits until `kept` says where the data is
+        with outputs.critical():  # a signal waits until `kept` says where the data is
             try:
                 fd = os.open(self.tmp, os.O_WRONLY | getattr(os, "O_CLOEXEC", 0))
                 try:
@@ -875,7 +926,8 @@ class LogWriter:
                 why = outputs.reason(exc) if isinstance(exc, OSError) else str(exc)
                 self._left = OutputError(
                     f"{os.fsdecode(self.tmp)}: holds the data written so far (its first {self.flushed:,} bytes are "
-                    f"complete) but could not become {os.fsdecode(self.path)} ({why}); rename it yourself")
+                    f"complete) but could not become {os.fsdecode(self.path)} ({why}); rename it yourself"
+                )
                 raise self._left from exc
             outputs.forget(self.tmp)
             self.kept = self.flushed
@@ -911,8 +963,9 @@ class LogWriter:
 
         topic = TOPIC_TF_STATIC if static else TOPIC_TF
         qos = QOS_YAML_LATCHED if static else QOS_YAML
-        return self.channel(topic, transforms.TF_MESSAGE, schema_text=transforms.SCHEMA,
-                            metadata={"offered_qos_profiles": qos})
+        return self.channel(
+            topic, transforms.TF_MESSAGE, schema_text=transforms.SCHEMA, metadata={"offered_qos_profiles": qos}
+        )
 
     def write_transforms(self, stamps_ns, payloads: list[bytes], static: bool = False) -> None:
         """TFMessage payloads (transforms.encode_tf) on /tf, or on /tf_static; stamps in ns."""

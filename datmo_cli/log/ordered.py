@@ -23,7 +23,7 @@ import numpy as np
 from .mcapio import LogWriter
 
 _MIN = int(np.iinfo(np.int64).min)
-WINDOW = 4096   # messages written at once, and held back at least, once more than twice as many are held
+WINDOW = 4096  # messages written at once, and held back at least, once more than twice as many are held
 
 
 class OrderedSink:
@@ -37,21 +37,21 @@ class OrderedSink:
         self.unique = set(unique)
         self._stamps: list[np.ndarray] = []
         self._cids: list[np.ndarray] = []
-        self._seqs: list[np.ndarray] = []            # each message's index among its channel's arrivals
-        self._backs: list[np.ndarray] = []           # whether it came after a later-stamped one on its channel
+        self._seqs: list[np.ndarray] = []  # each message's index among its channel's arrivals
+        self._backs: list[np.ndarray] = []  # whether it came after a later-stamped one on its channel
         self._payloads: list[bytes] = []
         self._held = 0
-        self._last = (_MIN, -1)   # key of the last message written
-        self._arrived: dict[int, int] = {}           # channel -> messages that came
-        self._top: dict[int, int] = {}               # unique channel -> largest stamp that came
-        self._taken: dict[int, int] = {}             # unique channel -> stamp of the last message written
-        self.late = 0        # messages that came after a later one was written
-        self.reordered = 0   # messages of a unique channel stamped before one that came earlier on it (and kept)
-        self.first_reordered: int | None = None      # the first such message's index on its channel
-        self.dropped = 0     # messages of a unique channel with the stamp of one already taken
+        self._last = (_MIN, -1)  # key of the last message written
+        self._arrived: dict[int, int] = {}  # channel -> messages that came
+        self._top: dict[int, int] = {}  # unique channel -> largest stamp that came
+        self._taken: dict[int, int] = {}  # unique channel -> stamp of the last message written
+        self.late = 0  # messages that came after a later one was written
+        self.reordered = 0  # messages of a unique channel stamped before one that came earlier on it (and kept)
+        self.first_reordered: int | None = None  # the first such message's index on its channel
+        self.dropped = 0  # messages of a unique channel with the stamp of one already taken
         self.first_dropped: int | None = None
         self.written = 0
-        self.peak = 0        # most messages held at once
+        self.peak = 0  # most messages held at once
 
     def add(self, cid: int, stamps, payloads: list[bytes]) -> None:
         """Messages of one channel (registered in the writer), in arrival order."""
@@ -91,7 +91,7 @@ class OrderedSink:
         if k <= 0:
             return
         stamps, cids, seqs, backs = (np.concatenate(a) for a in (self._stamps, self._cids, self._seqs, self._backs))
-        order = np.lexsort((cids, stamps))   # stable: arrival order between equal keys
+        order = np.lexsort((cids, stamps))  # stable: arrival order between equal keys
         out, keep = order[:k], np.sort(order[k:])
         payloads = self._payloads
         for cid in np.unique(cids[out]).tolist():
@@ -141,18 +141,25 @@ def stamp_order(stamps) -> tuple[np.ndarray, int, int | None, int, int | None]:
     dropped = np.zeros(len(stamps), bool)
     dropped[order[repeat]] = True
     back = np.flatnonzero((stamps[1:] < np.maximum.accumulate(stamps)[:-1]) & ~dropped[1:]) + 1
-    return (keep, len(back), int(back[0]) if len(back) else None, int(repeat.sum()),
-            int(order[repeat].min()) if repeat.any() else None)
+    return (
+        keep,
+        len(back),
+        int(back[0]) if len(back) else None,
+        int(repeat.sum()),
+        int(order[repeat].min()) if repeat.any() else None,
+    )
 
 
-def order_note(src, total: int, reordered: int, first_reordered: int | None, dropped: int,
-               first_dropped: int | None) -> str | None:
+def order_note(
+    src, total: int, reordered: int, first_reordered: int | None, dropped: int, first_dropped: int | None
+) -> str | None:
     """The one-line warning for `src`'s scans (`total` of them) that came out of time order (`reordered`,
     the first's index) or repeat a stamp (`dropped`); None when there are neither."""
     parts = []
     if reordered:
-        parts.append(f"{reordered} stamped before an earlier one (first at scan {first_reordered}), written in "
-                     "time order")
+        parts.append(
+            f"{reordered} stamped before an earlier one (first at scan {first_reordered}), written in time order"
+        )
     if dropped:
         parts.append(f"{dropped} repeat the stamp of another (first at scan {first_dropped}), dropped")
     if not parts:

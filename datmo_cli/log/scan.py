@@ -40,23 +40,29 @@ class ScanGeometry:
     def same_beams(self, other: ScanGeometry) -> bool:
         """True when both put the same beams at the same angles with the same range limits."""
         f = np.float32
-        return (self.n_beams == other.n_beams and f(self.angle_min) == f(other.angle_min)
-                and f(self.angle_increment) == f(other.angle_increment)
-                and f(self.range_min) == f(other.range_min) and f(self.range_max) == f(other.range_max)
-                and self.frame_id == other.frame_id)
+        return (
+            self.n_beams == other.n_beams
+            and f(self.angle_min) == f(other.angle_min)
+            and f(self.angle_increment) == f(other.angle_increment)
+            and f(self.range_min) == f(other.range_min)
+            and f(self.range_max) == f(other.range_max)
+            and self.frame_id == other.frame_id
+        )
 
     def describe(self) -> str:
-        return (f"{self.n_beams} beams from {np.degrees(self.angle_min):.2f}° by "
-                f"{np.degrees(self.angle_increment):.3f}°, {self.range_min:g}-{self.range_max:g} m, "
-                f"frame '{self.frame_id}'")
+        return (
+            f"{self.n_beams} beams from {np.degrees(self.angle_min):.2f}° by "
+            f"{np.degrees(self.angle_increment):.3f}°, {self.range_min:g}-{self.range_max:g} m, "
+            f"frame '{self.frame_id}'"
+        )
 
 
 @dataclass
 class ScanRun:
     """A whole run of scans as arrays (see the module docstring for units and frames)."""
 
-    stamps: np.ndarray                      # (N,) int64, nanoseconds
-    ranges: np.ndarray                      # (N, B) float32, metres
+    stamps: np.ndarray  # (N,) int64, nanoseconds
+    ranges: np.ndarray  # (N, B) float32, metres
     geometry: ScanGeometry
     intensities: np.ndarray = field(default=None)  # (N, B) or (N, 0) float32
 
@@ -64,8 +70,7 @@ class ScanRun:
         self.stamps = np.ascontiguousarray(self.stamps, dtype=np.int64)
         self.ranges = np.ascontiguousarray(self.ranges, dtype=np.float32)
         if self.ranges.ndim != 2 or self.ranges.shape != (len(self.stamps), self.geometry.n_beams):
-            raise ValueError(f"ranges must be ({len(self.stamps)}, {self.geometry.n_beams}), "
-                             f"got {self.ranges.shape}")
+            raise ValueError(f"ranges must be ({len(self.stamps)}, {self.geometry.n_beams}), got {self.ranges.shape}")
         if self.intensities is None:
             self.intensities = np.zeros((len(self.stamps), 0), np.float32)
         self.intensities = np.ascontiguousarray(self.intensities, dtype=np.float32)
@@ -76,16 +81,15 @@ class ScanRun:
         return len(self.stamps)
 
     def slice(self, start: int, stop: int) -> ScanRun:
-        return ScanRun(self.stamps[start:stop], self.ranges[start:stop], self.geometry,
-                       self.intensities[start:stop])
+        return ScanRun(self.stamps[start:stop], self.ranges[start:stop], self.geometry, self.intensities[start:stop])
 
 
 @dataclass
 class Odometry:
     """Poses of the sensor's base in the world (odom) frame: x, y in metres, theta in radians."""
 
-    stamps: np.ndarray   # (M,) int64 ns
-    x: np.ndarray        # (M,) float64
+    stamps: np.ndarray  # (M,) int64 ns
+    x: np.ndarray  # (M,) float64
     y: np.ndarray
     theta: np.ndarray
     frame_id: str = "odom"
@@ -108,10 +112,22 @@ class Odometry:
 def _row_dtype(frame_len: int, n_beams: int, n_intens: int) -> np.dtype:
     """One LaserScan CDR payload (after the 4-byte encapsulation header) as a packed record."""
     pad = (-(12 + frame_len)) % 4
-    fields = [("sec", "<i4"), ("nanosec", "<u4"), ("frame_len", "<u4"), ("frame", f"V{frame_len + pad}"),
-              ("angle_min", "<f4"), ("angle_max", "<f4"), ("angle_increment", "<f4"),
-              ("time_increment", "<f4"), ("scan_time", "<f4"), ("range_min", "<f4"), ("range_max", "<f4"),
-              ("n_ranges", "<u4"), ("ranges", "<f4", (n_beams,)), ("n_intens", "<u4")]
+    fields = [
+        ("sec", "<i4"),
+        ("nanosec", "<u4"),
+        ("frame_len", "<u4"),
+        ("frame", f"V{frame_len + pad}"),
+        ("angle_min", "<f4"),
+        ("angle_max", "<f4"),
+        ("angle_increment", "<f4"),
+        ("time_increment", "<f4"),
+        ("scan_time", "<f4"),
+        ("range_min", "<f4"),
+        ("range_max", "<f4"),
+        ("n_ranges", "<u4"),
+        ("ranges", "<f4", (n_beams,)),
+        ("n_intens", "<u4"),
+    ]
     if n_intens:
         fields.append(("intensities", "<f4", (n_intens,)))
     return np.dtype([("cdr", "V4")] + fields)
@@ -139,19 +155,20 @@ def encode_scans(run: ScanRun) -> list[bytes]:
         rows["intensities"] = run.intensities
     raw = rows.tobytes()
     size = dt.itemsize
-    return [raw[i:i + size] for i in range(0, len(raw), size)]
+    return [raw[i : i + size] for i in range(0, len(raw), size)]
 
 
-def encode_scan(stamp_ns: int, ranges: np.ndarray, geometry: ScanGeometry,
-                intensities: np.ndarray | None = None) -> bytes:
+def encode_scan(
+    stamp_ns: int, ranges: np.ndarray, geometry: ScanGeometry, intensities: np.ndarray | None = None
+) -> bytes:
     """CDR payload of one LaserScan."""
     inten = None if intensities is None else np.asarray(intensities, np.float32)[None]
     run = ScanRun(np.array([stamp_ns]), np.asarray(ranges, np.float32)[None], geometry, inten)
     return encode_scans(run)[0]
 
 
-TELEGRAM = "std_msgs/msg/UInt8MultiArray"   # the message type of a scanner's raw telegrams (datmo record --raw)
-_EMPTY_LAYOUT = struct.pack("<II", 0, 0)      # MultiArrayLayout: no dims, data_offset 0
+TELEGRAM = "std_msgs/msg/UInt8MultiArray"  # the message type of a scanner's raw telegrams (datmo record --raw)
+_EMPTY_LAYOUT = struct.pack("<II", 0, 0)  # MultiArrayLayout: no dims, data_offset 0
 
 
 def encode_telegram(raw: bytes) -> bytes:
@@ -160,13 +177,19 @@ def encode_telegram(raw: bytes) -> bytes:
 
 
 def _geometry_of(rec: np.void | np.ndarray, frame_id: str, n_beams: int) -> ScanGeometry:
-    return ScanGeometry(angle_min=float(rec["angle_min"]), angle_increment=float(rec["angle_increment"]),
-                        n_beams=n_beams, range_min=float(rec["range_min"]), range_max=float(rec["range_max"]),
-                        time_increment=float(rec["time_increment"]), scan_time=float(rec["scan_time"]),
-                        frame_id=frame_id)
+    return ScanGeometry(
+        angle_min=float(rec["angle_min"]),
+        angle_increment=float(rec["angle_increment"]),
+        n_beams=n_beams,
+        range_min=float(rec["range_min"]),
+        range_max=float(rec["range_max"]),
+        time_increment=float(rec["time_increment"]),
+        scan_time=float(rec["scan_time"]),
+        frame_id=frame_id,
+    )
 
 
-GEOMETRY_FIELDS = ("angle_min", "angle_increment", "angle_max", "range_min", "range_max")   # must be finite
+GEOMETRY_FIELDS = ("angle_min", "angle_increment", "angle_max", "range_min", "range_max")  # must be finite
 _NS = 1_000_000_000
 
 
@@ -186,11 +209,11 @@ def decode_scan(data: bytes | memoryview) -> tuple[int, np.ndarray, np.ndarray, 
         raise ValueError(f"frame_id length {frame_len} runs past the end of the {size}-byte message")
     p0 = 4 + 12 + frame_len
     p0 += (-(p0 - 4)) % 4
-    n = int.from_bytes(buf[p0 + 28:p0 + 32], "little")
+    n = int.from_bytes(buf[p0 + 28 : p0 + 32], "little")
     pi = p0 + 32 + 4 * n
     if pi + 4 > size:
         raise ValueError(f"{n} ranges run past the end of the {size}-byte message")
-    ni = int.from_bytes(buf[pi:pi + 4], "little")
+    ni = int.from_bytes(buf[pi : pi + 4], "little")
     if pi + 4 + 4 * ni > size:
         raise ValueError(f"{ni} intensities run past the end of the {size}-byte message")
     dt = _row_dtype(frame_len, n, ni)
@@ -199,7 +222,7 @@ def decode_scan(data: bytes | memoryview) -> tuple[int, np.ndarray, np.ndarray, 
     rows = np.frombuffer(buf, dt, 1)
     _check_rows(rows, None)
     rec = rows[0]
-    frame_id = bytes(buf[16:16 + max(frame_len - 1, 0)]).decode(errors="replace")
+    frame_id = bytes(buf[16 : 16 + max(frame_len - 1, 0)]).decode(errors="replace")
     stamp = int(rec["sec"]) * _NS + int(rec["nanosec"])
     inten = rec["intensities"].copy() if ni else np.zeros(0, np.float32)
     return stamp, rec["ranges"].copy(), inten, _geometry_of(rec, frame_id, n)
@@ -218,8 +241,9 @@ def stamp_problem(sec: int, nanosec: int) -> str | None:
     return None
 
 
-def geometry_problem(angle_min: float, angle_increment: float, n_beams: int, range_min: float,
-                     range_max: float) -> str | None:
+def geometry_problem(
+    angle_min: float, angle_increment: float, n_beams: int, range_min: float, range_max: float
+) -> str | None:
     """What is wrong with a finite scan geometry no scanner has (radians, metres), or None: a negative
     range_min, a range_max not above it (no reading could be a return), a zero angle step, or beams that
     span more than a turn."""
@@ -250,12 +274,20 @@ def _check_rows(rows: np.ndarray, first: int | None) -> None:
             raise ValueError(f"{_scan_label(first, bad[0])}{name} is {float(rows[name][bad[0]])}")
     n = rows.dtype["ranges"].shape[0] if rows.dtype["ranges"].shape else 1
     step = np.abs(rows["angle_increment"].astype(np.float64))
-    bad = np.flatnonzero((rows["range_min"] < 0) | (rows["range_max"] <= rows["range_min"])
-                         | ((step == 0) & (n > 1)) | (step * (n - 1) > 2 * np.pi * 1.001))
+    bad = np.flatnonzero(
+        (rows["range_min"] < 0)
+        | (rows["range_max"] <= rows["range_min"])
+        | ((step == 0) & (n > 1))
+        | (step * (n - 1) > 2 * np.pi * 1.001)
+    )
     if len(bad):
         r = rows[bad[0]]
-        raise ValueError(_scan_label(first, bad[0]) + geometry_problem(
-            float(r["angle_min"]), float(r["angle_increment"]), n, float(r["range_min"]), float(r["range_max"])))
+        raise ValueError(
+            _scan_label(first, bad[0])
+            + geometry_problem(
+                float(r["angle_min"]), float(r["angle_increment"]), n, float(r["range_min"]), float(r["range_max"])
+            )
+        )
 
 
 def _scan_label(first: int | None, i: int) -> str:
@@ -297,8 +329,7 @@ def decode_scans(payloads: list[bytes], first: int = 0) -> ScanRun:
         except ValueError as exc:
             raise ValueError(f"scan {first + i}: {exc}") from None
         if not g.same_beams(g0):
-            raise GeometryChangeError(f"scan geometry changes at scan {first + i}: {g0.describe()} -> "
-                                      f"{g.describe()}")
+            raise GeometryChangeError(f"scan geometry changes at scan {first + i}: {g0.describe()} -> {g.describe()}")
         stamps.append(s)
         ranges.append(r)
         intens.append(it)
@@ -322,7 +353,6 @@ def _check_constant(rows: np.ndarray, g0: ScanGeometry, first: int = 0) -> None:
         if len(bad):
             i = int(bad[0])
             frame_len = int(rows["frame_len"][i])
-            frame_id = bytes(rows["frame"][i])[:max(frame_len - 1, 0)].decode(errors="replace")
+            frame_id = bytes(rows["frame"][i])[: max(frame_len - 1, 0)].decode(errors="replace")
             gi = _geometry_of(rows[i], frame_id, int(rows["n_ranges"][i]))
-            raise GeometryChangeError(f"scan geometry changes at scan {first + i}: {g0.describe()} -> "
-                                      f"{gi.describe()}")
+            raise GeometryChangeError(f"scan geometry changes at scan {first + i}: {g0.describe()} -> {gi.describe()}")

@@ -29,18 +29,44 @@ from .scan import Odometry
 
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 BASE_FRAME = "base_link"
-LASER_POSE_RECORD = "datmo.laser_pose"   # metadata record of the laser pose given on the command line
+LASER_POSE_RECORD = "datmo.laser_pose"  # metadata record of the laser pose given on the command line
 # The ros2msg schema of TFMessage with its dependencies, as rosbags' type store generates it (a test checks).
-SCHEMA = "\n".join([
-    "geometry_msgs/TransformStamped[] transforms", "=" * 80, "MSG: geometry_msgs/TransformStamped",
-    "std_msgs/Header header", "string child_frame_id", "geometry_msgs/Transform transform", "=" * 80,
-    "MSG: std_msgs/Header", "builtin_interfaces/Time stamp", "string frame_id", "=" * 80,
-    "MSG: builtin_interfaces/Time", "int32 sec", "uint32 nanosec", "=" * 80, "MSG: geometry_msgs/Transform",
-    "geometry_msgs/Vector3 translation", "geometry_msgs/Quaternion rotation", "=" * 80,
-    "MSG: geometry_msgs/Vector3", "float64 x", "float64 y", "float64 z", "=" * 80, "MSG: geometry_msgs/Quaternion",
-    "float64 x", "float64 y", "float64 z", "float64 w", ""])
+SCHEMA = "\n".join(
+    [
+        "geometry_msgs/TransformStamped[] transforms",
+        "=" * 80,
+        "MSG: geometry_msgs/TransformStamped",
+        "std_msgs/Header header",
+        "string child_frame_id",
+        "geometry_msgs/Transform transform",
+        "=" * 80,
+        "MSG: std_msgs/Header",
+        "builtin_interfaces/Time stamp",
+        "string frame_id",
+        "=" * 80,
+        "MSG: builtin_interfaces/Time",
+        "int32 sec",
+        "uint32 nanosec",
+        "=" * 80,
+        "MSG: geometry_msgs/Transform",
+        "geometry_msgs/Vector3 translation",
+        "geometry_msgs/Quaternion rotation",
+        "=" * 80,
+        "MSG: geometry_msgs/Vector3",
+        "float64 x",
+        "float64 y",
+        "float64 z",
+        "=" * 80,
+        "MSG: geometry_msgs/Quaternion",
+        "float64 x",
+        "float64 y",
+        "float64 z",
+        "float64 w",
+        "",
+    ]
+)
 
-_CDR_HEADER = b"\x00\x01\x00\x00"   # CDR, little endian
+_CDR_HEADER = b"\x00\x01\x00\x00"  # CDR, little endian
 _U32, _STAMP, _POSE = struct.Struct("<I"), struct.Struct("<iI"), struct.Struct("<7d")
 
 
@@ -63,8 +89,9 @@ class Transform:
     @classmethod
     def planar(cls, stamp_ns: int, parent: str, child: str, x: float, y: float, yaw: float) -> Transform:
         """A transform in the plane: (x, y) metres, yaw radians about z."""
-        return cls(int(stamp_ns), parent, child, float(x), float(y), 0.0, 0.0, 0.0, math.sin(yaw / 2),
-                   math.cos(yaw / 2))
+        return cls(
+            int(stamp_ns), parent, child, float(x), float(y), 0.0, 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)
+        )
 
     @property
     def yaw(self) -> float:
@@ -86,15 +113,20 @@ class LaserPose:
 
     def record(self, base: str, laser: str) -> dict[str, str]:
         """The metadata record LASER_POSE_RECORD: the pose and the frames it joins."""
-        return {"parent": base, "child": laser, "x_m": repr(self.x), "y_m": repr(self.y),
-                "yaw_deg": repr(math.degrees(self.yaw))}
+        return {
+            "parent": base,
+            "child": laser,
+            "x_m": repr(self.x),
+            "y_m": repr(self.y),
+            "yaw_deg": repr(math.degrees(self.yaw)),
+        }
 
 
 # ------------------------------------------------------------------------------------------- CDR payloads
 
 
 def _pad(buf: bytearray, n: int) -> None:
-    buf += b"\x00" * ((-(len(buf) - 4)) % n)   # alignment counts from after the 4-byte encapsulation header
+    buf += b"\x00" * ((-(len(buf) - 4)) % n)  # alignment counts from after the 4-byte encapsulation header
 
 
 def _put_string(buf: bytearray, text: str) -> None:
@@ -122,7 +154,7 @@ def _get_string(data: bytes, pos: int) -> tuple[str, int]:
     n = _U32.unpack_from(data, 4 + pos)[0]
     if n == 0 or 8 + pos + n > len(data):
         raise ValueError(f"a string of {n} bytes at byte {pos + 4} runs past the end of the {len(data)}-byte message")
-    return data[8 + pos:8 + pos + n - 1].decode("utf-8", "replace"), pos + 4 + n
+    return data[8 + pos : 8 + pos + n - 1].decode("utf-8", "replace"), pos + 4 + n
 
 
 def decode_tf(data: bytes) -> list[Transform]:
@@ -132,7 +164,7 @@ def decode_tf(data: bytes) -> list[Transform]:
         raise ValueError("not little-endian CDR data")
     try:
         count, pos, out = _U32.unpack_from(data, 4)[0], 4, []
-        if count > len(data) // 64:   # a transform takes at least 64 bytes
+        if count > len(data) // 64:  # a transform takes at least 64 bytes
             raise ValueError(f"{count} transforms cannot fit in {len(data)} bytes")
         for _ in range(count):
             pos += (-pos) % 4
@@ -177,9 +209,10 @@ def header_frame(payload: bytes) -> str:
 
 def odometry_tf(odom: Odometry) -> list[bytes]:
     """One TFMessage payload per pose: odom.frame_id -> odom.child_frame_id at the pose's stamp."""
-    return [encode_tf([Transform.planar(t, odom.frame_id, odom.child_frame_id, x, y, th)])
-            for t, x, y, th in zip(odom.stamps.tolist(), odom.x.tolist(), odom.y.tolist(), odom.theta.tolist(),
-                                   strict=True)]
+    return [
+        encode_tf([Transform.planar(t, odom.frame_id, odom.child_frame_id, x, y, th)])
+        for t, x, y, th in zip(odom.stamps.tolist(), odom.x.tolist(), odom.y.tolist(), odom.theta.tolist(), strict=True)
+    ]
 
 
 def mount_tf(stamp_ns: int, base: str, laser: str, pose: LaserPose) -> bytes:
@@ -201,8 +234,9 @@ def base_odometry(sensor: Odometry, pose: LaserPose, base: str = BASE_FRAME) -> 
     c, s = math.cos(pose.yaw), math.sin(pose.yaw)
     ix, iy = -(c * pose.x + s * pose.y), -(-s * pose.x + c * pose.y)
     x, y, th = _compose(sensor.x, sensor.y, sensor.theta, ix, iy, -pose.yaw)
-    return Odometry(sensor.stamps, np.asarray(x, float), np.asarray(y, float), np.asarray(th, float),
-                    sensor.frame_id, base)
+    return Odometry(
+        sensor.stamps, np.asarray(x, float), np.asarray(y, float), np.asarray(th, float), sensor.frame_id, base
+    )
 
 
 def chain(transforms: list[Transform], base: str, laser: str) -> list[Transform] | None:
@@ -288,5 +322,6 @@ def sensor_odometry(odom: Odometry | None, statics: list[Transform], laser: str)
     if mount is None or mount.identity:
         return odom
     x, y, th = _compose(odom.x, odom.y, odom.theta, mount.x, mount.y, mount.yaw)
-    return Odometry(odom.stamps, np.asarray(x, float), np.asarray(y, float), np.asarray(th, float), odom.frame_id,
-                    laser)
+    return Odometry(
+        odom.stamps, np.asarray(x, float), np.asarray(y, float), np.asarray(th, float), odom.frame_id, laser
+    )

@@ -58,7 +58,7 @@ def schema_text(msgtype: str) -> str:
     return text
 
 
-SCHEMA_TABLE = "schemas.json"   # in datmo_cli/msg; python -m datmo_cli.log.types rewrites it
+SCHEMA_TABLE = "schemas.json"  # in datmo_cli/msg; python -m datmo_cli.log.types rewrites it
 WRITTEN_TYPES = (LASERSCAN, ODOMETRY, MARKER_ARRAY, SEGMENTS, FEATURES, LANDMARKS, TRACKS, GROUND_TRUTH)
 
 
@@ -79,8 +79,22 @@ def schema_table() -> dict[str, str]:
 # type, 3 fixed array, 4 sequence), read from the .msg files without building the store (cdr needs them).
 BASE, NAME, ARRAY, SEQUENCE = 1, 2, 3, 4
 _BUILTIN_FIELDS = {"builtin_interfaces/msg/Time": [("sec", (BASE, ("int32", 0))), ("nanosec", (BASE, ("uint32", 0)))]}
-_BASE_TYPES = {"bool", "byte", "char", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64",
-               "float32", "float64", "string"}
+_BASE_TYPES = {
+    "bool",
+    "byte",
+    "char",
+    "int8",
+    "uint8",
+    "int16",
+    "uint16",
+    "int32",
+    "uint32",
+    "int64",
+    "uint64",
+    "float32",
+    "float64",
+    "string",
+}
 
 
 @cache
@@ -99,7 +113,7 @@ def fields(msgtype: str) -> tuple:
             continue
         kind, name = line.split()[:2]
         if "=" in name or "=" in kind:
-            continue   # a constant
+            continue  # a constant
         out.append((name, _field_type(kind, msgtype)))
     return tuple(out)
 
@@ -125,8 +139,11 @@ def constants(msgtype: str) -> dict[str, int]:
 def _field_type(kind: str, owner: str) -> tuple:
     if kind.endswith("]"):
         inner, count = kind[:-1].split("[")
-        return (SEQUENCE, (_field_type(inner, owner), 0)) if not count else (ARRAY, (_field_type(inner, owner),
-                                                                                     int(count)))
+        return (
+            (SEQUENCE, (_field_type(inner, owner), 0))
+            if not count
+            else (ARRAY, (_field_type(inner, owner), int(count)))
+        )
     if kind in _BASE_TYPES:
         return BASE, (kind, 0)
     if kind == "Header":
@@ -136,7 +153,7 @@ def _field_type(kind: str, owner: str) -> tuple:
     return NAME, f"{pkg}/msg/{name}"
 
 
-if __name__ == "__main__":   # rewrite msg/schemas.json from the type store
+if __name__ == "__main__":  # rewrite msg/schemas.json from the type store
     import json
     from pathlib import Path
 

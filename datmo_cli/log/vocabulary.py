@@ -57,7 +57,7 @@ def _names(table: dict[str, int], prefix: str) -> dict[int, str]:
     return {v: k.removeprefix(prefix).lower().replace("_", " ") for k, v in table.items() if k.startswith(prefix)}
 
 
-CLASS_NAMES = _names(_TRACK, "CLASS_")   # a track's classes
+CLASS_NAMES = _names(_TRACK, "CLASS_")  # a track's classes
 MOBILITY_NAMES = _names(_TRACK, "MOBILITY_")
 STATUS_NAMES = _names(_TRACK, "STATUS_")
 LANDMARK_NAMES = _names(_LANDMARK, "")

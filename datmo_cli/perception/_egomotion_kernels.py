@@ -16,16 +16,16 @@ from numba import njit
 from ..numba_runtime import key_kernel_cache_on_sources
 from ._kernels import valid_return
 
-key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
+key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 
 # columns of the per-scan statistics written by odometry_run
 S_RESIDUAL, S_INLIER_SHARE, S_MATCHED, S_POINTS, S_FLAGS, S_ITERATIONS = range(6)
 N_STATS = 6
 # flag bits in stats[:, S_FLAGS]
 FLAG_KEYFRAME, FLAG_RECOVERED, FLAG_FAILED = 1, 2, 4
-MIN_MATCHES = 12           # correspondences below which a match is refused (the prediction is kept)
-CONVERGED_STEP = 2e-4      # m: a Gauss-Newton step this small in x and y ...
-CONVERGED_TURN = 5e-5      # rad: ... and in theta ends the iterations once the gate is final
+MIN_MATCHES = 12  # correspondences below which a match is refused (the prediction is kept)
+CONVERGED_STEP = 2e-4  # m: a Gauss-Newton step this small in x and y ...
+CONVERGED_TURN = 5e-5  # rad: ... and in theta ends the iterations once the gate is final
 EMPTY = -1
 
 
@@ -113,9 +113,11 @@ def beam_normal(r, cos_a, sin_a, range_min, range_max, b, normal_radius, max_gap
     pin a point-to-point match to the keyframe, so it is left out of the map.
     """
     acc = np.zeros(6)
-    acc[0] = 1.0      # b's own point, at the origin of the sums
-    far = max(_gather(r, cos_a, sin_a, range_min, range_max, b, -1, normal_radius, max_gap, max_window, acc),
-              _gather(r, cos_a, sin_a, range_min, range_max, b, 1, normal_radius, max_gap, max_window, acc))
+    acc[0] = 1.0  # b's own point, at the origin of the sums
+    far = max(
+        _gather(r, cos_a, sin_a, range_min, range_max, b, -1, normal_radius, max_gap, max_window, acc),
+        _gather(r, cos_a, sin_a, range_min, range_max, b, 1, normal_radius, max_gap, max_window, acc),
+    )
     m = acc[0]
     if m < 3:
         return np.nan, np.nan
@@ -129,7 +131,7 @@ def beam_normal(r, cos_a, sin_a, range_min, range_max, b, normal_radius, max_gap
     lmax = mid + dev
     lmin = mid - dev
     if lmax > 0.0 and lmin <= planarity * planarity * lmax:
-        phi = 0.5 * np.arctan2(2.0 * h, a - c)    # direction of the major axis
+        phi = 0.5 * np.arctan2(2.0 * h, a - c)  # direction of the major axis
         return -np.sin(phi), np.cos(phi)
     if far <= 2.0 * normal_radius:
         return 0.0, 0.0
@@ -137,12 +139,14 @@ def beam_normal(r, cos_a, sin_a, range_min, range_max, b, normal_radius, max_gap
 
 
 @njit(cache=True)
-def scan_normals(r, cos_a, sin_a, range_min, range_max, beams, n, normal_radius, max_gap, max_window, planarity,
-                 nx_out, ny_out) -> None:
+def scan_normals(
+    r, cos_a, sin_a, range_min, range_max, beams, n, normal_radius, max_gap, max_window, planarity, nx_out, ny_out
+) -> None:
     """beam_normal at the points of beams[0:n] into nx_out, ny_out."""
     for i in range(n):
-        nx, ny = beam_normal(r, cos_a, sin_a, range_min, range_max, beams[i], normal_radius, max_gap, max_window,
-                             planarity)
+        nx, ny = beam_normal(
+            r, cos_a, sin_a, range_min, range_max, beams[i], normal_radius, max_gap, max_window, planarity
+        )
         nx_out[i] = nx
         ny_out[i] = ny
 
@@ -192,8 +196,9 @@ def grid_nearest(qx, qy, mx, my, cell, head, nxt, max_dist) -> int:
 
 
 @njit(cache=True)
-def add_to_map(px, py, pnx, pny, n, pose_x, pose_y, pose_t, min_spacing, cell, head, nxt, mx, my, mnx, mny,
-               count) -> int:
+def add_to_map(
+    px, py, pnx, pny, n, pose_x, pose_y, pose_t, min_spacing, cell, head, nxt, mx, my, mnx, mny, count
+) -> int:
     """Add sensor-frame points (and normals) seen from pose to the map, skipping those whose normal is NaN
     (see beam_normal) and those within min_spacing (m) of a map point already there. Returns the new map
     size; stops when the map arrays are full."""
@@ -228,8 +233,27 @@ def robust_weight(ares, scale, redescend) -> float:
 
 
 @njit(cache=True)
-def icp_step(sx, sy, n, pose_x, pose_y, pose_t, mx, my, mnx, mny, cell, head, nxt, max_dist, scale, redescend,
-             inlier_tol, hess, grad):
+def icp_step(
+    sx,
+    sy,
+    n,
+    pose_x,
+    pose_y,
+    pose_t,
+    mx,
+    my,
+    mnx,
+    mny,
+    cell,
+    head,
+    nxt,
+    max_dist,
+    scale,
+    redescend,
+    inlier_tol,
+    hess,
+    grad,
+):
     """One Gauss-Newton linearisation of the robust point-to-line cost of source points (sx, sy)[0:n] (sensor
     frame, m) placed at pose against the map.
 
@@ -322,8 +346,28 @@ def solve3(a, b, out) -> bool:
 
 
 @njit(cache=True)
-def icp_align(sx, sy, n, init_x, init_y, init_t, mx, my, mnx, mny, cell, head, nxt, max_dist0, max_dist, scale,
-              inlier_tol, max_iter, prior_weight, pose_out):
+def icp_align(
+    sx,
+    sy,
+    n,
+    init_x,
+    init_y,
+    init_t,
+    mx,
+    my,
+    mnx,
+    mny,
+    cell,
+    head,
+    nxt,
+    max_dist0,
+    max_dist,
+    scale,
+    inlier_tol,
+    max_iter,
+    prior_weight,
+    pose_out,
+):
     """Pose of the source scan (sensor points (sx, sy)[0:n]) against the map by Gauss-Newton ICP from init.
 
     The correspondence gate halves from max_dist0 down to max_dist (m) under Huber weights, then iterations
@@ -346,8 +390,9 @@ def icp_align(sx, sy, n, init_x, init_y, init_t, mx, my, mnx, mny, cell, head, n
     it = 0
     while it < max_iter:
         it += 1
-        matched, abs_sum, inliers = icp_step(sx, sy, n, x, y, t, mx, my, mnx, mny, cell, head, nxt, gate, scale,
-                                             gate <= max_dist, inlier_tol, hess, grad)
+        matched, abs_sum, inliers = icp_step(
+            sx, sy, n, x, y, t, mx, my, mnx, mny, cell, head, nxt, gate, scale, gate <= max_dist, inlier_tol, hess, grad
+        )
         if matched < MIN_MATCHES:
             break
         hess[0, 0] += prior_weight
@@ -373,8 +418,9 @@ def icp_align(sx, sy, n, init_x, init_y, init_t, mx, my, mnx, mny, cell, head, n
         pose_out[2] = init_t
         return matched, 0.0, 0, it
     # the figures of the final pose, at the final gate
-    matched, abs_sum, inliers = icp_step(sx, sy, n, x, y, t, mx, my, mnx, mny, cell, head, nxt, gate, scale, True,
-                                         inlier_tol, hess, grad)
+    matched, abs_sum, inliers = icp_step(
+        sx, sy, n, x, y, t, mx, my, mnx, mny, cell, head, nxt, gate, scale, True, inlier_tol, hess, grad
+    )
     pose_out[0] = x
     pose_out[1] = y
     pose_out[2] = np.arctan2(np.sin(t), np.cos(t))
@@ -401,8 +447,9 @@ def between(ax, ay, at, bx, by, bt):
 
 
 @njit(cache=True)
-def rebuild_map(kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose, newest, n_kf, map_spacing, cell, head, nxt, mx, my, mnx,
-                mny) -> int:
+def rebuild_map(
+    kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose, newest, n_kf, map_spacing, cell, head, nxt, mx, my, mnx, mny
+) -> int:
     """The map from the n_kf keyframes ending at ring slot newest, newest first (its points win where
     keyframes overlap, so older, more drifted ones only fill in). Returns the map size."""
     head[:] = EMPTY
@@ -410,16 +457,58 @@ def rebuild_map(kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose, newest, n_kf, map_spaci
     k_slots = kf_n.shape[0]
     for a in range(n_kf):
         k = (newest - a) % k_slots
-        count = add_to_map(kf_x[k], kf_y[k], kf_nx[k], kf_ny[k], kf_n[k], kf_pose[k, 0], kf_pose[k, 1],
-                           kf_pose[k, 2], map_spacing if a > 0 else 0.0, cell, head, nxt, mx, my, mnx, mny, count)
+        count = add_to_map(
+            kf_x[k],
+            kf_y[k],
+            kf_nx[k],
+            kf_ny[k],
+            kf_n[k],
+            kf_pose[k, 0],
+            kf_pose[k, 1],
+            kf_pose[k, 2],
+            map_spacing if a > 0 else 0.0,
+            cell,
+            head,
+            nxt,
+            mx,
+            my,
+            mnx,
+            mny,
+            count,
+        )
     return count
 
 
 @njit(cache=True)
-def odometry_run(ranges, dt, cos_a, sin_a, range_min, range_max, max_points, source_spacing,
-                 map_spacing, normal_radius, max_gap, max_window, planarity, max_dist0, max_dist, scale, inlier_tol,
-                 max_iter, prior_weight, keyframe_dist, keyframe_angle, keyframe_share, n_keyframes,
-                 min_inlier_share, recovery_moves, poses, stats) -> None:
+def odometry_run(
+    ranges,
+    dt,
+    cos_a,
+    sin_a,
+    range_min,
+    range_max,
+    max_points,
+    source_spacing,
+    map_spacing,
+    normal_radius,
+    max_gap,
+    max_window,
+    planarity,
+    max_dist0,
+    max_dist,
+    scale,
+    inlier_tol,
+    max_iter,
+    prior_weight,
+    keyframe_dist,
+    keyframe_angle,
+    keyframe_share,
+    n_keyframes,
+    min_inlier_share,
+    recovery_moves,
+    poses,
+    stats,
+) -> None:
     """Sensor poses (N x 3, scan_odom frame) of every scan of ranges (N x B, m) by scan-to-local-map ICP.
 
     dt (N,): seconds since the previous scan (dt[0] unused). The prediction is the previous pose plus the
@@ -470,16 +559,61 @@ def odometry_run(ranges, dt, cos_a, sin_a, range_min, range_max, max_points, sou
                 vx, vy, vt = between(poses[k - 2, 0], poses[k - 2, 1], poses[k - 2, 2], px, py, pt)
                 ratio = min(max(dt[k] / dt[k - 1], 0.0), 3.0)
                 px, py, pt = compose(px, py, pt, ratio * vx, ratio * vy, ratio * vt)
-            matched, mean_res, inliers, iters = icp_align(sx, sy, n_src, px, py, pt, mx, my, mnx, mny, cell, head, nxt,
-                                                      max_dist0, max_dist, scale, inlier_tol, max_iter,
-                                                      prior_weight, pose)
+            matched, mean_res, inliers, iters = icp_align(
+                sx,
+                sy,
+                n_src,
+                px,
+                py,
+                pt,
+                mx,
+                my,
+                mnx,
+                mny,
+                cell,
+                head,
+                nxt,
+                max_dist0,
+                max_dist,
+                scale,
+                inlier_tol,
+                max_iter,
+                prior_weight,
+                pose,
+            )
             share = inliers / max(n_src, 1)
             if share < min_inlier_share or iters >= max_iter:
                 for a in range(recovery_moves.shape[0]):
-                    gx, gy, gt = compose(poses[k - 1, 0], poses[k - 1, 1], poses[k - 1, 2], recovery_moves[a, 0],
-                                         recovery_moves[a, 1], recovery_moves[a, 2])
-                    m2, r2, i2, i3 = icp_align(sx, sy, n_src, gx, gy, gt, mx, my, mnx, mny, cell, head, nxt,
-                                              max_dist0, max_dist, scale, inlier_tol, max_iter, prior_weight, trial)
+                    gx, gy, gt = compose(
+                        poses[k - 1, 0],
+                        poses[k - 1, 1],
+                        poses[k - 1, 2],
+                        recovery_moves[a, 0],
+                        recovery_moves[a, 1],
+                        recovery_moves[a, 2],
+                    )
+                    m2, r2, i2, i3 = icp_align(
+                        sx,
+                        sy,
+                        n_src,
+                        gx,
+                        gy,
+                        gt,
+                        mx,
+                        my,
+                        mnx,
+                        mny,
+                        cell,
+                        head,
+                        nxt,
+                        max_dist0,
+                        max_dist,
+                        scale,
+                        inlier_tol,
+                        max_iter,
+                        prior_weight,
+                        trial,
+                    )
                     iters += i3
                     if m2 >= MIN_MATCHES and i2 / max(n_src, 1) > share:
                         share = i2 / max(n_src, 1)
@@ -490,22 +624,37 @@ def odometry_run(ranges, dt, cos_a, sin_a, range_min, range_max, max_points, sou
                 flags |= FLAG_FAILED
         poses[k] = pose
         new_kf = n_kf == 0
-        if not new_kf and n_src >= MIN_MATCHES:     # a scan with (almost) no returns would only empty the map
-            dx, dy, dth = between(kf_pose[newest, 0], kf_pose[newest, 1], kf_pose[newest, 2], pose[0], pose[1],
-                                  pose[2])
-            new_kf = dx * dx + dy * dy > keyframe_dist * keyframe_dist or abs(dth) > keyframe_angle \
-                or share < keyframe_share
+        if not new_kf and n_src >= MIN_MATCHES:  # a scan with (almost) no returns would only empty the map
+            dx, dy, dth = between(kf_pose[newest, 0], kf_pose[newest, 1], kf_pose[newest, 2], pose[0], pose[1], pose[2])
+            new_kf = (
+                dx * dx + dy * dy > keyframe_dist * keyframe_dist or abs(dth) > keyframe_angle or share < keyframe_share
+            )
         if new_kf:
             newest = (newest + 1) % k_slots
             n_kf = min(n_kf + 1, k_slots)
-            m = scan_points(r, cos_a, sin_a, range_min, range_max, map_spacing, n_beams, kf_x[newest],
-                            kf_y[newest], beams)
+            m = scan_points(
+                r, cos_a, sin_a, range_min, range_max, map_spacing, n_beams, kf_x[newest], kf_y[newest], beams
+            )
             kf_n[newest] = m
-            scan_normals(r, cos_a, sin_a, range_min, range_max, beams, m, normal_radius, max_gap, max_window,
-                         planarity, kf_nx[newest], kf_ny[newest])
+            scan_normals(
+                r,
+                cos_a,
+                sin_a,
+                range_min,
+                range_max,
+                beams,
+                m,
+                normal_radius,
+                max_gap,
+                max_window,
+                planarity,
+                kf_nx[newest],
+                kf_ny[newest],
+            )
             kf_pose[newest] = pose
-            rebuild_map(kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose, newest, n_kf, map_spacing, cell, head, nxt, mx, my,
-                        mnx, mny)
+            rebuild_map(
+                kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose, newest, n_kf, map_spacing, cell, head, nxt, mx, my, mnx, mny
+            )
             flags |= FLAG_KEYFRAME
         stats[k, S_RESIDUAL] = mean_res
         stats[k, S_INLIER_SHARE] = share

@@ -12,12 +12,33 @@ from numba import njit, prange
 
 from ..numba_runtime import key_kernel_cache_on_sources
 
-key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
+key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 
-(P_C0, P_MIN_POINTS, P_THETA_RES, P_RHO_RES, P_WINDOW, P_LINE_MIN_POINTS, P_LINE_MIN_RACC, P_LINE_MIN_LENGTH,
- P_PERP_TOL, P_R_MIN, P_R_MAX, P_R_STEP, P_CELL, P_CWINDOW, P_CTOL, P_CIRCLE_MIN_POINTS, P_SMALL,
- P_MIN_SAG, P_LEG_R, P_MIN_COVER, P_RES_RATIO, P_R_MARGIN,
- P_LINES_RATIO) = range(23)
+(
+    P_C0,
+    P_MIN_POINTS,
+    P_THETA_RES,
+    P_RHO_RES,
+    P_WINDOW,
+    P_LINE_MIN_POINTS,
+    P_LINE_MIN_RACC,
+    P_LINE_MIN_LENGTH,
+    P_PERP_TOL,
+    P_R_MIN,
+    P_R_MAX,
+    P_R_STEP,
+    P_CELL,
+    P_CWINDOW,
+    P_CTOL,
+    P_CIRCLE_MIN_POINTS,
+    P_SMALL,
+    P_MIN_SAG,
+    P_LEG_R,
+    P_MIN_COVER,
+    P_RES_RATIO,
+    P_R_MARGIN,
+    P_LINES_RATIO,
+) = range(23)
 
 # columns of the line rows
 L_SCAN, L_SEG, L_FIRST, L_LAST, L_N, L_X0, L_Y0, L_X1, L_Y1, L_RHO, L_THETA, L_LEN, L_RACC = range(13)
@@ -30,7 +51,7 @@ B_SCAN, B_SEG, B_FIRST, B_LAST, B_N, B_X, B_Y, B_SIZE, B_KIND = range(9)
 LC_N, LC_FIRST, LC_LAST, LC_X0, LC_Y0, LC_X1, LC_Y1, LC_RHO, LC_THETA, LC_LEN, LC_RACC, LC_PEAK_RACC = range(12)
 # a circle candidate (circle_of_run's `out`): points, centre x, y, radius, r_acc
 CC_N, CC_X, CC_Y, CC_R, CC_RACC = range(5)
-MAX_SUB = 256   # line candidates per segment
+MAX_SUB = 256  # line candidates per segment
 
 
 @njit(cache=True)
@@ -52,7 +73,7 @@ def segment_scan(r, cos_inc, c0, c1, range_min, range_max, min_points, starts, e
     for i in range(B + 1):
         ok = i < B and valid_return(r[i], range_min, range_max)
         if ok and start >= 0:
-            a = np.float64(r[i - 1])   # float64 arithmetic whatever the ranges' type
+            a = np.float64(r[i - 1])  # float64 arithmetic whatever the ranges' type
             b = np.float64(r[i])
             d2 = a * a + b * b - 2.0 * a * b * cos_inc
             d = np.sqrt(max(d2, 0.0))
@@ -164,7 +185,7 @@ def _clear(acc, touched, width) -> None:
     """Zero the rows voted in (flat rows of `width` cells, see _vote)."""
     for t in range(touched.shape[0]):
         if touched[t]:
-            acc[t * width:(t + 1) * width] = 0
+            acc[t * width : (t + 1) * width] = 0
             touched[t] = False
 
 
@@ -414,7 +435,7 @@ def fit_circle(x, y, idx, m, a, b, r):
             g1 += v * res
             g2 += -res
         # solve the symmetric 3x3 system by Cramer's rule (no allocation in the loop)
-        det = (j00 * (j11 * j22 - j12 * j12) - j01 * (j01 * j22 - j12 * j02) + j02 * (j01 * j12 - j11 * j02))
+        det = j00 * (j11 * j22 - j12 * j12) - j01 * (j01 * j22 - j12 * j02) + j02 * (j01 * j12 - j11 * j02)
         if abs(det) < 1e-18:
             return a, b, r, False
         s0 = (g0 * (j11 * j22 - j12 * j12) - j01 * (g1 * j22 - j12 * g2) + j02 * (g1 * j12 - j11 * g2)) / det
@@ -439,7 +460,7 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     out[CC_N] = 0.0
     out[CC_RACC] = 0.0
     n = e - s
-    if n < 3 or beat >= 1.0:   # r_acc is at most 1: nothing can beat `beat`
+    if n < 3 or beat >= 1.0:  # r_acc is at most 1: nothing can beat `beat`
         return
     cell = p[P_CELL]
     w = int(round(p[P_CWINDOW] / cell))
@@ -459,12 +480,12 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     my = 0.5 * (y0 + y1)
     nx = (y1 - y0) / chord
     ny = -(x1 - x0) / chord
-    if nx * mx + ny * my < 0:   # the normal of the chord pointing away from the scanner
+    if nx * mx + ny * my < 0:  # the normal of the chord pointing away from the scanner
         nx = -nx
         ny = -ny
-    sag = -((x[near] - mx) * nx + (y[near] - my) * ny)   # P_near's bulge towards the scanner
+    sag = -((x[near] - mx) * nx + (y[near] - my) * ny)  # P_near's bulge towards the scanner
     if sag < p[P_MIN_SAG]:
-        return   # flat within the noise: a line or a blob, not an arc
+        return  # flat within the noise: a line or a blob, not an arc
     half = 0.5 * chord
     r_lo = max(p[P_R_MIN], half - tol)
     r_hi = p[P_R_MAX]
@@ -485,7 +506,7 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     ba = 0.0
     bb = 0.0
     br = -1.0
-    reach = w * cell * np.sqrt(2.0) + 1e-9   # window centre to its farthest cell centre (and rounding)
+    reach = w * cell * np.sqrt(2.0) + 1e-9  # window centre to its farthest cell centre (and rounding)
     for k in range(k0, k1 + 1):
         r = p[P_R_MIN] + k * step
         h = np.sqrt(max(r * r - half * half, 0.0))
@@ -499,7 +520,7 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
             if r - tol - reach <= dc <= r + tol + reach:
                 most += 1
         if most <= best or most / n <= beat:
-            continue   # this radius can neither take the peak (ties go to the earlier radius) nor be kept
+            continue  # this radius can neither take the peak (ties go to the earlier radius) nor be kept
         for ia in range(size):
             for ib in range(size):
                 cacc[ia, ib] = 0
@@ -607,8 +628,30 @@ def _convex(ax, ay, jx, jy, bx, by) -> bool:
 
 
 @njit(cache=True)
-def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx, sub_s, sub_e,
-                 lines, nl, circles, nc, blobs, nb, work, dalpha=0.0):
+def extract_scan(
+    x,
+    y,
+    starts,
+    ends,
+    nseg,
+    scan,
+    p,
+    acc,
+    cacc,
+    cos_t,
+    sin_t,
+    idx,
+    sub_s,
+    sub_e,
+    lines,
+    nl,
+    circles,
+    nc,
+    blobs,
+    nb,
+    work,
+    dalpha=0.0,
+):
     """Features of one scan's segments (points x, y, m, sensor frame): HTL on every segment, then the
     decision rule of docs/method.md §5.2, a circle kept only when well posed (circle_posed; `dalpha`: the
     scan's angle step, rad). Appends rows to lines/circles/blobs from nl/nc/nb; returns the new counts.
@@ -631,28 +674,39 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
             # line_subsegments uses the first nt * width cells of acc (flat): zero what was never used before
             used = nt * _bounding_box(x, y, s, e, rho_res, acc.shape[1], box)
             if used > zeroed[0]:
-                acc.reshape(-1)[zeroed[0]:used] = 0
+                acc.reshape(-1)[zeroed[0] : used] = 0
                 zeroed[0] = used
-            nsub = line_subsegments(x, y, s, e, acc, toff, cos_t, sin_t, rho_res, kwin, cell, touched, sub_s,
-                                    sub_e, peaks, hist)
+            nsub = line_subsegments(
+                x, y, s, e, acc, toff, cos_t, sin_t, rho_res, kwin, cell, touched, sub_s, sub_e, peaks, hist
+            )
         else:
-            nsub = 0   # too few points for a line of more than three: no HTL
+            nsub = 0  # too few points for a line of more than three: no HTL
         nkept = 0
         ncand = 0
         votes = 0.0
         for k in range(nsub):
             t = peaks[k, 1]
-            line_of_run(x, y, sub_s[k], sub_e[k], t * tstep, toff[t] + (peaks[k, 2] + 0.5) * rho_res, peaks[k, 0],
-                        rho_res, idx, lo)
+            line_of_run(
+                x,
+                y,
+                sub_s[k],
+                sub_e[k],
+                t * tstep,
+                toff[t] + (peaks[k, 2] + 0.5) * rho_res,
+                peaks[k, 0],
+                rho_res,
+                idx,
+                lo,
+            )
             cand[k, :] = lo
-            if lo[LC_N] >= min_pts:   # an HTL line (more than 3 points) for the decision rule
+            if lo[LC_N] >= min_pts:  # an HTL line (more than 3 points) for the decision rule
                 cidx[ncand] = k
                 ncand += 1
-                votes += lo[LC_RACC] * (sub_e[k] - sub_s[k])   # the refined line's r_acc, in points
+                votes += lo[LC_RACC] * (sub_e[k] - sub_s[k])  # the refined line's r_acc, in points
             if lo[LC_N] >= min_pts and lo[LC_RACC] > min_racc and lo[LC_LEN] > min_len:
                 kept[nkept] = k
                 nkept += 1
-        htl_racc = votes / (e - s)   # r_acc of the segment's lines together
+        htl_racc = votes / (e - s)  # r_acc of the segment's lines together
         # merge consecutive kept lines that are one line split by noise
         if nkept > 1:
             m = 1
@@ -661,14 +715,18 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                 b = cand[kept[q]]
                 dt = abs(a[LC_THETA] - b[LC_THETA])
                 dt = min(dt, np.pi - dt)
-                same_side = (abs(a[LC_RHO] - b[LC_RHO]) if abs(a[LC_THETA] - b[LC_THETA]) < np.pi / 2
-                             else abs(a[LC_RHO] + b[LC_RHO]))
+                same_side = (
+                    abs(a[LC_RHO] - b[LC_RHO])
+                    if abs(a[LC_THETA] - b[LC_THETA]) < np.pi / 2
+                    else abs(a[LC_RHO] + b[LC_RHO])
+                )
                 if dt < 3.0 * np.pi / 180 and same_side < 2 * rho_res and kept[q] == kept[m - 1] + 1:
                     len_a = sub_e[kept[m - 1]] - sub_s[kept[m - 1]]
                     len_b = sub_e[kept[q]] - sub_s[kept[q]]
                     merged = a[LC_RACC] * len_a + b[LC_RACC] * len_b
-                    line_of_run(x, y, sub_s[kept[m - 1]], sub_e[kept[q]], a[LC_THETA], a[LC_RHO], merged, rho_res,
-                                idx, lo)
+                    line_of_run(
+                        x, y, sub_s[kept[m - 1]], sub_e[kept[q]], a[LC_THETA], a[LC_RHO], merged, rho_res, idx, lo
+                    )
                     sub_e[kept[m - 1]] = sub_e[kept[q]]
                     cand[kept[m - 1], :] = lo
                 else:
@@ -679,7 +737,7 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
         # circle of the allowed radii (a long wall with a deflection stays lines)
         ext = np.hypot(x[e - 1] - x[s], y[e - 1] - y[s])
         try_circle = False
-        leg_only = False   # tested as a circle beyond the paper's rule: if it fails, the lines stay
+        leg_only = False  # tested as a circle beyond the paper's rule: if it fails, the lines stay
         if ext <= 2.0 * p[P_R_MAX] + 2.0 * p[P_CTOL]:
             if ncand == 0:
                 try_circle = True
@@ -688,7 +746,7 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                 # line of a segment small enough to be a circle, and keeps the better fit (a leg a few metres
                 # away, or a column's arc, is a shallow arc that HTL can take for a line with r_acc > 0.5)
                 try_circle = True
-                leg_only = cand[cidx[0], LC_PEAK_RACC] >= min_racc   # not the paper's case: no circle keeps the line
+                leg_only = cand[cidx[0], LC_PEAK_RACC] >= min_racc  # not the paper's case: no circle keeps the line
             elif ncand == 2:
                 # two non-perpendicular lines: the paper's case; two perpendicular ones may be a box's corner
                 # or an arc cut in two halves (a column seen whole): the better fit decides, lines on a tie
@@ -707,7 +765,7 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                 circle_of_run(x, y, s, e, p, cacc, idx, cout, max(htl_racc, min_racc))
             else:
                 cout[CC_RACC] = 0.0
-            lines_rss = -1.0   # the circle's points to the segment's HTL lines (two or more: a corner?)
+            lines_rss = -1.0  # the circle's points to the segment's HTL lines (two or more: a corner?)
             if ncand >= 2 and cout[CC_N] >= 3:
                 lines_rss = 0.0
                 for q in range(int(cout[CC_N])):
@@ -719,9 +777,11 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
                     lines_rss += dmin * dmin
             # a circle beats the lines, and holds like a line must (r_acc above line_min_racc)
             # and is a well-posed arc (idx[:n] still holds the points circle_of_run fitted)
-            if (cout[CC_RACC] > max(htl_racc, min_racc) and cout[CC_N] >= p[P_CIRCLE_MIN_POINTS]
-                    and circle_posed(x, y, idx, int(cout[CC_N]), cout[CC_X], cout[CC_Y], cout[CC_R], p, dalpha,
-                                     lines_rss)):
+            if (
+                cout[CC_RACC] > max(htl_racc, min_racc)
+                and cout[CC_N] >= p[P_CIRCLE_MIN_POINTS]
+                and circle_posed(x, y, idx, int(cout[CC_N]), cout[CC_X], cout[CC_Y], cout[CC_R], p, dalpha, lines_rss)
+            ):
                 row = circles[nc]
                 row[C_SCAN] = scan
                 row[C_SEG] = g
@@ -768,7 +828,7 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
             if d > dmax:
                 dmax = d
                 far = i
-        for i in range(s, e):   # two sweeps: exact for convex outlines, within a few % otherwise
+        for i in range(s, e):  # two sweeps: exact for convex outlines, within a few % otherwise
             d = (x[i] - x[far]) ** 2 + (y[i] - y[far]) ** 2
             if d > dmax:
                 dmax = d
@@ -787,8 +847,27 @@ def extract_scan(x, y, starts, ends, nseg, scan, p, acc, cacc, cos_t, sin_t, idx
 
 
 @njit(cache=True)
-def extract_scans(ranges, k0, k1, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, cos_t, sin_t, seg_out, lines,
-                  circles, blobs, counts, given, given_offsets):
+def extract_scans(
+    ranges,
+    k0,
+    k1,
+    cos_a,
+    sin_a,
+    cos_inc,
+    c1,
+    range_min,
+    range_max,
+    p,
+    cos_t,
+    sin_t,
+    seg_out,
+    lines,
+    circles,
+    blobs,
+    counts,
+    given,
+    given_offsets,
+):
     """Segment and extract features of scans k0 .. k1 - 1 of a block (ranges (N, B), m): scan k's segments
     (rows [start, end)), lines, circles and blobs go to rows [k * B, k * B + counts[k, j]) of seg_out, lines,
     circles and blobs (j = 0, 1, 2, 3), each (N * B, columns) (a scan has at most B of each). With
@@ -810,12 +889,22 @@ def extract_scans(ranges, k0, k1, cos_a, sin_a, cos_inc, c1, range_min, range_ma
     cacc = np.zeros((2 * w + 1, 2 * w + 1), np.int32)
     min_points = int(p[P_MIN_POINTS])
     use_given = given_offsets.shape[0] == N + 1
-    dalpha = np.arccos(min(max(cos_inc, -1.0), 1.0))   # the angle step, for circle_posed
+    dalpha = np.arccos(min(max(cos_inc, -1.0), 1.0))  # the angle step, for circle_posed
     nt = cos_t.shape[0]
-    work = (np.empty(12), np.empty(nt), np.empty(B, np.int64), np.zeros(nt, np.bool_),
-            np.empty((MAX_SUB, 3), np.int64), np.empty((MAX_SUB, 12)), np.empty(MAX_SUB, np.int64),
-            np.empty(MAX_SUB, np.int64), np.empty(5), np.empty((B, 3), np.int64), np.empty(4),
-            np.zeros(1, np.int64))
+    work = (
+        np.empty(12),
+        np.empty(nt),
+        np.empty(B, np.int64),
+        np.zeros(nt, np.bool_),
+        np.empty((MAX_SUB, 3), np.int64),
+        np.empty((MAX_SUB, 12)),
+        np.empty(MAX_SUB, np.int64),
+        np.empty(MAX_SUB, np.int64),
+        np.empty(5),
+        np.empty((B, 3), np.int64),
+        np.empty(4),
+        np.zeros(1, np.int64),
+    )
     for k in range(k0, k1):
         r = ranges[k]
         if use_given:
@@ -837,25 +926,84 @@ def extract_scans(ranges, k0, k1, cos_a, sin_a, cos_inc, c1, range_min, range_ma
         for i in range(B):
             ri = r[i]
             if not valid_return(ri, range_min, range_max):
-                ri = 0.0   # only reachable through given segments: an invalid return is a point at the scanner
+                ri = 0.0  # only reachable through given segments: an invalid return is a point at the scanner
             x[i] = ri * cos_a[i]
             y[i] = ri * sin_a[i]
-        nl, nc, nb = extract_scan(x, y, starts, ends, nseg, k, p, acc, cacc, cos_t, sin_t, idx, sub_s, sub_e,
-                                  lines, base, circles, base, blobs, base, work, dalpha)
+        nl, nc, nb = extract_scan(
+            x,
+            y,
+            starts,
+            ends,
+            nseg,
+            k,
+            p,
+            acc,
+            cacc,
+            cos_t,
+            sin_t,
+            idx,
+            sub_s,
+            sub_e,
+            lines,
+            base,
+            circles,
+            base,
+            blobs,
+            base,
+            work,
+            dalpha,
+        )
         counts[k, 1] = nl - base
         counts[k, 2] = nc - base
         counts[k, 3] = nb - base
 
 
 @njit(cache=True, parallel=True)
-def extract_parallel(ranges, parts, cos_a, sin_a, cos_inc, c1, range_min, range_max, p, cos_t, sin_t, seg_out,
-                     lines, circles, blobs, counts, given, given_offsets):
+def extract_parallel(
+    ranges,
+    parts,
+    cos_a,
+    sin_a,
+    cos_inc,
+    c1,
+    range_min,
+    range_max,
+    p,
+    cos_t,
+    sin_t,
+    seg_out,
+    lines,
+    circles,
+    blobs,
+    counts,
+    given,
+    given_offsets,
+):
     """extract_scans over all N scans of the block, split into `parts` ranges of consecutive scans run on
     numba's threads (numba.set_num_threads); the same rows as one extract_scans(ranges, 0, N, ...)."""
     N = ranges.shape[0]
     for j in prange(parts):
-        extract_scans(ranges, j * N // parts, (j + 1) * N // parts, cos_a, sin_a, cos_inc, c1, range_min, range_max,
-                      p, cos_t, sin_t, seg_out, lines, circles, blobs, counts, given, given_offsets)
+        extract_scans(
+            ranges,
+            j * N // parts,
+            (j + 1) * N // parts,
+            cos_a,
+            sin_a,
+            cos_inc,
+            c1,
+            range_min,
+            range_max,
+            p,
+            cos_t,
+            sin_t,
+            seg_out,
+            lines,
+            circles,
+            blobs,
+            counts,
+            given,
+            given_offsets,
+        )
 
 
 @njit(cache=True)

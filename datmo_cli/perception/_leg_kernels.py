@@ -13,17 +13,36 @@ from numba import njit, prange
 from ..numba_runtime import key_kernel_cache_on_sources
 from ._kernels import valid_return
 
-key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
+key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 
-(F_N, F_WIDTH, F_LINEARITY, F_CIRCULARITY, F_RADIUS, F_STD, F_MEDIAN_DEV, F_BOUNDARY_LENGTH,
- F_BOUNDARY_REGULARITY, F_MEAN_CURVATURE, F_INSCRIBED_ANGLE, F_INSCRIBED_ANGLE_STD, F_DISTANCE,
- F_SUBTENDED_ANGLE, F_OCCLUDED_START, F_OCCLUDED_END, F_JUMP_START, F_JUMP_END, F_NEIGHBOUR, F_DENSITY,
- F_RELATIVE_CURVATURE) = range(21)
+(
+    F_N,
+    F_WIDTH,
+    F_LINEARITY,
+    F_CIRCULARITY,
+    F_RADIUS,
+    F_STD,
+    F_MEDIAN_DEV,
+    F_BOUNDARY_LENGTH,
+    F_BOUNDARY_REGULARITY,
+    F_MEAN_CURVATURE,
+    F_INSCRIBED_ANGLE,
+    F_INSCRIBED_ANGLE_STD,
+    F_DISTANCE,
+    F_SUBTENDED_ANGLE,
+    F_OCCLUDED_START,
+    F_OCCLUDED_END,
+    F_JUMP_START,
+    F_JUMP_END,
+    F_NEIGHBOUR,
+    F_DENSITY,
+    F_RELATIVE_CURVATURE,
+) = range(21)
 N_FEATURES = 21
-JUMP_CLIP = 3.0       # m: bound of the range jumps; the jump when no valid return lies beyond an end
+JUMP_CLIP = 3.0  # m: bound of the range jumps; the jump when no valid return lies beyond an end
 NEIGHBOUR_CLIP = 2.0  # m: bound of the distance to the nearest other candidate (also when there is none)
-DENSITY_CLIP = 10.0   # bound of the angle-step-free point density (also for a segment of zero width)
-DEGENERATE = 1e-12   # circle fit refused when det(scatter) <= DEGENERATE * trace(scatter)**2 (collinear points)
+DENSITY_CLIP = 10.0  # bound of the angle-step-free point density (also for a segment of zero width)
+DEGENERATE = 1e-12  # circle fit refused when det(scatter) <= DEGENERATE * trace(scatter)**2 (collinear points)
 KIND_FOREST, KIND_BOOSTING = 0, 1
 
 
@@ -137,10 +156,10 @@ def segment_features(x, y, n, radius_clip, work, step, out) -> None:
             ay = y[i] - y[i - 1]
             cx = x[i + 1] - x[i - 1]
             cy = y[i + 1] - y[i - 1]
-            cross = cx * ay - cy * ax             # side of p_i relative to the chord p_i-1 -> p_i+1
+            cross = cx * ay - cy * ax  # side of p_i relative to the chord p_i-1 -> p_i+1
             abc = step[i - 1] * step[i] * np.sqrt(cx * cx + cy * cy)
             if abc > 0.0 and cross != 0.0:
-                k = 2.0 * abs(cross) / abc          # 1 / circumradius
+                k = 2.0 * abs(cross) / abc  # 1 / circumradius
                 origin = cy * x[i - 1] - cx * y[i - 1]
                 curv += k if cross * origin > 0.0 else -k
             # inscribed angle at p_i between the first and the last point, in [0, pi]
@@ -173,8 +192,24 @@ def _jump(r, i, d, B, range_min, range_max) -> float:
 
 
 @njit(cache=True)
-def block_features(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min, range_max,
-                   radius_clip, margin, max_width, min_points, skip, angle_step, out) -> None:
+def block_features(
+    ranges,
+    cos_a,
+    sin_a,
+    angles,
+    seg_start,
+    seg_end,
+    seg_offsets,
+    range_min,
+    range_max,
+    radius_clip,
+    margin,
+    max_width,
+    min_points,
+    skip,
+    angle_step,
+    out,
+) -> None:
     """Features of every segment of a block of scans into out (M, N_FEATURES).
 
     Scan k's segments are seg_start/seg_end[seg_offsets[k]:seg_offsets[k + 1]], beam ranges [start, end)
@@ -340,12 +375,19 @@ def ensemble(features, max_width, min_points, nodes, split, roots, kind, base, s
             rows[c] = m
             c += 1
     acc = np.zeros(c, np.float64)
-    for t in range(T):      # tree by tree, in sklearn's order (the same sums), four rows at a time
+    for t in range(T):  # tree by tree, in sklearn's order (the same sums), four rows at a time
         root = roots[t]
         i = 0
         while i + 4 <= c:
-            l0, l1, l2, l3 = _leaves4(nodes, split, features[rows[i]], features[rows[i + 1]],
-                                      features[rows[i + 2]], features[rows[i + 3]], root)
+            l0, l1, l2, l3 = _leaves4(
+                nodes,
+                split,
+                features[rows[i]],
+                features[rows[i + 1]],
+                features[rows[i + 2]],
+                features[rows[i + 3]],
+                root,
+            )
             acc[i] += split[l0]
             acc[i + 1] += split[l1]
             acc[i + 2] += split[l2]
@@ -362,19 +404,78 @@ def ensemble(features, max_width, min_points, nodes, split, roots, kind, base, s
 
 
 @njit(cache=True)
-def block_probabilities(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min, range_max,
-                        radius_clip, margin, max_width, min_points, angle_step, nodes, split, roots, kind, base,
-                        scale, features, out) -> None:
+def block_probabilities(
+    ranges,
+    cos_a,
+    sin_a,
+    angles,
+    seg_start,
+    seg_end,
+    seg_offsets,
+    range_min,
+    range_max,
+    radius_clip,
+    margin,
+    max_width,
+    min_points,
+    angle_step,
+    nodes,
+    split,
+    roots,
+    kind,
+    base,
+    scale,
+    features,
+    out,
+) -> None:
     """block_features (candidates only) then ensemble, in one compiled call: the per-scan hot path."""
-    block_features(ranges, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min, range_max,
-                   radius_clip, margin, max_width, min_points, True, angle_step, features)
+    block_features(
+        ranges,
+        cos_a,
+        sin_a,
+        angles,
+        seg_start,
+        seg_end,
+        seg_offsets,
+        range_min,
+        range_max,
+        radius_clip,
+        margin,
+        max_width,
+        min_points,
+        True,
+        angle_step,
+        features,
+    )
     ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, out)
 
 
 @njit(cache=True, parallel=True)
-def block_probabilities_parallel(ranges, parts, cos_a, sin_a, angles, seg_start, seg_end, seg_offsets, range_min,
-                                 range_max, radius_clip, margin, max_width, min_points, angle_step, nodes, split,
-                                 roots, kind, base, scale, features, out) -> None:
+def block_probabilities_parallel(
+    ranges,
+    parts,
+    cos_a,
+    sin_a,
+    angles,
+    seg_start,
+    seg_end,
+    seg_offsets,
+    range_min,
+    range_max,
+    radius_clip,
+    margin,
+    max_width,
+    min_points,
+    angle_step,
+    nodes,
+    split,
+    roots,
+    kind,
+    base,
+    scale,
+    features,
+    out,
+) -> None:
     """block_probabilities on numba's threads: the block's scans split into `parts` ranges of consecutive scans,
     each range's segments (rows seg_offsets[k0]:seg_offsets[k1] of features and out) done at once. Every row's
     features and probability depend on its own scan only: the same out as block_probabilities."""
@@ -384,8 +485,24 @@ def block_probabilities_parallel(ranges, parts, cos_a, sin_a, angles, seg_start,
         k1 = (j + 1) * N // parts
         g0 = seg_offsets[k0]
         g1 = seg_offsets[k1]
-        block_features(ranges[k0:k1], cos_a, sin_a, angles, seg_start, seg_end, seg_offsets[k0:k1 + 1], range_min,
-                       range_max, radius_clip, margin, max_width, min_points, True, angle_step, features)
+        block_features(
+            ranges[k0:k1],
+            cos_a,
+            sin_a,
+            angles,
+            seg_start,
+            seg_end,
+            seg_offsets[k0 : k1 + 1],
+            range_min,
+            range_max,
+            radius_clip,
+            margin,
+            max_width,
+            min_points,
+            True,
+            angle_step,
+            features,
+        )
         ensemble(features[g0:g1], max_width, min_points, nodes, split, roots, kind, base, scale, out[g0:g1])
 
 
@@ -400,7 +517,7 @@ def _gap_pass(ranges, cos_a, sin_a, range_min, range_max, gap, min_points, start
     for k in range(N):
         r = ranges[k]
         c = 0
-        first = -1      # first beam of the open cluster (-1: none)
+        first = -1  # first beam of the open cluster (-1: none)
         last = -1
         n = 0
         px = 0.0

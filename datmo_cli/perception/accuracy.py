@@ -32,15 +32,16 @@ def _per_scan(offsets: np.ndarray) -> np.ndarray:
     return np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
 
 
-def wall_errors(f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray, sensor_theta: np.ndarray,
-                min_length: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+def wall_errors(
+    f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray, sensor_theta: np.ndarray, min_length: float = 0.5
+) -> tuple[np.ndarray, np.ndarray]:
     """(angle errors in degrees, rho errors in m) of every line at least `min_length` long that lies on a
     ground-truth wall (normal within 5 degrees and 10 cm, midpoint within the wall's extent)."""
     ang, dist = [], []
     for k in range(len(f)):
-        walls = truth[truth_offsets[k]:truth_offsets[k + 1]]
+        walls = truth[truth_offsets[k] : truth_offsets[k + 1]]
         walls = walls[walls["classification"] == CLASS_WALL]
-        lines = f.lines[f.line_offsets[k]:f.line_offsets[k + 1]]
+        lines = f.lines[f.line_offsets[k] : f.line_offsets[k + 1]]
         lines = lines[lines["length"] >= min_length]
         if not len(walls) or not len(lines):
             continue
@@ -63,21 +64,26 @@ def wall_errors(f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray, se
     return np.array(ang), np.array(dist)
 
 
-def leg_errors(f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray, max_range: float = 4.0,
-               match: float = 0.15) -> tuple[np.ndarray, np.ndarray, float]:
+def leg_errors(
+    f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray, max_range: float = 4.0, match: float = 0.15
+) -> tuple[np.ndarray, np.ndarray, float]:
     """(centre errors m, radius errors m, share of visible legs within max_range that got a circle) of the
     circles within `match` of a true leg centre (radius 10 cm)."""
     centre, radius = [], []
     legs_seen = legs_found = 0
     for k in range(len(f)):
-        objs = truth[truth_offsets[k]:truth_offsets[k + 1]]
+        objs = truth[truth_offsets[k] : truth_offsets[k + 1]]
         people = objs[(objs["classification"] == CLASS_PERSON) & (objs["visible"] == 1)]
         if not len(people):
             continue
-        legs = np.concatenate([np.stack([people["left_leg_x"], people["left_leg_y"]], 1),
-                               np.stack([people["right_leg_x"], people["right_leg_y"]], 1)]).astype(np.float64)
+        legs = np.concatenate(
+            [
+                np.stack([people["left_leg_x"], people["left_leg_y"]], 1),
+                np.stack([people["right_leg_x"], people["right_leg_y"]], 1),
+            ]
+        ).astype(np.float64)
         legs = legs[np.hypot(legs[:, 0], legs[:, 1]) <= max_range]
-        circles = f.circles[f.circle_offsets[k]:f.circle_offsets[k + 1]]
+        circles = f.circles[f.circle_offsets[k] : f.circle_offsets[k + 1]]
         legs_seen += len(legs)
         if not len(circles) or not len(legs):
             continue
@@ -95,9 +101,9 @@ def column_errors(f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray, 
     """Centre errors (m) of the circles within `match` of a true column."""
     out = []
     for k in range(len(f)):
-        objs = truth[truth_offsets[k]:truth_offsets[k + 1]]
+        objs = truth[truth_offsets[k] : truth_offsets[k + 1]]
         cols = objs[(objs["classification"] == CLASS_COLUMN) & (objs["visible"] == 1)]
-        circles = f.circles[f.circle_offsets[k]:f.circle_offsets[k + 1]]
+        circles = f.circles[f.circle_offsets[k] : f.circle_offsets[k + 1]]
         if not len(cols) or not len(circles):
             continue
         d = np.hypot(circles["x"][:, None] - cols["x"][None, :], circles["y"][:, None] - cols["y"][None, :])
@@ -110,9 +116,9 @@ def column_errors(f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray, 
 class LandmarkScore:
     """Landmark database against the true static landmarks (columns, benches, wall corners)."""
 
-    found: dict[str, tuple[int, int]]   # class -> (found, visible)
-    spurious: int                       # defined landmarks (not line ends) near no true landmark
-    defined: int                        # defined landmarks in the database
+    found: dict[str, tuple[int, int]]  # class -> (found, visible)
+    spurious: int  # defined landmarks (not line ends) near no true landmark
+    defined: int  # defined landmarks in the database
     line_ends: int
     line_ends_on_corners: int
 
@@ -127,8 +133,16 @@ class LandmarkScore:
         return self.spurious / self.defined if self.defined else 0.0
 
 
-def corner_observed(run, truth: np.ndarray, truth_offsets: np.ndarray, sensor_theta: np.ndarray,
-                    reach: float = 0.5, near: float = 0.03, min_points: int = 4, c0: float = 0.08) -> dict[int, int]:
+def corner_observed(
+    run,
+    truth: np.ndarray,
+    truth_offsets: np.ndarray,
+    sensor_theta: np.ndarray,
+    reach: float = 0.5,
+    near: float = 0.03,
+    min_points: int = 4,
+    c0: float = 0.08,
+) -> dict[int, int]:
     """For each true wall corner id, the number of scans in which the method can see it as a corner: each of
     its two walls has at least `min_points` scan points (the paper keeps a line of more than 3 points) within
     `near` of the wall line, within `reach` of the vertex and not on the other wall, and these points with
@@ -139,7 +153,7 @@ def corner_observed(run, truth: np.ndarray, truth_offsets: np.ndarray, sensor_th
     c1 = float(np.sqrt(2.0 * (1.0 - np.cos(run.geometry.angle_increment))))
     out: dict[int, int] = {}
     for k in range(len(run)):
-        objs = truth[truth_offsets[k]:truth_offsets[k + 1]]
+        objs = truth[truth_offsets[k] : truth_offsets[k + 1]]
         corners = objs[objs["classification"] == CLASS_WALL_CORNER]
         walls = objs[objs["classification"] == CLASS_WALL]
         if not len(corners):
@@ -154,8 +168,10 @@ def corner_observed(run, truth: np.ndarray, truth_offsets: np.ndarray, sensor_th
         ends = np.stack([walls["x"] - ux * h, walls["y"] - uy * h, walls["x"] + ux * h, walls["y"] + uy * h], 1)
         for c in corners:
             cx, cy = float(c["x"]), float(c["y"])
-            touching = np.flatnonzero((np.hypot(ends[:, 0] - cx, ends[:, 1] - cy) < 0.02)
-                                      | (np.hypot(ends[:, 2] - cx, ends[:, 3] - cy) < 0.02))[:2]
+            touching = np.flatnonzero(
+                (np.hypot(ends[:, 0] - cx, ends[:, 1] - cy) < 0.02)
+                | (np.hypot(ends[:, 2] - cx, ends[:, 3] - cy) < 0.02)
+            )[:2]
             if len(touching) < 2:
                 continue
             close = np.hypot(px - cx, py - cy) <= reach
@@ -163,15 +179,21 @@ def corner_observed(run, truth: np.ndarray, truth_offsets: np.ndarray, sensor_th
             sides = [on[0] & ~on[1], on[1] & ~on[0]]
             if min(int(np.count_nonzero(side)) for side in sides) < min_points:
                 continue
-            chain = np.flatnonzero(on[0] | on[1])     # in beam order: both walls and the vertex's points
+            chain = np.flatnonzero(on[0] | on[1])  # in beam order: both walls and the vertex's points
             gap = np.hypot(np.diff(px[chain]), np.diff(py[chain]))
             if np.all(gap <= c0 + c1 * np.minimum(pr[chain][:-1], pr[chain][1:])):
                 out[int(c["id"])] = out.get(int(c["id"]), 0) + 1
     return out
 
 
-def landmark_score(f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray, match: float = 0.2,
-                   min_scans: int = 10, corner_scans: dict[int, int] | None = None) -> LandmarkScore:
+def landmark_score(
+    f: RunFeatures,
+    truth: np.ndarray,
+    truth_offsets: np.ndarray,
+    match: float = 0.2,
+    min_scans: int = 10,
+    corner_scans: dict[int, int] | None = None,
+) -> LandmarkScore:
     """Score the database after the last scan. A column or bench counts when hit by at least 3 beams in at
     least `min_scans` scans; a wall corner when it can be seen as a corner (both walls, see corner_observed)
     in at least `min_scans` scans. It is found when a landmark of a fitting type lies within `match` (a wall
@@ -199,7 +221,8 @@ def landmark_score(f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray,
             nv += 1
             x, y = float(rows[kx][-1]), float(rows[ky][-1])
             types = {CLASS_COLUMN: (LANDMARK_COLUMN,), CLASS_BENCH: (LANDMARK_BENCH,)}.get(
-                cls, (LANDMARK_CORNER, LANDMARK_CONVEX_DEFLECTION, LANDMARK_CONCAVE_DEFLECTION, LANDMARK_LINE_END))
+                cls, (LANDMARK_CORNER, LANDMARK_CONVEX_DEFLECTION, LANDMARK_CONCAVE_DEFLECTION, LANDMARK_LINE_END)
+            )
             near = np.isin(db["type"], types) & (np.hypot(db["x"] - x, db["y"] - y) <= match)
             nf += bool(near.any())
         found[name] = (nf, nv)
@@ -210,8 +233,8 @@ def landmark_score(f: RunFeatures, truth: np.ndarray, truth_offsets: np.ndarray,
     def near_truth(items: np.ndarray) -> np.ndarray:
         if not len(txy) or not len(items):
             return np.zeros(len(items), bool)
-        return (np.hypot(items["x"][:, None] - txy[None, :, 0], items["y"][:, None] - txy[None, :, 1])
-                <= match).any(axis=1)
+        return (np.hypot(items["x"][:, None] - txy[None, :, 0], items["y"][:, None] - txy[None, :, 1]) <= match).any(
+            axis=1
+        )
 
-    return LandmarkScore(found, int((~near_truth(defined)).sum()), len(defined), len(ends),
-                         int(near_truth(ends).sum()))
+    return LandmarkScore(found, int((~near_truth(defined)).sum()), len(defined), len(ends), int(near_truth(ends).sum()))

@@ -26,8 +26,9 @@ FRAME_ID = "scan_odom"
 #: retries' starting moves from the previous pose (x, y m, theta rad, in its sensor frame): standing or driving
 #: on 0.5 or 1 m, each turning 0, 15, 30 or 45 degrees either way (a robot that starts to turn or drive breaks
 #: the constant-velocity guess; thinned logs such as CARMEN's corrected ones jump that far between scans)
-DEFAULT_RECOVERY_MOVES = tuple((x, 0.0, math.radians(a)) for x in (0.0, 0.5, 1.0)
-                               for a in (0.0, -15.0, 15.0, -30.0, 30.0, -45.0, 45.0))
+DEFAULT_RECOVERY_MOVES = tuple(
+    (x, 0.0, math.radians(a)) for x in (0.0, 0.5, 1.0) for a in (0.0, -15.0, 15.0, -30.0, 30.0, -45.0, 45.0)
+)
 
 
 @dataclass
@@ -132,19 +133,55 @@ def estimate_egomotion(run: ScanRun, **params) -> EgoMotion:
     dt[1:] = np.diff(run.stamps) * 1e-9
     poses = np.zeros((len(run), 3))
     stats = np.zeros((len(run), K.N_STATS))
-    K.odometry_run(run.ranges, dt, cos_a, sin_a, float(g.range_min), float(g.range_max), int(p.max_points),
-                   float(p.source_spacing), float(p.map_spacing), float(p.normal_radius), float(p.max_gap),
-                   _max_window(g), float(p.planarity), float(p.max_dist0), float(p.max_dist),
-                   float(p.robust_scale), float(p.inlier_tol), int(p.max_iter), float(p.prior_weight),
-                   float(p.keyframe_dist), float(p.keyframe_angle), float(p.keyframe_share), int(p.n_keyframes),
-                   float(p.min_inlier_share), np.asarray(p.recovery_moves, np.float64).reshape(-1, 3), poses, stats)
-    odom = Odometry(run.stamps.copy(), poses[:, 0].copy(), poses[:, 1].copy(), poses[:, 2].copy(),
-                    frame_id=FRAME_ID, child_frame_id=g.frame_id)
+    K.odometry_run(
+        run.ranges,
+        dt,
+        cos_a,
+        sin_a,
+        float(g.range_min),
+        float(g.range_max),
+        int(p.max_points),
+        float(p.source_spacing),
+        float(p.map_spacing),
+        float(p.normal_radius),
+        float(p.max_gap),
+        _max_window(g),
+        float(p.planarity),
+        float(p.max_dist0),
+        float(p.max_dist),
+        float(p.robust_scale),
+        float(p.inlier_tol),
+        int(p.max_iter),
+        float(p.prior_weight),
+        float(p.keyframe_dist),
+        float(p.keyframe_angle),
+        float(p.keyframe_share),
+        int(p.n_keyframes),
+        float(p.min_inlier_share),
+        np.asarray(p.recovery_moves, np.float64).reshape(-1, 3),
+        poses,
+        stats,
+    )
+    odom = Odometry(
+        run.stamps.copy(),
+        poses[:, 0].copy(),
+        poses[:, 1].copy(),
+        poses[:, 2].copy(),
+        frame_id=FRAME_ID,
+        child_frame_id=g.frame_id,
+    )
     flags = stats[:, K.S_FLAGS].astype(np.int64)
-    return EgoMotion(odom, stats[:, K.S_RESIDUAL].copy(), stats[:, K.S_INLIER_SHARE].copy(),
-                     stats[:, K.S_MATCHED].astype(np.int64), stats[:, K.S_POINTS].astype(np.int64),
-                     (flags & K.FLAG_KEYFRAME) != 0, (flags & K.FLAG_RECOVERED) != 0, (flags & K.FLAG_FAILED) != 0,
-                     stats[:, K.S_ITERATIONS].astype(np.int64))
+    return EgoMotion(
+        odom,
+        stats[:, K.S_RESIDUAL].copy(),
+        stats[:, K.S_INLIER_SHARE].copy(),
+        stats[:, K.S_MATCHED].astype(np.int64),
+        stats[:, K.S_POINTS].astype(np.int64),
+        (flags & K.FLAG_KEYFRAME) != 0,
+        (flags & K.FLAG_RECOVERED) != 0,
+        (flags & K.FLAG_FAILED) != 0,
+        stats[:, K.S_ITERATIONS].astype(np.int64),
+    )
 
 
 def estimate_odometry(run: ScanRun, *, max_points: int = IcpParams.max_points, **params) -> Odometry:
@@ -154,8 +191,13 @@ def estimate_odometry(run: ScanRun, *, max_points: int = IcpParams.max_points, *
     return estimate_egomotion(run, max_points=max_points, **params).odometry
 
 
-def align_scans(reference: np.ndarray, ranges: np.ndarray, geometry: ScanGeometry,
-                init: tuple[float, float, float] = (0.0, 0.0, 0.0), **params) -> tuple[np.ndarray, dict]:
+def align_scans(
+    reference: np.ndarray,
+    ranges: np.ndarray,
+    geometry: ScanGeometry,
+    init: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    **params,
+) -> tuple[np.ndarray, dict]:
     """Pose (x, y m, theta rad) of the scan `ranges` in the sensor frame of the scan `reference` (both of
     `geometry`, (B,) ranges in m), by one ICP from init; and its figures: matched, residual (mean |r|, m),
     inlier_share, iterations. Keyword parameters are the fields of IcpParams (the keyframe and recovery
@@ -173,8 +215,7 @@ def align_scans(reference: np.ndarray, ranges: np.ndarray, geometry: ScanGeometr
     px, py, beams = np.zeros(b), np.zeros(b), np.zeros(b, np.int64)
     m = K.scan_points(ref, cos_a, sin_a, lo, hi, p.map_spacing, b, px, py, beams)
     nx, ny = np.zeros(b), np.zeros(b)
-    K.scan_normals(ref, cos_a, sin_a, lo, hi, beams, m, p.normal_radius, p.max_gap, _max_window(g), p.planarity,
-                   nx, ny)
+    K.scan_normals(ref, cos_a, sin_a, lo, hi, beams, m, p.normal_radius, p.max_gap, _max_window(g), p.planarity, nx, ny)
     mx, my, mnx, mny = (np.zeros(b) for _ in range(4))
     nxt = np.full(b, K.EMPTY, np.int64)
     head = np.full(1 << max(4, int(2 * b - 1).bit_length()), K.EMPTY, np.int64)
@@ -183,10 +224,33 @@ def align_scans(reference: np.ndarray, ranges: np.ndarray, geometry: ScanGeometr
     n = K.scan_points(cur, cos_a, sin_a, lo, hi, p.source_spacing, p.max_points, sx, sy, beams)
     pose = np.zeros(3)
     matched, residual, inliers, iters = K.icp_align(
-        sx, sy, n, float(init[0]), float(init[1]), float(init[2]), mx, my, mnx, mny, p.max_dist, head, nxt,
-        p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight, pose)
-    return pose, {"matched": int(matched), "residual": float(residual), "inlier_share": inliers / max(n, 1),
-                  "iterations": int(iters)}
+        sx,
+        sy,
+        n,
+        float(init[0]),
+        float(init[1]),
+        float(init[2]),
+        mx,
+        my,
+        mnx,
+        mny,
+        p.max_dist,
+        head,
+        nxt,
+        p.max_dist0,
+        p.max_dist,
+        p.robust_scale,
+        p.inlier_tol,
+        p.max_iter,
+        p.prior_weight,
+        pose,
+    )
+    return pose, {
+        "matched": int(matched),
+        "residual": float(residual),
+        "inlier_share": inliers / max(n, 1),
+        "iterations": int(iters),
+    }
 
 
 def path_length(odometry: Odometry) -> float:
@@ -214,7 +278,7 @@ def is_moving(odometry: Odometry, min_path: float = 0.3, min_turn: float = math.
 
 
 EGO_MOTION_MODES = ("auto", "on", "off")
-EGO_SAMPLE_SCANS = 1024   # "auto" judges whether the scanner moves on a log's first scans (one block), not all
+EGO_SAMPLE_SCANS = 1024  # "auto" judges whether the scanner moves on a log's first scans (one block), not all
 
 
 def sampled_scans(n: int) -> int:
@@ -222,8 +286,9 @@ def sampled_scans(n: int) -> int:
     return min(n, EGO_SAMPLE_SCANS)
 
 
-def scans_move(run: ScanRun, samples: int = 100, min_step: float = 0.05, min_turn: float = math.radians(1.5),
-               share: float = 0.1) -> bool:
+def scans_move(
+    run: ScanRun, samples: int = 100, min_step: float = 0.05, min_turn: float = math.radians(1.5), share: float = 0.1
+) -> bool:
     """Whether a log's scanner moves, cheaply: up to `samples` pairs of consecutive scans, spread over its first
     EGO_SAMPLE_SCANS scans (a streamed log decides before its first block is processed, without reading the
     whole log an extra time), are aligned by one ICP each (align_scans); it moves when at least `share` of them
@@ -246,8 +311,14 @@ def pair_picks(n: int, samples: int = 100) -> np.ndarray:
     return np.unique(np.linspace(0, n - 2, min(samples, n - 1)).astype(np.int64))
 
 
-def pairs_move(pairs: ScanRun, n: int, samples: int = 100, min_step: float = 0.05,
-               min_turn: float = math.radians(1.5), share: float = 0.1) -> bool:
+def pairs_move(
+    pairs: ScanRun,
+    n: int,
+    samples: int = 100,
+    min_step: float = 0.05,
+    min_turn: float = math.radians(1.5),
+    share: float = 0.1,
+) -> bool:
     """scans_move's decision on its pairs already gathered (rows 2i and 2i + 1 of `pairs`, from n sampled
     scans; see pair_picks)."""
     if n < 2:

@@ -34,8 +34,8 @@ LINE_DTYPE = cdr.element_dtype(types.LINE)
 CIRCLE_DTYPE = cdr.element_dtype(types.CIRCLE)
 BLOB_DTYPE = cdr.element_dtype(types.BLOB)
 LEG_DTYPE = cdr.element_dtype(types.LEG)
-NO_SEGMENT = 0xFFFFFFFF   # Leg.segment of a leg cluster no segment holds the middle of
-BLOCK = 256   # scans per kernel call: bounds the scratch memory and paces progress reports
+NO_SEGMENT = 0xFFFFFFFF  # Leg.segment of a leg cluster no segment holds the middle of
+BLOCK = 256  # scans per kernel call: bounds the scratch memory and paces progress reports
 
 
 @dataclass
@@ -63,8 +63,8 @@ class RunFeatures:
     landmark_frame: str = ""
     legs: np.ndarray | None = None
     leg_offsets: np.ndarray | None = None
-    range_limits: tuple[float, float] = (0.0, np.inf)   # valid returns (m): range_min and range_max
-    angles: np.ndarray | None = None                     # (B,) beam angles, rad
+    range_limits: tuple[float, float] = (0.0, np.inf)  # valid returns (m): range_min and range_max
+    angles: np.ndarray | None = None  # (B,) beam angles, rad
 
     def __post_init__(self) -> None:
         if self.legs is None:
@@ -77,8 +77,13 @@ class RunFeatures:
     def counts(self) -> dict[str, float]:
         """Mean segments, lines, circles and blobs per scan."""
         n = max(len(self), 1)
-        return {"segments": len(self.seg_start) / n, "lines": len(self.lines) / n,
-                "circles": len(self.circles) / n, "blobs": len(self.blobs) / n, "legs": len(self.legs) / n}
+        return {
+            "segments": len(self.seg_start) / n,
+            "lines": len(self.lines) / n,
+            "circles": len(self.circles) / n,
+            "blobs": len(self.blobs) / n,
+            "legs": len(self.legs) / n,
+        }
 
 
 def _check(run: ScanRun) -> None:
@@ -114,8 +119,9 @@ def segment_run(run: ScanRun, params: FeatureParams | None = None) -> tuple[np.n
     seg = np.empty((max(N * (B // max(p.min_points, 1) + 1), 1), 2), np.int64)
     count = np.zeros(N, np.int64)
     if N and B:
-        n = K.segment_block(ranges, float(np.cos(run.geometry.angle_increment)), p.c0, _c1(run), lo, hi,
-                            p.min_points, seg, count)
+        n = K.segment_block(
+            ranges, float(np.cos(run.geometry.angle_increment)), p.c0, _c1(run), lo, hi, p.min_points, seg, count
+        )
         seg = seg[:n]
     else:
         seg = seg[:0]
@@ -130,8 +136,20 @@ def _rows_to(dtype: np.dtype, rows: np.ndarray, names: tuple[str, ...]) -> np.nd
     return out
 
 
-_LINE_NAMES = ("segment", "first", "last", "n_points", "x_ini", "y_ini", "x_end", "y_end", "rho", "theta",
-               "length", "r_acc")
+_LINE_NAMES = (
+    "segment",
+    "first",
+    "last",
+    "n_points",
+    "x_ini",
+    "y_ini",
+    "x_end",
+    "y_end",
+    "rho",
+    "theta",
+    "length",
+    "r_acc",
+)
 _CIRCLE_NAMES = ("segment", "first", "last", "n_points", "x", "y", "radius", "r_acc")
 _BLOB_NAMES = ("segment", "first", "last", "n_points", "x", "y", "size", "kind")
 _LEG_NAMES = ("segment", "first", "last", "n_points", "x", "y", "width", "probability")
@@ -151,12 +169,24 @@ def _check_segments(start: np.ndarray, end: np.ndarray, offsets: np.ndarray, bea
     if bad.any():
         i = int(np.argmax(bad))
         scan = int(np.searchsorted(offsets, i, side="right") - 1)
-        raise InputError(f"segment [{start[i]}, {end[i]}) of scan {scan} overlaps the one before: "
-                         "segments must be disjoint and in scan order")
+        raise InputError(
+            f"segment [{start[i]}, {end[i]}) of scan {scan} overlaps the one before: "
+            "segments must be disjoint and in scan order"
+        )
 
 
-def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.ndarray, count: np.ndarray,
-              lo: float, hi: float, angles: np.ndarray, model, threads: int = 1) -> np.ndarray:
+def _leg_rows(
+    block: np.ndarray,
+    cos_a: np.ndarray,
+    sin_a: np.ndarray,
+    seg: np.ndarray,
+    count: np.ndarray,
+    lo: float,
+    hi: float,
+    angles: np.ndarray,
+    model,
+    threads: int = 1,
+) -> np.ndarray:
     """Rows (scan in block, segment in scan, first, last, n, x, y, width, probability) of the block's
     clusters (those legs.LegModel `model` scores: the segments, or leg_tracker's gap clusters) it gives a leg
     probability above 0 (every leg candidate, weak or strong: the tracker takes the model's threshold_p); x, y
@@ -165,7 +195,7 @@ def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.n
     from .legs import leg_probabilities, model_clusters
 
     seg_off = _offsets(count)
-    seg_start, seg_end = seg[:seg_off[-1], 0], seg[:seg_off[-1], 1]
+    seg_start, seg_end = seg[: seg_off[-1], 0], seg[: seg_off[-1], 1]
     start, end, off = model_clusters(block, angles, lo, hi, model, seg_start, seg_end, seg_off)
     prob = leg_probabilities(block, angles, start, end, off, lo, hi, model, threads)
     hit = np.flatnonzero(prob > 0.0)
@@ -176,7 +206,7 @@ def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.n
     s, e = start[hit].astype(np.int64), end[hit].astype(np.int64)
     B = block.shape[1]
     # the segment under each cluster's middle beam (segments are in scan order: global beam indices sort)
-    segment = np.full(len(hit), NO_SEGMENT, np.int64)   # a cluster may stand where no segment is kept
+    segment = np.full(len(hit), NO_SEGMENT, np.int64)  # a cluster may stand where no segment is kept
     if len(seg_start):
         seg_scan = np.searchsorted(seg_off, np.arange(len(seg_start)), side="right") - 1
         g0, g1 = seg_scan * B + seg_start, seg_scan * B + seg_end
@@ -184,7 +214,7 @@ def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.n
         j = np.maximum(np.searchsorted(g0, mid, side="right") - 1, 0)
         inside = (g0[j] <= mid) & (mid < g1[j])
         segment = np.where(inside, j - seg_off[seg_scan[j]], NO_SEGMENT)
-    r = np.where(np.isfinite(block), block, 0.0).astype(np.float64)   # segments hold valid returns only
+    r = np.where(np.isfinite(block), block, 0.0).astype(np.float64)  # segments hold valid returns only
     px, py = r * cos_a, r * sin_a
     # sums over [s, e) of each hit: segments are disjoint and in scan order, so the bounds interleave sorted
     bounds = np.empty(2 * len(hit), np.int64)
@@ -199,8 +229,9 @@ def _leg_rows(block: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray, seg: np.n
     return rows
 
 
-def _extract_block(block: np.ndarray, args: tuple, given: np.ndarray, given_off: np.ndarray,
-                   threads: int) -> tuple[np.ndarray, ...]:
+def _extract_block(
+    block: np.ndarray, args: tuple, given: np.ndarray, given_off: np.ndarray, threads: int
+) -> tuple[np.ndarray, ...]:
     """The perception kernels on one block of scans (ranges (n, B), m; `args` the kernels' geometry and
     parameters: cos_a, sin_a, cos_inc, c1, range_min, range_max, params vector, cos_t, sin_t) on `threads`
     threads (a threads.resolve()d count): (segments (S, 2) beam ranges [start, end), segments per scan (n,),
@@ -209,7 +240,7 @@ def _extract_block(block: np.ndarray, args: tuple, given: np.ndarray, given_off:
     from . import threads as T
 
     n, B = block.shape
-    rows = n * B   # a scan has at most B segments, lines, circles and blobs (disjoint beam ranges)
+    rows = n * B  # a scan has at most B segments, lines, circles and blobs (disjoint beam ranges)
     # empty, not zeros: only the rows the kernel fills are read
     seg, lines, circles, blobs = (np.empty((rows, c), np.int64 if c == 2 else np.float64) for c in (2, 13, 9, 9))
     counts = np.zeros((n, 4), np.int64)
@@ -227,9 +258,16 @@ def _extract_block(block: np.ndarray, args: tuple, given: np.ndarray, given_off:
     return out[0], counts[:, 0].copy(), out[1], out[2], out[3]
 
 
-def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odometry | None = None, *,
-                landmarks: bool = True, segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                progress: Callable[[int, int], None] | None = None, threads: int | None = None) -> RunFeatures:
+def extract_run(
+    run: ScanRun,
+    params: FeatureParams | None = None,
+    odometry: Odometry | None = None,
+    *,
+    landmarks: bool = True,
+    segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    threads: int | None = None,
+) -> RunFeatures:
     """Segment every scan and extract its lines, circles and blobs (HTL, HTC and the section 5.2 rule);
     with `landmarks`, also build the landmark database (world frame when `odometry` is given).
     `segments` (start, end, offsets as segment_run gives them, e.g. a log's /datmo/segments) are used
@@ -263,11 +301,11 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
     n_threads = T.resolve(threads)
     args = (cos_a, sin_a, cos_inc, c1, lo, hi, vec, cos_t, sin_t)
     for a in range(0, N, BLOCK):
-        block = ranges[a:a + BLOCK]
+        block = ranges[a : a + BLOCK]
         n = len(block)
         if segments is not None:
-            sub_off = g_off[a:a + n + 1]
-            block_given, block_off = given[sub_off[0]:sub_off[-1]], sub_off - sub_off[0]
+            sub_off = g_off[a : a + n + 1]
+            block_given, block_off = given[sub_off[0] : sub_off[-1]], sub_off - sub_off[0]
         else:
             block_given, block_off = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
         if B:
@@ -277,8 +315,11 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
             lines, circles, blobs = np.zeros((0, 13)), np.zeros((0, 9)), np.zeros((0, 9))
         segs.append(seg)
         seg_counts.append(count)
-        legs = (_leg_rows(block, cos_a, sin_a, seg, count, lo, hi, angles, model, n_threads)
-                if model is not None and B else None)
+        legs = (
+            _leg_rows(block, cos_a, sin_a, seg, count, lo, hi, angles, model, n_threads)
+            if model is not None and B
+            else None
+        )
         for key, rows in (("l", lines), ("c", circles), ("b", blobs)):
             rows[:, 0] += a
             parts[key].append(rows)
@@ -292,36 +333,59 @@ def extract_run(run: ScanRun, params: FeatureParams | None = None, odometry: Odo
     rows = {k: (np.concatenate(v) if v else np.zeros((0, 13 if k == "l" else 9))) for k, v in parts.items()}
     leg_scan = rows["g"][:, 0].astype(np.int64)
     out = RunFeatures(
-        stamps=run.stamps, frame_id=run.geometry.frame_id,
-        seg_start=seg[:, 0].astype(np.uint32), seg_end=seg[:, 1].astype(np.uint32), seg_offsets=_offsets(count),
+        stamps=run.stamps,
+        frame_id=run.geometry.frame_id,
+        seg_start=seg[:, 0].astype(np.uint32),
+        seg_end=seg[:, 1].astype(np.uint32),
+        seg_offsets=_offsets(count),
         lines=_rows_to(LINE_DTYPE, rows["l"], _LINE_NAMES),
         line_offsets=_offsets(np.bincount(rows["l"][:, 0].astype(np.int64), minlength=N)),
         circles=_rows_to(CIRCLE_DTYPE, rows["c"], _CIRCLE_NAMES),
         circle_offsets=_offsets(np.bincount(rows["c"][:, 0].astype(np.int64), minlength=N)),
         blobs=_rows_to(BLOB_DTYPE, rows["b"], _BLOB_NAMES),
         blob_offsets=_offsets(np.bincount(rows["b"][:, 0].astype(np.int64), minlength=N)),
-        legs=_rows_to(LEG_DTYPE, rows["g"], _LEG_NAMES), leg_offsets=_offsets(np.bincount(leg_scan, minlength=N)),
-        range_limits=(lo, hi), angles=angles)
+        legs=_rows_to(LEG_DTYPE, rows["g"], _LEG_NAMES),
+        leg_offsets=_offsets(np.bincount(leg_scan, minlength=N)),
+        range_limits=(lo, hi),
+        angles=angles,
+    )
     if landmarks:
-        out.landmarks, out.landmark_frame = LandmarkDatabase(*_world_detections(out, ranges, odometry, p), p), (
-            odometry.frame_id if odometry is not None and len(odometry) else run.geometry.frame_id)
+        out.landmarks, out.landmark_frame = (
+            LandmarkDatabase(*_world_detections(out, ranges, odometry, p), p),
+            (odometry.frame_id if odometry is not None and len(odometry) else run.geometry.frame_id),
+        )
     return out
 
 
-def _world_detections(f: RunFeatures, ranges: np.ndarray, odometry: Odometry | None,
-                      p: FeatureParams) -> tuple[np.ndarray, np.ndarray]:
+def _world_detections(
+    f: RunFeatures, ranges: np.ndarray, odometry: Odometry | None, p: FeatureParams
+) -> tuple[np.ndarray, np.ndarray]:
     """(landmark detections of `f`'s scans (rows DET_*, scans counted from f's first), in the odometry frame
     when there is odometry, else the sensor frame; f's stamps)."""
     n = len(f)
     lo, hi = f.range_limits
     line_scan = np.repeat(np.arange(n), np.diff(f.line_offsets))
     circle_scan = np.repeat(np.arange(n), np.diff(f.circle_offsets))
-    det = np.concatenate([
-        junction_detections(f.lines, line_scan, p),
-        line_end_detections(f.lines, line_scan, f.seg_start, f.seg_end, f.seg_offsets, ranges, (lo, hi), p),
-        circle_detections(f.circles, circle_scan, f.lines, line_scan, f.line_offsets, f.seg_start, f.seg_end,
-                          f.seg_offsets, ranges, (lo, hi), p),
-        seat_detections(f.lines, line_scan, f.seg_start, f.seg_end, f.seg_offsets, ranges, (lo, hi), f.angles, p)])
+    det = np.concatenate(
+        [
+            junction_detections(f.lines, line_scan, p),
+            line_end_detections(f.lines, line_scan, f.seg_start, f.seg_end, f.seg_offsets, ranges, (lo, hi), p),
+            circle_detections(
+                f.circles,
+                circle_scan,
+                f.lines,
+                line_scan,
+                f.line_offsets,
+                f.seg_start,
+                f.seg_end,
+                f.seg_offsets,
+                ranges,
+                (lo, hi),
+                p,
+            ),
+            seat_detections(f.lines, line_scan, f.seg_start, f.seg_end, f.seg_offsets, ranges, (lo, hi), f.angles, p),
+        ]
+    )
     poses = odometry.at(f.stamps) if odometry is not None and len(odometry) else None
     return to_world(det, poses), f.stamps
 
@@ -339,9 +403,14 @@ class FeatureStream:
         self.odometry = odometry
         self.landmarks = LandmarkStream(self.params)
 
-    def block(self, run: ScanRun, segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-              progress: Callable[[int, int], None] | None = None, *,
-              markers: bool = True) -> tuple[dict[str, tuple], RunFeatures]:
+    def block(
+        self,
+        run: ScanRun,
+        segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        progress: Callable[[int, int], None] | None = None,
+        *,
+        markers: bool = True,
+    ) -> tuple[dict[str, tuple], RunFeatures]:
         from ..log import mcapio
         from .markers import feature_markers
 
@@ -351,9 +420,17 @@ class FeatureStream:
         f.landmarks = LandmarkDatabase(det, stamps, self.params, stream=self.landmarks)
         world = self.odometry is not None and len(self.odometry) > 0
         f.landmark_frame = self.odometry.frame_id if world else run.geometry.frame_id
-        channels = {} if segments is not None else {
-            mcapio.TOPIC_SEGMENTS: (types.SEGMENTS, stamps, segment_payloads(run, f.seg_start, f.seg_end,
-                                                                             f.seg_offsets))}
+        channels = (
+            {}
+            if segments is not None
+            else {
+                mcapio.TOPIC_SEGMENTS: (
+                    types.SEGMENTS,
+                    stamps,
+                    segment_payloads(run, f.seg_start, f.seg_end, f.seg_offsets),
+                )
+            }
+        )
         channels |= {
             mcapio.TOPIC_FEATURES: (types.FEATURES, stamps, feature_payloads(f)),
             mcapio.TOPIC_LANDMARKS: (types.LANDMARKS, stamps, landmark_payloads(f)),
@@ -376,28 +453,46 @@ def leg_model_provenance(spec: str) -> dict:
     if model is None:
         return {"model": "paper", "rule": "legs are circles of leg radius; a person needs the walking pattern"}
     path = Path(DEFAULT_MODEL_PATH) if spec == "default" else Path(spec)
-    trained = {k: model.provenance[k] for k in ("estimator", "held_out", "trained_on", "created")
-               if k in model.provenance}
-    return {"model": spec, "path": str(path), "sha256": sha256_of(path), "threshold": model.threshold_p,
-            "features": list(model.feature_names), "trained": trained}
+    trained = {
+        k: model.provenance[k] for k in ("estimator", "held_out", "trained_on", "created") if k in model.provenance
+    }
+    return {
+        "model": spec,
+        "path": str(path),
+        "sha256": sha256_of(path),
+        "threshold": model.threshold_p,
+        "features": list(model.feature_names),
+        "trained": trained,
+    }
 
 
 def segment_payloads(run: ScanRun, seg_start: np.ndarray, seg_end: np.ndarray, offsets: np.ndarray) -> list[bytes]:
     """datmo_msgs/msg/Segments CDR payloads, one per scan."""
     frame = run.geometry.frame_id
-    return [cdr.encode(types.SEGMENTS, {"stamp_ns": s, "frame_id": frame, "start": seg_start[a:b],
-                                         "end": seg_end[a:b]})
-            for s, a, b in zip(run.stamps.tolist(), offsets[:-1].tolist(), offsets[1:].tolist(), strict=True)]
+    return [
+        cdr.encode(types.SEGMENTS, {"stamp_ns": s, "frame_id": frame, "start": seg_start[a:b], "end": seg_end[a:b]})
+        for s, a, b in zip(run.stamps.tolist(), offsets[:-1].tolist(), offsets[1:].tolist(), strict=True)
+    ]
 
 
 def feature_payloads(f: RunFeatures) -> list[bytes]:
     """datmo_msgs/msg/Features CDR payloads, one per scan."""
     lo, co, bo = f.line_offsets.tolist(), f.circle_offsets.tolist(), f.blob_offsets.tolist()
     go = f.leg_offsets.tolist()
-    return [cdr.encode(types.FEATURES, {"stamp_ns": s, "frame_id": f.frame_id, "lines": f.lines[lo[k]:lo[k + 1]],
-                                         "circles": f.circles[co[k]:co[k + 1]], "blobs": f.blobs[bo[k]:bo[k + 1]],
-                                         "legs": f.legs[go[k]:go[k + 1]]})
-            for k, s in enumerate(f.stamps.tolist())]
+    return [
+        cdr.encode(
+            types.FEATURES,
+            {
+                "stamp_ns": s,
+                "frame_id": f.frame_id,
+                "lines": f.lines[lo[k] : lo[k + 1]],
+                "circles": f.circles[co[k] : co[k + 1]],
+                "blobs": f.blobs[bo[k] : bo[k + 1]],
+                "legs": f.legs[go[k] : go[k + 1]],
+            },
+        )
+        for k, s in enumerate(f.stamps.tolist())
+    ]
 
 
 def landmark_payloads(f: RunFeatures) -> list[bytes]:
@@ -405,9 +500,12 @@ def landmark_payloads(f: RunFeatures) -> list[bytes]:
     db = f.landmarks
     elems = db.all_snapshots(f.stamps)
     off = db.snap_offsets.tolist()
-    return [cdr.encode(types.LANDMARKS, {"stamp_ns": s, "frame_id": f.landmark_frame,
-                                         "landmarks": elems[off[k]:off[k + 1]]})
-            for k, s in enumerate(np.asarray(f.stamps, np.int64).tolist())]
+    return [
+        cdr.encode(
+            types.LANDMARKS, {"stamp_ns": s, "frame_id": f.landmark_frame, "landmarks": elems[off[k] : off[k + 1]]}
+        )
+        for k, s in enumerate(np.asarray(f.stamps, np.int64).tolist())
+    ]
 
 
 def decode_segments(payloads: list[bytes], first: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -27,7 +27,7 @@ from ..log.vocabulary import (
 from ..numba_runtime import key_kernel_cache_on_sources
 from .params import FeatureParams
 
-key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
+key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 
 LANDMARK_DTYPE = cdr.element_dtype(types.LANDMARK)
 # a detection: scan index, type, x, y, orientation (rad), size (m)
@@ -57,11 +57,11 @@ def junction_detections(lines: np.ndarray, scan: np.ndarray, p: FeatureParams) -
         jx = (ra * np.sin(tb) - rb * np.sin(ta)) / det
         jy = (rb * np.cos(ta) - ra * np.cos(tb)) / det
     turn = np.abs(ta - tb) % np.pi
-    turn = np.minimum(turn, np.pi - turn)                       # angle between the lines, 0 .. pi/2
+    turn = np.minimum(turn, np.pi - turn)  # angle between the lines, 0 .. pi/2
     gap = np.maximum(np.hypot(jx - a["x_end"], jy - a["y_end"]), np.hypot(jx - b["x_ini"], jy - b["y_ini"]))
     ok = np.isfinite(jx) & (gap <= p.corner_gap) & (np.minimum(a["length"], b["length"]) >= p.line_min_length)
     corner = ok & (np.abs(turn - np.pi / 2) <= np.radians(p.perpendicular_tolerance))
-    walls = np.minimum(a["length"], b["length"]) >= 0.5   # a deflection is of a wall, not of a small object
+    walls = np.minimum(a["length"], b["length"]) >= 0.5  # a deflection is of a wall, not of a small object
     deflection = ok & ~corner & walls & (turn >= np.radians(p.deflection_min))
     # bisector of the two walls seen from the junction, and whether it bulges towards the scanner
     ux, uy = a["x_ini"] - jx, a["y_ini"] - jy
@@ -80,9 +80,16 @@ def junction_detections(lines: np.ndarray, scan: np.ndarray, p: FeatureParams) -
     return out
 
 
-def line_end_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray,
-                        seg_offsets: np.ndarray, ranges: np.ndarray, limits: tuple[float, float],
-                        p: FeatureParams) -> np.ndarray:
+def line_end_detections(
+    lines: np.ndarray,
+    scan: np.ndarray,
+    seg_start: np.ndarray,
+    seg_end: np.ndarray,
+    seg_offsets: np.ndarray,
+    ranges: np.ndarray,
+    limits: tuple[float, float],
+    p: FeatureParams,
+) -> np.ndarray:
     """Undefined line ends, sensor frame: ends of wall lines (longer than d_max) that end their segment
     where the next return beyond (past a dropout of a few invalid beams) is absent or at least 0.5 m farther
     (so the end is seen: not hidden by something nearer, not a dropout on the wall, and not just a wall at a
@@ -95,9 +102,17 @@ def line_end_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarr
     g = seg_offsets[s] + ln["segment"].astype(np.int64)
     out = []
     for beam, at_end, nb, ex, ey, fx, fy in (
-            (ln["first"].astype(np.int64), seg_start[g], -1, ln["x_ini"], ln["y_ini"], ln["x_end"], ln["y_end"]),
-            (ln["last"].astype(np.int64), seg_end[g].astype(np.int64) - 1, 1, ln["x_end"], ln["y_end"], ln["x_ini"],
-             ln["y_ini"])):
+        (ln["first"].astype(np.int64), seg_start[g], -1, ln["x_ini"], ln["y_ini"], ln["x_end"], ln["y_end"]),
+        (
+            ln["last"].astype(np.int64),
+            seg_end[g].astype(np.int64) - 1,
+            1,
+            ln["x_end"],
+            ln["y_end"],
+            ln["x_ini"],
+            ln["y_ini"],
+        ),
+    ):
         there, _, exists = return_beyond(ranges, s, beam, nb, limits)
         here = ranges[s, beam]
         seen = exists & (there > here + 0.5) & (here < 0.9 * limits[1])
@@ -110,32 +125,54 @@ def line_end_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarr
     return np.concatenate(out)
 
 
-def circle_detections(circles: np.ndarray, scan: np.ndarray, lines: np.ndarray, line_scan: np.ndarray,
-                      line_offsets: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray, seg_offsets: np.ndarray,
-                      ranges: np.ndarray, limits: tuple[float, float], p: FeatureParams) -> np.ndarray:
+def circle_detections(
+    circles: np.ndarray,
+    scan: np.ndarray,
+    lines: np.ndarray,
+    line_scan: np.ndarray,
+    line_offsets: np.ndarray,
+    seg_start: np.ndarray,
+    seg_end: np.ndarray,
+    seg_offsets: np.ndarray,
+    ranges: np.ndarray,
+    limits: tuple[float, float],
+    p: FeatureParams,
+) -> np.ndarray:
     """Column candidates (free-standing circles larger than a leg) and benches (two such supports with a
     line between them, near their axis and along it), sensor frame."""
     big = np.flatnonzero(circles["radius"] > p.column_radius_min)
     g = seg_offsets[scan[big]] + circles["segment"][big].astype(np.int64)
-    big = big[free_standing(scan[big], seg_start[g].astype(np.int64), seg_end[g].astype(np.int64), ranges, p.c0,
-                                   limits)]
+    big = big[
+        free_standing(scan[big], seg_start[g].astype(np.int64), seg_end[g].astype(np.int64), ranges, p.c0, limits)
+    ]
     c = circles[big]
     cols = np.zeros((len(big), 6))
     cols[:, DET_SCAN], cols[:, DET_TYPE] = scan[big], LANDMARK_COLUMN
     cols[:, DET_X], cols[:, DET_Y], cols[:, DET_SIZE] = c["x"], c["y"], c["radius"]
     benches = np.zeros((len(big), 6))
-    nb = _benches(scan[big].astype(np.int64), c["x"].astype(np.float64), c["y"].astype(np.float64),
-                  c["radius"].astype(np.float64), lines["x_ini"].astype(np.float64), lines["y_ini"].astype(np.float64),
-                  lines["x_end"].astype(np.float64), lines["y_end"].astype(np.float64),
-                  np.asarray(line_offsets, np.int64), p.bench_min_length, p.bench_max_length, benches)
+    nb = _benches(
+        scan[big].astype(np.int64),
+        c["x"].astype(np.float64),
+        c["y"].astype(np.float64),
+        c["radius"].astype(np.float64),
+        lines["x_ini"].astype(np.float64),
+        lines["y_ini"].astype(np.float64),
+        lines["x_end"].astype(np.float64),
+        lines["y_end"].astype(np.float64),
+        np.asarray(line_offsets, np.int64),
+        p.bench_min_length,
+        p.bench_max_length,
+        benches,
+    )
     return np.concatenate([cols, benches[:nb]])
 
 
-DROPOUT_BEAMS = 3   # invalid beams a surface may drop out for and still continue beyond them
+DROPOUT_BEAMS = 3  # invalid beams a surface may drop out for and still continue beyond them
 
 
-def return_beyond(ranges: np.ndarray, scan: np.ndarray, beam: np.ndarray, step: int,
-                  limits: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def return_beyond(
+    ranges: np.ndarray, scan: np.ndarray, beam: np.ndarray, step: int, limits: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The range (metres) of the first valid return beyond `beam` in direction `step` (+1 or -1), looking
     past up to DROPOUT_BEAMS invalid beams (a dropout on a surface); inf where there is none that near (open
     space). Also its beam (-1 where none), and whether the next beam exists at all (False at the scan's own
@@ -143,8 +180,9 @@ def return_beyond(ranges: np.ndarray, scan: np.ndarray, beam: np.ndarray, step: 
     beam = np.asarray(beam, np.int64)
     out = np.full(len(beam), np.inf)
     where = np.full(len(beam), -1, np.int64)
-    _beyond(ranges, np.asarray(scan, np.int64), beam, step, float(limits[0]), float(limits[1]), DROPOUT_BEAMS,
-            out, where)
+    _beyond(
+        ranges, np.asarray(scan, np.int64), beam, step, float(limits[0]), float(limits[1]), DROPOUT_BEAMS, out, where
+    )
     B = ranges.shape[1]
     return out, where, (beam + step >= 0) & (beam + step < B)
 
@@ -164,9 +202,16 @@ def _beyond(ranges, scan, beam, step, lo, hi, dropout, out, where) -> None:
                 break
 
 
-def free_standing(scan: np.ndarray, a: np.ndarray, b: np.ndarray, ranges: np.ndarray, c0: float,
-                  limits: tuple[float, float], line: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                  behind: float = 0.3) -> np.ndarray:
+def free_standing(
+    scan: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    ranges: np.ndarray,
+    c0: float,
+    limits: tuple[float, float],
+    line: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    behind: float = 0.3,
+) -> np.ndarray:
     """Whether segments [a, b) of scans `scan` stand free: beyond each end the next return (past a dropout of
     a few invalid beams) is absent or at least 0.5 m farther (open space behind), or nearer (an occluder), and
     at least one end is open; no return beyond is open space only well within the range limit. The scan's
@@ -194,9 +239,17 @@ def free_standing(scan: np.ndarray, a: np.ndarray, b: np.ndarray, ranges: np.nda
     return (n_open >= 1) & ~closed
 
 
-def seat_detections(lines: np.ndarray, scan: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray,
-                    seg_offsets: np.ndarray, ranges: np.ndarray, limits: tuple[float, float], angles: np.ndarray,
-                    p: FeatureParams) -> np.ndarray:
+def seat_detections(
+    lines: np.ndarray,
+    scan: np.ndarray,
+    seg_start: np.ndarray,
+    seg_end: np.ndarray,
+    seg_offsets: np.ndarray,
+    ranges: np.ndarray,
+    limits: tuple[float, float],
+    angles: np.ndarray,
+    p: FeatureParams,
+) -> np.ndarray:
     """Benches whose supports the scan cannot resolve as circles: a free-standing line of a bench's length,
     sensor frame. It spans its segment but for a support's arc at either end (8 beams), and beyond each end
     of the segment the next beam returns nothing, or returns 0.5 m farther and 0.3 m or more behind the line
@@ -282,8 +335,27 @@ C_ROWS, C_LIVE, C_CONFIRMED = 0, 1, 2
 
 
 @njit(cache=True)
-def accumulate(det, stamps, k0, match, min_count, max_drift, column_time, forget, column_radius_min, db,
-               first_ns, last_ns, live, confirmed, counters, snap_idx, snap_vals, snap_last, snap_count):
+def accumulate(
+    det,
+    stamps,
+    k0,
+    match,
+    min_count,
+    max_drift,
+    column_time,
+    forget,
+    column_radius_min,
+    db,
+    first_ns,
+    last_ns,
+    live,
+    confirmed,
+    counters,
+    snap_idx,
+    snap_vals,
+    snap_last,
+    snap_count,
+):
     """Fold one block of scans' detections (rows DET_*, sorted by scan; scans k0 .. k0 + len(stamps) - 1,
     stamped `stamps` ns) into the database `db` (rows as DB_COLUMNS; first_ns/last_ns: the stamps its row was
     first and last seen), carrying `live`, `confirmed` and `counters` (C_*) from the blocks before. After
@@ -353,7 +425,7 @@ def accumulate(det, stamps, k0, match, min_count, max_drift, column_time, forget
             elif best >= 0:
                 c = db[best, 5] + 1.0
                 if t == 5.0:
-                    if det[j, 5] > db[best, 4]:   # the most complete view of a bench stands for it
+                    if det[j, 5] > db[best, 4]:  # the most complete view of a bench stands for it
                         db[best, 1] = x
                         db[best, 2] = y
                         db[best, 3] = det[j, 4]
@@ -369,14 +441,17 @@ def accumulate(det, stamps, k0, match, min_count, max_drift, column_time, forget
                 # a column that drifts from where it was first seen is a mover, not a landmark
                 if t == 4.0 and np.hypot(x - db[best, 8], y - db[best, 9]) > max_drift:
                     db[best, DB_MOVED] = 1.0
-                if db[best, DB_CONFIRMED] == 0.0 and c >= min_count and \
-                        (t != 4.0 or stamp - first_ns[best] >= column_time):
+                if (
+                    db[best, DB_CONFIRMED] == 0.0
+                    and c >= min_count
+                    and (t != 4.0 or stamp - first_ns[best] >= column_time)
+                ):
                     db[best, DB_CONFIRMED] = 1.0
                     confirmed[nconf] = best
                     nconf += 1
             j += 1
         u = 0
-        while u < nlive:   # forget stale candidates and moved columns
+        while u < nlive:  # forget stale candidates and moved columns
             q = live[u]
             if (db[q, DB_CONFIRMED] == 0.0 and k - db[q, 7] > forget) or db[q, DB_MOVED] != 0.0:
                 nlive -= 1
@@ -422,8 +497,9 @@ def _hide_bench_supports(db, confirmed, nconf, min_count, column_radius_min):
                     db[q, DB_HIDDEN] = 1.0
 
 
-def landmark_elements(db: np.ndarray, first_ns: np.ndarray, snap_idx: np.ndarray, snap_vals: np.ndarray,
-                      snap_last: np.ndarray) -> np.ndarray:
+def landmark_elements(
+    db: np.ndarray, first_ns: np.ndarray, snap_idx: np.ndarray, snap_vals: np.ndarray, snap_last: np.ndarray
+) -> np.ndarray:
     """Landmark message elements of snapshot entries (see accumulate)."""
     out = np.zeros(len(snap_vals), LANDMARK_DTYPE)
     out["id"] = snap_idx + 1
@@ -431,13 +507,17 @@ def landmark_elements(db: np.ndarray, first_ns: np.ndarray, snap_idx: np.ndarray
     for key, ns in (("first_seen", first_ns[snap_idx]), ("last_seen", snap_last)):
         out[key]["sec"] = ns // 1_000_000_000
         out[key]["nanosec"] = ns % 1_000_000_000
-    out["x"], out["y"], out["orientation"], out["size"] = snap_vals[:, 0], snap_vals[:, 1], snap_vals[:, 2], \
-        snap_vals[:, 3]
+    out["x"], out["y"], out["orientation"], out["size"] = (
+        snap_vals[:, 0],
+        snap_vals[:, 1],
+        snap_vals[:, 2],
+        snap_vals[:, 3],
+    )
     out["type"] = db[snap_idx, 0]
     return out
 
 
-SNAPSHOT_SCANS = 32   # scans per kernel call of LandmarkStream.add
+SNAPSHOT_SCANS = 32  # scans per kernel call of LandmarkStream.add
 
 
 class LandmarkStream:
@@ -470,7 +550,7 @@ class LandmarkStream:
     @property
     def rows(self) -> np.ndarray:
         """The database rows used so far (DB_COLUMNS)."""
-        return self.db[:self.counters[C_ROWS]]
+        return self.db[: self.counters[C_ROWS]]
 
     def add(self, detections: np.ndarray, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fold in the detections (rows DET_*, DET_SCAN counted from this block's first scan, world or sensor
@@ -485,13 +565,13 @@ class LandmarkStream:
         for a, lo, hi in zip(range(0, nb, SNAPSHOT_SCANS), cuts[:-1].tolist(), cuts[1:].tolist(), strict=False):
             chunk = det[lo:hi].copy()
             chunk[:, DET_SCAN] -= a
-            elems, count = self._add(chunk, stamps[a:a + SNAPSHOT_SCANS])
+            elems, count = self._add(chunk, stamps[a : a + SNAPSHOT_SCANS])
             parts.append(elems)
             counts.append(count)
         elems = np.concatenate(parts) if parts else np.zeros(0, LANDMARK_DTYPE)
         offsets = np.concatenate([[0], np.cumsum(np.concatenate(counts) if counts else [])]).astype(np.int64)
         if nb:
-            self._last = elems[offsets[-2]:offsets[-1]]
+            self._last = elems[offsets[-2] : offsets[-1]]
         return elems, offsets
 
     def _add(self, det: np.ndarray, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -504,9 +584,27 @@ class LandmarkStream:
         cap = nb * (int(self.counters[C_CONFIRMED]) + len(det)) + 1
         snap_idx, snap_vals = np.zeros(cap, np.int64), np.zeros((cap, 6))
         snap_last, snap_count = np.zeros(cap, np.int64), np.zeros(nb, np.int64)
-        ns = accumulate(det, stamps, self.scans, p.landmark_match, p.landmark_min_count, p.column_max_drift,
-                        p.column_min_time * 1e9, 10, p.column_radius_min, self.db, self.first_ns, self.last_ns,
-                        self.live, self.confirmed, self.counters, snap_idx, snap_vals, snap_last, snap_count)
+        ns = accumulate(
+            det,
+            stamps,
+            self.scans,
+            p.landmark_match,
+            p.landmark_min_count,
+            p.column_max_drift,
+            p.column_min_time * 1e9,
+            10,
+            p.column_radius_min,
+            self.db,
+            self.first_ns,
+            self.last_ns,
+            self.live,
+            self.confirmed,
+            self.counters,
+            snap_idx,
+            snap_vals,
+            snap_last,
+            snap_count,
+        )
         self.scans += nb
         return landmark_elements(self.db, self.first_ns, snap_idx[:ns], snap_vals[:ns], snap_last[:ns]), snap_count
 
@@ -520,8 +618,9 @@ class LandmarkDatabase:
     database) and, per scan, the Landmark elements in it after that scan (`all_snapshots`, sliced by
     snap_offsets). Built at once from a whole run's detections, or by `LandmarkStream.add` for a block."""
 
-    def __init__(self, detections: np.ndarray, stamps: np.ndarray, p: FeatureParams,
-                 stream: LandmarkStream | None = None) -> None:
+    def __init__(
+        self, detections: np.ndarray, stamps: np.ndarray, p: FeatureParams, stream: LandmarkStream | None = None
+    ) -> None:
         stream = stream if stream is not None else LandmarkStream(p)
         self._elems, self.snap_offsets = stream.add(detections, stamps)
         self.rows = stream.rows
@@ -538,4 +637,4 @@ class LandmarkDatabase:
 
     def snapshot(self, k: int, stamps: np.ndarray | None = None) -> np.ndarray:
         """Landmark elements of the database after scan k."""
-        return self._elems[self.snap_offsets[k]:self.snap_offsets[k + 1]]
+        return self._elems[self.snap_offsets[k] : self.snap_offsets[k + 1]]

@@ -31,38 +31,38 @@ import numpy as np
 from ..errors import InputError
 
 FEATURE_NAMES: tuple[str, ...] = (
-    "n_points",               # valid returns in the segment
-    "width",                  # m, first to last point
-    "linearity",              # m, RMS orthogonal residual of the total-least-squares line
-    "circularity",            # m, RMS radial residual of the algebraic (Kasa) circle; = linearity if collinear
-    "radius",                 # m, that circle's radius, clipped to RADIUS_CLIP (also when collinear)
-    "std",                    # m, sqrt(sum |p - centroid|^2 / (n - 1))
-    "median_deviation",       # m, mean |p - median point| (component-wise median)
-    "boundary_length",        # m, sum of consecutive point distances
-    "boundary_regularity",    # m, standard deviation of consecutive point distances
-    "mean_curvature",         # 1/m, mean over interior triples of 1/circumradius, + when bulging toward the sensor
-    "mean_inscribed_angle",   # rad, mean angle at interior points between the first and last point (pi: a line)
-    "inscribed_angle_std",    # rad, standard deviation of those angles
-    "distance",               # m, range of the centroid
-    "subtended_angle",        # rad, |angle of last point's beam - angle of first point's beam|
-    "occluded_start",         # 1.0 when the beam before the first point is a valid return nearer by > margin
-    "occluded_end",           # 1.0 when the beam after the last point is a valid return nearer by > margin
-    "jump_start",             # m, range of the nearest valid return before the first point minus the first
-                              # point's (+ when that return lies behind), clipped to +-JUMP_CLIP; +JUMP_CLIP: none
-    "jump_end",               # m, the same beyond the last point
-    "neighbour_distance",     # m, centroid to the nearest other candidate's centroid in the scan, <= NEIGHBOUR_CLIP
-    "density",                # n_points * angle step * distance / width (~1 for a surface facing the sensor),
-                              # <= DENSITY_CLIP (also for zero width): independent of the scanner's resolution
-    "relative_curvature",     # mean_curvature * width: scale-free (2 for a half circle)
+    "n_points",  # valid returns in the segment
+    "width",  # m, first to last point
+    "linearity",  # m, RMS orthogonal residual of the total-least-squares line
+    "circularity",  # m, RMS radial residual of the algebraic (Kasa) circle; = linearity if collinear
+    "radius",  # m, that circle's radius, clipped to RADIUS_CLIP (also when collinear)
+    "std",  # m, sqrt(sum |p - centroid|^2 / (n - 1))
+    "median_deviation",  # m, mean |p - median point| (component-wise median)
+    "boundary_length",  # m, sum of consecutive point distances
+    "boundary_regularity",  # m, standard deviation of consecutive point distances
+    "mean_curvature",  # 1/m, mean over interior triples of 1/circumradius, + when bulging toward the sensor
+    "mean_inscribed_angle",  # rad, mean angle at interior points between the first and last point (pi: a line)
+    "inscribed_angle_std",  # rad, standard deviation of those angles
+    "distance",  # m, range of the centroid
+    "subtended_angle",  # rad, |angle of last point's beam - angle of first point's beam|
+    "occluded_start",  # 1.0 when the beam before the first point is a valid return nearer by > margin
+    "occluded_end",  # 1.0 when the beam after the last point is a valid return nearer by > margin
+    "jump_start",  # m, range of the nearest valid return before the first point minus the first
+    # point's (+ when that return lies behind), clipped to +-JUMP_CLIP; +JUMP_CLIP: none
+    "jump_end",  # m, the same beyond the last point
+    "neighbour_distance",  # m, centroid to the nearest other candidate's centroid in the scan, <= NEIGHBOUR_CLIP
+    "density",  # n_points * angle step * distance / width (~1 for a surface facing the sensor),
+    # <= DENSITY_CLIP (also for zero width): independent of the scanner's resolution
+    "relative_curvature",  # mean_curvature * width: scale-free (2 for a half circle)
 )
-RADIUS_CLIP = 1.0             # m: the radius feature's bound (degenerate or nearly straight segments)
-JUMP_CLIP = 3.0               # m (the kernels' constants, repeated here for readers)
-NEIGHBOUR_CLIP = 2.0          # m
+RADIUS_CLIP = 1.0  # m: the radius feature's bound (degenerate or nearly straight segments)
+JUMP_CLIP = 3.0  # m (the kernels' constants, repeated here for readers)
+NEIGHBOUR_CLIP = 2.0  # m
 DENSITY_CLIP = 10.0
-GAP_M = 0.13                  # m: leg_tracker's cluster gap (gap_clusters)
+GAP_M = 0.13  # m: leg_tracker's cluster gap (gap_clusters)
 GAP_MIN_POINTS = 3
-OCCLUSION_MARGIN = 0.1        # m
-CANDIDATE_MAX_WIDTH = 0.8     # m
+OCCLUSION_MARGIN = 0.1  # m
+CANDIDATE_MAX_WIDTH = 0.8  # m
 CANDIDATE_MIN_POINTS = 3
 FORMAT_VERSION = 1
 KINDS = ("forest", "boosting")
@@ -133,8 +133,9 @@ def _angle_step(angles: np.ndarray) -> float:
     return abs(float(angles[-1]) - float(angles[0])) / (len(angles) - 1) if len(angles) > 1 else 0.0
 
 
-def gap_clusters(ranges, angles, range_min: float, range_max: float, gap: float = GAP_M,
-                 min_points: int = GAP_MIN_POINTS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def gap_clusters(
+    ranges, angles, range_min: float, range_max: float, gap: float = GAP_M, min_points: int = GAP_MIN_POINTS
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """leg_tracker's clusters of every scan: consecutive valid returns (finite, strictly between range_min and
     range_max) more than `gap` metres apart start a new cluster, an invalid return ends one, and clusters of
     fewer than `min_points` returns are dropped. ranges (N, B) metres, angles (B,) radians. Returns (start,
@@ -158,22 +159,28 @@ def gap_clusters(ranges, angles, range_min: float, range_max: float, gap: float 
     return start, end, offsets
 
 
-def model_clusters(ranges, angles, range_min: float, range_max: float, model: LegModel | None, seg_start,
-                   seg_end, seg_offsets) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def model_clusters(
+    ranges, angles, range_min: float, range_max: float, model: LegModel | None, seg_start, seg_end, seg_offsets
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The clusters `model` scores (its provenance["clusters"]): gap_clusters of the scans for a model trained
     on them ({"method": "gap", "gap": m, "min_points": n}), else (method "segments", no such key, or no model)
     the given segments (seg_start, seg_end, seg_offsets as int64 arrays). Inputs as in cluster_features."""
     spec = (model.provenance.get("clusters") if model is not None else None) or {"method": "segments"}
     if spec.get("method") == "gap":
-        return gap_clusters(ranges, angles, range_min, range_max, float(spec.get("gap", GAP_M)),
-                            int(spec.get("min_points", GAP_MIN_POINTS)))
+        return gap_clusters(
+            ranges,
+            angles,
+            range_min,
+            range_max,
+            float(spec.get("gap", GAP_M)),
+            int(spec.get("min_points", GAP_MIN_POINTS)),
+        )
     if spec.get("method") != "segments":
         raise ValueError(f"unknown cluster method {spec.get('method')!r} in the leg model's provenance")
     return (np.asarray(seg_start, np.int64), np.asarray(seg_end, np.int64), np.asarray(seg_offsets, np.int64))
 
 
-def cluster_features(ranges, angles, seg_start, seg_end, seg_offsets, range_min: float,
-                     range_max: float) -> np.ndarray:
+def cluster_features(ranges, angles, seg_start, seg_end, seg_offsets, range_min: float, range_max: float) -> np.ndarray:
     """Features of every segment, shape (M, len(FEATURE_NAMES)) float64, in the order of seg_start.
 
     ranges (N, B) metres; angles (B,) radians, sensor frame (x forward, y left), beam i at angles[i]. Scan k's
@@ -187,8 +194,24 @@ def cluster_features(ranges, angles, seg_start, seg_end, seg_offsets, range_min:
     lo, hi = _limits(range_min, range_max)
     out = np.zeros((len(start), LK.N_FEATURES), np.float64)
     if len(start):
-        LK.block_features(ranges, cos_a, sin_a, angles, start, end, offsets, lo, hi, RADIUS_CLIP, OCCLUSION_MARGIN,
-                          CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, False, _angle_step(angles), out)
+        LK.block_features(
+            ranges,
+            cos_a,
+            sin_a,
+            angles,
+            start,
+            end,
+            offsets,
+            lo,
+            hi,
+            RADIUS_CLIP,
+            OCCLUSION_MARGIN,
+            CANDIDATE_MAX_WIDTH,
+            CANDIDATE_MIN_POINTS,
+            False,
+            _angle_step(angles),
+            out,
+        )
     return out
 
 
@@ -233,10 +256,11 @@ class LegModel:
         # what the kernel walks: (feature, left, right) side by side, and one float per node (threshold of an
         # inner node, value of a leaf): two cache lines per visited node instead of five
         inner = self.feature >= 0
-        self._nodes = np.ascontiguousarray(np.column_stack([np.where(inner, self.feature, -1), self.left,
-                                                            self.right]), np.int64)
+        self._nodes = np.ascontiguousarray(
+            np.column_stack([np.where(inner, self.feature, -1), self.left, self.right]), np.int64
+        )
         self._split = np.where(inner, self.threshold, self.value)
-        kind = 0 if self.kind == "forest" else 1   # _leg_kernels.KIND_FOREST / KIND_BOOSTING
+        kind = 0 if self.kind == "forest" else 1  # _leg_kernels.KIND_FOREST / KIND_BOOSTING
         self._args = (self._nodes, self._split, self.roots, kind, self.base, self.scale)
 
     def _problem(self) -> str:
@@ -293,11 +317,21 @@ class LegModel:
 
     def _write(self, f) -> None:
         np.savez_compressed(
-            f, format_version=np.int64(FORMAT_VERSION), feature=self.feature, threshold=self.threshold,
-            left=self.left, right=self.right, value=self.value, roots=self.roots, kind=np.str_(self.kind),
-            base=np.float64(self.base), scale=np.float64(self.scale), threshold_p=np.float64(self.threshold_p),
+            f,
+            format_version=np.int64(FORMAT_VERSION),
+            feature=self.feature,
+            threshold=self.threshold,
+            left=self.left,
+            right=self.right,
+            value=self.value,
+            roots=self.roots,
+            kind=np.str_(self.kind),
+            base=np.float64(self.base),
+            scale=np.float64(self.scale),
+            threshold_p=np.float64(self.threshold_p),
             feature_names=np.array(self.feature_names, np.str_),
-            provenance=np.str_(json.dumps(self.provenance, sort_keys=True)))
+            provenance=np.str_(json.dumps(self.provenance, sort_keys=True)),
+        )
 
     @classmethod
     def load(cls, path: str | Path) -> LegModel:
@@ -310,11 +344,11 @@ class LegModel:
 
         from ..input_files import check
 
-        most = 256 << 20   # bytes of arrays a leg model may declare (the packaged one: about 0.5 MB)
+        most = 256 << 20  # bytes of arrays a leg model may declare (the packaged one: about 0.5 MB)
         path = Path(path)
         if not path.exists():
             raise InputError(f"{path}: no such leg model file")
-        check(path)   # a folder, FIFO or device: one line saying what it is
+        check(path)  # a folder, FIFO or device: one line saying what it is
         try:
             declared = 0
             with zipfile.ZipFile(path) as zf:
@@ -323,61 +357,119 @@ class LegModel:
                         version = np.lib.format.read_magic(member)
                         if version not in ((1, 0), (2, 0)):
                             raise ValueError(f"{info.filename}: .npy format {version[0]}.{version[1]}")
-                        read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                                       else np.lib.format.read_array_header_2_0)
+                        read_header = (
+                            np.lib.format.read_array_header_1_0
+                            if version == (1, 0)
+                            else np.lib.format.read_array_header_2_0
+                        )
                         shape, _, dtype = read_header(member)
                     declared += math.prod(shape) * dtype.itemsize
                     if declared > most:
-                        raise InputError(f"{path}: not a leg model file ({info.filename} and the arrays before "
-                                         f"it declare {declared:,} bytes, more than a leg model takes ({most:,}))")
+                        raise InputError(
+                            f"{path}: not a leg model file ({info.filename} and the arrays before "
+                            f"it declare {declared:,} bytes, more than a leg model takes ({most:,}))"
+                        )
             with np.load(path, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
         except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, io.UnsupportedOperation) as exc:
             raise InputError(f"{path}: not a leg model file ({exc})") from None
-        missing = [k for k in ("format_version", "feature", "threshold", "left", "right", "value", "roots", "kind",
-                               "base", "scale", "threshold_p", "feature_names", "provenance") if k not in data]
+        missing = [
+            k
+            for k in (
+                "format_version",
+                "feature",
+                "threshold",
+                "left",
+                "right",
+                "value",
+                "roots",
+                "kind",
+                "base",
+                "scale",
+                "threshold_p",
+                "feature_names",
+                "provenance",
+            )
+            if k not in data
+        ]
         if missing:
             raise InputError(f"{path}: not a leg model file (missing {', '.join(missing)})")
         arrays = ("feature", "left", "right", "roots", "threshold", "value", "feature_names")
-        for key, kind in (("format_version", "i"), ("feature", "i"), ("left", "i"), ("right", "i"), ("roots", "i"),
-                          ("threshold", "f"), ("value", "f"), ("base", "f"), ("scale", "f"), ("threshold_p", "f"),
-                          ("kind", "U"), ("provenance", "U"), ("feature_names", "U")):
+        for key, kind in (
+            ("format_version", "i"),
+            ("feature", "i"),
+            ("left", "i"),
+            ("right", "i"),
+            ("roots", "i"),
+            ("threshold", "f"),
+            ("value", "f"),
+            ("base", "f"),
+            ("scale", "f"),
+            ("threshold_p", "f"),
+            ("kind", "U"),
+            ("provenance", "U"),
+            ("feature_names", "U"),
+        ):
             a, one = data[key], key not in arrays
             if a.dtype.kind != kind and not (kind == "f" and a.dtype.kind == "i") or a.ndim != (0 if one else 1):
                 want = {"i": "integer", "f": "number", "U": "string"}[kind]
                 want = ("an " if kind == "i" else "a ") + want if one else f"a list of {want}s"
-                raise InputError(f"{path}: corrupt leg model ({key} is {a.dtype} of shape {a.shape}; a model's is "
-                                 f"{want})")
+                raise InputError(
+                    f"{path}: corrupt leg model ({key} is {a.dtype} of shape {a.shape}; a model's is {want})"
+                )
             if kind == "f" and not np.all(np.isfinite(a)):
                 raise InputError(f"{path}: corrupt leg model ({key} holds NaN or infinite values)")
         if int(data["format_version"]) != FORMAT_VERSION:
-            raise InputError(f"{path}: leg model format {int(data['format_version'])}, this datmo reads "
-                             f"{FORMAT_VERSION}")
+            raise InputError(
+                f"{path}: leg model format {int(data['format_version'])}, this datmo reads {FORMAT_VERSION}"
+            )
         names = tuple(str(n) for n in data["feature_names"].tolist())
         if names != FEATURE_NAMES:
-            raise InputError(f"{path}: the leg model was trained on other features ({', '.join(names)}) than "
-                             f"this datmo computes ({', '.join(FEATURE_NAMES)}); retrain it")
+            raise InputError(
+                f"{path}: the leg model was trained on other features ({', '.join(names)}) than "
+                f"this datmo computes ({', '.join(FEATURE_NAMES)}); retrain it"
+            )
         try:
             provenance = json.loads(str(data["provenance"]))
         except ValueError as exc:
             raise InputError(f"{path}: corrupt leg model (provenance is not JSON: {exc})") from None
 
-        def sane(clusters) -> bool:   # how model_clusters reads provenance["clusters"]
+        def sane(clusters) -> bool:  # how model_clusters reads provenance["clusters"]
             if not isinstance(clusters, dict) or clusters.get("method") not in ("segments", "gap"):
                 return False
             gap, least = clusters.get("gap", GAP_M), clusters.get("min_points", GAP_MIN_POINTS)
-            return (isinstance(gap, int | float) and not isinstance(gap, bool) and math.isfinite(gap) and gap > 0
-                    and isinstance(least, int) and not isinstance(least, bool) and least > 0)
+            return (
+                isinstance(gap, int | float)
+                and not isinstance(gap, bool)
+                and math.isfinite(gap)
+                and gap > 0
+                and isinstance(least, int)
+                and not isinstance(least, bool)
+                and least > 0
+            )
 
         if not isinstance(provenance, dict) or not sane(provenance.get("clusters", {"method": "segments"})):
             what = f"clusters {provenance.get('clusters')!r}" if isinstance(provenance, dict) else "not a JSON object"
-            raise InputError(f"{path}: corrupt leg model (provenance: {what}; a model's is a JSON object whose "
-                             'clusters are {"method": "segments"} or {"method": "gap", "gap": metres, '
-                             '"min_points": n})')
+            raise InputError(
+                f"{path}: corrupt leg model (provenance: {what}; a model's is a JSON object whose "
+                'clusters are {"method": "segments"} or {"method": "gap", "gap": metres, '
+                '"min_points": n})'
+            )
         try:
-            return cls(data["feature"], data["threshold"], data["left"], data["right"], data["value"],
-                       data["roots"], kind=str(data["kind"]), base=float(data["base"]), scale=float(data["scale"]),
-                       threshold_p=float(data["threshold_p"]), feature_names=names, provenance=provenance)
+            return cls(
+                data["feature"],
+                data["threshold"],
+                data["left"],
+                data["right"],
+                data["value"],
+                data["roots"],
+                kind=str(data["kind"]),
+                base=float(data["base"]),
+                scale=float(data["scale"]),
+                threshold_p=float(data["threshold_p"]),
+                feature_names=names,
+                provenance=provenance,
+            )
         except (ValueError, TypeError) as exc:
             raise InputError(f"{path}: corrupt leg model ({exc})") from None
 
@@ -423,13 +515,22 @@ def from_sklearn(estimator, threshold_p: float, provenance: dict) -> LegModel:
         x0 = np.zeros((1, len(FEATURE_NAMES)), np.float32)
         scale = float(estimator.learning_rate)
         base = float(estimator.decision_function(x0)[0]) - scale * sum(float(t.predict(x0)[0]) for t in trees)
-        return LegModel(*arrays, roots, kind="boosting", base=base, scale=scale, threshold_p=threshold_p,
-                        provenance=dict(provenance))
-    raise ValueError(f"unsupported estimator {type(estimator).__name__}: use RandomForestClassifier, "
-                     "ExtraTreesClassifier or GradientBoostingClassifier")
+        return LegModel(
+            *arrays,
+            roots,
+            kind="boosting",
+            base=base,
+            scale=scale,
+            threshold_p=threshold_p,
+            provenance=dict(provenance),
+        )
+    raise ValueError(
+        f"unsupported estimator {type(estimator).__name__}: use RandomForestClassifier, "
+        "ExtraTreesClassifier or GradientBoostingClassifier"
+    )
 
 
-_LOADED: dict[tuple, LegModel] = {}   # (resolved path, mtime ns, size) -> the model read from it
+_LOADED: dict[tuple, LegModel] = {}  # (resolved path, mtime ns, size) -> the model read from it
 
 
 def load_leg_model(spec: str) -> LegModel | None:
@@ -444,7 +545,7 @@ def load_leg_model(spec: str) -> LegModel | None:
         st = path.stat()
         key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
     except OSError:
-        return LegModel.load(path)   # missing or unreadable: load says so in one line
+        return LegModel.load(path)  # missing or unreadable: load says so in one line
     model = _LOADED.get(key)
     if model is None:
         model = LegModel.load(path)
@@ -454,8 +555,17 @@ def load_leg_model(spec: str) -> LegModel | None:
     return model
 
 
-def leg_probabilities(ranges, angles, seg_start, seg_end, seg_offsets, range_min: float, range_max: float,
-                      model: LegModel, threads: int = 1) -> np.ndarray:
+def leg_probabilities(
+    ranges,
+    angles,
+    seg_start,
+    seg_end,
+    seg_offsets,
+    range_min: float,
+    range_max: float,
+    model: LegModel,
+    threads: int = 1,
+) -> np.ndarray:
     """Leg probability (M,) float64 of every segment (inputs as in cluster_features): features and ensemble in
     one compiled call, on `threads` threads (a perception.threads.resolve()d count; the same result for any).
     Segments outside candidate_mask get 0."""
@@ -468,8 +578,24 @@ def leg_probabilities(ranges, angles, seg_start, seg_end, seg_offsets, range_min
     out = np.zeros(M, np.float64)
     if M:
         feats = np.empty((M, LK.N_FEATURES), np.float64)
-        args = (cos_a, sin_a, angles, start, end, offsets, lo, hi, RADIUS_CLIP, OCCLUSION_MARGIN, CANDIDATE_MAX_WIDTH,
-                CANDIDATE_MIN_POINTS, _angle_step(angles), *model._kernel_args(), feats, out)
+        args = (
+            cos_a,
+            sin_a,
+            angles,
+            start,
+            end,
+            offsets,
+            lo,
+            hi,
+            RADIUS_CLIP,
+            OCCLUSION_MARGIN,
+            CANDIDATE_MAX_WIDTH,
+            CANDIDATE_MIN_POINTS,
+            _angle_step(angles),
+            *model._kernel_args(),
+            feats,
+            out,
+        )
         N = len(ranges)
         threads = T.for_scans(threads, N)
         if threads > 1:

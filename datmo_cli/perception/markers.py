@@ -15,10 +15,18 @@ from ..log.scan import Odometry, ScanRun
 from .features import RunFeatures
 
 NS = "datmo/features"
-LANDMARK_COLORS = np.array([   # by landmark type: corner, convex, concave, line end, column, bench
-    (0.0, 0.9, 0.9, 1.0), (0.6, 0.3, 0.9, 1.0), (0.9, 0.3, 0.6, 1.0), (0.7, 0.7, 0.7, 1.0),
-    (1.0, 1.0, 0.0, 1.0), (0.6, 0.4, 0.2, 1.0)], np.float32)
-_POLY = 8   # sides of a circle drawn as a polygon: round enough at leg and column radii
+LANDMARK_COLORS = np.array(
+    [  # by landmark type: corner, convex, concave, line end, column, bench
+        (0.0, 0.9, 0.9, 1.0),
+        (0.6, 0.3, 0.9, 1.0),
+        (0.9, 0.3, 0.6, 1.0),
+        (0.7, 0.7, 0.7, 1.0),
+        (1.0, 1.0, 0.0, 1.0),
+        (0.6, 0.4, 0.2, 1.0),
+    ],
+    np.float32,
+)
+_POLY = 8  # sides of a circle drawn as a polygon: round enough at leg and column radii
 _ANG = np.linspace(0.0, 2 * np.pi, _POLY + 1)
 
 
@@ -49,15 +57,29 @@ def feature_markers(run: ScanRun, f: RunFeatures, odometry: Odometry | None = No
     elems = lm.all_snapshots(f.stamps) if lm is not None else None
     lm_off = lm.snap_offsets.tolist() if lm is not None else None
     poses = odometry.at(f.stamps) if odometry is not None and len(odometry) else None
-    return [scan_feature_markers(stamp, f.frame_id, f.lines[lo[k]:lo[k + 1]], f.circles[co[k]:co[k + 1]],
-                                 f.blobs[bo[k]:bo[k + 1]],
-                                 elems[lm_off[k]:lm_off[k + 1]] if elems is not None else None,
-                                 poses[k] if poses is not None else None)
-            for k, stamp in enumerate(np.asarray(f.stamps, np.int64).tolist())]
+    return [
+        scan_feature_markers(
+            stamp,
+            f.frame_id,
+            f.lines[lo[k] : lo[k + 1]],
+            f.circles[co[k] : co[k + 1]],
+            f.blobs[bo[k] : bo[k + 1]],
+            elems[lm_off[k] : lm_off[k + 1]] if elems is not None else None,
+            poses[k] if poses is not None else None,
+        )
+        for k, stamp in enumerate(np.asarray(f.stamps, np.int64).tolist())
+    ]
 
 
-def scan_feature_markers(stamp: int, frame: str, lines: np.ndarray, circles: np.ndarray, blobs: np.ndarray,
-                         landmarks: np.ndarray | None = None, pose: np.ndarray | None = None) -> bytes:
+def scan_feature_markers(
+    stamp: int,
+    frame: str,
+    lines: np.ndarray,
+    circles: np.ndarray,
+    blobs: np.ndarray,
+    landmarks: np.ndarray | None = None,
+    pose: np.ndarray | None = None,
+) -> bytes:
     """The MarkerArray CDR payload of one scan: its Line, Circle and Blob elements (sensor frame `frame`) and
     the landmark database after it (Landmark elements; None: none drawn), brought into the sensor frame from
     the world frame by the scanner's `pose` (x, y, theta) when given. What feature_markers draws per scan, and

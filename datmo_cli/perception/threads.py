@@ -15,8 +15,8 @@ import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-_POOL_PID: int | None = None   # the process that started numba's thread pool through numba_threads
-_DEFAULT: int = 0              # the count a call without one runs on (0: all); set_default, from --threads
+_POOL_PID: int | None = None  # the process that started numba's thread pool through numba_threads
+_DEFAULT: int = 0  # the count a call without one runs on (0: all); set_default, from --threads
 
 
 def available() -> int:
@@ -48,7 +48,7 @@ def resolve(threads: int | None = None) -> int:
     return max(n, 1)
 
 
-MIN_SCANS_PER_THREAD = 16   # fewer scans per thread run on one (the parallel kernels' start-up and compile cost)
+MIN_SCANS_PER_THREAD = 16  # fewer scans per thread run on one (the parallel kernels' start-up and compile cost)
 
 
 def for_scans(threads: int, scans: int) -> int:

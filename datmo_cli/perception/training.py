@@ -31,14 +31,14 @@ from ..extras import require
 from ..log.scan import ScanGeometry, ScanRun
 from .params import FeatureParams
 
-MATCH_RADIUS_M = 0.15      # a segment is a leg when a labelled leg is this close to its centroid
-LABEL_WINDOW_NS = 50_000_000   # a scan takes the label message logged nearest to it, within this
-METRIC_RANGE_M = 5.0       # figures count clusters whose centroid is at most this far from the scanner
+MATCH_RADIUS_M = 0.15  # a segment is a leg when a labelled leg is this close to its centroid
+LABEL_WINDOW_NS = 50_000_000  # a scan takes the label message logged nearest to it, within this
+METRIC_RANGE_M = 5.0  # figures count clusters whose centroid is at most this far from the scanner
 CIRCLE_LEG_RADIUS_M = 0.13  # the paper's rule: a circle of at most this radius is a leg
 DEFAULT_LABELS_TOPIC = "/leg_cluster_positions"
 POSE_ARRAY_TYPES = ("geometry_msgs/msg/PoseArray", "geometry_msgs/PoseArray")
-EMPTY_FALSE_BUDGET = 0.5   # false legs per empty scan allowed when choosing the threshold (the target)
-SEGMENT_CLUSTERS = {"method": "segments"}                       # datmo's own segments (features.segment_run)
+EMPTY_FALSE_BUDGET = 0.5  # false legs per empty scan allowed when choosing the threshold (the target)
+SEGMENT_CLUSTERS = {"method": "segments"}  # datmo's own segments (features.segment_run)
 GAP_CLUSTERS = {"method": "gap", "gap": 0.13, "min_points": 3}  # leg_tracker's clusters (legs.gap_clusters)
 DEFAULT_CLUSTERS = GAP_CLUSTERS
 
@@ -78,8 +78,9 @@ def thinned(rec: Recording, step: int = 2) -> Recording:
     g = rec.run.geometry
     ranges = rec.run.ranges[:, ::step]
     geometry = dataclasses.replace(g, angle_increment=g.angle_increment * step, n_beams=ranges.shape[1])
-    return Recording(f"{rec.name} thinned {step}x", rec.path, rec.topic, ScanRun(rec.run.stamps, ranges, geometry),
-                     rec.legs)
+    return Recording(
+        f"{rec.name} thinned {step}x", rec.path, rec.topic, ScanRun(rec.run.stamps, ranges, geometry), rec.legs
+    )
 
 
 @dataclass
@@ -95,8 +96,9 @@ def _poses_xy(msg) -> np.ndarray:
     return np.array([[p.position.x, p.position.y] for p in msg.poses], np.float64).reshape(-1, 2)
 
 
-def _run_of(label: str, topic: str, stamps: list[int], ranges: list[np.ndarray], geoms: list[ScanGeometry],
-            log_times: list[int]) -> tuple[ScanRun, np.ndarray]:
+def _run_of(
+    label: str, topic: str, stamps: list[int], ranges: list[np.ndarray], geoms: list[ScanGeometry], log_times: list[int]
+) -> tuple[ScanRun, np.ndarray]:
     if not ranges:
         raise InputError(f"{label}: {topic} has no messages")
     g0 = geoms[0]
@@ -181,8 +183,9 @@ def _read(path: str | Path, scan_topics: Callable[[dict], list[str]], pose_topic
     raise InputError(f"{path}: a {kind} log has no leg labels; give a ROS 1/ROS 2 bag or an MCAP file")
 
 
-def match_labels(scan_log_times: np.ndarray, label_times: np.ndarray, labels: Sequence[np.ndarray],
-                 window_ns: int = LABEL_WINDOW_NS) -> list[np.ndarray]:
+def match_labels(
+    scan_log_times: np.ndarray, label_times: np.ndarray, labels: Sequence[np.ndarray], window_ns: int = LABEL_WINDOW_NS
+) -> list[np.ndarray]:
     """Each scan's labelled legs: the label message logged nearest to the scan's log time, when within
     `window_ns` (else none: K = 0). Times in ns; labels K x 2 arrays (metres, laser frame)."""
     empty = np.zeros((0, 2))
@@ -196,12 +199,13 @@ def match_labels(scan_log_times: np.ndarray, label_times: np.ndarray, labels: Se
     after = np.clip(j, 0, len(lt) - 1)
     near = np.where(np.abs(lt[before] - t) <= np.abs(lt[after] - t), before, after)
     ok = np.abs(lt[near] - t) <= window_ns
-    return [np.asarray(labels[order[n]], np.float64).reshape(-1, 2) if k else empty
-            for n, k in zip(near.tolist(), ok.tolist(), strict=True)]
+    return [
+        np.asarray(labels[order[n]], np.float64).reshape(-1, 2) if k else empty
+        for n, k in zip(near.tolist(), ok.tolist(), strict=True)
+    ]
 
 
-def read_labelled(path: str | Path, topic: str | None = None,
-                  labels_topic: str = DEFAULT_LABELS_TOPIC) -> Recording:
+def read_labelled(path: str | Path, topic: str | None = None, labels_topic: str = DEFAULT_LABELS_TOPIC) -> Recording:
     """A labelled recording: scans on `topic` (the file's only LaserScan topic when None) and the legs of
     each scan from the geometry_msgs/PoseArray messages on `labels_topic` (laser frame, no header stamp:
     matched by log time, see match_labels). ROS 1 bags, ROS 2 bag folders and MCAP files.
@@ -217,15 +221,19 @@ def read_labelled(path: str | Path, topic: str | None = None,
 
     raw = _read(path, pick, labels_topic)
     if labels_topic not in raw.topics:
-        raise InputError(f"{path}: no leg labels: no topic {labels_topic} (a labelled file needs "
-                         "geometry_msgs/PoseArray leg positions; choose the topic with --labels-topic)")
+        raise InputError(
+            f"{path}: no leg labels: no topic {labels_topic} (a labelled file needs "
+            "geometry_msgs/PoseArray leg positions; choose the topic with --labels-topic)"
+        )
     if raw.poses is None:
         raise InputError(f"{path}: {labels_topic} holds {raw.topics[labels_topic][0]}, not geometry_msgs/PoseArray")
     run, log_times = raw.runs[chosen[0]]
     legs = match_labels(log_times, *raw.poses)
     if not sum(len(x) for x in legs):
-        raise InputError(f"{path}: no labelled leg on {labels_topic} within {LABEL_WINDOW_NS // 1_000_000} ms "
-                         f"of a scan on {chosen[0]}")
+        raise InputError(
+            f"{path}: no labelled leg on {labels_topic} within {LABEL_WINDOW_NS // 1_000_000} ms "
+            f"of a scan on {chosen[0]}"
+        )
     return Recording(f"{path.name}", path, chosen[0], run, legs)
 
 
@@ -246,8 +254,7 @@ def read_empty(path: str | Path, topic: str | None = None) -> list[Recording]:
 
     raw = _read(path, pick, None)
     several = len(raw.runs) > 1
-    return [Recording(f"{path.name}:{t}" if several else path.name, path, t, run)
-            for t, (run, _) in raw.runs.items()]
+    return [Recording(f"{path.name}:{t}" if several else path.name, path, t, run) for t, (run, _) in raw.runs.items()]
 
 
 # -------------------------------------------------------------------------------------------- segments
@@ -278,29 +285,41 @@ class SegmentTable:
         return len(self.label)
 
 
-def segment_centroids(ranges: np.ndarray, angles: np.ndarray, seg_start: np.ndarray, seg_end: np.ndarray,
-                      seg_offsets: np.ndarray, range_min: float = 0.0, range_max: float = np.inf) -> np.ndarray:
+def segment_centroids(
+    ranges: np.ndarray,
+    angles: np.ndarray,
+    seg_start: np.ndarray,
+    seg_end: np.ndarray,
+    seg_offsets: np.ndarray,
+    range_min: float = 0.0,
+    range_max: float = np.inf,
+) -> np.ndarray:
     """The centroid (mean of the valid returns, metres, sensor frame) of every segment (M x 2); NaN for a
     segment without a valid return. ranges N x B, angles B (radians), segments as segment_run gives them."""
     ranges = np.asarray(ranges, np.float64)
     n_seg = len(seg_start)
     scan = np.repeat(np.arange(len(seg_offsets) - 1), np.diff(seg_offsets))
-    lengths = (np.asarray(seg_end, np.int64) - np.asarray(seg_start, np.int64))
+    lengths = np.asarray(seg_end, np.int64) - np.asarray(seg_start, np.int64)
     seg_of = np.repeat(np.arange(n_seg), lengths)
-    beam = np.arange(lengths.sum()) - np.repeat(np.cumsum(lengths) - lengths, lengths) + np.repeat(
-        np.asarray(seg_start, np.int64), lengths)
+    beam = (
+        np.arange(lengths.sum())
+        - np.repeat(np.cumsum(lengths) - lengths, lengths)
+        + np.repeat(np.asarray(seg_start, np.int64), lengths)
+    )
     r = ranges[scan[seg_of], beam]
     ok = np.isfinite(r) & (r > range_min) & (r < range_max)
     x = np.where(ok, r * np.cos(angles[beam]), 0.0)
     y = np.where(ok, r * np.sin(angles[beam]), 0.0)
     n = np.bincount(seg_of, ok, minlength=n_seg)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.stack([np.bincount(seg_of, x, minlength=n_seg) / n, np.bincount(seg_of, y, minlength=n_seg) / n],
-                        axis=1)
+        return np.stack(
+            [np.bincount(seg_of, x, minlength=n_seg) / n, np.bincount(seg_of, y, minlength=n_seg) / n], axis=1
+        )
 
 
-def label_segments(centroid: np.ndarray, scan: np.ndarray, legs: Sequence[np.ndarray],
-                   radius: float = MATCH_RADIUS_M) -> np.ndarray:
+def label_segments(
+    centroid: np.ndarray, scan: np.ndarray, legs: Sequence[np.ndarray], radius: float = MATCH_RADIUS_M
+) -> np.ndarray:
     """True for each segment (centroid M x 2, scan index M) with a labelled leg of its scan (legs[k], K x 2)
     within `radius` metres of its centroid. Several segments may match one leg (a leg split in two) and one
     segment several legs (two legs merged)."""
@@ -327,8 +346,9 @@ def _paper_rule(p: FeatureParams) -> FeatureParams:
     return dataclasses.replace(p, leg_model="paper") if "leg_model" in names else p
 
 
-def recording_clusters(run: ScanRun, params: FeatureParams | None = None,
-                       clusters: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def recording_clusters(
+    run: ScanRun, params: FeatureParams | None = None, clusters: dict | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(start, end, offsets) of the clusters of every scan of `run`: datmo's segments (features.segment_run with
     params) for clusters {"method": "segments"}, leg_tracker's gap clusters (legs.gap_clusters) for
     {"method": "gap", "gap": m, "min_points": n}; None: DEFAULT_CLUSTERS."""
@@ -340,13 +360,20 @@ def recording_clusters(run: ScanRun, params: FeatureParams | None = None,
         return segment_run(run, params or FeatureParams())
     if c.get("method") == "gap":
         lo, hi = _range_limits(run)
-        return legs.gap_clusters(run.ranges, run.geometry.angles(), lo, hi, float(c.get("gap", legs.GAP_M)),
-                                 int(c.get("min_points", legs.GAP_MIN_POINTS)))
+        return legs.gap_clusters(
+            run.ranges,
+            run.geometry.angles(),
+            lo,
+            hi,
+            float(c.get("gap", legs.GAP_M)),
+            int(c.get("min_points", legs.GAP_MIN_POINTS)),
+        )
     raise ValueError(f"unknown cluster method {c.get('method')!r}: 'segments' or 'gap'")
 
 
-def segment_table(rec: Recording, params: FeatureParams | None = None, radius: float = MATCH_RADIUS_M,
-                  clusters: dict | None = None) -> SegmentTable:
+def segment_table(
+    rec: Recording, params: FeatureParams | None = None, radius: float = MATCH_RADIUS_M, clusters: dict | None = None
+) -> SegmentTable:
     """Cluster a recording (recording_clusters: datmo's segments or gap clusters) and tabulate its clusters
     (see SegmentTable); the circle rule runs on the same clusters."""
     from . import legs
@@ -371,13 +398,27 @@ def segment_table(rec: Recording, params: FeatureParams | None = None, radius: f
         small = circles["radius"] <= CIRCLE_LEG_RADIUS_M
         circle_leg[idx[small]] = True
         circle_score[idx[small]] = circles["r_acc"][small]
-    return SegmentTable(rec.name, rec.labelled, len(run), feats, label, np.asarray(legs.candidate_mask(feats), bool),
-                        scan, centroid, circle_leg, circle_score)
+    return SegmentTable(
+        rec.name,
+        rec.labelled,
+        len(run),
+        feats,
+        label,
+        np.asarray(legs.candidate_mask(feats), bool),
+        scan,
+        centroid,
+        circle_leg,
+        circle_score,
+    )
 
 
-
-def tables_of(recordings: Sequence[Recording], params: FeatureParams | None = None, radius: float = MATCH_RADIUS_M,
-              progress: Progress | None = None, clusters: dict | None = None) -> list[SegmentTable]:
+def tables_of(
+    recordings: Sequence[Recording],
+    params: FeatureParams | None = None,
+    radius: float = MATCH_RADIUS_M,
+    progress: Progress | None = None,
+    clusters: dict | None = None,
+) -> list[SegmentTable]:
     """segment_table of each recording, reporting progress("segments", done, total)."""
     out = []
     for i, rec in enumerate(recordings):
@@ -412,8 +453,9 @@ def leave_one_out_folds(n_labelled: int, n_empty: int) -> list[Fold]:
     out = []
     for i in range(n_labelled):
         j = i % n_empty if n_empty else None
-        out.append(Fold(i, j, tuple(k for k in range(n_labelled) if k != i),
-                        tuple(k for k in range(n_empty) if k != j)))
+        out.append(
+            Fold(i, j, tuple(k for k in range(n_labelled) if k != i), tuple(k for k in range(n_empty) if k != j))
+        )
     return out
 
 
@@ -450,7 +492,7 @@ def average_precision(y: np.ndarray, score: np.ndarray) -> float:
         return float("nan")
     order = np.argsort(-np.asarray(score, np.float64), kind="stable")
     s, yy = np.asarray(score)[order], y[order]
-    last = np.r_[np.flatnonzero(np.diff(s)), len(s) - 1]   # the last index of each group of tied scores
+    last = np.r_[np.flatnonzero(np.diff(s)), len(s) - 1]  # the last index of each group of tied scores
     tp = np.cumsum(yy)[last]
     fp = (last + 1) - tp
     precision = tp / (tp + fp)
@@ -458,8 +500,13 @@ def average_precision(y: np.ndarray, score: np.ndarray) -> float:
     return float(np.sum(np.diff(np.r_[0.0, recall]) * precision))
 
 
-def figures(labelled: SegmentTable, score: np.ndarray, threshold: float, empty: SegmentTable | None = None,
-            empty_score: np.ndarray | None = None) -> Figures:
+def figures(
+    labelled: SegmentTable,
+    score: np.ndarray,
+    threshold: float,
+    empty: SegmentTable | None = None,
+    empty_score: np.ndarray | None = None,
+) -> Figures:
     """Figures (see Figures) of scores on a held-out labelled table (and an empty one); a cluster is called a
     leg when its score >= threshold."""
     near = labelled.range_m <= METRIC_RANGE_M
@@ -516,14 +563,26 @@ class EstimatorSpec:
         from sklearn.ensemble import ExtraTreesClassifier, GradientBoostingClassifier, RandomForestClassifier
 
         if self.kind == "gradient_boosting":
-            return GradientBoostingClassifier(n_estimators=self.n_estimators, max_depth=self.max_depth,
-                                              learning_rate=self.learning_rate, min_samples_leaf=self.min_samples_leaf,
-                                              max_features=self.max_features, subsample=0.8, random_state=self.seed)
+            return GradientBoostingClassifier(
+                n_estimators=self.n_estimators,
+                max_depth=self.max_depth,
+                learning_rate=self.learning_rate,
+                min_samples_leaf=self.min_samples_leaf,
+                max_features=self.max_features,
+                subsample=0.8,
+                random_state=self.seed,
+            )
         cls = {"extra_trees": ExtraTreesClassifier, "random_forest": RandomForestClassifier}.get(self.kind)
         if cls is None:
             raise ValueError(f"unknown estimator kind {self.kind!r}")
-        return cls(n_estimators=self.n_estimators, max_depth=self.max_depth, min_samples_leaf=self.min_samples_leaf,
-                   max_features=self.max_features, random_state=self.seed, n_jobs=1)
+        return cls(
+            n_estimators=self.n_estimators,
+            max_depth=self.max_depth,
+            min_samples_leaf=self.min_samples_leaf,
+            max_features=self.max_features,
+            random_state=self.seed,
+            n_jobs=1,
+        )
 
     def for_threshold(self) -> EstimatorSpec:
         """The spec of the inner models that only score recordings for choosing the threshold: a forest of a
@@ -557,7 +616,7 @@ def training_rows(tables: Sequence[SegmentTable], spec: EstimatorSpec) -> tuple[
     X = np.concatenate(xs) if xs else np.zeros((0, 0))
     y = np.concatenate(ys) if ys else np.zeros(0, bool)
     w = np.concatenate(ws) if ws else np.zeros(0)
-    if spec.negative_fraction < 1.0:   # a random share of the non-legs, weighted up to stand for the rest
+    if spec.negative_fraction < 1.0:  # a random share of the non-legs, weighted up to stand for the rest
         rng = np.random.default_rng(spec.seed)
         drop = ~y & (rng.random(len(y)) >= spec.negative_fraction)
         w = np.where(drop, 0.0, np.where(y, w, w / spec.negative_fraction))
@@ -566,7 +625,7 @@ def training_rows(tables: Sequence[SegmentTable], spec: EstimatorSpec) -> tuple[
         from .legs import FEATURE_NAMES
 
         X = X.copy()
-        X[:, [FEATURE_NAMES.index(n) for n in spec.ignore_features]] = 0.0   # constant: no tree splits on it
+        X[:, [FEATURE_NAMES.index(n) for n in spec.ignore_features]] = 0.0  # constant: no tree splits on it
     if spec.class_weight == "balanced" and y.any() and (~y).any():
         w = w * np.where(y, 0.5 * w.sum() / w[y].sum(), 0.5 * w.sum() / w[~y].sum())
     return X, y.astype(np.int64), w
@@ -597,14 +656,19 @@ def scores(model, table: SegmentTable) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------- threshold
 
 
-def choose_threshold(y: np.ndarray, score: np.ndarray, empty_score: np.ndarray | None = None, empty_scans: int = 0,
-                     budget: float = EMPTY_FALSE_BUDGET) -> float:
+def choose_threshold(
+    y: np.ndarray,
+    score: np.ndarray,
+    empty_score: np.ndarray | None = None,
+    empty_scans: int = 0,
+    budget: float = EMPTY_FALSE_BUDGET,
+) -> float:
     """The threshold (a segment is a leg when its score >= it) of highest F1 on labelled clusters (y, score),
     among those giving at most `budget` false legs per empty scan on empty clusters (empty_score over
     empty_scans scans); the lowest threshold meeting the budget when none scores. Scores in [0, 1]."""
     y = np.asarray(y, bool)
     s = np.asarray(score, np.float64)
-    cand = np.unique(np.r_[s[s > 0], 1.0])            # thresholds worth trying: each distinct positive score
+    cand = np.unique(np.r_[s[s > 0], 1.0])  # thresholds worth trying: each distinct positive score
     order = np.sort(s)
     n_at_or_above = len(s) - np.searchsorted(order, cand, side="left")
     tp = len(s[y]) - np.searchsorted(np.sort(s[y]), cand, side="left")
@@ -632,12 +696,17 @@ class HeldOut:
     threshold: float
     learned: Figures
     circle: Figures
-    thinned_recall: float | None = None                              # on the held-out recording thinned 2x
-    recall_by_range: tuple[float | None, ...] = ()                   # per RANGE_BINS_M bin, at the threshold
+    thinned_recall: float | None = None  # on the held-out recording thinned 2x
+    recall_by_range: tuple[float | None, ...] = ()  # per RANGE_BINS_M bin, at the threshold
 
     def to_dict(self) -> dict:
-        return {"labelled": self.labelled, "empty": self.empty, "threshold": self.threshold,
-                "learned": asdict(self.learned), "circle": asdict(self.circle)}
+        return {
+            "labelled": self.labelled,
+            "empty": self.empty,
+            "threshold": self.threshold,
+            "learned": asdict(self.learned),
+            "circle": asdict(self.circle),
+        }
 
 
 def _step(progress: Progress | None, total: int) -> Callable[[], None]:
@@ -657,9 +726,14 @@ def _near(t: SegmentTable) -> np.ndarray:
     return t.range_m <= METRIC_RANGE_M
 
 
-def tuned_threshold(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], spec: EstimatorSpec,
-                    step: Callable[[], None] = lambda: None, budget: float = EMPTY_FALSE_BUDGET,
-                    extra: Sequence[SegmentTable] = ()) -> float:
+def tuned_threshold(
+    lab: Sequence[SegmentTable],
+    emp: Sequence[SegmentTable],
+    spec: EstimatorSpec,
+    step: Callable[[], None] = lambda: None,
+    budget: float = EMPTY_FALSE_BUDGET,
+    extra: Sequence[SegmentTable] = (),
+) -> float:
     """The threshold for a model trained on (lab, emp), chosen on those recordings alone: each is scored by a
     model trained without it (inner leave-one-out, as leave_one_out_folds), and choose_threshold picks on
     the pooled out-of-fold scores of clusters within METRIC_RANGE_M (inner models: spec.for_threshold()). With
@@ -675,8 +749,9 @@ def tuned_threshold(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], sp
         folds_scored = []
         inner = spec.for_threshold()
         for f in folds:
-            model = to_model(fit([lab[i] for i in f.train_labelled] + [emp[j] for j in f.train_empty]
-                                 + list(extra), inner))
+            model = to_model(
+                fit([lab[i] for i in f.train_labelled] + [emp[j] for j in f.train_empty] + list(extra), inner)
+            )
             step()
             folds_scored.append((lab[f.test_labelled], scores(model, lab[f.test_labelled])))
             if f.test_empty is not None:
@@ -689,8 +764,7 @@ def tuned_threshold(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], sp
         else:
             es.append(s[near])
             scans += t.n_scans
-    return choose_threshold(np.concatenate(ys), np.concatenate(ss), np.concatenate(es) if es else None, scans,
-                            budget)
+    return choose_threshold(np.concatenate(ys), np.concatenate(ss), np.concatenate(es) if es else None, scans, budget)
 
 
 def _fits(n_lab: int, n_emp: int) -> int:
@@ -711,9 +785,16 @@ def recall_by_range(table: SegmentTable, score: np.ndarray, threshold: float) ->
     return tuple(out)
 
 
-def cross_validate(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], spec: EstimatorSpec,
-                   progress: Progress | None = None, *, step: Callable[[], None] | None = None,
-                   extra: Sequence[SegmentTable] = (), thin: Sequence[SegmentTable] = ()) -> list[HeldOut]:
+def cross_validate(
+    lab: Sequence[SegmentTable],
+    emp: Sequence[SegmentTable],
+    spec: EstimatorSpec,
+    progress: Progress | None = None,
+    *,
+    step: Callable[[], None] | None = None,
+    extra: Sequence[SegmentTable] = (),
+    thin: Sequence[SegmentTable] = (),
+) -> list[HeldOut]:
     """Leave-one-recording-out figures (see leave_one_out_folds): for each fold a model trained on the other
     recordings (and `extra`, always), its threshold tuned on them alone, scored on the held-out pair beside
     the circle rule, with its recall by range; `thin[i]`, when given, is labelled recording i thinned
@@ -737,14 +818,29 @@ def cross_validate(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], spe
         if thin:
             t = thin[f.test_labelled]
             thin_recall = figures(t, scores(model, t), threshold).recall
-        out.append(HeldOut(test.name, None if empty is None else empty.name, threshold, learned,
-                           circle_figures(test, empty), thin_recall, recall_by_range(test, test_scores, threshold)))
+        out.append(
+            HeldOut(
+                test.name,
+                None if empty is None else empty.name,
+                threshold,
+                learned,
+                circle_figures(test, empty),
+                thin_recall,
+                recall_by_range(test, test_scores, threshold),
+            )
+        )
     return out
 
 
-def fold_model(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], fold: Fold,
-               spec: EstimatorSpec | None = None, extra: Sequence[SegmentTable] = (),
-               clusters: dict | None = None, tune: bool = False):
+def fold_model(
+    lab: Sequence[SegmentTable],
+    emp: Sequence[SegmentTable],
+    fold: Fold,
+    spec: EstimatorSpec | None = None,
+    extra: Sequence[SegmentTable] = (),
+    clusters: dict | None = None,
+    tune: bool = False,
+):
     """A model trained as the shipped one without `fold`'s held-out recordings, as a LegModel run time can use
     (its provenance names the clusters it scores), to track the held-out recordings with. Its threshold is
     tuned on the rest only with `tune` (tracking does not use it: it takes legs by TrackingParams.leg_probability);
@@ -754,8 +850,11 @@ def fold_model(lab: Sequence[SegmentTable], emp: Sequence[SegmentTable], fold: F
     tr_emp = [emp[j] for j in fold.train_empty]
     threshold = tuned_threshold(tr_lab, tr_emp, spec, extra=extra) if tune else 0.5
     c = dict(DEFAULT_CLUSTERS if clusters is None else clusters)
-    return to_model(fit(tr_lab + tr_emp + list(extra), spec), threshold,
-                    {"clusters": c, "note": f"fold model: {lab[fold.test_labelled].name} held out"})
+    return to_model(
+        fit(tr_lab + tr_emp + list(extra), spec),
+        threshold,
+        {"clusters": c, "note": f"fold model: {lab[fold.test_labelled].name} held out"},
+    )
 
 
 def cv_fits(n_lab: int, n_emp: int) -> int:
@@ -770,9 +869,11 @@ def mean_figures(held_out: Sequence[HeldOut]) -> dict:
     out = {}
     for which in ("learned", "circle"):
         rows = [asdict(getattr(h, which)) for h in held_out]
-        out[which] = {k: float(np.nanmean([r[k] for r in rows if r[k] is not None]))
-                      for k in ("precision", "recall", "ap", "false_per_scan")
-                      if any(r[k] is not None for r in rows)}
+        out[which] = {
+            k: float(np.nanmean([r[k] for r in rows if r[k] is not None]))
+            for k in ("precision", "recall", "ap", "false_per_scan")
+            if any(r[k] is not None for r in rows)
+        }
     out["threshold"] = float(np.mean([h.threshold for h in held_out]))
     return out
 
@@ -785,15 +886,17 @@ class TrainingResult:
     """The model trained on every recording (threshold and provenance inside) and the held-out figures that
     estimate how it does on recordings it has not seen (empty with one labelled recording)."""
 
-    model: object   # legs.LegModel
+    model: object  # legs.LegModel
     held_out: list[HeldOut]
     mean: dict
     threshold: float
     tables: list[SegmentTable] = field(default_factory=list, repr=False)
 
 
-THRESHOLD_RULE = (f"highest F1 on the training recordings' inner leave-one-recording-out scores (clusters within "
-                  f"{METRIC_RANGE_M:g} m) with at most {EMPTY_FALSE_BUDGET:g} false legs per empty scan")
+THRESHOLD_RULE = (
+    f"highest F1 on the training recordings' inner leave-one-recording-out scores (clusters within "
+    f"{METRIC_RANGE_M:g} m) with at most {EMPTY_FALSE_BUDGET:g} false legs per empty scan"
+)
 
 
 def total_fits(n_lab: int, n_emp: int) -> int:
@@ -808,8 +911,15 @@ def _sources(recordings: Sequence[Recording]) -> list[dict]:
     for r in recordings:
         key = str(r.path)
         if key not in seen:
-            seen[key] = {"file": r.path.name, "path": key, "sha256": sha256_of(r.path),
-                         "role": "labelled" if r.labelled else "empty", "topics": [], "scans": 0, "legs": 0}
+            seen[key] = {
+                "file": r.path.name,
+                "path": key,
+                "sha256": sha256_of(r.path),
+                "role": "labelled" if r.labelled else "empty",
+                "topics": [],
+                "scans": 0,
+                "legs": 0,
+            }
             out.append(seen[key])
         entry = seen[key]
         entry["topics"].append(r.topic)
@@ -818,10 +928,16 @@ def _sources(recordings: Sequence[Recording]) -> list[dict]:
     return out
 
 
-def train_leg_model(labelled: Sequence[Recording], empty: Sequence[Recording], spec: EstimatorSpec | None = None,
-                    params: FeatureParams | None = None, progress: Progress | None = None,
-                    labels_topic: str = DEFAULT_LABELS_TOPIC, clusters: dict | None = None,
-                    extra: Sequence[Recording] = ()) -> TrainingResult:
+def train_leg_model(
+    labelled: Sequence[Recording],
+    empty: Sequence[Recording],
+    spec: EstimatorSpec | None = None,
+    params: FeatureParams | None = None,
+    progress: Progress | None = None,
+    labels_topic: str = DEFAULT_LABELS_TOPIC,
+    clusters: dict | None = None,
+    extra: Sequence[Recording] = (),
+) -> TrainingResult:
     """Cross-validate (see cross_validate), then train on every recording with the threshold tuned on them
     all (see tuned_threshold); the model's provenance holds the data files and their SHA-256, the features,
     the estimator, the threshold and its rule, the held-out figures, scikit-learn's version, the date and the
@@ -838,11 +954,12 @@ def train_leg_model(labelled: Sequence[Recording], empty: Sequence[Recording], s
     p = params or FeatureParams()
     clusters = dict(DEFAULT_CLUSTERS if clusters is None else clusters)
     tables = tables_of(list(labelled) + list(empty) + list(extra), p, progress=progress, clusters=clusters)
-    lab, emp = tables[:len(labelled)], tables[len(labelled):len(labelled) + len(empty)]
-    more = tables[len(labelled) + len(empty):]
+    lab, emp = tables[: len(labelled)], tables[len(labelled) : len(labelled) + len(empty)]
+    more = tables[len(labelled) + len(empty) :]
     if not any(t.label.any() for t in lab):
-        raise InputError(f"no segment lies within {MATCH_RADIUS_M:g} m of a labelled leg: are the labels in the "
-                         "scans' frame?")
+        raise InputError(
+            f"no segment lies within {MATCH_RADIUS_M:g} m of a labelled leg: are the labels in the scans' frame?"
+        )
     step = _step(progress, total_fits(len(lab), len(emp)))
     held_out = cross_validate(lab, emp, spec, step=step, extra=more)
     threshold = tuned_threshold(lab, emp, spec, step, extra=more)
@@ -854,18 +971,20 @@ def train_leg_model(labelled: Sequence[Recording], empty: Sequence[Recording], s
         "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "sklearn_version": sklearn.__version__,
         "data": _sources(list(labelled) + list(empty)),
-        "simulated": [{"name": r.name, "scans": len(r.run), "legs": int(sum(len(g) for g in r.legs))}
-                      for r in extra],
+        "simulated": [{"name": r.name, "scans": len(r.run), "legs": int(sum(len(g) for g in r.legs))} for r in extra],
         "feature_names": list(FEATURE_NAMES),
         "candidate_rule": {"min_points": CANDIDATE_MIN_POINTS, "max_width_m": CANDIDATE_MAX_WIDTH},
         "estimator": {"class": type(estimator).__name__, **spec.to_dict()},
         "segmentation": {"c0": p.c0, "min_points": p.min_points},
         "clusters": clusters,
-        "labels": {"topic": labels_topic, "match_radius_m": MATCH_RADIUS_M,
-                   "window_ms": LABEL_WINDOW_NS / 1e6},
+        "labels": {"topic": labels_topic, "match_radius_m": MATCH_RADIUS_M, "window_ms": LABEL_WINDOW_NS / 1e6},
         "threshold": {"value": threshold, "rule": THRESHOLD_RULE},
-        "held_out": {"scheme": "leave one labelled recording out, with one empty recording in turn",
-                     "metric_range_m": METRIC_RANGE_M, "mean": mean, "folds": [h.to_dict() for h in held_out]},
+        "held_out": {
+            "scheme": "leave one labelled recording out, with one empty recording in turn",
+            "metric_range_m": METRIC_RANGE_M,
+            "mean": mean,
+            "folds": [h.to_dict() for h in held_out],
+        },
     }
     model = to_model(estimator, threshold, provenance)
     return TrainingResult(model, held_out, mean, threshold, tables)

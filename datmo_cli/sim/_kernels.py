@@ -14,7 +14,7 @@ from numba import njit
 
 from ..numba_runtime import key_kernel_cache_on_sources
 
-key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
+key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 
 EPS = 1e-9
 
@@ -51,8 +51,9 @@ def _ray_circle(ox, oy, dx, dy, cx, cy, r):
 
 
 @njit(cache=True)
-def cast_batch(poses, angles, seg_s, own_seg_s, circ_s, own_circ_s, seg_d, own_seg_d, circ_d, own_circ_d,
-               out_t, out_owner):
+def cast_batch(
+    poses, angles, seg_s, own_seg_s, circ_s, own_circ_s, seg_d, own_seg_d, circ_d, own_circ_d, out_t, out_owner
+):
     """Cast every beam of every scan.
 
     poses (n, 3): sensor x, y (m), heading (rad), world frame. angles (B,): beam angles in the sensor

@@ -16,10 +16,10 @@ import numpy as np
 class PathSpec:
     """A path as a scene file gives it."""
 
-    points: np.ndarray                      # (K, 2) waypoints, world frame, m
-    speed: float                            # m/s while moving
+    points: np.ndarray  # (K, 2) waypoints, world frame, m
+    speed: float  # m/s while moving
     pauses: dict[int, float] = field(default_factory=dict)  # waypoint index -> standing time, s
-    start_time: float = 0.0                 # s after the run's start
+    start_time: float = 0.0  # s after the run's start
     loop: bool = False
 
 
@@ -59,7 +59,7 @@ class Timeline:
         self.xy = np.array(xy)
         self.u = np.array(arc)
         moving = np.diff(self.u) > 0
-        self._leg_knot = np.flatnonzero(moving)          # knot index where each moving leg starts
+        self._leg_knot = np.flatnonzero(moving)  # knot index where each moving leg starts
         d = self.xy[self._leg_knot + 1] - self.xy[self._leg_knot]
         self._leg_dir = d / np.hypot(d[:, 0], d[:, 1])[:, None]
         self._leg_u0 = self.u[self._leg_knot]

@@ -38,15 +38,20 @@ def rectangle_segments(centre: np.ndarray, length: float, width: float, heading:
 
 def _f64(a, shape_tail: tuple[int, ...], name: str) -> np.ndarray:
     a = np.ascontiguousarray(a, np.float64)
-    if a.shape[a.ndim - len(shape_tail):] != shape_tail:
+    if a.shape[a.ndim - len(shape_tail) :] != shape_tail:
         raise ValueError(f"{name} must end in shape {shape_tail}, got {a.shape}")
     return a
 
 
-def cast(poses: np.ndarray, angles: np.ndarray, static: Primitives,
-         moving_segments: np.ndarray | None = None, moving_segment_owner: np.ndarray | None = None,
-         moving_circles: np.ndarray | None = None, moving_circle_owner: np.ndarray | None = None,
-         ) -> tuple[np.ndarray, np.ndarray]:
+def cast(
+    poses: np.ndarray,
+    angles: np.ndarray,
+    static: Primitives,
+    moving_segments: np.ndarray | None = None,
+    moving_segment_owner: np.ndarray | None = None,
+    moving_circles: np.ndarray | None = None,
+    moving_circle_owner: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Distances (n, B) float64 to the first hit of every beam (inf: no hit) and the hit object (n, B) int32
     (-1: none).
 
@@ -72,6 +77,7 @@ def cast(poses: np.ndarray, angles: np.ndarray, static: Primitives,
         raise ValueError("one owner per static primitive")
     out_t = np.empty((n, len(angles)))
     out_owner = np.empty((n, len(angles)), np.int32)
-    cast_batch(poses, angles, seg_s, own_seg_s, circ_s, own_circ_s, seg_d, own_seg_d, circ_d, own_circ_d,
-               out_t, out_owner)
+    cast_batch(
+        poses, angles, seg_s, own_seg_s, circ_s, own_circ_s, seg_d, own_seg_d, circ_d, own_circ_d, out_t, out_owner
+    )
     return out_t, out_owner

@@ -59,7 +59,7 @@ GAIT_KEYS = {"shoulder_width", "leg_radius", "leg_length", "swing_angle_deg", "s
 
 @dataclass(frozen=True)
 class Wall:
-    points: np.ndarray          # (K, 2) polyline vertices
+    points: np.ndarray  # (K, 2) polyline vertices
     closed: bool = False
 
 
@@ -73,7 +73,7 @@ class Column:
 class Bench:
     """Two circular supports with a rectangular seat between their centres."""
 
-    supports: np.ndarray        # (2, 2)
+    supports: np.ndarray  # (2, 2)
     support_radius: float = 0.1
     seat_width: float = 0.35
 
@@ -187,7 +187,7 @@ def load_scene(scene: str | Path) -> Scene:
         path = Path(scene)
         if not path.exists():
             raise InputError(f"{path}: scene file not found")
-        check(path)   # a folder, FIFO or device: one line saying what it is
+        check(path)  # a folder, FIFO or device: one line saying what it is
         try:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
@@ -195,8 +195,9 @@ def load_scene(scene: str | Path) -> Scene:
         return parse_scene(text, str(path), default_name=path.stem)
     names = builtin_scenes()
     if text_path not in names:
-        raise ConfigError(f"unknown scene '{text_path}' (built-in: {', '.join(names)}; "
-                          "or give the path of a .toml scene file)")
+        raise ConfigError(
+            f"unknown scene '{text_path}' (built-in: {', '.join(names)}; or give the path of a .toml scene file)"
+        )
     text = (resources.files("datmo_cli.sim") / "scenes" / f"{text_path}.toml").read_text(encoding="utf-8")
     return parse_scene(text, f"{text_path}.toml", default_name=text_path)
 
@@ -208,8 +209,25 @@ def parse_scene(text: str, source: str = "<scene>", default_name: str = "scene")
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: invalid TOML: {exc}") from None
     v = _Validator(source)
-    v.keys(data, "top level", {"name", "description", "duration", "rate", "sensor", "scanner", "wall", "column",
-                               "bench", "box", "platform", "person", "crowd"})
+    v.keys(
+        data,
+        "top level",
+        {
+            "name",
+            "description",
+            "duration",
+            "rate",
+            "sensor",
+            "scanner",
+            "wall",
+            "column",
+            "bench",
+            "box",
+            "platform",
+            "person",
+            "crowd",
+        },
+    )
     kw: dict = {
         "name": v.string(data, "top level", "name", default_name),
         "description": v.string(data, "top level", "description", ""),
@@ -246,8 +264,10 @@ def _sensor(v: _Validator, t: dict) -> SensorPlacement:
     v.keys(t, where, {"pose", "turn_rate_deg", "follow", "gap", "odometry", "laser_pose"} | PATH_KEYS)
     placements = [k for k in ("pose", "path", "follow") if k in t]
     if len(placements) > 1:
-        raise ConfigError(f"{v.source}: {where}: give 'pose' (a still scanner), 'path' (a moving one) or 'follow' "
-                          f"(one trailing a person), not both {' and '.join(repr(k) for k in placements)}")
+        raise ConfigError(
+            f"{v.source}: {where}: give 'pose' (a still scanner), 'path' (a moving one) or 'follow' "
+            f"(one trailing a person), not both {' and '.join(repr(k) for k in placements)}"
+        )
     mount = v.vector(t, where, "laser_pose", 3, default=None)
     if mount is not None:
         mount[2] = np.radians(mount[2])
@@ -259,16 +279,21 @@ def _sensor(v: _Validator, t: dict) -> SensorPlacement:
         gap = v.vector(t, where, "gap", 2, default=[1.5, 2.5])
         if not 0 < gap[0] < gap[1]:
             v.fail(where, "gap", f"give [low, high] with 0 < low < high, got {gap.tolist()}")
-        return SensorPlacement(follow=v.string(t, where, "follow"), gap=(float(gap[0]), float(gap[1])),
-                               follow_speed=v.number(t, where, "speed", 1.3, positive=True), odometry=odometry,
-                               mount=mount)
+        return SensorPlacement(
+            follow=v.string(t, where, "follow"),
+            gap=(float(gap[0]), float(gap[1])),
+            follow_speed=v.number(t, where, "speed", 1.3, positive=True),
+            odometry=odometry,
+            mount=mount,
+        )
     if "gap" in t:
         v.fail(where, "gap", "only applies with 'follow'")
     pose = v.vector(t, where, "pose", 3, default=[0.0, 0.0, 0.0])
     pose[2] = np.radians(pose[2])
     turn = np.radians(v.number(t, where, "turn_rate_deg", 90.0, positive=True))
-    return SensorPlacement(pose=pose, path=v.path(t, where, required=False), turn_rate=float(turn),
-                           odometry=odometry, mount=mount)
+    return SensorPlacement(
+        pose=pose, path=v.path(t, where, required=False), turn_rate=float(turn), odometry=odometry, mount=mount
+    )
 
 
 def _check_follow(v: _Validator, sensor: SensorPlacement | None, people: tuple[Person, ...]) -> None:
@@ -281,8 +306,12 @@ def _check_follow(v: _Validator, sensor: SensorPlacement | None, people: tuple[P
     if leader.path is None:
         v.fail("[sensor]", "follow", f"'{sensor.follow}' stands still (give them a path)")
     if leader.path.speed >= sensor.follow_speed:
-        v.fail("[sensor]", "speed", f"the robot's top speed {sensor.follow_speed:g} m/s must be above "
-                                    f"'{sensor.follow}''s {leader.path.speed:g} m/s, or it falls behind")
+        v.fail(
+            "[sensor]",
+            "speed",
+            f"the robot's top speed {sensor.follow_speed:g} m/s must be above "
+            f"'{sensor.follow}''s {leader.path.speed:g} m/s, or it falls behind",
+        )
 
 
 def _scanner(v: _Validator, t: dict) -> ScannerSpec:
@@ -321,8 +350,11 @@ def _bench(v: _Validator, t: dict, where: str) -> Bench:
     sup = v.points(t, where, "supports", minimum=2)
     if len(sup) != 2 or np.all(sup[0] == sup[1]):
         raise ConfigError(f"{v.source}: {where}, key 'supports': give two different points")
-    return Bench(sup, v.number(t, where, "support_radius", 0.1, positive=True),
-                 v.number(t, where, "seat_width", 0.35, nonnegative=True))
+    return Bench(
+        sup,
+        v.number(t, where, "support_radius", 0.1, positive=True),
+        v.number(t, where, "seat_width", 0.35, nonnegative=True),
+    )
 
 
 def _box(v: _Validator, t: dict, where: str) -> Box:
@@ -334,8 +366,9 @@ def _box(v: _Validator, t: dict, where: str) -> Box:
     center = v.vector(t, where, "center", 2, default=None)
     if (path is None) == (center is None):
         raise ConfigError(f"{v.source}: {where}: give either 'center' (static) or 'path' (moving)")
-    return Box(float(size[0]), float(size[1]), center,
-               float(np.radians(v.number(t, where, "orientation_deg", 0.0))), path)
+    return Box(
+        float(size[0]), float(size[1]), center, float(np.radians(v.number(t, where, "orientation_deg", 0.0))), path
+    )
 
 
 def _platform(v: _Validator, t: dict, where: str) -> Platform:
@@ -345,8 +378,10 @@ def _platform(v: _Validator, t: dict, where: str) -> Platform:
     pulled = v.string(t, where, "pulled_by", None)
     center = v.vector(t, where, "center", 2, default=None)
     if sum(x is not None for x in (path, pulled)) > 1 or (center is None and path is None and pulled is None):
-        raise ConfigError(f"{v.source}: {where}: give 'center' (static), 'path' (driven) or "
-                          "'pulled_by' (towed, starting at 'center' if given)")
+        raise ConfigError(
+            f"{v.source}: {where}: give 'center' (static), 'path' (driven) or "
+            "'pulled_by' (towed, starting at 'center' if given)"
+        )
     if path is not None and center is not None:
         raise ConfigError(f"{v.source}: {where}: a driven platform starts at its path's first point; drop 'center'")
     return Platform(radius, center, path, pulled, v.number(t, where, "wire", 2.0, positive=True))
@@ -356,13 +391,14 @@ def _person(v: _Validator, t: dict, where: str, index: int) -> Person:
     v.keys(t, where, {"name", "position", "heading_deg"} | PATH_KEYS | GAIT_KEYS)
     g = Gait()
     step = v.number(t, where, "step_length", None, positive=True)
-    gait = Gait(leg_length=v.number(t, where, "leg_length", g.leg_length, positive=True),
-                swing_angle=float(np.radians(v.number(t, where, "swing_angle_deg", np.degrees(g.swing_angle),
-                                                      positive=True))),
-                shoulder_width=v.number(t, where, "shoulder_width", g.shoulder_width, positive=True),
-                leg_radius=v.number(t, where, "leg_radius", g.leg_radius, positive=True),
-                double_support=v.number(t, where, "double_support", g.double_support, nonnegative=True),
-                step=step)
+    gait = Gait(
+        leg_length=v.number(t, where, "leg_length", g.leg_length, positive=True),
+        swing_angle=float(np.radians(v.number(t, where, "swing_angle_deg", np.degrees(g.swing_angle), positive=True))),
+        shoulder_width=v.number(t, where, "shoulder_width", g.shoulder_width, positive=True),
+        leg_radius=v.number(t, where, "leg_radius", g.leg_radius, positive=True),
+        double_support=v.number(t, where, "double_support", g.double_support, nonnegative=True),
+        step=step,
+    )
     if gait.double_support >= 1:
         raise ConfigError(f"{v.source}: {where}, key 'double_support': must be below 1")
     if gait.step_length <= 0:
@@ -371,8 +407,13 @@ def _person(v: _Validator, t: dict, where: str, index: int) -> Person:
     position = v.vector(t, where, "position", 2, default=None)
     if (path is None) == (position is None):
         raise ConfigError(f"{v.source}: {where}: give either 'path' (walking) or 'position' (standing)")
-    return Person(v.string(t, where, "name", f"person{index}"), gait, path, position,
-                  float(np.radians(v.number(t, where, "heading_deg", 0.0))))
+    return Person(
+        v.string(t, where, "name", f"person{index}"),
+        gait,
+        path,
+        position,
+        float(np.radians(v.number(t, where, "heading_deg", 0.0))),
+    )
 
 
 def _crowd(v: _Validator, t: dict) -> Crowd:
@@ -388,8 +429,9 @@ def _crowd(v: _Validator, t: dict) -> Crowd:
     prob = v.number(t, where, "pause_probability", 0.2, nonnegative=True)
     if prob > 1:
         raise ConfigError(f"{v.source}: {where}, key 'pause_probability': must be in [0, 1]")
-    return Crowd(people, area, (float(speed[0]), float(speed[1])), prob,
-                 v.number(t, where, "max_pause", 3.0, nonnegative=True))
+    return Crowd(
+        people, area, (float(speed[0]), float(speed[1])), prob, v.number(t, where, "max_pause", 3.0, nonnegative=True)
+    )
 
 
 _REQUIRED = object()
@@ -452,8 +494,9 @@ class _Validator:
             self.fail(where, key, f"must be a whole number >= 0, got {x!r}")
         return x
 
-    def number(self, t: dict, where: str, key: str, default=_REQUIRED, *, positive: bool = False,
-               nonnegative: bool = False):
+    def number(
+        self, t: dict, where: str, key: str, default=_REQUIRED, *, positive: bool = False, nonnegative: bool = False
+    ):
         x = self._get(t, where, key, default)
         if x is _REQUIRED:
             return default
@@ -476,17 +519,26 @@ class _Validator:
         x = self._get(t, where, key, default)
         if x is _REQUIRED:
             return None if default is None else np.array(default, np.float64)
-        if (not isinstance(x, list) or len(x) != n
-                or not all(isinstance(c, int | float) and not isinstance(c, bool) and np.isfinite(c) for c in x)):
+        if (
+            not isinstance(x, list)
+            or len(x) != n
+            or not all(isinstance(c, int | float) and not isinstance(c, bool) and np.isfinite(c) for c in x)
+        ):
             self.fail(where, key, f"must be a list of {n} numbers, got {x!r}")
         return np.array(x, np.float64)
 
     def points(self, t: dict, where: str, key: str, minimum: int = 1) -> np.ndarray:
         x = self._get(t, where, key, _REQUIRED)
-        ok = isinstance(x, list) and len(x) >= minimum and all(
-            isinstance(p, list) and len(p) == 2
-            and all(isinstance(c, int | float) and not isinstance(c, bool) and np.isfinite(c) for c in p)
-            for p in x)
+        ok = (
+            isinstance(x, list)
+            and len(x) >= minimum
+            and all(
+                isinstance(p, list)
+                and len(p) == 2
+                and all(isinstance(c, int | float) and not isinstance(c, bool) and np.isfinite(c) for c in p)
+                for p in x
+            )
+        )
         if not ok:
             self.fail(where, key, f"must be a list of {minimum} or more [x, y] points, got {x!r}")
         return np.array(x, np.float64)
@@ -509,11 +561,22 @@ class _Validator:
         if not isinstance(pauses_raw, list):
             self.fail(where, "pauses", "must be a list of [waypoint index, seconds] pairs")
         for p in pauses_raw:
-            if (not isinstance(p, list) or len(p) != 2 or isinstance(p[0], bool) or not isinstance(p[0], int)
-                    or not 0 <= p[0] < len(pts) or isinstance(p[1], bool) or not isinstance(p[1], int | float)
-                    or not 0 <= p[1] < np.inf):
-                self.fail(where, "pauses", f"each pause is [waypoint index 0..{len(pts) - 1}, seconds >= 0], "
-                                           f"got {p!r}")
+            if (
+                not isinstance(p, list)
+                or len(p) != 2
+                or isinstance(p[0], bool)
+                or not isinstance(p[0], int)
+                or not 0 <= p[0] < len(pts)
+                or isinstance(p[1], bool)
+                or not isinstance(p[1], int | float)
+                or not 0 <= p[1] < np.inf
+            ):
+                self.fail(where, "pauses", f"each pause is [waypoint index 0..{len(pts) - 1}, seconds >= 0], got {p!r}")
             pauses[int(p[0])] = float(p[1])
-        return PathSpec(pts, self.number(t, where, "speed", 1.0, positive=True), pauses,
-                        self.number(t, where, "start_time", 0.0, nonnegative=True), loop)
+        return PathSpec(
+            pts,
+            self.number(t, where, "speed", 1.0, positive=True),
+            pauses,
+            self.number(t, where, "start_time", 0.0, nonnegative=True),
+            loop,
+        )

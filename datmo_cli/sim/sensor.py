@@ -15,8 +15,8 @@ import numpy as np
 
 from ..log.scan import ScanGeometry
 
-FIELDS_OF_VIEW = {180: (1.0, 0.5), 100: (1.0, 0.5, 0.25)}    # degrees -> allowed resolutions, degrees
-MAX_RATE_HZ = {1.0: 75.0, 0.5: 37.5, 0.25: 18.75}           # one mirror turn per 1° grid (TL p.19)
+FIELDS_OF_VIEW = {180: (1.0, 0.5), 100: (1.0, 0.5, 0.25)}  # degrees -> allowed resolutions, degrees
+MAX_RATE_HZ = {1.0: 75.0, 0.5: 37.5, 0.25: 18.75}  # one mirror turn per 1° grid (TL p.19)
 RANGE_BITS = {8: 13, 16: 14, 32: 15, 80: 13}
 UNITS_M = {"mm": 0.001, "cm": 0.01}
 
@@ -39,8 +39,9 @@ class Sensor:
             raise ValueError(f"field of view must be 180 or 100 degrees, got {self.fov_deg}")
         if self.resolution_deg not in FIELDS_OF_VIEW[self.fov_deg]:
             allowed = ", ".join(f"{r:g}" for r in FIELDS_OF_VIEW[self.fov_deg])
-            raise ValueError(f"resolution {self.resolution_deg:g}° is not available at {self.fov_deg}° "
-                             f"(choose {allowed})")
+            raise ValueError(
+                f"resolution {self.resolution_deg:g}° is not available at {self.fov_deg}° (choose {allowed})"
+            )
         if self.range_mode_m not in RANGE_BITS:
             raise ValueError(f"range mode must be 8, 16, 32 or 80 m, got {self.range_mode_m}")
         if self.units not in UNITS_M:
@@ -53,8 +54,9 @@ class Sensor:
             raise ValueError(f"dropout must be in [0, 1), got {self.dropout}")
         top = MAX_RATE_HZ[self.resolution_deg]
         if not 0 < self.rate_hz <= top:
-            raise ValueError(f"rate must be above 0 and at most {top:g} Hz at {self.resolution_deg:g}°, "
-                             f"got {self.rate_hz:g}")
+            raise ValueError(
+                f"rate must be above 0 and at most {top:g} Hz at {self.resolution_deg:g}°, got {self.rate_hz:g}"
+            )
 
     @property
     def n_beams(self) -> int:
@@ -85,10 +87,16 @@ class Sensor:
 
     def geometry(self, frame_id: str = "laser") -> ScanGeometry:
         """The LaserScan geometry: nominal range limits, all beams measured at the scan's instant."""
-        return ScanGeometry(angle_min=float(np.radians(-self.fov_deg / 2)),
-                            angle_increment=float(np.radians(self.resolution_deg)), n_beams=self.n_beams,
-                            range_min=0.0, range_max=float(self.range_mode_m), time_increment=0.0,
-                            scan_time=1.0 / self.rate_hz, frame_id=frame_id)
+        return ScanGeometry(
+            angle_min=float(np.radians(-self.fov_deg / 2)),
+            angle_increment=float(np.radians(self.resolution_deg)),
+            n_beams=self.n_beams,
+            range_min=0.0,
+            range_max=float(self.range_mode_m),
+            time_increment=0.0,
+            scan_time=1.0 / self.rate_hz,
+            frame_id=frame_id,
+        )
 
     def measure(self, distances: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """The integer values (uint16) the sensor sends for true distances (m; inf: no target).
@@ -117,8 +125,8 @@ class Sensor:
         return out
 
 
-NO_RETURN_CODE = 0xFFFF   # Scanner: nothing within range_max
-ERROR_CODE = 0            # Scanner: a dropped return, or a target nearer than range_min
+NO_RETURN_CODE = 0xFFFF  # Scanner: nothing within range_max
+ERROR_CODE = 0  # Scanner: a dropped return, or a target nearer than range_min
 
 
 @dataclass(frozen=True)
@@ -144,8 +152,9 @@ class Scanner:
         if not 0 < self.fov_deg <= 360:
             raise ValueError(f"field of view must be in (0, 360] degrees, got {self.fov_deg:g}")
         if not 0 <= self.range_min < self.range_max <= 60:
-            raise ValueError(f"range must be [min, max] with 0 <= min < max <= 60 m, got "
-                             f"[{self.range_min:g}, {self.range_max:g}]")
+            raise ValueError(
+                f"range must be [min, max] with 0 <= min < max <= 60 m, got [{self.range_min:g}, {self.range_max:g}]"
+            )
         if not (self.noise_sigma >= 0 and np.isfinite(self.noise_sigma)):
             raise ValueError(f"noise sigma must be a finite number >= 0, got {self.noise_sigma}")
         if not 0 <= self.dropout < 1:
@@ -162,10 +171,16 @@ class Scanner:
         return np.radians(-self.fov_deg / 2) + np.radians(self.resolution_deg) * np.arange(self.n_beams)
 
     def geometry(self, frame_id: str = "laser") -> ScanGeometry:
-        return ScanGeometry(angle_min=float(np.radians(-self.fov_deg / 2)),
-                            angle_increment=float(np.radians(self.resolution_deg)), n_beams=self.n_beams,
-                            range_min=float(self.range_min), range_max=float(self.range_max), time_increment=0.0,
-                            scan_time=1.0 / self.rate_hz, frame_id=frame_id)
+        return ScanGeometry(
+            angle_min=float(np.radians(-self.fov_deg / 2)),
+            angle_increment=float(np.radians(self.resolution_deg)),
+            n_beams=self.n_beams,
+            range_min=float(self.range_min),
+            range_max=float(self.range_max),
+            time_increment=0.0,
+            scan_time=1.0 / self.rate_hz,
+            frame_id=frame_id,
+        )
 
     def measure(self, distances: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Whole millimetres (uint16) for true distances (m; inf: no target): NO_RETURN_CODE beyond range_max,

@@ -24,10 +24,10 @@ from .scene import Scene, load_scene
 from .sensor import Scanner, Sensor
 from .world import ObjectInfo, World
 
-START_NS = 1_088_985_600 * 1_000_000_000   # 2004-07-05T00:00:00Z, the first scan's stamp
-CHUNK = 512                                 # scans cast per kernel call
-CORNER_RADIUS = 0.3                         # m: beams on a corner's walls this close to it count as hits
-MOVING_SPEED = 0.01                         # m/s
+START_NS = 1_088_985_600 * 1_000_000_000  # 2004-07-05T00:00:00Z, the first scan's stamp
+CHUNK = 512  # scans cast per kernel call
+CORNER_RADIUS = 0.3  # m: beams on a corner's walls this close to it count as hits
+MOVING_SPEED = 0.01  # m/s
 
 
 @dataclass
@@ -54,7 +54,7 @@ class SimResult:
 
     def truth_at(self, k: int) -> np.ndarray:
         """Ground-truth objects of scan k."""
-        return self.truth[self.truth_offsets[k]:self.truth_offsets[k + 1]]
+        return self.truth[self.truth_offsets[k] : self.truth_offsets[k + 1]]
 
     def ground_truth_payloads(self) -> list[bytes]:
         """CDR payloads of datmo_msgs/msg/GroundTruth, one per scan, stamped like the scans."""
@@ -62,14 +62,25 @@ class SimResult:
         return ground_truth_payloads(self.run.stamps, self.sensor_poses, truth, self.run.geometry.frame_id)
 
 
-def ground_truth_payloads(stamps: np.ndarray, sensor_poses: np.ndarray, truth: np.ndarray,
-                          frame_id: str) -> list[bytes]:
+def ground_truth_payloads(
+    stamps: np.ndarray, sensor_poses: np.ndarray, truth: np.ndarray, frame_id: str
+) -> list[bytes]:
     """CDR payloads of datmo_msgs/msg/GroundTruth of scans with these stamps, sensor poses (n, 3) and
     ground-truth records (n, n_objects), as SimResult and SimChunk hold them."""
-    return [cdr.encode(types.GROUND_TRUTH, {
-        "stamp_ns": int(s), "frame_id": frame_id, "sensor_x": float(p[0]), "sensor_y": float(p[1]),
-        "sensor_theta": float(p[2]), "objects": truth[k]})
-        for k, (s, p) in enumerate(zip(stamps, sensor_poses, strict=True))]
+    return [
+        cdr.encode(
+            types.GROUND_TRUTH,
+            {
+                "stamp_ns": int(s),
+                "frame_id": frame_id,
+                "sensor_x": float(p[0]),
+                "sensor_y": float(p[1]),
+                "sensor_theta": float(p[2]),
+                "objects": truth[k],
+            },
+        )
+        for k, (s, p) in enumerate(zip(stamps, sensor_poses, strict=True))
+    ]
 
 
 @dataclass
@@ -77,11 +88,11 @@ class SimChunk:
     """Consecutive scans `start`..`start + len(stamps) - 1` of a Simulation (see SimResult for the fields)."""
 
     start: int
-    stamps: np.ndarray          # (n,) int64 ns
-    sensor_poses: np.ndarray    # (n, 3)
-    codes: np.ndarray           # (n, B) uint16
-    ranges: np.ndarray          # (n, B) float32
-    truth: np.ndarray           # (n, n_objects) ground-truth records
+    stamps: np.ndarray  # (n,) int64 ns
+    sensor_poses: np.ndarray  # (n, 3)
+    codes: np.ndarray  # (n, B) uint16
+    ranges: np.ndarray  # (n, B) float32
+    truth: np.ndarray  # (n, n_objects) ground-truth records
 
 
 class Simulation:
@@ -92,10 +103,21 @@ class Simulation:
     crowds) is laid out for the whole duration up front; the scans and ground truth come block by block.
     """
 
-    def __init__(self, scene: str | Path | Scene, *, seed: int = 0, duration: float | None = None,
-                 rate: float | None = None, fov_deg: int | None = None, resolution_deg: float | None = None,
-                 range_mode_m: int | None = None, units: str | None = None, noise_sigma: float = 0.01,
-                 people: int | None = None, dropout: float = 0.0) -> None:
+    def __init__(
+        self,
+        scene: str | Path | Scene,
+        *,
+        seed: int = 0,
+        duration: float | None = None,
+        rate: float | None = None,
+        fov_deg: int | None = None,
+        resolution_deg: float | None = None,
+        range_mode_m: int | None = None,
+        units: str | None = None,
+        noise_sigma: float = 0.01,
+        people: int | None = None,
+        dropout: float = 0.0,
+    ) -> None:
         self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
         rate = rate if rate is not None else self.scene.rate if self.scene.rate is not None else 5.0
         lms = {"fov_deg": fov_deg, "resolution_deg": resolution_deg, "range_mode_m": range_mode_m, "units": units}
@@ -104,23 +126,38 @@ class Simulation:
             if spec is not None:
                 given = [k for k, x in lms.items() if x is not None]
                 if given:
-                    raise ConfigError(f"{self.scene.source}: the scene sets its own scanner ([scanner]); "
-                                      f"{', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to the LMS200")
-                self.sensor = Scanner(spec.beams, spec.fov_deg, spec.range_min, spec.range_max, float(noise_sigma),
-                                      float(rate), float(dropout))
+                    raise ConfigError(
+                        f"{self.scene.source}: the scene sets its own scanner ([scanner]); "
+                        f"{', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to the LMS200"
+                    )
+                self.sensor = Scanner(
+                    spec.beams,
+                    spec.fov_deg,
+                    spec.range_min,
+                    spec.range_max,
+                    float(noise_sigma),
+                    float(rate),
+                    float(dropout),
+                )
             else:
-                self.sensor = Sensor(180 if fov_deg is None else int(fov_deg),
-                                     0.5 if resolution_deg is None else float(resolution_deg),
-                                     8 if range_mode_m is None else int(range_mode_m), units or "mm",
-                                     float(noise_sigma), float(rate), float(dropout))
+                self.sensor = Sensor(
+                    180 if fov_deg is None else int(fov_deg),
+                    0.5 if resolution_deg is None else float(resolution_deg),
+                    8 if range_mode_m is None else int(range_mode_m),
+                    units or "mm",
+                    float(noise_sigma),
+                    float(rate),
+                    float(dropout),
+                )
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
         if duration is not None:
             duration = check(OPTIONS["sim_duration"], float(duration), "duration")
         duration = self.scene.duration if duration is None else duration
         if people is not None and self.scene.crowd is None:
-            raise ConfigError(f"{self.scene.source}: --people applies to scenes with a [crowd] table; "
-                              "this one has none")
+            raise ConfigError(
+                f"{self.scene.source}: --people applies to scenes with a [crowd] table; this one has none"
+            )
         if people is not None:
             check(OPTIONS["people"], people, "people")
         if seed < 0:
@@ -165,16 +202,27 @@ class Simulation:
         angles = self.sensor.angles()
         for a in range(0, len(self), size):
             b = min(len(self), a + size)
-            poses, codes, ranges, truth = _chunk(self.world, self.sensor, angles, self.times[a:b], self._noise,
-                                                 self.truth_dtype)
+            poses, codes, ranges, truth = _chunk(
+                self.world, self.sensor, angles, self.times[a:b], self._noise, self.truth_dtype
+            )
             yield SimChunk(a, self.stamps[a:b], poses, codes, ranges, truth)
 
 
-def simulate_scene(scene: str | Path | Scene, *, seed: int = 0, duration: float | None = None,
-                   rate: float | None = None, fov_deg: int | None = None, resolution_deg: float | None = None,
-                   range_mode_m: int | None = None, units: str | None = None, noise_sigma: float = 0.01,
-                   people: int | None = None, dropout: float = 0.0,
-                   progress: Callable[[int, int], None] | None = None) -> SimResult:
+def simulate_scene(
+    scene: str | Path | Scene,
+    *,
+    seed: int = 0,
+    duration: float | None = None,
+    rate: float | None = None,
+    fov_deg: int | None = None,
+    resolution_deg: float | None = None,
+    range_mode_m: int | None = None,
+    units: str | None = None,
+    noise_sigma: float = 0.01,
+    people: int | None = None,
+    dropout: float = 0.0,
+    progress: Callable[[int, int], None] | None = None,
+) -> SimResult:
     """Simulate a scanner in `scene` (a built-in name, a .toml path, or a loaded Scene): the scene's [scanner],
     else an LMS200.
 
@@ -184,9 +232,19 @@ def simulate_scene(scene: str | Path | Scene, *, seed: int = 0, duration: float 
     crowd (crowd scenes only); dropout: probability that a beam returns nothing (NaN).
     `progress(done, total)` is called after each block of scans. Raises ConfigError on bad settings.
     """
-    sim = Simulation(scene, seed=seed, duration=duration, rate=rate, fov_deg=fov_deg,
-                     resolution_deg=resolution_deg, range_mode_m=range_mode_m, units=units,
-                     noise_sigma=noise_sigma, people=people, dropout=dropout)
+    sim = Simulation(
+        scene,
+        seed=seed,
+        duration=duration,
+        rate=rate,
+        fov_deg=fov_deg,
+        resolution_deg=resolution_deg,
+        range_mode_m=range_mode_m,
+        units=units,
+        noise_sigma=noise_sigma,
+        people=people,
+        dropout=dropout,
+    )
     n, n_obj = len(sim), len(sim.objects)
     truth = np.zeros((n, n_obj), sim.truth_dtype)
     codes = np.empty((n, sim.sensor.n_beams), np.uint16)
@@ -199,32 +257,50 @@ def simulate_scene(scene: str | Path | Scene, *, seed: int = 0, duration: float 
             progress(k.stop, n)
     stamps = sim.stamps
     run = ScanRun(stamps, ranges, sim.geometry)
-    odom = Odometry(stamps.copy(), poses[:, 0].copy(), poses[:, 1].copy(), poses[:, 2].copy()) \
-        if sim.writes_odometry else None
-    return SimResult(run, odom, truth.reshape(-1), np.arange(n + 1, dtype=np.int64) * n_obj, poses, codes,
-                     sim.sensor, sim.scene, sim.objects)
+    odom = (
+        Odometry(stamps.copy(), poses[:, 0].copy(), poses[:, 1].copy(), poses[:, 2].copy())
+        if sim.writes_odometry
+        else None
+    )
+    return SimResult(
+        run,
+        odom,
+        truth.reshape(-1),
+        np.arange(n + 1, dtype=np.int64) * n_obj,
+        poses,
+        codes,
+        sim.sensor,
+        sim.scene,
+        sim.objects,
+    )
 
 
-def _chunk(world: World, sensor: Sensor, angles: np.ndarray, t: np.ndarray, noise: np.random.Generator,
-           dtype: np.dtype) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _chunk(
+    world: World, sensor: Sensor, angles: np.ndarray, t: np.ndarray, noise: np.random.Generator, dtype: np.dtype
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(sensor poses, sensor codes, ranges, ground truth (n, n_objects)) of the scans at times t."""
     poses = world.sensor.poses(t)
     states = [(k, m.state(t)) for k, m in world.movers]
     circ = [(s.circles, np.full(s.circles.shape[1], k)) for k, s in states if s.circles is not None]
     segs = [(s.segments, np.full(s.segments.shape[1], k)) for k, s in states if s.segments is not None]
-    dist, owner = cast(poses, angles, world.static,
-                       np.concatenate([a for a, _ in segs], 1) if segs else None,
-                       np.concatenate([o for _, o in segs]) if segs else None,
-                       np.concatenate([a for a, _ in circ], 1) if circ else None,
-                       np.concatenate([o for _, o in circ]) if circ else None)
+    dist, owner = cast(
+        poses,
+        angles,
+        world.static,
+        np.concatenate([a for a, _ in segs], 1) if segs else None,
+        np.concatenate([o for _, o in segs]) if segs else None,
+        np.concatenate([a for a, _ in circ], 1) if circ else None,
+        np.concatenate([o for _, o in circ]) if circ else None,
+    )
     codes = sensor.measure(dist, noise)
     ranges = sensor.ranges(codes)
     hits = _hits(world, poses, angles, dist, owner, np.isfinite(ranges) & (owner >= 0))
     return poses, codes, ranges, _truth(world, t, poses, states, hits, dtype)
 
 
-def _hits(world: World, poses: np.ndarray, angles: np.ndarray, dist: np.ndarray, owner: np.ndarray,
-          valid: np.ndarray) -> np.ndarray:
+def _hits(
+    world: World, poses: np.ndarray, angles: np.ndarray, dist: np.ndarray, owner: np.ndarray, valid: np.ndarray
+) -> np.ndarray:
     """(n, n_objects) beams that hit each object and return a finite range; for wall corners, those on
     either wall within CORNER_RADIUS of the vertex."""
     nb, n_obj = len(poses), len(world.objects)
@@ -242,8 +318,9 @@ def _hits(world: World, poses: np.ndarray, angles: np.ndarray, dist: np.ndarray,
     return hits
 
 
-def _truth(world: World, t: np.ndarray, poses: np.ndarray, states: list, hits: np.ndarray,
-           dtype: np.dtype) -> np.ndarray:
+def _truth(
+    world: World, t: np.ndarray, poses: np.ndarray, states: list, hits: np.ndarray, dtype: np.dtype
+) -> np.ndarray:
     """Ground-truth records (n, n_objects): static objects from the table, movers from their states."""
     nb, n_obj = hits.shape
     sensor_vel = world.sensor.velocity(t)

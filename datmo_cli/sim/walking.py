@@ -23,13 +23,13 @@ from .paths import Timeline
 class Gait:
     """Walking parameters: metres and radians."""
 
-    leg_length: float = 0.9          # l
+    leg_length: float = 0.9  # l
     swing_angle: float = np.radians(22.0)  # theta
-    shoulder_width: float = 0.3      # d_S, distance between the legs' paths
-    leg_radius: float = 0.10         # leg circle at the scanner's height
-    double_support: float = 0.15     # fraction of a step with both feet down
-    step: float | None = None        # step length override, m
-    settle: float = 0.5              # s to bring the feet together after stopping (and apart before starting)
+    shoulder_width: float = 0.3  # d_S, distance between the legs' paths
+    leg_radius: float = 0.10  # leg circle at the scanner's height
+    double_support: float = 0.15  # fraction of a step with both feet down
+    step: float | None = None  # step length override, m
+    settle: float = 0.5  # s to bring the feet together after stopping (and apart before starting)
 
     @property
     def step_length(self) -> float:
@@ -64,7 +64,7 @@ def legs(timeline: Timeline, gait: Gait, t: np.ndarray) -> tuple[np.ndarray, np.
     left_stance = (k % 2 == 0)[:, None]
     left, right = np.where(left_stance, stance, swing), np.where(left_stance, swing, stance)
     since, until = timeline.standing(t)
-    rest = np.minimum(since, until)   # inf while walking
+    rest = np.minimum(since, until)  # inf while walking
     with np.errstate(divide="ignore", invalid="ignore"):
         beta = np.where(np.isfinite(rest), np.clip(rest / gait.settle, 0.0, 1.0) if gait.settle > 0 else 1.0, 0.0)
     beta = beta[:, None]

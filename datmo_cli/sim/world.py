@@ -23,7 +23,7 @@ from .scene import Crowd, Person, Scene
 from .walking import Gait, legs
 
 CORNER_MIN_TURN = np.radians(10.0)  # a polyline vertex is a corner when the wall turns by more than this
-TOW_DT = 0.01                        # s, integration step of towed loads
+TOW_DT = 0.01  # s, integration step of towed loads
 
 
 @dataclass
@@ -43,13 +43,13 @@ class ObjectInfo:
 class MoverState:
     """A mover at n instants: centre, velocity (world), heading, size, and its geometry."""
 
-    xy: np.ndarray                         # (n, 2)
-    velocity: np.ndarray                   # (n, 2)
-    heading: np.ndarray                    # (n,)
-    length: np.ndarray                     # (n,)
-    width: np.ndarray                      # (n,)
-    circles: np.ndarray | None = None      # (n, c, 3)
-    segments: np.ndarray | None = None     # (n, s, 4)
+    xy: np.ndarray  # (n, 2)
+    velocity: np.ndarray  # (n, 2)
+    heading: np.ndarray  # (n,)
+    length: np.ndarray  # (n,)
+    width: np.ndarray  # (n,)
+    circles: np.ndarray | None = None  # (n, c, 3)
+    segments: np.ndarray | None = None  # (n, s, 4)
     legs: tuple[np.ndarray, np.ndarray] | None = None
 
 
@@ -81,15 +81,17 @@ class Walker:
         across = np.abs(np.sum((left - right) * h[:, ::-1] * [-1, 1], 1))
         r = np.full((len(t), 1), g.leg_radius)
         circles = np.stack([np.hstack([left, r]), np.hstack([right, r])], 1)
-        return MoverState(xy, vel, heading, along + 2 * g.leg_radius, across + 2 * g.leg_radius,
-                          circles=circles, legs=(left, right))
+        return MoverState(
+            xy, vel, heading, along + 2 * g.leg_radius, across + 2 * g.leg_radius, circles=circles, legs=(left, right)
+        )
 
 
 class Driven:
     """A circle (platform) or rectangle (box, robot) moving along its own path; the rectangle faces its way."""
 
-    def __init__(self, path: PathSpec, t_end: float, radius: float | None = None,
-                 size: tuple[float, float] | None = None) -> None:
+    def __init__(
+        self, path: PathSpec, t_end: float, radius: float | None = None, size: tuple[float, float] | None = None
+    ) -> None:
         self.timeline = Timeline(path, t_end)
         self.radius = radius
         self.size = size
@@ -103,8 +105,14 @@ class Driven:
             circles = np.hstack([xy, np.full((n, 1), self.radius)])[:, None, :]
             return MoverState(xy, vel, heading, d, d, circles=circles)
         length, width = self.size
-        return MoverState(xy, vel, heading, np.full(n, length), np.full(n, width),
-                          segments=rectangle_segments(xy, length, width, heading))
+        return MoverState(
+            xy,
+            vel,
+            heading,
+            np.full(n, length),
+            np.full(n, width),
+            segments=rectangle_segments(xy, length, width, heading),
+        )
 
 
 class Towed:
@@ -188,8 +196,8 @@ class SensorTrack:
         return np.zeros(len(t)) if self.timeline is None else self._turning(t)[1]
 
 
-FOLLOW_DT = 0.01      # s, integration step of a following robot
-FOLLOW_STOP = 0.02    # m: a following robot stands while the gap is within this of its low end
+FOLLOW_DT = 0.01  # s, integration step of a following robot
+FOLLOW_STOP = 0.02  # m: a following robot stands while the gap is within this of its low end
 
 
 class FollowTrack:
@@ -226,8 +234,7 @@ class FollowTrack:
 
     def poses(self, t: np.ndarray) -> np.ndarray:
         """(n, 3): x, y, heading."""
-        return np.stack([self._at(t, self.xy[:, 0]), self._at(t, self.xy[:, 1]),
-                         _wrap(self._at(t, self.heading))], 1)
+        return np.stack([self._at(t, self.xy[:, 0]), self._at(t, self.xy[:, 1]), _wrap(self._at(t, self.heading))], 1)
 
     def velocity(self, t: np.ndarray) -> np.ndarray:
         """(n, 2) world-frame velocity, m/s."""
@@ -273,10 +280,10 @@ def _wrap(a):
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
-CROWD_CLEARANCE = 0.9   # m between walkers' centres that crowd paths try to keep
+CROWD_CLEARANCE = 0.9  # m between walkers' centres that crowd paths try to keep
 CROWD_TRIES = 30
-CROWD_BLOCK = 60.0      # s: crowd paths are planned in blocks of this length
-CROWD_DT = 0.1          # s: time step of the clearance checks
+CROWD_BLOCK = 60.0  # s: crowd paths are planned in blocks of this length
+CROWD_DT = 0.1  # s: time step of the clearance checks
 
 
 def crowd_people(crowd: Crowd, t_end: float, seed: np.random.SeedSequence, first_index: int) -> list[Person]:
@@ -291,7 +298,7 @@ def crowd_people(crowd: Crowd, t_end: float, seed: np.random.SeedSequence, first
     lo, hi = crowd.area
     # plan whole minutes so that runs of 10 s and 60 s (same seed) show the same crowd
     t_end = CROWD_BLOCK * np.ceil((t_end + 1.0) / CROWD_BLOCK)
-    grid = np.arange(0.0, t_end + CROWD_BLOCK, CROWD_DT)     # earlier walkers' positions, sampled
+    grid = np.arange(0.0, t_end + CROWD_BLOCK, CROWD_DT)  # earlier walkers' positions, sampled
     others = np.zeros((0, len(grid), 2))
 
     def gap(t0: float, t1: float, xy0: np.ndarray, xy1: np.ndarray) -> float:
@@ -302,7 +309,7 @@ def crowd_people(crowd: Crowd, t_end: float, seed: np.random.SeedSequence, first
         i1 = min(int(np.ceil(t1 / CROWD_DT)), len(grid) - 1) + 1
         f = np.clip((grid[i0:i1] - t0) / max(t1 - t0, 1e-9), 0.0, 1.0)[:, None]
         d = others[:, i0:i1] - (xy0 + (xy1 - xy0) * f)
-        return float(np.sqrt((d ** 2).sum(-1).min()))
+        return float(np.sqrt((d**2).sum(-1).min()))
 
     for i, ss in enumerate(seed.spawn(crowd.people)):
         rng = np.random.default_rng(ss)
@@ -367,9 +374,13 @@ class World:
             persons += crowd_people(crowd, t_end, seed, len(persons) + 1)
         walkers = self._add_movers(scene, persons, t_end)
         self._add_fixtures(scene)
-        self.corner_walls = self._add_walls(scene)   # (corner index, wall segment index, wall segment index)
-        self.static = Primitives(np.array(self._segs, np.float64).reshape(-1, 4), np.array(self._seg_own, np.int32),
-                                 np.array(self._circs, np.float64).reshape(-1, 3), np.array(self._circ_own, np.int32))
+        self.corner_walls = self._add_walls(scene)  # (corner index, wall segment index, wall segment index)
+        self.static = Primitives(
+            np.array(self._segs, np.float64).reshape(-1, 4),
+            np.array(self._seg_own, np.int32),
+            np.array(self._circs, np.float64).reshape(-1, 3),
+            np.array(self._circ_own, np.int32),
+        )
         placed = scene.sensor
         if placed.follow is not None:
             base = FollowTrack(walkers[placed.follow], placed.gap, placed.follow_speed, t_end)
@@ -419,8 +430,14 @@ class World:
             a, c = b.supports
             span = float(np.hypot(*(c - a)))
             heading = float(np.arctan2(*(c - a)[::-1]))
-            k = self._add(CLASS_BENCH, f"bench{i}", (a + c) / 2, heading, span + 2 * b.support_radius,
-                          max(b.seat_width, 2 * b.support_radius))
+            k = self._add(
+                CLASS_BENCH,
+                f"bench{i}",
+                (a + c) / 2,
+                heading,
+                span + 2 * b.support_radius,
+                max(b.seat_width, 2 * b.support_radius),
+            )
             self._circle(k, a, b.support_radius)
             self._circle(k, c, b.support_radius)
             if b.seat_width > 0:
@@ -448,15 +465,22 @@ class World:
         for wi, ws in enumerate(wall_segments):
             for j, (p, q) in enumerate(ws):
                 d = q - p
-                k = self._add(CLASS_WALL, f"wall{wi + 1}.{j + 1}", (p + q) / 2, float(np.arctan2(d[1], d[0])),
-                              float(np.hypot(*d)), 0.0)
+                k = self._add(
+                    CLASS_WALL,
+                    f"wall{wi + 1}.{j + 1}",
+                    (p + q) / 2,
+                    float(np.arctan2(d[1], d[0])),
+                    float(np.hypot(*d)),
+                    0.0,
+                )
                 seg_index[wi, j] = k
                 self._segs.append([*p, *q])
                 self._seg_own.append(k)
         return [(k, seg_index[wi, a], seg_index[wi, b]) for k, wi, a, b in corners]
 
-    def _add(self, cls: int, name: str, xy=None, orientation: float = 0.0, length: float = 0.0,
-             width: float = 0.0) -> int:
+    def _add(
+        self, cls: int, name: str, xy=None, orientation: float = 0.0, length: float = 0.0, width: float = 0.0
+    ) -> int:
         xy = (np.nan, np.nan) if xy is None else (float(xy[0]), float(xy[1]))
         self.objects.append(ObjectInfo(len(self.objects) + 1, cls, name, xy, orientation, length, width))
         return len(self.objects) - 1

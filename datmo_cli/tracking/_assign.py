@@ -24,7 +24,7 @@ from numba import njit
 
 from ..numba_runtime import key_kernel_cache_on_sources
 
-key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
+key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 
 INFEASIBLE = 1e12
 
@@ -73,7 +73,7 @@ def lsap(cost):
                     lowest = spc[j]
                     index = it
             min_val = lowest
-            if min_val == np.inf:   # cannot happen with finite costs
+            if min_val == np.inf:  # cannot happen with finite costs
                 return np.zeros(0, np.int64), np.zeros(0, np.int64)
             j = remaining[index]
             if row4col[j] == -1:
@@ -119,7 +119,7 @@ def _components(allowed, rows_in, cols_in, nr, nc):
     row and per column (0, 1, ...), and the number of components."""
     crow = np.full(nr, -1, np.int64)
     ccol = np.full(nc, -1, np.int64)
-    stack = np.empty(nr + nc, np.int64)   # rows as a, columns as nr + b
+    stack = np.empty(nr + nc, np.int64)  # rows as a, columns as nr + b
     n_comp = 0
     for start in range(nr):
         if crow[start] >= 0:
@@ -172,7 +172,7 @@ def gnn(cost, allowed):
         if col_used[j]:
             cols_in[nc] = j
             nc += 1
-    pair_col = np.full(K, -1, np.int64)   # the column each row takes
+    pair_col = np.full(K, -1, np.int64)  # the column each row takes
     crow, ccol, n_comp = _components(allowed, rows_in, cols_in, nr, nc)
     for comp in range(n_comp):
         rr = np.empty(nr, np.int64)

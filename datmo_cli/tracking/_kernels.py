@@ -25,7 +25,7 @@ from .state import (
     P_STRIDE_MAX,
 )
 
-key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
+key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 
 
 @njit(cache=True)
@@ -190,8 +190,34 @@ def _span_max(marks, a, b):
 
 
 @njit(cache=True)
-def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0,
-                         lx1, ly1, gfirst, glast, gx, gy, gw, wfirst, wlast, wp, prm):
+def learned_measurements(
+    cfirst,
+    clast,
+    cx,
+    cy,
+    cr,
+    bfirst,
+    blast,
+    bx,
+    by,
+    bsize,
+    lseg,
+    lfirst,
+    llast,
+    lx0,
+    ly0,
+    lx1,
+    ly1,
+    gfirst,
+    glast,
+    gx,
+    gy,
+    gw,
+    wfirst,
+    wlast,
+    wp,
+    prm,
+):
     """Measurements of one scan when a leg detector ran (see measurements.py): its legs (beams gfirst..glast
     at gx, gy, width gw) paired into people or single, then everything else as what it is: a circle
     (kind 2), the bounding box of a segment's lines (kind 3) or a blob (kind 4), whatever its size up to
@@ -291,7 +317,7 @@ def leg_stage(tx, ty, lx, ly, ls, prm):
             if second[k] >= 0:
                 continue
             f = first[k]
-            limit = reach if f < 0 else stride_max   # a second leg: anywhere within a stride of the first
+            limit = reach if f < 0 else stride_max  # a second leg: anywhere within a stride of the first
             for j in range(L):
                 if taken[j] or d[k, j] > limit or d[k, j] >= best:
                     continue
@@ -350,8 +376,9 @@ def duplicates(x, y, vx, vy, vvar, victim, candidate, confirmed, rank, prm):
                 continue
             if rank[j] > rank[i] or (rank[j] == rank[i] and j < i):
                 if np.hypot(x[i] - x[j], y[i] - y[j]) < merge_distance and (
-                        not (confirmed[i] and confirmed[j])
-                        or np.hypot(vx[i] - vx[j], vy[i] - vy[j]) < merge_speed + np.sqrt(vvar[i] + vvar[j])):
+                    not (confirmed[i] and confirmed[j])
+                    or np.hypot(vx[i] - vx[j], vy[i] - vy[j]) < merge_speed + np.sqrt(vvar[i] + vvar[j])
+                ):
                     dup[i] = True
                     break
     return dup

@@ -125,7 +125,7 @@ from .state import (
     Y,
 )
 
-key_kernel_cache_on_sources()   # before any kernel is declared: their cache stamps cover what they read
+key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 
 K_PERSON, K_LEG, K_CIRCLE, K_RECT, K_BLOB = 0, 1, 2, 3, 4
 # the raw leg candidates of a scan, (L, RAW_COLS): x, y (m), width (m), leg probability (0 without a detector),
@@ -135,7 +135,7 @@ RAW_COLS = 5
 # the leg probability of a leg candidate found on the background or carried: a candidate (its hit moves a track's
 # evidence), and not a leg
 NOT_A_LEG = 1e-6
-ANY_ROW = 4   # the compatibility row of tentative tracks (tracker._COMPAT)
+ANY_ROW = 4  # the compatibility row of tentative tracks (tracker._COMPAT)
 
 
 # ------------------------------------------------------------------------------------- measurements
@@ -145,7 +145,8 @@ def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly
     learned=False), sensor frame: x, y, size, kind, legs (M, 4), raw leg candidates (L, RAW_COLS: x, y, size, 0,
     -1), prob (M,: zeros)."""
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
-        cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm)
+        cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm
+    )
     raw = np.zeros((len(lx), RAW_COLS))
     for i in range(len(lx)):
         raw[i, R_X], raw[i, R_Y], raw[i, R_W], raw[i, R_COVER] = lx[i], ly[i], ls[i], -1.0
@@ -153,8 +154,32 @@ def paper_measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly
 
 
 @njit(cache=True)
-def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0,
-                         lx1, ly1, gfirst, glast, gx, gy, gw, gp, prm):
+def learned_measurements(
+    cfirst,
+    clast,
+    cx,
+    cy,
+    cr,
+    bfirst,
+    blast,
+    bx,
+    by,
+    bsize,
+    lseg,
+    lfirst,
+    llast,
+    lx0,
+    ly0,
+    lx1,
+    ly1,
+    gfirst,
+    glast,
+    gx,
+    gy,
+    gw,
+    gp,
+    prm,
+):
     """One scan's measurements with a leg detector's legs (reference_measurements, learned=True): the candidates
     of probability >= the leg threshold (P_LEG_THRESHOLD, the model's) not on the beams of a circle wider than
     leg_radius_max are legs (strong); the others (weak) are measured as what covers their beams, which takes their
@@ -172,9 +197,33 @@ def learned_measurements(cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize
         strong[i] = s
     weak = ~strong
     x, y, size, kind, legs, prob, cover = _kernels.learned_measurements(
-        cfirst, clast, cx, cy, cr, bfirst, blast, bx, by, bsize, lseg, lfirst, llast, lx0, ly0, lx1, ly1,
-        gfirst[strong], glast[strong], gx[strong], gy[strong], gw[strong], gfirst[weak], glast[weak], gp[weak],
-        prm)
+        cfirst,
+        clast,
+        cx,
+        cy,
+        cr,
+        bfirst,
+        blast,
+        bx,
+        by,
+        bsize,
+        lseg,
+        lfirst,
+        llast,
+        lx0,
+        ly0,
+        lx1,
+        ly1,
+        gfirst[strong],
+        glast[strong],
+        gx[strong],
+        gy[strong],
+        gw[strong],
+        gfirst[weak],
+        glast[weak],
+        gp[weak],
+        prm,
+    )
     raw = np.empty((len(gx), RAW_COLS))
     q = 0
     for i in range(len(gx)):
@@ -276,7 +325,7 @@ def predict(tab, n, dt, prm):
     for k in range(n):
         g = kind_group(tab, k)
         q = prm[P_PERSON_PROCESS_NOISE] if g == 0 or g == 5 else prm[P_PROCESS_NOISE]
-        P = tab[k, P0:P0 + 16].reshape((4, 4))
+        P = tab[k, P0 : P0 + 16].reshape((4, 4))
         qa, qb, qc = 0.25 * dt**4 * q, 0.5 * dt**3 * q, dt**2 * q
         tab[k, X] += dt * tab[k, VX]
         tab[k, Y] += dt * tab[k, VY]
@@ -300,7 +349,7 @@ def predict(tab, n, dt, prm):
 def kalman_update(tab, k, zx, zy, sigma, scratch):
     """Kalman update of track k with a position measurement (zx, zy) of sigma m, Joseph form
     (reference: tests/reference_tracking.joseph_update); scratch: (3, 4, 4) work space."""
-    P = tab[k, P0:P0 + 16].reshape((4, 4))
+    P = tab[k, P0 : P0 + 16].reshape((4, 4))
     I_KH = scratch[0]
     G = scratch[1]
     T = scratch[2]
@@ -334,9 +383,9 @@ def kalman_update(tab, k, zx, zy, sigma, scratch):
 def restart(tab, k, zx, zy, sigma, prm):
     """Track k's filter restarted at (zx, zy): no velocity, position sigma m, speed sigma initial_speed_sigma."""
     tab[k, X], tab[k, Y], tab[k, VX], tab[k, VY] = zx, zy, 0.0, 0.0
-    tab[k, P0:P0 + 16] = 0.0
+    tab[k, P0 : P0 + 16] = 0.0
     tab[k, P0 + 0] = tab[k, P0 + 5] = sigma**2
-    tab[k, P0 + 10] = tab[k, P0 + 15] = prm[P_INITIAL_SPEED_SIGMA]**2
+    tab[k, P0 + 10] = tab[k, P0 + 15] = prm[P_INITIAL_SPEED_SIGMA] ** 2
 
 
 # -------------------------------------------------------------------------------------------- phases
@@ -381,16 +430,40 @@ def carried_beams(out, raw, ranges, carry_ref, carry_seen, carry_away, has_pose,
         total = carried = 0
         for j in range(max(b - h, 0), min(b + h + 1, B)):
             total += 1
-            if (carry_seen[j] >= prm[P_CARRIED_TRAVEL] and carry_seen[j] >= 3.0 * carry_away[j]
-                    and abs(np.float64(ranges[j]) - carry_ref[j]) <= tol):
+            if (
+                carry_seen[j] >= prm[P_CARRIED_TRAVEL]
+                and carry_seen[j] >= 3.0 * carry_away[j]
+                and abs(np.float64(ranges[j]) - carry_ref[j]) <= tol
+            ):
                 carried += 1
         if total > 0 and 2 * carried > total:
             out[i] = True
 
 
 @njit(cache=True)
-def off_background(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ctx, px, py, ranges, carry_ref,
-                   carry_seen, carry_away, has_pose, pose, geo, prm):
+def off_background(
+    tab,
+    n,
+    mx,
+    my,
+    msize,
+    mkind,
+    mlegs,
+    raw,
+    mprob,
+    bg_score,
+    ctx,
+    px,
+    py,
+    ranges,
+    carry_ref,
+    carry_seen,
+    carry_away,
+    has_pose,
+    pose,
+    geo,
+    prm,
+):
     """The leg candidates on the background or carried (carried_beams) taken out (tracker._off_background): a
     strong one becomes a blob, a weak one stays the measurement covering it, each of leg probability NOT_A_LEG,
     and the other strong legs are paired again; the same arrays when none is. A candidate within leg_reach of a
@@ -400,8 +473,18 @@ def off_background(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ct
         return mx, my, msize, mkind, mlegs, raw, mprob
     if ctx[C_BG_READY] != 0:
         nbg = int(np.sqrt(len(bg_score)) + 0.5)
-        bg = _kernels.on_background(bg_score, raw[:, R_X].copy(), raw[:, R_Y].copy(), raw[:, R_W].copy(), px, py,
-                                    ctx[C_BG_X0], ctx[C_BG_Y0], nbg, prm)
+        bg = _kernels.on_background(
+            bg_score,
+            raw[:, R_X].copy(),
+            raw[:, R_Y].copy(),
+            raw[:, R_W].copy(),
+            px,
+            py,
+            ctx[C_BG_X0],
+            ctx[C_BG_Y0],
+            nbg,
+            prm,
+        )
     else:
         bg = np.zeros(len(raw), np.bool_)
     for i in range(len(bg)):
@@ -416,8 +499,9 @@ def off_background(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ct
         return mx, my, msize, mkind, mlegs, raw, mprob
     strong = raw[:, R_COVER] < 0
     keep = strong & ~bg
-    lx, ly, ls, kind, legs = _kernels.legs_to_measurements(raw[keep, R_X].copy(), raw[keep, R_Y].copy(),
-                                                           raw[keep, R_W].copy(), prm)
+    lx, ly, ls, kind, legs = _kernels.legs_to_measurements(
+        raw[keep, R_X].copy(), raw[keep, R_Y].copy(), raw[keep, R_W].copy(), prm
+    )
     n_bg = 0
     for i in range(len(bg)):
         if bg[i] and strong[i]:
@@ -431,7 +515,7 @@ def off_background(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, bg_score, ct
     knd = np.empty(M, np.int64)
     lg = np.full((M, 4), np.nan)
     prob = np.zeros(M)
-    where = np.full(len(mx), -1, np.int64)   # an other-kind measurement's new index
+    where = np.full(len(mx), -1, np.int64)  # an other-kind measurement's new index
     m = 0
     for i in range(len(lx)):
         x[m], y[m], size[m], knd[m] = lx[i], ly[i], ls[i], kind[i]
@@ -504,8 +588,20 @@ def legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm):
     use = (raw[:, R_COVER] < 0) | (raw[:, R_P] >= prm[P_PERSON_MAINTAIN])
     cand = raw[use]
     owner, x, y, size, kind, legs, other = _kernels.leg_stage_measurements(
-        tx, ty, cand[:, R_X].copy(), cand[:, R_Y].copy(), cand[:, R_W].copy(), cand[:, R_COVER] < 0,
-        cand[:, R_COVER].astype(np.int64), mx, my, msize, mkind, mlegs, prm)
+        tx,
+        ty,
+        cand[:, R_X].copy(),
+        cand[:, R_Y].copy(),
+        cand[:, R_W].copy(),
+        cand[:, R_COVER] < 0,
+        cand[:, R_COVER].astype(np.int64),
+        mx,
+        my,
+        msize,
+        mkind,
+        mlegs,
+        prm,
+    )
     if len(owner) == 0:
         return mx, my, msize, mkind, mlegs, mprob, none
     prob = np.zeros(len(x))
@@ -527,7 +623,7 @@ def gated_costs(tab, n, mx, my, mkind, compat, crow, prm):
         row = crow[k]
         for j in range(M):
             dx, dy = mx[j] - tab[k, X], my[j] - tab[k, Y]
-            if not compat[row, mkind[j]] or abs(dx) > far or abs(dy) > far:   # then hypot(dx, dy) > far too
+            if not compat[row, mkind[j]] or abs(dx) > far or abs(dy) > far:  # then hypot(dx, dy) > far too
                 continue
             s = prm[P_LEG_MEASUREMENT_NOISE] if mkind[j] == K_LEG else prm[P_MEASUREMENT_NOISE]
             v = s * s
@@ -565,8 +661,9 @@ def hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg_score, ctx, px, 
     if ctx[C_BG_READY] == 0:
         return
     nbg = int(np.sqrt(len(bg_score)) + 0.5)
-    on_bg = _kernels.tracks_on_background(bg_score, mx, my, msize, mkind, rows, cols, n, px, py, ctx[C_BG_X0],
-                                          ctx[C_BG_Y0], nbg, prm)
+    on_bg = _kernels.tracks_on_background(
+        bg_score, mx, my, msize, mkind, rows, cols, n, px, py, ctx[C_BG_X0], ctx[C_BG_Y0], nbg, prm
+    )
     for k in range(n):
         tab[k, ON_BG] = 1.0 if on_bg[k] else 0.0
 
@@ -580,8 +677,14 @@ def update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm):
     for q in range(len(rows)):
         k, j = rows[q], cols[q]
         moving = tab[k, MOVING_TIME] >= prm[P_WALKING_AFTER]
-        kalman_update(tab, k, mx[j], my[j], prm[P_LEG_MEASUREMENT_NOISE] if mkind[j] == K_LEG
-                      else prm[P_MEASUREMENT_NOISE], scratch)
+        kalman_update(
+            tab,
+            k,
+            mx[j],
+            my[j],
+            prm[P_LEG_MEASUREMENT_NOISE] if mkind[j] == K_LEG else prm[P_MEASUREMENT_NOISE],
+            scratch,
+        )
         tab[k, LAST_X], tab[k, LAST_Y] = tab[k, X], tab[k, Y]
         tab[k, HIT] = 1.0
         tab[k, VOTES + mkind[j]] += 1
@@ -593,7 +696,7 @@ def update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm):
                 ux, uy = vx / speed, vy / speed
                 dx, dy = mlegs[j, 0] - mlegs[j, 2], mlegs[j, 1] - mlegs[j, 3]
                 along = dx * ux + dy * uy
-                lead = along if (ux * dy - uy * dx) > 0 else -along   # left leg minus right leg
+                lead = along if (ux * dy - uy * dx) > 0 else -along  # left leg minus right leg
                 if abs(lead) <= prm[P_STEP_MAX]:
                     if lead > prm[P_STEP_MIN]:
                         tab[k, LEAD_LEFT] = 1.0
@@ -616,8 +719,8 @@ def reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm):
     if nl == 0 or M == 0:
         return none, none
     lost = lost[:nl]
-    free = np.empty(M, np.bool_)   # a lone leg may be someone else's second leg: taken back only where reacq lets a
-    for j in range(M):              # person (row 0) take one; one beside a confirmed track just hit is never free
+    free = np.empty(M, np.bool_)  # a lone leg may be someone else's second leg: taken back only where reacq lets a
+    for j in range(M):  # person (row 0) take one; one beside a confirmed track just hit is never free
         free[j] = mkind[j] != K_LEG or reacq[0, K_LEG]
     tentative = np.zeros(M, np.bool_)
     for q in range(len(cols)):
@@ -629,8 +732,11 @@ def reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm):
     for j in range(M):
         near = False
         for k in range(n):
-            if (tab[k, HIT] != 0 and tab[k, CONFIRMED] != 0
-                    and np.hypot(mx[j] - tab[k, X], my[j] - tab[k, Y]) <= prm[P_LEG_BESIDE]):
+            if (
+                tab[k, HIT] != 0
+                and tab[k, CONFIRMED] != 0
+                and np.hypot(mx[j] - tab[k, X], my[j] - tab[k, Y]) <= prm[P_LEG_BESIDE]
+            ):
                 near = True
                 break
         free[j] = free[j] and not near
@@ -644,13 +750,16 @@ def reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm):
     ok = np.empty((nl, nc), np.bool_)
     for a in range(nl):
         k = lost[a]
-        reach = min(prm[P_REACQUIRE_SPEED] * (stamp - np.int64(tab[k, LAST_HIT])) * 1e-9 + prm[P_MAX_GATE_DISTANCE],
-                    prm[P_REACQUIRE_DISTANCE])
+        reach = min(
+            prm[P_REACQUIRE_SPEED] * (stamp - np.int64(tab[k, LAST_HIT])) * 1e-9 + prm[P_MAX_GATE_DISTANCE],
+            prm[P_REACQUIRE_DISTANCE],
+        )
         for b in range(nc):
             j = cand[b]
             dist[a, b] = np.hypot(mx[j] - tab[k, LAST_X], my[j] - tab[k, LAST_Y])
-            ok[a, b] = (dist[a, b] <= reach and reacq[crow[k], mkind[j]]
-                        and (free[j] or tab[k, MOBILITY] == MOBILITY_DYNAMIC))
+            ok[a, b] = (
+                dist[a, b] <= reach and reacq[crow[k], mkind[j]] and (free[j] or tab[k, MOBILITY] == MOBILITY_DYNAMIC)
+            )
     r, c = _assign.gnn(dist, ok)
     rows2 = np.empty(len(r), np.int64)
     cols2 = np.empty(len(r), np.int64)
@@ -685,7 +794,7 @@ def fold_evidence(tab, k, p, prm):
     first 1/leg_evidence_rate such hits, then a running mean of that rate; a candidate found on the background or
     carried (p = NOT_A_LEG) sets it to 0."""
     tab[k, LEG_HITS] += 1
-    if p == NOT_A_LEG:   # a candidate on the background or carried: whatever fed the evidence was no leg
+    if p == NOT_A_LEG:  # a candidate on the background or carried: whatever fed the evidence was no leg
         tab[k, LEG_SCORE] = 0.0
         return
     a = max(prm[P_LEG_EVIDENCE_RATE], 1.0 / tab[k, LEG_HITS])
@@ -745,13 +854,17 @@ def duplicates(tab, n, learned, prm):
         x[k], y[k], vx[k], vy[k] = tab[k, X], tab[k, Y], tab[k, VX], tab[k, VY]
         vvar[k] = tab[k, P0 + 10] + tab[k, P0 + 15] if learned else 0.0
         legs = tab[k, VOTES + K_PERSON] + tab[k, VOTES + K_LEG]
-        candidate[k] = ((legs > 0 and tab[k, CLS] <= CLASS_PERSON)
-                        or (tab[k, LEG_HITS] > 0 and tab[k, LEG_SCORE] >= prm[P_PERSON_MAINTAIN]))
+        candidate[k] = (legs > 0 and tab[k, CLS] <= CLASS_PERSON) or (
+            tab[k, LEG_HITS] > 0 and tab[k, LEG_SCORE] >= prm[P_PERSON_MAINTAIN]
+        )
         victim[k] = candidate[k] or tab[k, LEG_HITS] > 0
         confirmed[k] = tab[k, CONFIRMED] != 0
-        rank[k] = (np.int64(tab[k, HITS]) * 2 + np.int64(tab[k, CONFIRMED])
-                   + (np.int64(1) << 40 if tab[k, MOBILITY] == MOBILITY_DYNAMIC else 0)
-                   + (np.int64(1) << 41 if tab[k, CLS] == CLASS_PERSON else 0))
+        rank[k] = (
+            np.int64(tab[k, HITS]) * 2
+            + np.int64(tab[k, CONFIRMED])
+            + (np.int64(1) << 40 if tab[k, MOBILITY] == MOBILITY_DYNAMIC else 0)
+            + (np.int64(1) << 41 if tab[k, CLS] == CLASS_PERSON else 0)
+        )
     return _kernels.duplicates(x, y, vx, vy, vvar, victim, candidate, confirmed, rank, prm)
 
 
@@ -799,8 +912,7 @@ def life_cycle(tab, n, stamp, superseded, learned, prm):
 
 
 @njit(cache=True)
-def spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp, has_pose, pose, px, py, ctx,
-          prm):
+def spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp, has_pose, pose, px, py, ctx, prm):
     """Start tentative tracks on measurements no track took, except legs beside a track that took a leg and
     measurements on top of a track (tracker._spawn). Returns the table (grown when full) and its row count."""
     M = len(mx)
@@ -875,8 +987,9 @@ def classify(tab, n, dt, stamp, learned, prm):
         moved = np.hypot(tab[k, X] - tab[k, FIRST_X], tab[k, Y] - tab[k, FIRST_Y])
         age_s = (stamp - np.int64(tab[k, BORN])) * 1e-9
         confirmed = tab[k, CONFIRMED] != 0
-        dynamic = tab[k, MOBILITY] == MOBILITY_DYNAMIC or (confirmed and moved > prm[P_MOVING_DISTANCE]
-                                                  and speed > prm[P_MOVING_SPEED])
+        dynamic = tab[k, MOBILITY] == MOBILITY_DYNAMIC or (
+            confirmed and moved > prm[P_MOVING_DISTANCE] and speed > prm[P_MOVING_SPEED]
+        )
         if dynamic:
             mob = 1
         elif tab[k, SIZE] > prm[P_D_MAX] or age_s >= prm[P_UNDEFINED_WINDOW]:
@@ -915,7 +1028,7 @@ def classify(tab, n, dt, stamp, learned, prm):
             if tab[k, IS_PERSON] != 0:
                 if tab[k, LEG_SCORE] < prm[P_PERSON_MAINTAIN]:
                     tab[k, IS_PERSON] = 0.0
-            elif (confirmed and tab[k, LEG_SCORE] >= prm[P_PERSON_EVIDENCE] and person >= prm[P_PERSON_PAIRS]):
+            elif confirmed and tab[k, LEG_SCORE] >= prm[P_PERSON_EVIDENCE] and person >= prm[P_PERSON_PAIRS]:
                 tab[k, IS_PERSON] = 1.0
             if tab[k, IS_PERSON] != 0:
                 cls = CLASS_PERSON
@@ -933,9 +1046,36 @@ def push_tail(tab, n, prm):
 
 
 @njit(cache=True)
-def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a, sin_a, angle_min, increment,
-                      range_min, range_max, px, py, pc, ps, dt, x0, y0, cell, n, margin, settled, fresh, qx, qy,
-                      radius):
+def background_update(
+    score,
+    mark,
+    active,
+    cache,
+    n_active,
+    scan,
+    ranges,
+    cos_a,
+    sin_a,
+    angle_min,
+    increment,
+    range_min,
+    range_max,
+    px,
+    py,
+    pc,
+    ps,
+    dt,
+    x0,
+    y0,
+    cell,
+    n,
+    margin,
+    settled,
+    fresh,
+    qx,
+    qy,
+    radius,
+):
     """reference_tracking.background_update with each active cell's range and beam kept beside it (cache[a] = r, beam
     for active[a], beam -2: not yet computed), valid while the sensor pose does not change (`fresh`: it
     changed, compute them all again). The same arithmetic on the same numbers: the same grid. An inactive
@@ -948,7 +1088,7 @@ def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a,
         r, jf = cache[a, 0], cache[a, 1]
         if score[c] >= settled and (c + scan) % 4 != 0:
             active[keep] = c
-            cache[keep, 0], cache[keep, 1] = r, -2.0 if fresh else jf   # not tested: computed when it is
+            cache[keep, 0], cache[keep, 1] = r, -2.0 if fresh else jf  # not tested: computed when it is
             keep += 1
             continue
         if fresh or jf == -2.0:
@@ -998,12 +1138,12 @@ def background_update(score, mark, active, cache, n_active, scan, ranges, cos_a,
 
 
 @njit(cache=True)
-def background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, cos_a, sin_a, geo, px, py, pc, ps,
-               dt, tab, n, prm):
+def background(
+    bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, cos_a, sin_a, geo, px, py, pc, ps, dt, tab, n, prm
+):
     """Add the scan's returns but the people's (within person_radius of a person track) to the background grid
     (tracker._background; geo: angle_min, increment, range_max, has geometry, range_min)."""
-    if (not has_ranges or geo[3] == 0 or prm[P_BACKGROUND_TIME] <= 0 or len(ranges) != len(cos_a)
-            or len(bg_score) == 0):
+    if not has_ranges or geo[3] == 0 or prm[P_BACKGROUND_TIME] <= 0 or len(ranges) != len(cos_a) or len(bg_score) == 0:
         return
     if ctx[C_BG_READY] == 0:
         ctx[C_BG_READY] = 1.0
@@ -1013,8 +1153,13 @@ def background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, 
         ctx[C_BG_LO] = lo
         ctx[C_BG_HI] = geo[2] if np.isfinite(geo[2]) and geo[2] > lo else np.inf
     ctx[C_BG_SCAN] += 1
-    fresh = not (ctx[C_BG_CACHED] != 0 and ctx[C_BG_PX] == px and ctx[C_BG_PY] == py and ctx[C_BG_PC] == pc
-                 and ctx[C_BG_PS] == ps)
+    fresh = not (
+        ctx[C_BG_CACHED] != 0
+        and ctx[C_BG_PX] == px
+        and ctx[C_BG_PY] == py
+        and ctx[C_BG_PC] == pc
+        and ctx[C_BG_PS] == ps
+    )
     ctx[C_BG_CACHED], ctx[C_BG_PX], ctx[C_BG_PY], ctx[C_BG_PC], ctx[C_BG_PS] = 1.0, px, py, pc, ps
     nbg = int(np.sqrt(len(bg_score)) + 0.5)
     people = 0
@@ -1028,10 +1173,35 @@ def background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, 
             qx[q], qy[q] = tab[k, X], tab[k, Y]
             q += 1
     ctx[C_BG_COUNT] = background_update(
-        bg_score, bg_mark, bg_active, bg_cache, int(ctx[C_BG_COUNT]), int(ctx[C_BG_SCAN]), ranges, cos_a, sin_a,
-        geo[0], geo[1], ctx[C_BG_LO], ctx[C_BG_HI], px, py, pc, ps, max(dt, 0.0), ctx[C_BG_X0], ctx[C_BG_Y0],
-        prm[P_BACKGROUND_CELL], nbg, prm[P_OCCLUSION_MARGIN], 4.0 * prm[P_BACKGROUND_TIME], fresh, qx, qy,
-        prm[P_PERSON_RADIUS])
+        bg_score,
+        bg_mark,
+        bg_active,
+        bg_cache,
+        int(ctx[C_BG_COUNT]),
+        int(ctx[C_BG_SCAN]),
+        ranges,
+        cos_a,
+        sin_a,
+        geo[0],
+        geo[1],
+        ctx[C_BG_LO],
+        ctx[C_BG_HI],
+        px,
+        py,
+        pc,
+        ps,
+        max(dt, 0.0),
+        ctx[C_BG_X0],
+        ctx[C_BG_Y0],
+        prm[P_BACKGROUND_CELL],
+        nbg,
+        prm[P_OCCLUSION_MARGIN],
+        4.0 * prm[P_BACKGROUND_TIME],
+        fresh,
+        qx,
+        qy,
+        prm[P_PERSON_RADIUS],
+    )
 
 
 @njit(cache=True)
@@ -1067,9 +1237,37 @@ def write_tracks(out, o, tab, n, has_pose, pose):
 
 # -------------------------------------------------------------------------------------------- the step
 @njit(cache=True)
-def track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
-               has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, carry_ref, carry_seen,
-               carry_away, learned, compat, reacq):
+def track_scan(
+    tab,
+    ctx,
+    prm,
+    stamp,
+    mx,
+    my,
+    msize,
+    mkind,
+    mlegs,
+    raw,
+    mprob,
+    has_prob,
+    ranges,
+    has_ranges,
+    has_pose,
+    pose,
+    geo,
+    cos_a,
+    sin_a,
+    bg_score,
+    bg_mark,
+    bg_active,
+    bg_cache,
+    carry_ref,
+    carry_seen,
+    carry_away,
+    learned,
+    compat,
+    reacq,
+):
     """One scan (measurements in the sensor frame, stamp in ns since the first scan) through every phase;
     returns the table (a new one when it grew). ctx[C_N_TRACKS] holds the number of live tracks."""
     n = int(ctx[C_N_TRACKS])
@@ -1085,9 +1283,29 @@ def track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, ha
         crow[k] = kind_group(tab, k) if tab[k, CONFIRMED] != 0 else ANY_ROW
     predict(tab, n, dt, prm)
     carried_update(carry_ref, carry_seen, carry_away, ranges, has_ranges, has_pose, pose, geo, ctx, prm)
-    mx, my, msize, mkind, mlegs, raw, mprob = off_background(tab, n, mx, my, msize, mkind, mlegs, raw, mprob,
-                                                             bg_score, ctx, px, py, ranges, carry_ref, carry_seen,
-                                                             carry_away, has_pose, pose, geo, prm)
+    mx, my, msize, mkind, mlegs, raw, mprob = off_background(
+        tab,
+        n,
+        mx,
+        my,
+        msize,
+        mkind,
+        mlegs,
+        raw,
+        mprob,
+        bg_score,
+        ctx,
+        px,
+        py,
+        ranges,
+        carry_ref,
+        carry_seen,
+        carry_away,
+        has_pose,
+        pose,
+        geo,
+        prm,
+    )
     mx, my, msize, mkind, mlegs, mprob, rows0 = legs_stage(tab, n, mx, my, msize, mkind, mlegs, raw, mprob, prm)
     rows, cols = associate(tab, n, mx, my, mkind, rows0, compat, crow, prm)
     hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg_score, ctx, px, py, prm)
@@ -1097,25 +1315,101 @@ def track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, ha
     leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, prm)
     occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm)
     n = life_cycle(tab, n, stamp, superseded, learned, prm)
-    tab, n = spawn(tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp, has_pose, pose, px, py,
-                   ctx, prm)
+    tab, n = spawn(
+        tab, n, cols, mx, my, msize, mkind, mlegs, mprob, raw, has_prob, stamp, has_pose, pose, px, py, ctx, prm
+    )
     classify(tab, n, dt, stamp, learned, prm)
     push_tail(tab, n, prm)
-    background(bg_score, bg_mark, bg_active, bg_cache, ctx, ranges, has_ranges, cos_a, sin_a, geo, px, py, pc, ps, dt,
-               tab, n, prm)
+    background(
+        bg_score,
+        bg_mark,
+        bg_active,
+        bg_cache,
+        ctx,
+        ranges,
+        has_ranges,
+        cos_a,
+        sin_a,
+        geo,
+        px,
+        py,
+        pc,
+        ps,
+        dt,
+        tab,
+        n,
+        prm,
+    )
     ctx[C_N_TRACKS] = n
     return tab
 
 
 @njit(cache=True)
-def step_measurements(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
-                      has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, carry_ref, carry_seen,
-                      carry_away, learned, compat, reacq, out):
+def step_measurements(
+    tab,
+    ctx,
+    prm,
+    stamp,
+    mx,
+    my,
+    msize,
+    mkind,
+    mlegs,
+    raw,
+    mprob,
+    has_prob,
+    ranges,
+    has_ranges,
+    has_pose,
+    pose,
+    geo,
+    cos_a,
+    sin_a,
+    bg_score,
+    bg_mark,
+    bg_active,
+    bg_cache,
+    carry_ref,
+    carry_seen,
+    carry_away,
+    learned,
+    compat,
+    reacq,
+    out,
+):
     """track_scan on one scan's measurements, then its live tracks as Track elements in `out` (a new, larger
     array when it is too small). Returns (table, out)."""
-    tab = track_scan(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mprob, has_prob, ranges, has_ranges,
-                     has_pose, pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, carry_ref, carry_seen,
-                     carry_away, learned, compat, reacq)
+    tab = track_scan(
+        tab,
+        ctx,
+        prm,
+        stamp,
+        mx,
+        my,
+        msize,
+        mkind,
+        mlegs,
+        raw,
+        mprob,
+        has_prob,
+        ranges,
+        has_ranges,
+        has_pose,
+        pose,
+        geo,
+        cos_a,
+        sin_a,
+        bg_score,
+        bg_mark,
+        bg_active,
+        bg_cache,
+        carry_ref,
+        carry_seen,
+        carry_away,
+        learned,
+        compat,
+        reacq,
+    )
     n = int(ctx[C_N_TRACKS])
     if n > len(out):
         out = np.empty(2 * n, out.dtype)
@@ -1124,9 +1418,38 @@ def step_measurements(tab, ctx, prm, stamp, mx, my, msize, mkind, mlegs, raw, mp
 
 
 @njit(cache=True)
-def track_block(tab, ctx, prm, stamps, circles, blobs, lines, legs, learned, ranges, has_ranges, poses,
-                has_pose, geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache, carry_ref, carry_seen, carry_away,
-                compat, reacq, out, tails, out_tail, out_tail_count, offsets):
+def track_block(
+    tab,
+    ctx,
+    prm,
+    stamps,
+    circles,
+    blobs,
+    lines,
+    legs,
+    learned,
+    ranges,
+    has_ranges,
+    poses,
+    has_pose,
+    geo,
+    cos_a,
+    sin_a,
+    bg_score,
+    bg_mark,
+    bg_active,
+    bg_cache,
+    carry_ref,
+    carry_seen,
+    carry_away,
+    compat,
+    reacq,
+    out,
+    tails,
+    out_tail,
+    out_tail_count,
+    offsets,
+):
     """Track scans 0..len(stamps)-1 of a block of features (flat per kind, with per-scan offsets) in one call.
 
     circles: (offsets, first, last, x, y, radius); blobs: (offsets, first, last, x, y, size, kind); lines:
@@ -1145,16 +1468,78 @@ def track_block(tab, ctx, prm, stamps, circles, blobs, lines, legs, learned, ran
         a0, a1, b0, b1, l0, l1, g0, g1 = co[i], co[i + 1], bo[i], bo[i + 1], lo[i], lo[i + 1], go[i], go[i + 1]
         if learned:
             mx, my, msize, mkind, mlegs, raw, mprob = learned_measurements(
-                cf[a0:a1], cl[a0:a1], cx[a0:a1], cy[a0:a1], cr[a0:a1], bf[b0:b1], bl[b0:b1], bx[b0:b1], by[b0:b1],
-                bs[b0:b1], ls[l0:l1], lf[l0:l1], ll[l0:l1], lx0[l0:l1], ly0[l0:l1], lx1[l0:l1], ly1[l0:l1],
-                gf[g0:g1], gl[g0:g1], gx[g0:g1], gy[g0:g1], gw[g0:g1], gp[g0:g1], prm)
+                cf[a0:a1],
+                cl[a0:a1],
+                cx[a0:a1],
+                cy[a0:a1],
+                cr[a0:a1],
+                bf[b0:b1],
+                bl[b0:b1],
+                bx[b0:b1],
+                by[b0:b1],
+                bs[b0:b1],
+                ls[l0:l1],
+                lf[l0:l1],
+                ll[l0:l1],
+                lx0[l0:l1],
+                ly0[l0:l1],
+                lx1[l0:l1],
+                ly1[l0:l1],
+                gf[g0:g1],
+                gl[g0:g1],
+                gx[g0:g1],
+                gy[g0:g1],
+                gw[g0:g1],
+                gp[g0:g1],
+                prm,
+            )
         else:
             mx, my, msize, mkind, mlegs, raw, mprob = paper_measurements(
-                cx[a0:a1], cy[a0:a1], cr[a0:a1], bx[b0:b1], by[b0:b1], bs[b0:b1], bk[b0:b1], ls[l0:l1], lx0[l0:l1],
-                ly0[l0:l1], lx1[l0:l1], ly1[l0:l1], prm)
-        tab = track_scan(tab, ctx, prm, stamps[i], mx, my, msize, mkind, mlegs, raw, mprob, learned, ranges[i],
-                         has_ranges, has_pose, poses[i], geo, cos_a, sin_a, bg_score, bg_mark, bg_active, bg_cache,
-                         carry_ref, carry_seen, carry_away, learned, compat, reacq)
+                cx[a0:a1],
+                cy[a0:a1],
+                cr[a0:a1],
+                bx[b0:b1],
+                by[b0:b1],
+                bs[b0:b1],
+                bk[b0:b1],
+                ls[l0:l1],
+                lx0[l0:l1],
+                ly0[l0:l1],
+                lx1[l0:l1],
+                ly1[l0:l1],
+                prm,
+            )
+        tab = track_scan(
+            tab,
+            ctx,
+            prm,
+            stamps[i],
+            mx,
+            my,
+            msize,
+            mkind,
+            mlegs,
+            raw,
+            mprob,
+            learned,
+            ranges[i],
+            has_ranges,
+            has_pose,
+            poses[i],
+            geo,
+            cos_a,
+            sin_a,
+            bg_score,
+            bg_mark,
+            bg_active,
+            bg_cache,
+            carry_ref,
+            carry_seen,
+            carry_away,
+            learned,
+            compat,
+            reacq,
+        )
         n = int(ctx[C_N_TRACKS])
         o = offsets[i]
         if o + n > len(out):

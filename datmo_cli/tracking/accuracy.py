@@ -15,8 +15,9 @@ from .measurements import ScanFeatures
 from .synthetic import features_from_lists
 
 
-def ideal_features(offsets: np.ndarray, objects: np.ndarray, rng: np.random.Generator, noise: float = 0.01,
-                   degraded: bool = False) -> list[ScanFeatures]:
+def ideal_features(
+    offsets: np.ndarray, objects: np.ndarray, rng: np.random.Generator, noise: float = 0.01, degraded: bool = False
+) -> list[ScanFeatures]:
     """Per scan, the features a perfect perception would give for the visible ground-truth objects:
     two leg circles (radius 0.1 m) per person, a circle per circle object or column, a line across each
     rectangular object; positions with Gaussian noise of `noise` m. `degraded` makes it harder, like a
@@ -25,22 +26,23 @@ def ideal_features(offsets: np.ndarray, objects: np.ndarray, rng: np.random.Gene
     scans = []
     for k in range(len(offsets) - 1):
         circles, lines, blobs = [], [], []
-        for g in objects[offsets[k]:offsets[k + 1]]:
+        for g in objects[offsets[k] : offsets[k + 1]]:
             if not g["visible"]:
                 continue
             c = int(g["classification"])
             if c == CLASS_PERSON:
-                legs = [(float(g["left_leg_x"]), float(g["left_leg_y"])), (float(g["right_leg_x"]),
-                                                                            float(g["right_leg_y"]))]
+                legs = [
+                    (float(g["left_leg_x"]), float(g["left_leg_y"])),
+                    (float(g["right_leg_x"]), float(g["right_leg_y"])),
+                ]
                 if degraded:
                     (ax, ay), (bx, by) = legs
                     if np.hypot(ax - bx, ay - by) < 0.25:
-                        blobs.append(((ax + bx) / 2 + rng.normal(0, noise), (ay + by) / 2 + rng.normal(0, noise),
-                                      0.3))
+                        blobs.append(((ax + bx) / 2 + rng.normal(0, noise), (ay + by) / 2 + rng.normal(0, noise), 0.3))
                         continue
                     ra, rb = np.hypot(ax, ay), np.hypot(bx, by)
                     gap = abs(np.arctan2(ay, ax) - np.arctan2(by, bx)) * min(ra, rb)
-                    if gap < 0.15:   # the farther leg is behind the nearer one
+                    if gap < 0.15:  # the farther leg is behind the nearer one
                         legs = [legs[0] if ra < rb else legs[1]]
                     legs = [leg for leg in legs if rng.random() > 0.05]
                 for lx, ly in legs:
@@ -53,8 +55,9 @@ def ideal_features(offsets: np.ndarray, objects: np.ndarray, rng: np.random.Gene
     return features_from_lists(scans)
 
 
-def matched_targets(gt_offsets: np.ndarray, gt: np.ndarray, tr_offsets: np.ndarray, tracks: np.ndarray,
-                    radius: float = 0.5) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def matched_targets(
+    gt_offsets: np.ndarray, gt: np.ndarray, tr_offsets: np.ndarray, tracks: np.ndarray, radius: float = 0.5
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Confirmed track states matched one to one, frame by frame (frames aligned one to one with the
     ground truth), to the visible targets (movers that move at some time in the run) within `radius` m.
     Returns (track id, track class, target id or -1 when unmatched, target class or 0), time ordered."""
@@ -64,9 +67,9 @@ def matched_targets(gt_offsets: np.ndarray, gt: np.ndarray, tr_offsets: np.ndarr
     moved = np.unique(gt["id"][movers & (gt["moving"] == 1)])
     tid, tcls, gid, gcls = [], [], [], []
     for k in range(len(gt_offsets) - 1):
-        g = gt[gt_offsets[k]:gt_offsets[k + 1]]
+        g = gt[gt_offsets[k] : gt_offsets[k + 1]]
         g = g[(g["visible"] == 1) & np.isin(g["id"], moved)]
-        t = tracks[tr_offsets[k]:tr_offsets[k + 1]]
+        t = tracks[tr_offsets[k] : tr_offsets[k + 1]]
         t = t[t["status"] == STATUS_CONFIRMED]
         if not len(t):
             continue
@@ -98,8 +101,13 @@ def id_switches(track_id: np.ndarray, target_id: np.ndarray, target: int) -> int
     return int(np.sum(ids[1:] != ids[:-1])) if len(ids) else 0
 
 
-def leg_coverage(legs: list[np.ndarray], circles: list[np.ndarray], tracks: list[np.ndarray],
-                 leg_radius_max: float = 0.2, person_radius: float = 0.5) -> tuple[int, int]:
+def leg_coverage(
+    legs: list[np.ndarray],
+    circles: list[np.ndarray],
+    tracks: list[np.ndarray],
+    leg_radius_max: float = 0.2,
+    person_radius: float = 0.5,
+) -> tuple[int, int]:
     """(labelled legs covered, labelled legs) over scans: a leg (x, y) is covered when it lies inside a
     detected leg circle (radius up to leg_radius_max, plus 5 cm) or within person_radius of a person
     track (class 1). `legs[k]` (n, 2), `circles[k]` Circle elements, `tracks[k]` Track elements."""

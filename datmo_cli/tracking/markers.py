@@ -24,8 +24,11 @@ from ..log.vocabulary import (
 
 NS = "datmo/tracks"
 COLORS = {  # by class, RGBA
-    CLASS_UNKNOWN: (0.6, 0.6, 0.6, 0.8), CLASS_PERSON: (0.1, 0.8, 0.2, 0.9), CLASS_CIRCLE_OBJECT: (0.9, 0.2, 0.2, 0.9),
-    CLASS_RECTANGULAR_OBJECT: (0.2, 0.4, 0.9, 0.9)}
+    CLASS_UNKNOWN: (0.6, 0.6, 0.6, 0.8),
+    CLASS_PERSON: (0.1, 0.8, 0.2, 0.9),
+    CLASS_CIRCLE_OBJECT: (0.9, 0.2, 0.2, 0.9),
+    CLASS_RECTANGULAR_OBJECT: (0.2, 0.4, 0.9, 0.9),
+}
 
 
 _COLOR_TABLE = np.array([COLORS[k] for k in range(4)], np.float32)
@@ -39,17 +42,23 @@ def tail_segments(tail: np.ndarray, count: np.ndarray) -> np.ndarray:
         return np.zeros((0, 3))
     n = np.minimum(count, T)
     j = np.arange(T)
-    order = (count[:, None] - n[:, None] + j[None, :]) % T          # oldest first
-    pts = tail[np.arange(K)[:, None], order]                         # (K, T, 2)
-    valid = j[None, :-1] < (n[:, None] - 1)                          # segment j joins j and j + 1
+    order = (count[:, None] - n[:, None] + j[None, :]) % T  # oldest first
+    pts = tail[np.arange(K)[:, None], order]  # (K, T, 2)
+    valid = j[None, :-1] < (n[:, None] - 1)  # segment j joins j and j + 1
     a, b = pts[:, :-1][valid], pts[:, 1:][valid]
     out = np.zeros((2 * len(a), 3))
     out[0::2, :2], out[1::2, :2] = a, b
     return out
 
 
-def track_markers(stamp_ns: int, frame_id: str, tracks: np.ndarray, tail: np.ndarray | None = None,
-                  tail_count: np.ndarray | None = None, world: bool = False) -> bytes:
+def track_markers(
+    stamp_ns: int,
+    frame_id: str,
+    tracks: np.ndarray,
+    tail: np.ndarray | None = None,
+    tail_count: np.ndarray | None = None,
+    world: bool = False,
+) -> bytes:
     """The MarkerArray CDR payload for one scan's tracks (Track elements). Positions are the tracks'
     world fields when `world`, else their sensor-frame fields; `tail` (K, T, 2) and `tail_count` (K,) are
     the tracks' ring buffers of recent positions in the same frame (see tail_segments; None: no tails)."""
@@ -66,14 +75,22 @@ def track_markers(stamp_ns: int, frame_id: str, tracks: np.ndarray, tail: np.nda
     lively = shown & ((tracks["mobility"] == MOBILITY_DYNAMIC) | (tracks["classification"] == CLASS_PERSON))
     none = np.zeros(len(tracks), np.int64)
     pp, pc, cp, cc, op, oc, _, _ = _kernels.marker_points(
-        px, py, vx, vy, tracks["classification"].astype(np.int64), shown, 0.3, _COLOR_TABLE,
-        np.zeros((len(tracks), 1, 2)), none)
+        px,
+        py,
+        vx,
+        vy,
+        tracks["classification"].astype(np.int64),
+        shown,
+        0.3,
+        _COLOR_TABLE,
+        np.zeros((len(tracks), 1, 2)),
+        none,
+    )
     k = np.flatnonzero(lively)
     arrows = np.zeros((2 * len(k), 3))
     arrows[0::2, 0], arrows[0::2, 1] = px[k], py[k]
     arrows[1::2, 0], arrows[1::2, 1] = px[k] + vx[k], py[k] + vy[k]
-    tails = (tail_segments(tail[k], np.asarray(tail_count, np.int64)[k]) if tail is not None
-             else np.zeros((0, 3)))
+    tails = tail_segments(tail[k], np.asarray(tail_count, np.int64)[k]) if tail is not None else np.zeros((0, 3))
     ids = tracks["id"].tolist()
     labels = k.tolist()
     w = MarkerArrayWriter(6 + len(labels), head)

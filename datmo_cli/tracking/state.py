@@ -22,54 +22,150 @@ import numpy as np
 
 # ------------------------------------------------------------------------------------------ track table
 ID = 0
-X, Y, VX, VY = 1, 2, 3, 4          # state (tracking frame), m and m/s
-P0 = 5                             # P[r, s] at column P0 + 4 r + s
-BORN = 21                          # ns since the tracker's first scan
-LAST_HIT = 22                      # ns of the last hit, same origin
-AGE, HITS, MISSES = 23, 24, 25     # scans
-HISTORY = 26                       # bit mask of hits in the last confirm_window scans
-VOTES = 27                         # hits per measurement kind: columns VOTES + KIND_* (5 columns)
-LEAD_LEFT, LEAD_RIGHT = 32, 33     # 0/1: the left (right) leg was seen leading
-MOVING_TIME = 34                   # s of consecutive hits with a speed above moving_speed
-SIZE = 35                          # largest extent seen, m
-FIRST_X, FIRST_Y = 36, 37          # position when created, m
-LAST_X, LAST_Y = 38, 39            # position after the last hit, m
-CONFIRMED, OCCLUDED, HIT = 40, 41, 42   # 0/1
-CLS, MOBILITY = 43, 44             # class and mobility (datmo_msgs/Track's classification, mobility)
-TAIL_COUNT = 45                    # positions written to the tail so far
-LEG_SCORE = 46                     # leg evidence: mean of the leg detector's probability of its leg-candidate hits
-ON_BG = 47                         # 0/1: took a measurement on the background this scan
-IS_PERSON = 48                     # 0/1: a person (with a leg detector: set once from paired legs, kept until the
-                                   # evidence falls below person_maintain or the track dies)
-LEG_HITS = 49                      # leg-candidate hits folded into LEG_SCORE
-STILL_TIME = 50                    # s of a speed at most moving_speed (a dynamic track this still is static again)
-TAIL = 51                          # tail point i at columns TAIL + 2 i (x), TAIL + 2 i + 1 (y)
+X, Y, VX, VY = 1, 2, 3, 4  # state (tracking frame), m and m/s
+P0 = 5  # P[r, s] at column P0 + 4 r + s
+BORN = 21  # ns since the tracker's first scan
+LAST_HIT = 22  # ns of the last hit, same origin
+AGE, HITS, MISSES = 23, 24, 25  # scans
+HISTORY = 26  # bit mask of hits in the last confirm_window scans
+VOTES = 27  # hits per measurement kind: columns VOTES + KIND_* (5 columns)
+LEAD_LEFT, LEAD_RIGHT = 32, 33  # 0/1: the left (right) leg was seen leading
+MOVING_TIME = 34  # s of consecutive hits with a speed above moving_speed
+SIZE = 35  # largest extent seen, m
+FIRST_X, FIRST_Y = 36, 37  # position when created, m
+LAST_X, LAST_Y = 38, 39  # position after the last hit, m
+CONFIRMED, OCCLUDED, HIT = 40, 41, 42  # 0/1
+CLS, MOBILITY = 43, 44  # class and mobility (datmo_msgs/Track's classification, mobility)
+TAIL_COUNT = 45  # positions written to the tail so far
+LEG_SCORE = 46  # leg evidence: mean of the leg detector's probability of its leg-candidate hits
+ON_BG = 47  # 0/1: took a measurement on the background this scan
+IS_PERSON = 48  # 0/1: a person (with a leg detector: set once from paired legs, kept until the
+# evidence falls below person_maintain or the track dies)
+LEG_HITS = 49  # leg-candidate hits folded into LEG_SCORE
+STILL_TIME = 50  # s of a speed at most moving_speed (a dynamic track this still is static again)
+TAIL = 51  # tail point i at columns TAIL + 2 i (x), TAIL + 2 i + 1 (y)
 N_FIXED = TAIL
 
 # ------------------------------------------------------------------------------------- parameter vector
-(P_PROCESS_NOISE, P_PERSON_PROCESS_NOISE, P_MEASUREMENT_NOISE, P_LEG_MEASUREMENT_NOISE, P_INITIAL_SPEED_SIGMA,
- P_GATE, P_MAX_GATE_DISTANCE, P_CONFIRM_HITS, P_CONFIRM_WINDOW, P_DELETE_AFTER, P_DELETE_AFTER_OCCLUDED,
- P_REACQUIRE_SPEED, P_REACQUIRE_DISTANCE, P_OCCLUSION_MARGIN, P_TENTATIVE_DELETE_AFTER, P_D_MAX,
- P_UNDEFINED_WINDOW, P_MOVING_DISTANCE, P_MOVING_SPEED, P_MOVING_TIME, P_STILL_TIME, P_LEG_RADIUS_MAX, P_LEG_BLOB_MAX,
- P_STRIDE_MAX, P_LEG_REACH, P_LEG_BESIDE, P_SPAWN_CLEARANCE, P_STEP_MIN, P_WALKING_AFTER, P_STEP_MAX,
- P_MERGE_DISTANCE, P_MERGE_SPEED, P_PERSON_VOTES, P_LEG_EVIDENCE_RATE, P_PERSON_EVIDENCE, P_PERSON_MAINTAIN,
- P_PERSON_PAIRS, P_PERSON_COAST, P_PERSON_RADIUS, P_CARRIED_TRAVEL, P_CARRIED_RADIUS,
- P_BACKGROUND_TIME, P_BACKGROUND_CELL, P_BACKGROUND_EXTENT, P_TAIL_LENGTH) = range(45)
+(
+    P_PROCESS_NOISE,
+    P_PERSON_PROCESS_NOISE,
+    P_MEASUREMENT_NOISE,
+    P_LEG_MEASUREMENT_NOISE,
+    P_INITIAL_SPEED_SIGMA,
+    P_GATE,
+    P_MAX_GATE_DISTANCE,
+    P_CONFIRM_HITS,
+    P_CONFIRM_WINDOW,
+    P_DELETE_AFTER,
+    P_DELETE_AFTER_OCCLUDED,
+    P_REACQUIRE_SPEED,
+    P_REACQUIRE_DISTANCE,
+    P_OCCLUSION_MARGIN,
+    P_TENTATIVE_DELETE_AFTER,
+    P_D_MAX,
+    P_UNDEFINED_WINDOW,
+    P_MOVING_DISTANCE,
+    P_MOVING_SPEED,
+    P_MOVING_TIME,
+    P_STILL_TIME,
+    P_LEG_RADIUS_MAX,
+    P_LEG_BLOB_MAX,
+    P_STRIDE_MAX,
+    P_LEG_REACH,
+    P_LEG_BESIDE,
+    P_SPAWN_CLEARANCE,
+    P_STEP_MIN,
+    P_WALKING_AFTER,
+    P_STEP_MAX,
+    P_MERGE_DISTANCE,
+    P_MERGE_SPEED,
+    P_PERSON_VOTES,
+    P_LEG_EVIDENCE_RATE,
+    P_PERSON_EVIDENCE,
+    P_PERSON_MAINTAIN,
+    P_PERSON_PAIRS,
+    P_PERSON_COAST,
+    P_PERSON_RADIUS,
+    P_CARRIED_TRAVEL,
+    P_CARRIED_RADIUS,
+    P_BACKGROUND_TIME,
+    P_BACKGROUND_CELL,
+    P_BACKGROUND_EXTENT,
+    P_TAIL_LENGTH,
+) = range(45)
 N_PARAMS = 45
-P_LEG_THRESHOLD = N_PARAMS         # the leg model's threshold, appended by TrackingParams.kernel_vector
-PARAM_NAMES = ("process_noise", "person_process_noise", "measurement_noise", "leg_measurement_noise",
-               "initial_speed_sigma", "gate", "max_gate_distance", "confirm_hits", "confirm_window",
-               "delete_after", "delete_after_occluded", "reacquire_speed", "reacquire_distance",
-               "occlusion_margin", "tentative_delete_after", "d_max", "undefined_window", "moving_distance",
-               "moving_speed", "moving_time", "still_time", "leg_radius_max", "leg_blob_max", "stride_max", "leg_reach",
-               "leg_beside", "spawn_clearance", "step_min", "walking_after", "step_max", "merge_distance",
-               "merge_speed", "person_votes", "leg_evidence_rate", "person_evidence", "person_maintain",
-               "person_pairs", "person_coast", "person_radius", "carried_travel",
-               "carried_radius", "background_time", "background_cell", "background_extent", "tail_length")
+P_LEG_THRESHOLD = N_PARAMS  # the leg model's threshold, appended by TrackingParams.kernel_vector
+PARAM_NAMES = (
+    "process_noise",
+    "person_process_noise",
+    "measurement_noise",
+    "leg_measurement_noise",
+    "initial_speed_sigma",
+    "gate",
+    "max_gate_distance",
+    "confirm_hits",
+    "confirm_window",
+    "delete_after",
+    "delete_after_occluded",
+    "reacquire_speed",
+    "reacquire_distance",
+    "occlusion_margin",
+    "tentative_delete_after",
+    "d_max",
+    "undefined_window",
+    "moving_distance",
+    "moving_speed",
+    "moving_time",
+    "still_time",
+    "leg_radius_max",
+    "leg_blob_max",
+    "stride_max",
+    "leg_reach",
+    "leg_beside",
+    "spawn_clearance",
+    "step_min",
+    "walking_after",
+    "step_max",
+    "merge_distance",
+    "merge_speed",
+    "person_votes",
+    "leg_evidence_rate",
+    "person_evidence",
+    "person_maintain",
+    "person_pairs",
+    "person_coast",
+    "person_radius",
+    "carried_travel",
+    "carried_radius",
+    "background_time",
+    "background_cell",
+    "background_extent",
+    "tail_length",
+)
 
 # ------------------------------------------------------------------------------------------- context
-(C_HAS_STAMP, C_STAMP, C_NEXT_ID, C_BG_READY, C_BG_COUNT, C_BG_SCAN, C_BG_X0, C_BG_Y0, C_BG_LO, C_BG_HI,
- C_N_TRACKS, C_BG_CACHED, C_BG_PX, C_BG_PY, C_BG_PC, C_BG_PS, C_CARRY_POSED, C_CARRY_PX, C_CARRY_PY) = range(19)
+(
+    C_HAS_STAMP,
+    C_STAMP,
+    C_NEXT_ID,
+    C_BG_READY,
+    C_BG_COUNT,
+    C_BG_SCAN,
+    C_BG_X0,
+    C_BG_Y0,
+    C_BG_LO,
+    C_BG_HI,
+    C_N_TRACKS,
+    C_BG_CACHED,
+    C_BG_PX,
+    C_BG_PY,
+    C_BG_PC,
+    C_BG_PS,
+    C_CARRY_POSED,
+    C_CARRY_PX,
+    C_CARRY_PY,
+) = range(19)
 N_CONTEXT = 19
 # C_CARRY_*: the sensor position (tracking frame) at the last scan, for the carried beams (_step.carried_update)
 # C_BG_CACHED: the background's active cells carry their range and beam as seen from the sensor pose
@@ -101,32 +197,32 @@ class TrackTable:
 
     def column(self, c: int) -> np.ndarray:
         """Column `c` of the live tracks (a view)."""
-        return self.table[:self.n, c]
+        return self.table[: self.n, c]
 
     @property
     def id(self) -> np.ndarray:
-        return self.table[:self.n, ID].astype(np.int64)
+        return self.table[: self.n, ID].astype(np.int64)
 
     @property
     def x(self) -> np.ndarray:
         """(n, 4) x, y, vx, vy (a view), tracking frame."""
-        return self.table[:self.n, X:X + 4]
+        return self.table[: self.n, X : X + 4]
 
     @property
     def P(self) -> np.ndarray:
         """(n, 4, 4) covariances (a copy)."""
-        return self.table[:self.n, P0:P0 + 16].reshape(self.n, 4, 4)
+        return self.table[: self.n, P0 : P0 + 16].reshape(self.n, 4, 4)
 
     @property
     def votes(self) -> np.ndarray:
-        return self.table[:self.n, VOTES:VOTES + 5].astype(np.int64)
+        return self.table[: self.n, VOTES : VOTES + 5].astype(np.int64)
 
     @property
     def tail(self) -> np.ndarray:
         """(n, T, 2) ring buffers of recent positions (tracking frame, m; a view)."""
-        return self.table[:self.n, TAIL:TAIL + 2 * self.tail_length].reshape(self.n, self.tail_length, 2)
+        return self.table[: self.n, TAIL : TAIL + 2 * self.tail_length].reshape(self.n, self.tail_length, 2)
 
     @property
     def tail_count(self) -> np.ndarray:
         """(n,) int64 positions written to each tail so far."""
-        return self.table[:self.n, TAIL_COUNT].astype(np.int64)
+        return self.table[: self.n, TAIL_COUNT].astype(np.int64)

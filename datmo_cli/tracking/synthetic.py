@@ -23,7 +23,7 @@ def features_from_lists(scans: list[dict]) -> list[ScanFeatures]:
         c = np.zeros(len(s.get("circles", ())), CIRCLE_DTYPE)
         for k, (x, y, r) in enumerate(s.get("circles", ())):
             c[k]["x"], c[k]["y"], c[k]["radius"], c[k]["segment"] = x, y, r, k
-            c[k]["first"], c[k]["last"] = 10 * k, 10 * k + 5   # each its own beams
+            c[k]["first"], c[k]["last"] = 10 * k, 10 * k + 5  # each its own beams
         li = np.zeros(len(s.get("lines", ())), LINE_DTYPE)
         for k, (x0, y0, x1, y1) in enumerate(s.get("lines", ())):
             li[k]["x_ini"], li[k]["y_ini"], li[k]["x_end"], li[k]["y_end"] = x0, y0, x1, y1

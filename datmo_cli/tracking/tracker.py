@@ -21,16 +21,7 @@ import numpy as np
 from ..log import cdr, types
 from ..log.scan import ScanGeometry
 from . import state
-from .measurements import (
-    KIND_BLOB,
-    KIND_CIRCLE,
-    KIND_LEG,
-    KIND_PERSON,
-    KIND_RECT,
-    N_KINDS,
-    Measurements,
-    ScanFeatures,
-)
+from .measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, N_KINDS, Measurements, ScanFeatures
 from .params import TrackingParams
 
 TRACK_DTYPE = cdr.element_dtype(types.TRACK)
@@ -38,7 +29,7 @@ TRACK_DTYPE = cdr.element_dtype(types.TRACK)
 # legs, circles, lines, blobs, -, a lone leg; see _step.kind_group); tentative tracks (row 4) take any
 _COMPAT = np.ones((6, N_KINDS), bool)
 _COMPAT[0, [KIND_CIRCLE, KIND_RECT]] = False
-_COMPAT[1, KIND_PERSON] = False   # a circle partly seen may pass for a leg, or for a line
+_COMPAT[1, KIND_PERSON] = False  # a circle partly seen may pass for a leg, or for a line
 _COMPAT[2, [KIND_PERSON, KIND_LEG, KIND_CIRCLE]] = False
 _ANY, _LONE_LEG = 4, 5
 _COMPAT[_LONE_LEG, [KIND_PERSON, KIND_CIRCLE, KIND_RECT]] = False
@@ -65,10 +56,10 @@ class TrackBlock:
     """What tracking a block of N scans gave: the live tracks of scan i are items[offsets[i]:offsets[i + 1]]
     (Track elements), their tails tail[...] (rows of (T, 2) positions, tracking frame, m) and tail_count."""
 
-    offsets: np.ndarray      # (N + 1,) int64
-    items: np.ndarray        # Track elements
-    tail: np.ndarray         # (len(items), T, 2) float64
-    tail_count: np.ndarray   # (len(items),) int64
+    offsets: np.ndarray  # (N + 1,) int64
+    items: np.ndarray  # Track elements
+    tail: np.ndarray  # (len(items), T, 2) float64
+    tail_count: np.ndarray  # (len(items),) int64
 
 
 def _flat(features: list[ScanFeatures]) -> tuple[tuple, tuple, tuple, tuple]:
@@ -82,7 +73,7 @@ def _flat(features: list[ScanFeatures]) -> tuple[tuple, tuple, tuple, tuple]:
         counts = np.fromiter((0 if a is None else len(a) for a in parts), np.int64, len(parts))
         offsets = np.zeros(len(parts) + 1, np.int64)
         np.cumsum(counts, out=offsets[1:])
-        same = {id(dtype)}   # dtypes found equal to `dtype` (comparing structured dtypes costs ~1 µs)
+        same = {id(dtype)}  # dtypes found equal to `dtype` (comparing structured dtypes costs ~1 µs)
         chunks = []
         for a in parts:
             if a is None:
@@ -99,14 +90,42 @@ def _flat(features: list[ScanFeatures]) -> tuple[tuple, tuple, tuple, tuple]:
     bo, b = join("blobs", _BLOB_DTYPE)
     lo, li = join("lines", _LINE_DTYPE)
     go, g = join("legs", _LEG_DTYPE)
-    circles = (co, c["first"].astype(i8), c["last"].astype(i8), c["x"].astype(f8), c["y"].astype(f8),
-               c["radius"].astype(f8))
-    blobs = (bo, b["first"].astype(i8), b["last"].astype(i8), b["x"].astype(f8), b["y"].astype(f8),
-             b["size"].astype(f8), b["kind"].astype(i8))
-    lines = (lo, li["segment"].astype(i8), li["first"].astype(i8), li["last"].astype(i8), li["x_ini"].astype(f8),
-             li["y_ini"].astype(f8), li["x_end"].astype(f8), li["y_end"].astype(f8))
-    legs = (go, g["first"].astype(i8), g["last"].astype(i8), g["x"].astype(f8), g["y"].astype(f8),
-            g["width"].astype(f8), g["probability"].astype(f8))
+    circles = (
+        co,
+        c["first"].astype(i8),
+        c["last"].astype(i8),
+        c["x"].astype(f8),
+        c["y"].astype(f8),
+        c["radius"].astype(f8),
+    )
+    blobs = (
+        bo,
+        b["first"].astype(i8),
+        b["last"].astype(i8),
+        b["x"].astype(f8),
+        b["y"].astype(f8),
+        b["size"].astype(f8),
+        b["kind"].astype(i8),
+    )
+    lines = (
+        lo,
+        li["segment"].astype(i8),
+        li["first"].astype(i8),
+        li["last"].astype(i8),
+        li["x_ini"].astype(f8),
+        li["y_ini"].astype(f8),
+        li["x_end"].astype(f8),
+        li["y_end"].astype(f8),
+    )
+    legs = (
+        go,
+        g["first"].astype(i8),
+        g["last"].astype(i8),
+        g["x"].astype(f8),
+        g["y"].astype(f8),
+        g["width"].astype(f8),
+        g["probability"].astype(f8),
+    )
     return circles, blobs, lines, legs
 
 
@@ -136,8 +155,13 @@ class Tracker:
       travels carried_travel sees a part of the robot: candidates on such beams are not legs.
     With the paper's rule, a person needs paired legs and the walking pattern (legs leading in turn)."""
 
-    def __init__(self, params: TrackingParams | None = None, geometry: ScanGeometry | None = None,
-                 learned: bool = False, leg_threshold: float = 0.5) -> None:
+    def __init__(
+        self,
+        params: TrackingParams | None = None,
+        geometry: ScanGeometry | None = None,
+        learned: bool = False,
+        leg_threshold: float = 0.5,
+    ) -> None:
         self.params = params or TrackingParams()
         self.learned = learned
         self.leg_threshold = float(leg_threshold)
@@ -147,7 +171,7 @@ class Tracker:
         self.pose: np.ndarray | None = None
         self._prm = self.params.kernel_vector(self.leg_threshold)
         self._ctx = state.new_context()
-        self._t0: int | None = None   # ns of the first scan: the table's times count from it
+        self._t0: int | None = None  # ns of the first scan: the table's times count from it
         self._compat = _COMPAT_LEARNED if learned else _COMPAT
         self._reacquire = _REACQUIRE_LEARNED if learned else _REACQUIRE
         self._out = np.zeros(64, TRACK_DTYPE)
@@ -155,8 +179,9 @@ class Tracker:
         if geometry is not None:
             angles = geometry.angle_min + geometry.angle_increment * np.arange(geometry.n_beams)
             self._cos, self._sin = np.cos(angles), np.sin(angles)
-            self._geo = np.array([geometry.angle_min, geometry.angle_increment, geometry.range_max, 1.0,
-                                  geometry.range_min], np.float64)
+            self._geo = np.array(
+                [geometry.angle_min, geometry.angle_increment, geometry.range_max, 1.0, geometry.range_min], np.float64
+            )
         else:
             self._cos = self._sin = np.zeros(0)
             self._geo = np.array([0.0, 1.0, np.inf, 0.0, 0.0])
@@ -183,16 +208,24 @@ class Tracker:
         return int(stamp_ns) - self._t0
 
     # ---------------------------------------------------------------------------------------- step
-    def step(self, stamp_ns: int, meas: Measurements | ScanFeatures, ranges: np.ndarray | None = None,
-             pose: np.ndarray | None = None) -> np.ndarray:
+    def step(
+        self,
+        stamp_ns: int,
+        meas: Measurements | ScanFeatures,
+        ranges: np.ndarray | None = None,
+        pose: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Advance to the scan at `stamp_ns` (ns) with its measurements or features `meas` (sensor frame),
         its ranges (m, for the occlusion test and the background; None: no missed track counts as occluded)
         and the sensor's world pose (x, y in m, theta in rad) when tracking in the world frame. Returns the
         live tracks (Track elements)."""
         if isinstance(meas, ScanFeatures):
-            block = self.track_block(np.array([stamp_ns], np.int64), [meas],
-                                     None if ranges is None else np.asarray(ranges, np.float32)[None, :],
-                                     None if pose is None else np.asarray(pose, np.float64)[None, :])
+            block = self.track_block(
+                np.array([stamp_ns], np.int64),
+                [meas],
+                None if ranges is None else np.asarray(ranges, np.float32)[None, :],
+                None if pose is None else np.asarray(pose, np.float64)[None, :],
+            )
             return block.items
         from . import _step
 
@@ -202,21 +235,47 @@ class Tracker:
         has_prob = raw.shape[1] >= 4
         raw5 = np.zeros((len(raw), _step.RAW_COLS))
         raw5[:, _step.R_COVER] = -1.0
-        raw5[:, :min(raw.shape[1], _step.RAW_COLS)] = raw[:, :_step.RAW_COLS]
+        raw5[:, : min(raw.shape[1], _step.RAW_COLS)] = raw[:, : _step.RAW_COLS]
         c8 = np.ascontiguousarray
         tab, self._out = _step.step_measurements(
-            self.tracks.table, self._ctx, self._prm, np.int64(stamp), c8(meas.x, np.float64), c8(meas.y, np.float64),
-            c8(meas.size, np.float64), c8(meas.kind, np.int64), c8(meas.legs, np.float64).reshape(-1, 4), raw5,
-            c8(meas.prob, np.float64), has_prob,
-            np.zeros(0, np.float32) if ranges is None else c8(ranges, np.float32), ranges is not None,
-            pose is not None, np.zeros(3) if pose is None else c8(pose, np.float64), self._geo, self._cos,
-            self._sin, *self._bg, *self._carry, self.learned, self._compat, self._reacquire, self._out)
+            self.tracks.table,
+            self._ctx,
+            self._prm,
+            np.int64(stamp),
+            c8(meas.x, np.float64),
+            c8(meas.y, np.float64),
+            c8(meas.size, np.float64),
+            c8(meas.kind, np.int64),
+            c8(meas.legs, np.float64).reshape(-1, 4),
+            raw5,
+            c8(meas.prob, np.float64),
+            has_prob,
+            np.zeros(0, np.float32) if ranges is None else c8(ranges, np.float32),
+            ranges is not None,
+            pose is not None,
+            np.zeros(3) if pose is None else c8(pose, np.float64),
+            self._geo,
+            self._cos,
+            self._sin,
+            *self._bg,
+            *self._carry,
+            self.learned,
+            self._compat,
+            self._reacquire,
+            self._out,
+        )
         self.tracks.table = tab
         self.tracks.n = n = int(self._ctx[state.C_N_TRACKS])
         return self._out[:n].copy()
 
-    def track_block(self, stamps: np.ndarray, features: list[ScanFeatures], ranges: np.ndarray | None = None,
-                    poses: np.ndarray | None = None, tails: bool = True) -> TrackBlock:
+    def track_block(
+        self,
+        stamps: np.ndarray,
+        features: list[ScanFeatures],
+        ranges: np.ndarray | None = None,
+        poses: np.ndarray | None = None,
+        tails: bool = True,
+    ) -> TrackBlock:
         """Track N scans in one compiled call: stamps (N,) ns, their features (sensor frame), ranges (N, B)
         m or None, the sensor's world poses (N, 3: x, y m, theta rad) or None (track in the sensor frame).
         Features become measurements by the paper's rule or with the learned legs (_step.paper_measurements,
@@ -228,33 +287,60 @@ class Tracker:
         stamps = np.asarray(stamps, np.int64)
         if N == 0:
             T = self.tracks.tail_length
-            return TrackBlock(np.zeros(1, np.int64), np.zeros(0, TRACK_DTYPE), np.zeros((0, T, 2)),
-                              np.zeros(0, np.int64))
+            return TrackBlock(
+                np.zeros(1, np.int64), np.zeros(0, TRACK_DTYPE), np.zeros((0, T, 2)), np.zeros(0, np.int64)
+            )
         self._relative(int(stamps[0]))
         rel = stamps - np.int64(self._t0)
         self.stamp_ns = int(stamps[-1])
         self.pose = None if poses is None else np.asarray(poses[-1], np.float64)
-        ranges_arg = (np.zeros((N, 0), np.float32) if ranges is None
-                      else np.ascontiguousarray(ranges, np.float32).reshape(N, -1))
+        ranges_arg = (
+            np.zeros((N, 0), np.float32) if ranges is None else np.ascontiguousarray(ranges, np.float32).reshape(N, -1)
+        )
         poses_arg = np.zeros((N, 3)) if poses is None else np.ascontiguousarray(poses, np.float64).reshape(N, 3)
-        cap = N * (len(self.tracks) + 4)   # grown in the call when more tracks live
+        cap = N * (len(self.tracks) + 4)  # grown in the call when more tracks live
         T = self.tracks.tail_length
         offsets = np.zeros(N + 1, np.int64)
         tab, out, tail, count = _step.track_block(
-            self.tracks.table, self._ctx, self._prm, rel, *_flat(features), self.learned, ranges_arg,
-            ranges is not None, poses_arg, poses is not None, self._geo, self._cos, self._sin, *self._bg,
-            *self._carry, self._compat, self._reacquire, np.zeros(cap, TRACK_DTYPE), tails,
-            np.zeros((cap if tails else 0, T, 2)), np.zeros(cap if tails else 0, np.int64), offsets)
+            self.tracks.table,
+            self._ctx,
+            self._prm,
+            rel,
+            *_flat(features),
+            self.learned,
+            ranges_arg,
+            ranges is not None,
+            poses_arg,
+            poses is not None,
+            self._geo,
+            self._cos,
+            self._sin,
+            *self._bg,
+            *self._carry,
+            self._compat,
+            self._reacquire,
+            np.zeros(cap, TRACK_DTYPE),
+            tails,
+            np.zeros((cap if tails else 0, T, 2)),
+            np.zeros(cap if tails else 0, np.int64),
+            offsets,
+        )
         self.tracks.table = tab
         self.tracks.n = int(self._ctx[state.C_N_TRACKS])
         end = offsets[-1] if tails else 0
-        return TrackBlock(offsets, out[:offsets[-1]], tail[:end], count[:end])
+        return TrackBlock(offsets, out[: offsets[-1]], tail[:end], count[:end])
 
     def output(self) -> np.ndarray:
         """The live tracks as Track elements: positions in the sensor frame and, with a pose, the world."""
         from . import _step
 
         out = np.zeros(len(self.tracks), TRACK_DTYPE)
-        _step.write_tracks(out, 0, self.tracks.table, len(self.tracks), self.pose is not None,
-                           np.zeros(3) if self.pose is None else self.pose)
+        _step.write_tracks(
+            out,
+            0,
+            self.tracks.table,
+            len(self.tracks),
+            self.pose is not None,
+            np.zeros(3) if self.pose is None else self.pose,
+        )
         return out

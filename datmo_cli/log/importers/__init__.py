@@ -28,7 +28,7 @@ from ..scan import Odometry, ScanGeometry, ScanRun
 #: progress(done, total): bytes of a text log, or messages of a bag, read so far (total 0 when unknown).
 Progress = Callable[[int, int], None]
 
-IMPORT_BLOCK = 1024   # scans per block
+IMPORT_BLOCK = 1024  # scans per block
 KINDS = ("carmen", "g2o", "ros1", "ros2", "mcap")
 _ROSBAG1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP"
@@ -59,7 +59,7 @@ class ImportResult:
 def _check_path(path: Path) -> None:
     from ...input_files import check
 
-    check(path, folder_ok=True)   # a regular file or a folder: a FIFO or a device would never end
+    check(path, folder_ok=True)  # a regular file or a folder: a FIFO or a device would never end
     if path.is_dir():
         if (path / "metadata.yaml").exists():
             return
@@ -105,9 +105,16 @@ def detect_kind(path: str | Path) -> str:
     return kind
 
 
-def open_import(path: str | Path, topic: str | None = None, *, odom_topic: str | None = None,
-                max_scans: int | None = None, progress: Progress | None = None,
-                spool_dir: str | Path | None = None, block_scans: int | None = None) -> ImportStream:
+def open_import(
+    path: str | Path,
+    topic: str | None = None,
+    *,
+    odom_topic: str | None = None,
+    max_scans: int | None = None,
+    progress: Progress | None = None,
+    spool_dir: str | Path | None = None,
+    block_scans: int | None = None,
+) -> ImportStream:
     """Open the log at `path` for importing block by block (see ImportStream).
 
     topic: which scan stream to take when there are several (a ROS topic, or for CARMEN a message name
@@ -125,18 +132,24 @@ def open_import(path: str | Path, topic: str | None = None, *, odom_topic: str |
         if kind in ("carmen", "g2o"):
             from .carmen import stream_carmen
 
-            stream = stream_carmen(path, topic=topic, max_scans=max_scans, progress=progress, spool_dir=spool_dir,
-                                   block_scans=block_scans)
+            stream = stream_carmen(
+                path, topic=topic, max_scans=max_scans, progress=progress, spool_dir=spool_dir, block_scans=block_scans
+            )
         elif kind == "mcap":
             from .rosbag import stream_mcap
 
-            stream = stream_mcap(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans,
-                                 block_scans=block_scans)
+            stream = stream_mcap(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans, block_scans=block_scans)
         else:
             from .rosbag import stream_bag
 
-            stream = stream_bag(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress,
-                                block_scans=block_scans)
+            stream = stream_bag(
+                path,
+                topic=topic,
+                odom_topic=odom_topic,
+                max_scans=max_scans,
+                progress=progress,
+                block_scans=block_scans,
+            )
     stream.kind = kind
     stream.source = path
     return stream
@@ -156,8 +169,14 @@ class _compressed_errors:
             raise InputError(f"{self.path}: corrupt or truncated compressed data ({exc})") from None
 
 
-def import_log(path: str | Path, topic: str | None = None, *, odom_topic: str | None = None,
-               max_scans: int | None = None, progress: Progress | None = None) -> ImportResult:
+def import_log(
+    path: str | Path,
+    topic: str | None = None,
+    *,
+    odom_topic: str | None = None,
+    max_scans: int | None = None,
+    progress: Progress | None = None,
+) -> ImportResult:
     """Read the log at `path` into arrays: open_import's blocks collected (arguments as there)."""
     return open_import(path, topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress).collect()
 
@@ -176,8 +195,8 @@ class ImportStream:
     source: Path | None = None
     facts: dict = field(default_factory=dict)
     geometry: ScanGeometry | None = None
-    sort_odometry: bool = False      # collect() sorts the poses by stamp (what the whole-run bag import did)
-    closer: Callable[[], None] | None = None   # releases what the source holds open, when blocks() is not run
+    sort_odometry: bool = False  # collect() sorts the poses by stamp (what the whole-run bag import did)
+    closer: Callable[[], None] | None = None  # releases what the source holds open, when blocks() is not run
     peak_scans: int = 0
     # the source's /tf and /tf_static: (topic, log time ns, CDR TFMessage payload) read with the last block, taken
     # by write_import; `tf_topics` those it has (known up front)
@@ -219,10 +238,14 @@ class ImportStream:
             stamps = np.concatenate([r.stamps for r in runs])
             keep, *counts = stamp_order(stamps)
             note = order_note(self.source, len(stamps), *counts)
-            if note:   # as write_import writes them: in time order, a repeated stamp dropped
+            if note:  # as write_import writes them: in time order, a repeated stamp dropped
                 self.warnings.append(note)
-            run = ScanRun(stamps[keep], np.concatenate([r.ranges for r in runs])[keep], g,
-                          np.concatenate([r.intensities for r in runs])[keep])
+            run = ScanRun(
+                stamps[keep],
+                np.concatenate([r.ranges for r in runs])[keep],
+                g,
+                np.concatenate([r.intensities for r in runs])[keep],
+            )
         else:
             g = self.geometry or ScanGeometry(0.0, 0.0, 0, 0.0, 0.0)
             run = ScanRun(np.zeros(0, np.int64), np.zeros((0, g.n_beams), np.float32), g)
@@ -233,8 +256,16 @@ class ImportStream:
                 order = np.argsort(cols[0], kind="stable")
                 cols = [c[order] for c in cols]
             odometry = Odometry(*cols, poses[-1].frame_id, poses[-1].child_frame_id)
-        return ImportResult(run=run, odometry=odometry, warnings=self.warnings, kind=self.kind, topic=self.topic,
-                            odom_topic=self.odom_topic, source=self.source, facts=self.facts)
+        return ImportResult(
+            run=run,
+            odometry=odometry,
+            warnings=self.warnings,
+            kind=self.kind,
+            topic=self.topic,
+            odom_topic=self.odom_topic,
+            source=self.source,
+            facts=self.facts,
+        )
 
 
 @dataclass
@@ -249,8 +280,15 @@ class ImportStats:
     peak_messages: int
 
 
-def write_import(stream: ImportStream, output: str | Path, *, force: bool = False, provenance=None,
-                 window: int | None = None, laser_pose=None) -> ImportStats:
+def write_import(
+    stream: ImportStream,
+    output: str | Path,
+    *,
+    force: bool = False,
+    provenance=None,
+    window: int | None = None,
+    laser_pose=None,
+) -> ImportStats:
     """Write `stream`'s scans to /scan and poses to /odom of `output` (atomically, LogWriter), block by block
     in time order (OrderedSink over `window` messages), with the transforms (see Frames), then its facts as
     metadata "datmo.import". Raises InputError when there are no scans. A message more than the window late is
@@ -291,8 +329,10 @@ def write_import(stream: ImportStream, output: str | Path, *, force: bool = Fals
                 stream.warnings.append(note)
             scans -= sink.dropped
             if sink.late:
-                stream.warnings.append(f"{src}: {sink.late} message{'s' if sink.late != 1 else ''} came after later "
-                                       f"ones beyond a window of {window}; written out of time order")
+                stream.warnings.append(
+                    f"{src}: {sink.late} message{'s' if sink.late != 1 else ''} came after later "
+                    f"ones beyond a window of {window}; written out of time order"
+                )
             writer.add_metadata("datmo.import", import_facts(stream))
             if laser_pose is not None:
                 from ..transforms import BASE_FRAME, LASER_POSE_RECORD
@@ -324,10 +364,10 @@ class Frames:
         self.stream, self.writer, self.sink, self.mount = stream, writer, sink, laser_pose
         self.keep_tf = mcapio.TOPIC_TF in stream.tf_topics
         self.ids: dict[str, int] = {}
-        self.laser: str | None = None      # the scan's frame, once a scan came
-        self.first: int | None = None      # the first scan's stamp
-        self.joined: set[str] = set()      # child frames of the poses whose mount is settled
-        self.pending: list = []            # poses' child frames (and stamps) waiting for the first scan
+        self.laser: str | None = None  # the scan's frame, once a scan came
+        self.first: int | None = None  # the first scan's stamp
+        self.joined: set[str] = set()  # child frames of the poses whose mount is settled
+        self.pending: list = []  # poses' child frames (and stamps) waiting for the first scan
         self.warned = False
 
     def _cid(self, topic: str) -> int:
@@ -352,8 +392,10 @@ class Frames:
         if self.warned:
             return
         self.warned = True
-        self.stream.warnings.append(f"{self.stream.source}: no laser mount ({base} -> {laser}) in the log; {how}: "
-                                    "give the scanner's mounting with --laser-pose X,Y,YAW (metres, metres, degrees)")
+        self.stream.warnings.append(
+            f"{self.stream.source}: no laser mount ({base} -> {laser}) in the log; {how}: "
+            "give the scanner's mounting with --laser-pose X,Y,YAW (metres, metres, degrees)"
+        )
 
     def scans(self, run: ScanRun) -> None:
         """A block of scans: the first fixes the scan's frame (and writes what waited for it)."""
@@ -397,12 +439,12 @@ class Frames:
         from .. import mcapio, transforms
 
         laser = self.laser
-        if laser is None and self.stream.geometry is not None:   # poses before the first scan
+        if laser is None and self.stream.geometry is not None:  # poses before the first scan
             laser = self.stream.geometry.frame_id
         if odom.child_frame_id == laser:
             if self.mount is not None:
                 odom = transforms.base_odometry(odom, self.mount)
-            else:   # the identity mount: the same poses, the base's
+            else:  # the identity mount: the same poses, the base's
                 self._no_mount(transforms.BASE_FRAME, laser, "the poses are the scanner's, so the base is put on it")
                 odom = Odometry(odom.stamps, odom.x, odom.y, odom.theta, odom.frame_id, transforms.BASE_FRAME)
         if not self.keep_tf:
@@ -424,11 +466,26 @@ def import_facts(stream: ImportStream) -> dict[str, str]:
     """The "datmo.import" metadata of an import."""
     import json
 
-    out = {"kind": stream.kind, "topic": str(stream.topic), "odom_topic": str(stream.odom_topic or ""),
-           "source": str(stream.source), "warnings": json.dumps(stream.warnings)}
+    out = {
+        "kind": stream.kind,
+        "topic": str(stream.topic),
+        "odom_topic": str(stream.odom_topic or ""),
+        "source": str(stream.source),
+        "warnings": json.dumps(stream.warnings),
+    }
     out.update({k: json.dumps(v, default=str) for k, v in stream.facts.items()})
     return out
 
 
-__all__ = ["IMPORT_BLOCK", "KINDS", "ImportResult", "ImportStats", "ImportStream", "detect_kind", "import_facts",
-           "import_log", "open_import", "write_import"]
+__all__ = [
+    "IMPORT_BLOCK",
+    "KINDS",
+    "ImportResult",
+    "ImportStats",
+    "ImportStream",
+    "detect_kind",
+    "import_facts",
+    "import_log",
+    "open_import",
+    "write_import",
+]

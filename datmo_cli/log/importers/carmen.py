@@ -67,12 +67,12 @@ LASER_MESSAGES = FLASER_LIKE + RAWLASER + ROBOTLASER
 G2O_MESSAGES = ("VERTEX_SE2", "EDGE_SE2", "VERTEX_XY", "EDGE_SE2_XY")
 _OTHER_KNOWN = ("ODOM", "PARAM", "NEFF", "SYNC", "TRUEPOS", "GPSNMEA", "SONAR", "BUMPER", "IMU")
 _MESSAGE = re.compile(r"[A-Z][A-Z0-9_]*$")
-SICK_CODE_M = 81.83        # SICK LMS cm mode: 8183..8191 are error / no-return codes
-CARMEN_CAP_M = 50.0        # CARMEN logs cap no-return readings at (or just above) 50 m
-MM_CODE_M = 32.767         # 0x7FFF mm
+SICK_CODE_M = 81.83  # SICK LMS cm mode: 8183..8191 are error / no-return codes
+CARMEN_CAP_M = 50.0  # CARMEN logs cap no-return readings at (or just above) 50 m
+MM_CODE_M = 32.767  # 0x7FFF mm
 SYNTH_PERIOD_NS = 1_000_000_000
-MAX_STAMP_S = 9.2e9        # the largest stamp, seconds, that int64 nanoseconds hold (2^63 ns is 9.22e9 s)
-_META = struct.Struct("<4d")   # spooled per scan: ipc stamp, laser pose (NaN when none); per ODOM line: a row
+MAX_STAMP_S = 9.2e9  # the largest stamp, seconds, that int64 nanoseconds hold (2^63 ns is 9.22e9 s)
+_META = struct.Struct("<4d")  # spooled per scan: ipc stamp, laser pose (NaN when none); per ODOM line: a row
 
 
 def sniff_text(head: bytes) -> str | None:
@@ -80,7 +80,7 @@ def sniff_text(head: bytes) -> str | None:
     lines = head.decode("latin-1").splitlines()
     seen = set()
     for line in lines[:2000]:
-        if "\x00" in line:   # a block of NULs (a crash, a copy cut short) is a malformed line, not a binary file
+        if "\x00" in line:  # a block of NULs (a crash, a copy cut short) is a malformed line, not a binary file
             continue
         tok = line.split(None, 1)
         if tok and _MESSAGE.match(tok[0]):
@@ -100,18 +100,18 @@ class _Stream:
     def __init__(self, name: str, first_line: int = 0, spool: Path | None = None) -> None:
         self.name = name
         self.first_line = first_line
-        self.geometry: tuple | None = None     # (start, resolution, max_range) or None (FLASER)
+        self.geometry: tuple | None = None  # (start, resolution, max_range) or None (FLASER)
         self.n_beams = 0
         self.count = 0
-        self.top = np.nan                      # largest reading (NaN ignored), for FLASER's no-return limit
-        self.all_remissions = True             # every scan has one remission per beam
-        self.posed = 0                         # scans with a laser pose
-        self.unposed = _NotANumber()           # of them, poses that are not finite numbers (left out of /odom)
+        self.top = np.nan  # largest reading (NaN ignored), for FLASER's no-return limit
+        self.all_remissions = True  # every scan has one remission per beam
+        self.posed = 0  # scans with a laser pose
+        self.unposed = _NotANumber()  # of them, poses that are not finite numbers (left out of /odom)
         self.stamps = StampCheck()
-        self.ranges: list = []                 # (in memory) arrays (n,), metres
-        self.remissions: list = []             # (in memory) arrays (n,) or (0,)
-        self.stamps_s: list = []               # (in memory) ipc_timestamp, seconds
-        self.poses: list = []                  # (in memory) (x, y, theta) of the laser, world frame
+        self.ranges: list = []  # (in memory) arrays (n,), metres
+        self.remissions: list = []  # (in memory) arrays (n,) or (0,)
+        self.stamps_s: list = []  # (in memory) ipc_timestamp, seconds
+        self.poses: list = []  # (in memory) (x, y, theta) of the laser, world frame
         self._files = None
         if spool is not None:
             self._paths = tuple(spool / f"{name}.{part}" for part in ("ranges", "remissions", "meta"))
@@ -120,7 +120,7 @@ class _Stream:
     def add(self, ranges: np.ndarray, rem: np.ndarray, ipc: float, pose: tuple | None) -> None:
         n = len(ranges)
         self.count += 1
-        top = float(np.fmax.reduce(ranges))   # NaN readings ignored, as np.nanmax
+        top = float(np.fmax.reduce(ranges))  # NaN readings ignored, as np.nanmax
         if top > self.top or self.top != self.top:
             self.top = top
         self.stamps.add(ipc)
@@ -189,8 +189,10 @@ class _NotANumber:
         """The warning about them: which poses are left out of /odom (all: no /odom)."""
         which = "all" if self.count == total else f"{self.count} of the {total}"
         left = "no /odom written" if self.count == total else "left out of /odom"
-        return (f"{label}: {which} {what} poses are not finite numbers (NaN or infinite; first at line "
-                f"{self.first_line}); {left}")
+        return (
+            f"{label}: {which} {what} poses are not finite numbers (NaN or infinite; first at line "
+            f"{self.first_line}); {left}"
+        )
 
 
 class _Odom:
@@ -200,7 +202,7 @@ class _Odom:
         self.rows: list = []
         self.count = 0
         self.stamps = StampCheck()
-        self.unposed = _NotANumber()   # poses that are not finite numbers (left out of /odom)
+        self.unposed = _NotANumber()  # poses that are not finite numbers (left out of /odom)
         self._path = spool / "ODOM" if spool is not None else None
         self._file = open(self._path, "wb", buffering=1 << 20) if self._path is not None else None
 
@@ -223,7 +225,7 @@ class _Odom:
         """Rows (k, 4) in order, `size` at a time."""
         if self._file is None:
             for a in range(0, self.count, size):
-                yield np.array(self.rows[a:a + size], np.float64).reshape(-1, 4)
+                yield np.array(self.rows[a : a + size], np.float64).reshape(-1, 4)
             return
         with open(self._path, "rb") as f:
             for a in range(0, self.count, size):
@@ -241,7 +243,7 @@ class CarmenParse:
     malformed_lines: list[int] = field(default_factory=list)
     lines: int = 0
     counts: dict[str, int] = field(default_factory=dict)
-    spool: Path | None = None       # where the scans are spooled (None: in memory)
+    spool: Path | None = None  # where the scans are spooled (None: in memory)
 
     def close(self) -> None:
         for s in self.streams.values():
@@ -259,14 +261,14 @@ def _laser_fields(tok: list[str], robot: bool) -> tuple[tuple, np.ndarray, np.nd
     n = int(tok[8])
     if n < 1 or len(tok) < 10 + n or not _sane_fan(start, fov, res, max_range):
         raise _Malformed
-    ranges = np.array(tok[9:9 + n], float)
+    ranges = np.array(tok[9 : 9 + n], float)
     n_rem = int(tok[9 + n])
-    rest = tok[10 + n + n_rem:]
+    rest = tok[10 + n + n_rem :]
     extra = 11 if robot else 0
     if n_rem < 0 or not (extra + 1 <= len(rest) <= extra + 3):
         raise _Malformed
-    rem = np.array(tok[10 + n:10 + n + n_rem], float)
-    nums = np.array(rest[:extra + 1], float)
+    rem = np.array(tok[10 + n : 10 + n + n_rem], float)
+    nums = np.array(rest[: extra + 1], float)
     pose = tuple(nums[:3]) if robot else None
     return (start, res, max_range), ranges, rem, float(nums[extra]), pose
 
@@ -275,20 +277,22 @@ def _sane_fan(start: float, fov: float, res: float, max_range: float) -> bool:
     """Whether a RAWLASER/ROBOTLASER line's beam fan (radians) and stated maximum range (metres) can be a
     laser's: a finite start angle, a field of view in (0, 2π], a step in (0, fov], a finite maximum (zero
     or negative means "not stated"). A field of view of 0, or NaN, makes the line malformed, not a 0° step."""
-    return (math.isfinite(start) and 0 < fov <= 2 * math.pi * 1.001 and 0 < res <= fov * 1.001
-            and math.isfinite(max_range))
+    return (
+        math.isfinite(start) and 0 < fov <= 2 * math.pi * 1.001 and 0 < res <= fov * 1.001 and math.isfinite(max_range)
+    )
 
 
 def _flaser_fields(tok: list[str]) -> tuple[np.ndarray, float, tuple]:
     n = int(tok[1])
     if n < 1 or not (n + 9 <= len(tok) <= n + 11):
         raise _Malformed
-    vals = np.array(tok[2:n + 9], float)
-    return vals[:n], float(vals[n + 6]), tuple(vals[n:n + 3])
+    vals = np.array(tok[2 : n + 9], float)
+    return vals[:n], float(vals[n + 6]), tuple(vals[n : n + 3])
 
 
-def parse_lines(lines: Iterable[str], *, topic: str | None = None, max_scans: int | None = None,
-                spool: Path | None = None) -> CarmenParse:
+def parse_lines(
+    lines: Iterable[str], *, topic: str | None = None, max_scans: int | None = None, spool: Path | None = None
+) -> CarmenParse:
     """Parse CARMEN text lines (pure: no files unless `spool`, a folder to spool the scans to). Keeps at
     most `max_scans` scans per laser message and stops early once `topic`'s scans are complete. Raises
     GeometryError (without a file name) when a laser message changes its beam layout."""
@@ -301,8 +305,9 @@ def parse_lines(lines: Iterable[str], *, topic: str | None = None, max_scans: in
     return out
 
 
-def _parse(lines: Iterable[str], out: CarmenParse, streams: dict[str, _Stream], topic: str | None,
-           max_scans: int | None) -> None:
+def _parse(
+    lines: Iterable[str], out: CarmenParse, streams: dict[str, _Stream], topic: str | None, max_scans: int | None
+) -> None:
     for lineno, line in enumerate(lines, 1):
         out.lines = lineno
         tok = line.split()
@@ -354,8 +359,10 @@ def _add_scan(s: _Stream, lineno: int, ranges, rem, ipc, pose, geom) -> None:
     elif n != s.n_beams or geom != s.geometry:
         was = f"{s.n_beams} beams" + (f", start/resolution/max {s.geometry}" if s.geometry else "")
         now = f"{n} beams" + (f", start/resolution/max {geom}" if geom else "")
-        raise GeometryError(f"{s.name} geometry changes at scan {s.count} (line {lineno}): "
-                            f"{was} -> {now}; datmo does not split runs, cut the log at that line")
+        raise GeometryError(
+            f"{s.name} geometry changes at scan {s.count} (line {lineno}): "
+            f"{was} -> {now}; datmo does not split runs, cut the log at that line"
+        )
     if pose is not None:
         s.unposed.check(pose, lineno)
     s.add(ranges, rem, ipc, pose)
@@ -409,11 +416,11 @@ class StampCheck:
 
     def __init__(self) -> None:
         self.n = 0
-        self.ok = True         # every stamp finite and the first >= 0
-        self.bad = 0           # steps that go backwards or repeat
+        self.ok = True  # every stamp finite and the first >= 0
+        self.bad = 0  # steps that go backwards or repeat
         self._prev = 0.0
         self.t0 = 0.0
-        self._done = 0         # stamps applied so far
+        self._done = 0  # stamps applied so far
         self._last_ns = 0
 
     def add(self, t: float) -> None:
@@ -429,7 +436,7 @@ class StampCheck:
 
     @property
     def mode(self) -> str:
-        """"keep", "repair" or "synthesise"."""
+        """ "keep", "repair" or "synthesise"."""
         if self.n and self.ok and self.bad == 0:
             return "keep"
         if self.n and self.ok and self.bad <= 0.05 * self.n:
@@ -482,8 +489,9 @@ def pick_stream(parse: CarmenParse, topic: str | None, label: str) -> _Stream:
         return parse.streams[topic]
     if not names:
         skipped = f"; skipped {parse.malformed} malformed lines" if parse.malformed else ""
-        raise InputError(f"{label}: no laser scans (no valid FLASER, RLASER, RAWLASER1-4 or ROBOTLASER1-2 "
-                         f"lines{skipped})")
+        raise InputError(
+            f"{label}: no laser scans (no valid FLASER, RLASER, RAWLASER1-4 or ROBOTLASER1-2 lines{skipped})"
+        )
     if len(names) > 1:
         raise InputError(f"{label}: several laser streams, choose one with --topic: {listing}")
     return parse.streams[names[0]]
@@ -498,10 +506,10 @@ class _Plan:
     limit: float
     flip: bool
     stamps_note: str | None
-    odometry_source: str | None      # the laser message (its poses), "ODOM", or None
+    odometry_source: str | None  # the laser message (its poses), "ODOM", or None
     warnings: list[str]
     facts: dict
-    pose_frame: str = "odom"         # the poses' frame: "map" for SLAM-corrected poses (see pose_frame)
+    pose_frame: str = "odom"  # the poses' frame: "map" for SLAM-corrected poses (see pose_frame)
 
 
 def pose_frame(label: str) -> str:
@@ -532,10 +540,16 @@ def plan(parse: CarmenParse, topic: str | None = None, label: str = "<text>") ->
     if fixed:
         warnings.append(f"{label}: {s.name} timestamps: {fixed}")
     frame = "rear_laser" if s.name == "RLASER" else "laser"
-    geometry = ScanGeometry(angle_min=float(angle_min), angle_increment=float(inc), n_beams=n,
-                            range_min=0.0, range_max=float(limit), frame_id=frame)
+    geometry = ScanGeometry(
+        angle_min=float(angle_min),
+        angle_increment=float(inc),
+        n_beams=n,
+        range_min=0.0,
+        range_max=float(limit),
+        frame_id=frame,
+    )
     odom = parse.odom
-    if s.posed == s.count:   # the laser lines carry the poses
+    if s.posed == s.count:  # the laser lines carry the poses
         odom_source = s.name if s.unposed.count < s.count else None
         if s.unposed.count:
             warnings.append(s.unposed.said(label, s.name, s.count))
@@ -553,11 +567,21 @@ def plan(parse: CarmenParse, topic: str | None = None, label: str = "<text>") ->
             warnings.append(odom.unposed.said(label, "ODOM", odom.count))
     if parse.malformed:
         where = ", ".join(str(i) for i in parse.malformed_lines)
-        warnings.insert(0, f"{label}: skipped {parse.malformed} malformed line{'s' if parse.malformed != 1 else ''}"
-                           f" (first at line {where})")
-    facts = {"message": s.name, "scans": s.count, "beams": n, "no_return_at_m": float(limit),
-             "no_return_readings": 0, "stamps": fixed or "ipc_timestamp",
-             "malformed_lines": parse.malformed, "odometry_source": odom_source}
+        warnings.insert(
+            0,
+            f"{label}: skipped {parse.malformed} malformed line{'s' if parse.malformed != 1 else ''}"
+            f" (first at line {where})",
+        )
+    facts = {
+        "message": s.name,
+        "scans": s.count,
+        "beams": n,
+        "no_return_at_m": float(limit),
+        "no_return_readings": 0,
+        "stamps": fixed or "ipc_timestamp",
+        "malformed_lines": parse.malformed,
+        "odometry_source": odom_source,
+    }
     frame = pose_frame(label)
     if odom_source is not None:
         facts["pose_frame"] = frame
@@ -581,9 +605,15 @@ def blocks(parse: CarmenParse, p: _Plan, size: int) -> Iterator[tuple[ScanRun | 
             run = ScanRun(stamps, ranges.astype(np.float32), p.geometry, rem)
             odom = None
             if p.odometry_source == s.name:
-                ok = np.isfinite(poses).all(axis=1)   # a pose that is not a number is left out (plan warns)
-                odom = Odometry(stamps[ok], poses[ok, 0], poses[ok, 1], poses[ok, 2],
-                                frame_id=p.pose_frame, child_frame_id=p.geometry.frame_id)
+                ok = np.isfinite(poses).all(axis=1)  # a pose that is not a number is left out (plan warns)
+                odom = Odometry(
+                    stamps[ok],
+                    poses[ok, 0],
+                    poses[ok, 1],
+                    poses[ok, 2],
+                    frame_id=p.pose_frame,
+                    child_frame_id=p.geometry.frame_id,
+                )
             yield run, odom
 
     if p.odometry_source != "ODOM":
@@ -594,7 +624,7 @@ def blocks(parse: CarmenParse, p: _Plan, size: int) -> Iterator[tuple[ScanRun | 
 
     def poses() -> Iterator[Odometry]:
         for rows in parse.odom.blocks(size):
-            stamps = check.apply(rows[:, 0])   # every row's, in order (a repair carries on from the one before)
+            stamps = check.apply(rows[:, 0])  # every row's, in order (a repair carries on from the one before)
             ok = np.isfinite(rows[:, 1:]).all(axis=1)
             yield Odometry(stamps[ok], rows[ok, 1], rows[ok, 2], rows[ok, 3], frame_id=p.pose_frame)
 
@@ -638,8 +668,11 @@ def _cat(parts: list[Odometry]) -> Odometry:
     if len(parts) == 1:
         return parts[0]
     o = parts[0]
-    return Odometry(*(np.concatenate([getattr(q, f) for q in parts]) for f in ("stamps", "x", "y", "theta")),
-                    o.frame_id, o.child_frame_id)
+    return Odometry(
+        *(np.concatenate([getattr(q, f) for q in parts]) for f in ("stamps", "x", "y", "theta")),
+        o.frame_id,
+        o.child_frame_id,
+    )
 
 
 def build(parse: CarmenParse, topic: str | None = None, label: str = "<text>"):
@@ -651,14 +684,21 @@ def build(parse: CarmenParse, topic: str | None = None, label: str = "<text>"):
             runs.append(run)
         if odom is not None:
             poses.append(odom)
-    run = runs[0] if len(runs) == 1 else ScanRun(np.concatenate([r.stamps for r in runs]),
-                                                  np.concatenate([r.ranges for r in runs]), p.geometry,
-                                                  np.concatenate([r.intensities for r in runs]))
+    run = (
+        runs[0]
+        if len(runs) == 1
+        else ScanRun(
+            np.concatenate([r.stamps for r in runs]),
+            np.concatenate([r.ranges for r in runs]),
+            p.geometry,
+            np.concatenate([r.intensities for r in runs]),
+        )
+    )
     return run, _cat(poses) if poses else None, p.warnings, p.facts
 
 
-MAX_LINE = 1 << 20   # characters of a line: a laser line of 10,000 beams and remissions takes under 200,000
-_TOO_LONG = "<a line longer than MAX_LINE>"   # what a longer line is read as: a malformed line (not a message name)
+MAX_LINE = 1 << 20  # characters of a line: a laser line of 10,000 beams and remissions takes under 200,000
+_TOO_LONG = "<a line longer than MAX_LINE>"  # what a longer line is read as: a malformed line (not a message name)
 
 
 def _lines(f, progress, raw, total: int, label: str, warnings: list[str]):
@@ -681,8 +721,15 @@ def _lines(f, progress, raw, total: int, label: str, warnings: list[str]):
         warnings.append(f"{label}: gzip stream ends early (truncated file); read {step} lines before the cut")
 
 
-def stream_carmen(path: str | Path, *, topic: str | None = None, max_scans: int | None = None, progress=None,
-                  spool_dir: str | Path | None = None, block_scans: int = 1024):
+def stream_carmen(
+    path: str | Path,
+    *,
+    topic: str | None = None,
+    max_scans: int | None = None,
+    progress=None,
+    spool_dir: str | Path | None = None,
+    block_scans: int = 1024,
+):
     """ImportStream of a CARMEN (or g2o ROBOTLASER1) text log, plain or gzipped.
 
     One pass parses the text and spools the scans to a temporary folder in `spool_dir` (the system's
@@ -702,8 +749,10 @@ def stream_carmen(path: str | Path, *, topic: str | None = None, max_scans: int 
     try:
         spool = tempfile.TemporaryDirectory(prefix=".datmo-import-", dir=spool_dir)
     except OSError as exc:
-        raise DatmoError(f"{spool_dir or tempfile.gettempdir()}: cannot make a temporary folder for the parsed "
-                         f"scans ({exc.strerror or exc})") from None
+        raise DatmoError(
+            f"{spool_dir or tempfile.gettempdir()}: cannot make a temporary folder for the parsed "
+            f"scans ({exc.strerror or exc})"
+        ) from None
     try:
         with open(path, "rb") as raw:
             gz = raw.read(2) == b"\x1f\x8b"
@@ -711,8 +760,12 @@ def stream_carmen(path: str | Path, *, topic: str | None = None, max_scans: int 
             binary = gzip.GzipFile(fileobj=raw) if gz else raw
             text = io.TextIOWrapper(binary, encoding="utf-8", errors="replace", newline=None)
             try:
-                parse = parse_lines(_lines(text, progress, raw, total, label, io_warnings), topic=topic,
-                                    max_scans=max_scans, spool=Path(spool.name))
+                parse = parse_lines(
+                    _lines(text, progress, raw, total, label, io_warnings),
+                    topic=topic,
+                    max_scans=max_scans,
+                    spool=Path(spool.name),
+                )
             except GeometryError as exc:
                 raise GeometryError(f"{label}: {exc}") from None
         if progress is not None:
@@ -722,8 +775,9 @@ def stream_carmen(path: str | Path, *, topic: str | None = None, max_scans: int 
         p = plan(parse, topic, label)
     except OSError as exc:  # the disk full while spooling, or the input unreadable
         spool.cleanup()
-        raise DatmoError(f"{label}: {exc.strerror or exc} (reading it, or spooling its scans to "
-                         f"{Path(spool.name).parent})") from None
+        raise DatmoError(
+            f"{label}: {exc.strerror or exc} (reading it, or spooling its scans to {Path(spool.name).parent})"
+        ) from None
     except BaseException:
         spool.cleanup()
         raise
@@ -735,11 +789,17 @@ def stream_carmen(path: str | Path, *, topic: str | None = None, max_scans: int 
         finally:
             spool.cleanup()
 
-    return ImportStream(pieces(), warnings=io_warnings + p.warnings, topic=p.stream.name,
-                        odom_topic=p.odometry_source, facts=p.facts, geometry=p.geometry, closer=spool.cleanup)
+    return ImportStream(
+        pieces(),
+        warnings=io_warnings + p.warnings,
+        topic=p.stream.name,
+        odom_topic=p.odometry_source,
+        facts=p.facts,
+        geometry=p.geometry,
+        closer=spool.cleanup,
+    )
 
 
-def read_carmen(path: str | Path, *, topic: str | None = None, max_scans: int | None = None,
-                progress=None):
+def read_carmen(path: str | Path, *, topic: str | None = None, max_scans: int | None = None, progress=None):
     """ImportResult of a CARMEN (or g2o ROBOTLASER1) text log, plain or gzipped (the whole run)."""
     return stream_carmen(path, topic=topic, max_scans=max_scans, progress=progress).collect()

@@ -43,9 +43,20 @@ def tf_transforms(msg) -> list:
     out = []
     for t in msg.transforms:
         s, p, q = t.header.stamp, t.transform.translation, t.transform.rotation
-        out.append(Transform(int(s.sec) * 1_000_000_000 + int(s.nanosec), ros2_frame(t.header.frame_id),
-                             ros2_frame(t.child_frame_id), float(p.x), float(p.y), float(p.z), float(q.x), float(q.y),
-                             float(q.z), float(q.w)))
+        out.append(
+            Transform(
+                int(s.sec) * 1_000_000_000 + int(s.nanosec),
+                ros2_frame(t.header.frame_id),
+                ros2_frame(t.child_frame_id),
+                float(p.x),
+                float(p.y),
+                float(p.z),
+                float(q.x),
+                float(q.y),
+                float(q.z),
+                float(q.w),
+            )
+        )
     return out
 
 
@@ -79,8 +90,15 @@ def survey_tf(messages) -> TfSurvey:
     return TfSurvey(statics, moving.constant())
 
 
-def choose_topic(label: str, topics: dict[str, tuple[str, int]], wanted: str | None, types: tuple[str, ...],
-                 what: str, option: str, required: bool = True) -> str | None:
+def choose_topic(
+    label: str,
+    topics: dict[str, tuple[str, int]],
+    wanted: str | None,
+    types: tuple[str, ...],
+    what: str,
+    option: str,
+    required: bool = True,
+) -> str | None:
     """The topic to read among `topics` ({topic: (msgtype, count)}) of one of `types`.
 
     `wanted` must be such a topic; otherwise the only one is taken. Several and none chosen raises
@@ -118,10 +136,16 @@ def _stamp(header, log_time: int) -> int:
 
 def scan_geometry(msg) -> ScanGeometry:
     """The ScanGeometry of a deserialised sensor_msgs/LaserScan."""
-    return ScanGeometry(angle_min=float(msg.angle_min), angle_increment=float(msg.angle_increment),
-                        n_beams=len(msg.ranges), range_min=float(msg.range_min), range_max=float(msg.range_max),
-                        time_increment=float(msg.time_increment), scan_time=float(msg.scan_time),
-                        frame_id=ros2_frame(msg.header.frame_id))
+    return ScanGeometry(
+        angle_min=float(msg.angle_min),
+        angle_increment=float(msg.angle_increment),
+        n_beams=len(msg.ranges),
+        range_min=float(msg.range_min),
+        range_max=float(msg.range_max),
+        time_increment=float(msg.time_increment),
+        scan_time=float(msg.scan_time),
+        frame_id=ros2_frame(msg.header.frame_id),
+    )
 
 
 def check_bag_scan(label: str, topic: str, i: int, msg) -> None:
@@ -145,16 +169,23 @@ def _scan_problem(msg) -> str | None:
         return problem
     a0, a1, step = float(msg.angle_min), float(msg.angle_max), float(msg.angle_increment)
     r0, r1 = float(msg.range_min), float(msg.range_max)
-    for name, value in (("angle_min", a0), ("angle_max", a1), ("angle_increment", step), ("range_min", r0),
-                        ("range_max", r1)):
+    for name, value in (
+        ("angle_min", a0),
+        ("angle_max", a1),
+        ("angle_increment", step),
+        ("range_min", r0),
+        ("range_max", r1),
+    ):
         if not math.isfinite(value):
             return f"{name} is {value}"
     problem = geometry_problem(a0, step, n, r0, r1)
     if problem:
         return problem
     if n and abs(a0 + (n - 1) * step - a1) > abs(step) * 1.01 + 1e-4:
-        return (f"{n} beams from {math.degrees(a0):g}° by {math.degrees(step):g}° end at "
-                f"{math.degrees(a0 + (n - 1) * step):g}°, not at angle_max {math.degrees(a1):g}°")
+        return (
+            f"{n} beams from {math.degrees(a0):g}° by {math.degrees(step):g}° end at "
+            f"{math.degrees(a0 + (n - 1) * step):g}°, not at angle_max {math.degrees(a1):g}°"
+        )
     if m not in (0, n):
         return f"{m} intensities for {n} ranges"
     return None
@@ -182,14 +213,27 @@ def open_bag(path: str | Path):
     return reader, topics
 
 
-def read_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
-             max_scans: int | None = None, progress=None):
+def read_bag(
+    path: str | Path,
+    *,
+    topic: str | None = None,
+    odom_topic: str | None = None,
+    max_scans: int | None = None,
+    progress=None,
+):
     """ImportResult of a ROS 1 bag or ROS 2 bag folder (the whole run)."""
     return stream_bag(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress).collect()
 
 
-def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
-               max_scans: int | None = None, progress=None, block_scans: int = 1024):
+def stream_bag(
+    path: str | Path,
+    *,
+    topic: str | None = None,
+    odom_topic: str | None = None,
+    max_scans: int | None = None,
+    progress=None,
+    block_scans: int = 1024,
+):
     """ImportStream of a ROS 1 bag or ROS 2 bag folder.
 
     A first pass over the scans settles what concerns the whole run (their geometry, which must not
@@ -213,8 +257,9 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
 
     try:
         scan_topic = choose_topic(label, topics, topic, LASERSCAN_TYPES, "sensor_msgs/LaserScan", "--topic")
-        o_topic = choose_topic(label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic",
-                               required=False)
+        o_topic = choose_topic(
+            label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic", required=False
+        )
         one_connection(label, reader, scan_topic)
         total = topics[scan_topic][1]
         scans = _survey(reader, label, scan_topic, total, max_scans, progress)
@@ -234,8 +279,10 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
     if o_topic is not None and tfs:
         conns = [c for c in reader.connections if c.topic in tfs]
         try:
-            survey = survey_tf((c.topic, tf_transforms(reader.deserialize(raw, c.msgtype)))
-                               for c, _, raw in reader.messages(connections=conns))
+            survey = survey_tf(
+                (c.topic, tf_transforms(reader.deserialize(raw, c.msgtype)))
+                for c, _, raw in reader.messages(connections=conns)
+            )
         except Exception as exc:  # corrupt chunks, unknown message definitions
             close()
             raise InputError(f"{label}: cannot read bag ({type(exc).__name__}: {exc})") from None
@@ -250,9 +297,19 @@ def stream_bag(path: str | Path, *, topic: str | None = None, odom_topic: str | 
         finally:
             close()
 
-    return ImportStream(pieces(), warnings=warns, topic=scan_topic, odom_topic=o_topic,
-                        facts={"topics": {t: m for t, (m, _) in topics.items()}}, geometry=scans.geometry,
-                        sort_odometry=True, closer=close, transforms=moved, tf_topics=tfs, tf_survey=survey)
+    return ImportStream(
+        pieces(),
+        warnings=warns,
+        topic=scan_topic,
+        odom_topic=o_topic,
+        facts={"topics": {t: m for t, (m, _) in topics.items()}},
+        geometry=scans.geometry,
+        sort_odometry=True,
+        closer=close,
+        transforms=moved,
+        tf_topics=tfs,
+        tf_survey=survey,
+    )
 
 
 def one_connection(label: str, reader, topic: str) -> None:
@@ -261,8 +318,10 @@ def one_connection(label: str, reader, topic: str) -> None:
     on = [c for c in reader.connections if c.topic == topic and c.msgcount]
     if len(on) > 1:
         who = ", ".join(f"{getattr(c.ext, 'callerid', None) or c.msgtype}: {c.msgcount} messages" for c in on)
-        raise InputError(f"{label}: {topic} is on {len(on)} connections ({who}); their scans would interleave into "
-                         "one stream: keep one connection, or give each its own topic")
+        raise InputError(
+            f"{label}: {topic} is on {len(on)} connections ({who}); their scans would interleave into "
+            "one stream: keep one connection, or give each its own topic"
+        )
 
 
 @dataclass
@@ -271,8 +330,8 @@ class _Survey:
 
     geometry: ScanGeometry
     count: int
-    intensities: str          # "all" (one per beam in every scan), "none", or "fill" (NaN where missing)
-    last: int                 # the largest scan stamp, ns
+    intensities: str  # "all" (one per beam in every scan), "none", or "fill" (NaN where missing)
+    last: int  # the largest scan stamp, ns
 
 
 def _survey(reader, label: str, topic: str, total: int, max_scans: int | None, progress) -> _Survey:
@@ -287,8 +346,10 @@ def _survey(reader, label: str, topic: str, total: int, max_scans: int | None, p
         if g0 is None:
             g0 = g
         elif not g.same_beams(g0):
-            raise GeometryError(f"{label}: {topic} geometry changes at scan {i}: {g0.describe()} -> "
-                                f"{g.describe()}; datmo does not split runs, cut the bag there first")
+            raise GeometryError(
+                f"{label}: {topic} geometry changes at scan {i}: {g0.describe()} -> "
+                f"{g.describe()}; datmo does not split runs, cut the bag there first"
+            )
         t = _stamp(msg.header, log_time)
         last = t if last is None else max(last, t)
         sizes.add(len(msg.intensities))
@@ -302,9 +363,17 @@ def _survey(reader, label: str, topic: str, total: int, max_scans: int | None, p
     return _Survey(g0, count, mode, last)
 
 
-def _bag_blocks(reader, topic: str, o_topic: str | None, survey: _Survey, size: int, progress,
-                total: int, tfs: tuple[str, ...] = (),
-                moved: list | None = None) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
+def _bag_blocks(
+    reader,
+    topic: str,
+    o_topic: str | None,
+    survey: _Survey,
+    size: int,
+    progress,
+    total: int,
+    tfs: tuple[str, ...] = (),
+    moved: list | None = None,
+) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
     """Scans (and poses up to the first after the last scan) in the bag's order, `size` scans a block; the
     transforms on `tfs` read on the way appended to `moved` as (topic, log time, CDR TFMessage)."""
     conns = [c for c in reader.connections if c.topic in (topic, o_topic, *tfs)]
@@ -331,8 +400,9 @@ def _bag_blocks(reader, topic: str, o_topic: str | None, survey: _Survey, size: 
         if not rows:
             return None
         a = np.array(rows, np.float64)
-        return Odometry(a[:, 0].astype(np.int64), a[:, 1], a[:, 2], a[:, 3], frame_id=odo_frames[0],
-                        child_frame_id=odo_frames[1])
+        return Odometry(
+            a[:, 0].astype(np.int64), a[:, 1], a[:, 2], a[:, 3], frame_id=odo_frames[0], child_frame_id=odo_frames[1]
+        )
 
     for conn, log_time, raw in reader.messages(connections=conns):
         if conn.topic in tfs:
@@ -371,14 +441,21 @@ def _bag_blocks(reader, topic: str, o_topic: str | None, survey: _Survey, size: 
         yield None, poses()
 
 
-def read_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
-              max_scans: int | None = None):
+def read_mcap(
+    path: str | Path, *, topic: str | None = None, odom_topic: str | None = None, max_scans: int | None = None
+):
     """ImportResult of a single MCAP file holding CDR sensor_msgs/msg/LaserScan (the whole run)."""
     return stream_mcap(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans).collect()
 
 
-def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str | None = None,
-                max_scans: int | None = None, block_scans: int = 1024):
+def stream_mcap(
+    path: str | Path,
+    *,
+    topic: str | None = None,
+    odom_topic: str | None = None,
+    max_scans: int | None = None,
+    block_scans: int = 1024,
+):
     """ImportStream of a single MCAP file holding CDR sensor_msgs/msg/LaserScan (ROS 2 style).
 
     A first pass over the scan payloads (header stamps and intensity counts only) settles the intensities
@@ -397,16 +474,19 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
         head = mcapio.summary(path)
         topics = {c.topic: (c.msgtype, c.count) for c in head.channels.values()}
         scan_topic = choose_topic(label, topics, topic, LASERSCAN_TYPES, "sensor_msgs/LaserScan", "--topic")
-        o_topic = choose_topic(label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic",
-                               required=False)
+        o_topic = choose_topic(
+            label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic", required=False
+        )
         tfs = tuple(t for t in tf_topics(topics) if head.topics()[t].message_encoding == "cdr")
         if any(c.topic == scan_topic and c.count for c in head.channels.values()):
             mcapio.check_scan_channel(head, scan_topic)
         count, inten_mode, last, n_beams = _mcap_survey(path, label, scan_topic, max_scans)
         survey = None
         if o_topic is not None and tfs:
-            survey = survey_tf((t, [ros2_frames(x) for x in _decode_tf(payload)])
-                               for t, _, payload in mcapio.iter_messages(path, list(tfs), warn=False))
+            survey = survey_tf(
+                (t, [ros2_frames(x) for x in _decode_tf(payload)])
+                for t, _, payload in mcapio.iter_messages(path, list(tfs), warn=False)
+            )
     warns += [f"{w.message}" for w in caught]
 
     def pieces() -> Iterator[tuple[ScanRun | None, Odometry | None]]:
@@ -441,11 +521,18 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
             keep = odom.stamps <= last if max_scans is not None else np.ones(len(odom), bool)
             keep[0] |= first_pose
             first_pose = False
-            return Odometry(odom.stamps[keep], odom.x[keep], odom.y[keep], odom.theta[keep],
-                            ros2_frame(odom.frame_id), ros2_frame(odom.child_frame_id))
+            return Odometry(
+                odom.stamps[keep],
+                odom.x[keep],
+                odom.y[keep],
+                odom.theta[keep],
+                ros2_frame(odom.frame_id),
+                ros2_frame(odom.child_frame_id),
+            )
 
-        for t, stamp, payload in mcapio.iter_messages(path, [scan_topic, *tfs] + ([o_topic] if o_topic else []),
-                                                      warn=False):
+        for t, stamp, payload in mcapio.iter_messages(
+            path, [scan_topic, *tfs] + ([o_topic] if o_topic else []), warn=False
+        ):
             if t in tfs:
                 moved.append((t, stamp, _without_slashes(payload)))
             elif t == scan_topic:
@@ -464,7 +551,7 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
             elif not odom_done:
                 o_stamps.append(stamp)
                 o_payloads.append(payload)
-                if scans_done and max_scans is not None and stamp > last:   # the poses after: none kept
+                if scans_done and max_scans is not None and stamp > last:  # the poses after: none kept
                     odom_done = True
                     break
         if payloads:
@@ -473,9 +560,16 @@ def stream_mcap(path: str | Path, *, topic: str | None = None, odom_topic: str |
             yield None, poses()
 
     moved: list[tuple[str, int, bytes]] = []
-    return ImportStream(pieces(), warnings=warns, topic=scan_topic, odom_topic=o_topic,
-                        facts={"topics": {t: m for t, (m, _) in topics.items()}}, transforms=moved, tf_topics=tfs,
-                        tf_survey=survey)
+    return ImportStream(
+        pieces(),
+        warnings=warns,
+        topic=scan_topic,
+        odom_topic=o_topic,
+        facts={"topics": {t: m for t, (m, _) in topics.items()}},
+        transforms=moved,
+        tf_topics=tfs,
+        tf_survey=survey,
+    )
 
 
 def _decode_tf(payload: bytes) -> list:
@@ -548,6 +642,8 @@ def _decode_block(label: str, topic: str, payloads: list[bytes], first: int, g0:
     for i, p in enumerate(payloads):
         g = decode_scan(p)[3]
         if not g.same_beams(g0):
-            raise GeometryError(f"{label}: scan geometry changes at scan {first + i}: {g0.describe()} -> "
-                                f"{g.describe()}; split the log before processing it")
+            raise GeometryError(
+                f"{label}: scan geometry changes at scan {first + i}: {g0.describe()} -> "
+                f"{g.describe()}; split the log before processing it"
+            )
     raise AssertionError("decode_scans refused scans of one geometry")
