@@ -138,7 +138,7 @@ class RunStages:
         report=None,
     ) -> None:
         from .config import DatmoConfig
-        from .perception.features import FeatureStream
+        from .feature_channels import FeatureStream
 
         self.config = config or DatmoConfig()
         self.odometry = odometry
@@ -458,7 +458,7 @@ def features_file(
     `config`: the DatmoConfig (None: the defaults), its features section used and the whole recorded in the
     provenance."""
     from .config import DatmoConfig
-    from .perception.features import FeatureStream, decode_segments
+    from .feature_channels import FeatureStream, decode_segments
     from .streaming import BLOCK_SCANS, LogStream, write_derived
 
     config = config or DatmoConfig()

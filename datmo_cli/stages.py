@@ -1,5 +1,5 @@
 """The stages of the pipeline as channels, {topic: (msgtype, stamps, payloads)}: segmentation
-(`derive_segments`), features (`derive_features`, through perception.features.FeatureStream) and tracking
+(`derive_segments`), features (`derive_features`, through feature_channels.FeatureStream) and tracking
 (`TrackStream` block by block, `track_run`), with the glue between perception and tracking
 (features decoded from a log or taken from a RunFeatures, one ScanFeatures per scan). With odometry,
 tracking runs in the world frame and every track also carries its world position.
@@ -15,9 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .feature_channels import FeatureStream, segment_payloads
 from .log import cdr, mcapio, types
 from .log.scan import Odometry, ScanRun
-from .perception.features import FeatureStream, RunFeatures, extract_run, segment_payloads, segment_run
+from .perception.features import RunFeatures, extract_run, segment_run
 from .perception.params import FeatureParams
 from .tracking.markers import track_markers
 from .tracking.measurements import ScanFeatures

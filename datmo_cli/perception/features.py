@@ -2,7 +2,7 @@
 the one pass of `datmo run`.
 
 `segment_run` and `extract_run` validate the run and call the numba kernels block by block; results are
-flat arrays with per-scan offsets (RunFeatures). `FeatureStream` turns them into the
+flat arrays with per-scan offsets (RunFeatures). The pipeline layer's `feature_channels` turns them into the
 channels the commands write: /datmo/segments, /datmo/features, /datmo/landmarks and
 /datmo/markers/features. Sensor frame of each scan (x forward, y left), metres and radians; landmarks in
 the odometry (world) frame when the run has odometry.
@@ -267,9 +267,11 @@ def extract_run(
     segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     progress: Callable[[int, int], None] | None = None,
     threads: int | None = None,
+    landmark_stream: LandmarkStream | None = None,
 ) -> RunFeatures:
     """Segment every scan and extract its lines, circles and blobs (HTL, HTC and the section 5.2 rule);
-    with `landmarks`, also build the landmark database (world frame when `odometry` is given).
+    with `landmarks`, also build the landmark database (world frame when `odometry` is given), continuing
+    `landmark_stream` when given (the database of the scans before this run's, block by block).
     `segments` (start, end, offsets as segment_run gives them, e.g. a log's /datmo/segments) are used
     instead of segmenting. The leg detector `params.leg_model` names (see perception.legs) marks the
     segments it takes for legs. `progress(done, total)` is called after each block of scans. `threads`: how
@@ -351,7 +353,7 @@ def extract_run(
     )
     if landmarks:
         out.landmarks, out.landmark_frame = (
-            LandmarkDatabase(*_world_detections(out, ranges, odometry, p), p),
+            LandmarkDatabase(*_world_detections(out, ranges, odometry, p), p, stream=landmark_stream),
             (odometry.frame_id if odometry is not None and len(odometry) else run.geometry.frame_id),
         )
     return out
@@ -390,57 +392,6 @@ def _world_detections(
     return to_world(det, poses), f.stamps
 
 
-class FeatureStream:
-    """Segmentation, features and the landmark database of a log, block by block: `block(run)` gives the
-    channels of the next block of scans as datmo features writes them ({topic: (msgtype, stamps, payloads)})
-    and its RunFeatures; the landmark database carries over from block to block, so the channels are those of
-    the whole run at once. `segments` given with a block are used instead of segmenting (a log's own; the
-    segments channel is then not among the channels returned); with `markers` False the Foxglove markers are
-    neither drawn nor among them."""
-
-    def __init__(self, params: FeatureParams | None = None, odometry: Odometry | None = None) -> None:
-        self.params = params or FeatureParams()
-        self.odometry = odometry
-        self.landmarks = LandmarkStream(self.params)
-
-    def block(
-        self,
-        run: ScanRun,
-        segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-        progress: Callable[[int, int], None] | None = None,
-        *,
-        markers: bool = True,
-    ) -> tuple[dict[str, tuple], RunFeatures]:
-        from ..log import mcapio
-        from .markers import feature_markers
-
-        f = extract_run(run, self.params, self.odometry, landmarks=False, segments=segments, progress=progress)
-        ranges = np.ascontiguousarray(run.ranges, np.float32)
-        det, stamps = _world_detections(f, ranges, self.odometry, self.params)
-        f.landmarks = LandmarkDatabase(det, stamps, self.params, stream=self.landmarks)
-        world = self.odometry is not None and len(self.odometry) > 0
-        f.landmark_frame = self.odometry.frame_id if world else run.geometry.frame_id
-        channels = (
-            {}
-            if segments is not None
-            else {
-                mcapio.TOPIC_SEGMENTS: (
-                    types.SEGMENTS,
-                    stamps,
-                    segment_payloads(run, f.seg_start, f.seg_end, f.seg_offsets),
-                )
-            }
-        )
-        channels |= {
-            mcapio.TOPIC_FEATURES: (types.FEATURES, stamps, feature_payloads(f)),
-            mcapio.TOPIC_LANDMARKS: (types.LANDMARKS, stamps, landmark_payloads(f)),
-        }
-        if markers:
-            drawn = feature_markers(run, f, self.odometry)
-            channels[mcapio.TOPIC_MARKERS_FEATURES] = (types.MARKER_ARRAY, stamps, drawn)
-        return channels, f
-
-
 def leg_model_provenance(spec: str) -> dict:
     """What an output records of the leg detector `spec` names: the rule, or the model file with its
     SHA-256, decision threshold and what it was trained on (held-out figures included)."""
@@ -464,56 +415,3 @@ def leg_model_provenance(spec: str) -> dict:
         "features": list(model.feature_names),
         "trained": trained,
     }
-
-
-def segment_payloads(run: ScanRun, seg_start: np.ndarray, seg_end: np.ndarray, offsets: np.ndarray) -> list[bytes]:
-    """datmo_msgs/msg/Segments CDR payloads, one per scan."""
-    frame = run.geometry.frame_id
-    return [
-        cdr.encode(types.SEGMENTS, {"stamp_ns": s, "frame_id": frame, "start": seg_start[a:b], "end": seg_end[a:b]})
-        for s, a, b in zip(run.stamps.tolist(), offsets[:-1].tolist(), offsets[1:].tolist(), strict=True)
-    ]
-
-
-def feature_payloads(f: RunFeatures) -> list[bytes]:
-    """datmo_msgs/msg/Features CDR payloads, one per scan."""
-    lo, co, bo = f.line_offsets.tolist(), f.circle_offsets.tolist(), f.blob_offsets.tolist()
-    go = f.leg_offsets.tolist()
-    return [
-        cdr.encode(
-            types.FEATURES,
-            {
-                "stamp_ns": s,
-                "frame_id": f.frame_id,
-                "lines": f.lines[lo[k] : lo[k + 1]],
-                "circles": f.circles[co[k] : co[k + 1]],
-                "blobs": f.blobs[bo[k] : bo[k + 1]],
-                "legs": f.legs[go[k] : go[k + 1]],
-            },
-        )
-        for k, s in enumerate(f.stamps.tolist())
-    ]
-
-
-def landmark_payloads(f: RunFeatures) -> list[bytes]:
-    """datmo_msgs/msg/Landmarks CDR payloads: the database after each scan."""
-    db = f.landmarks
-    elems = db.all_snapshots(f.stamps)
-    off = db.snap_offsets.tolist()
-    return [
-        cdr.encode(
-            types.LANDMARKS, {"stamp_ns": s, "frame_id": f.landmark_frame, "landmarks": elems[off[k] : off[k + 1]]}
-        )
-        for k, s in enumerate(np.asarray(f.stamps, np.int64).tolist())
-    ]
-
-
-def decode_segments(payloads: list[bytes], first: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(start, end, offsets) of datmo_msgs/msg/Segments payloads (a log's /datmo/segments, messages first..;
-    cdr.DecodeError names a damaged one)."""
-    msgs = cdr.decode_many(types.SEGMENTS, payloads, first)
-    starts = [np.asarray(m["start"], np.int64) for m in msgs]
-    ends = [np.asarray(m["end"], np.int64) for m in msgs]
-    offsets = _offsets(np.array([len(s) for s in starts], np.int64))
-    empty = np.zeros(0, np.int64)
-    return (np.concatenate(starts) if starts else empty), (np.concatenate(ends) if ends else empty), offsets
