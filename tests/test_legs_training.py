@@ -1,6 +1,6 @@
-"""Leg detector training (datmo_cli.perception.training): label matching, segment labels, leave-one-recording-out
-folds (no held-out recording ever trains), metrics on hand-made cases, reading labelled bags and MCAP files,
-and the packaged model's provenance against ../shared/data."""
+"""Leg detector training (the datmo_cli.perception.training package): label matching, segment labels,
+leave-one-recording-out folds (no held-out recording ever trains), metrics on hand-made cases, reading labelled
+bags and MCAP files, and the packaged model's provenance against ../shared/data."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import pytest
 from datmo_cli.errors import InputError
 from datmo_cli.perception import training as T
 from datmo_cli.perception.legs import FEATURE_NAMES
+from datmo_cli.perception.training import cross_validation as CV
 from tests.conftest import shared_path
 from tests.synthetic_legs import scene, write_bag, write_mcap
 
@@ -110,9 +111,9 @@ def test_no_held_out_recording_ever_trains_its_own_fold_or_threshold(monkeypatch
         scored.append((table.name, model.names))
         return np.full(len(table), 0.5)
 
-    monkeypatch.setattr(T, "fit", spy_fit)
-    monkeypatch.setattr(T, "to_model", lambda est, *a, **k: Model(est))
-    monkeypatch.setattr(T, "scores", spy_scores)
+    monkeypatch.setattr(CV, "fit", spy_fit)  # where cross_validate and tuned_threshold look them up
+    monkeypatch.setattr(CV, "to_model", lambda est, *a, **k: Model(est))
+    monkeypatch.setattr(CV, "scores", spy_scores)
     held = T.cross_validate(lab, emp, T.EstimatorSpec())
     assert [(h.labelled, h.empty) for h in held] == [("L0", "E0"), ("L1", "E1"), ("L2", "E2"), ("L3", "E0")]
     assert all(name not in names for name, names in scored)
