@@ -86,7 +86,7 @@ def detect_kind(path: str | Path) -> str:
     Raises InputError for a missing file, an empty file, a directory that is not a ROS 2 bag, and
     content of no known kind.
     """
-    from .carmen import sniff_text
+    from .carmen_parse import sniff_text
 
     path = Path(path)
     _check_path(path)
