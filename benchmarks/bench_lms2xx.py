@@ -37,7 +37,7 @@ def bench_decode(n: int = 2000) -> Row:
 
 
 def bench_parser(n: int = 2000, chunk: int = 4096) -> tuple[Row, float]:
-    from datmo_cli.lms2xx import protocol as P
+    from datmo_cli.lms2xx.frame_parser import FrameParser
 
     raw, _ = _telegram()
     rng = np.random.default_rng(1)
@@ -48,7 +48,7 @@ def bench_parser(n: int = 2000, chunk: int = 4096) -> tuple[Row, float]:
     stream = b"".join(g + raw for g in garbage)
 
     def run() -> None:
-        parser = P.FrameParser()
+        parser = FrameParser()
         for i in range(0, len(stream), chunk):
             parser.feed(stream[i : i + chunk])
         assert parser.stats.frames == n

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .lms2xx.emulator import LogSource, ScanSource
+from .lms2xx.scan_sources import LogSource, ScanSource
 from .log.vocabulary import CLASS_PERSON
 
 # ------------------------------------------------------------------------------------ leg recordings

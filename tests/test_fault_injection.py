@@ -184,7 +184,8 @@ def test_write_failures_at_seeded_points_of_record(tmp_path, monkeypatch):
     """A full disk while recording keeps every scan flushed before it: the file cut after its last complete
     chunk and renamed into place, one line saying so, exit 1, no temporary file."""
     from datmo_cli.lms2xx import recorder
-    from datmo_cli.lms2xx.emulator import ArraySource, Emulator
+    from datmo_cli.lms2xx.emulator import Emulator
+    from datmo_cli.lms2xx.scan_sources import ArraySource
 
     rng = random.Random("write failures record")
     rooms = RECORD_ROOM + [rng.randrange(1_000, 20_000) for _ in range(2)]

@@ -9,7 +9,8 @@ import pytest
 
 from datmo_cli.errors import GeometryError, InputError
 from datmo_cli.log.importers import detect_kind, import_log
-from datmo_cli.log.importers.carmen import flaser_angles, no_return_limit, parse_lines, stamps_ns
+from datmo_cli.log.importers.carmen_conventions import flaser_angles, no_return_limit, stamps_ns
+from datmo_cli.log.importers.carmen_parse import parse_lines
 
 
 def flaser(ranges, t: float, pose=(1.0, 2.0, 0.5), name: str = "FLASER") -> str:

@@ -8,6 +8,7 @@ import pytest
 from datmo_cli.errors import DeviceError
 from datmo_cli.lms2xx import protocol as P
 from datmo_cli.lms2xx.driver import DeviceDisconnected, LMS2xx
+from datmo_cli.lms2xx.frame_parser import FrameParser
 
 
 class FakeLMS:
@@ -19,7 +20,7 @@ class FakeLMS:
         self.out = bytearray()
         self.scans = scans
         self.garbage = garbage
-        self.parser = P.FrameParser(replies=False)
+        self.parser = FrameParser(replies=False)
         self.commands: list[bytes] = []
         self.closed = False
         self.hang_up = False

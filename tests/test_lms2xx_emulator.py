@@ -14,7 +14,10 @@ import serial
 
 from datmo_cli.errors import ConfigError
 from datmo_cli.lms2xx import protocol as P
-from datmo_cli.lms2xx.emulator import ArraySource, Emulator, Faults
+from datmo_cli.lms2xx.emulator import Emulator
+from datmo_cli.lms2xx.faults import Faults
+from datmo_cli.lms2xx.frame_parser import FrameParser
+from datmo_cli.lms2xx.scan_sources import ArraySource
 from datmo_cli.log import mcapio
 
 
@@ -35,7 +38,7 @@ def test_fault_spec_parsing():
 def _exchange(port: serial.Serial, frame: bytes, n: int = 200, wait: float = 0.3) -> list:
     port.reset_input_buffer()
     port.write(frame)
-    parser = P.FrameParser()
+    parser = FrameParser()
     out: list = []
     deadline = time.monotonic() + wait
     while time.monotonic() < deadline:

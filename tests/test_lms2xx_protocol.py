@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from datmo_cli.lms2xx import protocol as P
+from datmo_cli.lms2xx.frame_parser import FrameParser
 
 # (bytes, payload builder or None) for every telegram in the doc's CRC table (§3)
 VECTORS = {
@@ -78,7 +79,7 @@ def test_real_capture():
     assert ranges.dtype == np.float32 and np.isfinite(ranges).all()
     assert ranges.min() == np.float32(0.407) and ranges.max() < 8.0
     # the incremental parser finds it in any chunking, after garbage
-    parser = P.FrameParser()
+    parser = FrameParser()
     stream = b"\x11\x22\x02\x33" + raw + raw[:100]
     got = [f for i in range(0, len(stream), 37) for f in parser.feed(stream[i : i + 37])]
     assert [f.raw for f in got] == [raw] and parser.stats.resyncs == 1 and parser.stats.discarded == 4
@@ -177,13 +178,13 @@ def test_parser_counts_crc_and_length_errors_and_handshake():
     bad_crc = good[:-1] + bytes([good[-1] ^ 0xFF])
     scan = P.reply_frame(P.encode_b0(np.arange(181, dtype=np.uint16)))
     bad_len = scan[:2] + (2 * 181 + 8).to_bytes(2, "little") + scan[4:]  # length disagrees with the info word
-    parser = P.FrameParser()
+    parser = FrameParser()
     items = parser.feed(bytes([P.ACK]) + bad_crc + good + bad_len + scan + bytes([P.NAK]))
     assert items[0] == P.ACK and items[-1] == P.NAK
     frames = [i for i in items if isinstance(i, P.Frame)]
     assert [f.command for f in frames] == [0xA0, 0xB0]
     assert parser.stats.crc_errors == 1 and parser.stats.length_errors == 1
-    host = P.FrameParser(replies=False)
+    host = FrameParser(replies=False)
     assert [f.command for f in host.feed(P.cmd_status() + b"\x02\x00\x01\x00\x31\x00\x00" + P.cmd_stop())] == [
         0x31,
         0x20,
@@ -231,21 +232,21 @@ frames_st = st.lists(
 )
 def test_parser_recovers_every_frame_from_any_chunking(frames, garbage, cuts):
     stream = b"".join(g + f for g, f in zip(garbage, frames + [b""], strict=False)) + garbage[-1]
-    parser = P.FrameParser()
+    parser = FrameParser()
     got, pos = [], 0
     for c in cuts:
         got += parser.feed(stream[pos : pos + c])
         pos += c
     got += parser.feed(stream[pos:])
     assert [f.raw for f in got if isinstance(f, P.Frame)] == frames
-    one = P.FrameParser()
+    one = FrameParser()
     assert [f.raw for f in one.feed(stream) if isinstance(f, P.Frame)] == frames
     assert one.stats == parser.stats  # counts do not depend on the chunking
 
 
 def test_parser_says_how_many_bytes_a_started_frame_still_needs():
     frame = P.reply_frame(P.encode_b0(np.arange(361, dtype=np.uint16)))
-    parser = P.FrameParser(replies=True)
+    parser = FrameParser(replies=True)
     assert parser.needed == 0
     parser.feed(b"\x11" + frame[:3])  # garbage, then too little of a header to read its length
     assert parser.needed == 0

@@ -25,8 +25,10 @@ from datmo_cli.errors import OutputError
 from datmo_cli.lms2xx import protocol as P
 from datmo_cli.lms2xx import recorder
 from datmo_cli.lms2xx.driver import LMS2xx
-from datmo_cli.lms2xx.emulator import ArraySource, Emulator, Faults, LogSource
+from datmo_cli.lms2xx.emulator import Emulator
+from datmo_cli.lms2xx.faults import Faults
 from datmo_cli.lms2xx.recorder import record
+from datmo_cli.lms2xx.scan_sources import ArraySource, LogSource
 from datmo_cli.log import mcapio
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.simulated import SceneSource

@@ -169,7 +169,7 @@ def test_row10_corrupt_zstd_frame_header_cli(tmp_path, log, command):
 
 
 def test_row10_emulate_log_with_corrupt_chunk_serves_the_sound_scans(tmp_path, log):
-    from datmo_cli.lms2xx.emulator import LogSource
+    from datmo_cli.lms2xx.scan_sources import LogSource
 
     data = log.read_bytes()
     _, cdata, _ = chunks(data)[1]

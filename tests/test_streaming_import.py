@@ -32,7 +32,7 @@ import datmo_cli.log.ordered as ordered
 from datmo_cli.cli import cli
 from datmo_cli.log import mcapio
 from datmo_cli.log.importers import open_import, write_import
-from datmo_cli.log.importers.carmen import StampCheck
+from datmo_cli.log.importers.carmen_conventions import StampCheck
 from datmo_cli.log.ordered import OrderedSink
 
 REFERENCE = json.loads(DIGESTS.read_text())
@@ -187,7 +187,7 @@ def test_carmen_import_memory_does_not_grow_with_the_log(tmp_path):
 
 
 def test_carmen_parse_spools_every_scan(tmp_path):
-    from datmo_cli.log.importers.carmen import parse_lines
+    from datmo_cli.log.importers.carmen_parse import parse_lines
 
     lines = [flaser([1.0] * 20, 5.0 + i) for i in range(3000)] + [odom_line(1.0, 5.0 + i) for i in range(50)]
     parse = parse_lines(lines, spool=tmp_path)

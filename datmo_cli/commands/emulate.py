@@ -101,7 +101,8 @@ def command(
     Example: datmo emulate --scene hall --fault garbage:0.05,crc:0.01
     """
     from ..errors import ConfigError
-    from ..lms2xx.emulator import Emulator, Faults
+    from ..lms2xx.emulator import Emulator
+    from ..lms2xx.faults import Faults
     from ..progress import quiet
     from ..simulated import scan_source
 

@@ -16,16 +16,17 @@ from __future__ import annotations
 import collections
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import DeviceError
 from ..log.scan import ScanGeometry
 from . import protocol as P
+from .frame_parser import FrameParser, ParserStats
+from .serial_port import READ_TIMEOUT_S, open_port
+from .stream_records import DriverStats, Scan
 
 DETECT_ORDER = (9600, 38400, 19200, 500000)
-READ_TIMEOUT_S = 0.02  # port timeout: how long one read waits for a first byte
 MODE_TIMEOUT_S = 3.5  # a mode change (20h) can take up to 3 s (TL §4.3)
 REPLY_TIMEOUT_S = 0.3
 MIN_WAIT_S, MAX_WAIT_S = 0.001, 0.02  # waits for the rest of a telegram: shorter ones are not worth a sleep
@@ -40,69 +41,6 @@ class _NoReply(Exception):
     def __init__(self, nak: bool) -> None:
         super().__init__("no reply")
         self.nak = nak
-
-
-@dataclass
-class DriverStats:
-    """Counts since the stream started (frames rejected, resyncs, scans lost)."""
-
-    scans: int = 0
-    telegrams: int = 0
-    crc_errors: int = 0
-    length_errors: int = 0
-    resyncs: int = 0
-    discarded_bytes: int = 0
-    dropped: int = 0
-    naks: int = 0
-    retries: int = 0
-    incomplete: int = 0  # interlaced sets missing a partial scan
-
-    def as_dict(self) -> dict[str, int]:
-        return dict(self.__dict__)
-
-
-@dataclass
-class Scan:
-    """One complete scan: raw values (uint16), ranges (m, float32), host times of its first and last byte
-    (ns), real-time indices when sent, and the scans lost just before it (dropped_before)."""
-
-    stamp_ns: int
-    end_ns: int
-    values: np.ndarray
-    ranges: np.ndarray
-    telegram: P.Telegram
-    raw: bytes
-    dropped_before: int = 0
-
-    @property
-    def scan_index(self) -> int | None:
-        return self.telegram.scan_index
-
-
-def open_port(path: str, baud: int = 9600):
-    """Open `path` with pyserial: 8N1, raw, no flow control. Raises DeviceError with the reason."""
-    import os
-
-    import serial
-
-    if not os.path.exists(path):
-        raise DeviceError(f"{path}: cannot open serial port (no such device)")
-    try:
-        return serial.Serial(
-            path,
-            baud,
-            bytesize=8,
-            parity="N",
-            stopbits=1,
-            timeout=READ_TIMEOUT_S,
-            write_timeout=2.0,
-            xonxoff=False,
-            rtscts=False,
-            dsrdtr=False,
-            exclusive=True,
-        )
-    except (serial.SerialException, OSError, ValueError) as exc:
-        raise DeviceError(f"{path}: cannot open serial port ({exc})") from None
 
 
 class LMS2xx:
@@ -143,7 +81,7 @@ class LMS2xx:
         self.measuring_mode = 0
         self.streaming = False
         self.stats = DriverStats()
-        self._parser = P.FrameParser(replies=True)
+        self._parser = FrameParser(replies=True)
         self._items: collections.deque[tuple[P.Frame | int, int]] = collections.deque()
         self._chunks: collections.deque[tuple[int, int]] = collections.deque(maxlen=256)  # (end offset, t ns)
         self._line_free_ns = 0  # when the last frame's last byte came (ns): the earliest the next can start
@@ -408,7 +346,7 @@ class LMS2xx:
     def start(self) -> None:
         """Start continuous (or interlaced) output."""
         frame = P.cmd_interlaced() if self._interlacing else P.cmd_stream()
-        self._parser.stats = P.ParserStats()
+        self._parser.stats = ParserStats()
         self.stats = DriverStats(naks=self.stats.naks, retries=self.stats.retries)
         reply = self._command(frame, P.REPLY_MODE, "the start of continuous output", timeout=MODE_TIMEOUT_S)
         if reply.data[:1] != b"\x00":

@@ -9,9 +9,9 @@ A pty has no physical baud rate, so bytes are paced in software (baud/10 bytes p
 emulator compares the speed the host set on the terminal (termios) with the baud it is at: host bytes
 sent at the wrong speed are ignored, and the host receives garbage instead of the emulator's output.
 
-Scans come from a `ScanSource` (a log, fixed arrays, or a simulated scene: datmo_cli.simulated); faults
-(garbage, corrupt CRCs, truncated telegrams, dropped bytes, NAKs, a disconnect) can be injected into the
-scan stream.
+Scans come from a `ScanSource` (scan_sources.py: a log, fixed arrays, or a simulated scene: datmo_cli.simulated);
+faults (faults.py: garbage, corrupt CRCs, truncated telegrams, dropped bytes, NAKs, a disconnect) can be injected
+into the scan stream.
 """
 
 from __future__ import annotations
@@ -25,12 +25,14 @@ import time
 import tty
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError, InputError
+from ..errors import ConfigError
 from . import protocol as P
+from .faults import Faults
+from .frame_parser import FrameParser
+from .scan_sources import ScanSource
 
 SPEEDS = {
     9600: termios.B9600,
@@ -38,112 +40,6 @@ SPEEDS = {
     38400: termios.B38400,
     500000: getattr(termios, "B500000", 0x1005),
 }
-GARBAGE_BYTES = np.array([b for b in range(256) if b not in (P.STX, P.ACK, P.NAK)], np.uint8)
-
-
-# ---------------------------------------------------------------------------------------------- faults
-
-
-@dataclass
-class Faults:
-    """Faults injected into the scan stream. Probabilities are per scan telegram.
-
-    garbage: a burst of 1-32 random bytes (never STX, ACK or NAK) before the telegram; crc: corrupt its CRC;
-    truncate: send only its first 7..len-3 bytes; drop: leave out one byte after the header; (crc, truncate
-    and drop exclude each other); disconnect: hang up after that many scan telegrams; nak: answer the first
-    that many good host frames with NAK as if their CRC were bad.
-    """
-
-    garbage: float = 0.0
-    crc: float = 0.0
-    truncate: float = 0.0
-    drop: float = 0.0
-    disconnect: int | None = None
-    nak: int = 0
-
-    @classmethod
-    def parse(cls, spec: str | None) -> Faults:
-        """Faults from `garbage:0.1,crc:0.05,truncate:0.02,drop:0.02,disconnect:200,nak:1`."""
-        out = cls()
-        if not spec:
-            return out
-        for item in spec.split(","):
-            name, _, value = item.strip().partition(":")
-            name = name.strip().lower()
-            try:
-                if name in ("garbage", "crc", "truncate", "drop"):
-                    p = float(value)
-                    if not 0.0 <= p <= 1.0:
-                        raise ValueError
-                    setattr(out, name, p)
-                elif name in ("disconnect", "nak"):
-                    k = int(value)
-                    if k < 0:
-                        raise ValueError
-                    setattr(out, name, k)
-                else:
-                    raise ConfigError(f"fault {name!r}: unknown (use garbage, crc, truncate, drop, disconnect, nak)")
-            except ValueError:
-                kind = "a probability in [0, 1]" if name not in ("disconnect", "nak") else "a count >= 0"
-                raise ConfigError(f"fault {item.strip()!r}: the value must be {kind}") from None
-        if out.crc + out.truncate + out.drop > 1:
-            raise ConfigError("faults crc + truncate + drop must add up to at most 1")
-        return out
-
-
-# --------------------------------------------------------------------------------------------- sources
-
-
-class ScanSource:
-    """Complete scans (uint16 values as the LMS sends them) for a variant, units and measuring mode."""
-
-    def scans(self, angle_deg: int, resolution_cdeg: int, units: str, measuring_mode: int) -> Iterator[np.ndarray]:
-        raise NotImplementedError
-
-
-class ArraySource(ScanSource):
-    """Fixed values, repeated: `values` (K, B) uint16 for the variant with B values (others get a wall)."""
-
-    def __init__(self, values: np.ndarray) -> None:
-        self.values = np.atleast_2d(np.asarray(values, np.uint16))
-
-    def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):
-        n = P.VARIANTS[(angle_deg, resolution_cdeg)]
-        rows = self.values if self.values.shape[1] == n else np.full((1, n), 2000, np.uint16)
-        while True:
-            yield from rows
-
-
-class LogSource(ScanSource):
-    """The scans of a log, repeated; each beam of the variant takes the log's nearest beam (NaN outside)."""
-
-    def __init__(self, path: str | Path) -> None:
-        from ..log.mcapio import read_run
-
-        self.run = read_run(path)
-        self.path = Path(path)
-        if self.run.geometry.n_beams == 0:
-            raise InputError(f"{path}: its scans have no beams: nothing to serve")
-
-    def scans(self, angle_deg, resolution_cdeg, units, measuring_mode):
-        g = self.run.geometry
-        n = P.VARIANTS[(angle_deg, resolution_cdeg)]
-        want = np.radians(-angle_deg / 2 + resolution_cdeg / 100 * np.arange(n))
-        pos = np.rint((want - g.angle_min) / g.angle_increment).astype(np.int64)
-        inside = (
-            (pos >= 0)
-            & (pos < g.n_beams)
-            & (np.abs(g.angle_min + pos * g.angle_increment - want) <= abs(g.angle_increment))
-        )
-        pos = np.clip(pos, 0, g.n_beams - 1)
-        ranges = self.run.ranges[:, pos]
-        ranges[:, ~inside] = np.nan
-        values = P.ranges_to_values(ranges, units, measuring_mode)
-        while True:
-            yield from values
-
-
-# -------------------------------------------------------------------------------------------- emulator
 
 
 @dataclass
@@ -245,7 +141,7 @@ class Emulator:
         self._scans: Iterator[np.ndarray] | None = None
         self._key: tuple | None = None
         self._queue: collections.deque[_Out] = collections.deque()
-        self._parser = P.FrameParser(replies=False)
+        self._parser = FrameParser(replies=False)
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._running = False
@@ -560,24 +456,11 @@ class Emulator:
         self._telegrams += 1
         scan = SentScan(number, np.array(values, np.uint16), self.units, self.measuring_mode, partial, offset, frame)
         f = self.faults
-        rng = self._rng
-        if f.garbage and rng.random() < f.garbage:
-            burst = rng.choice(GARBAGE_BYTES, int(rng.integers(1, 33))).tobytes()
+        burst, data, scan.fault = f.corrupt(frame, self._rng)
+        if burst:
             scan.garbage = len(burst)
             self.stats.faults["garbage"] += 1
             self._send(burst)
-        data = frame
-        u = rng.random() if (f.crc or f.truncate or f.drop) else 1.0
-        if u < f.crc:
-            data = frame[:-1] + bytes([frame[-1] ^ int(rng.integers(1, 256))])
-            scan.fault = "crc"
-        elif u < f.crc + f.truncate:
-            data = frame[: int(rng.integers(7, len(frame) - 2))]
-            scan.fault = "truncate"
-        elif u < f.crc + f.truncate + f.drop:
-            i = int(rng.integers(7, len(frame) - 1))
-            data = frame[:i] + frame[i + 1 :]
-            scan.fault = "drop"
         if scan.fault:
             self.stats.faults[scan.fault] += 1
         with self._lock:

@@ -20,7 +20,8 @@ from ..errors import DatmoError, OutputError
 from ..log import mcapio, transforms
 from ..log.scan import TELEGRAM, encode_telegram
 from ..outputs import Terminated
-from .driver import DeviceDisconnected, DriverStats
+from .driver import DeviceDisconnected
+from .stream_records import DriverStats
 
 FLUSH_EVERY_S = 0.5
 

@@ -3,7 +3,7 @@
 For logs that must look like a ROS 1 robot's (`datmo simulate -o NAME.bag`): sensor_msgs/LaserScan, nav_msgs/Odometry
 and tf2_msgs/TFMessage on /tf, frame names with ROS 1's leading slash (`/odom`, `/base_link`, `/laser`) and no
 /tf_static (ROS 1 drivers and static_transform_publisher repeat fixed transforms on /tf). Poses are planar
-(x, y in metres, yaw in radians, z = 0), quaternions made as mcapio.encode_odometry makes them, so a pose read back
+(x, y in metres, yaw in radians, z = 0), quaternions made as encode_odometry makes them, so a pose read back
 is the same number whichever format carried it. Messages are written in the order given; the bag's index sorts
 them by time.
 

@@ -24,7 +24,7 @@ from pathlib import Path, PurePath
 
 from .. import outputs
 from ..errors import OutputError, OutputExistsError
-from . import mcapio
+from .mcap_reader import LogContents, summary
 
 METADATA = "metadata.yaml"
 # rosbag2's metadata version of ROS 2 Humble: Humble and every later release read it, and so does rosbags.
@@ -137,8 +137,8 @@ def _scalar(text: str) -> str:
     return json.dumps(text)
 
 
-def metadata_text(log: mcapio.LogContents, file_name: str) -> str:
-    """metadata.yaml of a bag whose one file `file_name` holds `log` (read with mcapio.summary): rosbag2's
+def metadata_text(log: LogContents, file_name: str) -> str:
+    """metadata.yaml of a bag whose one file `file_name` holds `log` (read with summary): rosbag2's
     fields of VERSION, each channel as a topic with its offered QoS as the channel's metadata gives it (the
     same text, so readers that match the file's channels with the metadata find them equal)."""
     channels = sorted(log.channels.values(), key=lambda c: c.id)
@@ -183,7 +183,7 @@ def metadata_text(log: mcapio.LogContents, file_name: str) -> str:
 
 def _write_metadata(tmp: Path, log_file: Path, dest: Path) -> None:
     with outputs.writing(dest):
-        text = metadata_text(mcapio.summary(log_file), log_file.name)
+        text = metadata_text(summary(log_file), log_file.name)
         with open(tmp / METADATA, "w", encoding="utf-8") as f:
             f.write(text)
             f.flush()

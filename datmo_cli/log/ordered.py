@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mcapio import LogWriter
+from .mcap_writer import LogWriter
 
 _MIN = int(np.iinfo(np.int64).min)
 WINDOW = 4096  # messages written at once, and held back at least, once more than twice as many are held

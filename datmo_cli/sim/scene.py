@@ -48,12 +48,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bounds import OPTIONS, Bound, check
+from ..bounds import OPTIONS
 from ..errors import ConfigError, InputError
 from .paths import PathSpec
+from .scene_fields import PATH_KEYS, SceneValidator
 from .walking import Gait
 
-PATH_KEYS = {"path", "speed", "pauses", "start_time", "loop"}
 GAIT_KEYS = {"shoulder_width", "leg_radius", "leg_length", "swing_angle_deg", "step_length", "double_support"}
 
 
@@ -208,7 +208,7 @@ def parse_scene(text: str, source: str = "<scene>", default_name: str = "scene")
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: invalid TOML: {exc}") from None
-    v = _Validator(source)
+    v = SceneValidator(source)
     v.keys(
         data,
         "top level",
@@ -259,7 +259,7 @@ def parse_scene(text: str, source: str = "<scene>", default_name: str = "scene")
     return Scene(source=source, text=text, **kw)
 
 
-def _sensor(v: _Validator, t: dict) -> SensorPlacement:
+def _sensor(v: SceneValidator, t: dict) -> SensorPlacement:
     where = "[sensor]"
     v.keys(t, where, {"pose", "turn_rate_deg", "follow", "gap", "odometry", "laser_pose"} | PATH_KEYS)
     placements = [k for k in ("pose", "path", "follow") if k in t]
@@ -296,7 +296,7 @@ def _sensor(v: _Validator, t: dict) -> SensorPlacement:
     )
 
 
-def _check_follow(v: _Validator, sensor: SensorPlacement | None, people: tuple[Person, ...]) -> None:
+def _check_follow(v: SceneValidator, sensor: SensorPlacement | None, people: tuple[Person, ...]) -> None:
     """A followed person exists, walks, and is slower than the robot."""
     if sensor is None or sensor.follow is None:
         return
@@ -314,7 +314,7 @@ def _check_follow(v: _Validator, sensor: SensorPlacement | None, people: tuple[P
         )
 
 
-def _scanner(v: _Validator, t: dict) -> ScannerSpec:
+def _scanner(v: SceneValidator, t: dict) -> ScannerSpec:
     where = "[scanner]"
     v.keys(t, where, {"beams", "fov_deg", "range"})
     beams = v.integer(t, where, "beams")
@@ -329,7 +329,7 @@ def _scanner(v: _Validator, t: dict) -> ScannerSpec:
     return ScannerSpec(beams, fov, float(rng[0]), float(rng[1]))
 
 
-def _wall(v: _Validator, t: dict, where: str) -> Wall:
+def _wall(v: SceneValidator, t: dict, where: str) -> Wall:
     v.keys(t, where, {"points", "closed"})
     pts = v.points(t, where, "points", minimum=2)
     closed = v.boolean(t, where, "closed", False)
@@ -340,12 +340,12 @@ def _wall(v: _Validator, t: dict, where: str) -> Wall:
     return Wall(pts, closed)
 
 
-def _column(v: _Validator, t: dict, where: str) -> Column:
+def _column(v: SceneValidator, t: dict, where: str) -> Column:
     v.keys(t, where, {"center", "radius"})
     return Column(v.vector(t, where, "center", 2), v.number(t, where, "radius", positive=True))
 
 
-def _bench(v: _Validator, t: dict, where: str) -> Bench:
+def _bench(v: SceneValidator, t: dict, where: str) -> Bench:
     v.keys(t, where, {"supports", "support_radius", "seat_width"})
     sup = v.points(t, where, "supports", minimum=2)
     if len(sup) != 2 or np.all(sup[0] == sup[1]):
@@ -357,7 +357,7 @@ def _bench(v: _Validator, t: dict, where: str) -> Bench:
     )
 
 
-def _box(v: _Validator, t: dict, where: str) -> Box:
+def _box(v: SceneValidator, t: dict, where: str) -> Box:
     v.keys(t, where, {"center", "size", "orientation_deg"} | PATH_KEYS)
     size = v.vector(t, where, "size", 2)
     if np.any(size <= 0):
@@ -371,7 +371,7 @@ def _box(v: _Validator, t: dict, where: str) -> Box:
     )
 
 
-def _platform(v: _Validator, t: dict, where: str) -> Platform:
+def _platform(v: SceneValidator, t: dict, where: str) -> Platform:
     v.keys(t, where, {"radius", "center", "pulled_by", "wire"} | PATH_KEYS)
     radius = v.number(t, where, "radius", 0.25, positive=True)
     path = v.path(t, where, required=False)
@@ -387,7 +387,7 @@ def _platform(v: _Validator, t: dict, where: str) -> Platform:
     return Platform(radius, center, path, pulled, v.number(t, where, "wire", 2.0, positive=True))
 
 
-def _person(v: _Validator, t: dict, where: str, index: int) -> Person:
+def _person(v: SceneValidator, t: dict, where: str, index: int) -> Person:
     v.keys(t, where, {"name", "position", "heading_deg"} | PATH_KEYS | GAIT_KEYS)
     g = Gait()
     step = v.number(t, where, "step_length", None, positive=True)
@@ -416,7 +416,7 @@ def _person(v: _Validator, t: dict, where: str, index: int) -> Person:
     )
 
 
-def _crowd(v: _Validator, t: dict) -> Crowd:
+def _crowd(v: SceneValidator, t: dict) -> Crowd:
     where = "[crowd]"
     v.keys(t, where, {"people", "area", "speed", "pause_probability", "max_pause"})
     people = v.bounded(t, where, "people", 6, OPTIONS["people"])
@@ -432,151 +432,3 @@ def _crowd(v: _Validator, t: dict) -> Crowd:
     return Crowd(
         people, area, (float(speed[0]), float(speed[1])), prob, v.number(t, where, "max_pause", 3.0, nonnegative=True)
     )
-
-
-_REQUIRED = object()
-
-
-class _Validator:
-    """Typed getters that raise ConfigError naming the file, table and key."""
-
-    def __init__(self, source: str) -> None:
-        self.source = source
-
-    def fail(self, where: str, key: str, msg: str):
-        raise ConfigError(f"{self.source}: {where}, key '{key}': {msg}")
-
-    def keys(self, t: dict, where: str, allowed: set[str]) -> None:
-        for k in t:
-            if k not in allowed:
-                raise ConfigError(f"{self.source}: {where}: unknown key '{k}' (allowed: {', '.join(sorted(allowed))})")
-
-    def _get(self, t: dict, where: str, key: str, default):
-        if key not in t:
-            if default is _REQUIRED:
-                raise ConfigError(f"{self.source}: {where}: missing key '{key}'")
-            return _REQUIRED
-        return t[key]
-
-    def table(self, data: dict, key: str, where: str) -> dict:
-        t = data[key]
-        if not isinstance(t, dict):
-            raise ConfigError(f"{self.source}: '{key}' must be a table ({where})")
-        return t
-
-    def tables(self, data: dict, key: str) -> list[tuple[dict, str]]:
-        items = data.get(key, [])
-        if not isinstance(items, list) or not all(isinstance(x, dict) for x in items):
-            raise ConfigError(f"{self.source}: '{key}' must be an array of tables ([[{key}]])")
-        return [(t, f"[[{key}]] {i}") for i, t in enumerate(items, 1)]
-
-    def string(self, t: dict, where: str, key: str, default=_REQUIRED):
-        x = self._get(t, where, key, default)
-        if x is _REQUIRED:
-            return default
-        if not isinstance(x, str):
-            self.fail(where, key, f"must be a string, got {x!r}")
-        return x
-
-    def boolean(self, t: dict, where: str, key: str, default=_REQUIRED) -> bool:
-        x = self._get(t, where, key, default)
-        if x is _REQUIRED:
-            return default
-        if not isinstance(x, bool):
-            self.fail(where, key, f"must be true or false, got {x!r}")
-        return x
-
-    def integer(self, t: dict, where: str, key: str, default=_REQUIRED) -> int:
-        x = self._get(t, where, key, default)
-        if x is _REQUIRED:
-            return default
-        if isinstance(x, bool) or not isinstance(x, int) or x < 0:
-            self.fail(where, key, f"must be a whole number >= 0, got {x!r}")
-        return x
-
-    def number(
-        self, t: dict, where: str, key: str, default=_REQUIRED, *, positive: bool = False, nonnegative: bool = False
-    ):
-        x = self._get(t, where, key, default)
-        if x is _REQUIRED:
-            return default
-        if isinstance(x, bool) or not isinstance(x, int | float) or not np.isfinite(x):
-            self.fail(where, key, f"must be a number, got {x!r}")
-        if positive and x <= 0:
-            self.fail(where, key, f"must be > 0, got {x!r}")
-        if nonnegative and x < 0:
-            self.fail(where, key, f"must be >= 0, got {x!r}")
-        return float(x)
-
-    def bounded(self, t: dict, where: str, key: str, default: float, bound: Bound) -> float | int:
-        """A number within `bound` (bounds.py), its range said in the error."""
-        x = self._get(t, where, key, default)
-        if x is _REQUIRED:
-            return default
-        return check(bound, x, f"{self.source}: {where}, key '{key}'")
-
-    def vector(self, t: dict, where: str, key: str, n: int, default=_REQUIRED):
-        x = self._get(t, where, key, default)
-        if x is _REQUIRED:
-            return None if default is None else np.array(default, np.float64)
-        if (
-            not isinstance(x, list)
-            or len(x) != n
-            or not all(isinstance(c, int | float) and not isinstance(c, bool) and np.isfinite(c) for c in x)
-        ):
-            self.fail(where, key, f"must be a list of {n} numbers, got {x!r}")
-        return np.array(x, np.float64)
-
-    def points(self, t: dict, where: str, key: str, minimum: int = 1) -> np.ndarray:
-        x = self._get(t, where, key, _REQUIRED)
-        ok = (
-            isinstance(x, list)
-            and len(x) >= minimum
-            and all(
-                isinstance(p, list)
-                and len(p) == 2
-                and all(isinstance(c, int | float) and not isinstance(c, bool) and np.isfinite(c) for c in p)
-                for p in x
-            )
-        )
-        if not ok:
-            self.fail(where, key, f"must be a list of {minimum} or more [x, y] points, got {x!r}")
-        return np.array(x, np.float64)
-
-    def path(self, t: dict, where: str, required: bool = True) -> PathSpec | None:
-        if "path" not in t:
-            if required:
-                raise ConfigError(f"{self.source}: {where}: missing key 'path'")
-            for k in PATH_KEYS - {"path"}:
-                if k in t:
-                    self.fail(where, k, "only applies with a 'path'")
-            return None
-        pts = self.points(t, where, "path", minimum=2)
-        loop = self.boolean(t, where, "loop", False)
-        seq = np.vstack([pts, pts[:1]]) if loop else pts
-        if np.any(np.all(np.diff(seq, axis=0) == 0, axis=1)):
-            self.fail(where, "path", "two consecutive waypoints are equal")
-        pauses_raw = t.get("pauses", [])
-        pauses: dict[int, float] = {}
-        if not isinstance(pauses_raw, list):
-            self.fail(where, "pauses", "must be a list of [waypoint index, seconds] pairs")
-        for p in pauses_raw:
-            if (
-                not isinstance(p, list)
-                or len(p) != 2
-                or isinstance(p[0], bool)
-                or not isinstance(p[0], int)
-                or not 0 <= p[0] < len(pts)
-                or isinstance(p[1], bool)
-                or not isinstance(p[1], int | float)
-                or not 0 <= p[1] < np.inf
-            ):
-                self.fail(where, "pauses", f"each pause is [waypoint index 0..{len(pts) - 1}, seconds >= 0], got {p!r}")
-            pauses[int(p[0])] = float(p[1])
-        return PathSpec(
-            pts,
-            self.number(t, where, "speed", 1.0, positive=True),
-            pauses,
-            self.number(t, where, "start_time", 0.0, nonnegative=True),
-            loop,
-        )

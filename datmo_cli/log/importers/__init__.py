@@ -86,7 +86,7 @@ def detect_kind(path: str | Path) -> str:
     Raises InputError for a missing file, an empty file, a directory that is not a ROS 2 bag, and
     content of no known kind.
     """
-    from .carmen import sniff_text
+    from .carmen_parse import sniff_text
 
     path = Path(path)
     _check_path(path)
@@ -136,7 +136,7 @@ def open_import(
                 path, topic=topic, max_scans=max_scans, progress=progress, spool_dir=spool_dir, block_scans=block_scans
             )
         elif kind == "mcap":
-            from .rosbag import stream_mcap
+            from .mcap_file import stream_mcap
 
             stream = stream_mcap(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans, block_scans=block_scans)
         else:
@@ -202,7 +202,7 @@ class ImportStream:
     # by write_import; `tf_topics` those it has (known up front)
     transforms: list[tuple[str, int, bytes]] = field(default_factory=list)
     tf_topics: tuple[str, ...] = ()
-    # a source with poses and transforms: its /tf_static and its /tf transforms that never change (rosbag.TfSurvey)
+    # a source with poses and transforms: its /tf_static and its /tf transforms that never change (TfSurvey)
     tf_survey: object | None = None
 
     def blocks(self) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
