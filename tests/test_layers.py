@@ -29,10 +29,7 @@ RANK = {"base": 0, "log": 1, "core": 2, "pipeline": 3, "cli": 4}
 # arrows against the layers that another branch removes; each names that branch
 KNOWN: set[tuple[str, str]] = set()
 # import circles (the modules of each) that another branch removes; each names that branch
-KNOWN_CIRCLES: set[frozenset[str]] = {
-    # house-log: the importers package imports its readers, which import its ImportStream back
-    frozenset({"datmo_cli.log.importers", "datmo_cli.log.importers.carmen", "datmo_cli.log.importers.rosbag"}),
-}
+KNOWN_CIRCLES: set[frozenset[str]] = set()
 
 
 def layer(module: str) -> tuple[str, str]:

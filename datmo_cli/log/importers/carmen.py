@@ -285,7 +285,7 @@ def stream_carmen(
     import io
     import tempfile
 
-    from . import ImportStream
+    from .stream import ImportStream
 
     path = Path(path)
     label = str(path)

@@ -40,7 +40,7 @@ def stream_mcap(
     them) and the poses at the first one stamped after the last scan kept. Each block of poses keeps its
     own frame ids (the whole-run import gave all poses the last ones)."""
     from .. import mcapio
-    from . import ImportStream
+    from .stream import ImportStream
 
     path = Path(path)
     label = str(path)

@@ -82,7 +82,7 @@ def stream_bag(
     scans, and rosbags' reader holds the bag's index (about 200 bytes a message, as the bag stores it).
     Each pose keeps its own message's frame ids (the whole-run import gave all poses the last ones; the
     same for a bag whose frames do not change)."""
-    from . import ImportStream
+    from .stream import ImportStream
 
     path = Path(path)
     label = str(path)
