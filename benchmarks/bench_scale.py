@@ -97,7 +97,8 @@ def baseline_run_seconds(src: Path, out: Path) -> float | None:
 
 
 def main() -> None:
-    from datmo_cli.pipeline import features_file, process_file, warm_up
+    from datmo_cli.pipeline import process_file, warm_up
+    from datmo_cli.stage_files import features_file
 
     logs = {n: long_log(n) for n in SIZES}
     small = logs[SIZES[0]]

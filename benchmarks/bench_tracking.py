@@ -68,7 +68,7 @@ def main() -> None:
             f"the hall with given features): {'met' if us <= TRACK_TARGET_US else 'NOT met'}"
         )
     from datmo_cli.log import cdr
-    from datmo_cli.pipeline import track_file
+    from datmo_cli.stage_files import track_file
 
     big, bfeats = _repeat(run, sources["ideal features"])
     with tempfile.TemporaryDirectory() as tmp:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from distributed import WorkerPlugin
 
-from .batch import ensure_warm
+from .batch.task import ensure_warm
 
 
 class WarmUp(WorkerPlugin):

@@ -1,8 +1,8 @@
 """`datmo run --scheduler`: a batch's tasks on a Dask distributed cluster.
 
-One task per input (`batch.run_task` on a worker; the input and output paths are resolved for a shared
+One task per input (`batch.task.run_task` on a worker; the input and output paths are resolved for a shared
 filesystem or are fsspec URLs). Each worker process loads datmo's numba kernels once (a worker plugin
-calls `batch.ensure_warm`), not per task. A task that raises an unexpected error is retried by Dask
+calls `batch.task.ensure_warm`), not per task. A task that raises an unexpected error is retried by Dask
 (`retries`); a task whose worker dies is rescheduled on another worker by the scheduler, and resubmitted
 by the client up to `retries` times if the scheduler gives it up (KilledWorker). Ctrl-C sets a cluster-
 wide Event that running tasks poll as their scans go by: they stop, drop their partial output and return.
@@ -19,7 +19,9 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
-from .batch import CANCELLED, Executor, Task, ensure_warm, failed, run_task
+from .batch.executors import Executor
+from .batch.manifest import CANCELLED
+from .batch.task import Task, ensure_warm, failed, run_task
 from .errors import DatmoError
 from .extras import require
 

@@ -217,10 +217,10 @@ def test_the_leftover_of_an_interrupted_batch_is_redone(tmp_path, sample_logs):
 
     with mcapio.LogWriter(out / "hall.mcap", provenance=mcapio.Provenance("run", {}, [str(src)])) as w:
         w.copy_from(src)
-    assert batch._leftover(str(out / "hall.mcap"), str(src))
+    assert batch.plan._leftover(str(out / "hall.mcap"), str(src))
     plan = batch.prepare([str(src)], str(out))
     assert plan.tasks[0].force and not plan.skipped
-    assert not batch._leftover(str(out / "hall.mcap"), str(sample_logs / "hall.mcap"))
+    assert not batch.plan._leftover(str(out / "hall.mcap"), str(sample_logs / "hall.mcap"))
 
 
 def test_ctrl_c_keeps_finished_outputs_and_a_consistent_manifest(logs, tmp_path):

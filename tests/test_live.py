@@ -332,7 +332,7 @@ class _NoStages:
 
 
 def test_live_feed_drops_scans_rather_than_waiting(monkeypatch):
-    monkeypatch.setattr(live, "Stages", _NoStages)
+    monkeypatch.setattr(live.feed, "Stages", _NoStages)
     run = mcapio.read_run(HALL).slice(0, 11)
     gate = threading.Event()
     server = _Recorder()

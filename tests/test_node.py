@@ -448,7 +448,7 @@ class _NoStages:
 
 
 def test_a_burst_drops_the_oldest_waiting_scans_and_counts_them(monkeypatch):
-    monkeypatch.setattr(live, "Stages", _NoStages)
+    monkeypatch.setattr(live.feed, "Stages", _NoStages)
     run = mcapio.read_run(HALL).slice(0, 12)
     sink = _Stuck()
     feed = live.LiveFeed(sink, backlog=3, drop_oldest=True, scans=False)
@@ -544,7 +544,7 @@ class _Broken:
 
 
 def test_a_feed_whose_stages_failed_closes_even_with_its_queue_full(monkeypatch):
-    monkeypatch.setattr(live, "Stages", _Broken)
+    monkeypatch.setattr(live.feed, "Stages", _Broken)
     run = mcapio.read_run(HALL).slice(0, 1)
     feed = live.LiveFeed(object(), backlog=2)
     feed.scan(int(run.stamps[0]), run.ranges[0], run.geometry)

@@ -83,8 +83,8 @@ def command(
     from ..cli import invocation
     from ..config import provenance_line
     from ..perception.threads import set_default
-    from ..pipeline import features_file
     from ..progress import bar, say
+    from ..stage_files import features_file
     from ..streaming import LogStream
 
     set_default(threads)

@@ -35,8 +35,8 @@ def command(
     """
     from ..cli import invocation
     from ..config import provenance_line
-    from ..pipeline import segment_file
     from ..progress import bar, say
+    from ..stage_files import segment_file
     from ..streaming import LogStream
 
     with scan_log(input, output, topic, odom_topic, force=force) as src:

@@ -98,8 +98,8 @@ def command(
     from ..cli import invocation
     from ..config import provenance_line
     from ..log import bagdir
-    from ..pipeline import track_file
     from ..progress import bar, say
+    from ..stage_files import track_file
     from ..streaming import LogStream
 
     with (

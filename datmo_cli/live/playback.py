@@ -1,0 +1,230 @@
+"""`datmo play`: a log's messages published at its own rate (LogSource, Pace, play), its scans processed on the
+fly when it has no /datmo/tracks, and the markers of a processed log stored without them drawn as it plays
+(DrawnMarkers)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..log import mcapio, types
+from ..log.scan import Odometry
+from .messages import STATIC_EVERY_NS, TOPIC_TF, Message, Stages, Transforms
+
+if TYPE_CHECKING:
+    from ..config import DatmoConfig
+    from .server import LiveServer
+
+
+MIN_LOOP_PASS_S = 1.0  # play --loop: a pass of the log lasts at least this long (s, wall time)
+
+
+class DrawnMarkers:
+    """The Foxglove markers of a processed log stored without them (datmo run, track and features store them
+    only with --markers), drawn as it plays, as the stages draw them: /datmo/markers/tracks from /datmo/tracks
+    (each track's tail from its positions in the scans before, `tail_length` of them) and
+    /datmo/markers/features from /datmo/features and /datmo/landmarks. `odometry`: the log's (tracks and
+    landmarks then in its world frame)."""
+
+    def __init__(self, stream, odometry: Odometry | None, tail_length: int = 20) -> None:
+        self.tracks = stream.has(mcapio.TOPIC_TRACKS) and not stream.has(mcapio.TOPIC_MARKERS_TRACKS)
+        self.features = stream.has(mcapio.TOPIC_FEATURES) and not stream.has(mcapio.TOPIC_MARKERS_FEATURES)
+        self.path = stream.path
+        self.odometry = odometry if odometry is not None and len(odometry) else None
+        self.tail_length = max(int(tail_length), 1)
+        self.tails: dict[int, tuple[np.ndarray, int]] = {}  # track id: (ring of positions (T, 2), positions written)
+
+    def topics(self) -> dict[str, str]:
+        """{topic: message type} of what `messages` gives."""
+        return ({mcapio.TOPIC_MARKERS_FEATURES: types.MARKER_ARRAY} if self.features else {}) | (
+            {mcapio.TOPIC_MARKERS_TRACKS: types.MARKER_ARRAY} if self.tracks else {}
+        )
+
+    def messages(self, copies: dict[str, tuple[list[int], list[bytes]]]) -> list[Message]:
+        """The markers of a block's messages ({topic: (log times, payloads)}, as streaming.Block.copies)."""
+        from ..log import cdr
+
+        out: list[Message] = []
+        if self.features and mcapio.TOPIC_FEATURES in copies:
+            from ..perception.markers import scan_feature_markers
+
+            stamps, payloads = copies[mcapio.TOPIC_FEATURES]
+            lm_stamps, lm_payloads = copies.get(mcapio.TOPIC_LANDMARKS, ([], []))
+            landmarks = dict(zip(lm_stamps, lm_payloads, strict=True))
+            poses = self.odometry.at(np.asarray(stamps, np.int64)) if self.odometry is not None and stamps else None
+            for k, (stamp, payload) in enumerate(zip(stamps, payloads, strict=True)):
+                with mcapio.decoding(self.path, mcapio.TOPIC_FEATURES):
+                    f = cdr.decode(types.FEATURES, payload)
+                lm = landmarks.get(stamp)
+                with mcapio.decoding(self.path, mcapio.TOPIC_LANDMARKS):
+                    elems = cdr.decode(types.LANDMARKS, lm)["landmarks"] if lm is not None else None
+                drawn = scan_feature_markers(
+                    f["stamp_ns"],
+                    f["frame_id"],
+                    f["lines"],
+                    f["circles"],
+                    f["blobs"],
+                    elems,
+                    poses[k] if poses is not None and elems is not None else None,
+                )
+                out.append(Message(int(stamp), mcapio.TOPIC_MARKERS_FEATURES, types.MARKER_ARRAY, drawn))
+        if self.tracks and mcapio.TOPIC_TRACKS in copies:
+            from ..tracking.markers import track_markers
+
+            world = self.odometry is not None
+            for stamp, payload in zip(*copies[mcapio.TOPIC_TRACKS], strict=True):
+                with mcapio.decoding(self.path, mcapio.TOPIC_TRACKS):
+                    msg = cdr.decode(types.TRACKS, payload)
+                tracks = msg["tracks"]
+                tail, count = self._tails(tracks, world)
+                frame = self.odometry.frame_id if world else msg["frame_id"]
+                drawn = track_markers(msg["stamp_ns"], frame, tracks, tail, count, world=world)
+                out.append(Message(int(stamp), mcapio.TOPIC_MARKERS_TRACKS, types.MARKER_ARRAY, drawn))
+        return out
+
+    def _tails(self, tracks: np.ndarray, world: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Each track's ring of recent positions with this scan's added (as the tracker keeps them), and the
+        positions written to it; tracks gone are forgotten."""
+        T = self.tail_length
+        xs, ys = tracks["world_x" if world else "x"].tolist(), tracks["world_y" if world else "y"].tolist()
+        tail = np.zeros((len(tracks), T, 2))
+        count = np.zeros(len(tracks), np.int64)
+        kept = {}
+        for k, tid in enumerate(tracks["id"].tolist()):
+            ring, n = self.tails.get(tid) or (np.zeros((T, 2)), 0)
+            ring[n % T] = xs[k], ys[k]
+            kept[tid] = (ring, n + 1)
+            tail[k], count[k] = ring, n + 1
+        self.tails = kept
+        return tail, count
+
+
+def _ordered(messages: list[Message], order: dict[str, int]) -> list[Message]:
+    """In time order; at one instant the scan first, then the channels in `order` (the log's, then derived)."""
+    return sorted(messages, key=lambda m: (m.stamp, order.get(m.topic, len(order))))
+
+
+class LogSource:
+    """A log's messages as the live view publishes them, a short block at a time, in time order: the log's
+    channels, and when it has no /datmo/tracks, segmentation, features and tracks made from its scans (with
+    the transforms; the channels those stages make replace any the log has); a processed log stored without
+    markers gets them drawn from its tracks and features (DrawnMarkers)."""
+
+    def __init__(self, path: str | Path, config: DatmoConfig | None = None, block_scans: int = 32) -> None:
+        from ..pipeline import open_stages
+        from ..streaming import LogStream
+
+        self.stream = LogStream(path)
+        self.block_scans = block_scans
+        self.config = config
+        self.processed = self.stream.has(mcapio.TOPIC_TRACKS)
+        self.odometry, self.estimated = None, False
+        self.derived: dict[str, str] = {}
+        if not self.processed:
+            stages = open_stages(self.stream, config)
+            self.odometry, self.estimated, self.derived = stages.odometry, stages.estimated, stages.derived()
+        else:
+            self.odometry = self.stream.odometry
+        self.drawn = self._drawn().topics() if self.processed else {}
+        self.transforms = Transforms(
+            self.odometry, self._scan_frame(), self.stream.has(TOPIC_TF) or TOPIC_TF in self.derived
+        )
+        topics = [c.topic for c in self.stream.log.topics().values() if c.count and c.topic not in self.derived]
+        self.copied = topics
+        self.order = {
+            t: i for i, t in enumerate([self.stream.scan_topic] + topics + list(self.derived) + list(self.drawn))
+        }
+
+    def _drawn(self) -> DrawnMarkers:
+        from ..config import DatmoConfig
+
+        return DrawnMarkers(self.stream, self.odometry, (self.config or DatmoConfig()).track.tail_length)
+
+    def declare(self, server: LiveServer) -> None:
+        """Advertise every channel this source will publish (transforms as they come)."""
+        server.declare_log(self.stream.log, exclude=self.derived)
+        for topic, msgtype in (self.derived | self.drawn | self.transforms.topics()).items():
+            server.declare(topic, msgtype)
+
+    def batches(self) -> Iterator[list[Message]]:
+        """The log from its start, a block of scans at a time (the block's messages in time order)."""
+        stages = None if self.processed else Stages(self.odometry, self.config, self.estimated, has_tf=True)
+        transforms = Transforms(self.transforms.odometry, self.transforms.scan_frame, False)
+        drawn = self._drawn() if self.drawn else None
+        for block in self.stream.blocks(self.block_scans, copy=set(self.copied)):
+            out = []
+            for topic, (stamps, payloads) in block.copies.items():
+                msgtype = self.stream.log.topics()[topic].msgtype
+                out += [Message(int(s), topic, msgtype, bytes(p)) for s, p in zip(stamps, payloads, strict=True)]
+            out += transforms.messages(block.run.stamps)
+            if drawn is not None:
+                out += drawn.messages(block.copies)
+            if stages is not None:
+                out += stages.messages(block.run)
+            yield _ordered(out, self.order)
+
+    def _scan_frame(self) -> str:
+        for run in self.stream.scans(1):
+            return run.geometry.frame_id
+        return "laser"
+
+
+class Pace:
+    """When to send a message of log time `stamp` (ns) so the log plays at `rate` times its own speed:
+    `due(stamp)` is the monotonic time (s) to send it at, the clock starting at the first stamp given."""
+
+    def __init__(self, rate: float, clock: Callable[[], float] = time.monotonic) -> None:
+        self.rate = rate
+        self.clock = clock
+        self.origin: tuple[int, float] | None = None
+
+    def due(self, stamp: int) -> float:
+        if self.origin is None:
+            self.origin = (stamp, self.clock())
+        first, start = self.origin
+        return start + (stamp - first) / 1e9 / self.rate
+
+    def wait(self, stamp: int, sleep: Callable[[float], None] = time.sleep) -> None:
+        """Sleep until `stamp` is due (at once when it is past)."""
+        delay = self.due(stamp) - self.clock()
+        if delay > 0:
+            sleep(delay)
+
+
+def play(
+    source: LogSource,
+    server: LiveServer,
+    *,
+    rate: float = 1.0,
+    loop: bool = False,
+    sleep: Callable[[float], None] = time.sleep,
+    clock: Callable[[], float] = time.monotonic,
+) -> int:
+    """Publish `source` on `server` at `rate` times the log's speed, from the start again after the end with
+    `loop` (a new session each time, each pass lasting at least MIN_LOOP_PASS_S, so that a log of one scan
+    does not spin); returns the number of scans sent. `sleep` and `clock`: time.sleep and time.monotonic."""
+    scans = 0
+    while True:
+        pace = Pace(rate, clock)
+        started = clock()
+        last_static: int | None = None
+        for batch in source.batches():
+            for m in batch:
+                pace.wait(m.stamp, sleep)
+                if m.topic == source.stream.scan_topic:
+                    server.time(m.stamp)
+                    scans += 1
+                    if last_static is None or m.stamp - last_static >= STATIC_EVERY_NS:
+                        server.repeat_static(m.stamp)
+                        last_static = m.stamp
+                server.publish(m)
+        if not loop:
+            return scans
+        rest = started + MIN_LOOP_PASS_S - clock()
+        if rest > 0:
+            sleep(rest)
+        server.restart()
