@@ -296,7 +296,7 @@ def _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir, sch
     )
     plots = list(plot_of.values())
     if plots:
-        from .report import check_plot_outputs
+        from ..plot_files import check_plot_outputs
 
         check_plot_outputs(plots, force)
     if scheduler is not None and batch.tasks:
@@ -416,7 +416,7 @@ def _report(
             if fmt:
                 summaries.append(made[i] if made[i] is not None else summarise_file(out))
             continue
-        from .report import save_plot
+        from ..plot_files import save_plot
 
         data = read_run_data(out, keep_scans=True)
         summaries.append(made[i] if made[i] is not None else summarise(data))
