@@ -108,7 +108,7 @@ def command(
     """
     from ..pipeline import read_run_data
     from ..progress import bar, say
-    from ..report import render, summarise, summarise_file
+    from ..report import summarise, summarise_file
 
     files, batches = _batches(list(files))
     plots = plot_paths(plot, files) if plot else []
@@ -126,7 +126,15 @@ def command(
                 summaries.append(summarise_file(path, progress=lambda n, d=done: progress.update(d + n)))
             done += counts[i]
             progress.update(done)
-    options = {"top": top, "sort": sort, "tracks": track_table, "all_tracks": all_tracks}
+    _print(summaries, batches, fmt, top=top, sort=sort, tracks=track_table, all_tracks=all_tracks)
+    for line in written:
+        say(line)
+
+
+def _print(summaries: list, batches: list[tuple[Path, list[dict]]], fmt: str, **options) -> None:
+    """Print the report of `summaries` (report.RunSummary) and of the batch folders in `fmt` on stdout."""
+    from ..report import render
+
     if fmt == "json":
         from ..batch import summary
 
@@ -144,8 +152,6 @@ def command(
         render(summaries, fmt, **options, console=console(), before=_batch_tables(batches))
     else:
         click.echo(render(summaries, fmt, **options, before=_batch_tables(batches)), nl=False)
-    for line in written:
-        say(line)
 
 
 def _batches(paths: list[Path]) -> tuple[list[Path], list[tuple[Path, list[dict]]]]:
