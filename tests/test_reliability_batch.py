@@ -24,8 +24,8 @@ from test_batch import CALLS, fake_process
 
 from datmo_cli import batch, pipeline
 from datmo_cli.cli import cli
-from datmo_cli.commands.report import plot_paths
 from datmo_cli.errors import DatmoError, InputError, OutputError
+from datmo_cli.plot_files import plot_paths
 
 pytestmark = pytest.mark.timeout(300)
 

@@ -452,7 +452,7 @@ def test_what_is_held_does_not_grow_with_the_log(tmp_path, monkeypatch):
         decoded_at_once.append(len(payloads))
         return decode_channel(msgtype, payloads, *first)
 
-    monkeypatch.setattr(report, "decode_channel", counting)
+    monkeypatch.setattr(report.stream, "decode_channel", counting)  # where stream_run looks it up
     held = {}
     for n in (300, 3000):
         path = write_log(tmp_path / f"long{n}.mcap", np.delete(regular(n), [7, 8, 100]))

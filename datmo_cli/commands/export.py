@@ -71,6 +71,7 @@ def command(
     Example: datmo export out/hall.mcap -o hall-tracks.csv
     """
     from .. import export
+    from ..log import mcapio
     from ..outputs import atomic_output
     from ..progress import bar, say
 
@@ -83,9 +84,9 @@ def command(
         _ground_truth(files, output, fmt, features, ground_truth, include_occluded, force, stream)
         return
     p = export.plan(list(files), features)
-    scans = p.total(export.mcapio.TOPIC_TRACKS)
+    scans = p.total(mcapio.TOPIC_TRACKS)
     with bar("tracks", scans) as b:
-        shown = {"topic": export.mcapio.TOPIC_TRACKS}
+        shown = {"topic": mcapio.TOPIC_TRACKS}
 
         def progress(topic: str, n: int) -> None:
             if topic != shown["topic"]:  # the features pass, after every file's tracks: its own count of scans
@@ -122,6 +123,7 @@ def _ground_truth(
     """`--ground-truth`: one log's targets as the table evaluate --gt reads."""
     from .. import export
     from ..errors import ConfigError
+    from ..log import mcapio
     from ..outputs import atomic_output
     from ..progress import bar, say
 
@@ -135,7 +137,7 @@ def _ground_truth(
     if len(files) != 1:
         raise ConfigError(f"--ground-truth: give one FILE (evaluate --gt scores one log), not {len(files)}")
     p = export.plan(list(files), ground_truth=True)
-    scans = p.total(export.mcapio.TOPIC_GROUND_TRUTH)
+    scans = p.total(mcapio.TOPIC_GROUND_TRUTH)
     with bar("moving ids", scans) as b:
         shown = {"stage": "movers"}
 

@@ -7,76 +7,11 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS, option
+from ..plot_files import check_plot_outputs, plot_paths, save_plot
 from ..report import FORMATS, SORT_KEYS
 from .options import force_option, quiet_option
 
 PLOT_KINDS = ("auto", "top", "counts", "speeds", "all")
-
-PLOT_SUFFIXES = (".png", ".svg", ".pdf")
-
-
-def plot_paths(plot: Path, files: list[Path]) -> list[Path]:
-    """Where each file's plot goes: `plot` itself for one file, else PLOT-STEM.SUFFIX per file; files of one
-    stem in different folders get their folders' names too (A/x.mcap, B/x.mcap: PLOT-A-x.png, PLOT-B-x.png), so
-    no plot is written over another. One file given twice is an InputError."""
-    if len(files) == 1:
-        return [plot]
-    import os
-
-    from ..errors import InputError
-
-    parts = [Path(os.path.abspath(f)).with_suffix("").parts[1:] for f in files]
-    depth = [1] * len(files)
-    while True:
-        names = ["-".join(p[-d:]) for p, d in zip(parts, depth, strict=True)]
-        seen: dict[str, int] = {}
-        for name in names:
-            seen[name] = seen.get(name, 0) + 1
-        clash = [i for i, name in enumerate(names) if seen[name] > 1]
-        if not clash:
-            return [plot.with_name(f"{plot.stem}-{name}{plot.suffix}") for name in names]
-        grow = [i for i in clash if depth[i] < len(parts[i])]
-        if not grow:
-            raise InputError(f"{files[clash[0]]}: given twice; with --plot each file is plotted once")
-        for i in grow:
-            depth[i] += 1
-
-
-def check_plot_outputs(paths: list[Path], force: bool) -> None:
-    """Refuse a missing matplotlib (the plot extra), a bad plot suffix or a plot path outputs.check_output
-    refuses (an existing plot without --force, a folder or device in the way, a missing or read-only folder),
-    before any work."""
-    from ..errors import InputError
-    from ..extras import require
-    from ..outputs import check_output
-
-    if paths:
-        require("matplotlib", for_="--plot")
-    for p in paths:
-        if p.suffix.lower() not in PLOT_SUFFIXES:
-            raise InputError(f"{p}: plot format must be one of {', '.join(PLOT_SUFFIXES)}")
-        check_output(p, force=force, what="plot")
-
-
-def save_plot(data, path: Path, force: bool, kind: str = "auto", all_labels: bool = False) -> str:
-    """Draw `data` (pipeline.RunData) into `path` atomically (a temporary file renamed when the figure is
-    complete); returns the line that says so (with the labels left out where they would overlap)."""
-    import matplotlib
-
-    from ..outputs import atomic_output
-    from ..plot import plot_run
-
-    with (
-        atomic_output(path, force=force, what="plot") as f,
-        matplotlib.rc_context({"savefig.format": path.suffix.lower().lstrip(".")}),
-    ):
-        drawn = plot_run(data, f, kind=kind, all_labels=all_labels)
-    note = (
-        f" ({drawn.dropped} of {drawn.dropped + drawn.placed} labels left out: no room without overlap)"
-        if drawn.dropped
-        else ""
-    )
-    return f"{path}: plot written, {drawn.kind}{note}"
 
 
 def _scan_counts(files: list[Path]) -> list[int]:
@@ -173,7 +108,7 @@ def command(
     """
     from ..pipeline import read_run_data
     from ..progress import bar, say
-    from ..report import render, summarise, summarise_file
+    from ..report import summarise, summarise_file
 
     files, batches = _batches(list(files))
     plots = plot_paths(plot, files) if plot else []
@@ -191,7 +126,15 @@ def command(
                 summaries.append(summarise_file(path, progress=lambda n, d=done: progress.update(d + n)))
             done += counts[i]
             progress.update(done)
-    options = {"top": top, "sort": sort, "tracks": track_table, "all_tracks": all_tracks}
+    _print(summaries, batches, fmt, top=top, sort=sort, tracks=track_table, all_tracks=all_tracks)
+    for line in written:
+        say(line)
+
+
+def _print(summaries: list, batches: list[tuple[Path, list[dict]]], fmt: str, **options) -> None:
+    """Print the report of `summaries` (report.RunSummary) and of the batch folders in `fmt` on stdout."""
+    from ..report import render
+
     if fmt == "json":
         from ..batch import summary
 
@@ -209,8 +152,6 @@ def command(
         render(summaries, fmt, **options, console=console(), before=_batch_tables(batches))
     else:
         click.echo(render(summaries, fmt, **options, before=_batch_tables(batches)), nl=False)
-    for line in written:
-        say(line)
 
 
 def _batches(paths: list[Path]) -> tuple[list[Path], list[tuple[Path, list[dict]]]]:

@@ -235,12 +235,7 @@ def command(
     from ..text import printable
 
     set_default(threads)  # a run-time setting: not among the parameters (the outputs do not depend on it)
-    if scheduler is not None and jobs is not None:
-        raise DatmoError("--jobs is for local runs; with --scheduler the cluster's workers run the inputs")
-    if plot and remote(out_dir):
-        raise DatmoError(f"{out_dir}: --plot needs a local output folder")
-    if bag_dir and remote(out_dir):
-        raise DatmoError(f"{out_dir}: --bag-dir needs a local output folder")
+    _check_options(out_dir, scheduler, jobs, plot, bag_dir)
     _check_leg_model(cfg)
     options = RunOptions(markers=markers, covariance=covariance, topic=topic, odom_topic=odom_topic, bag_dir=bag_dir)
     with folder_lock(out_dir):  # one batch at a time in a folder: a second is refused, naming the first
@@ -296,7 +291,7 @@ def _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir, sch
     )
     plots = list(plot_of.values())
     if plots:
-        from .report import check_plot_outputs
+        from ..plot_files import check_plot_outputs
 
         check_plot_outputs(plots, force)
     if scheduler is not None and batch.tasks:
@@ -316,6 +311,19 @@ def _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir, sch
     finally:
         executor.close()
     return records, executor.where, time.perf_counter() - t0, plot_of
+
+
+def _check_options(out_dir: str, scheduler: str | None, jobs: int | None, plot: bool, bag_dir: bool) -> None:
+    """Options that do not go together are one error, before any input starts."""
+    from ..batch import remote
+    from ..errors import DatmoError
+
+    if scheduler is not None and jobs is not None:
+        raise DatmoError("--jobs is for local runs; with --scheduler the cluster's workers run the inputs")
+    if plot and remote(out_dir):
+        raise DatmoError(f"{out_dir}: --plot needs a local output folder")
+    if bag_dir and remote(out_dir):
+        raise DatmoError(f"{out_dir}: --bag-dir needs a local output folder")
 
 
 def _check_leg_model(cfg: DatmoConfig) -> None:
@@ -416,7 +424,7 @@ def _report(
             if fmt:
                 summaries.append(made[i] if made[i] is not None else summarise_file(out))
             continue
-        from .report import save_plot
+        from ..plot_files import save_plot
 
         data = read_run_data(out, keep_scans=True)
         summaries.append(made[i] if made[i] is not None else summarise(data))
