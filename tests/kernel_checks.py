@@ -52,7 +52,6 @@ CHECKS: dict[str, str] = {
     "tracking._step.write_tracks": STEP_PHASES,
     "tracking._step.track_block": f"{DRIVERS}::test_track_block_step_measurements_and_track_scan",
     "tracking._step.step_measurements": f"{DRIVERS}::test_track_block_step_measurements_and_track_scan",
-    "tracking._step.scan_features": f"{DRIVERS}::test_track_block_step_measurements_and_track_scan",
     "tracking._step.track_scan": f"{DRIVERS}::test_track_block_step_measurements_and_track_scan",
     "tracking._association.kalman_update": f"{HERE}::test_step_kalman_update_and_restart",
     "tracking._association.restart": f"{HERE}::test_step_kalman_update_and_restart",

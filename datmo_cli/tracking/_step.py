@@ -90,9 +90,9 @@ def track_scan(tab, ctx, prm, stamp, meas, has_prob, sensor, beam_dirs, bg, carr
         crow[k] = kind_group(tab, k) if tab[k, CONFIRMED] != 0 else ANY_ROW
     predict(tab, n, dt, prm)
     carried_update(carry[0], carry[1], carry[2], ranges, has_ranges, has_pose, pose, geo, ctx, prm)
-    found = (mx, my, msize, mkind, mlegs, raw, mprob)
-    mx, my, msize, mkind, mlegs, raw, mprob = off_background(tab, n, found, bg[0], ctx, frame, sensor, carry, prm)
-    mx, my, msize, mkind, mlegs, mprob, rows0 = legs_stage(tab, n, (mx, my, msize, mkind, mlegs, raw, mprob), prm)
+    found = off_background(tab, n, (mx, my, msize, mkind, mlegs, raw, mprob), bg[0], ctx, frame, sensor, carry, prm)
+    mx, my, msize, mkind, mlegs, mprob, rows0 = legs_stage(tab, n, found, prm)
+    raw = found[5]
     scan = (mx, my, msize, mkind, mlegs, raw, mprob)  # the measurements the tracks take
     rows, cols = associate(tab, n, mx, my, mkind, rows0, compat, crow, prm)
     hit_background(tab, n, rows, cols, scan, bg[0], ctx, frame, prm)
@@ -123,39 +123,31 @@ def step_measurements(tab, ctx, prm, stamp, meas, has_prob, sensor, beam_dirs, b
 
 
 @njit(cache=True)
-def scan_features(features, i):
-    """The features of scan i of a block (track_block's `features`): circles (first, last, x, y, radius), blobs
-    (first, last, x, y, size, kind), lines (segment, first, last, x_ini, y_ini, x_end, y_end), legs (first, last,
-    x, y, width, probability), views of the block's arrays."""
-    (co, cf, cl, cx, cy, cr), (bo, bf, bl, bx, by, bs, bk), lines, legs = features
-    lo, ls, lf, ll, lx0, ly0, lx1, ly1 = lines
-    go, gf, gl, gx, gy, gw, gp = legs
-    a0, a1, b0, b1, l0, l1, g0, g1 = co[i], co[i + 1], bo[i], bo[i + 1], lo[i], lo[i + 1], go[i], go[i + 1]
-    return (
-        (cf[a0:a1], cl[a0:a1], cx[a0:a1], cy[a0:a1], cr[a0:a1]),
-        (bf[b0:b1], bl[b0:b1], bx[b0:b1], by[b0:b1], bs[b0:b1], bk[b0:b1]),
-        (ls[l0:l1], lf[l0:l1], ll[l0:l1], lx0[l0:l1], ly0[l0:l1], lx1[l0:l1], ly1[l0:l1]),
-        (gf[g0:g1], gl[g0:g1], gx[g0:g1], gy[g0:g1], gw[g0:g1], gp[g0:g1]),
-    )
-
-
-@njit(cache=True)
 def track_block(tab, ctx, prm, scans, features, geo, beam_dirs, bg, carry, rules, output):
     """Track scans 0..len(stamps)-1 of a block of features (flat per kind, with per-scan offsets) in one call.
 
     scans: (stamps (N,) ns since the first scan, ranges (N, B) float32 m, has_ranges, poses (N, 3), has_pose);
-    features: (circles, blobs, lines, legs), each (offsets, fields...) with the fields of scan_features; sensor
-    frame, m; beam indices inclusive. geo, beam_dirs, bg, carry, rules: as track_scan's (module docstring).
-    output: (out, tails, out_tail, out_tail_count, offsets). Writes the live tracks of scan i to
-    out[offsets[i]:offsets[i + 1]] and, when `tails`, their tails (tracking frame) to out_tail and tail counts to
-    out_tail_count (each grown when full). Returns (table, out, out_tail, out_tail_count)."""
+    features: (circles, blobs, lines, legs), each (offsets, fields...): circles (first, last, x, y, radius), blobs
+    (first, last, x, y, size, kind), lines (segment, first, last, x_ini, y_ini, x_end, y_end), legs (first, last,
+    x, y, width, probability); sensor frame, m; beam indices inclusive. geo, beam_dirs, bg, carry, rules: as
+    track_scan's (module docstring). output: (out, tails, out_tail, out_tail_count, offsets). Writes the live
+    tracks of scan i to out[offsets[i]:offsets[i + 1]] and, when `tails`, their tails (tracking frame) to out_tail
+    and tail counts to out_tail_count (each grown when full). Returns (table, out, out_tail, out_tail_count)."""
     stamps, ranges, has_ranges, poses, has_pose = scans
     out, tails, out_tail, out_tail_count, offsets = output
     learned = rules[0]
     T = int(prm[P_TAIL_LENGTH])
+    co, cf, cl, cx, cy, cr = features[0]
+    bo, bf, bl, bx, by, bs, bk = features[1]
+    lo, ls, lf, ll, lx0, ly0, lx1, ly1 = features[2]
+    go, gf, gl, gx, gy, gw, gp = features[3]
     offsets[0] = 0
     for i in range(len(stamps)):
-        circles, blobs, lines, legs = scan_features(features, i)
+        a0, a1, b0, b1, l0, l1, g0, g1 = co[i], co[i + 1], bo[i], bo[i + 1], lo[i], lo[i + 1], go[i], go[i + 1]
+        circles = (cf[a0:a1], cl[a0:a1], cx[a0:a1], cy[a0:a1], cr[a0:a1])
+        blobs = (bf[b0:b1], bl[b0:b1], bx[b0:b1], by[b0:b1], bs[b0:b1], bk[b0:b1])
+        lines = (ls[l0:l1], lf[l0:l1], ll[l0:l1], lx0[l0:l1], ly0[l0:l1], lx1[l0:l1], ly1[l0:l1])
+        legs = (gf[g0:g1], gl[g0:g1], gx[g0:g1], gy[g0:g1], gw[g0:g1], gp[g0:g1])
         if learned:
             meas = learned_measurements(circles, blobs, lines, legs, prm)
         else:
