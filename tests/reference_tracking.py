@@ -1,6 +1,6 @@
 """The plain statements of the tracking rules, and the tracker as it was before the compiled step (issue #13
-point 2), kept as the references the package's kernels (datmo_cli/tracking/_kernels.py, _step.py, _assign.py)
-are checked against, phase by phase and run by run. Not part of the package: tests only.
+point 2), kept as the references the package's kernels (datmo_cli/tracking/_kernels.py, _step.py and the modules
+of its phases, _assign.py) are checked against, phase by phase and run by run. Not part of the package: tests only.
 
 - People (docs/method.md §6.1): `pair_legs`, `leg_lead`. Classification (docs/method.md §6): `classify`, `mobility`.
   Kalman model (filterpy's): `transition`, `process_noise`; gating: `gate`; global nearest neighbour:
@@ -556,31 +556,19 @@ def reference_measurements(
         weak, g = g[~strong], g[strong]
         i8 = np.int64
         x, y, size, kind, legs, prob, covers = _kernels.learned_measurements(
-            c["first"].astype(i8),
-            c["last"].astype(i8),
-            c["x"].astype(f8),
-            c["y"].astype(f8),
-            c["radius"].astype(f8),
-            b["first"].astype(i8),
-            b["last"].astype(i8),
-            b["x"].astype(f8),
-            b["y"].astype(f8),
-            b["size"].astype(f8),
-            li["segment"].astype(i8),
-            li["first"].astype(i8),
-            li["last"].astype(i8),
-            li["x_ini"].astype(f8),
-            li["y_ini"].astype(f8),
-            li["x_end"].astype(f8),
-            li["y_end"].astype(f8),
-            g["first"].astype(i8),
-            g["last"].astype(i8),
-            g["x"].astype(f8),
-            g["y"].astype(f8),
-            g["width"].astype(f8),
-            weak["first"].astype(i8),
-            weak["last"].astype(i8),
-            weak["probability"].astype(f8),
+            (c["first"].astype(i8), c["last"].astype(i8), c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8)),
+            (b["first"].astype(i8), b["last"].astype(i8), b["x"].astype(f8), b["y"].astype(f8), b["size"].astype(f8)),
+            (
+                li["segment"].astype(i8),
+                li["first"].astype(i8),
+                li["last"].astype(i8),
+                li["x_ini"].astype(f8),
+                li["y_ini"].astype(f8),
+                li["x_end"].astype(f8),
+                li["y_end"].astype(f8),
+            ),
+            (g["first"].astype(i8), g["last"].astype(i8), g["x"].astype(f8), g["y"].astype(f8), g["width"].astype(f8)),
+            (weak["first"].astype(i8), weak["last"].astype(i8), weak["probability"].astype(f8)),
             params.kernel_vector(leg_threshold),
         )
         raw = np.concatenate(
@@ -609,18 +597,15 @@ def reference_measurements(
         )
         return Measurements(x, y, size, kind, legs, raw, prob)
     x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
-        c["x"].astype(f8),
-        c["y"].astype(f8),
-        c["radius"].astype(f8),
-        b["x"].astype(f8),
-        b["y"].astype(f8),
-        b["size"].astype(f8),
-        b["kind"].astype(np.int64),
-        li["segment"].astype(np.int64),
-        li["x_ini"].astype(f8),
-        li["y_ini"].astype(f8),
-        li["x_end"].astype(f8),
-        li["y_end"].astype(f8),
+        (c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8)),
+        (b["x"].astype(f8), b["y"].astype(f8), b["size"].astype(f8), b["kind"].astype(np.int64)),
+        (
+            li["segment"].astype(np.int64),
+            li["x_ini"].astype(f8),
+            li["y_ini"].astype(f8),
+            li["x_end"].astype(f8),
+            li["y_end"].astype(f8),
+        ),
         params.kernel_vector(),
     )
     return Measurements(x, y, size, kind, legs, np.stack([lx, ly, ls], axis=1))
@@ -1360,21 +1345,9 @@ class ReferenceTracker:
             self._on_bg = np.zeros(len(t), bool)
             return
         px, py, _, _ = self._sensor()
+        grid = (self._bg_score, self._bg_origin[0], self._bg_origin[1], self._bg_n)
         self._on_bg = _kernels.tracks_on_background(
-            self._bg_score,
-            m.x,
-            m.y,
-            m.size,
-            m.kind,
-            rows,
-            cols,
-            len(t),
-            px,
-            py,
-            self._bg_origin[0],
-            self._bg_origin[1],
-            self._bg_n,
-            self.prm,
+            grid, m.x, m.y, m.size, m.kind, rows, cols, len(t), px, py, self.prm
         )
 
     def _carried(self, raw: np.ndarray) -> np.ndarray:

@@ -11,8 +11,8 @@ from hypothesis import given, settings
 
 from datmo_cli.perception import _egomotion_kernels as KE
 from datmo_cli.perception import _leg_kernels as KL
-from datmo_cli.tracking import _step
-from datmo_cli.tracking.tracker import _REACQUIRE, _REACQUIRE_LEARNED, TRACK_DTYPE, Tracker, _flat
+from datmo_cli.tracking import _step, state
+from datmo_cli.tracking.tracker import TRACK_DTYPE, Tracker, _flat
 from tests import reference_perception as rp
 from tests.reference_tracking import ReferenceTracker, reference_measurements
 from tests.test_tracking_step import GEOM, THR, P, meas_arrays, scenes
@@ -20,10 +20,10 @@ from tests.test_tracking_step import GEOM, THR, P, meas_arrays, scenes
 
 # ------------------------------------------------------------------------------------------------ tracking
 def _state(learned: bool) -> tuple:
-    """A new tracker's state as the compiled step takes it: (table, context, prm, geometry, cos, sin,
-    background arrays, carried beams, compatibility table)."""
+    """A new tracker's state as the compiled step takes it: (table, context, prm, geometry, beam directions
+    (cos, sin), background grid, carried beams, rules)."""
     t = Tracker(P, GEOM, learned=learned, leg_threshold=THR)
-    return t.tracks.table, t._ctx, t._prm, t._geo, t._cos, t._sin, t._bg + t._carry, t._compat
+    return t.tracks.table, t._ctx, t._prm, t._geo, (t._cos, t._sin), t._bg, t._carry, t._rules
 
 
 @settings(max_examples=6, deadline=None)
@@ -48,98 +48,42 @@ def test_track_block_step_measurements_and_track_scan(scene: tuple):
     ranges_arg = np.zeros((N, 0), np.float32) if ranges is None else ranges
     poses_arg = np.zeros((N, 3)) if poses is None else poses
 
-    tab, ctx, prm, geo, cos_a, sin_a, bg, compat = _state(learned)
-    reacq = _REACQUIRE_LEARNED if learned else _REACQUIRE
+    tab, ctx, prm, geo, beam_dirs, bg, carry, rules = _state(learned)
     cap, T = 4, P.tail_length
     offsets = np.zeros(N + 1, np.int64)
     _, out, _, count = _step.track_block(
         tab,
         ctx,
         prm,
-        rel,
-        *_flat(feats),
-        learned,
-        ranges_arg,
-        ranges is not None,
-        poses_arg,
-        poses is not None,
+        (rel, ranges_arg, ranges is not None, poses_arg, poses is not None),
+        _flat(feats),
         geo,
-        cos_a,
-        sin_a,
-        *bg,
-        compat,
-        reacq,
-        np.zeros(cap, TRACK_DTYPE),
-        True,
-        np.zeros((cap, T, 2)),
-        np.zeros(cap, np.int64),
-        offsets,
+        beam_dirs,
+        bg,
+        carry,
+        rules,
+        (np.zeros(cap, TRACK_DTYPE), True, np.zeros((cap, T, 2)), np.zeros(cap, np.int64), offsets),
     )
     np.testing.assert_array_equal(np.diff(offsets), [len(w) for w in want])
     assert out[: offsets[-1]].tobytes() == np.concatenate(want).tobytes()
     assert (count[: offsets[-1]] >= 1).all()
 
-    tab1, ctx1, prm1, geo1, cos1, sin1, bg1, compat1 = _state(learned)
-    tab2, ctx2, prm2, geo2, cos2, sin2, bg2, compat2 = _state(learned)
+    tab1, ctx1, prm1, geo1, dirs1, bg1, carry1, rules1 = _state(learned)
+    tab2, ctx2, prm2, geo2, dirs2, bg2, carry2, rules2 = _state(learned)
     out1 = np.zeros(1, TRACK_DTYPE)
     for i, f in enumerate(feats):
         m = reference_measurements(f, P, learned, THR)
-        mx, my, msize, mkind, mlegs, raw, mprob = meas_arrays(m)
+        meas = meas_arrays(m)
         has_prob = m.raw_legs.shape[1] >= 4
+        sensor = (ranges_arg[i], ranges is not None, poses is not None, poses_arg[i], geo1)
         tab1, out1 = _step.step_measurements(
-            tab1,
-            ctx1,
-            prm1,
-            rel[i],
-            mx,
-            my,
-            msize,
-            mkind,
-            mlegs,
-            raw,
-            mprob,
-            has_prob,
-            ranges_arg[i],
-            ranges is not None,
-            poses is not None,
-            poses_arg[i],
-            geo1,
-            cos1,
-            sin1,
-            *bg1,
-            learned,
-            compat1,
-            reacq,
-            out1,
+            tab1, ctx1, prm1, rel[i], meas, has_prob, sensor, dirs1, bg1, carry1, rules1, out1
         )
-        n = int(ctx1[_step.C_N_TRACKS])
+        n = int(ctx1[state.C_N_TRACKS])
         assert out1[:n].tobytes() == want[i].tobytes(), f"step_measurements, scan {i}"
-        tab2 = _step.track_scan(
-            tab2,
-            ctx2,
-            prm2,
-            rel[i],
-            mx,
-            my,
-            msize,
-            mkind,
-            mlegs,
-            raw,
-            mprob,
-            has_prob,
-            ranges_arg[i],
-            ranges is not None,
-            poses is not None,
-            poses_arg[i],
-            geo2,
-            cos2,
-            sin2,
-            *bg2,
-            learned,
-            compat2,
-            reacq,
-        )
-        n2 = int(ctx2[_step.C_N_TRACKS])
+        sensor = (ranges_arg[i], ranges is not None, poses is not None, poses_arg[i], geo2)
+        tab2 = _step.track_scan(tab2, ctx2, prm2, rel[i], meas, has_prob, sensor, dirs2, bg2, carry2, rules2)
+        n2 = int(ctx2[state.C_N_TRACKS])
         got = np.zeros(n2, TRACK_DTYPE)
         _step.write_tracks(got, 0, tab2, n2, poses is not None, poses_arg[i])
         assert got.tobytes() == want[i].tobytes(), f"track_scan, scan {i}"

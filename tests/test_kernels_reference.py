@@ -26,7 +26,7 @@ from datmo_cli.perception import _egomotion_kernels as KE
 from datmo_cli.perception import _kernels as KP
 from datmo_cli.perception import _leg_kernels as KL
 from datmo_cli.sim import _kernels as KS
-from datmo_cli.tracking import _assign
+from datmo_cli.tracking import _assign, _association, _background, _life_cycle, _people, _scan_measurements
 from datmo_cli.tracking import _kernels as KT
 from tests import reference_perception as rp
 from tests import reference_sim as rs
@@ -119,7 +119,8 @@ def test_paper_measurements(seed: int, nc: int, nb: int, nl: int):
     lx1, ly1 = lx0 + rng.uniform(-0.3, 0.3, nl), ly0 + rng.uniform(-0.3, 0.3, nl)
     args = (cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1)
     prm = rt.param_vector(leg_radius_max=0.13, leg_blob_max=0.3, stride_max=0.8, d_max=0.5)
-    _equal(KT.measurements(*args, prm), rt.paper_measurements(*args, 0.13, 0.3, 0.8, 0.5))
+    got = KT.measurements((cx, cy, cr), (bx, by, bsize, bkind), (lseg, lx0, ly0, lx1, ly1), prm)
+    _equal(got, rt.paper_measurements(*args, 0.13, 0.3, 0.8, 0.5))
 
 
 def test_beam_marks_and_span_max():
@@ -159,7 +160,7 @@ def test_leg_stage_measurements(seed: int, T: int, L: int):
     cover = np.where(strong, -1, rng.integers(1, M, L))  # a weak candidate on a measurement of other kind, or none
     cover = np.where(cover == 1, -1, cover)
     prm = rt.param_vector(leg_reach=0.6, stride_max=0.8)
-    got = KT.leg_stage_measurements(tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs, prm)
+    got = KT.leg_stage_measurements(tx, ty, (lx, ly, ls, strong, cover), (mx, my, msize, mkind, mlegs), prm)
     _equal(got, rt.leg_stage_measurements(tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs, 0.6, 0.8))
 
 
@@ -173,16 +174,8 @@ def test_a_taken_weak_candidate_is_no_longer_its_measurement():
     owner, x, y, size, kind, legs, other = KT.leg_stage_measurements(
         np.array([1.05]),
         np.array([0.0]),
-        lx,
-        ly,
-        ls,
-        strong,
-        cover,
-        mx,
-        my,
-        msize,
-        mkind,
-        mlegs,
+        (lx, ly, ls, strong, cover),
+        (mx, my, msize, mkind, mlegs),
         rt.param_vector(leg_reach=0.6, stride_max=0.8),
     )
     np.testing.assert_array_equal(owner, [0])
@@ -249,7 +242,9 @@ def test_tracks_on_background():
     rows, cols = np.array([0, 2, 3, 5, 6]), np.array([4, 0, 11, 7, 2])
     args = (score, mx, my, msize, mkind, rows, cols, 8, 0.1, 0.3, -2.5, -2.5)
     want = rt.tracks_on_background(*args, cell, n, 3.0)
-    got = KT.tracks_on_background(*args, n, rt.param_vector(background_cell=cell, background_time=3.0))
+    grid = (score, -2.5, -2.5, n)
+    prm = rt.param_vector(background_cell=cell, background_time=3.0)
+    got = KT.tracks_on_background(grid, mx, my, msize, mkind, rows, cols, 8, 0.1, 0.3, prm)
     np.testing.assert_array_equal(got, want)
     assert want.any() and not want.all()
 
@@ -268,7 +263,7 @@ def _table(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray, np
 
 
 def test_step_kalman_update_and_restart():
-    from datmo_cli.tracking import _step, state
+    from datmo_cli.tracking import state
 
     rng = np.random.default_rng(21)
     tab, x, P = _table(rng, 5)
@@ -276,31 +271,29 @@ def test_step_kalman_update_and_restart():
     zx, zy, sigma = rng.normal(0, 2, 3), rng.normal(0, 2, 3), rng.uniform(0.02, 0.3, 3)
     scratch = np.empty((3, 4, 4))
     for q, k in enumerate(rows.tolist()):
-        _step.kalman_update(tab, k, zx[q], zy[q], sigma[q], scratch)
+        _association.kalman_update(tab, k, zx[q], zy[q], sigma[q], scratch)
     rt.joseph_update(x, P, rows, zx, zy, sigma)
     np.testing.assert_array_equal(tab[:, state.X : state.X + 4], x)
     np.testing.assert_array_equal(tab[:, state.P0 : state.P0 + 16], P.reshape(5, 16))
     prm = rt.param_vector(initial_speed_sigma=0.7)
-    _step.restart(tab, 4, 1.5, -0.5, 0.1, prm)
+    _association.restart(tab, 4, 1.5, -0.5, 0.1, prm)
     want = np.diag([0.1**2, 0.1**2, 0.7**2, 0.7**2])
     np.testing.assert_array_equal(tab[4, state.X : state.X + 4], [1.5, -0.5, 0.0, 0.0])
     np.testing.assert_array_equal(tab[4, state.P0 : state.P0 + 16], want.reshape(16))
 
 
 def test_step_to_sensor():
-    from datmo_cli.tracking import _step
 
     rng = np.random.default_rng(22)
     for _ in range(20):
         pose, p = rng.uniform(-3, 3, 3), rng.uniform(-5, 5, 2)
-        got = _step.to_sensor(p[0], p[1], True, pose)
+        got = _scan_measurements.to_sensor(p[0], p[1], True, pose)
         want = np.linalg.inv(rp.se2(*pose)) @ [p[0], p[1], 1.0]
         np.testing.assert_allclose(got, want[:2], atol=1e-12)
-        assert _step.to_sensor(p[0], p[1], False, pose) == (p[0], p[1])
+        assert _scan_measurements.to_sensor(p[0], p[1], False, pose) == (p[0], p[1])
 
 
 def test_step_gated_costs():
-    from datmo_cli.tracking import _step
     from datmo_cli.tracking.params import TrackingParams
 
     rng = np.random.default_rng(23)
@@ -309,7 +302,7 @@ def test_step_gated_costs():
     compat = rng.random((6, 5)) < 0.7
     row = rng.integers(0, 6, 6)
     p = TrackingParams()
-    cost, ok = _step.gated_costs(tab, 6, mx, my, kind, compat, row, rt.param_vector())
+    cost, ok = _association.gated_costs(tab, 6, mx, my, kind, compat, row, rt.param_vector())
     want_cost, want_ok = rt.gated_costs(
         x, P, mx, my, kind, p.measurement_noise, p.leg_measurement_noise, p.gate, p.max_gate_distance, compat, row
     )
@@ -319,7 +312,7 @@ def test_step_gated_costs():
 
 
 def test_step_leggy_tracks_and_duplicates():
-    from datmo_cli.tracking import _step, state
+    from datmo_cli.tracking import state
 
     rng = np.random.default_rng(24)
     found = victims = 0
@@ -343,12 +336,12 @@ def test_step_leggy_tracks_and_duplicates():
         tab[:, state.IS_PERSON], tab[:, state.LEG_HITS], tab[:, state.LEG_SCORE] = person, leg_hits, score
         prm = rt.param_vector()
         np.testing.assert_array_equal(
-            _step.leggy_tracks(tab, n, prm),
+            _people.leggy_tracks(tab, n, prm),
             rt.leggy_tracks(
                 votes, cls, confirmed, person, leg_hits, score, prm[state.P_PERSON_VOTES], prm[state.P_PERSON_MAINTAIN]
             ),
         )
-        np.testing.assert_array_equal([_step.sure_person(tab, k, prm) for k in range(n)], rt.sure_people(person))
+        np.testing.assert_array_equal([_people.sure_person(tab, k, prm) for k in range(n)], rt.sure_people(person))
         victim, candidate, rank = rt.duplicate_ranks(
             votes, hits, confirmed, mob, cls, leg_hits, score, prm[state.P_PERSON_MAINTAIN]
         )
@@ -365,7 +358,7 @@ def test_step_leggy_tracks_and_duplicates():
             prm[state.P_MERGE_DISTANCE],
             prm[state.P_MERGE_SPEED],
         )
-        np.testing.assert_array_equal(_step.duplicates(tab, n, True, prm), want)
+        np.testing.assert_array_equal(_life_cycle.duplicates(tab, n, True, prm), want)
         found += int(want.sum())
         victims += int((want & ~candidate).sum())
     assert found > 0 and victims > 0
@@ -374,7 +367,7 @@ def test_step_leggy_tracks_and_duplicates():
 def test_step_kind_group():
     """The kind group of random tracks (votes, mobility, person) is the reference's: a person's is 0 whatever fed
     it."""
-    from datmo_cli.tracking import _step, state
+    from datmo_cli.tracking import state
 
     rng = np.random.default_rng(30)
     n = 40
@@ -383,12 +376,11 @@ def test_step_kind_group():
     mob, person = rng.integers(0, 3, n), rng.random(n) < 0.3
     tab[:, state.VOTES : state.VOTES + 5], tab[:, state.MOBILITY], tab[:, state.IS_PERSON] = votes, mob, person
     want = rt.kind_groups(votes, mob, person)
-    np.testing.assert_array_equal([_step.kind_group(tab, k) for k in range(n)], want)
+    np.testing.assert_array_equal([_association.kind_group(tab, k) for k in range(n)], want)
     assert (want[person] == 0).all() and (rt.kind_groups(votes, mob, np.zeros(n, bool))[person] != 0).any()
 
 
 def test_step_leg_probability():
-    from datmo_cli.tracking import _step
     from datmo_cli.tracking.measurements import Measurements
 
     rng = np.random.default_rng(25)
@@ -408,14 +400,13 @@ def test_step_leg_probability():
             rng.uniform(0, 1, M),
         )
         want = rt._leg_probability(m, np.arange(M))
-        got = [_step.leg_probability(m.x, m.y, m.kind, m.legs, m.prob, raw, with_prob, j) for j in range(M)]
+        got = [_people.leg_probability(m.x, m.y, m.kind, m.legs, m.prob, raw, with_prob, j) for j in range(M)]
         np.testing.assert_array_equal(got, want)
 
 
 def test_step_background_update():
     """Scan after scan (a still sensor, then a moved one), the grid with its range/beam cache equals the
     reference's: scores, active cells in order, and the scans that hit them."""
-    from datmo_cli.tracking import _step
 
     rng = np.random.default_rng(26)
     B, n, cell = 91, 40, 0.25
@@ -452,7 +443,8 @@ def test_step_background_update():
         )
         # a person at 2.5 m then 3 m ahead: their returns add nothing
         people = (np.array([2.5 + 0.5 * (scan > 12)]), np.array([0.1]), 0.4)
-        count = _step.background_update(score, mark, active, cache, count, scan, *args, fresh, *people)
+        bg, beams, frame, grid = (score, mark, active, cache), args[1:7], args[7:11], args[12:18]
+        count = _background.background_update(bg, count, scan, args[0], beams, frame, args[11], grid, fresh, people)
         want_count = rt.background_update(want_score, want_mark, want_active, want_count, scan, *args, *people)
         assert count == want_count
         np.testing.assert_array_equal(active[:count], want_active[:count])
@@ -466,7 +458,7 @@ def test_step_carried_update_and_beams():
     hidden), others on a wall it nears, invalid ones, and beams that return one range for a while and another
     after: the carried beams (range kept, travel seen and away) equal the reference's, then which leg candidates
     lie on carried beams; nothing changes without a pose."""
-    from datmo_cli.tracking import _step, state
+    from datmo_cli.tracking import state
 
     rng = np.random.default_rng(27)
     B = 91
@@ -487,7 +479,7 @@ def test_step_carried_update_and_beams():
         ranges[rng.random(B) < 0.05] = rng.uniform(0.5, 3.0)
         step = 0.0 if last is None else float(np.hypot(pose[0] - last[0], pose[1] - last[1]))
         last = pose
-        _step.carried_update(*carry, ranges, True, True, pose, geo, ctx, prm)
+        _background.carried_update(*carry, ranges, True, True, pose, geo, ctx, prm)
         rt.carried_update(*want, ranges, 0.05, 8.0, 0.05, step)
         for got, ref in zip(carry, want, strict=True):
             np.testing.assert_array_equal(got, ref)
@@ -498,19 +490,19 @@ def test_step_carried_update_and_beams():
         )
         out = rng.random(12) < 0.2
         was = out.copy()
-        _step.carried_beams(out, raw, ranges, *carry, True, pose, geo, prm)
+        _background.carried_beams(out, raw, ranges, *carry, True, pose, geo, prm)
         sx, sy = _sensor_frame(raw[:, 0], raw[:, 1], pose)
         expect = was | rt.carried_beams(sx, sy, raw[:, 2], ranges, *want, geo[0], geo[1], 1.0, 0.05)
         np.testing.assert_array_equal(out, expect)
         carried_seen += int((expect & ~was).sum())
         still = was.copy()
-        _step.carried_beams(still, raw, ranges, *carry, False, pose, geo, prm)  # no pose: nothing is carried
+        _background.carried_beams(still, raw, ranges, *carry, False, pose, geo, prm)  # no pose: nothing is carried
         np.testing.assert_array_equal(still, was)
     assert (want[1][10:25] >= 1.0).sum() >= 10 and carried_seen > 0
     # away farther than seen there: the beams took the new range as their reference
     assert (np.abs(want[0][40:50] - 1.2) < 0.01).sum() >= 8
     before = tuple(a.copy() for a in carry)
-    _step.carried_update(*carry, ranges, True, False, np.zeros(3), geo, ctx, prm)
+    _background.carried_update(*carry, ranges, True, False, np.zeros(3), geo, ctx, prm)
     for got, ref in zip(carry, before, strict=True):
         np.testing.assert_array_equal(got, ref)
 
@@ -530,17 +522,19 @@ def _sensor_frame(x: np.ndarray, y: np.ndarray, pose: np.ndarray) -> tuple[np.nd
 def test_step_fold_evidence():
     """Leg-candidate hits folded one by one: the plain mean of the first 1/leg_evidence_rate, then a running mean
     of that rate."""
-    from datmo_cli.tracking import _step, state
+    from datmo_cli.tracking import state
 
     rng = np.random.default_rng(28)
     prm = rt.param_vector(leg_evidence_rate=0.1)
     tab = np.zeros((4, state.n_columns(1)))
     score, hits = np.zeros(4), np.zeros(4, np.int64)
-    p = np.where(rng.random(40) < 0.15, _step.NOT_A_LEG, rng.random(40))  # some on the background or carried
-    assert rt.NOT_A_LEG == _step.NOT_A_LEG
+    p = np.where(
+        rng.random(40) < 0.15, _scan_measurements.NOT_A_LEG, rng.random(40)
+    )  # some on the background or carried
+    assert rt.NOT_A_LEG == _scan_measurements.NOT_A_LEG
     for q in range(40):
         k = int(rng.integers(0, 4))
-        _step.fold_evidence(tab, k, p[q], prm)
+        _people.fold_evidence(tab, k, p[q], prm)
         rt.fold_evidence(score, hits, k, p[q], 0.1)
     np.testing.assert_array_equal(tab[:, state.LEG_SCORE], score)
     np.testing.assert_array_equal(tab[:, state.LEG_HITS], hits)

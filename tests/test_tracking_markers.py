@@ -59,13 +59,13 @@ def test_tail_segments_follow_the_ring_buffer_oldest_first():
 
 
 def test_kernel_tails_equal_tail_segments():
-    from datmo_cli.tracking import _kernels
+    from datmo_cli.tracking import _marker_kernels
 
     rng = np.random.default_rng(0)
     ring, count = rng.normal(size=(5, 6, 2)), np.array([0, 1, 4, 6, 13])
     shown = np.ones(5, bool)
     z = np.zeros(5)
-    tails = _kernels.marker_points(
+    tails = _marker_kernels.marker_points(
         z, z, z, z, np.zeros(5, np.int64), shown, 0.3, np.zeros((4, 4), np.float32), ring, count
     )[7]
     assert np.array_equal(tails, tail_segments(ring, count))

@@ -17,7 +17,16 @@ from hypothesis import strategies as st
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry
 from datmo_cli.stages import iter_run_features, leg_threshold_of, track_run
-from datmo_cli.tracking import _step, state
+from datmo_cli.tracking import (
+    _association,
+    _background,
+    _classify,
+    _life_cycle,
+    _people,
+    _scan_measurements,
+    _step,
+    state,
+)
 from datmo_cli.tracking.markers import track_markers
 from datmo_cli.tracking.measurements import Measurements
 from datmo_cli.tracking.params import TrackingParams
@@ -178,57 +187,59 @@ def lockstep(
     group = kind_groups(t.votes, t.mobility, t.person)
     ref._compat_row = np.where(t.confirmed, group, 4)
     tab = to_table(ref, t0)
-    crow = np.array([_step.kind_group(tab, k) if t.confirmed[k] else 4 for k in range(n)], np.int64)
+    crow = np.array([_association.kind_group(tab, k) if t.confirmed[k] else 4 for k in range(n)], np.int64)
     np.testing.assert_array_equal(crow, ref._compat_row)
     kalman_predict(t.x, t.P, dt, np.where((group == 0) | (group == 5), p.person_process_noise, p.process_noise))
-    _step.predict(tab, n, dt, PRM)
+    _association.predict(tab, n, dt, PRM)
     same_tracks(ref, t0, tab, n, "predict")
     px, py, pc, ps = ref._sensor()
     meas, ref._has_prob = with_candidates(meas)
     m = moved(meas, ref.pose)
     if has_pose:
         a = meas_arrays(meas)
-        got = _step.moved(a[0], a[1], a[4], a[5], px, py, pc, ps)
+        got = _scan_measurements.moved(a[0], a[1], a[4], a[5], px, py, pc, ps)
         same_meas((got[0], got[1], m.size, m.kind, got[2]), m, "moved")
         np.testing.assert_array_equal(got[3], m.raw_legs)
     ctx = context(ref)
     carry = (ref.carry_ref.copy(), ref.carry_seen.copy(), ref.carry_away.copy())
-    _step.carried_update(*carry, rng, ranges is not None, has_pose, pose_arr, geo, ctx, PRM)
+    _background.carried_update(*carry, rng, ranges is not None, has_pose, pose_arr, geo, ctx, PRM)
     ref._carried_update(ranges)
     for got, want in zip(carry, (ref.carry_ref, ref.carry_seen, ref.carry_away), strict=True):
         np.testing.assert_array_equal(got, want)
     assert ctx[state.C_CARRY_POSED] == (ref._carry_pose is not None)
-    got = _step.off_background(tab, n, *meas_arrays(m), bg, ctx, px, py, rng, *carry, has_pose, pose_arr, geo, PRM)
+    sensor = (rng, ranges is not None, has_pose, pose_arr, geo)
+    frame = (px, py, pc, ps)
+    got = _background.off_background(tab, n, meas_arrays(m), bg, ctx, frame, sensor, carry, PRM)
     m = ref._off_background(t, m)
     same_meas(got, m, "off background")
     same_candidates(got[5], m, "off background")
     np.testing.assert_array_equal(got[6], m.prob)
-    got = _step.legs_stage(tab, n, *meas_arrays(m), PRM)
+    got = _people.legs_stage(tab, n, meas_arrays(m), PRM)
     m, rows0 = ref._legs(t, m)
     same_meas(got, m, "legs")
     np.testing.assert_array_equal(got[6], rows0)
     np.testing.assert_array_equal(got[5], m.prob)
     mx, my, msize, mkind, mlegs, raw, mprob = meas_arrays(m)
     compat = _COMPAT_LEARNED if learned else _COMPAT
-    rows_c, cols_c = _step.associate(tab, n, mx, my, mkind, rows0, compat, crow, PRM)
+    rows_c, cols_c = _association.associate(tab, n, mx, my, mkind, rows0, compat, crow, PRM)
     rows, cols = ref._associate(t, m, rows0)
     np.testing.assert_array_equal(rows_c, rows)
     np.testing.assert_array_equal(cols_c, cols)
-    _step.hit_background(tab, n, rows, cols, mx, my, msize, mkind, bg, ctx, px, py, PRM)
+    _background.hit_background(tab, n, rows, cols, meas_arrays(m), bg, ctx, frame, PRM)
     ref._hit_background(t, m, rows, cols)
     np.testing.assert_array_equal(tab[:n, state.ON_BG] != 0, ref._on_bg)
     tab = to_table(ref, t0)
     ref._update(t, m, rows, cols)
-    _step.update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, PRM)
+    _association.update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, PRM)
     same_tracks(ref, t0, tab, n, "update", on_bg=True)
     rows2, cols2 = ref._reacquire(t, m, rows, cols, stamp_ns)
-    got2 = _step.reacquire(
+    got2 = _association.reacquire(
         tab, n, rows, cols, mx, my, mkind, stamp, _REACQUIRE_LEARNED if learned else _REACQUIRE, crow, PRM
     )
     np.testing.assert_array_equal(got2[0], rows2)
     np.testing.assert_array_equal(got2[1], cols2)
     same_tracks(ref, t0, tab, n, "reacquire", on_bg=True)
-    merged = _step.merge_reacquired(rows, cols, rows2, cols2)
+    merged = _association.merge_reacquired(rows, cols, rows2, cols2)
     if len(rows2):
         keep = ~np.isin(cols, cols2)
         ref._superseded = rows[~keep]
@@ -238,44 +249,25 @@ def lockstep(
     np.testing.assert_array_equal(merged[2], ref._superseded)
     superseded = ref._superseded.copy()
     ref._leg_evidence(t, m, rows, cols)
-    _step.leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, ref._has_prob, PRM)
+    _people.leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, ref._has_prob, PRM)
     same_tracks(ref, t0, tab, n, "leg evidence", on_bg=True)
     ref._occlusion(t, ranges)
-    _step.occlusion(tab, n, rng, ranges is not None, geo, has_pose, pose_arr, PRM)
+    _life_cycle.occlusion(tab, n, rng, ranges is not None, geo, has_pose, pose_arr, PRM)
     same_tracks(ref, t0, tab, n, "occlusion", on_bg=True)
     ref._life_cycle(t, stamp_ns)
-    n = _step.life_cycle(tab, n, stamp, superseded, learned, PRM)
+    n = _life_cycle.life_cycle(tab, n, stamp, superseded, learned, PRM)
     same_tracks(ref, t0, tab, n, "life cycle", on_bg=True)
     ctx = context(ref)
     ref._spawn(m, rows, cols, stamp_ns)
-    tab, n = _step.spawn(
-        tab,
-        n,
-        cols,
-        mx,
-        my,
-        msize,
-        mkind,
-        mlegs,
-        mprob,
-        raw,
-        ref._has_prob,
-        stamp,
-        has_pose,
-        pose_arr,
-        px,
-        py,
-        ctx,
-        PRM,
-    )
+    tab, n = _life_cycle.spawn(tab, n, cols, meas_arrays(m), ref._has_prob, stamp, ctx, PRM)
     same_tracks(ref, t0, tab, n, "spawn")
     assert ctx[state.C_NEXT_ID] == ref.next_id
     tab = to_table(ref, t0)
     ref._classify()
-    _step.classify(tab, len(ref.tracks), dt, stamp, learned, PRM)
+    _classify.classify(tab, len(ref.tracks), dt, stamp, learned, PRM)
     same_tracks(ref, t0, tab, n, "classify")
     ref._push_tail()
-    _step.push_tail(tab, n, PRM)
+    _life_cycle.push_tail(tab, n, PRM)
     same_tracks(ref, t0, tab, n, "tail")
     if ref._bg_score is not None:
         before = (ref._bg_score.copy(), np.maximum(ref._bg_mark, 0), ref._bg_active.copy(), np.zeros((65536, 2)))
@@ -290,7 +282,7 @@ def lockstep(
                 np.zeros((65536, 2)),
             )
         cos_a, sin_a = ref._cos, ref._sin
-        _step.background(*before, ctx, rng, ranges is not None, cos_a, sin_a, geo, px, py, pc, ps, dt, tab, n, PRM)
+        _background.background(before, ctx, sensor, (cos_a, sin_a), frame, dt, tab, n, PRM)
         # inactive cells: mark -1 in the reference, 0 in the compiled grid
         for got, want in zip(before[:3], (ref._bg_score, np.maximum(ref._bg_mark, 0), ref._bg_active), strict=True):
             np.testing.assert_array_equal(got, want)
@@ -326,17 +318,10 @@ def _flat_measurements(f, learned: bool) -> tuple:
     """The compiled features-to-measurements of one scan."""
     from datmo_cli.tracking.tracker import _flat
 
-    (
-        (co, cf, cl, cx, cy, cr),
-        (bo, bf, bl, bx, by, bs, bk),
-        (lo, ls, lf, ll, lx0, ly0, lx1, ly1),
-        (go, gf, gl, gx, gy, gw, gp),
-    ) = _flat([f])
+    circles, blobs, lines, legs = (group[1:] for group in _flat([f]))  # without the per-scan offsets
     if learned:
-        return _step.learned_measurements(
-            cf, cl, cx, cy, cr, bf, bl, bx, by, bs, ls, lf, ll, lx0, ly0, lx1, ly1, gf, gl, gx, gy, gw, gp, PRM
-        )
-    return _step.paper_measurements(cx, cy, cr, bx, by, bs, bk, ls, lx0, ly0, lx1, ly1, PRM)
+        return _scan_measurements.learned_measurements(circles, blobs, lines, legs, PRM)
+    return _scan_measurements.paper_measurements(circles, blobs, lines, PRM)
 
 
 # ------------------------------------------------------------------------------------------- whole runs

@@ -298,7 +298,7 @@ def test_a_duplicate_yields_to_the_person_whatever_its_hits():
     not the person, even when the other (e.g. a track on a bench's pieces uncovered by the person walking
     past) has more hits; between two unknowns, the one with fewer hits goes."""
     from datmo_cli.log.vocabulary import CLASS_PERSON, CLASS_UNKNOWN, MOBILITY_DYNAMIC, MOBILITY_STATIC
-    from datmo_cli.tracking import _step, state
+    from datmo_cli.tracking import _life_cycle, state
     from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
 
     def tracks(cls, mobility, hits):
@@ -319,6 +319,6 @@ def test_a_duplicate_yields_to_the_person_whatever_its_hits():
     unknowns = tracks([CLASS_UNKNOWN, CLASS_UNKNOWN], [MOBILITY_STATIC, MOBILITY_STATIC], [40, 80])
     dynamic_first = tracks([CLASS_UNKNOWN, CLASS_UNKNOWN], [MOBILITY_DYNAMIC, MOBILITY_STATIC], [40, 80])
     for learned in (False, True):
-        assert _step.duplicates(person_fewer_hits, 2, learned, prm).tolist() == [False, True]
-        assert _step.duplicates(unknowns, 2, learned, prm).tolist() == [True, False]
-        assert _step.duplicates(dynamic_first, 2, learned, prm).tolist() == [False, True]
+        assert _life_cycle.duplicates(person_fewer_hits, 2, learned, prm).tolist() == [False, True]
+        assert _life_cycle.duplicates(unknowns, 2, learned, prm).tolist() == [True, False]
+        assert _life_cycle.duplicates(dynamic_first, 2, learned, prm).tolist() == [False, True]

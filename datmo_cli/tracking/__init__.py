@@ -7,9 +7,16 @@ markers       visualization_msgs/MarkerArray CDR for Foxglove
 synthetic     ScanFeatures from plain lists (tests, accuracy)
 accuracy      figures against ground truth that datmo_cli.evaluate does not give
 params        TrackingParams (defaults, TOML)
-_kernels      numba kernels the step calls: measurements, legs, background, occlusion, duplicates; markers
-              (their plain statements, and the pre-step tracker, are tests/reference_tracking.py)
 _step         the compiled tracking step: every phase of a scan, and blocks of scans, in one numba call
+_scan_measurements  features to measurements (the paper's rule, or with the leg detector's legs); frames
+_association  prediction, gating and GNN association, Kalman update, reacquisition of lost tracks
+_people       legs given to the tracks of people, and the leg evidence that makes a person
+_background   the background grid and the carried beams: leg candidates that are no legs
+_life_cycle   occlusion, confirmation and deletion, duplicates, new tracks, tails
+_classify     class and mobility of every track (with a leg detector, the person life cycle)
+_kernels      numba kernels the phases call: measurements, legs, background, occlusion, duplicates
+              (their plain statements, and the pre-step tracker, are tests/reference_tracking.py)
+_marker_kernels  the markers' points, colours, arrows and tails (markers.py)
 _assign       numba assignment solver (shortest augmenting paths; scipy's answer) and GNN
 state         the track table (one float64 array, named columns), parameter vector, context
 """

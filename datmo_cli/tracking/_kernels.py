@@ -1,8 +1,10 @@
-"""numba kernels of the tracker's per-scan arithmetic, called by the compiled step (_step.py) and markers.py.
+"""numba kernels of the tracker's per-scan arithmetic, called by the phases of the compiled step
+(_scan_measurements.py, _people.py, _background.py, _life_cycle.py).
 
-Kernels take contiguous arrays and scalars; frames and units are their callers'. Tracking parameters arrive
-as one float64 vector `prm` (state.param_vector, indexed by the state.P_* constants), as in _step.py. Their
-references are in tests/reference_tracking.py.
+Kernels take contiguous arrays, scalars and tuples of those that travel together (a scan's circles, its lines,
+the background grid); frames and units are their callers'. Tracking parameters arrive as one float64 vector
+`prm` (state.param_vector, indexed by the state.P_* constants). Their references are in
+tests/reference_tracking.py.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..log.vocabulary import BLOB_KIND_BLOB, CLASS_CIRCLE_OBJECT, CLASS_PERSON
+from ..log.vocabulary import BLOB_KIND_BLOB
 from ..numba_runtime import key_kernel_cache_on_sources
 from .state import (
     P_BACKGROUND_CELL,
@@ -105,9 +107,13 @@ def _people_first(lx, ly, ls, prm, n_more):
 
 
 @njit(cache=True)
-def measurements(cx, cy, cr, bx, by, bsize, bkind, lseg, lx0, ly0, lx1, ly1, prm):
-    """Measurements of one scan (see measurements.py): x, y, size, kind, legs (M, 4), and the leg
-    candidates lx, ly, ls (L,)."""
+def measurements(circles, blobs, lines, prm):
+    """Measurements of one scan (see measurements.py) from its circles (x, y, radius), blobs (x, y, size, kind)
+    and lines (segment, x_ini, y_ini, x_end, y_end): x, y, size, kind, legs (M, 4), and the leg candidates lx, ly,
+    ls (L,)."""
+    cx, cy, cr = circles
+    bx, by, bsize, bkind = blobs
+    lseg, lx0, ly0, lx1, ly1 = lines
     leg_radius_max, leg_blob_max, d_max = prm[P_LEG_RADIUS_MAX], prm[P_LEG_BLOB_MAX], prm[P_D_MAX]
     nc, nb, nl = len(cx), len(bx), len(lseg)
     # rectangular objects: the bounding box of each segment's lines
@@ -190,42 +196,22 @@ def _span_max(marks, a, b):
 
 
 @njit(cache=True)
-def learned_measurements(
-    cfirst,
-    clast,
-    cx,
-    cy,
-    cr,
-    bfirst,
-    blast,
-    bx,
-    by,
-    bsize,
-    lseg,
-    lfirst,
-    llast,
-    lx0,
-    ly0,
-    lx1,
-    ly1,
-    gfirst,
-    glast,
-    gx,
-    gy,
-    gw,
-    wfirst,
-    wlast,
-    wp,
-    prm,
-):
+def learned_measurements(circles, blobs, lines, legs, weak, prm):
     """Measurements of one scan when a leg detector ran (see measurements.py): its legs (beams gfirst..glast
     at gx, gy, width gw) paired into people or single, then everything else as what it is: a circle
     (kind 2), the bounding box of a segment's lines (kind 3) or a blob (kind 4), whatever its size up to
     d_max; circles, blobs and lines on a leg's beams are that leg. Beams wfirst..wlast are clusters the
     detector gave a lower leg probability wp: a measurement on them takes it (the largest it covers).
-    Beam ranges are inclusive. Returns x, y, size, kind, legs (M, 4), prob (M,: 0 for the legs, whose
-    probabilities the caller has, and for what the detector gave none) and cover (W,): for each of those weaker
-    clusters the measurement on most of its beams (-1: none), which is that cluster if a track takes it as a leg."""
+    Beam ranges are inclusive. The groups: circles (cfirst, clast, cx, cy, cr), blobs (bfirst, blast, bx, by,
+    bsize), lines (lseg, lfirst, llast, lx0, ly0, lx1, ly1), legs (gfirst, glast, gx, gy, gw), weak (wfirst,
+    wlast, wp). Returns x, y, size, kind, legs (M, 4), prob (M,: 0 for the legs, whose probabilities the caller
+    has, and for what the detector gave none) and cover (W,): for each of those weaker clusters the measurement on
+    most of its beams (-1: none), which is that cluster if a track takes it as a leg."""
+    cfirst, clast, cx, cy, cr = circles
+    bfirst, blast, bx, by, bsize = blobs
+    lseg, lfirst, llast, lx0, ly0, lx1, ly1 = lines
+    gfirst, glast, gx, gy, gw = legs
+    wfirst, wlast, wp = weak
     nc, nb, nl, ng = len(cx), len(bx), len(lseg), len(gx)
     d_max = prm[P_D_MAX]
     top = 1
@@ -234,7 +220,7 @@ def learned_measurements(
             top = max(top, v + 1)
     is_leg = _beam_marks(gfirst, glast, np.ones(ng), top)
     weak = _beam_marks(wfirst, wlast, wp, top)
-    x, y, size, kind, legs, m = _people_first(gx, gy, gw, prm, nc + nb + nl)
+    x, y, size, kind, mlegs, m = _people_first(gx, gy, gw, prm, nc + nb + nl)
     prob = np.zeros(len(x))
     nw = len(wfirst)
     cover = np.full(nw, -1, np.int64)
@@ -277,13 +263,13 @@ def learned_measurements(
     for i in range(m):
         if size[i] <= d_max:
             x[keep], y[keep], size[keep], kind[keep], prob[keep] = x[i], y[i], size[i], kind[i], prob[i]
-            legs[keep] = legs[i]
+            mlegs[keep] = mlegs[i]
             where[i] = keep
             keep += 1
     for i in range(nw):
         if cover[i] >= 0:
             cover[i] = where[cover[i]]
-    return x[:keep], y[:keep], size[:keep], kind[:keep], legs[:keep], prob[:keep], cover
+    return x[:keep], y[:keep], size[:keep], kind[:keep], mlegs[:keep], prob[:keep], cover
 
 
 @njit(cache=True)
@@ -385,12 +371,16 @@ def duplicates(x, y, vx, vy, vvar, victim, candidate, confirmed, rank, prm):
 
 
 @njit(cache=True)
-def leg_stage_measurements(tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mkind, mlegs, prm):
-    """leg_stage on every leg candidate (lx, ly, ls), then the scan's measurements rebuilt: first one per track
-    that took legs (owner gives the track), then the free strong candidates paired (legs_to_measurements), then
-    the measurements of other kinds (mkind not 0 or 1) but those a taken weaker candidate was measured as
+def leg_stage_measurements(tx, ty, cand, meas, prm):
+    """leg_stage on every leg candidate (cand: lx, ly, ls, strong, cover), then the scan's measurements rebuilt:
+    first one per track that took legs (owner gives the track), then the free strong candidates paired
+    (legs_to_measurements), then the measurements of other kinds (mkind not 0 or 1) but those a taken weaker
+    candidate was measured as
     (cover[i] >= 0: the measurement on its beams, which is that candidate). Returns (owner, x, y, size, kind,
-    legs, other): `other` the indices (into mx) of the other-kind measurements kept, in their order."""
+    legs, other): `other` the indices (into mx) of the other-kind measurements kept, in their order. meas: the
+    scan's measurements (mx, my, msize, mkind, mlegs)."""
+    lx, ly, ls, strong, cover = cand
+    mx, my, msize, mkind, mlegs = meas
     owner, ox, oy, osize, okind, olegs, taken = leg_stage(tx, ty, lx, ly, ls, prm)
     free = ~taken & strong
     rx, ry, rsize, rkind, rlegs = legs_to_measurements(lx[free], ly[free], ls[free], prm)
@@ -419,55 +409,6 @@ def leg_stage_measurements(tx, ty, lx, ly, ls, strong, cover, mx, my, msize, mki
             other[m - b] = i
             m += 1
     return owner, x, y, size, kind, legs, other
-
-
-@njit(cache=True)
-def marker_points(px, py, vx, vy, cls, shown, alpha, color_table, tail, tail_count):
-    """Points and colours of the track markers (markers.py): per shape list (people, circle objects,
-    others) points (n, 3) and colours (n, 4); velocity arrows and trajectory tails of `shown` tracks as
-    LINE_LIST points (2 per segment). Tentative tracks get colour alpha `alpha`."""
-    K = len(px)
-    T = tail.shape[1]
-    counts = np.zeros(3, np.int64)
-    group = np.empty(K, np.int64)
-    n_shown = 0
-    n_seg = 0
-    for k in range(K):
-        g = 0 if cls[k] == CLASS_PERSON else (1 if cls[k] == CLASS_CIRCLE_OBJECT else 2)
-        group[k] = g
-        counts[g] += 1
-        if shown[k]:
-            n_shown += 1
-            n_seg += max(min(tail_count[k], T) - 1, 0)
-    pts = [np.zeros((counts[g], 3)) for g in range(3)]
-    cols = [np.empty((counts[g], 4), np.float32) for g in range(3)]
-    arrows = np.zeros((2 * n_shown, 3))
-    tails = np.zeros((2 * n_seg, 3))
-    fill = np.zeros(3, np.int64)
-    a = 0
-    s = 0
-    for k in range(K):
-        g = group[k]
-        i = fill[g]
-        pts[g][i, 0], pts[g][i, 1] = px[k], py[k]
-        c = min(cls[k], 3)
-        for j in range(4):
-            cols[g][i, j] = color_table[c, j]
-        if not shown[k]:
-            cols[g][i, 3] = alpha
-        fill[g] += 1
-        if shown[k]:
-            arrows[a, 0], arrows[a, 1] = px[k], py[k]
-            arrows[a + 1, 0], arrows[a + 1, 1] = px[k] + vx[k], py[k] + vy[k]
-            a += 2
-            n = min(tail_count[k], T)
-            for j in range(n - 1):
-                p0 = (tail_count[k] - n + j) % T
-                p1 = (p0 + 1) % T
-                tails[s, 0], tails[s, 1] = tail[k, p0, 0], tail[k, p0, 1]
-                tails[s + 1, 0], tails[s + 1, 1] = tail[k, p1, 0], tail[k, p1, 1]
-                s += 2
-    return pts[0], cols[0], pts[1], cols[1], pts[2], cols[2], arrows, tails
 
 
 @njit(cache=True)
@@ -514,9 +455,10 @@ def on_background(score, lx, ly, ls, px, py, x0, y0, n, prm):
 
 
 @njit(cache=True)
-def tracks_on_background(score, mx, my, msize, mkind, rows, cols, n_tracks, px, py, x0, y0, n, prm):
+def tracks_on_background(grid, mx, my, msize, mkind, rows, cols, n_tracks, px, py, prm):
     """Which of n_tracks tracks took (rows, cols) a measurement on the background (see on_background; legs and
-    circles are tested on their side facing the sensor, other kinds at their centre)."""
+    circles are tested on their side facing the sensor, other kinds at their centre). grid: (score, x0, y0, n)."""
+    score, x0, y0, n = grid
     out = np.zeros(n_tracks, np.bool_)
     if not len(rows):
         return out

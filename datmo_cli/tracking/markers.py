@@ -62,7 +62,7 @@ def track_markers(
     """The MarkerArray CDR payload for one scan's tracks (Track elements). Positions are the tracks'
     world fields when `world`, else their sensor-frame fields; `tail` (K, T, 2) and `tail_count` (K,) are
     the tracks' ring buffers of recent positions in the same frame (see tail_segments; None: no tails)."""
-    from . import _kernels
+    from . import _marker_kernels
 
     head = header(stamp_ns, frame_id, NS)
     f8 = np.float64
@@ -74,7 +74,7 @@ def track_markers(
     # what moves gets a velocity arrow, a tail and an id label; what stays put is a dot (clutter is most tracks)
     lively = shown & ((tracks["mobility"] == MOBILITY_DYNAMIC) | (tracks["classification"] == CLASS_PERSON))
     none = np.zeros(len(tracks), np.int64)
-    pp, pc, cp, cc, op, oc, _, _ = _kernels.marker_points(
+    pp, pc, cp, cc, op, oc, _, _ = _marker_kernels.marker_points(
         px,
         py,
         vx,

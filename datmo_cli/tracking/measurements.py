@@ -4,7 +4,7 @@ Sensor frame of the scan (x forward, y left), metres. One measurement per segmen
 centre of the lines' bounding box (rectangular objects) or the blob's centroid; small circles, blobs and
 lines (a leg's arc can pass for a short line) may be legs, and legs are paired into people. Segments larger
 than d_max are static (walls) and are not measurements. The rule runs compiled (_kernels.measurements and
-learned_measurements, called by _step); this module holds the kinds and the containers.
+learned_measurements, called by _scan_measurements); this module holds the kinds and the containers.
 """
 
 from __future__ import annotations

@@ -167,7 +167,7 @@ PARAM_NAMES = (
     C_CARRY_PY,
 ) = range(19)
 N_CONTEXT = 19
-# C_CARRY_*: the sensor position (tracking frame) at the last scan, for the carried beams (_step.carried_update)
+# C_CARRY_*: the sensor position (tracking frame) at the last scan, for the carried beams (_background.carried_update)
 # C_BG_CACHED: the background's active cells carry their range and beam as seen from the sensor pose
 # (C_BG_PX, C_BG_PY, heading cos/sin C_BG_PC, C_BG_PS); a still sensor need not compute them again
 

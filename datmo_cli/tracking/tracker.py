@@ -26,7 +26,7 @@ from .params import TrackingParams
 
 TRACK_DTYPE = cdr.element_dtype(types.TRACK)
 # which measurement kinds (columns) a confirmed track may take, by the kind group that fed it most (rows:
-# legs, circles, lines, blobs, -, a lone leg; see _step.kind_group); tentative tracks (row 4) take any
+# legs, circles, lines, blobs, -, a lone leg; see _association.kind_group); tentative tracks (row 4) take any
 _COMPAT = np.ones((6, N_KINDS), bool)
 _COMPAT[0, [KIND_CIRCLE, KIND_RECT]] = False
 _COMPAT[1, KIND_PERSON] = False  # a circle partly seen may pass for a leg, or for a line
@@ -174,6 +174,7 @@ class Tracker:
         self._t0: int | None = None  # ns of the first scan: the table's times count from it
         self._compat = _COMPAT_LEARNED if learned else _COMPAT
         self._reacquire = _REACQUIRE_LEARNED if learned else _REACQUIRE
+        self._rules = (self.learned, self._compat, self._reacquire)  # the compiled step's `rules`
         self._out = np.zeros(64, TRACK_DTYPE)
         p = self.params
         if geometry is not None:
@@ -186,13 +187,13 @@ class Tracker:
             self._cos = self._sin = np.zeros(0)
             self._geo = np.array([0.0, 1.0, np.inf, 0.0, 0.0])
         if geometry is not None and p.background_time > 0:
-            # background grid (see _step.background_update): score and mark per cell, the active cells and their
+            # background grid (see _background.background_update): score and mark per cell, the active cells and their
             # range and beam
             n = int(np.ceil(2 * p.background_extent / p.background_cell))
             self._bg = (np.zeros(n * n), np.zeros(n * n, np.int64), np.zeros(65536, np.int64), np.zeros((65536, 2)))
         else:
             self._bg = (np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
-        # carried beams (see _step.carried_update): per beam, the range it keeps returning and the travel (m) it
+        # carried beams (see _background.carried_update): per beam, the range it keeps returning and the travel (m) it
         # was seen there and away
         B = geometry.n_beams if geometry is not None else 0
         self._carry = (np.full(B, np.nan), np.zeros(B), np.zeros(B))
@@ -227,21 +228,17 @@ class Tracker:
                 None if pose is None else np.asarray(pose, np.float64)[None, :],
             )
             return block.items
-        from . import _step
+        from . import _scan_measurements, _step
 
         stamp = self._relative(stamp_ns)
         self.pose = None if pose is None else np.asarray(pose, np.float64)
         raw = np.asarray(meas.raw_legs, np.float64)
         has_prob = raw.shape[1] >= 4
-        raw5 = np.zeros((len(raw), _step.RAW_COLS))
-        raw5[:, _step.R_COVER] = -1.0
-        raw5[:, : min(raw.shape[1], _step.RAW_COLS)] = raw[:, : _step.RAW_COLS]
+        raw5 = np.zeros((len(raw), _scan_measurements.RAW_COLS))
+        raw5[:, _scan_measurements.R_COVER] = -1.0
+        raw5[:, : min(raw.shape[1], _scan_measurements.RAW_COLS)] = raw[:, : _scan_measurements.RAW_COLS]
         c8 = np.ascontiguousarray
-        tab, self._out = _step.step_measurements(
-            self.tracks.table,
-            self._ctx,
-            self._prm,
-            np.int64(stamp),
+        meas_arrays = (
             c8(meas.x, np.float64),
             c8(meas.y, np.float64),
             c8(meas.size, np.float64),
@@ -249,19 +246,26 @@ class Tracker:
             c8(meas.legs, np.float64).reshape(-1, 4),
             raw5,
             c8(meas.prob, np.float64),
-            has_prob,
+        )
+        sensor = (
             np.zeros(0, np.float32) if ranges is None else c8(ranges, np.float32),
             ranges is not None,
             pose is not None,
             np.zeros(3) if pose is None else c8(pose, np.float64),
             self._geo,
-            self._cos,
-            self._sin,
-            *self._bg,
-            *self._carry,
-            self.learned,
-            self._compat,
-            self._reacquire,
+        )
+        tab, self._out = _step.step_measurements(
+            self.tracks.table,
+            self._ctx,
+            self._prm,
+            np.int64(stamp),
+            meas_arrays,
+            has_prob,
+            sensor,
+            (self._cos, self._sin),
+            self._bg,
+            self._carry,
+            self._rules,
             self._out,
         )
         self.tracks.table = tab
@@ -278,8 +282,8 @@ class Tracker:
     ) -> TrackBlock:
         """Track N scans in one compiled call: stamps (N,) ns, their features (sensor frame), ranges (N, B)
         m or None, the sensor's world poses (N, 3: x, y m, theta rad) or None (track in the sensor frame).
-        Features become measurements by the paper's rule or with the learned legs (_step.paper_measurements,
-        learned_measurements).
+        Features become measurements by the paper's rule or with the learned legs
+        (_scan_measurements.paper_measurements, learned_measurements).
         `tails`: give every track's tail at every scan too (for the markers; else TrackBlock.tail is empty)."""
         from . import _step
 
@@ -301,29 +305,26 @@ class Tracker:
         cap = N * (len(self.tracks) + 4)  # grown in the call when more tracks live
         T = self.tracks.tail_length
         offsets = np.zeros(N + 1, np.int64)
-        tab, out, tail, count = _step.track_block(
-            self.tracks.table,
-            self._ctx,
-            self._prm,
-            rel,
-            *_flat(features),
-            self.learned,
-            ranges_arg,
-            ranges is not None,
-            poses_arg,
-            poses is not None,
-            self._geo,
-            self._cos,
-            self._sin,
-            *self._bg,
-            *self._carry,
-            self._compat,
-            self._reacquire,
+        scans = (rel, ranges_arg, ranges is not None, poses_arg, poses is not None)
+        output = (
             np.zeros(cap, TRACK_DTYPE),
             tails,
             np.zeros((cap if tails else 0, T, 2)),
             np.zeros(cap if tails else 0, np.int64),
             offsets,
+        )
+        tab, out, tail, count = _step.track_block(
+            self.tracks.table,
+            self._ctx,
+            self._prm,
+            scans,
+            _flat(features),
+            self._geo,
+            (self._cos, self._sin),
+            self._bg,
+            self._carry,
+            self._rules,
+            output,
         )
         self.tracks.table = tab
         self.tracks.n = int(self._ctx[state.C_N_TRACKS])

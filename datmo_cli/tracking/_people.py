@@ -1,0 +1,144 @@
+"""Legs and people: leg candidates given to the tracks of legs or people first, and the leg evidence that
+makes a confirmed track a person (tracker.Tracker's docstring has the rules; classification is _classify.py).
+
+Tracking frame, m. Leg probabilities are the leg detector's (0..1); NOT_A_LEG marks a candidate found on the
+background or carried. References: tests/reference_tracking.ReferenceTracker's _legs and _leg_evidence.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..log.vocabulary import CLASS_PERSON
+from ..numba_runtime import key_kernel_cache_on_sources
+from . import _kernels
+from ._scan_measurements import K_LEG, K_PERSON, NOT_A_LEG, R_COVER, R_P, R_W, R_X, R_Y
+from .state import (
+    CLS,
+    CONFIRMED,
+    IS_PERSON,
+    LEG_HITS,
+    LEG_SCORE,
+    P_LEG_EVIDENCE_RATE,
+    P_PERSON_MAINTAIN,
+    P_PERSON_VOTES,
+    VOTES,
+    X,
+    Y,
+)
+
+key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
+
+
+@njit(cache=True)
+def sure_person(tab, k, prm):
+    """Whether track k is a person: its returns are its own, never background, and a candidate near it is its
+    leg even on the background (a person standing still, whose evidence may dip at range, is not swallowed)."""
+    return tab[k, IS_PERSON] != 0
+
+
+@njit(cache=True)
+def leg_probability(mx, my, mkind, mlegs, mprob, raw, has_prob, j):
+    """The leg detector's probability of measurement j (tracker._leg_probability): a leg's own, the mean of
+    a pair's two (the nearest raw candidates to its legs), the segment's for the rest; 1 for legs when the
+    candidates carry no probability."""
+    if mkind[j] > K_LEG:
+        return mprob[j]
+    if not has_prob or len(raw) == 0:
+        return 1.0
+    pair = mkind[j] == K_PERSON
+    ax, ay = (mlegs[j, 0], mlegs[j, 1]) if pair else (mx[j], my[j])
+    bx, by = (mlegs[j, 2], mlegs[j, 3]) if pair else (mx[j], my[j])
+    ia = ib = 0
+    da = db = np.inf
+    for i in range(len(raw)):
+        d = np.hypot(ax - raw[i, 0], ay - raw[i, 1])
+        if d < da:
+            da, ia = d, i
+        d = np.hypot(bx - raw[i, 0], by - raw[i, 1])
+        if d < db:
+            db, ib = d, i
+    return 0.5 * (raw[ia, 3] + raw[ib, 3])
+
+
+@njit(cache=True)
+def leggy_tracks(tab, n, prm):
+    """The tracks that may take leg candidates first: people, and confirmed tracks of legs (legs a share >=
+    person_votes of their hits) or whose leg evidence is at least person_maintain (a person whose legs the detector
+    was less sure of, measured as circles or blobs)."""
+    out = np.empty(n, np.int64)
+    q = 0
+    for k in range(n):
+        legs = tab[k, VOTES + K_PERSON] + tab[k, VOTES + K_LEG]
+        total = 0.0
+        for j in range(5):
+            total += tab[k, VOTES + j]
+        leggy = legs >= prm[P_PERSON_VOTES] * max(total, 1.0) and legs > 0 and tab[k, CLS] <= CLASS_PERSON
+        evident = tab[k, LEG_HITS] > 0 and tab[k, LEG_SCORE] >= prm[P_PERSON_MAINTAIN]
+        if tab[k, IS_PERSON] != 0 or (tab[k, CONFIRMED] != 0 and (leggy or evident)):
+            out[q] = k
+            q += 1
+    return out[:q]
+
+
+@njit(cache=True)
+def legs_stage(tab, n, meas, prm):
+    """Tracks of legs or people take up to two leg candidates each, weak ones too when the detector gives them at
+    least person_maintain (below it, no hit keeps a person) (tracker._legs). Returns the measurements (rebuilt when
+    some track took legs: theirs first; mx, my, msize, mkind, mlegs, mprob) and rows0, the tracks owning the first
+    len(rows0). meas: (mx, my, msize, mkind, mlegs, raw, mprob), tracking frame."""
+    mx, my, msize, mkind, mlegs, raw, mprob = meas
+    none = np.zeros(0, np.int64)
+    if n == 0 or len(raw) == 0:
+        return mx, my, msize, mkind, mlegs, mprob, none
+    leggy = leggy_tracks(tab, n, prm)
+    if len(leggy) == 0:
+        return mx, my, msize, mkind, mlegs, mprob, none
+    tx = np.empty(len(leggy))
+    ty = np.empty(len(leggy))
+    for q in range(len(leggy)):
+        tx[q], ty[q] = tab[leggy[q], X], tab[leggy[q], Y]
+    use = (raw[:, R_COVER] < 0) | (raw[:, R_P] >= prm[P_PERSON_MAINTAIN])
+    cand = raw[use]
+    strong = cand[:, R_COVER] < 0
+    owner, x, y, size, kind, legs, other = _kernels.leg_stage_measurements(
+        tx,
+        ty,
+        (cand[:, R_X].copy(), cand[:, R_Y].copy(), cand[:, R_W].copy(), strong, cand[:, R_COVER].astype(np.int64)),
+        (mx, my, msize, mkind, mlegs),
+        prm,
+    )
+    if len(owner) == 0:
+        return mx, my, msize, mkind, mlegs, mprob, none
+    prob = np.zeros(len(x))
+    m = len(x) - len(other)
+    for q in range(len(other)):
+        prob[m + q] = mprob[other[q]]
+    return x, y, size, kind, legs, prob, leggy[owner]
+
+
+@njit(cache=True)
+def fold_evidence(tab, k, p, prm):
+    """Fold a leg-candidate hit of leg probability p into track k's evidence LEG_SCORE: the plain mean of its
+    first 1/leg_evidence_rate such hits, then a running mean of that rate; a candidate found on the background or
+    carried (p = NOT_A_LEG) sets it to 0."""
+    tab[k, LEG_HITS] += 1
+    if p == NOT_A_LEG:  # a candidate on the background or carried: whatever fed the evidence was no leg
+        tab[k, LEG_SCORE] = 0.0
+        return
+    a = max(prm[P_LEG_EVIDENCE_RATE], 1.0 / tab[k, LEG_HITS])
+    tab[k, LEG_SCORE] = (1.0 - a) * tab[k, LEG_SCORE] + a * p
+
+
+@njit(cache=True)
+def leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, prm):
+    """Fold the leg probability of each hit (rows took cols) that was a leg candidate (a leg or pair, or a shape
+    the detector scored above 0) into the tracks' evidence; other hits leave it as it is. Without a detector
+    (`has_prob` false: the paper's rule) there is no evidence."""
+    if not has_prob:
+        return
+    for q in range(len(rows)):
+        j = cols[q]
+        if mkind[j] <= K_LEG or mprob[j] > 0:
+            fold_evidence(tab, rows[q], leg_probability(mx, my, mkind, mlegs, mprob, raw, has_prob, j), prm)
