@@ -320,7 +320,7 @@ def _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir, sch
 
 def _check_leg_model(cfg: DatmoConfig) -> None:
     """A leg model that does not load is one error, before any input starts."""
-    from ..perception.legs import load_leg_model
+    from ..perception.leg_model import load_leg_model
 
     load_leg_model(cfg.features.leg_model)
 
