@@ -25,7 +25,8 @@ DB_MOVED, DB_CONFIRMED, DB_HIDDEN = 10, 11, 12
 C_ROWS, C_LIVE, C_CONFIRMED = 0, 1, 2
 
 
-@njit(cache=True)
+# inlined into accumulate (one compiled function, as before it was cut out)
+@njit(cache=True, inline="always")
 def _fold(d, k, stamp, rules, state, used):
     """Fold the detection d (DET_*) of scan k, stamped `stamp` ns, into the database (rules and state as
     accumulate takes them): it is the nearest live landmark of its type within the gate not already seen in

@@ -96,6 +96,10 @@ def _convex(ax, ay, jx, jy, bx, by) -> bool:
     return cj * co > 0
 
 
+# extract_scan's steps below are inlined into it (inline="always"): it compiles to one function, as it was
+# before they were cut out, and unpacking the scratch tuple in each step costs nothing per segment
+
+
 @njit(cache=True)
 def scan_work(p, nt, B, range_max):
     """Scratch arrays of extract_scan for scans of B beams, nt theta cells, returns up to range_max (m) and the
@@ -127,7 +131,7 @@ def scan_work(p, nt, B, range_max):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _merge_lines(x, y, nkept, rho_res, work) -> int:
     """Merge consecutive kept lines (work's kept, rows of cand) that are one line split by noise; returns how
     many kept lines remain."""
@@ -154,7 +158,7 @@ def _merge_lines(x, y, nkept, rho_res, work) -> int:
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _segment_lines(x, y, s, e, p, trig, work):
     """HTL on the points [s, e) of one segment (trig = (cos_t, sin_t) of the theta cells; work: scan_work's):
     its line candidates go to work's cand (rows LC_*), the indices of those with more than three points to cidx
@@ -200,7 +204,7 @@ def _segment_lines(x, y, s, e, p, trig, work):
     return nkept, ncand, votes / (e - s)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _circle_case(x, y, s, e, p, ncand, cand, cidx):
     """Section 5.2: whether the segment [s, e) with ncand HTL lines (rows cidx[:ncand] of cand) is tested as a
     circle, and whether that test goes beyond the paper's rule (leg_only: if the circle fails, the lines stay).
@@ -235,7 +239,7 @@ def _circle_case(x, y, s, e, p, ncand, cand, cidx):
     return try_circle, leg_only
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha) -> bool:
     """HTC on the segment [s, e) (its circle in work's cout, CC_*): whether the circle beats the segment's
     ncand HTL lines (r_acc htl_racc together), holds like a line must (r_acc above line_min_racc) and is a
@@ -264,7 +268,7 @@ def _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha) -> bool:
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _circle_row(row, scan, g, s, e, cout) -> None:
     """A circle row (C_*) of segment g ([s, e)) of scan `scan` from the circle candidate cout (CC_*)."""
     row[C_SCAN] = scan
@@ -278,7 +282,7 @@ def _circle_row(row, scan, g, s, e, cout) -> None:
     row[C_RACC] = cout[CC_RACC]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _line_row(row, scan, g, c) -> None:
     """A line row (L_*) of segment g of scan `scan` from the line candidate c (LC_*)."""
     row[L_SCAN] = scan
@@ -296,7 +300,7 @@ def _line_row(row, scan, g, c) -> None:
     row[L_RACC] = c[LC_RACC]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _blob_row(row, x, y, scan, g, s, e) -> None:
     """A blob row (B_*) of segment g ([s, e)) of scan `scan`: a blob (or a point), centroid and largest extent."""
     sx = 0.0
