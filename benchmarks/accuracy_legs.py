@@ -28,7 +28,7 @@ def shipped_spec():
     import dataclasses
 
     from datmo_cli.perception import training as T
-    from datmo_cli.perception.legs import DEFAULT_MODEL_PATH, LegModel
+    from datmo_cli.perception.leg_model import DEFAULT_MODEL_PATH, LegModel
 
     if not DEFAULT_MODEL_PATH.exists():
         return T.EstimatorSpec(), None

@@ -207,7 +207,7 @@ def track_run(
 def leg_threshold_of(leg_model: str) -> float:
     """The leg threshold of the leg detector `leg_model` names (FeatureParams.leg_model): its model's tuned
     threshold_p (0.5 for the paper's rule, which has none)."""
-    from .perception.legs import load_leg_model
+    from .perception.leg_model import load_leg_model
 
     model = load_leg_model(leg_model)
     return 0.5 if model is None else float(model.threshold_p)

@@ -1,12 +1,13 @@
 """Slow, plain references for datmo's perception kernels, written to be read, not for speed: loops over
 points and segments, numpy only for small linear algebra, scipy for the circle fit. No numba.
 
-- Features (docs/method.md §4 and §5, followed literally; datmo_cli/perception/_kernels.py): segmentation,
+- Features (docs/method.md §4 and §5, followed literally; datmo_cli/perception/segmentation.py, hough_lines.py,
+  hough_circles.py and scan_extractor.py): segmentation,
   the Hough transform for lines and its refinement, circles; the scene helpers ray-cast walls and circles
   analytically, for synthetic scans of known geometry.
-- The leg detector (datmo_cli/perception/_leg_kernels.py): segment features one segment at a time, in the
-  feature order of legs.FEATURE_NAMES, and tree-ensemble evaluation.
-- Ego-motion (datmo_cli/perception/_egomotion_kernels.py): scan points and their thinning, line normals from
+- The leg detector (datmo_cli/perception/leg_features.py and leg_forest.py): segment features one segment at a
+  time, in the feature order of legs.FEATURE_NAMES, and tree-ensemble evaluation.
+- Ego-motion (datmo_cli/perception/scan_odometry.py and icp.py): scan points and their thinning, line normals from
   beam neighbours, brute-force nearest map points, one Gauss-Newton linearisation of the robust
   point-to-line cost, and the whole ICP. A pose (x, y, theta) maps a sensor point p to R(theta) p + (x, y).
 
@@ -21,7 +22,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import least_squares
 
-from datmo_cli.perception._kernels import (
+from datmo_cli.perception.feature_layout import (
     CC_N,
     CC_R,
     CC_RACC,

@@ -10,7 +10,8 @@ import pytest
 import reference_perception as reference
 
 from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
-from datmo_cli.perception import _egomotion_kernels as K
+from datmo_cli.perception import icp as KI
+from datmo_cli.perception import scan_odometry as K
 from datmo_cli.perception.egomotion import (
     FRAME_ID,
     IcpParams,
@@ -103,25 +104,12 @@ def room_map(geom: ScanGeometry, ranges: np.ndarray, p: IcpParams = DEFAULTS):
     px, py, beams = np.zeros(b), np.zeros(b), np.zeros(b, np.int64)
     m = K.scan_points(ranges, c, s, geom.range_min, geom.range_max, p.map_spacing, b, px, py, beams)
     nx, ny = np.zeros(b), np.zeros(b)
-    K.scan_normals(
-        ranges,
-        c,
-        s,
-        geom.range_min,
-        geom.range_max,
-        beams,
-        m,
-        p.normal_radius,
-        p.max_gap,
-        _max_window(geom),
-        p.planarity,
-        nx,
-        ny,
-    )
+    scan = (c, s, geom.range_min, geom.range_max)
+    K.scan_normals(ranges, scan, beams, m, (p.normal_radius, p.max_gap, _max_window(geom), p.planarity), nx, ny)
     mx, my, mnx, mny = (np.zeros(b) for _ in range(4))
-    nxt = np.full(b, K.EMPTY, np.int64)
-    head = np.full(4096, K.EMPTY, np.int64)
-    count = K.add_to_map(px, py, nx, ny, m, 0.0, 0.0, 0.0, 0.0, p.max_dist, head, nxt, mx, my, mnx, mny, 0)
+    nxt = np.full(b, KI.EMPTY, np.int64)
+    head = np.full(4096, KI.EMPTY, np.int64)
+    count = KI.add_to_map((px, py, nx, ny), m, (0.0, 0.0, 0.0), 0.0, (mx, my, mnx, mny, p.max_dist, head, nxt), 0)
     return (mx[:count], my[:count], mnx[:count], mny[:count]), head, nxt
 
 
@@ -168,21 +156,8 @@ def test_normals_match_reference(geom):
     win = _max_window(geom)
     valid = np.flatnonzero(np.isfinite(r) & (r > geom.range_min))
     nx, ny = np.zeros(len(valid)), np.zeros(len(valid))
-    K.scan_normals(
-        r,
-        np.cos(a),
-        np.sin(a),
-        geom.range_min,
-        geom.range_max,
-        valid,
-        len(valid),
-        p.normal_radius,
-        p.max_gap,
-        win,
-        p.planarity,
-        nx,
-        ny,
-    )
+    scan = (np.cos(a), np.sin(a), geom.range_min, geom.range_max)
+    K.scan_normals(r, scan, valid, len(valid), (p.normal_radius, p.max_gap, win, p.planarity), nx, ny)
     kinds = {"line": 0, "point": 0, "none": 0}
     for i, b in enumerate(valid):
         ex, ey = reference.beam_normal(
@@ -220,7 +195,8 @@ def test_icp_step_matches_reference(pose, redescend):
     (mx, my, mnx, mny), head, nxt = room_map(G361, ref)
     sx, sy = source_points(G361, cur)
     hess, grad = np.zeros((3, 3)), np.zeros(3)
-    got = K.icp_step(sx, sy, len(sx), *pose, mx, my, mnx, mny, 0.25, head, nxt, 0.25, 0.05, redescend, 0.05, hess, grad)
+    local_map = (mx, my, mnx, mny, 0.25, head, nxt)
+    got = KI.icp_step((sx, sy), len(sx), pose, local_map, 0.25, 0.05, redescend, 0.05, hess, grad)
     H, g, matched, abs_sum, inliers = reference.icp_step(
         np.stack([sx, sy], 1), pose, np.stack([mx, my], 1), np.stack([mnx, mny], 1), 0.25, 0.05, redescend, 0.05
     )
@@ -239,7 +215,8 @@ def test_icp_align_matches_reference(init):
     (mx, my, mnx, mny), head, nxt = room_map(G361, ref)
     sx, sy = source_points(G361, cur)
     pose = np.zeros(3)
-    got = K.icp_align(sx, sy, len(sx), *init, mx, my, mnx, mny, 0.25, head, nxt, 0.5, 0.25, 0.05, 0.05, 30, 1.0, pose)
+    local_map = (mx, my, mnx, mny, 0.25, head, nxt)
+    got = KI.icp_align((sx, sy), len(sx), init, local_map, (0.5, 0.25, 0.05, 0.05, 30, 1.0), pose)
     want, stats = reference.icp_align(
         np.stack([sx, sy], 1), init, np.stack([mx, my], 1), np.stack([mnx, mny], 1), 0.5, 0.25, 0.05, 0.05, 30, 1.0
     )
@@ -251,13 +228,13 @@ def test_icp_align_matches_reference(init):
 def test_grid_nearest_matches_brute_force():
     rng = np.random.default_rng(5)
     pts = rng.uniform(-3, 3, (400, 2))
-    head = np.full(1024, K.EMPTY, np.int64)
-    nxt = np.full(400, K.EMPTY, np.int64)
+    head = np.full(1024, KI.EMPTY, np.int64)
+    nxt = np.full(400, KI.EMPTY, np.int64)
     for i, (x, y) in enumerate(pts):
-        K.grid_insert(x, y, i, 0.25, head, nxt)
+        KI.grid_insert(x, y, i, 0.25, head, nxt)
     for q in rng.uniform(-3.5, 3.5, (300, 2)):
         for dist in (0.1, 0.25, 0.6):
-            assert K.grid_nearest(
+            assert KI.grid_nearest(
                 q[0], q[1], pts[:, 0].copy(), pts[:, 1].copy(), 0.25, head, nxt, dist
             ) == reference.nearest(q, pts, dist)
 

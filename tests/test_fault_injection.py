@@ -220,7 +220,7 @@ def test_write_failures_at_seeded_points_of_train_legs(tmp_path, monkeypatch):
     every point is the command's reading of its inputs and its write."""
     pytest.importorskip("sklearn")
     from datmo_cli.perception import training
-    from datmo_cli.perception.legs import LegModel
+    from datmo_cli.perception.leg_model import LegModel
     from tests.synthetic_legs import scene, write_bag
 
     positive = write_bag(tmp_path / "p0.bag", *scene(20, seed=0))

@@ -9,8 +9,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 
-from datmo_cli.perception import _egomotion_kernels as KE
-from datmo_cli.perception import _leg_kernels as KL
+from datmo_cli.perception import feature_layout as FL
+from datmo_cli.perception import hough_circles as HC
+from datmo_cli.perception import hough_lines as HL
+from datmo_cli.perception import icp as KI
+from datmo_cli.perception import landmark_database as LDB
+from datmo_cli.perception import leg_features as LF
+from datmo_cli.perception import scan_extractor as SX
+from datmo_cli.perception import scan_odometry as KO
 from datmo_cli.tracking import _step, state
 from datmo_cli.tracking.tracker import TRACK_DTYPE, Tracker, _flat
 from tests import reference_perception as rp
@@ -103,7 +109,7 @@ def test_gather():
         for direction in (-1, 1):
             for radius, gap, window in ((0.1, 0.5, 20), (0.3, 0.08, 6)):
                 acc = np.zeros(6)
-                far = KE._gather(r, cos_a, sin_a, 0.05, 30.0, b, direction, radius, gap, window, acc)
+                far = KO._gather(r, cos_a, sin_a, 0.05, 30.0, b, direction, radius, gap, window, acc)
                 uv, want_far = rp.gather(r, angles, 0.05, 30.0, b, direction, radius, gap, window)
                 u, v = uv[:, 0], uv[:, 1]
                 want = [len(uv), u.sum(), v.sum(), (u * u).sum(), (u * v).sum(), (v * v).sum()]
@@ -119,7 +125,7 @@ def test_rebuild_map():
     kf_n, kf_pose = np.zeros(slots, np.int64), np.zeros((slots, 3))
     cap = slots * beams
     mx, my, mnx, mny = np.zeros(cap), np.zeros(cap), np.zeros(cap), np.zeros(cap)
-    head, nxt = np.full(512, KE.EMPTY, np.int64), np.full(cap, KE.EMPTY, np.int64)
+    head, nxt = np.full(512, KI.EMPTY, np.int64), np.full(cap, KI.EMPTY, np.int64)
     ring: list = [(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(3))] * slots
     for newest_count in range(1, 6):
         newest, n_kf = (newest_count - 1) % slots, min(newest_count, slots)
@@ -137,13 +143,63 @@ def test_rebuild_map():
         )
         kf_n[newest], kf_pose[newest] = m, pose
         ring[newest] = (pts, nrm, pose)
-        count = KE.rebuild_map(
-            kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose, newest, n_kf, 0.2, cell, head, nxt, mx, my, mnx, mny
-        )
+        keyframes = (kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose)
+        count = KO.rebuild_map(keyframes, newest, n_kf, 0.2, (mx, my, mnx, mny, cell, head, nxt))
         want_xy, want_n = rp.rebuild_map(ring, newest, n_kf, 0.2, cap)
         assert count == len(want_xy)
         np.testing.assert_allclose(np.column_stack([mx, my])[:count], want_xy, atol=1e-12)
         np.testing.assert_allclose(np.column_stack([mnx, mny])[:count], want_n, atol=1e-12)
+
+
+def test_predict_and_match():
+    """_predict is the reference's constant-velocity guess (the previous pose moved on by the previous motion
+    times the ratio of the time steps, at most 3); _match aligns a scan from it, and from each recovery move when
+    the inlier share is low or ICP did not converge, as the reference's odometry does: the same pose and figures."""
+    from datmo_cli.perception.egomotion import IcpParams
+    from tests.test_egomotion import G361, START, cast, room_map, source_points
+
+    rng = np.random.default_rng(41)
+    for trial in range(20):
+        poses, dt = rng.uniform(-1, 1, (3, 3)), rng.uniform(0.0, 0.3, 3)
+        dt[1] = 0.0 if trial % 5 == 0 else dt[1]
+        want = poses[1]
+        if dt[1] > 0:
+            motion = rp.pose_of(np.linalg.inv(rp.se2(*poses[0])) @ rp.se2(*poses[1]))
+            want = rp.compose(poses[1], min(max(dt[2] / dt[1], 0.0), 3.0) * motion)
+        np.testing.assert_allclose(KO._predict(poses, dt, 2), want, atol=1e-12)
+        np.testing.assert_allclose(KO._predict(poses, dt, 1), poses[0], atol=0)
+    p = IcpParams()
+    (mx, my, mnx, mny), head, nxt = room_map(G361, cast(START, G361.angles(), noise=0.005, rng=rng))
+    local_map = (mx, my, mnx, mny, p.max_dist, head, nxt)
+    map_xy, map_n = np.stack([mx, my], 1), np.stack([mnx, mny], 1)
+    icp = (p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight)
+    moves = np.asarray(p.recovery_moves, np.float64).reshape(-1, 3)
+    poses, dt = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.0, 0.0]]), np.array([0.0, 0.1, 0.1])
+    flags_seen = 0
+    for turn in (0.02, 0.5):  # a small move, and a sudden turn the recovery moves find
+        cur = cast((START[0] + 0.05, START[1], START[2] + turn), G361.angles(), noise=0.005, rng=rng)
+        sx, sy = source_points(G361, cur)
+        n, src = len(sx), np.stack([sx, sy], 1)
+        pose, scratch = np.zeros(3), np.zeros(3)
+        got = KO._match((sx, sy), n, poses, dt, 2, local_map, icp, (p.min_inlier_share, moves), pose, scratch)
+        want_pose, (matched, mean_res, inliers, iters) = rp.icp_align(
+            src, KO._predict(poses, dt, 2), map_xy, map_n, *icp
+        )
+        share, flags = inliers / max(n, 1), 0
+        if share < p.min_inlier_share or iters >= p.max_iter:
+            for move in moves:
+                moved, (m2, r2, i2, it2) = rp.icp_align(src, rp.compose(poses[1], move), map_xy, map_n, *icp)
+                iters += it2
+                if m2 >= KI.MIN_MATCHES and i2 / max(n, 1) > share:
+                    share, matched, mean_res, inliers, want_pose = i2 / max(n, 1), m2, r2, i2, moved
+                    flags |= KO.FLAG_RECOVERED
+        if matched < KI.MIN_MATCHES:
+            flags |= KO.FLAG_FAILED
+        assert (got[0], got[2], got[3], got[5]) == (matched, inliers, iters, flags)
+        assert got[1] == pytest.approx(mean_res, rel=1e-9) and got[4] == pytest.approx(share, rel=1e-12)
+        np.testing.assert_allclose(pose, want_pose, atol=1e-9)
+        flags_seen |= flags
+    assert flags_seen & KO.FLAG_RECOVERED
 
 
 # ------------------------------------------------------------------------------------------------- legs
@@ -166,7 +222,7 @@ def test_segment_features():
             "relative_curvature",
         )
     ]
-    shape = np.setdiff1d(np.arange(KL.N_FEATURES), context)
+    shape = np.setdiff1d(np.arange(LF.N_FEATURES), context)
     for _ in range(20):
         r = (
             rng.uniform(1.0, 3.0) + 0.05 * np.cos(np.linspace(-1, 1, 60)) * rng.uniform(0, 1) + rng.normal(0, 0.01, 60)
@@ -175,8 +231,8 @@ def test_segment_features():
         e = s + int(rng.integers(1, 60 - s + 1))
         x = r[s:e].astype(np.float64) * np.cos(angles[s:e])
         y = r[s:e].astype(np.float64) * np.sin(angles[s:e])
-        out, work, step = np.zeros(KL.N_FEATURES), np.empty(e - s), np.empty(e - s)
-        KL.segment_features(x, y, e - s, legs.RADIUS_CLIP, work, step, out)
+        out, work, step = np.zeros(LF.N_FEATURES), np.empty(e - s), np.empty(e - s)
+        LF.segment_features(x, y, e - s, legs.RADIUS_CLIP, work, step, out)
         want = rp.segment_features(r, angles, s, e, 0.05, 30.0)
         np.testing.assert_allclose(out[shape], want[shape], rtol=1e-6, atol=1e-7)
         assert (out[context] == 0).all()
@@ -264,7 +320,6 @@ def _landmark_scene(rng: np.random.Generator, n_scans: int) -> np.ndarray:
 def test_accumulate_and_hide_bench_supports():
     """The landmark database, folded in two calls (state carried between them), equals the plain statement of
     its rules after every scan: the rows, the stamps first seen, and every scan's snapshot."""
-    from datmo_cli.perception import landmarks as LM
 
     rng = np.random.default_rng(36)
     n_scans, split = 40, 23
@@ -272,7 +327,7 @@ def test_accumulate_and_hide_bench_supports():
     stamps = (np.arange(n_scans) * 100_000_000 + 5 * 10**17).astype(np.int64)
     match, min_count, drift, column_time, forget, support = 0.3, 3, 0.1, 1e9, 10, 0.13
     cap = len(det) + 1
-    db, first_ns, last_ns = np.zeros((cap, LM.DB_COLUMNS)), np.zeros(cap, np.int64), np.zeros(cap, np.int64)
+    db, first_ns, last_ns = np.zeros((cap, LDB.DB_COLUMNS)), np.zeros(cap, np.int64), np.zeros(cap, np.int64)
     live, confirmed, counters = np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros(3, np.int64)
     snaps = []
     for k0, k1 in ((0, split), (split, n_scans)):
@@ -280,27 +335,9 @@ def test_accumulate_and_hide_bench_supports():
         size = (k1 - k0) * cap
         snap_idx, snap_vals = np.zeros(size, np.int64), np.zeros((size, 6))
         snap_last, snap_count = np.zeros(size, np.int64), np.zeros(k1 - k0, np.int64)
-        ns = LM.accumulate(
-            part,
-            stamps[k0:k1],
-            k0,
-            match,
-            min_count,
-            drift,
-            column_time,
-            forget,
-            support,
-            db,
-            first_ns,
-            last_ns,
-            live,
-            confirmed,
-            counters,
-            snap_idx,
-            snap_vals,
-            snap_last,
-            snap_count,
-        )
+        rules = (match, min_count, drift, column_time, forget, support)
+        state = (db, first_ns, last_ns, live, confirmed, counters)
+        ns = LDB.accumulate(part, stamps[k0:k1], k0, rules, state, (snap_idx, snap_vals, snap_last, snap_count))
         assert ns == snap_count.sum()
         offsets = np.concatenate([[0], np.cumsum(snap_count)])
         for a, b in zip(offsets[:-1], offsets[1:], strict=True):
@@ -308,7 +345,7 @@ def test_accumulate_and_hide_bench_supports():
     rows, want_first, want_snaps = rp.landmark_database(
         det, stamps, match, min_count, drift, column_time, forget, support
     )
-    n = counters[LM.C_ROWS]
+    n = counters[LDB.C_ROWS]
     assert n == len(rows)
     np.testing.assert_allclose(db[:n], rows, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(first_ns[:n], want_first)
@@ -317,15 +354,38 @@ def test_accumulate_and_hide_bench_supports():
         np.testing.assert_allclose(
             np.array(snaps[k]).reshape(-1, 8), np.array(want_snaps[k]).reshape(-1, 8), rtol=1e-12, atol=1e-12
         )
-    assert rows[:, LM.DB_MOVED].any() and rows[:, LM.DB_HIDDEN].sum() == 2 and len(want_snaps[-1]) >= 6
+    assert rows[:, LDB.DB_MOVED].any() and rows[:, LDB.DB_HIDDEN].sum() == 2 and len(want_snaps[-1]) >= 6
+    # accumulate's steps called one by one: _fold each detection, then forget stale candidates and moved
+    # columns and hide benches' supports after each scan: the same database
+    db1, first1, last1 = np.zeros((cap, LDB.DB_COLUMNS)), np.zeros(cap, np.int64), np.zeros(cap, np.int64)
+    live1, confirmed1, counters1 = np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros(3, np.int64)
+    state1 = (db1, first1, last1, live1, confirmed1, counters1)
+    used = (0, 0, 0)
+    for k in range(n_scans):
+        for d in det[det[:, 0] == k]:
+            used = LDB._fold(d, k, stamps[k], rules, state1, used)
+        m, nlive, nconf = used
+        u = 0
+        while u < nlive:  # as accumulate drops them: the last live row takes the dropped one's place
+            q = live1[u]
+            if (db1[q, LDB.DB_CONFIRMED] == 0 and k - db1[q, 7] > forget) or db1[q, LDB.DB_MOVED] != 0:
+                nlive -= 1
+                live1[u] = live1[nlive]
+            else:
+                u += 1
+        used = (m, nlive, nconf)
+        LDB._hide_bench_supports(db1, confirmed1, nconf, min_count, support)
+    assert used[0] == n
+    np.testing.assert_allclose(db1[:n], rows, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(first1[:n], want_first)
     # the hiding rule on its own: a confirmed column by a confirmed bench's support end, and one farther off
-    db2 = np.zeros((3, LM.DB_COLUMNS))
+    db2 = np.zeros((3, LDB.DB_COLUMNS))
     db2[0, :6] = [5, 0.0, 0.0, 0.0, 2.0, 3]
     db2[1, :6] = [4, 0.85 + 0.3, 0.2, 0.0, 0.15, 3]
     db2[2, :6] = [4, -0.87, 0.6, 0.0, 0.15, 3]
-    LM._hide_bench_supports(db2, np.array([0, 1, 2]), 3, 3, 0.15)
+    LDB._hide_bench_supports(db2, np.array([0, 1, 2]), 3, 3, 0.15)
     want = [rp.bench_support_hides(db2[q, 1:3], db2[0, 1:5], 0.15) for q in (1, 2)]
-    assert db2[1:, LM.DB_HIDDEN].tolist() == [float(w) for w in want] == [1.0, 0.0]
+    assert db2[1:, LDB.DB_HIDDEN].tolist() == [float(w) for w in want] == [1.0, 0.0]
 
 
 # ------------------------------------------------------------------------------------------- perception
@@ -345,55 +405,19 @@ def _room_scans(n: int, angles: np.ndarray) -> np.ndarray:
     return out
 
 
-def _extract_scan_rows(x, y, segs: list, k: int, vec, acc, cos_t, sin_t, inc: float) -> list[np.ndarray]:
+def _extract_scan_rows(x, y, segs: list, k: int, vec, cos_t, sin_t, inc: float, acc=None) -> list[np.ndarray]:
     """extract_scan on one scan's points (x, y m, sensor frame) and segments [(start, end)] as scan k, with the
-    scratch arrays extract_scans makes and the accumulator `acc` as given (extract_scan zeroes what it uses):
-    its line, circle and blob rows."""
-    from datmo_cli.perception import _kernels as KP
-
+    scratch arrays extract_scans makes (scan_work, for returns up to 8 m), the accumulator `acc` instead of
+    its own when given (extract_scan zeroes what it uses): its line, circle and blob rows."""
     B, nt = len(x), len(cos_t)
-    w = int(round(vec[KP.P_CWINDOW] / vec[KP.P_CELL]))
     starts = np.array([s for s, _ in segs] + [0], np.int64)
     ends = np.array([e for _, e in segs] + [0], np.int64)
     out = [np.zeros((B, c)) for c in (13, 9, 9)]
-    work = (
-        np.empty(12),
-        np.empty(nt),
-        np.empty(B, np.int64),
-        np.zeros(nt, np.bool_),
-        np.empty((KP.MAX_SUB, 3), np.int64),
-        np.empty((KP.MAX_SUB, 12)),
-        np.empty(KP.MAX_SUB, np.int64),
-        np.empty(KP.MAX_SUB, np.int64),
-        np.empty(5),
-        np.empty((B, 3), np.int64),
-        np.empty(4),
-        np.zeros(1, np.int64),
-    )
-    nl, nc, nb = KP.extract_scan(
-        x,
-        y,
-        starts,
-        ends,
-        len(segs),
-        k,
-        vec,
-        acc,
-        np.zeros((2 * w + 1, 2 * w + 1), np.int32),
-        cos_t,
-        sin_t,
-        np.empty(B, np.int64),
-        np.empty(KP.MAX_SUB, np.int64),
-        np.empty(KP.MAX_SUB, np.int64),
-        out[0],
-        0,
-        out[1],
-        0,
-        out[2],
-        0,
-        work,
-        inc,
-    )
+    work = SX.scan_work(vec, nt, B, 8.0)
+    if acc is not None:
+        work = work[:12] + (acc,) + work[13:]
+    segments = (starts, ends, len(segs))
+    nl, nc, nb = SX.extract_scan(x, y, segments, k, vec, (cos_t, sin_t), work, tuple(out), (0, 0, 0), inc)
     return [out[0][:nl], out[1][:nc], out[2][:nb]]
 
 
@@ -401,7 +425,6 @@ def test_extract_scan_scans_and_parallel():
     """A block of scans through extract_scans (one call) and extract_parallel (split in parts) gives the same
     rows as extract_scan called scan by scan on the reference's segments; each segment is one circle, or its
     lines, or a blob, and blobs are the reference's centroid and extent."""
-    from datmo_cli.perception import _kernels as KP
     from datmo_cli.perception.params import FeatureParams
 
     p = FeatureParams()
@@ -423,20 +446,19 @@ def test_extract_scan_scans_and_parallel():
         ]
 
     whole, parallel = rows(), rows()
-    KP.extract_scans(ranges, 0, N, *args, *whole, none_given, none_off)
-    KP.extract_parallel(ranges, 2, *args, *parallel, none_given, none_off)
+    SX.extract_scans(ranges, 0, N, args, tuple(whole), (none_given, none_off))
+    SX.extract_parallel(ranges, 2, args, tuple(parallel), (none_given, none_off))
     for a, b in zip(whole, parallel, strict=True):
         np.testing.assert_array_equal(a, b)
     seg, lines, circles, blobs, counts = whole
     assert (counts[:, 1:].sum(axis=0) > 0).all()  # lines, circles and blobs
 
     for k in range(N):
-        want_seg = rp.segment(ranges[k], inc, vec[KP.P_C0], 0.05, 8.0, int(vec[KP.P_MIN_POINTS]))
+        want_seg = rp.segment(ranges[k], inc, vec[FL.P_C0], 0.05, 8.0, int(vec[FL.P_MIN_POINTS]))
         assert [tuple(s) for s in seg[k * B : k * B + counts[k, 0]].tolist()] == want_seg
         r = np.where(np.isfinite(ranges[k]), ranges[k], 0.0).astype(np.float64)
         x, y = r * cos_a, r * sin_a
-        acc = np.zeros((nt, int(2 * 8.0 / vec[KP.P_RHO_RES]) + 3), np.int32)
-        got = _extract_scan_rows(x, y, want_seg, k, vec, acc, cos_t, sin_t, inc)
+        got = _extract_scan_rows(x, y, want_seg, k, vec, cos_t, sin_t, inc)
         for j, (g, table) in enumerate(zip(got, (lines, circles, blobs), strict=True)):
             np.testing.assert_array_equal(g, table[k * B : k * B + counts[k, j + 1]])
         kinds = [set() for _ in want_seg]
@@ -447,8 +469,8 @@ def test_extract_scan_scans_and_parallel():
                 kinds[int(row[1])].add(j)
         assert all(len(kind) == 1 for kind in kinds)
         for row in got[2]:
-            s, e = int(row[KP.B_FIRST]), int(row[KP.B_LAST]) + 1
-            np.testing.assert_allclose(row[KP.B_X : KP.B_SIZE + 1], rp.blob(x[s:e], y[s:e]), rtol=1e-12, atol=1e-12)
+            s, e = int(row[FL.B_FIRST]), int(row[FL.B_LAST]) + 1
+            np.testing.assert_allclose(row[FL.B_X : FL.B_SIZE + 1], rp.blob(x[s:e], y[s:e]), rtol=1e-12, atol=1e-12)
 
 
 def test_odometry_run():
@@ -466,43 +488,26 @@ def test_odometry_run():
     dt = np.full(len(ranges), 0.1)
     dt[0], dt[7] = 0.0, 0.2
     angles = geom.angles().astype(np.float64)
-    poses, stats = np.zeros((len(ranges), 3)), np.zeros((len(ranges), KE.N_STATS))
-    KE.odometry_run(
+    poses, stats = np.zeros((len(ranges), 3)), np.zeros((len(ranges), KO.N_STATS))
+    KO.odometry_run(
         ranges,
         dt,
-        np.cos(angles),
-        np.sin(angles),
-        geom.range_min,
-        geom.range_max,
-        p.max_points,
-        p.source_spacing,
-        p.map_spacing,
-        p.normal_radius,
-        p.max_gap,
-        _max_window(geom),
-        p.planarity,
-        p.max_dist0,
-        p.max_dist,
-        p.robust_scale,
-        p.inlier_tol,
-        p.max_iter,
-        p.prior_weight,
-        p.keyframe_dist,
-        p.keyframe_angle,
-        p.keyframe_share,
-        p.n_keyframes,
-        p.min_inlier_share,
-        np.asarray(p.recovery_moves, np.float64).reshape(-1, 3),
+        (np.cos(angles), np.sin(angles), geom.range_min, geom.range_max),
+        (p.max_points, p.source_spacing, p.map_spacing),
+        (p.normal_radius, p.max_gap, _max_window(geom), p.planarity),
+        (p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight),
+        (p.keyframe_dist, p.keyframe_angle, p.keyframe_share, p.n_keyframes),
+        (p.min_inlier_share, np.asarray(p.recovery_moves, np.float64).reshape(-1, 3)),
         poses,
         stats,
     )
     want_poses, want_stats = rp.odometry(ranges, dt, angles, geom.range_min, geom.range_max, p, _max_window(geom))
     np.testing.assert_allclose(poses, want_poses, rtol=0, atol=1e-9)
-    exact = [KE.S_MATCHED, KE.S_POINTS, KE.S_FLAGS, KE.S_ITERATIONS]
+    exact = [KO.S_MATCHED, KO.S_POINTS, KO.S_FLAGS, KO.S_ITERATIONS]
     np.testing.assert_array_equal(stats[:, exact], want_stats[:, exact])
     np.testing.assert_allclose(stats, want_stats, rtol=1e-9, atol=1e-12)
-    flags = stats[:, KE.S_FLAGS].astype(np.int64)
-    assert (flags & KE.FLAG_KEYFRAME).sum() >= 2 and (flags & KE.FLAG_RECOVERED).any()
+    flags = stats[:, KO.S_FLAGS].astype(np.int64)
+    assert (flags & KO.FLAG_KEYFRAME).sum() >= 2 and (flags & KO.FLAG_RECOVERED).any()
 
 
 def _feature_scenes(angles: np.ndarray) -> list[np.ndarray]:
@@ -683,41 +688,36 @@ def _mirror_segment(x, y, s: int, e: int, vec: np.ndarray, params, dalpha: float
     arrays kept from segment to segment in `st`, the accumulator zeroed as far as first needed), with the
     decision and the merges left to the reference: (rp.Decision, the candidate rows after the merges, the
     pairs merged, the kept lines before the decision, the r_acc a circle must beat)."""
-    from datmo_cli.perception import _kernels as KP
 
-    rho_res = vec[KP.P_RHO_RES]
+    rho_res = vec[FL.P_RHO_RES]
     cos_t, sin_t, acc, toff, idx, lo = st["cos_t"], st["sin_t"], st["acc"], st["toff"], st["idx"], st["lo"]
     sub_s, sub_e, peaks = st["sub_s"], st["sub_e"], st["peaks"]
     nt = cos_t.shape[0]
     nsub = 0
-    if e - s >= vec[KP.P_LINE_MIN_POINTS]:
-        KP.normal_cells(x, y, s, e, nt, st["cell"])
-        used = nt * KP._bounding_box(x, y, s, e, rho_res, acc.shape[1], st["box"])
+    if e - s >= vec[FL.P_LINE_MIN_POINTS]:
+        HL.normal_cells(x, y, s, e, nt, st["cell"])
+        used = nt * HL._bounding_box(x, y, s, e, rho_res, acc.shape[1], st["box"])
         if used > st["zeroed"]:
             acc.reshape(-1)[st["zeroed"] : used] = 0
             st["zeroed"] = used
-        nsub = KP.line_subsegments(
+        nsub = HL.line_subsegments(
             x,
             y,
             s,
             e,
-            acc,
-            toff,
+            (acc, toff, st["touched"]),
             cos_t,
             sin_t,
             rho_res,
-            int(vec[KP.P_WINDOW] / (np.pi / nt)),
+            int(vec[FL.P_WINDOW] / (np.pi / nt)),
             st["cell"],
-            st["touched"],
-            sub_s,
-            sub_e,
-            peaks,
+            (sub_s, sub_e, peaks),
             st["hist"],
         )
     rows, runs = [], []
     for k in range(nsub):
         t = peaks[k, 1]
-        KP.line_of_run(
+        HL.line_of_run(
             x,
             y,
             sub_s[k],
@@ -734,16 +734,57 @@ def _mirror_segment(x, y, s: int, e: int, vec: np.ndarray, params, dalpha: float
     htl, kept, htl_racc = rp.line_candidates(rows, runs, e - s, params)
 
     def refit(a: int, b: int, theta: float, rho: float, votes: float) -> np.ndarray:
-        KP.line_of_run(x, y, a, b, theta, rho, votes, rho_res, idx, lo)
+        HL.line_of_run(x, y, a, b, theta, rho, votes, rho_res, idx, lo)
         return lo.copy()
 
     def circle(beat: float) -> tuple[np.ndarray, np.ndarray]:
-        KP.circle_of_run(x, y, s, e, vec, st["cacc"], idx, st["cout"], beat)
-        return st["cout"].copy(), idx[: int(st["cout"][KP.CC_N])].copy()
+        HC.circle_of_run(x, y, s, e, vec, st["cacc"], idx, st["cout"], beat)
+        return st["cout"].copy(), idx[: int(st["cout"][FL.CC_N])].copy()
 
+    pre = (rows, runs, kept, htl, htl_racc)
     kept, rows, _, merged = rp.merge_lines(rows, runs, kept, rho_res, refit)
+    st["steps"] = (*pre, kept)
     decision = rp.feature_decision(x, y, s, e, rows, htl, kept, htl_racc, params, dalpha, circle)
     return decision, rows, merged, kept, max(htl_racc, params.line_min_racc)
+
+
+def _steps_agree(x, y, s: int, e: int, vec, inc: float, d, rows, st: dict, got: tuple, k: int, g: int) -> None:
+    """extract_scan's own steps on segment g [s, e) of scan k agree with the reference's (after _mirror_segment,
+    which leaves the reference's candidates before the merges in st["steps"]): _merge_lines with rp.merge_lines,
+    _segment_lines with rp.line_candidates and the merges, _circle_case and _circle_wins with the decision d; and
+    the row writers write the rows extract_scan wrote (`got`: its line, circle and blob rows of the segment)."""
+    pre_rows, runs, pre_kept, htl, htl_racc, kept = st["steps"]
+    work = st["work"]
+    _, _, _, _, _, cand, kept_at, cidx, cout, _, _, _, _, _, _, sub_s, sub_e = work
+    if len(pre_kept) > 1:
+        cand[: len(pre_rows)] = pre_rows
+        kept_at[: len(pre_kept)] = pre_kept
+        sub_s[: len(runs)] = [a for a, _ in runs]
+        sub_e[: len(runs)] = [b for _, b in runs]
+        m = SX._merge_lines(x, y, len(pre_kept), vec[FL.P_RHO_RES], work)
+        assert kept_at[:m].tolist() == list(kept), d
+        for q in kept:
+            np.testing.assert_array_equal(cand[q], rows[q], err_msg=str(d))
+    nkept, ncand, racc = SX._segment_lines(x, y, s, e, vec, (st["cos_t"], st["sin_t"]), work)
+    assert (nkept, ncand) == (len(kept), len(htl)) and racc == pytest.approx(htl_racc, rel=1e-12, abs=0), d
+    assert kept_at[:nkept].tolist() == list(kept) and cidx[:ncand].tolist() == list(htl), d
+    for q in range(len(rows)):
+        np.testing.assert_array_equal(cand[q], rows[q], err_msg=str(d))
+    tried, leg_only = SX._circle_case(x, y, s, e, vec, ncand, cand, cidx)
+    assert tried == d.tried and (not tried or leg_only == d.leg_only), d
+    if tried:
+        assert SX._circle_wins(x, y, s, e, vec, work, ncand, racc, inc) == (d.kind == "circle"), d
+    out = np.full(13, np.nan)
+    if d.kind == "circle":
+        SX._circle_row(out, k, g, s, e, cout)
+        np.testing.assert_array_equal(out[:9], got[1][0])
+    elif d.kind == "lines":
+        for q in range(nkept):
+            SX._line_row(out, k, g, cand[kept_at[q]])
+            np.testing.assert_array_equal(out, got[0][q])
+    else:
+        SX._blob_row(out, x, y, k, g, s, e)
+        np.testing.assert_array_equal(out[:9], got[2][0])
 
 
 def test_extract_scan_decision_equals_the_reference():
@@ -753,7 +794,6 @@ def test_extract_scan_decision_equals_the_reference():
     circle fit, those computed by the kernels extract_scan calls, called one by one (_mirror_segment): the same
     kind, the lines the kept and merged candidates, the circle the fit, the blob the reference's centroid and
     extent. Each branch of the rule is taken at least once, and some decisions are close."""
-    from datmo_cli.perception import _kernels as KP
     from datmo_cli.perception.params import FeatureParams
 
     counts: dict[str, int] = {}
@@ -765,15 +805,15 @@ def test_extract_scan_decision_equals_the_reference():
         nt = int(round(180.0 / params.theta_resolution))
         theta = np.arange(nt) * (np.pi / nt)
         cos_t, sin_t = np.cos(theta), np.sin(theta)
-        w = int(round(vec[KP.P_CWINDOW] / vec[KP.P_CELL]))
-        width = int(2 * 8.0 / vec[KP.P_RHO_RES]) + 3
+        w = int(round(vec[FL.P_CWINDOW] / vec[FL.P_CELL]))
+        width = int(2 * 8.0 / vec[FL.P_RHO_RES]) + 3
         for k, ranges in enumerate(list(_room_scans(2, angles)) + _feature_scenes(angles)):
-            segs = rp.segment(ranges, inc, vec[KP.P_C0], 0.05, 8.0, 1)  # single points and pairs too
+            segs = rp.segment(ranges, inc, vec[FL.P_C0], 0.05, 8.0, 1)  # single points and pairs too
             r = np.where(np.isfinite(ranges), ranges, 0.0).astype(np.float64)
             x, y = r * np.cos(angles), r * np.sin(angles)
             # the accumulator as extract_scans leaves it uninitialised: extract_scan zeroes what it uses
             acc = np.full((nt, width), 7, np.int32)
-            lines, circles, blobs = _extract_scan_rows(x, y, segs, k, vec, acc, cos_t, sin_t, inc)
+            lines, circles, blobs = _extract_scan_rows(x, y, segs, k, vec, cos_t, sin_t, inc, acc)
             st = {
                 "cos_t": cos_t,
                 "sin_t": sin_t,
@@ -782,15 +822,16 @@ def test_extract_scan_decision_equals_the_reference():
                 "toff": np.empty(nt),
                 "idx": np.empty(B, np.int64),
                 "lo": np.empty(12),
-                "sub_s": np.empty(KP.MAX_SUB, np.int64),
-                "sub_e": np.empty(KP.MAX_SUB, np.int64),
-                "peaks": np.empty((KP.MAX_SUB, 3), np.int64),
+                "sub_s": np.empty(FL.MAX_SUB, np.int64),
+                "sub_e": np.empty(FL.MAX_SUB, np.int64),
+                "peaks": np.empty((FL.MAX_SUB, 3), np.int64),
                 "cell": np.empty(B, np.int64),
                 "touched": np.zeros(nt, np.bool_),
                 "hist": np.empty((B, 3), np.int64),
                 "box": np.empty(4),
                 "cacc": np.zeros((2 * w + 1, 2 * w + 1), np.int32),
                 "cout": np.empty(5),
+                "work": SX.scan_work(vec, nt, B, 8.0),
             }
             n_lines = n_circles = n_blobs = 0
             for g, (s, e) in enumerate(segs):
@@ -802,11 +843,12 @@ def test_extract_scan_decision_equals_the_reference():
                     d.kind == "lines",
                     d.kind == "blob",
                 ), where
+                _steps_agree(x, y, s, e, vec, inc, d, rows, st, (got_l, got_c, got_b), k, g)
                 if d.kind == "circle":
                     c = d.circle
                     np.testing.assert_array_equal(
                         got_c[0],
-                        [k, g, s, e - 1, c[KP.CC_N], c[KP.CC_X], c[KP.CC_Y], c[KP.CC_R], c[KP.CC_RACC]],
+                        [k, g, s, e - 1, c[FL.CC_N], c[FL.CC_X], c[FL.CC_Y], c[FL.CC_R], c[FL.CC_RACC]],
                         err_msg=where,
                     )
                 elif d.kind == "lines":
@@ -816,17 +858,17 @@ def test_extract_scan_decision_equals_the_reference():
                             g,
                             *rows[q][
                                 [
-                                    KP.LC_FIRST,
-                                    KP.LC_LAST,
-                                    KP.LC_N,
-                                    KP.LC_X0,
-                                    KP.LC_Y0,
-                                    KP.LC_X1,
-                                    KP.LC_Y1,
-                                    KP.LC_RHO,
-                                    KP.LC_THETA,
-                                    KP.LC_LEN,
-                                    KP.LC_RACC,
+                                    FL.LC_FIRST,
+                                    FL.LC_LAST,
+                                    FL.LC_N,
+                                    FL.LC_X0,
+                                    FL.LC_Y0,
+                                    FL.LC_X1,
+                                    FL.LC_Y1,
+                                    FL.LC_RHO,
+                                    FL.LC_THETA,
+                                    FL.LC_LEN,
+                                    FL.LC_RACC,
                                 ]
                             ],
                         ]
@@ -836,16 +878,16 @@ def test_extract_scan_decision_equals_the_reference():
                 else:
                     np.testing.assert_array_equal(got_b[0][:5], [k, g, s, e - 1, e - s], err_msg=where)
                     np.testing.assert_allclose(
-                        got_b[0][KP.B_X : KP.B_SIZE + 1], rp.blob(x[s:e], y[s:e]), rtol=1e-12, atol=1e-12, err_msg=where
+                        got_b[0][FL.B_X : FL.B_SIZE + 1], rp.blob(x[s:e], y[s:e]), rtol=1e-12, atol=1e-12, err_msg=where
                     )
-                    assert got_b[0][KP.B_KIND] == (e - s < 3), where
+                    assert got_b[0][FL.B_KIND] == (e - s < 3), where
                 n_lines += len(d.lines)
                 n_circles += d.kind == "circle"
                 n_blobs += d.kind == "blob"
                 # the branches taken
                 lost = d.tried and d.kind != "circle"
-                fitted = d.circle is not None and d.circle[KP.CC_N] >= params.circle_min_points
-                voted = d.circle is not None and d.circle[KP.CC_RACC] > 0  # refined or not (see circle_of_run)
+                fitted = d.circle is not None and d.circle[FL.CC_N] >= params.circle_min_points
+                voted = d.circle is not None and d.circle[FL.CC_RACC] > 0  # refined or not (see circle_of_run)
                 for branch, taken in (
                     ("circle, no line", d.kind == "circle" and d.ncand == 0),
                     ("circle, one line", d.kind == "circle" and d.ncand == 1),
@@ -862,11 +904,11 @@ def test_extract_scan_decision_equals_the_reference():
                     ("under circle_min_points, HTC not run", d.tried and e - s < params.circle_min_points),
                     (
                         "close: the circle's r_acc within 0.05 of what it must beat, ties included",
-                        voted and abs(d.circle[KP.CC_RACC] - beat) <= 0.05,
+                        voted and abs(d.circle[FL.CC_RACC] - beat) <= 0.05,
                     ),
                     (
                         "close: the circle beat the lines, not well posed",
-                        lost and fitted and d.circle[KP.CC_RACC] > beat,
+                        lost and fitted and d.circle[FL.CC_RACC] > beat,
                     ),
                 ):
                     counts[branch] = counts.get(branch, 0) + bool(taken)

@@ -22,9 +22,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import datmo_cli
-from datmo_cli.perception import _egomotion_kernels as KE
-from datmo_cli.perception import _kernels as KP
-from datmo_cli.perception import _leg_kernels as KL
+from datmo_cli.perception import hough_lines as HL
+from datmo_cli.perception import icp as KI
+from datmo_cli.perception import leg_features as LF
+from datmo_cli.perception import leg_forest as LFO
+from datmo_cli.perception import scan_extractor as SX
+from datmo_cli.perception import segmentation as SEG
 from datmo_cli.sim import _kernels as KS
 from datmo_cli.tracking import _assign, _association, _background, _life_cycle, _people, _scan_measurements
 from datmo_cli.tracking import _kernels as KT
@@ -623,7 +626,7 @@ def test_cast_batch():
 # ------------------------------------------------------------------------------------------ perception
 def test_valid_return():
     for r in [0.0, 0.05, 0.1, 3.0, 8.0, 8.1, np.inf, -np.inf, np.nan]:
-        assert KP.valid_return(r, 0.05, 8.0) == rp.is_valid(r, 0.05, 8.0)
+        assert SEG.valid_return(r, 0.05, 8.0) == rp.is_valid(r, 0.05, 8.0)
 
 
 @settings(max_examples=200, deadline=None)
@@ -631,7 +634,7 @@ def test_valid_return():
 def test_atan2(y: float, x: float):
     """The polynomial atan2 is within its stated 0.0015 rad of the exact one (0 at the origin)."""
     want = 0.0 if x == 0 and y == 0 else math.atan2(y, x)
-    d = (KP._atan2(y, x) - want + math.pi) % (2 * math.pi) - math.pi
+    d = (HL._atan2(y, x) - want + math.pi) % (2 * math.pi) - math.pi
     assert abs(d) <= 0.0015
 
 
@@ -639,13 +642,13 @@ def test_bounding_box_and_row_offset():
     rng = np.random.default_rng(7)
     x, y = rng.uniform(-3, 3, 30), rng.uniform(-3, 3, 30)
     box = np.empty(4)
-    width = KP._bounding_box(x, y, 4, 25, 0.02, 10_000, box)
+    width = HL._bounding_box(x, y, 4, 25, 0.02, 10_000, box)
     lo, want_width = rp.box_rho_offsets(x[4:25].tolist(), y[4:25].tolist(), 8, 0.02)
     assert box.tolist() == [x[4:25].min(), x[4:25].max(), y[4:25].min(), y[4:25].max()]
     assert width == want_width
-    assert KP._bounding_box(x, y, 4, 25, 0.02, 50, box) == min(want_width, 50)
+    assert HL._bounding_box(x, y, 4, 25, 0.02, 50, box) == min(want_width, 50)
     for t, th in enumerate(rp.theta_table(8)):
-        assert KP._row_offset(box, math.cos(th), math.sin(th)) == pytest.approx(lo[t], abs=1e-12)
+        assert HL._row_offset(box, math.cos(th), math.sin(th)) == pytest.approx(lo[t], abs=1e-12)
 
 
 def test_segment_block():
@@ -656,7 +659,7 @@ def test_segment_block():
     seg = np.empty((4 * 120, 2), np.int64)
     count = np.zeros(4, np.int64)
     c1 = math.sqrt(2.0 * (1.0 - math.cos(inc)))
-    total = KP.segment_block(ranges, math.cos(inc), 0.05, c1, 0.1, 8.0, 3, seg, count)
+    total = SEG.segment_block(ranges, math.cos(inc), 0.05, c1, 0.1, 8.0, 3, seg, count)
     want = [rp.segment(r, inc, 0.05, 0.1, 8.0, 3) for r in ranges]
     assert count.tolist() == [len(w) for w in want] and total == sum(count)
     assert [tuple(s) for s in seg[:total].tolist()] == [s for w in want for s in w]
@@ -667,7 +670,7 @@ def test_scatter():
     rng = np.random.default_rng(17)
     x, y = rng.uniform(-3, 3, 20), rng.uniform(-3, 3, 20)
     idx = rng.permutation(20)
-    cx, cy, sxx, syy, sxy = KP.scatter(x, y, idx, 12)
+    cx, cy, sxx, syy, sxy = HL.scatter(x, y, idx, 12)
     px, py = x[idx[:12]], y[idx[:12]]
     np.testing.assert_allclose([cx, cy], [px.mean(), py.mean()], rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(
@@ -692,7 +695,7 @@ def test_one_line():
         if min(abs(d - tol) for d in rp.line_distances(x, y)) < 1e-9:
             continue  # a point on the tolerance itself: rounding decides
         want = rp.one_line(x, y, tol, tail)
-        assert KP._one_line(np.concatenate([[9.0], x]), np.concatenate([[9.0], y]), 1, n + 1, tol, tail) == want
+        assert HL._one_line(np.concatenate([[9.0], x]), np.concatenate([[9.0], y]), 1, n + 1, tol, tail) == want
         seen.add(want)
     assert seen == {True, False}
 
@@ -701,15 +704,15 @@ def test_perpendicular_and_convex():
     rng = np.random.default_rng(8)
     for _ in range(200):
         t1, t2, tol = rng.uniform(0, math.pi), rng.uniform(0, math.pi), rng.uniform(0.01, 0.3)
-        assert KP._perpendicular(t1, t2, tol) == rp.perpendicular(t1, t2, tol)
+        assert SX._perpendicular(t1, t2, tol) == rp.perpendicular(t1, t2, tol)
         a, j, b = rng.uniform(0.5, 4, 2), rng.uniform(0.5, 4, 2), rng.uniform(0.5, 4, 2)
-        assert KP._convex(a[0], a[1], j[0], j[1], b[0], b[1]) == rp.convex(a, j, b)
+        assert SX._convex(a[0], a[1], j[0], j[1], b[0], b[1]) == rp.convex(a, j, b)
 
 
 def test_robust_weight():
     for ares in [0.0, 0.01, 0.05, 0.2, 3.0]:
         for redescend in (False, True):
-            assert KE.robust_weight(ares, 0.05, redescend) == pytest.approx(rp.weight(ares, 0.05, redescend), rel=1e-12)
+            assert KI.robust_weight(ares, 0.05, redescend) == pytest.approx(rp.weight(ares, 0.05, redescend), rel=1e-12)
 
 
 def test_solve3():
@@ -718,24 +721,24 @@ def test_solve3():
     for _ in range(50):
         A = rng.normal(size=(3, 3))
         a, b = A @ A.T + 0.1 * np.eye(3), rng.normal(size=3)
-        assert KE.solve3(a, b, out)
+        assert KI.solve3(a, b, out)
         np.testing.assert_allclose(out, np.linalg.solve(a, b), rtol=1e-9, atol=1e-12)
-    assert not KE.solve3(np.ones((3, 3)), np.ones(3), out)
+    assert not KI.solve3(np.ones((3, 3)), np.ones(3), out)
 
 
 def test_compose_and_between():
     rng = np.random.default_rng(10)
     for _ in range(50):
         a, b = rng.uniform(-3, 3, 3), rng.uniform(-3, 3, 3)
-        np.testing.assert_allclose(rp.se2(*KE.compose(*a, *b)), rp.se2(*a) @ rp.se2(*b), atol=1e-12)
-        np.testing.assert_allclose(KE.between(*a, *b), rp.pose_of(np.linalg.inv(rp.se2(*a)) @ rp.se2(*b)), atol=1e-12)
+        np.testing.assert_allclose(rp.se2(*KI.compose(*a, *b)), rp.se2(*a) @ rp.se2(*b), atol=1e-12)
+        np.testing.assert_allclose(KI.between(*a, *b), rp.pose_of(np.linalg.inv(rp.se2(*a)) @ rp.se2(*b)), atol=1e-12)
 
 
 def test_add_to_map():
     rng = np.random.default_rng(16)
     cap, cell = 60, 0.25
     mx, my, mnx, mny = np.zeros(cap), np.zeros(cap), np.zeros(cap), np.zeros(cap)
-    head, nxt = np.full(256, KE.EMPTY, np.int64), np.full(cap, KE.EMPTY, np.int64)
+    head, nxt = np.full(256, KI.EMPTY, np.int64), np.full(cap, KI.EMPTY, np.int64)
     ref_xy, ref_n, count = np.zeros((0, 2)), np.zeros((0, 2)), 0
     for scan in range(4):  # the later scans overlap the earlier ones: their points near the map are skipped
         pts = rng.uniform(-2, 2, (50, 2))
@@ -743,23 +746,9 @@ def test_add_to_map():
         nrm = np.column_stack([np.cos(ang), np.sin(ang)])
         nrm[rng.random(50) < 0.2] = np.nan
         pose = rng.uniform(-0.3, 0.3, 3)
-        count = KE.add_to_map(
-            pts[:, 0].copy(),
-            pts[:, 1].copy(),
-            nrm[:, 0].copy(),
-            nrm[:, 1].copy(),
-            50,
-            *pose,
-            0.2 if scan else 0.0,
-            cell,
-            head,
-            nxt,
-            mx,
-            my,
-            mnx,
-            mny,
-            count,
-        )
+        points = (pts[:, 0].copy(), pts[:, 1].copy(), nrm[:, 0].copy(), nrm[:, 1].copy())
+        local_map = (mx, my, mnx, mny, cell, head, nxt)
+        count = KI.add_to_map(points, 50, tuple(pose), 0.2 if scan else 0.0, local_map, count)
         ref_xy, ref_n = rp.add_to_map(pts, nrm, pose, 0.2 if scan else 0.0, ref_xy, ref_n, cap)
         assert count == len(ref_xy)
         np.testing.assert_allclose(np.column_stack([mx, my])[:count], ref_xy, atol=1e-12)
@@ -769,10 +758,10 @@ def test_add_to_map():
 
 def test_cell_of_and_hash():
     for x in [-1.01, -0.5, -0.0, 0.0, 0.24, 0.25, 3.7]:
-        assert KE.cell_of(x, 0.25) == math.floor(x / 0.25)
+        assert KI.cell_of(x, 0.25) == math.floor(x / 0.25)
     mask = 1023
     for ix, iy in [(0, 0), (1, -1), (-7, 300), (12345, -6789)]:
-        assert KE.cell_hash(ix, iy, mask) == rp.cell_hash(ix, iy, mask)
+        assert KI.cell_hash(ix, iy, mask) == rp.cell_hash(ix, iy, mask)
 
 
 # -------------------------------------------------------------------------------------------- legs
@@ -793,32 +782,24 @@ def test_gap_pass_and_block_features():
         cos_a, sin_a = np.cos(angles), np.sin(angles)
         counts = np.zeros(N, np.int64)
         none = np.zeros(0, np.int64)
-        KL._gap_pass(ranges, cos_a, sin_a, 0.05, 30.0, 0.13, 3, none, none, counts)
+        LF._gap_pass(ranges, cos_a, sin_a, 0.05, 30.0, 0.13, 3, none, none, counts)
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         start, end = np.empty(offsets[-1], np.int64), np.empty(offsets[-1], np.int64)
-        KL._gap_pass(ranges, cos_a, sin_a, 0.05, 30.0, 0.13, 3, start, end, counts)
+        LF._gap_pass(ranges, cos_a, sin_a, 0.05, 30.0, 0.13, 3, start, end, counts)
         want = rp.gap_clusters(ranges, angles, 0.05, 30.0, 0.13, 3)
         assert [start.tolist(), end.tolist(), offsets.tolist()] == [w.tolist() for w in want]
-        assert KL.check_segments(start, end, offsets, B) == rp.check_segments(start, end, offsets, B) == 0
-        out = np.zeros((len(start), KL.N_FEATURES))
-        KL.block_features(
-            ranges,
-            cos_a,
-            sin_a,
-            angles,
-            start,
-            end,
-            offsets,
+        assert LF.check_segments(start, end, offsets, B) == rp.check_segments(start, end, offsets, B) == 0
+        out = np.zeros((len(start), LF.N_FEATURES))
+        beams = (cos_a, sin_a, angles, abs(angles[1] - angles[0]))
+        rules = (
             0.05,
             30.0,
             legs.RADIUS_CLIP,
             legs.OCCLUSION_MARGIN,
             legs.CANDIDATE_MAX_WIDTH,
             legs.CANDIDATE_MIN_POINTS,
-            False,
-            abs(angles[1] - angles[0]),
-            out,
         )
+        LF.block_features(ranges, beams, (start, end, offsets), rules, False, out)
         np.testing.assert_allclose(
             out, rp.cluster_features(ranges, angles, start, end, offsets, 0.05, 30.0), rtol=1e-6, atol=1e-7
         )
@@ -836,7 +817,7 @@ def test_check_segments():
     ]
     for s, e, o, B in cases:
         s, e, o = np.array(s, np.int64), np.array(e, np.int64), np.array(o, np.int64)
-        assert KL.check_segments(s, e, o, B) == rp.check_segments(s, e, o, B)
+        assert LF.check_segments(s, e, o, B) == rp.check_segments(s, e, o, B)
 
 
 def test_median_and_jump():
@@ -844,16 +825,17 @@ def test_median_and_jump():
     work = np.empty(200)
     for n in [1, 2, 5, 64, 65, 150]:
         v = rng.normal(size=n)
-        assert KL._median(v, n, work) == np.median(v)
+        assert LF._median(v, n, work) == np.median(v)
     ranges, _ = _scan(12, 1, 30)
     r = ranges[0]
     for i in np.flatnonzero([rp.is_valid(float(v), 0.05, 30.0) for v in r]).tolist():  # the ends of segments
         for d in (1, -1):
-            assert KL._jump(r, i, d, 30, 0.05, 30.0) == rp.jump(r, i, d, 0.05, 30.0)
+            assert LF._jump(r, i, d, 30, 0.05, 30.0) == rp.jump(r, i, d, 0.05, 30.0)
 
 
 def test_ensemble_leaf_and_candidates():
-    from datmo_cli.perception.legs import CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, load_leg_model
+    from datmo_cli.perception.leg_model import load_leg_model
+    from datmo_cli.perception.legs import CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS
 
     model = load_leg_model("default")
     nodes, split, roots, kind, base, scale = model._kernel_args()
@@ -863,18 +845,18 @@ def test_ensemble_leaf_and_candidates():
     X = rp.cluster_features(ranges, angles, start, end, offsets, 0.05, 30.0)
     X = np.concatenate([X, X * rng.uniform(0.5, 1.5, X.shape)])
     out = np.empty(len(X))
-    KL.ensemble(X, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, nodes, split, roots, kind, base, scale, out)
+    LFO.ensemble(X, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, nodes, split, roots, kind, base, scale, out)
     for x, got in zip(X, out, strict=True):
         candidate = rp.is_candidate(x)
-        assert KL.is_candidate(x, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS) == candidate
+        assert LFO.is_candidate(x, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS) == candidate
         leaves = [rp.tree_leaf(model, root, x) for root in model.roots]
-        assert [KL._leaf(nodes, split, x, root) for root in model.roots] == leaves
+        assert [LFO._leaf(nodes, split, x, root) for root in model.roots] == leaves
         want = rp.ensemble_probability(model, leaves) if candidate else 0.0
         assert got == pytest.approx(want, rel=1e-12, abs=1e-15)
     assert (out > 0).any()
     for q in range(0, len(X) - 3, 4):
         for root in model.roots[:3]:
-            got = KL._leaves4(nodes, split, X[q], X[q + 1], X[q + 2], X[q + 3], root)
+            got = LFO._leaves4(nodes, split, X[q], X[q + 1], X[q + 2], X[q + 3], root)
             assert list(got) == [rp.tree_leaf(model, root, X[q + i]) for i in range(4)]
 
 
@@ -882,8 +864,9 @@ def test_block_probabilities():
     """Features of the candidates (the reference's, to 1e-6) and their probability by the reference tree walk
     over the features the kernel computed; non-candidates 0; the threaded kernel gives the same, split in parts."""
     from datmo_cli.perception import legs
+    from datmo_cli.perception.leg_model import load_leg_model
 
-    model = legs.load_leg_model("default")
+    model = load_leg_model("default")
     rng = np.random.default_rng(20)
     angles = np.radians(np.linspace(-40.0, 40.0, 120))
     ranges = (3.0 + rng.normal(0, 0.005, (4, 120))).astype(np.float32)  # a wall: wide, not a candidate
@@ -892,24 +875,11 @@ def test_block_probabilities():
             d = rng.uniform(1.2, 2.0)
             ranges[k, i : i + 6] = d + 0.06 * (1 - np.cos(np.linspace(-1.2, 1.2, 6)))
     start, end, offsets = rp.gap_clusters(ranges, angles, 0.05, 30.0, 0.13, 1)
-    args = (
-        np.cos(angles),
-        np.sin(angles),
-        angles,
-        start,
-        end,
-        offsets,
-        0.05,
-        30.0,
-        legs.RADIUS_CLIP,
-        legs.OCCLUSION_MARGIN,
-        legs.CANDIDATE_MAX_WIDTH,
-        legs.CANDIDATE_MIN_POINTS,
-        abs(angles[1] - angles[0]),
-        *model._kernel_args(),
-    )
-    feats, out = np.empty((len(start), KL.N_FEATURES)), np.empty(len(start))
-    KL.block_probabilities(ranges, *args, feats, out)
+    beams = (np.cos(angles), np.sin(angles), angles, abs(angles[1] - angles[0]))
+    rules = (0.05, 30.0, legs.RADIUS_CLIP, legs.OCCLUSION_MARGIN, legs.CANDIDATE_MAX_WIDTH, legs.CANDIDATE_MIN_POINTS)
+    args = (beams, (start, end, offsets), rules, model._kernel_args())
+    feats, out = np.empty((len(start), LF.N_FEATURES)), np.empty(len(start))
+    LFO.block_probabilities(ranges, *args, feats, out)
     want_feats = rp.cluster_features(ranges, angles, start, end, offsets, 0.05, 30.0)
     candidate = np.array([rp.is_candidate(x) for x in want_feats])
     assert candidate.any() and not candidate.all()
@@ -920,7 +890,7 @@ def test_block_probabilities():
     ]
     np.testing.assert_allclose(out, want, rtol=1e-12, atol=1e-15)
     feats2, out2 = np.empty_like(feats), np.empty_like(out)
-    KL.block_probabilities_parallel(ranges, 2, *args, feats2, out2)
+    LFO.block_probabilities_parallel(ranges, 2, *args, feats2, out2)
     np.testing.assert_array_equal(out2, out)
 
 
@@ -939,17 +909,17 @@ def test_vote_and_clear():
         x = 1.5 * np.cos(th) - t * np.sin(th) + rng.normal(0, 0.01, n)
         y = 1.5 * np.sin(th) + t * np.cos(th) + rng.normal(0, 0.01, n)
         box = np.empty(4)
-        width = KP._bounding_box(x, y, 0, n, rho_res, 10_000, box)
+        width = HL._bounding_box(x, y, 0, n, rho_res, 10_000, box)
         acc, lo, touched = np.zeros(nt * width, np.int32), np.empty(nt), np.zeros(nt, np.bool_)
         k = nt if trial % 2 == 0 else int(rng.integers(1, 8))
         cells = rng.integers(0, nt, n)
         peak = (0, 0, 0)
         for i in range(n):
-            peak = KP._vote(x, y, i, acc, lo, cos_t, sin_t, 1.0 / rho_res, width, cells[i], k, *peak, touched, box)
+            peak = HL._vote(x, y, i, (acc, lo, touched, box), cos_t, sin_t, 1.0 / rho_res, width, cells[i], k, peak)
         windows = None if 2 * k + 1 >= nt else [[(c + j) % nt for j in range(-k, k + 1)] for c in cells.tolist()]
         want, want_peak = rp.htl_accumulator(x.tolist(), y.tolist(), nt, rho_res, windows)
         got = {(int(j) // width, int(j) % width): int(acc[j]) for j in np.flatnonzero(acc)}
         assert got == want and peak == want_peak
         assert touched.tolist() == [any(tt == c for tt, _ in want) for c in range(nt)]
-        KP._clear(acc, touched, width)
+        HL._clear(acc, touched, width)
         assert not acc.any() and not touched.any()

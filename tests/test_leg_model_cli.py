@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from datmo_cli.cli import cli
 from datmo_cli.log import cdr, mcapio, types
-from datmo_cli.perception.legs import DEFAULT_MODEL_PATH
+from datmo_cli.perception.leg_model import DEFAULT_MODEL_PATH
 from datmo_cli.sim.simulate import simulate_scene
 
 

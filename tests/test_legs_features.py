@@ -10,8 +10,10 @@ import reference_perception as ref
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from datmo_cli.perception import leg_features as LF
 from datmo_cli.perception import legs
 from datmo_cli.perception.features import segment_run
+from datmo_cli.perception.leg_model import LegModel
 from datmo_cli.perception.legs import FEATURE_NAMES, RADIUS_CLIP, candidate_mask, cluster_features
 
 COL = {name: i for i, name in enumerate(FEATURE_NAMES)}
@@ -165,10 +167,9 @@ def test_sample_log_matches_naive(sample_logs):
 
 
 def test_kernel_constants_match_the_documented_ones():
-    from datmo_cli.perception import _leg_kernels as LK
 
-    assert LK.N_FEATURES == len(FEATURE_NAMES)
-    assert (LK.JUMP_CLIP, LK.NEIGHBOUR_CLIP, LK.DENSITY_CLIP) == (
+    assert LF.N_FEATURES == len(FEATURE_NAMES)
+    assert (LF.JUMP_CLIP, LF.NEIGHBOUR_CLIP, LF.DENSITY_CLIP) == (
         legs.JUMP_CLIP,
         legs.NEIGHBOUR_CLIP,
         legs.DENSITY_CLIP,
@@ -250,7 +251,7 @@ def test_model_clusters_follow_the_provenance():
     segs = (np.array([0]), np.array([21]), np.array([0, 1]))
 
     def model(prov):
-        return legs.LegModel(
+        return LegModel(
             np.array([-1]), np.zeros(1), np.array([-1]), np.array([-1]), np.ones(1), np.array([0]), provenance=prov
         )
 

@@ -9,15 +9,13 @@ import reference_perception as ref
 from sklearn.ensemble import ExtraTreesClassifier, GradientBoostingClassifier, RandomForestClassifier
 
 from datmo_cli.errors import InputError
+from datmo_cli.perception import leg_forest as LFO
+from datmo_cli.perception.leg_model import DEFAULT_MODEL_PATH, LegModel, from_sklearn, load_leg_model
 from datmo_cli.perception.legs import (
-    DEFAULT_MODEL_PATH,
     FEATURE_NAMES,
-    LegModel,
     candidate_mask,
     cluster_features,
-    from_sklearn,
     leg_probabilities,
-    load_leg_model,
     model_clusters,
 )
 
@@ -166,12 +164,11 @@ def test_packaged_model_loads_and_gives_probabilities(sample_logs):
 
 
 def test_kind_codes_match_the_kernel():
-    from datmo_cli.perception import _leg_kernels as LK
 
     X, y = random_features(100, 8)
     forest = from_sklearn(RandomForestClassifier(n_estimators=2, random_state=0).fit(X, y), 0.5, {})
     boost = from_sklearn(GradientBoostingClassifier(n_estimators=2).fit(X, y), 0.5, {})
-    assert (forest._kernel_args()[3], boost._kernel_args()[3]) == (LK.KIND_FOREST, LK.KIND_BOOSTING)
+    assert (forest._kernel_args()[3], boost._kernel_args()[3]) == (LFO.KIND_FOREST, LFO.KIND_BOOSTING)
 
 
 def test_leg_probabilities_equal_the_model_on_all_features():

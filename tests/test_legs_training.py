@@ -265,7 +265,8 @@ def test_tables_tabulate_the_clusters_asked_for(tmp_path, clusters):
 
 def test_packaged_model_provenance_lists_every_shared_bag_with_its_sha256():
     from datmo_cli.log.mcapio import sha256_of
-    from datmo_cli.perception.legs import DEFAULT_MODEL_PATH, FEATURE_NAMES, LegModel
+    from datmo_cli.perception.leg_model import DEFAULT_MODEL_PATH, LegModel
+    from datmo_cli.perception.legs import FEATURE_NAMES
 
     folder = shared_path("legtracker")
     model = LegModel.load(DEFAULT_MODEL_PATH)

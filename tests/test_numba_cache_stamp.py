@@ -13,14 +13,14 @@ from datmo_cli import numba_runtime
 
 
 def test_a_datmo_kernels_cache_stamp_covers_the_files_it_reads():
-    from datmo_cli.perception import _kernels as perception_kernels
+    from datmo_cli.perception import segmentation
     from datmo_cli.tracking import _kernels
 
-    for kernel in (_kernels.pair_legs, perception_kernels.valid_return):
+    for kernel in (_kernels.pair_legs, segmentation.valid_return):
         own, sources = kernel._cache._impl.locator.get_source_stamp()
         assert sources == numba_runtime.sources_stamp()
         names = {path for path, _, _ in sources}
-        assert {"tracking/state.py", "log/vocabulary.py", "tracking/_kernels.py", "perception/_kernels.py"} <= names
+        assert {"tracking/state.py", "log/vocabulary.py", "tracking/_kernels.py", "perception/segmentation.py"} <= names
         assert any(name.startswith("msg/") for name in names)
 
 

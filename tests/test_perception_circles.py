@@ -14,7 +14,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from datmo_cli.log.scan import ScanGeometry, ScanRun
-from datmo_cli.perception import _kernels as K
+from datmo_cli.perception import hough_circles as HC
 from datmo_cli.perception.features import extract_run
 from datmo_cli.perception.params import FeatureParams
 
@@ -92,7 +92,7 @@ def test_circle_posed_equals_the_reference(
     )
     if lines:
         assume(abs(math.sqrt(rss_c) - lines_ratio * math.sqrt(rss_h)) > 1e-7)
-    got = K.circle_posed(x, y, np.arange(n), n, *circle, vec, math.radians(step_deg), rss_h)
+    got = HC.circle_posed(x, y, np.arange(n), n, *circle, vec, math.radians(step_deg), rss_h)
     assert got == ref.circle_well_posed(list(x), list(y), circle, p, math.radians(step_deg), lines)
 
 
@@ -101,8 +101,8 @@ def test_every_test_is_off_at_zero():
     y = np.array([-0.05, 0.0, 0.05])
     vec = OFF.kernel_vector()
     # pinned at the floor, three points for a wide circle, worse than a line: all allowed when off
-    assert K.circle_posed(x, y, np.arange(3), 3, 2.05, 0.0, 0.05, vec, math.radians(0.1), 0.0)
-    assert not K.circle_posed(
+    assert HC.circle_posed(x, y, np.arange(3), 3, 2.05, 0.0, 0.05, vec, math.radians(0.1), 0.0)
+    assert not HC.circle_posed(
         x, y, np.arange(3), 3, 2.05, 0.0, 0.05, FeatureParams().kernel_vector(), math.radians(0.1), 0.0
     )
 

@@ -13,7 +13,10 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from datmo_cli.perception import _kernels as K
+from datmo_cli.perception import feature_layout as FL
+from datmo_cli.perception import hough_circles as HC
+from datmo_cli.perception import hough_lines as HL
+from datmo_cli.perception import segmentation as SEG
 from datmo_cli.perception.params import FeatureParams
 
 INC = math.radians(0.5)
@@ -28,7 +31,7 @@ def kernel_segments(r, inc=INC, c0=0.08, rmin=0.0, rmax=8.0, min_points=5) -> li
     r = np.asarray(r, np.float32)
     starts = np.empty(len(r) + 1, np.int64)
     ends = np.empty(len(r) + 1, np.int64)
-    n = K.segment_scan(r, math.cos(inc), c0, ref.c1_of(inc), rmin, rmax, min_points, starts, ends)
+    n = SEG.segment_scan(r, math.cos(inc), c0, ref.c1_of(inc), rmin, rmax, min_points, starts, ends)
     return list(zip(starts[:n].tolist(), ends[:n].tolist(), strict=True))
 
 
@@ -41,29 +44,14 @@ def kernel_runs(x, y, n_theta=N_THETA, rho_res=RHO_RES, window_deg=10.0):
     cos_t, sin_t = np.cos(theta), np.sin(theta)
     acc = np.zeros((n_theta, 2000), np.int32)
     cell = np.empty(n, np.int64)
-    K.normal_cells(x, y, 0, n, n_theta, cell)
+    HL.normal_cells(x, y, 0, n, n_theta, cell)
     toff = np.empty(n_theta)
-    sub_s, sub_e = np.empty(K.MAX_SUB, np.int64), np.empty(K.MAX_SUB, np.int64)
-    peaks = np.empty((K.MAX_SUB, 3), np.int64)
+    sub_s, sub_e = np.empty(FL.MAX_SUB, np.int64), np.empty(FL.MAX_SUB, np.int64)
+    peaks = np.empty((FL.MAX_SUB, 3), np.int64)
     kwin = int(math.radians(window_deg) / (np.pi / n_theta))
-    m = K.line_subsegments(
-        x,
-        y,
-        0,
-        n,
-        acc,
-        toff,
-        cos_t,
-        sin_t,
-        rho_res,
-        kwin,
-        cell,
-        np.zeros(n_theta, np.bool_),
-        sub_s,
-        sub_e,
-        peaks,
-        np.empty((n, 3), np.int64),
-    )
+    hough = (acc, toff, np.zeros(n_theta, np.bool_))
+    hist = np.empty((n, 3), np.int64)
+    m = HL.line_subsegments(x, y, 0, n, hough, cos_t, sin_t, rho_res, kwin, cell, (sub_s, sub_e, peaks), hist)
     runs = list(zip(sub_s[:m].tolist(), sub_e[:m].tolist(), strict=True))
     return runs, [tuple(int(v) for v in peaks[k]) for k in range(m)], toff, acc
 
@@ -78,7 +66,7 @@ def kernel_lines(x, y, n_theta=N_THETA, rho_res=RHO_RES, window_deg=10.0) -> lis
     idx = np.empty(len(x), np.int64)
     for (s, e), (votes, t, k) in zip(runs, peaks, strict=True):
         o = np.empty(12)
-        K.line_of_run(x, y, s, e, t * np.pi / n_theta, toff[t] + (k + 0.5) * rho_res, votes, rho_res, idx, o)
+        HL.line_of_run(x, y, s, e, t * np.pi / n_theta, toff[t] + (k + 0.5) * rho_res, votes, rho_res, idx, o)
         out.append(o)
     return out
 
@@ -183,7 +171,7 @@ def test_fit_line_equals_total_least_squares(theta, rho, n, seed, sigma):
     idx = rng.permutation(n + 5)[:n]  # fit_line reads x[idx[k]]: scatter the points
     bx, by = np.zeros(n + 5), np.zeros(n + 5)
     bx[idx], by[idx] = x, y
-    th, rh = K.fit_line(bx, by, idx, n)
+    th, rh = HL.fit_line(bx, by, idx, n)
     th_ref, rh_ref = ref.fit_line(list(x), list(y))
     assert 0 <= th < math.pi
     dth, drho = ref.same_line(th, rh, th_ref, rh_ref)
@@ -193,7 +181,7 @@ def test_fit_line_equals_total_least_squares(theta, rho, n, seed, sigma):
 def test_fit_line_of_exact_points_is_the_line():
     for theta in (0.0, 0.3, math.pi / 2, 2.0, math.pi - 1e-3):
         x, y = line_points(theta, 2.5, np.linspace(-1, 1, 11))
-        th, rh = K.fit_line(x, y, np.arange(11), 11)
+        th, rh = HL.fit_line(x, y, np.arange(11), 11)
         dth, drho = ref.same_line(th, rh, theta, 2.5)
         assert dth < 1e-12 and drho < 1e-12
 
@@ -218,7 +206,7 @@ def test_fit_circle_equals_the_geometric_fit(radius, dist, bearing, half_arc, n,
     y = cy + radius * np.sin(a) + rng.normal(0, 0.003, n)
     # a Hough-like start: within a cell (1 cm) of the truth
     guess = (cx + 0.006, cy - 0.005, radius + 0.007)
-    ka, kb, kr, ok = K.fit_circle(x, y, np.arange(n), n, *guess)
+    ka, kb, kr, ok = HC.fit_circle(x, y, np.arange(n), n, *guess)
     ra, rb, rr = ref.fit_circle(x, y, guess)
     assert ok
     # the kernel stops once a Gauss-Newton step moves less than 10 µm in all; the reference iterates on
@@ -228,10 +216,10 @@ def test_fit_circle_equals_the_geometric_fit(radius, dist, bearing, half_arc, n,
 def test_fit_circle_refuses_degenerate_input():
     x = np.array([1.0, 1.0, 1.0])
     y = np.array([0.0, 0.0, 0.0])
-    *_, ok = K.fit_circle(x, y, np.arange(3), 3, 1.0, 0.0, 0.1)  # the start at a point: no gradient
+    *_, ok = HC.fit_circle(x, y, np.arange(3), 3, 1.0, 0.0, 0.1)  # the start at a point: no gradient
     assert not ok
     x, y = line_points(0.4, 2.0, np.linspace(-0.3, 0.3, 9))  # collinear points: no finite circle
-    a, b, r, ok = K.fit_circle(x, y, np.arange(9), 9, 2.0 * math.cos(0.4) + 0.2, 2.0 * math.sin(0.4), 0.2)
+    a, b, r, ok = HC.fit_circle(x, y, np.arange(9), 9, 2.0 * math.cos(0.4) + 0.2, 2.0 * math.sin(0.4), 0.2)
     assert not ok or r > 10
 
 
@@ -403,9 +391,9 @@ PVEC = FeatureParams().kernel_vector()
 def kernel_circle(x, y, p=PVEC, beat=-1.0) -> np.ndarray:
     x = np.ascontiguousarray(x, np.float64)
     y = np.ascontiguousarray(y, np.float64)
-    w = int(round(p[K.P_CWINDOW] / p[K.P_CELL]))
+    w = int(round(p[FL.P_CWINDOW] / p[FL.P_CELL]))
     out = np.zeros(5)
-    K.circle_of_run(
+    HC.circle_of_run(
         x, y, 0, len(x), p, np.zeros((2 * w + 1, 2 * w + 1), np.int32), np.empty(len(x), np.int64), out, beat
     )
     return out
@@ -448,14 +436,14 @@ def test_circle_votes_equal_the_reference_window(radius, dist, bearing, seed):
     cx, cy = dist * math.cos(bearing), dist * math.sin(bearing)
     x, y = arc_scan(cx, cy, radius, sigma=0.004, seed=seed)
     p = PVEC.copy()
-    p[K.P_R_MIN] = radius
-    p[K.P_R_MAX] = radius + 0.001
+    p[FL.P_R_MIN] = radius
+    p[FL.P_R_MAX] = radius + 0.001
     out = kernel_circle(x, y, p)
     if out[4] == 0.0:
         return  # the arc's chord and sagitta rule the radius out: nothing voted
     ca, cb = ref.chord_centre(x[0], y[0], x[-1], y[-1], radius)
-    w = int(round(p[K.P_CWINDOW] / p[K.P_CELL]))
-    _, (votes, ia, ib) = ref.htc_window(list(x), list(y), ca, cb, radius, w, p[K.P_CELL], p[K.P_CTOL])
+    w = int(round(p[FL.P_CWINDOW] / p[FL.P_CELL]))
+    _, (votes, ia, ib) = ref.htc_window(list(x), list(y), ca, cb, radius, w, p[FL.P_CELL], p[FL.P_CTOL])
     assert round(out[4] * len(x)) == votes
 
 

@@ -15,7 +15,9 @@ from hypothesis.extra.numpy import arrays
 
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.log.vocabulary import LANDMARK_COLUMN
-from datmo_cli.perception import _kernels as K
+from datmo_cli.perception import hough_circles as HC
+from datmo_cli.perception import hough_lines as HL
+from datmo_cli.perception import segmentation as SEG
 from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
 
@@ -32,7 +34,7 @@ def run_of(ranges, inc: float = INC, range_max: float = 8.0) -> ScanRun:
 def kernel_segments(r, inc=INC, c0=0.08, rmin=0.0, rmax=8.0, min_points=5) -> list[tuple[int, int]]:
     r = np.asarray(r, np.float32)
     starts, ends = np.empty(len(r) + 1, np.int64), np.empty(len(r) + 1, np.int64)
-    n = K.segment_scan(r, math.cos(inc), c0, math.sqrt(2 * (1 - math.cos(inc))), rmin, rmax, min_points, starts, ends)
+    n = SEG.segment_scan(r, math.cos(inc), c0, math.sqrt(2 * (1 - math.cos(inc))), rmin, rmax, min_points, starts, ends)
     return list(zip(starts[:n].tolist(), ends[:n].tolist(), strict=True))
 
 
@@ -77,7 +79,7 @@ def test_line_fit_equals_the_reference(theta, rho, n, seed):
     t = rng.uniform(-2, 2, n)
     x = rho * math.cos(theta) - t * math.sin(theta) + rng.normal(0, 0.01, n)
     y = rho * math.sin(theta) + t * math.cos(theta) + rng.normal(0, 0.01, n)
-    th, rh = K.fit_line(x, y, np.arange(n), n)
+    th, rh = HL.fit_line(x, y, np.arange(n), n)
     th_ref, rh_ref = ref.fit_line(x, y)
     d = (th - th_ref + math.pi / 2) % math.pi - math.pi / 2
     assert abs(d) < 1e-9
@@ -93,7 +95,7 @@ def test_circle_fit_equals_the_reference(radius, dist, bearing, seed):
     x = cx + radius * np.cos(a) + rng.normal(0, 0.005, 15)
     y = cy + radius * np.sin(a) + rng.normal(0, 0.005, 15)
     guess = (cx + 0.02, cy - 0.02, radius * 1.1)
-    ka, kb, kr, ok = K.fit_circle(x, y, np.arange(15), 15, *guess)
+    ka, kb, kr, ok = HC.fit_circle(x, y, np.arange(15), 15, *guess)
     ra, rb, rr = ref.fit_circle(x, y, guess)
     assert ok
     assert abs(ka - ra) < 1e-4 and abs(kb - rb) < 1e-4 and abs(kr - rr) < 1e-4
@@ -108,26 +110,11 @@ def htl_kernel_peak(x, y, n_theta: int, rho_res: float, window: int) -> tuple[in
     cos_t, sin_t = np.cos(np.arange(n_theta) * math.pi / n_theta), np.sin(np.arange(n_theta) * math.pi / n_theta)
     acc = np.zeros((n_theta, 2000), np.int32)
     cell = np.empty(n, np.int64)
-    K.normal_cells(x, y, 0, n, n_theta, cell)
+    HL.normal_cells(x, y, 0, n, n_theta, cell)
     sub_s, sub_e, peaks = np.empty(256, np.int64), np.empty(256, np.int64), np.empty((256, 3), np.int64)
-    runs = K.line_subsegments(
-        x,
-        y,
-        0,
-        n,
-        acc,
-        np.empty(n_theta),
-        cos_t,
-        sin_t,
-        rho_res,
-        window,
-        cell,
-        np.zeros(n_theta, np.bool_),
-        sub_s,
-        sub_e,
-        peaks,
-        np.empty((n, 3), np.int64),
-    )
+    hough = (acc, np.empty(n_theta), np.zeros(n_theta, np.bool_))
+    hist = np.empty((n, 3), np.int64)
+    runs = HL.line_subsegments(x, y, 0, n, hough, cos_t, sin_t, rho_res, window, cell, (sub_s, sub_e, peaks), hist)
     assert not acc.any()  # the accumulator is left clean for the next segment
     return runs, int(peaks[0, 0])
 

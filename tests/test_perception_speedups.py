@@ -11,7 +11,10 @@ import reference_perception as ref
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datmo_cli.perception import _kernels as K
+from datmo_cli.perception import feature_layout as FL
+from datmo_cli.perception import hough_circles as HC
+from datmo_cli.perception import hough_lines as HL
+from datmo_cli.perception import scan_extractor as SX
 from datmo_cli.perception.params import FeatureParams
 
 PVEC = FeatureParams().kernel_vector()
@@ -20,9 +23,9 @@ PVEC = FeatureParams().kernel_vector()
 def kernel_circle(x, y, beat=-1.0) -> np.ndarray:
     x = np.ascontiguousarray(x, np.float64)
     y = np.ascontiguousarray(y, np.float64)
-    w = int(round(PVEC[K.P_CWINDOW] / PVEC[K.P_CELL]))
+    w = int(round(PVEC[FL.P_CWINDOW] / PVEC[FL.P_CELL]))
     out = np.zeros(5)
-    K.circle_of_run(
+    HC.circle_of_run(
         x, y, 0, len(x), PVEC, np.zeros((2 * w + 1, 2 * w + 1), np.int32), np.empty(len(x), np.int64), out, beat
     )
     return out
@@ -30,9 +33,9 @@ def kernel_circle(x, y, beat=-1.0) -> np.ndarray:
 
 def reference_votes(x, y) -> int:
     p = PVEC
-    w = int(round(p[K.P_CWINDOW] / p[K.P_CELL]))
+    w = int(round(p[FL.P_CWINDOW] / p[FL.P_CELL]))
     return ref.htc_peak(
-        list(x), list(y), p[K.P_R_MIN], p[K.P_R_MAX], p[K.P_R_STEP], w, p[K.P_CELL], p[K.P_CTOL], p[K.P_MIN_SAG]
+        list(x), list(y), p[FL.P_R_MIN], p[FL.P_R_MAX], p[FL.P_R_STEP], w, p[FL.P_CELL], p[FL.P_CTOL], p[FL.P_MIN_SAG]
     )
 
 
@@ -87,7 +90,7 @@ def test_a_beat_of_one_or_more_skips_the_vote():
 @given(st.floats(-math.pi, 2 * math.pi, exclude_max=True))
 def test_wrap_pi_is_the_float_modulo(a):
     expected = a % math.pi
-    got = K._wrap_pi(a)
+    got = HL._wrap_pi(a)
     if a == 0.0:  # -0.0 stays -0.0 where the modulo gives 0.0: the same theta cell
         assert got == expected
     else:
@@ -105,7 +108,7 @@ def test_wrap_pi_edges():
         3 * math.pi / 2,
         math.nextafter(2 * math.pi, 0),
     ):
-        assert K._wrap_pi(a) == a % math.pi, a
+        assert HL._wrap_pi(a) == a % math.pi, a
 
 
 def test_gather_rows_keeps_each_scans_rows_in_order():
@@ -113,9 +116,9 @@ def test_gather_rows_keeps_each_scans_rows_in_order():
     rows = np.arange(3 * B * 2, dtype=np.float64).reshape(3 * B, 2)
     counts = np.array([[2, 0], [0, 1], [3, 4]], np.int64)
     out = np.empty((5, 2))
-    K.gather_rows(rows, counts, 0, B, out)
+    SX.gather_rows(rows, counts, 0, B, out)
     expected = np.concatenate([rows[0:2], rows[2 * B : 2 * B + 3]])
     assert np.array_equal(out, expected)
     out = np.empty((5, 2))
-    K.gather_rows(rows, counts, 1, B, out)
+    SX.gather_rows(rows, counts, 1, B, out)
     assert np.array_equal(out, np.concatenate([rows[B : B + 1], rows[2 * B : 3 * B]]))

@@ -141,9 +141,9 @@ def npy_header(shape: tuple, dtype: str = "<f8") -> bytes:
 
 
 def test_a_leg_model_declaring_a_3_gb_array_is_refused_before_loading(tmp_path, monkeypatch):
-    from datmo_cli.perception import legs
+    from datmo_cli.perception import leg_model
 
-    good = legs.DEFAULT_MODEL_PATH
+    good = leg_model.DEFAULT_MODEL_PATH
     path = tmp_path / "bomb.npz"
     with zipfile.ZipFile(good) as src, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as dst:
         for info in src.infolist():
@@ -162,13 +162,13 @@ def test_a_leg_model_declaring_a_3_gb_array_is_refused_before_loading(tmp_path, 
             match=r"bomb.npz: not a leg model file \(threshold.npy and the arrays before it "
             r"declare [\d,]+ bytes, more than a leg model takes \(268,435,456\)\)",
         ):
-            legs.LegModel.load(path)
+            leg_model.LegModel.load(path)
     except BaseException:
         tally("decompression bombs", failed=True)
         raise
     tally("decompression bombs")
     monkeypatch.undo()
-    assert legs.LegModel.load(good).n_trees > 0
+    assert leg_model.LegModel.load(good).n_trees > 0
 
 
 def test_a_long_line_in_a_gzipped_carmen_log_is_never_held_whole(tmp_path):

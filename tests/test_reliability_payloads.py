@@ -142,7 +142,7 @@ def test_fuzz_datmo_payloads_decode_or_say_why(processed, msgtype):
 
 
 def bad_model(path, kind: str) -> None:
-    from datmo_cli.perception.legs import DEFAULT_MODEL_PATH
+    from datmo_cli.perception.leg_model import DEFAULT_MODEL_PATH
 
     z = dict(np.load(DEFAULT_MODEL_PATH))
     prov = json.loads(str(z["provenance"]))
@@ -183,7 +183,7 @@ def bad_model(path, kind: str) -> None:
     ],
 )
 def test_a_corrupt_leg_model_is_one_line(tmp_path, kind):
-    from datmo_cli.perception.legs import LegModel
+    from datmo_cli.perception.leg_model import LegModel
 
     model = tmp_path / "bad.npz"
     bad_model(model, kind)

@@ -139,11 +139,11 @@ def test_the_cache_looks_stale_without_index_files_or_after_an_edit(tmp_path: Pa
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     monkeypatch.delenv("NUMBA_DISABLE_JIT", raising=False)
     monkeypatch.setattr(numba_runtime, "__file__", str(tmp_path / "numba_runtime.py"))
-    source = tmp_path / "perception" / "_kernels.py"
+    source = tmp_path / "perception" / "segmentation.py"
     (source.parent / "__pycache__").mkdir(parents=True)
     source.write_text("")
     assert numba_runtime.cache_looks_stale()  # nothing cached: a first run
-    index = source.parent / "__pycache__" / "_kernels.segment-12.py311.nbi"
+    index = source.parent / "__pycache__" / "segmentation.segment_scan-12.py311.nbi"
     index.write_bytes(b"")
     os.utime(source, (1_000, 1_000))
     os.utime(index, (2_000, 2_000))

@@ -328,7 +328,7 @@ def _check_options(out_dir: str, scheduler: str | None, jobs: int | None, plot: 
 
 def _check_leg_model(cfg: DatmoConfig) -> None:
     """A leg model that does not load is one error, before any input starts."""
-    from ..perception.legs import load_leg_model
+    from ..perception.leg_model import load_leg_model
 
     load_leg_model(cfg.features.leg_model)
 

@@ -7,7 +7,7 @@ then Geman-McClure weights, keep moving people and other changes from pulling th
 from the constant-velocity prediction; when few points fit or ICP does not converge, it is retried from
 the previous pose turned or driven on by a few set moves, and the best fit kept. Matching against keyframes
 rather than the previous scan means a still scanner estimates its first pose up to noise that never
-accumulates, and a slow one drifts only when the keyframe changes. Kernels are in _egomotion_kernels.py.
+accumulates, and a slow one drifts only when the keyframe changes. Kernels are in scan_odometry.py and icp.py.
 
 Frames and units: scans in the sensor frame (x forward, y left); poses (x, y in metres, theta in radians)
 in the "scan_odom" frame, whose origin is the first scan's sensor pose (x along its forward axis).
@@ -125,7 +125,7 @@ def estimate_egomotion(run: ScanRun, **params) -> EgoMotion:
     p = IcpParams(**params)
     if len(run) == 0:
         raise ValueError("no scans")
-    from . import _egomotion_kernels as K
+    from . import scan_odometry as K
 
     g = run.geometry
     cos_a, sin_a = _beam_trig(g)
@@ -136,29 +136,19 @@ def estimate_egomotion(run: ScanRun, **params) -> EgoMotion:
     K.odometry_run(
         run.ranges,
         dt,
-        cos_a,
-        sin_a,
-        float(g.range_min),
-        float(g.range_max),
-        int(p.max_points),
-        float(p.source_spacing),
-        float(p.map_spacing),
-        float(p.normal_radius),
-        float(p.max_gap),
-        _max_window(g),
-        float(p.planarity),
-        float(p.max_dist0),
-        float(p.max_dist),
-        float(p.robust_scale),
-        float(p.inlier_tol),
-        int(p.max_iter),
-        float(p.prior_weight),
-        float(p.keyframe_dist),
-        float(p.keyframe_angle),
-        float(p.keyframe_share),
-        int(p.n_keyframes),
-        float(p.min_inlier_share),
-        np.asarray(p.recovery_moves, np.float64).reshape(-1, 3),
+        (cos_a, sin_a, float(g.range_min), float(g.range_max)),
+        (int(p.max_points), float(p.source_spacing), float(p.map_spacing)),
+        (float(p.normal_radius), float(p.max_gap), _max_window(g), float(p.planarity)),
+        (
+            float(p.max_dist0),
+            float(p.max_dist),
+            float(p.robust_scale),
+            float(p.inlier_tol),
+            int(p.max_iter),
+            float(p.prior_weight),
+        ),
+        (float(p.keyframe_dist), float(p.keyframe_angle), float(p.keyframe_share), int(p.n_keyframes)),
+        (float(p.min_inlier_share), np.asarray(p.recovery_moves, np.float64).reshape(-1, 3)),
         poses,
         stats,
     )
@@ -203,7 +193,8 @@ def align_scans(
     inlier_share, iterations. Keyword parameters are the fields of IcpParams (the keyframe and recovery
     ones unused)."""
     p = IcpParams(**params)
-    from . import _egomotion_kernels as K
+    from . import icp
+    from . import scan_odometry as K
 
     g = geometry
     cos_a, sin_a = _beam_trig(g)
@@ -215,35 +206,18 @@ def align_scans(
     px, py, beams = np.zeros(b), np.zeros(b), np.zeros(b, np.int64)
     m = K.scan_points(ref, cos_a, sin_a, lo, hi, p.map_spacing, b, px, py, beams)
     nx, ny = np.zeros(b), np.zeros(b)
-    K.scan_normals(ref, cos_a, sin_a, lo, hi, beams, m, p.normal_radius, p.max_gap, _max_window(g), p.planarity, nx, ny)
-    mx, my, mnx, mny = (np.zeros(b) for _ in range(4))
-    nxt = np.full(b, K.EMPTY, np.int64)
-    head = np.full(1 << max(4, int(2 * b - 1).bit_length()), K.EMPTY, np.int64)
-    K.add_to_map(px, py, nx, ny, m, 0.0, 0.0, 0.0, 0.0, p.max_dist, head, nxt, mx, my, mnx, mny, 0)
+    K.scan_normals(
+        ref, (cos_a, sin_a, lo, hi), beams, m, (p.normal_radius, p.max_gap, _max_window(g), p.planarity), nx, ny
+    )
+    head = np.full(1 << max(4, int(2 * b - 1).bit_length()), icp.EMPTY, np.int64)
+    local_map = (np.zeros(b), np.zeros(b), np.zeros(b), np.zeros(b), p.max_dist, head, np.full(b, icp.EMPTY, np.int64))
+    icp.add_to_map((px, py, nx, ny), m, (0.0, 0.0, 0.0), 0.0, local_map, 0)
     sx, sy = np.zeros(b), np.zeros(b)
     n = K.scan_points(cur, cos_a, sin_a, lo, hi, p.source_spacing, p.max_points, sx, sy, beams)
     pose = np.zeros(3)
-    matched, residual, inliers, iters = K.icp_align(
-        sx,
-        sy,
-        n,
-        float(init[0]),
-        float(init[1]),
-        float(init[2]),
-        mx,
-        my,
-        mnx,
-        mny,
-        p.max_dist,
-        head,
-        nxt,
-        p.max_dist0,
-        p.max_dist,
-        p.robust_scale,
-        p.inlier_tol,
-        p.max_iter,
-        p.prior_weight,
-        pose,
+    settings = (p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight)
+    matched, residual, inliers, iters = icp.icp_align(
+        (sx, sy), n, (float(init[0]), float(init[1]), float(init[2])), local_map, settings, pose
     )
     return pose, {
         "matched": int(matched),

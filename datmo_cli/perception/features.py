@@ -18,10 +18,10 @@ import numpy as np
 from ..errors import InputError
 from ..log import cdr, types
 from ..log.scan import Odometry, ScanRun
-from . import _kernels as K
+from . import scan_extractor as K
+from . import segmentation
+from .landmark_database import LandmarkDatabase, LandmarkStream
 from .landmarks import (
-    LandmarkDatabase,
-    LandmarkStream,
     circle_detections,
     junction_detections,
     line_end_detections,
@@ -119,7 +119,7 @@ def segment_run(run: ScanRun, params: FeatureParams | None = None) -> tuple[np.n
     seg = np.empty((max(N * (B // max(p.min_points, 1) + 1), 1), 2), np.int64)
     count = np.zeros(N, np.int64)
     if N and B:
-        n = K.segment_block(
+        n = segmentation.segment_block(
             ranges, float(np.cos(run.geometry.angle_increment)), p.c0, _c1(run), lo, hi, p.min_points, seg, count
         )
         seg = seg[:n]
@@ -247,9 +247,11 @@ def _extract_block(
     threads = T.for_scans(threads, n)
     if threads > 1:
         with T.numba_threads(threads):
-            K.extract_parallel(block, min(n, 4 * threads), *args, seg, lines, circles, blobs, counts, given, given_off)
+            K.extract_parallel(
+                block, min(n, 4 * threads), args, (seg, lines, circles, blobs, counts), (given, given_off)
+            )
     else:
-        K.extract_scans(block, 0, n, *args, seg, lines, circles, blobs, counts, given, given_off)
+        K.extract_scans(block, 0, n, args, (seg, lines, circles, blobs, counts), (given, given_off))
     out = []
     for j, rows in enumerate((seg, lines, circles, blobs)):
         kept = np.empty((int(counts[:, j].sum()), rows.shape[1]), rows.dtype)
@@ -278,7 +280,7 @@ def extract_run(
     many threads the per-scan work runs on (None: the process's default, all cores unless `--threads` set
     it; 0: all cores; see perception.threads); the results are the same for any count."""
     from . import threads as T
-    from .legs import load_leg_model
+    from .leg_model import load_leg_model
 
     p = params or FeatureParams()
     model = load_leg_model(p.leg_model)
@@ -398,7 +400,7 @@ def leg_model_provenance(spec: str) -> dict:
     from pathlib import Path
 
     from ..log.mcapio import sha256_of
-    from .legs import DEFAULT_MODEL_PATH, load_leg_model
+    from .leg_model import DEFAULT_MODEL_PATH, load_leg_model
 
     model = load_leg_model(spec)
     if model is None:

@@ -167,7 +167,7 @@ class FeatureParams(Section):
         features_combined(params, where)
 
     def kernel_vector(self) -> np.ndarray:
-        """The parameters in the order `_kernels` reads them (radians where the kernels need them)."""
+        """The parameters in the order the feature kernels read them, feature_layout.P_* (radians where needed)."""
         return np.array(
             [
                 self.c0,

@@ -131,7 +131,7 @@ def fit(tables: Sequence[SegmentTable], spec: EstimatorSpec):
 
 def to_model(estimator, threshold: float = 0.5, provenance: dict | None = None):
     """The legs.LegModel of a fitted estimator (what run time evaluates)."""
-    from ..legs import from_sklearn
+    from ..leg_model import from_sklearn
 
     return from_sklearn(estimator, float(threshold), provenance or {})
 

@@ -1,19 +1,20 @@
-"""numba kernels of the learned leg detector: per-segment geometric features and a tree-ensemble evaluator.
+"""numba kernels of the leg detector's features: per-segment geometric features, and leg_tracker's gap clusters.
 
-Sensor frame: x forward, y left, metres; angles in radians. The public wrappers (validation, allocation,
-model loading) are in legs.py; every feature is checked against the plain-numpy reference in
-tests/reference_perception.py. Feature columns are the F_* constants below, in the order of legs.FEATURE_NAMES.
+Sensor frame: x forward, y left, metres; angles in radians. The public wrappers (validation, allocation) are in
+legs.py; every feature is checked against the plain-numpy reference in tests/reference_perception.py. Feature
+columns are the F_* constants below, in the order of legs.FEATURE_NAMES.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ..numba_runtime import key_kernel_cache_on_sources
-from ._kernels import valid_return
+from .segmentation import valid_return
 
 key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
+
 
 (
     F_N,
@@ -38,12 +39,21 @@ key_kernel_cache_on_sources()  # before any kernel is declared: their cache stam
     F_DENSITY,
     F_RELATIVE_CURVATURE,
 ) = range(21)
+
+
 N_FEATURES = 21
+
+
 JUMP_CLIP = 3.0  # m: bound of the range jumps; the jump when no valid return lies beyond an end
+
+
 NEIGHBOUR_CLIP = 2.0  # m: bound of the distance to the nearest other candidate (also when there is none)
+
+
 DENSITY_CLIP = 10.0  # bound of the angle-step-free point density (also for a segment of zero width)
+
+
 DEGENERATE = 1e-12  # circle fit refused when det(scatter) <= DEGENERATE * trace(scatter)**2 (collinear points)
-KIND_FOREST, KIND_BOOSTING = 0, 1
 
 
 @njit(cache=True)
@@ -192,24 +202,7 @@ def _jump(r, i, d, B, range_min, range_max) -> float:
 
 
 @njit(cache=True)
-def block_features(
-    ranges,
-    cos_a,
-    sin_a,
-    angles,
-    seg_start,
-    seg_end,
-    seg_offsets,
-    range_min,
-    range_max,
-    radius_clip,
-    margin,
-    max_width,
-    min_points,
-    skip,
-    angle_step,
-    out,
-) -> None:
+def block_features(ranges, beams, segs, rules, skip, out) -> None:
     """Features of every segment of a block of scans into out (M, N_FEATURES).
 
     Scan k's segments are seg_start/seg_end[seg_offsets[k]:seg_offsets[k + 1]], beam ranges [start, end)
@@ -220,7 +213,13 @@ def block_features(
     nearest other candidate's centroid in the same scan. angle_step (rad) is the scan's beam spacing, for the
     density n_points * angle_step * distance / width. With skip, segments that are not candidates get only
     n_points and width, the rest zero: the hot path skips what the ensemble will not look at.
+
+    beams = (cos_a, sin_a, angles, angle_step) of the beams; segs = (seg_start, seg_end, seg_offsets); rules =
+    (range_min, range_max, radius_clip, margin, max_width, min_points).
     """
+    cos_a, sin_a, angles, angle_step = beams
+    seg_start, seg_end, seg_offsets = segs
+    range_min, range_max, radius_clip, margin, max_width, min_points = rules
     N, B = ranges.shape
     x = np.empty(B, np.float64)
     y = np.empty(B, np.float64)
@@ -314,196 +313,6 @@ def check_segments(seg_start, seg_end, seg_offsets, B) -> int:
         if seg_start[g] < 0 or seg_end[g] < seg_start[g] or seg_end[g] > B:
             return 2
     return 0
-
-
-@njit(cache=True)
-def is_candidate(row, max_width, min_points) -> bool:
-    """A segment that may be a leg: at least min_points points and at most max_width (m) wide."""
-    return row[F_N] >= min_points and row[F_WIDTH] <= max_width
-
-
-@njit(cache=True)
-def _leaf(nodes, split, row, node) -> int:
-    """The leaf a row reaches from node (x goes left when float32(x[feature]) <= threshold, as in sklearn)."""
-    f = nodes[node, 0]
-    while f >= 0:
-        # an index rather than a branch: which way a row goes is unpredictable
-        node = nodes[node, 1 + np.int64(not np.float64(np.float32(row[f])) <= split[node])]
-        f = nodes[node, 0]
-    return node
-
-
-@njit(cache=True)
-def _leaves4(nodes, split, r0, r1, r2, r3, root):
-    """_leaf of four rows walked together: their chains of dependent loads overlap."""
-    n0 = root
-    n1 = root
-    n2 = root
-    n3 = root
-    while True:
-        f0 = nodes[n0, 0]
-        f1 = nodes[n1, 0]
-        f2 = nodes[n2, 0]
-        f3 = nodes[n3, 0]
-        if f0 < 0 and f1 < 0 and f2 < 0 and f3 < 0:
-            return n0, n1, n2, n3
-        if f0 >= 0:
-            n0 = nodes[n0, 1 + np.int64(not np.float64(np.float32(r0[f0])) <= split[n0])]
-        if f1 >= 0:
-            n1 = nodes[n1, 1 + np.int64(not np.float64(np.float32(r1[f1])) <= split[n1])]
-        if f2 >= 0:
-            n2 = nodes[n2, 1 + np.int64(not np.float64(np.float32(r2[f2])) <= split[n2])]
-        if f3 >= 0:
-            n3 = nodes[n3, 1 + np.int64(not np.float64(np.float32(r3[f3])) <= split[n3])]
-
-
-@njit(cache=True)
-def ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, out) -> None:
-    """Leg probability of each row of features (M, F) into out (M,); non-candidates get 0.
-
-    Trees as flat node arrays: nodes[i] = (feature, left, right) with feature -1 at leaves and children as
-    global indices; split[i] = the threshold of an inner node, the value of a leaf. Like scikit-learn, a node
-    sends x left when float32(x[feature]) <= threshold. kind KIND_FOREST: mean over trees of the leaf values
-    (positive-class fractions); KIND_BOOSTING: sigmoid(base + scale * sum of leaf values)."""
-    M = features.shape[0]
-    T = roots.shape[0]
-    rows = np.empty(M, np.int64)
-    c = 0
-    for m in range(M):
-        out[m] = 0.0
-        if T > 0 and is_candidate(features[m], max_width, min_points):
-            rows[c] = m
-            c += 1
-    acc = np.zeros(c, np.float64)
-    for t in range(T):  # tree by tree, in sklearn's order (the same sums), four rows at a time
-        root = roots[t]
-        i = 0
-        while i + 4 <= c:
-            l0, l1, l2, l3 = _leaves4(
-                nodes,
-                split,
-                features[rows[i]],
-                features[rows[i + 1]],
-                features[rows[i + 2]],
-                features[rows[i + 3]],
-                root,
-            )
-            acc[i] += split[l0]
-            acc[i + 1] += split[l1]
-            acc[i + 2] += split[l2]
-            acc[i + 3] += split[l3]
-            i += 4
-        while i < c:
-            acc[i] += split[_leaf(nodes, split, features[rows[i]], root)]
-            i += 1
-    for i in range(c):
-        if kind == KIND_FOREST:
-            out[rows[i]] = acc[i] / T
-        else:
-            out[rows[i]] = 1.0 / (1.0 + np.exp(-(base + scale * acc[i])))
-
-
-@njit(cache=True)
-def block_probabilities(
-    ranges,
-    cos_a,
-    sin_a,
-    angles,
-    seg_start,
-    seg_end,
-    seg_offsets,
-    range_min,
-    range_max,
-    radius_clip,
-    margin,
-    max_width,
-    min_points,
-    angle_step,
-    nodes,
-    split,
-    roots,
-    kind,
-    base,
-    scale,
-    features,
-    out,
-) -> None:
-    """block_features (candidates only) then ensemble, in one compiled call: the per-scan hot path."""
-    block_features(
-        ranges,
-        cos_a,
-        sin_a,
-        angles,
-        seg_start,
-        seg_end,
-        seg_offsets,
-        range_min,
-        range_max,
-        radius_clip,
-        margin,
-        max_width,
-        min_points,
-        True,
-        angle_step,
-        features,
-    )
-    ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, out)
-
-
-@njit(cache=True, parallel=True)
-def block_probabilities_parallel(
-    ranges,
-    parts,
-    cos_a,
-    sin_a,
-    angles,
-    seg_start,
-    seg_end,
-    seg_offsets,
-    range_min,
-    range_max,
-    radius_clip,
-    margin,
-    max_width,
-    min_points,
-    angle_step,
-    nodes,
-    split,
-    roots,
-    kind,
-    base,
-    scale,
-    features,
-    out,
-) -> None:
-    """block_probabilities on numba's threads: the block's scans split into `parts` ranges of consecutive scans,
-    each range's segments (rows seg_offsets[k0]:seg_offsets[k1] of features and out) done at once. Every row's
-    features and probability depend on its own scan only: the same out as block_probabilities."""
-    N = ranges.shape[0]
-    for j in prange(parts):
-        k0 = j * N // parts
-        k1 = (j + 1) * N // parts
-        g0 = seg_offsets[k0]
-        g1 = seg_offsets[k1]
-        block_features(
-            ranges[k0:k1],
-            cos_a,
-            sin_a,
-            angles,
-            seg_start,
-            seg_end,
-            seg_offsets[k0 : k1 + 1],
-            range_min,
-            range_max,
-            radius_clip,
-            margin,
-            max_width,
-            min_points,
-            True,
-            angle_step,
-            features,
-        )
-        ensemble(features[g0:g1], max_width, min_points, nodes, split, roots, kind, base, scale, out[g0:g1])
 
 
 @njit(cache=True)

@@ -1,0 +1,440 @@
+"""numba kernels that extract one scan's features, and whole blocks of scans (docs/method.md §5.2).
+
+Sensor frame: x forward, y left, metres; angles in radians. Checked against tests/reference_perception.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from ..numba_runtime import key_kernel_cache_on_sources
+from .feature_layout import (
+    B_FIRST,
+    B_KIND,
+    B_LAST,
+    B_N,
+    B_SCAN,
+    B_SEG,
+    B_SIZE,
+    B_X,
+    B_Y,
+    C_FIRST,
+    C_LAST,
+    C_N,
+    C_R,
+    C_RACC,
+    C_SCAN,
+    C_SEG,
+    C_X,
+    C_Y,
+    CC_N,
+    CC_R,
+    CC_RACC,
+    CC_X,
+    CC_Y,
+    L_FIRST,
+    L_LAST,
+    L_LEN,
+    L_N,
+    L_RACC,
+    L_RHO,
+    L_SCAN,
+    L_SEG,
+    L_THETA,
+    L_X0,
+    L_X1,
+    L_Y0,
+    L_Y1,
+    LC_FIRST,
+    LC_LAST,
+    LC_LEN,
+    LC_N,
+    LC_PEAK_RACC,
+    LC_RACC,
+    LC_RHO,
+    LC_THETA,
+    LC_X0,
+    LC_X1,
+    LC_Y0,
+    LC_Y1,
+    MAX_SUB,
+    P_C0,
+    P_CELL,
+    P_CIRCLE_MIN_POINTS,
+    P_CTOL,
+    P_CWINDOW,
+    P_LINE_MIN_LENGTH,
+    P_LINE_MIN_POINTS,
+    P_LINE_MIN_RACC,
+    P_MIN_POINTS,
+    P_PERP_TOL,
+    P_R_MAX,
+    P_RHO_RES,
+    P_WINDOW,
+)
+from .hough_circles import circle_of_run, circle_posed
+from .hough_lines import _bounding_box, line_of_run, line_subsegments, normal_cells
+from .segmentation import segment_scan, valid_return
+
+key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
+
+
+@njit(cache=True)
+def _perpendicular(t1: float, t2: float, tol: float) -> bool:
+    d = abs(t1 - t2) % np.pi
+    return abs(d - np.pi / 2) <= tol
+
+
+@njit(cache=True)
+def _convex(ax, ay, jx, jy, bx, by) -> bool:
+    """Junction J bulges towards the scanner (origin) from the chord A-B."""
+    ex = bx - ax
+    ey = by - ay
+    cj = ex * (jy - ay) - ey * (jx - ax)
+    co = ex * (0.0 - ay) - ey * (0.0 - ax)
+    return cj * co > 0
+
+
+# extract_scan's steps below are inlined into it (inline="always"): it compiles to one function, as it was
+# before they were cut out, and unpacking the scratch tuple in each step costs nothing per segment
+
+
+@njit(cache=True)
+def scan_work(p, nt, B, range_max):
+    """Scratch arrays of extract_scan for scans of B beams, nt theta cells, returns up to range_max (m) and the
+    parameter vector p, in this order: lo (a line candidate, LC_*), toff (nt,), cell (B,), touched (nt,),
+    peaks (MAX_SUB, 3), cand (MAX_SUB, LC_*), kept, cidx (MAX_SUB,), cout (a circle candidate, CC_*), hist
+    (B, 3), box (4,), zeroed (1,), acc (nt, rho cells), cacc (HTC window), idx (B,), sub_s, sub_e (MAX_SUB,).
+    acc is not zeroed here: extract_scan zeroes the part a segment needs the first time (a few % of it in
+    practice; zeroed[0]: how many flat cells of acc are zero)."""
+    diag = 2.0 * min(range_max, 100.0)
+    w = int(round(p[P_CWINDOW] / p[P_CELL]))
+    return (
+        np.empty(12),
+        np.empty(nt),
+        np.empty(B, np.int64),
+        np.zeros(nt, np.bool_),
+        np.empty((MAX_SUB, 3), np.int64),
+        np.empty((MAX_SUB, 12)),
+        np.empty(MAX_SUB, np.int64),
+        np.empty(MAX_SUB, np.int64),
+        np.empty(5),
+        np.empty((B, 3), np.int64),
+        np.empty(4),
+        np.zeros(1, np.int64),
+        np.empty((nt, int(diag / p[P_RHO_RES]) + 3), np.int32),
+        np.zeros((2 * w + 1, 2 * w + 1), np.int32),
+        np.empty(B, np.int64),
+        np.empty(MAX_SUB, np.int64),
+        np.empty(MAX_SUB, np.int64),
+    )
+
+
+@njit(cache=True, inline="always")
+def _merge_lines(x, y, nkept, rho_res, work) -> int:
+    """Merge consecutive kept lines (work's kept, rows of cand) that are one line split by noise; returns how
+    many kept lines remain."""
+    lo, _, _, _, _, cand, kept, _, _, _, _, _, _, _, idx, sub_s, sub_e = work
+    m = 1
+    for q in range(1, nkept):
+        a = cand[kept[m - 1]]
+        b = cand[kept[q]]
+        dt = abs(a[LC_THETA] - b[LC_THETA])
+        dt = min(dt, np.pi - dt)
+        same_side = (
+            abs(a[LC_RHO] - b[LC_RHO]) if abs(a[LC_THETA] - b[LC_THETA]) < np.pi / 2 else abs(a[LC_RHO] + b[LC_RHO])
+        )
+        if dt < 3.0 * np.pi / 180 and same_side < 2 * rho_res and kept[q] == kept[m - 1] + 1:
+            len_a = sub_e[kept[m - 1]] - sub_s[kept[m - 1]]
+            len_b = sub_e[kept[q]] - sub_s[kept[q]]
+            merged = a[LC_RACC] * len_a + b[LC_RACC] * len_b
+            line_of_run(x, y, sub_s[kept[m - 1]], sub_e[kept[q]], a[LC_THETA], a[LC_RHO], merged, rho_res, idx, lo)
+            sub_e[kept[m - 1]] = sub_e[kept[q]]
+            cand[kept[m - 1], :] = lo
+        else:
+            kept[m] = kept[q]
+            m += 1
+    return m
+
+
+@njit(cache=True, inline="always")
+def _segment_lines(x, y, s, e, p, trig, work):
+    """HTL on the points [s, e) of one segment (trig = (cos_t, sin_t) of the theta cells; work: scan_work's):
+    its line candidates go to work's cand (rows LC_*), the indices of those with more than three points to cidx
+    and of those kept as lines (enough points, r_acc and length) to kept, consecutive kept lines that are one
+    line merged. Returns (kept lines, candidates, r_acc of the segment's candidates together)."""
+    lo, toff, cell, touched, peaks, cand, kept, cidx, _, hist, box, zeroed, acc, _, idx, sub_s, sub_e = work
+    cos_t, sin_t = trig
+    rho_res = p[P_RHO_RES]
+    min_pts = p[P_LINE_MIN_POINTS]
+    min_racc = p[P_LINE_MIN_RACC]
+    min_len = p[P_LINE_MIN_LENGTH]
+    nt = cos_t.shape[0]
+    kwin = int(p[P_WINDOW] / (np.pi / nt))
+    tstep = np.pi / nt
+    if e - s >= min_pts:
+        normal_cells(x, y, s, e, nt, cell)
+        # line_subsegments uses the first nt * width cells of acc (flat): zero what was never used before
+        used = nt * _bounding_box(x, y, s, e, rho_res, acc.shape[1], box)
+        if used > zeroed[0]:
+            acc.reshape(-1)[zeroed[0] : used] = 0
+            zeroed[0] = used
+        runs = (sub_s, sub_e, peaks)
+        nsub = line_subsegments(x, y, s, e, (acc, toff, touched), cos_t, sin_t, rho_res, kwin, cell, runs, hist)
+    else:
+        nsub = 0  # too few points for a line of more than three: no HTL
+    nkept = 0
+    ncand = 0
+    votes = 0.0
+    for k in range(nsub):
+        t = peaks[k, 1]
+        rho_p = toff[t] + (peaks[k, 2] + 0.5) * rho_res
+        line_of_run(x, y, sub_s[k], sub_e[k], t * tstep, rho_p, peaks[k, 0], rho_res, idx, lo)
+        cand[k, :] = lo
+        if lo[LC_N] >= min_pts:  # an HTL line (more than 3 points) for the decision rule
+            cidx[ncand] = k
+            ncand += 1
+            votes += lo[LC_RACC] * (sub_e[k] - sub_s[k])  # the refined line's r_acc, in points
+        if lo[LC_N] >= min_pts and lo[LC_RACC] > min_racc and lo[LC_LEN] > min_len:
+            kept[nkept] = k
+            nkept += 1
+    if nkept > 1:
+        nkept = _merge_lines(x, y, nkept, rho_res, work)
+    return nkept, ncand, votes / (e - s)
+
+
+@njit(cache=True, inline="always")
+def _circle_case(x, y, s, e, p, ncand, cand, cidx):
+    """Section 5.2: whether the segment [s, e) with ncand HTL lines (rows cidx[:ncand] of cand) is tested as a
+    circle, and whether that test goes beyond the paper's rule (leg_only: if the circle fails, the lines stay).
+    Only segments small enough to be a circle of the allowed radii (a long wall with a deflection stays lines)."""
+    ext = np.hypot(x[e - 1] - x[s], y[e - 1] - y[s])
+    try_circle = False
+    leg_only = False
+    if ext <= 2.0 * p[P_R_MAX] + 2.0 * p[P_CTOL]:
+        if ncand == 0:
+            try_circle = True
+        elif ncand == 1:
+            # the paper tests a single line as a circle when its r_acc < 0.5; datmo tests every single
+            # line of a segment small enough to be a circle, and keeps the better fit (a leg a few metres
+            # away, or a column's arc, is a shallow arc that HTL can take for a line with r_acc > 0.5)
+            try_circle = True
+            leg_only = (
+                cand[cidx[0], LC_PEAK_RACC] >= p[P_LINE_MIN_RACC]
+            )  # not the paper's case: no circle keeps the line
+        elif ncand == 2:
+            # two non-perpendicular lines: the paper's case; two perpendicular ones may be a box's corner
+            # or an arc cut in two halves (a column seen whole): the better fit decides, lines on a tie
+            try_circle = True
+            leg_only = _perpendicular(cand[cidx[0], LC_THETA], cand[cidx[1], LC_THETA], p[P_PERP_TOL])
+        else:
+            convex = 0
+            for q in range(ncand - 1):
+                a = cand[cidx[q]]
+                b = cand[cidx[q + 1]]
+                if _convex(a[LC_X0], a[LC_Y0], a[LC_X1], a[LC_Y1], b[LC_X1], b[LC_Y1]):
+                    convex += 1
+            try_circle = convex >= 2
+    return try_circle, leg_only
+
+
+@njit(cache=True, inline="always")
+def _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha) -> bool:
+    """HTC on the segment [s, e) (its circle in work's cout, CC_*): whether the circle beats the segment's
+    ncand HTL lines (r_acc htl_racc together), holds like a line must (r_acc above line_min_racc) and is a
+    well-posed arc (circle_posed; dalpha: the scan's angle step, rad)."""
+    _, _, _, _, _, cand, _, cidx, cout, _, _, _, _, cacc, idx, _, _ = work
+    min_racc = p[P_LINE_MIN_RACC]
+    if e - s >= p[P_CIRCLE_MIN_POINTS]:
+        circle_of_run(x, y, s, e, p, cacc, idx, cout, max(htl_racc, min_racc))
+    else:
+        cout[CC_RACC] = 0.0
+    lines_rss = -1.0  # the circle's points to the segment's HTL lines (two or more: a corner?)
+    if ncand >= 2 and cout[CC_N] >= 3:
+        lines_rss = 0.0
+        for q in range(int(cout[CC_N])):
+            i = idx[q]
+            dmin = np.inf
+            for j in range(ncand):
+                c = cand[cidx[j]]
+                dmin = min(dmin, abs(x[i] * np.cos(c[LC_THETA]) + y[i] * np.sin(c[LC_THETA]) - c[LC_RHO]))
+            lines_rss += dmin * dmin
+    # idx[:n] still holds the points circle_of_run fitted
+    return (
+        cout[CC_RACC] > max(htl_racc, min_racc)
+        and cout[CC_N] >= p[P_CIRCLE_MIN_POINTS]
+        and circle_posed(x, y, idx, int(cout[CC_N]), cout[CC_X], cout[CC_Y], cout[CC_R], p, dalpha, lines_rss)
+    )
+
+
+@njit(cache=True, inline="always")
+def _circle_row(row, scan, g, s, e, cout) -> None:
+    """A circle row (C_*) of segment g ([s, e)) of scan `scan` from the circle candidate cout (CC_*)."""
+    row[C_SCAN] = scan
+    row[C_SEG] = g
+    row[C_FIRST] = s
+    row[C_LAST] = e - 1
+    row[C_N] = cout[CC_N]
+    row[C_X] = cout[CC_X]
+    row[C_Y] = cout[CC_Y]
+    row[C_R] = cout[CC_R]
+    row[C_RACC] = cout[CC_RACC]
+
+
+@njit(cache=True, inline="always")
+def _line_row(row, scan, g, c) -> None:
+    """A line row (L_*) of segment g of scan `scan` from the line candidate c (LC_*)."""
+    row[L_SCAN] = scan
+    row[L_SEG] = g
+    row[L_FIRST] = c[LC_FIRST]
+    row[L_LAST] = c[LC_LAST]
+    row[L_N] = c[LC_N]
+    row[L_X0] = c[LC_X0]
+    row[L_Y0] = c[LC_Y0]
+    row[L_X1] = c[LC_X1]
+    row[L_Y1] = c[LC_Y1]
+    row[L_RHO] = c[LC_RHO]
+    row[L_THETA] = c[LC_THETA]
+    row[L_LEN] = c[LC_LEN]
+    row[L_RACC] = c[LC_RACC]
+
+
+@njit(cache=True, inline="always")
+def _blob_row(row, x, y, scan, g, s, e) -> None:
+    """A blob row (B_*) of segment g ([s, e)) of scan `scan`: a blob (or a point), centroid and largest extent."""
+    sx = 0.0
+    sy = 0.0
+    for i in range(s, e):
+        sx += x[i]
+        sy += y[i]
+    far = s
+    dmax = 0.0
+    for i in range(s, e):
+        d = (x[i] - x[s]) ** 2 + (y[i] - y[s]) ** 2
+        if d > dmax:
+            dmax = d
+            far = i
+    for i in range(s, e):  # two sweeps: exact for convex outlines, within a few % otherwise
+        d = (x[i] - x[far]) ** 2 + (y[i] - y[far]) ** 2
+        if d > dmax:
+            dmax = d
+    row[B_SCAN] = scan
+    row[B_SEG] = g
+    row[B_FIRST] = s
+    row[B_LAST] = e - 1
+    row[B_N] = e - s
+    row[B_X] = sx / (e - s)
+    row[B_Y] = sy / (e - s)
+    row[B_SIZE] = np.sqrt(dmax)
+    row[B_KIND] = 1.0 if e - s < 3 else 0.0
+
+
+@njit(cache=True)
+def extract_scan(x, y, segs, scan, p, trig, work, rows, counts, dalpha=0.0):
+    """Features of one scan's segments (points x, y, m, sensor frame; segs = (starts, ends, nseg): beam
+    ranges [start, end)): HTL on every segment, then the decision rule of docs/method.md §5.2, a circle kept
+    only when well posed (circle_posed; `dalpha`: the scan's angle step, rad). trig = (cos_t, sin_t) of the
+    theta cells; work: scan_work's scratch. Appends rows to rows = (lines, circles, blobs) from counts = (nl,
+    nc, nb); returns the new counts."""
+    starts, ends, nseg = segs
+    lines, circles, blobs = rows
+    nl, nc, nb = counts
+    _, _, _, _, _, cand, kept, cidx, cout, _, _, _, _, _, _, _, _ = work
+    for g in range(nseg):
+        s = starts[g]
+        e = ends[g]
+        nkept, ncand, htl_racc = _segment_lines(x, y, s, e, p, trig, work)
+        try_circle, leg_only = _circle_case(x, y, s, e, p, ncand, cand, cidx)
+        if try_circle:
+            if _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha):
+                _circle_row(circles[nc], scan, g, s, e, cout)
+                nc += 1
+                continue
+            if not leg_only:
+                nkept = 0
+        if nkept > 0:
+            for q in range(nkept):
+                _line_row(lines[nl], scan, g, cand[kept[q]])
+                nl += 1
+            continue
+        _blob_row(blobs[nb], x, y, scan, g, s, e)
+        nb += 1
+    return nl, nc, nb
+
+
+@njit(cache=True)
+def extract_scans(ranges, k0, k1, setup, out, given):
+    """Segment and extract features of scans k0 .. k1 - 1 of a block (ranges (N, B), m).
+
+    setup = (cos_a, sin_a, cos_inc, c1, range_min, range_max, p, cos_t, sin_t): the beams' cos and sin, the
+    cos of the angle step, segmentation's c1, the range limits (m), the parameter vector and the theta cells'
+    cos and sin. out = (seg_out, lines, circles, blobs, counts): scan k's segments (rows [start, end)), lines,
+    circles and blobs go to rows [k * B, k * B + counts[k, j]) of seg_out, lines, circles and blobs (j = 0, 1,
+    2, 3), each (N * B, columns) (a scan has at most B of each). given = (rows, offsets): with offsets of
+    length N + 1, the segments are not computed but taken from rows ([start, end), scan k's at
+    offsets[k]:offsets[k + 1]). Scans are independent: any split of a block into calls gives the same rows, so
+    extract_parallel runs disjoint ranges of scans at once."""
+    cos_a, sin_a, cos_inc, c1, range_min, range_max, p, cos_t, sin_t = setup
+    seg_out, lines, circles, blobs, counts = out
+    given_rows, given_offsets = given
+    N, B = ranges.shape
+    x = np.empty(B)
+    y = np.empty(B)
+    starts = np.empty(B + 1, np.int64)
+    ends = np.empty(B + 1, np.int64)
+    work = scan_work(p, cos_t.shape[0], B, range_max)
+    min_points = int(p[P_MIN_POINTS])
+    use_given = given_offsets.shape[0] == N + 1
+    dalpha = np.arccos(min(max(cos_inc, -1.0), 1.0))  # the angle step, for circle_posed
+    trig = (cos_t, sin_t)
+    rows = (lines, circles, blobs)
+    for k in range(k0, k1):
+        r = ranges[k]
+        if use_given:
+            nseg = 0
+            for q in range(given_offsets[k], given_offsets[k + 1]):
+                a = min(max(given_rows[q, 0], 0), B)
+                b = min(max(given_rows[q, 1], a), B)
+                if b > a and nseg < B:
+                    starts[nseg] = a
+                    ends[nseg] = b
+                    nseg += 1
+        else:
+            nseg = segment_scan(r, cos_inc, p[P_C0], c1, range_min, range_max, min_points, starts, ends)
+        base = k * B
+        for g in range(nseg):
+            seg_out[base + g, 0] = starts[g]
+            seg_out[base + g, 1] = ends[g]
+        counts[k, 0] = nseg
+        for i in range(B):
+            ri = r[i]
+            if not valid_return(ri, range_min, range_max):
+                ri = 0.0  # only reachable through given segments: an invalid return is a point at the scanner
+            x[i] = ri * cos_a[i]
+            y[i] = ri * sin_a[i]
+        nl, nc, nb = extract_scan(x, y, (starts, ends, nseg), k, p, trig, work, rows, (base, base, base), dalpha)
+        counts[k, 1] = nl - base
+        counts[k, 2] = nc - base
+        counts[k, 3] = nb - base
+
+
+@njit(cache=True, parallel=True)
+def extract_parallel(ranges, parts, setup, out, given):
+    """extract_scans over all N scans of the block (setup, out, given as there), split into `parts` ranges of
+    consecutive scans run on numba's threads (numba.set_num_threads); the same rows as one
+    extract_scans(ranges, 0, N, ...)."""
+    N = ranges.shape[0]
+    for j in prange(parts):
+        extract_scans(ranges, j * N // parts, (j + 1) * N // parts, setup, out, given)
+
+
+@njit(cache=True)
+def gather_rows(rows, counts, j, B, out) -> None:
+    """out (sum of counts[:, j], columns): the first counts[k, j] rows of each scan k's stretch of B rows of
+    `rows` (see extract_scans), in scan order."""
+    m = 0
+    for k in range(counts.shape[0]):
+        for q in range(counts[k, j]):
+            out[m] = rows[k * B + q]
+            m += 1
