@@ -15,7 +15,7 @@ import numpy as np
 from .log import cdr, mcapio, types
 from .log.scan import Odometry, ScanRun
 from .perception.features import RunFeatures, extract_run
-from .perception.landmarks import LandmarkStream
+from .perception.landmark_database import LandmarkStream
 from .perception.markers import feature_markers
 from .perception.params import FeatureParams
 
