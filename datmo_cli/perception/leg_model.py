@@ -1,7 +1,7 @@
 """The learned leg detector's model: a tree ensemble (a random forest / extra trees or gradient boosting,
 trained offline with scikit-learn) shipped as plain node arrays in one .npz (LegModel) and evaluated by a numba
 kernel (leg_forest.py), so run time needs neither scikit-learn nor pickles. The features it scores and the
-candidate rule are in legs.py.
+candidate rule are in leg_rules.py.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .legs import CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, FEATURE_NAMES, GAP_M, GAP_MIN_POINTS
+from .leg_rules import CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, FEATURE_NAMES, GAP_M, GAP_MIN_POINTS
 
 FORMAT_VERSION = 1
 KINDS = ("forest", "boosting")
