@@ -22,8 +22,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from datmo_cli import bounds
-from datmo_cli.bounds import OPTIONS, Bound, Bounded, OptionError, check, validate
+from datmo_cli.bounds import OPTIONS, Bound, OptionError, check, validate
 from datmo_cli.cli import COMMANDS, cli
+from datmo_cli.commands.types import Bounded, option_name
 from datmo_cli.config import BOUNDS, SECTIONS, load
 from datmo_cli.errors import ConfigError
 from datmo_cli.perception.params import FeatureParams
@@ -274,7 +275,7 @@ def test_every_numeric_option_is_bounded_by_a_bound_of_the_one_place():
             if not _numeric(param.type):
                 continue
             types = param.type.types if isinstance(param.type, click.Tuple) else [param.type]
-            assert all(isinstance(t, Bounded) for t in types), f"datmo {name} {param.opts}: not a bounds.Bounded type"
+            assert all(isinstance(t, Bounded) for t in types), f"datmo {name} {param.opts}: not a Bounded type"
             assert all(any(t.bound is b for b in ALL_BOUNDS) for t in types), (name, param.opts)
     assert len(OPTION_CASES) >= 25
 
@@ -294,7 +295,7 @@ def test_every_numeric_option_shows_its_range_in_its_help():
 @pytest.mark.parametrize("command, option, ptype", OPTION_CASES, ids=[f"{c} {o}" for c, o, _ in OPTION_CASES])
 def test_every_numeric_option_refuses_bad_values_naming_it_and_the_range(command, option, ptype):
     param = next(p for _, p, t in bounded_options() if t is ptype)
-    name = bounds.option_name(param)
+    name = option_name(param)
     b = ptype.bound
     for value in [*bad_values(b), "x", ""]:
         tally("params: bad option values refused")
@@ -316,7 +317,7 @@ def test_fuzz_any_option_text_is_a_number_in_range_or_one_clean_error(text):
         try:
             value = t.convert(text, param, None)
         except OptionError as exc:
-            assert "\n" not in str(exc) and bounds.option_name(param) in str(exc)
+            assert "\n" not in str(exc) and option_name(param) in str(exc)
             continue
         assert t.bound.lo <= value <= t.bound.hi and math.isfinite(value)
 

@@ -6,9 +6,10 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS, option
+from ..bounds import OPTIONS
 from ..report import FORMATS, SORT_KEYS
 from .options import force_option, quiet_option
+from .types import option
 
 PLOT_KINDS = ("auto", "top", "counts", "speeds", "all")
 
