@@ -18,6 +18,8 @@ from datmo_cli.errors import InputError, MissingChannelError
 from datmo_cli.extras import MissingExtraError
 from datmo_cli.log import mcapio
 
+pytestmark = pytest.mark.cli
+
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
 
 

@@ -30,6 +30,8 @@ from datmo_cli.log import mcapio
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.params import TrackingParams
 
+pytestmark = pytest.mark.cli
+
 ROOT = Path(__file__).resolve().parents[1]
 DATMO = Path(sys.executable).with_name("datmo")
 SAMPLE = ROOT / "sample_logs" / "static.mcap"

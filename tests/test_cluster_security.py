@@ -17,7 +17,7 @@ from datmo_cli.cli import cli
 
 distributed = pytest.importorskip("distributed")
 pytest.importorskip("cryptography")
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.cli, pytest.mark.timeout(300)]
 
 
 def _refused(address: str, **kw) -> bool:

@@ -16,6 +16,8 @@ from datmo_cli.cli import cli
 from datmo_cli.csvsafe import neutralise, neutralise_row
 from datmo_cli.log import cdr, mcapio, types
 
+pytestmark = pytest.mark.cli
+
 
 @pytest.mark.parametrize(
     ("text", "written"),

@@ -11,6 +11,8 @@ from datmo_cli.errors import GeometryError, InputError
 from datmo_cli.log.importers import detect_kind, import_log
 from datmo_cli.log.importers.carmen import flaser_angles, no_return_limit, parse_lines, stamps_ns
 
+pytestmark = pytest.mark.unit
+
 
 def flaser(ranges, t: float, pose=(1.0, 2.0, 0.5), name: str = "FLASER") -> str:
     r = " ".join(f"{v:g}" for v in ranges)

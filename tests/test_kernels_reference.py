@@ -33,7 +33,7 @@ from tests import reference_sim as rs
 from tests import reference_tracking as rt
 from tests.kernel_checks import CHECKS
 
-pytestmark = pytest.mark.kernels
+pytestmark = [pytest.mark.unit, pytest.mark.kernels]
 TESTS = Path(__file__).parent
 
 

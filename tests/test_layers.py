@@ -21,6 +21,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.unit
+
 PACKAGE = "datmo_cli"
 ROOT = Path(__file__).resolve().parent.parent / PACKAGE
 

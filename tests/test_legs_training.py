@@ -15,6 +15,8 @@ from datmo_cli.perception.legs import FEATURE_NAMES
 from tests.conftest import shared_path
 from tests.synthetic_legs import scene, write_bag, write_mcap
 
+pytestmark = pytest.mark.unit
+
 # ------------------------------------------------------------------------------------------------- labels
 
 

@@ -31,7 +31,7 @@ HALL = ROOT / "sample_logs" / "hall.mcap"
 LAYOUT = ROOT / "foxglove-layouts" / "datmo-layout.json"
 TRACK_FIELDS = {"id", "x", "y", "vx", "vy", "world_x", "world_y", "status", "mobility", "classification", "size"}
 
-pytestmark = pytest.mark.timeout(120) if hasattr(pytest.mark, "timeout") else []
+pytestmark = [pytest.mark.cli, pytest.mark.timeout(120)]
 
 
 def _datmo(*args: str) -> list[str]:

@@ -9,6 +9,8 @@ from datmo_cli.errors import DeviceError
 from datmo_cli.lms2xx import protocol as P
 from datmo_cli.lms2xx.driver import DeviceDisconnected, LMS2xx
 
+pytestmark = pytest.mark.unit
+
 
 class FakeLMS:
     """A scripted port: answers host frames at 9600 Bd from memory; streams `scans` after 20 24."""

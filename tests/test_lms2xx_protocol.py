@@ -10,6 +10,8 @@ from hypothesis import strategies as st
 
 from datmo_cli.lms2xx import protocol as P
 
+pytestmark = pytest.mark.unit
+
 # (bytes, payload builder or None) for every telegram in the doc's CRC table (§3)
 VECTORS = {
     "status": ("02 00 01 00 31 15 12", P.cmd_status),

@@ -31,7 +31,7 @@ from datmo_cli.log import mcapio
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.simulated import SceneSource
 
-pytestmark = pytest.mark.timeout(60) if hasattr(pytest.mark, "timeout") else []
+pytestmark = [pytest.mark.cli, pytest.mark.timeout(60)]
 
 
 def run_record(emu, path, *, baud=500000, scans=None, duration=None, stop=None, **kw):

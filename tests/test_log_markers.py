@@ -11,6 +11,8 @@ import pytest
 import datmo_cli
 from datmo_cli.log import markers, types
 
+pytestmark = pytest.mark.unit
+
 PACKAGE = Path(datmo_cli.__file__).parent
 
 

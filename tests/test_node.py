@@ -28,6 +28,8 @@ from datmo_cli.cli import cli
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
 
+pytestmark = pytest.mark.cli
+
 cyclonedds = pytest.importorskip("cyclonedds", reason="the node extra (cyclonedds) is not installed")
 
 from cyclonedds.domain import DomainParticipant  # noqa: E402

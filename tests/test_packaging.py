@@ -26,6 +26,8 @@ from benchmarks.bench_install import heavy, normalise
 from datmo_cli import extras
 from datmo_cli.cli import cli
 
+pytestmark = pytest.mark.cli
+
 ROOT = Path(__file__).resolve().parent.parent
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
 PROJECT = PYPROJECT["project"]

@@ -18,6 +18,8 @@ from datmo_cli.perception import _kernels as K
 from datmo_cli.perception.features import extract_run
 from datmo_cli.perception.params import FeatureParams
 
+pytestmark = pytest.mark.unit
+
 OFF = FeatureParams().replace(
     circle_min_coverage=0, circle_residual_ratio=0, circle_radius_margin=0, circle_lines_ratio=0
 )  # the rule before the well-posedness tests

@@ -16,6 +16,8 @@ from hypothesis.extra.numpy import arrays
 from datmo_cli.perception import _kernels as K
 from datmo_cli.perception.params import FeatureParams
 
+pytestmark = pytest.mark.unit
+
 INC = math.radians(0.5)
 N_THETA = 120  # 1.5 degree theta cells, the default
 RHO_RES = 0.02

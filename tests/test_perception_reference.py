@@ -19,6 +19,8 @@ from datmo_cli.perception import _kernels as K
 from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
 
+pytestmark = pytest.mark.unit
+
 INC = math.radians(0.5)
 ANGLES = -math.pi / 2 + np.arange(361) * INC
 

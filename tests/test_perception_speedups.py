@@ -7,12 +7,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 import reference_perception as ref
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from datmo_cli.perception import _kernels as K
 from datmo_cli.perception.params import FeatureParams
+
+pytestmark = pytest.mark.unit
 
 PVEC = FeatureParams().kernel_vector()
 

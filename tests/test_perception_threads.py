@@ -18,6 +18,8 @@ from datmo_cli.perception import threads as T
 from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
 
+pytestmark = pytest.mark.cli
+
 ARRAYS = (
     "seg_start",
     "seg_end",

@@ -27,7 +27,7 @@ from datmo_cli.cli import cli
 from datmo_cli.commands.report import plot_paths
 from datmo_cli.errors import DatmoError, InputError, OutputError
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.cli, pytest.mark.timeout(300)]
 
 
 @pytest.fixture

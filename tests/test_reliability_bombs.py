@@ -21,6 +21,8 @@ from datmo_cli.errors import InputError
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry, ScanRun, encode_scans
 
+pytestmark = pytest.mark.cli
+
 T0 = 1_600_000_000_000_000_000
 
 

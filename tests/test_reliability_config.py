@@ -13,6 +13,8 @@ from datmo_cli.cli import cli
 from datmo_cli.config import SECTIONS, load
 from datmo_cli.errors import ConfigError
 
+pytestmark = pytest.mark.cli
+
 
 @pytest.mark.parametrize(
     "table, hint",

@@ -22,6 +22,8 @@ from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.text import markup, printable
 
+pytestmark = pytest.mark.cli
+
 CLEAR = "\x1b[2J"
 LINK = "\x1b]8;;http://evil.example/\x1b\\click me\x1b]8;;\x1b\\"
 HOSTILE = f"[/]{CLEAR}[link=http://evil.example/]x[/link]{LINK}\u202eevil\n"

@@ -19,7 +19,10 @@ from datmo_cli import input_files
 from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 
-pytestmark = pytest.mark.timeout(120)  # a reader that blocks on a FIFO fails here instead of hanging the suite
+pytestmark = [
+    pytest.mark.cli,
+    pytest.mark.timeout(120),
+]  # a reader that blocks on a FIFO fails here instead of hanging the suite
 
 
 def invoke(*args):

@@ -18,6 +18,8 @@ from datmo_cli.log import mcapio, types
 from datmo_cli.log.importers import import_log
 from datmo_cli.log.scan import ScanGeometry, ScanRun, encode_scans
 
+pytestmark = pytest.mark.cli
+
 T0 = 1_600_000_000_000_000_000
 STORE1 = get_typestore(Stores.ROS1_NOETIC)
 

@@ -44,6 +44,8 @@ from datmo_cli.log import mcapio, types
 from datmo_cli.log.importers import import_log
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 
+pytestmark = pytest.mark.cli
+
 
 def invoke(*args):
     return CliRunner().invoke(cli, [str(a) for a in args])

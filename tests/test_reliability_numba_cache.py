@@ -18,6 +18,8 @@ import pytest
 
 from datmo_cli import numba_runtime
 
+pytestmark = pytest.mark.cli
+
 ROOT = Path(__file__).resolve().parent.parent
 
 

@@ -30,6 +30,8 @@ from datmo_cli.errors import ConfigError
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.params import TrackingParams
 
+pytestmark = pytest.mark.cli
+
 TABLES = {s: (BOUNDS[s], SECTIONS[s]) for s in SECTIONS}
 KEYS = [(table, key) for table, (b, _) in TABLES.items() for key in sorted(b)]
 

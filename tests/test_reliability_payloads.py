@@ -16,6 +16,8 @@ from fuzzing import tally
 from datmo_cli.cli import cli
 from datmo_cli.log import cdr, mcapio, types
 
+pytestmark = pytest.mark.cli
+
 
 def run_cli(*args) -> tuple[int, str]:
     result = CliRunner().invoke(cli, [str(a) for a in args])

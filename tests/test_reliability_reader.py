@@ -24,6 +24,8 @@ from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun, encode_scans
 from datmo_cli.streaming import LogStream
 
+pytestmark = pytest.mark.cli
+
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, "laser")
 T0 = 1_600_000_000_000_000_000
 N_SCANS = 60

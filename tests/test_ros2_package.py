@@ -21,6 +21,8 @@ from datmo_cli.cli import cli
 from datmo_cli.log import bagdir, mcapio
 from datmo_cli.log.scan import ScanRun
 
+pytestmark = pytest.mark.cli
+
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "datmo_msgs"
 SOURCE = ROOT / "datmo_cli" / "msg"

@@ -17,6 +17,8 @@ from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 from datmo_cli.log import importers, mcapio
 
+pytestmark = pytest.mark.cli
+
 
 def invoke(*args, quiet: bool = True):
     return CliRunner().invoke(cli, ["run", *map(str, args), "--no-report", *(["-q"] if quiet else [])])

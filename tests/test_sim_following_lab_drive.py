@@ -18,6 +18,8 @@ from datmo_cli.log.vocabulary import CLASS_PERSON
 from datmo_cli.sim.scene import builtin_scenes, load_scene, parse_scene
 from datmo_cli.sim.simulate import Simulation, simulate_scene
 
+pytestmark = pytest.mark.cli
+
 
 def invoke(*args) -> str:
     result = CliRunner().invoke(cli, [str(a) for a in args])

@@ -14,6 +14,8 @@ from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.perception.egomotion import EGO_SAMPLE_SCANS
 from datmo_cli.pipeline import features_file, process_file, segment_file, track_file
 
+pytestmark = pytest.mark.cli
+
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
 DECODE, DRAIN = mcapio.decode_scan_block, mcapio.LogWriter.drain
 

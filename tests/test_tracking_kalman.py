@@ -4,12 +4,15 @@ predict and kalman_update are checked against) against filterpy's KalmanFilter (
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import KalmanFilter
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests import reference_tracking as kalman
+
+pytestmark = pytest.mark.unit
 
 
 def _oracle(x0: np.ndarray, P0: np.ndarray) -> KalmanFilter:

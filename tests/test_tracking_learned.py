@@ -31,6 +31,8 @@ from datmo_cli.tracking.tracker import Tracker
 from tests.reference_tracking import param_vector
 from tests.reference_tracking import reference_measurements as measurements
 
+pytestmark = pytest.mark.cli
+
 P = TrackingParams()
 THR = 0.8  # the leg threshold of these scenes (about the shipped model's)
 

@@ -33,6 +33,8 @@ from tests.reference_tracking import (
     with_candidates,
 )
 
+pytestmark = pytest.mark.unit
+
 P = TrackingParams()
 THR = leg_threshold_of("default")  # the shipped leg model's threshold, which datmo track takes
 PRM = P.kernel_vector(THR)

@@ -20,6 +20,8 @@ from datmo_cli.cli import cli
 from datmo_cli.log import transforms
 from datmo_cli.log.scan import Odometry
 
+pytestmark = pytest.mark.cli
+
 MARKER_TOPICS = ("/datmo/markers/tracks", "/datmo/markers/features", "/datmo/landmarks")  # runs with --markers
 DELETEALL = 3
 TOLERANCE_NS = 50_000_000  # a dynamic transform is taken up to 50 ms beyond the first or last one

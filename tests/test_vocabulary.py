@@ -8,8 +8,12 @@ import ast
 import re
 from pathlib import Path
 
+import pytest
+
 import datmo_cli
 from datmo_cli.log import types, vocabulary
+
+pytestmark = pytest.mark.unit
 
 PACKAGE = Path(datmo_cli.__file__).parent
 CONSTANT = re.compile(r"^\s*\w+\s+([A-Z][A-Z0-9_]*)\s*=\s*(-?\d+)", re.MULTILINE)

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from typing import Any
 
 import click
+from click.decorators import FC
 
 from .. import progress
 from ..bounds import OPTIONS, Bound, OptionError, check
@@ -73,14 +74,14 @@ class Bounded(click.ParamType):
         return check(self.bound, value, name, OptionError)
 
 
-def option(*decls: str, bound: Bound, help: str, **kwargs) -> click.decorators.FC:
+def option(*decls: str, bound: Bound, help: str, **kwargs) -> Callable[[FC], FC]:
     """click.option for a number within `bound`, the range appended to its help."""
     return click.option(*decls, type=Bounded(bound), help=f"{help} Range: {bound.describe()}.", **kwargs)
 
 
 def pair_option(
     *decls: str, bounds: tuple[Bound, Bound], names: tuple[str, str], help: str, **kwargs
-) -> click.decorators.FC:
+) -> Callable[[FC], FC]:
     """click.option taking two numbers (e.g. MIN MAX), each within its bound, the ranges appended to its help."""
     ranges = ", ".join(f"{n} {b.describe()}" for n, b in zip(names, bounds, strict=True))
     return click.option(
@@ -121,7 +122,7 @@ class LaserPose(click.ParamType):
         return out[0], out[1], math.radians(out[2])
 
 
-def laser_pose_option() -> click.decorators.FC:
+def laser_pose_option() -> Callable[[FC], FC]:
     """--laser-pose X,Y,YAW (see LaserPose)."""
     ranges = ", ".join(f"{part} {bound.describe()}" for part, bound in LaserPose.parts)
     return click.option(
