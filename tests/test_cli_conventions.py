@@ -1,4 +1,4 @@
-"""CLI conventions (issue #15 point 7): --quiet everywhere, piped output never wraps or cuts names, progress bars
+"""CLI conventions: --quiet everywhere, piped output never wraps or cuts names, progress bars
 with a total, `-o -` refused for logs, ./datmo.toml picked up and `datmo config`, bags as inputs of the
 processing commands, shell completion."""
 

@@ -1,4 +1,4 @@
-"""The distribution (issue 26 points 3 and 4): its name, licence and one version; a plain install that pulls
+"""The distribution: its name, licence and one version; a plain install that pulls
 none of the heavy packages, and `datmo run` and `datmo report` working with only what it installs.
 
 The plain install's requirement closure is read from pyproject.toml's dependencies and, from there on, from the

@@ -1,4 +1,4 @@
-"""A circle is a well-posed arc (issue point 6): enough points for its size, a fit clearly better than a line's
+"""A circle is a well-posed arc: enough points for its size, a fit clearly better than a line's
 (and than the segment's HTL lines: a corner), a radius not pinned at a bound. The kernel's test against the
 plain reference, then whole scans: a 3-point arc at the radius floor and a wall corner are no circles, a
 well-sampled leg and a column still are."""

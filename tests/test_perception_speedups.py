@@ -1,4 +1,4 @@
-"""The exact shortcuts of the faster perception kernels (issue #13 point 3), each against a slow reference:
+"""The exact shortcuts of the faster perception kernels, each against a slow reference:
 HTC skips radii that cannot take the peak or beat the lines, the normal's angle is wrapped without fmod, and
 each scan's rows are gathered from its own stretch."""
 

@@ -1,4 +1,4 @@
-"""Strings from a log reach the terminal as themselves (issue #25, items 3 and 4).
+"""Strings from a log reach the terminal as themselves.
 
 A log's topic, schema and frame names and its metadata (the provenance's command line and parameters among
 them) are data anyone can write: printed by `info`, `report` or `run`'s report they must not be read as Rich

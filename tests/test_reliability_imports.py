@@ -1,4 +1,4 @@
-"""What comes into datmo is checked where it comes in (issue #25, items 10, 13 and 20).
+"""What comes into datmo is checked where it comes in.
 
 - CARMEN poses that are NaN were imported as they were, and every track's world position became NaN: they
   are left out of /odom with one warning (all of them: no /odom).

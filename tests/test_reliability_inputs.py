@@ -1,4 +1,4 @@
-"""Reliability of what datmo reads (issue #14): importers, scan-stamp order and ground truth.
+"""Reliability of what datmo reads: importers, scan-stamp order and ground truth.
 
 Regression tests, through the CLI, for the issue's rows 7 (scan stamps that go backwards or repeat), 8 and
 17 (ground-truth CSV with NaN/inf, an id twice in a frame, an unknown class, a binary file, a stamp beyond
@@ -72,7 +72,7 @@ def leftovers(folder: Path, *keep: Path) -> list[str]:
     return sorted(p.name for p in folder.rglob("*") if p.is_file() and p not in keep)
 
 
-# ------------------------------------------------------------------ row 7: scan stamps out of order
+# ------------------------------------------------------------------------- scan stamps out of order
 
 
 N_SCANS = 30
