@@ -4,8 +4,10 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 DEMO_LOG := sample_logs/hall.mcap
-# pytest-xdist workers of make test (auto: one per core)
+# pytest-xdist workers of make test (auto: one per core); each test file runs whole on one worker, so its
+# module-scoped fixtures (a `datmo run` shared by its tests) run once
 WORKERS ?= auto
+XDIST := -n $(WORKERS) --dist loadfile
 
 .PHONY: help install demo check test test-unit test-fast test-nojit lint typecheck bench accuracy sample-logs regress regress-update run-digests clean legs-model
 
@@ -28,16 +30,16 @@ demo: install ## process the hall sample log: segment, features, track; print th
 check: lint typecheck test test-nojit ## what CI runs (.ci/run): lint, typecheck, test, test-nojit
 
 test: install ## the whole test suite, in parallel (pytest-xdist, WORKERS=auto)
-	$(BIN)/pytest -q -n $(WORKERS)
+	$(BIN)/pytest -q $(XDIST)
 
-test-unit: install ## the fast inner loop: the tests marked unit and not slow (under a minute)
-	$(BIN)/pytest -q -m "unit and not slow"
+test-unit: install ## the fast inner loop: the tests marked unit and not slow, in parallel (under a minute)
+	$(BIN)/pytest -q $(XDIST) -m "unit and not slow"
 
 test-fast: install ## the suite without the tests marked slow, in parallel
-	$(BIN)/pytest -q -n $(WORKERS) -m "not slow"
+	$(BIN)/pytest -q $(XDIST) -m "not slow"
 
 test-nojit: install ## the kernel reference checks (tests/kernel_checks.py) with the kernels as plain Python (NUMBA_DISABLE_JIT=1), with the kernel modules' coverage
-	NUMBA_DISABLE_JIT=1 $(BIN)/pytest -q -n $(WORKERS) -m "kernels and not slow" \
+	NUMBA_DISABLE_JIT=1 $(BIN)/pytest -q $(XDIST) -m "kernels and not slow" \
 		--cov=datmo_cli.tracking --cov=datmo_cli.perception --cov=datmo_cli.sim --cov-report=term
 
 lint: install ## ruff check and ruff format --check on the whole repository

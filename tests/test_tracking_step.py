@@ -307,6 +307,7 @@ def lockstep(
         np.testing.assert_allclose(out[name], want[name], rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "leg_model"), [("hall.mcap", "default"), ("patrol.mcap", "default"), ("crowd6.mcap", "paper")]
 )
