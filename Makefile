@@ -4,8 +4,12 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 DEMO_LOG := sample_logs/hall.mcap
+# pytest-xdist workers of make test (auto: one per core); each test file runs whole on one worker, so its
+# module-scoped fixtures (a `datmo run` shared by its tests) run once
+WORKERS ?= auto
+XDIST := -n $(WORKERS) --dist loadfile
 
-.PHONY: help install demo test test-fast test-nojit lint bench accuracy sample-logs regress regress-update run-digests clean legs-model
+.PHONY: help install demo check test test-unit test-fast test-nojit lint typecheck bench accuracy sample-logs regress regress-update run-digests clean legs-model
 
 $(STAMP): pyproject.toml datmo_cli/__init__.py
 	$(PYTHON) -m venv $(VENV)
@@ -23,17 +27,27 @@ install: $(STAMP) ## create .venv and install datmo (editable) with the dev extr
 demo: install ## process the hall sample log: segment, features, track; print the report and draw out/hall.png
 	$(BIN)/datmo run $(DEMO_LOG) -o out --force --plot
 
-test: install ## the whole test suite (what CI runs)
-	$(BIN)/pytest -q
+check: lint typecheck test test-nojit ## what CI runs (.ci/run): lint, typecheck, test, test-nojit
 
-test-fast: install ## the suite without tests marked slow
-	$(BIN)/pytest -q -m "not slow"
+test: install ## the whole test suite, in parallel (pytest-xdist, WORKERS=auto)
+	$(BIN)/pytest -q $(XDIST)
 
-test-nojit: install ## the kernel reference checks (tests/kernel_checks.py) with the kernels as plain Python (NUMBA_DISABLE_JIT=1)
-	NUMBA_DISABLE_JIT=1 $(BIN)/pytest -q -m "kernels and not slow"
+test-unit: install ## the fast inner loop: the tests marked unit and not slow, in parallel (under a minute)
+	$(BIN)/pytest -q $(XDIST) -m "unit and not slow"
 
-lint: install ## ruff on the package, the tests and the benchmarks
-	$(BIN)/ruff check datmo_cli tests benchmarks
+test-fast: install ## the suite without the tests marked slow, in parallel
+	$(BIN)/pytest -q $(XDIST) -m "not slow"
+
+test-nojit: install ## the kernel reference checks (tests/kernel_checks.py) with the kernels as plain Python (NUMBA_DISABLE_JIT=1), with the kernel modules' coverage
+	NUMBA_DISABLE_JIT=1 $(BIN)/pytest -q $(XDIST) -m "kernels and not slow" \
+		--cov=datmo_cli.tracking --cov=datmo_cli.perception --cov=datmo_cli.sim --cov-report=term
+
+lint: install ## ruff check and ruff format --check on the whole repository
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+typecheck: install ## mypy on the package (its tiers: [tool.mypy] in pyproject.toml)
+	$(BIN)/mypy datmo_cli
 
 bench: install ## speed figures: scans/s and µs/scan per stage beside plain MCAP read speed; a plain install's size
 	$(BIN)/python -m benchmarks bench
@@ -59,4 +73,4 @@ sample-logs: install ## regenerate sample_logs/ bit for bit
 	PATH="$(CURDIR)/$(BIN):$$PATH" bash sample_logs/make.sh
 
 clean: ## remove out/, .venv and the build and cache folders
-	rm -rf out $(VENV) build *.egg-info .pytest_cache .ruff_cache
+	rm -rf out $(VENV) build *.egg-info .pytest_cache .ruff_cache .mypy_cache .coverage

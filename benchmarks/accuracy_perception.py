@@ -218,7 +218,7 @@ def real(path: Path, topic: str | None) -> str:
     )
 
 
-# the circle rule before the well-posedness tests (issue point 6): all four off
+# the circle rule before the well-posedness tests: all four off
 BEFORE_CIRCLES = {
     "circle_min_coverage": 0,
     "circle_residual_ratio": 0,

@@ -1,4 +1,4 @@
-"""People from a moving robot, against ground truth (make accuracy; issue #23 point 6): the simulated scenes
+"""People from a moving robot, against ground truth (make accuracy): the simulated scenes
 `following` (a robot trailing a person, no /odom: datmo estimates the motion by scan matching) and `lab-drive` (a
 robot with odometry among standing and walking people, its laser mounted 0.85 m ahead and yawed 40°), each
 simulated in a temporary folder and run through datmo's real pipeline as `datmo run` runs it.
@@ -10,7 +10,7 @@ Matching (positions in the sensor frame, metres): in each scan, confirmed tracks
 visible ground-truth objects in question are paired one to one within MATCH_RADIUS (0.5 m, as `datmo evaluate`),
 nearest first (an optimal assignment). "People" are every ground-truth person, standing ones included.
 
-Figures (targets from issue #23):
+Figures (and their targets):
 - following: the leader's (ground-truth id 1) share of its frames in view where the track matched to it is a
   person (>= 0.95); the same over the passers-by (>= 0.90); people MOTA (>= 0.90: CLEAR-MOT over the people in
   view, tracks classified person as hypotheses, everything else a don't-care region, as `datmo evaluate`'s
@@ -395,7 +395,7 @@ def main() -> None:
         folder = Path(tmp)
         (folder / "following").mkdir()
         (folder / "lab-drive").mkdir()
-        print_lines("People from a moving robot, simulated (issue #23: following and lab-drive)", lines(folder))
+        print_lines("People from a moving robot, simulated (following and lab-drive)", lines(folder))
 
 
 if __name__ == "__main__":

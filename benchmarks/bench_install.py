@@ -1,4 +1,4 @@
-"""The size of a plain install (issue 26 point 4): a fresh venv in a temporary folder, `pip install` of this
+"""The size of a plain install: a fresh venv in a temporary folder, `pip install` of this
 clone's package without extras (the wheel pip builds from a copy of the sources), measured on disk; beside it
 the dev venv this runs in. Also checked there, as a user would find it: the heavy packages that must stay
 extras are not installed, the wheel holds no sample log (csail-excerpt.mcap is GPL-3.0 data), and
@@ -112,7 +112,7 @@ def main() -> None:
             "datmo run and datmo report on sample_logs/hall.mcap in that venv: "
             + ("ok" if ok else f"FAILED: {' '.join(failure)}"),
         ]
-        print_lines("Plain install (issue 26 point 4)", lines)
+        print_lines("Plain install", lines)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 """The leg detector's cost (make bench): segmentation + lines, circles and blobs per scan, as datmo did it
-before the detector (the paper's rule, the circle well-posedness tests off: the perception of cd981b7), with
+before the detector (the paper's rule, the circle well-posedness tests off: datmo's first perception), with
 the well-posed circle rule, and with the leg detector (the shipped model) on top; on the hall log tiled to
 5,000 scans, the CARMEN csail, intel and freiburg-079 logs, and a legtracker bag (768 beams). One core,
 after warm-up. Target: the detector costs at most 25 % more per scan than the perception before it.
@@ -24,7 +24,7 @@ BEFORE = FeatureParams(leg_model="paper").replace(
     circle_min_coverage=0, circle_residual_ratio=0, circle_radius_margin=0, circle_lines_ratio=0
 )
 CONFIGS = (
-    ("before the detector (cd981b7's rule)", BEFORE),
+    ("before the detector (the paper's rule)", BEFORE),
     ("well-posed circles, paper's legs", FeatureParams(leg_model="paper")),
     ("  + leg detector (shipped model)", FeatureParams()),
 )

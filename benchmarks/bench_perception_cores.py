@@ -1,14 +1,14 @@
-"""Perception against the code of cd981b7, and on several cores (make bench; issue #13 points 3 and 5).
+"""Perception against the code of an older commit (OLD), and on several cores (make bench).
 
-Point 3: segmentation + lines, circles and blobs (extract_run without landmarks; the paper's leg rule, as
-cd981b7 had no leg detector) on the CARMEN csail, intel and freiburg-079 logs, µs per scan, today's code
-beside cd981b7's measured in the same run: cd981b7's package is exported once (git archive) to a cache
+Against OLD: segmentation + lines, circles and blobs (extract_run without landmarks; the paper's leg rule, as
+OLD had no leg detector) on the CARMEN csail, intel and freiburg-079 logs, µs per scan, today's code
+beside OLD's measured in the same run: OLD's package is exported once (git archive) to a cache
 folder and imported in a subprocess with that folder first on sys.path; each version is timed in its own
 subprocess, alternately, each log in blocks of 64 scans, best of several passes per block (the least
-disturbed by other processes). Target: at most 0.65x cd981b7's time, aim 0.35x. Today's code is timed on
-one thread (like for like: cd981b7 used one) and on all cores (its default); with the leg detector too.
+disturbed by other processes). Target: at most 0.65x OLD's time, aim 0.35x. Today's code is timed on
+one thread (like for like: OLD used one) and on all cores (its default); with the leg detector too.
 
-Point 5: features (the shipped leg detector on, no landmarks) of freiburg-079 (or of the hall log tiled
+On several cores: features (the shipped leg detector on, no landmarks) of freiburg-079 (or of the hall log tiled
 when ../shared/data is absent) on 1 and 2 threads, interleaved, best of repeats. Target: >= 1.7x on 2 cores.
 Other processes share the cores: the load average is printed beside the figures.
 """
@@ -84,7 +84,7 @@ def cache_dir() -> Path:
 
 
 def old_tree() -> tuple[Path | None, str]:
-    """cd981b7's datmo_cli exported (once) to the cache folder: (its root, "") or (None, why not)."""
+    """OLD's datmo_cli exported (once) to the cache folder: (its root, "") or (None, why not)."""
     root = cache_dir() / "tree"
     if (root / "datmo_cli" / "perception" / "features.py").is_file():
         return root, ""
@@ -158,7 +158,7 @@ def time_version(root: Path, paths: list[Path], threads: int, legs: bool) -> dic
 
 
 def against_old() -> list[str]:
-    """Point 3's lines: µs/scan of cd981b7 and of today's code per log, and the ratios."""
+    """The lines against OLD: µs/scan of OLD and of today's code per log, and the ratios."""
     paths, why = log_arrays()
     if not paths:
         return [f"skipped: {why}"]
@@ -206,7 +206,7 @@ def against_old() -> list[str]:
 
 
 def thread_speedup() -> list[str]:
-    """Point 5's lines: features (leg detector on, no landmarks) on 1 and 2 threads."""
+    """The lines on several cores: features (leg detector on, no landmarks) on 1 and 2 threads."""
     from datmo_cli.log import mcapio
     from datmo_cli.log.scan import ScanRun
     from datmo_cli.perception.features import extract_run
@@ -253,8 +253,8 @@ def thread_speedup() -> list[str]:
 
 
 def main() -> None:
-    print_lines(f"Perception against {OLD} (issue #13 point 3)", against_old())
-    print_lines("Perception on 1 and 2 threads (issue #13 point 5)", thread_speedup())
+    print_lines(f"Perception against {OLD}", against_old())
+    print_lines("Perception on 1 and 2 threads", thread_speedup())
 
 
 if __name__ == "__main__":

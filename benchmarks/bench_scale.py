@@ -1,11 +1,10 @@
 """Scale (make bench): `datmo run` and `datmo features` on long raw logs, in bounded memory.
 
-The 361-beam hall log's scans (/scan only) tiled to 20,000 and 80,000 scans. Printed beside the plain
-MCAP read speed of the same file: peak RSS of a whole `datmo run` process on each (targets: within 10 % of
-each other, both under 400 MB); `datmo run` and `datmo features` speed on one core with a warm cache (targets:
-run >= 5,000 scans/s and >= 3x the code of cd981b7 measured in the same run, features >= 10,000 scans/s); and
-output bytes per scan with --markers and by default (no markers, no covariance; targets: at most 2x the input
-with markers, 1.2x without).
+The 361-beam hall log's scans (/scan only) tiled to 20,000 and 80,000 scans. Printed beside the plain MCAP read speed of
+the same file: peak RSS of a whole `datmo run` process on each (targets: within 10 % of each other, both under 400 MB);
+`datmo run` and `datmo features` speed on one core with a warm cache (targets: run >= RUN_TARGET scans/s and >= RUN_GAIN
+x the BASELINE commit's code measured in the same run, features >= 10,000 scans/s); and output bytes per scan with
+--markers and by default (no markers, no covariance; targets: at most 2x the input with markers, 1.2x without).
 With the report, the process also holds one summary row per track of the run (the report's track table),
 so its memory grows with the number of tracks; --no-report shows the pipeline alone. Logs are made once and
 kept in the system's temporary folder.

@@ -1,4 +1,4 @@
-"""Start-up with a warm numba cache (issue #13): wall time of `datmo --help`, `info` and `report` (target
+"""Start-up with a warm numba cache: wall time of `datmo --help`, `info` and `report` (target
 0.3 s) and of `features`, `track` and `run` on a one-scan log (target 0.8 s), the best of 5 runs each in a
 fresh process, and the least CPU time (user + system) of those runs, which a busy machine inflates less.
 `import numba` alone is the yardstick: about 0.3 s on the machine the targets were set on, so "met, scaled"
@@ -79,7 +79,7 @@ def main() -> None:
         f"ONE: a one-scan hall log; DONE: its datmo run output; best of {REPEAT} runs each; "
         f"load average {load:.2f} on {os.cpu_count()} cores"
     )
-    print_lines("Start-up, warm numba cache (issue #13: 0.3 s light commands, 0.8 s stages on one scan)", lines)
+    print_lines("Start-up, warm numba cache (targets: 0.3 s light commands, 0.8 s stages on one scan)", lines)
 
 
 if __name__ == "__main__":

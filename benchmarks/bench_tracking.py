@@ -18,7 +18,7 @@ from datmo_cli.tracking import accuracy as acc
 from datmo_cli.tracking.params import TrackingParams
 
 HALL = Path(__file__).resolve().parent.parent / "sample_logs" / "hall.mcap"
-TRACK_TARGET_US = 40.0  # issue #13: the whole tracking step per scan, given features
+TRACK_TARGET_US = 40.0  # the whole tracking step per scan, given features
 REPEAT = 4  # the 60 s hall log is 300 scans; repeat it (later copies shifted in time) for steadier figures
 
 

@@ -5,12 +5,12 @@ Every `[features]` and `[track]` key has its Bound in its field's declaration (`
 and tracking/params.py; `bounds_of` lists them) and every numeric command-line option that is not one of them
 (OPTIONS) has a Bound here: its unit, its closed or open range and why the range ends where it does.
 `check` refuses NaN, infinities, wrong types and values outside the range with a ConfigError naming the key
-or option, the value and the range; `Bounded` is the Click type built on it, so a bad option is one line
-(`datmo: error: --gate: ...`, exit status 2 as for any bad option). The ranges are wide enough for any
-scanner (a 30 m Hokuyo, an 80 m SICK, a big hall); what they exclude would hang a kernel, allocate
-unbounded arrays or make no sense. Some parameters combine into an array's size or a kernel's work
-(Hough accumulators, the background grid): `features_combined` and `track_combined` refuse combinations
-above a limit, naming both parameters.
+or option, the value and the range; `Bounded` (datmo_cli/commands/types.py) is the Click type built on it,
+so a bad option is one line (`datmo: error: --gate: ...`, exit status 2 as for any bad option). The ranges
+are wide enough for any scanner (a 30 m Hokuyo, an 80 m SICK, a big hall); what they exclude would hang a
+kernel, allocate unbounded arrays or make no sense. Some parameters combine into an array's size or a
+kernel's work (Hough accumulators, the background grid): `features_combined` and `track_combined` refuse
+combinations above a limit, naming both parameters.
 """
 
 from __future__ import annotations
@@ -18,8 +18,6 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, ClassVar, Self
-
-import click
 
 from .errors import ConfigError
 
@@ -283,94 +281,3 @@ def track_combined(p, where: str = "track") -> None:
             f"{p.background_cell:g} m make a background grid {side:,} cells a side (at most "
             f"{BACKGROUND_SIDE:,}); raise background_cell or lower background_extent"
         )
-
-
-def option_name(param: click.Parameter | None) -> str:
-    """An option as the user typed it: its longest flag ('--gate'), or its name."""
-    if param is None:
-        return "value"
-    flags = [o for o in getattr(param, "opts", []) if o.startswith("-")]
-    return max(flags, key=len) if flags else (param.name or "value")
-
-
-class Bounded(click.ParamType):
-    """A number within a Bound; a bad value is one line naming the option and the range (OptionError)."""
-
-    def __init__(self, bound: Bound) -> None:
-        self.bound = bound
-        self.name = "integer" if bound.integer else "float"
-
-    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
-        return "INTEGER" if self.bound.integer else "FLOAT"
-
-    def convert(self, value, param, ctx):
-        name = option_name(param)
-        if isinstance(value, str):
-            text = value.strip()
-            try:
-                value = int(text) if self.bound.integer else float(text)
-            except ValueError:
-                kind = "a whole number" if self.bound.integer else "a number"
-                raise OptionError(f"{name}: expected {kind}, got {text!r}; allowed: {self.bound.describe()}") from None
-        return check(self.bound, value, name, OptionError)
-
-
-def option(*decls: str, bound: Bound, help: str, **kwargs) -> click.decorators.FC:
-    """click.option for a number within `bound`, the range appended to its help."""
-    return click.option(*decls, type=Bounded(bound), help=f"{help} Range: {bound.describe()}.", **kwargs)
-
-
-def pair_option(
-    *decls: str, bounds: tuple[Bound, Bound], names: tuple[str, str], help: str, **kwargs
-) -> click.decorators.FC:
-    """click.option taking two numbers (e.g. MIN MAX), each within its bound, the ranges appended to its help."""
-    ranges = ", ".join(f"{n} {b.describe()}" for n, b in zip(names, bounds, strict=True))
-    return click.option(
-        *decls,
-        type=click.Tuple([Bounded(bounds[0]), Bounded(bounds[1])]),
-        metavar=" ".join(names),
-        help=f"{help} Range: {ranges}.",
-        **kwargs,
-    )
-
-
-class LaserPose(click.ParamType):
-    """`X,Y,YAW`: where the scanner sits on the robot (metres, metres, degrees), each within its Bound; the value
-    is (x, y, yaw in radians)."""
-
-    name = "pose"
-    parts = (("x", OPTIONS["laser_offset"]), ("y", OPTIONS["laser_offset"]), ("yaw", OPTIONS["laser_yaw"]))
-
-    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
-        return "X,Y,YAW"
-
-    def convert(self, value, param, ctx):
-        if isinstance(value, tuple):
-            return value
-        name = option_name(param)
-        fields = str(value).split(",")
-        if len(fields) != 3:
-            raise OptionError(f"{name}: expected X,Y,YAW (metres, metres, degrees), got {value!r}")
-        out = []
-        for text, (part, bound) in zip(fields, self.parts, strict=True):
-            try:
-                number = float(text.strip())
-            except ValueError:
-                raise OptionError(
-                    f"{name}: {part} is not a number, got {text.strip()!r}; expected X,Y,YAW (metres, metres, degrees)"
-                ) from None
-            out.append(check(bound, number, f"{name} {part}", OptionError))
-        return out[0], out[1], math.radians(out[2])
-
-
-def laser_pose_option() -> click.decorators.FC:
-    """--laser-pose X,Y,YAW (see LaserPose)."""
-    ranges = ", ".join(f"{part} {bound.describe()}" for part, bound in LaserPose.parts)
-    return click.option(
-        "--laser-pose",
-        type=LaserPose(),
-        default=None,
-        help="Where the scanner sits on the robot: X,Y in metres and YAW in degrees, in the base frame "
-        f"(base_link); written to /tf_static and the metadata (datmo.laser_pose). "
-        f"Range: {ranges}.",
-    )

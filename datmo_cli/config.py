@@ -143,7 +143,7 @@ def _names(section: type[Section]) -> set[str]:
 
 
 LOCAL = "datmo.toml"  # picked up from the current folder when no --config is given
-PICKED_KEY = "datmo.config_picked"  # in the Click context's meta: ./datmo.toml was picked up
+PICKED_KEY = "datmo.config_picked"  # in the running command's meta (progress.command_meta): ./datmo.toml was picked up
 
 
 def effective_path(config: str | Path | None, no_config: bool) -> Path | None:
@@ -158,13 +158,11 @@ def effective_path(config: str | Path | None, no_config: bool) -> Path | None:
     local = Path(LOCAL)
     if not local.is_file():
         return None
-    import click
+    from .progress import command_meta, say
 
-    from .progress import say
-
-    ctx = click.get_current_context(silent=True)
-    if ctx is not None:
-        ctx.meta[PICKED_KEY] = True
+    meta = command_meta()
+    if meta is not None:
+        meta[PICKED_KEY] = True
     say(f"datmo: using ./{LOCAL}")
     return local
 
@@ -172,10 +170,10 @@ def effective_path(config: str | Path | None, no_config: bool) -> Path | None:
 def provenance_line(line: str) -> str:
     """The command line recorded in an output's provenance: `line`, with `--config datmo.toml` appended when
     ./datmo.toml was picked up without being named (so the record says which file set the parameters)."""
-    import click
+    from .progress import command_meta
 
-    ctx = click.get_current_context(silent=True)
-    return f"{line} --config {LOCAL}" if ctx is not None and ctx.meta.get(PICKED_KEY) else line
+    meta = command_meta()
+    return f"{line} --config {LOCAL}" if meta is not None and meta.get(PICKED_KEY) else line
 
 
 def _toml_value(value: object) -> str:

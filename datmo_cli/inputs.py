@@ -3,12 +3,9 @@ a CARMEN log or a chosen topic converted as by `datmo import` into a temporary M
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-
-import click
 
 from .errors import InputError
 
@@ -32,7 +29,7 @@ def scan_log(
     said (the conversion, warnings), e.g. a batch task's record (default: stderr, the conversion unless --quiet)."""
     from . import outputs
     from .log.importers import detect_kind, open_import, write_import
-    from .progress import say
+    from .progress import say, stderr_line
     from .text import printable
 
     src = _bag_folder(Path(src))
@@ -50,7 +47,7 @@ def scan_log(
             stats = write_import(stream, tmp, force=True)
         finally:
             for w in stream.warnings:
-                (tell or functools.partial(click.echo, err=True))(f"datmo: warning: {printable(w)}")
+                (tell or stderr_line)(f"datmo: warning: {printable(w)}")
         odom = f" and {stats.poses} poses from {stream.odom_topic}" if stats.poses else ""
         kind = {"ros1": "ROS 1 bag", "ros2": "ROS 2 bag"}.get(stream.kind, stream.kind)
         (tell or say)(

@@ -214,9 +214,13 @@ def _timer(delay: float, action: Callable[[], None]) -> threading.Timer:
 def said_if_slow(delay: float = 2.0) -> Iterator[None]:
     """Print NOTICE on stderr when the block is still running after `delay` s (a cache hit loads the kernels
     in about a second; only a compilation takes longer)."""
-    import click
+    import sys
 
-    timer = _timer(delay, lambda: click.echo(f"{NOTICE}...", err=True))
+    def notice() -> None:
+        sys.stderr.write(f"{NOTICE}...\n")
+        sys.stderr.flush()
+
+    timer = _timer(delay, notice)
     try:
         yield
     finally:

@@ -1,5 +1,5 @@
 """What the commands say while they work: one progress helper (a bar, or a panel redrawn in place), `--quiet`,
-and consoles for piped output.
+and consoles for piped output. The --quiet option itself is Click's: datmo_cli/commands/types.py.
 
 Rules shared by every command:
 - progress goes to stderr, as a rich bar with a known total (`bar`) or a panel of counts (`Panel`) on a
@@ -16,35 +16,44 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Any
 
-import click
-
-QUIET_KEY = "datmo.quiet"  # in the Click context's meta, shared by a command and its group
+QUIET_KEY = "datmo.quiet"  # in the running command's meta (command_meta), shared by a command and its group
 PIPE_WIDTH = 10_000  # columns of a console that is not a terminal: wide enough never to wrap a row
+
+
+def _no_command() -> dict[str, Any] | None:
+    return None
+
+
+_command_meta: Callable[[], dict[str, Any] | None] = _no_command
+
+
+def use_command_meta(source: Callable[[], dict[str, Any] | None]) -> None:
+    """Set where `command_meta` finds the running command's state: the CLI layer gives Click's context meta
+    (datmo_cli/commands/types.py), so this module needs no click."""
+    global _command_meta
+    _command_meta = source
+
+
+def command_meta() -> dict[str, Any] | None:
+    """The running command's state, shared by a command and its group (e.g. QUIET_KEY), or None outside a
+    command (a library call, another thread, a worker process)."""
+    return _command_meta()
 
 
 def quiet() -> bool:
     """Whether the running command was given --quiet (False outside a command, e.g. in a worker process)."""
-    ctx = click.get_current_context(silent=True)
-    return bool(ctx is not None and ctx.meta.get(QUIET_KEY))
+    meta = command_meta()
+    return bool(meta is not None and meta.get(QUIET_KEY))
 
 
-def _set_quiet(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
-    ctx.meta[QUIET_KEY] = bool(value)
+def stderr_line(line: str) -> None:
+    """`line` on stderr, always (a warning, said even under --quiet)."""
+    import sys
 
-
-def quiet_option(f: Callable) -> Callable:
-    """The `-q/--quiet` option: no progress bars and no informational lines; warnings and errors are still
-    printed on stderr, and a command's result (tables, JSON, CSV on stdout) is still printed."""
-    return click.option(
-        "-q",
-        "--quiet",
-        is_flag=True,
-        expose_value=False,
-        is_eager=True,
-        callback=_set_quiet,
-        help="No progress and no informational output (warnings and errors still go to stderr).",
-    )(f)
+    sys.stderr.write(f"{line}\n")
+    sys.stderr.flush()
 
 
 def say(message: str) -> None:
@@ -52,7 +61,7 @@ def say(message: str) -> None:
     from .text import printable
 
     if not quiet():
-        click.echo(printable(message), err=True)
+        stderr_line(printable(message))
 
 
 def console(*, stderr: bool = False):
@@ -220,7 +229,7 @@ class Bar:
         if self.progress is not None:
             self.progress.console.print(printable(line), markup=False, highlight=False, soft_wrap=True)
         elif line.startswith("datmo: warning"):
-            click.echo(printable(line), err=True)
+            stderr_line(printable(line))
         else:
             say(line)
 

@@ -40,6 +40,25 @@ def sample_logs() -> Path:
     return SAMPLE_LOGS
 
 
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """On a pytest-xdist worker: hand its fault-injection and fuzz counts to the controller, which prints them."""
+    workeroutput = getattr(session.config, "workeroutput", None)
+    if workeroutput is not None:
+        from fuzzing import COUNTS
+
+        workeroutput["fuzz_counts"] = {name: list(row) for name, row in COUNTS.items()}
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error) -> None:
+    """On the pytest-xdist controller: add a finished worker's counts to this process's."""
+    from fuzzing import COUNTS
+
+    for name, (tried, failures) in getattr(node, "workeroutput", {}).get("fuzz_counts", {}).items():
+        COUNTS[name][0] += tried
+        COUNTS[name][1] += failures
+
+
 def pytest_terminal_summary(terminalreporter) -> None:
     """Print the fault-injection and fuzz counts (tests/fuzzing.py) after the run."""
     from fuzzing import summary_lines
@@ -51,11 +70,23 @@ def pytest_terminal_summary(terminalreporter) -> None:
             terminalreporter.write_line(line)
 
 
+KINDS = ("unit", "cli")  # every test is one: `cli` runs datmo commands (CliRunner, a subprocess), `unit` the rest
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark `kernels` the tests tests/kernel_checks.py names as a kernel's reference check."""
+    """Mark `kernels` the tests tests/kernel_checks.py names as a kernel's reference check, and refuse a test
+    marked neither or both of KINDS (a `pytestmark = pytest.mark.unit` or `.cli` per test file)."""
     from kernel_checks import CHECKS
 
     checks = {tuple(node.split("::")) for node in CHECKS.values()}
+    unmarked = []
     for item in items:
         if (item.path.name, getattr(item, "originalname", item.name)) in checks:
             item.add_marker(pytest.mark.kernels)
+        if sum(item.get_closest_marker(kind) is not None for kind in KINDS) != 1:
+            unmarked.append(item.nodeid)
+    if unmarked:
+        raise pytest.UsageError(
+            "mark each test unit or cli (one of them), e.g. `pytestmark = pytest.mark.unit` in its file:\n  "
+            + "\n  ".join(unmarked)
+        )

@@ -2,7 +2,7 @@
 repaired or synthesised, flipped beams, ODOM poses, malformed lines, mixed intensities, zero stamps,
 --max-scans), the real logs in ../shared/data, and a digest of an output's messages to compare runs.
 
-tests/import_digests.json holds the digests of the whole-run importer (datmo at 0eee248) for these inputs;
+tests/import_digests.json holds the digests of the whole-run importer (before the streaming one) for these inputs;
 `python tests/import_cases.py` writes them again (only to record a deliberate change of output)."""
 
 from __future__ import annotations

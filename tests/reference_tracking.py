@@ -1,11 +1,11 @@
-"""The plain statements of the tracking rules, and the tracker as it was before the compiled step (issue #13
-point 2), kept as the references the package's kernels (datmo_cli/tracking/_kernels.py, _step.py and the modules
-of its phases, _assign.py) are checked against, phase by phase and run by run. Not part of the package: tests only.
+"""The plain statements of the tracking rules, and the tracker as it was before the compiled step, kept as the
+references the package's kernels (datmo_cli/tracking/_kernels.py, _step.py and the modules of its phases,
+_assign.py) are checked against, phase by phase and run by run. Not part of the package: tests only.
 
 - People (docs/method.md §6.1): `pair_legs`, `leg_lead`. Classification (docs/method.md §6): `classify`, `mobility`.
   Kalman model (filterpy's): `transition`, `process_noise`; gating: `gate`; global nearest neighbour:
   `reference_gnn` (scipy's linear_sum_assignment).
-- The person life cycle with a leg detector (issue #23): `fold_evidence` (a track's leg evidence),
+- The person life cycle with a leg detector: `fold_evidence` (a track's leg evidence),
   `carried_update` and `carried_beams` (beams that see a part of the robot), `cover` (which measurement a weak
   leg candidate was measured as), `leg_stage_measurements` (tracks taking strong and weak candidates).
 - The per-scan arithmetic of the tracker before the compiled step (`cv_predict`, `joseph_update`,
@@ -364,7 +364,7 @@ def tracks_on_background(
     return out
 
 
-# ---------------------------------------------------------------- the person life cycle (issue #23)
+# ------------------------------------------------------------------------- the person life cycle
 # the leg probability a leg candidate on the background or on carried beams keeps: still a leg candidate (a track
 # that takes it folds it into its evidence), and no leg
 NOT_A_LEG = 1e-6
@@ -1018,7 +1018,7 @@ def components(allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
 
 TRACK_DTYPE = cdr.element_dtype(types.TRACK)
 # which measurement kinds (columns) a confirmed track may take, by the kind group that fed it most (rows:
-# legs, circles, lines, blobs, -, a lone leg; see kind_groups); tentative tracks (row 4) take any
+# legs, circles, lines, blobs, -, a lone leg; see kind_groups); tentative tracks (the fifth row) take any
 _COMPAT = np.ones((6, N_KINDS), bool)
 _COMPAT[0, [KIND_CIRCLE, KIND_RECT]] = False
 _COMPAT[1, KIND_PERSON] = False  # a circle partly seen may pass for a leg, or for a line

@@ -18,6 +18,8 @@ from datmo_cli.log.vocabulary import (
     STATUS_TENTATIVE,
 )
 
+pytestmark = pytest.mark.unit
+
 GT = cdr.element_dtype(types.GROUND_TRUTH_OBJECT)
 TRACK = cdr.element_dtype(types.TRACK)
 

@@ -1,4 +1,4 @@
-"""The Python API (issue 26 point 6, docs/python.md): `process` writes what `datmo run` writes, a Log's tables are
+"""The Python API (docs/python.md): `process` writes what `datmo run` writes, a Log's tables are
 `datmo export`'s rows, and a LiveTracker fed the scans of a log one at a time gives the tracks `datmo run` gave
 for them (with the log's poses, and for a still scanner without), with one-line refusals of bad scans."""
 
@@ -17,6 +17,8 @@ from datmo_cli.cli import cli
 from datmo_cli.errors import InputError, MissingChannelError
 from datmo_cli.extras import MissingExtraError
 from datmo_cli.log import mcapio
+
+pytestmark = pytest.mark.cli
 
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
 

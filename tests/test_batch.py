@@ -17,6 +17,8 @@ from datmo_cli import batch, pipeline
 from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 
+pytestmark = pytest.mark.cli
+
 
 def fake_process(
     src,

@@ -12,6 +12,8 @@ from datmo_cli.cli import COMMANDS, cli
 from datmo_cli.log import mcapio
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 
+pytestmark = pytest.mark.cli
+
 
 @pytest.fixture
 def log(tmp_path):

@@ -1,4 +1,4 @@
-"""CLI conventions (issue #15 point 7): --quiet everywhere, piped output never wraps or cuts names, progress bars
+"""CLI conventions: --quiet everywhere, piped output never wraps or cuts names, progress bars
 with a total, `-o -` refused for logs, ./datmo.toml picked up and `datmo config`, bags as inputs of the
 processing commands, shell completion."""
 
@@ -29,6 +29,8 @@ from datmo_cli.config import BOUNDS, DatmoConfig, load, to_toml
 from datmo_cli.log import mcapio
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.params import TrackingParams
+
+pytestmark = pytest.mark.cli
 
 ROOT = Path(__file__).resolve().parents[1]
 DATMO = Path(sys.executable).with_name("datmo")

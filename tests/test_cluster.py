@@ -22,6 +22,8 @@ from click.testing import CliRunner
 from datmo_cli.cli import cli
 from datmo_cli.log import mcapio
 
+pytestmark = pytest.mark.cli
+
 distributed = pytest.importorskip("distributed")
 
 BIN = Path(sys.executable).parent

@@ -1,4 +1,4 @@
-"""The Dask side of `datmo run` and security (issue #25, items 2 and 18): `--scheduler local[:N]` starts a
+"""The Dask side of `datmo run` and security: `--scheduler local[:N]` starts a
 cluster that speaks TLS with a temporary certificate, so nobody without it (another user of the machine) can
 connect and run code as the user running datmo; `--scheduler tls://...` uses the certificate of the Dask
 configuration, and says in one line (exit 1, not 70) when there is none."""
@@ -17,7 +17,7 @@ from datmo_cli.cli import cli
 
 distributed = pytest.importorskip("distributed")
 pytest.importorskip("cryptography")
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.cli, pytest.mark.timeout(300)]
 
 
 def _refused(address: str, **kw) -> bool:

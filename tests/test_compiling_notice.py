@@ -5,7 +5,11 @@ from __future__ import annotations
 import time
 from types import SimpleNamespace
 
+import pytest
+
 from datmo_cli.numba_runtime import NOTICE, compile_notice
+
+pytestmark = pytest.mark.unit
 
 
 class FakeBar:

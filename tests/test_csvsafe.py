@@ -1,4 +1,4 @@
-"""CSV text fields that a spreadsheet would run as a formula are written as text (issue 25 item 4): the shared
+"""CSV text fields that a spreadsheet would run as a formula are written as text: the shared
 function of every CSV writer, and `datmo export`'s CSV of a log whose frame id and file name are formulas."""
 
 from __future__ import annotations
@@ -15,6 +15,8 @@ from click.testing import CliRunner
 from datmo_cli.cli import cli
 from datmo_cli.csvsafe import neutralise, neutralise_row
 from datmo_cli.log import cdr, mcapio, types
+
+pytestmark = pytest.mark.cli
 
 
 @pytest.mark.parametrize(

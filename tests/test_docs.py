@@ -15,6 +15,8 @@ from click.testing import CliRunner
 from datmo_cli import export
 from datmo_cli.cli import cli
 
+pytestmark = pytest.mark.cli
+
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 

@@ -23,6 +23,8 @@ from datmo_cli.perception.egomotion import (
     path_length,
 )
 
+pytestmark = pytest.mark.unit
+
 # A 10 x 6 m room (world frame, m) with a pillar, a cabinet and a recess, so that no direction is free.
 ROOM = [
     ((-3, -2), (7, -2)),

@@ -13,6 +13,8 @@ from datmo_cli import evaluate as ev
 from datmo_cli.cli import cli
 from datmo_cli.log import cdr, types
 
+pytestmark = pytest.mark.cli
+
 
 @pytest.fixture(scope="module")
 def log(tmp_path_factory):

@@ -25,6 +25,8 @@ from datmo_cli import export, pipeline
 from datmo_cli.cli import cli
 from datmo_cli.log import cdr, mcapio, types
 
+pytestmark = pytest.mark.cli
+
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
 CLASSES = {0: "unknown", 1: "person", 2: "circle object", 3: "rectangular object"}
 MOBILITIES = {0: "static", 1: "dynamic", 2: "undefined"}

@@ -18,6 +18,8 @@ from datmo_cli.errors import DatmoError
 from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.log.scan import ScanGeometry, encode_scan
 
+pytestmark = pytest.mark.cli
+
 ROOT = Path(__file__).parent.parent
 
 

@@ -30,6 +30,8 @@ from datmo_cli.cli import cli
 from datmo_cli.log import mcapio
 from datmo_cli.log.scan import ScanRun
 
+pytestmark = pytest.mark.cli
+
 ROOT = Path(__file__).resolve().parent.parent
 HALL = ROOT / "sample_logs" / "hall.mcap"
 

@@ -17,6 +17,8 @@ import pytest
 
 from datmo_cli import evaluate as ev
 
+pytestmark = pytest.mark.unit
+
 FAR = 5.0  # m between the two targets: never a doubt which hypothesis is near which
 
 

@@ -12,6 +12,8 @@ from datmo_cli.log.importers import detect_kind, import_log
 from datmo_cli.log.importers.carmen_conventions import flaser_angles, no_return_limit, stamps_ns
 from datmo_cli.log.importers.carmen_parse import parse_lines
 
+pytestmark = pytest.mark.unit
+
 
 def flaser(ranges, t: float, pose=(1.0, 2.0, 0.5), name: str = "FLASER") -> str:
     r = " ".join(f"{v:g}" for v in ranges)

@@ -14,6 +14,8 @@ from test_import_rosbag import messages, write_ros1
 from datmo_cli.cli import cli
 from datmo_cli.log import mcapio
 
+pytestmark = pytest.mark.cli
+
 
 def run_cli(*args):
     result = CliRunner().invoke(cli, ["import", *map(str, args)])

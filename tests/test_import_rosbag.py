@@ -9,6 +9,8 @@ from rosbags.typesys import Stores, get_typestore
 from datmo_cli.errors import GeometryError, InputError
 from datmo_cli.log.importers import detect_kind, import_log
 
+pytestmark = pytest.mark.unit
+
 STORE2 = get_typestore(Stores.ROS2_HUMBLE)
 STORE1 = get_typestore(Stores.ROS1_NOETIC)
 SCAN = "sensor_msgs/msg/LaserScan"

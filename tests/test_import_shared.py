@@ -40,7 +40,7 @@ POSITIVE = {
     "positive_7": 267,
 }
 
-pytestmark = pytest.mark.shared
+pytestmark = [pytest.mark.cli, pytest.mark.shared]
 
 
 @pytest.mark.parametrize("name", sorted(CARMEN))

@@ -23,6 +23,8 @@ from tests import reference_perception as rp
 from tests.reference_tracking import ReferenceTracker, reference_measurements
 from tests.test_tracking_step import GEOM, THR, P, meas_arrays, scenes
 
+pytestmark = pytest.mark.unit
+
 
 # ------------------------------------------------------------------------------------------------ tracking
 def _state(learned: bool) -> tuple:

@@ -36,7 +36,7 @@ from tests import reference_sim as rs
 from tests import reference_tracking as rt
 from tests.kernel_checks import CHECKS
 
-pytestmark = pytest.mark.kernels
+pytestmark = [pytest.mark.unit, pytest.mark.kernels]
 TESTS = Path(__file__).parent
 
 
@@ -60,11 +60,19 @@ def dispatchers() -> frozenset[str]:
     return frozenset(found)
 
 
+@cache
+def _functions(file: str) -> dict[str, str]:
+    """{name: source} of the top-level functions of test file `file` (parsed once per file)."""
+    text = (TESTS / file).read_text()
+    lines = text.splitlines()
+    body = ast.parse(text).body
+    return {f.name: "\n".join(lines[f.lineno - 1 : f.end_lineno]) for f in body if isinstance(f, ast.FunctionDef)}
+
+
 def _test_source(node: str) -> str:
     """The source of test `node` and of the helpers of its module it calls."""
     file, name = node.split("::")
-    text = (TESTS / file).read_text()
-    funcs = {f.name: ast.get_source_segment(text, f) for f in ast.parse(text).body if isinstance(f, ast.FunctionDef)}
+    funcs = _functions(file)
     assert name in funcs, f"{node}: no such test"
     return "\n".join([funcs[name]] + [s for n, s in funcs.items() if n != name and re.search(rf"\b{n}\(", funcs[name])])
 

@@ -9,6 +9,10 @@ modules import each other in a circle (not even within a layer, nor through a fu
     log        datmo_cli.log.* (importing only itself and base)
     base       errors, extras, outputs, input_files, bounds, numba_runtime, progress, csvsafe, text and the
                package itself (__version__): usable by every layer, importing only base
+
+Only the CLI layer imports click (at the top or inside a function): the layers below it take plain values,
+and what a command shares with them (--quiet, ./datmo.toml picked up) reaches them through
+progress.command_meta, which the CLI layer points at Click's context.
 """
 
 from __future__ import annotations
@@ -17,6 +21,8 @@ import ast
 from pathlib import Path
 
 import pytest
+
+pytestmark = pytest.mark.unit
 
 PACKAGE = "datmo_cli"
 ROOT = Path(__file__).resolve().parent.parent / PACKAGE
@@ -184,6 +190,51 @@ def test_a_planted_import_circle_is_reported(tmp_path):
 def test_the_package_imports_read_one_way():
     bad = violations(ROOT, KNOWN)
     assert not bad, "imports against the layers:\n" + "\n".join(bad)
+
+
+def click_imports(root: Path = ROOT) -> list[str]:
+    """ "module:line" of every import of click (or a click submodule) under `root` outside the CLI layer."""
+    files = sorted(root.rglob("*.py"))
+    out = []
+    for p in files:
+        name = module_name(p, root)
+        if layer(name)[0] == "cli":
+            continue
+        for node in ast.walk(ast.parse(p.read_text(), str(p))):
+            if isinstance(node, ast.Import):
+                hit = any(a.name.split(".")[0] == "click" for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                hit = node.level == 0 and (node.module or "").split(".")[0] == "click"
+            else:
+                continue
+            if hit:
+                out.append(f"{name}:{node.lineno}")
+    return out
+
+
+def test_only_the_cli_layer_imports_click():
+    bad = click_imports(ROOT)
+    assert not bad, "click imported below the CLI layer:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize(
+    "where, code, reported",
+    [
+        ("progress.py", "import click\n", True),
+        ("config.py", "def f():\n    from click import echo\n", True),
+        ("log/bad.py", "def f():\n    import click.testing\n", True),
+        ("commands/run.py", "import click\n", False),
+        ("cli.py", "def f():\n    import click\n", False),
+        ("bounds.py", "from .click import x\n", False),
+    ],
+)
+def test_a_planted_click_import_is_reported_below_the_cli_layer(tmp_path, where, code, reported):
+    root = tmp_path / PACKAGE
+    for folder in ("", "log", "commands"):
+        (root / folder).mkdir(exist_ok=True)
+        (root / folder / "__init__.py").write_text("")
+    (root / where).write_text(code)
+    assert bool(click_imports(root)) == reported, click_imports(root)
 
 
 def test_the_known_exceptions_are_still_needed():

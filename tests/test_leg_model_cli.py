@@ -14,6 +14,8 @@ from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.perception.leg_model import DEFAULT_MODEL_PATH
 from datmo_cli.sim.simulate import simulate_scene
 
+pytestmark = pytest.mark.cli
+
 
 @pytest.fixture(scope="module")
 def crowd(tmp_path_factory):

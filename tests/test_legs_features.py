@@ -16,6 +16,8 @@ from datmo_cli.perception.features import segment_run
 from datmo_cli.perception.leg_model import LegModel
 from datmo_cli.perception.legs import FEATURE_NAMES, RADIUS_CLIP, candidate_mask, cluster_features
 
+pytestmark = pytest.mark.unit
+
 COL = {name: i for i, name in enumerate(FEATURE_NAMES)}
 ANGLES_361 = np.radians(np.linspace(-90.0, 90.0, 361))
 

@@ -19,6 +19,8 @@ from datmo_cli.perception.legs import (
     model_clusters,
 )
 
+pytestmark = pytest.mark.unit
+
 F = len(FEATURE_NAMES)
 
 

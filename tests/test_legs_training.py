@@ -16,6 +16,8 @@ from datmo_cli.perception.training import cross_validation as CV
 from tests.conftest import shared_path
 from tests.synthetic_legs import scene, write_bag, write_mcap
 
+pytestmark = pytest.mark.unit
+
 # ------------------------------------------------------------------------------------------------- labels
 
 

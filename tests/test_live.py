@@ -31,7 +31,7 @@ HALL = ROOT / "sample_logs" / "hall.mcap"
 LAYOUT = ROOT / "foxglove-layouts" / "datmo-layout.json"
 TRACK_FIELDS = {"id", "x", "y", "vx", "vy", "world_x", "world_y", "status", "mobility", "classification", "size"}
 
-pytestmark = pytest.mark.timeout(120) if hasattr(pytest.mark, "timeout") else []
+pytestmark = [pytest.mark.cli, pytest.mark.timeout(120)]
 
 
 def _datmo(*args: str) -> list[str]:
@@ -431,7 +431,7 @@ def test_the_foxglove_layout_shows_scan_features_tracks_and_a_plot_of_track_velo
     assert {"vx", "vy"} <= {p.rsplit(".", 1)[1] for p in paths} and TRACK_FIELDS <= track_fields
 
 
-# --------------------------------------------------------------- play --loop (issue 25, item 17)
+# -------------------------------------------------------------------------------------- play --loop
 
 
 class _Passes(_Recorder):
@@ -468,7 +468,7 @@ def test_play_loop_of_a_one_scan_log_waits_between_passes(tmp_path):
     assert slept == [live.MIN_LOOP_PASS_S] * 5
 
 
-# -------------------------------------- clients of either subprotocol, and leaving quietly (issue 26 and 25)
+# ------------------------------------------------------ clients of either subprotocol, and leaving quietly
 
 
 async def _spec_client(url: str, subprotocol: str, topics: list[str], want: int, timeout: float = 60.0) -> dict:

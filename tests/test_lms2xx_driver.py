@@ -10,6 +10,8 @@ from datmo_cli.lms2xx import protocol as P
 from datmo_cli.lms2xx.driver import DeviceDisconnected, LMS2xx
 from datmo_cli.lms2xx.frame_parser import FrameParser
 
+pytestmark = pytest.mark.unit
+
 
 class FakeLMS:
     """A scripted port: answers host frames at 9600 Bd from memory; streams `scans` after 20 24."""
@@ -130,7 +132,7 @@ class BurstyLMS(FakeLMS):
 
 def test_stamps_are_strictly_increasing_when_bytes_come_in_bursts():
     """A telegram read late on its own, then two read at once 1 ms later: extrapolated back at the line's
-    byte rate, the first of those once landed before the one read alone (issue 25: 12.9 ms backwards on a
+    byte rate, the first of those once landed before the one read alone (12.9 ms backwards on a
     loaded machine). A telegram cannot start before the one before it ended."""
     values = [np.full(361, 100 * (k + 1), np.uint16) for k in range(5)]
     scans = [P.reply_frame(P.encode_b0(v)) for v in values]

@@ -20,6 +20,8 @@ from datmo_cli.lms2xx.frame_parser import FrameParser
 from datmo_cli.lms2xx.scan_sources import ArraySource
 from datmo_cli.log import mcapio
 
+pytestmark = pytest.mark.cli
+
 
 def test_fault_spec_parsing():
     f = Faults.parse("garbage:0.1, crc:0.05,truncate:0.02,drop:0.01,disconnect:200,nak:1")

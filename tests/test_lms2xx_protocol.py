@@ -11,6 +11,8 @@ from hypothesis import strategies as st
 from datmo_cli.lms2xx import protocol as P
 from datmo_cli.lms2xx.frame_parser import FrameParser
 
+pytestmark = pytest.mark.unit
+
 # (bytes, payload builder or None) for every telegram in the doc's CRC table (§3)
 VECTORS = {
     "status": ("02 00 01 00 31 15 12", P.cmd_status),

@@ -33,7 +33,7 @@ from datmo_cli.log import mcapio
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.simulated import SceneSource
 
-pytestmark = pytest.mark.timeout(60) if hasattr(pytest.mark, "timeout") else []
+pytestmark = [pytest.mark.cli, pytest.mark.timeout(60)]
 
 
 def run_record(emu, path, *, baud=500000, scans=None, duration=None, stop=None, **kw):
@@ -87,7 +87,7 @@ def test_record_is_bit_exact(tmp_path, baud, n):
     raws = log.messages[mcapio.TOPIC_TELEGRAM][1]
     b0 = [p[16:] for p in raws if p[16:][4] == P.REPLY_SCAN]
     assert b0[:n] == [s.telegram for s in sent[:n]]
-    # the telegram rate, untimed (a loaded machine delays the emulator and the reads alike, issue 25): the scans
+    # the telegram rate, untimed (a loaded machine delays the emulator and the reads alike): the scans
     # the rate table lets through at this baud, each stamped (host time of its first byte) no earlier than the
     # one before it ended on the line
     numbers = [s.number for s in sent[:n]]

@@ -10,6 +10,8 @@ from hypothesis import strategies as st
 from datmo_cli.log import cdr, types
 from datmo_cli.log.scan import GeometryChangeError, ScanGeometry, ScanRun, decode_scan, decode_scans, encode_scans
 
+pytestmark = pytest.mark.unit
+
 STORE = types.typestore()
 SPECIALS = np.array([np.nan, np.inf, -np.inf, 0.0, -0.0, 1e-30, 3.4e38], np.float32)
 

@@ -11,6 +11,8 @@ import pytest
 import datmo_cli
 from datmo_cli.log import markers, types
 
+pytestmark = pytest.mark.unit
+
 PACKAGE = Path(datmo_cli.__file__).parent
 
 
@@ -69,7 +71,7 @@ def test_the_codes_are_the_type_stores():
         assert getattr(markers, name) == getattr(marker, name), name
 
 
-# The recorder writes its own CDR header until the layers part of issue #17 moves its loop into lms2xx/.
+# The recorder writes its own CDR header until its loop moves into lms2xx/.
 def test_no_cdr_is_written_outside_log():
     writers = []
     for path in sorted(PACKAGE.rglob("*.py")):

@@ -13,6 +13,8 @@ from datmo_cli.errors import GeometryError, InputError, MissingChannelError, Out
 from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
 
+pytestmark = pytest.mark.unit
+
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0, 0.0, 0.2, "laser")
 
 

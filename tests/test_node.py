@@ -1,4 +1,4 @@
-"""`datmo node` (issue 26, point 1): a ROS 2 node over DDS, checked with a publisher and a subscriber written
+"""`datmo node`: a ROS 2 node over DDS, checked with a publisher and a subscriber written
 here on cyclonedds alone, with their own IDL types (the ROS 2 definitions of LaserScan, Odometry and
 datmo_msgs/Tracks as rmw_cyclonedds names them), not datmo's code. They run on a domain of this test run's own,
 over the loopback interface only. Also: the DDS types and topic names, and the live feed's drop-oldest and new-geometry
@@ -27,6 +27,8 @@ from datmo_cli import live
 from datmo_cli.cli import cli
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
+
+pytestmark = pytest.mark.cli
 
 cyclonedds = pytest.importorskip("cyclonedds", reason="the node extra (cyclonedds) is not installed")
 

@@ -9,7 +9,11 @@ import os
 import shutil
 from pathlib import Path
 
+import pytest
+
 from datmo_cli import numba_runtime
+
+pytestmark = pytest.mark.unit
 
 
 def test_a_datmo_kernels_cache_stamp_covers_the_files_it_reads():

@@ -12,6 +12,8 @@ from run_cases import DIGESTS, digests, run_outputs, sample_logs
 
 from datmo_cli.pipeline import process_file
 
+pytestmark = pytest.mark.cli
+
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory) -> dict[str, dict]:

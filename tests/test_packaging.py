@@ -1,4 +1,4 @@
-"""The distribution (issue 26 points 3 and 4): its name, licence and one version; a plain install that pulls
+"""The distribution: its name, licence and one version; a plain install that pulls
 none of the heavy packages, and `datmo run` and `datmo report` working with only what it installs.
 
 The plain install's requirement closure is read from pyproject.toml's dependencies and, from there on, from the
@@ -25,6 +25,8 @@ import datmo_cli
 from benchmarks.bench_install import heavy, normalise
 from datmo_cli import extras
 from datmo_cli.cli import cli
+
+pytestmark = pytest.mark.cli
 
 ROOT = Path(__file__).resolve().parent.parent
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, shared_path
 
-pytestmark = [pytest.mark.slow, pytest.mark.shared]
+pytestmark = [pytest.mark.unit, pytest.mark.slow, pytest.mark.shared]
 
 # measured with the quick fold models (a quarter of the trees): longest 7.5 / 8.9 / 27.8 s (left, right, rear
 # scanner), covered 0.827, 0 on walls. The targets are 2 s, 0.90 and 0: the empty rooms and the cover are not met

@@ -18,6 +18,8 @@ from datmo_cli.perception import accuracy as acc
 from datmo_cli.perception.features import RunFeatures, extract_run
 from datmo_cli.report import decode_channel
 
+pytestmark = pytest.mark.unit
+
 WITH_WALLS = ["hall", "corridor", "crowd6", "static", "patrol"]
 WITH_PEOPLE = ["hall", "corridor", "crowd6", "patrol"]
 WITH_COLUMNS = ["hall", "static"]

@@ -1,4 +1,4 @@
-"""A circle is a well-posed arc (issue point 6): enough points for its size, a fit clearly better than a line's
+"""A circle is a well-posed arc: enough points for its size, a fit clearly better than a line's
 (and than the segment's HTL lines: a corner), a radius not pinned at a bound. The kernel's test against the
 plain reference, then whole scans: a 3-point arc at the radius floor and a wall corner are no circles, a
 well-sampled leg and a column still are."""
@@ -17,6 +17,8 @@ from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.perception import hough_circles as HC
 from datmo_cli.perception.features import extract_run
 from datmo_cli.perception.params import FeatureParams
+
+pytestmark = pytest.mark.unit
 
 OFF = FeatureParams().replace(
     circle_min_coverage=0, circle_residual_ratio=0, circle_radius_margin=0, circle_lines_ratio=0

@@ -16,6 +16,8 @@ from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.perception.features import extract_run
 from datmo_cli.perception.params import FeatureParams
 
+pytestmark = pytest.mark.cli
+
 
 @pytest.fixture(scope="module")
 def hall(tmp_path_factory):

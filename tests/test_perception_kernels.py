@@ -19,6 +19,8 @@ from datmo_cli.perception import hough_lines as HL
 from datmo_cli.perception import segmentation as SEG
 from datmo_cli.perception.params import FeatureParams
 
+pytestmark = pytest.mark.unit
+
 INC = math.radians(0.5)
 N_THETA = 120  # 1.5 degree theta cells, the default
 RHO_RES = 0.02

@@ -14,7 +14,7 @@ from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.stages import derive_features
 
-pytestmark = pytest.mark.shared
+pytestmark = [pytest.mark.unit, pytest.mark.shared]
 
 CARMEN = [
     "acapulco",

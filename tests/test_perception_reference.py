@@ -21,6 +21,8 @@ from datmo_cli.perception import segmentation as SEG
 from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
 
+pytestmark = pytest.mark.unit
+
 INC = math.radians(0.5)
 ANGLES = -math.pi / 2 + np.arange(361) * INC
 

@@ -24,6 +24,8 @@ from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
 
+pytestmark = pytest.mark.unit
+
 ROOT = Path(__file__).resolve().parent.parent
 SPECIAL = st.sampled_from([np.nan, np.inf, -np.inf, 0.0, -1.0, 1e6, 8.0, 7.999, 0.001])
 STEPS_DEG = [1.0, 0.5, 0.25, -0.5, -1.0]

@@ -1,4 +1,4 @@
-"""The exact shortcuts of the faster perception kernels (issue #13 point 3), each against a slow reference:
+"""The exact shortcuts of the faster perception kernels, each against a slow reference:
 HTC skips radii that cannot take the peak or beat the lines, the normal's angle is wrapped without fmod, and
 each scan's rows are gathered from its own stretch."""
 
@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 import reference_perception as ref
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -16,6 +17,8 @@ from datmo_cli.perception import hough_circles as HC
 from datmo_cli.perception import hough_lines as HL
 from datmo_cli.perception import scan_extractor as SX
 from datmo_cli.perception.params import FeatureParams
+
+pytestmark = pytest.mark.unit
 
 PVEC = FeatureParams().kernel_vector()
 

@@ -15,6 +15,8 @@ from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.log.vocabulary import LANDMARK_BENCH, LANDMARK_COLUMN, LANDMARK_LINE_END
 from datmo_cli.perception.features import extract_run
 
+pytestmark = pytest.mark.unit
+
 INC = math.radians(0.5)
 ANGLE_MIN = -math.pi / 2
 ANGLES = ANGLE_MIN + np.arange(361) * INC

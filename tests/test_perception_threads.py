@@ -1,4 +1,4 @@
-"""Perception on several threads (issue #13, point 5): extract_run gives the same arrays on 1 and 2 threads
+"""Perception on several threads: extract_run gives the same arrays on 1 and 2 threads
 (sample logs, given segments, the CARMEN logs of the speed figures), `--threads` on datmo features and datmo
 run changes neither the messages nor the recorded parameters, and perception.threads resolves counts."""
 
@@ -17,6 +17,8 @@ from datmo_cli.log import mcapio
 from datmo_cli.perception import threads as T
 from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
+
+pytestmark = pytest.mark.cli
 
 ARRAYS = (
     "seg_start",

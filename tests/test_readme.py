@@ -32,6 +32,8 @@ import pytest
 from conftest import ROOT, SAMPLE_LOGS, SHARED_DATA, shared_path
 from fuzzing import tally
 
+pytestmark = pytest.mark.cli
+
 README = ROOT / "README.md"
 DOCS = ROOT / "docs"
 # README.md and the pages its sections moved to, in the order their examples build on each other's outputs

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.unit
+
 _spec = importlib.util.spec_from_file_location(
     "regress", Path(__file__).resolve().parent.parent / "benchmarks" / "regress.py"
 )

@@ -1,10 +1,9 @@
-"""Reliability of `datmo run`'s batches and `datmo report DIR` (issue #25, the batch side): nothing written
-through a symbolic link (1), only outputs under DIR, each once (5), the datmo version part of what resume
-matches (6), no plot written over another (7), a literal path with glob characters is that file (9), one batch
-at a time in a folder (11), --scheduler local:N bounded by the cores (17), --jobs workers that end with their
-parent (17), manifest fields of the wrong type are input errors (18), --jobs saying the processes it started
-(20). The one-pass processing is test_batch's stand-in (a synthetic processed log); test_cluster_security.py
-holds the Dask cluster's TLS (2)."""
+"""Reliability of `datmo run`'s batches and `datmo report DIR`: nothing written through a
+symbolic link, only outputs under DIR, each once, the datmo version part of what resume matches, no plot
+written over another, a literal path with glob characters is that file, one batch at a time in a folder,
+--scheduler local:N bounded by the cores, --jobs workers that end with their parent, manifest fields of the
+wrong type are input errors, --jobs saying the processes it started. The one-pass processing is test_batch's
+stand-in (a synthetic processed log); test_cluster_security.py holds the Dask cluster's TLS."""
 
 from __future__ import annotations
 
@@ -27,7 +26,7 @@ from datmo_cli.cli import cli
 from datmo_cli.errors import DatmoError, InputError, OutputError
 from datmo_cli.plot_files import plot_paths
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.cli, pytest.mark.timeout(300)]
 
 
 @pytest.fixture

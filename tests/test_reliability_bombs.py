@@ -1,4 +1,4 @@
-"""Reads bounded by what a sane file needs (issue #25, item 15): a zstd chunk declaring 2 GiB took 2.1 GB; an lz4
+"""Reads bounded by what a sane file needs: a zstd chunk declaring 2 GiB took 2.1 GB; an lz4
 chunk was decompressed whole before its size was checked; a leg model declaring a 3 GB array was loaded before
 its shapes were; a 1 GB line of a .log.gz was read whole. Each is refused, or skipped with a warning, before the
 memory is spent."""
@@ -20,6 +20,8 @@ from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry, ScanRun, encode_scans
+
+pytestmark = pytest.mark.cli
 
 T0 = 1_600_000_000_000_000_000
 

@@ -1,4 +1,4 @@
-"""A config file says what it means or is refused (issue #25, item 8): a misspelt table (`[tracks]`,
+"""A config file says what it means or is refused: a misspelt table (`[tracks]`,
 `[Features]`) was ignored, so its values silently did not apply; a minimum above its maximum (`step_min >
 step_max`) was accepted, so nothing could lie between them. Both are one line naming the file and the key."""
 
@@ -12,6 +12,8 @@ from datmo_cli.bounds import bounds_of, min_max_pairs
 from datmo_cli.cli import cli
 from datmo_cli.config import SECTIONS, load
 from datmo_cli.errors import ConfigError
+
+pytestmark = pytest.mark.cli
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,4 @@
-"""Strings from a log reach the terminal as themselves (issue #25, items 3 and 4).
+"""Strings from a log reach the terminal as themselves.
 
 A log's topic, schema and frame names and its metadata (the provenance's command line and parameters among
 them) are data anyone can write: printed by `info`, `report` or `run`'s report they must not be read as Rich
@@ -21,6 +21,8 @@ from datmo_cli.cli import cli
 from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.text import markup, printable
+
+pytestmark = pytest.mark.cli
 
 CLEAR = "\x1b[2J"
 LINK = "\x1b]8;;http://evil.example/\x1b\\click me\x1b]8;;\x1b\\"

@@ -1,4 +1,4 @@
-"""Files the user names for reading (issue #25, items 14 and 20): a FIFO, /dev/zero or another device given
+"""Files the user names for reading : a FIFO, /dev/zero or another device given
 as a log, a bag, --config, --gt, a leg model, a scene or a batch's manifest is refused in one line naming the
 path and what it is (never "empty file" or "no such file"), without hanging or reading until memory runs out;
 text inputs read whole are refused past their kind's size; an unreadable input is one line and exit 1, not
@@ -19,7 +19,10 @@ from datmo_cli import input_files
 from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 
-pytestmark = pytest.mark.timeout(120)  # a reader that blocks on a FIFO fails here instead of hanging the suite
+pytestmark = [
+    pytest.mark.cli,
+    pytest.mark.timeout(120),
+]  # a reader that blocks on a FIFO fails here instead of hanging the suite
 
 
 def invoke(*args):

@@ -1,4 +1,4 @@
-"""What comes into datmo is checked where it comes in (issue #25, items 10, 13 and 20).
+"""What comes into datmo is checked where it comes in.
 
 - CARMEN poses that are NaN were imported as they were, and every track's world position became NaN: they
   are left out of /odom with one warning (all of them: no /odom).
@@ -17,6 +17,8 @@ from datmo_cli.cli import cli
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.importers import import_log
 from datmo_cli.log.scan import ScanGeometry, ScanRun, encode_scans
+
+pytestmark = pytest.mark.cli
 
 T0 = 1_600_000_000_000_000_000
 STORE1 = get_typestore(Stores.ROS1_NOETIC)

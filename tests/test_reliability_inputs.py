@@ -1,4 +1,4 @@
-"""Reliability of what datmo reads (issue #14): importers, scan-stamp order and ground truth.
+"""Reliability of what datmo reads: importers, scan-stamp order and ground truth.
 
 Regression tests, through the CLI, for the issue's rows 7 (scan stamps that go backwards or repeat), 8 and
 17 (ground-truth CSV with NaN/inf, an id twice in a frame, an unknown class, a binary file, a stamp beyond
@@ -44,6 +44,8 @@ from datmo_cli.log import mcapio, types
 from datmo_cli.log.importers import import_log
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 
+pytestmark = pytest.mark.cli
+
 
 def invoke(*args):
     return CliRunner().invoke(cli, [str(a) for a in args])
@@ -70,7 +72,7 @@ def leftovers(folder: Path, *keep: Path) -> list[str]:
     return sorted(p.name for p in folder.rglob("*") if p.is_file() and p not in keep)
 
 
-# ------------------------------------------------------------------ row 7: scan stamps out of order
+# ------------------------------------------------------------------------- scan stamps out of order
 
 
 N_SCANS = 30

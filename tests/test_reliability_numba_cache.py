@@ -1,4 +1,4 @@
-"""A read-only install run by a user without a writable HOME (issue #25, item 16): numba found nowhere to cache a
+"""A read-only install run by a user without a writable HOME: numba found nowhere to cache a
 kernel and every stage exited 70 ("cannot cache function ...: no locator available"). datmo then caches in a
 private folder of the temporary folder, or, without one, compiles in each process without a cache.
 
@@ -17,6 +17,8 @@ from pathlib import Path
 import pytest
 
 from datmo_cli import numba_runtime
+
+pytestmark = pytest.mark.cli
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -1,4 +1,5 @@
-"""Issue #14, outputs and errors: a regression test per row (1, 2, 3, 4, 13, 14, 15, 21's trailing slash).
+"""Reliability of outputs and errors: emulate --link, --force over a node, a full disk, errors inside close(),
+non-UTF-8 names, read-only folders, long names and a trailing slash.
 
 Each bad case gives one line on stderr naming the file and the problem, a non-zero exit, no traceback, no
 temporary file left, and the input unchanged. The signal and write-failure sweeps are in test_fault_injection.
@@ -24,6 +25,8 @@ from datmo_cli.commands.emulate import make_link, remove_link
 from datmo_cli.errors import OutputError
 from datmo_cli.log import mcapio
 from datmo_cli.log.scan import ScanRun
+
+pytestmark = pytest.mark.cli
 
 ROOT = Path(__file__).resolve().parent.parent
 HALL = ROOT / "sample_logs" / "hall.mcap"
@@ -65,10 +68,10 @@ def one_line_error(res, *needles: str, code: int | None = None) -> str:
     return lines[0]
 
 
-# ------------------------------------------------------------------------------------ row 1: emulate --link
+# -------------------------------------------------------------------------------------------- emulate --link
 
 
-def test_row1_emulate_link_refuses_an_existing_file_without_force(tmp_path):
+def test_emulate_link_refuses_an_existing_file_without_force(tmp_path):
     keep = tmp_path / "f.txt"
     keep.write_text("keep\n")
     res = datmo("emulate", "--link", keep)
@@ -76,7 +79,7 @@ def test_row1_emulate_link_refuses_an_existing_file_without_force(tmp_path):
     assert keep.read_text() == "keep\n" and not keep.is_symlink()
 
 
-def test_row1_link_replaces_only_a_file_or_link_and_leaves_what_is_not_its_own(tmp_path):
+def test_link_replaces_only_a_file_or_link_and_leaves_what_is_not_its_own(tmp_path):
     fifo = tmp_path / "fifo"
     os.mkfifo(fifo)
     with pytest.raises(OutputError, match="FIFO"):
@@ -95,11 +98,11 @@ def test_row1_link_replaces_only_a_file_or_link_and_leaves_what_is_not_its_own(t
     assert not os.path.lexists(link)
 
 
-# --------------------------------------------------------------------------------- row 2: --force over a node
+# ----------------------------------------------------------------------------------------- --force over a node
 
 
 @pytest.mark.parametrize("kind", ["fifo", "chardev", "dir"])
-def test_row2_force_never_replaces_a_fifo_device_or_folder(small, tmp_path, kind):
+def test_force_never_replaces_a_fifo_device_or_folder(small, tmp_path, kind):
     if kind == "fifo":
         node = tmp_path / "node"
         os.mkfifo(node)
@@ -115,7 +118,7 @@ def test_row2_force_never_replaces_a_fifo_device_or_folder(small, tmp_path, kind
     assert digest(small) == before and not temps(tmp_path)
 
 
-def test_row2_force_replaces_a_symlink_itself_not_its_target(small, tmp_path):
+def test_force_replaces_a_symlink_itself_not_its_target(small, tmp_path):
     target = tmp_path / "target.txt"
     target.write_text("keep")
     link = tmp_path / "out.mcap"
@@ -126,7 +129,7 @@ def test_row2_force_replaces_a_symlink_itself_not_its_target(small, tmp_path):
     assert target.read_text() == "keep" and not link.is_symlink() and len(mcapio.read_run(link)) == 20
 
 
-# -------------------------------------------------------------------------------------- row 3: a full disk
+# ---------------------------------------------------------------------------------------------- a full disk
 
 
 def _limited(limit: int):
@@ -138,7 +141,7 @@ def _limited(limit: int):
     [["import", str(HALL)], ["simulate", "--scene", "hall", "--duration", "20"], ["segment", str(HALL)]],
     ids=["import", "simulate", "segment"],
 )
-def test_row3_file_size_limit_is_one_line_and_leaves_nothing(tmp_path, args):
+def test_file_size_limit_is_one_line_and_leaves_nothing(tmp_path, args):
     out = tmp_path / "out.mcap"
     before = digest(HALL)
     proc = subprocess.run(
@@ -155,11 +158,11 @@ def test_row3_file_size_limit_is_one_line_and_leaves_nothing(tmp_path, args):
     assert not out.exists() and not temps(tmp_path) and digest(HALL) == before
 
 
-# ---------------------------------------------------------------------------- row 4: errors inside close()
+# ------------------------------------------------------------------------------------ errors inside close()
 
 
 @pytest.mark.parametrize("exc", [KeyboardInterrupt(), outputs.Terminated(15), OSError(errno.ENOSPC, "full")])
-def test_row4_an_error_or_signal_inside_close_removes_the_temporary_file(tmp_path, exc):
+def test_an_error_or_signal_inside_close_removes_the_temporary_file(tmp_path, exc):
     out = tmp_path / "x.mcap"
     w = mcapio.LogWriter(out)
     w.write_scans(mcapio.read_run(HALL))
@@ -174,7 +177,7 @@ def test_row4_an_error_or_signal_inside_close_removes_the_temporary_file(tmp_pat
     assert not out.exists() and not temps(tmp_path) and not outputs.live()
 
 
-def test_row4_a_signal_inside_a_critical_section_is_held_until_it_ends():
+def test_a_signal_inside_a_critical_section_is_held_until_it_ends():
     with outputs.handle_signals(), pytest.raises(outputs.Terminated) as info:
         with outputs.critical():
             os.kill(os.getpid(), 15)
@@ -184,10 +187,10 @@ def test_row4_a_signal_inside_a_critical_section_is_held_until_it_ends():
     assert held and info.value.exit_code == 143
 
 
-# ------------------------------------------------------------------------------- row 13: non-UTF-8 names
+# --------------------------------------------------------------------------------------- non-UTF-8 names
 
 
-def test_row13_non_utf8_input_and_output_names(small, tmp_path):
+def test_non_utf8_input_and_output_names(small, tmp_path):
     src = Path(os.fsdecode(bytes(tmp_path) + b"/in\xff.mcap"))
     src.write_bytes(small.read_bytes())
     out = Path(os.fsdecode(bytes(tmp_path) + b"/out\xfe.mcap"))
@@ -200,11 +203,11 @@ def test_row13_non_utf8_input_and_output_names(small, tmp_path):
     assert not temps(tmp_path)
 
 
-# ---------------------------------------------------------------------------- row 14: read-only folders
+# ------------------------------------------------------------------------------------ read-only folders
 
 
 @pytest.mark.parametrize("code", [errno.EROFS, errno.EACCES, errno.EPERM])
-def test_row14_read_only_folder_is_one_line_naming_it(small, tmp_path, monkeypatch, code):
+def test_read_only_folder_is_one_line_naming_it(small, tmp_path, monkeypatch, code):
     tracked = tmp_path / "tracked.mcap"
     assert datmo("track", small, "-o", tracked).exit_code == 0
     real = os.open
@@ -229,33 +232,33 @@ def test_row14_read_only_folder_is_one_line_naming_it(small, tmp_path, monkeypat
     assert not list(out.parent.iterdir())
 
 
-def test_row14_unwritable_folder_is_refused_before_any_work(small, tmp_path, monkeypatch):
+def test_unwritable_folder_is_refused_before_any_work(small, tmp_path, monkeypatch):
     real = os.access
     monkeypatch.setattr(os, "access", lambda path, mode, **k: not mode & os.W_OK and real(path, mode, **k))
     one_line_error(datmo("track", small, "-o", tmp_path / "t.mcap"), f"{tmp_path}: output folder is not writable")
 
 
-# ---------------------------------------------------------------------------------- row 15: long names
+# ------------------------------------------------------------------------------------------ long names
 
 
-def test_row15_a_name_over_255_bytes_is_one_line(small, tmp_path):
+def test_a_name_over_255_bytes_is_one_line(small, tmp_path):
     out = tmp_path / ("n" * 300 + ".mcap")
     one_line_error(datmo("segment", small, "-o", out), "file name too long (305 bytes")
     assert not list(tmp_path.iterdir())
 
 
-def test_row15_a_name_near_the_limit_still_gets_a_temporary_file(small, tmp_path):
+def test_a_name_near_the_limit_still_gets_a_temporary_file(small, tmp_path):
     out = tmp_path / ("n" * 250 + ".mcap")
     res = datmo("segment", small, "-o", out)
     assert res.exit_code == 0, res.output
     assert out.exists() and not temps(tmp_path)
 
 
-# ---------------------------------------------------------------------------- row 21: a trailing slash
+# ------------------------------------------------------------------------------------ a trailing slash
 
 
 @pytest.mark.parametrize("cmd", ["segment", "import", "track"])
-def test_row21_trailing_slash_is_refused_not_turned_into_a_file(small, tmp_path, cmd):
+def test_trailing_slash_is_refused_not_turned_into_a_file(small, tmp_path, cmd):
     res = datmo(cmd, small, "-o", f"{tmp_path}/newdir/")
     one_line_error(res, "newdir/", "ends with '/'")
     assert not list(tmp_path.iterdir())

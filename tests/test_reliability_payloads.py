@@ -1,4 +1,4 @@
-"""Damage a CRC cannot see is an input error (issue #25, item 18): a datmo_msgs payload that is not what its
+"""Damage a CRC cannot see is an input error: a datmo_msgs payload that is not what its
 channel says, in a sound chunk (written so, or damaged before the chunk's CRC was computed), and a leg model of
 the wrong types or with NaN in it, once ended in exit 70 with a traceback class. Each is exit 1, one line naming
 the file (and the topic and message)."""
@@ -15,6 +15,8 @@ from fuzzing import tally
 
 from datmo_cli.cli import cli
 from datmo_cli.log import cdr, mcapio, types
+
+pytestmark = pytest.mark.cli
 
 
 def run_cli(*args) -> tuple[int, str]:

@@ -14,6 +14,8 @@ from datmo_cli import report
 from datmo_cli.cli import cli
 from datmo_cli.pipeline import read_run_data
 
+pytestmark = pytest.mark.cli
+
 
 @pytest.fixture(scope="module")
 def log(tmp_path_factory):

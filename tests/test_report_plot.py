@@ -14,6 +14,8 @@ from synthetic_logs import write
 from datmo_cli import pipeline, plot, report
 from datmo_cli.cli import cli
 
+pytestmark = pytest.mark.cli
+
 
 def rendered_boxes(drawn: plot.Drawn) -> list:
     """The label boxes (display pixels) of the figure rendered as saved."""

@@ -14,6 +14,8 @@ from synthetic_logs import write
 from datmo_cli import report
 from datmo_cli.cli import cli
 
+pytestmark = pytest.mark.cli
+
 FILE_HEADER = (
     "file,duration_s,scans,lines_per_scan,circles_per_scan,blobs_per_scan,landmarks,tracks,moving,"
     "static_pieces,person,circle_object,rectangular_object,unknown,dynamic,distance_m"

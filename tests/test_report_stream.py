@@ -19,6 +19,8 @@ from datmo_cli.errors import GeometryError, MissingChannelError
 from datmo_cli.log import cdr, mcapio, types, vocabulary
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 
+pytestmark = pytest.mark.cli
+
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
 TRACK = cdr.element_dtype(types.TRACK)
 LANDMARK = cdr.element_dtype(types.LANDMARK)

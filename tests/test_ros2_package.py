@@ -1,4 +1,4 @@
-"""Issue #15 point 2: the datmo_msgs ROS 2 package, outputs as ROS 2 bag folders (--bag-dir), and the QoS written.
+"""The datmo_msgs ROS 2 package, outputs as ROS 2 bag folders (--bag-dir), and the QoS written.
 
 The package in datmo_msgs/ must be buildable by colcon (package.xml, CMakeLists.txt listing every .msg with its
 dependencies) and hold the same .msg files the Python package reads (datmo_cli/msg, the source). colcon cannot
@@ -20,6 +20,8 @@ from datmo_cli import __version__, outputs
 from datmo_cli.cli import cli
 from datmo_cli.log import bagdir, mcapio
 from datmo_cli.log.scan import ScanRun
+
+pytestmark = pytest.mark.cli
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "datmo_msgs"

@@ -11,10 +11,13 @@ from click.testing import CliRunner
 from datmo_cli.cli import cli
 from datmo_cli.log import mcapio
 
-pytestmark = pytest.mark.skipif(
-    importlib.util.find_spec("datmo_cli.perception.features") is None,
-    reason="datmo_cli.perception.features (datmo segment, datmo features) is not built yet",
-)
+pytestmark = [
+    pytest.mark.cli,
+    pytest.mark.skipif(
+        importlib.util.find_spec("datmo_cli.perception.features") is None,
+        reason="datmo_cli.perception.features (datmo segment, datmo features) is not built yet",
+    ),
+]
 
 
 def invoke(*args):

@@ -1,4 +1,4 @@
-"""`datmo run` on bags resumes as on logs (issue #15): the batch keys a bag by its own path and SHA-256, with
+"""`datmo run` on bags resumes as on logs: the batch keys a bag by its own path and SHA-256, with
 --topic/--odom-topic in the parameters' hash; only the tasks that run convert their bag (in the worker, into a
 temporary MCAP beside the output, removed on every way out); the output's provenance names the bag."""
 
@@ -16,6 +16,8 @@ from test_cli_conventions import N_SCANS, write_ros1_bag, write_ros2_bag
 from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 from datmo_cli.log import importers, mcapio
+
+pytestmark = pytest.mark.cli
 
 
 def invoke(*args, quiet: bool = True):

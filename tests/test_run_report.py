@@ -16,6 +16,8 @@ from datmo_cli.cli import cli
 from datmo_cli.log import mcapio
 from datmo_cli.log.scan import ScanRun
 
+pytestmark = pytest.mark.cli
+
 
 def invoke(*args):
     result = CliRunner().invoke(cli, [str(a) for a in args])

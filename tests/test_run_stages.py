@@ -10,6 +10,8 @@ from datmo_cli import pipeline
 from datmo_cli.cli import cli
 from datmo_cli.log import mcapio
 
+pytestmark = pytest.mark.cli
+
 
 @pytest.fixture
 def hall_log(tmp_path):

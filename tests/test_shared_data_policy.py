@@ -5,6 +5,8 @@ from __future__ import annotations
 import conftest
 import pytest
 
+pytestmark = pytest.mark.unit
+
 
 def test_absent_shared_data_skips_for_users(monkeypatch, tmp_path):
     monkeypatch.setattr(conftest, "SHARED_DATA", tmp_path / "nowhere")

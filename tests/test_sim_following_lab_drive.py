@@ -1,7 +1,7 @@
-"""The scenes of issue #23 point 6: `following` (a robot trailing a person, no /odom) and `lab-drive` (a robot with
-odometry, its Hokuyo-like laser mounted 0.85 m ahead and yawed 40°), the scene keys they brought (follow, gap,
-odometry, laser_pose, [scanner], rate), and lab-drive as a ROS 1 bag that `datmo import` brings back to the same
-log and `datmo run` to the same tracks."""
+"""The scenes of a moving robot among people: `following` (a robot trailing a person, no /odom) and `lab-drive` (a robot
+with odometry, its Hokuyo-like laser mounted 0.85 m ahead and yawed 40°), the scene keys they brought (follow, gap,
+odometry, laser_pose, [scanner], rate), and lab-drive as a ROS 1 bag that `datmo import` brings back to the same log and
+`datmo run` to the same tracks."""
 
 from __future__ import annotations
 
@@ -17,6 +17,8 @@ from datmo_cli.log import mcapio, transforms
 from datmo_cli.log.vocabulary import CLASS_PERSON
 from datmo_cli.sim.scene import builtin_scenes, load_scene, parse_scene
 from datmo_cli.sim.simulate import Simulation, simulate_scene
+
+pytestmark = pytest.mark.cli
 
 
 def invoke(*args) -> str:

@@ -12,6 +12,8 @@ from reference_sim import cast as naive_cast
 
 from datmo_cli.sim.raycast import Primitives, cast, rectangle_segments
 
+pytestmark = pytest.mark.unit
+
 ANGLES = np.radians(-90 + 0.5 * np.arange(361))
 
 

@@ -10,6 +10,8 @@ from conftest import SAMPLE_LOGS
 
 from datmo_cli.cli import cli
 
+pytestmark = pytest.mark.cli
+
 SCRIPT = SAMPLE_LOGS / "make_simulated.sh"
 
 

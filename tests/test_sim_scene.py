@@ -10,6 +10,8 @@ from datmo_cli.log.vocabulary import CLASS_BENCH, CLASS_CIRCLE_OBJECT, CLASS_COL
 from datmo_cli.sim.scene import builtin_scenes, load_scene, parse_scene
 from datmo_cli.sim.simulate import simulate_scene
 
+pytestmark = pytest.mark.unit
+
 MINIMAL = """
 name = "mini"
 [[wall]]

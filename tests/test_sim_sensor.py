@@ -7,6 +7,8 @@ import pytest
 
 from datmo_cli.sim.sensor import Sensor
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.mark.parametrize(
     "fov,res,n,first",

@@ -13,6 +13,8 @@ from datmo_cli.log.vocabulary import CLASS_COLUMN, CLASS_PERSON, CLASS_WALL_CORN
 from datmo_cli.sim.scene import parse_scene
 from datmo_cli.sim.simulate import START_NS, simulate_scene
 
+pytestmark = pytest.mark.cli
+
 OCCLUSION = """
 [[column]]
 center = [2.0, 0.0]

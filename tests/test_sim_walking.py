@@ -9,6 +9,8 @@ from datmo_cli.sim._kernels import tow
 from datmo_cli.sim.paths import PathSpec, Timeline
 from datmo_cli.sim.walking import Gait, footprints, legs
 
+pytestmark = pytest.mark.unit
+
 STRAIGHT = PathSpec(np.array([[0.0, 0.0], [100.0, 0.0]]), speed=1.3)
 
 

@@ -14,6 +14,8 @@ import pytest
 from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.log.scan import ScanGeometry, encode_scan
 
+pytestmark = pytest.mark.cli
+
 HEAVY = ("numba", "scipy", "scipy.linalg", "sklearn", "rosbags.typesys.stores.ros2_humble", "matplotlib", "dask")
 
 PROBE = """

@@ -15,6 +15,8 @@ from datmo_cli.perception.egomotion import EGO_SAMPLE_SCANS
 from datmo_cli.pipeline import process_file
 from datmo_cli.stage_files import features_file, segment_file, track_file
 
+pytestmark = pytest.mark.cli
+
 SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
 DECODE, DRAIN = mcapio.decode_scan_block, mcapio.LogWriter.drain
 

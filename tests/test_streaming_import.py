@@ -35,6 +35,8 @@ from datmo_cli.log.importers import open_import, write_import
 from datmo_cli.log.importers.carmen_conventions import StampCheck
 from datmo_cli.log.ordered import OrderedSink
 
+pytestmark = pytest.mark.cli
+
 REFERENCE = json.loads(DIGESTS.read_text())
 SHARED = sorted(k for k in REFERENCE if k.startswith(("carmen/", "legtracker/", "killian")))
 SYNTHETIC = sorted(k for k in REFERENCE if k not in SHARED and not k.startswith("simulate/"))

@@ -19,6 +19,8 @@ from datmo_cli.report import decode_channel
 from datmo_cli.stages import run_features, track_run
 from datmo_cli.tracking import accuracy as acc
 
+pytestmark = pytest.mark.unit
+
 
 def _score(sample_logs, name: str, source: str) -> dict:
     log = mcapio.read_log(sample_logs / f"{name}.mcap", topics=None)

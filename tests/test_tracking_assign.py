@@ -5,12 +5,15 @@ gated matrices."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linear_sum_assignment
 
 from datmo_cli.tracking import _assign
 from tests.reference_tracking import reference_gnn
+
+pytestmark = pytest.mark.unit
 
 
 @settings(max_examples=200, deadline=None)

@@ -5,11 +5,14 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from datmo_cli.tracking._assign import gnn
 from tests.reference_tracking import gate, gated_costs, mahalanobis2
+
+pytestmark = pytest.mark.unit
 
 
 def _brute_force(cost: np.ndarray, allowed: np.ndarray) -> tuple[int, float]:

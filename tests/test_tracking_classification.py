@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, N_KINDS
 from datmo_cli.tracking.params import TrackingParams
@@ -18,6 +19,8 @@ from tests.reference_tracking import (
     classify_tracks,
     mobility,
 )
+
+pytestmark = pytest.mark.unit
 
 P = TrackingParams()
 

@@ -16,6 +16,8 @@ from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.synthetic import features_from_lists
 
+pytestmark = pytest.mark.cli
+
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0, 0.0, 0.2, "laser")
 N = 30
 STAMPS = 1_700_000_000_000_000_000 + np.arange(N, dtype=np.int64) * 200_000_000

@@ -12,6 +12,8 @@ from datmo_cli.log import mcapio
 from datmo_cli.perception.egomotion import FRAME_ID, odometry_for, scans_move
 from datmo_cli.sim.simulate import simulate_scene
 
+pytestmark = pytest.mark.cli
+
 
 @pytest.fixture(scope="module")
 def patrol():

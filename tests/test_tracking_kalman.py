@@ -4,12 +4,15 @@ predict and kalman_update are checked against) against filterpy's KalmanFilter (
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import KalmanFilter
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests import reference_tracking as kalman
+
+pytestmark = pytest.mark.unit
 
 
 def _oracle(x0: np.ndarray, P0: np.ndarray) -> KalmanFilter:
@@ -28,6 +31,7 @@ def test_model_is_filterpys():
         assert np.allclose(kalman.process_noise(dt, q), Q, rtol=0, atol=1e-15)
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n_tracks=st.integers(1, 6), steps=st.integers(1, 40))
 def test_matches_filterpy_on_random_sequences(seed: int, n_tracks: int, steps: int):

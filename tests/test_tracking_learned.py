@@ -1,4 +1,4 @@
-"""People with a leg detector (issue #23): the measurements of a scan whose leg candidates a detector scored, and
+"""People with a leg detector: the measurements of a scan whose leg candidates a detector scored, and
 the person life cycle on small synthetic scenes: a person is promoted once from paired legs and kept until the
 evidence (moved only by leg-candidate hits) falls below person_maintain, coasts person_coast s flagged occluded,
 never feeds the background, takes weak legs above person_maintain; candidates on beams the robot carries are no
@@ -30,6 +30,8 @@ from datmo_cli.tracking.synthetic import BLOB_DTYPE, CIRCLE_DTYPE, LEG_DTYPE, LI
 from datmo_cli.tracking.tracker import Tracker
 from tests.reference_tracking import param_vector
 from tests.reference_tracking import reference_measurements as measurements
+
+pytestmark = pytest.mark.cli
 
 P = TrackingParams()
 THR = 0.8  # the leg threshold of these scenes (about the shipped model's)

@@ -9,7 +9,7 @@ import importlib.util
 import pytest
 from conftest import ROOT, shared_path
 
-pytestmark = [pytest.mark.slow, pytest.mark.shared]
+pytestmark = [pytest.mark.unit, pytest.mark.slow, pytest.mark.shared]
 
 
 def _accuracy_module():

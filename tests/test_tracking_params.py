@@ -11,6 +11,8 @@ from datmo_cli.errors import ConfigError, InputError
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.params import TrackingParams
 
+pytestmark = pytest.mark.unit
+
 
 def test_defaults_follow_the_paper():
     p = TrackingParams()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from datmo_cli.log.vocabulary import CLASS_PERSON, MOBILITY_DYNAMIC
 from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
@@ -11,6 +12,8 @@ from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
 from tests.reference_tracking import leg_lead, pair_legs, param_vector
 from tests.reference_tracking import reference_measurements as measurements
+
+pytestmark = pytest.mark.unit
 
 STEP, WIDTH = 2 * 0.9 * np.sin(np.radians(22)), 0.3  # 2 l sin(theta) and the legs' path distance, m
 

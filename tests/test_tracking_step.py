@@ -42,6 +42,8 @@ from tests.reference_tracking import (
     with_candidates,
 )
 
+pytestmark = pytest.mark.unit
+
 P = TrackingParams()
 THR = leg_threshold_of("default")  # the shipped leg model's threshold, which datmo track takes
 PRM = P.kernel_vector(THR)
@@ -297,6 +299,7 @@ def lockstep(
         np.testing.assert_allclose(out[name], want[name], rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "leg_model"), [("hall.mcap", "default"), ("patrol.mcap", "default"), ("crowd6.mcap", "paper")]
 )

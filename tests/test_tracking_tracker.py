@@ -15,6 +15,8 @@ from datmo_cli.tracking.tracker import Tracker
 from tests.reference_tracking import background_update, param_vector
 from tests.reference_tracking import reference_measurements as measurements
 
+pytestmark = pytest.mark.unit
+
 GEOM = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0)
 P = TrackingParams()
 

@@ -10,6 +10,8 @@ from click.testing import CliRunner
 from datmo_cli.cli import cli
 from tests.synthetic_legs import scene, write_bag, write_mcap
 
+pytestmark = pytest.mark.cli
+
 
 def _run(*args: str):
     return CliRunner().invoke(cli, ["train-legs", *args])

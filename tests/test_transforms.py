@@ -1,4 +1,4 @@
-"""/tf and /tf_static (issue #15 point 1): checked with an independent reader (mcap's reader and mcap_ros2's
+"""/tf and /tf_static: checked with an independent reader (mcap's reader and mcap_ros2's
 decoder, not datmo's code) and a tiny tf buffer: the chain from every marker's frame (and the landmarks') to the
 scan's frame resolves at every marker stamp, on a moving robot (the patrol sample log through datmo run), a CARMEN
 import with odometry, a still scanner, and a ROS 1 bag import that holds /tf and /tf_static."""
@@ -19,6 +19,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from datmo_cli.cli import cli
 from datmo_cli.log import transforms
 from datmo_cli.log.scan import Odometry
+
+pytestmark = pytest.mark.cli
 
 MARKER_TOPICS = ("/datmo/markers/tracks", "/datmo/markers/features", "/datmo/landmarks")  # runs with --markers
 DELETEALL = 3

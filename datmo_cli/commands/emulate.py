@@ -9,8 +9,9 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS, option
+from ..bounds import OPTIONS
 from .options import force_option, quiet_option
+from .types import option
 
 FAULT_HELP = (
     "Faults to inject, comma-separated: garbage:P (a burst of random bytes before a scan), crc:P (corrupt "

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS, option
-from ..progress import quiet_option
+from ..bounds import OPTIONS
+from .types import option, quiet_option
 
 COLUMNS = {
     "mota": "MOTA",

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ..bounds import OPTIONS, option
+from ..bounds import OPTIONS
 from ..inputs import scan_log
 from .options import (
     config_options,
@@ -18,6 +18,7 @@ from .options import (
     param_pair_option,
     quiet_option,
 )
+from .types import option
 
 if TYPE_CHECKING:
     from ..config import DatmoConfig

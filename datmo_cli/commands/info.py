@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ..progress import quiet_option
+from .types import quiet_option
 
 
 def describe(path: Path) -> dict:

@@ -6,8 +6,9 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ..bounds import OPTIONS, option
+from ..bounds import OPTIONS
 from .options import config_options, quiet_option
+from .types import option
 
 if TYPE_CHECKING:
     from ..config import DatmoConfig

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from ..progress import quiet_option
+from .types import quiet_option
 
 __all__ = [
     "config_options",
@@ -119,7 +119,7 @@ def param_option(key: str, *decls: str, help: str | None = None, expose: bool = 
     `help`) with the default and the range. The value goes to the DatmoConfig config_options makes (the
     command gets `cfg`, not the option), overriding the config file; with `expose` the command also gets the
     option's value as given (None: not given), for a command that treats an explicit value apart."""
-    from ..bounds import Bounded
+    from .types import Bounded
 
     _, f = _field(key)
     meta = f.metadata
@@ -146,7 +146,7 @@ def param_option(key: str, *decls: str, help: str | None = None, expose: bool = 
 def param_pair_option(decl: str, first: str, second: str, names: tuple[str, str], help: str) -> Callable:
     """One option setting two numeric parameters (e.g. --circle-radius MIN MAX: features.circle_radius_min and
     features.circle_radius_max), each within its field's Bound; help: `help` with both defaults and ranges."""
-    from ..bounds import Bounded
+    from .types import Bounded
 
     (_, a), (_, b) = _field(first), _field(second)
     bounds = (a.metadata["bound"], b.metadata["bound"])

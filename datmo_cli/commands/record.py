@@ -19,8 +19,9 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS, laser_pose_option, option
+from ..bounds import OPTIONS
 from .options import force_option, output_option, quiet_option
+from .types import laser_pose_option, option
 
 
 def _panel(scans: int, elapsed: float, stats, port: str, baud: int):

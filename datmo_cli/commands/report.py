@@ -6,10 +6,11 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS, option
+from ..bounds import OPTIONS
 from ..plot_files import check_plot_outputs, plot_paths, save_plot
 from ..report import FORMATS, SORT_KEYS
 from .options import force_option, quiet_option
+from .types import option
 
 PLOT_KINDS = ("auto", "top", "counts", "speeds", "all")
 

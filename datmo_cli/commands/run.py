@@ -7,9 +7,10 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ..bounds import OPTIONS, option
+from ..bounds import OPTIONS
 from ..report import FORMATS, SORT_KEYS
 from .options import config_options, force_option, input_options, no_stdout, output_option, param_option, quiet_option
+from .types import option
 
 if TYPE_CHECKING:
     from ..config import DatmoConfig

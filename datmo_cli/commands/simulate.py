@@ -7,8 +7,9 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS, OptionError, laser_pose_option, option
+from ..bounds import OPTIONS, OptionError
 from .options import force_option, output_option, quiet_option
+from .types import laser_pose_option, option
 
 SCENE_HELP = (
     "Built-in scene name (hall, corridor, crowd, static, patrol, following, lab-drive; see --list-scenes) "
