@@ -90,3 +90,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
             "mark each test unit or cli (one of them), e.g. `pytestmark = pytest.mark.unit` in its file:\n  "
             + "\n  ".join(unmarked)
         )
+    # the files holding slow tests first (in their order, each whole): a parallel run (make test, --dist loadfile)
+    # hands them out before the quick ones, so the workers finish together instead of one waiting on the last slow file
+    slow_files = {item.path for item in items if item.get_closest_marker("slow") is not None}
+    items.sort(key=lambda item: item.path not in slow_files)
