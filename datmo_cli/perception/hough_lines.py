@@ -73,7 +73,7 @@ def normal_cells(x, y, s, e, nt, cell) -> None:
         cell[i] = min(int(phi * nt / np.pi), nt - 1)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # per point: no call, no tuple packed and unpacked
 def _vote(x, y, i, hough, cos_t, sin_t, inv_res, width, c, k, peak):
     """Point i votes along its sinusoid: theta cells c - k .. c + k (wrapping; all of them when 2k + 1 >= nt)
     around its local normal's cell c, and marks those theta rows in `touched`. Returns the peak (votes, theta

@@ -96,8 +96,8 @@ def _convex(ax, ay, jx, jy, bx, by) -> bool:
     return cj * co > 0
 
 
-# extract_scan's steps below are inlined into it (inline="always"): it compiles to one function, as it was
-# before they were cut out, and unpacking the scratch tuple in each step costs nothing per segment
+# extract_scan's steps below are inlined into it, and it into extract_scans (inline="always"): the per-scan loop
+# compiles to one function, as it was before they were cut out (calls cost 1-2 us a scan, measured)
 
 
 @njit(cache=True)
@@ -330,7 +330,7 @@ def _blob_row(row, x, y, scan, g, s, e) -> None:
     row[B_KIND] = 1.0 if e - s < 3 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def extract_scan(x, y, segs, scan, p, trig, work, rows, counts, dalpha=0.0):
     """Features of one scan's segments (points x, y, m, sensor frame; segs = (starts, ends, nseg): beam
     ranges [start, end)): HTL on every segment, then the decision rule of docs/method.md §5.2, a circle kept
