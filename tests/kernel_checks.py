@@ -109,7 +109,6 @@ CHECKS: dict[str, str] = {
     "perception.scan_extractor.extract_parallel": f"{DRIVERS}::test_extract_scan_scans_and_parallel",
     "perception.scan_extractor.scan_work": f"{DRIVERS}::test_extract_scan_decision_equals_the_reference",
     "perception.scan_extractor._merge_lines": f"{DRIVERS}::test_extract_scan_decision_equals_the_reference",
-    "perception.scan_extractor._segment_lines": f"{DRIVERS}::test_extract_scan_decision_equals_the_reference",
     "perception.scan_extractor._circle_case": f"{DRIVERS}::test_extract_scan_decision_equals_the_reference",
     "perception.scan_extractor._circle_wins": f"{DRIVERS}::test_extract_scan_decision_equals_the_reference",
     "perception.scan_extractor._circle_row": f"{DRIVERS}::test_extract_scan_decision_equals_the_reference",

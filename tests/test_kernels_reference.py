@@ -923,7 +923,7 @@ def test_vote_and_clear():
         cells = rng.integers(0, nt, n)
         peak = (0, 0, 0)
         for i in range(n):
-            peak = HL._vote(x, y, i, (acc, lo, touched, box), cos_t, sin_t, 1.0 / rho_res, width, cells[i], k, peak)
+            peak = HL._vote(x[i], y[i], acc, lo, touched, box, cos_t, sin_t, (1.0 / rho_res, width, cells[i], k), peak)
         windows = None if 2 * k + 1 >= nt else [[(c + j) % nt for j in range(-k, k + 1)] for c in cells.tolist()]
         want, want_peak = rp.htl_accumulator(x.tolist(), y.tolist(), nt, rho_res, windows)
         got = {(int(j) // width, int(j) % width): int(acc[j]) for j in np.flatnonzero(acc)}

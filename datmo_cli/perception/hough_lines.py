@@ -73,15 +73,16 @@ def normal_cells(x, y, s, e, nt, cell) -> None:
         cell[i] = min(int(phi * nt / np.pi), nt - 1)
 
 
-@njit(cache=True, inline="always")  # per point: no call, no tuple packed and unpacked
-def _vote(x, y, i, hough, cos_t, sin_t, inv_res, width, c, k, peak):
-    """Point i votes along its sinusoid: theta cells c - k .. c + k (wrapping; all of them when 2k + 1 >= nt)
-    around its local normal's cell c, and marks those theta rows in `touched`. Returns the peak (votes, theta
-    cell, rho cell) updated from `peak`. hough = (acc, lo, touched, box): acc the accumulator as one flat
-    array, theta row t at [t * width, (t + 1) * width) (rows `width` apart keep a segment's votes in a few cache
-    lines); lo[t] is computed from the segment's bounding box (xmin, xmax, ymin, ymax) when row t is first
-    voted in."""
-    acc, lo, touched, box = hough
+@njit(cache=True)
+def _vote(xi, yi, acc, lo, touched, box, cos_t, sin_t, cells, peak):
+    """Point (xi, yi) votes along its sinusoid: theta cells c - k .. c + k (wrapping; all of them when 2k + 1 >= nt)
+    around its local normal's cell c, and marks those theta rows in `touched`; cells = (inv_res, width, c, k).
+    Returns the peak (votes, theta cell, rho cell) updated from `peak`. acc: the accumulator as one flat array,
+    theta row t at [t * width, (t + 1) * width) (rows `width` apart keep a segment's votes in a few cache lines);
+    lo[t] is computed from the segment's bounding box (xmin, xmax, ymin, ymax) when row t is first voted in.
+    Arrays are passed one by one, not in a tuple: this runs per point, and a tuple of arrays costs reference
+    counting each time."""
+    inv_res, width, c, k = cells
     bv, bt, br = peak
     nt = cos_t.shape[0]
     if 2 * k + 1 >= nt:
@@ -90,8 +91,6 @@ def _vote(x, y, i, hough, cos_t, sin_t, inv_res, width, c, k, peak):
     else:
         t_from = c - k
         t_to = c + k + 1
-    xi = x[i]
-    yi = y[i]
     for tt in range(t_from, t_to):
         t = tt
         if t < 0:
@@ -198,7 +197,6 @@ def line_subsegments(x, y, s, e, hough, cos_t, sin_t, rho_res, k, cell, runs, hi
     box = np.empty(4)
     width = _bounding_box(x, y, s, e, rho_res, acc.shape[1], box)
     acc = acc.reshape(-1)
-    flat = (acc, lo, touched, box)
     inv = 1.0 / rho_res
     bv = 0
     bt = 0
@@ -208,7 +206,7 @@ def line_subsegments(x, y, s, e, hough, cos_t, sin_t, rho_res, k, cell, runs, hi
     start = s
     off = 0
     for i in range(s, e):
-        bv, bt, br = _vote(x, y, i, flat, cos_t, sin_t, inv, width, cell[i], k, (bv, bt, br))
+        bv, bt, br = _vote(x[i], y[i], acc, lo, touched, box, cos_t, sin_t, (inv, width, cell[i], k), (bv, bt, br))
         hist[i - s, 0] = bv
         hist[i - s, 1] = bt
         hist[i - s, 2] = br
@@ -238,7 +236,9 @@ def line_subsegments(x, y, s, e, hough, cos_t, sin_t, rho_res, k, cell, runs, hi
                 bt = 0
                 br = 0
                 for j in range(cut, i + 1):
-                    bv, bt, br = _vote(x, y, j, flat, cos_t, sin_t, inv, width, cell[j], k, (bv, bt, br))
+                    bv, bt, br = _vote(
+                        x[j], y[j], acc, lo, touched, box, cos_t, sin_t, (inv, width, cell[j], k), (bv, bt, br)
+                    )
                     hist[j - s, 0] = bv
                     hist[j - s, 1] = bt
                     hist[j - s, 2] = br

@@ -159,52 +159,6 @@ def _merge_lines(x, y, nkept, rho_res, work) -> int:
 
 
 @njit(cache=True, inline="always")
-def _segment_lines(x, y, s, e, p, trig, work):
-    """HTL on the points [s, e) of one segment (trig = (cos_t, sin_t) of the theta cells; work: scan_work's):
-    its line candidates go to work's cand (rows LC_*), the indices of those with more than three points to cidx
-    and of those kept as lines (enough points, r_acc and length) to kept, consecutive kept lines that are one
-    line merged. Returns (kept lines, candidates, r_acc of the segment's candidates together)."""
-    lo, toff, cell, touched, peaks, cand, kept, cidx, _, hist, box, zeroed, acc, _, idx, sub_s, sub_e = work
-    cos_t, sin_t = trig
-    rho_res = p[P_RHO_RES]
-    min_pts = p[P_LINE_MIN_POINTS]
-    min_racc = p[P_LINE_MIN_RACC]
-    min_len = p[P_LINE_MIN_LENGTH]
-    nt = cos_t.shape[0]
-    kwin = int(p[P_WINDOW] / (np.pi / nt))
-    tstep = np.pi / nt
-    if e - s >= min_pts:
-        normal_cells(x, y, s, e, nt, cell)
-        # line_subsegments uses the first nt * width cells of acc (flat): zero what was never used before
-        used = nt * _bounding_box(x, y, s, e, rho_res, acc.shape[1], box)
-        if used > zeroed[0]:
-            acc.reshape(-1)[zeroed[0] : used] = 0
-            zeroed[0] = used
-        runs = (sub_s, sub_e, peaks)
-        nsub = line_subsegments(x, y, s, e, (acc, toff, touched), cos_t, sin_t, rho_res, kwin, cell, runs, hist)
-    else:
-        nsub = 0  # too few points for a line of more than three: no HTL
-    nkept = 0
-    ncand = 0
-    votes = 0.0
-    for k in range(nsub):
-        t = peaks[k, 1]
-        rho_p = toff[t] + (peaks[k, 2] + 0.5) * rho_res
-        line_of_run(x, y, sub_s[k], sub_e[k], t * tstep, rho_p, peaks[k, 0], rho_res, idx, lo)
-        cand[k, :] = lo
-        if lo[LC_N] >= min_pts:  # an HTL line (more than 3 points) for the decision rule
-            cidx[ncand] = k
-            ncand += 1
-            votes += lo[LC_RACC] * (sub_e[k] - sub_s[k])  # the refined line's r_acc, in points
-        if lo[LC_N] >= min_pts and lo[LC_RACC] > min_racc and lo[LC_LEN] > min_len:
-            kept[nkept] = k
-            nkept += 1
-    if nkept > 1:
-        nkept = _merge_lines(x, y, nkept, rho_res, work)
-    return nkept, ncand, votes / (e - s)
-
-
-@njit(cache=True, inline="always")
 def _circle_case(x, y, s, e, p, ncand, cand, cidx):
     """Section 5.2: whether the segment [s, e) with ncand HTL lines (rows cidx[:ncand] of cand) is tested as a
     circle, and whether that test goes beyond the paper's rule (leg_only: if the circle fails, the lines stay).
@@ -340,11 +294,49 @@ def extract_scan(x, y, segs, scan, p, trig, work, rows, counts, dalpha=0.0):
     starts, ends, nseg = segs
     lines, circles, blobs = rows
     nl, nc, nb = counts
-    _, _, _, _, _, cand, kept, cidx, cout, _, _, _, _, _, _, _, _ = work
+    lo, toff, cell, touched, peaks, cand, kept, cidx, cout, hist, box, zeroed, acc, _, idx, sub_s, sub_e = work
+    cos_t, sin_t = trig
+    rho_res = p[P_RHO_RES]
+    min_pts = p[P_LINE_MIN_POINTS]
+    min_racc = p[P_LINE_MIN_RACC]
+    min_len = p[P_LINE_MIN_LENGTH]
+    nt = cos_t.shape[0]
+    kwin = int(p[P_WINDOW] / (np.pi / nt))
+    tstep = np.pi / nt
     for g in range(nseg):
         s = starts[g]
         e = ends[g]
-        nkept, ncand, htl_racc = _segment_lines(x, y, s, e, p, trig, work)
+        # HTL on the segment: its line candidates to cand (rows LC_*), those of more than three points to cidx,
+        # those kept as lines (enough points, r_acc and length) to kept, consecutive kept lines that are one merged
+        if e - s >= min_pts:
+            normal_cells(x, y, s, e, nt, cell)
+            # line_subsegments uses the first nt * width cells of acc (flat): zero what was never used before
+            used = nt * _bounding_box(x, y, s, e, rho_res, acc.shape[1], box)
+            if used > zeroed[0]:
+                acc.reshape(-1)[zeroed[0] : used] = 0
+                zeroed[0] = used
+            runs = (sub_s, sub_e, peaks)
+            nsub = line_subsegments(x, y, s, e, (acc, toff, touched), cos_t, sin_t, rho_res, kwin, cell, runs, hist)
+        else:
+            nsub = 0  # too few points for a line of more than three: no HTL
+        nkept = 0
+        ncand = 0
+        votes = 0.0
+        for k in range(nsub):
+            t = peaks[k, 1]
+            rho_p = toff[t] + (peaks[k, 2] + 0.5) * rho_res
+            line_of_run(x, y, sub_s[k], sub_e[k], t * tstep, rho_p, peaks[k, 0], rho_res, idx, lo)
+            cand[k, :] = lo
+            if lo[LC_N] >= min_pts:  # an HTL line (more than 3 points) for the decision rule
+                cidx[ncand] = k
+                ncand += 1
+                votes += lo[LC_RACC] * (sub_e[k] - sub_s[k])  # the refined line's r_acc, in points
+            if lo[LC_N] >= min_pts and lo[LC_RACC] > min_racc and lo[LC_LEN] > min_len:
+                kept[nkept] = k
+                nkept += 1
+        if nkept > 1:
+            nkept = _merge_lines(x, y, nkept, rho_res, work)
+        htl_racc = votes / (e - s)
         try_circle, leg_only = _circle_case(x, y, s, e, p, ncand, cand, cidx)
         if try_circle:
             if _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha):
