@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import perception_scoring as acc
 from benchmarks.common import print_lines
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry, ScanRun
 from datmo_cli.log.vocabulary import LANDMARK_NAMES
-from datmo_cli.perception import accuracy as acc
 from datmo_cli.perception.features import RunFeatures, extract_run
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.report import decode_channel

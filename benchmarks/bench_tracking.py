@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import tracking_scoring as acc
 from benchmarks.common import Row, best_of, print_lines, print_table
 from datmo_cli.log import mcapio, types
 from datmo_cli.report import decode_channel
 from datmo_cli.stages import TrackedRun, run_features, track_run
-from datmo_cli.tracking import accuracy as acc
 from datmo_cli.tracking.params import TrackingParams
 
 HALL = Path(__file__).resolve().parent.parent / "sample_logs" / "hall.mcap"

@@ -1,7 +1,7 @@
 """Feature and landmark accuracy on the simulated sample logs against their ground truth. The bounds are looser
 than the published targets (walls 1° and 2 cm, legs within 4 m 3 cm centre and 2 cm radius, columns 3 cm),
 which `make accuracy` (benchmarks/accuracy_perception.py) prints beside the measured figures. Wall
-corners are scored where the method can see them (perception/accuracy.py corner_observed)."""
+corners are scored where the method can see them (benchmarks/perception_scoring.py corner_observed)."""
 
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from conftest import SAMPLE_LOGS
 
+from benchmarks import perception_scoring as acc
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanRun
-from datmo_cli.perception import accuracy as acc
 from datmo_cli.perception.features import RunFeatures, extract_run
 from datmo_cli.report import decode_channel
 

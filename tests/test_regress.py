@@ -2,19 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.unit
+from benchmarks import regress
 
-_spec = importlib.util.spec_from_file_location(
-    "regress", Path(__file__).resolve().parent.parent / "benchmarks" / "regress.py"
-)
-regress = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(regress)
+pytestmark = pytest.mark.unit
 
 BASE = {
     "hall": {

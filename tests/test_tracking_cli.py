@@ -9,12 +9,12 @@ import pytest
 from click.testing import CliRunner
 from test_tracking_people import legs_as_circles, walker_legs
 
+from benchmarks.synthetic_features import features_from_lists
 from datmo_cli.cli import cli
 from datmo_cli.config import DatmoConfig
 from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
 from datmo_cli.perception.params import FeatureParams
-from datmo_cli.tracking.synthetic import features_from_lists
 
 pytestmark = pytest.mark.cli
 

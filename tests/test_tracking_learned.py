@@ -13,6 +13,7 @@ import pytest
 from click.testing import CliRunner
 from test_tracking_people import walker_legs
 
+from benchmarks.synthetic_features import BLOB_DTYPE, CIRCLE_DTYPE, LEG_DTYPE, LINE_DTYPE, features_from_lists
 from datmo_cli.cli import cli
 from datmo_cli.log import cdr, mcapio, types
 from datmo_cli.log.scan import ScanGeometry, ScanRun
@@ -26,7 +27,6 @@ from datmo_cli.log.vocabulary import (
 from datmo_cli.tracking import _kernels, state
 from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, ScanFeatures
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.synthetic import BLOB_DTYPE, CIRCLE_DTYPE, LEG_DTYPE, LINE_DTYPE, features_from_lists
 from datmo_cli.tracking.tracker import Tracker
 from tests.reference_tracking import param_vector
 from tests.reference_tracking import reference_measurements as measurements

@@ -4,23 +4,16 @@ mostly covered. The learned detector's figures on the same bags are in test_peop
 
 from __future__ import annotations
 
-import importlib.util
-
 import pytest
-from conftest import ROOT, shared_path
+from conftest import shared_path
 
 pytestmark = [pytest.mark.unit, pytest.mark.slow, pytest.mark.shared]
 
 
 def _accuracy_module():
-    import sys
+    from benchmarks import accuracy_tracking
 
-    if str(ROOT) not in sys.path:  # accuracy_tracking imports benchmarks.common
-        sys.path.insert(0, str(ROOT))
-    spec = importlib.util.spec_from_file_location("accuracy_tracking", ROOT / "benchmarks" / "accuracy_tracking.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return accuracy_tracking
 
 
 def test_demo_bag_people_and_no_walls():

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from benchmarks.synthetic_features import features_from_lists
 from datmo_cli.log.vocabulary import CLASS_PERSON, MOBILITY_DYNAMIC
 from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
 from tests.reference_tracking import leg_lead, pair_legs, param_vector
 from tests.reference_tracking import reference_measurements as measurements

@@ -14,6 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from benchmarks.synthetic_features import features_from_lists
 from datmo_cli.log import mcapio, types
 from datmo_cli.log.scan import ScanGeometry
 from datmo_cli.stages import iter_run_features, leg_threshold_of, track_run
@@ -30,7 +31,6 @@ from datmo_cli.tracking import (
 from datmo_cli.tracking.markers import track_markers
 from datmo_cli.tracking.measurements import Measurements
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import _COMPAT, _COMPAT_LEARNED, _REACQUIRE, _REACQUIRE_LEARNED, TRACK_DTYPE, Tracker
 from tests.conftest import SAMPLE_LOGS
 from tests.reference_tracking import (
@@ -369,8 +369,8 @@ def test_whole_runs_equal_the_reference(name: str):
 
 def test_ideal_features_on_the_hall_equal_the_reference():
     """The benchmark's ideal features (ground truth's objects), the paper's rule, no ranges given."""
+    from benchmarks import tracking_scoring as acc
     from datmo_cli.report import decode_channel
-    from datmo_cli.tracking import accuracy as acc
 
     log = mcapio.read_log(SAMPLE_LOGS / "hall.mcap", topics=None)
     run = mcapio.run_from_log(log)
@@ -399,7 +399,7 @@ def weak_legs(feats: list, rng: np.random.Generator) -> None:
     """Give the legs of `feats` leg probabilities from the whole range, in place: about half strong (at least
     THR), a quarter weak but at least person_maintain, a quarter below it; and each leg the blob of its own beams
     (as a real leg's cluster is also a segment), which is what a weak candidate is measured as."""
-    from datmo_cli.tracking.synthetic import BLOB_DTYPE
+    from benchmarks.synthetic_features import BLOB_DTYPE
 
     for f in feats:
         g = f.legs

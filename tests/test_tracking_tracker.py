@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from benchmarks.synthetic_features import features_from_lists
 from datmo_cli.log.scan import ScanGeometry
 from datmo_cli.log.vocabulary import STATUS_COASTING, STATUS_CONFIRMED, STATUS_TENTATIVE
 from datmo_cli.tracking.params import TrackingParams
-from datmo_cli.tracking.synthetic import features_from_lists
 from datmo_cli.tracking.tracker import Tracker
 from tests.reference_tracking import background_update, param_vector
 from tests.reference_tracking import reference_measurements as measurements

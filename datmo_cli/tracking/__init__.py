@@ -4,8 +4,6 @@ measurements  the measurement kinds, and the containers of a scan's features and
 tracker       Tracker: the state between compiled steps, one call per scan (`step`) or per block of scans
               (`track_block`)
 markers       visualization_msgs/MarkerArray CDR for Foxglove
-synthetic     ScanFeatures from plain lists (tests, accuracy)
-accuracy      figures against ground truth that datmo_cli.evaluate does not give
 params        TrackingParams (defaults, TOML)
 _step         the compiled tracking step: every phase of a scan, and blocks of scans, in one numba call
 _scan_measurements  features to measurements (the paper's rule, or with the leg detector's legs); frames

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..log.vocabulary import (
+from datmo_cli.log.vocabulary import (
     CLASS_BENCH,
     CLASS_COLUMN,
     CLASS_PERSON,
@@ -23,7 +23,7 @@ from ..log.vocabulary import (
     LANDMARK_CORNER,
     LANDMARK_LINE_END,
 )
-from .features import RunFeatures
+from datmo_cli.perception.features import RunFeatures
 
 LEG_RADIUS = 0.10
 

@@ -1,12 +1,12 @@
 """ScanFeatures from plain lists of circles, lines, blobs and legs: the scenes of the tracking tests and the
-ideal features of tracking.accuracy, without segmentation or feature extraction. Sensor frame, metres."""
+ideal features of benchmarks/tracking_scoring.py, without segmentation or feature extraction. Sensor frame, metres."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..log import cdr, types
-from .measurements import ScanFeatures
+from datmo_cli.log import cdr, types
+from datmo_cli.tracking.measurements import ScanFeatures
 
 LINE_DTYPE = cdr.element_dtype(types.LINE)
 CIRCLE_DTYPE = cdr.element_dtype(types.CIRCLE)

@@ -10,9 +10,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..log.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_COLUMN, CLASS_PERSON, CLASS_RECTANGULAR_OBJECT, STATUS_CONFIRMED
-from .measurements import ScanFeatures
-from .synthetic import features_from_lists
+from benchmarks.synthetic_features import features_from_lists
+from datmo_cli.log.vocabulary import (
+    CLASS_CIRCLE_OBJECT,
+    CLASS_COLUMN,
+    CLASS_PERSON,
+    CLASS_RECTANGULAR_OBJECT,
+    STATUS_CONFIRMED,
+)
+from datmo_cli.tracking.measurements import ScanFeatures
 
 
 def ideal_features(
