@@ -9,7 +9,7 @@ DEMO_LOG := sample_logs/hall.mcap
 WORKERS ?= auto
 XDIST := -n $(WORKERS) --dist loadfile
 
-.PHONY: help install demo check test test-unit test-fast test-nojit lint typecheck bench accuracy sample-logs regress regress-update run-digests clean legs-model
+.PHONY: help install demo check test test-suite test-unit test-fast test-nojit lint typecheck bench accuracy sample-logs regress regress-update run-digests clean legs-model
 
 $(STAMP): pyproject.toml datmo_cli/__init__.py
 	$(PYTHON) -m venv $(VENV)
@@ -27,9 +27,11 @@ install: $(STAMP) ## create .venv and install datmo (editable) with the dev extr
 demo: install ## process the hall sample log: segment, features, track; print the report and draw out/hall.png
 	$(BIN)/datmo run $(DEMO_LOG) -o out --force --plot
 
-check: lint typecheck test test-nojit ## what CI runs (.ci/run): lint, typecheck, test, test-nojit
+test: lint typecheck test-suite test-nojit ## what CI runs (.ci/run): lint, typecheck, the whole suite, test-nojit
 
-test: install ## the whole test suite, in parallel (pytest-xdist, WORKERS=auto)
+check: test ## another name for make test
+
+test-suite: install ## the whole test suite alone, in parallel (pytest-xdist, WORKERS=auto)
 	$(BIN)/pytest -q $(XDIST)
 
 test-unit: install ## the fast inner loop: the tests marked unit and not slow, in parallel (under a minute)
