@@ -208,91 +208,26 @@ def test_background_grid_marks_long_hit_places_and_forgets_places_seen_through()
     active = np.zeros(1000, np.int64)
     angles = np.radians([-1.0, 0.0, 1.0])
     wall = np.array([3.0, 3.0, 3.0], np.float32)
+
+    def update(count: int, scan: int, ranges: np.ndarray) -> int:
+        return background_update(
+            score, mark, active, count, scan, ranges, np.cos(angles), np.sin(angles), angles[0],
+            angles[1] - angles[0], 0.0, 8.0, 0.0, 0.0, 1.0, 0.0, 0.2, -5.0, -5.0, cell, n, 0.3, 6.0,
+            NO_PEOPLE, NO_PEOPLE, 0.4,
+        )  # fmt: skip
+
+    def on_background_at_3m() -> bool:
+        params = param_vector(background_cell=cell, background_time=3.0)
+        xs, zero = np.array([3.0]), np.array([0.0])
+        return bool(_kernels.on_background(score, xs, zero, zero, 0.0, 0.0, -5.0, -5.0, n, params)[0])
+
     count = 0
     for scan in range(1, 21):  # 4 s at 5 Hz
-        count = background_update(
-            score,
-            mark,
-            active,
-            count,
-            scan,
-            wall,
-            np.cos(angles),
-            np.sin(angles),
-            angles[0],
-            angles[1] - angles[0],
-            0.0,
-            8.0,
-            0.0,
-            0.0,
-            1.0,
-            0.0,
-            0.2,
-            -5.0,
-            -5.0,
-            cell,
-            n,
-            0.3,
-            6.0,
-            NO_PEOPLE,
-            NO_PEOPLE,
-            0.4,
-        )
-    on = _kernels.on_background(
-        score,
-        np.array([3.0]),
-        np.array([0.0]),
-        np.array([0.0]),
-        0.0,
-        0.0,
-        -5.0,
-        -5.0,
-        n,
-        param_vector(background_cell=cell, background_time=3.0),
-    )
-    assert on[0]
+        count = update(count, scan, wall)
+    assert on_background_at_3m()
     gone = np.array([6.0, 6.0, 6.0], np.float32)  # the object left: the beams now reach 6 m
-    count = background_update(
-        score,
-        mark,
-        active,
-        count,
-        21,
-        gone,
-        np.cos(angles),
-        np.sin(angles),
-        angles[0],
-        angles[1] - angles[0],
-        0.0,
-        8.0,
-        0.0,
-        0.0,
-        1.0,
-        0.0,
-        0.2,
-        -5.0,
-        -5.0,
-        cell,
-        n,
-        0.3,
-        6.0,
-        NO_PEOPLE,
-        NO_PEOPLE,
-        0.4,
-    )
-    on = _kernels.on_background(
-        score,
-        np.array([3.0]),
-        np.array([0.0]),
-        np.array([0.0]),
-        0.0,
-        0.0,
-        -5.0,
-        -5.0,
-        n,
-        param_vector(background_cell=cell, background_time=3.0),
-    )
-    assert not on[0]
+    update(count, 21, gone)
+    assert not on_background_at_3m()
 
 
 def test_a_duplicate_yields_to_the_person_whatever_its_hits():

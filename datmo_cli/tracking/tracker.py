@@ -86,46 +86,14 @@ def _flat(features: list[ScanFeatures]) -> tuple[tuple, tuple, tuple, tuple]:
             chunks.append(a.tobytes())
         return offsets, np.frombuffer(b"".join(chunks), dtype)
 
-    co, c = join("circles", _CIRCLE_DTYPE)
-    bo, b = join("blobs", _BLOB_DTYPE)
-    lo, li = join("lines", _LINE_DTYPE)
-    go, g = join("legs", _LEG_DTYPE)
-    circles = (
-        co,
-        c["first"].astype(i8),
-        c["last"].astype(i8),
-        c["x"].astype(f8),
-        c["y"].astype(f8),
-        c["radius"].astype(f8),
-    )
-    blobs = (
-        bo,
-        b["first"].astype(i8),
-        b["last"].astype(i8),
-        b["x"].astype(f8),
-        b["y"].astype(f8),
-        b["size"].astype(f8),
-        b["kind"].astype(i8),
-    )
-    lines = (
-        lo,
-        li["segment"].astype(i8),
-        li["first"].astype(i8),
-        li["last"].astype(i8),
-        li["x_ini"].astype(f8),
-        li["y_ini"].astype(f8),
-        li["x_end"].astype(f8),
-        li["y_end"].astype(f8),
-    )
-    legs = (
-        go,
-        g["first"].astype(i8),
-        g["last"].astype(i8),
-        g["x"].astype(f8),
-        g["y"].astype(f8),
-        g["width"].astype(f8),
-        g["probability"].astype(f8),
-    )
+    def fields(name: str, dtype: np.dtype, names: str) -> tuple:
+        offsets, a = join(name, dtype)
+        return (offsets, *(a[n].astype(i8 if n in ("first", "last", "segment", "kind") else f8) for n in names.split()))
+
+    circles = fields("circles", _CIRCLE_DTYPE, "first last x y radius")
+    blobs = fields("blobs", _BLOB_DTYPE, "first last x y size kind")
+    lines = fields("lines", _LINE_DTYPE, "segment first last x_ini y_ini x_end y_end")
+    legs = fields("legs", _LEG_DTYPE, "first last x y width probability")
     return circles, blobs, lines, legs
 
 
