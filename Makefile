@@ -16,6 +16,9 @@ $(STAMP): pyproject.toml datmo_cli/__init__.py
 	@# the distribution was called datmo before it became datmo-cli: an older venv drops the old name
 	$(BIN)/pip uninstall --quiet --disable-pip-version-check -y datmo 2>/dev/null || true
 	$(BIN)/pip install --quiet --disable-pip-version-check -e '.[dev]'
+	@# byte-compile datmo's own modules now: an editable install leaves that to each import, and where
+	@# PYTHONDONTWRITEBYTECODE is set (as in many containers) every process would compile them again
+	$(BIN)/python -m compileall -q datmo_cli
 	touch $(STAMP)
 
 help: ## list the targets, each with what it does
