@@ -208,9 +208,9 @@ def feed_report(report, run, features, landmark_payloads: list[bytes], tracked) 
     if landmark_payloads:
         frame = cdr.decode(types.LANDMARKS, landmark_payloads[0])["frame_id"] if report.landmark_frame is None else ""
         report.add_landmarks(frame, cdr.decode(types.LANDMARKS, landmark_payloads[-1])["landmarks"])
-    counts = [len(t) for t in tracked.tracks]
-    if sum(counts):
-        report.add_tracks(np.repeat(np.asarray(tracked.stamps, np.int64), counts), np.concatenate(tracked.tracks))
+    offsets, items = tracked.all_tracks()
+    if len(items):
+        report.add_tracks(np.repeat(np.asarray(tracked.stamps, np.int64), np.diff(offsets)), items)
 
 
 def derive(

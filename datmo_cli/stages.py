@@ -79,6 +79,9 @@ class TrackedRun:
     world: bool  # tracks carry world positions (the log had odometry)
     tracks: list[np.ndarray] = field(default_factory=list)
     markers: list[bytes] = field(default_factory=list)
+    # the same tracks as the tracker gave them, every scan's of a compiled call in one array: `tracks` holds
+    # views into these, and concatenating a few of them is far cheaper than one structured array per scan
+    flat: list[np.ndarray] = field(default_factory=list)
 
     def track_payloads(self) -> list[bytes]:
         """datmo_msgs/msg/Tracks CDR payloads, one per scan."""
@@ -91,7 +94,8 @@ class TrackedRun:
         """(offsets (N+1,), every scan's tracks concatenated), as evaluate.track_frames takes them."""
         counts = [len(t) for t in self.tracks]
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        items = np.concatenate(self.tracks) if self.tracks else np.zeros(0, TRACK_DTYPE)
+        parts = self.flat if sum(map(len, self.flat)) == offsets[-1] else self.tracks
+        items = np.concatenate(parts) if parts else np.zeros(0, TRACK_DTYPE)
         return offsets, items
 
 
@@ -155,6 +159,7 @@ class TrackStream:
             if not self.covariance:
                 block.items["covariance"] = np.nan
             o = block.offsets.tolist()
+            out.flat.append(block.items[o[0] : o[-1]])
             for i in range(b - a):
                 tracks = block.items[o[i] : o[i + 1]]
                 out.tracks.append(tracks)
