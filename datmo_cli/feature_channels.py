@@ -68,44 +68,31 @@ class FeatureStream:
 
 def segment_payloads(run: ScanRun, seg_start: np.ndarray, seg_end: np.ndarray, offsets: np.ndarray) -> list[bytes]:
     """datmo_msgs/msg/Segments CDR payloads, one per scan."""
-    frame = run.geometry.frame_id
-    return [
-        cdr.encode(types.SEGMENTS, {"stamp_ns": s, "frame_id": frame, "start": seg_start[a:b], "end": seg_end[a:b]})
-        for s, a, b in zip(run.stamps.tolist(), offsets[:-1].tolist(), offsets[1:].tolist(), strict=True)
-    ]
+    return cdr.encode_block(
+        types.SEGMENTS, run.stamps, run.geometry.frame_id, {"start": (seg_start, offsets), "end": (seg_end, offsets)}
+    )
 
 
 def feature_payloads(f: RunFeatures) -> list[bytes]:
     """datmo_msgs/msg/Features CDR payloads, one per scan."""
-    lo, co, bo = f.line_offsets.tolist(), f.circle_offsets.tolist(), f.blob_offsets.tolist()
-    go = f.leg_offsets.tolist()
-    return [
-        cdr.encode(
-            types.FEATURES,
-            {
-                "stamp_ns": s,
-                "frame_id": f.frame_id,
-                "lines": f.lines[lo[k] : lo[k + 1]],
-                "circles": f.circles[co[k] : co[k + 1]],
-                "blobs": f.blobs[bo[k] : bo[k + 1]],
-                "legs": f.legs[go[k] : go[k + 1]],
-            },
-        )
-        for k, s in enumerate(f.stamps.tolist())
-    ]
+    return cdr.encode_block(
+        types.FEATURES,
+        f.stamps,
+        f.frame_id,
+        {
+            "lines": (f.lines, f.line_offsets),
+            "circles": (f.circles, f.circle_offsets),
+            "blobs": (f.blobs, f.blob_offsets),
+            "legs": (f.legs, f.leg_offsets),
+        },
+    )
 
 
 def landmark_payloads(f: RunFeatures) -> list[bytes]:
     """datmo_msgs/msg/Landmarks CDR payloads: the database after each scan."""
     db = f.landmarks
     elems = db.all_snapshots(f.stamps)
-    off = db.snap_offsets.tolist()
-    return [
-        cdr.encode(
-            types.LANDMARKS, {"stamp_ns": s, "frame_id": f.landmark_frame, "landmarks": elems[off[k] : off[k + 1]]}
-        )
-        for k, s in enumerate(np.asarray(f.stamps, np.int64).tolist())
-    ]
+    return cdr.encode_block(types.LANDMARKS, f.stamps, f.landmark_frame, {"landmarks": (elems, db.snap_offsets)})
 
 
 def decode_segments(payloads: list[bytes], first: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -85,10 +85,8 @@ class TrackedRun:
 
     def track_payloads(self) -> list[bytes]:
         """datmo_msgs/msg/Tracks CDR payloads, one per scan."""
-        return [
-            cdr.encode(types.TRACKS, {"stamp_ns": int(s), "frame_id": self.frame_id, "tracks": t})
-            for s, t in zip(self.stamps.tolist(), self.tracks, strict=True)
-        ]
+        offsets, items = self.all_tracks()
+        return cdr.encode_block(types.TRACKS, self.stamps, self.frame_id, {"tracks": (items, offsets)})
 
     def all_tracks(self) -> tuple[np.ndarray, np.ndarray]:
         """(offsets (N+1,), every scan's tracks concatenated), as evaluate.track_frames takes them."""

@@ -152,6 +152,49 @@ def test_datmo_msgs_round_trip_and_match_rosbags(msgtype, n):
             assert back[key] == pytest.approx(value)
 
 
+@settings(max_examples=40, deadline=None)
+@given(
+    msgtype=st.sampled_from([types.SEGMENTS, types.FEATURES, types.LANDMARKS, types.TRACKS]),
+    counts=st.lists(st.integers(0, 6), min_size=0, max_size=12),
+    frame_len=st.integers(0, 9),
+    first=st.integers(0, 3),
+    seed=st.integers(0, 2**31),
+)
+def test_encode_block_gives_encode_s_bytes(msgtype, counts, frame_len, first, seed):
+    """One message per stamp from flat arrays and offsets (which need not start at 0): each message's bytes
+    are encode's of its slices, whatever the lengths of the frame and of each sequence do to the padding."""
+    rng = np.random.default_rng(seed)
+    n = len(counts)
+    stamps = rng.integers(-(2**31), 2**31 - 1, n) * 10**9 + rng.integers(0, 10**9, n)
+    frame = "laser_frame"[:frame_len]
+    sequences = {}
+    for f in cdr._plan(msgtype)[1:]:
+        own = np.roll(counts, int(rng.integers(0, 3))) if n else counts  # each field its own lengths
+        offsets = first + np.concatenate([[0], np.cumsum(own)]).astype(np.int64)
+        total = int(offsets[-1]) + int(rng.integers(0, 3))  # values past the last message are not written
+        raw = rng.integers(0, 256, total * f.dtype.itemsize, dtype=np.uint8).tobytes()
+        sequences[f.name] = (np.frombuffer(raw, f.dtype), offsets)
+    expected = [
+        cdr.encode(
+            msgtype,
+            {"stamp_ns": int(stamps[k]), "frame_id": frame}
+            | {name: values[offsets[k] : offsets[k + 1]] for name, (values, offsets) in sequences.items()},
+        )
+        for k in range(n)
+    ]
+    assert cdr.encode_block(msgtype, stamps, frame, sequences) == expected
+
+
+def test_encode_block_refuses_what_it_cannot_encode():
+    with pytest.raises(TypeError, match="header followed by sequences"):
+        cdr.encode_block(types.GROUND_TRUTH, [0], "laser", {})
+    offsets = np.zeros(3, np.int64)
+    with pytest.raises(ValueError, match="3 offsets for 1 messages"):
+        cdr.encode_block(types.TRACKS, [0], "laser", {"tracks": (np.zeros(0, cdr.element_dtype(types.TRACK)), offsets)})
+    with pytest.raises(OverflowError):
+        cdr.encode_block(types.TRACKS, [2**31 * 10**9], "laser", {})
+
+
 def test_fields_method_md_needs_are_defined():
     line = cdr.element_dtype(types.LINE).names
     for name in ("x_ini", "y_ini", "x_end", "y_end", "rho", "theta", "length", "r_acc"):
