@@ -104,7 +104,7 @@ def ensemble(features, max_width, min_points, nodes, split, roots, kind, base, s
             out[rows[i]] = 1.0 / (1.0 + np.exp(-(base + scale * acc[i])))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def block_probabilities(ranges, beams, segs, rules, model, features, out) -> None:
     """block_features (candidates only) then ensemble, in one compiled call: the per-scan hot path. beams, segs and
     rules as block_features takes them; model = (nodes, split, roots, kind, base, scale) as ensemble takes them."""
@@ -115,7 +115,7 @@ def block_probabilities(ranges, beams, segs, rules, model, features, out) -> Non
     ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, out)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def block_probabilities_parallel(ranges, parts, beams, segs, rules, model, features, out) -> None:
     """block_probabilities on numba's threads: the block's scans split into `parts` ranges of consecutive scans,
     each range's segments (rows seg_offsets[k0]:seg_offsets[k1] of features and out) done at once. Every row's

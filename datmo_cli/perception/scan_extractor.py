@@ -355,7 +355,7 @@ def extract_scan(x, y, segs, scan, p, trig, work, rows, counts, dalpha=0.0):
     return nl, nc, nb
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def extract_scans(ranges, k0, k1, setup, out, given):
     """Segment and extract features of scans k0 .. k1 - 1 of a block (ranges (N, B), m).
 
@@ -411,7 +411,7 @@ def extract_scans(ranges, k0, k1, setup, out, given):
         counts[k, 3] = nb - base
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def extract_parallel(ranges, parts, setup, out, given):
     """extract_scans over all N scans of the block (setup, out, given as there), split into `parts` ranges of
     consecutive scans run on numba's threads (numba.set_num_threads); the same rows as one
@@ -421,7 +421,7 @@ def extract_parallel(ranges, parts, setup, out, given):
         extract_scans(ranges, j * N // parts, (j + 1) * N // parts, setup, out, given)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def gather_rows(rows, counts, j, B, out) -> None:
     """out (sum of counts[:, j], columns): the first counts[k, j] rows of each scan k's stretch of B rows of
     `rows` (see extract_scans), in scan order."""

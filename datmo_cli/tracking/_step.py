@@ -122,7 +122,7 @@ def step_measurements(tab, ctx, prm, stamp, meas, has_prob, sensor, beam_dirs, b
     return tab, out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def track_block(tab, ctx, prm, scans, features, geo, beam_dirs, bg, carry, rules, output):
     """Track scans 0..len(stamps)-1 of a block of features (flat per kind, with per-scan offsets) in one call.
 
