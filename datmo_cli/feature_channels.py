@@ -28,10 +28,13 @@ class FeatureStream:
     segments channel is then not among the channels returned); with `markers` False the Foxglove markers are
     neither drawn nor among them."""
 
-    def __init__(self, params: FeatureParams | None = None, odometry: Odometry | None = None) -> None:
+    def __init__(
+        self, params: FeatureParams | None = None, odometry: Odometry | None = None, threads: int | None = None
+    ) -> None:
         self.params = params or FeatureParams()
         self.odometry = odometry
         self.landmarks = LandmarkStream(self.params)
+        self.threads = threads  # the perception kernels' threads (extract_run's; None: the process's default)
 
     def block(
         self,
@@ -42,7 +45,13 @@ class FeatureStream:
         markers: bool = True,
     ) -> tuple[dict[str, tuple], RunFeatures]:
         f = extract_run(
-            run, self.params, self.odometry, segments=segments, progress=progress, landmark_stream=self.landmarks
+            run,
+            self.params,
+            self.odometry,
+            segments=segments,
+            progress=progress,
+            threads=self.threads,
+            landmark_stream=self.landmarks,
         )
         stamps = f.stamps
         channels = (

@@ -9,9 +9,9 @@ another, without intermediate files.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from .log import mcapio
 
@@ -165,13 +165,42 @@ class RunStages:
         }
 
     def __call__(self, block) -> dict[str, tuple]:
+        return self._finish(block, self.features.block(block.run, markers=self.markers))
+
+    def pipelined(self, blocks: Iterable) -> Iterator[tuple[Any, dict[str, tuple]]]:
+        """(block, its derived channels) for each block in order, the channels those of calling the stages on it.
+        On two threads or more (perception.threads, `--threads`), the perception of the next block runs on a
+        thread of its own (its kernels on the threads left over) beside the tracking, encoding and writing of
+        this one: the compiled kernels release the GIL. The channels are the same for any count."""
+        from .perception import threads as T
+
+        n = T.resolve(None)
+        if n < 2:
+            for block in blocks:
+                yield block, self(block)
+            return
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.features.threads = n - 1
+        with ThreadPoolExecutor(1, thread_name_prefix="datmo-perception") as pool:
+            ahead = None
+            for block in blocks:
+                made = pool.submit(self.features.block, block.run, markers=self.markers)
+                if ahead is not None:
+                    yield ahead[0], self._finish(ahead[0], ahead[1].result())
+                ahead = (block, made)
+            if ahead is not None:
+                yield ahead[0], self._finish(ahead[0], ahead[1].result())
+
+    def _finish(self, block, made: tuple[dict[str, tuple], Any]) -> dict[str, tuple]:
+        """The block's channels from its perception's (channels, RunFeatures): odometry, features, tracks."""
         from .stages import TrackStream, iter_run_features, leg_threshold_of
 
         run = block.run
         out = {}
         if self.estimated:
             out[mcapio.TOPIC_ODOM] = odometry_channel(self.odometry, block)
-        channels, features = self.features.block(run, markers=self.markers)
+        channels, features = made
         out |= channels
         if self.tracking is None:
             model = self.config.features.leg_model

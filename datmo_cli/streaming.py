@@ -239,10 +239,12 @@ def write_derived(
         done = 0
         if progress is not None:
             progress(0, total)
-        for block in stream.blocks(block_scans, aligned=aligned, copy=set(copy_ids)):
+        blocks = stream.blocks(block_scans, aligned=aligned, copy=set(copy_ids))
+        pipelined = getattr(stage, "pipelined", None)  # RunStages: the next block's perception beside this one
+        staged = pipelined(blocks) if pipelined is not None else ((b, stage(b)) for b in blocks)
+        for block, out_channels in staged:
             for topic, (stamps, payloads) in block.copies.items():
                 writer.write_ids(copy_ids[topic], stamps, payloads)
-            out_channels = stage(block)
             for topic, (_, stamps, payloads) in out_channels.items():
                 writer.write_ids(ids[topic], stamps, payloads)
             odom = (

@@ -49,3 +49,16 @@ def test_same_outputs_for_any_block_size(reference, tmp_path, block):
         out = tmp_path / log.name
         process_file(log, out, force=True, block_scans=block)
         assert digests(out) == reference[log.name], (log.name, block)
+
+
+def test_same_outputs_with_the_next_block_perceived_on_its_own_thread(reference, tmp_path, monkeypatch):
+    """Two threads or more: RunStages.pipelined perceives block k + 1 on a thread beside the tracking of block
+    k; on many small blocks, whatever the machine's cores, the outputs stay the same."""
+    from datmo_cli.perception import threads
+
+    monkeypatch.setattr(threads, "available", lambda: 2)
+    monkeypatch.setattr(threads, "_DEFAULT", 2)
+    for log in sample_logs():
+        out = tmp_path / log.name
+        process_file(log, out, force=True, block_scans=50)
+        assert digests(out) == reference[log.name], log.name
