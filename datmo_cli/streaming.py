@@ -8,8 +8,10 @@ scanner moves, the scans themselves while ego-motion is estimated (see `stream_o
 
 Blocks end right before the scan that would make them longer than the block size, so the messages a
 stage derived from a scan at the same stamp (a log's /datmo/features after its /scan) fall in that scan's
-block. Within a block, messages are written in log-time order (then channel order: the input's channels
-before derived ones), as a whole-run write would order them.
+block. Each channel's messages are written in log-time order (then channel order: the input's channels
+before derived ones), as a whole-run write would order them, but in chunks of their own (CHUNK_GROUPS), so
+the file holds a channel's messages of a stretch after another channel's of a later stretch: `blocks`
+reads the channels by their chunks' times (mcap_reader.iter_stretches), not by their places in the file.
 
 A log whose scan stamps go backwards or repeat is refused when it is opened (`StampOrder`), with the count
 and the first such scan: the tracker's time comes from the stamps, and `datmo import` puts such a log in
@@ -31,11 +33,19 @@ from .log.scan import Odometry, ScanRun, stamp_problem
 
 _STAMP = struct.Struct("<iI")  # a CDR header stamp: sec, nanosec
 BLOCK_SCANS = 1024  # scans per block: large enough that per-block costs vanish, small enough to stay flat
-# MCAP chunk size of the logs written here (zstd at mcap's level 3). Measured on datmo run's lean outputs of a
-# 10,000-scan simulated hall and the 4,791-scan Freiburg 079 log: 4 MiB chunks against 1 MiB give 2-3 % fewer
-# bytes for the same compression CPU (0.24 s vs 0.26 s of 2.5 s); level 1 would save another 0.1 s (4-5 % of a
-# run) for 7-11 % more bytes, so the level stays.
+# How the logs written here are chunked: each channel in zstd chunks of its own (poses and their transforms
+# together: /tf repeats /odom's stamps and poses), a chunk ending at CHUNK_BYTES or after CHUNK_BLOCKS blocks.
+# Measured on datmo run's lean output of CARMEN intel (910 scans, one block) against the interleaved chunks at
+# level 3 (3.40x its input): by channel 3.21x at level 3, 3.04x at level 9 (0.11 s for its 6.1 MB, against
+# 0.03 s), 2.96x at level 16 (0.64 s: too slow for long logs); poses with /tf saves 34 KB of 1.2 MB. The
+# message indexes (16 bytes a message, uncompressed, which Foxglove's indexed reader uses) are 0.3x of it.
+# On the 20,000-scan hall of benchmarks/bench_scale (level 9): chunks ending each block 1.70x, after 2 blocks
+# 1.16x, 4 or 8 blocks 1.01x; that log repeats every 300 scans, which chunks spanning blocks profit from as
+# real logs would not. A reader holds about CHUNK_BLOCKS blocks in wait for the chunks of other channels.
 CHUNK_BYTES = 4 << 20
+CHUNK_LEVEL = 9
+CHUNK_BLOCKS = 4
+CHUNK_GROUPS = {mcapio.TOPIC_ODOM: "poses", mcapio.TOPIC_TF: "poses", mcapio.TOPIC_TF_STATIC: "poses"}
 
 
 @dataclass
@@ -93,42 +103,64 @@ class LogStream:
     ) -> Iterator[Block]:
         """The log's blocks of up to `size` scans. `aligned` topics must have one message per scan in each
         block (else InputError naming the command to run again); `copy`: the topics whose messages the
-        blocks carry for copying (None: none)."""
+        blocks carry for copying (None: none).
+
+        A block holds, of each other topic, its messages (in file order) up to the first at or after the next
+        block's first scan, by (log time, channel id): in a log written in time order, those between the
+        block's first scan and the next block's, wherever the file keeps them. A block is given once the
+        chunks read so far hold every message before that point (mcapio.iter_stretches), so the blocks are
+        the same whatever the chunks and their order in the file; memory holds the stretch of the log that
+        the chunks of different channels are apart in the file (CHUNK_BLOCKS blocks of a log written here)."""
+        from collections import deque
+
         copy = copy or set()
         scan_topic, path = self.scan_topic, self.path
-        scans: list[bytes] = []
-        lined: dict[str, list[bytes]] = {t: [] for t in aligned}
-        copies: dict[str, tuple[list[int], list[bytes]]] = {}
-        first, geometry = 0, None
+        others = (set(aligned) | copy) - {scan_topic}
+        ids = {c.topic: c.id for c in sorted(self.log.channels.values(), key=lambda c: -c.id)}
+        scan_id = ids.get(scan_topic, 0)
+        scans: deque[tuple[int, bytes]] = deque()
+        held: dict[str, deque[tuple[int, bytes]]] = {t: deque() for t in others}
+        state = {"first": 0, "geometry": None}
 
-        def emit() -> Block:
-            nonlocal geometry
-            run = mcapio.decode_scan_block(path, scans, first, geometry, scan_topic)
-            geometry = run.geometry
-            for t, payloads in lined.items():
-                if len(payloads) != len(scans):
+        def emit(n: int, end: tuple[int, int] | None) -> Block:
+            """The block of the next `n` scans, with the held messages before `end` (None: all)."""
+            block_scans = [scans.popleft() for _ in range(n)]
+            payloads = [p for _, p in block_scans]
+            first = state["first"]
+            run = mcapio.decode_scan_block(path, payloads, first, state["geometry"], scan_topic)
+            state["geometry"] = run.geometry
+            taken: dict[str, tuple[list[int], list[bytes]]] = {}
+            for topic, queue in held.items():
+                cid = ids.get(topic, 0)
+                stamps, out = [], []
+                while queue and (end is None or (queue[0][0], cid) < end):
+                    t, p = queue.popleft()
+                    stamps.append(t)
+                    out.append(p)
+                taken[topic] = (stamps, out)
+            lined = {t: taken[t][1] for t in aligned}
+            for t, got in lined.items():
+                if len(got) != n:
                     raise InputError(
-                        f"{path}: {len(payloads)} messages on {t} for the {len(scans)} scans from scan "
+                        f"{path}: {len(got)} messages on {t} for the {n} scans from scan "
                         f"{first}; run {mcapio.PRODUCER.get(t, 'the stage that made it')} again"
                     )
-            return Block(first, run, dict(lined), copies)
+            copies = {t: v for t, v in taken.items() if t in copy and v[1]}
+            if scan_topic in copy:
+                copies[scan_topic] = ([t for t, _ in block_scans], payloads)
+            state["first"] = first + n
+            return Block(first, run, lined, copies)
 
-        for topic, stamp, payload in mcapio.iter_messages(path, None, warn=False):
-            if topic == scan_topic:
-                if len(scans) == size:
-                    yield emit()
-                    first += len(scans)
-                    scans, copies = [], {}
-                    lined = {t: [] for t in aligned}
-                scans.append(payload)
-            elif topic in lined:
-                lined[topic].append(payload)
-            if topic in copy:
-                stamps, payloads = copies.setdefault(topic, ([], []))
-                stamps.append(stamp)
-                payloads.append(payload)
+        wanted = {scan_topic} | others
+        for horizon, stretch in mcapio.iter_stretches(path, wanted, warn=False):
+            for topic, stamp, payload in stretch:
+                (scans if topic == scan_topic else held[topic]).append((stamp, payload))
+            while len(scans) > size and scans[size][0] < horizon:
+                yield emit(size, (scans[size][0], scan_id))
+        while len(scans) > size:
+            yield emit(size, (scans[size][0], scan_id))
         if scans:
-            yield emit()
+            yield emit(len(scans), None)
 
     def scans(self, size: int = BLOCK_SCANS) -> Iterator[ScanRun]:
         """Just the scans, block by block."""
@@ -232,7 +264,16 @@ def write_derived(
         command, params, [origin or stream.path], command_line, names=[input_name] if input_name else None
     )
     total = stream.n_scans
-    with mcapio.LogWriter(out, force=force, provenance=provenance, chunk_size=CHUNK_BYTES) as writer:
+    with mcapio.LogWriter(
+        out,
+        force=force,
+        provenance=provenance,
+        chunk_size=CHUNK_BYTES,
+        grouped=True,
+        groups=CHUNK_GROUPS,
+        level=CHUNK_LEVEL,
+        span=CHUNK_BLOCKS,
+    ) as writer:
         copy_ids = writer.copy_channels(stream.log, exclude=list(derived))
         ids = {topic: writer.channel(topic, msgtype) for topic, msgtype in derived.items()}
         tf = _DerivedTf(stream, writer, mcapio.TOPIC_ODOM in derived)

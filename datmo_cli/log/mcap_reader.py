@@ -1,6 +1,10 @@
 """Reading MCAP logs: a linear record scanner over the mapped file that yields the messages of the topics asked
 for and fills a LogContents with every channel (message counts, time ranges) and metadata record.
 
+`iter_stretches` gives the messages a chunk at a time, each stretch with the earliest log time of the chunks
+after it in the file: how a reader of a file whose chunks overlap in time (datmo writes each channel in
+chunks of its own) knows when it has every message before a time.
+
 The scanner is fast, and it recovers every complete chunk of a truncated file. Each chunk's CRC-32 and size are
 checked before its records are parsed: a corrupt chunk is skipped, counted and warned about, never decoded.
 Log times are int64 nanoseconds.
@@ -142,8 +146,54 @@ def iter_messages(
     yield from _walk_file(path, topics, out, warn)
 
 
+END_OF_TIME = (1 << 63) - 1
+
+
+def iter_stretches(
+    path: str | Path, topics: Iterable[str] | None = None, contents: LogContents | None = None, *, warn: bool = True
+) -> Iterator[tuple[int, list[tuple[str, int, bytes]]]]:
+    """(horizon, messages) for each chunk (or message outside chunks) of the file in file order: the chunk's
+    messages on `topics` as iter_messages gives them (the list may be empty), and a log time that every
+    message of the file after this chunk is at or after (from the chunks' headers; END_OF_TIME after the
+    last). Arguments and errors as iter_messages."""
+    out = contents if contents is not None else LogContents(path=Path(path))
+    stretch: list[tuple[str, int, bytes]] = []
+    for item in _walk_file(path, topics, out, warn, marks=True):
+        if item[0] is _MARK:
+            yield item[1], stretch
+            stretch = []
+        else:
+            stretch.append(item)
+    if stretch:
+        yield END_OF_TIME, stretch
+
+
+_MARK = "\0end of a chunk"  # a string no topic is (compared by identity)
+
+
+def _horizons(buf) -> list[int]:
+    """For each chunk or message record at the top of a mapped file, the earliest log time of those after it
+    (chunk headers' start times; END_OF_TIME after the last); a damaged tail ends the list."""
+    starts = []
+    pos, end = 8, len(buf)
+    while pos + 9 <= end:
+        op, length = buf[pos], _U64.unpack_from(buf, pos + 1)[0]
+        body = pos + 9
+        if op == _OP_DATA_END or body + length > end:
+            break
+        if op == _OP_CHUNK and length >= 8:
+            starts.append(_U64.unpack_from(buf, body)[0])
+        elif op == _OP_MESSAGE and length >= 14:
+            starts.append(_U64.unpack_from(buf, body + 6)[0])
+        pos = body + length
+    out = [END_OF_TIME] * len(starts)
+    for i in range(len(starts) - 2, -1, -1):
+        out[i] = min(out[i + 1], starts[i + 1])
+    return out
+
+
 def _walk_file(
-    path: str | Path, topics: Iterable[str] | None, out: LogContents, warn: bool = True
+    path: str | Path, topics: Iterable[str] | None, out: LogContents, warn: bool = True, marks: bool = False
 ) -> Iterator[tuple[str, int, bytes]]:
     path = _check_input(Path(path))
     out.path, out.size = path, path.stat().st_size
@@ -156,6 +206,8 @@ def _walk_file(
             if buf[:8] != MAGIC:
                 raise InputError(f"{path}: not an MCAP file (bad magic bytes)")
             walk = _Walk(buf, out, None if topics is None else set(topics))
+            if marks:
+                walk.horizons = _horizons(buf)
             try:
                 yield from walk.scan(buf, 8, len(buf), top=True)
                 out.truncated = buf[-8:] != MAGIC or len(buf) < 16  # no footer: cut after the data
@@ -270,6 +322,8 @@ class _Walk:
         self.released = 0  # bytes of the mapped file given back to the system (see _RELEASE)
         self._summary: list[tuple[int, int]] | None = None
         self._recovered = False
+        self.horizons: list[int] | None = None  # see _horizons: a mark is yielded after each chunk when set
+        self.units = 0  # chunks and messages met at the top of the file
 
     def scan(self, buf, pos: int, end: int, top: bool) -> Iterator[tuple[str, int, bytes]]:
         """Walk the records in buf[pos:end], filling the channels and metadata and yielding (topic, log
@@ -298,6 +352,8 @@ class _Walk:
                 ch.last_ns = log_time
                 if cid in self.wanted_ids:
                     yield ch.topic, log_time, bytes(buf[body + 22 : pos])
+                if top and self.horizons is not None:
+                    yield self.mark()
             elif op == _OP_CHUNK:
                 try:
                     data = _chunk_records(buf, body, pos)
@@ -315,6 +371,8 @@ class _Walk:
                             "past the chunk's end"
                         ) from None
                     out.chunks += 1
+                if self.horizons is not None:
+                    yield self.mark()
                 if top and isinstance(buf, mmap.mmap) and pos - self.released >= _RELEASE:
                     # pages of the file read so far leave this process's memory (a long log is not held whole)
                     upto = pos - pos % mmap.PAGESIZE
@@ -331,6 +389,13 @@ class _Walk:
                 out.library, _ = _string(buf, p)
             elif op == _OP_DATA_END and top:
                 return
+
+    def mark(self) -> tuple[str, int, bytes]:
+        """The end of a chunk (or message) at the top of the file, with the earliest time of those after it."""
+        horizons = self.horizons or []
+        at = horizons[self.units] if self.units < len(horizons) else END_OF_TIME
+        self.units += 1
+        return _MARK, at, b""
 
     def define(self, op: int, buf, body: int) -> None:
         """Register the schema or channel whose record body starts at buf[body] (a channel seen before stays)."""

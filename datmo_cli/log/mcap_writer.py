@@ -1,6 +1,7 @@
-"""Writing MCAP logs safely: mcap's Writer with zstd chunks and the `ros2` profile, so Foxglove and `ros2 bag`
+"""Writing MCAP logs safely: zstd chunks (log.mcap_chunks) and the `ros2` profile, so Foxglove and `ros2 bag`
 open the files; messages are CDR with their `ros2msg` schemas embedded; the file appears under its name only
-when complete (or, streaming, as far as it was flushed).
+when complete (or, streaming, as far as it was flushed). A `grouped` writer puts each channel (or group of
+channels) in chunks of its own, block by block (see LogWriter.drain).
 """
 
 from __future__ import annotations
@@ -39,10 +40,13 @@ class LogWriter:
         provenance: Provenance | None = None,
         streaming: bool = False,
         chunk_size: int = 1 << 20,
+        grouped: bool = False,
+        groups: dict[str, str] | None = None,
+        level: int = 3,
+        span: int = 0,
     ) -> None:
-        from mcap.writer import CompressionType, Writer
-
         from .. import outputs
+        from .mcap_chunks import ChunkWriter
 
         self.path = outputs.check_output(path, force=force, inputs=provenance.inputs if provenance else ())
         self.force = force
@@ -55,13 +59,16 @@ class LogWriter:
         self._file = outputs.Guarded(file, self.path)  # a write error names the output, not the temporary file
         try:
             with outputs.writing(self.path):
-                self._writer = Writer(self._file, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+                self._writer = ChunkWriter(self._file, chunk_size=chunk_size, level=level, span=span if grouped else 0)
                 self._writer.start(profile="ros2", library=f"datmo {__version__}")
                 self._streaming = streaming
+                self._grouped = grouped
+                self._groups: dict[str, int] = {}
+                self._group_names = dict(groups or {})  # topic -> group, for channels given none
                 self._schemas: dict[str, int] = {}
                 self._channels: dict[str, int] = {}
                 self._buffer: list[tuple[np.ndarray, int, list[bytes]]] = []  # (stamps, channel id, payloads)
-                self._seq = 0
+                self._seq: dict[int, int] = {}  # channel -> its messages so far (their sequence numbers)
                 self.metadata: dict[str, dict[str, str]] = {}  # the metadata records written, by name
                 if provenance is not None:
                     for name, data in provenance.records().items():
@@ -80,8 +87,11 @@ class LogWriter:
         schema_encoding: str = "ros2msg",
         message_encoding: str = "cdr",
         metadata: dict[str, str] | None = None,
+        group: str | None = None,
     ) -> int:
-        """The id of `topic`'s channel, registering it (and its schema) on first use."""
+        """The id of `topic`'s channel, registering it (and its schema) on first use. A grouped writer puts its
+        messages in chunks of their own, shared with the channels of the same `group` (default: the topic's
+        own)."""
         if topic in self._channels:
             return self._channels[topic]
         key = f"{schema_encoding}:{msgtype}"
@@ -89,7 +99,11 @@ class LogWriter:
             text = schema_text if schema_text is not None else types.schema_text(msgtype)
             self._schemas[key] = self._writer.register_schema(msgtype, schema_encoding, text.encode())
         meta = {"offered_qos_profiles": QOS_YAML} if metadata is None else metadata
-        cid = self._writer.register_channel(topic, message_encoding, self._schemas[key], meta)
+        gid = None
+        if self._grouped:
+            name = group or self._group_names.get(topic, topic)
+            gid = self._groups.setdefault(name, len(self._groups))
+        cid = self._writer.register_channel(topic, message_encoding, self._schemas[key], meta, gid)
         self._channels[topic] = cid
         return cid
 
@@ -109,9 +123,11 @@ class LogWriter:
             raise ValueError("one stamp per payload")
         if self._streaming:
             add = self._writer.add_message
+            seq = self._seq.get(cid, 0)
             for t, p in zip(stamps.tolist(), payloads, strict=True):
-                add(cid, t, p, t, self._seq)
-                self._seq += 1
+                add(cid, t, p, seq)
+                seq += 1
+            self._seq[cid] = seq
         else:
             self._buffer.append((stamps, cid, payloads))
 
@@ -176,8 +192,11 @@ class LogWriter:
     def drain(self) -> None:
         """Write the messages added so far, in log-time order (then channel order: a scan before what was
         derived from it), and forget them: a streaming command drains after each block, so memory holds one
-        block whatever the log's length."""
+        block whatever the log's length. A grouped writer puts them in the chunks of their groups (each
+        channel's messages in that same order) and counts a block (ChunkWriter.end_block)."""
         if not self._buffer:
+            if self._grouped:
+                self._writer.end_block()
             return
         stamps = np.concatenate([b[0] for b in self._buffer])
         cids = np.concatenate([np.full(len(b[0]), b[1], np.int64) for b in self._buffer])
@@ -185,11 +204,13 @@ class LogWriter:
         self._buffer.clear()
         order = np.lexsort((cids, stamps))
         add = self._writer.add_message
-        seq = self._seq
+        seqs = self._seq
         for i, t, c in zip(order.tolist(), stamps[order].tolist(), cids[order].tolist(), strict=True):
-            add(c, t, payloads[i], t, seq)
-            seq += 1
-        self._seq = seq
+            seq = seqs.get(c, 0)
+            add(c, t, payloads[i], seq)
+            seqs[c] = seq + 1
+        if self._grouped:
+            self._writer.end_block()
 
     # -- finishing
     def flush(self) -> None:

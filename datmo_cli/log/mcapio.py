@@ -26,6 +26,7 @@ from .mcap_reader import (
     LogContents,
     TruncatedLogWarning,
     iter_messages,
+    iter_stretches,
     read_log,
     summary,
 )
@@ -83,6 +84,7 @@ __all__ = [
     "encode_scan",
     "encode_scans",
     "iter_messages",
+    "iter_stretches",
     "odometry_from_log",
     "read_log",
     "read_messages",

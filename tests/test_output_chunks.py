@@ -1,0 +1,98 @@
+"""Outputs in chunks by channel (streaming.CHUNK_GROUPS): the same messages as the interleaved writing of
+before, each chunk holding one group's channels, readable in time order by mcap's own reader, and read back
+by `LogStream.blocks` into the same blocks whatever the reader's and the writer's block sizes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from run_cases import digests
+
+from datmo_cli import streaming
+from datmo_cli.errors import InputError
+from datmo_cli.log import mcapio
+from datmo_cli.pipeline import process_file
+from datmo_cli.stage_files import features_file
+
+pytestmark = pytest.mark.cli
+
+SAMPLES = Path(__file__).resolve().parent.parent / "sample_logs"
+
+
+def interleaved(monkeypatch, src: Path, out: Path, **kw) -> None:
+    """`process_file` with every channel in one chunk stream, in time order (how outputs were written before)."""
+    real = mcapio.LogWriter
+
+    def writer(*args, **kwargs):
+        kwargs["grouped"] = False
+        return real(*args, **kwargs)
+
+    with monkeypatch.context() as m:
+        m.setattr(mcapio, "LogWriter", writer)
+        process_file(src, out, force=True, **kw)
+
+
+@pytest.mark.parametrize("log", ["patrol.mcap", "csail-excerpt.mcap"])
+def test_grouped_chunks_hold_the_messages_of_the_interleaved_writing(tmp_path, monkeypatch, log) -> None:
+    grouped, mixed = tmp_path / "grouped.mcap", tmp_path / "mixed.mcap"
+    process_file(SAMPLES / log, grouped, force=True, markers=True, block_scans=50)
+    interleaved(monkeypatch, SAMPLES / log, mixed, markers=True, block_scans=50)
+    a, b = mcapio.read_log(grouped, topics=None), mcapio.read_log(mixed, topics=None)
+    assert a.messages == b.messages  # every channel's messages, stamps and bytes, in file order
+    assert digests(grouped) == digests(mixed)
+    with open(grouped, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        topics = {c.id: c.topic for c in summary.channels.values()}
+        for index in summary.chunk_indexes:
+            held = {topics[c] for c in index.message_index_offsets}
+            assert len(held) == 1 or held <= set(streaming.CHUNK_GROUPS), held
+        assert len({c for i in summary.chunk_indexes for c in i.message_index_offsets}) == len(topics)
+        stamps = [m.log_time for _, _, m in reader.iter_messages(log_time_order=True)]
+    assert stamps == sorted(stamps) and len(stamps) == sum(len(s) for s, _ in a.messages.values())
+
+
+def test_blocks_are_the_same_for_any_reader_and_writer_block_size(tmp_path) -> None:
+    feats = tmp_path / "features.mcap"
+    features_file(SAMPLES / "patrol.mcap", feats, force=True, block_scans=100)
+    log = mcapio.read_log(feats, topics=None)
+    stream = streaming.LogStream(feats)
+    copy = set(log.topics())
+    seen = []
+    for size in (1, 7, 1024):
+        blocks = list(stream.blocks(size, aligned=(mcapio.TOPIC_FEATURES,), copy=copy))
+        assert all(len(b.run) == size for b in blocks[:-1])
+        for b in blocks:
+            assert len(b.aligned[mcapio.TOPIC_FEATURES]) == len(b.run)
+            end = blocks[blocks.index(b) + 1].run.stamps[0] if b is not blocks[-1] else None
+            for stamps, _ in b.copies.values():
+                assert end is None or all(t <= end for t in stamps)  # nothing of a later block's stretch
+        whole = {
+            t: (
+                [s for b in blocks for s in b.copies.get(t, ([], []))[0]],
+                [p for b in blocks for p in b.copies.get(t, ([], []))[1]],
+            )
+            for t in copy
+        }
+        assert whole == {t: log.messages[t] for t in copy}
+        assert [p for b in blocks for p in b.aligned[mcapio.TOPIC_FEATURES]] == log.messages[mcapio.TOPIC_FEATURES][1]
+        seen.append([s for b in blocks for s in b.run.stamps.tolist()])
+    assert seen[0] == seen[1] == seen[2]
+
+
+def test_a_missing_aligned_message_is_refused(tmp_path) -> None:
+    feats = tmp_path / "features.mcap"
+    features_file(SAMPLES / "patrol.mcap", feats, force=True)
+    log = mcapio.read_log(feats, topics=None)
+    cut = tmp_path / "cut.mcap"
+    with mcapio.LogWriter(cut, grouped=True, span=2) as writer:
+        ids = writer.copy_channels(log)
+        for topic, (stamps, payloads) in log.messages.items():
+            if topic == mcapio.TOPIC_FEATURES:
+                stamps, payloads = stamps[:10] + stamps[11:], payloads[:10] + payloads[11:]
+            writer.write_ids(ids[topic], stamps, payloads)
+    with pytest.raises(InputError, match="messages on"):
+        list(streaming.LogStream(cut).blocks(7, aligned=(mcapio.TOPIC_FEATURES,)))
