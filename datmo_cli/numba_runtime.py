@@ -7,13 +7,15 @@ raised "cannot cache function ...: no locator available" at import. Then the cac
 in the temporary folder (NUMBA_CACHE_DIR), or, with no writable temporary folder either, kernels are compiled
 in each process and not cached.
 
-The first cached kernel a process loads makes numba import its typing and lowering registries; one of
-them, numba.np.arraymath, imports scipy.linalg (about 0.3 s, a quarter of a one-scan `datmo run`) only to
-learn whether BLAS is there (`numba.np.linalg.ensure_blas` imports scipy.linalg.cython_blas). `prepare`
-sets the registries up once with that one extension module loaded on its own for the moment of the check
-(a few ms; the check's answer is the same), then forgets it, so a later `import scipy.linalg` anywhere is
-the ordinary one. No datmo kernel calls BLAS; numba binds BLAS functions only when it compiles a kernel
-that does, and then imports scipy.linalg itself.
+Loading a cached kernel the way numba does makes it refresh its typing and lowering registries first, which
+imports and installs every implementation numba has (a third of a one-scan `datmo track`), though
+only compiling uses them; `prepare` has datmo's cached kernels loaded without it (`_load_cached_lightly`).
+One numba module, numba.np.arraymath, imports scipy.linalg (about 0.3 s) only to learn whether BLAS is there
+(`numba.np.linalg.ensure_blas` imports scipy.linalg.cython_blas): while it is yet to be imported, a kernel is
+loaded (or numba's set-up runs) with that one extension module loaded on its own (a few ms; the check's
+answer is the same), which is then forgotten, so a later `import scipy.linalg` anywhere is the ordinary one.
+No datmo kernel calls BLAS; numba binds BLAS functions only when it compiles a kernel that does, and then
+imports scipy.linalg itself.
 """
 
 from __future__ import annotations
@@ -120,22 +122,72 @@ BLAS = "scipy.linalg.cython_blas"
 
 
 def prepare() -> None:
-    """Import numba and initialise its CPU target (what loading the first cached kernel would do), once."""
+    """Get numba ready to load datmo's cached kernels, once: its CPU target and runtime, and a light way to
+    load them (`_load_cached_lightly`)."""
     global _READY
     if _READY:
         return
     with _LOCK:  # threads of one Dask worker may start stages at once
         if _READY:
             return
-        loaded = None if "scipy.linalg" in sys.modules else _load_blas_alone()
-        try:
-            from numba.core.registry import cpu_target
+        import numba.cpython.hashing  # noqa: F401  # its import gives compiled code the hash secret's symbols
+        from numba.core.registry import cpu_target
+        from numba.core.runtime import rtsys
 
-            cpu_target.target_context.refresh()
-        finally:
-            if loaded is not None and sys.modules.get(BLAS) is loaded and "scipy.linalg" not in sys.modules:
-                del sys.modules[BLAS]
+        rtsys.initialize(cpu_target.target_context)  # the runtime (NRT) every kernel allocates with
+        _load_cached_lightly()
         _READY = True
+
+
+def _load_cached_lightly() -> None:
+    """Load datmo's cached kernels without numba's registry refresh (half the set-up of a one-scan run), and
+    whatever kernel numba has to compile or load otherwise with it, as before.
+
+    Before each load numba refreshes its typing and lowering registries (importing and installing every
+    implementation it has: typed containers, random generators, cffi, jitclass...), which only compiling
+    uses. Loading a cached kernel needs the runtime (prepare), the symbols its code links to (the C helpers
+    and the runtime's, registered with the target; the hash secret's, by numba.cpython.hashing) and the
+    modules of its environments, which unpickling imports. A datmo kernel that is not cached, or whose light
+    load fails, goes numba's way: refresh, load or compile. Other packages' kernels always go numba's way.
+    Either way one numba module, numba.np.arraymath, checks for BLAS when imported: scipy.linalg.cython_blas
+    is then loaded on its own for the moment (see the module docstring)."""
+    from numba.core import caching
+
+    original = caching.Cache.load_overload
+    if getattr(original, "datmo_light", False):
+        return
+    package = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+    def load_overload(self, sig, target_context):
+        code = getattr(getattr(self, "_py_func", None), "__code__", None)
+        with _blas_alone():
+            if code is not None and os.path.abspath(code.co_filename).startswith(package):
+                try:
+                    with self._guard_against_spurious_io_errors():
+                        cres = self._load_overload(sig, target_context)
+                    if cres is not None:
+                        return cres
+                except Exception:  # numba's way below
+                    pass
+            return original(self, sig, target_context)
+
+    load_overload.datmo_light = True
+    caching.Cache.load_overload = load_overload
+
+
+@contextmanager
+def _blas_alone() -> Iterator[None]:
+    """scipy.linalg.cython_blas loaded on its own for the block when numba.np.arraymath, which imports it
+    to check for BLAS, is yet to be imported and scipy.linalg is not; forgotten after it."""
+    if "numba.np.arraymath" in sys.modules or "scipy.linalg" in sys.modules:
+        yield
+        return
+    loaded = _load_blas_alone()
+    try:
+        yield
+    finally:
+        if loaded is not None and sys.modules.get(BLAS) is loaded and "scipy.linalg" not in sys.modules:
+            del sys.modules[BLAS]
 
 
 def _load_blas_alone():
