@@ -116,6 +116,54 @@ def _without_cache() -> None:
     dispatcher.Dispatcher.enable_caching = enable_caching
 
 
+class _NumbaWithoutCoverage:
+    """numba imports `coverage` (about 65 ms) when it is installed, to report the lines of the kernels it
+    compiles to a coverage run in progress. With no coverage run in this process ("coverage" not imported
+    yet: a run under coverage, pytest-cov's too, imports it first), numba's module for that
+    (numba.misc.coverage_support) is imported with coverage marked missing, and so finds none in progress,
+    as it would anyway; coverage itself stays importable. A finder on sys.meta_path, used once."""
+
+    NAME = "numba.misc.coverage_support"
+
+    def find_spec(self, name, path, target=None):
+        if name != self.NAME:
+            return None
+        sys.meta_path.remove(self)
+        if "coverage" in sys.modules:
+            return None
+        import importlib.abc
+        import importlib.util
+
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.loader is None:
+            return spec
+        loader = spec.loader
+
+        class Loader(importlib.abc.Loader):
+            def create_module(self, spec):
+                return loader.create_module(spec)
+
+            def exec_module(self, module):
+                sys.modules["coverage"] = None  # type: ignore[assignment]  # `import coverage` raises ImportError
+                try:
+                    loader.exec_module(module)
+                finally:
+                    if sys.modules.get("coverage", 0) is None:
+                        del sys.modules["coverage"]
+
+        spec.loader = Loader()
+        return spec
+
+
+def numba_without_coverage() -> None:
+    """Spare numba's import of coverage when no coverage run is in progress (_NumbaWithoutCoverage); call
+    before numba is imported."""
+    if "coverage" in sys.modules or "numba.misc.coverage_support" in sys.modules:
+        return
+    if not any(isinstance(f, _NumbaWithoutCoverage) for f in sys.meta_path):
+        sys.meta_path.insert(0, _NumbaWithoutCoverage())
+
+
 _READY = False
 _LOCK = threading.Lock()
 BLAS = "scipy.linalg.cython_blas"
@@ -140,7 +188,7 @@ def prepare() -> None:
 
 
 def _load_cached_lightly() -> None:
-    """Load datmo's cached kernels without numba's registry refresh (half the set-up of a one-scan run), and
+    """Load datmo's cached kernels without numba's registry refresh, and
     whatever kernel numba has to compile or load otherwise with it, as before.
 
     Before each load numba refreshes its typing and lowering registries (importing and installing every
