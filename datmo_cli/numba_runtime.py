@@ -212,7 +212,7 @@ def _load_cached_lightly() -> None:
             if code is not None and os.path.abspath(code.co_filename).startswith(package):
                 try:
                     with self._guard_against_spurious_io_errors():
-                        cres = self._load_overload(sig, target_context)
+                        cres = _load_light(self, sig, target_context)
                     if cres is not None:
                         return cres
                 except Exception:  # numba's way below
@@ -221,6 +221,86 @@ def _load_cached_lightly() -> None:
 
     load_overload.datmo_light = True
     caching.Cache.load_overload = load_overload
+    _defer_shared_modules()
+
+
+_DEFER = threading.local()  # .entry: the entry point's name while a datmo kernel's code is being loaded
+
+
+def _load_light(cache, sig, target_context):
+    """A cached kernel as Cache._load_overload loads it (None when not cached), its code's bitcode parsed
+    only when needed (_defer_shared_modules)."""
+    if not cache._enabled:
+        return None
+    data = cache._cache_file.load(cache._index_key(sig, target_context.codegen()))
+    if data is None:
+        return None
+    fndesc = data[1] if isinstance(data, tuple) and len(data) > 1 else None  # CompileResult._reduce's
+    _DEFER.entry = getattr(fndesc, "llvm_cpython_wrapper_name", None)
+    try:
+        return cache._impl.rebuild(target_context, data)
+    finally:
+        _DEFER.entry = None
+
+
+def _defer_shared_modules() -> None:
+    """Loading a cached kernel, numba parses the LLVM bitcode stored beside its machine code (to inline it
+    into kernels compiled later) and reads every symbol it defines: about half the load of a big kernel
+    (track_block), and of no use to running it. In `_load_light` the bitcode is kept as it is and parsed
+    the first time anything asks for the module, or for a symbol numba does not know yet (numba's own way,
+    only later); the one symbol a load looks up, the kernel's entry point, which its code defines, is
+    recorded at once. Nothing changes where numba's code is not as expected."""
+    import llvmlite.binding as ll
+    from numba.core import codegen
+
+    library, engine = getattr(codegen, "JITCodeLibrary", None), getattr(codegen, "JitEngine", None)
+    unserialize = codegen.CPUCodeLibrary.__dict__.get("_unserialize")
+    if library is None or engine is None or not isinstance(unserialize, classmethod):
+        return
+    if not all(hasattr(engine, a) for a in ("is_symbol_defined", "_load_defined_symbols")):
+        return
+    original_unserialize, original_defined = unserialize.__func__, engine.is_symbol_defined
+
+    class SharedModule:
+        """CPUCodeLibrary._shared_module, parsed from its bitcode when first read."""
+
+        def __get__(self, lib, owner=None):
+            if lib is None:
+                return self
+            value = lib.__dict__.get("_datmo_shared", lib.__dict__.get("_shared_module"))
+            if isinstance(value, bytes):
+                value = lib.__dict__["_datmo_shared"] = ll.parse_bitcode(value)
+                lib._codegen._engine._load_defined_symbols(value)
+            return value
+
+        def __set__(self, lib, value) -> None:
+            lib.__dict__["_datmo_shared"] = value
+
+    def _unserialize(cls, codegen_, state):
+        name, kind, data = state
+        entry = getattr(_DEFER, "entry", None)
+        if kind != "object" or entry is None or not issubclass(cls, library):
+            return original_unserialize(cls, codegen_, state)
+        object_code, shared_bitcode = data
+        self = codegen_.create_library(name)
+        self.enable_object_caching()
+        self._set_compiled_object(object_code)
+        self._shared_module = bytes(shared_bitcode)  # parsed when first read (SharedModule)
+        self._finalize_final_module()
+        ee = self._codegen._engine
+        ee.__dict__.setdefault("_datmo_pending", []).append(self)
+        ee._defined_symbols.add(entry)
+        return self
+
+    def is_symbol_defined(self, name):
+        pending = self.__dict__.get("_datmo_pending")
+        while pending and name not in self._defined_symbols:
+            _ = pending.pop()._shared_module  # parses it, recording its symbols
+        return original_defined(self, name)
+
+    codegen.CPUCodeLibrary._shared_module = SharedModule()
+    codegen.CPUCodeLibrary._unserialize = classmethod(_unserialize)
+    engine.is_symbol_defined = is_symbol_defined
 
 
 @contextmanager

@@ -164,6 +164,25 @@ def test_stage_commands_load_datmos_cached_kernels_without_numbas_registry_refre
     assert json.loads(out.rsplit("\nPROBE ", 1)[1]) == {"code": 0, "heavy": ["numba"]}
 
 
+def test_a_kernel_loaded_lightly_still_links_into_a_kernel_compiled_later(tmp_path: Path):
+    """A cached datmo kernel's bitcode is left unparsed at load; a kernel compiled later that calls it
+    parses it then, to inline it."""
+    code = """
+import numba
+from datmo_cli.numba_runtime import prepare
+prepare()
+from datmo_cli.perception.segmentation import valid_return
+loaded = valid_return(1.0, 0.0, 8.0)
+library = valid_return.overloads[valid_return.signatures[0]].library
+deferred = isinstance(library.__dict__.get("_datmo_shared"), bytes)
+g = numba.njit(lambda r: valid_return(r, 0.0, 8.0))
+print(loaded, deferred, g(9.0), g(2.0), isinstance(library.__dict__.get("_datmo_shared"), bytes))
+"""
+    for _ in range(2):  # compiled (if it was not cached), then loaded from the cache
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, check=True)
+    assert out.stdout.split() == ["True", "True", "False", "True", "False"]
+
+
 def test_the_cache_looks_stale_without_index_files_or_after_an_edit(tmp_path: Path, monkeypatch):
     import os
 
