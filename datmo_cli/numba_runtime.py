@@ -188,8 +188,8 @@ def prepare() -> None:
 
 
 def _load_cached_lightly() -> None:
-    """Load datmo's cached kernels without numba's registry refresh, and
-    whatever kernel numba has to compile or load otherwise with it, as before.
+    """Have datmo's cached kernels loaded without numba's registry refresh; any other kernel is loaded or
+    compiled after it, as before.
 
     Before each load numba refreshes its typing and lowering registries (importing and installing every
     implementation it has: typed containers, random generators, cffi, jitclass...), which only compiling

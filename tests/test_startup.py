@@ -183,6 +183,27 @@ print(loaded, deferred, g(9.0), g(2.0), isinstance(library.__dict__.get("_datmo_
     assert out.stdout.split() == ["True", "True", "False", "True", "False"]
 
 
+def test_numba_skips_coverage_unless_a_coverage_run_is_in_progress(tmp_path: Path):
+    pytest.importorskip("coverage")
+    code = """
+import sys
+{first}
+import datmo_cli
+import numba
+from numba.misc import coverage_support
+import coverage
+print("coverage" in sys.modules, coverage_support.coverage_available)
+"""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("COV_CORE_", "COVERAGE_PROCESS_START"))}
+    outs = [
+        subprocess.run(
+            [sys.executable, "-c", code.format(first=first)], capture_output=True, text=True, cwd=tmp_path, env=env
+        ).stdout.split()
+        for first in ("", "import coverage")
+    ]
+    assert outs == [["True", "False"], ["True", "True"]]  # coverage still imports; numba has it only if it came first
+
+
 def test_the_cache_looks_stale_without_index_files_or_after_an_edit(tmp_path: Path, monkeypatch):
     import os
 
