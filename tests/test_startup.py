@@ -4,6 +4,7 @@ numba's set-up without scipy.linalg. No wall-clock asserts: benchmarks/bench_sta
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -116,10 +117,15 @@ def test_the_shipped_schema_table_is_the_type_stores():
 
 
 def test_numba_is_prepared_without_scipy_linalg_and_scipy_linalg_still_imports_whole(tmp_path: Path):
+    """Another package's cached kernel, after prepare: numba's set-up (its BLAS check) runs as it loads or
+    compiles, with scipy.linalg.cython_blas loaded on its own, then forgotten."""
+    (tmp_path / "theirs.py").write_text("import numba\n\n@numba.njit(cache=True)\ndef g(x):\n    return x + 1\n")
     code = """
 import sys
 from datmo_cli.numba_runtime import prepare
 prepare()
+import theirs
+assert theirs.g(1) == 2
 import numba.np.arraymath as arraymath
 before = [m for m in sys.modules if m.startswith("scipy.linalg")]
 import numpy as np
@@ -129,8 +135,73 @@ from scipy.linalg import cython_blas
 f = numba.njit(lambda a, b: np.dot(a, b))
 print(before, arraymath._HAVE_BLAS, scipy.linalg.cython_blas is cython_blas, f(np.ones(3), np.ones(3)))
 """
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, check=True).stdout
-    assert out.strip() == "[] True True 3.0"
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path), *sys.path])
+    for _ in range(2):  # compiled, then loaded from the cache
+        out = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, check=True, env=env
+        ).stdout
+        assert out.strip() == "[] True True 3.0"
+
+
+def test_stage_commands_load_datmos_cached_kernels_without_numbas_registry_refresh(tmp_path: Path):
+    """The second run loads every kernel from the cache: numba's registries (here its typed containers and
+    random generators, imported only by the refresh) are never set up."""
+    log = one_scan_log(tmp_path / "one.mcap")
+    probe = PROBE.replace("{heavy!r}", repr(("numba", "numba.typed.typeddict", "numba.np.random.generator_core")))
+    for _ in range(2):
+        out = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                probe.format(args=["features", str(log), "-o", str(tmp_path / "f.mcap"), "--force"]),
+            ],
+            capture_output=True,
+            text=True,
+            cwd=tmp_path,
+            check=True,
+        ).stdout
+    assert json.loads(out.rsplit("\nPROBE ", 1)[1]) == {"code": 0, "heavy": ["numba"]}
+
+
+def test_a_kernel_loaded_lightly_still_links_into_a_kernel_compiled_later(tmp_path: Path):
+    """A cached datmo kernel's bitcode is left unparsed at load; a kernel compiled later that calls it
+    parses it then, to inline it."""
+    code = """
+import numba
+from datmo_cli.numba_runtime import prepare
+prepare()
+from datmo_cli.perception.segmentation import valid_return
+loaded = valid_return(1.0, 0.0, 8.0)
+library = valid_return.overloads[valid_return.signatures[0]].library
+deferred = isinstance(library.__dict__.get("_datmo_shared"), bytes)
+g = numba.njit(lambda r: valid_return(r, 0.0, 8.0))
+print(loaded, deferred, g(9.0), g(2.0), isinstance(library.__dict__.get("_datmo_shared"), bytes))
+"""
+    for _ in range(2):  # compiled (if it was not cached), then loaded from the cache
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, check=True)
+    assert out.stdout.split() == ["True", "True", "False", "True", "False"]
+
+
+def test_numba_skips_coverage_unless_a_coverage_run_is_in_progress(tmp_path: Path):
+    pytest.importorskip("coverage")
+    code = """
+import sys
+{first}
+import datmo_cli
+import numba
+from numba.misc import coverage_support
+import coverage
+print("coverage" in sys.modules, coverage_support.coverage_available)
+"""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("COV_CORE_", "COVERAGE_PROCESS_START"))}
+    outs = [
+        subprocess.run(
+            [sys.executable, "-c", code.format(first=first)], capture_output=True, text=True, cwd=tmp_path, env=env
+        ).stdout.split()
+        for first in ("", "import coverage")
+    ]
+    assert outs == [["True", "False"], ["True", "True"]]  # coverage still imports; numba has it only if it came first
 
 
 def test_the_cache_looks_stale_without_index_files_or_after_an_edit(tmp_path: Path, monkeypatch):
