@@ -183,8 +183,23 @@ def prepare() -> None:
         from numba.core.runtime import rtsys
 
         rtsys.initialize(cpu_target.target_context)  # the runtime (NRT) every kernel allocates with
-        _load_cached_lightly()
+        if light_loading():
+            _load_cached_lightly()
         _READY = True
+
+
+# the numba releases whose internals _load_cached_lightly was written and tested against; others load numba's way
+LIGHT_NUMBA = ("0.68.",)
+
+
+def light_loading() -> bool:
+    """Whether datmo's cached kernels load lightly (_load_cached_lightly): on the numba releases it was tested
+    against (LIGHT_NUMBA), unless DATMO_NUMBA_LIGHT=0 asks for numba's own way."""
+    import numba
+
+    if os.environ.get("DATMO_NUMBA_LIGHT", "1") == "0":
+        return False
+    return numba.__version__.startswith(LIGHT_NUMBA)
 
 
 def _load_cached_lightly() -> None:
