@@ -123,10 +123,9 @@ def intel_sizes(tmp: Path) -> list[str]:
 
 
 def main() -> None:
+    from datmo_cli.perception.threads import set_default
     from datmo_cli.pipeline import process_file, warm_up
     from datmo_cli.stage_files import features_file
-
-    from datmo_cli.perception.threads import set_default
 
     logs = {n: long_log(n) for n in SIZES}
     small = logs[SIZES[0]]
