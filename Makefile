@@ -30,7 +30,7 @@ install: $(STAMP) ## create .venv and install datmo (editable) with the dev extr
 demo: install ## process the hall sample log: segment, features, track; print the report and draw out/hall.png
 	$(BIN)/datmo run $(DEMO_LOG) -o out --force --plot
 
-test: lint typecheck test-suite test-nojit ## what CI runs (.ci/run): lint, typecheck, the whole suite, test-nojit
+test: lint typecheck test-suite test-nojit ## lint, typecheck, the whole suite, test-nojit (CI runs it as make check: .ci/run)
 
 check: test ## another name for make test
 
