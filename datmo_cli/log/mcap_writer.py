@@ -193,10 +193,9 @@ class LogWriter:
         """Write the messages added so far, in log-time order (then channel order: a scan before what was
         derived from it), and forget them: a streaming command drains after each block, so memory holds one
         block whatever the log's length. A grouped writer puts them in the chunks of their groups (each
-        channel's messages in that same order) and counts a block (ChunkWriter.end_block)."""
+        channel's messages in that same order); a block is counted (ChunkWriter.end_block)."""
         if not self._buffer:
-            if self._grouped:
-                self._writer.end_block()
+            self._writer.end_block()
             return
         stamps = np.concatenate([b[0] for b in self._buffer])
         cids = np.concatenate([np.full(len(b[0]), b[1], np.int64) for b in self._buffer])
@@ -209,8 +208,7 @@ class LogWriter:
             seq = seqs.get(c, 0)
             add(c, t, payloads[i], seq)
             seqs[c] = seq + 1
-        if self._grouped:
-            self._writer.end_block()
+        self._writer.end_block()  # ends nothing unless grouped (its span is 0 otherwise)
 
     # -- finishing
     def flush(self) -> None:
