@@ -83,12 +83,17 @@ def _raise_for(signum: int) -> None:
 RESEND_AFTER_S = 0.05
 
 
-def in_native_callback(frame) -> bool:
-    """Whether `frame` runs inside a callback from native code: llvmlite's object cache callbacks, which numba's
-    compiler calls while it compiles or loads a kernel. An exception raised there is ignored by ctypes and leaves
-    LLVM broken (the process then dies of SIGSEGV), so a signal must not raise there."""
+def must_not_raise(frame) -> bool:
+    """Whether `frame` runs where an exception raised by a signal handler does harm:
+    - inside a callback from native code (llvmlite's object cache callbacks, which numba's compiler calls while
+      it compiles or loads a kernel): ctypes ignores the exception and LLVM is left broken (the process then
+      dies of SIGSEGV);
+    - inside code that `exec` runs from a string (dataclasses and namedtuples make their methods so, as modules
+      are imported): a KeyboardInterrupt that leaves it makes CPython (3.11) end the process by SIGINT at exit,
+      whatever exit code datmo chose (-2, not 130), even when the exception was caught."""
     while frame is not None:
-        if "llvmlite" in frame.f_code.co_filename:
+        name = frame.f_code.co_filename
+        if "llvmlite" in name or name == "<string>":
             return True
         frame = frame.f_back
     return False
@@ -98,7 +103,7 @@ def _handler(signum: int, frame) -> None:
     if _state["depth"]:
         _PENDING.append(signum)
         return
-    if in_native_callback(frame):  # the callback is short: the same signal again, a moment later
+    if must_not_raise(frame):  # such code is short: the same signal again, a moment later
         threading.Timer(RESEND_AFTER_S, os.kill, (os.getpid(), signum)).start()
         return
     _raise_for(signum)

@@ -321,6 +321,33 @@ def test_debug_flag_and_environment_show_the_original_exception(small, tmp_path,
     assert not temps(tmp_path) and not outputs.live()
 
 
+def test_a_signal_inside_code_exec_runs_from_a_string_is_sent_again_not_raised_there(monkeypatch):
+    """dataclasses make their methods with exec as a module is imported; a KeyboardInterrupt leaving such code
+    makes CPython end the process by SIGINT (-2) whatever datmo's exit code: the handler sends it again later."""
+    import signal
+    import sys
+
+    from datmo_cli import outputs
+
+    sent = []
+
+    class Timer:
+        def __init__(self, *call):
+            self.call = call
+
+        def start(self):
+            sent.append(self.call)
+
+    monkeypatch.setattr(outputs.threading, "Timer", Timer)
+    frames: list = []
+    exec("import sys\nframes.append(sys._getframe())", {"frames": frames})
+    assert outputs.must_not_raise(frames[0]) and not outputs.must_not_raise(sys._getframe())
+    outputs._handler(signal.SIGINT, frames[0])  # no raise
+    assert sent == [(outputs.RESEND_AFTER_S, os.kill, (os.getpid(), signal.SIGINT))]
+    with pytest.raises(KeyboardInterrupt):
+        outputs._handler(signal.SIGINT, sys._getframe())
+
+
 def test_a_signal_inside_llvmlites_callbacks_is_sent_again_not_raised_there(monkeypatch):
     """numba's compiler calls back into Python from LLVM (llvmlite's object cache); a stop raised there is ignored
     by ctypes and the process dies of SIGSEGV: the handler sends the signal again a moment later instead."""
