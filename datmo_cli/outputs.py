@@ -88,12 +88,14 @@ def must_not_raise(frame) -> bool:
     - inside a callback from native code (llvmlite's object cache callbacks, which numba's compiler calls while
       it compiles or loads a kernel): ctypes ignores the exception and LLVM is left broken (the process then
       dies of SIGSEGV);
-    - inside code that `exec` runs from a string (dataclasses and namedtuples make their methods so, as modules
-      are imported): a KeyboardInterrupt that leaves it makes CPython (3.11) end the process by SIGINT at exit,
-      whatever exit code datmo chose (-2, not 130), even when the exception was caught."""
+    - in code that `exec` runs from a string, where the signal lands (dataclasses and namedtuples make their
+      methods so, as modules are imported): a KeyboardInterrupt that leaves it makes CPython (3.11) end the
+      process by SIGINT at exit, whatever exit code datmo chose (-2, not 130), even when the exception was caught.
+      Only the innermost frame counts: `python -c` and pytest-xdist's workers run everything below such a frame."""
+    if frame is not None and frame.f_code.co_filename == "<string>" and frame.f_back is not None:
+        return True
     while frame is not None:
-        name = frame.f_code.co_filename
-        if "llvmlite" in name or name == "<string>":
+        if "llvmlite" in frame.f_code.co_filename:
             return True
         frame = frame.f_back
     return False

@@ -342,6 +342,10 @@ def test_a_signal_inside_code_exec_runs_from_a_string_is_sent_again_not_raised_t
     frames: list = []
     exec("import sys\nframes.append(sys._getframe())", {"frames": frames})
     assert outputs.must_not_raise(frames[0]) and not outputs.must_not_raise(sys._getframe())
+    below: list = []  # `python -c` runs everything below a frame of "<string>": that one does not count
+    exec("def outer(frames, inner):\n    inner(frames)", namespace := {})
+    namespace["outer"](below, lambda frames: frames.append(sys._getframe()))
+    assert below[0].f_back.f_code.co_filename == "<string>" and not outputs.must_not_raise(below[0])
     outputs._handler(signal.SIGINT, frames[0])  # no raise
     assert sent == [(outputs.RESEND_AFTER_S, os.kill, (os.getpid(), signal.SIGINT))]
     with pytest.raises(KeyboardInterrupt):
