@@ -58,7 +58,7 @@ def test_grouped_chunks_hold_the_messages_of_the_interleaved_writing(tmp_path, m
 def test_rosbags_reads_a_grouped_output_message_for_message_in_time_order(tmp_path) -> None:
     """ROS 2's Python tooling (rosbags' AnyReader, as `datmo import` and rosbag2 users read MCAP) gets every
     message of a chunk-per-channel output, with mcap's bytes and stamps, in time order across many chunks.
-    (Foxglove's reader, @mcap/core's McapIndexedReader, was checked by hand the same way: docs/performance.md.)"""
+    (Foxglove's reader, @mcap/core's McapIndexedReader, was checked by hand the same way: CHANGELOG.md.)"""
     from rosbags.highlevel import AnyReader
 
     out = tmp_path / "out.mcap"
