@@ -116,8 +116,9 @@ class Tracker:
     - A confirmed track becomes a person once its evidence is at least person_evidence and it has been seen with
       two legs person_pairs times; it stays a person until its evidence falls below person_maintain or it dies.
       Walking is not required (someone standing, or followed by a robot, is a person) and mobility plays no part.
-    - Unseen, a person coasts person_coast s on its prediction, output flagged occluded, and may be taken back by
-      a measurement it could have reached (as an occluded track is).
+    - Unseen, a person coasts person_coast s on its prediction (delete_after_occluded s while hidden or out of
+      view, as every track), output flagged occluded, and may be taken back by a measurement it could have
+      reached (as an occluded track is).
     - Returns within person_radius of a person never feed the background grid, and a leg candidate near a person
       is theirs even on the background. A beam whose return keeps its place in the sensor frame while the sensor
       travels carried_travel sees a part of the robot: candidates on such beams are not legs.
