@@ -118,6 +118,9 @@ def open_stages(
     return RunStages(odometry, config, estimated=estimated, markers=markers, covariance=covariance)
 
 
+PERCEIVE_AHEAD = 2  # blocks whose perception may run ahead of the tracking: one block's wait is the next's slack
+
+
 class RunStages:
     """Segmentation, features and tracking of one log, block by block (the stages of `datmo run`): call it
     with each Block in order; it returns the block's derived channels. `config`: the DatmoConfig (None: the
@@ -169,9 +172,10 @@ class RunStages:
 
     def pipelined(self, blocks: Iterable) -> Iterator[tuple[Any, dict[str, tuple]]]:
         """(block, its derived channels) for each block in order, the channels those of calling the stages on it.
-        On two threads or more (perception.threads, `--threads`), the perception of the next block runs on a
-        thread of its own (its kernels on the threads left over) beside the tracking, encoding and writing of
-        this one: the compiled kernels release the GIL. The channels are the same for any count."""
+        On two threads or more (perception.threads, `--threads`), the perception of the next blocks (up to
+        PERCEIVE_AHEAD) runs on a thread of its own (its kernels on the threads left over) beside the tracking,
+        encoding and writing of this one: the compiled kernels release the GIL. The channels are the same for any
+        count."""
         from .perception import threads as T
 
         n = T.resolve(None)
@@ -179,18 +183,24 @@ class RunStages:
             for block in blocks:
                 yield block, self(block)
             return
+        from collections import deque
         from concurrent.futures import ThreadPoolExecutor
 
         self.features.threads = n - 1
         with ThreadPoolExecutor(1, thread_name_prefix="datmo-perception") as pool:
-            ahead = None
-            for block in blocks:
-                made = pool.submit(self.features.block, block.run, markers=self.markers)
-                if ahead is not None:
-                    yield ahead[0], self._finish(ahead[0], ahead[1].result())
-                ahead = (block, made)
-            if ahead is not None:
-                yield ahead[0], self._finish(ahead[0], ahead[1].result())
+            ahead: deque = deque()  # perceived or queued, in order (one worker: FeatureStream's state is ordered)
+            try:
+                for block in blocks:
+                    ahead.append((block, pool.submit(self.features.block, block.run, markers=self.markers)))
+                    if len(ahead) > PERCEIVE_AHEAD:
+                        done, made = ahead.popleft()
+                        yield done, self._finish(done, made.result())
+                while ahead:
+                    done, made = ahead.popleft()
+                    yield done, self._finish(done, made.result())
+            finally:  # stopped early (an error, Ctrl-C): the queued blocks are not perceived for nothing
+                for _, made in ahead:
+                    made.cancel()
 
     def _finish(self, block, made: tuple[dict[str, tuple], Any]) -> dict[str, tuple]:
         """The block's channels from its perception's (channels, RunFeatures): odometry, features, tracks."""

@@ -10,6 +10,7 @@ import json
 import pytest
 from run_cases import DIGESTS, digests, run_outputs, sample_logs
 
+from datmo_cli import pipeline
 from datmo_cli.pipeline import process_file
 
 pytestmark = pytest.mark.cli
@@ -51,11 +52,13 @@ def test_same_outputs_for_any_block_size(reference, tmp_path, block):
         assert digests(out) == reference[log.name], (log.name, block)
 
 
-def test_same_outputs_with_the_next_block_perceived_on_its_own_thread(reference, tmp_path, monkeypatch):
-    """Two threads or more: RunStages.pipelined perceives block k + 1 on a thread beside the tracking of block
-    k; on many small blocks, whatever the machine's cores, the outputs stay the same."""
+@pytest.mark.parametrize("ahead", [1, pipeline.PERCEIVE_AHEAD, 5])
+def test_same_outputs_with_the_next_blocks_perceived_on_their_own_thread(reference, tmp_path, monkeypatch, ahead):
+    """Two threads or more: RunStages.pipelined perceives blocks k + 1 .. k + ahead on a thread beside the
+    tracking of block k; on many small blocks, whatever the machine's cores, the outputs stay the same."""
     from datmo_cli.perception import threads
 
+    monkeypatch.setattr(pipeline, "PERCEIVE_AHEAD", ahead)
     monkeypatch.setattr(threads, "available", lambda: 2)
     monkeypatch.setattr(threads, "_DEFAULT", 2)
     for log in sample_logs():
