@@ -9,13 +9,14 @@ DEMO_LOG := sample_logs/hall.mcap
 WORKERS ?= auto
 XDIST := -n $(WORKERS) --dist loadfile
 
-.PHONY: help install demo check test test-suite test-unit test-fast test-nojit lint typecheck bench accuracy sample-logs regress regress-update run-digests clean legs-model
+.PHONY: help install demo check test test-suite test-unit test-fast test-nojit test-no-avx512 lint typecheck bench accuracy sample-logs regress regress-update run-digests clean legs-model lock
 
-$(STAMP): pyproject.toml datmo_cli/__init__.py
+$(STAMP): pyproject.toml datmo_cli/__init__.py constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	@# the distribution was called datmo before it became datmo-cli: an older venv drops the old name
 	$(BIN)/pip uninstall --quiet --disable-pip-version-check -y datmo 2>/dev/null || true
-	$(BIN)/pip install --quiet --disable-pip-version-check -e '.[dev]'
+	@# constraints.txt: the versions CI tests (make lock refreshes it on purpose)
+	$(BIN)/pip install --quiet --disable-pip-version-check -c constraints.txt -e '.[dev]'
 	@# byte-compile datmo's own modules now: an editable install leaves that to each import, and where
 	@# PYTHONDONTWRITEBYTECODE is set (as in many containers) every process would compile them again
 	$(BIN)/python -m compileall -q datmo_cli
@@ -30,7 +31,7 @@ install: $(STAMP) ## create .venv and install datmo (editable) with the dev extr
 demo: install ## process the hall sample log: segment, features, track; print the report and draw out/hall.png
 	$(BIN)/datmo run $(DEMO_LOG) -o out --force --plot
 
-test: lint typecheck test-suite test-nojit ## lint, typecheck, the whole suite, test-nojit (CI runs it as make check: .ci/run)
+test: lint typecheck test-suite test-nojit test-no-avx512 ## lint, typecheck, the whole suite, test-nojit, test-no-avx512 (CI runs it as make check: .ci/run)
 
 check: test ## another name for make test
 
@@ -46,6 +47,10 @@ test-fast: install ## the suite without the tests marked slow, in parallel
 test-nojit: install ## the kernel reference checks (tests/kernel_checks.py) with the kernels as plain Python (NUMBA_DISABLE_JIT=1), with the kernel modules' coverage
 	NUMBA_DISABLE_JIT=1 $(BIN)/pytest -q $(XDIST) -m "kernels and not slow" \
 		--cov=datmo_cli.tracking --cov=datmo_cli.perception --cov=datmo_cli.sim --cov-report=term
+
+test-no-avx512: install ## the output fingerprints again with numpy's AVX-512 code switched off (a no-op on a CPU without it)
+	NPY_DISABLE_CPU_FEATURES="$$($(BIN)/python tests/avx512_features.py)" $(BIN)/pytest -q -p no:xdist \
+		tests/test_output_digests.py -k stored_fingerprints
 
 lint: install ## ruff check and ruff format --check on the whole repository
 	$(BIN)/ruff check .
@@ -66,7 +71,7 @@ regress: install ## datmo run + evaluate on every sample log, compared with test
 regress-update: install ## rewrite tests/regress_baseline.json from the current figures (review the diff)
 	$(BIN)/python -m benchmarks.regress --update
 
-run-digests: install ## rewrite tests/run_digests.json, datmo run's outputs on the sample logs message for message (say why in the commit)
+run-digests: install ## rewrite tests/run_digests.json, the fingerprints of datmo run's outputs on the sample logs (say why in the commit)
 	$(BIN)/python tests/run_cases.py
 
 legs-model: install ## retrain the packaged leg model (datmo_cli/perception/models/legs.npz) from ../shared/data/legtracker
@@ -76,6 +81,14 @@ legs-model: install ## retrain the packaged leg model (datmo_cli/perception/mode
 
 sample-logs: install ## regenerate sample_logs/ bit for bit
 	PATH="$(CURDIR)/$(BIN):$$PATH" bash sample_logs/make.sh
+
+lock: ## refresh constraints.txt to the newest versions pyproject.toml allows, in a new venv; prints what moved
+	rm -rf .venv-lock && $(PYTHON) -m venv .venv-lock
+	.venv-lock/bin/pip install --quiet --disable-pip-version-check -e '.[dev]'
+	.venv-lock/bin/pip freeze --exclude-editable > constraints.txt.new
+	@diff constraints.txt constraints.txt.new | grep '^[<>]' || echo "nothing moved"
+	mv constraints.txt.new constraints.txt && rm -rf .venv-lock
+	@echo "constraints.txt refreshed: run make test, then commit it with what moved"
 
 clean: ## remove out/, .venv and the build and cache folders
 	rm -rf out $(VENV) build *.egg-info .pytest_cache .ruff_cache .mypy_cache .coverage

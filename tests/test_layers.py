@@ -27,7 +27,7 @@ pytestmark = pytest.mark.unit
 PACKAGE = "datmo_cli"
 ROOT = Path(__file__).resolve().parent.parent / PACKAGE
 
-BASE = {"errors", "extras", "outputs", "input_files", "bounds", "numba_runtime", "progress", "csvsafe", "text"}
+BASE = {"errors", "extras", "outputs", "input_files", "bounds", "numba_runtime", "progress", "csvsafe", "text", "libm"}
 CLI = {"cli", "__main__", "commands"}
 CORE = {"perception", "tracking", "sim", "lms2xx"}
 RANK = {"base": 0, "log": 1, "core": 2, "pipeline": 3, "cli": 4}

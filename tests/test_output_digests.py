@@ -1,14 +1,17 @@
 """`datmo run`'s outputs on every sample log, message for message (tests/run_cases.py, markers and the tracks'
-covariance aside): the same as tests/run_digests.json records, and the same whatever the perception threads
-(--threads) and the streaming block size. Speed work must leave these alone; a deliberate change of the
-tracker or of perception writes the digests again (`make run-digests`) with the reason in its commit."""
+covariance aside): what tests/run_digests.json records, on any machine (fingerprints: floats within a stated
+tolerance, everything else exact), and bit for bit the same whatever the perception threads (--threads) and the
+streaming block size. Speed work must leave these alone; a deliberate change of the tracker or of perception
+writes them again (`make run-digests`) with the reason in its commit."""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
+import numpy as np
 import pytest
-from run_cases import DIGESTS, digests, run_outputs, sample_logs
+from run_cases import DIGESTS, FLOAT_RTOL, differences, digests, fingerprints, run_outputs, sample_logs
 
 from datmo_cli import pipeline
 from datmo_cli.pipeline import process_file
@@ -29,14 +32,69 @@ def test_every_sample_log_is_covered(reference):
         assert not any(t.startswith("/datmo/markers/") for t in channels), name
 
 
-def test_outputs_match_the_stored_digests(reference):
+@pytest.fixture(scope="module")
+def outputs(tmp_path_factory) -> dict[str, Path]:
+    return run_outputs(tmp_path_factory.mktemp("fingerprints"), "--threads", "1")
+
+
+def test_outputs_match_the_stored_fingerprints(outputs):
     stored = json.loads(DIGESTS.read_text())
-    for name in sorted(reference):
-        assert reference[name] == stored.get(name), (
-            f"{name}: datmo run's output differs from {DIGESTS.name}; if the change is meant (a tracker or "
-            "perception change), run `make run-digests` and give the reason in the commit"
+    assert set(stored) == set(outputs)
+    for name, path in sorted(outputs.items()):
+        found = differences(stored[name], fingerprints(path))
+        assert not found, (
+            f"{name}: datmo run's output differs from {DIGESTS.name}: " + "; ".join(found) + ". If the change is "
+            "meant (a tracker or perception change), run `make run-digests` and give the reason in the commit"
         )
-    assert set(stored) == set(reference)
+
+
+def _float_fields_moved(decode, seed: int):
+    """cdr.decode whose float fields come back moved one unit in the last place (float32), up or down at random:
+    what rounding differently in the last bits gives."""
+    rng = np.random.default_rng(seed)
+
+    def moved(msgtype, payload):
+        msg = decode(msgtype, payload)
+        for key, value in msg.items():
+            if isinstance(value, np.ndarray) and value.dtype.names:
+                value = msg[key] = value.copy()
+                for f in value.dtype.names:
+                    if value.dtype[f].kind == "f":
+                        v = value[f]
+                        value[f] = np.nextafter(v, np.where(rng.random(v.shape) < 0.5, -np.inf, np.inf)).astype(v.dtype)
+            elif isinstance(value, float):
+                msg[key] = float(np.nextafter(np.float32(value), np.float32(np.inf)))
+        return msg
+
+    return moved
+
+
+@pytest.mark.slow
+def test_fingerprints_let_last_bit_rounding_pass_and_catch_a_one_percent_change(outputs, tmp_path, monkeypatch):
+    """The stored comparison fails for datmo's changes, not for rounding: every float of every output moved one
+    unit in the last place keeps its fingerprint; a 1% change of one tracking parameter does not."""
+    from datmo_cli.log import cdr
+
+    here = {name: fingerprints(path) for name, path in outputs.items()}
+    monkeypatch.setattr(cdr, "decode", _float_fields_moved(cdr.decode, 1))
+    for name, path in outputs.items():
+        assert not differences(here[name], fingerprints(path)), name
+    monkeypatch.undo()
+
+    config = tmp_path / "noise.toml"
+    config.write_text("[track]\nmeasurement_noise = 0.0505\n")
+    changed = run_outputs(tmp_path / "changed", "--threads", "1", "--config", str(config))
+    caught = {name: differences(here[name], fingerprints(path)) for name, path in changed.items()}
+    assert all(any("/datmo/tracks" in line for line in lines) for lines in caught.values()), caught
+
+
+def test_the_float_comparison_has_the_stated_tolerance():
+    a = {"/t": {"messages": 1, "exact": "x", "floats": {"f": [10.0, 1.0, 1.0, 100.0, 3]}}}
+    inside = {"/t": {"messages": 1, "exact": "x", "floats": {"f": [10.0 + 0.9e-4, 1.0, 1.0, 100.0, 3]}}}
+    outside = {"/t": {"messages": 1, "exact": "x", "floats": {"f": [10.0 + 1.1e-4, 1.0, 1.0, 100.0, 3]}}}
+    assert FLOAT_RTOL == 1e-6 and differences(a, inside) == []
+    assert differences(a, outside) == ["/t f: sums differ by 0.00011 (tolerance 0.0001)"]
+    assert differences(a, {"/t": {**a["/t"], "exact": "y"}}) == ["/t: times, counts, integer or text fields differ"]
 
 
 def test_same_outputs_with_two_threads(reference, tmp_path):

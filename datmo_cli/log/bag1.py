@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from datmo_cli import libm
+
 from .. import outputs
 from .scan import Odometry, ScanRun
 from .transforms import Transform
@@ -124,7 +126,7 @@ class Ros1BagWriter:
             pose = T["geometry_msgs/msg/Pose"](
                 position=T["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0),
                 orientation=T["geometry_msgs/msg/Quaternion"](
-                    x=0.0, y=0.0, z=float(np.sin(th / 2)), w=float(np.cos(th / 2))
+                    x=0.0, y=0.0, z=float(libm.sin(th / 2)), w=float(libm.cos(th / 2))
                 ),
             )
             msg = T[ODOMETRY](

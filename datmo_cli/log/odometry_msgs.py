@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from datmo_cli import libm
+
 from . import types
 from .scan import Odometry
 
@@ -20,7 +22,7 @@ def encode_odometry(odom: Odometry) -> list[bytes]:
         pose = T["geometry_msgs/msg/Pose"](
             position=T["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0),
             orientation=T["geometry_msgs/msg/Quaternion"](
-                x=0.0, y=0.0, z=float(np.sin(th / 2)), w=float(np.cos(th / 2))
+                x=0.0, y=0.0, z=float(libm.sin(th / 2)), w=float(libm.cos(th / 2))
             ),
         )
         zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
@@ -47,6 +49,6 @@ def decode_odometry(stamps: np.ndarray, payloads: list[bytes]) -> Odometry:
         pose = msg.pose.pose
         q = pose.orientation
         xs[i], ys[i] = pose.position.x, pose.position.y
-        ths[i] = np.arctan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+        ths[i] = libm.arctan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
         frame, child = msg.header.frame_id, msg.child_frame_id
     return Odometry(stamps, xs, ys, ths, frame or "odom", child or "base_link")

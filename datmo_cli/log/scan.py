@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from datmo_cli import libm
+
 from .cdr import CDR_HEADER
 
 
@@ -106,7 +108,7 @@ class Odometry:
         x = np.interp(q, rel, self.x)
         y = np.interp(q, rel, self.y)
         th = np.interp(q, rel, np.unwrap(self.theta))
-        return np.stack([x, y, np.arctan2(np.sin(th), np.cos(th))], axis=1)
+        return np.stack([x, y, libm.arctan2(libm.sin(th), libm.cos(th))], axis=1)
 
 
 def _row_dtype(frame_len: int, n_beams: int, n_intens: int) -> np.dtype:

@@ -25,6 +25,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from datmo_cli import libm
+
 from .scan import Odometry
 
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
@@ -224,8 +226,8 @@ def mount_tf(stamp_ns: int, base: str, laser: str, pose: LaserPose) -> bytes:
 
 
 def _compose(x, y, th, mx: float, my: float, mth: float):
-    c, s = np.cos(th), np.sin(th)
-    return x + c * mx - s * my, y + s * mx + c * my, np.arctan2(np.sin(th + mth), np.cos(th + mth))
+    c, s = libm.cos(th), libm.sin(th)
+    return x + c * mx - s * my, y + s * mx + c * my, libm.arctan2(libm.sin(th + mth), libm.cos(th + mth))
 
 
 def base_odometry(sensor: Odometry, pose: LaserPose, base: str = BASE_FRAME) -> Odometry:

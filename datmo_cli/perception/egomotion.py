@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from datmo_cli import libm
+
 from ..log.scan import Odometry, ScanGeometry, ScanRun
 
 FRAME_ID = "scan_odom"
@@ -62,7 +64,7 @@ class EgoMotion:
 
 def _beam_trig(geometry: ScanGeometry) -> tuple[np.ndarray, np.ndarray]:
     a = geometry.angles()
-    return np.ascontiguousarray(np.cos(a)), np.ascontiguousarray(np.sin(a))
+    return np.ascontiguousarray(libm.cos(a)), np.ascontiguousarray(libm.sin(a))
 
 
 def _max_window(geometry: ScanGeometry) -> int:
@@ -236,7 +238,7 @@ def path_length(odometry: Odometry) -> float:
 def total_turn(odometry: Odometry) -> float:
     """Sum of |heading change| between consecutive poses, radians."""
     d = np.diff(odometry.theta)
-    return float(np.abs(np.arctan2(np.sin(d), np.cos(d))).sum())
+    return float(np.abs(libm.arctan2(libm.sin(d), libm.cos(d))).sum())
 
 
 def is_moving(odometry: Odometry, min_path: float = 0.3, min_turn: float = math.radians(20.0)) -> bool:
@@ -247,7 +249,7 @@ def is_moving(odometry: Odometry, min_path: float = 0.3, min_turn: float = math.
         return False
     reach = float(np.hypot(odometry.x - odometry.x[0], odometry.y - odometry.y[0]).max())
     d = odometry.theta - odometry.theta[0]
-    turn = float(np.abs(np.arctan2(np.sin(d), np.cos(d))).max())
+    turn = float(np.abs(libm.arctan2(libm.sin(d), libm.cos(d))).max())
     return reach > min_path or turn > min_turn
 
 

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from datmo_cli import libm
+
 from ..errors import InputError
 from ..log import cdr, types
 from ..log.scan import Odometry, ScanRun
@@ -94,7 +96,7 @@ def _check(run: ScanRun) -> None:
 
 def _c1(run: ScanRun) -> float:
     """C1 = sqrt(2 (1 - cos delta_alpha)): the chord of the scan's angle step at unit range."""
-    return float(np.sqrt(2.0 * (1.0 - np.cos(run.geometry.angle_increment))))
+    return float(np.sqrt(2.0 * (1.0 - libm.cos(run.geometry.angle_increment))))
 
 
 def _range_limits(run: ScanRun) -> tuple[float, float]:
@@ -120,7 +122,7 @@ def segment_run(run: ScanRun, params: FeatureParams | None = None) -> tuple[np.n
     count = np.zeros(N, np.int64)
     if N and B:
         n = segmentation.segment_block(
-            ranges, float(np.cos(run.geometry.angle_increment)), p.c0, _c1(run), lo, hi, p.min_points, seg, count
+            ranges, float(libm.cos(run.geometry.angle_increment)), p.c0, _c1(run), lo, hi, p.min_points, seg, count
         )
         seg = seg[:n]
     else:
@@ -289,12 +291,12 @@ def extract_run(
     ranges = np.ascontiguousarray(run.ranges, np.float32)
     N, B = ranges.shape if ranges.ndim == 2 else (0, 0)
     angles = run.geometry.angles().astype(np.float64) if B else np.zeros(0)
-    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    cos_a, sin_a = libm.cos(angles), libm.sin(angles)
     nt = max(int(round(180.0 / p.theta_resolution)), 1)
     theta = np.arange(nt) * (np.pi / nt)
-    cos_t, sin_t = np.cos(theta), np.sin(theta)
+    cos_t, sin_t = libm.cos(theta), libm.sin(theta)
     vec = p.kernel_vector()
-    cos_inc, c1 = float(np.cos(run.geometry.angle_increment)), _c1(run)
+    cos_inc, c1 = float(libm.cos(run.geometry.angle_increment)), _c1(run)
     if segments is not None:
         g_start, g_end, g_off = (np.asarray(v, np.int64) for v in segments)
         if len(g_off) != N + 1:

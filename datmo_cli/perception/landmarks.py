@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from datmo_cli import libm
+
 from ..log import cdr, types
 from ..log.vocabulary import (
     LANDMARK_BENCH,
@@ -53,10 +55,10 @@ def junction_detections(lines: np.ndarray, scan: np.ndarray, p: FeatureParams) -
     a, b = lines[i], lines[i + 1]
     ta, tb = a["theta"].astype(np.float64), b["theta"].astype(np.float64)
     ra, rb = a["rho"].astype(np.float64), b["rho"].astype(np.float64)
-    det = np.cos(ta) * np.sin(tb) - np.sin(ta) * np.cos(tb)
+    det = libm.cos(ta) * libm.sin(tb) - libm.sin(ta) * libm.cos(tb)
     with np.errstate(divide="ignore", invalid="ignore"):
-        jx = (ra * np.sin(tb) - rb * np.sin(ta)) / det
-        jy = (rb * np.cos(ta) - ra * np.cos(tb)) / det
+        jx = (ra * libm.sin(tb) - rb * libm.sin(ta)) / det
+        jy = (rb * libm.cos(ta) - ra * libm.cos(tb)) / det
     turn = np.abs(ta - tb) % np.pi
     turn = np.minimum(turn, np.pi - turn)  # angle between the lines, 0 .. pi/2
     gap = np.maximum(np.hypot(jx - a["x_end"], jy - a["y_end"]), np.hypot(jx - b["x_ini"], jy - b["y_ini"]))
@@ -69,7 +71,7 @@ def junction_detections(lines: np.ndarray, scan: np.ndarray, p: FeatureParams) -
     vx, vy = b["x_end"] - jx, b["y_end"] - jy
     nu, nv = np.hypot(ux, uy), np.hypot(vx, vy)
     with np.errstate(divide="ignore", invalid="ignore"):
-        orient = np.arctan2(uy / nu + vy / nv, ux / nu + vx / nv)
+        orient = libm.arctan2(uy / nu + vy / nv, ux / nu + vx / nv)
     ex, ey = b["x_end"] - a["x_ini"], b["y_end"] - a["y_ini"]
     convex = (ex * (jy - a["y_ini"]) - ey * (jx - a["x_ini"])) * (ex * -a["y_ini"] - ey * -a["x_ini"]) > 0
     kind = np.where(corner, LANDMARK_CORNER, np.where(convex, LANDMARK_CONVEX_DEFLECTION, LANDMARK_CONCAVE_DEFLECTION))
@@ -121,7 +123,7 @@ def line_end_detections(
         rows = np.zeros((int(keep.sum()), 6))
         rows[:, DET_SCAN], rows[:, DET_TYPE] = s[keep], LANDMARK_LINE_END
         rows[:, DET_X], rows[:, DET_Y] = ex[keep], ey[keep]
-        rows[:, DET_ORIENT] = np.arctan2(fy[keep] - ey[keep], fx[keep] - ex[keep])
+        rows[:, DET_ORIENT] = libm.arctan2(fy[keep] - ey[keep], fx[keep] - ex[keep])
         out.append(rows)
     return np.concatenate(out)
 
@@ -232,7 +234,7 @@ def free_standing(
         if line is not None:
             theta, rho, angles = line
             t = angles[np.maximum(beam, 0)]
-            off = np.abs(there * np.cos(t - theta) - rho)
+            off = np.abs(there * libm.cos(t - theta) - rho)
             is_open &= ~np.isfinite(there) | (off >= behind)
         occluded = exists & (there < here - c0)
         n_open += is_open
@@ -274,7 +276,7 @@ def seat_detections(
     out[:, DET_SCAN], out[:, DET_TYPE] = s, LANDMARK_BENCH
     out[:, DET_X] = 0.5 * (ln["x_ini"] + ln["x_end"])
     out[:, DET_Y] = 0.5 * (ln["y_ini"] + ln["y_end"])
-    out[:, DET_ORIENT] = np.arctan2(ln["y_end"] - ln["y_ini"], ln["x_end"] - ln["x_ini"])
+    out[:, DET_ORIENT] = libm.arctan2(ln["y_end"] - ln["y_ini"], ln["x_end"] - ln["x_ini"])
     out[:, DET_SIZE] = ln["length"]
     return out
 
@@ -320,8 +322,10 @@ def to_world(det: np.ndarray, poses: np.ndarray | None) -> np.ndarray:
         return det
     out = det.copy()
     pose = poses[det[:, DET_SCAN].astype(np.int64)]
-    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    c, s = libm.cos(pose[:, 2]), libm.sin(pose[:, 2])
     out[:, DET_X] = c * det[:, DET_X] - s * det[:, DET_Y] + pose[:, 0]
     out[:, DET_Y] = s * det[:, DET_X] + c * det[:, DET_Y] + pose[:, 1]
-    out[:, DET_ORIENT] = np.arctan2(np.sin(det[:, DET_ORIENT] + pose[:, 2]), np.cos(det[:, DET_ORIENT] + pose[:, 2]))
+    out[:, DET_ORIENT] = libm.arctan2(
+        libm.sin(det[:, DET_ORIENT] + pose[:, 2]), libm.cos(det[:, DET_ORIENT] + pose[:, 2])
+    )
     return out

@@ -22,6 +22,8 @@ import math
 
 import numpy as np
 
+from datmo_cli import libm
+
 from .leg_model import LegModel
 from .leg_rules import (  # noqa: F401 (the detector's vocabulary, read from here by its callers)
     CANDIDATE_MAX_WIDTH,
@@ -86,7 +88,7 @@ def _trig(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if hit is None:
         if len(_TRIG) >= 8:
             _TRIG.clear()
-        hit = _TRIG[key] = (np.cos(angles), np.sin(angles))
+        hit = _TRIG[key] = (libm.cos(angles), libm.sin(angles))
     return hit
 
 

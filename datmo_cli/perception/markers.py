@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from datmo_cli import libm
+
 from ..log.markers import ADD, ARROW, CUBE_LIST, DELETEALL, LINE_LIST, SPHERE_LIST, MarkerArrayWriter, header
 from ..log.scan import Odometry, ScanRun
 from .features import RunFeatures
@@ -43,7 +45,7 @@ def circle_points(circles: np.ndarray) -> np.ndarray:
     if not len(circles):
         return np.zeros((0, 3))
     cx, cy, r = (circles[k].astype(np.float64)[:, None] for k in ("x", "y", "radius"))
-    px, py = cx + r * np.cos(_ANG), cy + r * np.sin(_ANG)
+    px, py = cx + r * libm.cos(_ANG), cy + r * libm.sin(_ANG)
     out = np.zeros((len(circles), _POLY, 2, 3))
     out[:, :, 0, 0], out[:, :, 0, 1] = px[:, :-1], py[:, :-1]
     out[:, :, 1, 0], out[:, :, 1, 1] = px[:, 1:], py[:, 1:]
@@ -97,7 +99,7 @@ def scan_feature_markers(
         pts[:, 0], pts[:, 1] = e["x"], e["y"]
         colors = LANDMARK_COLORS[e["type"].astype(np.int64)]
         if pose is not None and len(e):
-            c, s = np.cos(pose[2]), np.sin(pose[2])
+            c, s = libm.cos(pose[2]), libm.sin(pose[2])
             dx, dy = pts[:, 0] - pose[0], pts[:, 1] - pose[1]
             pts[:, 0], pts[:, 1] = c * dx + s * dy, -s * dx + c * dy
         w.marker(4, CUBE_LIST, ADD, scale=(0.15, 0.15, 0.15), points=pts, colors=colors)

@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from datmo_cli import libm
+
 
 @dataclass(frozen=True)
 class PathSpec:
@@ -100,7 +102,7 @@ class Timeline:
         leg = np.searchsorted(self._leg_knot, idx, side="right") - 1
         leg = np.clip(leg, 0, len(self._leg_knot) - 1)
         d = self._leg_dir[leg]
-        return np.arctan2(d[:, 1], d[:, 0])
+        return libm.arctan2(d[:, 1], d[:, 0])
 
     def standing(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(seconds since the walker last stopped, seconds until it moves again) at times `t`; both inf while

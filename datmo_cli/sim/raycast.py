@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from datmo_cli import libm
+
 
 @dataclass
 class Primitives:
@@ -28,7 +30,7 @@ class Primitives:
 
 def rectangle_segments(centre: np.ndarray, length: float, width: float, heading: np.ndarray) -> np.ndarray:
     """The four sides (..., 4, 4) of rectangles centred at `centre` (..., 2) with `length` along `heading`."""
-    c, s = np.cos(heading), np.sin(heading)
+    c, s = libm.cos(heading), libm.sin(heading)
     ax = np.stack([c, s], -1) * (length / 2)
     ay = np.stack([-s, c], -1) * (width / 2)
     corners = np.stack([centre + ax + ay, centre - ax + ay, centre - ax - ay, centre + ax - ay], -2)

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from datmo_cli import libm
+
 from ..bounds import OPTIONS, check
 from ..errors import ConfigError
 from ..log import cdr, types
@@ -309,8 +311,8 @@ def _hits(
     if world.corner_walls:
         beam = poses[:, 2:3] + angles[None, :]
         with np.errstate(invalid="ignore"):
-            hx = poses[:, 0:1] + dist * np.cos(beam)
-            hy = poses[:, 1:2] + dist * np.sin(beam)
+            hx = poses[:, 0:1] + dist * libm.cos(beam)
+            hy = poses[:, 1:2] + dist * libm.sin(beam)
         for k, s1, s2 in world.corner_walls:
             cx, cy = world.objects[k].world_xy
             near = valid & ((owner == s1) | (owner == s2)) & (np.hypot(hx - cx, hy - cy) < CORNER_RADIUS)
@@ -332,7 +334,7 @@ def _truth(
     length = np.tile(np.array([o.length for o in info]), (nb, 1))
     width = np.tile(np.array([o.width for o in info]), (nb, 1))
     gt["left_leg_x"] = gt["left_leg_y"] = gt["right_leg_x"] = gt["right_leg_y"] = np.nan
-    c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+    c, s = libm.cos(poses[:, 2])[:, None], libm.sin(poses[:, 2])[:, None]
 
     def to_sensor(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         rx, ry = xy[..., 0] - poses[:, 0:1], xy[..., 1] - poses[:, 1:2]
@@ -362,7 +364,7 @@ def _truth(
     omega = world.sensor.yaw_rate(t)[:, None]
     gt["vx"] = c * rel[..., 0] + s * rel[..., 1] + omega * ys
     gt["vy"] = -s * rel[..., 0] + c * rel[..., 1] - omega * xs
-    gt["orientation"] = np.arctan2(np.sin(orient), np.cos(orient))
+    gt["orientation"] = libm.arctan2(libm.sin(orient), libm.cos(orient))
     gt["length"], gt["width"] = length, width
     gt["moving"] = np.hypot(wvel[..., 0], wvel[..., 1]) > MOVING_SPEED
     return gt

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from datmo_cli import libm
+
 from .paths import Timeline
 
 
@@ -34,7 +36,7 @@ class Gait:
     @property
     def step_length(self) -> float:
         """s = 2 l sin(theta), unless given directly."""
-        return self.step if self.step is not None else 2.0 * self.leg_length * np.sin(self.swing_angle)
+        return self.step if self.step is not None else 2.0 * self.leg_length * libm.sin(self.swing_angle)
 
 
 def footprints(timeline: Timeline, gait: Gait, index: np.ndarray) -> np.ndarray:
@@ -59,7 +61,7 @@ def legs(timeline: Timeline, gait: Gait, t: np.ndarray) -> tuple[np.ndarray, np.
     landing = footprints(timeline, gait, k + 1)
     ds = gait.double_support
     x = np.clip((phase - ds) / (1.0 - ds), 0.0, 1.0)
-    g = 0.5 - 0.5 * np.cos(np.pi * x)  # the swing foot starts and stops gently
+    g = 0.5 - 0.5 * libm.cos(np.pi * x)  # the swing foot starts and stops gently
     swing = lifted + g[:, None] * (landing - lifted)
     left_stance = (k % 2 == 0)[:, None]
     left, right = np.where(left_stance, stance, swing), np.where(left_stance, swing, stance)
@@ -70,7 +72,7 @@ def legs(timeline: Timeline, gait: Gait, t: np.ndarray) -> tuple[np.ndarray, np.
     beta = beta[:, None]
     if np.any(beta > 0):
         body, heading = timeline.position(t), timeline.heading(t)
-        normal = np.stack([-np.sin(heading), np.cos(heading)], 1) * (gait.shoulder_width / 2)
+        normal = np.stack([-libm.sin(heading), libm.cos(heading)], 1) * (gait.shoulder_width / 2)
         left = (1 - beta) * left + beta * (body + normal)
         right = (1 - beta) * right + beta * (body - normal)
     return left, right

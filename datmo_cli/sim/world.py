@@ -8,6 +8,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from datmo_cli import libm
+
 from ..log.vocabulary import (
     CLASS_BENCH,
     CLASS_CIRCLE_OBJECT,
@@ -72,11 +74,11 @@ class Walker:
         xy, vel, heading = self.body(t)
         g = self.gait
         if self.timeline is None:
-            normal = np.stack([-np.sin(heading), np.cos(heading)], 1) * (g.shoulder_width / 2)
+            normal = np.stack([-libm.sin(heading), libm.cos(heading)], 1) * (g.shoulder_width / 2)
             left, right = xy + normal, xy - normal
         else:
             left, right = legs(self.timeline, g, t)
-        h = np.stack([np.cos(heading), np.sin(heading)], 1)
+        h = np.stack([libm.cos(heading), libm.sin(heading)], 1)
         along = np.abs(np.sum((left - right) * h, 1))
         across = np.abs(np.sum((left - right) * h[:, ::-1] * [-1, 1], 1))
         r = np.full((len(t), 1), g.leg_radius)
@@ -124,7 +126,7 @@ class Towed:
         self.tt = np.arange(0.0, t_end + 2 * TOW_DT, TOW_DT)
         lead, _, heading = leader.body(self.tt)
         if start is None:
-            start = lead[0] - wire * np.array([np.cos(heading[0]), np.sin(heading[0])])
+            start = lead[0] - wire * np.array([libm.cos(heading[0]), libm.sin(heading[0])])
         self.track = tow(np.ascontiguousarray(lead), np.asarray(start, np.float64), float(wire))
         self.vel = np.gradient(self.track, TOW_DT, axis=0)
         self.lead = lead
@@ -135,7 +137,7 @@ class Towed:
             return np.stack([np.interp(t, self.tt, a[:, 0]), np.interp(t, self.tt, a[:, 1])], 1)
 
         xy, vel, lead = at(self.track), at(self.vel), at(self.lead)
-        heading = np.arctan2(lead[:, 1] - xy[:, 1], lead[:, 0] - xy[:, 0])  # along the wire
+        heading = libm.arctan2(lead[:, 1] - xy[:, 1], lead[:, 0] - xy[:, 0])  # along the wire
         d = np.full(len(t), 2 * self.radius)
         circles = np.hstack([xy, np.full((len(t), 1), self.radius)])[:, None, :]
         return MoverState(xy, vel, heading, d, d, circles=circles)
@@ -155,7 +157,7 @@ class SensorTrack:
         if path is not None:
             pts = np.asarray(path.points, np.float64)
             d = np.diff(np.vstack([pts, pts[:1]]) if path.loop else pts, axis=0)
-            heading = np.arctan2(d[:, 1], d[:, 0])
+            heading = libm.arctan2(d[:, 1], d[:, 0])
             pauses = dict(path.pauses)
             for i in range(len(pts)) if path.loop else range(1, len(pts) - 1):
                 turn = abs(float(_wrap(heading[i] - heading[i - 1])))
@@ -223,7 +225,7 @@ class FollowTrack:
             r[i] = r[i - 1] + v * FOLLOW_DT
         self.xy, _ = tl.point_at(r)
         lead = tl.position(self.tt)
-        self.heading = np.unwrap(np.arctan2(lead[:, 1] - self.xy[:, 1], lead[:, 0] - self.xy[:, 0]))
+        self.heading = np.unwrap(libm.arctan2(lead[:, 1] - self.xy[:, 1], lead[:, 0] - self.xy[:, 0]))
         self.vel = np.gradient(self.xy, FOLLOW_DT, axis=0)
         self.omega = np.gradient(self.heading, FOLLOW_DT)
 
@@ -259,7 +261,7 @@ class MountedTrack:
 
     def _offset(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         p = self.base.poses(t)
-        c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+        c, s = libm.cos(p[:, 2]), libm.sin(p[:, 2])
         mx, my = self.mount[0], self.mount[1]
         return p, np.stack([c * mx - s * my, s * mx + c * my], 1)
 
@@ -429,7 +431,7 @@ class World:
         for i, b in enumerate(scene.benches, 1):
             a, c = b.supports
             span = float(np.hypot(*(c - a)))
-            heading = float(np.arctan2(*(c - a)[::-1]))
+            heading = float(libm.arctan2(*(c - a)[::-1]))
             k = self._add(
                 CLASS_BENCH,
                 f"bench{i}",
@@ -459,7 +461,9 @@ class World:
                 d1, d2 = p0 - v, p2 - v
                 if np.pi - _angle_between(d1, d2) > CORNER_MIN_TURN:
                     bis = d1 / np.hypot(*d1) + d2 / np.hypot(*d2)
-                    k = self._add(CLASS_WALL_CORNER, f"corner{len(corners) + 1}", v, float(np.arctan2(bis[1], bis[0])))
+                    k = self._add(
+                        CLASS_WALL_CORNER, f"corner{len(corners) + 1}", v, float(libm.arctan2(bis[1], bis[0]))
+                    )
                     corners.append((k, wi, a, b))
         seg_index = {}
         for wi, ws in enumerate(wall_segments):
@@ -469,7 +473,7 @@ class World:
                     CLASS_WALL,
                     f"wall{wi + 1}.{j + 1}",
                     (p + q) / 2,
-                    float(np.arctan2(d[1], d[0])),
+                    float(libm.arctan2(d[1], d[0])),
                     float(np.hypot(*d)),
                     0.0,
                 )
@@ -487,4 +491,5 @@ class World:
 
 
 def _angle_between(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.arccos(np.clip(np.dot(a, b) / (np.hypot(*a) * np.hypot(*b)), -1.0, 1.0)))
+    dot = a[0] * b[0] + a[1] * b[1]  # not np.dot: BLAS picks its code (FMA or not) by the CPU
+    return float(libm.arccos(np.clip(dot / (np.hypot(*a) * np.hypot(*b)), -1.0, 1.0)))

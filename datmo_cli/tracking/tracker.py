@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from datmo_cli import libm
+
 from ..log import cdr, types
 from ..log.scan import ScanGeometry
 from . import state
@@ -148,7 +150,7 @@ class Tracker:
         p = self.params
         if geometry is not None:
             angles = geometry.angle_min + geometry.angle_increment * np.arange(geometry.n_beams)
-            self._cos, self._sin = np.cos(angles), np.sin(angles)
+            self._cos, self._sin = libm.cos(angles), libm.sin(angles)
             self._geo = np.array(
                 [geometry.angle_min, geometry.angle_increment, geometry.range_max, 1.0, geometry.range_min], np.float64
             )

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
+from datmo_cli import libm
 
 from ...errors import InputError
 from ..scan import ScanGeometry, geometry_problem, stamp_problem
@@ -116,7 +116,7 @@ def choose_topic(
 
 def yaw_of(qx, qy, qz, qw):
     """Yaw (radians) of a quaternion."""
-    return np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    return libm.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
 
 
 def header_stamp(header, log_time: int) -> int:
