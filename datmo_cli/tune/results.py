@@ -213,7 +213,10 @@ def draw(result: TuneResult, path: Path) -> Path:
         ax.grid(alpha=0.3)
     ax = axes[0][-1]
     _per_log(ax, result)
-    fig.suptitle(f"datmo tune: {goal.objective} of {len(result.trials)} trials (blue: whole logs; ringed: best)")
+    fig.suptitle(
+        f"datmo tune: {goal.objective} of {len(result.trials)} trials "
+        "(blue: on the whole logs, grey: on a prefix only; ringed: the best)"
+    )
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
@@ -235,5 +238,6 @@ def _per_log(ax, result: TuneResult) -> None:
         ax.bar(np.arange(len(logs)) + i * width, [v if v is not None else 0.0 for v in values], width, label=m)
     ax.set_xticks(np.arange(len(logs)) + 0.4 - width / 2, logs, rotation=20, ha="right")
     ax.set_title(f"trial {result.best.index} per log", fontsize="medium")
-    ax.legend(fontsize="small")
+    ax.set_ylim(min(0.0, ax.get_ylim()[0]), 1.15)
+    ax.legend(fontsize="small", loc="upper right", ncol=len(figures))
     ax.grid(axis="y", alpha=0.3)

@@ -104,7 +104,7 @@ def _dimension(path: str, section: str, key: str, spec: object) -> Dimension:
         if not isinstance(log, bool):
             raise ConfigError(f"{name}: log must be true or false, got {log!r}")
         if "choices" in spec:
-            return Dimension(full, choices=_choices(name, meta, spec["choices"]))
+            return Dimension(full, choices=_choices(name, meta, spec["choices"], full))
         spec = spec["range"]
         if not (isinstance(spec, list) and len(spec) == 2):
             raise ConfigError(f"{name}: a range is two numbers [LOW, HIGH], got {spec!r}")
@@ -112,7 +112,7 @@ def _dimension(path: str, section: str, key: str, spec: object) -> Dimension:
         raise ConfigError(f"{name}: give a range [LOW, HIGH] or a list of choices, got {spec!r}")
     bound = meta["bound"]
     if bound is None or len(spec) != 2 or any(isinstance(v, str) for v in spec):
-        return Dimension(full, choices=_choices(name, meta, spec))
+        return Dimension(full, choices=_choices(name, meta, spec, full))
     lo, hi = (check(bound, v, name) for v in spec)
     if not lo < hi:
         raise ConfigError(f"{name}: a range's low end must be below its high end, got [{lo:g}, {hi:g}]")
@@ -121,8 +121,9 @@ def _dimension(path: str, section: str, key: str, spec: object) -> Dimension:
     return Dimension(full, lo, hi, integer=bound.integer, log=log)
 
 
-def _choices(name: str, meta, values: object) -> tuple:
-    """The choices of a dimension, each a value the parameter takes (messages as bounds.validate's)."""
+def _choices(name: str, meta, values: object, key: str) -> tuple:
+    """The choices of dimension `key`, each a value the parameter takes (messages as bounds.validate's; a leg
+    model must load, as datmo run checks before any input)."""
     if not isinstance(values, list) or not values:
         raise ConfigError(f"{name}: an empty list of choices; give at least one value")
     out: list[object] = []
@@ -139,6 +140,15 @@ def _choices(name: str, meta, values: object) -> tuple:
             out.append(v)
     if len(set(out)) != len(out):
         raise ConfigError(f"{name}: a choice is given twice in {values!r}")
+    if key == "features.leg_model":
+        from ..errors import DatmoError
+        from ..perception.leg_model import load_leg_model
+
+        for v in out:
+            try:
+                load_leg_model(str(v))
+            except DatmoError as exc:
+                raise ConfigError(f"{name}: {exc}") from None
     return tuple(out)
 
 
