@@ -2,7 +2,8 @@
 ground truth, the objective and constraints, the extras the outputs need), then the search on local processes
 or a Dask cluster, the leave-one-log-out folds with --cv, and the outputs (results.write_outputs).
 
-DIR/tune.json records what the tune is (logs, space, objective, constraints, trials, seed, start); running
+DIR/tune.json records what the tune is (logs, space, objective, constraints, trials, seed, start; not --cv,
+which adds folds to the same tune); running
 the same tune again in DIR continues it (or, finished, re-prints its result at no cost); a different tune in a
 DIR that holds one needs --force (its outputs would be replaced).
 """
@@ -71,7 +72,7 @@ def _check_logs(logs: list[str | Path]) -> list[LogInput]:
     return out
 
 
-def _spec(logs, dims, goal, trials, seed, base, cv) -> dict:
+def _spec(logs, dims, goal, trials, seed, base) -> dict:
     from ..batch.task import params_hash
 
     return {
@@ -82,7 +83,6 @@ def _spec(logs, dims, goal, trials, seed, base, cv) -> dict:
         "trials": trials,
         "seed": seed,
         "start": params_hash(base),
-        "cv": cv,
     }
 
 
@@ -151,7 +151,7 @@ def run_tune(
         require("matplotlib", for_="--plot")
     base = config if config is not None else DatmoConfig()
     out = Path(out_dir).resolve()
-    spec = _spec(inputs, dims, goal, trials, seed, base, cv)
+    spec = _spec(inputs, dims, goal, trials, seed, base)
     _check_folder(out, spec, force)
     from ..batch.folder import folder_lock
 
