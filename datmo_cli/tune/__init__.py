@@ -10,10 +10,12 @@ DIR/manifest.jsonl, so a tune resumes, and the same seed gives the same trials a
 (tune.results): DIR/trials.parquet, DIR/best.toml, DIR/tune.png; with --cv, leave-one-log-out folds.
 
 The modules: space, objective, trial (one evaluation: a batch task; the logs' prefixes), search (settings,
-rungs, the evaluations and their ledger, halving), results (outputs and the table), runner (run_tune).
+rungs, the evaluations and their ledger, halving), outcome (TuneResult), results (outputs and the table),
+runner (run_tune).
 """
 
-from .runner import Fold, TuneResult, run_tune
+from .outcome import Fold, TuneResult
+from .runner import run_tune
 from .search import TuneInterrupted
 
 __all__ = ["Fold", "TuneInterrupted", "TuneResult", "run_tune"]

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from .objective import SHOWN
 
 if TYPE_CHECKING:
-    from .runner import TuneResult
+    from .outcome import TuneResult
     from .search import Score
 
 TRIALS, BEST, PLOT = "trials.parquet", "best.toml", "tune.png"

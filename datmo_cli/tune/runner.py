@@ -12,52 +12,20 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import ConfigError, DatmoError
 from .objective import Constraint, check_name, higher_is_better, parse_constraint
-from .search import Evaluations, Goal, Score, Trial, halving, rungs, settings
-from .space import Dimension, load_space
+from .outcome import Fold, TuneResult
+from .search import Evaluations, Goal, halving, rungs, settings
+from .space import load_space
 from .trial import LogInput, log_input
 
 if TYPE_CHECKING:
     from ..batch.executors import Executor
 
 SPEC = "tune.json"
-
-
-@dataclass
-class Fold:
-    """One fold of --cv: the log held out, the best trial of the tune on the others, its objective there (the
-    tuned figure) and on the held-out log."""
-
-    held_out: str
-    best: int
-    tuned: float | None
-    held_out_value: float | None
-
-
-@dataclass
-class TuneResult:
-    """What a tune found: its trials (each with its score at its last rung: on the whole logs for those that
-    reached it), the best, the start's score on the whole logs, the folds of --cv, and where the outputs are."""
-
-    out_dir: Path
-    goal: Goal
-    dims: list[Dimension]
-    logs: list[LogInput]
-    trials: list[Trial]
-    scores: dict[int, Score]  # trial index -> its score at its last rung
-    fractions: list[float]
-    best: Trial
-    best_score: Score
-    start_score: Score
-    folds: list[Fold] = field(default_factory=list)
-    ran: int = 0
-    reused: int = 0
-    outputs: list[Path] = field(default_factory=list)
 
 
 def _check_logs(logs: list[str | Path]) -> list[LogInput]:
