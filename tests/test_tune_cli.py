@@ -53,3 +53,13 @@ def test_a_finished_tune_prints_its_result_again_without_running(tmp_path):
     assert (tmp_path / "out" / "best.toml").is_file() and (tmp_path / "out" / "trials.parquet").is_file()
     other = CliRunner().invoke(cli, [*args[:-1], "3"])  # another tune in the same folder
     assert other.exit_code != 0 and "holds another tune" in other.output and "--force" in other.output
+
+
+def test_a_folder_of_datmo_run_is_refused(tmp_path):
+    (tmp_path / "space.toml").write_text(GOOD)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "manifest.jsonl").write_text("")
+    r = CliRunner().invoke(cli, ["tune", HALL, "--space", str(tmp_path / "space.toml"), "-o", str(out), "--force"])
+    assert r.exit_code != 0 and "holds a datmo run batch" in r.output and len(r.output.strip().splitlines()) == 1
+    assert sorted(p.name for p in out.iterdir()) == ["manifest.jsonl"]

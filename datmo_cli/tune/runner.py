@@ -57,6 +57,12 @@ def _spec(logs, dims, goal, trials, seed, base) -> dict:
 def _check_folder(out_dir: Path, spec: dict, force: bool) -> None:
     """Refuse a DIR holding another tune (without --force): its outputs would be replaced."""
     path = out_dir / SPEC
+    from ..batch.manifest import MANIFEST
+
+    if (out_dir / MANIFEST).exists() and not path.is_file():
+        raise DatmoError(
+            f"{out_dir}: holds a datmo run batch ({MANIFEST} without {SPEC}); give datmo tune a folder of its own"
+        )
     if force or not path.is_file():
         return
     try:
@@ -175,6 +181,9 @@ def _search(inputs, dims, goal, base, trials, seed, cv, out, executor, force, mi
 
     evals = Evaluations(out, executor, force=force, progress=said("evaluations"))
     ranked = halving(every, inputs, fractions, evals, goal, mark=True)
+    if not ranked or ranked[0][1].error is not None:
+        why = ranked[0][1].error if ranked else next((t.refused for t in every if t.refused), "no trial")
+        raise DatmoError(f"no trial was scored: {why}")
     best, best_score = ranked[0]
     scores = {t.index: evals.score(t, inputs, fractions[max(t.rung, 0)], goal) for t in every}
     start_score = scores[0]

@@ -123,6 +123,14 @@ class Evaluations:
                     self.records[key] = rec
         self.reused = 0
         self.ran = 0
+        self._prefixes: dict[tuple[str, int], tuple[str, str | None, float]] = {}
+
+    def prefix(self, log: LogInput, scans: int) -> tuple[str, str | None, float]:
+        """trial.prefix_log of `log`'s first `scans` scans, made (or found) once per tune."""
+        key = (log.sha256, scans)
+        if key not in self._prefixes:
+            self._prefixes[key] = prefix_log(log, scans, self.out_dir / WORK)
+        return self._prefixes[key]
 
     @staticmethod
     def key(trial: Trial, log: LogInput, scans: int) -> str:
@@ -142,7 +150,7 @@ class Evaluations:
             if key in self.records:
                 self.reused += 1
                 continue
-            path, gt_csv, seconds = prefix_log(log, scans, work)
+            path, gt_csv, seconds = self.prefix(log, scans)
             todo[key] = EvalTask(
                 index=len(todo),
                 input=key,
