@@ -202,3 +202,35 @@ def test_a_detuned_start_is_brought_back_to_the_defaults_mota(tmp_path):
     result = run_tune([HALL], path, tmp_path / "out", config=start, objective="mota", trials=8, jobs=2)
     assert result.start_score.value < default_mota - 0.01  # the start is detuned
     assert result.best_score.value >= default_mota
+
+
+@pytest.mark.slow
+def test_a_log_with_its_ground_truth_in_a_csv_beside_it_is_tuned_as_evaluate_gt_scores_it(tmp_path):
+    from click.testing import CliRunner
+
+    from datmo_cli.cli import cli
+    from datmo_cli.evaluate.files import score_file
+    from datmo_cli.log import mcapio
+
+    contents = mcapio.read_log(HALL, topics=None)
+    log = tmp_path / "hall.mcap"  # the hall without its ground-truth channel
+    with mcapio.LogWriter(log) as w:
+        for ch in contents.channels.values():
+            if ch.topic != mcapio.TOPIC_GROUND_TRUTH:
+                w.channel(ch.topic, ch.msgtype, schema_text=ch.schema_data.decode(), metadata=ch.metadata)
+                w.write_many(ch.topic, ch.msgtype, *contents.messages[ch.topic])
+    r = CliRunner().invoke(cli, ["export", str(HALL), "--ground-truth", "-o", str(tmp_path / "hall.gt.csv")])
+    assert r.exit_code == 0, r.output
+    assert log_input(log).gt_csv == str(tmp_path / "hall.gt.csv")
+    path = space(tmp_path, "[track]\nperson_maintain = [0.05, 0.3]\n")
+    result = run_tune([log], path, tmp_path / "out", objective="mota", trials=3, jobs=1)
+    assert result.fractions == [1 / 3, 1.0] and result.best_score.error is None
+    whole = result.best_score.per_log["hall.mcap"]["num_objects"]
+    prefix = [result.scores[t.index].per_log["hall.mcap"]["num_objects"] for t in result.trials if t.rung == 0]
+    assert prefix and all(abs(n - whole / 3) < 0.05 * whole for n in prefix)  # the CSV cut with the scans
+    process_out = tmp_path / "check.mcap"
+    from datmo_cli.pipeline import process_file
+
+    process_file(log, process_out, config=result.best.config)
+    mota = score_file(process_out, gt_csv=tmp_path / "hall.gt.csv")["scores"]["all"]["mota"]
+    assert abs(mota - result.best_score.value) <= 1e-9
