@@ -45,12 +45,13 @@ def test_a_finished_tune_prints_its_result_again_without_running(tmp_path):
     args = ["tune", HALL, "--space", str(tmp_path / "space.toml"), "-o", str(tmp_path / "out"), "--trials", "2"]
     first = CliRunner().invoke(cli, [*args, "-j", "1"])
     assert first.exit_code == 0, first.output
-    again = CliRunner().invoke(cli, [*args, "-j", "1"])
+    again = CliRunner().invoke(cli, [*args, "-j", "1", "--plot"])
     assert again.exit_code == 0, again.output
     best = [line for line in first.output.splitlines() if line.startswith("best: trial")]
     assert best and best[0] in again.output
     assert "0 evaluations run, 2 reused" in again.output
     assert (tmp_path / "out" / "best.toml").is_file() and (tmp_path / "out" / "trials.parquet").is_file()
+    assert (tmp_path / "out" / "tune.png").read_bytes().startswith(b"\x89PNG")
     other = CliRunner().invoke(cli, [*args[:-1], "3"])  # another tune in the same folder
     assert other.exit_code != 0 and "holds another tune" in other.output and "--force" in other.output
 
