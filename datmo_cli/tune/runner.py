@@ -176,10 +176,7 @@ def _search(inputs, dims, goal, base, trials, seed, cv, out, executor, force, mi
     every = settings(base, dims, trials, seed)
     fractions = rungs(trials, inputs, MIN_PREFIX_S if min_prefix_s is None else min_prefix_s)
 
-    def said(what: str) -> Callable[[int, int], None] | None:
-        return (lambda done, total: progress(done, total, what)) if progress else None
-
-    evals = Evaluations(out, executor, force=force, progress=said("evaluations"))
+    evals = Evaluations(out, executor, force=force, progress=progress)
     ranked = halving(every, inputs, fractions, evals, goal, mark=True)
     if not ranked or ranked[0][1].error is not None:
         why = ranked[0][1].error if ranked else next((t.refused for t in every if t.refused), "no trial")
@@ -191,7 +188,9 @@ def _search(inputs, dims, goal, base, trials, seed, cv, out, executor, force, mi
     if cv:
         for held in inputs:
             train = [log for log in inputs if log is not held]
-            fold_best, fold_score = halving(every, train, fractions, evals, goal)[0]  # the tune's prefixes
+            fold_best, fold_score = halving(every, train, fractions, evals, goal, tag=f"without {held.name}: ")[
+                0
+            ]  # the tune's prefixes
             evals.need([(fold_best, held, held.scans)])
             on_held = evals.score(fold_best, [held], 1.0, goal)
             folds.append(Fold(held.name, fold_best.index, fold_score.value, on_held.value))

@@ -108,14 +108,17 @@ def rungs(trials: int, logs: list[LogInput], min_prefix_s: float = MIN_PREFIX_S)
 
 class Evaluations:
     """Every evaluation of the tune in DIR: those in the manifest (done with this datmo version; none with
-    `force`) and those run through `executor`, each run once; `progress(done, total)` counts the evaluations
+    `force`) and those run through `executor`, each run once; `progress(done, total, label)` counts the evaluations
     of the current call to `need`."""
 
-    def __init__(self, out_dir: Path, executor, *, force: bool, progress: Callable[[int, int], None] | None = None):
+    def __init__(
+        self, out_dir: Path, executor, *, force: bool, progress: Callable[[int, int, str], None] | None = None
+    ):
         self.out_dir = out_dir
         self.executor = executor
         self.manifest = Manifest(str(out_dir))
         self.progress = progress
+        self.label = "evaluations"  # what the current evaluations are (the rung), for progress
         self.records: dict[str, dict] = {}
         if not force:
             for key, rec in self.manifest.latest().items():
@@ -169,7 +172,7 @@ class Evaluations:
         work.mkdir(parents=True, exist_ok=True)
         done = [0]
         if self.progress:
-            self.progress(0, len(todo))
+            self.progress(0, len(todo), self.label)
 
         def finished(rec: dict) -> None:
             if rec["status"] not in (DONE, FAILED):
@@ -179,7 +182,7 @@ class Evaluations:
             self.ran += 1
             done[0] += 1
             if self.progress:
-                self.progress(done[0], len(todo))
+                self.progress(done[0], len(todo), self.label)
 
         try:
             self.executor.run(list(todo.values()), finished)
@@ -229,14 +232,24 @@ def rank_key(trial: Trial, score: Score, goal: Goal) -> tuple:
 
 
 def halving(
-    trials: list[Trial], logs: list[LogInput], fractions: list[float], evals: Evaluations, goal: Goal, *, mark=False
+    trials: list[Trial],
+    logs: list[LogInput],
+    fractions: list[float],
+    evals: Evaluations,
+    goal: Goal,
+    *,
+    mark: bool = False,
+    tag: str = "",
 ) -> list[tuple[Trial, Score]]:
     """Successive halving of `trials` on `logs`: every trial at the first fraction, then the best ceil(n / ETA**r)
     at rung r (trial 0, the start, always goes on: it is the reference). Returns the trials of the last rung with
-    their scores on the whole logs, best first. `mark`: record each trial's last rung (the tune on all logs)."""
+    their scores on the whole logs, best first. `mark`: record each trial's last rung (the tune on all logs);
+    `tag`: what the progress calls this search (a --cv fold)."""
     alive = [t for t in trials if t.config is not None]
     ranked: list[tuple[Trial, Score]] = []
     for r, fraction in enumerate(fractions):
+        share = "the whole logs" if fraction >= 1 else f"the first 1/{round(1 / fraction)} of each log"
+        evals.label = f"{tag}{len(alive)} trials on {share} (rung {r + 1} of {len(fractions)})"
         evals.need([(t, log, prefix_scans(log, fraction)) for t in alive for log in logs])
         if mark:
             for t in alive:
