@@ -234,3 +234,38 @@ def test_a_log_with_its_ground_truth_in_a_csv_beside_it_is_tuned_as_evaluate_gt_
     process_file(log, process_out, config=result.best.config)
     mota = score_file(process_out, gt_csv=tmp_path / "hall.gt.csv")["scores"]["all"]["mota"]
     assert abs(mota - result.best_score.value) <= 1e-9
+
+
+def test_a_trial_missing_a_constraint_ranks_after_those_meeting_it():
+    from datmo_cli.tune.search import Goal, Score, Trial, rank_key
+
+    goal = Goal("mota", True, (parse_constraint("false_people_s=1", True),))
+    trials = [Trial(i, {}, DatmoConfig()) for i in range(4)]
+    scores = [
+        Score(0.95, {"false_people_s": 2.0}, False),  # the highest MOTA, too many false people
+        Score(0.80, {"false_people_s": 0.5}, True),
+        Score(0.85, {"false_people_s": 0.9}, True),
+        Score(error="refused"),
+    ]
+    order = sorted(range(4), key=lambda i: rank_key(trials[i], scores[i], goal))
+    assert order == [2, 1, 0, 3]
+    lower = Goal("motp", False)
+    assert rank_key(trials[0], Score(0.1, feasible=True), lower) < rank_key(trials[1], Score(0.2, feasible=True), lower)
+
+
+@pytest.mark.slow
+def test_cv_scores_each_folds_best_on_the_log_left_out(tmp_path):
+    corridor = ROOT / "sample_logs" / "corridor.mcap"
+    result = run_tune([HALL, corridor], space(tmp_path, SPACE), tmp_path / "out", trials=3, jobs=2, cv=True)
+    assert [f.held_out for f in result.folds] == ["hall.mcap", "corridor.mcap"]
+    from datmo_cli.evaluate.files import score_file
+    from datmo_cli.pipeline import process_file
+
+    fold = result.folds[0]  # tuned on the corridor alone, scored on the hall
+    best = next(t for t in result.trials if t.index == fold.best)
+    process_file(HALL, tmp_path / "held.mcap", config=best.config)
+    held = score_file(tmp_path / "held.mcap")["scores"]["all"]["hota"]
+    assert fold.held_out_value is not None and abs(held - fold.held_out_value) <= 1e-9
+    assert fold.tuned is not None
+    best_toml = (tmp_path / "out" / "best.toml").read_text()
+    assert best_toml.count("# cv: tuned without") == 2
