@@ -124,7 +124,8 @@ class Evaluations:
             for key, rec in self.manifest.latest().items():
                 if rec["status"] == DONE and rec.get("datmo_version") == __version__ and "metrics" in rec:
                     self.records[key] = rec
-        self.reused = 0
+        self._loaded = set(self.records)  # done before this run
+        self._reused: set[str] = set()
         self.ran = 0
         self._prefixes: dict[tuple[str, int], tuple[str, str | None, float]] = {}
 
@@ -134,6 +135,11 @@ class Evaluations:
         if key not in self._prefixes:
             self._prefixes[key] = prefix_log(log, scans, self.out_dir / WORK)
         return self._prefixes[key]
+
+    @property
+    def reused(self) -> int:
+        """Evaluations found done in the manifest (by an earlier run) and used by this one."""
+        return len(self._reused)
 
     @staticmethod
     def key(trial: Trial, log: LogInput, scans: int) -> str:
@@ -151,7 +157,8 @@ class Evaluations:
             if trial.config is None or key in todo:
                 continue
             if key in self.records:
-                self.reused += 1
+                if key in self._loaded:
+                    self._reused.add(key)
                 continue
             path, gt_csv, seconds = self.prefix(log, scans)
             todo[key] = EvalTask(
