@@ -56,7 +56,7 @@ def rows(result: TuneResult) -> dict[str, list]:
             "status": "refused" if t.config is None else "failed" if s.error else "scored",
             "error": s.error,
             "rung": t.rung,
-            "log_fraction": result.fractions[max(t.rung, 0)],
+            "log_fraction": result.fractions[t.rung] if t.rung >= 0 else None,
             result.goal.objective: s.value,
             "seconds": round(s.seconds, 3),
             **t.values,
