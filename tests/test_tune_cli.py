@@ -64,3 +64,35 @@ def test_a_folder_of_datmo_run_is_refused(tmp_path):
     r = CliRunner().invoke(cli, ["tune", HALL, "--space", str(tmp_path / "space.toml"), "-o", str(out), "--force"])
     assert r.exit_code != 0 and "holds a datmo run batch" in r.output and len(r.output.strip().splitlines()) == 1
     assert sorted(p.name for p in out.iterdir()) == ["manifest.jsonl"]
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_a_tune_that_the_same_command_then_continues(tmp_path):
+    import json
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    (tmp_path / "space.toml").write_text(GOOD)
+    out = tmp_path / "out"
+    args = [sys.executable, "-m", "datmo_cli", "tune", HALL, "--space", str(tmp_path / "space.toml"), "-o", str(out)]
+    args += ["--trials", "4", "-j", "2"]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    manifest = out / "manifest.jsonl"
+    deadline = time.monotonic() + 300
+    while not (manifest.exists() and manifest.read_text().count("\n") >= 2) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGINT)
+    output, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 130, output
+    assert output.strip().splitlines()[-1].startswith("datmo: error: interrupted: ")
+    kept = {json.loads(line)["input"] for line in manifest.read_text().splitlines()}
+    import re
+
+    left = [p.name for p in (out / ".work").iterdir()]  # the prefix of the hall only: no evaluation's output
+    assert all(re.fullmatch(r"hall-[0-9a-f]{12}-\d+\.mcap", name) for name in left), left
+    again = subprocess.run(args, capture_output=True, text=True, timeout=600, env=os.environ)
+    assert again.returncode == 0, again.stderr
+    assert f"{len(kept)} reused" in again.stderr
