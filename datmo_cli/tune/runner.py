@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 from ..errors import ConfigError, DatmoError
 from .objective import Constraint, check_name, higher_is_better, parse_constraint
 from .outcome import Fold, TuneResult
-from .search import Evaluations, Goal, halving, rungs, settings
+from .search import Evaluations, Goal, TuneInterrupted, halving, rungs, settings
 from .space import load_space
 from .trial import LogInput, log_input
 
@@ -137,6 +137,11 @@ def run_tune(
         executor = _Executor(jobs, scheduler, retries)
         try:
             result = _search(inputs, dims, goal, base, trials, seed, cv, out, executor, force, min_prefix_s, progress)
+        except KeyboardInterrupt:  # between two rungs' evaluations (during them: Evaluations says how many)
+            raise TuneInterrupted(
+                f"interrupted: the evaluations done are in {out / 'manifest.jsonl'}; run the same command again "
+                "to continue"
+            ) from None
         finally:
             executor.close()
         from .results import write_outputs
