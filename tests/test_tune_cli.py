@@ -78,14 +78,18 @@ def test_ctrl_c_stops_a_tune_that_the_same_command_then_continues(tmp_path):
     (tmp_path / "space.toml").write_text(GOOD)
     out = tmp_path / "out"
     args = [sys.executable, "-m", "datmo_cli", "tune", HALL, "--space", str(tmp_path / "space.toml"), "-o", str(out)]
-    args += ["--trials", "4", "-j", "2"]
+    args += ["--trials", "4", "-j", "1"]  # in this process: a --jobs pool's Ctrl-C is batch/'s (tests/test_batch.py)
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     manifest = out / "manifest.jsonl"
     deadline = time.monotonic() + 300
     while not (manifest.exists() and manifest.read_text().count("\n") >= 2) and time.monotonic() < deadline:
         time.sleep(0.1)
     proc.send_signal(signal.SIGINT)
-    output, _ = proc.communicate(timeout=120)
+    try:
+        output, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
     assert proc.returncode == 130, output
     assert output.strip().splitlines()[-1].startswith("datmo: error: interrupted: "), output
     lines = [json.loads(line) for line in manifest.read_text().splitlines()]
