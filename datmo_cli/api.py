@@ -6,6 +6,7 @@ numpy arrays or pandas DataFrames, run the pipeline on a log, and feed scans one
                             .poses() (the scans and the scanner's poses, to feed a LiveTracker)
     process(src, out)       `datmo run` on one MCAP log (segmentation, features, tracking), written to `out`
     LiveTracker(...)        .update(ranges, stamp_ns, pose=None): one scan in, the tracks after it out
+    tune(logs, space, dir)  `datmo tune`: the setting of a space of parameters that scores best against ground truth
 
 The same code as the commands: `process` is pipeline.process_file (what `datmo run` runs per input), the tables
 are `datmo export`'s rows (export.track_batch and feature_batch; the tracks table has export.TRACK_COLUMNS),
@@ -38,7 +39,7 @@ if TYPE_CHECKING:
 
     Config: TypeAlias = DatmoConfig | str | os.PathLike | dict | None
 
-__all__ = ["FEATURE_COLUMNS", "TRACK_COLUMNS", "LiveTracker", "Log", "open_log", "process"]
+__all__ = ["FEATURE_COLUMNS", "TRACK_COLUMNS", "LiveTracker", "Log", "open_log", "process", "tune"]
 
 # The tables' columns (name -> type): the tracks table is the export's; the features table has the columns that
 # describe features (the export's feature rows without the track-only columns, which are null there).
@@ -195,6 +196,48 @@ def process(
         command_line=f"datmo_cli.api.process({os.fsdecode(src)!r}, {os.fsdecode(out)!r})",
     )
     return Log(out)
+
+
+def tune(
+    logs: list[str | os.PathLike],
+    space: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    config: Config = None,
+    objective: str = "hota",
+    maxima: tuple[str, ...] = (),
+    minima: tuple[str, ...] = (),
+    trials: int = 24,
+    seed: int = 0,
+    cv: bool = False,
+    jobs: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    plot: bool = False,
+):
+    """`datmo tune` (docs/tune.md): search the parameters of the TOML file `space` on `logs` (logs with ground
+    truth) from `config` (as for `process`; trial 0), into `out_dir` (trials.parquet, best.toml, manifest.jsonl).
+    `objective`: a figure `datmo evaluate` prints, averaged over the logs; `maxima`/`minima`: constraints
+    "NAME=VALUE". Returns a tune.TuneResult: `.best` (the trial: `.index`, `.values`, `.config`), `.best_score`
+    (`.value`, `.per_log`), `.start_score`, `.trials`, `.folds` (with `cv`)."""
+    from .tune import run_tune
+
+    return run_tune(
+        [os.fsdecode(p) for p in logs],
+        space,
+        out_dir,
+        config=_config(config),
+        objective=objective,
+        maxima=maxima,
+        minima=minima,
+        trials=trials,
+        seed=seed,
+        cv=cv,
+        jobs=jobs,
+        scheduler=scheduler,
+        force=force,
+        plot=plot,
+    )
 
 
 class LiveTracker:

@@ -212,6 +212,7 @@ OPTIONS: dict[str, Bound] = {
     "threads": _b(1, 1024, "threads", integer=True),
     "jobs": _b(1, 1024, "processes", integer=True),
     "retries": _b(0, 100, "retries", integer=True),
+    "trials": _b(1, 100_000, "trials", "each trial scores every log at least once", integer=True),
     "top": _b(0, 10**9, "tracks", "0: all", integer=True),
     "match_radius": _b(0, 100, "m", NO_SENSE, open_=True),
     "min_mota": _b(-100, 1, "", "MOTA is at most 1"),

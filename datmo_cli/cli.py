@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "play": ("play", "Serve a log to Foxglove live (WebSocket), processing scans as they play."),
     "node": ("node", "Run live as a ROS 2 node over DDS: LaserScans in, tracks out (no ROS needed)."),
     "evaluate": ("evaluate", "Score tracks against ground truth (CLEAR-MOT, IDF1)."),
+    "tune": ("tune", "Find the parameters that score best against ground truth (search, successive halving)."),
     "train-legs": ("train_legs", "Train the learned leg detector on labelled scans; print held-out figures."),
     "config": ("config", "Print the effective configuration ([features], [track]) as TOML."),
 }

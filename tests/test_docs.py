@@ -27,7 +27,8 @@ def blocks(path: Path) -> list[tuple[str, str]]:
 
 
 def run_document(path: Path, folder: Path, monkeypatch) -> None:
-    """Every sh and python block of `path`, in order, in `folder` (sample_logs/ linked there)."""
+    """Every sh and python block of `path`, in order, in `folder` (sample_logs/ linked there); a toml block whose
+    first line is a comment naming a file (`# space.toml`) is written to that file, as the page asks."""
     (folder / "sample_logs").symlink_to(ROOT / "sample_logs")
     monkeypatch.chdir(folder)
     namespace: dict = {"__name__": f"docs.{path.stem}"}
@@ -42,12 +43,17 @@ def run_document(path: Path, folder: Path, monkeypatch) -> None:
                 assert result.exit_code == 0, f"{path.name}: {line}\n{result.output}"
         elif language == "python":
             exec(compile(text, f"{path.name} block", "exec"), namespace)
+        elif language == "toml" and (named := re.match(r"# ([\w.-]+\.toml)\n", text)):
+            (folder / named.group(1)).write_text(text, encoding="utf-8")
 
 
-IN_PROCESS = ["export.md", "python.md", "method.md", "lms2xx.md"]  # the pages whose examples run here
+IN_PROCESS = ["export.md", "python.md", "method.md", "lms2xx.md", "tune.md"]  # the pages whose examples run here
+SLOW_PAGES = {"tune.md"}  # a tune of 8 trials: under a minute on two cores
 
 
-@pytest.mark.parametrize("name", IN_PROCESS)
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW_PAGES else n for n in IN_PROCESS]
+)
 def test_the_examples_run_as_written(tmp_path, monkeypatch, name):
     run_document(DOCS / name, tmp_path, monkeypatch)
 

@@ -157,6 +157,8 @@ def run_task(
     A done line carries the output's report (report.RunSummary, gathered as the output is written) under
     SUMMARY_KEY, which the manifest does not keep.
     """
+    if hasattr(task, "run"):  # another kind of batch task (datmo tune's evaluations): it runs itself
+        return task.run(cancelled=cancelled, scans=scans, raise_unexpected=raise_unexpected)
     from .. import pipeline
     from ..report import RunAccumulator
 
