@@ -104,3 +104,38 @@ def test_cli_output_dir_must_be_a_folder(tmp_path, inputs):
     f.write_text("x")
     result = CliRunner().invoke(cli, ["run", str(inputs[0]), "-o", str(f)])
     assert result.exit_code != 0 and "file" in result.output
+
+
+class _Stubborn:
+    """A batch task that ignores SIGTERM and never ends (index 1), or ends at once (index 0)."""
+
+    def __init__(self, index: int, flag: Path) -> None:
+        self.index, self.flag = index, flag
+
+    def run(self, **_kwargs) -> dict:
+        import signal
+        import time
+
+        if self.index == 0:  # ends once the other one ignores SIGTERM
+            while not self.flag.exists():
+                time.sleep(0.01)
+            return {"input": "quick", "status": "done"}
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        self.flag.touch()
+        while True:
+            time.sleep(0.05)
+
+
+def test_a_stopped_batch_kills_a_worker_that_does_not_end(monkeypatch, tmp_path):
+    """Ctrl-C during a --jobs batch: a worker that does not end on SIGTERM (its exit blocked on a lock, or a
+    handler that ignores it) is killed after STOP_GRACE; the batch does not hang (pytest-timeout would say so)."""
+    from datmo_cli.batch import executors
+
+    monkeypatch.setattr(executors, "STOP_GRACE", 0.5)
+    monkeypatch.setattr(executors, "ensure_warm", lambda: None)
+
+    def on_record(line: dict) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        executors.LocalExecutor(jobs=2).run([_Stubborn(0, tmp_path / "f"), _Stubborn(1, tmp_path / "f")], on_record)

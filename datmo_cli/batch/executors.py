@@ -75,13 +75,21 @@ class LocalExecutor(Executor):
                         on_record(failed(t, f"worker died ({exc})"))
             _drain(queue, on_scans)
         except BaseException:
-            for p in list(getattr(pool, "_processes", {}).values()):
+            workers = list(getattr(pool, "_processes", {}).values())
+            for p in workers:
                 p.terminate()  # a task still running must not finish an output after the batch stopped
+            for p in workers:  # one that does not end (its exit waits on a lock) is killed: no hang on Ctrl-C
+                p.join(STOP_GRACE)
+                if p.is_alive():
+                    p.kill()
             pool.shutdown(wait=True, cancel_futures=True)
             queue.close()
             raise
         pool.shutdown(wait=True)
         queue.close()
+
+
+STOP_GRACE = 3.0  # s a --jobs worker has to end after SIGTERM when the batch stops, before SIGKILL
 
 
 def _processes(n: int) -> str:
@@ -94,6 +102,8 @@ _SCANS: list = []  # in a --jobs worker: the queue its tasks report their scans 
 def _worker_started(parent: int, queue) -> None:
     """A --jobs worker's start: end with the batch's process; keep the queue scans are reported on."""
     _SCANS[:] = [queue]
+    # scan counts are progress only: a worker that ends must not wait to flush them (a stopped batch hung on it)
+    queue.cancel_join_thread()
     die_with_parent(parent)
 
 
