@@ -98,7 +98,7 @@ def command(
             export.export(p, sink, features=features, progress=progress)
 
         if stdout:
-            sink = _to_stdout(stream, export.sink_for(stream, fmt, features), write)
+            sink = _to_stdout(stream, export.sink_for(stream, fmt, features, terminal=_terminal()), write)
         else:
             with atomic_output(output, force=force, inputs=files) as f:
                 sink = export.sink_for(f, fmt, features)
@@ -152,7 +152,7 @@ def _ground_truth(
 
         cols = export.GROUND_TRUTH_COLUMNS
         if stream is not None:
-            sink = _to_stdout(stream, export.sink_for(stream, fmt, cols=cols), write)
+            sink = _to_stdout(stream, export.sink_for(stream, fmt, cols=cols, terminal=_terminal()), write)
         else:
             with atomic_output(output, force=force, inputs=files) as f:
                 sink = export.sink_for(f, fmt, cols=cols)
@@ -162,6 +162,15 @@ def _ground_truth(
         f"{'stdout' if stream is not None else output}: {sink.rows:,} rows ({fmt}) of ground truth from {scans:,} "
         f"scans of {files[0]}"
     )
+
+
+def _terminal() -> bool:
+    """Whether stdout is a terminal (CSV written there has its text's control characters escaped)."""
+    import sys
+
+    from ..progress import is_terminal
+
+    return is_terminal(sys.stdout)
 
 
 def _to_stdout(stream, sink, write):
