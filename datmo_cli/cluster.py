@@ -13,6 +13,7 @@ million futures.
 from __future__ import annotations
 
 import os
+import re
 import time
 import uuid
 from collections import deque
@@ -46,7 +47,7 @@ def parse_local(address: str) -> int | None:
     n = address.partition(":")[2]
     if not n:
         return cores()
-    if not n.isdigit() or int(n) < 1:
+    if not re.fullmatch("[0-9]{1,9}", n) or int(n) < 1:  # ASCII digits only: `²` passes str.isdigit
         raise DatmoError(f"--scheduler {address}: expected local or local:N with N >= 1 workers")
     if int(n) > cores():
         raise DatmoError(f"--scheduler {address}: at most local:{cores()} here (one worker process per core)")

@@ -7,6 +7,7 @@ check of a section, `commands.options.param_option` builds the Click options fro
 
 from __future__ import annotations
 
+import sys
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -101,13 +102,20 @@ def read_tables(path: str | Path) -> dict[str, dict]:
 
     path = Path(path)
     try:
-        data = tomllib.loads(input_files.read_text(path, input_files.MAX_CONFIG_BYTES, "configuration file"))
+        text = input_files.read_text(path, input_files.MAX_CONFIG_BYTES, "configuration file")
+        data = tomllib.loads(text.removeprefix("\ufeff"))  # a UTF-8 BOM (some editors write one) is no statement
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: {exc}") from None
+    except ValueError:  # Python's limit on the digits of a whole number read from text
+        raise ConfigError(
+            f"{path}: a whole number of more than {sys.get_int_max_str_digits():,} digits (no parameter takes one)"
+        ) from None
+    except RecursionError:
+        raise ConfigError(f"{path}: arrays or tables nested too deeply to read (no parameter nests)") from None
     for stage in STAGES:
         if stage in data and not isinstance(data[stage], dict):
             raise ConfigError(f"{path}: {stage} must be a table ([{stage}] with its parameters), got {data[stage]!r}")

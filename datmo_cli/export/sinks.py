@@ -99,6 +99,9 @@ class TextSink:
     def close(self) -> None:
         self.stream.flush()
 
+    def abort(self) -> None:
+        """Nothing to undo after an error (the output file is removed by its writer)."""
+
 
 class ParquetSink:
     """Rows to a Parquet file (pyarrow.parquet.ParquetWriter), one row group per batch, zstd-compressed."""
@@ -138,6 +141,15 @@ class ParquetSink:
 
     def close(self) -> None:
         self.writer.close()
+
+    def abort(self) -> None:
+        """Close the writer after an error or Ctrl-C, while its file is still open (the file is then removed):
+        else pyarrow closes it when the writer is collected, after the file is closed, and prints "Exception
+        ignored in ParquetWriter.__del__" after datmo's one-line error."""
+        try:
+            self.writer.close()
+        except Exception:
+            pass
 
 
 def sink_for(
