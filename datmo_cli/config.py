@@ -185,22 +185,32 @@ def provenance_line(line: str) -> str:
 
 
 def _toml_value(value: object) -> str:
-    """`value` as a TOML value that reads back equal (floats by repr, strings JSON-escaped)."""
+    """`value` as a TOML value that reads back equal (floats by repr, strings JSON-escaped, and every
+    character text.printable escapes written as TOML's \\uXXXX: nothing raw reaches a terminal)."""
     import json
+
+    from .text import UNSAFE
 
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int | float):
         return repr(value)
     if isinstance(value, str):
-        return json.dumps(value, ensure_ascii=False)
+        return UNSAFE.sub(_toml_escape, json.dumps(value, ensure_ascii=False))
     raise ConfigError(f"cannot write {value!r} as TOML")
+
+
+def _toml_escape(match) -> str:
+    c = ord(match.group())
+    return f"\\u{c:04x}" if c < 0x10000 else f"\\U{c:08x}"
 
 
 def to_toml(tables: dict[str, dict], sources: dict[str, dict[str, str]], header: str = "") -> str:
     """TOML text of `tables` (stage -> key -> value), each key followed by a comment naming where its value
     came from (sources: stage -> key -> source)."""
-    lines = [f"# {h}" for h in header.splitlines()] if header else []
+    from .text import printable
+
+    lines = [f"# {printable(h)}" for h in header.splitlines()] if header else []
     for stage, table in tables.items():
         if lines:
             lines.append("")
@@ -208,5 +218,5 @@ def to_toml(tables: dict[str, dict], sources: dict[str, dict[str, str]], header:
         width = max((len(f"{k} = {_toml_value(v)}") for k, v in table.items()), default=0)
         for key, value in table.items():
             entry = f"{key} = {_toml_value(value)}"
-            lines.append(f"{entry:{width}s}  # {sources[stage][key]}")
+            lines.append(f"{entry:{width}s}  # {printable(sources[stage][key])}")
     return "\n".join(lines) + "\n"

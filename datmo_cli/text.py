@@ -16,7 +16,7 @@ import re
 # and isolates, which reorder what a terminal shows; the invisible ones: soft hyphen, zero-width space and
 # joiners, word joiner, BOM, the tags) and the Hangul fillers, which show as nothing: a name that holds them
 # would look like another
-_UNSAFE = re.compile(
+UNSAFE = re.compile(
     "[\x00-\x1f\x7f-\x9f\xad\u0600-\u0605\u061c\u06dd\u070f\u0890\u0891\u08e2\u115f\u1160\u180e"
     "\u200b-\u200f\u2028-\u202e\u2060-\u206f\u3164\ufeff\uffa0\ufff9-\ufffb\U000110bd\U000110cd"
     "\U00013430-\U0001343f\U0001bca0-\U0001bca3\U0001d173-\U0001d17a\U000e0001\U000e0020-\U000e007f]"
@@ -31,7 +31,7 @@ def _escaped(match: re.Match) -> str:
 def printable(text: object) -> str:
     """`text` (str() of it) with every control character, line separator and bidirectional control shown as
     a `\\xNN` or `\\uNNNN` escape: what a terminal shows is what the string holds, on one line. Idempotent."""
-    return _UNSAFE.sub(_escaped, str(text))
+    return UNSAFE.sub(_escaped, str(text))
 
 
 def markup(text: object) -> str:

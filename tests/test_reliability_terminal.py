@@ -230,3 +230,69 @@ def test_a_dask_warning_of_several_lines_prints_line_by_line(capsys):
     ]
     cli_module._show_warning(UserWarning("a topic\n\x1b[2J"), UserWarning, cli_module.__file__, 1)
     assert capsys.readouterr().err == "datmo: warning: a topic\\x0a\\x1b[2J\n"  # datmo's own: one line
+
+
+def test_node_rate_limits_what_a_publisher_makes_it_say(monkeypatch):
+    """A publisher alternating two scan geometries made the node say "tracking starts over" for every scan."""
+    from datmo_cli import node as node_module
+
+    class Publisher:
+        """A stand-in for the DDS node: 1,000 restarts whose reason holds a publisher's frame id, then Ctrl-C."""
+
+        def __init__(self, domain, scan_topic, odom_topic, cfg, say) -> None:
+            self.say, self.scan_topic, self.odom_topic, self.topics = say, scan_topic, None, ["/datmo/tracks"]
+            self.feed = type("Feed", (), {"failure": None})()
+
+        def spin(self) -> None:
+            for k in range(1000):
+                self.say(f"datmo node: the scans' geometry changed ({k} beams in 'laser{TITLE}'): tracking starts over")
+            raise KeyboardInterrupt
+
+        def close(self) -> None:
+            pass
+
+        def summary(self) -> str:
+            return "1,000 scans received"
+
+    monkeypatch.setattr(node_module, "Node", Publisher)
+    monkeypatch.setattr("datmo_cli.dds.domain_id", lambda value=None: 0)
+    code, out, err = run_cli("node")
+    assert code == 130
+    lines = err.splitlines()
+    assert len(lines) <= 10 and not CONTROL.search(err), err[:3000]
+    assert "datmo node: 995 more such messages not shown" in lines
+
+
+def test_config_listing_escapes_what_a_config_gave(tmp_path):
+    """`datmo config` printed a string value's invisible characters (and DEL, which TOML refuses) raw."""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[features]\nleg_model = "x\\u001b[2J\\u200fy\\u007f\\ufeff"\n')
+    code, out, err = run_cli("config", "--config", cfg)
+    assert code == 0, err
+    assert not raw(out) and "\x7f" not in out
+    assert 'leg_model = "x\\u001b[2J\\u200fy\\u007f\\ufeff"' in out
+    back = tmp_path / "back.toml"
+    back.write_text(out)
+    code, again, err = run_cli("config", "--config", back)
+    assert code == 0 and 'leg_model = "x\\u001b[2J\\u200fy\\u007f\\ufeff"' in again  # reads back the same value
+
+
+def test_a_librarys_log_goes_through_one_escaping_rate_limited_path(capsys):
+    """What Dask logs (errors of the scheduler, the nannies and the workers, whose text may quote a task's
+    error, and so a log's strings) printed raw through its own handler."""
+    import logging
+
+    said: list[str] = []
+    limited = progress.Limited("datmo: dask", multiline=True, sink=said.append)
+    log = logging.getLogger("distributed.test_reliability_terminal")
+    restore = progress.route_logs(("distributed",), limited, level=logging.ERROR)
+    try:
+        log.warning("not shown: below the level")
+        for _ in range(10):
+            log.error("Compute Failed\nKey: x\nException: 'frame\x1b[2J'", exc_info=(ValueError, ValueError(), None))
+    finally:
+        restore()
+        limited.close()
+    assert said[0] == "datmo: dask: Compute Failed\n  Key: x\n  Exception: 'frame\\x1b[2J'"
+    assert len(said) == 7 and said[-1] == "datmo: dask: 5 more such messages not shown"
+    assert capsys.readouterr().err == ""
