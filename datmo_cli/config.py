@@ -7,8 +7,6 @@ check of a section, `commands.options.param_option` builds the Click options fro
 
 from __future__ import annotations
 
-import sys
-import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -98,24 +96,16 @@ def read_tables(path: str | Path) -> dict[str, dict]:
     level, outside any table, go to the section that declares them (features first: the home of d_max); one
     neither declares is an unknown parameter, and any other table (a misspelt `[tracks]` or `[Features]`) is
     refused, not ignored. ConfigError names the file and what is wrong."""
-    from . import input_files
+    from . import input_files, toml_text
 
     path = Path(path)
     try:
         text = input_files.read_text(path, input_files.MAX_CONFIG_BYTES, "configuration file")
-        data = tomllib.loads(text.removeprefix("\ufeff"))  # a UTF-8 BOM (some editors write one) is no statement
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: {exc}") from None
-    except ValueError:  # Python's limit on the digits of a whole number read from text
-        raise ConfigError(
-            f"{path}: a whole number of more than {sys.get_int_max_str_digits():,} digits (no parameter takes one)"
-        ) from None
-    except RecursionError:
-        raise ConfigError(f"{path}: arrays or tables nested too deeply to read (no parameter nests)") from None
+    data = toml_text.loads(text, path)
     for stage in STAGES:
         if stage in data and not isinstance(data[stage], dict):
             raise ConfigError(f"{path}: {stage} must be a table ([{stage}] with its parameters), got {data[stage]!r}")

@@ -227,3 +227,31 @@ def test_report_piped_prints_parameters_whole_and_a_terminal_cuts_them(tmp_path,
     as_terminal(monkeypatch)
     code, out, err = run_cli("report", tmp_path / "p.mcap")
     assert code == 0 and whole not in out and "…" in out
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("duration = " + "9" * 5000 + "\n", "a whole number of more than"),
+        ("x = " + "[" * 5000 + "]" * 5000 + "\n", "nested too deeply"),
+    ],
+)
+def test_a_scene_file_too_large_a_number_or_too_deeply_nested_is_one_line(tmp_path, text, message):
+    """A --scene file is TOML too: the same cases were exit 70 ("internal error: ValueError", "input too deeply
+    nested" without the file)."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(text)
+    code, _, err = run_cli("simulate", "--scene", scene, "-o", tmp_path / "o.mcap")
+    assert code == 1 and one_error(err).startswith(f"datmo: error: {scene}: ") and message in err
+
+
+def test_a_scene_file_with_a_utf8_bom_is_read():
+    from importlib import resources
+
+    from datmo_cli.sim.scene import parse_scene
+
+    text = (resources.files("datmo_cli.sim") / "scenes" / "corridor.toml").read_text(encoding="utf-8")
+    read = parse_scene("\ufeff" + text, "corridor.toml")  # it was "invalid TOML: Invalid statement"
+    import dataclasses
+
+    assert repr(dataclasses.replace(read, text=text)) == repr(parse_scene(text, "corridor.toml"))

@@ -84,23 +84,6 @@ def detect_kind(path: str | Path) -> str:
     return kind
 
 
-_KIND_NAMES = {"carmen": "a CARMEN log", "g2o": "a g2o file", "ros1": "a ROS 1 bag"}
-
-
-def not_mcap(path: str | Path) -> str:
-    """What to add to "PATH: not an MCAP file": the kind of log it is and how to convert it (`datmo import`),
-    or " (bad magic bytes)" for content of no known kind."""
-    import shlex
-
-    try:
-        kind = detect_kind(path)
-    except (InputError, OSError):
-        kind = ""
-    if kind not in _KIND_NAMES:
-        return " (bad magic bytes)"
-    return f": it is {_KIND_NAMES[kind]}; convert it with `datmo import {shlex.quote(str(path))} -o LOG.mcap` first"
-
-
 def open_import(
     path: str | Path,
     topic: str | None = None,
