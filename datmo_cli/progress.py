@@ -348,16 +348,3 @@ def route_logs(loggers: tuple[str, ...], limited: Limited, level: int = 30) -> C
             log.propagate = propagate
 
     return restore
-
-
-@contextmanager
-def library_messages(loggers: tuple[str, ...], prefix: str, multiline: bool = False) -> Iterator[Limited]:
-    """Within the block, what the loggers `loggers` emit goes to stderr through one Limited (route_logs),
-    prefixed by `prefix`; at the end, how many were held back."""
-    limited = Limited(prefix, multiline=multiline)
-    restore = route_logs(loggers, limited)
-    try:
-        yield limited
-    finally:
-        restore()
-        limited.close()

@@ -61,28 +61,27 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
     Example: datmo play sample_logs/hall.mcap --rate 2 --loop
     """
     from .. import live, outputs
-    from ..progress import library_messages, say
+    from ..progress import say
     from ..text import printable
 
-    with library_messages(("foxglove",), "datmo play"):  # a client's bad frames: escaped, rate-limited
-        server = live.LiveServer(host, port)  # the package and the port are checked before the log is read
-        try:
-            source = live.LogSource(input, cfg)
-            source.declare(server)
-            what = "as it is" if source.processed else "segmented, features and tracks made on the fly"
-            scans = source.stream.n_scans
-            click.echo(f"datmo play: serving {printable(input)} ({scans:,} scans, {what}) on {server.url}")
-            click.echo(f"  open {server.app_url}")
-            click.echo(f"  or in Foxglove desktop: Open connection > Foxglove WebSocket > {server.url}")
-            if wait:
-                say("  waiting for a client to subscribe (Ctrl-C to stop)")
-                while not server.subscribed.wait(0.2):
-                    pass
-            scans = live.play(source, server, rate=rate, loop=loop)
-            say(f"datmo play: {scans:,} scans served")
-        except (KeyboardInterrupt, outputs.Terminated) as exc:
-            code = 130 if isinstance(exc, KeyboardInterrupt) else exc.exit_code
-            say(f"datmo play: stopped ({'Ctrl-C' if code == 130 else exc}); {server.sent:,} messages served")
-            raise click.exceptions.Exit(code) from None
-        finally:
-            server.close()
+    server = live.LiveServer(host, port)  # the package and the port are checked before the log is read
+    try:
+        source = live.LogSource(input, cfg)
+        source.declare(server)
+        what = "as it is" if source.processed else "segmented, features and tracks made on the fly"
+        scans = source.stream.n_scans
+        click.echo(f"datmo play: serving {printable(input)} ({scans:,} scans, {what}) on {server.url}")
+        click.echo(f"  open {server.app_url}")
+        click.echo(f"  or in Foxglove desktop: Open connection > Foxglove WebSocket > {server.url}")
+        if wait:
+            say("  waiting for a client to subscribe (Ctrl-C to stop)")
+            while not server.subscribed.wait(0.2):
+                pass
+        scans = live.play(source, server, rate=rate, loop=loop)
+        say(f"datmo play: {scans:,} scans served")
+    except (KeyboardInterrupt, outputs.Terminated) as exc:
+        code = 130 if isinstance(exc, KeyboardInterrupt) else exc.exit_code
+        say(f"datmo play: stopped ({'Ctrl-C' if code == 130 else exc}); {server.sent:,} messages served")
+        raise click.exceptions.Exit(code) from None
+    finally:
+        server.close()
