@@ -218,12 +218,22 @@ class Bar:
     def update(self, done: int, total: int | None = None, **fields) -> None:
         """Set the count done (and the total when it becomes known, and any extra column's fields)."""
         if self.progress is not None:
+            from .text import markup
+
             extra = {} if total is None else {"total": total}
+            for key in ("description", "info"):  # shown as Rich markup by their columns: a file name, a stage
+                if isinstance(fields.get(key), str):
+                    fields[key] = markup(fields[key])
             self.progress.update(self.task, completed=done, **extra, **fields)
 
     def advance(self, n: int = 1, **fields) -> None:
         """Count `n` more done."""
         if self.progress is not None:
+            from .text import markup
+
+            for key in ("description", "info"):
+                if isinstance(fields.get(key), str):
+                    fields[key] = markup(fields[key])
             self.progress.update(self.task, advance=n, **fields)
 
     def __call__(self, done: int, total: int | None = None) -> None:
@@ -270,12 +280,14 @@ def bar(description: str, total: int | None, *, unit: str = "scans", info: bool 
         TimeRemainingColumn,
     )
 
+    from .text import markup
+
     columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn(unit)]
     if info:
         columns.append(TextColumn("{task.fields[info]}", style="progress.data.speed"))
     columns += [TimeElapsedColumn(), TimeRemainingColumn()]
     with Progress(*columns, console=_progress_console(), transient=True) as progress:
-        task = progress.add_task(description, total=total, **({"info": ""} if info else {}))
+        task = progress.add_task(markup(description), total=total, **({"info": ""} if info else {}))
         yield Bar(progress, task)
 
 

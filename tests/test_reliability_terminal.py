@@ -296,3 +296,18 @@ def test_a_librarys_log_goes_through_one_escaping_rate_limited_path(capsys):
     assert said[0] == "datmo: dask: Compute Failed\n  Key: x\n  Exception: 'frame\\x1b[2J'"
     assert len(said) == 7 and said[-1] == "datmo: dask: 5 more such messages not shown"
     assert capsys.readouterr().err == ""
+
+
+def test_a_progress_bar_shows_a_file_name_as_it_is(monkeypatch):
+    """`import` draws `reading NAME` on a terminal: a file name holding `[/]` crashed rich's markup (exit 70),
+    and its escape sequences reached the terminal."""
+    monkeypatch.setattr(progress, "_drawn", lambda: True)
+    with progress.bar(f"reading a[/]b{TITLE}.log", 10, info=True) as b:
+        b.update(3, info="[/]x")
+        b.advance(1, description=f"[/]{TITLE}")
+        b.progress.refresh()  # rendered now: the description and the info column as Rich markup
+        task = b.progress.tasks[0]
+        from rich.text import Text
+
+        assert Text.from_markup(task.description).plain == f"[/]{printable(TITLE)}"
+        assert Text.from_markup(task.fields["info"]).plain == "[/]x"
