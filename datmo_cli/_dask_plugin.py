@@ -31,3 +31,20 @@ class IgnoreInterrupt(WorkerPlugin):
 
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+class LocalWorker(WorkerPlugin):
+    """For the worker processes of a run's own local cluster: no HTTP server (it serves no route, the run's
+    configuration gives none; this closes its port too), and what the worker logs (errors only: the run
+    silences the rest) goes to stderr escaped and rate-limited, as the client's own (progress.route_logs)."""
+
+    name = "datmo-local-worker"
+    idempotent = True
+
+    def setup(self, worker) -> None:
+        from .progress import Limited, route_logs
+
+        server = getattr(worker, "http_server", None)
+        if server is not None:
+            server.stop()
+        route_logs(("distributed",), Limited("datmo: dask worker", multiline=True), level=40)

@@ -48,9 +48,19 @@ def invocation(command: str) -> str:
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    from .text import printable
+    """A warning on stderr: datmo's own as one printable line (a log's strings in it are escaped, line breaks
+    too); another library's (Dask's, whose warnings span lines) line by line, each escaped, the following ones
+    indented: never a raw control sequence, never a `\\x0a` in the middle of a sentence."""
+    import os
 
-    click.echo(f"datmo: warning: {printable(message)}", err=True)
+    from .text import printable, printable_lines
+
+    ours = os.path.dirname(os.path.abspath(__file__))
+    if os.path.abspath(str(filename)).startswith(ours + os.sep):
+        click.echo(f"datmo: warning: {printable(message)}", err=True)
+        return
+    first, *rest = printable_lines(message)
+    click.echo("\n".join([f"datmo: warning: {first}", *(f"  {line}" for line in rest)]), err=True)
 
 
 def _escape(err: UnicodeEncodeError) -> tuple[str, int]:

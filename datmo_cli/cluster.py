@@ -13,6 +13,7 @@ million futures.
 from __future__ import annotations
 
 import os
+import re
 import time
 import uuid
 from collections import deque
@@ -46,7 +47,7 @@ def parse_local(address: str) -> int | None:
     n = address.partition(":")[2]
     if not n:
         return cores()
-    if not n.isdigit() or int(n) < 1:
+    if not re.fullmatch("[0-9]{1,9}", n) or int(n) < 1:  # ASCII digits only: `²` passes str.isdigit
         raise DatmoError(f"--scheduler {address}: expected local or local:N with N >= 1 workers")
     if int(n) > cores():
         raise DatmoError(f"--scheduler {address}: at most local:{cores()} here (one worker process per core)")
@@ -138,6 +139,7 @@ class DaskExecutor(Executor):
                 # environment before it spawns a worker: it is put back after, or this process's numba would
                 # refuse to run kernels on its threads (NUMBA_NUM_THREADS changed after they were launched)
                 security = local_security(address)  # TLS: no other user of this machine can connect
+                self._quiet_dask()
                 own_threads = os.environ.get("NUMBA_NUM_THREADS")
                 try:
                     with dask.config.set(
@@ -145,6 +147,10 @@ class DaskExecutor(Executor):
                             "distributed.scheduler.allowed-failures": retries,
                             "distributed.worker.profile.enabled": False,
                             "distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1,
+                            # no HTTP endpoint (/info, /json, /metrics, call stacks, logs: served without
+                            # authentication) on the scheduler or the workers; their servers are stopped below
+                            "distributed.scheduler.http.routes": [],
+                            "distributed.worker.http.routes": [],
                         }
                     ):
                         self.cluster = distributed.LocalCluster(
@@ -155,8 +161,12 @@ class DaskExecutor(Executor):
                             protocol="tls://",
                             security=security,
                             dashboard_address=None,
+                            # a free loopback port for the scheduler's (empty) HTTP server, not 8787 and a
+                            # warning when another cluster has it
+                            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
                             silence_logs=logging.ERROR,
                         )
+                    self.cluster.scheduler.http_server.stop()
                 finally:
                     if own_threads is None:
                         os.environ.pop("NUMBA_NUM_THREADS", None)
@@ -168,10 +178,11 @@ class DaskExecutor(Executor):
         except (OSError, TimeoutError, ValueError) as exc:
             self.close()
             raise DatmoError(f"--scheduler {address}: cannot reach the Dask scheduler ({exc})") from None
-        from ._dask_plugin import IgnoreInterrupt, WarmUp
+        from ._dask_plugin import IgnoreInterrupt, LocalWorker, WarmUp
 
         if self.cluster is not None:
             self.client.register_plugin(IgnoreInterrupt(), name=IgnoreInterrupt.name)
+            self.client.register_plugin(LocalWorker(), name=LocalWorker.name)
         self.client.register_plugin(WarmUp(), name=WarmUp.name)  # returns once every worker has loaded them
         threads = sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values())
         self.workers = max(threads, 1)
@@ -254,6 +265,14 @@ class DaskExecutor(Executor):
         finally:
             self.close()
 
+    def _quiet_dask(self) -> None:
+        """What the run's own cluster (its scheduler and nannies live in this process) logs goes to stderr
+        escaped and rate-limited (progress.route_logs), until close()."""
+        from .progress import Limited, route_logs
+
+        self._dask_log = Limited("datmo: dask", multiline=True)
+        self._restore_log = route_logs(("distributed",), self._dask_log, level=40)
+
     def close(self) -> None:
         for thing in (getattr(self, "client", None), self.cluster):
             if thing is not None:
@@ -262,6 +281,11 @@ class DaskExecutor(Executor):
                 except Exception:
                     pass
         self.cluster = None
+        restore = getattr(self, "_restore_log", None)
+        if restore is not None:
+            self._restore_log = None
+            restore()
+            self._dask_log.close()
 
 
 @contextmanager

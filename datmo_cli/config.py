@@ -7,7 +7,6 @@ check of a section, `commands.options.param_option` builds the Click options fro
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -97,17 +96,16 @@ def read_tables(path: str | Path) -> dict[str, dict]:
     level, outside any table, go to the section that declares them (features first: the home of d_max); one
     neither declares is an unknown parameter, and any other table (a misspelt `[tracks]` or `[Features]`) is
     refused, not ignored. ConfigError names the file and what is wrong."""
-    from . import input_files
+    from . import input_files, toml_text
 
     path = Path(path)
     try:
-        data = tomllib.loads(input_files.read_text(path, input_files.MAX_CONFIG_BYTES, "configuration file"))
+        text = input_files.read_text(path, input_files.MAX_CONFIG_BYTES, "configuration file")
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: {exc}") from None
+    data = toml_text.loads(text, path)
     for stage in STAGES:
         if stage in data and not isinstance(data[stage], dict):
             raise ConfigError(f"{path}: {stage} must be a table ([{stage}] with its parameters), got {data[stage]!r}")
@@ -177,22 +175,32 @@ def provenance_line(line: str) -> str:
 
 
 def _toml_value(value: object) -> str:
-    """`value` as a TOML value that reads back equal (floats by repr, strings JSON-escaped)."""
+    """`value` as a TOML value that reads back equal (floats by repr, strings JSON-escaped, and every
+    character text.printable escapes written as TOML's \\uXXXX: nothing raw reaches a terminal)."""
     import json
+
+    from .text import UNSAFE
 
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int | float):
         return repr(value)
     if isinstance(value, str):
-        return json.dumps(value, ensure_ascii=False)
+        return UNSAFE.sub(_toml_escape, json.dumps(value, ensure_ascii=False))
     raise ConfigError(f"cannot write {value!r} as TOML")
+
+
+def _toml_escape(match) -> str:
+    c = ord(match.group())
+    return f"\\u{c:04x}" if c < 0x10000 else f"\\U{c:08x}"
 
 
 def to_toml(tables: dict[str, dict], sources: dict[str, dict[str, str]], header: str = "") -> str:
     """TOML text of `tables` (stage -> key -> value), each key followed by a comment naming where its value
     came from (sources: stage -> key -> source)."""
-    lines = [f"# {h}" for h in header.splitlines()] if header else []
+    from .text import printable
+
+    lines = [f"# {printable(h)}" for h in header.splitlines()] if header else []
     for stage, table in tables.items():
         if lines:
             lines.append("")
@@ -200,5 +208,5 @@ def to_toml(tables: dict[str, dict], sources: dict[str, dict[str, str]], header:
         width = max((len(f"{k} = {_toml_value(v)}") for k, v in table.items()), default=0)
         for key, value in table.items():
             entry = f"{key} = {_toml_value(value)}"
-            lines.append(f"{entry:{width}s}  # {sources[stage][key]}")
+            lines.append(f"{entry:{width}s}  # {printable(sources[stage][key])}")
     return "\n".join(lines) + "\n"

@@ -12,12 +12,11 @@ PLOT_SUFFIXES = (".png", ".svg", ".pdf")
 def plot_paths(plot: Path, files: list[Path]) -> list[Path]:
     """Where each file's plot goes: `plot` itself for one file, else PLOT-STEM.SUFFIX per file; files of one
     stem in different folders get their folders' names too (A/x.mcap, B/x.mcap: PLOT-A-x.png, PLOT-B-x.png), so
-    no plot is written over another. One file given twice is an InputError."""
+    no plot is written over another (paths that are still one name once joined get -2, -3: _numbered). One
+    file given twice is an InputError."""
     if len(files) == 1:
         return [plot]
     import os
-
-    from .errors import InputError
 
     parts = [Path(os.path.abspath(f)).with_suffix("").parts[1:] for f in files]
     depth = [1] * len(files)
@@ -31,9 +30,36 @@ def plot_paths(plot: Path, files: list[Path]) -> list[Path]:
             return [plot.with_name(f"{plot.stem}-{name}{plot.suffix}") for name in names]
         grow = [i for i in clash if depth[i] < len(parts[i])]
         if not grow:
-            raise InputError(f"{files[clash[0]]}: given twice; with --plot each file is plotted once")
+            return [plot.with_name(f"{plot.stem}-{name}{plot.suffix}") for name in _numbered(files, names)]
         for i in grow:
             depth[i] += 1
+
+
+def _numbered(files: list[Path], names: list[str]) -> list[str]:
+    """`names` made unique when whole paths still clash once joined with '-' (a-b/c.mcap and a/b/c.mcap are
+    both a-b-c): the second and later of a name get -2, -3, ...; one file given twice is an InputError."""
+    import os
+
+    from .errors import InputError
+
+    first: dict[str, str] = {}
+    for f in files:
+        real = os.path.realpath(f)
+        if real in first:
+            raise InputError(f"{f}: given twice (as {first[real]}); with --plot each file is plotted once")
+        first[real] = str(f)
+    taken = set(names)
+    out: list[str] = []
+    for name in names:
+        if name not in out:
+            out.append(name)
+            continue
+        k = 2
+        while f"{name}-{k}" in taken:
+            k += 1
+        taken.add(f"{name}-{k}")
+        out.append(f"{name}-{k}")
+    return out
 
 
 def check_plot_outputs(paths: list[Path], force: bool) -> None:

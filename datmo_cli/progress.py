@@ -66,15 +66,18 @@ def say(message: str) -> None:
 
 def console(*, stderr: bool = False):
     """A rich console on stdout (or stderr) for tables: the terminal's width on a terminal; otherwise
-    PIPE_WIDTH columns, no wrapping and no colour, so piped and redirected output keeps every name whole."""
+    PIPE_WIDTH columns, no wrapping and no colour, so piped and redirected output keeps every name whole.
+    Emoji codes are not replaced (`:smile:` in a log's header or metadata prints as written)."""
     import sys
 
     from rich.console import Console
 
     stream = sys.stderr if stderr else sys.stdout
     if _isatty(stream):
-        return Console(stderr=stderr)
-    plain = Console(file=_Trimmed(stream), width=PIPE_WIDTH, soft_wrap=True, no_color=True, highlight=False)
+        return Console(stderr=stderr, emoji=False)
+    plain = Console(
+        file=_Trimmed(stream), width=PIPE_WIDTH, soft_wrap=True, no_color=True, highlight=False, emoji=False
+    )
     plain.datmo_plain = True
     return plain
 
@@ -140,6 +143,11 @@ class _Trimmed:
         return self.stream.fileno()
 
 
+def is_terminal(stream) -> bool:
+    """Whether `stream` is a terminal (text written there must not hold control sequences: text.printable)."""
+    return _isatty(stream)
+
+
 def _isatty(stream) -> bool:
     try:
         return stream.isatty()
@@ -158,7 +166,7 @@ def _progress_console():
     """The rich console progress is drawn on: the terminal's stderr."""
     from rich.console import Console
 
-    return Console(stderr=True)
+    return Console(stderr=True, emoji=False)
 
 
 class Panel:
@@ -210,12 +218,22 @@ class Bar:
     def update(self, done: int, total: int | None = None, **fields) -> None:
         """Set the count done (and the total when it becomes known, and any extra column's fields)."""
         if self.progress is not None:
+            from .text import markup
+
             extra = {} if total is None else {"total": total}
+            for key in ("description", "info"):  # shown as Rich markup by their columns: a file name, a stage
+                if isinstance(fields.get(key), str):
+                    fields[key] = markup(fields[key])
             self.progress.update(self.task, completed=done, **extra, **fields)
 
     def advance(self, n: int = 1, **fields) -> None:
         """Count `n` more done."""
         if self.progress is not None:
+            from .text import markup
+
+            for key in ("description", "info"):
+                if isinstance(fields.get(key), str):
+                    fields[key] = markup(fields[key])
             self.progress.update(self.task, advance=n, **fields)
 
     def __call__(self, done: int, total: int | None = None) -> None:
@@ -262,10 +280,83 @@ def bar(description: str, total: int | None, *, unit: str = "scans", info: bool 
         TimeRemainingColumn,
     )
 
+    from .text import markup
+
     columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn(unit)]
     if info:
         columns.append(TextColumn("{task.fields[info]}", style="progress.data.speed"))
     columns += [TimeElapsedColumn(), TimeRemainingColumn()]
     with Progress(*columns, console=_progress_console(), transient=True) as progress:
-        task = progress.add_task(description, total=total, **({"info": ""} if info else {}))
+        task = progress.add_task(markup(description), total=total, **({"info": ""} if info else {}))
         yield Bar(progress, task)
+
+
+class Limited:
+    """Lines of one kind (a client's bad frames, a publisher's bad messages, a library's log) said on stderr
+    through `sink` (default: stderr_line): each one printable line (text.printable; with `multiline`, a
+    library's own message of several lines keeps its lines, each escaped, the following ones indented:
+    text.printable_lines), the first `burst` of each kind, then at
+    most one every `every_s` seconds with the count held back since; `close()` says how many were never
+    shown. Thread-safe (the live view's server logs from its own threads)."""
+
+    def __init__(self, prefix: str, burst: int = 5, every_s: float = 60.0, sink=None, multiline: bool = False) -> None:
+        import threading
+
+        self.prefix, self.burst, self.every_s, self.multiline = prefix, burst, every_s, multiline
+        self.sink = sink or stderr_line
+        self.kinds: dict[str, list[float]] = {}  # kind -> [shown, held back, time of the last shown]
+        self.lock = threading.Lock()
+
+    def __call__(self, message: object, kind: str = "") -> None:
+        import time
+
+        from .text import printable, printable_lines
+
+        now = time.monotonic()
+        with self.lock:
+            k = self.kinds.setdefault(kind, [0, 0, -1e18])
+            if k[0] >= self.burst and now - k[2] < self.every_s:
+                k[1] += 1
+                if k[1] == 1 and k[0] == self.burst:
+                    self.sink(f"{self.prefix}: more such messages are shown at most once a minute")
+                return
+            lines = printable_lines(message) if self.multiline else [printable(message)]
+            if k[1]:
+                lines[-1] += f" ({int(k[1]):,} more like it not shown)"
+            k[0], k[1], k[2] = k[0] + 1, 0, now
+        self.sink("\n".join([f"{self.prefix}: {lines[0]}", *(f"  {line}" for line in lines[1:])]))
+
+    def close(self) -> None:
+        held = sum(int(k[1]) for k in self.kinds.values())
+        self.kinds.clear()
+        if held:
+            self.sink(f"{self.prefix}: {held:,} more such messages not shown")
+
+
+def route_logs(loggers: tuple[str, ...], limited: Limited, level: int = 30) -> Callable[[], None]:
+    """Send what the Python loggers `loggers` (another library's: foxglove-sdk's, Dask's) emit at `level` or
+    above (default WARNING) to `limited` (escaped, rate-limited, on stderr; a record's traceback is not
+    printed) instead of their own handlers or Python's last-resort one. Returns what puts them back."""
+    import logging
+
+    class Handler(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            try:
+                limited(record.getMessage(), record.name)
+            except Exception:
+                self.handleError(record)
+
+    handler = Handler(level)
+    saved = []
+    for name in loggers:
+        log = logging.getLogger(name)
+        saved.append((log, log.handlers[:], log.propagate))
+        log.handlers[:] = [handler]
+        log.propagate = False
+
+    def restore() -> None:
+        for log, handlers, propagate in saved:
+            log.handlers[:] = handlers
+            log.propagate = propagate
+
+    return restore

@@ -88,6 +88,49 @@ def test_a_runs_own_local_cluster_speaks_tls_and_refuses_strangers(tmp_path, sam
     assert result.returncode == 0 and result.stdout.strip().endswith("ok"), result.stderr[-2000:]
 
 
+_NO_HTTP_CHECK = """
+import socket
+import urllib.request
+
+from datmo_cli.cluster import DaskExecutor
+
+
+def answers(port):
+    try:
+        socket.create_connection(("127.0.0.1", port), timeout=5).close()
+    except OSError:
+        return False
+    return True
+
+
+executor = DaskExecutor("local:1")
+try:
+    ports = {"scheduler": executor.cluster.scheduler.http_server.port}
+    for address, worker in executor.client.scheduler_info()["workers"].items():
+        ports[address] = worker["services"]["dashboard"]
+    assert len(ports) == 2 and all(isinstance(p, int) and p > 0 for p in ports.values()), ports
+    for who, port in ports.items():
+        assert not answers(port), f"{who}: an HTTP server on 127.0.0.1:{port}"
+finally:
+    executor.close()
+print("ok")
+"""
+
+
+@pytest.mark.slow
+def test_a_runs_own_local_cluster_serves_no_http(tmp_path):
+    """No HTTP server on the local cluster's scheduler or workers: their endpoints (/info, /json, /metrics,
+    /eventstream, call stacks, logs) would be open to every user of the machine, without authentication."""
+    import subprocess
+    import sys
+
+    result = subprocess.run(
+        [sys.executable, "-c", _NO_HTTP_CHECK], capture_output=True, text=True, timeout=600, cwd=tmp_path
+    )
+    assert result.returncode == 0 and result.stdout.strip().endswith("ok"), result.stderr[-2000:]
+    assert "Traceback" not in result.stderr and "8787" not in result.stderr, result.stderr[-2000:]
+
+
 @pytest.fixture
 def tls_scheduler(tmp_path, monkeypatch):
     """A TLS scheduler with a worker thread in this process (so the stand-in processing reaches it), and its

@@ -7,7 +7,7 @@ modules import each other in a circle (not even within a layer, nor through a fu
                of the core packages' parameter sections)
     core       perception, tracking, sim, lms2xx (each importing only itself, log and base), above log
     log        datmo_cli.log.* (importing only itself and base)
-    base       errors, extras, outputs, input_files, bounds, numba_runtime, progress, csvsafe, text and the
+    base       errors, extras, outputs, input_files, bounds, numba_runtime, progress, csvsafe, text, toml_text and the
                package itself (__version__): usable by every layer, importing only base
 
 Only the CLI layer imports click (at the top or inside a function): the layers below it take plain values,
@@ -31,6 +31,7 @@ BASE = {"errors", "extras", "outputs", "input_files", "bounds", "numba_runtime",
 CLI = {"cli", "__main__", "commands"}
 CORE = {"perception", "tracking", "sim", "lms2xx"}
 RANK = {"base": 0, "log": 1, "core": 2, "pipeline": 3, "cli": 4}
+BASE |= {"toml_text"}  # a user's TOML file read, every failure one line
 
 # arrows against the layers that another branch removes; each names that branch
 KNOWN: set[tuple[str, str]] = set()

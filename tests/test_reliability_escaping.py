@@ -151,6 +151,10 @@ def test_report_shows_a_hostile_log_as_it_is(hostile, monkeypatch, fmt, on_termi
     assert "\x1b" not in out and "\u202e" not in out
     if fmt == "json":
         assert json.loads(out)["files"][0]["run"]["command"] == HOSTILE  # JSON keeps the string, escaped by JSON
+    elif fmt == "markdown":  # escaped for Markdown too (text.markdown): `[/]` shows as `\[/\]`
+        from datmo_cli.text import markdown
+
+        assert "\x1b" not in out and markdown(SHOWN) in out, out[:2000]
     elif fmt != "csv":
         assert_shown_safely(out)  # the command line, the version, a parameter's name and value, the landmark frame
 

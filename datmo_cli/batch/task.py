@@ -116,7 +116,9 @@ def record(task: Task, status: str, **fields) -> dict:
 
 
 def failed(task: Task, error: str) -> dict:
-    text = error if error.startswith(task.input) else f"{task.input}: {error}"
+    """A failed line: its error names the input, unless it names the output (a full disk, a folder in the
+    way: the input is not at fault)."""
+    text = error if error.startswith((task.input, task.output)) else f"{task.input}: {error}"
     return record(task, FAILED, error=text.splitlines()[0] if text else text)
 
 

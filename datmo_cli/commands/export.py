@@ -98,12 +98,11 @@ def command(
             export.export(p, sink, features=features, progress=progress)
 
         if stdout:
-            sink = _to_stdout(stream, export.sink_for(stream, fmt, features), write)
+            sink = _to_stdout(stream, export.sink_for(stream, fmt, features, terminal=_terminal()), write)
         else:
             with atomic_output(output, force=force, inputs=files) as f:
                 sink = export.sink_for(f, fmt, features)
-                write(sink)
-                sink.close()
+                _write_file(sink, write)
     say(
         f"{'stdout' if stdout else output}: {sink.rows:,} rows ({fmt}) from {scans:,} scans of {len(files)} "
         f"file{'s' if len(files) != 1 else ''}"
@@ -152,16 +151,35 @@ def _ground_truth(
 
         cols = export.GROUND_TRUTH_COLUMNS
         if stream is not None:
-            sink = _to_stdout(stream, export.sink_for(stream, fmt, cols=cols), write)
+            sink = _to_stdout(stream, export.sink_for(stream, fmt, cols=cols, terminal=_terminal()), write)
         else:
             with atomic_output(output, force=force, inputs=files) as f:
                 sink = export.sink_for(f, fmt, cols=cols)
-                write(sink)
-                sink.close()
+                _write_file(sink, write)
     say(
         f"{'stdout' if stream is not None else output}: {sink.rows:,} rows ({fmt}) of ground truth from {scans:,} "
         f"scans of {files[0]}"
     )
+
+
+def _write_file(sink, write) -> None:
+    """Write the rows to a file with `write(sink)`; on an error or Ctrl-C the sink is closed at once, while its
+    file is open (ParquetSink.abort), and the error goes on (the unfinished file is removed)."""
+    try:
+        write(sink)
+    except BaseException:
+        sink.abort()
+        raise
+    sink.close()
+
+
+def _terminal() -> bool:
+    """Whether stdout is a terminal (CSV written there has its text's control characters escaped)."""
+    import sys
+
+    from ..progress import is_terminal
+
+    return is_terminal(sys.stdout)
 
 
 def _to_stdout(stream, sink, write):

@@ -51,12 +51,23 @@ def command(scan_topic: str, odom_topic: str | None, domain_id: int | None, cfg:
 
     Example: datmo node --domain-id 7 --scan-topic /front/scan --odom-topic /odom
     """
+    import re
+
     from .. import dds, outputs
     from ..node import Node
-    from ..progress import say
+    from ..progress import Limited, say
 
     domain = dds.domain_id(domain_id)
-    node = Node(domain, scan_topic, odom_topic, cfg, say=lambda line: click.echo(line, err=True))
+    # what a publisher's messages make the node say (a scan that does not decode, a restart): escaped, and
+    # rate-limited by kind (a publisher alternating two geometries would restart the tracking every scan)
+    told = Limited("datmo node", sink=lambda line: click.echo(line, err=True))
+    node = Node(
+        domain,
+        scan_topic,
+        odom_topic,
+        cfg,
+        say=lambda line: told(line.removeprefix("datmo node: "), re.split(r"[\d(]", line)[0]),
+    )
     try:
         inputs = node.scan_topic + (f" and {node.odom_topic}" if node.odom_topic else "")
         click.echo(f"datmo node: ROS 2 domain {domain}: {inputs} in, {', '.join(node.topics)} out")
@@ -67,5 +78,6 @@ def command(scan_topic: str, odom_topic: str | None, domain_id: int | None, cfg:
     except (KeyboardInterrupt, outputs.Terminated) as exc:
         code = 130 if isinstance(exc, KeyboardInterrupt) else exc.exit_code
         node.close()
+        told.close()
         say(f"datmo node: stopped ({'Ctrl-C' if code == 130 else exc}); {node.summary()}")
         raise click.exceptions.Exit(code) from None

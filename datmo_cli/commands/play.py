@@ -62,13 +62,15 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
     """
     from .. import live, outputs
     from ..progress import say
+    from ..text import printable
 
     server = live.LiveServer(host, port)  # the package and the port are checked before the log is read
     try:
         source = live.LogSource(input, cfg)
         source.declare(server)
         what = "as it is" if source.processed else "segmented, features and tracks made on the fly"
-        click.echo(f"datmo play: serving {input} ({source.stream.n_scans:,} scans, {what}) on {server.url}")
+        scans = source.stream.n_scans
+        click.echo(f"datmo play: serving {printable(input)} ({scans:,} scans, {what}) on {server.url}")
         click.echo(f"  open {server.app_url}")
         click.echo(f"  or in Foxglove desktop: Open connection > Foxglove WebSocket > {server.url}")
         if wait:

@@ -426,10 +426,11 @@ def _report(
                 summaries.append(made[i] if made[i] is not None else summarise_file(out))
             continue
         from ..plot_files import save_plot
+        from ..text import printable
 
         data = read_run_data(out, keep_scans=True)
         summaries.append(made[i] if made[i] is not None else summarise(data))
-        click.echo(save_plot(data, plots[i], force), err=True)
+        click.echo(printable(save_plot(data, plots[i], force)), err=True)
     if fmt == "rich":
         render(summaries, fmt, top=top, sort=sort, console=console())
     elif fmt:

@@ -10,13 +10,15 @@ import numpy as np
 
 from ..csvsafe import neutralise
 from ..errors import ConfigError
+from ..text import printable
 from .rows import Batch
 from .schema import arrow_schema, columns, require_pyarrow
 
 
-def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
+def _text_column(kind: str, a: np.ndarray, null: str, quote: bool, terminal: bool = False) -> list[str]:
     """A column's values as text: float32 as its shortest round-trip form, non-finite floats and None as `null`;
-    strings JSON-quoted with `quote`, else as CSV fields."""
+    strings JSON-quoted with `quote`, else as CSV fields (with `terminal`, their control characters escaped
+    first: text.printable)."""
     if kind in ("float32", "float64") and a.dtype != object:
         out = a.astype(np.float32 if kind == "float32" else np.float64).astype(str).astype(object)
         out[~np.isfinite(a)] = null
@@ -30,7 +32,9 @@ def _text_column(kind: str, a: np.ndarray, null: str, quote: bool) -> list[str]:
         if v is None:
             return null
         if kind == "string":
-            return json.dumps(v) if quote else _csv_field(neutralise(v))
+            if quote:
+                return json.dumps(v)
+            return _csv_field(neutralise(printable(v) if terminal else v))
         if kind == "bool":
             return "true" if v else "false"
         return str(v)
@@ -47,19 +51,23 @@ def _csv_field(text: str) -> str:
     return text
 
 
-def _text_columns(cols: dict[str, str], batch: Batch, null: str, quote: bool) -> list[list[str]]:
+def _text_columns(
+    cols: dict[str, str], batch: Batch, null: str, quote: bool, terminal: bool = False
+) -> list[list[str]]:
     return [
-        _text_column(kind, batch.values[name], null, quote) if name in batch.values else [null] * batch.n
+        _text_column(kind, batch.values[name], null, quote, terminal) if name in batch.values else [null] * batch.n
         for name, kind in cols.items()
     ]
 
 
 class TextSink:
     """CSV or NDJSON rows to a binary stream, one write per batch. Strings in UTF-8 (file names that are not
-    are written as their bytes in CSV, \\uXXXX-escaped in NDJSON)."""
+    are written as their bytes in CSV, \\uXXXX-escaped in NDJSON). With `terminal` (stdout is a terminal) the
+    CSV's text fields have their control characters escaped (text.printable: a log's frame id must not clear
+    the screen or open a link); NDJSON's strings are escaped by JSON anyway."""
 
-    def __init__(self, stream: IO[bytes], fmt: str, cols: dict[str, str]) -> None:
-        self.stream, self.fmt, self.cols = stream, fmt, cols
+    def __init__(self, stream: IO[bytes], fmt: str, cols: dict[str, str], terminal: bool = False) -> None:
+        self.stream, self.fmt, self.cols, self.terminal = stream, fmt, cols, terminal
         self.rows = self.batches = self.peak_rows = 0
         keys = ",".join(f"{json.dumps(name)}:%s" for name in cols)
         self._template = "{" + keys + "}\n"
@@ -74,7 +82,10 @@ class TextSink:
             return
         if self.fmt == "csv":
             self._write(
-                "".join(",".join(row) + "\n" for row in zip(*_text_columns(self.cols, batch, "", False), strict=True))
+                "".join(
+                    ",".join(row) + "\n"
+                    for row in zip(*_text_columns(self.cols, batch, "", False, self.terminal), strict=True)
+                )
             )
         else:
             template = self._template
@@ -87,6 +98,9 @@ class TextSink:
 
     def close(self) -> None:
         self.stream.flush()
+
+    def abort(self) -> None:
+        """Nothing to undo after an error (the output file is removed by its writer)."""
 
 
 class ParquetSink:
@@ -128,14 +142,23 @@ class ParquetSink:
     def close(self) -> None:
         self.writer.close()
 
+    def abort(self) -> None:
+        """Close the writer after an error or Ctrl-C, while its file is still open (the file is then removed):
+        else pyarrow closes it when the writer is collected, after the file is closed, and prints "Exception
+        ignored in ParquetWriter.__del__" after datmo's one-line error."""
+        try:
+            self.writer.close()
+        except Exception:
+            pass
+
 
 def sink_for(
-    stream: IO[bytes], fmt: str, features: bool = False, cols: dict[str, str] | None = None
+    stream: IO[bytes], fmt: str, features: bool = False, cols: dict[str, str] | None = None, terminal: bool = False
 ) -> TextSink | ParquetSink:
     """The writer of `fmt` rows to the binary `stream`: of `cols` when given (GROUND_TRUTH_COLUMNS), else of
-    columns(features)."""
+    columns(features); `terminal`: the stream is a terminal (TextSink)."""
     cols = cols or columns(features)
-    return ParquetSink(stream, cols) if fmt == "parquet" else TextSink(stream, fmt, cols)
+    return ParquetSink(stream, cols) if fmt == "parquet" else TextSink(stream, fmt, cols, terminal)
 
 
 def to_stdout(fmt: str) -> IO[bytes]:

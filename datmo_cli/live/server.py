@@ -61,6 +61,13 @@ class LiveServer:
         foxglove = require_foxglove()
         from foxglove.websocket import Capability
 
+        from ..progress import Limited, route_logs
+
+        # what the SDK logs about a client (a bad frame names its op, which the client chose): escaped and
+        # rate-limited on stderr, until close() (it went to Python's last-resort handler, raw, one line a frame)
+        self._told = Limited("datmo live view")
+        self._restore_log = route_logs(("foxglove",), self._told)
+
         self._foxglove = foxglove
         self.host = host
         self.context = foxglove.Context()
@@ -78,11 +85,13 @@ class LiveServer:
                 context=self.context,
             )
         except Exception as exc:  # the SDK raises its own errors
+            self._restore_log()
             raise ConfigError(f"{option} {port}: cannot start the live view's server ({_reason(exc)})") from None
         try:
             self.front = _Front(host, port, f"ws://127.0.0.1:{self.server.port}")
         except Exception as exc:  # OSError for a busy port, a bad host or a name that does not resolve
             self.server.stop()
+            self._restore_log()
             raise ConfigError(f"{option} {port}: cannot serve on {host}:{port} ({_reason(exc)})") from None
         self.port = self.front.port
 
@@ -140,6 +149,8 @@ class LiveServer:
         for ch in self.channels.values():
             ch.close()
         self.server.stop()
+        self._restore_log()
+        self._told.close()
 
 
 class _Listener:

@@ -204,7 +204,9 @@ def _walk_file(
             raise InputError(f"{path}: cannot map file: {exc}") from None
         with buf:
             if buf[:8] != MAGIC:
-                raise InputError(f"{path}: not an MCAP file (bad magic bytes)")
+                from .kind_hint import not_mcap
+
+                raise InputError(f"{path}: not an MCAP file{not_mcap(path, buf[:65536])}")
             walk = _Walk(buf, out, None if topics is None else set(topics))
             if marks:
                 walk.horizons = _horizons(buf)

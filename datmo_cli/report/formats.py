@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from ..csvsafe import neutralise
-from ..text import printable
+from ..text import markdown, printable
 from .summary import RunSummary
-from .tables import FILE_COLUMNS, SCHEMA, TRACK_CSV_KEYS, Table, file_table, file_tables, total_row
+from .tables import FILE_COLUMNS, PARAM_WIDTH, SCHEMA, TRACK_CSV_KEYS, Table, file_table, file_tables, total_row
 
 FORMATS = ("rich", "json", "csv", "markdown")
 
@@ -40,8 +40,11 @@ def console():
 
 
 def render_rich(tabs: list[Table], console) -> None:
-    """Print tables with rich."""
+    """Print tables with rich. On a terminal a text cell longer than PARAM_WIDTH is cut there ("…"); piped or
+    redirected, every cell is printed whole."""
     from ..progress import table as rich_table
+
+    cut = not getattr(console, "datmo_plain", False)
 
     for t in tabs:
         rt = rich_table(console, title=t.title, title_justify="left")
@@ -49,20 +52,25 @@ def render_rich(tabs: list[Table], console) -> None:
             rt.add_column(c, justify="right" if i in t.numeric else "left", overflow="fold")
         for row in t.rows:
             style = "bold" if row and row[0] == "total" else None
-            rt.add_row(*(_cell(v) for v in row), style=style)
+            rt.add_row(*(_cut(_cell(v)) if cut else _cell(v) for v in row), style=style)
         if not t.rows:
             rt.add_row(*(["(none)"] + [""] * (len(t.columns) - 1)))
         console.print(rt)
 
 
+def _cut(text: str) -> str:
+    return text if len(text) <= PARAM_WIDTH else text[: PARAM_WIDTH - 1] + "…"
+
+
 def render_markdown(tabs: list[Table]) -> str:
-    """GitHub-flavoured markdown: a heading and a pipe table per table."""
+    """GitHub-flavoured markdown: a heading and a pipe table per table. Text (a log's frame ids and file names
+    among it) is escaped for Markdown (text.markdown): no link, image, heading or HTML tag comes from a log."""
     parts = []
     for t in tabs:
         head = "| " + " | ".join(t.columns) + " |"
         rule = "|" + "|".join("---:" if i in t.numeric else "---" for i in range(len(t.columns))) + "|"
-        body = ["| " + " | ".join(_cell(v).replace("|", "\\|") for v in row) + " |" for row in t.rows]
-        parts.append("\n".join([f"### {printable(t.title)}", "", head, rule, *body]))
+        body = ["| " + " | ".join(markdown(_cell(v)) for v in row) + " |" for row in t.rows]
+        parts.append("\n".join([f"### {markdown(t.title)}", "", head, rule, *body]))
     return "\n\n".join(parts) + "\n"
 
 

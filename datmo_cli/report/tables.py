@@ -107,18 +107,19 @@ Moving: a person, or a track whose mobility is dynamic. Times in s from the file
 in m in the world frame when every track state has one, else the sensor frame; speeds in m/s."""
 
 
-PARAM_WIDTH = 160  # characters of a parameter's value in the run table; `datmo info FILE --json` has it whole
+PARAM_WIDTH = 160  # characters of a text cell the rich report shows on a terminal; piped, cells are whole
 
 
 def param_text(name: str, value) -> str:
     """A parameter's value as the run table shows it: the leg model by its name, digest and threshold (its
-    record holds the training figures), any other value as JSON cut at PARAM_WIDTH characters."""
+    record holds the training figures), any other value as JSON, whole (on a terminal the rich report cuts it
+    at PARAM_WIDTH characters)."""
     if name == "leg_model" and isinstance(value, dict) and "sha256" in value:
         threshold = value.get("threshold")
         about = f", threshold {threshold:.2f}" if isinstance(threshold, float) else ""
         return f"{value.get('model') or value.get('path')} (sha256 {str(value['sha256'])[:12]}{about})"
     text = value if isinstance(value, str) else json.dumps(value)
-    return text if len(text) <= PARAM_WIDTH else text[: PARAM_WIDTH - 1] + "…"
+    return text
 
 
 def file_tables(

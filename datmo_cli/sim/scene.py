@@ -48,6 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import toml_text
 from ..bounds import OPTIONS
 from ..errors import ConfigError, InputError
 from .paths import PathSpec
@@ -204,10 +205,7 @@ def load_scene(scene: str | Path) -> Scene:
 
 def parse_scene(text: str, source: str = "<scene>", default_name: str = "scene") -> Scene:
     """Validate TOML text into a Scene; `source` names the file in error messages."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{source}: invalid TOML: {exc}") from None
+    data = toml_text.loads(text, source, "invalid TOML: ")  # a BOM read, huge numbers and deep nesting refused
     v = SceneValidator(source)
     v.keys(
         data,

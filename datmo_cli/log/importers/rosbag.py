@@ -35,6 +35,40 @@ from .ros_messages import (
     yaw_of,
 )
 
+_MEMBER_MAGIC = {".mcap": (b"\x89MCAP0\r\n", b"\x89MCAP0\r\n"), ".db3": (b"SQLite format 3\x00", b"")}
+
+
+def bag_error(path: str | Path, exc: BaseException) -> InputError:
+    """The error for a bag rosbags cannot read: for a ROS 2 bag folder it names the member at fault, the
+    first whose start or end is not what its storage writes (MCAP's magic, SQLite's header), else the only
+    member; members are looked at only if regular files (a FIFO or device is never opened here)."""
+    import os
+
+    path = Path(path)
+    what = f"({type(exc).__name__}: {exc})"
+    if not path.is_dir():
+        return InputError(f"{path}: cannot read bag {what}")
+    try:
+        members = sorted(p for p in path.iterdir() if p.suffix in _MEMBER_MAGIC and p.is_file())
+    except OSError:
+        members = []
+    for member in members:
+        head, tail = _MEMBER_MAGIC[member.suffix]
+        try:
+            with open(member, "rb") as f:
+                start = f.read(len(head))
+                f.seek(max(os.fstat(f.fileno()).st_size - len(tail), 0))
+                end = f.read(len(tail)) if tail else b""
+        except OSError as err:
+            return InputError(f"{path}: cannot read bag member {member.name} ({err.strerror or err})")
+        if start != head or end != tail:
+            kind = "MCAP" if member.suffix == ".mcap" else "SQLite"
+            cut = " (cut short?)" if start == head else ""
+            return InputError(f"{path}: bag member {member.name} is not a whole {kind} file{cut} {what}")
+    if len(members) == 1:
+        return InputError(f"{path}: cannot read bag member {members[0].name} {what}")
+    return InputError(f"{path}: cannot read bag {what}")
+
 
 def open_bag(path: str | Path):
     """An opened rosbags AnyReader on a ROS 1 bag or ROS 2 bag folder, and its topics with their types and
@@ -45,7 +79,7 @@ def open_bag(path: str | Path):
         reader = AnyReader([Path(path)])
         reader.open()
     except Exception as exc:  # rosbags raises several unrelated types for corrupt bags
-        raise InputError(f"{path}: cannot read bag ({type(exc).__name__}: {exc})") from None
+        raise bag_error(path, exc) from None
     topics: dict[str, tuple[str, int]] = {}
     for c in reader.connections:
         m, n = topics.get(c.topic, (c.msgtype, 0))
@@ -108,7 +142,7 @@ def stream_bag(
         raise
     except Exception as exc:  # corrupt chunks, unknown message definitions
         close()
-        raise InputError(f"{label}: cannot read bag ({type(exc).__name__}: {exc})") from None
+        raise bag_error(path, exc) from None
     warns = []
     if odom_topic is None and o_topic is None and sum(m in ODOMETRY_TYPES for m, _ in topics.values()) > 1:
         warns.append(f"{label}: several nav_msgs/Odometry topics; none written (choose one with --odom-topic)")
@@ -125,7 +159,7 @@ def stream_bag(
             )
         except Exception as exc:  # corrupt chunks, unknown message definitions
             close()
-            raise InputError(f"{label}: cannot read bag ({type(exc).__name__}: {exc})") from None
+            raise bag_error(path, exc) from None
 
     def pieces() -> Iterator[tuple[ScanRun | None, Odometry | None]]:
         try:
@@ -133,7 +167,7 @@ def stream_bag(
         except (InputError, GeometryError):
             raise
         except Exception as exc:  # corrupt chunks, unknown message definitions
-            raise InputError(f"{label}: cannot read bag ({type(exc).__name__}: {exc})") from None
+            raise bag_error(path, exc) from None
         finally:
             close()
 

@@ -50,7 +50,7 @@ def _run_of(
 
 def _read_bag(path: Path, scan_topics: Callable[[dict], list[str]], pose_topic: str | None) -> ScansAndPoses:
     """Scans and poses of a ROS 1 bag or ROS 2 bag folder (rosbags' AnyReader)."""
-    from .rosbag import open_bag, scan_geometry, scan_stamp
+    from .rosbag import bag_error, open_bag, scan_geometry, scan_stamp
 
     label = str(path)
     reader, topics = open_bag(path)
@@ -75,7 +75,7 @@ def _read_bag(path: Path, scan_topics: Callable[[dict], list[str]], pose_topic: 
     except (InputError, DatmoError):
         raise
     except Exception as exc:  # corrupt chunks, unknown message definitions
-        raise InputError(f"{label}: cannot read bag ({type(exc).__name__}: {exc})") from None
+        raise bag_error(path, exc) from None
     finally:
         reader.close()
     out.runs = {t: _run_of(label, t, *s) for t, s in scans.items()}
