@@ -27,11 +27,22 @@ pytestmark = pytest.mark.unit
 PACKAGE = "datmo_cli"
 ROOT = Path(__file__).resolve().parent.parent / PACKAGE
 
-BASE = {"errors", "extras", "outputs", "input_files", "bounds", "numba_runtime", "progress", "csvsafe", "text", "libm"}
+BASE = {
+    "errors",
+    "extras",
+    "outputs",
+    "input_files",
+    "bounds",
+    "numba_runtime",
+    "progress",
+    "csvsafe",
+    "text",
+    "libm",
+    "toml_text",
+}
 CLI = {"cli", "__main__", "commands"}
 CORE = {"perception", "tracking", "sim", "lms2xx"}
 RANK = {"base": 0, "log": 1, "core": 2, "pipeline": 3, "cli": 4}
-BASE |= {"toml_text"}  # a user's TOML file read, every failure one line
 
 # arrows against the layers that another branch removes; each names that branch
 KNOWN: set[tuple[str, str]] = set()
