@@ -1,5 +1,5 @@
 """Hindsight for batch outputs: a fixed-lag Rauch–Tung–Striebel smoother over the tracker's constant-velocity
-model, and person labels back-filled over the same lag (docs/method.md §6.4).
+model, and person labels back-filled over the same lag (docs/method.md §6.3).
 
 A batch run (`datmo run`, `datmo track`) sees the whole log, so the state it writes for scan k may use the scans
 that follow it. With a lag L (s), the output state of a track at time t is its RTS-smoothed state given every scan
