@@ -237,3 +237,20 @@ def test_hindsight_outputs_are_the_same_whatever_the_blocks(tmp_path, hall):
     pipeline.process_file(hall, tmp_path / "b.mcap", block_scans=7)
     track_file(tmp_path / "a.mcap", tmp_path / "c.mcap", block_scans=3)  # from the log's features
     assert tracks_of(tmp_path / "a.mcap") == tracks_of(tmp_path / "b.mcap") == tracks_of(tmp_path / "c.mcap")
+
+
+def test_nothing_is_smoothed_across_a_reset():
+    """A track re-initialised (its state and covariance started anew, as at a merge or a re-acquisition that
+    resets it) is smoothed as two tracks: the rows before the reset as if the track had died there."""
+    a = filtered_track(20, seed=5)
+    b = filtered_track(15, seed=6)
+    shift = a[0][-1] + 200_000_000 - b[0][0]
+    stamps = np.concatenate([a[0], b[0] + shift])
+    xs = np.concatenate([a[1], b[1] + [3.0, -2.0, 0.0, 0.0]])  # a jump of 3.6 m with a fresh covariance
+    Ps = np.concatenate([a[2], b[2]])
+    rows = np.arange(35)
+    got, _ = H.smooth(stamps, np.full(35, 4), xs, Ps, np.full(35, Q), rows, 10**9, q_most=Q)
+    alone, _ = H.smooth(a[0], np.full(20, 4), a[1], a[2], np.full(20, Q), np.arange(20), 10**9, q_most=Q)
+    np.testing.assert_allclose(got[:20], alone, atol=1e-9)
+    joined, _ = H.smooth(stamps, np.full(35, 4), xs, Ps, np.full(35, Q), rows, 10**9, q_most=1e9)  # no reset seen
+    assert np.abs(joined[19, 2:] - alone[19, 2:]).max() > 1.0  # it would have spread the jump into a speed

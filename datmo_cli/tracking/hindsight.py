@@ -50,28 +50,37 @@ def chains(ids: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return nxt, prv
 
 
+RESET_TOLERANCE = 1e-3  # share of the predicted covariance's trace a filtered one may exceed it by (float32 rounding)
+
+
 def gains(
-    t_ns: np.ndarray, state: np.ndarray, cov: np.ndarray, q: np.ndarray, nxt: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    t_ns: np.ndarray, state: np.ndarray, cov: np.ndarray, q: np.ndarray, nxt: np.ndarray, q_most: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The RTS terms of each row r that has a next row n (zeros elsewhere): the gain C_r = P_r F' Pp_n^-1 (n, 4, 4),
-    the prediction of n from r xp (n, 4), and its covariance Pp (n, 4, 4), stored at row n (xp, Pp) and r (C).
-    q: each row's q for the step to its next row."""
+    the prediction of n from r xp (n, 4), and its covariance Pp (n, 4, 4), stored at row n (xp, Pp) and r (C); and
+    the rows r whose next row is no Kalman step from r (a reset: a re-initialised or merged track), whose filtered
+    covariance exceeds the prediction's (an update never increases it), predicted with q_most (m/s²)²/Hz at
+    least, the largest q the tracker may have stepped with. q: each row's q for the step to its next row."""
     C = np.zeros((len(t_ns), 4, 4))
     xp, Pp = np.zeros((len(t_ns), 4)), np.zeros((len(t_ns), 4, 4))
     r = np.flatnonzero(nxt >= 0)
     if not len(r):
-        return C, xp, Pp
+        return C, xp, Pp, r
     n = nxt[r]
     dt = (t_ns[n] - t_ns[r]).astype(np.float64) * 1e-9
     F = transition(dt)
     PFt = cov[r] @ np.transpose(F, (0, 2, 1))
-    pred = F @ PFt + process_noise(dt, q[r])
+    FPFt = F @ PFt
+    pred = FPFt + process_noise(dt, q[r])
     pred = 0.5 * (pred + np.transpose(pred, (0, 2, 1)))
     # C = P F' pred^-1, by solving pred' C' = (P F')' (pred symmetric)
     C[r] = np.transpose(np.linalg.solve(pred, np.transpose(PFt, (0, 2, 1))), (0, 2, 1))
     xp[n] = np.einsum("nij,nj->ni", F, state[r])
     Pp[n] = pred
-    return C, xp, Pp
+    widest = FPFt + process_noise(dt, np.maximum(q[r], q_most))
+    excess = np.linalg.eigvalsh(0.5 * (cov[n] + np.transpose(cov[n], (0, 2, 1))) - widest)[:, -1]
+    reset = excess > RESET_TOLERANCE * np.trace(widest, axis1=1, axis2=2)
+    return C, xp, Pp, r[reset]
 
 
 def horizon(t_ns: np.ndarray, nxt: np.ndarray, rows: np.ndarray, lag_ns: int) -> np.ndarray:
@@ -98,14 +107,18 @@ def smooth(
     lag_ns: int,
     *,
     covariance: bool = True,
+    q_most: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Fixed-lag RTS states of `rows`: each given its track's rows up to lag_ns after it, by the backward
     recursion x_s(r) = x(r) + C_r (x_s(n) - xp(n)), P_s(r) = P(r) + C_r (P_s(n) - Pp(n)) C_r', started at that
     horizon's filtered state. Every row of those tracks up to that horizon must be given (a track's rows end at
-    its death). Returns (states (len(rows), 4), covariances (len(rows), 4, 4), or None without `covariance`)."""
+    its death). A reset of a track (see `gains`; q_most as there) ends its chain as its death would. Returns
+    (states (len(rows), 4), covariances (len(rows), 4, 4), or None without `covariance`)."""
     rows = np.asarray(rows, np.int64)
     nxt, prv = chains(ids, t_ns)
-    C, xp, Pp = gains(t_ns, state, cov, q, nxt)
+    C, xp, Pp, reset = gains(t_ns, state, cov, q, nxt, q_most)
+    prv[nxt[reset]] = -1  # a reset starts the track anew: nothing is smoothed across it
+    nxt[reset] = -1
     cur = horizon(t_ns, nxt, rows, lag_ns)
     xs = state[cur].copy()
     Ps = cov[cur].copy() if covariance else None
@@ -233,7 +246,8 @@ class Hindsight:
         ids = all_items["id"].astype(np.int64)
         q = np.where(all_items["classification"] == CLASS_PERSON, self.q_person, self.q)
         rows = np.arange(len(items))
-        xs, Ps = smooth(t, ids, state, cov, q, rows, self.lag_ns, covariance=self.covariance)
+        q_most = max(self.q, self.q_person)
+        xs, Ps = smooth(t, ids, state, cov, q, rows, self.lag_ns, covariance=self.covariance, q_most=q_most)
         for k, name in enumerate(names):
             items[name] = xs[:, k]
         if poses is not None:
