@@ -20,7 +20,7 @@ from .log import cdr, mcapio, types
 from .log.scan import Odometry, ScanRun
 from .perception.features import RunFeatures, extract_run, segment_run
 from .perception.params import FeatureParams
-from .tracking.hindsight import Hindsight
+from .tracking.hindsight import Hindsight, smoothed_tails
 from .tracking.markers import track_markers
 from .tracking.measurements import ScanFeatures
 from .tracking.params import TrackingParams
@@ -162,6 +162,7 @@ class TrackStream:
         lag = self.params.hindsight_lag if hindsight else 0.0
         p = self.params
         self.held = Hindsight(lag, p.process_noise, p.person_process_noise, covariance=covariance) if lag > 0 else None
+        self._rings: dict = {}  # with hindsight, each track's marker tail of smoothed positions (smoothed_tails)
 
     def block(
         self,
@@ -184,7 +185,9 @@ class TrackStream:
         for a in range(0, n, step):  # one compiled call per chunk of scans (Tracker.track_block)
             b = min(a + step, n)
             part = None if poses is None else poses[a:b]
-            block = tracker.track_block(run.stamps[a:b], feats[a:b], run.ranges[a:b], part, tails=self.markers)
+            block = tracker.track_block(
+                run.stamps[a:b], feats[a:b], run.ranges[a:b], part, tails=self.markers and self.held is None
+            )
             if self.held is None:
                 given.append(run.stamps[a:b])
                 self._add(out, run.stamps[a:b], block)
@@ -218,17 +221,13 @@ class TrackStream:
         for i, stamp in enumerate(stamps.tolist()):
             tracks = block.items[o[i] : o[i + 1]]
             out.tracks.append(tracks)
-            if self.markers:
-                out.markers.append(
-                    track_markers(
-                        stamp,
-                        self.marker_frame,
-                        tracks,
-                        block.tail[o[i] : o[i + 1]],
-                        block.tail_count[o[i] : o[i + 1]],
-                        world=world,
-                    )
-                )
+            if not self.markers:
+                continue
+            if self.held is None:
+                tail, count = block.tail[o[i] : o[i + 1]], block.tail_count[o[i] : o[i + 1]]
+            else:  # the tails of the smoothed positions, as a player draws them from the stored tracks
+                tail, count = smoothed_tails(self._rings, tracks, world, self.params.tail_length)
+            out.markers.append(track_markers(stamp, self.marker_frame, tracks, tail, count, world=world))
 
     def channels(self, tracked: TrackedRun) -> dict[str, tuple[str, np.ndarray, list]]:
         """The channels `datmo track` adds for a TrackedRun: {topic: (msgtype, stamps, payloads)}."""

@@ -273,3 +273,24 @@ def _first_stamps(ids: np.ndarray, t: np.ndarray) -> tuple[list[int], list[int]]
     order = np.lexsort((t, ids))
     first = np.concatenate([[True], ids[order[1:]] != ids[order[:-1]]])
     return ids[order][first].tolist(), t[order][first].tolist()
+
+
+def smoothed_tails(
+    rings: dict[int, tuple[np.ndarray, int]], tracks: np.ndarray, world: bool, length: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """One scan's tracks' marker tails from their released (smoothed) positions, as the tracker keeps its own:
+    each track's ring of its last `length` positions (tracking frame, m) with this scan's written at
+    count % length, and the positions written (`rings`, track id -> (ring, count), carried from scan to scan;
+    tracks gone are forgotten). Returns (tail (K, length, 2), count (K,))."""
+    T = max(int(length), 1)
+    xs, ys = tracks["world_x" if world else "x"].tolist(), tracks["world_y" if world else "y"].tolist()
+    tail, count = np.zeros((len(tracks), T, 2)), np.zeros(len(tracks), np.int64)
+    kept = {}
+    for k, tid in enumerate(tracks["id"].tolist()):
+        ring, n = rings.get(tid) or (np.zeros((T, 2)), 0)
+        ring[n % T] = xs[k], ys[k]
+        kept[tid] = (ring, n + 1)
+        tail[k], count[k] = ring, n + 1
+    rings.clear()
+    rings.update(kept)
+    return tail, count
