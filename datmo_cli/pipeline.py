@@ -115,7 +115,13 @@ def open_stages(
 
     config = config or DatmoConfig()
     odometry, estimated = stream_odometry(stream, config.track.ego_motion)
-    return RunStages(odometry, config, estimated=estimated, markers=markers, covariance=covariance)
+    return RunStages(odometry, config, estimated=estimated, markers=markers, covariance=covariance, hindsight=True)
+
+
+def hindsight_provenance(used: bool, track) -> dict:
+    """What an output's provenance says of hindsight (tracking.hindsight): whether its tracks were smoothed and
+    labelled over a lag, and the lag (s; 0 when not used)."""
+    return {"used": bool(used), "lag_s": float(track.hindsight_lag) if used else 0.0}
 
 
 PERCEIVE_AHEAD = 2  # blocks whose perception may run ahead of the tracking: one block's wait is the next's slack
@@ -138,6 +144,7 @@ class RunStages:
         markers: bool = True,
         covariance: bool = True,
         report=None,
+        hindsight: bool = False,
     ) -> None:
         from .config import DatmoConfig
         from .feature_channels import FeatureStream
@@ -150,6 +157,7 @@ class RunStages:
         self.features = FeatureStream(self.config.features, odometry)
         self.tracking = None
         self.report = report
+        self.hindsight = hindsight and self.config.track.hindsight_lag > 0
 
     def derived(self) -> dict[str, str]:
         """{topic: message type} of the channels the stages write, in writing order."""
@@ -165,23 +173,42 @@ class RunStages:
             "track": track.to_dict(),
             "leg_model": leg_model_provenance(features.leg_model),
             "config": self.config.to_dict(),
+            "hindsight": hindsight_provenance(self.hindsight, track),
         }
 
     def __call__(self, block) -> dict[str, tuple]:
-        return self._finish(block, self.features.block(block.run, markers=self.markers))
+        """The block's channels at once: causal tracks (the live paths: play, record --live, node, the API's
+        LiveTracker). A RunStages with hindsight gives its blocks through `pipelined`."""
+        if self.hindsight:
+            raise ValueError("the stages with hindsight give their blocks through pipelined()")
+        channels, extra, tracks = self._track(block, self.features.block(block.run, markers=self.markers))
+        out = channels | self.tracking.channels(tracks)
+        if self.report is not None:
+            feed_report(self.report, block.run, extra[0], extra[1], tracks)
+        return out
 
     def pipelined(self, blocks: Iterable) -> Iterator[tuple[Any, dict[str, tuple]]]:
-        """(block, its derived channels) for each block in order, the channels those of calling the stages on it.
-        On two threads or more (perception.threads, `--threads`), the perception of the next blocks (up to
-        PERCEIVE_AHEAD) runs on a thread of its own (its kernels on the threads left over) beside the tracking,
-        encoding and writing of this one: the compiled kernels release the GIL. The channels are the same for any
-        count."""
+        """(block, its derived channels) for each block in order. With hindsight (`datmo run`, `datmo track`), a
+        block is given once the tracks of its scans are final (tracking.hindsight: up to hindsight_lag s of scans
+        later), so the blocks after it are perceived and tracked first; memory holds those. On two threads or more
+        (perception.threads, `--threads`), the perception of the next blocks (up to PERCEIVE_AHEAD) runs on a
+        thread of its own (its kernels on the threads left over) beside the tracking, encoding and writing of this
+        one: the compiled kernels release the GIL. The channels are the same for any count."""
+        tracked = ((b, *self._track(b, made)) for b, made in self._perceived(blocks))
+        for block, channels, extra, tracks in held_until_tracked(tracked, lambda: self.tracking):
+            out = channels | self.tracking.channels(tracks)
+            if self.report is not None:
+                feed_report(self.report, block.run, extra[0], extra[1], tracks)
+            yield block, out
+
+    def _perceived(self, blocks: Iterable) -> Iterator[tuple[Any, tuple[dict[str, tuple], Any]]]:
+        """(block, its perception's (channels, RunFeatures)) for each block in order (see pipelined)."""
         from .perception import threads as T
 
         n = T.resolve(None)
         if n < 2:
             for block in blocks:
-                yield block, self(block)
+                yield block, self.features.block(block.run, markers=self.markers)
             return
         from collections import deque
         from concurrent.futures import ThreadPoolExecutor
@@ -194,16 +221,17 @@ class RunStages:
                     ahead.append((block, pool.submit(self.features.block, block.run, markers=self.markers)))
                     if len(ahead) > PERCEIVE_AHEAD:
                         done, made = ahead.popleft()
-                        yield done, self._finish(done, made.result())
+                        yield done, made.result()
                 while ahead:
                     done, made = ahead.popleft()
-                    yield done, self._finish(done, made.result())
+                    yield done, made.result()
             finally:  # stopped early (an error, Ctrl-C): the queued blocks are not perceived for nothing
                 for _, made in ahead:
                     made.cancel()
 
-    def _finish(self, block, made: tuple[dict[str, tuple], Any]) -> dict[str, tuple]:
-        """The block's channels from its perception's (channels, RunFeatures): odometry, features, tracks."""
+    def _track(self, block, made: tuple[dict[str, tuple], Any]) -> tuple[dict[str, tuple], tuple, Any]:
+        """(the block's channels but the tracks: odometry, features; (its RunFeatures, landmark payloads) for the
+        report; the TrackedRun of the scans tracking gives now) from its perception's (channels, RunFeatures)."""
         from .stages import TrackStream, iter_run_features, leg_threshold_of
 
         run = block.run
@@ -222,12 +250,41 @@ class RunStages:
                 learned=model != "paper",
                 leg_threshold=leg_threshold_of(model),
                 covariance=self.covariance,
+                hindsight=self.hindsight,
             )
         tracked = self.tracking.block(run, iter_run_features(features))
-        out |= self.tracking.channels(tracked)
-        if self.report is not None:
-            feed_report(self.report, run, features, out[mcapio.TOPIC_LANDMARKS][2], tracked)
-        return out
+        return out, (features, out[mcapio.TOPIC_LANDMARKS][2]), tracked
+
+
+def held_until_tracked(items: Iterable[tuple], tracking: Callable[[], Any]) -> Iterator[tuple]:
+    """Blocks held until their tracks are given: `items` yields (block, channels, extra, TrackedRun of the scans
+    the tracking gave with that block: with hindsight, earlier scans' and not the newest); this yields (block,
+    channels, extra, the TrackedRun of the block's own scans) in order, each as soon as its scans' tracks are
+    all given, and the rest after the last block (`tracking()`: the stages.TrackStream, its `finish` then).
+    Without hindsight each block is given at once with its own TrackedRun."""
+    from collections import deque
+
+    from .stages import split_tracked
+
+    held: deque = deque()
+    ready: list = []  # TrackedRuns given and not yet assigned to a block, in order
+
+    def give():
+        while held and sum(len(t.stamps) for t in ready) >= len(held[0][0].run):
+            block, channels, extra = held.popleft()
+            tracks, ready[:] = split_tracked(ready, len(block.run))
+            yield block, channels, extra, tracks
+
+    for block, channels, extra, tracked in items:
+        held.append((block, channels, extra))
+        ready.append(tracked)
+        yield from give()
+    stream = tracking()
+    if held and stream is not None:
+        ready.append(stream.finish())
+        yield from give()
+    if held:
+        raise RuntimeError(f"tracking gave too few scans' tracks for {len(held)} blocks")
 
 
 def feed_report(report, run, features, landmark_payloads: list[bytes], tracked) -> None:
@@ -269,10 +326,12 @@ def derive(
 
     config = config or DatmoConfig()
     odometry, odom_channel = estimated_odometry(run, odometry, config.track.ego_motion)
-    stages = RunStages(odometry, config, estimated=bool(odom_channel), markers=markers, covariance=covariance)
+    stages = RunStages(
+        odometry, config, estimated=bool(odom_channel), markers=markers, covariance=covariance, hindsight=True
+    )
     if progress:
         progress(0, len(run))
-    derived = stages(Block(0, run))
+    derived = next(stages.pipelined([Block(0, run)]))[1]
     if progress:
         progress(len(run), len(run))
     return derived, stages.effective()

@@ -13,7 +13,14 @@ from typing import TYPE_CHECKING
 
 from .errors import InputError
 from .log import mcapio
-from .pipeline import derived_topics, odometry_channel, open_stages, write_options
+from .pipeline import (
+    derived_topics,
+    held_until_tracked,
+    hindsight_provenance,
+    odometry_channel,
+    open_stages,
+    write_options,
+)
 
 if TYPE_CHECKING:
     from .config import DatmoConfig
@@ -79,7 +86,6 @@ def track_file(
     Returns (scans, whether features were computed here)."""
     from .config import DatmoConfig
     from .perception.features import leg_model_provenance
-    from .stages import TrackStream, decode_features
     from .streaming import LogStream, write_derived
 
     config = config or DatmoConfig()
@@ -109,34 +115,15 @@ def track_file(
     if computed:
         derived, stage, effective = stages.derived(), stages, stages.effective()
     else:
-        state: dict = {}
         derived = derived_topics(odom=estimated, tracks=True, markers=markers)
         threshold = features_leg_threshold(stream.log, used)
         effective = {
             "track": params.to_dict(),
             "leg_model": (leg_model_provenance(used) if used == "paper" else {"model": used, "threshold": threshold}),
             "config": config.to_dict(),
+            "hindsight": hindsight_provenance(params.hindsight_lag > 0, params),
         }
-
-        def stage(block) -> dict:
-            run, out = block.run, {}
-            if estimated:
-                out[mcapio.TOPIC_ODOM] = odometry_channel(odometry, block)
-            if "tracking" not in state:
-                state["tracking"] = TrackStream(
-                    run.geometry,
-                    odometry=odometry,
-                    params=params,
-                    markers=markers,
-                    learned=used != "paper",
-                    leg_threshold=threshold,
-                    covariance=covariance,
-                )
-            tracking = state["tracking"]
-            with mcapio.decoding(stream.path, mcapio.TOPIC_FEATURES):
-                features = decode_features(block.aligned[mcapio.TOPIC_FEATURES], block.first)
-            return out | tracking.channels(tracking.block(run, features))
-
+        stage = _TrackFeatures(stream, odometry, estimated, params, used, threshold, markers, covariance)
     scans = write_derived(
         stream,
         out,
@@ -148,6 +135,43 @@ def track_file(
         **write_options(force, command_line, block_scans, progress),
     )
     return scans, computed
+
+
+class _TrackFeatures:
+    """`datmo track`'s stage on a log with features: its blocks' tracks (with hindsight, see
+    pipeline.RunStages.pipelined) and estimated odometry."""
+
+    def __init__(self, stream, odometry, estimated: bool, params, used: str, threshold: float, markers, covariance):
+        self.stream, self.odometry, self.estimated, self.params = stream, odometry, estimated, params
+        self.used, self.threshold, self.markers, self.covariance = used, threshold, markers, covariance
+        self.tracking = None
+
+    def pipelined(self, blocks):
+        """(block, its channels) for each block in order, once its tracks are given."""
+        made = ((block, *self._track(block)) for block in blocks)
+        for block, channels, _, tracks in held_until_tracked(made, lambda: self.tracking):
+            yield block, channels | self.tracking.channels(tracks)
+
+    def _track(self, block) -> tuple[dict, None, object]:
+        from .stages import TrackStream, decode_features
+
+        run, out = block.run, {}
+        if self.estimated:
+            out[mcapio.TOPIC_ODOM] = odometry_channel(self.odometry, block)
+        if self.tracking is None:
+            self.tracking = TrackStream(
+                run.geometry,
+                odometry=self.odometry,
+                params=self.params,
+                markers=self.markers,
+                learned=self.used != "paper",
+                leg_threshold=self.threshold,
+                covariance=self.covariance,
+                hindsight=True,
+            )
+        with mcapio.decoding(self.stream.path, mcapio.TOPIC_FEATURES):
+            features = decode_features(block.aligned[mcapio.TOPIC_FEATURES], block.first)
+        return out, None, self.tracking.block(run, features)
 
 
 @dataclass

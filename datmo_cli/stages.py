@@ -20,6 +20,7 @@ from .log import cdr, mcapio, types
 from .log.scan import Odometry, ScanRun
 from .perception.features import RunFeatures, extract_run, segment_run
 from .perception.params import FeatureParams
+from .tracking.hindsight import Hindsight, smoothed_tails
 from .tracking.markers import track_markers
 from .tracking.measurements import ScanFeatures
 from .tracking.params import TrackingParams
@@ -97,6 +98,33 @@ class TrackedRun:
         return offsets, items
 
 
+def split_tracked(pieces: list[TrackedRun], n: int) -> tuple[TrackedRun, list[TrackedRun]]:
+    """(the first n scans of consecutive TrackedRuns, the rest of them), e.g. a block's scans of the runs a
+    TrackStream with hindsight gave; a run of exactly n scans is given as it is."""
+    pieces = [p for p in pieces if len(p.stamps)]
+    if pieces and len(pieces[0].stamps) == n:
+        return pieces[0], pieces[1:]
+    head = pieces[0] if pieces else None
+    out = TrackedRun(np.zeros(0, np.int64), head.frame_id if head else "", head.world if head else False)
+    stamps, rest, need = [], [], n
+    for p in pieces:
+        if need <= 0:
+            rest.append(p)
+            continue
+        k = min(need, len(p.stamps))
+        stamps.append(p.stamps[:k])
+        out.tracks += p.tracks[:k]
+        out.markers += p.markers[:k]
+        if k < len(p.stamps):
+            more = TrackedRun(p.stamps[k:], p.frame_id, p.world, p.tracks[k:], p.markers[k:])
+            rest.append(more)
+        need -= k
+    if need > 0:
+        raise ValueError(f"{n} scans asked of tracked runs holding {n - need}")
+    out.stamps = np.concatenate(stamps) if stamps else out.stamps
+    return out, rest
+
+
 # scans per compiled tracking call: at least _CHUNK (a call costs ~0.4 ms of Python around it), at most
 # _CHUNK_MAX (the tails a block gives for the markers take 320 B per track and scan); progress between calls
 _CHUNK, _CHUNK_MAX = 512, 4096
@@ -121,6 +149,7 @@ class TrackStream:
         learned: bool = False,
         leg_threshold: float = 0.5,
         covariance: bool = True,
+        hindsight: bool = False,
     ) -> None:
         self.params = params or TrackingParams()
         self.tracker = Tracker(self.params, geometry, learned=learned, leg_threshold=leg_threshold)
@@ -130,6 +159,10 @@ class TrackStream:
         self.covariance = covariance
         self.frame = geometry.frame_id
         self.marker_frame = self.odometry.frame_id if self.odometry is not None else self.frame
+        lag = self.params.hindsight_lag if hindsight else 0.0
+        p = self.params
+        self.held = Hindsight(lag, p.process_noise, p.person_process_noise, covariance=covariance) if lag > 0 else None
+        self._rings: dict = {}  # with hindsight, each track's marker tail of smoothed positions (smoothed_tails)
 
     def block(
         self,
@@ -147,34 +180,54 @@ class TrackStream:
         feats = list(features)[:n]
         if len(feats) != n:
             raise ValueError(f"features for {len(feats)} scans, the run has {n}")
-        stamps = run.stamps.tolist()
         step = min(max(n // 10, _CHUNK), _CHUNK_MAX)
+        given = []
         for a in range(0, n, step):  # one compiled call per chunk of scans (Tracker.track_block)
             b = min(a + step, n)
+            part = None if poses is None else poses[a:b]
             block = tracker.track_block(
-                run.stamps[a:b], feats[a:b], run.ranges[a:b], None if poses is None else poses[a:b], tails=self.markers
+                run.stamps[a:b], feats[a:b], run.ranges[a:b], part, tails=self.markers and self.held is None
             )
-            if not self.covariance:
-                block.items["covariance"] = np.nan
-            o = block.offsets.tolist()
-            out.flat.append(block.items[o[0] : o[-1]])
-            for i in range(b - a):
-                tracks = block.items[o[i] : o[i + 1]]
-                out.tracks.append(tracks)
-                if self.markers:
-                    out.markers.append(
-                        track_markers(
-                            stamps[a + i],
-                            self.marker_frame,
-                            tracks,
-                            block.tail[o[i] : o[i + 1]],
-                            block.tail_count[o[i] : o[i + 1]],
-                            world=poses is not None,
-                        )
-                    )
+            if self.held is None:
+                given.append(run.stamps[a:b])
+                self._add(out, run.stamps[a:b], block)
+            else:  # hindsight: the scans whose tracks are final, smoothed and labelled (see tracking.hindsight)
+                self.held.push(run.stamps[a:b], block, part)
+                stamps, final, _ = self.held.release()
+                given.append(stamps)
+                self._add(out, stamps, final)
             if progress is not None:
                 progress(b)
+        out.stamps = np.concatenate(given) if given else run.stamps[:0]
         return out
+
+    def finish(self) -> TrackedRun:
+        """The tracks of the scans hindsight still holds (none without hindsight): call once after the last
+        block."""
+        out = TrackedRun(np.zeros(0, np.int64), self.frame, self.odometry is not None)
+        if self.held is not None:
+            stamps, final, _ = self.held.release(final=True)
+            out.stamps = stamps
+            self._add(out, stamps, final)
+        return out
+
+    def _add(self, out: TrackedRun, stamps: np.ndarray, block) -> None:
+        """Append a TrackBlock of the scans at `stamps` to `out`, with their markers."""
+        if not self.covariance:
+            block.items["covariance"] = np.nan
+        o = block.offsets.tolist()
+        out.flat.append(block.items[o[0] : o[-1]])
+        world = out.world
+        for i, stamp in enumerate(stamps.tolist()):
+            tracks = block.items[o[i] : o[i + 1]]
+            out.tracks.append(tracks)
+            if not self.markers:
+                continue
+            if self.held is None:
+                tail, count = block.tail[o[i] : o[i + 1]], block.tail_count[o[i] : o[i + 1]]
+            else:  # the tails of the smoothed positions, as a player draws them from the stored tracks
+                tail, count = smoothed_tails(self._rings, tracks, world, self.params.tail_length)
+            out.markers.append(track_markers(stamp, self.marker_frame, tracks, tail, count, world=world))
 
     def channels(self, tracked: TrackedRun) -> dict[str, tuple[str, np.ndarray, list]]:
         """The channels `datmo track` adds for a TrackedRun: {topic: (msgtype, stamps, payloads)}."""

@@ -237,9 +237,13 @@ def _wait_for(condition, what: str, timeout: float = 60.0) -> None:
 
 
 def _expected(tmp_path: Path, run: ScanRun, odom_stamps: np.ndarray) -> dict[int, bytes]:
-    """{stamp: the /datmo/tracks payload} that `datmo track --config datmo.toml --covariance` writes for `run` with
-    the robot at POSE (the node publishes the covariance; a file stores it when asked)."""
+    """{stamp: the /datmo/tracks payload} that `datmo track --covariance` writes for `run` without hindsight
+    (datmo.toml with lag 0) with the robot at POSE (the node publishes the covariance; a file stores it when
+    asked)."""
     n = len(odom_stamps)
+    # the node is causal whatever the lag: datmo track gives its tracks without hindsight
+    causal = tmp_path / "causal.toml"
+    causal.write_text((tmp_path / "datmo.toml").read_text() + "hindsight_lag = 0.0\n")
     odom = Odometry(odom_stamps, np.full(n, POSE[0]), np.full(n, POSE[1]), np.full(n, POSE[2]))
     with mcapio.LogWriter(tmp_path / "in.mcap", provenance=mcapio.Provenance("test", {})) as w:
         w.write_scans(run)
@@ -252,7 +256,7 @@ def _expected(tmp_path: Path, run: ScanRun, odom_stamps: np.ndarray) -> dict[int
             "-o",
             str(tmp_path / "out.mcap"),
             "--config",
-            str(tmp_path / "datmo.toml"),
+            str(causal),
             "--covariance",
             "-q",
         ],

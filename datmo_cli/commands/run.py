@@ -173,6 +173,7 @@ class _BatchProgress:
     help="Store each track's covariance in /datmo/tracks (otherwise its 16 numbers are NaN).",
 )
 @param_option("track.ego_motion")
+@param_option("track.hindsight_lag")
 @param_option("features.leg_model")
 @option(
     "--threads",

@@ -61,6 +61,7 @@ if TYPE_CHECKING:
 @param_option("track.delete_after_occluded")
 @param_option("track.d_max")
 @param_option("track.ego_motion")
+@param_option("track.hindsight_lag")
 @param_option(
     "features.leg_model",
     expose=True,

@@ -25,6 +25,8 @@ class TrackingParams(Section):
     """The `[track]` table of a config file: parameters of `datmo track`."""
 
     name: ClassVar[str] = "track"
+    # fields the pipeline reads, not the tracking kernels (not in state.PARAM_NAMES)
+    not_in_kernels: ClassVar[tuple[str, ...]] = ("hindsight_lag",)
     removed: ClassVar[dict[str, str]] = {
         "leg_probability": "the leg threshold is the leg model's own (threshold_p, chosen by datmo train-legs)",
         "moving_person_evidence": "a person's class no longer depends on its mobility (see person_evidence)",
@@ -173,6 +175,13 @@ class TrackingParams(Section):
         "('off').",
     )
     # output
+    hindsight_lag: float = param(
+        1.0,
+        _b(0, 60, "s", "a minute of tracks held back; the memory held grows with the lag"),
+        "Batch outputs (datmo run, datmo track) smooth each track over this lag (a fixed-lag RTS smoother) and "
+        "label a track promoted to person within it a person from its first confirmed scan; the live paths "
+        "(node, play, record --live) stay causal (0: off).",
+    )
     tail_length: int = param(
         20,
         _b(0, 10_000, "points", "each track holds its tail", integer=True),
