@@ -6,9 +6,11 @@ against a generous bound, never by timing."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import textwrap
+import warnings
 from pathlib import Path
 
 import pytest
@@ -19,18 +21,27 @@ pytestmark = [pytest.mark.unit, pytest.mark.timeout(180)]
 RSS_BOUND_MB = 400  # generous: the bombs below take over 1,000 MB when unbounded
 
 
-def run_measured(code: str, tmp_path: Path) -> dict:
-    """Run `code` (which sets `out`, a dict) in a fresh interpreter; `out` with the peak RSS in MB as "rss_mb"."""
-    script = textwrap.dedent(code) + textwrap.dedent(
+SPACE_LIMIT = 2 << 30  # address space of a measured process: an unbounded read fails there, never the machine
+
+
+def run_measured(code: str, tmp_path: Path, timeout: float = 170) -> dict:
+    """Run `code` (which sets `out`, a dict) in a fresh interpreter of at most SPACE_LIMIT bytes of address
+    space; `out` with the peak RSS in MB as "rss_mb". The process failing (out of memory) or running past
+    `timeout` (blocked) fails the test."""
+    script = "import resource\n" + f"resource.setrlimit(resource.RLIMIT_AS, ({SPACE_LIMIT}, {SPACE_LIMIT}))\n"
+    script += textwrap.dedent(code) + textwrap.dedent(
         """
         import json, resource
         out["rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         print(json.dumps(out))
         """
     )
-    proc = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=170, check=False
-    )
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=timeout, check=False
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"still running after {timeout} s (blocked)")
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -134,3 +145,104 @@ def test_a_sound_compressed_ros1_bag_reads_whole(tmp_path, compression):
 
     res = import_log(ros1_bag_with_chunk(tmp_path / "sound.bag", compression, None), topic="/front")
     assert len(res.run) == 5 and res.odometry is not None and len(res.odometry) == 5
+
+
+IMPORT_BAG = """
+from datmo_cli.errors import InputError
+from datmo_cli.log.importers import import_log
+try:
+    import_log("BAG")
+    out = {"error": None}
+except InputError as exc:
+    out = {"error": str(exc)}
+"""
+
+
+@pytest.fixture
+def ros2_bag(tmp_path):
+    from test_import_rosbag import messages, write_ros2
+
+    return write_ros2(tmp_path / "b2", messages(), topics={"/front"})
+
+
+def _swap(path: Path, kind: str) -> None:
+    path.unlink()
+    if kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "zero":
+        path.symlink_to("/dev/zero")
+    else:  # a sparse regular file larger than the cap
+        with open(path, "wb") as f:
+            f.truncate((16 << 20) + 1)
+
+
+@pytest.mark.parametrize(
+    ("which", "kind"),
+    # a member is a log, whatever its size: its reads are bounded chunk by chunk
+    [
+        ("metadata.yaml", "fifo"),
+        ("metadata.yaml", "zero"),
+        ("metadata.yaml", "large"),
+        ("member", "fifo"),
+        ("member", "zero"),
+    ],
+)
+def test_a_bag_folder_file_that_is_not_a_sane_regular_file_is_refused_naming_it(ros2_bag, which, kind):
+    path = ros2_bag / "metadata.yaml" if which == "metadata.yaml" else next(ros2_bag.glob("*.mcap"))
+    _swap(path, kind)
+    out = run_measured(IMPORT_BAG.replace("BAG", str(ros2_bag)), ros2_bag.parent, timeout=30)
+    text = out["error"]
+    assert text and text.startswith(f"{path}: "), out
+    expected = {"fifo": "is a FIFO", "zero": "is a character device", "large": "is at most 16,777,216 bytes"}[kind]
+    assert expected in text, text
+
+
+def test_a_sound_bag_folder_still_reads(ros2_bag):
+    from datmo_cli.log.importers import import_log
+
+    assert len(import_log(ros2_bag).run) == 5
+
+
+def test_a_bag_folder_member_whose_zstd_frame_states_1_gib_is_refused_in_bounded_memory(tmp_path, monkeypatch):
+    """A ROS 2 bag folder whose MCAP member's first chunk holds a zstd frame stating 1 GiB (its header declares
+    the real size): rosbags' reader decompressed it whole."""
+    import synthetic_logs
+
+    from datmo_cli.log import bagdir, mcap_chunks
+
+    class Bomb:
+        def __init__(self, real):
+            self.real, self.first = real, True
+
+        def compress(self, data):
+            if self.first:
+                self.first = False
+                return zstd_stating(1 << 30, data)
+            return self.real.compress(data)
+
+    made = mcap_chunks.ChunkWriter.__init__
+
+    def init(self, *args, **kwargs):
+        made(self, *args, **kwargs)
+        self._zstd = Bomb(self._zstd)
+
+    monkeypatch.setattr(mcap_chunks.ChunkWriter, "__init__", init)
+    with warnings.catch_warnings(), bagdir.writing(tmp_path / "bag") as log_file:
+        warnings.simplefilter("ignore")  # metadata.yaml's summary, read by datmo's reader, skips the bomb
+        synthetic_logs.write(log_file)
+    monkeypatch.undo()
+    out = run_measured(
+        """
+        from datmo_cli.errors import InputError
+        from datmo_cli.log.importers import import_log
+        try:
+            import_log("bag")
+            out = {"error": None}
+        except InputError as exc:
+            out = {"error": str(exc)}
+        """,
+        tmp_path,
+    )
+    assert out["error"] and out["error"].startswith("bag: cannot read bag"), out
+    assert "decompresses to more than the" in out["error"], out
+    assert out["rss_mb"] < RSS_BOUND_MB, out

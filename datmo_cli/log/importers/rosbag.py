@@ -41,9 +41,11 @@ def open_bag(path: str | Path):
     message counts; InputError naming the file when it cannot be read. The caller closes the reader."""
     from rosbags.highlevel import AnyReader
 
-    from .ros1_chunks import bound_ros1_chunks
+    from .bag_chunks import bound_bag_chunks, check_bag_folder
 
-    bound_ros1_chunks()
+    bound_bag_chunks()
+    if Path(path).is_dir():
+        check_bag_folder(Path(path))
     try:
         reader = AnyReader([Path(path)])
         reader.open()
