@@ -246,3 +246,52 @@ def test_a_bag_folder_member_whose_zstd_frame_states_1_gib_is_refused_in_bounded
     assert out["error"] and out["error"].startswith("bag: cannot read bag"), out
     assert "decompresses to more than the" in out["error"], out
     assert out["rss_mb"] < RSS_BOUND_MB, out
+
+
+def test_a_leg_model_of_100000_tiny_members_is_refused_before_any_is_opened(tmp_path, monkeypatch):
+    import zipfile
+
+    import numpy as np
+
+    from datmo_cli.errors import InputError
+    from datmo_cli.perception import leg_model
+
+    path = tmp_path / "many.npz"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as zf:
+        for i in range(100_000):
+            zf.writestr(f"m{i}.npy", b"")
+
+    def opened(*args, **kwargs):
+        raise AssertionError("a member was opened")
+
+    monkeypatch.setattr(np.lib.format, "read_magic", opened)
+    with pytest.raises(
+        InputError, match=r"many.npz: not a leg model file \(100,000 members; a leg model has 13, at most 64"
+    ):
+        leg_model.LegModel.load(path)
+
+
+def test_a_leg_model_larger_than_256_mib_is_refused_before_it_is_opened(tmp_path, monkeypatch):
+    import zipfile
+
+    from datmo_cli.errors import InputError
+    from datmo_cli.perception import leg_model
+
+    path = tmp_path / "huge.npz"
+    with open(path, "wb") as f:
+        f.truncate((256 << 20) + 1)
+
+    def opened(*args, **kwargs):
+        raise AssertionError("the file was opened as a zip")
+
+    monkeypatch.setattr(zipfile, "ZipFile", opened)
+    with pytest.raises(
+        InputError, match=r"huge.npz: not a leg model file \(268,435,457 bytes; a leg model takes at most"
+    ):
+        leg_model.LegModel.load(path)
+
+
+def test_the_packaged_leg_model_still_loads():
+    from datmo_cli.perception import leg_model
+
+    assert leg_model.LegModel.load(leg_model.DEFAULT_MODEL_PATH).n_trees > 0
