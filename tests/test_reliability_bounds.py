@@ -295,3 +295,28 @@ def test_the_packaged_leg_model_still_loads():
     from datmo_cli.perception import leg_model
 
     assert leg_model.LegModel.load(leg_model.DEFAULT_MODEL_PATH).n_trees > 0
+
+
+def test_play_refuses_a_client_frame_over_1_mib_on_its_header_before_buffering_it():
+    """A client's frame whose header declares 256 MiB: the connection is closed (1009, message too big) on the
+    header alone; unbounded, the server waited for the 256 MiB to buffer them (1.45 GB RSS)."""
+    import socket
+    import struct
+
+    pytest.importorskip("foxglove")
+    from websockets.sync.client import connect
+
+    from datmo_cli import live
+
+    server = live.LiveServer("127.0.0.1", 0)
+    try:
+        with connect(server.url, subprotocols=[live.SUBPROTOCOL], max_size=None, open_timeout=10) as ws:
+            sock: socket.socket = ws.socket
+            # a masked binary frame (FIN, opcode 2) declaring 256 MiB by its 64-bit length, then 16 bytes of it
+            sock.sendall(bytes([0x82, 0x80 | 127]) + struct.pack(">Q", 256 << 20) + bytes(4) + bytes(16))
+            with pytest.raises(Exception) as closed:
+                while True:
+                    ws.recv(timeout=10)
+        assert getattr(getattr(closed.value, "rcvd", None), "code", None) == 1009, repr(closed.value)
+    finally:
+        server.close()
