@@ -325,14 +325,47 @@ def temp_path(path: Path) -> Path:
     return folder_of(path) / os.fsdecode(b"." + name + tail.encode())
 
 
+_JOURNAL = threading.local()  # .path: where this thread records the temporary files it makes (a batch's)
+
+
+def journal_to(path: str | None) -> None:
+    """Record, from now on in this thread, the name of every temporary file (or folder) made and kept in the
+    journal file `path` (None: stop), so that a batch removes exactly the temporary files its tasks made even
+    when a worker dies without removing its own (`journal.remove_recorded`)."""
+    _JOURNAL.path = path
+
+
+def note(sign: str, tmp: str | Path) -> None:
+    """Append `tmp` to this thread's journal: made ("+") or kept ("-": it stays on disk); one JSON line, written
+    in one append. A journal that cannot be written (a worker on another machine) records nothing."""
+    path = getattr(_JOURNAL, "path", None)
+    if path is None:
+        return
+    import json
+
+    line = (json.dumps([sign, os.fsdecode(tmp)]) + "\n").encode("utf-8", "surrogateescape")
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return
+    try:
+        os.write(fd, line)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 def track(tmp: Path) -> None:
     """Register a temporary file made elsewhere (e.g. a symlink), so it is removed on every way out."""
     _LIVE[os.fspath(tmp)] = os.getpid()
+    note("+", tmp)
 
 
 def forget(tmp: str | Path) -> None:
     """Stop tracking `tmp`: it stays on disk (a recording kept, or one that could not be renamed into place)."""
     _LIVE.pop(os.fspath(tmp), None)
+    note("-", tmp)
 
 
 def interrupt(signum: int) -> None:
