@@ -205,6 +205,8 @@ def _run(task: Task, t0: float, progress: Callable[[int, int], None], raise_unex
                     **origin,
                 )
             summary = report.summary()
+        out_size, out_mtime = input_stat(task.output)  # what resume checks the output against
+        out_sha = input_sha256(task.output)
         seconds = time.perf_counter() - t0
         return record(
             task,
@@ -212,6 +214,9 @@ def _run(task: Task, t0: float, progress: Callable[[int, int], None], raise_unex
             input_sha256=sha,
             input_size=size,
             input_mtime_ns=mtime,
+            output_sha256=out_sha,
+            output_size=out_size,
+            output_mtime_ns=out_mtime,
             scans=n,
             seconds=round(seconds, 3),
             scans_per_s=round(n / seconds, 1) if seconds > 0 else 0.0,
