@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -53,3 +55,81 @@ def test_resume_redoes_a_done_output_that_was_truncated_or_changed_since(fake_ba
     (out / "b.mcap").write_bytes(bytes(data))
     assert run() == ["a.mcap", "b.mcap"]  # c.mcap, unchanged, is skipped
     assert run() == []
+
+
+T0 = 1_600_000_000_000_000_000
+BAD_POSES = {3: (float("nan"), 0.0, 0.0), 5: (0.0, float("inf"), 0.0), 7: (1e300, 0.0, 0.0), 8: (0.0, 0.0, np.nan)}
+
+
+def odom_log(path, bad=BAD_POSES, n: int = 10, channels: int = 1) -> None:
+    """An MCAP of `n` scans and /odom poses (x = 0.1 k) 0.2 s apart, except the poses `bad` (k: x, y, theta);
+    with channels=2, /odom on two channels (the second 50 ms later)."""
+    from mcap.writer import Writer
+
+    from datmo_cli.log import mcapio, types
+    from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun, encode_scans
+
+    stamps = T0 + np.arange(n, dtype=np.int64) * 200_000_000
+    g = ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, "laser")
+    run = ScanRun(stamps, np.full((n, 91), 3.0, np.float32), g)
+    xyz = [bad.get(k, (0.1 * k, 0.0, 0.0)) for k in range(n)]
+    odo = Odometry(stamps, *(np.array(c, np.float64) for c in zip(*xyz, strict=True)))
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema(types.LASERSCAN, "ros2msg", types.schema_text(types.LASERSCAN).encode())
+        oid = w.register_schema(types.ODOMETRY, "ros2msg", types.schema_text(types.ODOMETRY).encode())
+        scan = w.register_channel(mcapio.TOPIC_SCAN, "cdr", sid, {})
+        odoms = [w.register_channel(mcapio.TOPIC_ODOM, "cdr", oid, {"publisher": str(i)}) for i in range(channels)]
+        payloads = mcapio.encode_odometry(odo)
+        for k, (t, p) in enumerate(zip(stamps.tolist(), encode_scans(run), strict=True)):
+            w.add_message(scan, t, p, t)
+            for i, cid in enumerate(odoms):
+                w.add_message(cid, t + i * 50_000_000, payloads[k], t)
+        w.finish()
+
+
+def test_odometry_poses_not_finite_or_beyond_the_bound_are_dropped_with_their_count(tmp_path):
+    from datmo_cli.log import mcapio, poses
+
+    path = tmp_path / "odom.mcap"
+    odom_log(path)
+    with pytest.warns(
+        poses.BadPoseWarning, match=r"dropped 4 of 10 odometry poses .* beyond 1,000,000 m \(the first: pose 3\)"
+    ):
+        odo = mcapio.odometry_from_log(mcapio.read_log(path, topics=None))
+    assert len(odo) == 6 and np.isfinite(odo.x).all() and np.abs(odo.x).max() < 1
+    result = CliRunner().invoke(cli, ["import", str(path), "-o", str(tmp_path / "out.mcap")])
+    assert result.exit_code == 0, result.output
+    assert "dropped 4 of 10 odometry poses" in result.stderr, result.stderr
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the output holds only sane poses: no warning when read
+        assert len(mcapio.read_odometry(tmp_path / "out.mcap")) == 6
+
+
+def test_carmen_poses_beyond_the_bound_are_dropped_with_their_count(tmp_path):
+    from test_reliability_imports import flaser_log
+
+    from datmo_cli.log.importers import import_log
+
+    path = tmp_path / "in.log"
+    flaser_log(path, {4: "1e308 2 0.5", 9: "1 -1e300 0.5"})
+    res = import_log(path)
+    assert len(res.run) == 30 and len(res.odometry) == 28
+    assert (
+        f"{path}: dropped 2 of 30 odometry poses that are not finite or lie beyond 1,000,000 m (the first: pose 4)"
+        in res.warnings
+    )
+
+
+def test_two_channels_on_the_odometry_topic_are_refused_as_for_scans(tmp_path):
+    from datmo_cli.errors import InputError
+    from datmo_cli.log import mcapio
+
+    path = tmp_path / "two.mcap"
+    odom_log(path, bad={}, channels=2)
+    with pytest.raises(InputError, match=r"/odom is on 2 channels \(id 2: 10 nav_msgs/msg/Odometry, id 3: 10"):
+        mcapio.odometry_from_log(mcapio.read_log(path, topics=None))
+    result = CliRunner().invoke(cli, ["import", str(path), "-o", str(tmp_path / "out.mcap")])
+    assert result.exit_code == 1 and "/odom is on 2 channels" in result.stderr, result.output
+    assert not (tmp_path / "out.mcap").exists()
