@@ -133,3 +133,24 @@ def test_two_channels_on_the_odometry_topic_are_refused_as_for_scans(tmp_path):
     result = CliRunner().invoke(cli, ["import", str(path), "-o", str(tmp_path / "out.mcap")])
     assert result.exit_code == 1 and "/odom is on 2 channels" in result.stderr, result.output
     assert not (tmp_path / "out.mcap").exists()
+
+
+def test_one_nan_carmen_timestamp_is_repaired_alone_and_named(tmp_path):
+    from datmo_cli.log.importers import import_log
+
+    ranges = " ".join(["3.0"] * 181)
+    lines = []
+    for k in range(30):
+        t = "nan" if k == 10 else f"{100 + 0.2 * k:.6f}"
+        lines.append(f"FLASER 181 {ranges} 1 2 0.5 1 2 0.5 {t} host {t}")
+    path = tmp_path / "in.log"
+    path.write_text("\n".join(lines) + "\n")
+    res = import_log(path)
+    want = np.round((100 + 0.2 * np.arange(30)) * 1e9).astype(np.int64)
+    want[10] = want[9] + 1_000_000  # the bad one alone: 1 ms after the one before
+    np.testing.assert_array_equal(res.run.stamps, want)
+    said = [w for w in res.warnings if "stamp" in w]
+    assert (
+        len(said) == 1 and "1 is not a number or out of range; each set 1 ms after the one before (scan 10)" in said[0]
+    )
+    assert "synthesised" not in said[0]
