@@ -320,3 +320,30 @@ def test_play_refuses_a_client_frame_over_1_mib_on_its_header_before_buffering_i
         assert getattr(getattr(closed.value, "rcvd", None), "code", None) == 1009, repr(closed.value)
     finally:
         server.close()
+
+
+def ros2_bag_compressed_whole(folder: Path) -> Path:
+    """A ROS 2 bag folder of five scans whose MCAP member is compressed whole (compression_mode: file)."""
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+    from test_import_rosbag import SCAN, STORE2, messages
+
+    w = Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP)
+    w.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
+    with w:
+        conn = w.add_connection("/front", SCAN, typestore=STORE2)
+        for topic, msgtype, t, make in messages():
+            if topic == "/front":
+                w.write(conn, t, STORE2.serialize_cdr(make(STORE2), msgtype))
+    return folder
+
+
+def test_a_bag_member_compressed_whole_is_decompressed_within_bounds(tmp_path):
+    from datmo_cli.errors import InputError
+    from datmo_cli.log.importers import import_log
+
+    bag = ros2_bag_compressed_whole(tmp_path / "whole")
+    assert len(import_log(bag).run) == 5  # a sound one reads
+    member = next(bag.glob("*.zstd"))
+    member.write_bytes(zstd_stating(1 << 30))  # 1 GiB of zeros in about 32 KB
+    with pytest.raises(InputError, match=r"decompresses to more than [\d,]+ bytes \(1,000 times its size plus 64 MiB"):
+        import_log(bag)

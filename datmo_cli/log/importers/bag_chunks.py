@@ -83,6 +83,61 @@ def bound_bag_chunks() -> None:
     r1.Reader.read_chunk = read_chunk  # type: ignore[method-assign]
     for name in ("lz4", "zstd"):
         storage_mcap.DECOMPRESSORS[name] = functools.partial(_mcap_chunk, name)
+    from rosbags.rosbag2 import reader as r2
+
+    r2.zstd = _BoundedZstd(r2.zstd)  # type: ignore[assignment]
+
+
+# A ROS 2 bag member compressed whole (compression_mode: file), which rosbags decompresses into a temporary
+# folder, decompresses to at most MAX_BAG_FILE_RATIO times its size plus 64 MiB, and at most MAX_BAG_FILE_BYTES
+# (zstd makes a bag 2 to 10 times smaller; a bomb of 1,000 times more would fill the disk)
+MAX_BAG_FILE_RATIO = 1000
+MAX_BAG_FILE_BYTES = 64 << 30
+
+
+class _BoundedZstd:
+    """rosbags' zstd module with `open` reading at most the bound above from a member (ChunkTooLarge past it)."""
+
+    def __init__(self, module) -> None:
+        self._module = module
+
+    def __getattr__(self, name: str):
+        return getattr(self._module, name)
+
+    def open(self, file, mode: str = "rb", **kwargs):
+        try:
+            size = os.fstat(file.fileno()).st_size
+        except (AttributeError, OSError, ValueError):
+            size = 0
+        limit = min(MAX_BAG_FILE_BYTES, MAX_BAG_FILE_RATIO * size + (64 << 20))
+        return _Limited(self._module.open(file, mode, **kwargs), limit, getattr(file, "name", "a member"))
+
+
+class _Limited:
+    """A file read at most `limit` bytes: ChunkTooLarge when it holds more."""
+
+    def __init__(self, file, limit: int, name: str) -> None:
+        self._file, self._left, self._limit, self._name = file, limit, limit, name
+
+    def read(self, size: int = -1) -> bytes:
+        want = self._left + 1 if size is None or size < 0 else min(size, self._left + 1)
+        data = self._file.read(want)
+        self._left -= len(data)
+        if self._left < 0:
+            raise ChunkTooLarge(
+                f"{os.fsdecode(self._name)}: decompresses to more than {self._limit:,} bytes "
+                f"({MAX_BAG_FILE_RATIO:,} times its size plus 64 MiB, at most {MAX_BAG_FILE_BYTES:,})"
+            )
+        return data
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._file.close()
+
+    def __getattr__(self, name: str):
+        return getattr(self._file, name)
 
 
 def _mcap_chunk(compression: str, data: bytes, declared: int) -> bytes:
