@@ -154,3 +154,20 @@ def test_one_nan_carmen_timestamp_is_repaired_alone_and_named(tmp_path):
         len(said) == 1 and "1 is not a number or out of range; each set 1 ms after the one before (scan 10)" in said[0]
     )
     assert "synthesised" not in said[0]
+
+
+def test_carmen_poses_of_1e308_never_make_tracks_that_are_not_finite(tmp_path):
+    from test_reliability_imports import flaser_log
+
+    from datmo_cli.log import mcapio, types
+    from datmo_cli.report import decode_channel
+
+    path = tmp_path / "in.log"
+    flaser_log(path, {4: "1e308 2 0.5", 5: "1 1e308 0.5"})
+    result = CliRunner().invoke(cli, ["import", str(path), "-o", str(tmp_path / "in.mcap")])
+    assert result.exit_code == 0 and "dropped 2 of 30 odometry poses" in result.stderr, result.output
+    result = CliRunner().invoke(cli, ["track", str(tmp_path / "in.mcap"), "-o", str(tmp_path / "tracks.mcap")])
+    assert result.exit_code == 0, result.output
+    _, payloads = mcapio.read_messages(tmp_path / "tracks.mcap", mcapio.TOPIC_TRACKS)
+    states = decode_channel(types.TRACKS, payloads).items["tracks"]
+    assert len(states) and all(np.isfinite(states[f]).all() for f in ("x", "y", "world_x", "world_y"))
