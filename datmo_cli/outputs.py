@@ -10,6 +10,8 @@ Every command that writes a file goes through here (LogWriter, plots, leg models
 - The data goes to a temporary file beside the output (`.NAME.PID.N.tmp`, mode as umask allows), synced
   and renamed over the output only when complete (`commit`). Live temporary files are kept in a registry
   of this process; `remove_live` deletes them on every way out (errors, Ctrl-C, SIGTERM, SIGHUP, exit).
+  Temporary files are only ever found by their names, never by a pattern: a batch's tasks also record each
+  name in the batch's journal (`journal_to`, `note`), from which the batch removes what a dead worker left.
 - `handle_signals` turns SIGTERM and SIGHUP into `Terminated` (a BaseException, like KeyboardInterrupt for
   SIGINT), so `with` blocks unwind and drop their temporary files; the CLI then exits 128 + the signal's
   number (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP). A signal arriving inside `critical()` (creating, renaming or
