@@ -10,6 +10,8 @@ Every command that writes a file goes through here (LogWriter, plots, leg models
 - The data goes to a temporary file beside the output (`.NAME.PID.N.tmp`, mode as umask allows), synced
   and renamed over the output only when complete (`commit`). Live temporary files are kept in a registry
   of this process; `remove_live` deletes them on every way out (errors, Ctrl-C, SIGTERM, SIGHUP, exit).
+  Temporary files are only ever found by their names, never by a pattern: a batch's tasks also record each
+  name in the batch's journal (`journal_to`, `note`), from which the batch removes what a dead worker left.
 - `handle_signals` turns SIGTERM and SIGHUP into `Terminated` (a BaseException, like KeyboardInterrupt for
   SIGINT), so `with` blocks unwind and drop their temporary files; the CLI then exits 128 + the signal's
   number (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP). A signal arriving inside `critical()` (creating, renaming or
@@ -325,14 +327,47 @@ def temp_path(path: Path) -> Path:
     return folder_of(path) / os.fsdecode(b"." + name + tail.encode())
 
 
+_JOURNAL = threading.local()  # .path: where this thread records the temporary files it makes (a batch's)
+
+
+def journal_to(path: str | None) -> None:
+    """Record, from now on in this thread, the name of every temporary file (or folder) made and kept in the
+    journal file `path` (None: stop), so that a batch removes exactly the temporary files its tasks made even
+    when a worker dies without removing its own (`journal.remove_recorded`)."""
+    _JOURNAL.path = path
+
+
+def note(sign: str, tmp: str | Path) -> None:
+    """Append `tmp` to this thread's journal: made ("+") or kept ("-": it stays on disk); one JSON line, written
+    in one append. A journal that cannot be written (a worker on another machine) records nothing."""
+    path = getattr(_JOURNAL, "path", None)
+    if path is None:
+        return
+    import json
+
+    line = (json.dumps([sign, os.fsdecode(tmp)]) + "\n").encode("utf-8", "surrogateescape")
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return
+    try:
+        os.write(fd, line)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 def track(tmp: Path) -> None:
     """Register a temporary file made elsewhere (e.g. a symlink), so it is removed on every way out."""
     _LIVE[os.fspath(tmp)] = os.getpid()
+    note("+", tmp)
 
 
 def forget(tmp: str | Path) -> None:
     """Stop tracking `tmp`: it stays on disk (a recording kept, or one that could not be renamed into place)."""
     _LIVE.pop(os.fspath(tmp), None)
+    note("-", tmp)
 
 
 def interrupt(signum: int) -> None:

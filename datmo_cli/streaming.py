@@ -29,6 +29,7 @@ import numpy as np
 
 from .errors import InputError
 from .log import mcapio, transforms
+from .log.poses import sane as sane_poses
 from .log.scan import Odometry, ScanRun, stamp_problem
 
 _STAMP = struct.Struct("<iI")  # a CDR header stamp: sec, nanosec
@@ -323,6 +324,12 @@ class _DerivedTf:
             poses = transforms.decode_odometry(payloads)
         except ValueError as exc:
             raise InputError(f"{self.stream.path}: bad nav_msgs/msg/Odometry on {mcapio.TOPIC_ODOM}: {exc}") from None
+        ok = sane_poses(poses.x, poses.y, poses.theta)  # the others dropped, as LogStream's odometry says
+        if not ok.all():
+            stamps = np.asarray(stamps)[ok]
+            poses = Odometry(
+                poses.stamps[ok], poses.x[ok], poses.y[ok], poses.theta[ok], poses.frame_id, poses.child_frame_id
+            )
         self.writer.write_transforms(stamps, transforms.odometry_tf(poses))
         child = poses.child_frame_id
         if self.static and child not in self.joined:

@@ -230,12 +230,12 @@ def test_ctrl_c_keeps_finished_outputs_and_a_consistent_manifest(logs, tmp_path)
     (logs / "stop.mcap").write_bytes(b"x")
     names = [logs / "a.mcap", logs / "b.mcap", logs / "stop.mcap", logs / "site" / "c.mcap"]
     (out).mkdir()
-    (out / ".stop.mcap.123.tmp").write_bytes(b"partial")  # as a writer killed mid-file leaves it
+    (out / ".stop.mcap.123.tmp").write_bytes(b"partial")  # another process's: not this batch's to remove
     r = run(*names, "-o", out, "--jobs", "1")
     assert r.exit_code == 130, r.output
     assert "interrupted: 2 of 4 inputs done" in r.stderr and "Traceback" not in r.output
     assert [Path(x["input"]).name for x in manifest(out)] == ["a.mcap", "b.mcap"]
-    assert sorted(p.name for p in out.iterdir()) == ["a.mcap", "b.mcap", "manifest.jsonl"]
+    assert sorted(p.name for p in out.iterdir()) == [".stop.mcap.123.tmp", "a.mcap", "b.mcap", "manifest.jsonl"]
     (logs / "stop.mcap").rename(logs / "go.mcap")
     CALLS.clear()
     names[2] = logs / "go.mcap"

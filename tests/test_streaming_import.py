@@ -302,31 +302,58 @@ def test_an_interrupted_import_leaves_no_spool(tmp_path):
 
 
 def _stamps_ns_whole(t: np.ndarray) -> tuple[np.ndarray, str | None]:
-    """The whole-run stamp rule as it was (carmen.stamps_ns before StampCheck)."""
+    """The whole-run stamp rule: a stamp that is not finite (the first: or negative), or that does not follow
+    the last usable one, is bad; none bad: kept; at most 5 % bad and the first good: each bad one set 1 ms after
+    the one before; else all synthesised at 1 s per scan. The note names the first 5 bad scans."""
     t = np.asarray(t, np.float64)
-    ok = len(t) > 0 and bool(np.all(np.isfinite(t))) and t[0] >= 0
-    bad = int(np.sum(np.diff(t) <= 0)) if ok else len(t)
-    if ok and bad == 0:
+    n = len(t)
+    usable = np.isfinite(t) & (t < 9.2e9)
+    if n:
+        usable[0] &= t[0] >= 0
+    prev, bad, invalid, which = None, 0, 0, []
+    for i, v in enumerate(t.tolist()):
+        if not usable[i]:
+            invalid += 1
+        elif prev is not None and v <= prev:
+            bad += 1
+        else:
+            prev = v
+            continue
+        which.append(i)
+    first_bad = bool(n) and not usable[0]
+    scans = (
+        f"scan{'s' if len(which[:5]) > 1 else ''} {', '.join(map(str, which[:5]))}{', ...' if len(which) > 5 else ''}"
+    )
+    what = " and ".join(
+        ([f"{bad} stamps go backwards or repeat"] if bad else [])
+        + ([f"{invalid} {'is' if invalid == 1 else 'are'} not a number or out of range"] if invalid else [])
+    )
+    if n and not first_bad and bad + invalid == 0:
         return np.round(t * 1e9).astype(np.int64), None
-    if ok and bad <= 0.05 * len(t):
-        ns = np.round(t * 1e9).astype(np.int64)
-        for i in range(1, len(ns)):
-            if ns[i] <= ns[i - 1]:
+    if n and not first_bad and bad + invalid <= 0.05 * n:
+        ns = np.round(np.where(usable, t, 0.0) * 1e9).astype(np.int64)
+        for i in range(1, n):
+            if ns[i] <= ns[i - 1] or not usable[i]:
                 ns[i] = ns[i - 1] + 1_000_000
-        return ns, f"{bad} stamps go backwards or repeat; each set 1 ms after the one before"
-    t0 = float(t[0]) if len(t) and np.isfinite(t[0]) and t[0] >= 0 else 0.0
-    synth = int(round(t0 * 1e9)) + np.arange(len(t), dtype=np.int64) * 1_000_000_000
-    return synth, f"not increasing ({len(np.unique(t))} distinct of {len(t)}); synthesised at 1 s per scan"
+        return ns, f"{what}; each set 1 ms after the one before ({scans})"
+    t0 = float(t[0]) if n and np.isfinite(t[0]) and 0 <= t[0] < 9.2e9 else 0.0
+    synth = int(round(t0 * 1e9)) + np.arange(n, dtype=np.int64) * 1_000_000_000
+    if not invalid:
+        return synth, f"not increasing ({len(np.unique(t))} distinct of {n}); synthesised at 1 s per scan"
+    why = "the first stamp is one" if first_bad else "more than 5 % of the stamps are bad"
+    return synth, f"{what} ({scans}) and {why}; all {n} synthesised at 1 s per scan"
 
 
 @settings(max_examples=200, deadline=None)
 @given(
     steps=st.lists(st.one_of(st.floats(0.001, 2.0), st.sampled_from([0.0, -0.5, -3.0])), min_size=1, max_size=120),
     start=st.sampled_from([0.0, 1.13486e9, 100.25, -1.0, float("nan")]),
+    holes=st.lists(st.integers(0, 119), max_size=4),
     block=st.integers(1, 50),
 )
-def test_stamp_check_block_by_block_equals_the_whole_run_rule(steps, start, block):
+def test_stamp_check_block_by_block_equals_the_whole_run_rule(steps, start, holes, block):
     t = start + np.concatenate([[0.0], np.cumsum(steps[1:])])
+    t[[h for h in holes if h < len(t)]] = np.nan  # a few stamps that are not numbers
     check = StampCheck()
     for v in t.tolist():
         check.add(v)

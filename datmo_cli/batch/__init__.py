@@ -18,7 +18,7 @@ plan (prepare: what to redo), executors (local processes), running (run_many).
 from .discovery import LOG_SUFFIXES, discover
 from .executors import Executor, LocalExecutor, die_with_parent
 from .folder import LOCK, folder_lock, out_folder
-from .locations import exists, input_sha256, input_stat, join, local, remote, remove_partial, tmp_pattern
+from .locations import exists, input_sha256, input_stat, join, local, new_journal, remote, remove_recorded
 from .manifest import (
     CANCELLED,
     DONE,
@@ -70,6 +70,7 @@ __all__ = [
     "input_stat",
     "join",
     "local",
+    "new_journal",
     "manifest_line",
     "out_folder",
     "params_hash",
@@ -77,9 +78,8 @@ __all__ = [
     "read_batch",
     "record",
     "remote",
-    "remove_partial",
+    "remove_recorded",
     "run_many",
     "run_task",
     "summary",
-    "tmp_pattern",
 ]

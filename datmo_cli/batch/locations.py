@@ -4,7 +4,6 @@ write leaves beside its output."""
 
 from __future__ import annotations
 
-import glob
 import hashlib
 import os
 from pathlib import Path
@@ -47,31 +46,59 @@ def inside(path: str, folder: str | None) -> bool:
     return folder is not None and (path == folder or path.startswith(folder.rstrip(os.sep) + os.sep))
 
 
-def tmp_pattern(output: str) -> str:
-    """The glob of the temporary files a writer of `output` leaves beside it (LogWriter and remote uploads)."""
-    name = os.path.basename(output.rstrip("/"))
-    return join(
-        os.path.dirname(output.rstrip("/")) if remote(output) else str(Path(local(output)).parent),
-        f".{glob.escape(name)}.*tmp",
-    )
+def new_journal() -> str:
+    """A new, empty journal file (mode 0600, in the system's temporary folder, removed on every way out) where
+    a batch's tasks record the temporary files they make (outputs.journal_to)."""
+    import tempfile
+
+    from ..outputs import track
+
+    fd, path = tempfile.mkstemp(prefix="datmo-run-", suffix=".journal")
+    os.close(fd)
+    track(Path(path))
+    return path
 
 
-def remove_partial(outputs: list[str]) -> int:
-    """Remove the temporary files of unfinished writes of `outputs`; returns how many."""
+def remove_recorded(journal: str | None) -> int:
+    """Remove the temporary files and folders `journal` records as made and not kept that are still there
+    (left by a task that was stopped, or a worker that died, mid-write); returns how many. Only those names:
+    nothing else in an output's folder is looked at."""
+    import json
+    import shutil
+    import stat
+
+    if journal is None:
+        return 0
+    made: dict[str, None] = {}
+    try:
+        with open(journal, "rb") as f:
+            for line in f:
+                try:
+                    sign, name = json.loads(line)
+                except ValueError:
+                    continue  # a line cut by a worker's death
+                if sign == "+":
+                    made[name] = None
+                else:
+                    made.pop(name, None)
+    except OSError:
+        return 0
     n = 0
-    for out in outputs:
-        pattern = tmp_pattern(out)
+    for name in made:
         try:
-            if remote(pattern):
-                fs, p = fs_of(pattern)
-                for f in fs.glob(p):
-                    fs.rm(f)
+            if remote(name):
+                fs, p = fs_of(name)
+                if fs.exists(p):
+                    fs.rm(p)
                     n += 1
+                continue
+            mode = os.lstat(name).st_mode
+            if stat.S_ISDIR(mode):
+                shutil.rmtree(name)
             else:
-                for f in glob.glob(pattern):
-                    os.unlink(f)
-                    n += 1
-        except OSError:
+                os.unlink(name)
+            n += 1
+        except (OSError, DatmoError):
             pass
     return n
 

@@ -228,6 +228,12 @@ RECORD_FIELDS: dict[str, tuple[Callable[[object], bool], str]] = {
         _or_none(lambda v: isinstance(v, int) and not isinstance(v, bool)),
         "a whole number of nanoseconds or null",
     ),
+    "output_sha256": (_or_none(_text), "a string or null"),
+    "output_size": (_or_none(_count), "a whole number of bytes or null"),
+    "output_mtime_ns": (
+        _or_none(lambda v: isinstance(v, int) and not isinstance(v, bool)),
+        "a whole number of nanoseconds or null",
+    ),
     "error": (_or_none(_text), "a string or null"),
     "scans": (_count, "a whole number of scans"),
     "seconds": (_figure, "a finite number of seconds, 0 or more"),

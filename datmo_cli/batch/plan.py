@@ -50,8 +50,9 @@ def prepare(
 
     An input is skipped when its latest manifest line is done (or skipped) by this datmo version with the
     same parameters' hash and the same input SHA-256 (not rehashed when size and mtime are unchanged) and
-    its output exists (a line of another version is redone: outputs of two versions never mix silently);
-    `force` redoes everything. An output that exists may be overwritten without `force` only when the
+    its output exists with the size and SHA-256 the line recorded (rehashed only when its mtime moved); a
+    line of another version is redone (outputs of two versions never mix silently); `force` redoes everything.
+    An output that exists may be overwritten without `force` only when the
     manifest lists it for this input or it is the leftover of an interrupted batch (its provenance says
     `datmo run` of this input); any other existing output fails as its input with "use --force".
     Call it, and run_many, inside `folder_lock(out_dir)` (as `datmo run` does): two batches at once in one
@@ -74,6 +75,7 @@ def prepare(
             and last.get("datmo_version") == __version__
             and exists(dst)
             and _same_input(src, last)
+            and _same_output(dst, last)
         ):
             skipped.append(
                 {**last, "status": SKIPPED, "error": None, "finished": datetime.now(UTC).isoformat(timespec="seconds")}
@@ -96,6 +98,22 @@ def _same_input(src: str, last: dict) -> bool:
         return True
     try:
         return input_sha256(src) == last.get("input_sha256")
+    except OSError:
+        return False
+
+
+def _same_output(dst: str, last: dict) -> bool:
+    """Whether output `dst` is still what the manifest line `last` recorded: its size, and its SHA-256 when
+    its mtime moved (a line of a version that recorded neither: whether it exists)."""
+    if last.get("output_size") is None and last.get("output_sha256") is None:
+        return True
+    size, mtime = input_stat(dst)
+    if size is None or size != last.get("output_size"):
+        return False  # truncated, grown or gone: redone
+    if mtime is not None and mtime == last.get("output_mtime_ns"):
+        return True
+    try:
+        return input_sha256(dst) == last.get("output_sha256")
     except OSError:
         return False
 

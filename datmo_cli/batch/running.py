@@ -9,7 +9,7 @@ from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 from ..errors import DatmoError
-from .locations import remove_partial
+from .locations import new_journal, remove_recorded
 from .manifest import CANCELLED, FAILED, manifest_line
 
 if TYPE_CHECKING:
@@ -74,25 +74,33 @@ def run_many(
         if on_record:
             on_record(rec)
 
-    from ..outputs import Terminated
+    from ..outputs import Terminated, discard
+
+    journal = new_journal()  # the tasks' temporary files, by name: removed when a task leaves one behind
+    for t in batch.tasks:
+        t.journal = journal
+
+    def clean_up() -> None:
+        remove_recorded(journal)
+        discard(journal)
 
     for rec in batch.skipped:
         finished(rec)
     try:
         executor.run(batch.tasks, finished, on_scans)
     except Terminated:  # SIGTERM, SIGHUP: the same clean-up; the CLI exits 143 or 129
-        remove_partial([t.output for t in batch.tasks if t.input not in batch.records])
+        clean_up()
         batch.manifest.close()
         raise
     except KeyboardInterrupt:
-        remove_partial([t.output for t in batch.tasks if t.input not in batch.records])
+        clean_up()
         batch.manifest.close()
         done = sum(r["status"] != FAILED for r in batch.records.values())
         raise BatchInterrupted(
             f"interrupted: {done} of {batch.total} inputs done and in {batch.manifest.path}; "
             "run the same command again to do the rest"
         ) from None
-    remove_partial([t.output for t in batch.tasks])  # left by workers that died mid-write
+    clean_up()  # left by workers that died mid-write
     batch.manifest.close()
     index = {out: i for i, out in enumerate(batch.outputs)}
     return sorted(batch.records.values(), key=lambda r: index.get(r["output"], len(index)))

@@ -90,6 +90,7 @@ class Task:
     params_hash: str
     command_line: str | None
     threads: int | None = None  # --threads: perception threads on a Dask worker (None: one per task there)
+    journal: str | None = None  # where the task records the temporary files it makes (locations.new_journal)
 
 
 def record(task: Task, status: str, **fields) -> dict:
@@ -157,12 +158,12 @@ def run_task(
     `scans(done, total)` follows the scans of this input. A bag (ROS 1 file, ROS 2 folder) and, with a topic
     in the parameters, any input is converted here first (`converted`), so a skipped input never is.
     A done line carries the output's report (report.RunSummary, gathered as the output is written) under
-    SUMMARY_KEY, which the manifest does not keep.
+    SUMMARY_KEY, which the manifest does not keep. The temporary files the task makes are recorded in
+    task.journal, when it has one.
     """
     if hasattr(task, "run"):  # another kind of batch task (datmo tune's evaluations): it runs itself
         return task.run(cancelled=cancelled, scans=scans, raise_unexpected=raise_unexpected)
-    from .. import pipeline
-    from ..report import RunAccumulator
+    from ..outputs import journal_to
 
     t0 = time.perf_counter()
 
@@ -172,9 +173,20 @@ def run_task(
         if scans is not None:
             scans(done, total)
 
+    if cancelled is not None and cancelled():
+        return record(task, CANCELLED)
+    journal_to(task.journal)
     try:
-        if cancelled is not None and cancelled():
-            raise Cancelled()
+        return _run(task, t0, progress, raise_unexpected)
+    finally:
+        journal_to(None)
+
+
+def _run(task: Task, t0: float, progress: Callable[[int, int], None], raise_unexpected: bool) -> dict:
+    from .. import pipeline
+    from ..report import RunAccumulator
+
+    try:
         size, mtime = input_stat(task.input)
         with _staged_input(task.input) as src, _staged_output(task.output, task.force) as out:
             sha = input_sha256(src)
@@ -197,6 +209,8 @@ def run_task(
                     **origin,
                 )
             summary = report.summary()
+        out_size, out_mtime = input_stat(task.output)  # what resume checks the output against
+        out_sha = input_sha256(task.output)
         seconds = time.perf_counter() - t0
         return record(
             task,
@@ -204,6 +218,9 @@ def run_task(
             input_sha256=sha,
             input_size=size,
             input_mtime_ns=mtime,
+            output_sha256=out_sha,
+            output_size=out_size,
+            output_mtime_ns=out_mtime,
             scans=n,
             seconds=round(seconds, 3),
             scans_per_s=round(n / seconds, 1) if seconds > 0 else 0.0,
@@ -310,5 +327,8 @@ def _staged_output(path: str, force: bool) -> Iterator[str]:
         yield out
         parent, name = p.rsplit("/", 1) if "/" in p else ("", p)
         part = f"{parent}/.{name}.{os.getpid()}.{time.monotonic_ns()}.tmp" if parent else f".{name}.tmp"
+        from ..outputs import note
+
+        note("+", fs.unstrip_protocol(part))  # removed by the batch if this worker dies before the move
         fs.put_file(out, part)
         fs.mv(part, p)

@@ -63,6 +63,7 @@ def command(cfg: DatmoConfig, config: Path | None, output: Path, force: bool) ->
     from ..outputs import atomic_output
     from ..progress import say
 
-    with atomic_output(output, force=force, mode="w", what="config") as f:
+    read = [p for p in (config, cfg.features.leg_model) if p]  # its inputs: refused as outputs, even with --force
+    with atomic_output(output, force=force, mode="w", inputs=read, what="config") as f:
         f.write(text)
     say(f"{output}: configuration written")

@@ -172,12 +172,17 @@ _QUIET.addHandler(logging.NullHandler())
 _QUIET.propagate = False
 
 
+MAX_CLIENT_FRAME_BYTES = 1 << 20  # a client's message: its subscribe and unsubscribe requests take well under a
+# kilobyte; a frame whose header declares more is refused (close 1009) before its payload is read
+
+
 class _Front:
     """The port clients connect to: a WebSocket server (its own thread and event loop) that accepts a client
     asking for any of SUBPROTOCOLS (else HTTP 400, as the SDK's server answers), opens a connection of its own
     to the SDK's server at `backend` (a ws:// URL), and relays every frame both ways,
-    unchanged, until either side closes; then it closes the other. Nothing is printed when a client leaves or
-    fails. Raises OSError when it cannot listen on `host`:`port`."""
+    unchanged, until either side closes; then it closes the other. A client frame over MAX_CLIENT_FRAME_BYTES
+    closes that client's connection, refused on its header before any of it is buffered. Nothing is printed
+    when a client leaves or fails. Raises OSError when it cannot listen on `host`:`port`."""
 
     def __init__(self, host: str, port: int, backend: str) -> None:
         self.backend = backend
@@ -195,7 +200,13 @@ class _Front:
 
         async def listen():
             return await serve(
-                self._relay, host, port, subprotocols=list(SUBPROTOCOLS), compression=None, max_size=None, logger=_QUIET
+                self._relay,
+                host,
+                port,
+                subprotocols=list(SUBPROTOCOLS),
+                compression=None,
+                max_size=MAX_CLIENT_FRAME_BYTES,
+                logger=_QUIET,
             )
 
         asyncio.set_event_loop(self.loop)

@@ -203,6 +203,7 @@ def _commit(tmp: Path, dest: Path, force: bool) -> None:
         aside = outputs.temp_path(dest) if state == "bag" else None
         try:
             if aside is not None:
+                outputs.note("+", aside)
                 os.rename(dest, aside)
             try:
                 os.replace(tmp, dest)  # a missing name or an empty folder
@@ -228,6 +229,7 @@ def writing(folder: str | Path, *, force: bool = False, inputs: Iterable[str | P
             os.mkdir(tmp)
         except OSError as exc:
             raise outputs.os_error(exc, outputs.folder_of(dest), "creating a folder there") from None
+        outputs.note("+", tmp)  # a batch's journal: removed by the batch if this process dies with it there
     try:
         log_file = tmp / member(dest).name
         yield log_file

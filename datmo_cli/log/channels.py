@@ -113,11 +113,23 @@ def read_run(path: str | Path, topic: str = TOPIC_SCAN) -> ScanRun:
 
 
 def odometry_from_log(log: LogContents, topic: str = TOPIC_ODOM) -> Odometry | None:
-    """Odometry poses of an already-read log, or None when it has none on `topic`."""
+    """Odometry poses of an already-read log, or None when it has none on `topic` (or no sane one). Poses that
+    are not finite or lie beyond poses.MAX_POSE_M are dropped with a BadPoseWarning saying how many; two
+    channels on `topic` are refused (InputError), as for scans."""
+    import warnings
+
+    from . import poses
+
+    problem = several_channels(log, topic)
+    if problem:
+        raise InputError(problem)
     stamps, payloads = _messages_of(log, topic, required=False)
     if not payloads:
         return None
-    return decode_odometry(stamps, payloads)
+    odo, dropped, first = poses.keep_sane(decode_odometry(stamps, payloads))
+    if dropped:
+        warnings.warn(poses.note(log.path, dropped, len(payloads), first), poses.BadPoseWarning, stacklevel=2)
+    return odo
 
 
 def read_odometry(path: str | Path, topic: str = TOPIC_ODOM) -> Odometry | None:

@@ -284,7 +284,7 @@ def _chunk_records(buf, body: int, end: int) -> bytes | memoryview:
             )
         data = buf[cpos + 8 : cpos + 8 + size]
         if compression == "zstd":
-            data = zstandard.ZstdDecompressor().decompress(data, max_output_size=uncompressed)
+            data = _zstd(data, uncompressed)
         elif compression == "lz4":
             data = _lz4(data, uncompressed)
         elif compression:
@@ -298,6 +298,22 @@ def _chunk_records(buf, body: int, end: int) -> bytes | memoryview:
     if crc and zlib.crc32(data) != crc:
         raise _CorruptChunk("CRC mismatch")
     return data
+
+
+def _zstd(data, uncompressed: int) -> bytes:
+    """A zstd frame decompressed to at most `uncompressed` bytes (one more tells that it holds more). Read as a
+    stream: `ZstdDecompressor.decompress` allocates whatever size the frame itself states, which may be far
+    more than the chunk's header declares."""
+    import zstandard
+
+    with zstandard.ZstdDecompressor().stream_reader(data) as reader:
+        parts, got = [], 0
+        while got <= uncompressed and (part := reader.read(uncompressed + 1 - got)):
+            parts.append(part)
+            got += len(part)
+    if got > uncompressed:
+        raise _CorruptChunk(f"decompresses to more than the {uncompressed:,} bytes its header says")
+    return b"".join(parts)
 
 
 def _lz4(data, uncompressed: int) -> bytes:

@@ -24,6 +24,26 @@ KINDS = ("forest", "boosting")
 DEFAULT_MODEL_PATH = Path(__file__).resolve().parent / "models" / "legs.npz"
 
 
+MEMBERS = (  # the arrays of a leg model file (.npz members NAME.npy)
+    "format_version",
+    "feature",
+    "threshold",
+    "left",
+    "right",
+    "value",
+    "roots",
+    "kind",
+    "base",
+    "scale",
+    "threshold_p",
+    "feature_names",
+    "provenance",
+)
+MAX_MODEL_MEMBERS = 64  # members of a leg model file read at most (a model has 13): more are refused unopened
+MAX_MODEL_BYTES = 256 << 20  # bytes of a leg model file, of its members uncompressed and of the arrays they
+# declare (the packaged model: about 0.5 MB)
+
+
 @dataclass
 class LegModel:
     """A binary tree ensemble as flat node arrays (all trees concatenated; children are global indices).
@@ -152,15 +172,29 @@ class LegModel:
 
         from ..input_files import check
 
-        most = 256 << 20  # bytes of arrays a leg model may declare (the packaged one: about 0.5 MB)
+        most = MAX_MODEL_BYTES
         path = Path(path)
         if not path.exists():
             raise InputError(f"{path}: no such leg model file")
-        check(path)  # a folder, FIFO or device: one line saying what it is
+        size = check(path).st_size  # a folder, FIFO or device: one line saying what it is
+        if size > most:
+            raise InputError(f"{path}: not a leg model file ({size:,} bytes; a leg model takes at most {most:,})")
         try:
             declared = 0
             with zipfile.ZipFile(path) as zf:
-                for info in zf.infolist():
+                infos = zf.infolist()
+                if len(infos) > MAX_MODEL_MEMBERS:
+                    raise InputError(
+                        f"{path}: not a leg model file ({len(infos):,} members; a leg model has "
+                        f"{len(MEMBERS)}, at most {MAX_MODEL_MEMBERS} are read)"
+                    )
+                stored = sum(i.file_size for i in infos)
+                if stored > most:
+                    raise InputError(
+                        f"{path}: not a leg model file (its members hold {stored:,} bytes uncompressed, more "
+                        f"than a leg model takes ({most:,}))"
+                    )
+                for info in infos:
                     with zf.open(info) as member:
                         version = np.lib.format.read_magic(member)
                         if version not in ((1, 0), (2, 0)):
@@ -181,25 +215,7 @@ class LegModel:
                 data = {k: z[k] for k in z.files}
         except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, io.UnsupportedOperation) as exc:
             raise InputError(f"{path}: not a leg model file ({exc})") from None
-        missing = [
-            k
-            for k in (
-                "format_version",
-                "feature",
-                "threshold",
-                "left",
-                "right",
-                "value",
-                "roots",
-                "kind",
-                "base",
-                "scale",
-                "threshold_p",
-                "feature_names",
-                "provenance",
-            )
-            if k not in data
-        ]
+        missing = [k for k in MEMBERS if k not in data]
         if missing:
             raise InputError(f"{path}: not a leg model file (missing {', '.join(missing)})")
         arrays = ("feature", "left", "right", "roots", "threshold", "value", "feature_names")

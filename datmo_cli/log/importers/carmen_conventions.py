@@ -17,8 +17,9 @@ Conventions (stated in docs/import.md):
 - Stamps: ipc_timestamp seconds -> int64 ns. When up to 5 % of them go backwards or repeat (intel), each
   such stamp is set 1 ms after the one before; when more do (several logs print them with 6 significant
   digits, or as 0), all are synthesised at 1 s per scan from the first stamp (0 when negative). Both warn.
-  A stamp that is not finite, or beyond int64 nanoseconds (after 2262), counts as a stamp that cannot be
-  kept: all are synthesised.
+  A stamp that is not finite, or beyond int64 nanoseconds (after 2262), is a bad stamp too: repaired alone
+  (set 1 ms after the one before) when the bad ones are at most 5 %; all are synthesised only when more are,
+  or when the first stamp is one (nothing before it to repair it from). The warning names the scans repaired.
 """
 
 from __future__ import annotations
@@ -81,45 +82,73 @@ class StampCheck:
     """`stamps_ns` over stamps that come one at a time: `add` each (seconds), then `note` what is done to
     them, then `apply` it to the same stamps block by block, in order. Holds a few numbers."""
 
+    SHOWN = 5  # scans the note names
+
     def __init__(self) -> None:
         self.n = 0
-        self.ok = True  # every stamp finite and the first >= 0
-        self.bad = 0  # steps that go backwards or repeat
-        self._prev = 0.0
+        self.first_bad = False  # the first stamp is not finite, negative or beyond MAX_STAMP_S
+        self.bad = 0  # steps that go backwards or repeat (from the last usable stamp)
+        self.invalid = 0  # stamps that are not finite or beyond MAX_STAMP_S
+        self.which: list[int] = []  # the first SHOWN scans (from 0) whose stamp is bad
+        self._prev: float | None = None  # the last usable stamp
         self.t0 = 0.0
         self._done = 0  # stamps applied so far
         self._last_ns = 0
 
+    @property
+    def ok(self) -> bool:
+        return not self.first_bad
+
     def add(self, t: float) -> None:
-        if self.n == 0:
-            self.t0 = t
-            self.ok = math.isfinite(t) and 0 <= t < MAX_STAMP_S
-        elif not (math.isfinite(t) and t < MAX_STAMP_S):
-            self.ok = False
-        elif t - self._prev <= 0:
-            self.bad += 1
-        self._prev = t
+        i = self.n
         self.n += 1
+        if i == 0:
+            self.t0 = t
+        usable = math.isfinite(t) and t < MAX_STAMP_S and (i > 0 or t >= 0)
+        if not usable:
+            self.invalid += 1
+            self.first_bad = self.first_bad or i == 0
+        elif self._prev is not None and t - self._prev <= 0:
+            self.bad += 1
+        else:
+            self._prev = t
+            return
+        if len(self.which) < self.SHOWN:
+            self.which.append(i)
 
     @property
     def mode(self) -> str:
         """ "keep", "repair" or "synthesise"."""
-        if self.n and self.ok and self.bad == 0:
+        wrong = self.bad + self.invalid
+        if self.n and self.ok and wrong == 0:
             return "keep"
-        if self.n and self.ok and self.bad <= 0.05 * self.n:
+        if self.n and self.ok and wrong <= 0.05 * self.n:
             return "repair"
         return "synthesise"
 
+    def _scans(self) -> str:
+        more = ", ..." if self.bad + self.invalid > len(self.which) else ""
+        return f"scan{'s' if len(self.which) > 1 else ''} {', '.join(map(str, self.which))}{more}"
+
+    def _what(self) -> str:
+        parts = [f"{self.bad} stamps go backwards or repeat"] if self.bad else []
+        if self.invalid:
+            parts.append(f"{self.invalid} {'is' if self.invalid == 1 else 'are'} not a number or out of range")
+        return " and ".join(parts)
+
     def note(self, stamps: Callable[[], np.ndarray]) -> str | None:
-        """What is done to the stamps (None: kept); `stamps()` gives them all, for the count of distinct
-        stamps of the synthesised case only."""
+        """What is done to the stamps (None: kept), naming the first scans whose stamps are bad; `stamps()`
+        gives them all, for the count of distinct stamps of the synthesised case only."""
         mode = self.mode
         if mode == "keep":
             return None
         if mode == "repair":
-            return f"{self.bad} stamps go backwards or repeat; each set 1 ms after the one before"
-        distinct = len(np.unique(stamps()))
-        return f"not increasing ({distinct} distinct of {self.n}); synthesised at 1 s per scan"
+            return f"{self._what()}; each set 1 ms after the one before ({self._scans()})"
+        if not self.invalid:
+            distinct = len(np.unique(stamps()))
+            return f"not increasing ({distinct} distinct of {self.n}); synthesised at 1 s per scan"
+        why = "the first stamp is one" if self.first_bad else "more than 5 % of the stamps are bad"
+        return f"{self._what()} ({self._scans()}) and {why}; all {self.n} synthesised at 1 s per scan"
 
     def rewind(self) -> None:
         """Apply from the first stamp again."""
@@ -133,10 +162,11 @@ class StampCheck:
         if mode == "keep":
             return np.round(t * 1e9).astype(np.int64)
         if mode == "repair":
-            ns = np.round(t * 1e9).astype(np.int64)
+            usable = np.isfinite(t) & (t < MAX_STAMP_S)
+            ns = np.round(np.where(usable, t, 0.0) * 1e9).astype(np.int64)
             last = self._last_ns
             for i in range(len(ns)):  # per scan, a few thousand at most
-                if (first or i) and ns[i] <= last:
+                if (first or i) and (ns[i] <= last or not usable[i]):
                     ns[i] = last + 1_000_000
                 last = int(ns[i])
             self._last_ns = last

@@ -40,6 +40,7 @@ def stream_mcap(
     them) and the poses at the first one stamped after the last scan kept. Each block of poses keeps its
     own frame ids (the whole-run import gave all poses the last ones)."""
     from .. import mcapio
+    from ..odometry_msgs import decode_odometry
     from .stream import ImportStream
 
     path = Path(path)
@@ -56,6 +57,8 @@ def stream_mcap(
         tfs = tuple(t for t in tf_topics(topics) if head.topics()[t].message_encoding == "cdr")
         if any(c.topic == scan_topic and c.count for c in head.channels.values()):
             mcapio.check_scan_channel(head, scan_topic)
+        if o_topic is not None and (two := mcapio.several_channels(head, o_topic)):
+            raise InputError(two)  # two odometry streams would interleave, as two scan streams would
         count, inten_mode, last, n_beams = _mcap_survey(path, label, scan_topic, max_scans)
         survey = None
         if o_topic is not None and tfs:
@@ -89,9 +92,8 @@ def stream_mcap(
             nonlocal first_pose
             if not o_payloads:
                 return None
-            log = mcapio.LogContents(path=path, messages={o_topic: (o_stamps, o_payloads)})
-            try:
-                odom = mcapio.odometry_from_log(log, o_topic)
+            try:  # poses not finite or too far are dropped, and counted, by ImportStream.blocks
+                odom = decode_odometry(np.asarray(o_stamps, np.int64), o_payloads)
             except Exception as exc:  # a message the ROS 2 type store cannot decode
                 raise InputError(f"{label}: bad nav_msgs/Odometry message on {o_topic}: {exc}") from None
             keep = odom.stamps <= last if max_scans is not None else np.ones(len(odom), bool)

@@ -75,6 +75,11 @@ def open_bag(path: str | Path):
     message counts; InputError naming the file when it cannot be read. The caller closes the reader."""
     from rosbags.highlevel import AnyReader
 
+    from .bag_chunks import bound_bag_chunks, check_bag_folder
+
+    bound_bag_chunks()
+    if Path(path).is_dir():
+        check_bag_folder(Path(path))
     try:
         reader = AnyReader([Path(path)])
         reader.open()
@@ -135,6 +140,8 @@ def stream_bag(
             label, topics, odom_topic, ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic", required=False
         )
         one_connection(label, reader, scan_topic)
+        if o_topic is not None:
+            one_connection(label, reader, o_topic)  # two odometry streams would interleave too
         total = topics[scan_topic][1]
         scans = _survey(reader, label, scan_topic, total, max_scans, progress)
     except (InputError, GeometryError):
@@ -187,14 +194,14 @@ def stream_bag(
 
 
 def one_connection(label: str, reader, topic: str) -> None:
-    """InputError when two of the bag's connections (two publishers, as ROS 1 records them) hold messages on the
-    scan topic: two scan streams, which a read by topic would interleave."""
+    """InputError when two of the bag's connections (two publishers, as ROS 1 records them) hold messages on
+    `topic` (the scan or the odometry topic): two streams, which a read by topic would interleave."""
     on = [c for c in reader.connections if c.topic == topic and c.msgcount]
     if len(on) > 1:
         who = ", ".join(f"{getattr(c.ext, 'callerid', None) or c.msgtype}: {c.msgcount} messages" for c in on)
         raise InputError(
-            f"{label}: {topic} is on {len(on)} connections ({who}); their scans would interleave into "
-            "one stream: keep one connection, or give each its own topic"
+            f"{label}: {topic} is on {len(on)} connections ({who}); their messages would interleave "
+            "into one stream: keep one connection, or give each its own topic"
         )
 
 

@@ -73,11 +73,24 @@ class ImportStream:
     tf_survey: object | None = None
 
     def blocks(self) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
+        """The pieces, each piece's poses without those not finite or beyond poses.MAX_POSE_M (counted in one
+        warning once the pieces are done)."""
+        from .. import poses
+
+        seen, dropped, first = 0, 0, -1
         with compressed_errors(self.source or Path("?")):
             for scans, odom in self.pieces:
                 if scans is not None:
                     self.peak_scans = max(self.peak_scans, len(scans))
+                if odom is not None and len(odom):
+                    n = len(odom)
+                    odom, bad, at = poses.keep_sane(odom)
+                    if bad and first < 0:
+                        first = seen + at
+                    seen, dropped = seen + n, dropped + bad
                 yield scans, odom
+        if dropped:
+            self.warnings.append(poses.note(self.source or self.topic, dropped, seen, first))
 
     def close(self) -> None:
         """Stop early (temporary files removed, readers closed)."""
