@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("evaluate", "Score tracks against ground truth (CLEAR-MOT, IDF1)."),
     "train-legs": ("train_legs", "Train the learned leg detector on labelled scans; print held-out figures."),
     "config": ("config", "Print the effective configuration ([features], [track]) as TOML."),
+    "warm-up": ("warm_up", "Compile the numba kernels ahead of the first run (for images and CI)."),
 }
 
 

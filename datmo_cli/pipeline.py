@@ -43,21 +43,38 @@ def read_run_data(path: str | Path, *, keep_scans: bool = False, ground_truth: b
 # ------------------------------------------------------------------------------------------ datmo run
 
 
-def warm_up() -> None:
+def warm_up(progress: Callable[[int, int], None] | None = None) -> None:
     """Compile every numba kernel of the pipeline in this process (or load it from numba's cache) on short
     simulated runs of the hall (people, a platform, columns, benches, occlusions) and of the patrol scene
     (odometry), before any input's clock starts and before worker processes start: they then inherit the
     compiled kernels (fork) or find the cache complete (spawn), and never compile one kernel at once (a
-    first run after an install would otherwise have every worker writing the same cache files)."""
+    first run after an install would otherwise have every worker writing the same cache files).
+    `progress(done, total)` follows its WARM_UP_STEPS steps."""
     from .numba_runtime import prepare
     from .perception.egomotion import odometry_for
     from .sim.simulate import simulate_scene
 
     prepare()
+    done = 0
+    if progress:
+        progress(done, WARM_UP_STEPS)
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        if progress:
+            progress(done, WARM_UP_STEPS)
+
     for scene in ("hall", "patrol"):
         sim = simulate_scene(scene, duration=8.0)
+        step()
         derive(sim.run, sim.odometry, markers=True)  # the markers' kernels too (--markers, the live view)
+        step()
     odometry_for(sim.run, None, "on")  # scan matching, for logs without odometry
+    step()
+
+
+WARM_UP_STEPS = 5  # warm_up's steps: each scene simulated, then its stages; scan matching
 
 
 def estimated_odometry(run, odometry, mode: str) -> tuple:
