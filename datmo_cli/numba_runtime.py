@@ -408,23 +408,22 @@ def cache_looks_stale() -> bool:
 
 
 # ------------------------------------------------------------------------------------ compiling notice
-# Saying that numba is compiling: the first run after an install compiles the kernels (tens of seconds)
-# before a stage's first progress report, which otherwise comes within milliseconds.
-# One process compiling every kernel of pipeline.warm_up with a cold cache on a 2-core VM shared with other
-# jobs: COMPILE_SECONDS (sim 5 s, the hall's stages SIM_S..., see docs/performance.md). A desktop is faster.
-COMPILE_SECONDS = 220
-NOTICE = (
-    f"compiling the numba kernels (once after an install or an update; about {COMPILE_SECONDS // 60} min on 2 cores)"
-)
+# Saying that numba is compiling: the first run after an install compiles the kernels (minutes) before a stage's
+# first progress report, which otherwise comes within milliseconds. One process compiling every kernel of
+# pipeline.warm_up with a cold cache, on the project's 2-core VM: 137 s user + 15 s system CPU (the hall's stages
+# nearly all of it; scan matching 11 s, the simulator 5 s), which is its wall time on an idle core; a VM shared
+# with other jobs takes longer, a desktop less.
+COMPILE_SECONDS = 150
+NOTICE = f"compiling the numba kernels (once after an install or an update: about {COMPILE_SECONDS / 60:.1f} min)"
 _SAID = False
 
 
 def say_compiling(force: bool = False) -> bool:
     """Say on stderr, once a process, terminal or not, that the kernels are about to compile (cache_looks_stale;
     `force`: without asking it), with how long that takes and how to do it ahead (`datmo warm-up`); not under
-    --quiet. Returns whether the line was written."""
+    --quiet, nor with DATMO_COMPILE_NOTICE=0 in the environment. Returns whether the line was written."""
     global _SAID
-    if _SAID or not (force or cache_looks_stale()):
+    if _SAID or os.environ.get("DATMO_COMPILE_NOTICE") == "0" or not (force or cache_looks_stale()):
         return False
     _SAID = True
     progress = sys.modules.get("datmo_cli.progress")  # loaded by any command (its --quiet); not imported here

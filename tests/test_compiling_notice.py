@@ -112,7 +112,7 @@ def test_the_compile_line_comes_at_once_on_a_redirected_stderr(tmp_path):
         "import sys; from datmo_cli.numba_runtime import prepare; prepare(); prepare(); "
         "print('numba' in ' '.join(sys.modules))"
     )
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_DISABLE_JIT"}
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_DISABLE_JIT", "DATMO_COMPILE_NOTICE")}
     said = []
     for cache in ("empty", "cache"):
         if cache == "cache":
@@ -129,7 +129,7 @@ def test_the_compile_line_comes_at_once_on_a_redirected_stderr(tmp_path):
         assert done.returncode == 0 and done.stdout.strip() == "True"
         said.append((tmp_path / f"{cache}.err").read_text())
     assert said[0] == f"datmo: {NOTICE}; cached for the next runs (`datmo warm-up` compiles them ahead)\n"
-    assert "min on 2 cores" in said[0]
+    assert "about 2.5 min" in said[0]
     assert said[1] == ""
 
 
@@ -143,3 +143,34 @@ def test_warm_up_loads_or_compiles_every_kernel_and_says_how_long():
     assert result.exit_code == 0, result.output
     assert "the numba kernels in" in result.output and "later runs load them from the cache" in result.output
     assert CliRunner().invoke(cli, ["warm-up", "-q"]).output == ""
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["run", "in.mcap", "-o", "out"], True),
+        (["--debug", "features", "in.mcap"], True),
+        (["warm-up"], True),
+        (["run", "--help"], False),
+        (["track", "in.mcap", "-q"], False),
+        (["info", "in.mcap"], False),
+        ([], False),
+    ],
+)
+def test_a_kernel_command_says_it_compiles_before_its_own_imports(tmp_path, monkeypatch, capsys, args, said):
+    from datmo_cli import cli, numba_runtime
+
+    monkeypatch.delenv("DATMO_COMPILE_NOTICE", raising=False)
+    monkeypatch.delenv("NUMBA_DISABLE_JIT", raising=False)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "empty"))  # nothing cached
+    monkeypatch.setattr(numba_runtime, "_SAID", False)
+    monkeypatch.setattr(cli, "_ARGS", list(args))
+    cli._say_compiling()
+    cli._say_compiling()
+    assert capsys.readouterr().err == (
+        f"datmo: {NOTICE}; cached for the next runs (`datmo warm-up` compiles them ahead)\n" if said else ""
+    )
+    monkeypatch.setenv("DATMO_COMPILE_NOTICE", "0")
+    monkeypatch.setattr(numba_runtime, "_SAID", False)
+    cli._say_compiling()
+    assert capsys.readouterr().err == ""
