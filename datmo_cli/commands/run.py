@@ -393,12 +393,13 @@ def _warm_up() -> None:
     import time
 
     from ..batch import ensure_warm
-    from ..numba_runtime import say_compiling
+    from ..numba_runtime import cache_looks_stale, say_compiling
     from ..progress import bar, say
 
     t0 = time.perf_counter()
-    compiled = say_compiling()
-    with bar("compiling the numba kernels", None, unit="steps") as b:
+    compiled = cache_looks_stale()  # before anything is compiled
+    say_compiling()  # said once a process (the command line's first step has said it)
+    with bar(f"{'compiling' if compiled else 'loading'} the numba kernels", None, unit="steps") as b:
         ensure_warm(b.update)  # once per process: the --jobs pool forks after it
     seconds = time.perf_counter() - t0
     if compiled or seconds > 2.0:

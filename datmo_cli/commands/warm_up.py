@@ -21,12 +21,13 @@ def command() -> None:
     """
     import time
 
-    from ..numba_runtime import say_compiling
+    from ..numba_runtime import cache_looks_stale, say_compiling
     from ..pipeline import warm_up
     from ..progress import bar, say
 
     t0 = time.perf_counter()
-    compiled = say_compiling()
+    compiled = cache_looks_stale()  # before anything is compiled
+    say_compiling()  # said once a process (the command line's first step has said it)
     with bar("compiling the numba kernels" if compiled else "loading the numba kernels", None, unit="steps") as b:
         warm_up(b.update)
     seconds = time.perf_counter() - t0
