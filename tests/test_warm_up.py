@@ -51,3 +51,22 @@ def test_no_helper_when_the_kernels_are_cached_or_in_the_helper(monkeypatch):
     monkeypatch.setattr(numba_runtime, "cache_looks_stale", lambda: True)
     monkeypatch.setenv("DATMO_WARM_HELPER", "0")
     assert pipeline._tracking_helper() is None
+
+
+def test_the_helper_compiles_the_tracking_quietly_when_the_kernels_look_uncompiled(monkeypatch):
+    import os
+    import subprocess
+
+    from datmo_cli import numba_runtime, pipeline
+
+    started = []
+    monkeypatch.delenv("DATMO_WARM_HELPER", raising=False)
+    monkeypatch.setattr(numba_runtime, "cache_looks_stale", lambda: True)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.setattr(subprocess, "Popen", lambda args, **kw: started.append((args, kw)) or "helper")
+    assert pipeline._tracking_helper() == "helper"
+    ((args, kw),) = started
+    assert "warm_tracking()" in args[-1]
+    assert kw["env"]["DATMO_WARM_HELPER"] == "0" and kw["env"]["DATMO_COMPILE_NOTICE"] == "0"
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0}, raising=False)
+    assert pipeline._tracking_helper() is None  # one core: nothing to gain
