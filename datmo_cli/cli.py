@@ -33,6 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "tune": ("tune", "Find the parameters that score best against ground truth (search, successive halving)."),
     "train-legs": ("train_legs", "Train the learned leg detector on labelled scans; print held-out figures."),
     "config": ("config", "Print the effective configuration ([features], [track]) as TOML."),
+    "warm-up": ("warm_up", "Compile the numba kernels ahead of the first run (for images and CI)."),
 }
 
 
@@ -163,6 +164,21 @@ class CleanError(click.ClickException):
         click.echo(f"datmo: error: {printable(self.format_message())}", err=True, file=file)
 
 
+# the commands that run numba kernels: the line that they are about to compile comes before anything else
+KERNEL_COMMANDS = ("segment", "features", "track", "run", "play", "node", "warm-up")
+
+
+def _say_compiling() -> None:
+    """Say at once, before a kernel command's own imports, that the kernels will compile when their cache looks
+    stale (numba_runtime.say_compiling; not for --help or --quiet, which are read from the arguments here)."""
+    words = [a for a in _ARGS if not a.startswith("-")]
+    if not words or words[0] not in KERNEL_COMMANDS or {"--help", "-q", "--quiet"} & set(_ARGS):
+        return
+    from .numba_runtime import say_compiling
+
+    say_compiling()
+
+
 class LazyGroup(click.Group):
     """A group whose commands are imported on first use, and the one place where errors become messages.
 
@@ -181,6 +197,7 @@ class LazyGroup(click.Group):
         from . import outputs
 
         _safe_streams()
+        _say_compiling()
         try:
             with warnings.catch_warnings(), outputs.handle_signals():
                 warnings.simplefilter("always", UserWarning)

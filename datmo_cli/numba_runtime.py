@@ -178,6 +178,7 @@ def prepare() -> None:
     with _LOCK:  # threads of one Dask worker may start stages at once
         if _READY:
             return
+        say_compiling()  # before numba's import: the line comes at once
         import numba.cpython.hashing  # noqa: F401  # its import gives compiled code the hash secret's symbols
         from numba.core.registry import cpu_target
         from numba.core.runtime import rtsys
@@ -361,23 +362,37 @@ def _load_blas_alone():
         return None
 
 
+def _cache_folder(folder: str) -> str:
+    """Where numba keeps the cache of the kernels of the modules in `folder`: NUMBA_CACHE_DIR when set, else the
+    folder's __pycache__ when it is writable, else the user's cache folder (numba's locators, in that order; the
+    two outside the package under the name numba gives them: the folder's name and the SHA-1 of its path)."""
+    import hashlib
+
+    given = os.environ.get("NUMBA_CACHE_DIR")
+    subpath = f"{os.path.basename(folder)}_{hashlib.sha1(folder.encode()).hexdigest()}"
+    if given:
+        return os.path.join(os.path.abspath(given), subpath)
+    tree = os.path.join(folder, "__pycache__")
+    if _usable(tree):
+        return tree
+    return os.path.join(_user_cache(), subpath)
+
+
 def cache_looks_stale() -> bool:
     """Whether a stage would compile kernels rather than load them from numba's cache, judged from the index
-    files (*.nbi) in datmo's __pycache__ folders without importing numba: none at all (the first run after an
-    install, or a cache kept elsewhere by NUMBA_CACHE_DIR or a read-only install), or a module edited after
-    its kernels were last cached (numba keys its cache on the source's time and size). A kernel never yet
-    called in a module whose others are cached is not seen; it compiles when first called."""
-    import os
-
+    files (*.nbi) where numba keeps datmo's cache (_cache_folder: the package's __pycache__ folders,
+    NUMBA_CACHE_DIR or the user's cache folder) without importing numba: none at all (the first run after an
+    install), or a module edited after its kernels were last cached (numba keys its cache on the source's time
+    and size). A kernel never yet called in a module whose others are cached is not seen; it compiles when
+    first called."""
     if os.environ.get("NUMBA_DISABLE_JIT", "0") != "0":
         return False
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        return True  # not judged: as stale
     package = os.path.dirname(os.path.abspath(__file__))
     newest: dict[str, float] = {}
-    for folder in [package, *(e.path for e in os.scandir(package) if e.is_dir() and not e.name.startswith("_"))]:
+    for name in KERNEL_PACKAGES:
+        folder = os.path.join(package, name)
         try:
-            entries = list(os.scandir(os.path.join(folder, "__pycache__")))
+            entries = list(os.scandir(_cache_folder(folder)))
         except OSError:
             continue
         for e in entries:
@@ -393,9 +408,30 @@ def cache_looks_stale() -> bool:
 
 
 # ------------------------------------------------------------------------------------ compiling notice
-# Saying that numba is compiling: the first run after an install compiles the kernels (tens of seconds)
-# before a stage's first progress report, which otherwise comes within milliseconds.
-NOTICE = "compiling the numba kernels (once after an install, up to a minute)"
+# Saying that numba is compiling: the first run after an install compiles the kernels (minutes) before a stage's
+# first progress report, which otherwise comes within milliseconds. One process compiling every kernel of
+# pipeline.warm_up with a cold cache, on the project's 2-core VM: 137 s user + 15 s system CPU (the hall's stages
+# nearly all of it; scan matching 11 s, the simulator 5 s), which is its wall time on an idle core; a VM shared
+# with other jobs takes longer, a desktop less.
+COMPILE_SECONDS = 150
+NOTICE = f"compiling the numba kernels (once after an install or an update: about {COMPILE_SECONDS / 60:.1f} min)"
+_SAID = False
+
+
+def say_compiling(force: bool = False) -> bool:
+    """Say on stderr, once a process, terminal or not, that the kernels are about to compile (cache_looks_stale;
+    `force`: without asking it), with how long that takes and how to do it ahead (`datmo warm-up`); not under
+    --quiet, nor with DATMO_COMPILE_NOTICE=0 in the environment. Returns whether the line was written."""
+    global _SAID
+    if _SAID or os.environ.get("DATMO_COMPILE_NOTICE") == "0" or not (force or cache_looks_stale()):
+        return False
+    _SAID = True
+    progress = sys.modules.get("datmo_cli.progress")  # loaded by any command (its --quiet); not imported here
+    if progress is not None and progress.quiet():
+        return False
+    sys.stderr.write(f"datmo: {NOTICE}; cached for the next runs (`datmo warm-up` compiles them ahead)\n")
+    sys.stderr.flush()
+    return True
 
 
 def _timer(delay: float, action: Callable[[], None]) -> threading.Timer:

@@ -42,10 +42,13 @@ BLOCK_SCANS = 1024  # scans per block: large enough that per-block costs vanish,
 # message indexes (16 bytes a message, uncompressed, which Foxglove's indexed reader uses) are 0.3x of it.
 # On the 20,000-scan hall of benchmarks/bench_scale (level 9): chunks ending each block 1.70x, after 2 blocks
 # 1.16x, 4 or 8 blocks 1.01x; that log repeats every 300 scans, which chunks spanning blocks profit from as
-# real logs would not. A reader holds about CHUNK_BLOCKS blocks in wait for the chunks of other channels.
+# real logs would not. CHUNK_SECONDS: chunks are cut in windows of log time (log.mcap_chunks), so the file
+# is in time order within 5 s without its index (docs/performance.md has the sizes); CHUNK_BLOCKS then has no
+# effect. A reader holds about CHUNK_SECONDS of the log in wait for the chunks of other channels.
 CHUNK_BYTES = 4 << 20
 CHUNK_LEVEL = 9
 CHUNK_BLOCKS = 4
+CHUNK_SECONDS = 5.0
 CHUNK_GROUPS = {mcapio.TOPIC_ODOM: "poses", mcapio.TOPIC_TF: "poses", mcapio.TOPIC_TF_STATIC: "poses"}
 
 
@@ -111,7 +114,7 @@ class LogStream:
         block's first scan and the next block's, wherever the file keeps them. A block is given once the
         chunks read so far hold every message before that point (mcapio.iter_stretches), so the blocks are
         the same whatever the chunks and their order in the file; memory holds the stretch of the log that
-        the chunks of different channels are apart in the file (CHUNK_BLOCKS blocks of a log written here)."""
+        the chunks of different channels are apart in the file (CHUNK_SECONDS of a log written here)."""
         from collections import deque
 
         copy = copy or set()
@@ -274,6 +277,7 @@ def write_derived(
         groups=CHUNK_GROUPS,
         level=CHUNK_LEVEL,
         span=CHUNK_BLOCKS,
+        seconds=CHUNK_SECONDS,
     ) as writer:
         copy_ids = writer.copy_channels(stream.log, exclude=list(derived))
         ids = {topic: writer.channel(topic, msgtype) for topic, msgtype in derived.items()}

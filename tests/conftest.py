@@ -8,6 +8,12 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+# The line "compiling the numba kernels" (numba_runtime.say_compiling) comes once a process when the cache looks
+# stale, as it does in a fresh clone while the first tests compile the kernels: not in the tests' outputs
+# (their subprocesses inherit this). tests/test_compiling_notice.py turns it on where it checks it.
+os.environ["DATMO_COMPILE_NOTICE"] = "0"
+os.environ["DATMO_WARM_HELPER"] = "0"  # no second compiling process beside each xdist worker's (pipeline.warm_up)
+
 # CI reruns the same examples every time (a red build is reproducible); elsewhere hypothesis explores anew.
 settings.register_profile("ci", derandomize=True, print_blob=True)
 if os.environ.get("CI", "").lower() == "true":

@@ -239,7 +239,7 @@ def read_table(path: Path, fmt: str, features: bool = False) -> tuple[list[str],
     else:
         import pyarrow.parquet as pq
 
-        table = pq.read_table(path)
+        table = pq.read_table(path).drop_columns(["stamp"])  # Parquet's own: stamp_ns as a timestamp
         names, rows = table.schema.names, table.to_pylist()
     return names, [typed(r, kinds) for r in rows]
 
@@ -641,7 +641,7 @@ def test_ground_truth_in_every_format_holds_the_csvs_rows(tmp_path, fmt):
     if fmt == "parquet":
         import pyarrow.parquet as pq
 
-        assert pq.read_schema(tmp_path / "gt.parquet").names == GT_HEADER
+        assert pq.read_schema(tmp_path / "gt.parquet").names == [*GT_HEADER[:1], "stamp", *GT_HEADER[1:]]
 
 
 def test_ground_truth_to_stdout_is_the_same_table(tmp_path):
@@ -831,7 +831,7 @@ def test_every_format_reads_back_with_the_documented_types(typed_logs, tmp_path,
     frames = {
         "csv": pl.read_csv(paths["csv"], schema=schema),
         "ndjson": pl.read_ndjson(paths["ndjson"], schema=schema),
-        "parquet": pl.read_parquet(paths["parquet"]),
+        "parquet": pl.read_parquet(paths["parquet"]).drop("stamp"),  # Parquet's own timestamp column
     }
     tables = {
         "csv": pacsv.read_csv(
@@ -840,7 +840,7 @@ def test_every_format_reads_back_with_the_documented_types(typed_logs, tmp_path,
         "ndjson": pajson.read_json(paths["ndjson"], parse_options=pajson.ParseOptions(explicit_schema=arrow))
         if paths["ndjson"].stat().st_size
         else arrow.empty_table(),
-        "parquet": pq.read_table(paths["parquet"]),
+        "parquet": pq.read_table(paths["parquet"]).drop_columns(["stamp"]),
     }
     for fmt in export.FORMATS:
         assert frames[fmt].schema == pl.Schema(schema), fmt
@@ -877,8 +877,32 @@ def test_ground_truth_reads_back_with_its_types(tmp_path):
         frames[fmt] = (
             {"csv": pl.read_csv, "ndjson": pl.read_ndjson}[fmt](out, schema=schema)
             if fmt != "parquet"
-            else pl.read_parquet(out)
+            else pl.read_parquet(out).drop("stamp")
         )
         assert frames[fmt].schema == pl.Schema(schema)
     assert frames["csv"].equals(frames["parquet"]) and frames["ndjson"].equals(frames["parquet"])
-    assert pq.read_schema(tmp_path / "gt.parquet").equals(export.arrow_schema(export.GROUND_TRUTH_COLUMNS))
+    assert pq.read_schema(tmp_path / "gt.parquet").equals(export.parquet_schema(export.GROUND_TRUTH_COLUMNS))
+
+
+@pytest.mark.parametrize("ground_truth", [False, True])
+def test_parquet_stamps_read_as_utc_timestamps_and_carry_their_units(processed, tmp_path, ground_truth):
+    """polars reads the Parquet export's `stamp` column, without a schema given, as a UTC timestamp in ns equal to
+    `stamp_ns`; the file's metadata holds every column's type and unit."""
+    import json
+
+    import polars as pl
+    import pyarrow.parquet as pq
+
+    out = tmp_path / "t.parquet"
+    source = str(SAMPLES / "crowd6.mcap") if ground_truth else str(processed["patrol"])
+    assert invoke(source, *(["--ground-truth"] if ground_truth else []), "-o", str(out)).exit_code == 0
+    df = pl.read_parquet(out)
+    assert df.schema["stamp"] == pl.Datetime("ns", "UTC") and df.height > 100
+    assert df["stamp"].dt.epoch("ns").to_list() == df["stamp_ns"].to_list()
+    assert list(df.columns).index("stamp") == list(df.columns).index("stamp_ns") + 1
+    schema = pq.read_schema(out)
+    described = json.loads(schema.metadata[b"datmo"])["columns"]
+    assert list(described) == schema.names
+    assert described["stamp"]["type"] == "timestamp[ns, UTC]" and described["stamp_ns"]["type"] == "int64"
+    x = "x" if ground_truth else "x_m"
+    assert described[x]["unit"] == "m, sensor frame" == schema.field(x).metadata[b"unit"].decode()

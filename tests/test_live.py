@@ -557,3 +557,13 @@ def test_play_serves_clients_of_either_subprotocol_and_says_nothing_when_they_le
     lines = err.splitlines()
     assert lines[0] == "  waiting for a client to subscribe (Ctrl-C to stop)" and len(lines) == 2, err
     assert re.fullmatch(r"datmo play: stopped \(Ctrl-C\); [\d,]+ messages served", lines[1]), err
+
+
+def test_play_help_says_what_the_viewer_can_and_cannot_do():
+    from click.testing import CliRunner
+
+    from datmo_cli.cli import cli
+
+    text = " ".join(CliRunner().invoke(cli, ["play", "--help"]).output.split())
+    assert "What it cannot do: pause, seek or change the speed" in text and "--rate" in text
+    assert "What the viewer can do" in text

@@ -210,3 +210,28 @@ def test_run_and_report_work_with_the_plain_install_alone(tmp_path):
         "pip install 'datmo-cli[eval]'\n"
     )
     assert not (work / "hall.png").exists()
+
+
+def test_an_author_and_no_invented_home():
+    assert PROJECT["authors"] == [{"name": "the datmo developers"}]
+    assert "Copyright (c) 2026 the datmo developers" in (ROOT / "LICENSE").read_text(encoding="utf-8")
+    assert "urls" not in PROJECT  # no public home yet: none is made up
+
+
+def test_the_sdist_holds_every_file_the_readme_links_to():
+    """A package page shows the README alone; its links name the files' paths, and MANIFEST.in puts each of them
+    in the source distribution (the sample logs excepted: the README says they are in the repository only).
+    (Checked by building the sdist with `python -m build --sdist` too: its files are listed in the report.)"""
+    rules = [line.split() for line in (ROOT / "MANIFEST.in").read_text(encoding="utf-8").splitlines()]
+    rules = [r for r in rules if r and not r[0].startswith("#")]
+    grafted = [r[1] for r in rules if r[0] == "graft"]
+    included = {name for r in rules if r[0] == "include" for name in r[1:]} | {"README.md", "LICENSE"}
+    pruned = [r[1] for r in rules if r[0] == "prune"]
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    targets = {t.split("#")[0] for t in re.findall(r"\]\(([^)\s]+)\)", readme) if "://" not in t}
+    targets = {t for t in targets if t and not t.startswith("sample_logs/")}
+    assert len(targets) > 10 and "docs/install.md" in targets
+    for target in targets:
+        assert (ROOT / target).is_file(), target
+        assert target in included or any(target.startswith(g + "/") for g in grafted), target
+    assert "sample_logs" in pruned and "tests" in pruned

@@ -133,13 +133,14 @@ def headline(summary) -> dict:
 _WARM = False
 
 
-def ensure_warm() -> None:
-    """warm_up() once per process (a worker's first task, or the worker plugin): numba kernels loaded."""
+def ensure_warm(progress: Callable[[int, int], None] | None = None) -> None:
+    """warm_up() once per process (a worker's first task, or the worker plugin): numba kernels loaded;
+    `progress(done, total)` follows its steps."""
     global _WARM
     if not _WARM:
         from ..pipeline import warm_up
 
-        warm_up()
+        warm_up(progress)
         _WARM = True
 
 

@@ -58,6 +58,11 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
     features and tracks and plots track velocities (Layouts, Import from file). Ctrl-C stops (exit 130).
     Needs the live extra: pip install 'datmo-cli[live]'.
 
+    What the viewer can do: show every channel as it plays, on the log's clock (the server sends the log's
+    time, so plots and the timeline follow it). What it cannot do: pause, seek or change the speed from
+    Foxglove's playback bar, which stays inactive (the server offers Foxglove's time capability, not playback
+    control): the speed is --rate, --loop plays the log again, and a restart of datmo play starts it over.
+
     Example: datmo play sample_logs/hall.mcap --rate 2 --loop
     """
     from .. import live, outputs

@@ -389,18 +389,21 @@ def _compiling() -> bool:
 
 def _warm_up() -> None:
     """Load the numba kernels before the clock of any input starts; the first run after an install
-    compiles them (tens of seconds, then cached), which is said rather than counted in the inputs' speed."""
+    compiles them (minutes, then cached), which is said at once (numba_runtime.say_compiling, terminal or
+    not) with a progress bar in a terminal, rather than counted in the inputs' speed."""
     import time
 
     from ..batch import ensure_warm
-    from ..numba_runtime import said_if_slow
-    from ..progress import say
+    from ..numba_runtime import cache_looks_stale, say_compiling
+    from ..progress import bar, say
 
     t0 = time.perf_counter()
-    with said_if_slow():
-        ensure_warm()  # once per process: the --jobs pool forks after it
+    compiled = cache_looks_stale()  # before anything is compiled
+    say_compiling()  # said once a process (the command line's first step has said it)
+    with bar(f"{'compiling' if compiled else 'loading'} the numba kernels", None, unit="steps") as b:
+        ensure_warm(b.update)  # once per process: the --jobs pool forks after it
     seconds = time.perf_counter() - t0
-    if seconds > 2.0:
+    if compiled or seconds > 2.0:
         say(f"compiled the numba kernels in {seconds:.0f} s (first run after an install; cached for the next runs)")
 
 

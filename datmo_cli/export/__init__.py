@@ -52,6 +52,7 @@ from .schema import (
     arrow_schema,
     columns,
     format_for,
+    parquet_schema,
     polars_schema,
     require_pyarrow,
 )
@@ -80,6 +81,7 @@ __all__ = [
     "format_for",
     "ground_truth_batch",
     "plan",
+    "parquet_schema",
     "polars_schema",
     "require_channel",
     "require_pyarrow",

@@ -61,6 +61,24 @@ GROUND_TRUTH_COLUMNS: dict[str, str] = {
 }
 
 
+# Each column's unit (and frame) as docs/export.md gives it, carried in a Parquet file's metadata; "" for none.
+UNITS: dict[str, str] = {
+    "stamp_ns": "ns since 1970 (UTC)",
+    "stamp": "ns since 1970, UTC (timestamp of stamp_ns)",
+    **{c: "m, sensor frame" for c in ("x_m", "y_m", "x_end_m", "y_end_m")},
+    **{c: "m/s, sensor frame" for c in ("vx_mps", "vy_mps")},
+    **{c: "m, odometry frame" for c in ("world_x_m", "world_y_m")},
+    **{c: "m/s, odometry frame" for c in ("world_vx_mps", "world_vy_mps")},
+    **{c: "m" for c in ("size_m", "radius_m", "rho_m")},
+    "theta_rad": "rad",
+    **{c: "scans" for c in ("age", "hits", "misses")},
+    **{c: "beam index" for c in ("first_beam", "last_beam")},
+    "probability": "0 to 1",
+}
+UNITS.update({"x": "m, sensor frame", "y": "m, sensor frame"})  # GROUND_TRUTH_COLUMNS' own
+STAMP = "stamp"  # the Parquet column beside stamp_ns: the same instant as a timestamp (ns, UTC)
+
+
 def columns(features: bool = False) -> dict[str, str]:
     """The output's columns (name -> type, one of TYPES) in order: the track columns, then with `features` the
     feature columns."""
@@ -80,6 +98,28 @@ def arrow_schema(cols: dict[str, str] | None = None, *, features: bool = False):
         "bool": pa.bool_(),
     }
     return pa.schema([(name, types_[t]) for name, t in (cols or columns(features)).items()])
+
+
+def parquet_schema(cols: dict[str, str]):
+    """The pyarrow.Schema a Parquet export is written with: arrow_schema(cols) with, after `stamp_ns`, the column
+    `stamp` (the same instant as timestamp[ns, UTC], which polars, duckdb and pandas read as a time); each field's
+    unit in its metadata ("unit"), and the table's columns, types and units as JSON under b"datmo" in the
+    schema's metadata (units from UNITS)."""
+    import json
+
+    pa = require_pyarrow()
+    base = arrow_schema(cols)
+    units = UNITS
+    fields = []
+    for f in base:
+        fields.append(f.with_metadata({"unit": units.get(f.name, "")}) if units.get(f.name) else f)
+        if f.name == "stamp_ns":
+            fields.append(pa.field(STAMP, pa.timestamp("ns", tz="UTC"), metadata={"unit": units[STAMP]}))
+    described = {
+        f.name: {"type": cols.get(f.name, "timestamp[ns, UTC]"), "unit": units.get(f.name, "")} for f in fields
+    }
+    meta = {"columns": described, "docs": "docs/export.md (in the datmo-cli source distribution)"}
+    return pa.schema(fields, metadata={b"datmo": json.dumps(meta).encode()})
 
 
 def polars_schema(cols: dict[str, str] | None = None, *, features: bool = False) -> dict:

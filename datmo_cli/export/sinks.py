@@ -12,7 +12,7 @@ from ..csvsafe import neutralise
 from ..errors import ConfigError
 from ..text import printable
 from .rows import Batch
-from .schema import arrow_schema, columns, require_pyarrow
+from .schema import columns, parquet_schema, require_pyarrow
 
 
 def _text_column(kind: str, a: np.ndarray, null: str, quote: bool, terminal: bool = False) -> list[str]:
@@ -104,12 +104,13 @@ class TextSink:
 
 
 class ParquetSink:
-    """Rows to a Parquet file (pyarrow.parquet.ParquetWriter), one row group per batch, zstd-compressed."""
+    """Rows to a Parquet file (pyarrow.parquet.ParquetWriter), one row group per batch, zstd-compressed, with
+    schema.parquet_schema's `stamp` column beside `stamp_ns` and the columns' units in the metadata."""
 
     def __init__(self, stream: IO[bytes], cols: dict[str, str]) -> None:
         self.pa = require_pyarrow()
         self.cols = cols
-        self.schema = arrow_schema(cols)
+        self.schema = parquet_schema(cols)
         import pyarrow.parquet as pq
 
         self.writer = pq.ParquetWriter(stream, self.schema, compression="zstd")
@@ -133,7 +134,11 @@ class ParquetSink:
     def write(self, batch: Batch) -> None:
         if not batch.n:
             return
-        arrays = [self._array(name, batch.values.get(name), batch.n) for name in self.cols]
+        arrays = []
+        for name in self.cols:
+            arrays.append(self._array(name, batch.values.get(name), batch.n))
+            if name == "stamp_ns":
+                arrays.append(arrays[-1].cast(self.pa.timestamp("ns", tz="UTC")))
         self.writer.write_table(self.pa.Table.from_arrays(arrays, schema=self.schema), row_group_size=batch.n)
         self.rows += batch.n
         self.batches += 1

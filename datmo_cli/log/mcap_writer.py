@@ -1,7 +1,8 @@
 """Writing MCAP logs safely: zstd chunks (log.mcap_chunks) and the `ros2` profile, so Foxglove and `ros2 bag`
 open the files; messages are CDR with their `ros2msg` schemas embedded; the file appears under its name only
 when complete (or, streaming, as far as it was flushed). A `grouped` writer puts each channel (or group of
-channels) in chunks of its own, block by block (see LogWriter.drain).
+channels) in chunks of its own, block by block (see LogWriter.drain), each covering less than `seconds` of
+log time when that is given (so the file is in time order within `seconds` without its index).
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ class LogWriter:
         groups: dict[str, str] | None = None,
         level: int = 3,
         span: int = 0,
+        seconds: float = 0.0,
     ) -> None:
         from .. import outputs
         from .mcap_chunks import ChunkWriter
@@ -59,7 +61,13 @@ class LogWriter:
         self._file = outputs.Guarded(file, self.path)  # a write error names the output, not the temporary file
         try:
             with outputs.writing(self.path):
-                self._writer = ChunkWriter(self._file, chunk_size=chunk_size, level=level, span=span if grouped else 0)
+                self._writer = ChunkWriter(
+                    self._file,
+                    chunk_size=chunk_size,
+                    level=level,
+                    span=span if grouped else 0,
+                    seconds=seconds if grouped else 0.0,
+                )
                 self._writer.start(profile="ros2", library=f"datmo {__version__}")
                 self._streaming = streaming
                 self._grouped = grouped
