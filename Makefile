@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml datmo_cli/__init__.py constraints.txt
 	touch $(STAMP)
 
 help: ## list the targets, each with what it does
-	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/^([a-z-]+):.*## (.*)$$/\1\t\2/' | \
+	@grep -E '^[a-z0-9-]+:.*## ' $(MAKEFILE_LIST) | sed -E 's/^([a-z0-9-]+):.*## (.*)$$/\1\t\2/' | \
 		awk -F'\t' '{ printf "  make %-15s %s\n", $$1, $$2 }'
 
 install: $(STAMP) ## create .venv and install datmo (editable) with the dev extras
