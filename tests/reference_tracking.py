@@ -386,7 +386,7 @@ def fold_evidence(leg_score: np.ndarray, leg_hits: np.ndarray, k: int, p: float,
     `rate`; a candidate found on the background or carried (p = NOT_A_LEG) is folded as such (no single hit undoes
     the evidence); one on carried beams (p = CARRIED_LEG) sets it to 0."""
     leg_hits[k] += 1
-    if p == CARRIED_LEG:
+    if p == NOT_A_LEG or p == CARRIED_LEG:
         leg_score[k] = 0.0
         return
     a = max(rate, 1.0 / leg_hits[k])
@@ -1396,7 +1396,7 @@ class ReferenceTracker:
         self._bg_scan += 1
         t = self.tracks
         # people, and tracks of evidence enough for a person (one standing from the start is not swallowed first)
-        sure = sure_people(t.person) | ((t.leg_hits > 0) & (t.leg_score >= p.person_evidence))
+        sure = sure_people(t.person) | ((t.leg_hits > 0) & (t.leg_score >= p.background_shield))
         # cells hit for four background times are walls: seen-through tests on them every fourth scan suffice
         self._bg_count = background_update(
             self._bg_score,
@@ -1581,7 +1581,7 @@ class ReferenceTracker:
         )
         # a person with a leg candidate within leg_reach takes no measurement that is no leg candidate
         raw = m.raw_legs
-        if len(raw):
+        if len(raw) and p.person_hold:
             there = t.person & (
                 np.hypot(raw[None, :, 0] - t.x[:, 0:1], raw[None, :, 1] - t.x[:, 1:2]) <= p.leg_reach
             ).any(axis=1)
@@ -1595,7 +1595,8 @@ class ReferenceTracker:
     def _update(self, t: TrackArrays, m: Measurements, rows: np.ndarray, cols: np.ndarray) -> None:
         p = self.params
         moving = t.moving_time >= p.walking_after
-        jump = (t.misses[rows] > 0) & (np.hypot(m.x[cols] - t.x[rows, 0], m.y[cols] - t.x[rows, 1]) > p.stride_max)
+        jump = (t.misses[rows] > 0) & (p.restart_jump > 0)
+        jump &= np.hypot(m.x[cols] - t.x[rows, 0], m.y[cols] - t.x[rows, 1]) > p.restart_jump
         apply_updates(
             t.x,
             t.P,

@@ -38,13 +38,14 @@ from .state import (
     P_MAX_GATE_DISTANCE,
     P_MEASUREMENT_NOISE,
     P_MOVING_SPEED,
+    P_PERSON_HOLD,
     P_PERSON_PROCESS_NOISE,
     P_PROCESS_NOISE,
     P_REACQUIRE_DISTANCE,
     P_REACQUIRE_SPEED,
+    P_RESTART_JUMP,
     P_STEP_MAX,
     P_STEP_MIN,
-    P_STRIDE_MAX,
     P_WALKING_AFTER,
     SIZE,
     VOTES,
@@ -200,7 +201,8 @@ def associate(tab, n, mx, my, mkind, mprob, raw, rows0, compat, crow, prm):
     if n == 0 or len(mx) == n0:
         return rows0, cols0
     cost, ok = gated_costs(tab, n, mx, my, mkind, compat, crow, prm)
-    hold_people(ok, tab, n, mkind, mprob, raw, prm)
+    if prm[P_PERSON_HOLD] != 0:
+        hold_people(ok, tab, n, mkind, mprob, raw, prm)
     if n0:
         for q in range(n0):
             ok[rows0[q], :] = False
@@ -212,7 +214,7 @@ def associate(tab, n, mx, my, mkind, mprob, raw, rows0, compat, crow, prm):
 @njit(cache=True)
 def update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm):
     """Kalman-update tracks rows with measurements cols and record the hits (reference_tracking.apply_updates); a
-    track that missed and is taken back more than stride_max from its prediction restarts there (no velocity)."""
+    track that missed and is taken back more than restart_jump from its prediction restarts there (no velocity)."""
     for k in range(n):
         tab[k, HIT] = 0.0
     scratch = np.empty((3, 4, 4))
@@ -220,7 +222,8 @@ def update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm):
         k, j = rows[q], cols[q]
         moving = tab[k, MOVING_TIME] >= prm[P_WALKING_AFTER]
         sigma = prm[P_LEG_MEASUREMENT_NOISE] if mkind[j] == K_LEG else prm[P_MEASUREMENT_NOISE]
-        if tab[k, MISSES] > 0 and np.hypot(mx[j] - tab[k, X], my[j] - tab[k, Y]) > prm[P_STRIDE_MAX]:
+        jump = np.hypot(mx[j] - tab[k, X], my[j] - tab[k, Y])
+        if tab[k, MISSES] > 0 and prm[P_RESTART_JUMP] > 0 and jump > prm[P_RESTART_JUMP]:
             # taken back more than a stride from its prediction: the jump is no velocity, start again there
             restart(tab, k, mx[j], my[j], sigma, prm)
         else:

@@ -129,7 +129,7 @@ class TrackingParams(Section):
     # track's leg-candidate hits (other hits leave it as it is); a track becomes a person once, from paired legs,
     # and stays one until its evidence falls below person_maintain or it dies; unseen, it coasts person_coast s
     leg_evidence_rate: float = param(
-        0.05,
+        0.1,
         _b(0, 1, "", "a share; 0 would never learn", open_=True),
         "Weight of each leg-candidate hit in the evidence (a plain mean over the first "
         "1/rate such hits, then a running mean that remembers about 1/rate of them).",
@@ -138,7 +138,7 @@ class TrackingParams(Section):
         0.6, _b(0, 1, "", PROBABILITY), "A confirmed track becomes a person when its evidence is at least this ..."
     )
     person_maintain: float = param(
-        0.1, _b(0, 1, "", PROBABILITY), "... and stays one until its evidence falls below this."
+        0.2, _b(0, 1, "", PROBABILITY), "... and stays one until its evidence falls below this."
     )
     person_pairs: int = param(
         1, _b(0, 1_000_000, "scans", integer=True), "... and it has been seen with two legs this many times."
@@ -160,7 +160,7 @@ class TrackingParams(Section):
         "A confirmed track whose legs were never seen in free space becomes a person only at this evidence.",
     )
     free_space_scans: int = param(
-        8,
+        0,
         _b(0, 1000, "scans", "each kept scan holds its ranges", integer=True),
         "Earlier scans kept for the free-space test (0: no test, every leg counts as in free space) ...",
     )
@@ -173,6 +173,23 @@ class TrackingParams(Section):
     )
     free_space_share: float = param(
         0.5, _b(0, 1, "", SHARE), "... and at least this share of those that had its place in view."
+    )
+    restart_jump: float = param(
+        0.0,
+        _b(0, 100, "m", NO_SENSE),
+        "A track that missed and is taken back farther than this from its prediction restarts there, without "
+        "velocity (0: never).",
+    )
+    person_hold: int = param(
+        1,
+        _b(0, 1, "", "a switch", integer=True),
+        "1: a person with a leg candidate within leg_reach takes no measurement that is no leg candidate.",
+    )
+    background_shield: float = param(
+        1.0,
+        _b(0, 1, "", PROBABILITY),
+        "Returns within person_radius of a track of leg evidence at least this never feed the background "
+        "(1: only people's).",
     )
     # carried: a beam whose return stays put in the sensor frame while the sensor travels sees a part of the robot
     carried_travel: float = param(

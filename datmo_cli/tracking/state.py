@@ -94,14 +94,17 @@ N_FIXED = TAIL
     P_FREE_SPACE_INTERVAL,
     P_FREE_SPACE_MIN,
     P_FREE_SPACE_SHARE,
+    P_RESTART_JUMP,
+    P_PERSON_HOLD,
+    P_BACKGROUND_SHIELD,
     P_CARRIED_TRAVEL,
     P_CARRIED_RADIUS,
     P_BACKGROUND_TIME,
     P_BACKGROUND_CELL,
     P_BACKGROUND_EXTENT,
     P_TAIL_LENGTH,
-) = range(51)
-N_PARAMS = 51
+) = range(54)
+N_PARAMS = 54
 P_LEG_THRESHOLD = N_PARAMS  # the leg model's threshold, appended by TrackingParams.kernel_vector
 PARAM_NAMES = (
     "process_noise",
@@ -149,6 +152,9 @@ PARAM_NAMES = (
     "free_space_interval",
     "free_space_min",
     "free_space_share",
+    "restart_jump",
+    "person_hold",
+    "background_shield",
     "carried_travel",
     "carried_radius",
     "background_time",

@@ -113,19 +113,21 @@ class Tracker:
       people, or single; the others are measured as their shape (circle, line or blob) carrying their p.
     - A track's evidence is the mean p of its leg-candidate hits (a plain mean of the first 1/leg_evidence_rate,
       then a running mean of that rate); hits on anything else leave it unchanged; a candidate on the background
-      or carried is one hit of p about 0.
-    - A leg is in free space where kept earlier scans saw through its place (_people.in_free_space); a track one
-      of whose legs was once (sticky).
+      or carried sets it to 0.
+    - With the free-space test on (free_space_scans > 0), a leg is in free space where kept earlier scans saw
+      through its place (_people.in_free_space); a track one of whose legs was keeps that (sticky). With it off,
+      every leg counts as in free space.
     - A confirmed track becomes a person once it has been seen with two legs person_pairs times and its evidence
       is at least person_evidence with its legs once in free space, or person_evidence_unfree without; it stays a
       person until its evidence falls below person_maintain or it dies. Walking is not required (someone
       standing, or followed by a robot, is a person) and mobility plays no part.
-    - A person with a leg candidate within leg_reach takes no measurement that is no leg candidate; a track that
-      missed and is taken back more than stride_max from its prediction restarts there (no velocity).
+    - A person with a leg candidate within leg_reach takes no measurement that is no leg candidate (person_hold);
+      with restart_jump > 0, a track that missed and is taken back farther than it from its prediction restarts
+      there (no velocity).
     - Unseen, a person coasts person_coast s on its prediction (at least delete_after_occluded s while hidden
       behind a nearer return, delete_after_out_of_view s out of view, as every track), output flagged occluded,
       and may be taken back by a measurement it could have reached (as an occluded track is).
-    - Returns within person_radius of a person, or of a track of evidence at least person_evidence, never feed
+    - Returns within person_radius of a person, or of a track of evidence at least background_shield, never feed
       the background grid, and a leg candidate near a person is theirs even on the background.
     - A beam whose return keeps its place in the sensor frame while the sensor travels carried_travel sees a part
       of the robot: candidates on such beams are not legs, and a track that takes one loses its evidence.
