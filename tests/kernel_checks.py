@@ -10,6 +10,7 @@ from __future__ import annotations
 
 HERE = "test_kernels_reference.py"
 DRIVERS = "test_kernels_drivers.py"
+HOLD = "test_tracking_people_hold.py"
 STEP_PHASES = "test_tracking_step.py::test_every_phase_equals_the_reference_on_small_scenes"
 
 CHECKS: dict[str, str] = {
@@ -65,6 +66,11 @@ CHECKS: dict[str, str] = {
     "tracking._background.carried_beams": f"{HERE}::test_step_carried_update_and_beams",
     "tracking._people.fold_evidence": f"{HERE}::test_step_fold_evidence",
     "tracking._people.sure_person": f"{HERE}::test_step_leggy_tracks_and_duplicates",
+    "tracking._people.owns_returns": f"{HOLD}::test_owns_returns_people_and_tracks_of_background_shield_evidence",
+    "tracking._people.in_free_space": f"{HOLD}::test_in_free_space_equals_the_reference",
+    "tracking._people.free_legs": STEP_PHASES,
+    "tracking._people.keep_scan": STEP_PHASES,
+    "tracking._association.hold_people": f"{HOLD}::test_a_person_whose_legs_are_there_takes_no_segment_beside_them",
     # tracking: the assignment solver
     "tracking._assign.lsap": "test_tracking_assign.py::test_lsap_is_scipys_assignment",
     "tracking._assign.gnn": "test_tracking_assign.py::test_gnn_is_the_reference_gnn_on_gated_matrices",

@@ -322,16 +322,18 @@ def duplicate_ranks(
 
 
 def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, margin) -> np.ndarray:
-    """Missed tracks (sensor-frame centres, extents in m) that are hidden: their bearing outside the beams or
-    their range at least range_max, or a return more than `margin` m nearer within the beams their extent
-    (at least 0.2 m, at a range of at least 0.1 m) spans either side of their bearing."""
+    """How missed tracks (sensor-frame centres, extents in m) are unseen: 2 (out of view) when their bearing is
+    outside the beams or their range at least range_max, 1 (hidden) when a return more than `margin` m nearer
+    lies within the beams their extent (at least 0.2 m, at a range of at least 0.1 m) spans either side of their
+    bearing, else 0."""
     rng = np.hypot(sx, sy)
     beam = np.rint((np.arctan2(sy, sx) - angle_min) / increment).astype(np.int64)
-    out = missed & ((beam < 0) | (beam >= len(ranges)) | (rng >= range_max))
+    view = missed & ((beam < 0) | (beam >= len(ranges)) | (rng >= range_max))
+    out = np.where(view, 2, 0).astype(np.int64)
     half = np.ceil(np.arctan2(np.maximum(size, 0.2) / 2, np.maximum(rng, 0.1)) / abs(increment)).astype(np.int64)
-    for k in np.flatnonzero(missed & ~out):
+    for k in np.flatnonzero(missed & ~view):
         near = ranges[max(beam[k] - half[k], 0) : beam[k] + half[k] + 1]
-        out[k] = bool((near < rng[k] - margin).any())
+        out[k] = 1 if (near < rng[k] - margin).any() else 0
     return out
 
 
@@ -368,6 +370,7 @@ def tracks_on_background(
 # the leg probability a leg candidate on the background or on carried beams keeps: still a leg candidate (a track
 # that takes it folds it into its evidence), and no leg
 NOT_A_LEG = 1e-6
+CARRIED_LEG = 2e-6  # ... and on carried beams: a part of the robot, whose hit takes all of a track's evidence
 
 
 def sure_people(person: np.ndarray) -> np.ndarray:
@@ -380,14 +383,35 @@ def sure_people(person: np.ndarray) -> np.ndarray:
 def fold_evidence(leg_score: np.ndarray, leg_hits: np.ndarray, k: int, p: float, rate: float) -> None:
     """Fold a leg-candidate hit of leg probability p into track k's evidence, in place: leg_hits[k] counts the
     hits folded; the evidence is their plain mean over the first 1/rate of them, then a running mean of weight
-    `rate`; a candidate found on the background or carried (p = NOT_A_LEG) sets it to 0 (what fed it was no
-    leg)."""
+    `rate`; a candidate found on the background or carried (p = NOT_A_LEG) is folded as such (no single hit undoes
+    the evidence); one on carried beams (p = CARRIED_LEG) sets it to 0."""
     leg_hits[k] += 1
-    if p == NOT_A_LEG:
+    if p == NOT_A_LEG or p == CARRIED_LEG:
         leg_score[k] = 0.0
         return
     a = max(rate, 1.0 / leg_hits[k])
     leg_score[k] = (1.0 - a) * leg_score[k] + a * p
+
+
+def in_free_space(x, y, kept_ranges, kept_poses, angle_min, increment, range_min, range_max, params) -> bool:
+    """Whether the point (x, y) (tracking frame) lies where the kept scans (ranges (K, B), sensor poses (K, 3))
+    saw through: of the scans that had it in view (its bearing within the beams, its range under range_max, a
+    valid return on that beam), at least free_space_min returned more than occlusion_margin beyond it or
+    nothing within range, and at least free_space_share of them did."""
+    if not len(kept_ranges):
+        return False
+    c, s = np.cos(kept_poses[:, 2]), np.sin(kept_poses[:, 2])
+    dx, dy = x - kept_poses[:, 0], y - kept_poses[:, 1]
+    sx, sy = c * dx + s * dy, -s * dx + c * dy
+    r = np.hypot(sx, sy)
+    b = np.rint((np.arctan2(sy, sx) - angle_min) / increment).astype(np.int64)
+    inside = (b >= 0) & (b < kept_ranges.shape[1]) & (r < range_max)
+    rj = kept_ranges[np.arange(len(b))[inside], b[inside]].astype(np.float64)
+    r = r[inside]
+    none = rj >= range_max
+    valid = none | (rj > range_min)
+    through = int((none | (valid & (rj > r + params.occlusion_margin))).sum())
+    return through >= params.free_space_min and through >= params.free_space_share * int(valid.sum())
 
 
 def carried_update(
@@ -762,15 +786,27 @@ def apply_updates(
     moving_speed,
     step_min,
     step_max,
+    jump,
+    speed_sigma,
 ):
     """Kalman-update tracks `rows` with measurements (zx, zy) of kinds zkind, and record the hit: last
     position, kind votes, largest size, and for people that have been `moving` which leg leads along the
-    velocity (the walking pattern; noise on a still pair of posts would fake it)."""
+    velocity (the walking pattern; noise on a still pair of posts would fake it). A `jump` row (a track that
+    missed, taken back more than a stride from its prediction) restarts at its measurement instead: no
+    velocity, position sigma its measurement's, speed sigma speed_sigma."""
     hit[:] = False
     sig = np.empty(len(rows))
     for n in range(len(rows)):
         sig[n] = sigma_leg if zkind[n] == 1 else sigma
-    joseph_update(x, P, rows, zx, zy, sig)
+    keep = ~jump
+    joseph_update(x, P, rows[keep], zx[keep], zy[keep], sig[keep])
+    for n in np.flatnonzero(jump):
+        k = rows[n]
+        x[k] = 0.0
+        x[k, 0], x[k, 1] = zx[n], zy[n]
+        P[k] = 0.0
+        P[k, 0, 0] = P[k, 1, 1] = sig[n] ** 2
+        P[k, 2, 2] = P[k, 3, 3] = speed_sigma**2
     for n in range(len(rows)):
         k = rows[n]
         last[k, 0], last[k, 1] = x[k, 0], x[k, 1]
@@ -809,6 +845,7 @@ def life_cycle(
     confirm_hits,
     delete_after,
     delete_after_occluded,
+    delete_after_out_of_view,
     tentative_delete_after,
     person_coast,
 ):
@@ -830,7 +867,12 @@ def life_cycle(
             confirmed[k] = True
         since = (stamp_ns - last_hit_ns[k]) * 1e-9
         if confirmed[k]:
-            limit = delete_after_occluded if occluded[k] else delete_after
+            if occluded[k] == 1:  # hidden behind a nearer return
+                limit = delete_after_occluded
+            elif occluded[k] == 2:  # out of the field of view or range
+                limit = delete_after_out_of_view
+            else:
+                limit = delete_after
             if person[k]:
                 limit = max(limit, person_coast)
         else:
@@ -1060,7 +1102,7 @@ class TrackArrays:
     first: np.ndarray  # (K, 2) position when created
     last: np.ndarray  # (K, 2) position after the last hit
     confirmed: np.ndarray  # (K,) bool
-    occluded: np.ndarray
+    occluded: np.ndarray  # (K,) int64: 0 seen or should have been, 1 hidden behind a nearer return, 2 out of view
     hit: np.ndarray  # (K,) bool: matched in the last step
     cls: np.ndarray  # (K,) uint8
     mobility: np.ndarray  # (K,) uint8
@@ -1072,6 +1114,7 @@ class TrackArrays:
     #                         the evidence falls below person_maintain or the track dies)
     still_time: np.ndarray  # (K,) float64, s of a speed at most moving_speed (a dynamic track this still is
     #                         static again)
+    free: np.ndarray  # (K,) bool, sticky: one of its legs was seen in free space (in_free_space)
 
     @classmethod
     def zeros(cls, n: int, tail_length: int) -> TrackArrays:
@@ -1095,7 +1138,7 @@ class TrackArrays:
             first=np.zeros((n, 2)),
             last=np.zeros((n, 2)),
             confirmed=np.zeros(n, bool),
-            occluded=np.zeros(n, bool),
+            occluded=np.zeros(n, np.int64),
             hit=np.zeros(n, bool),
             cls=np.zeros(n, np.uint8),
             mobility=np.zeros(n, np.uint8),
@@ -1105,6 +1148,7 @@ class TrackArrays:
             leg_hits=np.zeros(n, i8),
             person=np.zeros(n, bool),
             still_time=np.zeros(n),
+            free=np.zeros(n, bool),
         )
 
     @classmethod
@@ -1216,6 +1260,13 @@ class ReferenceTracker:
         self.carry_away = np.zeros(self._n)
         self._carry_pose: tuple[float, float] | None = None
         self._ranges: np.ndarray | None = None  # this scan's, for the carried beams
+        # the scans kept for the free-space test: ranges, sensor poses (tracking frame), how many, the next slot,
+        # the stamp of the last one kept
+        K = self.params.free_space_scans if geometry is not None else 0
+        self.kept_ranges = np.zeros((K, self._n), np.float32)
+        self.kept_poses = np.zeros((K, 3))
+        self.kept_n = self.kept_next = 0
+        self.kept_stamp: int | None = None
 
     # ---------------------------------------------------------------------------------------- step
     def step(
@@ -1250,13 +1301,50 @@ class ReferenceTracker:
             self._superseded = rows[~keep]  # those tentative tracks were started on it: they go
             rows, cols = np.concatenate([rows[keep], rows2]), np.concatenate([cols[keep], cols2])
         self._leg_evidence(t, m, rows, cols)
+        self._free_legs(t, m, rows, cols)
         self._occlusion(t, ranges)
         self._life_cycle(t, stamp_ns)
         self._spawn(m, rows, cols, stamp_ns)
         self._classify()
         self._push_tail()
         self._background(ranges)
+        self._keep_scan(ranges, stamp_ns)
         return self.output()
+
+    def _keep_scan(self, ranges: np.ndarray | None, stamp_ns: int) -> None:
+        """Keep this scan's ranges and sensor pose for the free-space test, free_space_interval s after the last
+        one kept (a ring of free_space_scans)."""
+        p = self.params
+        if not len(self.kept_ranges) or ranges is None or len(ranges) != self._n:
+            return
+        if self.kept_stamp is not None and (stamp_ns - self.kept_stamp) * 1e-9 < p.free_space_interval - 1e-9:
+            return
+        i = self.kept_next
+        self.kept_ranges[i] = np.asarray(ranges, np.float32)
+        self.kept_poses[i] = np.zeros(3) if self.pose is None else self.pose
+        self.kept_next = (i + 1) % len(self.kept_ranges)
+        self.kept_n = min(self.kept_n + 1, len(self.kept_ranges))
+        self.kept_stamp = stamp_ns
+
+    def _free_legs(self, t: TrackArrays, m: Measurements, rows: np.ndarray, cols: np.ndarray) -> None:
+        """Mark free (sticky) the tracks that took a leg or a pair one of whose legs lies in free space (against
+        the kept scans); without kept scans (no geometry, or free_space_scans 0) every leg counts as free."""
+        if self.geometry is None or not len(self.kept_ranges):
+            t.free[rows[m.kind[cols] <= KIND_LEG]] = True
+            return
+        g, p = self.geometry, self.params
+        kr, kp = self.kept_ranges[: self.kept_n], self.kept_poses[: self.kept_n]
+
+        def free(x: float, y: float) -> bool:
+            return in_free_space(x, y, kr, kp, g.angle_min, g.angle_increment, g.range_min, g.range_max, p)
+
+        for k, j in zip(rows.tolist(), cols.tolist(), strict=True):
+            if t.free[k] or m.kind[j] > KIND_LEG:
+                continue
+            if m.kind[j] == KIND_PERSON:
+                t.free[k] = free(m.legs[j, 0], m.legs[j, 1]) or free(m.legs[j, 2], m.legs[j, 3])
+            else:
+                t.free[k] = free(m.x[j], m.y[j])
 
     def _sensor(self) -> tuple[float, float, float, float]:
         """The sensor's position and heading (cos, sin) in the tracking frame."""
@@ -1307,7 +1395,8 @@ class ReferenceTracker:
             self._bg_hi = float(g.range_max) if np.isfinite(g.range_max) and g.range_max > self._bg_lo else np.inf
         self._bg_scan += 1
         t = self.tracks
-        sure = sure_people(t.person)
+        # people, and tracks of evidence enough for a person (one standing from the start is not swallowed first)
+        sure = sure_people(t.person) | ((t.leg_hits > 0) & (t.leg_score >= p.background_shield))
         # cells hit for four background times are walls: seen-through tests on them every fourth scan suffice
         self._bg_count = background_update(
             self._bg_score,
@@ -1401,7 +1490,8 @@ class ReferenceTracker:
         if sure.any():
             d = np.hypot(raw[:, 0:1] - t.x[None, sure, 0], raw[:, 1:2] - t.x[None, sure, 1])
             bg &= ~(d <= p.leg_reach).any(axis=1)
-        bg |= self._carried(raw)
+        carried = self._carried(raw)
+        bg |= carried
         if not bg.any():
             return m
         strong = raw[:, 4] < 0
@@ -1412,11 +1502,12 @@ class ReferenceTracker:
         n_first = len(lx) + int(blob.sum())
         where = np.full(len(m), -1, np.int64)  # an other-kind measurement's new index
         where[other] = n_first + np.arange(len(other))
-        prob = np.concatenate([np.zeros(len(lx)), np.full(int(blob.sum()), NOT_A_LEG), m.prob[other]])
+        not_a_leg = np.where(carried, CARRIED_LEG, NOT_A_LEG)
+        prob = np.concatenate([np.zeros(len(lx)), not_a_leg[blob], m.prob[other]])
         covered = raw[:, 4].astype(np.int64)
-        gone = covered[bg & ~strong & (raw[:, 4] >= 0)]
-        gone = where[gone]
-        prob[gone[gone >= 0]] = NOT_A_LEG
+        weak = bg & ~strong & (raw[:, 4] >= 0)
+        gone = where[covered[weak]]
+        prob[gone[gone >= 0]] = not_a_leg[weak][gone >= 0]
         out = raw[~bg].copy()
         c = covered[~bg]
         out[:, 4] = np.where(c >= 0, where[np.maximum(c, 0)], out[:, 4])
@@ -1488,6 +1579,13 @@ class ReferenceTracker:
             _COMPAT_LEARNED if self.learned else _COMPAT,
             self._compat_row,
         )
+        # a person with a leg candidate within leg_reach takes no measurement that is no leg candidate
+        raw = m.raw_legs
+        if len(raw) and p.person_hold:
+            there = t.person & (
+                np.hypot(raw[None, :, 0] - t.x[:, 0:1], raw[None, :, 1] - t.x[:, 1:2]) <= p.leg_reach
+            ).any(axis=1)
+            allowed[np.ix_(there, (m.kind > KIND_LEG) & (m.prob == 0))] = False
         if n0:
             allowed[rows0, :] = False
             allowed[:, :n0] = False
@@ -1497,6 +1595,8 @@ class ReferenceTracker:
     def _update(self, t: TrackArrays, m: Measurements, rows: np.ndarray, cols: np.ndarray) -> None:
         p = self.params
         moving = t.moving_time >= p.walking_after
+        jump = (t.misses[rows] > 0) & (p.restart_jump > 0)
+        jump &= np.hypot(m.x[cols] - t.x[rows, 0], m.y[cols] - t.x[rows, 1]) > p.restart_jump
         apply_updates(
             t.x,
             t.P,
@@ -1518,6 +1618,8 @@ class ReferenceTracker:
             p.moving_speed,
             p.step_min,
             p.step_max,
+            jump,
+            p.initial_speed_sigma,
         )
 
     def _reacquire(
@@ -1527,7 +1629,7 @@ class ReferenceTracker:
         have reached since its last hit (at `reacquire_speed`), restarting its filter there; a prediction at
         constant velocity does not follow someone who turned while hidden."""
         p = self.params
-        lost = np.flatnonzero(~t.hit & t.confirmed & t.occluded)
+        lost = np.flatnonzero(~t.hit & t.confirmed & (t.occluded != 0))
         if not len(lost) or not len(m):
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         # a lone leg may be someone else's second leg: taken back only where the table lets a person take one
@@ -1577,7 +1679,7 @@ class ReferenceTracker:
     def _occlusion(self, t: TrackArrays, ranges: np.ndarray | None) -> None:
         """Mark each missed track occluded when a return nearer than it covers its bearing, or when it is
         outside the field of view or the range limit."""
-        t.occluded[:] = False
+        t.occluded[:] = 0
         if ranges is None or self.geometry is None or t.hit.all():
             return
         sx, sy = self._to_sensor(t.x[:, 0], t.x[:, 1])
@@ -1611,6 +1713,7 @@ class ReferenceTracker:
             p.confirm_hits,
             p.delete_after,
             p.delete_after_occluded,
+            p.delete_after_out_of_view,
             p.tentative_delete_after,
             p.person_coast,
         )
@@ -1731,12 +1834,9 @@ class ReferenceTracker:
             ]
             by_shape[shape.sum(axis=1) == 0] = CLASS_UNKNOWN
             drop = t.person & (t.leg_score < p.person_maintain)
-            promote = (
-                ~t.person
-                & t.confirmed
-                & (t.leg_score >= p.person_evidence)
-                & (t.votes[:, KIND_PERSON] >= p.person_pairs)
-            )
+            # legs seen in free space once (a place, not a mobility), or evidence beyond doubt
+            need = np.where(t.free, p.person_evidence, p.person_evidence_unfree)
+            promote = ~t.person & t.confirmed & (t.leg_score >= need) & (t.votes[:, KIND_PERSON] >= p.person_pairs)
             t.person = (t.person & ~drop) | promote
             t.cls = np.where(t.person, np.uint8(CLASS_PERSON), by_shape).astype(np.uint8)
 
@@ -1779,5 +1879,5 @@ class ReferenceTracker:
         out["classification"] = t.cls
         out["mobility"] = t.mobility
         out["status"] = np.where(t.confirmed, np.where(t.hit, STATUS_CONFIRMED, STATUS_COASTING), STATUS_TENTATIVE)
-        out["occluded"] = t.occluded | (t.confirmed & ~t.hit & t.person)
+        out["occluded"] = (t.occluded != 0) | (t.confirmed & ~t.hit & t.person)
         return out

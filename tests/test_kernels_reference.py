@@ -554,7 +554,10 @@ def test_step_fold_evidence():
         rt.fold_evidence(first[1], first[0], 0, ten[q], 0.1)
     np.testing.assert_allclose(first[1][0], ten.mean(), rtol=1e-12)  # ten hits: their plain mean
     rt.fold_evidence(first[1], first[0], 0, rt.NOT_A_LEG, 0.1)
-    assert first[1][0] == 0.0 and first[0][0] == 11  # a candidate found on the background or carried
+    assert first[1][0] == 0.0 and first[0][0] == 11  # a candidate found on the background
+    rt.fold_evidence(first[1], first[0], 0, 0.5, 0.1)
+    rt.fold_evidence(first[1], first[0], 0, rt.CARRIED_LEG, 0.1)
+    assert first[1][0] == 0.0 and first[0][0] == 13  # ... or carried
 
 
 def test_cover():

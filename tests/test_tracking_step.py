@@ -98,6 +98,7 @@ def to_table(ref: ReferenceTracker, t0: int) -> np.ndarray:
         (state.LEG_HITS, "leg_hits"),
         (state.IS_PERSON, "person"),
         (state.STILL_TIME, "still_time"),
+        (state.FREE, "free"),
     ):
         tab[:K, col] = getattr(t, name)
     tab[:K, state.VOTES : state.VOTES + 5] = t.votes
@@ -154,6 +155,7 @@ def context(ref: ReferenceTracker) -> np.ndarray:
         ctx[state.C_BG_X0], ctx[state.C_BG_Y0] = ref._bg_origin
         ctx[state.C_BG_LO], ctx[state.C_BG_HI] = ref._bg_lo, ref._bg_hi
         ctx[state.C_BG_COUNT], ctx[state.C_BG_SCAN] = ref._bg_count, ref._bg_scan
+    ctx[state.C_KEPT_N], ctx[state.C_KEPT_NEXT] = ref.kept_n, ref.kept_next
     return ctx
 
 
@@ -223,7 +225,7 @@ def lockstep(
     np.testing.assert_array_equal(got[5], m.prob)
     mx, my, msize, mkind, mlegs, raw, mprob = meas_arrays(m)
     compat = _COMPAT_LEARNED if learned else _COMPAT
-    rows_c, cols_c = _association.associate(tab, n, mx, my, mkind, rows0, compat, crow, PRM)
+    rows_c, cols_c = _association.associate(tab, n, mx, my, mkind, mprob, raw, rows0, compat, crow, PRM)
     rows, cols = ref._associate(t, m, rows0)
     np.testing.assert_array_equal(rows_c, rows)
     np.testing.assert_array_equal(cols_c, cols)
@@ -253,6 +255,10 @@ def lockstep(
     ref._leg_evidence(t, m, rows, cols)
     _people.leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, ref._has_prob, PRM)
     same_tracks(ref, t0, tab, n, "leg evidence", on_bg=True)
+    ref._free_legs(t, m, rows, cols)
+    kept = (ref.kept_ranges.copy(), ref.kept_poses.copy())
+    _people.free_legs(tab, rows, cols, mx, my, mkind, mlegs, kept, geo, context(ref), PRM)
+    same_tracks(ref, t0, tab, n, "free legs", on_bg=True)
     ref._occlusion(t, ranges)
     _life_cycle.occlusion(tab, n, rng, ranges is not None, geo, has_pose, pose_arr, PRM)
     same_tracks(ref, t0, tab, n, "occlusion", on_bg=True)
@@ -290,6 +296,14 @@ def lockstep(
             np.testing.assert_array_equal(got, want)
         assert ctx[state.C_BG_COUNT] == ref._bg_count and ctx[state.C_BG_SCAN] == ref._bg_scan
         assert (ctx[state.C_BG_X0], ctx[state.C_BG_Y0]) == ref._bg_origin
+    ctx = context(ref)
+    ctx[state.C_KEPT_STAMP] = -1.0 if ref.kept_stamp is None else ref.kept_stamp - t0
+    kept = (ref.kept_ranges.copy(), ref.kept_poses.copy())
+    ref._keep_scan(ranges, stamp_ns)
+    _people.keep_scan(*kept, rng, ranges is not None and geo[3] != 0, pose_arr, stamp, ctx, PRM)
+    np.testing.assert_array_equal(kept[0], ref.kept_ranges)
+    np.testing.assert_array_equal(kept[1], ref.kept_poses)
+    assert (ctx[state.C_KEPT_N], ctx[state.C_KEPT_NEXT]) == (ref.kept_n, ref.kept_next)
     out = np.zeros(n, TRACK_DTYPE)
     _step.write_tracks(out, 0, tab, n, has_pose, pose_arr)
     want = ref.output()

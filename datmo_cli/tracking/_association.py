@@ -25,6 +25,7 @@ from .state import (
     LAST_Y,
     LEAD_LEFT,
     LEAD_RIGHT,
+    MISSES,
     MOBILITY,
     MOVING_TIME,
     OCCLUDED,
@@ -33,13 +34,16 @@ from .state import (
     P_INITIAL_SPEED_SIGMA,
     P_LEG_BESIDE,
     P_LEG_MEASUREMENT_NOISE,
+    P_LEG_REACH,
     P_MAX_GATE_DISTANCE,
     P_MEASUREMENT_NOISE,
     P_MOVING_SPEED,
+    P_PERSON_HOLD,
     P_PERSON_PROCESS_NOISE,
     P_PROCESS_NOISE,
     P_REACQUIRE_DISTANCE,
     P_REACQUIRE_SPEED,
+    P_RESTART_JUMP,
     P_STEP_MAX,
     P_STEP_MIN,
     P_WALKING_AFTER,
@@ -169,13 +173,36 @@ def gated_costs(tab, n, mx, my, mkind, compat, crow, prm):
 
 
 @njit(cache=True)
-def associate(tab, n, mx, my, mkind, rows0, compat, crow, prm):
-    """Tracks rows0 own measurements 0..len(rows0)-1; the others are gated and assigned by GNN. (rows, cols)."""
+def hold_people(ok, tab, n, mkind, mprob, raw, prm):
+    """A person with a leg candidate (raw: x, y, ..., tracking frame) within leg_reach of its prediction does not
+    take a measurement that is no leg candidate (neither leg nor pair, leg probability 0): its legs are there, and
+    the segment beside them is someone or something else."""
+    for k in range(n):
+        if tab[k, IS_PERSON] == 0:
+            continue
+        there = False
+        for i in range(len(raw)):
+            if np.hypot(raw[i, 0] - tab[k, X], raw[i, 1] - tab[k, Y]) <= prm[P_LEG_REACH]:
+                there = True
+                break
+        if there:
+            for j in range(len(mkind)):
+                if mkind[j] > K_LEG and mprob[j] == 0:
+                    ok[k, j] = False
+
+
+@njit(cache=True)
+def associate(tab, n, mx, my, mkind, mprob, raw, rows0, compat, crow, prm):
+    """Tracks rows0 own measurements 0..len(rows0)-1; the others are gated and assigned by GNN (a person keeps to
+    its legs: hold_people; raw: the scan's leg candidates, mprob: each measurement's leg probability).
+    (rows, cols)."""
     n0 = len(rows0)
     cols0 = np.arange(n0)
     if n == 0 or len(mx) == n0:
         return rows0, cols0
     cost, ok = gated_costs(tab, n, mx, my, mkind, compat, crow, prm)
+    if prm[P_PERSON_HOLD] != 0:
+        hold_people(ok, tab, n, mkind, mprob, raw, prm)
     if n0:
         for q in range(n0):
             ok[rows0[q], :] = False
@@ -186,21 +213,21 @@ def associate(tab, n, mx, my, mkind, rows0, compat, crow, prm):
 
 @njit(cache=True)
 def update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm):
-    """Kalman-update tracks rows with measurements cols and record the hits (reference_tracking.apply_updates)."""
+    """Kalman-update tracks rows with measurements cols and record the hits (reference_tracking.apply_updates); a
+    track that missed and is taken back more than restart_jump from its prediction restarts there (no velocity)."""
     for k in range(n):
         tab[k, HIT] = 0.0
     scratch = np.empty((3, 4, 4))
     for q in range(len(rows)):
         k, j = rows[q], cols[q]
         moving = tab[k, MOVING_TIME] >= prm[P_WALKING_AFTER]
-        kalman_update(
-            tab,
-            k,
-            mx[j],
-            my[j],
-            prm[P_LEG_MEASUREMENT_NOISE] if mkind[j] == K_LEG else prm[P_MEASUREMENT_NOISE],
-            scratch,
-        )
+        sigma = prm[P_LEG_MEASUREMENT_NOISE] if mkind[j] == K_LEG else prm[P_MEASUREMENT_NOISE]
+        jump = np.hypot(mx[j] - tab[k, X], my[j] - tab[k, Y])
+        if tab[k, MISSES] > 0 and prm[P_RESTART_JUMP] > 0 and jump > prm[P_RESTART_JUMP]:
+            # taken back more than a stride from its prediction: the jump is no velocity, start again there
+            restart(tab, k, mx[j], my[j], sigma, prm)
+        else:
+            kalman_update(tab, k, mx[j], my[j], sigma, scratch)
         tab[k, LAST_X], tab[k, LAST_Y] = tab[k, X], tab[k, Y]
         tab[k, HIT] = 1.0
         tab[k, VOTES + mkind[j]] += 1

@@ -17,8 +17,8 @@ from numba import njit
 
 from ..numba_runtime import key_kernel_cache_on_sources
 from . import _kernels
-from ._people import sure_person
-from ._scan_measurements import K_BLOB, K_LEG, NOT_A_LEG, R_COVER, R_W, R_X, R_Y, RAW_COLS, to_sensor
+from ._people import owns_returns, sure_person
+from ._scan_measurements import CARRIED_LEG, K_BLOB, K_LEG, NOT_A_LEG, R_COVER, R_W, R_X, R_Y, RAW_COLS, to_sensor
 from .state import (
     C_BG_CACHED,
     C_BG_COUNT,
@@ -105,7 +105,8 @@ def carried_beams(out, raw, ranges, carry_ref, carry_seen, carry_away, has_pose,
 @njit(cache=True)
 def off_background(tab, n, meas, bg_score, ctx, frame, sensor, carry, prm):
     """The leg candidates on the background or carried (carried_beams) taken out (tracker._off_background): a
-    strong one becomes a blob, a weak one stays the measurement covering it, each of leg probability NOT_A_LEG,
+    strong one becomes a blob, a weak one stays the measurement covering it, each of leg probability NOT_A_LEG
+    (CARRIED_LEG when carried),
     and the other strong legs are paired again; the same arrays when none is. A candidate within leg_reach of a
     person's prediction is that person's leg, background or not (a person standing by a wall keeps their legs), but
     not when carried. meas: the scan's measurements (mx, my, msize, mkind, mlegs, raw, mprob), tracking frame;
@@ -114,7 +115,7 @@ def off_background(tab, n, meas, bg_score, ctx, frame, sensor, carry, prm):
     mx, my, msize, mkind, mlegs, raw, mprob = meas
     px, py = frame[0], frame[1]
     ranges, _, has_pose, pose, geo = sensor
-    carry_ref, carry_seen, carry_away = carry
+    carry_ref, carry_seen, carry_away = carry[0], carry[1], carry[2]
     if len(raw) == 0:
         return mx, my, msize, mkind, mlegs, raw, mprob
     if ctx[C_BG_READY] != 0:
@@ -140,7 +141,9 @@ def off_background(tab, n, meas, bg_score, ctx, frame, sensor, carry, prm):
                 if sure_person(tab, k, prm) and d <= prm[P_LEG_REACH]:
                     bg[i] = False
                     break
-    carried_beams(bg, raw, ranges, carry_ref, carry_seen, carry_away, has_pose, pose, geo, prm)
+    carried = np.zeros(len(raw), np.bool_)
+    carried_beams(carried, raw, ranges, carry_ref, carry_seen, carry_away, has_pose, pose, geo, prm)
+    bg |= carried
     if not bg.any():
         return mx, my, msize, mkind, mlegs, raw, mprob
     strong = raw[:, R_COVER] < 0
@@ -169,7 +172,8 @@ def off_background(tab, n, meas, bg_score, ctx, frame, sensor, carry, prm):
         m += 1
     for i in range(len(bg)):
         if bg[i] and strong[i]:
-            x[m], y[m], size[m], knd[m], prob[m] = raw[i, R_X], raw[i, R_Y], raw[i, R_W], K_BLOB, NOT_A_LEG
+            not_a_leg = CARRIED_LEG if carried[i] else NOT_A_LEG
+            x[m], y[m], size[m], knd[m], prob[m] = raw[i, R_X], raw[i, R_Y], raw[i, R_W], K_BLOB, not_a_leg
             m += 1
     for j in range(len(mx)):
         if mkind[j] > K_LEG:
@@ -187,7 +191,7 @@ def off_background(tab, n, meas, bg_score, ctx, frame, sensor, carry, prm):
         c = int(raw[i, R_COVER])
         if bg[i]:
             if c >= 0 and where[c] >= 0:
-                prob[where[c]] = NOT_A_LEG
+                prob[where[c]] = CARRIED_LEG if carried[i] else NOT_A_LEG
             continue
         out[q] = raw[i]
         if c >= 0:
@@ -289,10 +293,10 @@ def background_update(bg, n_active, scan, ranges, beams, frame, dt, grid, fresh,
 
 @njit(cache=True)
 def background(bg, ctx, sensor, beam_dirs, frame, dt, tab, n, prm):
-    """Add the scan's returns but the people's (within person_radius of a person track) to the background grid
-    (tracker._background). sensor: (ranges, has_ranges, has_pose, pose, geo: angle_min, increment, range_max,
-    has geometry, range_min); beam_dirs: (cos, sin) of each beam's angle; frame: (px, py, cos, sin) of the
-    sensor."""
+    """Add the scan's returns but the people's (within person_radius of a person track, or of a track of leg
+    evidence at least person_evidence: owns_returns) to the background grid (tracker._background). sensor:
+    (ranges, has_ranges, has_pose, pose, geo: angle_min, increment, range_max, has geometry, range_min);
+    beam_dirs: (cos, sin) of each beam's angle; frame: (px, py, cos, sin) of the sensor."""
     bg_score = bg[0]
     ranges, has_ranges, _, _, geo = sensor
     cos_a, sin_a = beam_dirs
@@ -318,12 +322,12 @@ def background(bg, ctx, sensor, beam_dirs, frame, dt, tab, n, prm):
     nbg = int(np.sqrt(len(bg_score)) + 0.5)
     n_people = 0
     for k in range(n):
-        if sure_person(tab, k, prm):
+        if owns_returns(tab, k, prm):
             n_people += 1
     qx, qy = np.empty(n_people), np.empty(n_people)
     q = 0
     for k in range(n):
-        if sure_person(tab, k, prm):
+        if owns_returns(tab, k, prm):
             qx[q], qy[q] = tab[k, X], tab[k, Y]
             q += 1
     beams = (cos_a, sin_a, geo[0], geo[1], ctx[C_BG_LO], ctx[C_BG_HI])

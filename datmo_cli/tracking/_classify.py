@@ -22,6 +22,7 @@ from .state import (
     CONFIRMED,
     FIRST_X,
     FIRST_Y,
+    FREE,
     HIT,
     IS_PERSON,
     LEAD_LEFT,
@@ -35,6 +36,7 @@ from .state import (
     P_MOVING_SPEED,
     P_MOVING_TIME,
     P_PERSON_EVIDENCE,
+    P_PERSON_EVIDENCE_UNFREE,
     P_PERSON_MAINTAIN,
     P_PERSON_PAIRS,
     P_PERSON_VOTES,
@@ -56,7 +58,8 @@ key_kernel_cache_on_sources()  # before any kernel is declared: their cache stam
 def classify(tab, n, dt, stamp, learned, prm):
     """Class and mobility of every track (references: tests/reference_tracking's ReferenceTracker._classify
     and classify_tracks). With the leg detector, the person life cycle: a confirmed track becomes a person once
-    its evidence reaches person_evidence with person_pairs sightings of two legs, and stays one until its evidence
+    its evidence reaches person_evidence (person_evidence_unfree while none of its legs was seen in free space)
+    with person_pairs sightings of two legs, and stays one until its evidence
     falls below person_maintain; the rest are classified by the shape of their hits. Mobility apart."""
     for k in range(n):
         speed = np.hypot(tab[k, VX], tab[k, VY])
@@ -118,8 +121,11 @@ def classify(tab, n, dt, stamp, learned, prm):
             if tab[k, IS_PERSON] != 0:
                 if tab[k, LEG_SCORE] < prm[P_PERSON_MAINTAIN]:
                     tab[k, IS_PERSON] = 0.0
-            elif confirmed and tab[k, LEG_SCORE] >= prm[P_PERSON_EVIDENCE] and person >= prm[P_PERSON_PAIRS]:
-                tab[k, IS_PERSON] = 1.0
+            elif confirmed and person >= prm[P_PERSON_PAIRS]:
+                # its legs seen in free space once (a place, not a mobility), or evidence beyond doubt
+                need = prm[P_PERSON_EVIDENCE] if tab[k, FREE] != 0 else prm[P_PERSON_EVIDENCE_UNFREE]
+                if tab[k, LEG_SCORE] >= need:
+                    tab[k, IS_PERSON] = 1.0
             if tab[k, IS_PERSON] != 0:
                 cls = CLASS_PERSON
         tab[k, CLS] = cls

@@ -29,6 +29,8 @@ from .state import (
 
 key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 
+HIDDEN, OUT_OF_VIEW = 1, 2  # how a missed track is unseen (occlusion; the track table's OCCLUDED column)
+
 
 @njit(cache=True)
 def pair_legs(x, y, prm):
@@ -413,23 +415,24 @@ def leg_stage_measurements(tx, ty, cand, meas, prm):
 
 @njit(cache=True)
 def occlusion(sx, sy, size, missed, ranges, angle_min, increment, range_max, prm):
-    """Which missed tracks (sensor-frame centres sx, sy and extents, m) are hidden: outside the field of
-    view or range, or behind a return more than occlusion_margin m nearer within their angular extent."""
+    """How each missed track (sensor-frame centres sx, sy and extents, m) is unseen (int64): OUT_OF_VIEW (2)
+    outside the field of view or at least range_max away, HIDDEN (1) behind a return more than occlusion_margin
+    m nearer within its angular extent, else 0 (it should have been seen; a track seen is 0 too)."""
     margin = prm[P_OCCLUSION_MARGIN]
     K, B = len(sx), len(ranges)
-    occ = np.zeros(K, np.bool_)
+    occ = np.zeros(K, np.int64)
     for k in range(K):
         if not missed[k]:
             continue
         rng = np.hypot(sx[k], sy[k])
         beam = int(np.rint((np.arctan2(sy[k], sx[k]) - angle_min) / increment))
         if beam < 0 or beam >= B or rng >= range_max:
-            occ[k] = True
+            occ[k] = OUT_OF_VIEW
             continue
         half = int(np.ceil(np.arctan2(max(size[k], 0.2) / 2, max(rng, 0.1)) / abs(increment)))
         for j in range(max(beam - half, 0), min(beam + half + 1, B)):
             if ranges[j] < rng - margin:
-                occ[k] = True
+                occ[k] = HIDDEN
                 break
     return occ
 

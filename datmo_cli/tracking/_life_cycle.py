@@ -42,6 +42,7 @@ from .state import (
     P_CONFIRM_WINDOW,
     P_DELETE_AFTER,
     P_DELETE_AFTER_OCCLUDED,
+    P_DELETE_AFTER_OUT_OF_VIEW,
     P_LEG_BESIDE,
     P_LEG_MEASUREMENT_NOISE,
     P_MEASUREMENT_NOISE,
@@ -65,8 +66,9 @@ key_kernel_cache_on_sources()  # before any kernel is declared: their cache stam
 
 @njit(cache=True)
 def occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm):
-    """Mark each missed track occluded when a nearer return covers its bearing or it is out of view
-    (tracker._occlusion; geo: angle_min, increment, range_max, has geometry)."""
+    """Mark how each missed track is unseen (column OCCLUDED: _kernels.HIDDEN when a nearer return covers its
+    bearing, _kernels.OUT_OF_VIEW outside the field of view or the range, else 0) (tracker._occlusion; geo:
+    angle_min, increment, range_max, has geometry)."""
     all_hit = True
     for k in range(n):
         tab[k, OCCLUDED] = 0.0
@@ -84,7 +86,7 @@ def occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm):
         missed[k] = tab[k, HIT] == 0
     occ = _kernels.occlusion(sx, sy, size, missed, ranges, geo[0], geo[1], geo[2], prm)
     for k in range(n):
-        tab[k, OCCLUDED] = 1.0 if occ[k] else 0.0
+        tab[k, OCCLUDED] = float(occ[k])
 
 
 @njit(cache=True)
@@ -119,7 +121,9 @@ def duplicates(tab, n, learned, prm):
 
 @njit(cache=True)
 def life_cycle(tab, n, stamp, superseded, learned, prm):
-    """Count the scan for every track, confirm, and delete the tracks past their timeout, the duplicates and
+    """Count the scan for every track, confirm, and delete the tracks past their timeout (delete_after s unseen,
+    delete_after_occluded while hidden behind a nearer return, delete_after_out_of_view outside the field of view
+    or range, a person at least person_coast), the duplicates and
     the `superseded` ones, keeping the others' order. Returns the new number of tracks."""
     mask = (1 << int(prm[P_CONFIRM_WINDOW])) - 1
     dead = np.zeros(n, np.bool_)
@@ -142,7 +146,13 @@ def life_cycle(tab, n, stamp, superseded, learned, prm):
             tab[k, CONFIRMED] = 1.0
         since = (stamp - np.int64(tab[k, LAST_HIT])) * 1e-9
         if tab[k, CONFIRMED] != 0:
-            limit = prm[P_DELETE_AFTER_OCCLUDED] if tab[k, OCCLUDED] != 0 else prm[P_DELETE_AFTER]
+            # hidden behind a nearer return, out of the field of view or range, or unseen where it should be seen
+            if tab[k, OCCLUDED] == _kernels.HIDDEN:
+                limit = prm[P_DELETE_AFTER_OCCLUDED]
+            elif tab[k, OCCLUDED] == _kernels.OUT_OF_VIEW:
+                limit = prm[P_DELETE_AFTER_OUT_OF_VIEW]
+            else:
+                limit = prm[P_DELETE_AFTER]
             if tab[k, IS_PERSON] != 0:
                 limit = max(limit, prm[P_PERSON_COAST])
         else:

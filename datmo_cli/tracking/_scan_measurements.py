@@ -27,6 +27,8 @@ RAW_COLS = 5
 # the leg probability of a leg candidate found on the background or carried: a candidate (its hit moves a track's
 # evidence), and not a leg
 NOT_A_LEG = 1e-6
+# ... and of one on carried beams: a part of the robot, whose hit takes all of a track's evidence
+CARRIED_LEG = 2e-6
 
 
 @njit(cache=True)

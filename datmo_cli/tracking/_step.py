@@ -20,7 +20,8 @@ What travels together is one tuple:
                (rad), range_max, has geometry, range_min (m))
     beam_dirs  (cos, sin) of each beam's angle (B,)
     bg         the background grid (score, mark, active, cache); see _background.py
-    carry      the carried beams (ref, seen, away); see _background.py
+    carry      the beams' memory: the carried beams (ref, seen, away; see _background.py), then the scans kept for the
+               free-space test (ranges (K, B) float32 m, poses (K, 3) tracking frame; see _people.keep_scan)
     rules      (learned: with a leg detector, compat (6, N_KINDS): the kinds a track may take by its kind group,
                reacq (6, N_KINDS): the kinds it may be reacquired on)
 """
@@ -35,7 +36,7 @@ from ._association import associate, kind_group, merge_reacquired, predict, reac
 from ._background import background, carried_update, hit_background, off_background
 from ._classify import classify
 from ._life_cycle import life_cycle, occlusion, push_tail, spawn
-from ._people import leg_evidence, legs_stage
+from ._people import free_legs, keep_scan, leg_evidence, legs_stage
 from ._scan_measurements import learned_measurements, moved, paper_measurements, to_sensor
 from .state import (
     AGE,
@@ -94,18 +95,20 @@ def track_scan(tab, ctx, prm, stamp, meas, has_prob, sensor, beam_dirs, bg, carr
     mx, my, msize, mkind, mlegs, mprob, rows0 = legs_stage(tab, n, found, prm)
     raw = found[5]
     scan = (mx, my, msize, mkind, mlegs, raw, mprob)  # the measurements the tracks take
-    rows, cols = associate(tab, n, mx, my, mkind, rows0, compat, crow, prm)
+    rows, cols = associate(tab, n, mx, my, mkind, mprob, raw, rows0, compat, crow, prm)
     hit_background(tab, n, rows, cols, scan, bg[0], ctx, frame, prm)
     update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm)
     rows2, cols2 = reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm)
     rows, cols, superseded = merge_reacquired(rows, cols, rows2, cols2)
     leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, prm)
+    free_legs(tab, rows, cols, mx, my, mkind, mlegs, (carry[3], carry[4]), geo, ctx, prm)
     occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm)
     n = life_cycle(tab, n, stamp, superseded, learned, prm)
     tab, n = spawn(tab, n, cols, scan, has_prob, stamp, ctx, prm)
     classify(tab, n, dt, stamp, learned, prm)
     push_tail(tab, n, prm)
     background(bg, ctx, sensor, beam_dirs, frame, dt, tab, n, prm)
+    keep_scan(carry[3], carry[4], ranges, has_ranges and geo[3] != 0, pose, stamp, ctx, prm)
     ctx[C_N_TRACKS] = n
     return tab
 

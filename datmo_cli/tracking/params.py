@@ -71,7 +71,13 @@ class TrackingParams(Section):
         0.8, _b(0, 3600, "s", _HOUR), "Seconds a confirmed track lives unseen when it should be seen."
     )
     delete_after_occluded: float = param(
-        8.0, _b(0, 3600, "s", _HOUR), "Seconds a confirmed track lives unseen while occluded or out of view."
+        8.0, _b(0, 3600, "s", _HOUR), "Seconds a confirmed track lives unseen while hidden behind a nearer return."
+    )
+    delete_after_out_of_view: float = param(
+        8.0,
+        _b(0, 3600, "s", _HOUR),
+        "Seconds a confirmed track lives unseen outside the field of view or beyond the range (a person at least "
+        "person_coast).",
     )
     reacquire_speed: float = param(
         1.5, _b(0, 50, "m/s"), "A lost occluded track may take a measurement it could reach at this speed ..."
@@ -143,7 +149,49 @@ class TrackingParams(Section):
         3.0, _b(0, 3600, "s", _HOUR), "Seconds a person lives unseen (output flagged occluded), predicted on."
     )
     person_radius: float = param(
-        0.4, _b(0, 5, "m"), "Returns this near a person are the person's: they never become background."
+        0.4,
+        _b(0, 5, "m"),
+        "Returns this near a person, or a track of evidence at least person_evidence, are theirs: they never "
+        "become background.",
+    )
+    # free space: a track becomes a person from person_evidence once one of its legs was seen where kept earlier
+    # scans saw through (a place, not a mobility: static leg-like clutter never is); else only from this much
+    person_evidence_unfree: float = param(
+        0.85,
+        _b(0, 1, "", PROBABILITY),
+        "A confirmed track whose legs were never seen in free space becomes a person only at this evidence.",
+    )
+    free_space_scans: int = param(
+        0,
+        _b(0, 1000, "scans", "each kept scan holds its ranges", integer=True),
+        "Earlier scans kept for the free-space test (0: no test, every leg counts as in free space) ...",
+    )
+    free_space_interval: float = param(0.25, _b(0, 3600, "s", _HOUR), "... one kept every this many seconds ...")
+    free_space_min: int = param(
+        2,
+        _b(1, 1000, "scans", integer=True),
+        "... a leg is in free space when at least this many of them saw through its place (returned more than "
+        "occlusion_margin beyond it, or nothing within range) ...",
+    )
+    free_space_share: float = param(
+        0.5, _b(0, 1, "", SHARE), "... and at least this share of those that had its place in view."
+    )
+    restart_jump: float = param(
+        0.0,
+        _b(0, 100, "m", NO_SENSE),
+        "A track that missed and is taken back farther than this from its prediction restarts there, without "
+        "velocity (0: never).",
+    )
+    person_hold: int = param(
+        1,
+        _b(0, 1, "", "a switch", integer=True),
+        "1: a person with a leg candidate within leg_reach takes no measurement that is no leg candidate.",
+    )
+    background_shield: float = param(
+        1.0,
+        _b(0, 1, "", PROBABILITY),
+        "Returns within person_radius of a track of leg evidence at least this never feed the background "
+        "(1: only people's).",
     )
     # carried: a beam whose return stays put in the sensor frame while the sensor travels sees a part of the robot
     carried_travel: float = param(

@@ -43,7 +43,8 @@ IS_PERSON = 48  # 0/1: a person (with a leg detector: set once from paired legs,
 # evidence falls below person_maintain or the track dies)
 LEG_HITS = 49  # leg-candidate hits folded into LEG_SCORE
 STILL_TIME = 50  # s of a speed at most moving_speed (a dynamic track this still is static again)
-TAIL = 51  # tail point i at columns TAIL + 2 i (x), TAIL + 2 i + 1 (y)
+FREE = 51  # 0/1 (sticky): one of its legs was seen where kept earlier scans saw through (free space)
+TAIL = 52  # tail point i at columns TAIL + 2 i (x), TAIL + 2 i + 1 (y)
 N_FIXED = TAIL
 
 # ------------------------------------------------------------------------------------- parameter vector
@@ -59,6 +60,7 @@ N_FIXED = TAIL
     P_CONFIRM_WINDOW,
     P_DELETE_AFTER,
     P_DELETE_AFTER_OCCLUDED,
+    P_DELETE_AFTER_OUT_OF_VIEW,
     P_REACQUIRE_SPEED,
     P_REACQUIRE_DISTANCE,
     P_OCCLUSION_MARGIN,
@@ -87,14 +89,22 @@ N_FIXED = TAIL
     P_PERSON_PAIRS,
     P_PERSON_COAST,
     P_PERSON_RADIUS,
+    P_PERSON_EVIDENCE_UNFREE,
+    P_FREE_SPACE_SCANS,
+    P_FREE_SPACE_INTERVAL,
+    P_FREE_SPACE_MIN,
+    P_FREE_SPACE_SHARE,
+    P_RESTART_JUMP,
+    P_PERSON_HOLD,
+    P_BACKGROUND_SHIELD,
     P_CARRIED_TRAVEL,
     P_CARRIED_RADIUS,
     P_BACKGROUND_TIME,
     P_BACKGROUND_CELL,
     P_BACKGROUND_EXTENT,
     P_TAIL_LENGTH,
-) = range(45)
-N_PARAMS = 45
+) = range(54)
+N_PARAMS = 54
 P_LEG_THRESHOLD = N_PARAMS  # the leg model's threshold, appended by TrackingParams.kernel_vector
 PARAM_NAMES = (
     "process_noise",
@@ -108,6 +118,7 @@ PARAM_NAMES = (
     "confirm_window",
     "delete_after",
     "delete_after_occluded",
+    "delete_after_out_of_view",
     "reacquire_speed",
     "reacquire_distance",
     "occlusion_margin",
@@ -136,6 +147,14 @@ PARAM_NAMES = (
     "person_pairs",
     "person_coast",
     "person_radius",
+    "person_evidence_unfree",
+    "free_space_scans",
+    "free_space_interval",
+    "free_space_min",
+    "free_space_share",
+    "restart_jump",
+    "person_hold",
+    "background_shield",
     "carried_travel",
     "carried_radius",
     "background_time",
@@ -165,8 +184,13 @@ PARAM_NAMES = (
     C_CARRY_POSED,
     C_CARRY_PX,
     C_CARRY_PY,
-) = range(19)
-N_CONTEXT = 19
+    C_KEPT_N,
+    C_KEPT_NEXT,
+    C_KEPT_STAMP,
+) = range(22)
+N_CONTEXT = 22
+# C_KEPT_*: the scans kept for the free-space test (_people.keep_scan): how many, the next slot, the last one's stamp
+# (ns since the first scan; -1: none yet)
 # C_CARRY_*: the sensor position (tracking frame) at the last scan, for the carried beams (_background.carried_update)
 # C_BG_CACHED: the background's active cells carry their range and beam as seen from the sensor pose
 # (C_BG_PX, C_BG_PY, heading cos/sin C_BG_PC, C_BG_PS); a still sensor need not compute them again
@@ -181,6 +205,7 @@ def new_context() -> np.ndarray:
     """The context of a tracker that has seen no scan (next id 1, no background grid yet)."""
     ctx = np.zeros(N_CONTEXT)
     ctx[C_NEXT_ID] = 1.0
+    ctx[C_KEPT_STAMP] = -1.0
     return ctx
 
 

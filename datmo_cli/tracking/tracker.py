@@ -5,8 +5,8 @@ Tracking frame: the sensor frame of a still scanner, or the world (odometry) fra
 the sensor's pose. Time comes from the scan stamps (ns), so uneven rates and dropped scans are handled.
 Life cycle: a track starts tentative; it is confirmed after `confirm_hits` hits in the last
 `confirm_window` scans (never from one scan); a confirmed track that misses is coasting; a track is deleted
-after `delete_after` s without a hit while it should have been seen, or `delete_after_occluded` s while
-a nearer return covers its bearing or it is out of the field of view.
+after `delete_after` s without a hit while it should have been seen, `delete_after_occluded` s while a nearer
+return covers its bearing, or `delete_after_out_of_view` s out of the field of view or range.
 
 The work of a scan is one compiled call (_step.track_scan, on the track table of state.py); a block of scans
 is one call too (`Tracker.track_block`). This class holds the state between calls and converts inputs.
@@ -114,16 +114,25 @@ class Tracker:
       Candidates of p >= `leg_threshold` (the model's own threshold) are legs: paired within a stride into
       people, or single; the others are measured as their shape (circle, line or blob) carrying their p.
     - A track's evidence is the mean p of its leg-candidate hits (a plain mean of the first 1/leg_evidence_rate,
-      then a running mean of that rate); hits on anything else leave it unchanged.
-    - A confirmed track becomes a person once its evidence is at least person_evidence and it has been seen with
-      two legs person_pairs times; it stays a person until its evidence falls below person_maintain or it dies.
-      Walking is not required (someone standing, or followed by a robot, is a person) and mobility plays no part.
-    - Unseen, a person coasts person_coast s on its prediction (delete_after_occluded s while hidden or out of
-      view, as every track), output flagged occluded, and may be taken back by a measurement it could have
-      reached (as an occluded track is).
-    - Returns within person_radius of a person never feed the background grid, and a leg candidate near a person
-      is theirs even on the background. A beam whose return keeps its place in the sensor frame while the sensor
-      travels carried_travel sees a part of the robot: candidates on such beams are not legs.
+      then a running mean of that rate); hits on anything else leave it unchanged; a candidate on the background
+      or carried sets it to 0.
+    - With the free-space test on (free_space_scans > 0), a leg is in free space where kept earlier scans saw
+      through its place (_people.in_free_space); a track one of whose legs was keeps that (sticky). With it off,
+      every leg counts as in free space.
+    - A confirmed track becomes a person once it has been seen with two legs person_pairs times and its evidence
+      is at least person_evidence with its legs once in free space, or person_evidence_unfree without; it stays a
+      person until its evidence falls below person_maintain or it dies. Walking is not required (someone
+      standing, or followed by a robot, is a person) and mobility plays no part.
+    - A person with a leg candidate within leg_reach takes no measurement that is no leg candidate (person_hold);
+      with restart_jump > 0, a track that missed and is taken back farther than it from its prediction restarts
+      there (no velocity).
+    - Unseen, a person coasts person_coast s on its prediction (at least delete_after_occluded s while hidden
+      behind a nearer return, delete_after_out_of_view s out of view, as every track), output flagged occluded,
+      and may be taken back by a measurement it could have reached (as an occluded track is).
+    - Returns within person_radius of a person, or of a track of evidence at least background_shield, never feed
+      the background grid, and a leg candidate near a person is theirs even on the background.
+    - A beam whose return keeps its place in the sensor frame while the sensor travels carried_travel sees a part
+      of the robot: candidates on such beams are not legs, and a track that takes one loses its evidence.
     With the paper's rule, a person needs paired legs and the walking pattern (legs leading in turn)."""
 
     def __init__(
@@ -166,8 +175,16 @@ class Tracker:
             self._bg = (np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
         # carried beams (see _background.carried_update): per beam, the range it keeps returning and the travel (m) it
         # was seen there and away
+        # and the scans kept for the free-space test (see _people.keep_scan): ranges (K, B) m, poses (K, 3)
         B = geometry.n_beams if geometry is not None else 0
-        self._carry = (np.full(B, np.nan), np.zeros(B), np.zeros(B))
+        K = p.free_space_scans if geometry is not None else 0
+        self._carry = (
+            np.full(B, np.nan),
+            np.zeros(B),
+            np.zeros(B),
+            np.zeros((K, B), np.float32),
+            np.zeros((K, 3)),
+        )
 
     @property
     def next_id(self) -> int:
