@@ -188,7 +188,7 @@ class LazyGroup(click.Group):
     On every way out the temporary files of unfinished outputs are removed (outputs.remove_live)."""
 
     def main(self, args=None, *rest, **kwargs):
-        _ARGS[:] = list(sys.argv[1:] if args is None else args)
+        _ARGS[:] = [str(a) for a in (sys.argv[1:] if args is None else args)]
         return super().main(args, *rest, **kwargs)
 
     def invoke(self, ctx: click.Context):

@@ -32,7 +32,7 @@ pytestmark = [pytest.mark.cli, pytest.mark.timeout(300)]
 @pytest.fixture
 def logs(tmp_path, monkeypatch):
     monkeypatch.setattr(pipeline, "process_file", fake_process)
-    monkeypatch.setattr(pipeline, "warm_up", lambda: None)
+    monkeypatch.setattr(pipeline, "warm_up", lambda *_a, **_k: None)
     CALLS.clear()
     d = tmp_path / "logs"
     (d / "site").mkdir(parents=True)
@@ -289,7 +289,7 @@ def stuck(src, out, **kw):
     time.sleep(600)
 
 pipeline.process_file = stuck
-pipeline.warm_up = lambda: None
+pipeline.warm_up = lambda *_a, **_k: None
 plan = batch.prepare([{a!r}, {b!r}], {out!r})
 batch.run_many(plan, batch.LocalExecutor(2))
 """

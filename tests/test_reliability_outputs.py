@@ -138,7 +138,7 @@ def _limited(limit: int):
 
 @pytest.mark.parametrize(
     "args",
-    [["import", str(HALL)], ["simulate", "--scene", "hall", "--duration", "20"], ["segment", str(HALL)]],
+    [["import", str(HALL)], ["simulate", "--scene", "hall", "--duration", "60"], ["segment", str(HALL)]],
     ids=["import", "simulate", "segment"],
 )
 def test_file_size_limit_is_one_line_and_leaves_nothing(tmp_path, args):

@@ -150,7 +150,8 @@ def test_raw_log_is_segmented_and_tracked(tmp_path):
     assert len(column) == 1 and column["classification"][0] == 2
     assert (confirmed["classification"] == 1).sum() == 1  # the walker
     params = log.metadata["datmo.params"]
-    assert set(params) == {"track", "features", "leg_model", "config"}
+    assert set(params) == {"track", "features", "leg_model", "config", "hindsight"}
+    assert json.loads(params["hindsight"]) == {"used": True, "lag_s": 1.0}
     assert json.loads(params["config"]) == DatmoConfig(features=FeatureParams(leg_model="default")).to_dict()
     assert json.loads(params["track"])["confirm_hits"] == 3 and "min_points" in json.loads(params["features"])
     model = json.loads(params["leg_model"])  # the detector that found the legs, with its file's hash

@@ -254,3 +254,18 @@ def test_nothing_is_smoothed_across_a_reset():
     np.testing.assert_allclose(got[:20], alone, atol=1e-9)
     joined, _ = H.smooth(stamps, np.full(35, 4), xs, Ps, np.full(35, Q), rows, 10**9, q_most=1e9)  # no reset seen
     assert np.abs(joined[19, 2:] - alone[19, 2:]).max() > 1.0  # it would have spread the jump into a speed
+
+
+def test_the_written_out_matrix_algebra_equals_numpys():
+    """hindsight's batched products, SPD solve and eigenvalue test (plain products and sums, the same bits on
+    every CPU) give what numpy's matmul, linalg.solve and eigvalsh give, to rounding."""
+    from datmo_cli.tracking import hindsight as h
+
+    rng = np.random.default_rng(0)
+    a, b, x = rng.normal(size=(60, 4, 4)), rng.normal(size=(60, 4, 4)), rng.normal(size=(60, 4))
+    np.testing.assert_allclose(h._mm(a, b), a @ b, atol=1e-12)
+    np.testing.assert_allclose(h._mv(a, x), np.einsum("nij,nj->ni", a, x), atol=1e-12)
+    spd = a @ np.transpose(a, (0, 2, 1)) + 0.1 * np.eye(4)
+    np.testing.assert_allclose(h._solve_spd(spd, b), np.linalg.solve(spd, b), rtol=1e-8, atol=1e-9)
+    sym, limit = 0.5 * (a + np.transpose(a, (0, 2, 1))), rng.normal(size=60)
+    assert (h._largest_eigenvalue_above(sym, limit) == (np.linalg.eigvalsh(sym)[:, -1] > limit)).all()

@@ -424,7 +424,7 @@ def test_track_takes_the_leg_threshold_its_features_log_records(tmp_path, thresh
 
     src, out = tmp_path / "in.mcap", tmp_path / "out.mcap"
     feats = _features_log(src, threshold)
-    result = CliRunner().invoke(cli, ["track", str(src), "-o", str(out), "--covariance"])
+    result = CliRunner().invoke(cli, ["track", str(src), "-o", str(out), "--covariance", "--hindsight-lag", "0"])
     assert result.exit_code == 0, result.output
     _, payloads = mcapio.read_messages(out, mcapio.TOPIC_TRACKS)
     got = [cdr.decode(types.TRACKS, p)["tracks"] for p in payloads]

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from datmo_cli import libm
+
 
 def transition(dt: np.ndarray) -> np.ndarray:
     """F of the constant-velocity model for steps of dt s: (n, 4, 4)."""
@@ -53,6 +55,60 @@ def chains(ids: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 RESET_TOLERANCE = 1e-3  # share of the predicted covariance's trace a filtered one may exceed it by (float32 rounding)
 
 
+# The small batched matrix algebra below is written out in plain products and sums, in a fixed order: numpy's
+# matmul, einsum and linalg hand it to BLAS and LAPACK, which pick their code (FMA or not) by the CPU, and the
+# outputs must carry the same bits on every CPU (docs/reliability.md).
+
+
+def _mm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched matrix product (n, i, k) x (n, k, j) -> (n, i, j)."""
+    out = a[:, :, 0, None] * b[:, None, 0, :]
+    for k in range(1, a.shape[2]):
+        out = out + a[:, :, k, None] * b[:, None, k, :]
+    return out
+
+
+def _mv(a: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Batched matrix-vector product (n, i, k) x (n, k) -> (n, i)."""
+    out = a[:, :, 0] * x[:, None, 0]
+    for k in range(1, a.shape[2]):
+        out = out + a[:, :, k] * x[:, None, k]
+    return out
+
+
+def _solve_spd(m: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """X with m X = b for each of a batch of symmetric positive definite m (n, k, k) and b (n, k, j): Gaussian
+    elimination (no pivoting needed for such m), then back substitution."""
+    m, x = m.astype(np.float64, copy=True), b.astype(np.float64, copy=True)
+    size = m.shape[1]
+    for k in range(size):
+        for i in range(k + 1, size):
+            f = m[:, i, k] / m[:, k, k]
+            m[:, i, k:] -= f[:, None] * m[:, k, k:]
+            x[:, i, :] -= f[:, None] * x[:, k, :]
+    for i in reversed(range(size)):
+        acc = x[:, i, :].copy()
+        for j in range(i + 1, size):
+            acc -= m[:, i, j, None] * x[:, j, :]
+        x[:, i, :] = acc / m[:, i, i, None]
+    return x
+
+
+def _largest_eigenvalue_above(m: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    """Per symmetric m (n, k, k): whether its largest eigenvalue exceeds limit (n,), that is whether limit I - m is
+    not positive definite: a pivot of its elimination (no pivoting) is not positive."""
+    size = m.shape[1]
+    a = limit[:, None, None] * np.eye(size) - m
+    above = np.zeros(len(m), bool)
+    for k in range(size):
+        above |= ~(a[:, k, k] > 0)
+        pivot = np.where(above, 1.0, a[:, k, k])
+        for i in range(k + 1, size):
+            f = a[:, i, k] / pivot
+            a[:, i, k:] -= f[:, None] * a[:, k, k:]
+    return above
+
+
 def gains(
     t_ns: np.ndarray, state: np.ndarray, cov: np.ndarray, q: np.ndarray, nxt: np.ndarray, q_most: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -69,17 +125,17 @@ def gains(
     n = nxt[r]
     dt = (t_ns[n] - t_ns[r]).astype(np.float64) * 1e-9
     F = transition(dt)
-    PFt = cov[r] @ np.transpose(F, (0, 2, 1))
-    FPFt = F @ PFt
+    PFt = _mm(cov[r], np.transpose(F, (0, 2, 1)))
+    FPFt = _mm(F, PFt)
     pred = FPFt + process_noise(dt, q[r])
     pred = 0.5 * (pred + np.transpose(pred, (0, 2, 1)))
     # C = P F' pred^-1, by solving pred' C' = (P F')' (pred symmetric)
-    C[r] = np.transpose(np.linalg.solve(pred, np.transpose(PFt, (0, 2, 1))), (0, 2, 1))
-    xp[n] = np.einsum("nij,nj->ni", F, state[r])
+    C[r] = np.transpose(_solve_spd(pred, np.transpose(PFt, (0, 2, 1))), (0, 2, 1))
+    xp[n] = _mv(F, state[r])
     Pp[n] = pred
     widest = FPFt + process_noise(dt, np.maximum(q[r], q_most))
-    excess = np.linalg.eigvalsh(0.5 * (cov[n] + np.transpose(cov[n], (0, 2, 1))) - widest)[:, -1]
-    reset = excess > RESET_TOLERANCE * np.trace(widest, axis1=1, axis2=2)
+    excess = 0.5 * (cov[n] + np.transpose(cov[n], (0, 2, 1))) - widest
+    reset = _largest_eigenvalue_above(excess, RESET_TOLERANCE * np.trace(widest, axis1=1, axis2=2))
     return C, xp, Pp, r[reset]
 
 
@@ -127,9 +183,9 @@ def smooth(
         c = cur[active]
         p = prv[c]
         Cp = C[p]
-        xs[active] = state[p] + np.einsum("nij,nj->ni", Cp, xs[active] - xp[c])
+        xs[active] = state[p] + _mv(Cp, xs[active] - xp[c])
         if Ps is not None:
-            Ps[active] = cov[p] + Cp @ (Ps[active] - Pp[c]) @ np.transpose(Cp, (0, 2, 1))
+            Ps[active] = cov[p] + _mm(_mm(Cp, Ps[active] - Pp[c]), np.transpose(Cp, (0, 2, 1)))
         cur[active] = p
         active = active[p != rows[active]]
     return xs, Ps
@@ -252,7 +308,7 @@ class Hindsight:
             items[name] = xs[:, k]
         if poses is not None:
             pose = np.repeat(poses[:m], np.diff(self.offsets[: m + 1]), axis=0)
-            c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+            c, s = libm.cos(pose[:, 2]), libm.sin(pose[:, 2])
             dx, dy = xs[:, 0] - pose[:, 0], xs[:, 1] - pose[:, 1]
             items["x"], items["y"] = c * dx + s * dy, -s * dx + c * dy
             items["vx"], items["vy"] = c * xs[:, 2] + s * xs[:, 3], -s * xs[:, 2] + c * xs[:, 3]
