@@ -15,6 +15,7 @@ in the "scan_odom" frame, whose origin is the first scan's sensor pose (x along 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -62,7 +63,10 @@ class EgoMotion:
         return np.stack([o.x, o.y, o.theta], axis=1)
 
 
+@functools.lru_cache(maxsize=8)
 def _beam_trig(geometry: ScanGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin of the beam angles, made once per geometry (align_scans asks for them on every pair; the
+    kernels only read them)."""
     a = geometry.angles()
     return np.ascontiguousarray(libm.cos(a)), np.ascontiguousarray(libm.sin(a))
 

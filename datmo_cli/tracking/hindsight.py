@@ -307,8 +307,10 @@ class Hindsight:
         for k, name in enumerate(names):
             items[name] = xs[:, k]
         if poses is not None:
-            pose = np.repeat(poses[:m], np.diff(self.offsets[: m + 1]), axis=0)
-            c, s = libm.cos(pose[:, 2]), libm.sin(pose[:, 2])
+            per_scan = np.diff(self.offsets[: m + 1])
+            pose = np.repeat(poses[:m], per_scan, axis=0)
+            c = np.repeat(libm.cos(poses[:m, 2]), per_scan)  # once a scan, not once a track row
+            s = np.repeat(libm.sin(poses[:m, 2]), per_scan)
             dx, dy = xs[:, 0] - pose[:, 0], xs[:, 1] - pose[:, 1]
             items["x"], items["y"] = c * dx + s * dy, -s * dx + c * dy
             items["vx"], items["vy"] = c * xs[:, 2] + s * xs[:, 3], -s * xs[:, 2] + c * xs[:, 3]
