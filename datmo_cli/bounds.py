@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, fields
-from typing import Any, ClassVar, Self
+from typing import Any, ClassVar, Self, TypeVar
 
 from .errors import ConfigError
 
@@ -106,6 +106,7 @@ def param(
     )
 
 
+@dataclass(frozen=True)
 class Section:
     """A table of a config file (`[features]`, `[track]`): a frozen dataclass whose fields are declared with
     `param`. `renamed`: keys an older datmo read, each with the key that replaces it and why (an old config
@@ -129,18 +130,21 @@ class Section:
         """ConfigError when values each in range contradict each other (see features_combined)."""
 
 
+S = TypeVar("S", bound=Section)
+
+
 def bounds_of(section: type[Section]) -> dict[str, Bound]:
     """The Bound of every numeric field of a section, by key."""
     return {f.name: f.metadata["bound"] for f in fields(section) if f.metadata.get("bound") is not None}
 
 
-def validate(section: type[Section], values: dict, where: str | None = None) -> Section:
+def validate(section: type[S], values: dict, where: str | None = None) -> S:
     """A section from a mapping, every key checked against its field's metadata (names, types, ranges,
     choices) and the combination checked (Section.combined); keys not given take their defaults. ConfigError
     names `where`.key (default: the section's name), the value and what is allowed."""
     where = where or section.name
     known = {f.name: f for f in fields(section)}
-    out = {}
+    out: dict[str, Any] = {}
     for key, value in values.items():
         if key in section.renamed:
             raise ConfigError(f"{where}.{key}: renamed to {section.renamed[key]}")

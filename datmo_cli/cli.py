@@ -64,9 +64,11 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     click.echo("\n".join([f"datmo: warning: {first}", *(f"  {line}" for line in rest)]), err=True)
 
 
-def _escape(err: UnicodeEncodeError) -> tuple[str, int]:
+def _escape(err: UnicodeError) -> tuple[str, int]:
     """Codec error handler: a file name's byte that is not UTF-8 (a surrogate from os.fsdecode) as \\xNN,
     any other unencodable character as \\uNNNN."""
+    if not isinstance(err, UnicodeEncodeError):  # registered for writing only
+        raise err
     bad = err.object[err.start : err.end]
     return "".join(
         f"\\x{ord(c) - 0xDC00:02x}" if 0xDC80 <= ord(c) <= 0xDCFF else f"\\u{ord(c):04x}" for c in bad
@@ -81,7 +83,7 @@ def _safe_streams() -> None:
     codecs.register_error("datmo-escape", _escape)
     for stream in (sys.stdout, sys.stderr):
         try:
-            stream.reconfigure(errors="datmo-escape")
+            stream.reconfigure(errors="datmo-escape")  # type: ignore[union-attr]  # may be any TextIO
         except (AttributeError, ValueError, OSError):
             pass
 
@@ -156,7 +158,7 @@ class CleanError(click.ClickException):
 
     def __init__(self, message: str, exit_code: int = 1) -> None:
         super().__init__(message)
-        self.exit_code = exit_code
+        self.exit_code = exit_code  # type: ignore[misc]  # Click's default is a class attribute
 
     def show(self, file=None) -> None:
         from .text import printable

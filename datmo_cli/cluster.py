@@ -19,6 +19,7 @@ import uuid
 from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Any
 
 from .batch.executors import Executor
 from .batch.manifest import CANCELLED
@@ -104,7 +105,7 @@ def _worker_task(task: Task, cancel_event: str) -> dict:
     ensure_warm()
     set_default(task.threads or 1)  # Dask runs one task per worker thread: perception on one thread unless told
     event = Event(cancel_event)
-    last = [0.0, False]
+    last: list[Any] = [0.0, False]  # when polled, and what the event said
 
     def cancelled() -> bool:
         now = time.monotonic()
@@ -271,7 +272,7 @@ class DaskExecutor(Executor):
         from .progress import Limited, route_logs
 
         self._dask_log = Limited("datmo: dask", multiline=True)
-        self._restore_log = route_logs(("distributed",), self._dask_log, level=40)
+        self._restore_log: Callable[[], None] | None = route_logs(("distributed",), self._dask_log, level=40)
 
     def close(self) -> None:
         for thing in (getattr(self, "client", None), self.cluster):

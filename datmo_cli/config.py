@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Any
 
 from .bounds import Bound, Section, bounds_of, validate
 from .errors import ConfigError
@@ -72,7 +73,8 @@ def _build(sections: dict[str, Section], changes: dict[str, dict], where: str = 
                     f"as {value!r} and {moved[home][home_key]!r}; give it once, as {key}"
                 )
             moved[home][home_key] = value
-    return DatmoConfig(**{s: sections[s].replace(**moved[s]) for s in STAGES})
+    built: dict[str, Any] = {s: sections[s].replace(**moved[s]) for s in STAGES}
+    return DatmoConfig(**built)
 
 
 def load(path: str | Path | None = None, options: dict[str, dict] | None = None) -> DatmoConfig:

@@ -66,7 +66,7 @@ def check(path: str | os.PathLike, *, folder_ok: bool = False, name: str | None 
     except OSError as exc:
         if exc.errno == errno.ENOENT and os.path.islink(path):
             raise InputError(
-                f"{shown}: a symbolic link to {os.fsdecode(os.readlink(path))}, which does not exist"
+                f"{shown}: a symbolic link to {os.fsdecode(os.readlink(os.fspath(path)))}, which does not exist"
             ) from None
         raise InputError(f"{shown}: {_reason(exc)}") from None
     except ValueError as exc:  # a NUL byte in the name

@@ -270,7 +270,7 @@ _REASONS = {
 
 def reason(exc: OSError) -> str:
     """A short phrase for an OSError (no errno number)."""
-    return _REASONS.get(exc.errno, exc.strerror or str(exc))
+    return _REASONS.get(exc.errno if exc.errno is not None else -1, exc.strerror or str(exc))
 
 
 def os_error(exc: OSError, path: str | Path | None = None, doing: str = "") -> OutputError:

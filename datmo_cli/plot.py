@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO
+from typing import IO, Any
 
 import numpy as np
 
@@ -77,7 +77,7 @@ class Drawn:
     """A drawn figure: the kind drawn (auto resolved), its id labels (matplotlib Text, in the top view) and
     how many labels were placed and left out for want of room."""
 
-    figure: object
+    figure: Any  # a matplotlib Figure
     kind: str
     labels: list = field(default_factory=list)
     placed: int = 0
@@ -272,7 +272,9 @@ def place_labels(ax, labels: list[tuple[int, float, float, str]]) -> tuple[list,
     fig = ax.figure
     renderer = fig.canvas.get_renderer()
     frame = ax.get_window_extent(renderer)
-    placed, boxes, dropped = [], [], 0
+    placed: list[Any] = []
+    boxes: list[Any] = []
+    dropped = 0
     for tid, x, y, colour in labels:
         text = None
         for dx, dy, ha, va in LABEL_SPOTS:
@@ -361,7 +363,7 @@ def draw(
 
 def plot_run(
     data: RunData,
-    out: str | Path | BinaryIO,
+    out: str | Path | IO[bytes],
     *,
     kind: str = "auto",
     all_labels: bool = False,

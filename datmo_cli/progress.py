@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import IO, Any, cast
 
 QUIET_KEY = "datmo.quiet"  # in the running command's meta (command_meta), shared by a command and its group
 PIPE_WIDTH = 10_000  # columns of a console that is not a terminal: wide enough never to wrap a row
@@ -76,9 +76,14 @@ def console(*, stderr: bool = False):
     if _isatty(stream):
         return Console(stderr=stderr, emoji=False)
     plain = Console(
-        file=_Trimmed(stream), width=PIPE_WIDTH, soft_wrap=True, no_color=True, highlight=False, emoji=False
+        file=cast(IO[str], _Trimmed(stream)),
+        width=PIPE_WIDTH,
+        soft_wrap=True,
+        no_color=True,
+        highlight=False,
+        emoji=False,
     )
-    plain.datmo_plain = True
+    plain.datmo_plain = True  # type: ignore[attr-defined]  # a mark the table reads
     return plain
 
 
@@ -178,7 +183,7 @@ class Panel:
     def __init__(self, refresh_per_second: float = 4) -> None:
         self.shown = _drawn()
         self.refresh_per_second = refresh_per_second
-        self.live = None
+        self.live: Any = None  # a rich Live once shown
 
     def show(self, renderable) -> None:
         if not self.shown:
@@ -287,7 +292,8 @@ def bar(description: str, total: int | None, *, unit: str = "scans", info: bool 
         columns.append(TextColumn("{task.fields[info]}", style="progress.data.speed"))
     columns += [TimeElapsedColumn(), TimeRemainingColumn()]
     with Progress(*columns, console=_progress_console(), transient=True) as progress:
-        task = progress.add_task(markup(description), total=total, **({"info": ""} if info else {}))
+        extra: dict[str, Any] = {"info": ""} if info else {}
+        task = progress.add_task(markup(description), total=total, **extra)
         yield Bar(progress, task)
 
 

@@ -156,7 +156,7 @@ def command(
                 break
     finally:
         emu.stop()
-        if made is not None:
+        if made is not None and link is not None:
             remove_link(link, made)
         for sig, h in old.items():
             signal.signal(sig, h)

@@ -74,7 +74,12 @@ def command(
             progress=progress,
             spool_dir=output.parent if output.parent.is_dir() else None,
         )
-        params = {"topic": stream.topic, "odom_topic": stream.odom_topic, "max_scans": max_scans, "kind": stream.kind}
+        params: dict[str, object] = {
+            "topic": stream.topic,
+            "odom_topic": stream.odom_topic,
+            "max_scans": max_scans,
+            "kind": stream.kind,
+        }
         mount = None
         if laser_pose is not None:
             from ..log.transforms import LaserPose
@@ -88,7 +93,8 @@ def command(
             for w in stream.warnings:
                 click.echo(f"datmo: warning: {printable(w)}", err=True)
     odom = f", {stats.poses} poses on /odom" if stats.poses else ""
-    say(f"{output}: {stats.scans} scans of {stats.geometry.describe()} from {stream.kind} {stream.topic}{odom}")
+    geometry = stats.geometry.describe() if stats.geometry is not None else "no geometry"
+    say(f"{output}: {stats.scans} scans of {geometry} from {stream.kind} {stream.topic}{odom}")
 
 
 @contextlib.contextmanager

@@ -273,6 +273,7 @@ def _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir, sch
     """Prepare the batch and run it (the output folder locked by the caller): (its manifest lines, where they
     ran, seconds, each output's plot path)."""
     from ..batch import LocalExecutor, prepare, run_many
+    from ..batch.executors import Executor
     from ..cli import invocation
     from ..config import provenance_line
     from ..log import bagdir
@@ -296,13 +297,14 @@ def _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir, sch
         from ..plot_files import check_plot_outputs
 
         check_plot_outputs(plots, force)
+    executor: Executor
     if scheduler is not None and batch.tasks:
         from ..cluster import DaskExecutor
 
         executor = DaskExecutor(scheduler, retries=retries)
     else:
-        executor = LocalExecutor(jobs)
-        if batch.tasks and (min(executor.workers, len(batch.tasks)) > 1 or _compiling()):
+        executor = local = LocalExecutor(jobs)
+        if batch.tasks and (min(local.workers, len(batch.tasks)) > 1 or _compiling()):
             _warm_up()  # a pool, or a first run to say; else one process loads just the kernels it uses
     import time
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -138,7 +139,7 @@ def command(
         )
     if units is None:
         units = "cm" if range_m == "80" else "mm"
-    lms = (
+    lms: dict[str, Any] = (
         {}
         if loaded.scanner is not None
         else {"fov_deg": int(angle), "resolution_deg": float(resolution), "range_mode_m": int(range_m), "units": units}

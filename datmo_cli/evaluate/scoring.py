@@ -218,7 +218,7 @@ def evaluate(
     df = mm.metrics.create().compute_many(accs, metrics=METRICS, names=names, generate_overall=False)
     out = {}
     for name, hf in zip(names, gathered, strict=True):
-        row = {}
+        row: dict[str, float | int | None] = {}
         for m in METRICS:
             v = df.loc[name, m]
             if m.startswith("num_") or m in ("mostly_tracked", "partially_tracked", "mostly_lost"):

@@ -34,7 +34,7 @@ def _text_column(kind: str, a: np.ndarray, null: str, quote: bool, terminal: boo
         if kind == "string":
             if quote:
                 return json.dumps(v)
-            return _csv_field(neutralise(printable(v) if terminal else v))
+            return _csv_field(neutralise(printable(v) if terminal else str(v)))
         if kind == "bool":
             return "true" if v else "false"
         return str(v)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import collections
 import time
 from collections.abc import Callable
+from typing import Any, cast
 
 import numpy as np
 
@@ -70,7 +71,7 @@ class LMS2xx:
             raise DeviceError(f"units must be mm or cm, got {units!r}")
         self.name = name or (port if isinstance(port, str) else getattr(port, "port", None) or "serial port")
         self._port_arg = port
-        self.port = None
+        self.port: Any = None  # a serial.Serial (or a test's stand-in) once open
         self.want_baud, self.angle, self.res, self.units = baud, int(angle), res, units
         self.want_indices, self.interlaced = indices, interlaced
         self.clock = clock
@@ -309,6 +310,7 @@ class LMS2xx:
             raise DeviceError(
                 f"{self.name}: the LMS refused installation mode (A0 {reply.data.hex()}: 01 = bad password, 02 = fault)"
             )
+        assert self.config is not None  # read by the caller before installation mode
         block = P.with_config(self.config.raw, units=self.units, indices=True if self.want_indices else None)
         reply = self._command(
             P.cmd_write_config(block), P.REPLY_WRITE_CONFIG, "the configuration write", timeout=MODE_TIMEOUT_S
@@ -387,7 +389,7 @@ class LMS2xx:
 
     def _scan_of(self, frame: P.Frame, stamp: int) -> Scan | None:
         try:
-            tel = P.decode_b0(frame.data, frame.status)
+            tel = P.decode_b0(frame.data, cast(int, frame.status))  # an LMS reply: it has a status
         except P.ProtocolError:
             self.stats.length_errors += 1
             return None

@@ -256,7 +256,7 @@ class Emulator:
             self.stats.naks += 1
             self._send(bytes([P.NAK]))
         for f in frames:
-            if f.address != P.HOST_ADDRESS:
+            if not isinstance(f, P.Frame) or f.address != P.HOST_ADDRESS:  # no ACK/NAK ints here
                 continue
             self.stats.host_frames += 1
             self._cut()
@@ -389,12 +389,14 @@ class Emulator:
             self._key = key
             self._complete = next(self._scans)  # prepare the first scan now (simulation set-up)
             self._first_pending = True
+        assert self._scans is not None  # made above on the first call
         return self._scans
 
     def _next_complete(self) -> np.ndarray:
         scans = self._source_scans()
         if self._first_pending:
             self._first_pending = False
+            assert self._complete is not None  # made with the scans
             return self._complete
         self._complete = next(scans)
         return self._complete
@@ -434,6 +436,7 @@ class Emulator:
             if phase == 0:
                 full = self._next_complete()
             else:
+                assert self._complete is not None  # phase 0 made it
                 full = self._complete
             if k % (1 + lost):
                 continue

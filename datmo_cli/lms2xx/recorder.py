@@ -176,7 +176,7 @@ def _signalled(exc: BaseException) -> tuple[str, int]:
     """Ctrl-C or a signal that stopped a recording, as a phrase, and the exit code it gives."""
     if isinstance(exc, KeyboardInterrupt):
         return "interrupted (Ctrl-C) before the file was finished", 130
-    return f"{exc} before the file was finished", exc.exit_code
+    return f"{exc} before the file was finished", int(getattr(exc, "exit_code", 1))
 
 
 def _message(exc: BaseException) -> tuple[str, int]:

@@ -33,13 +33,13 @@ EMPTY = -1
 
 
 @njit(cache=True)
-def cell_of(x, cell) -> int:
+def cell_of(x, cell) -> np.int64:
     """Integer grid coordinate of x (m)."""
     return np.int64(np.floor(x / cell))
 
 
 @njit(cache=True)
-def cell_hash(ix, iy, mask) -> int:
+def cell_hash(ix, iy, mask) -> np.int64:
     """Bucket of the grid cell (ix, iy): a spatial hash of the integer cell coordinates."""
     return np.int64(((ix * 73856093) ^ (iy * 19349663)) & mask)
 
@@ -58,7 +58,7 @@ def grid_nearest(qx, qy, mx, my, cell, head, nxt, max_dist) -> int:
     ceil(max_dist / cell) of the query's; a bucket shared by two of them (hash collision) is scanned twice,
     harmlessly."""
     mask = head.shape[0] - 1
-    reach = max(1, np.int64(np.ceil(max_dist / cell - 1e-9)))
+    reach = max(np.int64(1), np.int64(np.ceil(max_dist / cell - 1e-9)))
     ix = cell_of(qx, cell)
     iy = cell_of(qy, cell)
     best = EMPTY

@@ -66,7 +66,7 @@ def feature_markers(run: ScanRun, f: RunFeatures, odometry: Odometry | None = No
             f.lines[lo[k] : lo[k + 1]],
             f.circles[co[k] : co[k + 1]],
             f.blobs[bo[k] : bo[k + 1]],
-            elems[lm_off[k] : lm_off[k + 1]] if elems is not None else None,
+            elems[lm_off[k] : lm_off[k + 1]] if elems is not None and lm_off is not None else None,
             poses[k] if poses is not None else None,
         )
         for k, stamp in enumerate(np.asarray(f.stamps, np.int64).tolist())

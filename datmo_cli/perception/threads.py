@@ -23,7 +23,7 @@ def available() -> int:
     """The most threads numba runs (NUMBA_NUM_THREADS; by default the machine's CPUs)."""
     import numba
 
-    return int(numba.config.NUMBA_NUM_THREADS)
+    return int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]  # set at numba's import
 
 
 def set_default(threads: int | None) -> None:

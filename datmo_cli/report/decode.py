@@ -5,11 +5,15 @@ must be there, naming the command that writes it)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import MissingChannelError
 from ..log import cdr, mcapio, types
+
+if TYPE_CHECKING:
+    from ..log.scan import Odometry, ScanRun
 
 
 @dataclass
@@ -75,8 +79,8 @@ class RunData:
     features: Decoded | None = None
     landmarks: Decoded | None = None
     ground_truth: Decoded | None = None
-    scans: object | None = None  # log.scan.ScanRun, for the plot
-    odometry: object | None = None  # log.scan.Odometry or None
+    scans: ScanRun | None = None  # for the plot
+    odometry: Odometry | None = None
 
     @classmethod
     def from_log(cls, log: mcapio.LogContents, *, keep_scans: bool = False) -> RunData:
@@ -98,7 +102,7 @@ class RunData:
             metadata=log.metadata,
             scan_stamps=run.stamps,
             n_beams=run.geometry.n_beams,
-            tracks=channel(mcapio.TOPIC_TRACKS, types.TRACKS),
+            tracks=channel(mcapio.TOPIC_TRACKS, types.TRACKS) or decode_channel(types.TRACKS, []),
             features=channel(mcapio.TOPIC_FEATURES, types.FEATURES),
             landmarks=channel(mcapio.TOPIC_LANDMARKS, types.LANDMARKS),
             ground_truth=channel(mcapio.TOPIC_GROUND_TRUTH, types.GROUND_TRUTH),

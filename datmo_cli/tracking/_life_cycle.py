@@ -140,7 +140,7 @@ def life_cycle(tab, n, stamp, superseded, learned, prm):
         tab[k, HISTORY] = h
         count = 0
         while h:
-            count += h & 1
+            count += h & 1  # type: ignore[assignment]  # numba: int64 arithmetic
             h >>= 1
         if count >= prm[P_CONFIRM_HITS]:
             tab[k, CONFIRMED] = 1.0

@@ -69,7 +69,7 @@ def learned_measurements(circles, blobs, lines, legs, prm):
         s = np.float32(gp[i]) >= thr
         for q in range(len(cr)):
             if np.float32(cr[q]) > rmax and not (glast[i] < cfirst[q] or gfirst[i] > clast[q]):
-                s = False
+                s = False  # type: ignore[assignment]  # numba: numpy and Python bools are one type
         strong[i] = s
     weak = ~strong
     x, y, size, kind, mlegs, prob, cover = _kernels.learned_measurements(

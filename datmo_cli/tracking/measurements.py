@@ -39,10 +39,11 @@ class Measurements:
     size: np.ndarray
     kind: np.ndarray
     legs: np.ndarray  # (M, 4): ax, ay, bx, by
-    raw_legs: np.ndarray = None  # (L, 3): x, y, size of every leg candidate, paired or not (a 4th column:
-    #                               the leg detector's probability, when it ran; a 5th: -1 for a strong candidate,
-    #                               a leg, else the index of the measurement of its beams)
-    prob: np.ndarray = None  # (M,) the leg detector's probability of the segment measured (0: none)
+    # (L, 3): x, y, size of every leg candidate, paired or not (a 4th column: the leg detector's probability, when
+    # it ran; a 5th: -1 for a strong candidate, a leg, else the index of the measurement of its beams); None: none
+    raw_legs: np.ndarray = None  # type: ignore[assignment]  # __post_init__ makes None an array
+    # (M,) the leg detector's probability of the segment measured (0: none)
+    prob: np.ndarray = None  # type: ignore[assignment]  # __post_init__ makes None an array
 
     def __post_init__(self) -> None:
         if self.raw_legs is None:

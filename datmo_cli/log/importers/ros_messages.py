@@ -5,6 +5,7 @@ deserialised LaserScan's geometry, stamp (ns) and sanity checks."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal, overload
 
 from datmo_cli import libm
 
@@ -77,6 +78,30 @@ def survey_tf(messages) -> TfSurvey:
         else:
             moving.add(found)
     return TfSurvey(statics, moving.constant())
+
+
+@overload
+def choose_topic(
+    label: str,
+    topics: dict[str, tuple[str, int]],
+    wanted: str | None,
+    types: tuple[str, ...],
+    what: str,
+    option: str,
+    required: Literal[True] = True,
+) -> str: ...
+
+
+@overload
+def choose_topic(
+    label: str,
+    topics: dict[str, tuple[str, int]],
+    wanted: str | None,
+    types: tuple[str, ...],
+    what: str,
+    option: str,
+    required: bool,
+) -> str | None: ...
 
 
 def choose_topic(

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -239,7 +240,7 @@ def mean_figures(held_out: Sequence[HeldOut]) -> dict:
     """Means over held-out pairs of each figure, learned and circle rule ({} without folds)."""
     if not held_out:
         return {}
-    out = {}
+    out: dict[str, Any] = {}
     for which in ("learned", "circle"):
         rows = [asdict(getattr(h, which)) for h in held_out]
         out[which] = {

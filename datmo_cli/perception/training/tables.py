@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -123,7 +124,7 @@ def recording_clusters(
     from .. import legs
     from ..features import _range_limits, segment_run
 
-    c = DEFAULT_CLUSTERS if clusters is None else clusters
+    c: dict[str, Any] = DEFAULT_CLUSTERS if clusters is None else clusters
     if c.get("method") == "segments":
         return segment_run(run, params or FeatureParams())
     if c.get("method") == "gap":
@@ -155,7 +156,7 @@ def segment_table(
     feats = np.asarray(legs.cluster_features(run.ranges, angles, start, end, offsets, lo, hi), np.float64)
     scan = np.repeat(np.arange(len(run)), np.diff(offsets))
     centroid = segment_centroids(run.ranges, angles, start, end, offsets, lo, hi)
-    label = label_segments(centroid, scan, rec.legs, radius) if rec.labelled else np.zeros(len(scan), bool)
+    label = label_segments(centroid, scan, rec.legs, radius) if rec.legs is not None else np.zeros(len(scan), bool)
     rf = extract_run(run, _paper_rule(p), landmarks=False, segments=(start, end, offsets))
     circles = rf.circles
     circle_leg = np.zeros(len(scan), bool)

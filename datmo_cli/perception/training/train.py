@@ -8,6 +8,7 @@ from __future__ import annotations
 import datetime as _dt
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 from ...errors import InputError
 from ..params import FeatureParams
@@ -26,13 +27,16 @@ from .metrics import METRIC_RANGE_M
 from .recordings import DEFAULT_LABELS_TOPIC, LABEL_WINDOW_NS, Recording
 from .tables import DEFAULT_CLUSTERS, MATCH_RADIUS_M, Progress, SegmentTable, tables_of
 
+if TYPE_CHECKING:
+    from ..leg_model import LegModel
+
 
 @dataclass
 class TrainingResult:
     """The model trained on every recording (threshold and provenance inside) and the held-out figures that
     estimate how it does on recordings it has not seen (empty with one labelled recording)."""
 
-    model: object  # legs.LegModel
+    model: LegModel
     held_out: list[HeldOut]
     mean: dict
     threshold: float
@@ -53,7 +57,8 @@ def total_fits(n_lab: int, n_emp: int) -> int:
 def _sources(recordings: Sequence[Recording]) -> list[dict]:
     from ...log.mcapio import sha256_of
 
-    out, seen = [], {}
+    out: list[dict] = []
+    seen: dict[str, dict[str, Any]] = {}
     for r in recordings:
         key = str(r.path)
         if key not in seen:
@@ -70,7 +75,7 @@ def _sources(recordings: Sequence[Recording]) -> list[dict]:
         entry = seen[key]
         entry["topics"].append(r.topic)
         entry["scans"] += len(r.run)
-        entry["legs"] += int(sum(len(x) for x in r.legs)) if r.labelled else 0
+        entry["legs"] += int(sum(len(x) for x in r.legs)) if r.legs is not None else 0
     return out
 
 
@@ -117,7 +122,9 @@ def train_leg_model(
         "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "sklearn_version": sklearn.__version__,
         "data": _sources(list(labelled) + list(empty)),
-        "simulated": [{"name": r.name, "scans": len(r.run), "legs": int(sum(len(g) for g in r.legs))} for r in extra],
+        "simulated": [
+            {"name": r.name, "scans": len(r.run), "legs": int(sum(len(g) for g in r.legs or ()))} for r in extra
+        ],
         "feature_names": list(FEATURE_NAMES),
         "candidate_rule": {"min_points": CANDIDATE_MIN_POINTS, "max_width_m": CANDIDATE_MAX_WIDTH},
         "estimator": {"class": type(estimator).__name__, **spec.to_dict()},
