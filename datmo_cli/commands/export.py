@@ -97,7 +97,7 @@ def command(
         def write(sink) -> None:
             export.export(p, sink, features=features, progress=progress)
 
-        if stdout:
+        if stream is not None:
             sink = _to_stdout(stream, export.sink_for(stream, fmt, features, terminal=_terminal()), write)
         else:
             with atomic_output(output, force=force, inputs=files) as f:

@@ -125,6 +125,7 @@ def param_option(key: str, *decls: str, help: str | None = None, expose: bool = 
     meta = f.metadata
     decls = decls or (f"--{f.name.replace('_', '-')}",)
     text = f"{(help or meta['help']).rstrip('.')} [default: {_default(f.default)}]"
+    kind: click.ParamType | type[str]
     if meta["bound"] is not None:
         kind, text = Bounded(meta["bound"]), f"{text}. Range: {meta['bound'].describe()}."
     elif meta["choices"]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -46,7 +47,7 @@ class Ros1BagWriter:
         # rosbags' Noetic store lacks tf2_msgs; its one message, as tf2_msgs/msg/TFMessage.msg defines it
         self.store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF))
         self.tmp: Path | None = None
-        self.writer = None
+        self.writer: Any = None  # a rosbags Writer while open
         self.conns: dict[str, object] = {}
         self.seq = 0
 
@@ -65,6 +66,7 @@ class Ros1BagWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
+        assert self.tmp is not None  # made by __enter__
         if exc_type is not None:
             try:
                 self.writer.close()

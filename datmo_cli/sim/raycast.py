@@ -28,7 +28,7 @@ class Primitives:
         return cls(np.zeros((0, 4)), np.zeros(0, np.int32), np.zeros((0, 3)), np.zeros(0, np.int32))
 
 
-def rectangle_segments(centre: np.ndarray, length: float, width: float, heading: np.ndarray) -> np.ndarray:
+def rectangle_segments(centre: np.ndarray, length: float, width: float, heading: np.ndarray | float) -> np.ndarray:
     """The four sides (..., 4, 4) of rectangles centred at `centre` (..., 2) with `length` along `heading`."""
     c, s = libm.cos(heading), libm.sin(heading)
     ax = np.stack([c, s], -1) * (length / 2)

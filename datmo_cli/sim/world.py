@@ -321,7 +321,8 @@ def crowd_people(crowd: Crowd, t_end: float, seed: np.random.SeedSequence, first
             if gap(0.0, 0.0, start, start) >= CROWD_CLEARANCE:
                 break
             start = rng.uniform(lo, hi)
-        pts, pauses, t, start_time = [start], {}, 0.0, 0.0
+        pauses: dict[int, float] = {}
+        pts, t, start_time = [start], 0.0, 0.0
         while t <= t_end:
             here = pts[-1]
             best, best_gap = None, -1.0
@@ -384,6 +385,7 @@ class World:
             np.array(self._circ_own, np.int32),
         )
         placed = scene.sensor
+        base: FollowTrack | SensorTrack
         if placed.follow is not None:
             base = FollowTrack(walkers[placed.follow], placed.gap, placed.follow_speed, t_end)
         else:
@@ -392,6 +394,7 @@ class World:
 
     def _add_movers(self, scene: Scene, persons: list[Person], t_end: float) -> dict[str, Walker]:
         walkers = {}
+        mover: Towed | Driven
         for p in persons:
             walkers[p.name] = Walker(p, t_end)
             self.movers.append((self._add(CLASS_PERSON, p.name), walkers[p.name]))
@@ -428,8 +431,8 @@ class World:
         for i, c in enumerate(scene.columns, 1):
             k = self._add(CLASS_COLUMN, f"column{i}", c.center, 0.0, 2 * c.radius, 2 * c.radius)
             self._circle(k, c.center, c.radius)
-        for i, b in enumerate(scene.benches, 1):
-            a, c = b.supports
+        for i, bench in enumerate(scene.benches, 1):
+            a, c = bench.supports
             span = float(np.hypot(*(c - a)))
             heading = float(libm.arctan2(*(c - a)[::-1]))
             k = self._add(
@@ -437,13 +440,13 @@ class World:
                 f"bench{i}",
                 (a + c) / 2,
                 heading,
-                span + 2 * b.support_radius,
-                max(b.seat_width, 2 * b.support_radius),
+                span + 2 * bench.support_radius,
+                max(bench.seat_width, 2 * bench.support_radius),
             )
-            self._circle(k, a, b.support_radius)
-            self._circle(k, c, b.support_radius)
-            if b.seat_width > 0:
-                self._rectangle(k, (a + c) / 2, span, b.seat_width, heading)
+            self._circle(k, a, bench.support_radius)
+            self._circle(k, c, bench.support_radius)
+            if bench.seat_width > 0:
+                self._rectangle(k, (a + c) / 2, span, bench.seat_width, heading)
 
     def _add_walls(self, scene: Scene) -> list[tuple[int, int, int]]:
         """Wall corners (vertices where a wall turns by more than CORNER_MIN_TURN), then wall segments."""
@@ -451,7 +454,7 @@ class World:
         for w in scene.walls:
             pts = np.vstack([w.points, w.points[:1]]) if w.closed else w.points
             wall_segments.append([(pts[j], pts[j + 1]) for j in range(len(pts) - 1)])
-        corners = []
+        corners: list[tuple] = []
         for wi, w in enumerate(scene.walls):
             n_seg = len(wall_segments[wi])
             pairs = [(j, (j + 1) % n_seg) for j in range(n_seg)] if w.closed else [(j, j + 1) for j in range(n_seg - 1)]
