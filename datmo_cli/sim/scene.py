@@ -428,5 +428,9 @@ def _crowd(v: SceneValidator, t: dict) -> Crowd:
     if prob > 1:
         raise ConfigError(f"{v.source}: {where}, key 'pause_probability': must be in [0, 1]")
     return Crowd(
-        people, area, (float(speed[0]), float(speed[1])), prob, v.number(t, where, "max_pause", 3.0, nonnegative=True)
+        int(people),
+        area,
+        (float(speed[0]), float(speed[1])),
+        prob,
+        v.number(t, where, "max_pause", 3.0, nonnegative=True),
     )

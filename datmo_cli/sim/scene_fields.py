@@ -3,6 +3,8 @@ paths in metres, metres per second and seconds) whose errors name the file, the 
 
 from __future__ import annotations
 
+from typing import NoReturn
+
 import numpy as np
 
 from ..bounds import Bound, check
@@ -20,7 +22,7 @@ class SceneValidator:
     def __init__(self, source: str) -> None:
         self.source = source
 
-    def fail(self, where: str, key: str, msg: str):
+    def fail(self, where: str, key: str, msg: str) -> NoReturn:
         raise ConfigError(f"{self.source}: {where}, key '{key}': {msg}")
 
     def keys(self, t: dict, where: str, allowed: set[str]) -> None:

@@ -124,6 +124,7 @@ class Simulation:
         rate = rate if rate is not None else self.scene.rate if self.scene.rate is not None else 5.0
         lms = {"fov_deg": fov_deg, "resolution_deg": resolution_deg, "range_mode_m": range_mode_m, "units": units}
         spec = self.scene.scanner
+        self.sensor: Sensor | Scanner
         try:
             if spec is not None:
                 given = [k for k, x in lms.items() if x is not None]
@@ -278,7 +279,12 @@ def simulate_scene(
 
 
 def _chunk(
-    world: World, sensor: Sensor, angles: np.ndarray, t: np.ndarray, noise: np.random.Generator, dtype: np.dtype
+    world: World,
+    sensor: Sensor | Scanner,
+    angles: np.ndarray,
+    t: np.ndarray,
+    noise: np.random.Generator,
+    dtype: np.dtype,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(sensor poses, sensor codes, ranges, ground truth (n, n_objects)) of the scans at times t."""
     poses = world.sensor.poses(t)

@@ -67,6 +67,7 @@ class Walker:
     def body(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if self.timeline is None:
             n = len(t)
+            assert self.position is not None  # a person without a path stands at a position
             return (np.repeat(self.position[None], n, 0), np.zeros((n, 2)), np.full(n, self.standing_heading))
         return self.timeline.position(t), self.timeline.velocity(t), self.timeline.heading(t)
 
@@ -106,6 +107,7 @@ class Driven:
             d = np.full(n, 2 * self.radius)
             circles = np.hstack([xy, np.full((n, 1), self.radius)])[:, None, :]
             return MoverState(xy, vel, heading, d, d, circles=circles)
+        assert self.size is not None  # a mover without a radius has a size
         length, width = self.size
         return MoverState(
             xy,
@@ -172,6 +174,7 @@ class SensorTrack:
     def _turning(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(heading, yaw rate, whether turning) at times t."""
         tl = self.timeline
+        assert tl is not None  # only a moving scanner turns
         heading = tl.heading(t)
         since, until = tl.standing(t)
         stopped = np.isfinite(since) & np.isfinite(until)
@@ -214,6 +217,7 @@ class FollowTrack:
 
     def __init__(self, leader: Walker, gap: tuple[float, float], speed: float, t_end: float) -> None:
         tl = leader.timeline
+        assert tl is not None  # the scene refuses a leader without a path
         low, high = gap
         self.tt = np.arange(0.0, t_end + 2 * FOLLOW_DT, FOLLOW_DT)
         u = tl.arclength(self.tt)

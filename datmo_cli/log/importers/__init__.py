@@ -215,6 +215,7 @@ def write_import(
             if laser_pose is not None:
                 from ..transforms import BASE_FRAME, LASER_POSE_RECORD
 
+                assert geometry is not None  # scans == 0 was refused above
                 writer.add_metadata(LASER_POSE_RECORD, laser_pose.record(BASE_FRAME, geometry.frame_id))
     finally:
         stream.close()
@@ -258,6 +259,7 @@ class Frames:
     def _static(self, stamp: int, parent: str, pose) -> None:
         from .. import transforms
 
+        assert self.laser is not None  # the scan's frame: after the first scan
         self._write_static(stamp, [transforms.Transform.planar(stamp, parent, self.laser, pose.x, pose.y, pose.yaw)])
 
     def _write_static(self, stamp: int, found: list) -> None:
@@ -294,6 +296,7 @@ class Frames:
 
         if child in self.joined or child == self.laser:
             return
+        assert self.laser is not None and self.first is not None  # scans() ties only once a scan came
         self.joined.add(child)
         at = min(stamp, self.first)
         if self.mount is not None:

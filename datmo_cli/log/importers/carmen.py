@@ -147,7 +147,8 @@ def blocks(parse: CarmenParse, p: _Plan, size: int) -> Iterator[tuple[ScanRun | 
             ranges[no_return] = np.inf
             p.facts["no_return_readings"] += int(no_return.sum())
             stamps = s.stamps.apply(ipc)
-            run = ScanRun(stamps, ranges.astype(np.float32), p.geometry, rem)
+            no_rem = np.zeros((len(stamps), 0), np.float32)  # what ScanRun makes of None
+            run = ScanRun(stamps, ranges.astype(np.float32), p.geometry, rem if rem is not None else no_rem)
             odom = None
             if p.odometry_source == s.name:
                 ok = np.isfinite(poses).all(axis=1)  # a pose that is not a number is left out (plan warns)
@@ -213,11 +214,8 @@ def _cat(parts: list[Odometry]) -> Odometry:
     if len(parts) == 1:
         return parts[0]
     o = parts[0]
-    return Odometry(
-        *(np.concatenate([getattr(q, f) for q in parts]) for f in ("stamps", "x", "y", "theta")),
-        o.frame_id,
-        o.child_frame_id,
-    )
+    stamps, x, y, theta = (np.concatenate([getattr(q, f) for q in parts]) for f in ("stamps", "x", "y", "theta"))
+    return Odometry(stamps, x, y, theta, o.frame_id, o.child_frame_id)
 
 
 def build(parse: CarmenParse, topic: str | None = None, label: str = "<text>"):
@@ -343,8 +341,3 @@ def stream_carmen(
         geometry=p.geometry,
         closer=spool.cleanup,
     )
-
-
-def read_carmen(path: str | Path, *, topic: str | None = None, max_scans: int | None = None, progress=None):
-    """ImportResult of a CARMEN (or g2o ROBOTLASER1) text log, plain or gzipped (the whole run)."""
-    return stream_carmen(path, topic=topic, max_scans=max_scans, progress=progress).collect()

@@ -66,7 +66,7 @@ def sniff_text(head: bytes) -> str | None:
 class LaserStream:
     """The scans of one laser message, as parsed (before geometry and stamps are settled): counts and
     whole-log figures, and the scans themselves either in lists (`parse_lines`) or spooled to a file
-    (`spool` given: `read_carmen`, so memory holds no scan after it is parsed)."""
+    (`spool` given: `stream_carmen`, so memory holds no scan after it is parsed)."""
 
     def __init__(self, name: str, first_line: int = 0, spool: Path | None = None) -> None:
         self.name = name
@@ -198,6 +198,7 @@ class _Odom:
             for a in range(0, self.count, size):
                 yield np.array(self.rows[a : a + size], np.float64).reshape(-1, 4)
             return
+        assert self._path is not None  # spooled: _file was opened at _path
         with open(self._path, "rb") as f:
             for a in range(0, self.count, size):
                 yield np.fromfile(f, np.float64, 4 * (min(self.count, a + size) - a)).reshape(-1, 4)
@@ -298,6 +299,8 @@ def _parse(
                     if topic == name:
                         break
                     continue
+                geom: tuple | None
+                pose: tuple | None
                 if name in FLASER_LIKE:
                     ranges, ipc, pose = _flaser_fields(tok)
                     rem, geom = np.zeros(0), None

@@ -17,13 +17,6 @@ from ..transforms import ros2_frame, ros2_frames
 from .ros_messages import LASERSCAN_TYPES, ODOMETRY_TYPES, choose_topic, survey_tf, tf_topics
 
 
-def read_mcap(
-    path: str | Path, *, topic: str | None = None, odom_topic: str | None = None, max_scans: int | None = None
-):
-    """ImportResult of a single MCAP file holding CDR sensor_msgs/msg/LaserScan (the whole run)."""
-    return stream_mcap(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans).collect()
-
-
 def stream_mcap(
     path: str | Path,
     *,
@@ -194,6 +187,7 @@ def _mcap_survey(path: Path, label: str, topic: str, max_scans: int | None) -> t
         raise InputError(f"{label}: no messages on {topic}")
     counts = set(sizes.values())
     mode = "all" if counts == {n_beams} else "none" if counts == {0} else "fill"
+    assert last is not None  # count > 0
     return count, mode, int(last), n_beams
 
 

@@ -92,18 +92,6 @@ def open_bag(path: str | Path):
     return reader, topics
 
 
-def read_bag(
-    path: str | Path,
-    *,
-    topic: str | None = None,
-    odom_topic: str | None = None,
-    max_scans: int | None = None,
-    progress=None,
-):
-    """ImportResult of a ROS 1 bag or ROS 2 bag folder (the whole run)."""
-    return stream_bag(path, topic=topic, odom_topic=odom_topic, max_scans=max_scans, progress=progress).collect()
-
-
 def stream_bag(
     path: str | Path,
     *,
@@ -241,6 +229,7 @@ def _survey(reader, label: str, topic: str, total: int, max_scans: int | None, p
         raise InputError(f"{label}: {topic} has no messages")
     n = g0.n_beams
     mode = "all" if sizes == {n} else "none" if sizes <= {0} or 0 not in sizes and n not in sizes else "fill"
+    assert last is not None  # set with g0
     return _Survey(g0, count, mode, last)
 
 
@@ -259,7 +248,9 @@ def _bag_blocks(
     transforms on `tfs` read on the way appended to `moved` as (topic, log time, CDR TFMessage)."""
     conns = [c for c in reader.connections if c.topic in (topic, o_topic, *tfs)]
     g0, n = survey.geometry, survey.geometry.n_beams
-    stamps, ranges, intens = [], [], []
+    stamps: list[int] = []
+    ranges: list[np.ndarray] = []
+    intens: list[np.ndarray] = []
     rows: list[tuple] = []
     frames = ("odom", "base_link")
     odo_frames = frames
@@ -267,7 +258,7 @@ def _bag_blocks(
     odom_done = o_topic is None
 
     def scan_block() -> ScanRun:
-        inten = None
+        inten = np.zeros((len(stamps), 0), np.float32)  # what ScanRun makes of None
         if survey.intensities == "all":
             inten = np.stack(intens)
         elif survey.intensities == "fill":
@@ -287,6 +278,7 @@ def _bag_blocks(
 
     for conn, log_time, raw in reader.messages(connections=conns):
         if conn.topic in tfs:
+            assert moved is not None  # given with tfs
             moved.append((conn.topic, int(log_time), tf_payload(reader.deserialize(raw, conn.msgtype))))
         elif conn.topic == topic:
             if scans >= survey.count:

@@ -59,7 +59,7 @@ def _read_bag(path: Path, scan_topics: Callable[[dict], list[str]], pose_topic: 
         wanted = scan_topics(topics)
         want_poses = pose_topic is not None and topics.get(pose_topic, ("", 0))[0] in POSE_ARRAY_TYPES
         conns = [c for c in reader.connections if c.topic in wanted or (want_poses and c.topic == pose_topic)]
-        scans = {t: ([], [], [], []) for t in wanted}
+        scans: dict[str, tuple[list, list, list, list]] = {t: ([], [], [], []) for t in wanted}
         pose_t, pose_xy = [], []
         for conn, log_time, raw in reader.messages(connections=conns):
             msg = reader.deserialize(raw, conn.msgtype)
@@ -93,7 +93,7 @@ def _read_mcap(path: Path, scan_topics: Callable[[dict], list[str]], pose_topic:
     out = ScansAndPoses(topics)
     wanted = scan_topics(topics)
     want_poses = pose_topic is not None and topics.get(pose_topic, ("", 0))[0] in POSE_ARRAY_TYPES
-    log = mcapio.read_log(path, topics=wanted + ([pose_topic] if want_poses else []))
+    log = mcapio.read_log(path, topics=wanted + ([pose_topic] if want_poses and pose_topic is not None else []))
     for t in wanted:
         run = mcapio.run_from_log(log, t)
         log_times = np.array(log.messages[t][0], np.int64)
@@ -101,6 +101,7 @@ def _read_mcap(path: Path, scan_topics: Callable[[dict], list[str]], pose_topic:
         run.stamps[zero] = log_times[zero]
         out.runs[t] = (run, log_times)
     if want_poses:
+        assert pose_topic is not None  # want_poses says so
         store = types.typestore()
         times, payloads = log.messages.get(pose_topic, ([], []))
         try:

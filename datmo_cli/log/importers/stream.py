@@ -8,9 +8,13 @@ import zlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ...errors import InputError
 from ..scan import Odometry, ScanGeometry, ScanRun
+
+if TYPE_CHECKING:
+    from .ros_messages import TfSurvey
 
 
 @dataclass
@@ -70,7 +74,7 @@ class ImportStream:
     transforms: list[tuple[str, int, bytes]] = field(default_factory=list)
     tf_topics: tuple[str, ...] = ()
     # a source with poses and transforms: its /tf_static and its /tf transforms that never change (TfSurvey)
-    tf_survey: object | None = None
+    tf_survey: TfSurvey | None = None
 
     def blocks(self) -> Iterator[tuple[ScanRun | None, Odometry | None]]:
         """The pieces, each piece's poses without those not finite or beyond poses.MAX_POSE_M (counted in one
@@ -116,8 +120,8 @@ class ImportStream:
 
             g = runs[0].geometry
             stamps = np.concatenate([r.stamps for r in runs])
-            keep, *counts = stamp_order(stamps)
-            note = order_note(self.source, len(stamps), *counts)
+            keep, reordered, first_reordered, dropped, first_dropped = stamp_order(stamps)
+            note = order_note(self.source, len(stamps), reordered, first_reordered, dropped, first_dropped)
             if note:  # as write_import writes them: in time order, a repeated stamp dropped
                 self.warnings.append(note)
             run = ScanRun(
@@ -135,7 +139,8 @@ class ImportStream:
             if self.sort_odometry:
                 order = np.argsort(cols[0], kind="stable")
                 cols = [c[order] for c in cols]
-            odometry = Odometry(*cols, poses[-1].frame_id, poses[-1].child_frame_id)
+            stamps_, x, y, theta = cols
+            odometry = Odometry(stamps_, x, y, theta, poses[-1].frame_id, poses[-1].child_frame_id)
         return ImportResult(
             run=run,
             odometry=odometry,
