@@ -239,6 +239,7 @@ class Graph:
             DISCOVERY_TOPIC, discovery_classes(self.gid_size)[2], dds.qos(transient_local=True, depth=1)
         )
         self.served = 0
+        self.bad: set[str] = set()
 
     def readers(self) -> list:
         """The service request readers (for the node's waitset)."""
@@ -281,10 +282,18 @@ class Graph:
         )
 
     def serve(self) -> int:
-        """Answer every request that arrived; returns how many."""
+        """Answer every request that arrived; returns how many. A request that does not decode is skipped
+        and said on /rosout (the first of each service)."""
         n = 0
         for s in self.services:
-            for request in s.request_reader.take(64):  # type: ignore[attr-defined]
+            try:
+                requests = s.request_reader.take(64)  # type: ignore[attr-defined]
+            except Exception as exc:  # cyclonedds raises several kinds for a sample that does not decode
+                if s.name not in self.bad:
+                    self.bad.add(s.name)
+                    self.log(WARN, f"{self.fqn}: a {s.name} request does not decode ({exc}); such are skipped")
+                continue
+            for request in requests:
                 reply = getattr(self, "_" + s.name)(request)
                 s.reply_writer.write(  # type: ignore[attr-defined]
                     service_classes(s.name)[1](guid=request.guid, seq=request.seq, **reply)

@@ -473,3 +473,23 @@ def test_names_as_rcl_makes_them():
     assert ros_graph.full_name(ros_graph.namespace("/"), "datmo") == "/datmo"
     assert ros_graph.full_name(ros_graph.namespace("robot1/front"), "tracker") == "/robot1/front/tracker"
     assert ros_graph.ros_distro("Jazzy") == "jazzy" and ros_graph.GID_SIZES["humble"] == 24
+
+
+def test_a_request_that_does_not_decode_is_said_once_and_skipped(monkeypatch):
+    from datmo_cli import dds, ros_graph
+    from datmo_cli.node_params import Parameters
+
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+    graph = ros_graph.Graph(dds.Participant(_free_domain()), Parameters(), "datmo", "/", "jazzy", print)
+
+    class Garbled:
+        def take(self, n: int):
+            raise ValueError("a truncated sample")
+
+    said: list[tuple[int, str]] = []
+    monkeypatch.setattr(graph, "log", lambda level, line, function="": said.append((level, line)))
+    graph.services[1].request_reader = Garbled()
+    assert graph.serve() == 0 and graph.serve() == 0
+    assert said == [
+        (LOG_WARN, "/datmo: a GetParameters request does not decode (a truncated sample); such are skipped")
+    ]
