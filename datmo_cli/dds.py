@@ -174,9 +174,15 @@ def subscription_qos(depth: int = DEFAULT_DEPTH):
     )
 
 
-def qos(reliable: bool = True, transient_local: bool = False, depth: int = DEFAULT_DEPTH, lifespan_s: float = 0.0):
+def qos(
+    reliable: bool = True,
+    transient_local: bool = False,
+    depth: int = DEFAULT_DEPTH,
+    lifespan_s: float = 0.0,
+    userdata: bytes = b"",
+):
     """A QoS in ROS 2's terms: reliable or best effort, transient-local or volatile, keep last `depth`, a
-    lifespan of `lifespan_s` seconds (0: infinite), in XCDR1."""
+    lifespan of `lifespan_s` seconds (0: infinite), in XCDR1, with `userdata` (none when empty)."""
     from cyclonedds.qos import Policy, Qos
     from cyclonedds.util import duration
 
@@ -188,6 +194,8 @@ def qos(reliable: bool = True, transient_local: bool = False, depth: int = DEFAU
     ]
     if lifespan_s > 0:
         policies.append(Policy.Lifespan(duration(seconds=lifespan_s)))
+    if userdata:
+        policies.append(Policy.Userdata(userdata))
     return Qos(*policies)
 
 

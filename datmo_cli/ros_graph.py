@@ -191,6 +191,14 @@ def from_value(v) -> object:
     return getattr(v, names[v.type]) if v.type in names else None
 
 
+def service_id(prefix: bytes, k: int) -> str:
+    """The id rmw_cyclonedds_cpp puts in a service's reader and writer user data (`serviceid=ID;`), which its
+    clients use to pair a request reader with a reply writer: the participant's 12-byte GUID prefix and the
+    big-endian count `k`, in hex, the bytes separated by dots."""
+    data = prefix + k.to_bytes(4, "big")
+    return f"{data[0]:2x}" + "".join(f".{b:x}" for b in data[1:])
+
+
 def _time(ns: int):
     return dds.idl_class("builtin_interfaces/msg/Time")(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
@@ -225,14 +233,16 @@ class Graph:
         )
         self.events = p.typed_writer(dds.dds_topic(PARAMETER_EVENTS), msg("ParameterEvent"), dds.qos(depth=1000))
         self.services = []
-        for short, service in SERVICES.items():
+        prefix = participant.participant.guid.bytes[:12]
+        for k, (short, service) in enumerate(SERVICES.items(), start=1):
             request, reply = service_classes(service)
             base = f"{self.fqn}/{short}"
+            paired = dds.qos(userdata=f"serviceid={service_id(prefix, k)};".encode())
             self.services.append(
                 Service(
                     service,
-                    p.typed_reader(f"rq{base}Request", request, dds.qos()),
-                    p.typed_writer(f"rr{base}Reply", reply, dds.qos()),
+                    p.typed_reader(f"rq{base}Request", request, paired),
+                    p.typed_writer(f"rr{base}Reply", reply, paired),
                 )
             )
         self.discovery = p.typed_writer(

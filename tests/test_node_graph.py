@@ -260,6 +260,19 @@ def _endpoints(dp, builtin) -> dict[str, list[bytes]]:
     return out
 
 
+def _service_ids(dp, builtin, kind: str) -> dict[str, set[str]]:
+    """{DDS topic of `kind` ('rq' or 'rr'): the serviceid values in its endpoints' user data}: what
+    rmw_cyclonedds_cpp's clients pair a service's request reader and reply writer by."""
+    out: dict[str, set[str]] = {}
+    for sample in BuiltinDataReader(dp, builtin).read(N=1000):
+        if sample.topic_name.startswith(kind):
+            user = sample.qos[Policy.Userdata]
+            pairs = dict(p.split("=", 1) for p in (user.data.decode() if user else "").split(";") if "=" in p)
+            name = sample.topic_name[2:].removesuffix("Request").removesuffix("Reply")
+            out.setdefault(name, set()).add(pairs.get("serviceid", ""))
+    return out
+
+
 @pytest.mark.slow
 def test_an_independent_ros2_peer_sees_datmo_in_the_graph_and_sets_a_live_parameter(tmp_path, monkeypatch):
     domain = _free_domain()
@@ -326,6 +339,13 @@ def test_an_independent_ros2_peer_sees_datmo_in_the_graph_and_sets_a_live_parame
         for topic in ("rt/scan", "rq/datmo/set_parametersRequest"):
             assert sum(g.ljust(24, b"\0") in readers for g in subscriptions[topic]) == 1, topic
         assert len(writers) == 6 + 2 + 4 and len(readers) == 1 + 4  # topics, rosout and events, replies
+        requests = _service_ids(dp, BuiltinTopicDcpsSubscription, "rq")
+        replies = _service_ids(dp, BuiltinTopicDcpsPublication, "rr")
+        assert set(requests) == set(replies) == {f"/datmo/{name}" for name in clients}
+        for name, ids in requests.items():
+            (service_id,) = ids
+            assert service_id and replies[name] == {service_id}  # the pair has one id
+        assert len({next(iter(ids)) for ids in requests.values()}) == 4  # each service its own
 
         # the parameters, through the services
         listed = clients["list_parameters"].call(prefixes=[], depth=0).result
@@ -473,6 +493,8 @@ def test_names_as_rcl_makes_them():
     assert ros_graph.full_name(ros_graph.namespace("/"), "datmo") == "/datmo"
     assert ros_graph.full_name(ros_graph.namespace("robot1/front"), "tracker") == "/robot1/front/tracker"
     assert ros_graph.ros_distro("Jazzy") == "jazzy" and ros_graph.GID_SIZES["humble"] == 24
+    prefix = bytes([1, 0x10, 0xAB] + [0] * 9)
+    assert ros_graph.service_id(prefix, 258) == " 1.10.ab.0.0.0.0.0.0.0.0.0.0.0.1.2"  # as rmw_cyclonedds_cpp prints
 
 
 def test_a_request_that_does_not_decode_is_said_once_and_skipped(monkeypatch):
