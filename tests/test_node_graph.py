@@ -515,3 +515,18 @@ def test_a_request_that_does_not_decode_is_said_once_and_skipped(monkeypatch):
     assert said == [
         (LOG_WARN, "/datmo: a GetParameters request does not decode (a truncated sample); such are skipped")
     ]
+
+
+def test_a_node_in_a_namespace_names_its_services_and_logger_as_rcl(monkeypatch):
+    from datmo_cli import dds, ros_graph
+    from datmo_cli.node_params import Parameters
+
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+    ns = ros_graph.namespace("robot1")
+    graph = ros_graph.Graph(dds.Participant(_free_domain()), Parameters(), "tracker", ns, "humble", print)
+    assert (graph.fqn, graph.logger) == ("/robot1/tracker", "robot1.tracker")
+    assert [s.request_reader.topic.name for s in graph.services] == [
+        f"rq/robot1/tracker/{name}Request"
+        for name in ("list_parameters", "get_parameters", "describe_parameters", "set_parameters")
+    ]
+    assert graph.services[3].reply_writer.topic.name == "rr/robot1/tracker/set_parametersReply"
