@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     metavar="ID",
     help="The ROS 2 domain. [default: ROS_DOMAIN_ID, else 0]",
 )
-@click.option("--name", default="datmo", show_default=True, help="The node's name in the ROS 2 graph.")
+@click.option("--name", default="datmo", show_default=True, metavar="NAME", help="The node's name in the ROS 2 graph.")
 @click.option("--namespace", default="/", show_default=True, metavar="NS", help="The node's namespace.")
 @click.option(
     "--ros-distro",
@@ -66,10 +66,10 @@ def command(
     over. Ctrl-C stops (exit 130) and prints what was received and processed. Needs the node extra:
     pip install 'datmo-cli[node]'.
 
-    In the ROS 2 graph it is the node /datmo (--name, --namespace): ros2 node list and ros2 topic info -v
-    show it, it logs to /rosout, and its parameters are the config keys (ros2 param list /datmo); those the
-    running tracker reads on each scan (the tracking thresholds) can be set live (ros2 param set /datmo
-    track.gate 9.0), the others are refused with the reason.
+    It announces itself in the ROS 2 graph as the node /datmo (--name, --namespace) with its topics, logs to
+    /rosout, and serves its parameters, the config keys (ros2 param list /datmo): those the running tracker
+    reads on each scan (the tracking thresholds) can be set live (ros2 param set /datmo track.gate 9.0), the
+    others are refused with the reason (docs/ros2.md says what was checked without ROS 2).
 
     Example: datmo node --domain-id 7 --scan-topic /front/scan --odom-topic /odom
     """
