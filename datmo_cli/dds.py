@@ -113,17 +113,18 @@ def _base(kind: str):
 
 
 def _annotation(spec: tuple):
+    """The cyclonedds annotation of a field spec; bounds kept (string<=256, Type[<=1]) as the .msg says."""
     from cyclonedds.idl import types as t
 
     node, detail = spec
     if node == types.BASE:
-        return _base(detail[0])
+        return t.bounded_str[detail[1]] if detail[0] == "string" and detail[1] else _base(detail[0])
     if node == types.NAME:
         return idl_class(detail)
     if node == types.ARRAY:
         return t.array[_annotation(detail[0]), detail[1]]
     if node == types.SEQUENCE:
-        return t.sequence[_annotation(detail[0])]
+        return t.sequence[_annotation(detail[0]), detail[1]] if detail[1] else t.sequence[_annotation(detail[0])]
     raise ValueError(f"field kind {node} of a ROS 2 message is not known")
 
 
@@ -173,18 +174,51 @@ def subscription_qos(depth: int = DEFAULT_DEPTH):
     )
 
 
+def qos(
+    reliable: bool = True,
+    transient_local: bool = False,
+    depth: int = DEFAULT_DEPTH,
+    lifespan_s: float = 0.0,
+    userdata: bytes = b"",
+):
+    """A QoS in ROS 2's terms: reliable or best effort, transient-local or volatile, keep last `depth`, a
+    lifespan of `lifespan_s` seconds (0: infinite), in XCDR1, with `userdata` (none when empty)."""
+    from cyclonedds.qos import Policy, Qos
+    from cyclonedds.util import duration
+
+    policies = [
+        Policy.Reliability.Reliable(duration(milliseconds=100)) if reliable else Policy.Reliability.BestEffort,
+        Policy.Durability.TransientLocal if transient_local else Policy.Durability.Volatile,
+        Policy.History.KeepLast(depth),
+        Policy.DataRepresentation(use_cdrv0_representation=True),
+    ]
+    if lifespan_s > 0:
+        policies.append(Policy.Lifespan(duration(seconds=lifespan_s)))
+    if userdata:
+        policies.append(Policy.Userdata(userdata))
+    return Qos(*policies)
+
+
+def gid(entity, size: int) -> bytes:
+    """The ROS 2 GID of a DDS entity as rmw_cyclonedds_cpp makes it: the entity's 16-byte DDS GUID, padded
+    with zeros to `size` bytes (24 in ROS 2 Humble's rmw_dds_common/Gid, 16 from Iron on)."""
+    return entity.guid.bytes.ljust(size, b"\x00")
+
+
 class Participant:
     """A DDS domain participant on `domain` (see domain_id) with ROS 2 topics: `writer(name, msgtype)` and
     `reader(name, msgtype)` make endpoints on ROS 2 topic `name`. Cyclone DDS deletes them, and tells the
-    peers, when the process exits."""
+    peers, when the process exits. Its user data says `enclave=/;`, as rmw_cyclonedds_cpp's participants do
+    (the ROS 2 graph reads the security enclave there)."""
 
     def __init__(self, domain: int) -> None:
         require_cyclonedds()
         from cyclonedds.domain import DomainParticipant
+        from cyclonedds.qos import Policy, Qos
 
         self.domain = domain
         try:
-            self.participant = DomainParticipant(domain)
+            self.participant = DomainParticipant(domain, qos=Qos(Policy.Userdata(b"enclave=/;")))
         except Exception as exc:  # a bad CYCLONEDDS_URI, no usable network interface
             raise ConfigError(f"cannot join DDS domain {domain} ({_reason(exc)}); check CYCLONEDDS_URI") from None
         self.topics: dict[str, object] = {}
@@ -206,13 +240,35 @@ class Participant:
 
         return CdrReader(DataReader(self.participant, self._topic(name, msgtype), qos=subscription_qos(depth)))
 
-    def waitset(self, readers: list[CdrReader]):
-        """A waitset woken by data on any of `readers`: call .wait(ns) on it."""
+    def typed_writer(self, dds_name: str, cls: type, qos_):
+        """A cyclonedds DataWriter of IdlStruct `cls` on DDS topic `dds_name` (as it is: no 'rt' added)."""
+        from cyclonedds.pub import DataWriter
+
+        return DataWriter(self.participant, self._dds_topic(dds_name, cls), qos=qos_)
+
+    def typed_reader(self, dds_name: str, cls: type, qos_):
+        """A cyclonedds DataReader of IdlStruct `cls` on DDS topic `dds_name` (as it is)."""
+        from cyclonedds.sub import DataReader
+
+        return DataReader(self.participant, self._dds_topic(dds_name, cls), qos=qos_)
+
+    def _dds_topic(self, dds_name: str, cls: type):
+        from cyclonedds.topic import Topic
+
+        key = "dds:" + dds_name
+        if key not in self.topics:
+            self.topics[key] = Topic(self.participant, dds_name, cls)
+        return self.topics[key]
+
+    def waitset(self, readers: list):
+        """A waitset woken by data on any of `readers` (CdrReaders or cyclonedds DataReaders): call .wait(ns)
+        on it."""
         from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
 
         ws = WaitSet(self.participant)
         for r in readers:
-            ws.attach(ReadCondition(r.reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+            reader = r.reader if isinstance(r, CdrReader) else r
+            ws.attach(ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any))
         return ws
 
 

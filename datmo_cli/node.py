@@ -11,19 +11,25 @@ stamped before the last, starts the tracking over; the robot's own /tf is left a
 
 With odometry, tracks carry world positions: each scan is placed at the pose interpolated at its stamp (the
 latest pose held when the odometry lags); scans that arrive before the first pose are skipped (counted).
+
+In the ROS 2 graph (ros_graph.py) the node is `/datmo` (name and namespace given): announced on
+ros_discovery_info with its endpoints, logging to /rosout, serving its parameters (node_params.py); a parameter
+set live takes effect from the next scans processed (RetunedFeed).
 """
 
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from . import dds
+from . import dds, ros_graph
 from .live import LiveFeed, Message, PoseBuffer
 from .log import types
 from .log.scan import decode_scan
+from .node_params import Parameters
 
 if TYPE_CHECKING:
     from .config import DatmoConfig
@@ -58,6 +64,40 @@ class DdsSink:
             self.sent += 1
 
 
+class RetunedFeed(LiveFeed):
+    """A LiveFeed whose tracking parameters may change while it runs: `retune(config)` gives the new
+    configuration, which the running tracker takes before the next scans it processes (only the parameters
+    node_params.LIVE names may differ) and new stages (after a restart) start with."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        self._pending: DatmoConfig | None = None
+        self._lock = threading.Lock()
+        super().__init__(*args, **kwargs)
+
+    def retune(self, config: DatmoConfig) -> None:
+        with self._lock:
+            self.config = self._pending = config
+
+    def _publish(self, stages, scans) -> None:
+        if stages is not None:
+            with self._lock:
+                config, self._pending = self._pending, None
+            if config is not None:
+                retune_stages(stages, config)
+        super()._publish(stages, scans)
+
+
+def retune_stages(stages, config: DatmoConfig) -> None:
+    """Give running live.Stages the tracking parameters of `config`: the tracker reads them as one vector
+    (TrackingParams.kernel_vector) on each scan."""
+    run_stages = stages.stages
+    run_stages.config = config
+    stream = run_stages.tracking
+    if stream is not None:
+        stream.params = stream.tracker.params = config.track
+        stream.tracker._prm = config.track.kernel_vector(stream.tracker.leg_threshold)
+
+
 @dataclass
 class Counts:
     """What the node has seen: scans taken from DDS, scans that did not decode (the first reason), scans
@@ -76,7 +116,8 @@ class Node:
     """The node on DDS domain `domain`: subscriptions to `scan_topic` (and `odom_topic`), publications of
     published_topics(), the stages of `config` fed by `spin()`. `say(line)` tells what happens (a geometry
     change, the first scan that does not decode). Raises ConfigError (bad topic names, a domain it cannot join)
-    and MissingExtraError (no cyclonedds)."""
+    and MissingExtraError (no cyclonedds). In the ROS 2 graph it is node `name` in namespace `ns`, speaking
+    `distro`'s rmw_dds_common (ros_graph)."""
 
     def __init__(
         self,
@@ -86,17 +127,24 @@ class Node:
         config: DatmoConfig | None = None,
         say: Callable[[str], None] = lambda line: None,
         backlog: int = BACKLOG,
+        name: str = "datmo",
+        ns: str = "/",
+        distro: str | None = None,
     ) -> None:
         dds.require_cyclonedds()
         self.scan_topic = dds.ros_topic(scan_topic, "--scan-topic")
         self.odom_topic = dds.ros_topic(odom_topic, "--odom-topic") if odom_topic else None
-        self.say = say
+        name, ns, distro = ros_graph.node_name(name), ros_graph.namespace(ns), ros_graph.ros_distro(distro)
         self.counts = Counts()
         self.participant = dds.Participant(domain)
         self.topics = published_topics()
         self.sink = DdsSink(self.participant, self.topics)
         self.odometry = PoseBuffer() if self.odom_topic else None
-        self.feed = LiveFeed(
+        self.params = Parameters(config)
+        self.graph = ros_graph.Graph(self.participant, self.params, name, ns, distro, self._retune)
+        self.name = self.graph.fqn
+        self.say = say
+        self.feed = RetunedFeed(
             self.sink,
             config,
             backlog=backlog,
@@ -108,12 +156,22 @@ class Node:
         self.feed.warm_up()  # the compiled stages load now, not while the first scans arrive
         self.scans = self.participant.reader(self.scan_topic, types.LASERSCAN, depth=SCAN_DEPTH)
         self.poses = self.participant.reader(self.odom_topic, types.ODOMETRY) if self.odom_topic else None
-        self.waitset = self.participant.waitset([r for r in (self.scans, self.poses) if r is not None])
+        inputs = [r for r in (self.scans, self.poses) if r is not None]
+        self.graph.announce([r.reader for r in inputs], [w.writer for w in self.sink.writers.values()])
+        self.waitset = self.participant.waitset(inputs + self.graph.readers())
+
+    def _retune(self, config: DatmoConfig) -> None:
+        self.feed.retune(config)
+
+    def log(self, level: int, line: str) -> None:
+        """`line` on /rosout at `level` (ros_graph.INFO, WARN, ERROR)."""
+        self.graph.log(level, line)
 
     def spin(self, wait_s: float = WAIT_S) -> int:
         """Wait up to `wait_s` seconds for data, then take every pose and scan that arrived and queue the scans
         for the stages; returns the number of scans queued."""
         self.waitset.wait(int(wait_s * 1e9))
+        self.graph.serve()
         if self.poses is not None:
             for payload in self.poses.take(SCAN_DEPTH):
                 self._pose(payload)

@@ -565,11 +565,17 @@ def test_a_feed_whose_stages_failed_closes_even_with_its_queue_full(monkeypatch)
 def test_the_node_stops_when_its_stages_fail(monkeypatch):
     import datmo_cli.node
 
+    logged: list[tuple[int, str]] = []
+
     class Failing:
-        def __init__(self, domain, scan_topic, odom_topic, cfg, say) -> None:
+        def __init__(self, domain, scan_topic, odom_topic, cfg, say, **graph) -> None:
             self.scan_topic, self.odom_topic, self.topics = scan_topic, odom_topic, {"/datmo/tracks": types.TRACKS}
             self.feed = type("Feed", (), {"failure": None})()
             self.spins = 0
+            self.name = "/datmo"
+
+        def log(self, level: int, line: str) -> None:
+            logged.append((level, line))
 
         def spin(self) -> None:
             self.spins += 1
@@ -581,6 +587,7 @@ def test_the_node_stops_when_its_stages_fail(monkeypatch):
     assert result.exit_code == 70, result.output
     assert result.output.splitlines()[0] == "datmo node: ROS 2 domain 3: /scan in, /datmo/tracks out"
     assert "the stages stopped: ValueError: a bug" in result.output.splitlines()[-1]
+    assert logged[-1] == (40, "datmo node: the stages stopped: ValueError: a bug")  # /rosout: ERROR
 
 
 def test_scans_and_poses_that_do_not_decode_are_counted_and_said_once(monkeypatch):

@@ -239,9 +239,14 @@ def test_node_rate_limits_what_a_publisher_makes_it_say(monkeypatch):
     class Publisher:
         """A stand-in for the DDS node: 1,000 restarts whose reason holds a publisher's frame id, then Ctrl-C."""
 
-        def __init__(self, domain, scan_topic, odom_topic, cfg, say) -> None:
+        def __init__(self, domain, scan_topic, odom_topic, cfg, say, **graph) -> None:
             self.say, self.scan_topic, self.odom_topic, self.topics = say, scan_topic, None, ["/datmo/tracks"]
             self.feed = type("Feed", (), {"failure": None})()
+            self.name, self.logged = "/datmo", []
+            published.append(self)
+
+        def log(self, level: int, line: str) -> None:
+            self.logged.append((level, line))
 
         def spin(self) -> None:
             for k in range(1000):
@@ -254,6 +259,7 @@ def test_node_rate_limits_what_a_publisher_makes_it_say(monkeypatch):
         def summary(self) -> str:
             return "1,000 scans received"
 
+    published: list[Publisher] = []
     monkeypatch.setattr(node_module, "Node", Publisher)
     monkeypatch.setattr("datmo_cli.dds.domain_id", lambda value=None: 0)
     code, out, err = run_cli("node")
@@ -261,6 +267,8 @@ def test_node_rate_limits_what_a_publisher_makes_it_say(monkeypatch):
     lines = err.splitlines()
     assert len(lines) <= 10 and not CONTROL.search(err), err[:3000]
     assert "datmo node: 995 more such messages not shown" in lines
+    warnings = [line for level, line in published[0].logged if level == 30]  # /rosout as limited as stderr
+    assert len(warnings) <= 8 and "datmo node: 995 more such messages not shown" in warnings
 
 
 def test_config_listing_escapes_what_a_config_gave(tmp_path):

@@ -35,9 +35,26 @@ if TYPE_CHECKING:
     metavar="ID",
     help="The ROS 2 domain. [default: ROS_DOMAIN_ID, else 0]",
 )
+@click.option("--name", default="datmo", show_default=True, metavar="NAME", help="The node's name in the ROS 2 graph.")
+@click.option("--namespace", default="/", show_default=True, metavar="NS", help="The node's namespace.")
+@click.option(
+    "--ros-distro",
+    default=None,
+    metavar="DISTRO",
+    help="The ROS 2 distribution whose graph messages to speak: humble, iron, jazzy, kilted or rolling "
+    "(Humble's GIDs are 24 bytes, later ones 16). [default: ROS_DISTRO, else humble]",
+)
 @config_options("TOML file with [features] and [track] tables.")
 @quiet_option
-def command(scan_topic: str, odom_topic: str | None, domain_id: int | None, cfg: DatmoConfig) -> None:
+def command(
+    scan_topic: str,
+    odom_topic: str | None,
+    domain_id: int | None,
+    name: str,
+    namespace: str,
+    ros_distro: str | None,
+    cfg: DatmoConfig,
+) -> None:
     """Run datmo live on a ROS 2 robot: subscribe to its LaserScans (and odometry) over DDS and publish
     /datmo/tracks (datmo_msgs/Tracks), /datmo/features, /datmo/landmarks, /datmo/segments and the markers
     (/datmo/markers/features, /datmo/markers/tracks), each stamped with its scan's stamp.
@@ -49,35 +66,57 @@ def command(scan_topic: str, odom_topic: str | None, domain_id: int | None, cfg:
     over. Ctrl-C stops (exit 130) and prints what was received and processed. Needs the node extra:
     pip install 'datmo-cli[node]'.
 
+    It announces itself in the ROS 2 graph as the node /datmo (--name, --namespace) with its topics, logs to
+    /rosout, and serves its parameters, the config keys (ros2 param list /datmo): those the running tracker
+    reads on each scan (the tracking thresholds) can be set live (ros2 param set /datmo track.gate 9.0), the
+    others are refused with the reason (docs/ros2.md says what was checked without ROS 2).
+
     Example: datmo node --domain-id 7 --scan-topic /front/scan --odom-topic /odom
     """
     import re
 
-    from .. import dds, outputs
+    from .. import dds, outputs, ros_graph
     from ..node import Node
     from ..progress import Limited, say
 
     domain = dds.domain_id(domain_id)
     # what a publisher's messages make the node say (a scan that does not decode, a restart): escaped, and
-    # rate-limited by kind (a publisher alternating two geometries would restart the tracking every scan)
-    told = Limited("datmo node", sink=lambda line: click.echo(line, err=True))
+    # rate-limited by kind (a publisher alternating two geometries would restart the tracking every scan), on
+    # stderr and on /rosout as warnings
+    nodes: list[Node] = []
+
+    def warn(line: str) -> None:
+        click.echo(line, err=True)
+        for n in nodes:
+            n.log(ros_graph.WARN, line)
+
+    told = Limited("datmo node", sink=warn)
     node = Node(
         domain,
         scan_topic,
         odom_topic,
         cfg,
         say=lambda line: told(line.removeprefix("datmo node: "), re.split(r"[\d(]", line)[0]),
+        name=name,
+        ns=namespace,
+        distro=ros_distro,
     )
+    nodes.append(node)
     try:
         inputs = node.scan_topic + (f" and {node.odom_topic}" if node.odom_topic else "")
-        click.echo(f"datmo node: ROS 2 domain {domain}: {inputs} in, {', '.join(node.topics)} out")
+        started = f"datmo node: ROS 2 domain {domain}: {inputs} in, {', '.join(node.topics)} out"
+        click.echo(started)
+        node.log(ros_graph.INFO, f"{started}; node {node.name}")
         say("  Ctrl-C to stop")
         while node.feed.failure is None:
             node.spin()
+        node.log(ros_graph.ERROR, f"datmo node: the stages stopped: {node.feed.failure}")
         raise RuntimeError(f"the stages stopped: {node.feed.failure}")  # a bug: exit 70, one line
     except (KeyboardInterrupt, outputs.Terminated) as exc:
         code = 130 if isinstance(exc, KeyboardInterrupt) else exc.exit_code
         node.close()
         told.close()
-        say(f"datmo node: stopped ({'Ctrl-C' if code == 130 else exc}); {node.summary()}")
+        stopped = f"datmo node: stopped ({'Ctrl-C' if code == 130 else exc}); {node.summary()}"
+        node.log(ros_graph.INFO, stopped)
+        say(stopped)
         raise click.exceptions.Exit(code) from None
