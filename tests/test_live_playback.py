@@ -124,6 +124,12 @@ async def _session(url: str, stamps: list[int]) -> dict:
         )
         c = _Client(ws)
         await c.until(lambda c: len(c.scans) >= 3)
+        # requests that are not ones (too short; a command neither play nor pause): refused, playing goes on
+        await ws.send(b"\x03\x01")
+        await ws.send(_request(7, 1.0, None, "bad"))
+        n = len(c.scans)
+        await c.until(lambda c: len(c.scans) >= n + 3)
+        out["bad_states"] = [s for s in c.states if s["id"] == b"bad"]
 
         # pause: nothing more once the answer came (what was on its way before may still land)
         out["pause"] = await c.ask(PAUSE, 1.0, None, "pause")
@@ -188,6 +194,7 @@ def test_a_client_pauses_seeks_and_changes_the_speed_of_play(tmp_path):
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 0, err
+    assert "Traceback" not in err and out["bad_states"] == []
 
     info = out["info"]
     assert "playbackControl" in info["capabilities"] and "time" in info["capabilities"]
