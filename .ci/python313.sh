@@ -36,8 +36,8 @@ chroot "$ROOT" /usr/bin/env -i PATH=/usr/bin:/bin HOME=/root /bin/bash -euo pipe
     /opt/datmo/bin/pip install --quiet --disable-pip-version-check /src
     /opt/datmo/bin/python --version
     /opt/datmo/bin/datmo --version
-    /opt/datmo/bin/datmo info /src/sample_logs/hall.mcap | head -3
+    /opt/datmo/bin/datmo info /src/sample_logs/hall.mcap > /tmp/info.txt && head -3 /tmp/info.txt
     /opt/datmo/bin/datmo run /src/sample_logs/hall.mcap -o /out
-    /opt/datmo/bin/datmo info /out/hall.mcap | head -12
+    /opt/datmo/bin/datmo info /out/hall.mcap > /tmp/info.txt && head -10 /tmp/info.txt
 '
 echo "make py313: a plain install on $(chroot "$ROOT" /opt/datmo/bin/python --version) ran datmo info and datmo run"
