@@ -9,7 +9,7 @@ DEMO_LOG := sample_logs/hall.mcap
 WORKERS ?= auto
 XDIST := -n $(WORKERS) --dist loadfile
 
-.PHONY: help install demo check test test-suite test-unit test-fast test-nojit test-no-avx512 lint typecheck bench accuracy sample-logs regress regress-update run-digests clean legs-model lock
+.PHONY: help install demo check test test-suite test-unit test-fast test-nojit test-no-avx512 lint typecheck bench accuracy sample-logs regress regress-update run-digests clean legs-model lock py313
 
 $(STAMP): pyproject.toml datmo_cli/__init__.py constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -83,6 +83,9 @@ legs-model: install ## retrain the packaged leg model (datmo_cli/perception/mode
 
 sample-logs: install ## regenerate sample_logs/ bit for bit
 	PATH="$(CURDIR)/$(BIN):$$PATH" bash sample_logs/make.sh
+
+py313: ## a plain install on Python 3.13 (Debian 13's, in a chroot made with debootstrap; root) runs datmo info and datmo run on the hall log
+	bash .ci/python313.sh
 
 lock: ## refresh constraints.txt to the newest versions pyproject.toml allows, in a new venv; prints what moved
 	rm -rf .venv-lock && $(PYTHON) -m venv .venv-lock

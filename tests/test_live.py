@@ -565,5 +565,6 @@ def test_play_help_says_what_the_viewer_can_and_cannot_do():
     from datmo_cli.cli import cli
 
     text = " ".join(CliRunner().invoke(cli, ["play", "--help"]).output.split())
-    assert "What it cannot do: pause, seek or change the speed" in text and "--rate" in text
-    assert "What the viewer can do" in text
+    assert "What the viewer can do" in text and "pause and play, seek to a time in the log" in text
+    assert "change the speed (--rate is the speed to start at)" in text
+    assert "What it cannot do: step a scan at a time, or play backwards" in text

@@ -235,3 +235,18 @@ def test_the_sdist_holds_every_file_the_readme_links_to():
         assert (ROOT / target).is_file(), target
         assert target in included or any(target.startswith(g + "/") for g in grafted), target
     assert "sample_logs" in pruned and "tests" in pruned
+
+
+def test_the_python_classifiers_name_only_the_versions_datmo_ran_on():
+    """3.11: CI's. 3.13: `make py313` (Debian 13's interpreter, a plain install of the wheel, datmo info and datmo
+    run on the hall log). No 3.12 interpreter comes from the registries this project reaches, so none is claimed."""
+    versions = {
+        c.rsplit(" :: ", 1)[1]
+        for c in PROJECT["classifiers"]
+        if re.fullmatch(r"Programming Language :: Python :: 3\.\d+", c)
+    }
+    assert versions == {"3.11", "3.13"}
+    recipe = re.search(r"^py313:.*\n\t(.+)$", (ROOT / "Makefile").read_text(), re.M).group(1)
+    script = (ROOT / ".ci" / "python313.sh").read_text(encoding="utf-8")
+    assert recipe == "bash .ci/python313.sh" and "python3.13 -m venv" in script
+    assert re.search(r"datmo run /src/sample_logs/hall\.mcap", script) and "datmo info" in script

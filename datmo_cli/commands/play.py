@@ -59,9 +59,13 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
     Needs the live extra: pip install 'datmo-cli[live]'.
 
     What the viewer can do: show every channel as it plays, on the log's clock (the server sends the log's
-    time, so plots and the timeline follow it). What it cannot do: pause, seek or change the speed from
-    Foxglove's playback bar, which stays inactive (the server offers Foxglove's time capability, not playback
-    control): the speed is --rate, --loop plays the log again, and a restart of datmo play starts it over.
+    time, so plots and the timeline follow it), and drive the playback from Foxglove's playback bar (the
+    server offers its playback control over the log's span): pause and play, seek to a time in the log
+    (playing goes on from the first scan at or after it; a log processed on the fly starts its tracks over
+    there), and change the speed (--rate is the speed to start at). At the log's end, without --loop, the
+    server says so and waits while a client is subscribed: seek back, or play to start over. What it cannot
+    do: step a scan at a time, or play backwards; a client without playback control follows the log's time
+    only.
 
     Example: datmo play sample_logs/hall.mcap --rate 2 --loop
     """
@@ -72,6 +76,8 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
     server = live.LiveServer(host, port)  # the package and the port are checked before the log is read
     try:
         source = live.LogSource(input, cfg)
+        control = live.PlaybackControl(*source.span, rate)
+        server.offer_playback(control)
         source.declare(server)
         what = "as it is" if source.processed else "segmented, features and tracks made on the fly"
         scans = source.stream.n_scans
@@ -82,7 +88,7 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
             say("  waiting for a client to subscribe (Ctrl-C to stop)")
             while not server.subscribed.wait(0.2):
                 pass
-        scans = live.play(source, server, rate=rate, loop=loop)
+        scans = live.play(source, server, rate=rate, loop=loop, control=control)
         say(f"datmo play: {scans:,} scans served")
     except (KeyboardInterrupt, outputs.Terminated) as exc:
         code = 130 if isinstance(exc, KeyboardInterrupt) else exc.exit_code

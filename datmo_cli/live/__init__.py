@@ -11,6 +11,7 @@ that subscribes late still places the scan.
 
 Times are the log's (header stamps, ns): the server advertises the time capability and broadcasts each
 scan's stamp, so Foxglove's clock follows the log (and restarts with it when `play --loop` starts over).
+`datmo play` also offers Foxglove's playback control over the log's span (control: pause, seek, speed).
 
 Clients: foxglove-sdk's server accepts only the subprotocol `foxglove.sdk.v1` (Foxglove's app today), while
 the public protocol (github.com/foxglove/ws-protocol) and the clients written to it (`@foxglove/ws-protocol`,
@@ -20,10 +21,11 @@ clients on the port asked for, accepts either name, and relays each client's fra
 server unchanged.
 
 The modules: messages (Message, the transforms a log lacks, the stages' messages of scans as they come), server
-(LiveServer and its front), playback (`datmo play`: LogSource, play) and feed (`datmo record --live`, `datmo
-node`: LiveFeed, PoseBuffer).
+(LiveServer and its front), control (PlaybackControl: the clients' requests and the state reported), playback
+(`datmo play`: LogSource, play) and feed (`datmo record --live`, `datmo node`: LiveFeed, PoseBuffer).
 """
 
+from .control import PlaybackControl
 from .feed import LiveFeed, PoseBuffer
 from .messages import STATIC_EVERY_NS, TF_MESSAGE, TOPIC_TF, TOPIC_TF_STATIC, Message, Stages, Transforms, tf_payload
 from .playback import MIN_LOOP_PASS_S, DrawnMarkers, LogSource, Pace, play
@@ -44,6 +46,7 @@ __all__ = [
     "LogSource",
     "Message",
     "Pace",
+    "PlaybackControl",
     "PoseBuffer",
     "Stages",
     "Transforms",

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..log import mcapio, types
 from ..log.scan import Odometry
+from .control import PlaybackControl
 from .messages import STATIC_EVERY_NS, TOPIC_TF, Message, Stages, Transforms
 
 if TYPE_CHECKING:
@@ -150,12 +151,23 @@ class LogSource:
         for topic, msgtype in (self.derived | self.drawn | self.transforms.topics()).items():
             server.declare(topic, msgtype)
 
-    def batches(self) -> Iterator[list[Message]]:
-        """The log from its start, a block of scans at a time (the block's messages in time order)."""
+    @property
+    def span(self) -> tuple[int, int]:
+        """The log times (ns) of its first and last scans."""
+        scans = self.stream.log.topics().get(self.stream.scan_topic)
+        return (scans.first_ns, scans.last_ns) if scans is not None and scans.count else (0, 0)
+
+    def batches(self, start: int | None = None) -> Iterator[list[Message]]:
+        """The log from its start, or from its first scan at or after log time `start` (ns), a block of scans
+        at a time (the block's messages in time order). From `start`, the log's messages before it are not
+        given, and the stages (a log processed on the fly) start there as on a log that started there: tracks
+        start over (a processed log's are its own)."""
         stages = None if self.processed else Stages(self.odometry, self.config, self.estimated, has_tf=True)
         transforms = Transforms(self.transforms.odometry, self.transforms.scan_frame, False)
         drawn = self._drawn() if self.drawn else None
         for block in self.stream.blocks(self.block_scans, copy=set(self.copied)):
+            if start is not None and not _from(block, start):
+                continue
             out = []
             for topic, (stamps, payloads) in block.copies.items():
                 msgtype = self.stream.log.topics()[topic].msgtype
@@ -173,6 +185,22 @@ class LogSource:
         return "laser"
 
 
+def _from(block, start: int) -> bool:
+    """Trim `block` (a streaming.Block) to its scans at or after `start` (ns) and the messages at or after
+    it; False when none of its scans is."""
+    stamps = block.run.stamps
+    if not len(stamps) or stamps[-1] < start:
+        return False
+    k = int(np.searchsorted(stamps, start))
+    if k:
+        block.run = block.run.slice(k, len(stamps))
+        block.copies = {
+            topic: ([s for s in times if s >= start], [p for s, p in zip(times, payloads, strict=True) if s >= start])
+            for topic, (times, payloads) in block.copies.items()
+        }
+    return True
+
+
 class Pace:
     """When to send a message of log time `stamp` (ns) so the log plays at `rate` times its own speed:
     `due(stamp)` is the monotonic time (s) to send it at, the clock starting at the first stamp given."""
@@ -188,6 +216,11 @@ class Pace:
         first, start = self.origin
         return start + (stamp - first) / 1e9 / self.rate
 
+    def rebase(self, stamp: int, rate: float) -> None:
+        """Play on at `rate` from log time `stamp` (ns), now (after a pause or a change of speed)."""
+        self.rate = rate
+        self.origin = (stamp, self.clock())
+
     def wait(self, stamp: int, sleep: Callable[[float], None] = time.sleep) -> None:
         """Sleep until `stamp` is due (at once when it is past)."""
         delay = self.due(stamp) - self.clock()
@@ -201,30 +234,91 @@ def play(
     *,
     rate: float = 1.0,
     loop: bool = False,
-    sleep: Callable[[float], None] = time.sleep,
+    sleep: Callable[[float], None] | None = None,
     clock: Callable[[], float] = time.monotonic,
+    control: PlaybackControl | None = None,
 ) -> int:
     """Publish `source` on `server` at `rate` times the log's speed, from the start again after the end with
     `loop` (a new session each time, each pass lasting at least MIN_LOOP_PASS_S, so that a log of one scan
-    does not spin); returns the number of scans sent. `sleep` and `clock`: time.sleep and time.monotonic."""
-    scans = 0
+    does not spin); returns the number of scans sent. `control`: the clients' playback control (its speed
+    replaces `rate`): paused, nothing is sent; a seek starts the log again at the first scan at or after the
+    time asked, the time sent at once; at the end of the log (without `loop`) the server reports it ended and
+    waits, while a client is subscribed, for a seek or play (play starts over), else returns. `sleep` and
+    `clock`: time.sleep and time.monotonic (`sleep`: waits that no request cuts short, as tests give)."""
+    control = control or PlaybackControl(*source.span, rate)
+    wait = control.wait if sleep is None else (lambda _gen, s: sleep(s))
+    scans, start = 0, None
     while True:
-        pace = Pace(rate, clock)
+        if start is not None:
+            server.time(start)
         started = clock()
-        last_static: int | None = None
-        for batch in source.batches():
-            for m in batch:
-                pace.wait(m.stamp, sleep)
-                if m.topic == source.stream.scan_topic:
-                    server.time(m.stamp)
-                    scans += 1
-                    if last_static is None or m.stamp - last_static >= STATIC_EVERY_NS:
-                        server.repeat_static(m.stamp)
-                        last_static = m.stamp
-                server.publish(m)
-        if not loop:
+        start, sent = _pass(source, server, control, start, clock, wait)
+        scans += sent
+        if start is not None:  # a seek
+            continue
+        if loop:
+            rest = started + MIN_LOOP_PASS_S - clock()
+            if rest > 0:
+                wait(control.snapshot()[0], rest)
+            server.restart()
+            continue
+        start = _hold(server, control)
+        if start is None:
             return scans
-        rest = started + MIN_LOOP_PASS_S - clock()
-        if rest > 0:
-            sleep(rest)
-        server.restart()
+
+
+def _pass(source, server, control, start, clock, wait) -> tuple[int | None, int]:
+    """Send `source` from `start` (ns; None: its start) as `control` says: (the time a client sought, or None
+    at the log's end; the scans sent)."""
+    pace = Pace(control.speed, clock)
+    scans = 0
+    last_static: int | None = None
+    for batch in source.batches(start):
+        for m in batch:
+            sought = _until_due(m.stamp, pace, control, clock, wait)
+            if sought is not None:
+                return sought, scans
+            if m.topic == source.stream.scan_topic:
+                server.time(m.stamp)
+                scans += 1
+                if last_static is None or m.stamp - last_static >= STATIC_EVERY_NS:
+                    server.repeat_static(m.stamp)
+                    last_static = m.stamp
+            server.publish(m)
+            control.sent(m.stamp)
+    return None, scans
+
+
+def _until_due(stamp: int, pace: Pace, control: PlaybackControl, clock, wait) -> int | None:
+    """Wait until the message of log time `stamp` (ns) is due, paused as long as `control` is, the pace
+    following its speed; the time sought when a client seeks meanwhile (else None)."""
+    rebase = False
+    while True:
+        generation, paused, speed, seeking = control.snapshot()
+        if seeking:
+            return control.take_seek()
+        if paused:
+            rebase = True
+            wait(generation, 0.5)
+            continue
+        if (rebase or speed != pace.rate) and pace.origin is not None:
+            pace.rebase(control.now, speed)
+        pace.rate, rebase = speed, False
+        delay = pace.due(stamp) - clock()
+        if delay <= 0:
+            return None
+        wait(generation, delay)
+
+
+def _hold(server, control: PlaybackControl) -> int | None:
+    """At the log's end: report it ended, and while a client is subscribed wait for a seek (or play, from the
+    start): its time, or None when no client is left (or the server offers no playback control)."""
+    if getattr(server, "control", None) is not control or not server.subscribers:
+        return None
+    server.playback_state(control.finish())
+    while server.subscribers:
+        generation, _, _, seeking = control.snapshot()
+        if seeking:
+            return control.take_seek()
+        control.wait(generation, 0.2)
+    return None

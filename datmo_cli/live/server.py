@@ -14,6 +14,7 @@ from urllib.parse import quote
 from ..errors import ConfigError
 from ..extras import require
 from ..log import mcapio, types
+from .control import ENDED, PAUSED, PLAYING, PlaybackControl, State
 from .messages import TOPIC_TF_STATIC, Message
 
 SUBPROTOCOL = "foxglove.sdk.v1"  # what the SDK's server speaks (the app's WebSocket data source)
@@ -59,8 +60,6 @@ class LiveServer:
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, name: str = "datmo", option: str = "--port") -> None:
         foxglove = require_foxglove()
-        from foxglove.websocket import Capability
-
         from ..progress import Limited, route_logs
 
         # what the SDK logs about a client (a bad frame names its op, which the client chose): escaped and
@@ -75,15 +74,11 @@ class LiveServer:
         self.channels: dict[str, object] = {}
         self.static: dict[str, Message] = {}
         self.sent = 0
+        self.name = name
+        self.listener = _Listener(self.subscribed)
+        self.control: PlaybackControl | None = None
         try:
-            self.server = foxglove.start_server(
-                name=name,
-                host="127.0.0.1",
-                port=0,
-                capabilities=[Capability.Time],
-                server_listener=_Listener(self.subscribed),
-                context=self.context,
-            )
+            self.server = self._start_backend()
         except Exception as exc:  # the SDK raises its own errors
             self._restore_log()
             raise ConfigError(f"{option} {port}: cannot start the live view's server ({_reason(exc)})") from None
@@ -94,6 +89,41 @@ class LiveServer:
             self._restore_log()
             raise ConfigError(f"{option} {port}: cannot serve on {host}:{port} ({_reason(exc)})") from None
         self.port = self.front.port
+
+    def _start_backend(self):
+        """foxglove-sdk's server on a loopback port of its own: the time capability, and playback control over
+        the log's span when `self.control` is set."""
+        from foxglove.websocket import Capability
+
+        c = self.control
+        return self._foxglove.start_server(
+            name=self.name,
+            host="127.0.0.1",
+            port=0,
+            capabilities=[Capability.Time],
+            server_listener=self.listener,
+            context=self.context,
+            playback_time_range=(c.start, c.end) if c is not None else None,
+        )
+
+    def offer_playback(self, control: PlaybackControl) -> None:
+        """Offer Foxglove's playback control (pause, seek, speed) over `control`'s span, `control` taking the
+        clients' requests. Call before a client connects: the SDK's server starts again with the capability
+        (its channels are kept: they belong to the context), and the front relays to the new one."""
+        self.control = self.listener.control = control
+        old = self.server
+        self.server = self._start_backend()
+        self.front.backend = f"ws://127.0.0.1:{self.server.port}"
+        old.stop()
+
+    def playback_state(self, state: State) -> None:
+        """Tell the clients the playback's state (when it changed by itself: a request is answered by the SDK)."""
+        self.server.broadcast_playback_state(_sdk_state(state, None))
+
+    @property
+    def subscribers(self) -> int:
+        """The clients' subscriptions to channels, now."""
+        return self.listener.subscriptions
 
     @property
     def url(self) -> str:
@@ -154,17 +184,48 @@ class LiveServer:
 
 
 class _Listener:
-    """The server's listener: notes the first subscription. The SDK calls on_unsubscribe for each channel a
-    client leaves (it is not optional: without it every client that leaves printed an AttributeError)."""
+    """The server's listener: notes the first subscription and counts them. The SDK calls on_unsubscribe for
+    each channel a client leaves (it is not optional: without it every client that leaves printed an
+    AttributeError). A playback control request goes to `control` (set with the capability), and its new state
+    is the answer."""
 
     def __init__(self, subscribed: threading.Event) -> None:
         self.subscribed = subscribed
+        self.subscriptions = 0
+        self.control: PlaybackControl | None = None
+        self._lock = threading.Lock()
 
     def on_subscribe(self, client, channel) -> None:
+        with self._lock:
+            self.subscriptions += 1
         self.subscribed.set()
 
     def on_unsubscribe(self, client, channel) -> None:
-        pass
+        with self._lock:
+            self.subscriptions = max(self.subscriptions - 1, 0)
+
+    def on_playback_control_request(self, request):
+        from foxglove.websocket import PlaybackCommand
+
+        if self.control is None:
+            return None
+        seek = request.seek_time
+        state = self.control.request(request.playback_command == PlaybackCommand.Play, request.playback_speed, seek)
+        return _sdk_state(state, request.request_id)
+
+
+def _sdk_state(state: State, request_id: str | None):
+    """foxglove-sdk's PlaybackState of `state`, answering `request_id` (None: no request)."""
+    from foxglove.websocket import PlaybackState, PlaybackStatus
+
+    status = {PLAYING: PlaybackStatus.Playing, PAUSED: PlaybackStatus.Paused, ENDED: PlaybackStatus.Ended}
+    return PlaybackState(
+        status=status[state.status],
+        current_time=state.time,
+        playback_speed=state.speed,
+        did_seek=state.sought,
+        request_id=request_id,
+    )
 
 
 _QUIET = logging.getLogger("datmo.live.front")  # the front's connection log: kept off the terminal
