@@ -237,6 +237,21 @@ def test_the_sdist_holds_every_file_the_readme_links_to():
     assert "sample_logs" in pruned and "tests" in pruned
 
 
+def test_the_package_page_has_no_link_the_index_cannot_follow():
+    """The index shows the project's readme alone: docs/package-page.md, with no relative link or image, names
+    every command `datmo --help` lists and says where the documentation is."""
+    assert PROJECT["readme"] == "docs/package-page.md"
+    page = (ROOT / "docs" / "package-page.md").read_text(encoding="utf-8")
+    assert not re.search(r"\]\((?![a-z]+://)[^)]*\)", page), "a relative link or image"
+    assert not re.search(r"<img|<a ", page)
+    from datmo_cli.cli import COMMANDS  # what `datmo --help` lists
+
+    commands = set(COMMANDS)
+    assert len(commands) > 15
+    missing = {c for c in commands if f"`{c}`" not in page}
+    assert not missing, missing
+
+
 def test_the_python_classifiers_name_only_the_versions_datmo_ran_on():
     """3.11: CI's. 3.13: `make py313` (Debian 13's interpreter, a plain install of the wheel, datmo info and datmo
     run on the hall log). No 3.12 interpreter comes from the registries this project reaches, so none is claimed."""

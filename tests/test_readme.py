@@ -42,6 +42,7 @@ GUIDE = [
     *(
         DOCS / name
         for name in (
+            "package-page.md",
             "install.md",
             "import.md",
             "simulate.md",
