@@ -13,6 +13,8 @@ numpy arrays or pandas DataFrames, run the pipeline on a log, and feed scans one
     LiveTracker(...)        .update(ranges, stamp_ns, pose=None): one scan in, the tracks after it out
     tune(logs, space, dir)  `datmo tune`: the setting of a space of parameters that scores best against ground truth
 
+    segment, extract_features, track, warm_up: `datmo segment`, `features`, `track`, `warm-up` (stage_files, pipeline)
+
 Each of these is what its command runs: the command is its options, this call, and what it prints.
 
 The same code as the commands: `process` is pipeline.process_file (what `datmo run` runs per input), the tables
@@ -45,6 +47,10 @@ if TYPE_CHECKING:
     import pandas
 
     from .log.scan import ScanRun
+    from .pipeline import warm_up
+    from .stage_files import features_file as extract_features
+    from .stage_files import segment_file as segment
+    from .stage_files import track_file as track
     from .tune import run_tune as tune
     from .workflows import Config
 
@@ -57,12 +63,16 @@ __all__ = [
     "Recording",
     "ReportResult",
     "evaluate",
+    "extract_features",
     "open_log",
     "process",
     "record",
     "report",
     "run_batch",
+    "segment",
+    "track",
     "tune",
+    "warm_up",
 ]
 
 # The tables' columns (name -> type): the tracks table is the export's; the features table has the columns that
@@ -82,12 +92,23 @@ _NUMPY = {
 }
 
 
-def __getattr__(name: str):
-    """`tune` is tune.run_tune, imported on first use (it brings the batch and scoring modules)."""
-    if name == "tune":
-        from .tune import run_tune
+# the other commands' work, imported on first use: name -> (module under datmo_cli, function)
+_LAZY = {
+    "tune": ("tune", "run_tune"),  # datmo tune (it brings the batch and scoring modules)
+    "segment": ("stage_files", "segment_file"),  # datmo segment
+    "extract_features": ("stage_files", "features_file"),  # datmo features
+    "track": ("stage_files", "track_file"),  # datmo track
+    "warm_up": ("pipeline", "warm_up"),  # datmo warm-up
+}
 
-        return run_tune
+
+def __getattr__(name: str):
+    """The functions of _LAZY, imported on first use: the commands' own calls, not copies of them."""
+    if name in _LAZY:
+        import importlib
+
+        module, attr = _LAZY[name]
+        return getattr(importlib.import_module(f"{__package__}.{module}"), attr)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
