@@ -151,10 +151,20 @@ def test_a_recording_stops_when_asked_and_refuses_what_the_command_refuses(tmp_p
     assert len(mcapio.read_run(out).stamps) == result.scans
 
 
-def test_tune_is_the_commands_call():
+def test_the_other_commands_calls_are_theirs_not_copies():
+    from datmo_cli import pipeline, stage_files
     from datmo_cli.tune import run_tune
 
     assert api.tune is run_tune
+    assert (api.segment, api.extract_features, api.track) == (
+        stage_files.segment_file,
+        stage_files.features_file,
+        stage_files.track_file,
+    )
+    assert api.warm_up is pipeline.warm_up
+    assert set(api.__all__) >= {"run_batch", "report", "evaluate", "record", "Recording", "tune", "track"}
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        api.nothing  # noqa: B018
 
 
 def test_the_api_takes_folders_as_paths_or_text(batch, tmp_path):
