@@ -249,7 +249,7 @@ def evaluate(
     exclude_static: bool = False,
     progress=None,
 ) -> dict:
-    """`datmo evaluate FILE` (docs/evaluate.md): score a tracked log against ground truth, its
+    """`datmo evaluate FILE` (docs/report.md): score a tracked log against ground truth, its
     /datmo/ground_truth channel or `gt_csv` (stamp_ns,id,x,y in the sensor frame, metres). Returns {"file",
     "ground_truth", "match_radius_m", "scores": {"all": {...}, "person": {...}, ...}}: MOTA, MOTP (m), IDF1,
     HOTA, DetA, AssA, LocA, counts, per class. `match_radius` metres; `include_occluded`: also score movers no
