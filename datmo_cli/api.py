@@ -5,8 +5,17 @@ numpy arrays or pandas DataFrames, run the pipeline on a log, and feed scans one
                             .features_dataframe() as pandas DataFrames (the pandas extra), .read_scans() and
                             .poses() (the scans and the scanner's poses, to feed a LiveTracker)
     process(src, out)       `datmo run` on one MCAP log (segmentation, features, tracking), written to `out`
+    run_batch(inputs, dir)  `datmo run`: a batch of inputs, resumed by its manifest, local or on Dask, with plots
+                            and the report's summaries (workflows.batch_run)
+    report(files)           `datmo report`: the summaries of processed logs and batch folders (workflows.reporting)
+    evaluate(file)          `datmo evaluate`: CLEAR-MOT, identity and HOTA scores against ground truth
+    record(port, out)       `datmo record`: a SICK LMS200 (or the emulator) into a log; Recording for more control
     LiveTracker(...)        .update(ranges, stamp_ns, pose=None): one scan in, the tracks after it out
     tune(logs, space, dir)  `datmo tune`: the setting of a space of parameters that scores best against ground truth
+
+    segment, extract_features, track, warm_up: `datmo segment`, `features`, `track`, `warm-up` (stage_files, pipeline)
+
+Each of these is what its command runs: the command is its options, this call, and what it prints.
 
 The same code as the commands: `process` is pipeline.process_file (what `datmo run` runs per input), the tables
 are `datmo export`'s rows (export.track_batch and feature_batch; the tracks table has export.TRACK_COLUMNS),
@@ -28,18 +37,43 @@ from . import export
 from .errors import InputError
 from .extras import require
 from .log import cdr, mcapio, types
+from .workflows import as_config as _config
+from .workflows.batch_run import BatchResult, run_batch
+from .workflows.recording import Recording, record
+from .workflows.reporting import ReportResult
+from .workflows.reporting import report_files as report
 
 if TYPE_CHECKING:
-    from typing import TypeAlias
-
     import pandas
 
-    from .config import DatmoConfig
     from .log.scan import ScanRun
+    from .pipeline import warm_up
+    from .stage_files import features_file as extract_features
+    from .stage_files import segment_file as segment
+    from .stage_files import track_file as track
+    from .tune import run_tune as tune
+    from .workflows import Config
 
-    Config: TypeAlias = DatmoConfig | str | os.PathLike | dict | None
-
-__all__ = ["FEATURE_COLUMNS", "TRACK_COLUMNS", "LiveTracker", "Log", "open_log", "process", "tune"]
+__all__ = [
+    "FEATURE_COLUMNS",
+    "TRACK_COLUMNS",
+    "BatchResult",
+    "LiveTracker",
+    "Log",
+    "Recording",
+    "ReportResult",
+    "evaluate",
+    "extract_features",
+    "open_log",
+    "process",
+    "record",
+    "report",
+    "run_batch",
+    "segment",
+    "track",
+    "tune",
+    "warm_up",
+]
 
 # The tables' columns (name -> type): the tracks table is the export's; the features table has the columns that
 # describe features (the export's feature rows without the track-only columns, which are null there).
@@ -56,6 +90,26 @@ _NUMPY = {
     "float64": np.float64,
     "bool": np.bool_,
 }
+
+
+# the other commands' work, imported on first use: name -> (module under datmo_cli, function)
+_LAZY = {
+    "tune": ("tune", "run_tune"),  # datmo tune (it brings the batch and scoring modules)
+    "segment": ("stage_files", "segment_file"),  # datmo segment
+    "extract_features": ("stage_files", "features_file"),  # datmo features
+    "track": ("stage_files", "track_file"),  # datmo track
+    "warm_up": ("pipeline", "warm_up"),  # datmo warm-up
+}
+
+
+def __getattr__(name: str):
+    """The functions of _LAZY, imported on first use: the commands' own calls, not copies of them."""
+    if name in _LAZY:
+        import importlib
+
+        module, attr = _LAZY[name]
+        return getattr(importlib.import_module(f"{__package__}.{module}"), attr)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def dtype(columns: dict[str, str]) -> np.dtype:
@@ -84,18 +138,6 @@ def _table(batches: Iterator[export.Batch], columns: dict[str, str]) -> np.ndarr
 def _dataframe(table: np.ndarray) -> pandas.DataFrame:
     pd = require("pandas", for_="DataFrames")
     return pd.DataFrame({name: table[name] for name in table.dtype.names})
-
-
-def _config(config: Config) -> DatmoConfig:
-    """A DatmoConfig from a DatmoConfig, a TOML file's path (its [features] and [track] tables, as --config),
-    a dict of overrides ({"features": {...}, "track": {...}}), or None (the defaults)."""
-    from .config import DatmoConfig, load
-
-    if config is None or isinstance(config, DatmoConfig):
-        return config or DatmoConfig()
-    if isinstance(config, dict):
-        return load(None, config)
-    return load(Path(config))
 
 
 class Log:
@@ -198,45 +240,32 @@ def process(
     return Log(out)
 
 
-def tune(
-    logs: list[str | os.PathLike],
-    space: str | os.PathLike,
-    out_dir: str | os.PathLike,
+def evaluate(
+    file: str | os.PathLike,
     *,
-    config: Config = None,
-    objective: str = "hota",
-    maxima: tuple[str, ...] = (),
-    minima: tuple[str, ...] = (),
-    trials: int = 24,
-    seed: int = 0,
-    cv: bool = False,
-    jobs: int | None = None,
-    scheduler: str | None = None,
-    force: bool = False,
-    plot: bool = False,
-):
-    """`datmo tune` (docs/tune.md): search the parameters of the TOML file `space` on `logs` (logs with ground
-    truth) from `config` (as for `process`; trial 0), into `out_dir` (trials.parquet, best.toml, manifest.jsonl).
-    `objective`: a figure `datmo evaluate` prints, averaged over the logs; `maxima`/`minima`: constraints
-    "NAME=VALUE". Returns a tune.TuneResult: `.best` (the trial: `.index`, `.values`, `.config`), `.best_score`
-    (`.value`, `.per_log`), `.start_score`, `.trials`, `.folds` (with `cv`)."""
-    from .tune import run_tune
+    gt_csv: str | os.PathLike | None = None,
+    match_radius: float = 0.5,
+    include_occluded: bool = False,
+    exclude_static: bool = False,
+    progress=None,
+) -> dict:
+    """`datmo evaluate FILE` (docs/report.md): score a tracked log against ground truth, its
+    /datmo/ground_truth channel or `gt_csv` (stamp_ns,id,x,y in the sensor frame, metres). Returns {"file",
+    "ground_truth", "match_radius_m", "scores": {"all": {...}, "person": {...}, ...}}: MOTA, MOTP (m), IDF1,
+    HOTA, DetA, AssA, LocA, counts, per class. `match_radius` metres; `include_occluded`: also score movers no
+    beam hits; `exclude_static`: leave out tracks classified static; `progress(done, total, stage)`. Needs
+    the eval extra (MissingExtraError without it)."""
+    from .evaluate import require_scoring
+    from .evaluate.files import score_file
 
-    return run_tune(
-        [os.fsdecode(p) for p in logs],
-        space,
-        out_dir,
-        config=_config(config),
-        objective=objective,
-        maxima=maxima,
-        minima=minima,
-        trials=trials,
-        seed=seed,
-        cv=cv,
-        jobs=jobs,
-        scheduler=scheduler,
-        force=force,
-        plot=plot,
+    require_scoring()
+    return score_file(
+        Path(file),
+        gt_csv=Path(gt_csv) if gt_csv is not None else None,
+        match_radius=match_radius,
+        include_occluded=include_occluded,
+        exclude_static=exclude_static,
+        progress=progress,
     )
 
 

@@ -144,6 +144,21 @@ def ensure_warm(progress: Callable[[int, int], None] | None = None) -> None:
         _WARM = True
 
 
+def follow(
+    cancelled: Callable[[], bool] | None, scans: Callable[[int, int], None] | None
+) -> Callable[[int, int], None]:
+    """A task's progress callback for the pass over its log: `progress(done, total)` raises Cancelled when
+    `cancelled()` says so, and passes the scans done of all to `scans` (either may be None)."""
+
+    def progress(done: int, total: int) -> None:
+        if cancelled is not None and cancelled():
+            raise Cancelled()
+        if scans is not None:
+            scans(done, total)
+
+    return progress
+
+
 def run_task(
     task: Task,
     *,
@@ -167,13 +182,7 @@ def run_task(
     from ..outputs import journal_to
 
     t0 = time.perf_counter()
-
-    def progress(done: int, total: int) -> None:
-        if cancelled is not None and cancelled():
-            raise Cancelled()
-        if scans is not None:
-            scans(done, total)
-
+    progress = follow(cancelled, scans)
     if cancelled is not None and cancelled():
         return record(task, CANCELLED)
     journal_to(task.journal)

@@ -144,15 +144,16 @@ def command(
 
     Example: datmo evaluate out/hall.mcap --format json --min-mota 0.6 --min-hota 0.4
     """
+    from .. import api
     from ..errors import DatmoError
     from ..evaluate import require_scoring
     from ..progress import bar, console
     from ..report import render_markdown, render_rich, to_json
 
-    require_scoring()  # before any work: a missing eval extra is one line
+    require_scoring()  # before the bar: a missing eval extra is one line
     with bar("scoring", None, unit="frames", info=True) as b:
         b.update(0, info="reading")
-        result = score_file(
+        result = api.evaluate(
             file,
             gt_csv=gt_csv,
             match_radius=match_radius,

@@ -1,5 +1,6 @@
 """Click options shared by the commands: -o/--output, --force, --config/--no-config with the parameter options
-built from the configuration's fields, --quiet, the bag inputs' --topic and --odom-topic."""
+built from the configuration's fields, --quiet, the bag inputs' --topic and --odom-topic, and the batch executor's
+-j/--jobs, --scheduler and --retries (datmo run and datmo tune)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from .types import quiet_option
 
 __all__ = [
     "config_options",
+    "executor_options",
     "force_option",
     "input_options",
     "no_stdout",
@@ -174,3 +176,36 @@ def input_options(f: Callable) -> Callable:
         help="With a bag (ROS 1 .bag, ROS 2 folder or .db3) or a foreign MCAP: the LaserScan topic to "
         "take when there are several (the input is converted as by datmo import).",
     )(f)
+
+
+def executor_options(units: str, task: str, tasks: str) -> Callable:
+    """`-j/--jobs`, `--scheduler` and `--retries`: where a batch's tasks run (batch.LocalExecutor or
+    cluster.DaskExecutor), one declaration for datmo run and datmo tune. `units`: what runs at once ("Inputs
+    processed"), `task`: one task ("a task"), `tasks`: what runs on a scheduler ("one task per input")."""
+    from ..bounds import OPTIONS
+    from .types import option
+
+    def decorate(f: Callable) -> Callable:
+        f = option(
+            "--retries",
+            bound=OPTIONS["retries"],
+            default=2,
+            show_default=True,
+            help=f"With --scheduler: times {task} is retried after an unexpected error or the death of its worker.",
+        )(f)
+        f = click.option(
+            "--scheduler",
+            metavar="ADDRESS",
+            default=None,
+            help=f"Run {tasks} on a running Dask scheduler (tcp://host:8786, tls://...), or on a local cluster of N "
+            "worker processes started for the run (local[:N]). Needs pip install 'datmo-cli[dask]'; see docs/batch.md.",
+        )(f)
+        return option(
+            "-j",
+            "--jobs",
+            bound=OPTIONS["jobs"],
+            default=None,
+            help=f"{units} at once, in separate processes on this machine [default: all cores].",
+        )(f)
+
+    return decorate

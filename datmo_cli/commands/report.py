@@ -7,23 +7,11 @@ from pathlib import Path
 import click
 
 from ..bounds import OPTIONS
-from ..plot_files import check_plot_outputs, plot_paths, save_plot
 from ..report import FORMATS, SORT_KEYS
 from .options import force_option, quiet_option
 from .types import option
 
 PLOT_KINDS = ("auto", "top", "counts", "speeds", "all")
-
-
-def _scan_counts(files: list[Path]) -> list[int]:
-    """Scans on /scan of each file, from its summary (the progress bar's total)."""
-    from ..log import mcapio
-
-    counts = []
-    for f in files:
-        ch = mcapio.summary(f).topics().get(mcapio.TOPIC_SCAN)
-        counts.append(ch.count if ch is not None else 0)
-    return counts
 
 
 @click.command(name="report")
@@ -107,28 +95,12 @@ def command(
 
     Example: datmo report out/hall.mcap --plot out/hall.png
     """
-    from ..pipeline import read_run_data
-    from ..progress import bar, say
-    from ..report import summarise, summarise_file
+    from .. import api
+    from ..progress import say
 
-    files, batches = _batches(list(files))
-    plots = plot_paths(plot, files) if plot else []
-    check_plot_outputs(plots, force)
-    counts = _scan_counts(files)
-    summaries, written = [], []
-    with bar("report", sum(counts)) as progress:
-        done = 0
-        for i, path in enumerate(files):
-            if plot:  # the plot draws every scan and state, so it decodes the whole run
-                data = read_run_data(path, keep_scans=True)
-                summaries.append(summarise(data))
-                written.append(save_plot(data, plots[i], force, plot_kind, all_tracks))
-            else:  # one streaming pass
-                summaries.append(summarise_file(path, progress=lambda n, d=done: progress.update(d + n)))
-            done += counts[i]
-            progress.update(done)
-    _print(summaries, batches, fmt, top=top, sort=sort, tracks=track_table, all_tracks=all_tracks)
-    for line in written:
+    result = api.report(files, plot=plot, plot_kind=plot_kind, all_tracks=all_tracks, force=force)
+    _print(result.summaries, result.batches, fmt, top=top, sort=sort, tracks=track_table, all_tracks=all_tracks)
+    for line in result.written:
         say(line)
 
 
@@ -153,28 +125,6 @@ def _print(summaries: list, batches: list[tuple[Path, list[dict]]], fmt: str, **
         render(summaries, fmt, **options, console=console(), before=_batch_tables(batches))
     else:
         click.echo(render(summaries, fmt, **options, before=_batch_tables(batches)), nl=False)
-
-
-def _batches(paths: list[Path]) -> tuple[list[Path], list[tuple[Path, list[dict]]]]:
-    """Split FILES into files and batch folders (with their manifest lines, batch.read_batch: only outputs
-    under the folder, each once); a batch's outputs that are done and present join the files."""
-    from ..batch import DONE, SKIPPED, read_batch
-    from ..progress import say
-
-    batches = []
-    for p in paths:
-        if p.is_dir():
-            recs, left_out = read_batch(str(p), with_left_out=True)
-            if left_out:
-                say(
-                    f"datmo: warning: {p}: {left_out} manifest line{'s' if left_out > 1 else ''} left out (an output "
-                    "outside the folder, or one another line already names)"
-                )
-            batches.append((p, recs))
-    files = [p for p in paths if not p.is_dir()]
-    for _, recs in batches:
-        files += [Path(r["output"]) for r in recs if r["status"] in (DONE, SKIPPED) and Path(r["output"]).exists()]
-    return files, batches
 
 
 def _batch_tables(batches: list[tuple[Path, list[dict]]]) -> list:

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import click
 
 from ..bounds import OPTIONS
-from .options import config_options, force_option, no_stdout, output_option, quiet_option
+from .options import config_options, executor_options, force_option, no_stdout, output_option, quiet_option
 from .types import option
 
 if TYPE_CHECKING:
@@ -57,27 +57,7 @@ if TYPE_CHECKING:
 @option("--trials", bound=OPTIONS["trials"], default=24, show_default=True, help="Settings tried, the start included.")
 @option("--seed", bound=OPTIONS["seed"], default=0, show_default=True, help="Seed of the Sobol samples.")
 @click.option("--cv", is_flag=True, help="Also tune leaving each log out in turn, and score the best on it.")
-@option(
-    "-j",
-    "--jobs",
-    bound=OPTIONS["jobs"],
-    default=None,
-    help="Evaluations run at once, in separate processes on this machine [default: all cores].",
-)
-@click.option(
-    "--scheduler",
-    metavar="ADDRESS",
-    default=None,
-    help="Run the evaluations on a Dask scheduler (tcp://host:8786, tls://...) or a local cluster of N "
-    "processes (local[:N]), as datmo run --scheduler does (docs/batch.md).",
-)
-@option(
-    "--retries",
-    bound=OPTIONS["retries"],
-    default=2,
-    show_default=True,
-    help="With --scheduler: times an evaluation is retried after an unexpected error or its worker's death.",
-)
+@executor_options("Evaluations run", "an evaluation", "the evaluations")
 @force_option("Redo every evaluation and replace the outputs of another tune in the folder.")
 @config_options("TOML file of parameters to start from (trial 0; the space's keys are tuned from there).")
 @click.option("--plot", is_flag=True, help="Also draw DIR/tune.png (needs the plot extra, matplotlib).")
@@ -115,14 +95,14 @@ def command(
     """
     import time
 
+    from .. import api
     from ..progress import bar, console, quiet
     from ..report import render_rich
-    from ..tune import run_tune
     from ..tune.results import tables
 
     t0 = time.perf_counter()
     with bar("tune", None, unit="evaluations", info=True) as b:
-        result = run_tune(
+        result = api.tune(
             list(logs),
             space,
             out_dir,

@@ -96,12 +96,18 @@ def run_tune(
     min_prefix_s: float | None = None,
     progress: Callable[[int, int, str], None] | None = None,
 ) -> TuneResult:
-    """Tune the parameters of `space` (a TOML file, see tune.space) on `logs` (MCAP logs with ground truth)
-    into `out_dir`; see the package docstring. `config`: the start (a DatmoConfig; None: the defaults);
-    `objective`, `maxima`/`minima` ("NAME=VALUE"): see tune.objective; `progress(done, total, what)` follows
-    the evaluations of each rung. Returns the TuneResult (its outputs written)."""
-    from ..config import DatmoConfig
+    """`datmo tune` (docs/tune.md; datmo_cli.api.tune): search the parameters of the TOML file `space` (see
+    tune.space) on `logs` (logs with ground truth) from `config` (trial 0: a DatmoConfig, a TOML file, a dict
+    of overrides, or None for the defaults), into `out_dir` (trials.parquet, best.toml, manifest.jsonl).
+    `objective`: a figure `datmo evaluate` prints, averaged over the logs; `maxima`/`minima`: constraints
+    "NAME=VALUE" (tune.objective); `jobs`/`scheduler`/`retries` as for `datmo run`; `progress(done, total,
+    what)` follows the evaluations of each rung. Returns a TuneResult (its outputs written): `.best` (the
+    trial: `.index`, `.values`, `.config`), `.best_score` (`.value`, `.per_log`), `.start_score`, `.trials`,
+    `.folds` (with `cv`)."""
+    import os
+
     from ..extras import require
+    from ..workflows import as_config
 
     goal = Goal(
         check_name(objective, "--objective"),
@@ -113,7 +119,7 @@ def run_tune(
     if trials < 1:
         raise ConfigError(f"--trials {trials}: at least 1")
     dims = load_space(space)
-    inputs = _check_logs(list(logs))
+    inputs = _check_logs([os.fsdecode(p) for p in logs])
     if cv and len(inputs) < 2:
         raise ConfigError("--cv leaves one log out at a time: give at least 2 logs")
     require("pyarrow.parquet", for_="DIR/trials.parquet (datmo tune)")
@@ -123,7 +129,7 @@ def run_tune(
     require_scoring("datmo tune (it scores as datmo evaluate)")
     if plot:
         require("matplotlib", for_="--plot")
-    base = config if config is not None else DatmoConfig()
+    base = as_config(config)
     out = Path(out_dir).resolve()
     spec = _spec(inputs, dims, goal, trials, seed, base)
     _check_folder(out, spec, force)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..batch.manifest import DONE
-from ..batch.task import Cancelled, Task, failed, record
+from ..batch.task import Cancelled, Task, failed, follow, record
 
 
 @dataclass(frozen=True)
@@ -62,15 +62,10 @@ class EvalTask(Task):
 
         set_default(self.threads or 1)  # evaluations run side by side, one per process
         t0 = time.perf_counter()
-
-        def progress(done: int, total: int) -> None:
-            if cancelled is not None and cancelled():
-                raise Cancelled()
-            if scans is not None:
-                scans(done, total)
-
         try:
-            n = pipeline.process_file(self.log, self.output, force=True, config=self.config, progress=progress)
+            n = pipeline.process_file(
+                self.log, self.output, force=True, config=self.config, progress=follow(cancelled, scans)
+            )
             result = score_file(Path(self.output), gt_csv=Path(self.gt_csv) if self.gt_csv else None)
         except Cancelled:
             return record(self, "cancelled")
