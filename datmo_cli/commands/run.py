@@ -302,8 +302,9 @@ def _run_batch(inputs, out_dir, cfg, options, force, threads, plot, bag_dir, sch
         executor = DaskExecutor(scheduler, retries=retries)
     else:
         executor = LocalExecutor(jobs)
-        if batch.tasks and (min(executor.workers, len(batch.tasks)) > 1 or _compiling()):
-            _warm_up()  # a pool, or a first run to say; else one process loads just the kernels it uses
+        if batch.tasks and min(executor.workers, len(batch.tasks)) > 1:
+            _warm_up()  # a pool: compiled (or loaded) once before the workers fork
+        # else one process compiles or loads just the kernels it runs (the line saying so came first)
     import time
 
     t0 = time.perf_counter()
@@ -378,13 +379,6 @@ def _final_table(records: list[dict], seconds: float, where: str) -> None:
         f"{where} ({rate:,.0f} scans/s)",
         err=True,
     )
-
-
-def _compiling() -> bool:
-    """Whether the kernels look uncompiled (numba_runtime.cache_looks_stale: a few ms, no numba import)."""
-    from ..numba_runtime import cache_looks_stale
-
-    return cache_looks_stale()
 
 
 def _warm_up() -> None:
