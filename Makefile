@@ -9,7 +9,7 @@ DEMO_LOG := sample_logs/hall.mcap
 WORKERS ?= auto
 XDIST := -n $(WORKERS) --dist loadfile
 
-.PHONY: help install demo check test test-suite test-unit test-fast test-nojit test-no-avx512 lint typecheck bench accuracy sample-logs regress regress-update run-digests clean legs-model lock py313
+.PHONY: help install demo check test test-suite test-unit test-fast test-nojit test-no-avx512 test-numba-plain lint typecheck bench accuracy sample-logs regress regress-update run-digests clean legs-model lock py313
 
 $(STAMP): pyproject.toml datmo_cli/__init__.py constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -31,7 +31,7 @@ install: $(STAMP) ## create .venv and install datmo (editable) with the dev extr
 demo: install ## process the hall sample log: segment, features, track; print the report and draw out/hall.png
 	$(BIN)/datmo run $(DEMO_LOG) -o out --force --plot
 
-test: lint typecheck test-suite test-nojit test-no-avx512 ## lint, typecheck, the whole suite, test-nojit, test-no-avx512 (CI runs it as make check: .ci/run)
+test: lint typecheck test-suite test-nojit test-no-avx512 test-numba-plain ## lint, typecheck, the whole suite, test-nojit, test-no-avx512, test-numba-plain (CI runs it as make check: .ci/run)
 
 check: test ## another name for make test
 
@@ -53,6 +53,9 @@ test-nojit: install ## the kernel reference checks (tests/kernel_checks.py) with
 test-no-avx512: install ## the output fingerprints again with numpy's AVX-512 code switched off (a no-op on a CPU without it)
 	NPY_DISABLE_CPU_FEATURES="$$($(BIN)/python tests/avx512_features.py)" $(BIN)/pytest -q -p no:xdist \
 		tests/test_output_digests.py -k stored_fingerprints
+
+test-numba-plain: install ## the kernel reference checks again with the kernels loaded numba's own way (DATMO_NUMBA_LIGHT=0: none of numba_light's patches), so that path cannot rot
+	DATMO_NUMBA_LIGHT=0 $(BIN)/pytest -q $(XDIST) -m "kernels and not slow"
 
 lint: install ## ruff check and ruff format --check on the whole repository
 	$(BIN)/ruff check .

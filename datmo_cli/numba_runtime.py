@@ -7,15 +7,14 @@ raised "cannot cache function ...: no locator available" at import. Then the cac
 in the temporary folder (NUMBA_CACHE_DIR), or, with no writable temporary folder either, kernels are compiled
 in each process and not cached.
 
-Loading a cached kernel the way numba does makes it refresh its typing and lowering registries first, which
-imports and installs every implementation numba has (a third of a one-scan `datmo track`), though
-only compiling uses them; `prepare` has datmo's cached kernels loaded without it (`_load_cached_lightly`).
-One numba module, numba.np.arraymath, imports scipy.linalg (about 0.3 s) only to learn whether BLAS is there
-(`numba.np.linalg.ensure_blas` imports scipy.linalg.cython_blas): while it is yet to be imported, a kernel is
-loaded (or numba's set-up runs) with that one extension module loaded on its own (a few ms; the check's
-answer is the same), which is then forgotten, so a later `import scipy.linalg` anywhere is the ordinary one.
-No datmo kernel calls BLAS; numba binds BLAS functions only when it compiles a kernel that does, and then
-imports scipy.linalg itself.
+`prepare` gets numba's CPU target and runtime ready once a process and applies the light loading of
+datmo's cached kernels (numba_light: every patch of numba's internals made for speed, applied only on the numba
+releases it was tested against). What stays here works on any numba: where the cache goes, whether it looks
+stale (`cache_looks_stale`, without importing numba), the line that says kernels compile, and the correctness
+part: numba's cache stamp of a datmo kernel keyed on every source file a kernel reads
+(`key_kernel_cache_on_sources`, which patches numba's `_SourceFileBackedLocatorMixin.get_source_stamp`; with a
+numba without that hook, numba's own stamp: an edit to state.py alone would then not recompile, and
+tests/test_numba_cache_stamp.py fails).
 """
 
 from __future__ import annotations
@@ -116,62 +115,13 @@ def _without_cache() -> None:
     dispatcher.Dispatcher.enable_caching = enable_caching
 
 
-class _NumbaWithoutCoverage:
-    """numba imports `coverage` (about 65 ms) when it is installed, to report the lines of the kernels it
-    compiles to a coverage run in progress. With no coverage run in this process ("coverage" not imported
-    yet: a run under coverage, pytest-cov's too, imports it first), numba's module for that
-    (numba.misc.coverage_support) is imported with coverage marked missing, and so finds none in progress,
-    as it would anyway; coverage itself stays importable. A finder on sys.meta_path, used once."""
-
-    NAME = "numba.misc.coverage_support"
-
-    def find_spec(self, name, path, target=None):
-        if name != self.NAME:
-            return None
-        sys.meta_path.remove(self)
-        if "coverage" in sys.modules:
-            return None
-        import importlib.abc
-        import importlib.util
-
-        spec = importlib.util.find_spec(name)
-        if spec is None or spec.loader is None:
-            return spec
-        loader = spec.loader
-
-        class Loader(importlib.abc.Loader):
-            def create_module(self, spec):
-                return loader.create_module(spec)
-
-            def exec_module(self, module):
-                sys.modules["coverage"] = None  # type: ignore[assignment]  # `import coverage` raises ImportError
-                try:
-                    loader.exec_module(module)
-                finally:
-                    if sys.modules.get("coverage", 0) is None:
-                        del sys.modules["coverage"]
-
-        spec.loader = Loader()
-        return spec
-
-
-def numba_without_coverage() -> None:
-    """Spare numba's import of coverage when no coverage run is in progress (_NumbaWithoutCoverage); call
-    before numba is imported."""
-    if "coverage" in sys.modules or "numba.misc.coverage_support" in sys.modules:
-        return
-    if not any(isinstance(f, _NumbaWithoutCoverage) for f in sys.meta_path):
-        sys.meta_path.insert(0, _NumbaWithoutCoverage())
-
-
 _READY = False
 _LOCK = threading.Lock()
-BLAS = "scipy.linalg.cython_blas"
 
 
 def prepare() -> None:
     """Get numba ready to load datmo's cached kernels, once: its CPU target and runtime, and a light way to
-    load them (`_load_cached_lightly`)."""
+    load them (numba_light)."""
     global _READY
     if _READY:
         return
@@ -184,182 +134,10 @@ def prepare() -> None:
         from numba.core.runtime import rtsys
 
         rtsys.initialize(cpu_target.target_context)  # the runtime (NRT) every kernel allocates with
-        if light_loading():
-            _load_cached_lightly()
+        from . import numba_light
+
+        numba_light.apply()  # the light loading, on the numba releases it was tested against
         _READY = True
-
-
-# the numba releases whose internals _load_cached_lightly was written and tested against; others load numba's way
-LIGHT_NUMBA = ("0.68.",)
-
-
-def light_loading() -> bool:
-    """Whether datmo's cached kernels load lightly (_load_cached_lightly): on the numba releases it was tested
-    against (LIGHT_NUMBA), unless DATMO_NUMBA_LIGHT=0 asks for numba's own way."""
-    import numba
-
-    if os.environ.get("DATMO_NUMBA_LIGHT", "1") == "0":
-        return False
-    return numba.__version__.startswith(LIGHT_NUMBA)
-
-
-def _load_cached_lightly() -> None:
-    """Have datmo's cached kernels loaded without numba's registry refresh; any other kernel is loaded or
-    compiled after it, as before.
-
-    Before each load numba refreshes its typing and lowering registries (importing and installing every
-    implementation it has: typed containers, random generators, cffi, jitclass...), which only compiling
-    uses. Loading a cached kernel needs the runtime (prepare), the symbols its code links to (the C helpers
-    and the runtime's, registered with the target; the hash secret's, by numba.cpython.hashing) and the
-    modules of its environments, which unpickling imports. A datmo kernel that is not cached, or whose light
-    load fails, goes numba's way: refresh, load or compile. Other packages' kernels always go numba's way.
-    Either way one numba module, numba.np.arraymath, checks for BLAS when imported: scipy.linalg.cython_blas
-    is then loaded on its own for the moment (see the module docstring)."""
-    from numba.core import caching
-
-    original = caching.Cache.load_overload
-    if getattr(original, "datmo_light", False):
-        return
-    package = os.path.dirname(os.path.abspath(__file__)) + os.sep
-
-    def load_overload(self, sig, target_context):
-        code = getattr(getattr(self, "_py_func", None), "__code__", None)
-        with _blas_alone():
-            if code is not None and os.path.abspath(code.co_filename).startswith(package):
-                try:
-                    with self._guard_against_spurious_io_errors():
-                        cres = _load_light(self, sig, target_context)
-                    if cres is not None:
-                        return cres
-                except Exception:  # numba's way below
-                    pass
-            return original(self, sig, target_context)
-
-    load_overload.datmo_light = True
-    caching.Cache.load_overload = load_overload
-    _defer_shared_modules()
-
-
-_DEFER = threading.local()  # .entry: the entry point's name while a datmo kernel's code is being loaded
-
-
-def _load_light(cache, sig, target_context):
-    """A cached kernel as Cache._load_overload loads it (None when not cached), its code's bitcode parsed
-    only when needed (_defer_shared_modules)."""
-    if not cache._enabled:
-        return None
-    data = cache._cache_file.load(cache._index_key(sig, target_context.codegen()))
-    if data is None:
-        return None
-    fndesc = data[1] if isinstance(data, tuple) and len(data) > 1 else None  # CompileResult._reduce's
-    _DEFER.entry = getattr(fndesc, "llvm_cpython_wrapper_name", None)
-    try:
-        return cache._impl.rebuild(target_context, data)
-    finally:
-        _DEFER.entry = None
-
-
-def _defer_shared_modules() -> None:
-    """Loading a cached kernel, numba parses the LLVM bitcode stored beside its machine code (to inline it
-    into kernels compiled later) and reads every symbol it defines: about half the load of a big kernel
-    (track_block), and of no use to running it. In `_load_light` the bitcode is kept as it is and parsed
-    the first time anything asks for the module, or for a symbol numba does not know yet (numba's own way,
-    only later); the one symbol a load looks up, the kernel's entry point, which its code defines, is
-    recorded at once. Nothing changes where numba's code is not as expected."""
-    import llvmlite.binding as ll
-    from numba.core import codegen
-
-    library, engine = getattr(codegen, "JITCodeLibrary", None), getattr(codegen, "JitEngine", None)
-    unserialize = codegen.CPUCodeLibrary.__dict__.get("_unserialize")
-    if library is None or engine is None or not isinstance(unserialize, classmethod):
-        return
-    if not all(hasattr(engine, a) for a in ("is_symbol_defined", "_load_defined_symbols")):
-        return
-    original_unserialize, original_defined = unserialize.__func__, engine.is_symbol_defined
-
-    class SharedModule:
-        """CPUCodeLibrary._shared_module, parsed from its bitcode when first read."""
-
-        def __get__(self, lib, owner=None):
-            if lib is None:
-                return self
-            value = lib.__dict__.get("_datmo_shared", lib.__dict__.get("_shared_module"))
-            if isinstance(value, bytes):
-                value = lib.__dict__["_datmo_shared"] = ll.parse_bitcode(value)
-                lib._codegen._engine._load_defined_symbols(value)
-            return value
-
-        def __set__(self, lib, value) -> None:
-            lib.__dict__["_datmo_shared"] = value
-
-    def _unserialize(cls, codegen_, state):
-        name, kind, data = state
-        entry = getattr(_DEFER, "entry", None)
-        if kind != "object" or entry is None or not issubclass(cls, library):
-            return original_unserialize(cls, codegen_, state)
-        object_code, shared_bitcode = data
-        self = codegen_.create_library(name)
-        self.enable_object_caching()
-        self._set_compiled_object(object_code)
-        self._shared_module = bytes(shared_bitcode)  # parsed when first read (SharedModule)
-        self._finalize_final_module()
-        ee = self._codegen._engine
-        ee.__dict__.setdefault("_datmo_pending", []).append(self)
-        ee._defined_symbols.add(entry)
-        return self
-
-    def is_symbol_defined(self, name):
-        pending = self.__dict__.get("_datmo_pending")
-        while pending and name not in self._defined_symbols:
-            _ = pending.pop()._shared_module  # parses it, recording its symbols
-        return original_defined(self, name)
-
-    codegen.CPUCodeLibrary._shared_module = SharedModule()
-    codegen.CPUCodeLibrary._unserialize = classmethod(_unserialize)
-    engine.is_symbol_defined = is_symbol_defined
-
-
-@contextmanager
-def _blas_alone() -> Iterator[None]:
-    """scipy.linalg.cython_blas loaded on its own for the block when numba.np.arraymath, which imports it
-    to check for BLAS, is yet to be imported and scipy.linalg is not; forgotten after it."""
-    if "numba.np.arraymath" in sys.modules or "scipy.linalg" in sys.modules:
-        yield
-        return
-    loaded = _load_blas_alone()
-    try:
-        yield
-    finally:
-        if loaded is not None and sys.modules.get(BLAS) is loaded and "scipy.linalg" not in sys.modules:
-            del sys.modules[BLAS]
-
-
-def _load_blas_alone():
-    """scipy.linalg.cython_blas loaded without its package (registered in sys.modules), or None when scipy
-    is missing or the module cannot be found or loaded that way (numba then checks as it always does)."""
-    import importlib.machinery
-    import importlib.util
-    from pathlib import Path
-
-    try:
-        spec = importlib.util.find_spec("scipy")
-        if spec is None or not spec.submodule_search_locations:
-            return None
-        folder = Path(next(iter(spec.submodule_search_locations))) / "linalg"
-        for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-            path = folder / f"cython_blas{suffix}"
-            if path.is_file():
-                break
-        else:
-            return None
-        blas_spec = importlib.util.spec_from_file_location(BLAS, path)
-        module = importlib.util.module_from_spec(blas_spec)
-        sys.modules[BLAS] = module
-        blas_spec.loader.exec_module(module)
-        return module
-    except Exception:  # any failure: numba imports scipy.linalg as usual
-        sys.modules.pop(BLAS, None)
-        return None
 
 
 def _cache_folder(folder: str) -> str:

@@ -190,3 +190,22 @@ def test_warm_up_says_it_compiled_when_the_cache_was_stale(monkeypatch):
     result = CliRunner().invoke(cli, ["warm-up"])
     assert result.exit_code == 0, result.output
     assert "compiled the numba kernels in" in result.output and len(steps) == 1
+
+
+def test_a_first_run_in_one_process_compiles_only_the_kernels_it_runs(monkeypatch, tmp_path):
+    """With one input and one process, `datmo run` does not warm up every kernel of the pipeline (the simulator,
+    scan matching, the markers, the patrol scene) when the cache looks stale: the run compiles what it runs."""
+    from click.testing import CliRunner
+
+    from datmo_cli import numba_runtime, pipeline
+    from datmo_cli.cli import cli
+
+    log = tmp_path / "one.mcap"
+    assert CliRunner().invoke(cli, ["simulate", "--scene", "hall", "--duration", "0.2", "-o", str(log)]).exit_code == 0
+    warmed = []
+    monkeypatch.setattr(numba_runtime, "cache_looks_stale", lambda: True)
+    monkeypatch.setattr(numba_runtime, "_SAID", False)
+    monkeypatch.setattr(pipeline, "warm_up", lambda progress=None: warmed.append(progress))
+    result = CliRunner().invoke(cli, ["run", str(log), "-o", str(tmp_path / "out"), "--no-report"])
+    assert result.exit_code == 0, result.output
+    assert warmed == [] and (tmp_path / "out" / "one.mcap").is_file()

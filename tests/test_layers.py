@@ -7,8 +7,8 @@ modules import each other in a circle (not even within a layer, nor through a fu
                of the core packages' parameter sections)
     core       perception, tracking, sim, lms2xx (each importing only itself, log and base), above log
     log        datmo_cli.log.* (importing only itself and base)
-    base       errors, extras, outputs, input_files, bounds, numba_runtime, progress, csvsafe, text, toml_text and the
-               package itself (__version__): usable by every layer, importing only base
+    base       errors, extras, outputs, input_files, bounds, numba_runtime, numba_light, progress, csvsafe, text,
+               toml_text and the package itself (__version__): usable by every layer, importing only base
 
 Only the CLI layer imports click (at the top or inside a function): the layers below it take plain values,
 and what a command shares with them (--quiet, ./datmo.toml picked up) reaches them through
@@ -34,6 +34,7 @@ BASE = {
     "input_files",
     "bounds",
     "numba_runtime",
+    "numba_light",
     "progress",
     "csvsafe",
     "text",

@@ -62,12 +62,14 @@ def one_scan_log(path: Path, tracks: bool = False) -> Path:
 
 
 def _light() -> bool:
-    from datmo_cli.numba_runtime import light_loading
+    from datmo_cli.numba_light import light_loading
 
     return light_loading()
 
 
-LIGHT = pytest.mark.skipif(not _light(), reason="this numba release loads datmo's kernels numba's way (LIGHT_NUMBA)")
+LIGHT = pytest.mark.skipif(
+    not _light(), reason="this numba release loads datmo's kernels numba's way (numba_light.NUMBA_RANGE)"
+)
 
 
 @pytest.mark.parametrize(

@@ -160,7 +160,7 @@ def _plots(batch: Batch, force: bool, bag_dir: bool) -> dict[str, Path]:
 
 def _executor(batch: Batch, scheduler: str | None, jobs: int | None, retries: int):
     """The executor of the batch: a Dask one on `scheduler`, else `jobs` local processes (the kernels warmed up
-    first when there is a pool, or a first run to say)."""
+    first when there is a pool)."""
     from ..batch import LocalExecutor
 
     if scheduler is not None and batch.tasks:
@@ -168,8 +168,9 @@ def _executor(batch: Batch, scheduler: str | None, jobs: int | None, retries: in
 
         return DaskExecutor(scheduler, retries=retries)
     executor = LocalExecutor(jobs)
-    if batch.tasks and (min(executor.workers, len(batch.tasks)) > 1 or _compiling()):
-        warm_up()  # a pool, or a first run to say; else one process loads just the kernels it uses
+    if batch.tasks and min(executor.workers, len(batch.tasks)) > 1:
+        warm_up()  # a pool: compiled (or loaded) once before the workers fork
+    # else one process compiles or loads just the kernels it runs (the line saying so came first)
     return executor
 
 
@@ -243,13 +244,6 @@ def gather_report(
         if on_plot is not None:
             on_plot(line)
     return (summaries if report or drawn else None), drawn
-
-
-def _compiling() -> bool:
-    """Whether the kernels look uncompiled (numba_runtime.cache_looks_stale: a few ms, no numba import)."""
-    from ..numba_runtime import cache_looks_stale
-
-    return cache_looks_stale()
 
 
 def warm_up() -> None:
