@@ -294,6 +294,8 @@ def _load_blas_alone():
         else:
             return None
         blas_spec = importlib.util.spec_from_file_location(BLAS, path)
+        if blas_spec is None or blas_spec.loader is None:
+            return None
         module = importlib.util.module_from_spec(blas_spec)
         sys.modules[BLAS] = module
         blas_spec.loader.exec_module(module)
