@@ -218,19 +218,18 @@ def circle_posed(x, y, idx, m, a, b, r, p, dalpha, lines_rss=-1.0) -> bool:
         if m < cover * span / dalpha:
             return False
     ratio = p[P_RES_RATIO]
-    if ratio > 0.0:
-        cx, cy, sxx, syy, sxy = scatter(x, y, idx, m)
-        rc = 0.0
+    by_lines = p[P_LINES_RATIO] > 0.0 and lines_rss >= 0.0
+    rc = 0.0  # the circle's sum of squared residuals, computed once for both tests
+    if ratio > 0.0 or by_lines:
         for k in range(m):
             rc += (np.hypot(x[idx[k]] - a, y[idx[k]] - b) - r) ** 2
+    if ratio > 0.0:
+        cx, cy, sxx, syy, sxy = scatter(x, y, idx, m)
         # the smallest eigenvalue of the scatter matrix: the line's sum of squared residuals
         rl = 0.5 * (sxx + syy) - np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
         if np.sqrt(rc) > ratio * np.sqrt(max(rl, 0.0)):
             return False
-    if p[P_LINES_RATIO] > 0.0 and lines_rss >= 0.0:
-        rc = 0.0
-        for k in range(m):
-            rc += (np.hypot(x[idx[k]] - a, y[idx[k]] - b) - r) ** 2
+    if by_lines:
         if np.sqrt(rc) > p[P_LINES_RATIO] * np.sqrt(lines_rss):
             return False
     return True
