@@ -343,8 +343,8 @@ def line_of_run(x, y, s, e, theta_t, rho_p, votes, rho_res, idx, out) -> None:
     # r_acc: the peak cell's votes, or the points in a cell-wide band centred on the fitted line if more
     on = 0
     for k in range(m):
-        i = np.uint64(idx[k])
-        if abs(x[i] * c + y[i] * sn - rho) <= 0.5 * rho_res:
+        ui = np.uint64(idx[k])
+        if abs(x[ui] * c + y[ui] * sn - rho) <= 0.5 * rho_res:
             on += 1
     out[LC_N] = m
     out[LC_RACC] = max(votes, on) / (e - s)
