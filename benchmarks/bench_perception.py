@@ -1,11 +1,15 @@
 """Perception speed (make bench): segmentation, features, landmarks and `datmo features`' encoding on the
 361-beam hall log tiled to 20,000 scans, one core, after warm-up, beside the plain MCAP read speed of the
 same file (targets: segmentation >= 200,000 scans/s, segmentation + full feature extraction >= 20,000
-scans/s); and the start-up time of a fresh process that extracts the features of 10 scans, with a cold
-numba cache and on the second run (cache hit, no recompilation)."""
+scans/s); the start-up time of a fresh process that extracts the features of 10 scans, with a cold
+numba cache and on the second run (cache hit, no recompilation); and the paper's-rule perception (segmentation,
+lines, circles, blobs; no leg detector, no landmarks) on the CARMEN csail, intel and freiburg-079 logs beside
+the code of START, the commit the third speed round started from, measured in the same run (issue 34's target:
+about 0.4x of START's time; the leg detector's share is bench_legs' and bench_perception_cores')."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -23,6 +27,11 @@ from datmo_cli.stages import derive_features
 
 ROOT = Path(__file__).resolve().parent.parent
 HALL = ROOT / "sample_logs" / "hall.mcap"
+CARMEN = ROOT.parent / "shared" / "data" / "carmen"
+CARMEN_LOGS = ("csail", "intel", "freiburg-079")
+CACHE = Path(tempfile.gettempdir()) / "datmo-bench"
+START = "a932713"  # the code the third speed round (issue 34) started from
+ROUNDS = 3  # START's and this code's child processes, interleaved; the best of each
 N_SCANS = 20_000
 SEGMENT_TARGET = 200_000  # scans/s
 FEATURES_TARGET = 20_000  # scans/s, segmentation + lines, circles, blobs and landmarks
@@ -77,6 +86,98 @@ def one_core() -> set[int] | None:
     before = os.sched_getaffinity(0)
     os.sched_setaffinity(0, {min(before)})
     return before
+
+
+# A child process timing the paper's-rule perception (no leg detector, no landmarks) on each CARMEN log saved
+# as .npz in argv[1]: CPU time of the one thread (the machine may be shared), best of argv[2] calls, µs/scan.
+CARMEN_CODE = """
+import json, sys, time
+import numpy as np
+from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.perception.features import extract_run
+from datmo_cli.perception.params import FeatureParams
+from datmo_cli.perception.threads import set_default
+set_default(1)
+p = FeatureParams(leg_model="paper")
+out = {}
+for name in sys.argv[3:]:
+    d = np.load(f"{sys.argv[1]}/{name}.npz")
+    a = d["geometry"]
+    g = ScanGeometry(a[0], a[1], int(a[2]), a[3], a[4], a[5], a[6], str(d["frame_id"]))
+    run = ScanRun(d["stamps"], d["ranges"], g)
+    extract_run(ScanRun(run.stamps[:20], run.ranges[:20], g), p, landmarks=False)
+    best = float("inf")
+    for _ in range(int(sys.argv[2])):
+        t0 = time.thread_time()
+        extract_run(run, p, landmarks=False)
+        best = min(best, time.thread_time() - t0)
+    out[name] = 1e6 * best / len(run)
+print(json.dumps(out))
+"""
+
+
+def start_tree() -> Path | None:
+    """A git worktree of START beside the bench logs (made once), or None without git."""
+    tree = CACHE / f"datmo-{START}"
+    if (tree / "datmo_cli").exists():
+        return tree
+    done = subprocess.run(
+        ["git", "-C", str(ROOT), "worktree", "add", "--detach", "-f", str(tree), START], capture_output=True
+    )
+    return tree if done.returncode == 0 else None
+
+
+def carmen_npz() -> list[str]:
+    """The CARMEN logs present, each imported once into CACHE as .npz (stamps, ranges, geometry)."""
+    from datmo_cli.log.importers import import_log
+
+    names = []
+    for name in CARMEN_LOGS:
+        src, dst = CARMEN / f"{name}-corrected.log.gz", CACHE / f"carmen-{name}.npz"
+        if not dst.exists() and src.exists():
+            CACHE.mkdir(parents=True, exist_ok=True)
+            run = import_log(src).run
+            g = run.geometry
+            geometry = [g.angle_min, g.angle_increment, g.n_beams, g.range_min, g.range_max]
+            geometry += [g.time_increment, g.scan_time]
+            np.savez(dst, stamps=run.stamps, ranges=run.ranges, geometry=geometry, frame_id=g.frame_id)
+        if dst.exists():
+            names.append(f"carmen-{name}")
+    return names
+
+
+def carmen_us_per_scan(tree: Path, names: list[str], repeat: int = 3) -> dict[str, float] | None:
+    """µs/scan (CPU, one thread) of `tree`'s perception on each of `names` (see CARMEN_CODE), in a fresh
+    process with `tree` first on the path; None when it cannot run here."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    cmd = [sys.executable, "-c", CARMEN_CODE, str(CACHE), str(repeat), *names]
+    done = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=tree)
+    return json.loads(done.stdout.strip().splitlines()[-1]) if done.returncode == 0 else None
+
+
+def carmen_vs_start() -> list[str]:
+    """The paper's-rule perception on the CARMEN logs, this code beside START's, interleaved in ROUNDS pairs of
+    child processes (the best of each): one line a log."""
+    names = carmen_npz()
+    if not names:
+        return [f"CARMEN logs absent under {CARMEN}: not measured"]
+    tree = start_tree()
+    if tree is None:
+        return [f"no git worktree of {START} could be made: the CARMEN figures are not measured"]
+    old: dict[str, float] = {}
+    new: dict[str, float] = {}
+    for _ in range(ROUNDS):
+        for tree_, best in ((tree, old), (ROOT, new)):
+            got = carmen_us_per_scan(tree_, names)
+            if got is None:
+                return [f"the perception of {tree_} did not run on the CARMEN logs"]
+            for k, v in got.items():
+                best[k] = min(best.get(k, v), v)
+    return [
+        f"{k.removeprefix('carmen-')}: {new[k]:.1f} µs/scan, {START}'s {old[k]:.1f} in the same run: "
+        f"{new[k] / old[k]:.2f}x (paper's rule, no leg detector; target about 0.4x)"
+        for k in names
+    ]
 
 
 def main() -> None:
@@ -137,6 +238,7 @@ def main() -> None:
             f"  with an empty NUMBA_CACHE_DIR: {t_cold:.2f} s first (compiles), {t_second_fresh_dir:.2f} s second",
         ],
     )
+    print_lines(f"Perception on CARMEN logs (one thread, CPU time), beside {START}", carmen_vs_start())
 
 
 if __name__ == "__main__":

@@ -101,6 +101,8 @@ CHECKS: dict[str, str] = {
     "perception.hough_circles.circle_of_run": (
         "test_perception_kernels.py::test_circle_votes_equal_the_reference_window"
     ),
+    "perception.hough_circles.ring_count": "test_perception_speedups.py::test_ring_count_equals_hypot_on_every_point",
+    "perception.scan_extractor._lines_rss": "test_perception_speedups.py::test_lines_rss_equals_the_per_point_sum",
     "perception.segmentation.segment_block": f"{HERE}::test_segment_block",
     "perception.hough_lines.scatter": f"{HERE}::test_scatter",
     "perception.hough_lines._one_line": f"{HERE}::test_one_line",

@@ -231,20 +231,34 @@ def _leg_rows(
     return rows
 
 
+def _row_buffers(n: int, B: int) -> tuple[np.ndarray, ...]:
+    """The kernels' row buffers for blocks of up to n scans of B beams: segments (n B, 2), lines (n B, 13),
+    circles and blobs (n B, 9). empty, not zeros: only the rows the kernel fills are read; made once a run,
+    so the pages a block writes are mapped once, not once a block."""
+    rows = n * B  # a scan has at most B segments, lines, circles and blobs (disjoint beam ranges)
+    return tuple(np.empty((rows, c), np.int64 if c == 2 else np.float64) for c in (2, 13, 9, 9))
+
+
 def _extract_block(
-    block: np.ndarray, args: tuple, given: np.ndarray, given_off: np.ndarray, threads: int
+    block: np.ndarray,
+    args: tuple,
+    given: np.ndarray,
+    given_off: np.ndarray,
+    threads: int,
+    buffers: tuple[np.ndarray, ...] | None = None,
 ) -> tuple[np.ndarray, ...]:
     """The perception kernels on one block of scans (ranges (n, B), m; `args` the kernels' geometry and
     parameters: cos_a, sin_a, cos_inc, c1, range_min, range_max, params vector, cos_t, sin_t) on `threads`
     threads (a threads.resolve()d count): (segments (S, 2) beam ranges [start, end), segments per scan (n,),
     line rows (L, 13), circle rows (C, 9), blob rows (Cb, 9)) in scan order, column 0 the scan in the block.
-    Each scan's rows are written to its own stretch of B rows, so the result is the same for any `threads`."""
+    Each scan's rows are written to its own stretch of B rows, so the result is the same for any `threads`.
+    `buffers`: _row_buffers of at least n scans to write into (made here when None)."""
     from . import threads as T
 
     n, B = block.shape
-    rows = n * B  # a scan has at most B segments, lines, circles and blobs (disjoint beam ranges)
-    # empty, not zeros: only the rows the kernel fills are read
-    seg, lines, circles, blobs = (np.empty((rows, c), np.int64 if c == 2 else np.float64) for c in (2, 13, 9, 9))
+    if buffers is None or len(buffers[0]) < n * B:
+        buffers = _row_buffers(n, B)
+    seg, lines, circles, blobs = (b[: n * B] for b in buffers)
     counts = np.zeros((n, 4), np.int64)
     threads = T.for_scans(threads, n)
     if threads > 1:
@@ -306,6 +320,7 @@ def extract_run(
     segs, seg_counts, parts = [], [], {"l": [], "c": [], "b": [], "g": []}
     n_threads = T.resolve(threads)
     args = (cos_a, sin_a, cos_inc, c1, lo, hi, vec, cos_t, sin_t)
+    buffers = _row_buffers(min(N, BLOCK), B) if N and B else None
     for a in range(0, N, BLOCK):
         block = ranges[a : a + BLOCK]
         n = len(block)
@@ -315,7 +330,7 @@ def extract_run(
         else:
             block_given, block_off = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
         if B:
-            seg, count, lines, circles, blobs = _extract_block(block, args, block_given, block_off, n_threads)
+            seg, count, lines, circles, blobs = _extract_block(block, args, block_given, block_off, n_threads, buffers)
         else:
             seg, count = np.zeros((0, 2), np.int64), np.zeros(n, np.int64)
             lines, circles, blobs = np.zeros((0, 13)), np.zeros((0, 9)), np.zeros((0, 9))

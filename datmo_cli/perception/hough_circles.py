@@ -75,6 +75,32 @@ def fit_circle(x, y, idx, m, a, b, r):
 
 
 @njit(cache=True)
+def ring_count(x, y, s, e, ca, cb, d_lo, d_hi) -> int:
+    """How many points of [s, e) lie at a distance d (np.hypot) from (ca, cb) with d_lo <= d <= d_hi (m).
+
+    The same count as testing np.hypot on every point, most points decided on the squared distance alone: the
+    squared bounds are narrowed (and widened) by a relative 1e-9, far beyond the few ulps by which hypot and
+    the square root of the sum of squares can differ, and hypot decides the points between them."""
+    in_lo = (d_lo * (1.0 + 1e-9)) ** 2 if d_lo > 0.0 else -1.0
+    out_lo = (d_lo * (1.0 - 1e-9)) ** 2 if d_lo > 0.0 else -1.0
+    in_hi = (d_hi * (1.0 - 1e-9)) ** 2 if d_hi > 0.0 else -1.0
+    out_hi = (d_hi * (1.0 + 1e-9)) ** 2 if d_hi > 0.0 else 0.0
+    n = 0
+    for i in range(s, e):
+        u = np.uint64(i)  # an unsigned index: numba drops its negative-index wrapping
+        dx = x[u] - ca
+        dy = y[u] - cb
+        d2 = dx * dx + dy * dy
+        if in_lo < d2 < in_hi:
+            n += 1
+        elif out_lo <= d2 <= out_hi:
+            d = np.hypot(dx, dy)
+            if d_lo <= d <= d_hi:
+                n += 1
+    return n
+
+
+@njit(cache=True)
 def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     """HTC on points [s, e): centre estimated from P_ini, P_near (nearest the scanner) and P_end, votes over
     (a, b) in a window around it for each radius the arc allows, peak, then a least-squares fit over the
@@ -139,11 +165,7 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
         cb = my + ny * h
         # at most `most` votes in any cell of this window: a point votes only within [r - tol, r + tol] of a
         # cell centre, and the cell centres lie within `reach` of (ca, cb)
-        most = 0
-        for i in range(s, e):
-            dc = np.hypot(x[i] - ca, y[i] - cb)
-            if r - tol - reach <= dc <= r + tol + reach:
-                most += 1
+        most = ring_count(x, y, s, e, ca, cb, r - tol - reach, r + tol + reach)
         if most <= best or most / n <= beat:
             continue  # this radius can neither take the peak (ties go to the earlier radius) nor be kept
         for ia in range(size):
@@ -152,16 +174,18 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
         lo2 = max(r - tol, 0.0) ** 2
         hi2 = (r + tol) ** 2
         for i in range(s, e):
+            xi = x[np.uint64(i)]  # unsigned indices: numba drops its negative-index wrapping
+            yi = y[np.uint64(i)]
             for ia in range(size):
-                dx = x[i] - (ca + (ia - w) * cell)
+                dx = xi - (ca + (ia - w) * cell)
                 dx2 = dx * dx
                 if dx2 > hi2:
                     continue
+                row = cacc[np.uint64(ia)]
                 for ib in range(size):
-                    dy = y[i] - (cb + (ib - w) * cell)
+                    dy = yi - (cb + (ib - w) * cell)
                     d2 = dx2 + dy * dy
-                    if lo2 <= d2 <= hi2:
-                        cacc[ia, ib] += 1
+                    row[np.uint64(ib)] += np.int32((lo2 <= d2) & (d2 <= hi2))  # no branch: a vote is 0 or 1
         for ia in range(size):
             for ib in range(size):
                 v = cacc[ia, ib]
@@ -218,19 +242,18 @@ def circle_posed(x, y, idx, m, a, b, r, p, dalpha, lines_rss=-1.0) -> bool:
         if m < cover * span / dalpha:
             return False
     ratio = p[P_RES_RATIO]
-    if ratio > 0.0:
-        cx, cy, sxx, syy, sxy = scatter(x, y, idx, m)
-        rc = 0.0
+    by_lines = p[P_LINES_RATIO] > 0.0 and lines_rss >= 0.0
+    rc = 0.0  # the circle's sum of squared residuals, computed once for both tests
+    if ratio > 0.0 or by_lines:
         for k in range(m):
             rc += (np.hypot(x[idx[k]] - a, y[idx[k]] - b) - r) ** 2
+    if ratio > 0.0:
+        cx, cy, sxx, syy, sxy = scatter(x, y, idx, m)
         # the smallest eigenvalue of the scatter matrix: the line's sum of squared residuals
         rl = 0.5 * (sxx + syy) - np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
         if np.sqrt(rc) > ratio * np.sqrt(max(rl, 0.0)):
             return False
-    if p[P_LINES_RATIO] > 0.0 and lines_rss >= 0.0:
-        rc = 0.0
-        for k in range(m):
-            rc += (np.hypot(x[idx[k]] - a, y[idx[k]] - b) - r) ** 2
+    if by_lines:
         if np.sqrt(rc) > p[P_LINES_RATIO] * np.sqrt(lines_rss):
             return False
     return True

@@ -66,11 +66,18 @@ def normal_cells(x, y, s, e, nt, cell) -> None:
     for i in range(s, e):
         a = max(s, i - 3)
         b = min(e - 1, i + 3)
-        while (x[b] - x[a]) ** 2 + (y[b] - y[a]) ** 2 < 0.04 and (a > max(s, i - 10) or b < min(e - 1, i + 10)):
+        a_min = max(s, i - 10)
+        b_max = min(e - 1, i + 10)
+        # unsigned indices (a, b >= s >= 0): numba drops its negative-index wrapping from the loop
+        ua = np.uint64(a)
+        ub = np.uint64(b)
+        while (x[ub] - x[ua]) ** 2 + (y[ub] - y[ua]) ** 2 < 0.04 and (a > a_min or b < b_max):
             a = max(s, a - 1)
             b = min(e - 1, b + 1)
-        phi = _wrap_pi(_atan2(y[b] - y[a], x[b] - x[a]) + np.pi / 2)
-        cell[i] = min(int(phi * nt / np.pi), nt - 1)
+            ua = np.uint64(a)
+            ub = np.uint64(b)
+        phi = _wrap_pi(_atan2(y[ub] - y[ua], x[ub] - x[ua]) + np.pi / 2)
+        cell[np.uint64(i)] = min(int(phi * nt / np.pi), nt - 1)
 
 
 @njit(cache=True)
@@ -97,15 +104,16 @@ def _vote(xi, yi, acc, lo, touched, box, cos_t, sin_t, cells, peak):
             t += nt
         elif t >= nt:
             t -= nt
-        if not touched[t]:
-            touched[t] = True
-            lo[t] = _row_offset(box, cos_t[t], sin_t[t])
-        ri = int((xi * cos_t[t] + yi * sin_t[t] - lo[t]) * inv_res)
+        u = np.uint64(t)  # an unsigned index: numba drops its negative-index wrapping (t >= 0 here)
+        if not touched[u]:
+            touched[u] = True
+            lo[u] = _row_offset(box, cos_t[u], sin_t[u])
+        ri = int((xi * cos_t[u] + yi * sin_t[u] - lo[u]) * inv_res)
         if ri < 0:
             ri = 0
         elif ri >= width:
             ri = width - 1
-        j = t * width + ri
+        j = np.uint64(t * width + ri)
         v = acc[j] + 1
         acc[j] = v
         if v > bv:
@@ -206,15 +214,18 @@ def line_subsegments(x, y, s, e, hough, cos_t, sin_t, rho_res, k, cell, runs, hi
     start = s
     off = 0
     for i in range(s, e):
-        bv, bt, br = _vote(x[i], y[i], acc, lo, touched, box, cos_t, sin_t, (inv, width, cell[i], k), (bv, bt, br))
+        ui = np.uint64(i)  # unsigned indices: no negative-index wrapping (see _vote)
+        xi = x[ui]
+        yi = y[ui]
+        bv, bt, br = _vote(xi, yi, acc, lo, touched, box, cos_t, sin_t, (inv, width, cell[ui], k), (bv, bt, br))
         hist[i - s, 0] = bv
         hist[i - s, 1] = bt
         hist[i - s, 2] = br
         if i - start >= 4:
-            t = bt
+            t = np.uint64(bt)
             rho_p = lo[t] + (br + 0.5) * rho_res
             # off the peak's line by more than two cells (one cell either way of the cell's quantisation)
-            if abs(x[i] * cos_t[t] + y[i] * sin_t[t] - rho_p) > 2.0 * rho_res:
+            if abs(xi * cos_t[t] + yi * sin_t[t] - rho_p) > 2.0 * rho_res:
                 off += 1
             else:
                 off = 0
@@ -260,16 +271,18 @@ def scatter(x, y, idx, m):
     cx = 0.0
     cy = 0.0
     for k in range(m):
-        cx += x[idx[k]]
-        cy += y[idx[k]]
+        i = np.uint64(idx[k])  # an unsigned index: no negative-index wrapping (see _vote)
+        cx += x[i]
+        cy += y[i]
     cx /= m
     cy /= m
     sxx = 0.0
     syy = 0.0
     sxy = 0.0
     for k in range(m):
-        dx = x[idx[k]] - cx
-        dy = y[idx[k]] - cy
+        i = np.uint64(idx[k])
+        dx = x[i] - cx
+        dy = y[i] - cy
         sxx += dx * dx
         syy += dy * dy
         sxy += dx * dy
@@ -297,7 +310,8 @@ def line_of_run(x, y, s, e, theta_t, rho_p, votes, rho_res, idx, out) -> None:
     sn = np.sin(theta_t)
     m = 0
     for i in range(s, e):
-        if abs(x[i] * c + y[i] * sn - rho_p) <= rho_res:
+        ui = np.uint64(i)  # unsigned indices here and below: no negative-index wrapping (see _vote)
+        if abs(x[ui] * c + y[ui] * sn - rho_p) <= rho_res:
             idx[m] = i
             m += 1
     out[LC_N] = m
@@ -313,12 +327,14 @@ def line_of_run(x, y, s, e, theta_t, rho_p, votes, rho_res, idx, out) -> None:
     # quantisation leaves the far ends outside the peak cell, though they lie on the line
     m2 = 0
     for i in range(s, e):
-        if abs(x[i] * c + y[i] * sn - rho) <= rho_res:
+        ui = np.uint64(i)
+        if abs(x[ui] * c + y[ui] * sn - rho) <= rho_res:
             m2 += 1
     if m2 > m:
         m = 0
         for i in range(s, e):
-            if abs(x[i] * c + y[i] * sn - rho) <= rho_res:
+            ui = np.uint64(i)
+            if abs(x[ui] * c + y[ui] * sn - rho) <= rho_res:
                 idx[m] = i
                 m += 1
         theta, rho = fit_line(x, y, idx, m)
@@ -327,7 +343,8 @@ def line_of_run(x, y, s, e, theta_t, rho_p, votes, rho_res, idx, out) -> None:
     # r_acc: the peak cell's votes, or the points in a cell-wide band centred on the fitted line if more
     on = 0
     for k in range(m):
-        if abs(x[idx[k]] * c + y[idx[k]] * sn - rho) <= 0.5 * rho_res:
+        ui = np.uint64(idx[k])
+        if abs(x[ui] * c + y[ui] * sn - rho) <= 0.5 * rho_res:
             on += 1
     out[LC_N] = m
     out[LC_RACC] = max(votes, on) / (e - s)

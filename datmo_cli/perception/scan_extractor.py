@@ -193,12 +193,31 @@ def _circle_case(x, y, s, e, p, ncand, cand, cidx):
     return try_circle, leg_only
 
 
+@njit(cache=True)
+def _lines_rss(x, y, idx, m, cand, cidx, ncand, trig) -> float:
+    """Sum over the points idx[:m] of the squared distance to the nearest of the ncand lines cand[cidx[:ncand]]
+    (LC_* rows: theta rad, rho m). trig: scratch of at least 2 ncand, each line's cos and sin (computed once
+    a line, not once a point and line: the same values, so the same sum)."""
+    for j in range(ncand):
+        c = cand[cidx[j]]
+        trig[2 * j] = np.cos(c[LC_THETA])
+        trig[2 * j + 1] = np.sin(c[LC_THETA])
+    rss = 0.0
+    for q in range(m):
+        i = idx[q]
+        dmin = np.inf
+        for j in range(ncand):
+            dmin = min(dmin, abs(x[i] * trig[2 * j] + y[i] * trig[2 * j + 1] - cand[cidx[j], LC_RHO]))
+        rss += dmin * dmin
+    return rss
+
+
 @njit(cache=True, inline="always")
 def _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha) -> bool:
     """HTC on the segment [s, e) (its circle in work's cout, CC_*): whether the circle beats the segment's
     ncand HTL lines (r_acc htl_racc together), holds like a line must (r_acc above line_min_racc) and is a
     well-posed arc (circle_posed; dalpha: the scan's angle step, rad)."""
-    _, _, _, _, _, cand, _, cidx, cout, _, _, _, _, cacc, idx, _, _ = work
+    _, _, _, _, _, cand, _, cidx, cout, hist, _, _, _, cacc, idx, _, _ = work
     min_racc = p[P_LINE_MIN_RACC]
     if e - s >= p[P_CIRCLE_MIN_POINTS]:
         circle_of_run(x, y, s, e, p, cacc, idx, cout, max(htl_racc, min_racc))
@@ -206,14 +225,8 @@ def _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha) -> bool:
         cout[CC_RACC] = 0.0
     lines_rss = -1.0  # the circle's points to the segment's HTL lines (two or more: a corner?)
     if ncand >= 2 and cout[CC_N] >= 3:
-        lines_rss = 0.0
-        for q in range(int(cout[CC_N])):
-            i = idx[q]
-            dmin = np.inf
-            for j in range(ncand):
-                c = cand[cidx[j]]
-                dmin = min(dmin, abs(x[i] * np.cos(c[LC_THETA]) + y[i] * np.sin(c[LC_THETA]) - c[LC_RHO]))
-            lines_rss += dmin * dmin
+        # hist (HTL's scratch, free once the segment's lines are made) holds the lines' cos and sin
+        lines_rss = _lines_rss(x, y, idx, int(cout[CC_N]), cand, cidx, ncand, hist.reshape(-1).view(np.float64))
     # idx[:n] still holds the points circle_of_run fitted
     return (
         cout[CC_RACC] > max(htl_racc, min_racc)
@@ -259,12 +272,11 @@ def _blob_row(row, x, y, scan, g, s, e) -> None:
     """A blob row (B_*) of segment g ([s, e)) of scan `scan`: a blob (or a point), centroid and largest extent."""
     sx = 0.0
     sy = 0.0
-    for i in range(s, e):
-        sx += x[i]
-        sy += y[i]
     far = s
     dmax = 0.0
-    for i in range(s, e):
+    for i in range(s, e):  # the centroid's sums and the first sweep in one pass
+        sx += x[i]
+        sy += y[i]
         d = (x[i] - x[s]) ** 2 + (y[i] - y[s]) ** 2
         if d > dmax:
             dmax = d
