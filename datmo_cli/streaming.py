@@ -9,9 +9,10 @@ scanner moves, the scans themselves while ego-motion is estimated (see `stream_o
 Blocks end right before the scan that would make them longer than the block size, so the messages a
 stage derived from a scan at the same stamp (a log's /datmo/features after its /scan) fall in that scan's
 block. Each channel's messages are written in log-time order (then channel order: the input's channels
-before derived ones), as a whole-run write would order them, but in chunks of their own (CHUNK_GROUPS), so
-the file holds a channel's messages of a stretch after another channel's of a later stretch: `blocks`
-reads the channels by their chunks' times (mcap_reader.iter_stretches), not by their places in the file.
+before derived ones), as a whole-run write would order them, but a window of log time at a time, a channel's
+after another's (log.mcap_chunks), so the file holds a channel's messages of a stretch after another
+channel's of a later stretch (within CHUNK_SECONDS): `blocks` reads the channels by their chunks' times
+(mcap_reader.iter_stretches), not by their places in the file.
 
 A log whose scan stamps go backwards or repeat is refused when it is opened (`StampOrder`), with the count
 and the first such scan: the tracker's time comes from the stamps, and `datmo import` puts such a log in
@@ -42,10 +43,11 @@ BLOCK_SCANS = 1024  # scans per block: large enough that per-block costs vanish,
 # message indexes (16 bytes a message, uncompressed, which Foxglove's indexed reader uses) are 0.3x of it.
 # On the 20,000-scan hall of benchmarks/bench_scale (level 9): chunks ending each block 1.70x, after 2 blocks
 # 1.16x, 4 or 8 blocks 1.01x; that log repeats every 300 scans, which chunks spanning blocks profit from as
-# real logs would not. CHUNK_SECONDS: chunks are cut in windows of log time (log.mcap_chunks), so the file
-# is in time order within 5 s without its index (docs/performance.md has the sizes); CHUNK_BLOCKS then has no
-# effect. A reader holds about CHUNK_SECONDS of the log in wait for the chunks of other channels.
-CHUNK_BYTES = 4 << 20
+# real logs would not. CHUNK_SECONDS: messages go in windows of log time into one stream of chunks of
+# CHUNK_BYTES (log.mcap_chunks), so the file is in time order within 5 s without its index; 32 MiB chunks keep
+# the output within 0-3 % of chunks by channel without the bound (4 MiB chunks in one stream: +11 % on a 5 Hz
+# log; docs/performance.md has the sizes); CHUNK_BLOCKS then has no effect.
+CHUNK_BYTES = 32 << 20
 CHUNK_LEVEL = 9
 CHUNK_BLOCKS = 4
 CHUNK_SECONDS = 5.0

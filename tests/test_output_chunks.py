@@ -1,6 +1,7 @@
-"""Outputs in chunks by channel (streaming.CHUNK_GROUPS): the same messages as the interleaved writing of
-before, each chunk holding one group's channels, readable in time order by mcap's own reader, and read back
-by `LogStream.blocks` into the same blocks whatever the reader's and the writer's block sizes."""
+"""Outputs in windows of log time (streaming.CHUNK_SECONDS), a channel's messages after another's in a window:
+the same messages as the interleaved writing of before, in one stream of chunks in time order, readable in
+time order by mcap's own reader, and read back by `LogStream.blocks` into the same blocks whatever the
+reader's and the writer's block sizes."""
 
 from __future__ import annotations
 
@@ -47,37 +48,68 @@ def test_grouped_chunks_hold_the_messages_of_the_interleaved_writing(tmp_path, m
         summary = reader.get_summary()
         assert summary is not None
         topics = {c.id: c.topic for c in summary.channels.values()}
-        alone = 0
-        for index in summary.chunk_indexes:
-            held = {topics[c] for c in index.message_index_offsets}
-            alone += len(held) == 1 or held <= set(streaming.CHUNK_GROUPS)
-        assert alone  # a channel of a dense stretch is chunked on its own (the others share one: mcap_chunks)
+        indexes = sorted(summary.chunk_indexes, key=lambda i: i.chunk_start_offset)
+        starts = [i.message_start_time for i in indexes]
+        assert starts == sorted(starts)  # one stream of chunks, in time order (mcap_chunks)
         assert len({c for i in summary.chunk_indexes for c in i.message_index_offsets}) == len(topics)
         stamps = [m.log_time for _, _, m in reader.iter_messages(log_time_order=True)]
     assert stamps == sorted(stamps) and len(stamps) == sum(len(s) for s, _ in a.messages.values())
 
 
-@pytest.mark.parametrize("log", ["patrol.mcap", "csail-excerpt.mcap"])
-def test_an_output_read_without_its_index_is_in_time_order_within_chunk_seconds(tmp_path, log) -> None:
-    """Read from start to end without the summary (a pipe, a cut download), no message of `datmo run`'s output
-    comes more than CHUNK_SECONDS of log time after a later one, and mcap's indexed reader still gives them all
-    in time order."""
+def file_order_lag(path: Path) -> tuple[int, list[int]]:
+    """(the most log time, ns, by which a message comes after a later one when `path` is read from start to end
+    without its summary, as a pipe or a cut download reads it; the stamps in that order)."""
     from mcap.records import Message
     from mcap.stream_reader import StreamReader
 
-    out = tmp_path / "out.mcap"
-    process_file(SAMPLES / log, out, force=True, markers=True, block_scans=50)
     latest, worst, stamps = None, 0, []
-    with open(out, "rb") as f:
+    with open(path, "rb") as f:
         for record in StreamReader(f).records:
             if isinstance(record, Message):
                 stamps.append(record.log_time)
                 latest = record.log_time if latest is None else max(latest, record.log_time)
                 worst = max(worst, latest - record.log_time)
+    return worst, stamps
+
+
+@pytest.mark.parametrize("log", ["patrol.mcap", "csail-excerpt.mcap"])
+def test_an_output_read_without_its_index_is_in_time_order_within_chunk_seconds(tmp_path, log) -> None:
+    """Read from start to end without the summary (a pipe, a cut download), no message of `datmo run`'s output
+    comes more than CHUNK_SECONDS of log time after a later one, across chunks too (small ones here), and mcap's
+    indexed reader still gives them all in time order."""
+    out = tmp_path / "out.mcap"
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(streaming, "CHUNK_BYTES", 64 << 10)
+        process_file(SAMPLES / log, out, force=True, markers=True, block_scans=50)
+    worst, stamps = file_order_lag(out)
     assert worst < streaming.CHUNK_SECONDS * 1e9
-    assert stamps != sorted(stamps) or log == "csail-excerpt.mcap"  # chunks by channel do stray, within the bound
+    assert stamps != sorted(stamps) or log == "csail-excerpt.mcap"  # a channel after another: within the bound
     with open(out, "rb") as f:
-        indexed = [m.log_time for _, _, m in make_reader(f).iter_messages(log_time_order=True)]
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None and len(summary.chunk_indexes) > 1
+        indexed = [m.log_time for _, _, m in reader.iter_messages(log_time_order=True)]
+    assert indexed == sorted(stamps)
+
+
+@pytest.mark.slow
+def test_a_ten_minute_output_read_in_file_order_is_within_chunk_seconds_of_time_order(tmp_path) -> None:
+    """A default `datmo run` output of a 10-minute simulated log (patrol, 5 Hz, 3,000 scans, 22 MB of messages),
+    read without its index: every message within CHUNK_SECONDS of time order, and every message there."""
+    from click.testing import CliRunner
+
+    from datmo_cli.cli import cli
+
+    log, out = tmp_path / "patrol.mcap", tmp_path / "out.mcap"
+    result = CliRunner().invoke(cli, ["simulate", "--scene", "patrol", "--duration", "600", "-o", str(log)])
+    assert result.exit_code == 0, result.output
+    process_file(log, out, force=True)
+    worst, stamps = file_order_lag(out)
+    assert 0 < worst < streaming.CHUNK_SECONDS * 1e9  # out of order (a channel after another), within bounds
+    assert stamps[-1] - stamps[0] > 599e9
+    with open(out, "rb") as f:
+        reader = make_reader(f)
+        indexed = [m.log_time for _, _, m in reader.iter_messages(log_time_order=True)]
     assert indexed == sorted(stamps)
 
 
@@ -88,7 +120,9 @@ def test_rosbags_reads_a_grouped_output_message_for_message_in_time_order(tmp_pa
     from rosbags.highlevel import AnyReader
 
     out = tmp_path / "out.mcap"
-    process_file(SAMPLES / "patrol.mcap", out, force=True, markers=True, block_scans=25)
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(streaming, "CHUNK_BYTES", 64 << 10)  # many chunks
+        process_file(SAMPLES / "patrol.mcap", out, force=True, markers=True, block_scans=25)
     with open(out, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()

@@ -261,7 +261,7 @@ class _CorruptChunk(Exception):
     pass
 
 
-MAX_CHUNK_BYTES = 256 << 20  # uncompressed bytes a chunk may declare: writers close a chunk at 1-4 MiB (datmo 1,
+MAX_CHUNK_BYTES = 256 << 20  # uncompressed bytes a chunk may declare: writers close a chunk at 1-32 MiB (datmo 1-32,
 # rosbag2 0.75) plus one message; a declared size beyond this is damage or a decompression bomb, never read
 
 
