@@ -1,5 +1,6 @@
-"""Threads that pay (make bench): `datmo run` and `datmo features` on the hall log tiled to 20,000 scans, on 2
-threads against 1 (`--threads`), in this process with a warm cache, interleaved, best of REPEAT each.
+"""Threads that pay (make bench): `datmo run` and `datmo features` on the hall simulated at 37.5 Hz for 20,025
+scans (benchmarks/hall_log: non-repeating), on 2 threads against 1 (`--threads`), in this process with a warm
+cache, interleaved, best of REPEAT each.
 
 Targets on two free cores: run >= 1.5x, features >= 1.6x. `run` on two threads perceives the next block on a
 thread of its own beside the tracking and writing of the current one (RunStages.pipelined); `features` runs its
@@ -12,10 +13,10 @@ import os
 import tempfile
 from pathlib import Path
 
-from benchmarks.bench_scale import long_log
 from benchmarks.common import best_of, print_lines
+from benchmarks.hall_log import HALL_SCANS, simulated_hall
 
-N = 20_000
+N = HALL_SCANS
 REPEAT = 2
 TARGETS = {"datmo run": 1.5, "datmo features": 1.6}
 
@@ -25,7 +26,7 @@ def main() -> None:
     from datmo_cli.pipeline import process_file, warm_up
     from datmo_cli.stage_files import features_file
 
-    src = long_log(N)
+    src = simulated_hall(N)
     warm_up()
     before = threads._DEFAULT
     lines = []
@@ -51,7 +52,7 @@ def main() -> None:
     finally:
         threads.set_default(before)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    lines.append(f"hall tiled to {N:,} scans; {threads.available()} threads available; load average {load:.2f}")
+    lines.append(f"simulated hall, {N:,} scans; {threads.available()} threads available; load average {load:.2f}")
     print_lines("Threads: 2 against 1", lines)
 
 

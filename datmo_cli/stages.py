@@ -94,8 +94,17 @@ class TrackedRun:
         counts = [len(t) for t in self.tracks]
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         parts = self.flat if sum(map(len, self.flat)) == offsets[-1] else self.tracks
-        items = np.concatenate(parts) if parts else np.zeros(0, TRACK_DTYPE)
-        return offsets, items
+        return offsets, join_tracks(parts)
+
+
+def join_tracks(parts: list[np.ndarray]) -> np.ndarray:
+    """Track element arrays concatenated: as bytes (np.concatenate of structured arrays costs ~20 µs each, and a
+    block's scans are a thousand of them), the same elements."""
+    if not parts:
+        return np.zeros(0, TRACK_DTYPE)
+    if not all(p.dtype is TRACK_DTYPE or p.dtype == TRACK_DTYPE for p in parts):
+        return np.concatenate(parts)
+    return np.concatenate([np.ascontiguousarray(p).view(np.uint8) for p in parts]).view(TRACK_DTYPE)
 
 
 def split_tracked(pieces: list[TrackedRun], n: int) -> tuple[TrackedRun, list[TrackedRun]]:

@@ -30,6 +30,10 @@ CHECKS: dict[str, str] = {
     "tracking._kernels.on_background": f"{HERE}::test_on_background",
     "tracking._kernels.tracks_on_background": f"{HERE}::test_tracks_on_background",
     "tracking._marker_kernels.marker_points": "test_tracking_markers.py::test_kernel_tails_equal_tail_segments",
+    "tracking._rts.smooth_rows": "test_tracking_hindsight.py::test_the_kernel_gives_the_references_bits",
+    "tracking._rts._gain": "test_tracking_hindsight.py::test_the_kernels_algebra_is_the_references",
+    "tracking._rts._mm": "test_tracking_hindsight.py::test_the_kernels_algebra_is_the_references",
+    "tracking._rts._noise": "test_tracking_hindsight.py::test_the_kernels_algebra_is_the_references",
     # tracking: the compiled step's phases, each run on the reference tracker's state (lockstep)
     "tracking._scan_measurements.paper_measurements": STEP_PHASES,
     "tracking._scan_measurements.learned_measurements": STEP_PHASES,

@@ -13,6 +13,8 @@ _assign.py) are checked against, phase by phase and run by run. Not part of the 
   `background_update`): loops over arrays, compiled with numba here for the speed of the run-long
   comparisons (plain Python under NUMBA_DISABLE_JIT=1); each is checked against the plain rules above.
 - `reference_measurements` (features to measurements) and `ReferenceTracker` (the whole scan).
+- Hindsight's fixed-lag RTS smoother as batched numpy (`reference_smooth`, with `rts_gains`, `rts_horizon` and
+  the written-out algebra `rts_mm`, `rts_mv`, `rts_solve_spd`, `rts_largest_eigenvalue_above`).
 
 Frames and units as datmo_cli/tracking/tracker.py says.
 """
@@ -38,7 +40,7 @@ from datmo_cli.log.vocabulary import (
     STATUS_CONFIRMED,
     STATUS_TENTATIVE,
 )
-from datmo_cli.tracking import _kernels
+from datmo_cli.tracking import _kernels, hindsight
 from datmo_cli.tracking.measurements import (
     KIND_BLOB,
     KIND_CIRCLE,
@@ -1881,3 +1883,161 @@ class ReferenceTracker:
         out["status"] = np.where(t.confirmed, np.where(t.hit, STATUS_CONFIRMED, STATUS_COASTING), STATUS_TENTATIVE)
         out["occluded"] = (t.occluded != 0) | (t.confirmed & ~t.hit & t.person)
         return out
+
+
+# ------------------------------------------------------- hindsight's fixed-lag RTS smoother (docs/method.md §6.3)
+# The batched numpy statements datmo_cli/tracking/_rts.smooth_rows was written from, in the same order of products
+# and sums: tests/test_tracking_hindsight.py checks the kernel against `reference_smooth` bit for bit.
+
+
+def rts_transition(dt: np.ndarray) -> np.ndarray:
+    """F of the constant-velocity model for steps of dt s: (n, 4, 4)."""
+    F = np.broadcast_to(np.eye(4), (len(dt), 4, 4)).copy()
+    F[:, 0, 2] = F[:, 1, 3] = dt
+    return F
+
+
+def rts_process_noise(dt: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Q of white-noise acceleration of spectral density q over dt s (as the tracker's predict): (n, 4, 4)."""
+    Q = np.zeros((len(dt), 4, 4))
+    qa, qb, qc = 0.25 * dt**4 * q, 0.5 * dt**3 * q, dt**2 * q
+    Q[:, 0, 0] = Q[:, 1, 1] = qa
+    Q[:, 0, 2] = Q[:, 2, 0] = Q[:, 1, 3] = Q[:, 3, 1] = qb
+    Q[:, 2, 2] = Q[:, 3, 3] = qc
+    return Q
+
+
+# The small batched matrix algebra below is written out in plain products and sums, in a fixed order: numpy's
+# matmul, einsum and linalg hand it to BLAS and LAPACK, which pick their code (FMA or not) by the CPU, and the
+# outputs must carry the same bits on every CPU (docs/reliability.md).
+
+
+def rts_mm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched matrix product (n, i, k) x (n, k, j) -> (n, i, j)."""
+    out = a[:, :, 0, None] * b[:, None, 0, :]
+    for k in range(1, a.shape[2]):
+        out = out + a[:, :, k, None] * b[:, None, k, :]
+    return out
+
+
+def rts_mv(a: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Batched matrix-vector product (n, i, k) x (n, k) -> (n, i)."""
+    out = a[:, :, 0] * x[:, None, 0]
+    for k in range(1, a.shape[2]):
+        out = out + a[:, :, k] * x[:, None, k]
+    return out
+
+
+def rts_solve_spd(m: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """X with m X = b for each of a batch of symmetric positive definite m (n, k, k) and b (n, k, j): Gaussian
+    elimination (no pivoting needed for such m), then back substitution."""
+    m, x = m.astype(np.float64, copy=True), b.astype(np.float64, copy=True)
+    size = m.shape[1]
+    for k in range(size):
+        for i in range(k + 1, size):
+            f = m[:, i, k] / m[:, k, k]
+            m[:, i, k:] -= f[:, None] * m[:, k, k:]
+            x[:, i, :] -= f[:, None] * x[:, k, :]
+    for i in reversed(range(size)):
+        acc = x[:, i, :].copy()
+        for j in range(i + 1, size):
+            acc -= m[:, i, j, None] * x[:, j, :]
+        x[:, i, :] = acc / m[:, i, i, None]
+    return x
+
+
+def rts_largest_eigenvalue_above(m: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    """Per symmetric m (n, k, k): whether its largest eigenvalue exceeds limit (n,), that is whether limit I - m is
+    not positive definite: a pivot of its elimination (no pivoting) is not positive."""
+    size = m.shape[1]
+    a = limit[:, None, None] * np.eye(size) - m
+    above = np.zeros(len(m), bool)
+    for k in range(size):
+        above |= ~(a[:, k, k] > 0)
+        pivot = np.where(above, 1.0, a[:, k, k])
+        for i in range(k + 1, size):
+            f = a[:, i, k] / pivot
+            a[:, i, k:] -= f[:, None] * a[:, k, k:]
+    return above
+
+
+def rts_gains(
+    t_ns: np.ndarray, state: np.ndarray, cov: np.ndarray, q: np.ndarray, nxt: np.ndarray, q_most: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The RTS terms of each row r that has a next row n (zeros elsewhere): the gain C_r = P_r F' Pp_n^-1 (n, 4, 4),
+    the prediction of n from r xp (n, 4), and its covariance Pp (n, 4, 4), stored at row n (xp, Pp) and r (C); and
+    the rows r whose next row is no Kalman step from r (a reset: a re-initialised or merged track), whose filtered
+    covariance exceeds the prediction's (an update never increases it), predicted with q_most (m/s²)²/Hz at
+    least, the largest q the tracker may have stepped with. q: each row's q for the step to its next row."""
+    C = np.zeros((len(t_ns), 4, 4))
+    xp, Pp = np.zeros((len(t_ns), 4)), np.zeros((len(t_ns), 4, 4))
+    r = np.flatnonzero(nxt >= 0)
+    if not len(r):
+        return C, xp, Pp, r
+    n = nxt[r]
+    dt = (t_ns[n] - t_ns[r]).astype(np.float64) * 1e-9
+    F = rts_transition(dt)
+    PFt = rts_mm(cov[r], np.transpose(F, (0, 2, 1)))
+    FPFt = rts_mm(F, PFt)
+    pred = FPFt + rts_process_noise(dt, q[r])
+    pred = 0.5 * (pred + np.transpose(pred, (0, 2, 1)))
+    # C = P F' pred^-1, by solving pred' C' = (P F')' (pred symmetric)
+    C[r] = np.transpose(rts_solve_spd(pred, np.transpose(PFt, (0, 2, 1))), (0, 2, 1))
+    xp[n] = rts_mv(F, state[r])
+    Pp[n] = pred
+    widest = FPFt + rts_process_noise(dt, np.maximum(q[r], q_most))
+    excess = 0.5 * (cov[n] + np.transpose(cov[n], (0, 2, 1))) - widest
+    reset = rts_largest_eigenvalue_above(excess, hindsight.RESET_TOLERANCE * np.trace(widest, axis1=1, axis2=2))
+    return C, xp, Pp, r[reset]
+
+
+def rts_horizon(t_ns: np.ndarray, nxt: np.ndarray, rows: np.ndarray, lag_ns: int) -> np.ndarray:
+    """For each of `rows`, the last row of its track stamped at most lag_ns after it (the smoother's start)."""
+    cur = rows.copy()
+    limit = t_ns[rows] + np.int64(lag_ns)
+    active = np.arange(len(rows))
+    while len(active):
+        n = nxt[cur[active]]
+        ok = n >= 0
+        ok[ok] = t_ns[n[ok]] <= limit[active[ok]]
+        active = active[ok]
+        cur[active] = n[ok]
+    return cur
+
+
+def reference_smooth(
+    t_ns: np.ndarray,
+    ids: np.ndarray,
+    state: np.ndarray,
+    cov: np.ndarray,
+    q: np.ndarray,
+    rows: np.ndarray,
+    lag_ns: int,
+    *,
+    covariance: bool = True,
+    q_most: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Fixed-lag RTS states of `rows`: each given its track's rows up to lag_ns after it, by the backward
+    recursion x_s(r) = x(r) + C_r (x_s(n) - xp(n)), P_s(r) = P(r) + C_r (P_s(n) - Pp(n)) C_r', started at that
+    horizon's filtered state. Every row of those tracks up to that horizon must be given (a track's rows end at
+    its death). A reset of a track (see `gains`; q_most as there) ends its chain as its death would. Returns
+    (states (len(rows), 4), covariances (len(rows), 4, 4), or None without `covariance`)."""
+    rows = np.asarray(rows, np.int64)
+    nxt, prv = hindsight.chains(ids, t_ns)
+    C, xp, Pp, reset = rts_gains(t_ns, state, cov, q, nxt, q_most)
+    prv[nxt[reset]] = -1  # a reset starts the track anew: nothing is smoothed across it
+    nxt[reset] = -1
+    cur = rts_horizon(t_ns, nxt, rows, lag_ns)
+    xs = state[cur].copy()
+    Ps = cov[cur].copy() if covariance else None
+    active = np.flatnonzero(cur != rows)
+    while len(active):
+        c = cur[active]
+        p = prv[c]
+        Cp = C[p]
+        xs[active] = state[p] + rts_mv(Cp, xs[active] - xp[c])
+        if Ps is not None:
+            Ps[active] = cov[p] + rts_mm(rts_mm(Cp, Ps[active] - Pp[c]), np.transpose(Cp, (0, 2, 1)))
+        cur[active] = p
+        active = active[p != rows[active]]
+    return xs, Ps

@@ -12,6 +12,7 @@ import pytest
 from datmo_cli.log.vocabulary import CLASS_PERSON, CLASS_UNKNOWN, STATUS_CONFIRMED, STATUS_TENTATIVE
 from datmo_cli.tracking import hindsight as H
 from datmo_cli.tracking.tracker import TRACK_DTYPE, TrackBlock
+from tests import reference_tracking as rt
 
 pytestmark = pytest.mark.unit
 
@@ -36,8 +37,8 @@ def filtered_track(n: int, seed: int, q: float = Q, sigma: float = 0.1):
     kf.R = sigma**2 * np.eye(2)
     Fs, Qs, xs, Ps = [], [], [], []
     for k in range(n):
-        F = H.transition(np.array([dt[k]]))[0]
-        Qk = H.process_noise(np.array([dt[k]]), np.array([q]))[0]
+        F = rt.rts_transition(np.array([dt[k]]))[0]
+        Qk = rt.rts_process_noise(np.array([dt[k]]), np.array([q]))[0]
         if k:
             kf.predict(F=F, Q=Qk)
             kf.update(z[k])
@@ -257,15 +258,76 @@ def test_nothing_is_smoothed_across_a_reset():
 
 
 def test_the_written_out_matrix_algebra_equals_numpys():
-    """hindsight's batched products, SPD solve and eigenvalue test (plain products and sums, the same bits on
-    every CPU) give what numpy's matmul, linalg.solve and eigvalsh give, to rounding."""
-    from datmo_cli.tracking import hindsight as h
-
+    """The reference's batched products, SPD solve and eigenvalue test (plain products and sums, the same bits on
+    every CPU, as the kernel's) give what numpy's matmul, linalg.solve and eigvalsh give, to rounding."""
     rng = np.random.default_rng(0)
     a, b, x = rng.normal(size=(60, 4, 4)), rng.normal(size=(60, 4, 4)), rng.normal(size=(60, 4))
-    np.testing.assert_allclose(h._mm(a, b), a @ b, atol=1e-12)
-    np.testing.assert_allclose(h._mv(a, x), np.einsum("nij,nj->ni", a, x), atol=1e-12)
+    np.testing.assert_allclose(rt.rts_mm(a, b), a @ b, atol=1e-12)
+    np.testing.assert_allclose(rt.rts_mv(a, x), np.einsum("nij,nj->ni", a, x), atol=1e-12)
     spd = a @ np.transpose(a, (0, 2, 1)) + 0.1 * np.eye(4)
-    np.testing.assert_allclose(h._solve_spd(spd, b), np.linalg.solve(spd, b), rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(rt.rts_solve_spd(spd, b), np.linalg.solve(spd, b), rtol=1e-8, atol=1e-9)
     sym, limit = 0.5 * (a + np.transpose(a, (0, 2, 1))), rng.normal(size=60)
-    assert (h._largest_eigenvalue_above(sym, limit) == (np.linalg.eigvalsh(sym)[:, -1] > limit)).all()
+    assert (rt.rts_largest_eigenvalue_above(sym, limit) == (np.linalg.eigvalsh(sym)[:, -1] > limit)).all()
+
+
+def buffer_of_tracks(seed: int, n_tracks: int = 6, n_scans: int = 90):
+    """A buffer of track rows as Hindsight holds them (rows in scan order, tracks born and dying, at a few
+    steps), float32 states and covariances as the Track elements carry them, some rows re-initialised (a
+    covariance far wider than its prediction), person steps with a larger q: (t_ns, ids, state, cov, q)."""
+    rng = np.random.default_rng(seed)
+    t = 10**9 + np.cumsum(rng.choice([26_666_667, 26_666_666, 53_333_333], n_scans))
+    born, dies = rng.integers(0, n_scans, n_tracks), rng.integers(0, n_scans, n_tracks)
+    rows = [(t[k], i) for k in range(n_scans) for i in range(n_tracks) if min(born[i], dies[i]) <= k <= dies[i] + 20]
+    t_ns, ids = np.array([r[0] for r in rows], np.int64), np.array([r[1] for r in rows], np.int64)
+    state = rng.normal(size=(len(rows), 4)).astype(np.float32).astype(np.float64)
+    a = rng.normal(size=(len(rows), 4, 4)) * 0.1
+    cov = (a @ np.transpose(a, (0, 2, 1)) + 0.01 * np.eye(4)).astype(np.float32).astype(np.float64)
+    cov[rng.random(len(rows)) < 0.05] *= 1000.0
+    cov[rng.random(len(rows)) < 0.1] = np.diag(rng.uniform(0.01, 1.0, 4))  # fresh tracks: exact zeros
+    q = np.where(rng.random(len(rows)) < 0.3, 4.0, Q)
+    return t_ns, ids, state, cov, q
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_kernel_gives_the_references_bits(seed):
+    """smooth (one compiled call, _rts.smooth_rows) gives reference_smooth's numbers bit for bit, states and
+    covariances, resets and all, for every row or the first ones alone."""
+    from datmo_cli.tracking import _rts
+
+    t_ns, ids, state, cov, q = buffer_of_tracks(seed)
+    for rows in (np.arange(len(t_ns)), np.arange(len(t_ns) * 2 // 3)):
+        for lag_ns in (10**9, 10**8):
+            want, want_cov = rt.reference_smooth(t_ns, ids, state, cov, q, rows, lag_ns, q_most=4.0)
+            got, got_cov = H.smooth(t_ns, ids, state, cov, q, rows, lag_ns, q_most=4.0)
+            assert np.array_equal(got, want) and np.array_equal(got_cov, want_cov)
+            lean, none = H.smooth(t_ns, ids, state, cov, q, rows, lag_ns, covariance=False, q_most=4.0)
+            assert np.array_equal(lean, want) and none is None
+            nxt, prv = H.chains(ids, t_ns)
+            direct = _rts.smooth_rows(t_ns, nxt, prv, state, cov, q, rows, lag_ns, True, 4.0, H.RESET_TOLERANCE)
+            assert np.array_equal(direct[0], want) and np.array_equal(direct[1], want_cov)
+    nxt, _ = H.chains(ids, t_ns)
+    assert len(rt.rts_gains(t_ns, state, cov, q, nxt, 4.0)[3])  # the case holds resets
+
+
+def test_the_kernels_algebra_is_the_references():
+    """_rts's product, process noise and RTS terms of one step give the reference's (rts_mm, rts_process_noise,
+    rts_gains) bit for bit."""
+    from datmo_cli.tracking import _rts
+
+    t_ns, ids, state, cov, q = buffer_of_tracks(7)
+    out = np.zeros((4, 4))
+    for k in range(20):
+        _rts._mm(cov[k], cov[k + 1], out)
+        assert np.array_equal(out, rt.rts_mm(cov[k : k + 1], cov[k + 1 : k + 2])[0])
+    for dt in (0.026666667, 0.053333333, 0.1, 1.7):
+        _rts._noise(dt, dt**3, dt**4, 2.0, out)
+        assert np.array_equal(out, rt.rts_process_noise(np.array([dt]), np.array([2.0]))[0])
+    nxt, _ = H.chains(ids, t_ns)
+    C, xp, Pp, reset = rt.rts_gains(t_ns, state, cov, q, nxt, 4.0)
+    work, c, x, p = np.zeros((7, 4, 4)), np.zeros((4, 4)), np.zeros(4), np.zeros((4, 4))
+    for r in np.flatnonzero(nxt >= 0)[:200]:
+        n = nxt[r]
+        dt = float(t_ns[n] - t_ns[r]) * 1e-9
+        args = (dt, dt**3, dt**4, cov[r], state[r], cov[n], q[r], 4.0, H.RESET_TOLERANCE, c, x, p, work)
+        assert _rts._gain(*args) == (r in reset)
+        assert np.array_equal(c, C[r]) and np.array_equal(x, xp[n]) and np.array_equal(p, Pp[n])

@@ -55,104 +55,6 @@ def chains(ids: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 RESET_TOLERANCE = 1e-3  # share of the predicted covariance's trace a filtered one may exceed it by (float32 rounding)
 
 
-# The small batched matrix algebra below is written out in plain products and sums, in a fixed order: numpy's
-# matmul, einsum and linalg hand it to BLAS and LAPACK, which pick their code (FMA or not) by the CPU, and the
-# outputs must carry the same bits on every CPU (docs/reliability.md).
-
-
-def _mm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Batched matrix product (n, i, k) x (n, k, j) -> (n, i, j)."""
-    out = a[:, :, 0, None] * b[:, None, 0, :]
-    for k in range(1, a.shape[2]):
-        out = out + a[:, :, k, None] * b[:, None, k, :]
-    return out
-
-
-def _mv(a: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Batched matrix-vector product (n, i, k) x (n, k) -> (n, i)."""
-    out = a[:, :, 0] * x[:, None, 0]
-    for k in range(1, a.shape[2]):
-        out = out + a[:, :, k] * x[:, None, k]
-    return out
-
-
-def _solve_spd(m: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """X with m X = b for each of a batch of symmetric positive definite m (n, k, k) and b (n, k, j): Gaussian
-    elimination (no pivoting needed for such m), then back substitution."""
-    m, x = m.astype(np.float64, copy=True), b.astype(np.float64, copy=True)
-    size = m.shape[1]
-    for k in range(size):
-        for i in range(k + 1, size):
-            f = m[:, i, k] / m[:, k, k]
-            m[:, i, k:] -= f[:, None] * m[:, k, k:]
-            x[:, i, :] -= f[:, None] * x[:, k, :]
-    for i in reversed(range(size)):
-        acc = x[:, i, :].copy()
-        for j in range(i + 1, size):
-            acc -= m[:, i, j, None] * x[:, j, :]
-        x[:, i, :] = acc / m[:, i, i, None]
-    return x
-
-
-def _largest_eigenvalue_above(m: np.ndarray, limit: np.ndarray) -> np.ndarray:
-    """Per symmetric m (n, k, k): whether its largest eigenvalue exceeds limit (n,), that is whether limit I - m is
-    not positive definite: a pivot of its elimination (no pivoting) is not positive."""
-    size = m.shape[1]
-    a = limit[:, None, None] * np.eye(size) - m
-    above = np.zeros(len(m), bool)
-    for k in range(size):
-        above |= ~(a[:, k, k] > 0)
-        pivot = np.where(above, 1.0, a[:, k, k])
-        for i in range(k + 1, size):
-            f = a[:, i, k] / pivot
-            a[:, i, k:] -= f[:, None] * a[:, k, k:]
-    return above
-
-
-def gains(
-    t_ns: np.ndarray, state: np.ndarray, cov: np.ndarray, q: np.ndarray, nxt: np.ndarray, q_most: float = 0.0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The RTS terms of each row r that has a next row n (zeros elsewhere): the gain C_r = P_r F' Pp_n^-1 (n, 4, 4),
-    the prediction of n from r xp (n, 4), and its covariance Pp (n, 4, 4), stored at row n (xp, Pp) and r (C); and
-    the rows r whose next row is no Kalman step from r (a reset: a re-initialised or merged track), whose filtered
-    covariance exceeds the prediction's (an update never increases it), predicted with q_most (m/s²)²/Hz at
-    least, the largest q the tracker may have stepped with. q: each row's q for the step to its next row."""
-    C = np.zeros((len(t_ns), 4, 4))
-    xp, Pp = np.zeros((len(t_ns), 4)), np.zeros((len(t_ns), 4, 4))
-    r = np.flatnonzero(nxt >= 0)
-    if not len(r):
-        return C, xp, Pp, r
-    n = nxt[r]
-    dt = (t_ns[n] - t_ns[r]).astype(np.float64) * 1e-9
-    F = transition(dt)
-    PFt = _mm(cov[r], np.transpose(F, (0, 2, 1)))
-    FPFt = _mm(F, PFt)
-    pred = FPFt + process_noise(dt, q[r])
-    pred = 0.5 * (pred + np.transpose(pred, (0, 2, 1)))
-    # C = P F' pred^-1, by solving pred' C' = (P F')' (pred symmetric)
-    C[r] = np.transpose(_solve_spd(pred, np.transpose(PFt, (0, 2, 1))), (0, 2, 1))
-    xp[n] = _mv(F, state[r])
-    Pp[n] = pred
-    widest = FPFt + process_noise(dt, np.maximum(q[r], q_most))
-    excess = 0.5 * (cov[n] + np.transpose(cov[n], (0, 2, 1))) - widest
-    reset = _largest_eigenvalue_above(excess, RESET_TOLERANCE * np.trace(widest, axis1=1, axis2=2))
-    return C, xp, Pp, r[reset]
-
-
-def horizon(t_ns: np.ndarray, nxt: np.ndarray, rows: np.ndarray, lag_ns: int) -> np.ndarray:
-    """For each of `rows`, the last row of its track stamped at most lag_ns after it (the smoother's start)."""
-    cur = rows.copy()
-    limit = t_ns[rows] + np.int64(lag_ns)
-    active = np.arange(len(rows))
-    while len(active):
-        n = nxt[cur[active]]
-        ok = n >= 0
-        ok[ok] = t_ns[n[ok]] <= limit[active[ok]]
-        active = active[ok]
-        cur[active] = n[ok]
-    return cur
-
-
 def smooth(
     t_ns: np.ndarray,
     ids: np.ndarray,
@@ -167,28 +69,32 @@ def smooth(
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Fixed-lag RTS states of `rows`: each given its track's rows up to lag_ns after it, by the backward
     recursion x_s(r) = x(r) + C_r (x_s(n) - xp(n)), P_s(r) = P(r) + C_r (P_s(n) - Pp(n)) C_r', started at that
-    horizon's filtered state. Every row of those tracks up to that horizon must be given (a track's rows end at
-    its death). A reset of a track (see `gains`; q_most as there) ends its chain as its death would. Returns
-    (states (len(rows), 4), covariances (len(rows), 4, 4), or None without `covariance`)."""
-    rows = np.asarray(rows, np.int64)
-    nxt, prv = chains(ids, t_ns)
-    C, xp, Pp, reset = gains(t_ns, state, cov, q, nxt, q_most)
-    prv[nxt[reset]] = -1  # a reset starts the track anew: nothing is smoothed across it
-    nxt[reset] = -1
-    cur = horizon(t_ns, nxt, rows, lag_ns)
-    xs = state[cur].copy()
-    Ps = cov[cur].copy() if covariance else None
-    active = np.flatnonzero(cur != rows)
-    while len(active):
-        c = cur[active]
-        p = prv[c]
-        Cp = C[p]
-        xs[active] = state[p] + _mv(Cp, xs[active] - xp[c])
-        if Ps is not None:
-            Ps[active] = cov[p] + _mm(_mm(Cp, Ps[active] - Pp[c]), np.transpose(Cp, (0, 2, 1)))
-        cur[active] = p
-        active = active[p != rows[active]]
-    return xs, Ps
+    horizon's filtered state, with the gain C_r = P_r F' Pp_n^-1, the prediction xp(n) = F x(r) of the next row n
+    and its covariance Pp(n) = F P_r F' + Q. Every row of those tracks up to that horizon must be given (a track's
+    rows end at its death). A reset ends a track's chain as its death would: a next row that is no Kalman step from
+    r (a re-initialised or merged track), whose filtered covariance exceeds the prediction's (an update never
+    increases it) made with q_most (m/s²)²/Hz at least, the largest q the tracker may have stepped with, by more
+    than RESET_TOLERANCE of that prediction's trace. q: each row's q for the step to its next row. Returns
+    (states (len(rows), 4), covariances (len(rows), 4, 4), or None without `covariance`). One compiled call
+    (_rts.smooth_rows)."""
+    from ._rts import smooth_rows
+
+    t_ns = np.ascontiguousarray(t_ns, np.int64)
+    nxt, prv = chains(np.asarray(ids), t_ns)
+    xs, Ps = smooth_rows(
+        t_ns,
+        nxt,
+        prv,
+        np.ascontiguousarray(state, np.float64),
+        np.ascontiguousarray(cov, np.float64).reshape(-1, 4, 4),
+        np.ascontiguousarray(q, np.float64),
+        np.ascontiguousarray(rows, np.int64),
+        int(lag_ns),
+        bool(covariance),
+        float(q_most),
+        RESET_TOLERANCE,
+    )
+    return xs, (Ps if covariance else None)
 
 
 def promoted_within_lag(t_ns: np.ndarray, confirmed_ns: np.ndarray, person_ns: np.ndarray, lag_ns: int) -> np.ndarray:
