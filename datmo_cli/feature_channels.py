@@ -100,6 +100,8 @@ def feature_payloads(f: RunFeatures) -> list[bytes]:
 def landmark_payloads(f: RunFeatures) -> list[bytes]:
     """datmo_msgs/msg/Landmarks CDR payloads: the database after each scan."""
     db = f.landmarks
+    if db is None:
+        raise ValueError("landmark_payloads: features extracted without landmarks")
     elems = db.all_snapshots(f.stamps)
     return cdr.encode_block(types.LANDMARKS, f.stamps, f.landmark_frame, {"landmarks": (elems, db.snap_offsets)})
 

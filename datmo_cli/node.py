@@ -221,6 +221,7 @@ class Node:
                 )
             return
         c.poses += 1
+        assert self.odometry is not None  # odometry messages come only with an odometry topic
         self.odometry.add(stamp.sec * 1_000_000_000 + stamp.nanosec, *values, msg.header.frame_id, msg.child_frame_id)
 
     def summary(self) -> str:

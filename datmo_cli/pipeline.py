@@ -19,6 +19,7 @@ from .log import mcapio
 if TYPE_CHECKING:
     from .config import DatmoConfig
     from .report import RunData
+    from .stages import TrackStream
 
 REPORT_TOPICS = (
     mcapio.TOPIC_SCAN,
@@ -258,7 +259,7 @@ class RunStages:
         self.markers = markers
         self.covariance = covariance
         self.features = FeatureStream(self.config.features, odometry)
-        self.tracking = None
+        self.tracking: TrackStream | None = None  # made with the first block, once the scans' geometry is known
         self.report = report
         self.hindsight = hindsight and self.config.track.hindsight_lag > 0
 
@@ -285,6 +286,7 @@ class RunStages:
         if self.hindsight:
             raise ValueError("the stages with hindsight give their blocks through pipelined()")
         channels, extra, tracks = self._track(block, self.features.block(block.run, markers=self.markers))
+        assert self.tracking is not None  # made by _track
         out = channels | self.tracking.channels(tracks)
         if self.report is not None:
             feed_report(self.report, block.run, extra[0], extra[1], tracks)
@@ -299,6 +301,7 @@ class RunStages:
         one: the compiled kernels release the GIL. The channels are the same for any count."""
         tracked = ((b, *self._track(b, made)) for b, made in self._perceived(blocks))
         for block, channels, extra, tracks in held_until_tracked(tracked, lambda: self.tracking):
+            assert self.tracking is not None  # made by _track
             out = channels | self.tracking.channels(tracks)
             if self.report is not None:
                 feed_report(self.report, block.run, extra[0], extra[1], tracks)

@@ -24,6 +24,9 @@ from .pipeline import (
 
 if TYPE_CHECKING:
     from .config import DatmoConfig
+    from .pipeline import RunStages
+    from .stages import TrackStream
+    from .streaming import LogStream
 
 
 def _provenance_entries(log, key: str) -> list[dict]:
@@ -65,7 +68,7 @@ def features_leg_threshold(log, used: str) -> float:
 
 
 def track_file(
-    src: str | Path,
+    src: str | Path | LogStream,
     out: str | Path,
     *,
     force: bool = False,
@@ -112,6 +115,7 @@ def track_file(
         covariance=covariance,
     )
     odometry, estimated = stages.odometry, stages.estimated
+    stage: RunStages | _TrackFeatures
     if computed:
         derived, stage, effective = stages.derived(), stages, stages.effective()
     else:
@@ -144,12 +148,13 @@ class _TrackFeatures:
     def __init__(self, stream, odometry, estimated: bool, params, used: str, threshold: float, markers, covariance):
         self.stream, self.odometry, self.estimated, self.params = stream, odometry, estimated, params
         self.used, self.threshold, self.markers, self.covariance = used, threshold, markers, covariance
-        self.tracking = None
+        self.tracking: TrackStream | None = None  # made with the first block
 
     def pipelined(self, blocks):
         """(block, its channels) for each block in order, once its tracks are given."""
         made = ((block, *self._track(block)) for block in blocks)
         for block, channels, _, tracks in held_until_tracked(made, lambda: self.tracking):
+            assert self.tracking is not None  # made by _track
             yield block, channels | self.tracking.channels(tracks)
 
     def _track(self, block) -> tuple[dict, None, object]:
@@ -190,7 +195,7 @@ class FeatureCounts:
 
 
 def features_file(
-    src: str | Path,
+    src: str | Path | LogStream,
     out: str | Path,
     config: DatmoConfig | None = None,
     *,
@@ -238,8 +243,11 @@ def features_file(
             raise InputError(f"{src}: {mcapio.TOPIC_SEGMENTS}{where}: {exc}") from None
         counts.scans += len(f)
         counts.lines, counts.circles = counts.lines + len(f.lines), counts.circles + len(f.circles)
-        counts.blobs, counts.legs = counts.blobs + len(f.blobs), counts.legs + len(f.legs)
-        counts.landmarks = len(f.landmarks.final())
+        counts.blobs, counts.legs = (
+            counts.blobs + len(f.blobs),
+            counts.legs + (len(f.legs) if f.legs is not None else 0),
+        )
+        counts.landmarks = len(f.landmarks.final()) if f.landmarks is not None else 0
         return channels
 
     from .perception.features import leg_model_provenance
@@ -263,7 +271,7 @@ def features_file(
 
 
 def segment_file(
-    src: str | Path,
+    src: str | Path | LogStream,
     out: str | Path,
     config: DatmoConfig | None = None,
     *,

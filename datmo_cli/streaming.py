@@ -25,6 +25,7 @@ import struct
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -236,7 +237,17 @@ class StampOrder:
             )
 
 
-Stage = Callable[[Block], dict[str, tuple[str, np.ndarray, list]]]
+Channels = dict[str, tuple[str, np.ndarray, list]]
+
+
+class Pipelined(Protocol):
+    """A stage that gives (block, its channels) for blocks in order, holding some back (hindsight, the perception
+    of the next blocks beside this one's tracking)."""
+
+    def pipelined(self, blocks: Iterator[Block]) -> Iterator[tuple[Block, Channels]]: ...
+
+
+Stage = Callable[[Block], Channels] | Pipelined
 
 
 def write_derived(

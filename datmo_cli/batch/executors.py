@@ -46,7 +46,7 @@ class LocalExecutor(Executor):
         self.where = _processes(n)  # what ran them, not what --jobs allowed
         if n <= 1:
             for t in tasks:
-                on_record(run_task(t, scans=(lambda d, m, i=t.index: on_scans(i, d, m)) if on_scans else None))
+                on_record(run_task(t, scans=_scans_of(t.index, on_scans)))
             return
         self._pool(tasks, n, on_record, on_scans)
 
@@ -90,6 +90,13 @@ class LocalExecutor(Executor):
 
 
 STOP_GRACE = 3.0  # s a --jobs worker has to end after SIGTERM when the batch stops, before SIGKILL
+
+
+def _scans_of(index: int, on_scans: Callable[[int, int, int], None] | None) -> Callable[[int, int], None] | None:
+    """A task's own progress callback (scans done, of how many) for the batch's `on_scans(index, done, total)`."""
+    if on_scans is None:
+        return None
+    return lambda done, total: on_scans(index, done, total)
 
 
 def _processes(n: int) -> str:

@@ -71,6 +71,7 @@ def prepare(
         if (
             not force
             and owned
+            and last is not None
             and last.get("params_hash") == phash
             and last.get("datmo_version") == __version__
             and exists(dst)

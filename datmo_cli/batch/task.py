@@ -16,7 +16,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from .. import __version__
 from ..errors import DatmoError, InputError, OutputExistsError
@@ -202,7 +202,9 @@ def _run(task: Task, t0: float, progress: Callable[[int, int], None], raise_unex
             sha = input_sha256(src)
             notes: list[str] = []
             with converted(src, out, task, notes.append) as log:
-                origin = {} if Path(log) == Path(src) else {"origin": src}  # provenance hashes the bag, not the copy
+                origin: dict[str, Any] = (
+                    {} if Path(log) == Path(src) else {"origin": src}
+                )  # provenance hashes the bag, not the copy
                 report = RunAccumulator(str(Path(task.output)))
                 n = pipeline.process_file(
                     log,

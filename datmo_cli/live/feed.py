@@ -7,7 +7,7 @@ import math
 import queue
 import threading
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -17,6 +17,7 @@ from .messages import Message, Stages
 
 if TYPE_CHECKING:
     from ..config import DatmoConfig
+    from ..log.scan import Odometry
 
 
 class LiveFeed:
@@ -122,7 +123,10 @@ class LiveFeed:
                             self.on_restart(why)
                     if stages is None:
                         stages = Stages(
-                            self.odometry, self.config, has_tf=self.odometry is not None, scan_frame=geometry.frame_id
+                            cast("Odometry | None", self.odometry),  # a PoseBuffer serves as one: at, frame_id, len
+                            self.config,
+                            has_tf=self.odometry is not None,
+                            scan_frame=geometry.frame_id,
                         )
                     run.append(item)
                     last = (stamp, geometry)

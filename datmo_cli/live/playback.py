@@ -82,7 +82,7 @@ class DrawnMarkers:
                     msg = cdr.decode(types.TRACKS, payload)
                 tracks = msg["tracks"]
                 tail, count = self._tails(tracks, world)
-                frame = self.odometry.frame_id if world else msg["frame_id"]
+                frame = self.odometry.frame_id if self.odometry is not None else msg["frame_id"]
                 drawn = track_markers(msg["stamp_ns"], frame, tracks, tail, count, world=world)
                 out.append(Message(int(stamp), mcapio.TOPIC_MARKERS_TRACKS, types.MARKER_ARRAY, drawn))
         return out

@@ -119,7 +119,7 @@ def _map(buf, pos: int) -> tuple[dict[str, str], int]:
     return out, end
 
 
-def read_log(path: str | Path, topics: Iterable[str] = ()) -> LogContents:
+def read_log(path: str | Path, topics: Iterable[str] | None = ()) -> LogContents:
     """Read a log's channels, metadata and the payloads of `topics` (all topics when topics is None).
 
     Raises InputError for files that are not MCAP; warns TruncatedLogWarning (and returns every

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 from pathlib import Path
+from typing import BinaryIO, cast
 
 import numpy as np
 
@@ -62,7 +63,7 @@ class LogWriter:
         try:
             with outputs.writing(self.path):
                 self._writer = ChunkWriter(
-                    self._file,
+                    cast(BinaryIO, self._file),  # Guarded: a binary file that names the output in its errors
                     chunk_size=chunk_size,
                     level=level,
                     span=span if grouped else 0,

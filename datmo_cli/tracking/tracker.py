@@ -283,6 +283,7 @@ class Tracker:
                 np.zeros(1, np.int64), np.zeros(0, TRACK_DTYPE), np.zeros((0, T, 2)), np.zeros(0, np.int64)
             )
         self._relative(int(stamps[0]))
+        assert self._t0 is not None  # set by _relative
         rel = stamps - np.int64(self._t0)
         self.stamp_ns = int(stamps[-1])
         self.pose = None if poses is None else np.asarray(poses[-1], np.float64)
