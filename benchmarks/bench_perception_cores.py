@@ -79,21 +79,21 @@ print(json.dumps(out))
 """.replace("CHUNK", str(CHUNK))
 
 
-def cache_dir() -> Path:
-    return Path(tempfile.gettempdir()) / f"datmo-bench-{OLD}"
+def cache_dir(commit: str = OLD) -> Path:
+    return Path(tempfile.gettempdir()) / f"datmo-bench-{commit}"
 
 
-def old_tree() -> tuple[Path | None, str]:
-    """OLD's datmo_cli exported (once) to the cache folder: (its root, "") or (None, why not)."""
-    root = cache_dir() / "tree"
+def old_tree(commit: str = OLD) -> tuple[Path | None, str]:
+    """The datmo_cli of `commit` exported (once) to its cache folder: (its root, "") or (None, why not)."""
+    root = cache_dir(commit) / "tree"
     if (root / "datmo_cli" / "perception" / "features.py").is_file():
         return root, ""
     try:
         tar = subprocess.run(
-            ["git", "-C", str(ROOT), "archive", "--format=tar", OLD, "datmo_cli"], capture_output=True, check=True
+            ["git", "-C", str(ROOT), "archive", "--format=tar", commit, "datmo_cli"], capture_output=True, check=True
         ).stdout
     except (OSError, subprocess.CalledProcessError) as exc:
-        return None, f"no git export of {OLD} ({exc.__class__.__name__}: git or the commit is missing)"
+        return None, f"no git export of {commit} ({exc.__class__.__name__}: git or the commit is missing)"
     root.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=root.parent))
     with tarfile.open(fileobj=io.BytesIO(tar)) as t:

@@ -849,14 +849,18 @@ def test_ensemble_leaf_and_candidates():
     from datmo_cli.perception.legs import CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS
 
     model = load_leg_model("default")
-    nodes, split, roots, kind, base, scale = model._kernel_args()
+    nodes, split, roots, kind, base, scale, pf, pt, pv, depth = model._kernel_args()
     rng = np.random.default_rng(13)
     ranges, angles = _scan(14, 3, 60)
     start, end, offsets = rp.gap_clusters(ranges, angles, 0.05, 30.0, 0.13, 1)
     X = rp.cluster_features(ranges, angles, start, end, offsets, 0.05, 30.0)
     X = np.concatenate([X, X * rng.uniform(0.5, 1.5, X.shape)])
     out = np.empty(len(X))
-    LFO.ensemble(X, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, nodes, split, roots, kind, base, scale, out)
+    LFO.ensemble(X, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, *model._kernel_args(), out)
+    assert depth == 5  # the shipped model walks its perfect trees
+    by_nodes = np.empty(len(X))
+    LFO.ensemble_nodes(X, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, nodes, split, roots, kind, base, scale, by_nodes)
+    np.testing.assert_array_equal(out, by_nodes)
     for x, got in zip(X, out, strict=True):
         candidate = rp.is_candidate(x)
         assert LFO.is_candidate(x, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS) == candidate
@@ -869,6 +873,68 @@ def test_ensemble_leaf_and_candidates():
         for root in model.roots[:3]:
             got = LFO._leaves4(nodes, split, X[q], X[q + 1], X[q + 2], X[q + 3], root)
             assert list(got) == [rp.tree_leaf(model, root, X[q + i]) for i in range(4)]
+
+
+def _random_model(rng, n_trees: int, max_depth: int, kind: str):
+    """A LegModel of random trees (leaves at any depth up to max_depth, depth-first numbering) whose thresholds
+    lie between float32 values, so rounding them to float32 would move rows."""
+    from datmo_cli.perception.leg_model import LegModel
+
+    feature, threshold, left, right, value, roots = [], [], [], [], [], []
+
+    def grow(depth: int) -> int:
+        i = len(feature)
+        for a in (feature, threshold, left, right, value):
+            a.append(-1 if a is not threshold and a is not value else 0.0)
+        value[i] = float(rng.normal())
+        if depth == max_depth or (depth > 0 and rng.random() < 0.3):
+            return i
+        feature[i] = int(rng.integers(0, 21))
+        threshold[i] = float(np.float32(rng.uniform(-1, 1))) + 1e-9 * rng.choice([-1.0, 1.0])
+        left[i] = grow(depth + 1)
+        right[i] = grow(depth + 1)
+        return i
+
+    for _ in range(n_trees):
+        roots.append(grow(0))
+    return LegModel(feature, threshold, left, right, value, roots, kind=kind, base=0.3, scale=0.7)
+
+
+@pytest.mark.parametrize("max_depth", [0, 1, 3, 6, 11])
+@pytest.mark.parametrize("kind", ["forest", "boosting"])
+def test_perfect_trees_equal_the_reference_walk(max_depth, kind):
+    """ensemble on the perfect trees (or the node walk, for a model deeper than PERFECT_MAX_DEPTH) gives exactly
+    the reference walk's probability (float32 rows against float64 thresholds, NaN to the right), summed tree
+    by tree; perfect_sum is that sum."""
+    from datmo_cli.perception.leg_model import PERFECT_MAX_DEPTH
+
+    rng = np.random.default_rng(max_depth)
+    model = _random_model(rng, 30, max_depth, kind)
+    args = model._kernel_args()
+    pf, pt, pv, depth = args[6:]
+    assert depth == (-1 if max_depth > PERFECT_MAX_DEPTH else max_depth)
+    X = rng.uniform(-1, 1, (300, 21))
+    used = model.feature >= 0
+    if used.any():  # values on and about the thresholds, and NaN
+        picks = rng.integers(0, used.sum(), X.shape)
+        X = np.where(rng.random(X.shape) < 0.5, model.threshold[used][picks], X)
+    X[::7, 5] = np.float32(X[::7, 5])
+    X[::11, 9] = np.nan
+    X[:, 0], X[:, 1] = 3 + rng.integers(0, 9, len(X)), rng.uniform(0, 0.8, len(X))
+    X[::13, 1] = 2.0  # not a candidate
+    out = np.empty(len(X))
+    LFO.ensemble(X, 0.8, 3, *args, out)
+    for x, got in zip(X, out, strict=True):
+        leaves = [rp.tree_leaf(model, root, x) for root in model.roots]
+        assert got == (rp.ensemble_probability(model, leaves) if rp.is_candidate(x) else 0.0)
+        if depth >= 0:
+            assert LFO.perfect_sum(x.astype(np.float32), pf, pt, pv, depth) == sum(
+                (float(model.value[leaf]) for leaf in leaves), 0.0
+            )
+    if depth >= 0:
+        acc = np.empty(16)
+        LFO.perfect_sums8(X[:16].astype(np.float32), pf, pt, pv, depth, acc)
+        assert acc.tolist() == [LFO.perfect_sum(x.astype(np.float32), pf, pt, pv, depth) for x in X[:16]]
 
 
 def test_block_probabilities():

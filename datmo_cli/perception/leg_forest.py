@@ -59,8 +59,96 @@ def _leaves4(nodes, split, r0, r1, r2, r3, root):
 
 
 @njit(cache=True)
-def ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, out) -> None:
-    """Leg probability of each row of features (M, F) into out (M,); non-candidates get 0.
+def perfect_sum(row, feature, threshold, value, depth) -> float:
+    """Sum over the perfect trees (leg_model.perfect_trees: flat arrays, 2**depth - 1 inner nodes and 2**depth
+    leaves a tree) of the leaf value the float32 row (F,) reaches, tree by tree in the model's order (the sum
+    ensemble makes): each walk is depth steps without a branch. Unsigned indices: no negative-index checks."""
+    inner = (1 << depth) - 1
+    one = np.uint64(1)
+    acc = 0.0
+    for t in range(value.shape[0] // (inner + 1)):
+        b = np.uint64(t * inner)
+        i = np.uint64(0)
+        for _ in range(depth):
+            # the same way as _leaf: right unless x <= threshold (NaN goes right)
+            i = i + i + one + np.uint64(not row[np.uint64(feature[b + i])] <= threshold[b + i])
+        acc += value[np.uint64(t * (inner + 1)) - np.uint64(inner) + i]
+    return acc
+
+
+@njit(cache=True)
+def perfect_sums8(rows, feature, threshold, value, depth, acc) -> None:
+    """perfect_sum of the float32 rows (R, F), R a multiple of 8, into acc (R,): eight rows walk each tree
+    together (eight independent chains of loads), and each row's sum is still taken tree by tree."""
+    inner = (1 << depth) - 1
+    one = np.uint64(1)
+    for q in range(0, rows.shape[0], 8):
+        r0, r1, r2, r3 = rows[q], rows[q + 1], rows[q + 2], rows[q + 3]
+        r4, r5, r6, r7 = rows[q + 4], rows[q + 5], rows[q + 6], rows[q + 7]
+        a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = 0.0
+        for t in range(value.shape[0] // (inner + 1)):
+            b = np.uint64(t * inner)
+            i0 = i1 = i2 = i3 = i4 = i5 = i6 = i7 = np.uint64(0)
+            for _ in range(depth):
+                i0 = i0 + i0 + one + np.uint64(not r0[np.uint64(feature[b + i0])] <= threshold[b + i0])
+                i1 = i1 + i1 + one + np.uint64(not r1[np.uint64(feature[b + i1])] <= threshold[b + i1])
+                i2 = i2 + i2 + one + np.uint64(not r2[np.uint64(feature[b + i2])] <= threshold[b + i2])
+                i3 = i3 + i3 + one + np.uint64(not r3[np.uint64(feature[b + i3])] <= threshold[b + i3])
+                i4 = i4 + i4 + one + np.uint64(not r4[np.uint64(feature[b + i4])] <= threshold[b + i4])
+                i5 = i5 + i5 + one + np.uint64(not r5[np.uint64(feature[b + i5])] <= threshold[b + i5])
+                i6 = i6 + i6 + one + np.uint64(not r6[np.uint64(feature[b + i6])] <= threshold[b + i6])
+                i7 = i7 + i7 + one + np.uint64(not r7[np.uint64(feature[b + i7])] <= threshold[b + i7])
+            v = np.uint64(t * (inner + 1)) - np.uint64(inner)  # leaf node k of tree t is value[v + k]
+            a0 += value[v + i0]
+            a1 += value[v + i1]
+            a2 += value[v + i2]
+            a3 += value[v + i3]
+            a4 += value[v + i4]
+            a5 += value[v + i5]
+            a6 += value[v + i6]
+            a7 += value[v + i7]
+        acc[q], acc[q + 1], acc[q + 2], acc[q + 3] = a0, a1, a2, a3
+        acc[q + 4], acc[q + 5], acc[q + 6], acc[q + 7] = a4, a5, a6, a7
+
+
+@njit(cache=True)
+def ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, pf, pt, pv, depth, out) -> None:
+    """Leg probability of each row of features (M, F) into out (M,); non-candidates get 0. Walks the perfect
+    trees (pf, pt, pv: leg_model.perfect_trees) when depth >= 0, else the node arrays (ensemble_nodes): the
+    same leaves, the same sums."""
+    if depth < 0 or roots.shape[0] == 0:
+        ensemble_nodes(features, max_width, min_points, nodes, split, roots, kind, base, scale, out)
+        return
+    M, F = features.shape
+    T = roots.shape[0]
+    take = np.empty(M, np.int64)
+    c = 0
+    for m in range(M):
+        out[m] = 0.0
+        if is_candidate(features[m], max_width, min_points):
+            take[c] = m
+            c += 1
+    if c == 0:
+        return
+    R = (c + 7) // 8 * 8
+    rows = np.empty((R, F), np.float32)  # the candidates as float32 (sklearn's comparisons), padded by repeats
+    for j in range(R):
+        m = take[min(j, c - 1)]
+        for f in range(F):
+            rows[j, f] = np.float32(features[m, f])
+    acc = np.empty(R, np.float64)
+    perfect_sums8(rows, pf, pt, pv, depth, acc)
+    for j in range(c):
+        if kind == KIND_FOREST:
+            out[take[j]] = acc[j] / T
+        else:
+            out[take[j]] = 1.0 / (1.0 + np.exp(-(base + scale * acc[j])))
+
+
+@njit(cache=True)
+def ensemble_nodes(features, max_width, min_points, nodes, split, roots, kind, base, scale, out) -> None:
+    """Leg probability of each row of features (M, F) into out (M,) by walking the node arrays (any depth);
+    non-candidates get 0.
 
     Trees as flat node arrays: nodes[i] = (feature, left, right) with feature -1 at leaves and children as
     global indices; split[i] = the threshold of an inner node, the value of a leaf. Like scikit-learn, a node
@@ -107,12 +195,13 @@ def ensemble(features, max_width, min_points, nodes, split, roots, kind, base, s
 @njit(cache=True, nogil=True)
 def block_probabilities(ranges, beams, segs, rules, model, features, out) -> None:
     """block_features (candidates only) then ensemble, in one compiled call: the per-scan hot path. beams, segs and
-    rules as block_features takes them; model = (nodes, split, roots, kind, base, scale) as ensemble takes them."""
-    nodes, split, roots, kind, base, scale = model
+    rules as block_features takes them; model = (nodes, split, roots, kind, base, scale, pf, pt, pv, depth) as
+    ensemble takes them (LegModel._kernel_args)."""
+    nodes, split, roots, kind, base, scale, pf, pt, pv, depth = model
     max_width = rules[4]
     min_points = rules[5]
     block_features(ranges, beams, segs, rules, True, features)
-    ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, out)
+    ensemble(features, max_width, min_points, nodes, split, roots, kind, base, scale, pf, pt, pv, depth, out)
 
 
 @njit(cache=True, parallel=True, nogil=True)
@@ -120,7 +209,7 @@ def block_probabilities_parallel(ranges, parts, beams, segs, rules, model, featu
     """block_probabilities on numba's threads: the block's scans split into `parts` ranges of consecutive scans,
     each range's segments (rows seg_offsets[k0]:seg_offsets[k1] of features and out) done at once. Every row's
     features and probability depend on its own scan only: the same out as block_probabilities."""
-    nodes, split, roots, kind, base, scale = model
+    nodes, split, roots, kind, base, scale, pf, pt, pv, depth = model
     seg_start, seg_end, seg_offsets = segs
     max_width = rules[4]
     min_points = rules[5]
@@ -131,4 +220,19 @@ def block_probabilities_parallel(ranges, parts, beams, segs, rules, model, featu
         g0 = seg_offsets[k0]
         g1 = seg_offsets[k1]
         block_features(ranges[k0:k1], beams, (seg_start, seg_end, seg_offsets[k0 : k1 + 1]), rules, True, features)
-        ensemble(features[g0:g1], max_width, min_points, nodes, split, roots, kind, base, scale, out[g0:g1])
+        ensemble(
+            features[g0:g1],
+            max_width,
+            min_points,
+            nodes,
+            split,
+            roots,
+            kind,
+            base,
+            scale,
+            pf,
+            pt,
+            pv,
+            depth,
+            out[g0:g1],
+        )

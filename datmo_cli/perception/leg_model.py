@@ -90,7 +90,7 @@ class LegModel:
         )
         self._split = np.where(inner, self.threshold, self.value)
         kind = 0 if self.kind == "forest" else 1  # leg_forest.KIND_FOREST / KIND_BOOSTING
-        self._args = (self._nodes, self._split, self.roots, kind, self.base, self.scale)
+        self._args = (self._nodes, self._split, self.roots, kind, self.base, self.scale, *perfect_trees(self))
 
     def _problem(self) -> str:
         n = len(self.feature)
@@ -121,7 +121,8 @@ class LegModel:
         return len(self.roots)
 
     def _kernel_args(self) -> tuple:
-        """What the ensemble kernel takes after the features: nodes, split, roots, kind, base, scale."""
+        """What the ensemble kernel takes after the features: nodes, split, roots, kind, base, scale, then the
+        perfect trees (perfect_trees: feature, threshold, leaf value, depth)."""
         return self._args
 
     def probabilities(self, features: np.ndarray) -> np.ndarray:
@@ -296,6 +297,47 @@ class LegModel:
             )
         except (ValueError, TypeError) as exc:
             raise InputError(f"{path}: corrupt leg model ({exc})") from None
+
+
+PERFECT_MAX_DEPTH = 8  # deepest model stored as perfect trees (2**depth leaves each); deeper: the node walk
+
+
+def _floor32(threshold: np.ndarray) -> np.ndarray:
+    """The largest float32 <= each threshold: for a float32 x, x <= t exactly when x <= _floor32(t)."""
+    t32 = threshold.astype(np.float32)
+    over = t32.astype(np.float64) > threshold
+    t32[over] = np.nextafter(t32[over], np.float32(-np.inf))
+    return t32
+
+
+def perfect_trees(model: LegModel) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The trees as perfect binary trees of one depth D (the model's deepest leaf), for a walk of exactly D
+    steps with no branch on the node kind: (feature int32, threshold float32, leaf value float64, D), tree t's
+    2**D - 1 inner nodes at feature/threshold[t * (2**D - 1):] and its 2**D leaves at value[t * 2**D:]. Within
+    a tree, node i's children are 2i + 1 (x[feature] <= threshold) and 2i + 2, and node 2**D - 1 + k is leaf k.
+    A leaf above depth D becomes a subtree whose every leaf holds its value (its inner nodes split on feature 0
+    at +inf: either way the same value). Thresholds are rounded down to float32 (_floor32): the same
+    comparisons as float32(x) <= threshold. D = -1 (empty arrays) when a tree is deeper than PERFECT_MAX_DEPTH."""
+    feature, left, right = model.feature, model.left, model.right
+    cur = model.roots[:, None]  # (T, 2**level): the node of the original tree at each perfect position
+    feats, thresholds = [], []
+    depth = 0
+    while np.any(feature[cur] >= 0):
+        if depth == PERFECT_MAX_DEPTH:
+            return np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float64), -1
+        inner = feature[cur] >= 0
+        feats.append(np.where(inner, feature[cur], 0))
+        thresholds.append(np.where(inner, _floor32(model.threshold[cur]), np.float32(np.inf)))
+        nxt = np.empty((cur.shape[0], 2 * cur.shape[1]), np.int64)
+        nxt[:, 0::2] = np.where(inner, left[cur], cur)
+        nxt[:, 1::2] = np.where(inner, right[cur], cur)
+        cur = nxt
+        depth += 1
+    T = len(model.roots)
+    f = np.concatenate(feats, axis=1) if feats else np.zeros((T, 0))
+    t = np.concatenate(thresholds, axis=1) if thresholds else np.zeros((T, 0))
+    flat = (np.ascontiguousarray(f, np.int32).ravel(), np.ascontiguousarray(t, np.float32).ravel())
+    return (*flat, np.ascontiguousarray(model.value[cur], np.float64).ravel(), depth)
 
 
 def _flatten_trees(trees, leaf_value) -> tuple[list[np.ndarray], np.ndarray]:

@@ -118,15 +118,15 @@ def gap_clusters(
     cos_a, sin_a = _trig(angles)
     lo, hi = _limits(range_min, range_max)
     counts = np.zeros(N, np.int64)
-    none = np.zeros(0, np.int64)
-    LF._gap_pass(ranges, cos_a, sin_a, lo, hi, float(gap), int(min_points), none, none, counts)
+    # one pass into room for the most clusters there can be: disjoint, of at least max(min_points, 1) beams
+    most = N * (B // max(int(min_points), 1))
+    start = np.empty(most, np.int64)
+    end = np.empty(most, np.int64)
+    if most:
+        LF._gap_pass(ranges, cos_a, sin_a, lo, hi, float(gap), int(min_points), start, end, counts)
     offsets = np.zeros(N + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])
-    start = np.empty(offsets[-1], np.int64)
-    end = np.empty(offsets[-1], np.int64)
-    if len(start):
-        LF._gap_pass(ranges, cos_a, sin_a, lo, hi, float(gap), int(min_points), start, end, counts)
-    return start, end, offsets
+    return start[: offsets[-1]].copy(), end[: offsets[-1]].copy(), offsets
 
 
 def model_clusters(
