@@ -22,23 +22,6 @@ import numpy as np
 from datmo_cli import libm
 
 
-def transition(dt: np.ndarray) -> np.ndarray:
-    """F of the constant-velocity model for steps of dt s: (n, 4, 4)."""
-    F = np.broadcast_to(np.eye(4), (len(dt), 4, 4)).copy()
-    F[:, 0, 2] = F[:, 1, 3] = dt
-    return F
-
-
-def process_noise(dt: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Q of white-noise acceleration of spectral density q over dt s (as the tracker's predict): (n, 4, 4)."""
-    Q = np.zeros((len(dt), 4, 4))
-    qa, qb, qc = 0.25 * dt**4 * q, 0.5 * dt**3 * q, dt**2 * q
-    Q[:, 0, 0] = Q[:, 1, 1] = qa
-    Q[:, 0, 2] = Q[:, 2, 0] = Q[:, 1, 3] = Q[:, 3, 1] = qb
-    Q[:, 2, 2] = Q[:, 3, 3] = qc
-    return Q
-
-
 def chains(ids: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(next, prev): for each row, the row of the same track at its next (previous) stamp, or -1."""
     n = len(ids)
