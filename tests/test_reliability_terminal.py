@@ -158,12 +158,20 @@ async def _junk_client(url: str, n: int) -> None:
     import websockets
 
     async with websockets.connect(url, subprotocols=["foxglove.websocket.v1"], max_size=None) as ws:
-        await asyncio.wait_for(ws.recv(), 60)
+        channels: list = []
+        while not channels:  # serverInfo, then the channels
+            frame = await asyncio.wait_for(ws.recv(), 60)
+            if isinstance(frame, str) and json.loads(frame).get("op") == "advertise":
+                channels = json.loads(frame)["channels"]
         await ws.send(json.dumps({"op": f"evil{TITLE}{LINK}\nforged line\x1b[2J"}))
         for i in range(n):
             await ws.send(json.dumps({"op": f"junk{i}"}))
-        await ws.send(json.dumps({"op": "subscribe", "subscriptions": []}))  # a frame after the junk: all read
-        await asyncio.sleep(1.0)
+        # a subscription after the junk: once a message comes on it, the server has read every frame before it
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": channels[0]["id"]}]}))
+        while True:
+            frame = await asyncio.wait_for(ws.recv(), 60)
+            if isinstance(frame, bytes) and frame[:1] == b"\x01":  # MESSAGE_DATA
+                break
 
 
 @pytest.mark.slow
