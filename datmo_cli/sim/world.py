@@ -1,6 +1,5 @@
 """A scene made concrete: static geometry, movers as functions of time, the sensor's trajectory, and the
-table of ground-truth objects. World frame, metres, seconds, radians.
-"""
+table of ground-truth objects. World frame, metres, seconds, radians."""
 
 from __future__ import annotations
 
@@ -398,14 +397,13 @@ class World:
 
     def _add_movers(self, scene: Scene, persons: list[Person], t_end: float) -> dict[str, Walker]:
         walkers = {}
-        mover: Towed | Driven
         for p in persons:
             walkers[p.name] = Walker(p, t_end)
             self.movers.append((self._add(CLASS_PERSON, p.name), walkers[p.name]))
         for i, pf in enumerate(scene.platforms, 1):
             if pf.pulled_by is not None:
-                mover = Towed(walkers[pf.pulled_by], pf.radius, pf.wire, pf.center, t_end)
-                self.movers.append((self._add(CLASS_CIRCLE_OBJECT, f"platform{i}"), mover))
+                towed = Towed(walkers[pf.pulled_by], pf.radius, pf.wire, pf.center, t_end)
+                self.movers.append((self._add(CLASS_CIRCLE_OBJECT, f"platform{i}"), towed))
             elif pf.path is not None:
                 mover = Driven(pf.path, t_end, radius=pf.radius)
                 self.movers.append((self._add(CLASS_CIRCLE_OBJECT, f"platform{i}"), mover))
