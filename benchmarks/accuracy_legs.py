@@ -55,7 +55,7 @@ def figure_lines() -> list[str]:
     lab, emp = T.tables_of(labelled, clusters=clusters), T.tables_of(empty, clusters=clusters)
     extra = []
     if model is not None and model.provenance.get("simulated"):  # trained with --with-simulated: so here
-        from datmo_cli.simulated import simulated_recordings
+        from datmo_cli.passes.simulated import simulated_recordings
 
         extra = T.tables_of(simulated_recordings(), clusters=clusters)
     thin = T.tables_of([T.thinned(r, 2) for r in labelled], clusters=clusters)

@@ -1,18 +1,18 @@
-"""The package's imports read one way (docs/architecture.md): every import of every module under
-datmo_cli, at the top or inside a function, points down the layers or within its own layer, and no
-modules import each other in a circle (not even within a layer, nor through a function-level import).
+"""The package's layers are its folders (docs/architecture.md), and its imports read one way: every import of
+every module under datmo_cli, at the top or inside a function, points down the layers or within its own layer,
+and no modules import each other in a circle (not even within a layer, nor through a function-level import).
 
-    cli        datmo_cli.cli, datmo_cli.__main__, datmo_cli.commands.*: Click only
-    pipeline   the other top-level modules: the stages, the passes over files and config (the DatmoConfig tree
-               of the core packages' parameter sections)
-    core       perception, tracking, sim, lms2xx (each importing only itself, log and base), above log
-    log        datmo_cli.log.* (importing only itself and base)
-    base       errors, extras, outputs, input_files, bounds, numba_runtime, numba_light, progress, csvsafe, text,
-               toml_text and the package itself (__version__): usable by every layer, importing only base
+    cli        commands/ (one module a command), beside the package's doors cli.py and __main__.py: Click only
+    pipeline   passes/ (the stages, the passes over a log and the configuration tree), batch/, report/, evaluate/,
+               export/, live/, tune/, workflows/, ros2/, beside the Python door api.py
+    core       perception/, tracking/, sim/, lms2xx/ (each importing only itself, logs and base), above logs
+    log        logs/ (reading and writing logs; importing only itself and base)
+    base       base/ (errors, safe inputs and outputs, bounds, progress, text, numba's set-up) and the package
+               itself (__version__): usable by every layer, importing only base
 
-Only the CLI layer imports click (at the top or inside a function): the layers below it take plain values,
-and what a command shares with them (--quiet, ./datmo.toml picked up) reaches them through
-progress.command_meta, which the CLI layer points at Click's context.
+Every module lives in one of these folders, but the doors. Only the CLI layer imports click (at the top or inside
+a function): the layers below it take plain values, and what a command shares with them (--quiet, ./datmo.toml
+picked up) reaches them through progress.command_meta, which the CLI layer points at Click's context.
 """
 
 from __future__ import annotations
@@ -27,23 +27,18 @@ pytestmark = pytest.mark.unit
 PACKAGE = "datmo_cli"
 ROOT = Path(__file__).resolve().parent.parent / PACKAGE
 
-BASE = {
-    "errors",
-    "extras",
-    "outputs",
-    "input_files",
-    "bounds",
-    "numba_runtime",
-    "numba_light",
-    "progress",
-    "csvsafe",
-    "text",
-    "libm",
-    "toml_text",
+FOLDERS = {
+    "base": {"base"},
+    "log": {"logs"},
+    "core": {"perception", "tracking", "sim", "lms2xx"},
+    "pipeline": {"passes", "batch", "report", "evaluate", "export", "live", "tune", "workflows", "ros2"},
+    "cli": {"commands"},
 }
-CLI = {"cli", "__main__", "commands"}
-CORE = {"perception", "tracking", "sim", "lms2xx"}
+# the modules beside the folders: the package itself, the command (cli, __main__) and the Python API
+DOORS = {"": "base", "__main__": "cli", "cli": "cli", "api": "pipeline"}
+CORE = FOLDERS["core"]
 RANK = {"base": 0, "log": 1, "core": 2, "pipeline": 3, "cli": 4}
+FOLDER_LAYER = {folder: name for name, folders in FOLDERS.items() for folder in folders}
 
 # arrows against the layers that another branch removes; each names that branch
 KNOWN: set[tuple[str, str]] = set()
@@ -53,28 +48,37 @@ KNOWN_CIRCLES: set[frozenset[str]] = set()
 
 def layer(module: str) -> tuple[str, str]:
     """(layer, unit) of a module name: the unit is the core package a core module belongs to (modules of one
-    core package may import each other, not another's), else the layer itself."""
+    core package may import each other, not another's), else the layer itself. A module outside the layer
+    folders and doors is in no layer ("unplaced")."""
     parts = module.split(".")
     top = parts[1] if len(parts) > 1 else ""
-    if top == "" or top in BASE:
-        return "base", "base"
-    if top in CLI:
-        return "cli", "cli"
-    if top == "log":
-        return "log", "log"
-    if top in CORE:
-        return "core", top
-    return "pipeline", "pipeline"
+    if top in DOORS:
+        return DOORS[top], DOORS[top]
+    if top not in FOLDER_LAYER:
+        return "unplaced", top
+    name = FOLDER_LAYER[top]
+    return name, top if name == "core" else name
 
 
 def rule_broken(src: str, dst: str) -> str | None:
     """Why `src` may not import `dst` (None: it may)."""
     (ls, us), (ld, ud) = layer(src), layer(dst)
+    if "unplaced" in (ls, ld):
+        return f"{us if ls == 'unplaced' else ud} is in no layer folder"
     if RANK[ld] > RANK[ls]:
         return f"{ls} may not import {ld} (a layer above it)"
     if ls == "core" and ld == "core" and us != ud:
         return f"core package {us} may not import core package {ud} (sideways)"
     return None
+
+
+def test_every_module_lives_in_a_layer_folder():
+    """The folders are the layers: no module lies loose in the package root but its doors, and no folder is in
+    no layer (a new folder is given its layer in FOLDERS)."""
+    loose = sorted(p.stem for p in ROOT.glob("*.py") if p.stem not in DOORS and p.stem != "__init__")
+    folders = {p.name for p in ROOT.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
+    assert not loose, f"modules outside the layer folders: {loose}"
+    assert folders == set(FOLDER_LAYER), (folders - set(FOLDER_LAYER), set(FOLDER_LAYER) - folders)
 
 
 def module_name(path: Path, root: Path) -> str:
@@ -233,17 +237,17 @@ def test_only_the_cli_layer_imports_click():
 @pytest.mark.parametrize(
     "where, code, reported",
     [
-        ("progress.py", "import click\n", True),
-        ("config.py", "def f():\n    from click import echo\n", True),
-        ("log/bad.py", "def f():\n    import click.testing\n", True),
+        ("base/progress.py", "import click\n", True),
+        ("passes/config.py", "def f():\n    from click import echo\n", True),
+        ("logs/bad.py", "def f():\n    import click.testing\n", True),
         ("commands/run.py", "import click\n", False),
         ("cli.py", "def f():\n    import click\n", False),
-        ("bounds.py", "from .click import x\n", False),
+        ("base/bounds.py", "from .click import x\n", False),
     ],
 )
 def test_a_planted_click_import_is_reported_below_the_cli_layer(tmp_path, where, code, reported):
     root = tmp_path / PACKAGE
-    for folder in ("", "log", "commands"):
+    for folder in ("", "base", "passes", "logs", "commands"):
         (root / folder).mkdir(exist_ok=True)
         (root / folder / "__init__.py").write_text("")
     (root / where).write_text(code)
@@ -258,19 +262,27 @@ def test_the_known_exceptions_are_still_needed():
 @pytest.mark.parametrize(
     "where, code, rule",
     [
-        ("log/bad.py", "from ..cli import invocation\n", "log may not import cli"),
+        ("logs/bad.py", "from ..cli import invocation\n", "log may not import cli"),
         ("tracking/bad.py", "def f():\n    from datmo_cli.perception import features\n", "sideways"),
         ("perception/bad.py", "import datmo_cli.sim.simulate\n", "sideways"),
-        ("progress.py", "def f():\n    from .commands import compiling\n", "base may not import cli"),
-        ("sim/bad.py", "from .. import pipeline\n", "core may not import pipeline"),
+        ("base/progress.py", "def f():\n    from ..commands import compiling\n", "base may not import cli"),
+        ("sim/bad.py", "from ..passes import pipeline\n", "core may not import pipeline"),
+        ("passes/bad.py", "from ..loose import x\n", "loose is in no layer folder"),
     ],
 )
 def test_a_planted_bad_import_is_reported(tmp_path, where, code, rule):
     root = tmp_path / PACKAGE
-    for folder in ("", "log", "tracking", "perception", "sim", "commands"):
+    for folder in ("", "base", "passes", "logs", "tracking", "perception", "sim", "commands"):
         (root / folder).mkdir(exist_ok=True)
         (root / folder / "__init__.py").write_text("")
-    for name in ("cli.py", "pipeline.py", "commands/compiling.py", "perception/features.py", "sim/simulate.py"):
+    for name in (
+        "cli.py",
+        "loose.py",
+        "passes/pipeline.py",
+        "commands/compiling.py",
+        "perception/features.py",
+        "sim/simulate.py",
+    ):
         (root / name).write_text("")
     (root / where).write_text(code)
     bad = violations(root)
@@ -279,14 +291,15 @@ def test_a_planted_bad_import_is_reported(tmp_path, where, code, rule):
 
 def test_imports_down_and_within_a_layer_pass(tmp_path):
     root = tmp_path / PACKAGE
-    (root / "log").mkdir(parents=True)
-    (root / "tracking").mkdir()
-    for name in ("__init__.py", "log/__init__.py", "tracking/__init__.py", "errors.py", "log/scan.py"):
+    for folder in ("logs", "tracking", "base", "passes"):
+        (root / folder).mkdir(parents=True)
+        (root / folder / "__init__.py").write_text("")
+    for name in ("__init__.py", "base/errors.py", "logs/scan.py"):
         (root / name).write_text("")
     (root / "tracking/kalman.py").write_text(
-        "from ..log import scan\nfrom ..errors import InputError\n"
+        "from ..logs import scan\nfrom ..base.errors import InputError\n"
         "from . import kalman\nfrom datmo_cli import __version__\n"
     )
-    (root / "stages.py").write_text("from .tracking import kalman\nfrom . import errors\n")
-    (root / "cli.py").write_text("def main():\n    from . import stages\n")
+    (root / "passes/stages.py").write_text("from ..tracking import kalman\nfrom ..base import errors\n")
+    (root / "cli.py").write_text("def main():\n    from .passes import stages\n")
     assert violations(root) == []

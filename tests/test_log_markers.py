@@ -1,5 +1,5 @@
 """log.markers: MarkerArray bytes identical to rosbags' serialisation, its codes the type store's, and no CDR
-written outside datmo_cli/log."""
+written outside datmo_cli/logs."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import datmo_cli
-from datmo_cli.log import markers, types
+from datmo_cli.logs import markers, types
 
 pytestmark = pytest.mark.unit
 
@@ -76,7 +76,7 @@ def test_no_cdr_is_written_outside_log():
     writers = []
     for path in sorted(PACKAGE.rglob("*.py")):
         rel = path.relative_to(PACKAGE).as_posix()
-        if rel.startswith("log/"):
+        if rel.startswith("logs/"):
             continue
         text = path.read_text(encoding="utf-8")
         if "CDR_HEADER" in text or r"b\"\x00\x01\x00\x00" in text or r"b'\x00\x01\x00\x00" in text:

@@ -1,5 +1,5 @@
 """numba keys a cached kernel on its own file only; datmo's kernels also compile in constants and kernels of other
-files (tracking/state.py's indices, log/vocabulary's codes from msg/*.msg, other modules' kernels). Their cache
+files (tracking/state.py's indices, logs/vocabulary.s codes from msg/*.msg, other modules' kernels). Their cache
 stamp covers every such file (numba_runtime.KERNEL_SOURCES), so an edit to state.py alone recompiles
 tracking/_kernels.py's kernels instead of loading code built on the old indices."""
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from datmo_cli import numba_runtime
+from datmo_cli.base import numba_runtime
 
 pytestmark = pytest.mark.unit
 
@@ -24,7 +24,7 @@ def test_a_datmo_kernels_cache_stamp_covers_the_files_it_reads():
         own, sources = kernel._cache._impl.locator.get_source_stamp()
         assert sources == numba_runtime.sources_stamp()
         names = {path for path, _, _ in sources}
-        assert {"tracking/state.py", "log/vocabulary.py", "tracking/_kernels.py", "perception/segmentation.py"} <= names
+        assert {"tracking/state.py", "logs/vocabulary.py", "tracking/_kernels.py", "perception/segmentation.py"} <= names
         assert any(name.startswith("msg/") for name in names)
 
 

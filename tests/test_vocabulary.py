@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 import datmo_cli
-from datmo_cli.log import types, vocabulary
+from datmo_cli.logs import types, vocabulary
 
 pytestmark = pytest.mark.unit
 
@@ -120,7 +120,7 @@ def test_no_module_declares_the_vocabulary_again():
     found = {}
     for path in sorted(PACKAGE.rglob("*.py")):
         rel = path.relative_to(PACKAGE).as_posix()
-        if rel == "log/vocabulary.py":
+        if rel == "logs/vocabulary.py":
             continue
         names = assigned_names(ast.parse(path.read_text(encoding="utf-8"))) & FORBIDDEN
         if names:
