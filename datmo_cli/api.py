@@ -95,10 +95,10 @@ _NUMPY = {
 # the other commands' work, imported on first use: name -> (module under datmo_cli, function)
 _LAZY = {
     "tune": ("tune", "run_tune"),  # datmo tune (it brings the batch and scoring modules)
-    "segment": ("stage_files", "segment_file"),  # datmo segment
-    "extract_features": ("stage_files", "features_file"),  # datmo features
-    "track": ("stage_files", "track_file"),  # datmo track
-    "warm_up": ("pipeline", "warm_up"),  # datmo warm-up
+    "segment": ("passes.stage_files", "segment_file"),  # datmo segment
+    "extract_features": ("passes.stage_files", "features_file"),  # datmo features
+    "track": ("passes.stage_files", "track_file"),  # datmo track
+    "warm_up": ("passes.pipeline", "warm_up"),  # datmo warm-up
 }
 
 
