@@ -146,6 +146,7 @@ def perception_in_python() -> Iterator[int]:
     from numba.core.registry import CPUDispatcher
 
     from .. import perception
+    from . import feature_channels, stages  # noqa: F401  (loaded, so their names are replaced too)
 
     for info in pkgutil.iter_modules(perception.__path__):
         importlib.import_module(f"{perception.__name__}.{info.name}")
