@@ -347,7 +347,7 @@ def test_accumulate_and_hide_bench_supports():
     rows, want_first, want_snaps = rp.landmark_database(
         det, stamps, match, min_count, drift, column_time, forget, support
     )
-    n = counters[LDB.C_ROWS]
+    n = counters[LDB.COUNT_ROWS]
     assert n == len(rows)
     np.testing.assert_allclose(db[:n], rows, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(first_ns[:n], want_first)
@@ -456,7 +456,7 @@ def test_extract_scan_scans_and_parallel():
     assert (counts[:, 1:].sum(axis=0) > 0).all()  # lines, circles and blobs
 
     for k in range(N):
-        want_seg = rp.segment(ranges[k], inc, vec[FL.P_C0], 0.05, 8.0, int(vec[FL.P_MIN_POINTS]))
+        want_seg = rp.segment(ranges[k], inc, vec[FL.FP_C0], 0.05, 8.0, int(vec[FL.FP_MIN_POINTS]))
         assert [tuple(s) for s in seg[k * B : k * B + counts[k, 0]].tolist()] == want_seg
         r = np.where(np.isfinite(ranges[k]), ranges[k], 0.0).astype(np.float64)
         x, y = r * cos_a, r * sin_a
@@ -691,12 +691,12 @@ def _mirror_segment(x, y, s: int, e: int, vec: np.ndarray, params, dalpha: float
     decision and the merges left to the reference: (rp.Decision, the candidate rows after the merges, the
     pairs merged, the kept lines before the decision, the r_acc a circle must beat)."""
 
-    rho_res = vec[FL.P_RHO_RES]
+    rho_res = vec[FL.FP_RHO_RESOLUTION]
     cos_t, sin_t, acc, toff, idx, lo = st["cos_t"], st["sin_t"], st["acc"], st["toff"], st["idx"], st["lo"]
     sub_s, sub_e, peaks = st["sub_s"], st["sub_e"], st["peaks"]
     nt = cos_t.shape[0]
     nsub = 0
-    if e - s >= vec[FL.P_LINE_MIN_POINTS]:
+    if e - s >= vec[FL.FP_LINE_MIN_POINTS]:
         HL.normal_cells(x, y, s, e, nt, st["cell"])
         used = nt * HL._bounding_box(x, y, s, e, rho_res, acc.shape[1], st["box"])
         if used > st["zeroed"]:
@@ -711,7 +711,7 @@ def _mirror_segment(x, y, s: int, e: int, vec: np.ndarray, params, dalpha: float
             cos_t,
             sin_t,
             rho_res,
-            int(vec[FL.P_WINDOW] / (np.pi / nt)),
+            int(vec[FL.FP_VOTE_WINDOW] / (np.pi / nt)),
             st["cell"],
             (sub_s, sub_e, peaks),
             st["hist"],
@@ -763,7 +763,7 @@ def _steps_agree(x, y, s: int, e: int, vec, inc: float, d, rows, st: dict, got: 
         kept_at[: len(pre_kept)] = pre_kept
         sub_s[: len(runs)] = [a for a, _ in runs]
         sub_e[: len(runs)] = [b for _, b in runs]
-        m = SX._merge_lines(x, y, len(pre_kept), vec[FL.P_RHO_RES], work)
+        m = SX._merge_lines(x, y, len(pre_kept), vec[FL.FP_RHO_RESOLUTION], work)
         assert kept_at[:m].tolist() == list(kept), d
         for q in kept:
             np.testing.assert_array_equal(cand[q], rows[q], err_msg=str(d))
@@ -808,10 +808,10 @@ def test_extract_scan_decision_equals_the_reference():
         nt = int(round(180.0 / params.theta_resolution))
         theta = np.arange(nt) * (np.pi / nt)
         cos_t, sin_t = np.cos(theta), np.sin(theta)
-        w = int(round(vec[FL.P_CWINDOW] / vec[FL.P_CELL]))
-        width = int(2 * 8.0 / vec[FL.P_RHO_RES]) + 3
+        w = int(round(vec[FL.FP_CIRCLE_WINDOW] / vec[FL.FP_CIRCLE_CELL]))
+        width = int(2 * 8.0 / vec[FL.FP_RHO_RESOLUTION]) + 3
         for k, ranges in enumerate(list(_room_scans(2, angles)) + _feature_scenes(angles)):
-            segs = rp.segment(ranges, inc, vec[FL.P_C0], 0.05, 8.0, 1)  # single points and pairs too
+            segs = rp.segment(ranges, inc, vec[FL.FP_C0], 0.05, 8.0, 1)  # single points and pairs too
             r = np.where(np.isfinite(ranges), ranges, 0.0).astype(np.float64)
             x, y = r * np.cos(angles), r * np.sin(angles)
             # the accumulator as extract_scans leaves it uninitialised: extract_scan zeroes what it uses

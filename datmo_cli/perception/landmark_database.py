@@ -22,7 +22,7 @@ key_kernel_cache_on_sources()  # before any kernel is declared: their cache stam
 DB_COLUMNS = 13
 DB_MOVED, DB_CONFIRMED, DB_HIDDEN = 10, 11, 12
 # counters of a database carried from block to block: rows used, live rows, confirmed rows
-C_ROWS, C_LIVE, C_CONFIRMED = 0, 1, 2
+COUNT_ROWS, COUNT_LIVE, COUNT_CONFIRMED = 0, 1, 2
 
 
 # inlined into accumulate (one compiled function, as before it was cut out)
@@ -112,23 +112,23 @@ def accumulate(det, stamps, k0, rules, state, snap):
 
     rules = (match, min_count, max_drift, column_time, forget, column_radius_min); state = (db, first_ns,
     last_ns, live, confirmed, counters): the database `db` (rows as DB_COLUMNS; first_ns/last_ns: the stamps
-    its row was first and last seen), carrying `live`, `confirmed` and `counters` (C_*) from the blocks
+    its row was first and last seen), carrying `live`, `confirmed` and `counters` (COUNT_*) from the blocks
     before; snap = (snap_idx, snap_vals, snap_last, snap_count). After each scan k, the landmarks in the
     database (confirmed, not moved, not hidden) are appended to snap_idx (row index), snap_vals (x, y,
     orientation, size, count, last scan: their state then) and snap_last (last seen, ns), and their number
     stored in snap_count[k - k0]. A candidate seen fewer than min_count times and not for `forget` scans is
     forgotten; a column enters the database only once seen over `column_time` ns (a circle object that stops
     for a moment is not a column); a column candidate by a confirmed bench's support (its end,
-    column_radius_min in) is hidden. Capacities: db rows >= counters[C_ROWS] + len(det), snapshot entries >=
-    len(stamps) * (counters[C_CONFIRMED] + len(det)). Returns the snapshot entries written."""
+    column_radius_min in) is hidden. Capacities: db rows >= counters[COUNT_ROWS] + len(det), snapshot entries >=
+    len(stamps) * (counters[COUNT_CONFIRMED] + len(det)). Returns the snapshot entries written."""
     _, min_count, _, _, forget, column_radius_min = rules
     db, first_ns, last_ns, live, confirmed, counters = state
     snap_idx, snap_vals, snap_last, snap_count = snap
     n_scans = stamps.shape[0]
     nd = det.shape[0]
-    n = counters[C_ROWS]
-    nlive = counters[C_LIVE]
-    nconf = counters[C_CONFIRMED]
+    n = counters[COUNT_ROWS]
+    nlive = counters[COUNT_LIVE]
+    nconf = counters[COUNT_CONFIRMED]
     ns = 0
     j = 0
     for kk in range(n_scans):
@@ -157,9 +157,9 @@ def accumulate(det, stamps, k0, rules, state, snap):
                 ns += 1
                 count += 1
         snap_count[kk] = count
-    counters[C_ROWS] = n
-    counters[C_LIVE] = nlive
-    counters[C_CONFIRMED] = nconf
+    counters[COUNT_ROWS] = n
+    counters[COUNT_LIVE] = nlive
+    counters[COUNT_CONFIRMED] = nconf
     return ns
 
 
@@ -236,7 +236,7 @@ class LandmarkStream:
     @property
     def rows(self) -> np.ndarray:
         """The database rows used so far (DB_COLUMNS)."""
-        return self.db[: self.counters[C_ROWS]]
+        return self.db[: self.counters[COUNT_ROWS]]
 
     def add(self, detections: np.ndarray, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fold in the detections (rows DET_*, DET_SCAN counted from this block's first scan, world or sensor
@@ -266,8 +266,8 @@ class LandmarkStream:
         p = self.p
         nb = len(stamps)
         det[:, DET_SCAN] += self.scans
-        self._reserve(int(self.counters[C_ROWS]) + len(det) + 1)
-        cap = nb * (int(self.counters[C_CONFIRMED]) + len(det)) + 1
+        self._reserve(int(self.counters[COUNT_ROWS]) + len(det) + 1)
+        cap = nb * (int(self.counters[COUNT_CONFIRMED]) + len(det)) + 1
         snap_idx, snap_vals = np.zeros(cap, np.int64), np.zeros((cap, 6))
         snap_last, snap_count = np.zeros(cap, np.int64), np.zeros(nb, np.int64)
         rules = (
