@@ -90,7 +90,6 @@ N_FIXED = TAIL
     P_PERSON_COAST,
     P_PERSON_RADIUS,
     P_PERSON_EVIDENCE_UNFREE,
-    P_FREE_SPACE_SCANS,
     P_FREE_SPACE_INTERVAL,
     P_FREE_SPACE_MIN,
     P_FREE_SPACE_SHARE,
@@ -103,8 +102,8 @@ N_FIXED = TAIL
     P_BACKGROUND_CELL,
     P_BACKGROUND_EXTENT,
     P_TAIL_LENGTH,
-) = range(54)
-N_PARAMS = 54
+) = range(53)
+N_PARAMS = 53
 P_LEG_THRESHOLD = N_PARAMS  # the leg model's threshold, appended by TrackingParams.kernel_vector
 PARAM_NAMES = (
     "process_noise",
@@ -148,7 +147,6 @@ PARAM_NAMES = (
     "person_coast",
     "person_radius",
     "person_evidence_unfree",
-    "free_space_scans",
     "free_space_interval",
     "free_space_min",
     "free_space_share",
