@@ -17,6 +17,7 @@ from datmo_cli.perception import landmark_database as LDB
 from datmo_cli.perception import leg_features as LF
 from datmo_cli.perception import scan_extractor as SX
 from datmo_cli.perception import scan_odometry as KO
+from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking import _step, state
 from datmo_cli.tracking.tracker import TRACK_DTYPE, Tracker, _flat
 from tests import reference_perception as rp
@@ -289,8 +290,7 @@ def test_benches():
         lines[:, 3],
         lines[:, 4],
         line_offsets,
-        0.6,
-        2.5,
+        FeatureParams(bench_min_length=0.6, bench_max_length=2.5).kernel_vector(),
         out,
     )
     want = rp.benches(circles, lines, 0.6, 2.5, LANDMARK_BENCH)
@@ -327,7 +327,14 @@ def test_accumulate_and_hide_bench_supports():
     n_scans, split = 40, 23
     det = _landmark_scene(rng, n_scans)
     stamps = (np.arange(n_scans) * 100_000_000 + 5 * 10**17).astype(np.int64)
-    match, min_count, drift, column_time, forget, support = 0.3, 3, 0.1, 1e9, 10, 0.13
+    match, min_count, drift, column_time, forget, support = 0.3, 3, 0.1, 1e9, LDB.FORGET_SCANS, 0.13
+    p = FeatureParams(
+        landmark_match=match,
+        landmark_min_count=min_count,
+        column_max_drift=drift,
+        column_min_time=column_time / 1e9,
+        column_radius_min=support,
+    ).kernel_vector()
     cap = len(det) + 1
     db, first_ns, last_ns = np.zeros((cap, LDB.DB_COLUMNS)), np.zeros(cap, np.int64), np.zeros(cap, np.int64)
     live, confirmed, counters = np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros(3, np.int64)
@@ -337,9 +344,8 @@ def test_accumulate_and_hide_bench_supports():
         size = (k1 - k0) * cap
         snap_idx, snap_vals = np.zeros(size, np.int64), np.zeros((size, 6))
         snap_last, snap_count = np.zeros(size, np.int64), np.zeros(k1 - k0, np.int64)
-        rules = (match, min_count, drift, column_time, forget, support)
         state = (db, first_ns, last_ns, live, confirmed, counters)
-        ns = LDB.accumulate(part, stamps[k0:k1], k0, rules, state, (snap_idx, snap_vals, snap_last, snap_count))
+        ns = LDB.accumulate(part, stamps[k0:k1], k0, p, state, (snap_idx, snap_vals, snap_last, snap_count))
         assert ns == snap_count.sum()
         offsets = np.concatenate([[0], np.cumsum(snap_count)])
         for a, b in zip(offsets[:-1], offsets[1:], strict=True):
@@ -365,7 +371,7 @@ def test_accumulate_and_hide_bench_supports():
     used = (0, 0, 0)
     for k in range(n_scans):
         for d in det[det[:, 0] == k]:
-            used = LDB._fold(d, k, stamps[k], rules, state1, used)
+            used = LDB._fold(d, k, stamps[k], p, state1, used)
         m, nlive, nconf = used
         u = 0
         while u < nlive:  # as accumulate drops them: the last live row takes the dropped one's place

@@ -26,16 +26,9 @@ PACKAGE = Path(datmo_cli.__file__).parent
 
 # [features] keys that are not in the feature kernels' vector: the file (under datmo_cli/) that reads each, by name
 FEATURES_ELSEWHERE = {
-    "d_max": "perception/landmarks.py",  # wall lines and line ends (Python); the tracking vector's d_max too
+    "d_max": "perception/landmarks.py",  # wall lines and line ends (numpy); the tracking vector's d_max too
     "corner_gap": "perception/landmarks.py",  # corners and deflections (numpy)
     "deflection_min": "perception/landmarks.py",
-    "column_radius_min": "perception/landmarks.py",  # column candidates; also the landmark database's rules
-    "bench_min_length": "perception/landmarks.py",  # arguments of the _benches kernel
-    "bench_max_length": "perception/landmarks.py",
-    "landmark_match": "perception/landmark_database.py",  # the accumulate kernel's `rules`, built by name
-    "landmark_min_count": "perception/landmark_database.py",
-    "column_max_drift": "perception/landmark_database.py",
-    "column_min_time": "perception/landmark_database.py",
     "theta_resolution": "perception/features.py",  # the HTL's theta cells, passed as their cos/sin tables
     "leg_model": "perception/features.py",  # a string: the leg detector's file, loaded in Python
 }

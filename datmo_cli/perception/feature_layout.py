@@ -1,4 +1,4 @@
-"""Layout shared by the feature kernels: the parameter vector (FEATURE_PARAMS, FP_* slots; built by
+"""Layout shared by the perception kernels: the parameter vector (FEATURE_PARAMS, FP_* slots; built by
 FeatureParams.kernel_vector) and the columns of line (L_*), circle (CR_*) and blob (B_*) rows and of line (LC_*)
 and circle (CC_*) candidates.
 """
@@ -29,6 +29,14 @@ FEATURE_PARAMS: tuple[tuple[str, str], ...] = (
     ("circle_residual_ratio", ""),
     ("circle_radius_margin", ""),
     ("circle_lines_ratio", ""),
+    # landmarks (landmarks._benches, landmark_database.accumulate)
+    ("column_radius_min", ""),
+    ("bench_min_length", ""),
+    ("bench_max_length", ""),
+    ("landmark_match", ""),
+    ("landmark_min_count", ""),
+    ("column_max_drift", ""),
+    ("column_min_time", ""),
 )
 FEATURE_PARAM_NAMES = tuple(key for key, _ in FEATURE_PARAMS)
 N_FEATURE_PARAMS = len(FEATURE_PARAMS)
@@ -59,6 +67,13 @@ FP_CIRCLE_MIN_COVERAGE = _slot("circle_min_coverage")
 FP_CIRCLE_RESIDUAL_RATIO = _slot("circle_residual_ratio")
 FP_CIRCLE_RADIUS_MARGIN = _slot("circle_radius_margin")
 FP_CIRCLE_LINES_RATIO = _slot("circle_lines_ratio")
+FP_COLUMN_RADIUS_MIN = _slot("column_radius_min")
+FP_BENCH_MIN_LENGTH = _slot("bench_min_length")
+FP_BENCH_MAX_LENGTH = _slot("bench_max_length")
+FP_LANDMARK_MATCH = _slot("landmark_match")
+FP_LANDMARK_MIN_COUNT = _slot("landmark_min_count")
+FP_COLUMN_MAX_DRIFT = _slot("column_max_drift")
+FP_COLUMN_MIN_TIME = _slot("column_min_time")  # s
 
 
 # columns of the line rows
