@@ -2,8 +2,8 @@
 name table (perception.feature_layout.FEATURE_PARAMS, FP_<KEY>; tracking.state.PARAM_NAMES, P_<KEY>), every slot
 is read by a kernel, and every other key is listed below with the file that reads it.
 
-The kernels' reads are found in their source: a slot constant loaded (`p[FP_CIRCLE_CELL]`, `FL.FP_C0`) in a
-module of the package other than the one that defines the slots; an import alone is no read."""
+The kernels' reads are found in their source: a slot constant loaded (`p[FP_CIRCLE_CELL]`) in a function of the
+package compiled by numba (@njit); an import, or a read in plain Python around the kernels, is no kernel's read."""
 
 from __future__ import annotations
 
@@ -44,14 +44,25 @@ TRACK_ELSEWHERE = {
 TRACK_EXTRA_SLOTS = {"P_LEG_THRESHOLD": state.N_PARAMS}  # the leg model's threshold_p, appended by kernel_vector
 
 
-def slots_read(folder: str, prefix: str, defined_in: str) -> set[str]:
-    """Names starting with `prefix` that the modules of datmo_cli/<folder> other than `defined_in` load: as a
-    name or a module's attribute (imports and assignments are no reads)."""
+def _is_kernel(node: ast.AST) -> bool:
+    """A function compiled by numba: decorated with njit or jit (bare, called, or numba.njit)."""
+    if not isinstance(node, ast.FunctionDef):
+        return False
+    for dec in node.decorator_list:
+        target = dec.func if isinstance(dec, ast.Call) else dec
+        name = target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", "")
+        if name in ("njit", "jit"):
+            return True
+    return False
+
+
+def slots_read(folder: str, prefix: str) -> set[str]:
+    """Names starting with `prefix` that the numba kernels of datmo_cli/<folder> load: as a name or a module's
+    attribute (imports, assignments and plain Python's reads are no kernel's reads)."""
     found = set()
     for path in sorted((PACKAGE / folder).glob("*.py")):
-        if path.name == defined_in:
-            continue
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        kernels = [n for n in ast.walk(ast.parse(path.read_text(), str(path))) if _is_kernel(n)]
+        for node in (n for kernel in kernels for n in ast.walk(kernel)):
             if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Load):
                 name = node.id
             elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Load):
@@ -93,14 +104,14 @@ def check_table(keys: tuple[str, ...], slots: dict[str, int], prefix: str, read:
 
 def test_every_feature_slot_is_a_key_and_every_key_a_slot_the_kernels_read():
     slots = slot_constants(feature_layout, "FP_")
-    read = slots_read("perception", "FP_", "feature_layout.py")
+    read = slots_read("perception", "FP_")
     assert check_table(feature_layout.FEATURE_PARAM_NAMES, slots, "FP_", read, {}) == []
     assert len(slots) == feature_layout.N_FEATURE_PARAMS == len(FeatureParams().kernel_vector())
 
 
 def test_every_track_slot_is_a_key_and_every_key_a_slot_the_kernels_read():
     slots = slot_constants(state, "P_")
-    read = slots_read("tracking", "P_", "state.py")
+    read = slots_read("tracking", "P_")
     assert check_table(state.PARAM_NAMES, slots, "P_", read, TRACK_EXTRA_SLOTS) == []
     assert {n: slots[n] for n in TRACK_EXTRA_SLOTS} == TRACK_EXTRA_SLOTS
     assert len(TrackingParams().kernel_vector()) == state.N_PARAMS + len(TRACK_EXTRA_SLOTS)
@@ -118,7 +129,8 @@ def test_every_key_is_in_its_name_table_or_listed_where_it_is_read(section, tabl
     keys = keys_of(section)
     assert len(set(table)) == len(table)
     assert not set(table) & set(elsewhere)
-    assert sorted(keys) == sorted(set(table) | set(elsewhere))
+    assert set(keys) - set(table) - set(elsewhere) == set(), "keys in neither the name table nor the list"
+    assert set(table) | set(elsewhere) <= set(keys), "listed names that are no key"
     for key, path in elsewhere.items():
         assert key in attributes_read(path), f"{key} is not read in {path}"
 
