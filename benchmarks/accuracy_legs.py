@@ -55,7 +55,7 @@ def figure_lines() -> list[str]:
     lab, emp = TR.tables_of(labelled, clusters=clusters), TR.tables_of(empty, clusters=clusters)
     extra = []
     if model is not None and model.provenance.get("simulated"):  # trained with --with-simulated: so here
-        from datmo_cli.simulated import simulated_recordings
+        from datmo_cli.passes.simulated import simulated_recordings
 
         extra = TR.tables_of(simulated_recordings(), clusters=clusters)
     thin = TR.tables_of([TR.thinned(r, 2) for r in labelled], clusters=clusters)

@@ -20,9 +20,9 @@ import numpy as np
 
 from benchmarks.accuracy_tracking import LEGTRACKER, demo_figures, learned_legs, read_leg_labels, read_ros1_scans
 from benchmarks.common import print_lines
-from datmo_cli.log.vocabulary import CLASS_PERSON, STATUS_TENTATIVE
+from datmo_cli.logs.vocabulary import CLASS_PERSON, STATUS_TENTATIVE
+from datmo_cli.passes.stages import leg_threshold_of, run_features, track_run
 from datmo_cli.perception.egomotion import odometry_for
-from datmo_cli.stages import leg_threshold_of, run_features, track_run
 
 NEGATIVE_TOPICS = ("/left_scan", "/right_scan", "/rear_scan")
 PERSON_RADIUS = 0.5  # m, a labelled leg this near a confirmed person track is covered
@@ -39,8 +39,8 @@ def fold_models(folder: Path, quick: bool = False) -> tuple[dict[str, str], dict
     a quarter of the trees, for tests."""
     import dataclasses
 
+    from datmo_cli.passes.simulated import simulated_recordings
     from datmo_cli.perception import training as TR
-    from datmo_cli.simulated import simulated_recordings
 
     positives = sorted(LEGTRACKER.glob("positive_*_extracted.bag"))
     lab = TR.tables_of([TR.read_labelled(p) for p in positives])

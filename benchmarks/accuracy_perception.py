@@ -15,9 +15,9 @@ import numpy as np
 
 from benchmarks import perception_scoring as acc
 from benchmarks.common import print_lines
-from datmo_cli.log import mcapio, types
-from datmo_cli.log.scan import ScanGeometry, ScanRun
-from datmo_cli.log.vocabulary import LANDMARK_NAMES
+from datmo_cli.logs import mcapio, types
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
+from datmo_cli.logs.vocabulary import LANDMARK_NAMES
 from datmo_cli.perception.features import RunFeatures, extract_run
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.report import decode_channel
@@ -198,7 +198,7 @@ def real_logs() -> list[tuple[Path, str | None]]:
 
 
 def real(path: Path, topic: str | None) -> str:
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     imported = import_log(path, topic)
     run = imported.run
@@ -243,7 +243,7 @@ def circle_figures(f: RunFeatures, p: FeatureParams) -> str:
 
 def carmen_circles() -> list[str]:
     """Circles on the CARMEN office logs before (the old rule: the well-posedness tests off) and after."""
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     before, after = FeatureParams().replace(**BEFORE_CIRCLES), FeatureParams()
     out = [

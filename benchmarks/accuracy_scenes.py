@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import print_lines
-from datmo_cli.log.vocabulary import CLASS_PERSON, MOBILITY_DYNAMIC, MOBILITY_STATIC, STATUS_CONFIRMED
+from datmo_cli.logs.vocabulary import CLASS_PERSON, MOBILITY_DYNAMIC, MOBILITY_STATIC, STATUS_CONFIRMED
 
 MATCH_RADIUS = 0.5  # m
 LEADER_ID = 1  # the following scene's first [[person]]
@@ -76,9 +76,9 @@ class SceneRun:
 def simulate(scene: str, out: Path, *, seed: int = 0, duration: float | None = None) -> Path:
     """`datmo simulate --scene SCENE --seed SEED [--duration D] -o OUT` in process: an MCAP with ground truth, or a
     ROS 1 bag when OUT ends in .bag."""
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
+    from datmo_cli.passes.simulated import write_simulation, write_simulation_bag
     from datmo_cli.sim.simulate import Simulation
-    from datmo_cli.simulated import write_simulation, write_simulation_bag
 
     sim = Simulation(scene, seed=seed, duration=duration)
     if Path(out).suffix == ".bag":
@@ -91,9 +91,9 @@ def simulate(scene: str, out: Path, *, seed: int = 0, duration: float | None = N
 
 def process(src: Path, out: Path, config=None) -> Path:
     """`datmo run SRC` for one input (a bag converted by the importers first, as `datmo run` converts it), into
-    OUT; `config`: a datmo_cli.config.DatmoConfig (None: the defaults)."""
-    from datmo_cli import pipeline
-    from datmo_cli.inputs import scan_log
+    OUT; `config`: a datmo_cli.passes.config.DatmoConfig (None: the defaults)."""
+    from datmo_cli.passes import pipeline
+    from datmo_cli.passes.input_logs import scan_log
 
     with scan_log(Path(src), Path(out), force=True, tell=lambda _line: None) as log:
         pipeline.process_file(log, out, force=True, config=config, markers=False, origin=src)
@@ -102,7 +102,7 @@ def process(src: Path, out: Path, config=None) -> Path:
 
 def load(truth_log: Path, tracked_log: Path) -> SceneRun:
     """The ground truth of `truth_log` and the tracks of `tracked_log` (the same scans), aligned by stamp."""
-    from datmo_cli.log import mcapio, types
+    from datmo_cli.logs import mcapio, types
     from datmo_cli.report import decode_channel
 
     truth = mcapio.read_log(truth_log, topics=[mcapio.TOPIC_GROUND_TRUTH])
@@ -303,7 +303,7 @@ def walking_dynamic_share(run: SceneRun, matched: np.ndarray | None = None) -> f
 
 def same_tracks(a: Path, b: Path) -> tuple[bool, int, int]:
     """(whether two tracked logs hold the same /datmo/tracks messages, how many are the same, how many a has)."""
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     pa = mcapio.read_messages(a, mcapio.TOPIC_TRACKS)[1]
     pb = mcapio.read_messages(b, mcapio.TOPIC_TRACKS)[1]

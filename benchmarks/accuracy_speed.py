@@ -20,7 +20,7 @@ import numpy as np
 
 from benchmarks import accuracy_scenes as sc
 from benchmarks.common import print_lines
-from datmo_cli.log.vocabulary import CLASS_PERSON, STATUS_CONFIRMED
+from datmo_cli.logs.vocabulary import CLASS_PERSON, STATUS_CONFIRMED
 
 HALL_SECONDS = 3600.0  # the hall at 5 Hz for the simulator's longest run: 18,000 scans, people looping on their paths
 SCENES = (("hall", HALL_SECONDS), ("following", None), ("lab-drive", None))
@@ -63,7 +63,7 @@ def speed_figures(run: sc.SceneRun) -> dict:
 
 def scene_speeds(scene: str, folder: Path, duration: float | None = None, lags=(None, 0.0)) -> dict:
     """{lag: speed_figures} of `scene` simulated once and run with each hindsight lag (None: the default)."""
-    from datmo_cli.config import DatmoConfig
+    from datmo_cli.passes.config import DatmoConfig
 
     folder = Path(folder)
     log = sc.simulate(scene, folder / f"{scene}.mcap", duration=duration)

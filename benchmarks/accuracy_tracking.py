@@ -18,11 +18,11 @@ import numpy as np
 from benchmarks import tracking_scoring as acc
 from benchmarks.common import print_lines
 from datmo_cli import evaluate as ev
-from datmo_cli.log import mcapio, types
-from datmo_cli.log.scan import ScanGeometry, ScanRun
-from datmo_cli.log.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON, MOBILITY_DYNAMIC, STATUS_CONFIRMED
+from datmo_cli.logs import mcapio, types
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
+from datmo_cli.logs.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON, MOBILITY_DYNAMIC, STATUS_CONFIRMED
+from datmo_cli.passes.stages import run_features, track_run
 from datmo_cli.report import decode_channel
-from datmo_cli.stages import run_features, track_run
 
 ROOT = Path(__file__).resolve().parent.parent
 LOGS = ROOT / "sample_logs"

@@ -83,7 +83,7 @@ def noop_round_trip(executor, n: int = 50) -> float:
 
 def main() -> None:
     from datmo_cli.batch import ensure_warm
-    from datmo_cli.cluster import DaskExecutor
+    from datmo_cli.batch.cluster import DaskExecutor
 
     ensure_warm()
     best = {"local": float("inf"), 1: float("inf"), 2: float("inf")}

@@ -21,8 +21,8 @@ from pathlib import Path
 from benchmarks.bench_perception import HALL, one_core, tiled
 from benchmarks.bench_perception_cores import LOGS, ROUNDS, log_arrays, old_tree, time_version
 from benchmarks.common import Row, best_of, print_lines, print_table
-from datmo_cli.log import mcapio
-from datmo_cli.log.scan import ScanRun
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.scan import ScanRun
 from datmo_cli.perception.features import extract_run
 from datmo_cli.perception.params import FeatureParams
 
@@ -44,7 +44,7 @@ CONFIGS = (
 
 def logs() -> list[tuple[str, object]]:
     """(name, ScanRun) of each log measured: the hall tiled to 5,000 scans, then the real logs present."""
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     out = [("hall x5,000", tiled(mcapio.read_run(HALL), 5000))]
     for name in ("csail", "intel", "freiburg-079"):

@@ -62,8 +62,8 @@ def bench_record(n: int, realtime: bool) -> Row:
     from datmo_cli.lms2xx.driver import LMS2xx
     from datmo_cli.lms2xx.emulator import Emulator
     from datmo_cli.lms2xx.recorder import record
-    from datmo_cli.log import mcapio
-    from datmo_cli.simulated import SceneSource
+    from datmo_cli.logs import mcapio
+    from datmo_cli.passes.simulated import SceneSource
 
     with tempfile.TemporaryDirectory() as d, Emulator(SceneSource("hall"), realtime=realtime) as emu:
         driver = LMS2xx(emu.device_path, baud=500000)
@@ -94,8 +94,8 @@ def bench_record_75hz(seconds: float = 30.0) -> tuple[Row, int, int, float]:
     import sys
 
     from datmo_cli.lms2xx.emulator import Emulator
-    from datmo_cli.log import mcapio
-    from datmo_cli.simulated import SceneSource
+    from datmo_cli.logs import mcapio
+    from datmo_cli.passes.simulated import SceneSource
 
     datmo = Path(sys.executable).with_name("datmo")
     with (

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import Row, best_of, print_lines, print_table
-from datmo_cli.log import mcapio
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 
 N_SCANS = 20_000
 

@@ -54,8 +54,8 @@ def file_order_gap(path: Path) -> float:
 def run_output(src: Path, out: Path, *, markers: bool = False, unbounded: bool = False) -> Path:
     """`datmo run`'s output of `src` (default options, or --markers); `unbounded`: chunked by channel without
     the windows of log time (how the size is compared)."""
-    from datmo_cli import streaming
-    from datmo_cli.pipeline import process_file
+    from datmo_cli.passes import streaming
+    from datmo_cli.passes.pipeline import process_file
 
     seconds = streaming.CHUNK_SECONDS
     streaming.CHUNK_SECONDS = 0.0 if unbounded else seconds

@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import Row, best_of, print_lines, print_table
-from datmo_cli.log import mcapio
-from datmo_cli.log.scan import ScanRun
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.scan import ScanRun
+from datmo_cli.passes.stages import derive_features
 from datmo_cli.perception.features import extract_run, segment_run
-from datmo_cli.stages import derive_features
 
 ROOT = Path(__file__).resolve().parent.parent
 HALL = ROOT / "sample_logs" / "hall.mcap"
@@ -39,7 +39,7 @@ FEATURES_TARGET = 20_000  # scans/s, segmentation + lines, circles, blobs and la
 # A fresh interpreter: import the perception code and extract the features of a 10-scan run.
 STARTUP_CODE = """
 import numpy as np
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 from datmo_cli.perception.features import extract_run
 g = ScanGeometry(-np.pi / 2, np.pi / 360, 361, 0.0, 8.0, 0.0, 0.2, "laser")
 a = g.angles()
@@ -93,7 +93,7 @@ def one_core() -> set[int] | None:
 CARMEN_CODE = """
 import json, sys, time
 import numpy as np
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 from datmo_cli.perception.features import extract_run
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.perception.threads import set_default
@@ -129,7 +129,7 @@ def start_tree() -> Path | None:
 
 def carmen_npz() -> list[str]:
     """The CARMEN logs present, each imported once into CACHE as .npz (stamps, ranges, geometry)."""
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     names = []
     for name in CARMEN_LOGS:

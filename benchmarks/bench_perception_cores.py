@@ -48,7 +48,7 @@ root, paths, passes, threads, legs = sys.argv[1], sys.argv[2].split(","), int(sy
     sys.argv[5]
 sys.path.insert(0, root)
 import numpy as np
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 from datmo_cli.perception import features as F
 from datmo_cli.perception.params import FeatureParams
 assert F.__file__.startswith(root), F.__file__
@@ -110,7 +110,7 @@ def log_arrays() -> tuple[list[Path], str]:
     missing = [n for n in LOGS if not (CARMEN / f"{n}-corrected.log.gz").is_file()]
     if missing:
         return [], f"{CARMEN} lacks {', '.join(missing)} (../shared/data exists only beside CI's clone)"
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     out = []
     for name in LOGS:
@@ -207,8 +207,8 @@ def against_old() -> list[str]:
 
 def thread_speedup() -> list[str]:
     """The lines on several cores: features (leg detector on, no landmarks) on 1 and 2 threads."""
-    from datmo_cli.log import mcapio
-    from datmo_cli.log.scan import ScanRun
+    from datmo_cli.logs import mcapio
+    from datmo_cli.logs.scan import ScanRun
     from datmo_cli.perception.features import extract_run
     from datmo_cli.perception.threads import available
 
@@ -217,7 +217,7 @@ def thread_speedup() -> list[str]:
     paths, _ = log_arrays()
     if paths:
         z = np.load(paths[-1])
-        from datmo_cli.log.scan import ScanGeometry
+        from datmo_cli.logs.scan import ScanGeometry
 
         g = z["geom"]
         run = ScanRun(

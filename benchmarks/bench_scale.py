@@ -28,7 +28,7 @@ from pathlib import Path
 from benchmarks.bench_perception import HALL, mcap_iterate, tiled
 from benchmarks.common import Row, best_of, print_lines, print_table
 from benchmarks.hall_log import HALL_SCANS, simulated_hall
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
 
 ROOT = Path(__file__).resolve().parent.parent
 CACHE = Path(tempfile.gettempdir()) / "datmo-bench"
@@ -46,8 +46,8 @@ REPEAT = 2  # timed processes of each code and command, interleaved
 TIMED = """
 import sys, time
 from datmo_cli.perception.threads import set_default
-from datmo_cli.pipeline import process_file, warm_up
-from datmo_cli.stage_files import features_file
+from datmo_cli.passes.pipeline import process_file, warm_up
+from datmo_cli.passes.stage_files import features_file
 warm_up()
 set_default(1)
 command, src, out = sys.argv[1:4]
@@ -154,7 +154,7 @@ def gains(logs: dict[str, Path], tmp: Path) -> tuple[list[Row], list[str], dict]
 
 def intel_sizes(tmp: Path) -> list[str]:
     """The output ratios of datmo run on CARMEN intel, lean and with --markers, against the targets."""
-    from datmo_cli.pipeline import process_file
+    from datmo_cli.passes.pipeline import process_file
 
     if not INTEL.exists():
         return [f"intel: {INTEL} is absent; its output sizes are not measured"]
@@ -175,9 +175,9 @@ def intel_sizes(tmp: Path) -> list[str]:
 
 
 def main() -> None:
+    from datmo_cli.passes.pipeline import process_file, warm_up
+    from datmo_cli.passes.stage_files import features_file
     from datmo_cli.perception.threads import set_default
-    from datmo_cli.pipeline import process_file, warm_up
-    from datmo_cli.stage_files import features_file
 
     n = 20_000
     small = long_log(n)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import Row, best_of, print_lines, print_table
-from datmo_cli.log import mcapio, types
+from datmo_cli.logs import mcapio, types
 from datmo_cli.sim.raycast import cast
 from datmo_cli.sim.scene import load_scene
 from datmo_cli.sim.simulate import simulate_scene

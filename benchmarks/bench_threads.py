@@ -22,9 +22,9 @@ TARGETS = {"datmo run": 1.5, "datmo features": 1.6}
 
 
 def main() -> None:
+    from datmo_cli.passes.pipeline import process_file, warm_up
+    from datmo_cli.passes.stage_files import features_file
     from datmo_cli.perception import threads
-    from datmo_cli.pipeline import process_file, warm_up
-    from datmo_cli.stage_files import features_file
 
     src = simulated_hall(N)
     warm_up()

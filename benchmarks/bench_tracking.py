@@ -12,9 +12,9 @@ import numpy as np
 
 from benchmarks import tracking_scoring as acc
 from benchmarks.common import Row, best_of, print_lines, print_table
-from datmo_cli.log import mcapio, types
+from datmo_cli.logs import mcapio, types
+from datmo_cli.passes.stages import TrackedRun, run_features, track_run
 from datmo_cli.report import decode_channel
-from datmo_cli.stages import TrackedRun, run_features, track_run
 from datmo_cli.tracking.params import TrackingParams
 
 HALL = Path(__file__).resolve().parent.parent / "sample_logs" / "hall.mcap"
@@ -23,7 +23,7 @@ REPEAT = 4  # the 60 s hall log is 300 scans; repeat it (later copies shifted in
 
 
 def _repeat(run, feats):
-    from datmo_cli.log.scan import ScanRun
+    from datmo_cli.logs.scan import ScanRun
 
     span = int(run.stamps[-1] - run.stamps[0]) + 200_000_000
     stamps = np.concatenate([run.stamps + i * span for i in range(REPEAT)])
@@ -67,8 +67,8 @@ def main() -> None:
             f"tracking and classification, {name}: {us:,.1f} µs/scan (target <= {TRACK_TARGET_US:g} µs on "
             f"the hall with given features): {'met' if us <= TRACK_TARGET_US else 'NOT met'}"
         )
-    from datmo_cli.log import cdr
-    from datmo_cli.stage_files import track_file
+    from datmo_cli.logs import cdr
+    from datmo_cli.passes.stage_files import track_file
 
     big, bfeats = _repeat(run, sources["ideal features"])
     with tempfile.TemporaryDirectory() as tmp:

@@ -11,7 +11,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
 
 CACHE = Path(tempfile.gettempdir()) / "datmo-bench"
 RATE_HZ = 37.5

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from datmo_cli.log.vocabulary import (
+from datmo_cli.logs.vocabulary import (
     CLASS_BENCH,
     CLASS_COLUMN,
     CLASS_PERSON,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from datmo_cli.log import cdr, types
+from datmo_cli.logs import cdr, types
 from datmo_cli.tracking.measurements import ScanFeatures
 
 LINE_DTYPE = cdr.element_dtype(types.LINE)

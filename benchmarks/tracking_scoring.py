@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.synthetic_features import features_from_lists
-from datmo_cli.log.vocabulary import (
+from datmo_cli.logs.vocabulary import (
     CLASS_CIRCLE_OBJECT,
     CLASS_COLUMN,
     CLASS_PERSON,

@@ -34,9 +34,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import export
-from .errors import InputError
-from .extras import require
-from .log import cdr, mcapio, types
+from .base.errors import InputError
+from .base.extras import require
+from .logs import cdr, mcapio, types
 from .workflows import as_config as _config
 from .workflows.batch_run import BatchResult, run_batch
 from .workflows.recording import Recording, record
@@ -46,11 +46,11 @@ from .workflows.reporting import report_files as report
 if TYPE_CHECKING:
     import pandas
 
-    from .log.scan import ScanRun
-    from .pipeline import warm_up
-    from .stage_files import features_file as extract_features
-    from .stage_files import segment_file as segment
-    from .stage_files import track_file as track
+    from .logs.scan import ScanRun
+    from .passes.pipeline import warm_up
+    from .passes.stage_files import features_file as extract_features
+    from .passes.stage_files import segment_file as segment
+    from .passes.stage_files import track_file as track
     from .tune import run_tune as tune
     from .workflows import Config
 
@@ -172,7 +172,7 @@ class Log:
     def poses(self) -> np.ndarray | None:
         """The scanner's pose at every scan, (N, 3): x m, y m, yaw rad in the odometry frame, from /odom (and the
         scanner's mount in /tf_static), as datmo tracks in it; None when the log has no odometry."""
-        from .streaming import LogStream
+        from .passes.streaming import LogStream
 
         stream = LogStream(self.path)
         if stream.odometry is None or not len(stream.odometry):
@@ -225,7 +225,7 @@ def process(
     overrides such as {"track": {"gate": 9.0}}, or None for the defaults; `force`: replace an existing `out`;
     `markers`: also write the Foxglove markers; `covariance`: store the tracks' covariance (else NaN). Convert
     a bag or CARMEN log with `datmo import` first."""
-    from .pipeline import process_file
+    from .passes.pipeline import process_file
 
     cfg = _config(config)
     process_file(
@@ -291,7 +291,7 @@ class LiveTracker:
         config: Config = None,
         name: str = "live",
     ) -> None:
-        from .log.scan import ScanGeometry
+        from .logs.scan import ScanGeometry
 
         self.geometry = ScanGeometry(
             float(angle_min),
@@ -312,9 +312,9 @@ class LiveTracker:
         """Process one scan: `ranges` (n_beams,) metres (inf or NaN: no return), `stamp_ns` its time (int64 ns,
         after the previous scan's), `pose` the scanner's (x m, y m, yaw rad) in the world frame, given with every
         scan or with none. Returns the tracks after it (TRACK_COLUMNS; scan counts the scans given, from 0)."""
-        from .log.scan import Odometry, ScanRun
-        from .pipeline import RunStages
-        from .streaming import Block
+        from .logs.scan import Odometry, ScanRun
+        from .passes.pipeline import RunStages
+        from .passes.streaming import Block
 
         r = np.asarray(ranges, np.float32)
         if r.shape != (self.geometry.n_beams,):

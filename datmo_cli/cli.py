@@ -54,7 +54,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     indented: never a raw control sequence, never a `\\x0a` in the middle of a sentence."""
     import os
 
-    from .text import printable, printable_lines
+    from .base.text import printable, printable_lines
 
     ours = os.path.dirname(os.path.abspath(__file__))
     if os.path.abspath(str(filename)).startswith(ours + os.sep):
@@ -120,8 +120,8 @@ def _input_named(exc: BaseException) -> str | None:
 
 def clean_error(exc: BaseException) -> CleanError | None:
     """The one-line error (and exit code) for `exc`, or None for an exit that needs no message."""
-    from . import outputs
-    from .errors import DatmoError
+    from .base import outputs
+    from .base.errors import DatmoError
 
     if isinstance(exc, SystemExit):
         return None
@@ -161,7 +161,7 @@ class CleanError(click.ClickException):
         self.exit_code = exit_code  # type: ignore[misc]  # Click's default is a class attribute
 
     def show(self, file=None) -> None:
-        from .text import printable
+        from .base.text import printable
 
         click.echo(f"datmo: error: {printable(self.format_message())}", err=True, file=file)
 
@@ -176,7 +176,7 @@ def _say_compiling() -> None:
     words = [a for a in _ARGS if not a.startswith("-")]
     if not words or words[0] not in KERNEL_COMMANDS or {"--help", "-q", "--quiet"} & set(_ARGS):
         return
-    from .numba_runtime import say_compiling
+    from .base.numba_runtime import say_compiling
 
     say_compiling()
 
@@ -196,7 +196,7 @@ class LazyGroup(click.Group):
     def invoke(self, ctx: click.Context):
         import warnings
 
-        from . import outputs
+        from .base import outputs
 
         _safe_streams()
         _say_compiling()
@@ -254,12 +254,12 @@ class _FileOutput(click.ParamType):
         if ctx is not None and ctx.params.get("bag_dir"):  # a folder (an eager --bag-dir; log/bagdir.py checks it)
             return self.inner.convert(value, param, ctx)
         if isinstance(value, (str, bytes)) and os.fsdecode(value).endswith(("/", os.sep)):
-            from .errors import OutputError
+            from .base.errors import OutputError
 
             option = param.opts[-1] if param is not None and param.opts else "output"
             raise OutputError(f"{os.fsdecode(value)}: {option} ends with '/' (a folder); give a file name")
         if isinstance(value, (str, bytes)) and os.path.isdir(value):
-            from .errors import OutputError
+            from .base.errors import OutputError
 
             raise OutputError(f"{os.fsdecode(value)}: is a directory; give a file name")
         return self.inner.convert(value, param, ctx)
@@ -301,7 +301,7 @@ def cli(debug: bool) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Console entry point."""
-    from . import outputs
+    from .base import outputs
 
     _safe_streams()
     try:

@@ -102,7 +102,7 @@ def shared_inputs(root: Path) -> dict[str, tuple[Path, list[str]]]:
 def digest(out: Path, src: Path) -> str:
     """SHA-256 of an output's channels, messages (topic, log time, payload, in file order) and metadata
     (less the tool version, command line and input hashes; the input's path as <src>)."""
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     h = hashlib.sha256()
     log = mcapio.LogContents(path=out)

@@ -26,9 +26,9 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 from numba import njit
 
-from datmo_cli.log import cdr, types
-from datmo_cli.log.scan import ScanGeometry
-from datmo_cli.log.vocabulary import (
+from datmo_cli.logs import cdr, types
+from datmo_cli.logs.scan import ScanGeometry
+from datmo_cli.logs.vocabulary import (
     CLASS_CIRCLE_OBJECT,
     CLASS_PERSON,
     CLASS_RECTANGULAR_OBJECT,

@@ -58,7 +58,7 @@ def _canonical(value: object, drop: tuple[str, ...] = ()) -> bytes:
 
 def message_digest(msgtype: str, payload: bytes) -> bytes:
     """SHA-256 of one message's content (see the module docstring)."""
-    from datmo_cli.log import cdr
+    from datmo_cli.logs import cdr
 
     if not msgtype.startswith("datmo_msgs/"):
         return hashlib.sha256(payload).digest()
@@ -74,7 +74,7 @@ def digests(path: Path) -> dict[str, dict]:
     """{topic: {"messages": count, "sha256": hex}} of the log at `path`, markers left out."""
     import numpy.lib.recfunctions  # noqa: F401  (np.lib.recfunctions)
 
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     contents = mcapio.LogContents(path=path)
     hashes: dict[str, hashlib._Hash] = {}
@@ -107,7 +107,7 @@ class _Fingerprint:
         self.messages = 0
 
     def add(self, stamp: int, msgtype: str, payload: bytes) -> None:
-        from datmo_cli.log import cdr
+        from datmo_cli.logs import cdr
 
         self.messages += 1
         self.exact.update(f"@{stamp};".encode())
@@ -159,7 +159,7 @@ class _Fingerprint:
 def fingerprints(path: Path) -> dict[str, dict]:
     """{topic: {"messages", "exact", "floats": {field: [sum, weighted sum 1, weighted sum 2, sum of magnitudes,
     values]}}} of the log at `path`, markers left out (module docstring)."""
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     contents = mcapio.LogContents(path=path)
     found: dict[str, _Fingerprint] = {}

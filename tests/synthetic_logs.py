@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from datmo_cli.log import cdr, mcapio, types
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 
 N = 50
 T0 = 1_600_000_000_000_000_000

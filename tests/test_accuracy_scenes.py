@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from benchmarks import accuracy_scenes as A
-from datmo_cli.log import cdr, types
-from datmo_cli.log.vocabulary import (
+from datmo_cli.logs import cdr, types
+from datmo_cli.logs.vocabulary import (
     CLASS_PERSON,
     CLASS_UNKNOWN,
     CLASS_WALL,

@@ -8,8 +8,8 @@ import pytest
 
 from benchmarks import accuracy_scenes as A
 from benchmarks import accuracy_speed as S
-from datmo_cli.log import cdr, types
-from datmo_cli.log.vocabulary import CLASS_PERSON, CLASS_UNKNOWN, STATUS_CONFIRMED
+from datmo_cli.logs import cdr, types
+from datmo_cli.logs.vocabulary import CLASS_PERSON, CLASS_UNKNOWN, STATUS_CONFIRMED
 
 pytestmark = pytest.mark.unit
 

@@ -13,10 +13,10 @@ import pytest
 from click.testing import CliRunner
 
 from datmo_cli import api
+from datmo_cli.base.errors import InputError, MissingChannelError
+from datmo_cli.base.extras import MissingExtraError
 from datmo_cli.cli import cli
-from datmo_cli.errors import InputError, MissingChannelError
-from datmo_cli.extras import MissingExtraError
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
 
 pytestmark = pytest.mark.cli
 

@@ -14,11 +14,11 @@ import pytest
 from click.testing import CliRunner
 
 from datmo_cli import api, report
+from datmo_cli.base.errors import DatmoError, InputError, OutputExistsError
 from datmo_cli.cli import cli
-from datmo_cli.errors import DatmoError, InputError, OutputExistsError
 from datmo_cli.lms2xx.emulator import Emulator
-from datmo_cli.log import mcapio
-from datmo_cli.simulated import SceneSource
+from datmo_cli.logs import mcapio
+from datmo_cli.passes.simulated import SceneSource
 
 pytestmark = [pytest.mark.cli, pytest.mark.timeout(300)]
 
@@ -152,7 +152,7 @@ def test_a_recording_stops_when_asked_and_refuses_what_the_command_refuses(tmp_p
 
 
 def test_the_other_commands_calls_are_theirs_not_copies():
-    from datmo_cli import pipeline, stage_files
+    from datmo_cli.passes import pipeline, stage_files
     from datmo_cli.tune import run_tune
 
     assert api.tune is run_tune

@@ -13,9 +13,10 @@ import pytest
 import synthetic_logs
 from click.testing import CliRunner
 
-from datmo_cli import batch, pipeline
+from datmo_cli import batch
+from datmo_cli.base.errors import InputError
 from datmo_cli.cli import cli
-from datmo_cli.errors import InputError
+from datmo_cli.passes import pipeline
 
 pytestmark = pytest.mark.cli
 
@@ -130,7 +131,7 @@ DEFAULT_PARAMS_HASH = "c92fb8f724b5b478"  # the defaults' hash since circle_chec
 
 
 def test_params_hash_follows_the_parameters():
-    from datmo_cli.config import DatmoConfig
+    from datmo_cli.passes.config import DatmoConfig
 
     default = batch.params_hash()
     assert default == DEFAULT_PARAMS_HASH  # the manifests written before keep skipping default runs
@@ -145,7 +146,7 @@ def test_params_hash_follows_the_parameters():
 def test_a_task_pickles_with_its_configuration():
     import pickle
 
-    from datmo_cli.config import DatmoConfig
+    from datmo_cli.passes.config import DatmoConfig
 
     cfg = DatmoConfig().replace(track={"gate": 10.0})
     task = batch.Task(0, "a.mcap", "out/a.mcap", False, cfg, batch.RunOptions(markers=True), "h", None)
@@ -215,7 +216,7 @@ def test_the_leftover_of_an_interrupted_batch_is_redone(tmp_path, sample_logs):
     src.write_bytes((sample_logs / "hall.mcap").read_bytes())
     out = tmp_path / "out"
     out.mkdir()
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     with mcapio.LogWriter(out / "hall.mcap", provenance=mcapio.Provenance("run", {}, [str(src)])) as w:
         w.copy_from(src)
@@ -304,7 +305,7 @@ def test_an_unreachable_scheduler_is_one_line(logs, tmp_path, monkeypatch):
     pytest.importorskip("distributed")
     import socket
 
-    from datmo_cli import cluster
+    from datmo_cli.batch import cluster
 
     monkeypatch.setattr(cluster, "CONNECT_TIMEOUT", "1s")
     with socket.socket() as s:

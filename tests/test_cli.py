@@ -9,8 +9,8 @@ import pytest
 from click.testing import CliRunner
 
 from datmo_cli.cli import COMMANDS, cli
-from datmo_cli.log import mcapio
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 
 pytestmark = pytest.mark.cli
 

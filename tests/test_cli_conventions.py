@@ -25,8 +25,8 @@ from hypothesis import strategies as st
 
 from datmo_cli.cli import COMMANDS, cli
 from datmo_cli.commands.options import config_options, param_option
-from datmo_cli.config import BOUNDS, DatmoConfig, load, to_toml
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
+from datmo_cli.passes.config import BOUNDS, DatmoConfig, load, to_toml
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.params import TrackingParams
 
@@ -109,7 +109,7 @@ def test_no_command_declares_a_parameter_option_by_hand():
     command, so its help, default and range cannot drift from the configuration."""
     from dataclasses import fields
 
-    from datmo_cli.config import SECTIONS
+    from datmo_cli.passes.config import SECTIONS
 
     names = {f.name for section in SECTIONS.values() for f in fields(section)}
     built = {(name, p.name) for name, p, _ in _param_options()}
@@ -247,7 +247,7 @@ def test_run_bar_counts_each_scan_once(tmp_path, small_log):
 
 def test_record_draws_its_panel_on_a_terminal_and_quiet_draws_none(tmp_path):
     from datmo_cli.lms2xx.emulator import Emulator
-    from datmo_cli.simulated import SceneSource
+    from datmo_cli.passes.simulated import SceneSource
 
     with Emulator(SceneSource("hall", seed=3, duration=10)) as emu:
         shown = on_terminal(["record", "--port", emu.device_path, "-o", "a.mcap", "--scans", "40"], tmp_path)
@@ -260,7 +260,7 @@ def test_record_draws_its_panel_on_a_terminal_and_quiet_draws_none(tmp_path):
 def test_a_panel_is_drawn_only_on_a_terminal_and_not_under_quiet(monkeypatch):
     from rich.text import Text
 
-    from datmo_cli import progress
+    from datmo_cli.base import progress
 
     assert not progress.Panel().shown  # pytest's stderr is not a terminal
     monkeypatch.setattr(progress, "_isatty", lambda stream: True)

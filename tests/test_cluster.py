@@ -20,7 +20,7 @@ import pytest
 from click.testing import CliRunner
 
 from datmo_cli.cli import cli
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
 
 pytestmark = pytest.mark.cli
 

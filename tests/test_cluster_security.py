@@ -12,8 +12,8 @@ import pytest
 from click.testing import CliRunner
 from test_batch import CALLS, fake_process
 
-from datmo_cli import pipeline
 from datmo_cli.cli import cli
+from datmo_cli.passes import pipeline
 
 distributed = pytest.importorskip("distributed")
 pytest.importorskip("cryptography")
@@ -37,7 +37,7 @@ import distributed
 from distributed.security import Security
 
 from datmo_cli import batch
-from datmo_cli.cluster import DaskExecutor
+from datmo_cli.batch.cluster import DaskExecutor
 
 
 def refused(address, **kw):
@@ -92,7 +92,7 @@ _NO_HTTP_CHECK = """
 import socket
 import urllib.request
 
-from datmo_cli.cluster import DaskExecutor
+from datmo_cli.batch.cluster import DaskExecutor
 
 
 def answers(port):

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from datmo_cli.numba_runtime import NOTICE, compile_notice
+from datmo_cli.base.numba_runtime import NOTICE, compile_notice
 
 pytestmark = pytest.mark.unit
 
@@ -62,7 +62,7 @@ def test_each_stage_started_with_zero_done_is_watched():
 
 
 def test_a_slow_block_is_said_once_on_stderr(capsys):
-    from datmo_cli.numba_runtime import said_if_slow
+    from datmo_cli.base.numba_runtime import said_if_slow
 
     with said_if_slow(delay=0.05):
         time.sleep(0.3)
@@ -88,7 +88,7 @@ def _fake_cache(root, stamp: float) -> None:
 
 
 def test_a_cache_in_numba_cache_dir_is_judged_by_its_index_files(tmp_path, monkeypatch):
-    from datmo_cli import numba_runtime
+    from datmo_cli.base import numba_runtime
 
     monkeypatch.delenv("NUMBA_DISABLE_JIT", raising=False)
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "empty"))
@@ -109,7 +109,7 @@ def test_the_compile_line_comes_at_once_on_a_redirected_stderr(tmp_path):
     import sys
 
     code = (
-        "import sys; from datmo_cli.numba_runtime import prepare; prepare(); prepare(); "
+        "import sys; from datmo_cli.base.numba_runtime import prepare; prepare(); prepare(); "
         "print('numba' in ' '.join(sys.modules))"
     )
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_DISABLE_JIT", "DATMO_COMPILE_NOTICE")}
@@ -158,7 +158,8 @@ def test_warm_up_loads_or_compiles_every_kernel_and_says_how_long():
     ],
 )
 def test_a_kernel_command_says_it_compiles_before_its_own_imports(tmp_path, monkeypatch, capsys, args, said):
-    from datmo_cli import cli, numba_runtime
+    from datmo_cli import cli
+    from datmo_cli.base import numba_runtime
 
     monkeypatch.delenv("DATMO_COMPILE_NOTICE", raising=False)
     monkeypatch.delenv("NUMBA_DISABLE_JIT", raising=False)
@@ -180,8 +181,9 @@ def test_warm_up_says_it_compiled_when_the_cache_was_stale(monkeypatch):
     """The command line's first step says the line; the command still knows it compiled (not 'loaded')."""
     from click.testing import CliRunner
 
-    from datmo_cli import numba_runtime, pipeline
+    from datmo_cli.base import numba_runtime
     from datmo_cli.cli import cli
+    from datmo_cli.passes import pipeline
 
     steps = []
     monkeypatch.setattr(numba_runtime, "cache_looks_stale", lambda: True)
@@ -197,8 +199,9 @@ def test_a_first_run_in_one_process_compiles_only_the_kernels_it_runs(monkeypatc
     scan matching, the markers, the patrol scene) when the cache looks stale: the run compiles what it runs."""
     from click.testing import CliRunner
 
-    from datmo_cli import numba_runtime, pipeline
+    from datmo_cli.base import numba_runtime
     from datmo_cli.cli import cli
+    from datmo_cli.passes import pipeline
 
     log = tmp_path / "one.mcap"
     assert CliRunner().invoke(cli, ["simulate", "--scene", "hall", "--duration", "0.2", "-o", str(log)]).exit_code == 0

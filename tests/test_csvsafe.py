@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from datmo_cli.base.csvsafe import neutralise, neutralise_row
 from datmo_cli.cli import cli
-from datmo_cli.csvsafe import neutralise, neutralise_row
-from datmo_cli.log import cdr, mcapio, types
+from datmo_cli.logs import cdr, mcapio, types
 
 pytestmark = pytest.mark.cli
 

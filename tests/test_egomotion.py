@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import reference_perception as reference
 
-from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
+from datmo_cli.logs.scan import Odometry, ScanGeometry, ScanRun
 from datmo_cli.perception import icp as KI
 from datmo_cli.perception import scan_odometry as KO
 from datmo_cli.perception.egomotion import (
@@ -454,7 +454,7 @@ def test_negative_2_three_scanners_agree():
     at this commit they part by under 8 degrees over some 1000 degrees of turning)."""
     from conftest import shared_path
 
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     path = shared_path("legtracker", "negative_2.bag")
     headings = []
@@ -479,7 +479,7 @@ def test_carmen_intel_increments_follow_the_corrected_poses():
     (first 300 scans): at this commit 91% within 10 cm and 2 degrees, median 2.4 cm and 0.26 degrees."""
     from conftest import shared_path
 
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     res = import_log(shared_path("carmen", "intel-corrected.log.gz"), max_scans=300)
     e = estimate_egomotion(res.run)

@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from datmo_cli import evaluate as ev
 from datmo_cli.cli import cli
-from datmo_cli.log import cdr, types
+from datmo_cli.logs import cdr, types
 
 pytestmark = pytest.mark.cli
 
@@ -282,7 +282,7 @@ def oracle_tracks(log):
 
 @pytest.mark.parametrize("name", ["hall", "patrol", "corridor"])
 def test_a_perfect_tracker_scores_perfectly_on_the_sample_logs(sample_logs, name):
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     path = sample_logs / f"{name}.mcap"
     if not path.exists():

@@ -21,9 +21,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap_ros2.reader import read_ros2_messages
 
-from datmo_cli import export, pipeline
+from datmo_cli import export
 from datmo_cli.cli import cli
-from datmo_cli.log import cdr, mcapio, types
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.passes import pipeline
 
 pytestmark = pytest.mark.cli
 
@@ -721,7 +722,7 @@ def test_a_ground_truth_stamp_that_does_not_increase_is_one_line(tmp_path):
     """Found by the fuzz test below: a flipped byte gave message 0 a later message's stamp, and evaluate --gt
     then refused the CSV (one id twice in one frame). Message k here gets message k - 2's stamp; k = 128 is the
     first of a block of 64."""
-    from datmo_cli.errors import InputError
+    from datmo_cli.base.errors import InputError
 
     stamps, payloads = mcapio.read_messages(SAMPLES / "hall.mcap", mcapio.TOPIC_GROUND_TRUTH)
     for k in (200, 128):
@@ -750,7 +751,7 @@ def test_damaged_ground_truth_messages_are_one_line(tmp_path, data):
     """A GroundTruth payload cut, flipped or replaced: exported as it decodes, to a CSV evaluate reads, or
     refused in one line naming the file; never a traceback, never a partial output."""
     from datmo_cli import evaluate as ev
-    from datmo_cli.errors import InputError
+    from datmo_cli.base.errors import InputError
 
     payloads = mcapio.read_messages(SAMPLES / "hall.mcap", mcapio.TOPIC_GROUND_TRUTH)[1]
     k = data.draw(st.integers(0, len(payloads) - 1))

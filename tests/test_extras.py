@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from datmo_cli import extras
+from datmo_cli.base import extras
+from datmo_cli.base.errors import DatmoError
 from datmo_cli.cli import cli
-from datmo_cli.errors import DatmoError
-from datmo_cli.log import cdr, mcapio, types
-from datmo_cli.log.scan import ScanGeometry, encode_scan
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.logs.scan import ScanGeometry, encode_scan
 
 pytestmark = pytest.mark.cli
 

@@ -25,10 +25,10 @@ import pytest
 from click.testing import CliRunner
 from fuzzing import tally
 
-from datmo_cli import outputs
+from datmo_cli.base import outputs
 from datmo_cli.cli import cli
-from datmo_cli.log import mcapio
-from datmo_cli.log.scan import ScanRun
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.scan import ScanRun
 
 pytestmark = pytest.mark.cli
 

@@ -7,10 +7,10 @@ import gzip
 import numpy as np
 import pytest
 
-from datmo_cli.errors import GeometryError, InputError
-from datmo_cli.log.importers import detect_kind, import_log
-from datmo_cli.log.importers.carmen_conventions import flaser_angles, no_return_limit, stamps_ns
-from datmo_cli.log.importers.carmen_parse import parse_lines
+from datmo_cli.base.errors import GeometryError, InputError
+from datmo_cli.logs.importers import detect_kind, import_log
+from datmo_cli.logs.importers.carmen_conventions import flaser_angles, no_return_limit, stamps_ns
+from datmo_cli.logs.importers.carmen_parse import parse_lines
 
 pytestmark = pytest.mark.unit
 

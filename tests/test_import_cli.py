@@ -12,7 +12,7 @@ from test_import_carmen import flaser, write
 from test_import_rosbag import messages, write_ros1
 
 from datmo_cli.cli import cli
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
 
 pytestmark = pytest.mark.cli
 

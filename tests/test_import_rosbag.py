@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
 
-from datmo_cli.errors import GeometryError, InputError
-from datmo_cli.log.importers import detect_kind, import_log
+from datmo_cli.base.errors import GeometryError, InputError
+from datmo_cli.logs.importers import detect_kind, import_log
 
 pytestmark = pytest.mark.unit
 

@@ -10,8 +10,8 @@ from click.testing import CliRunner
 from conftest import shared_path
 
 from datmo_cli.cli import cli
-from datmo_cli.log import mcapio
-from datmo_cli.log.importers import import_log
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.importers import import_log
 
 # file -> (FLASER scans, beams); angles: 181/361 span -90..+90 inclusive, 180/360 step 180/n from -90.
 CARMEN = {

@@ -259,7 +259,7 @@ def test_beyond():
 
 
 def test_benches():
-    from datmo_cli.log.vocabulary import LANDMARK_BENCH
+    from datmo_cli.logs.vocabulary import LANDMARK_BENCH
     from datmo_cli.perception import landmarks
 
     rng = np.random.default_rng(35)
@@ -301,7 +301,7 @@ def test_benches():
 def _landmark_scene(rng: np.random.Generator, n_scans: int) -> np.ndarray:
     """Detections (scan, type, x, y, orientation, size) of still landmarks of every type seen with noise and
     misses, a drifting column, columns at a bench's supports, and clutter seen once."""
-    from datmo_cli.log.vocabulary import LANDMARK_BENCH, LANDMARK_COLUMN
+    from datmo_cli.logs.vocabulary import LANDMARK_BENCH, LANDMARK_COLUMN
 
     still = [(t, *rng.uniform(-5, 5, 2), rng.uniform(-np.pi, np.pi), rng.uniform(0.1, 0.5)) for t in range(6)]
     still += [(LANDMARK_BENCH, 1.0, 2.0, 0.3, 1.6)]

@@ -6,7 +6,7 @@ modules import each other in a circle (not even within a layer, nor through a fu
     pipeline   the other top-level modules: the stages, the passes over files and config (the DatmoConfig tree
                of the core packages' parameter sections)
     core       perception, tracking, sim, lms2xx (each importing only itself, log and base), above log
-    log        datmo_cli.log.* (importing only itself and base)
+    log        datmo_cli.logs.* (importing only itself and base)
     base       errors, extras, outputs, input_files, bounds, numba_runtime, numba_light, progress, csvsafe, text,
                toml_text and the package itself (__version__): usable by every layer, importing only base
 

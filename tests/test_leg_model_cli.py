@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from datmo_cli.cli import cli
-from datmo_cli.log import cdr, mcapio, types
+from datmo_cli.logs import cdr, mcapio, types
 from datmo_cli.perception.leg_model import DEFAULT_MODEL_PATH
 from datmo_cli.sim.simulate import simulate_scene
 
@@ -95,7 +95,7 @@ def test_a_model_file_is_used_and_recorded(crowd, tmp_path):
 def test_a_leg_cluster_where_no_segment_is_kept():
     """The shipped model scores leg_tracker's clusters: one may stand where segmentation kept no segment (here
     3 points and min_points 4); its leg has no segment (found by a random example)."""
-    from datmo_cli.log.scan import ScanGeometry, ScanRun
+    from datmo_cli.logs.scan import ScanGeometry, ScanRun
     from datmo_cli.perception.features import NO_SEGMENT, extract_run
     from datmo_cli.perception.params import FeatureParams
 

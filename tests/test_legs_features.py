@@ -159,7 +159,7 @@ def test_noisy_circles_match_naive(dist, bearing, radius, seed):
 
 
 def test_sample_log_matches_naive(sample_logs):
-    from datmo_cli.log.mcapio import read_log, run_from_log
+    from datmo_cli.logs.mcapio import read_log, run_from_log
 
     run = run_from_log(read_log(sample_logs / "hall.mcap", topics=["/scan"]))
     sub = run.ranges[:5]

@@ -8,7 +8,7 @@ import pytest
 import reference_perception as ref
 from sklearn.ensemble import ExtraTreesClassifier, GradientBoostingClassifier, RandomForestClassifier
 
-from datmo_cli.errors import InputError
+from datmo_cli.base.errors import InputError
 from datmo_cli.perception import leg_forest as LFO
 from datmo_cli.perception.leg_model import DEFAULT_MODEL_PATH, LegModel, from_sklearn, load_leg_model
 from datmo_cli.perception.legs import (
@@ -150,7 +150,7 @@ def test_packaged_model_loads_and_gives_probabilities(sample_logs):
     assert load_leg_model("paper") is None
     assert model.feature_names == FEATURE_NAMES and model.n_trees > 0
     assert isinstance(model.provenance, dict) and model.provenance
-    from datmo_cli.log.mcapio import read_log, run_from_log
+    from datmo_cli.logs.mcapio import read_log, run_from_log
     from datmo_cli.perception.features import segment_run
 
     run = run_from_log(read_log(sample_logs / "hall.mcap", topics=["/scan"]))

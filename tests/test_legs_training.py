@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from datmo_cli.errors import InputError
+from datmo_cli.base.errors import InputError
 from datmo_cli.perception import training as TR
 from datmo_cli.perception.legs import FEATURE_NAMES
 from datmo_cli.perception.training import cross_validation as CV
@@ -162,7 +162,7 @@ def test_recall_by_range_counts_the_legs_of_each_bin_at_the_threshold():
 def test_a_thinned_recording_keeps_every_other_beam_at_twice_the_step_and_its_labels():
     from pathlib import Path
 
-    from datmo_cli.log.scan import ScanGeometry, ScanRun
+    from datmo_cli.logs.scan import ScanGeometry, ScanRun
 
     g = ScanGeometry(-1.0, 0.01, 201, 0.02, 30.0)
     ranges = np.arange(2 * 201, dtype=np.float32).reshape(2, 201) / 100
@@ -266,7 +266,7 @@ def test_tables_tabulate_the_clusters_asked_for(tmp_path, clusters):
 
 
 def test_packaged_model_provenance_lists_every_shared_bag_with_its_sha256():
-    from datmo_cli.log.mcapio import sha256_of
+    from datmo_cli.logs.mcapio import sha256_of
     from datmo_cli.perception.leg_model import DEFAULT_MODEL_PATH, LegModel
     from datmo_cli.perception.legs import FEATURE_NAMES
 
@@ -285,7 +285,7 @@ def test_packaged_model_provenance_lists_every_shared_bag_with_its_sha256():
 
 
 def test_simulated_recordings_of_a_finer_scanner_cover_270_degrees_and_people_who_stand():
-    from datmo_cli import simulated
+    from datmo_cli.passes import simulated
 
     scene, step = simulated._scene_for("crowd", 270 / 768)
     assert step is None and scene.scanner.beams == 768 and scene.scanner.fov_deg == 270.0

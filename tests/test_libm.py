@@ -1,5 +1,5 @@
 """datmo's outputs carry the same bits on every x86-64 CPU: Python-level code whose results reach an output calls
-datmo_cli.libm (the C library's sin, cos, atan2), not numpy's float64 sin/cos/arctan2 and kin, whose SIMD loops
+datmo_cli.base.libm (the C library's sin, cos, atan2), not numpy's float64 sin/cos/arctan2 and kin, whose SIMD loops
 depend on the CPU (AVX-512 or not); numba kernels call the C library's functions everywhere."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
 pytestmark = pytest.mark.unit
 
@@ -96,7 +96,7 @@ def test_no_cpu_dependent_math_reaches_an_output():
         rel = path.relative_to(ROOT).as_posix()
         if not rel.startswith(NOT_OUTPUTS):
             found += python_level_simd_math(path)
-    assert not found, "use datmo_cli.libm (same bits on every CPU) instead of: " + ", ".join(found)
+    assert not found, "use datmo_cli.base.libm (same bits on every CPU) instead of: " + ", ".join(found)
 
 
 def test_the_scan_finds_a_python_level_call_and_skips_kernels(tmp_path):

@@ -23,8 +23,8 @@ from mcap_ros2.decoder import DecoderFactory
 
 from datmo_cli import live
 from datmo_cli.cli import cli
-from datmo_cli.log import cdr, mcapio, types
-from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.logs.scan import Odometry, ScanGeometry, ScanRun
 
 ROOT = Path(__file__).resolve().parents[1]
 HALL = ROOT / "sample_logs" / "hall.mcap"
@@ -194,7 +194,7 @@ def test_a_log_stored_without_markers_gets_them_drawn_from_its_tracks_and_featur
     """datmo run stores no markers unless asked; played, its markers are drawn from its tracks and features as
     the stages draw them: the features' byte for byte, the tracks' within float32 rounding (their tails come
     from the stored positions)."""
-    from datmo_cli.pipeline import process_file
+    from datmo_cli.passes.pipeline import process_file
 
     src = ROOT / "sample_logs" / f"{name}.mcap"
     lean, fat = tmp_path / "lean.mcap", tmp_path / "fat.mcap"
@@ -355,7 +355,7 @@ def test_record_calls_on_scan_with_each_scan_written(tmp_path):
     from datmo_cli.lms2xx.driver import LMS2xx
     from datmo_cli.lms2xx.emulator import Emulator
     from datmo_cli.lms2xx.recorder import record
-    from datmo_cli.simulated import SceneSource
+    from datmo_cli.passes.simulated import SceneSource
 
     seen: list[tuple[int, np.ndarray, ScanGeometry]] = []
     with Emulator(SceneSource("hall", seed=3, duration=10)) as emu:

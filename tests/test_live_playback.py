@@ -20,8 +20,8 @@ import pytest
 
 from datmo_cli import live
 from datmo_cli.live.control import ENDED, MAX_SPEED, PAUSED, PLAYING
-from datmo_cli.log import cdr, mcapio, types
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 
 pytestmark = [pytest.mark.cli, pytest.mark.timeout(180)]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from datmo_cli.errors import DeviceError
+from datmo_cli.base.errors import DeviceError
 from datmo_cli.lms2xx import protocol as P
 from datmo_cli.lms2xx.driver import DeviceDisconnected, LMS2xx
 from datmo_cli.lms2xx.frame_parser import FrameParser

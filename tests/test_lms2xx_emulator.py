@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 import serial
 
-from datmo_cli.errors import ConfigError
+from datmo_cli.base.errors import ConfigError
 from datmo_cli.lms2xx import protocol as P
 from datmo_cli.lms2xx.emulator import Emulator
 from datmo_cli.lms2xx.faults import Faults
 from datmo_cli.lms2xx.frame_parser import FrameParser
 from datmo_cli.lms2xx.scan_sources import ArraySource
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
 
 pytestmark = pytest.mark.cli
 

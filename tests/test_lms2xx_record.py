@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from datmo_cli import outputs
+from datmo_cli.base import outputs
+from datmo_cli.base.errors import OutputError
 from datmo_cli.cli import cli
 from datmo_cli.commands import record as record_cmd
-from datmo_cli.errors import OutputError
 from datmo_cli.lms2xx import protocol as P
 from datmo_cli.lms2xx import recorder
 from datmo_cli.lms2xx.driver import LMS2xx
@@ -29,9 +29,9 @@ from datmo_cli.lms2xx.emulator import Emulator
 from datmo_cli.lms2xx.faults import Faults
 from datmo_cli.lms2xx.recorder import record
 from datmo_cli.lms2xx.scan_sources import ArraySource, LogSource
-from datmo_cli.log import mcapio
-from datmo_cli.log.scan import ScanGeometry, ScanRun
-from datmo_cli.simulated import SceneSource
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
+from datmo_cli.passes.simulated import SceneSource
 
 pytestmark = [pytest.mark.cli, pytest.mark.timeout(60)]
 

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datmo_cli.log import cdr, types
-from datmo_cli.log.scan import GeometryChangeError, ScanGeometry, ScanRun, decode_scan, decode_scans, encode_scans
+from datmo_cli.logs import cdr, types
+from datmo_cli.logs.scan import GeometryChangeError, ScanGeometry, ScanRun, decode_scan, decode_scans, encode_scans
 
 pytestmark = pytest.mark.unit
 

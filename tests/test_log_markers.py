@@ -1,5 +1,5 @@
 """log.markers: MarkerArray bytes identical to rosbags' serialisation, its codes the type store's, and no CDR
-written outside datmo_cli/log."""
+written outside datmo_cli/logs."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import datmo_cli
-from datmo_cli.log import markers, types
+from datmo_cli.logs import markers, types
 
 pytestmark = pytest.mark.unit
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from datmo_cli.errors import GeometryError, InputError, MissingChannelError, OutputExistsError
-from datmo_cli.log import cdr, mcapio, types
-from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
+from datmo_cli.base.errors import GeometryError, InputError, MissingChannelError, OutputExistsError
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.logs.scan import Odometry, ScanGeometry, ScanRun
 
 pytestmark = pytest.mark.unit
 

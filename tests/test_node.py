@@ -25,8 +25,8 @@ from click.testing import CliRunner
 
 from datmo_cli import live
 from datmo_cli.cli import cli
-from datmo_cli.log import mcapio, types
-from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
+from datmo_cli.logs import mcapio, types
+from datmo_cli.logs.scan import Odometry, ScanGeometry, ScanRun
 
 pytestmark = pytest.mark.cli
 
@@ -396,7 +396,7 @@ def test_an_independent_ros2_peer_gets_tracks_from_datmo_node(tmp_path, monkeypa
 
 
 def test_dds_types_and_names_follow_rmw_cyclonedds():
-    from datmo_cli import dds
+    from datmo_cli.ros2 import dds
 
     assert dds.dds_type_name(types.TRACKS) == "datmo_msgs::msg::dds_::Tracks_"
     for msgtype, ours in [(types.LASERSCAN, LaserScan), (types.ODOMETRY, OdometryMsg), (types.TRACKS, Tracks)]:
@@ -414,8 +414,8 @@ def test_dds_types_and_names_follow_rmw_cyclonedds():
 def test_dds_types_encode_as_datmo_writes_to_mcap(tmp_path):
     """Every channel the node publishes, decoded with the IDL class it is published as and encoded again by
     cyclonedds, is the payload datmo wrote: the classes lay the bytes out as datmo's codecs do."""
-    from datmo_cli import dds
-    from datmo_cli.node import published_topics
+    from datmo_cli.ros2 import dds
+    from datmo_cli.ros2.node import published_topics
 
     run = mcapio.read_run(HALL).slice(0, 8)
     derived = live.Stages(None, None, has_tf=True).messages(run)
@@ -563,7 +563,7 @@ def test_a_feed_whose_stages_failed_closes_even_with_its_queue_full(monkeypatch)
 
 
 def test_the_node_stops_when_its_stages_fail(monkeypatch):
-    import datmo_cli.node
+    import datmo_cli.ros2.node
 
     logged: list[tuple[int, str]] = []
 
@@ -582,7 +582,7 @@ def test_the_node_stops_when_its_stages_fail(monkeypatch):
             if self.spins == 3:
                 self.feed.failure = "ValueError: a bug"
 
-    monkeypatch.setattr(datmo_cli.node, "Node", Failing)
+    monkeypatch.setattr(datmo_cli.ros2.node, "Node", Failing)
     result = CliRunner().invoke(cli, ["node", "--no-config", "--domain-id", "3"])
     assert result.exit_code == 70, result.output
     assert result.output.splitlines()[0] == "datmo node: ROS 2 domain 3: /scan in, /datmo/tracks out"
@@ -591,8 +591,8 @@ def test_the_node_stops_when_its_stages_fail(monkeypatch):
 
 
 def test_scans_and_poses_that_do_not_decode_are_counted_and_said_once(monkeypatch):
-    from datmo_cli.log.scan import encode_scan
-    from datmo_cli.node import Node
+    from datmo_cli.logs.scan import encode_scan
+    from datmo_cli.ros2.node import Node
 
     monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
     said: list[str] = []

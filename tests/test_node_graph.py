@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
 
 pytestmark = pytest.mark.cli
 
@@ -434,7 +434,7 @@ def test_bad_node_names_and_distributions_are_one_line(args, line):
 
 
 def test_names_as_rcl_makes_them():
-    from datmo_cli import ros_graph
+    from datmo_cli.ros2 import ros_graph
 
     assert ros_graph.full_name(ros_graph.namespace("/"), "datmo") == "/datmo"
     assert ros_graph.full_name(ros_graph.namespace("robot1/front"), "tracker") == "/robot1/front/tracker"
@@ -444,8 +444,8 @@ def test_names_as_rcl_makes_them():
 
 
 def test_a_request_that_does_not_decode_is_said_once_and_skipped(monkeypatch):
-    from datmo_cli import dds, ros_graph
-    from datmo_cli.node_params import Parameters
+    from datmo_cli.ros2 import dds, ros_graph
+    from datmo_cli.ros2.node_params import Parameters
 
     monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
     graph = ros_graph.Graph(dds.Participant(_free_domain()), Parameters(), "datmo", "/", "jazzy", print)
@@ -464,8 +464,8 @@ def test_a_request_that_does_not_decode_is_said_once_and_skipped(monkeypatch):
 
 
 def test_a_node_in_a_namespace_names_its_services_and_logger_as_rcl(monkeypatch):
-    from datmo_cli import dds, ros_graph
-    from datmo_cli.node_params import Parameters
+    from datmo_cli.ros2 import dds, ros_graph
+    from datmo_cli.ros2.node_params import Parameters
 
     monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
     ns = ros_graph.namespace("robot1")

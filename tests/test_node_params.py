@@ -4,7 +4,7 @@ through the parameter services)."""
 
 import pytest
 
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
 from tests.test_node import HALL
 
 pytestmark = pytest.mark.unit
@@ -17,9 +17,9 @@ def test_a_live_parameter_changes_the_running_tracker():
     """The stages' tracker takes a changed moving_speed at once; with the default some tracks stay dynamic
     over the same scans (so the graph test's 'none dynamic' is the change's doing)."""
     from datmo_cli import live
-    from datmo_cli.config import DatmoConfig
-    from datmo_cli.log import cdr, types
-    from datmo_cli.node import retune_stages
+    from datmo_cli.logs import cdr, types
+    from datmo_cli.passes.config import DatmoConfig
+    from datmo_cli.ros2.node import retune_stages
 
     run = mcapio.read_run(HALL).slice(0, 160)
 
@@ -41,8 +41,8 @@ def test_a_live_parameter_changes_the_running_tracker():
 
 
 def test_parameters_are_the_config_keys_with_the_config_files_checks():
-    from datmo_cli.config import DatmoConfig
-    from datmo_cli.node_params import LIVE, Parameters
+    from datmo_cli.passes.config import DatmoConfig
+    from datmo_cli.ros2.node_params import LIVE, Parameters
 
     p = Parameters(DatmoConfig().replace(track={"gate": 9.0}))
     assert p.get("track.gate") == 9.0 and p.get("track.d_max") is None and p.get("features.d_max") == 1.5

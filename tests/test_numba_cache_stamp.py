@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from datmo_cli import numba_runtime
+from datmo_cli.base import numba_runtime
 
 pytestmark = pytest.mark.unit
 

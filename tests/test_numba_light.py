@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datmo_cli import numba_light
+from datmo_cli.base import numba_light
 
 pytestmark = pytest.mark.unit
 
@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PROBE = """
 import sys
 {before}
-from datmo_cli.numba_runtime import prepare
+from datmo_cli.base.numba_runtime import prepare
 prepare()
 from numba.core import caching, environment
 from datmo_cli.tracking import _kernels
@@ -118,7 +118,7 @@ def test_a_masked_array_is_still_refused():
 def test_an_environment_of_numbas_own_module_not_imported_yet_is_a_stand_in():
     code = """
 import sys
-from datmo_cli.numba_runtime import prepare
+from datmo_cli.base.numba_runtime import prepare
 prepare()
 from numba.core import environment
 env = environment._rebuild_env("numba.np.arrayobj", [1, 2], "datmo-test-env")

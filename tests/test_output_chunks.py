@@ -11,11 +11,11 @@ import pytest
 from mcap.reader import make_reader
 from run_cases import digests
 
-from datmo_cli import streaming
-from datmo_cli.errors import InputError
-from datmo_cli.log import mcapio
-from datmo_cli.pipeline import process_file
-from datmo_cli.stage_files import features_file
+from datmo_cli.base.errors import InputError
+from datmo_cli.logs import mcapio
+from datmo_cli.passes import streaming
+from datmo_cli.passes.pipeline import process_file
+from datmo_cli.passes.stage_files import features_file
 
 pytestmark = pytest.mark.cli
 

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from run_cases import DIGESTS, FLOAT_RTOL, differences, digests, fingerprints, run_outputs, sample_logs
 
-from datmo_cli import pipeline
-from datmo_cli.pipeline import process_file
+from datmo_cli.passes import pipeline
+from datmo_cli.passes.pipeline import process_file
 
 pytestmark = pytest.mark.cli
 
@@ -73,7 +73,7 @@ def _float_fields_moved(decode, seed: int):
 def test_fingerprints_let_last_bit_rounding_pass_and_catch_a_one_percent_change(outputs, tmp_path, monkeypatch):
     """The stored comparison fails for datmo's changes, not for rounding: every float of every output moved one
     unit in the last place keeps its fingerprint; a 1% change of one tracking parameter does not."""
-    from datmo_cli.log import cdr
+    from datmo_cli.logs import cdr
 
     here = {name: fingerprints(path) for name, path in outputs.items()}
     monkeypatch.setattr(cdr, "decode", _float_fields_moved(cdr.decode, 1))

@@ -23,7 +23,7 @@ from packaging.requirements import Requirement
 
 import datmo_cli
 from benchmarks.bench_install import heavy, normalise
-from datmo_cli import extras
+from datmo_cli.base import extras
 from datmo_cli.cli import cli
 
 pytestmark = pytest.mark.cli
@@ -130,7 +130,7 @@ def test_every_install_line_names_datmo_cli_and_an_extra_it_has():
     optional = PROJECT["optional-dependencies"]
     for file, name, extra in lines:
         if (name, extra) == ("{DISTRIBUTION}", "{extra}"):  # extras.require's message, filled in from its table
-            from datmo_cli import extras
+            from datmo_cli.base import extras
 
             name, extra = extras.DISTRIBUTION, ",".join(sorted({e for _, e in extras.EXTRAS.values()}))
         assert name in ("datmo-cli", "."), (file, name)

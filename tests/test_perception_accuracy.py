@@ -13,8 +13,8 @@ import pytest
 from conftest import SAMPLE_LOGS
 
 from benchmarks import perception_scoring as acc
-from datmo_cli.log import mcapio, types
-from datmo_cli.log.scan import ScanRun
+from datmo_cli.logs import mcapio, types
+from datmo_cli.logs.scan import ScanRun
 from datmo_cli.perception.features import RunFeatures, extract_run
 from datmo_cli.report import decode_channel
 

@@ -13,7 +13,7 @@ import reference_perception as ref
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 from datmo_cli.perception import hough_circles as HC
 from datmo_cli.perception.features import extract_run
 from datmo_cli.perception.params import FeatureParams

@@ -11,8 +11,8 @@ import pytest
 from click.testing import CliRunner
 
 from datmo_cli.cli import cli
-from datmo_cli.feature_channels import decode_segments
-from datmo_cli.log import cdr, mcapio, types
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.passes.feature_channels import decode_segments
 from datmo_cli.perception.features import extract_run
 from datmo_cli.perception.params import FeatureParams
 

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from conftest import shared_path
 
-from datmo_cli.log import mcapio
-from datmo_cli.log.importers import import_log
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.importers import import_log
+from datmo_cli.passes.stages import derive_features
 from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
-from datmo_cli.stages import derive_features
 
 pytestmark = [pytest.mark.unit, pytest.mark.shared]
 

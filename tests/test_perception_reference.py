@@ -13,8 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from datmo_cli.log.scan import ScanGeometry, ScanRun
-from datmo_cli.log.vocabulary import LANDMARK_COLUMN
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
+from datmo_cli.logs.vocabulary import LANDMARK_COLUMN
 from datmo_cli.perception import hough_circles as HC
 from datmo_cli.perception import hough_lines as HL
 from datmo_cli.perception import segmentation as SEG

@@ -19,8 +19,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from datmo_cli.errors import InputError
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.base.errors import InputError
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
 
@@ -238,7 +238,7 @@ def run_isolated(code: str) -> subprocess.CompletedProcess:
     prelude = textwrap.dedent("""
         import math
         import numpy as np
-        from datmo_cli.log.scan import ScanGeometry, ScanRun
+        from datmo_cli.logs.scan import ScanGeometry, ScanRun
         from datmo_cli.perception.features import extract_run, segment_run
         from datmo_cli.perception.params import FeatureParams
     """)
@@ -296,7 +296,7 @@ def test_overlapping_given_segments_are_a_clean_error_not_an_overflow():
     """More segments than beams (here the whole scan B + 1 times) would overflow the kernel's buffers:
     given segments must be disjoint and in scan order, else an InputError names the scan."""
     res = run_isolated("""
-        from datmo_cli.errors import InputError
+        from datmo_cli.base.errors import InputError
         B = 6
         r = np.full((2, B), 2.0, np.float32)
         run = ScanRun(np.arange(2, dtype=np.int64), r, ScanGeometry(0.0, math.radians(0.5), B, 0.0, 8.0))

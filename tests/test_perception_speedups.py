@@ -196,8 +196,8 @@ def test_lines_rss_equals_the_per_point_sum(seed, ncand, m):
 
 
 def test_blocks_sharing_row_buffers_give_each_block_its_own_rows():
-    from datmo_cli.log import mcapio
-    from datmo_cli.log.scan import ScanRun
+    from datmo_cli.logs import mcapio
+    from datmo_cli.logs.scan import ScanRun
     from datmo_cli.perception import features
 
     small = mcapio.read_run(features_sample())

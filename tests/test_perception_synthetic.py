@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import reference_perception as ref
 
-from datmo_cli.log.scan import ScanGeometry, ScanRun
-from datmo_cli.log.vocabulary import LANDMARK_BENCH, LANDMARK_COLUMN, LANDMARK_LINE_END
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
+from datmo_cli.logs.vocabulary import LANDMARK_BENCH, LANDMARK_COLUMN, LANDMARK_LINE_END
 from datmo_cli.perception.features import extract_run
 
 pytestmark = pytest.mark.unit

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from conftest import SAMPLE_LOGS, shared_path
 
 from datmo_cli.cli import cli
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
 from datmo_cli.perception import threads as TH
 from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
@@ -74,7 +74,7 @@ def test_given_segments_on_two_threads():
 @pytest.mark.shared
 @pytest.mark.parametrize("name", ["csail", "intel", "freiburg-079"])
 def test_carmen_logs_on_one_and_two_threads(name):
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     run = import_log(shared_path("carmen", f"{name}-corrected.log.gz")).run
     assert_same(extract_run(run, landmarks=False, threads=1), extract_run(run, landmarks=False, threads=2))

@@ -21,10 +21,11 @@ from click.testing import CliRunner
 from fuzzing import tally
 from test_batch import CALLS, fake_process
 
-from datmo_cli import batch, pipeline
+from datmo_cli import batch
+from datmo_cli.base.errors import DatmoError, InputError, OutputError
 from datmo_cli.cli import cli
-from datmo_cli.errors import DatmoError, InputError, OutputError
-from datmo_cli.plot_files import plot_paths
+from datmo_cli.passes import pipeline
+from datmo_cli.report.plot_files import plot_paths
 
 pytestmark = [pytest.mark.cli, pytest.mark.timeout(300)]
 
@@ -262,7 +263,7 @@ def test_the_lock_is_taken_again_when_its_file_was_replaced_meanwhile(tmp_path, 
 
 
 def test_local_n_is_bounded_by_the_cores():
-    from datmo_cli import cluster
+    from datmo_cli.batch import cluster
 
     assert cluster.parse_local("local") == cluster.cores()
     assert cluster.parse_local(f"local:{cluster.cores()}") == cluster.cores()
@@ -282,7 +283,8 @@ def test_jobs_says_the_processes_it_started(logs, tmp_path):
 WORKERS_SCRIPT = """
 import os, sys, time
 sys.path[:0] = [{root!r}, {tests!r}]
-from datmo_cli import batch, pipeline
+from datmo_cli import batch
+from datmo_cli.passes import pipeline
 
 def stuck(src, out, **kw):
     open(os.path.join({pids!r}, str(os.getpid())), "w").close()
@@ -395,7 +397,7 @@ def test_a_manifest_field_of_the_wrong_type_is_one_input_error(logs, batch_dir, 
 
 
 def test_a_manifest_line_too_long_is_passed_over_and_a_manifest_too_large_is_refused(tmp_path, monkeypatch):
-    from datmo_cli import input_files
+    from datmo_cli.base import input_files
 
     monkeypatch.setattr(input_files, "MAX_MANIFEST_LINE_BYTES", 100)
     (tmp_path / "manifest.jsonl").write_bytes(b"\0" * 1000 + b"\n" + b'{"input": "a", "status": "done"}\n')

@@ -16,10 +16,10 @@ import pytest
 from click.testing import CliRunner
 from fuzzing import tally
 
+from datmo_cli.base.errors import InputError
 from datmo_cli.cli import cli
-from datmo_cli.errors import InputError
-from datmo_cli.log import mcapio, types
-from datmo_cli.log.scan import ScanGeometry, ScanRun, encode_scans
+from datmo_cli.logs import mcapio, types
+from datmo_cli.logs.scan import ScanGeometry, ScanRun, encode_scans
 
 pytestmark = pytest.mark.cli
 
@@ -179,7 +179,7 @@ def test_a_long_line_in_a_gzipped_carmen_log_is_never_held_whole(tmp_path):
     path = tmp_path / "long.log.gz"
     with gzip.open(path, "wt") as f:
         f.write("\n".join(lines[:5]) + "\nFLASER " + "1.0 " * 4_000_000 + "\n" + "\n".join(lines[5:]) + "\n")
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     tracemalloc.start()
     try:

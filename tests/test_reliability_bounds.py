@@ -73,7 +73,7 @@ def test_a_zstd_frame_stating_1_gib_in_a_chunk_declaring_1_mib_is_skipped_in_bou
     out = run_measured(
         """
         import warnings
-        from datmo_cli.log import mcapio
+        from datmo_cli.logs import mcapio
         with warnings.catch_warnings(record=True) as seen:
             warnings.simplefilter("always")
             log = mcapio.read_log("bomb.mcap", topics=None)
@@ -87,7 +87,7 @@ def test_a_zstd_frame_stating_1_gib_in_a_chunk_declaring_1_mib_is_skipped_in_bou
 
 
 def test_a_sound_zstd_chunk_stating_its_size_still_reads(tmp_path):
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     _, payloads = mcap_with_chunk("", b"", 0)
     inner = messages(payloads)
@@ -128,8 +128,8 @@ def test_a_ros1_bag_chunk_decompressing_to_1_gib_is_refused_in_bounded_memory(tm
     ros1_bag_with_chunk(tmp_path / "bomb.bag", compression, bomb)
     out = run_measured(
         """
-        from datmo_cli.errors import InputError
-        from datmo_cli.log.importers import import_log
+        from datmo_cli.base.errors import InputError
+        from datmo_cli.logs.importers import import_log
         try:
             import_log("bomb.bag", topic="/front")
             out = {"error": None}
@@ -145,15 +145,15 @@ def test_a_ros1_bag_chunk_decompressing_to_1_gib_is_refused_in_bounded_memory(tm
 
 @pytest.mark.parametrize("compression", ["bz2", "lz4"])
 def test_a_sound_compressed_ros1_bag_reads_whole(tmp_path, compression):
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     res = import_log(ros1_bag_with_chunk(tmp_path / "sound.bag", compression, None), topic="/front")
     assert len(res.run) == 5 and res.odometry is not None and len(res.odometry) == 5
 
 
 IMPORT_BAG = """
-from datmo_cli.errors import InputError
-from datmo_cli.log.importers import import_log
+from datmo_cli.base.errors import InputError
+from datmo_cli.logs.importers import import_log
 try:
     import_log("BAG")
     out = {"error": None}
@@ -202,7 +202,7 @@ def test_a_bag_folder_file_that_is_not_a_sane_regular_file_is_refused_naming_it(
 
 
 def test_a_sound_bag_folder_still_reads(ros2_bag):
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     assert len(import_log(ros2_bag).run) == 5
 
@@ -212,7 +212,7 @@ def test_a_bag_folder_member_whose_zstd_frame_states_1_gib_is_refused_in_bounded
     the real size): rosbags' reader decompressed it whole."""
     import synthetic_logs
 
-    from datmo_cli.log import bagdir, mcap_chunks
+    from datmo_cli.logs import bagdir, mcap_chunks
 
     class Bomb:
         def __init__(self, real):
@@ -239,8 +239,8 @@ def test_a_bag_folder_member_whose_zstd_frame_states_1_gib_is_refused_in_bounded
     monkeypatch.undo()
     out = run_measured(
         """
-        from datmo_cli.errors import InputError
-        from datmo_cli.log.importers import import_log
+        from datmo_cli.base.errors import InputError
+        from datmo_cli.logs.importers import import_log
         try:
             import_log("bag")
             out = {"error": None}
@@ -259,7 +259,7 @@ def test_a_leg_model_of_100000_tiny_members_is_refused_before_any_is_opened(tmp_
 
     import numpy as np
 
-    from datmo_cli.errors import InputError
+    from datmo_cli.base.errors import InputError
     from datmo_cli.perception import leg_model
 
     path = tmp_path / "many.npz"
@@ -280,7 +280,7 @@ def test_a_leg_model_of_100000_tiny_members_is_refused_before_any_is_opened(tmp_
 def test_a_leg_model_larger_than_256_mib_is_refused_before_it_is_opened(tmp_path, monkeypatch):
     import zipfile
 
-    from datmo_cli.errors import InputError
+    from datmo_cli.base.errors import InputError
     from datmo_cli.perception import leg_model
 
     path = tmp_path / "huge.npz"
@@ -344,8 +344,8 @@ def ros2_bag_compressed_whole(folder: Path) -> Path:
 
 
 def test_a_bag_member_compressed_whole_is_decompressed_within_bounds(tmp_path):
-    from datmo_cli.errors import InputError
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.base.errors import InputError
+    from datmo_cli.logs.importers import import_log
 
     bag = ros2_bag_compressed_whole(tmp_path / "whole")
     assert len(import_log(bag).run) == 5  # a sound one reads

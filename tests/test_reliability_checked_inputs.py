@@ -22,7 +22,7 @@ pytestmark = pytest.mark.cli
 def fake_batch(tmp_path, monkeypatch):
     from test_batch import CALLS, fake_process
 
-    from datmo_cli import pipeline
+    from datmo_cli.passes import pipeline
 
     monkeypatch.setattr(pipeline, "process_file", fake_process)
     monkeypatch.setattr(pipeline, "warm_up", lambda: None)
@@ -66,8 +66,8 @@ def odom_log(path, bad=BAD_POSES, n: int = 10, channels: int = 1) -> None:
     with channels=2, /odom on two channels (the second 50 ms later)."""
     from mcap.writer import Writer
 
-    from datmo_cli.log import mcapio, types
-    from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun, encode_scans
+    from datmo_cli.logs import mcapio, types
+    from datmo_cli.logs.scan import Odometry, ScanGeometry, ScanRun, encode_scans
 
     stamps = T0 + np.arange(n, dtype=np.int64) * 200_000_000
     g = ScanGeometry(-np.pi / 2, np.pi / 90, 91, 0.0, 8.0, 0.0, 0.2, "laser")
@@ -90,7 +90,7 @@ def odom_log(path, bad=BAD_POSES, n: int = 10, channels: int = 1) -> None:
 
 
 def test_odometry_poses_not_finite_or_beyond_the_bound_are_dropped_with_their_count(tmp_path):
-    from datmo_cli.log import mcapio, poses
+    from datmo_cli.logs import mcapio, poses
 
     path = tmp_path / "odom.mcap"
     odom_log(path)
@@ -110,7 +110,7 @@ def test_odometry_poses_not_finite_or_beyond_the_bound_are_dropped_with_their_co
 def test_carmen_poses_beyond_the_bound_are_dropped_with_their_count(tmp_path):
     from test_reliability_imports import flaser_log
 
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     path = tmp_path / "in.log"
     flaser_log(path, {4: "1e308 2 0.5", 9: "1 -1e300 0.5"})
@@ -123,8 +123,8 @@ def test_carmen_poses_beyond_the_bound_are_dropped_with_their_count(tmp_path):
 
 
 def test_two_channels_on_the_odometry_topic_are_refused_as_for_scans(tmp_path):
-    from datmo_cli.errors import InputError
-    from datmo_cli.log import mcapio
+    from datmo_cli.base.errors import InputError
+    from datmo_cli.logs import mcapio
 
     path = tmp_path / "two.mcap"
     odom_log(path, bad={}, channels=2)
@@ -136,7 +136,7 @@ def test_two_channels_on_the_odometry_topic_are_refused_as_for_scans(tmp_path):
 
 
 def test_one_nan_carmen_timestamp_is_repaired_alone_and_named(tmp_path):
-    from datmo_cli.log.importers import import_log
+    from datmo_cli.logs.importers import import_log
 
     ranges = " ".join(["3.0"] * 181)
     lines = []
@@ -159,7 +159,7 @@ def test_one_nan_carmen_timestamp_is_repaired_alone_and_named(tmp_path):
 def test_carmen_poses_of_1e308_never_make_tracks_that_are_not_finite(tmp_path):
     from test_reliability_imports import flaser_log
 
-    from datmo_cli.log import mcapio, types
+    from datmo_cli.logs import mcapio, types
     from datmo_cli.report import decode_channel
 
     path = tmp_path / "in.log"

@@ -8,10 +8,10 @@ import pytest
 from click.testing import CliRunner
 from fuzzing import tally
 
-from datmo_cli.bounds import bounds_of, min_max_pairs
+from datmo_cli.base.bounds import bounds_of, min_max_pairs
+from datmo_cli.base.errors import ConfigError
 from datmo_cli.cli import cli
-from datmo_cli.config import SECTIONS, load
-from datmo_cli.errors import ConfigError
+from datmo_cli.passes.config import SECTIONS, load
 
 pytestmark = pytest.mark.cli
 

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from datmo_cli import progress
+from datmo_cli.base import progress
+from datmo_cli.base.text import markup, printable
 from datmo_cli.cli import cli
-from datmo_cli.log import cdr, mcapio, types
-from datmo_cli.log.scan import ScanGeometry, ScanRun
-from datmo_cli.text import markup, printable
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 
 pytestmark = pytest.mark.cli
 
@@ -152,7 +152,7 @@ def test_report_shows_a_hostile_log_as_it_is(hostile, monkeypatch, fmt, on_termi
     if fmt == "json":
         assert json.loads(out)["files"][0]["run"]["command"] == HOSTILE  # JSON keeps the string, escaped by JSON
     elif fmt == "markdown":  # escaped for Markdown too (text.markdown): `[/]` shows as `\[/\]`
-        from datmo_cli.text import markdown
+        from datmo_cli.base.text import markdown
 
         assert "\x1b" not in out and markdown(SHOWN) in out, out[:2000]
     elif fmt != "csv":

@@ -2,7 +2,7 @@
 as a log, a bag, --config, --gt, a leg model, a scene or a batch's manifest is refused in one line naming the
 path and what it is (never "empty file" or "no such file"), without hanging or reading until memory runs out;
 text inputs read whole are refused past their kind's size; an unreadable input is one line and exit 1, not
-Click's usage error. Every reader calls the one check, datmo_cli/input_files.py. Counted with fuzzing.tally
+Click's usage error. Every reader calls the one check, datmo_cli/base/input_files.py. Counted with fuzzing.tally
 ("special files as inputs", "unreadable inputs")."""
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ import synthetic_logs
 from click.testing import CliRunner
 from fuzzing import tally
 
-from datmo_cli import input_files
+from datmo_cli.base import input_files
+from datmo_cli.base.errors import InputError
 from datmo_cli.cli import cli
-from datmo_cli.errors import InputError
 
 pytestmark = [
     pytest.mark.cli,

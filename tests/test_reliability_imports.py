@@ -14,9 +14,9 @@ from click.testing import CliRunner
 from rosbags.typesys import Stores, get_typestore
 
 from datmo_cli.cli import cli
-from datmo_cli.log import mcapio, types
-from datmo_cli.log.importers import import_log
-from datmo_cli.log.scan import ScanGeometry, ScanRun, encode_scans
+from datmo_cli.logs import mcapio, types
+from datmo_cli.logs.importers import import_log
+from datmo_cli.logs.scan import ScanGeometry, ScanRun, encode_scans
 
 pytestmark = pytest.mark.cli
 
@@ -317,7 +317,7 @@ def test_fuzz_ros1_bag_errors_or_scans_whose_fields_agree(tmp_path):
 
     from fuzzing import tally
 
-    from datmo_cli.errors import DatmoError
+    from datmo_cli.base.errors import DatmoError
 
     base = tmp_path / "base.bag"
     write_ros1_bag(base, [ros1_scan(k) for k in range(3)])
@@ -381,8 +381,8 @@ def test_a_stamp_that_is_not_a_time_is_not_blamed_on_the_order(tmp_path, field, 
 def test_a_foreign_file_in_a_bag_folder_is_the_one_named(tmp_path):
     """A folder that is a bag but for one file was refused naming its first entry (metadata.yaml, or the bag's
     own file), not the foreign one."""
-    from datmo_cli.errors import OutputError
-    from datmo_cli.log import bagdir
+    from datmo_cli.base.errors import OutputError
+    from datmo_cli.logs import bagdir
 
     bag = tmp_path / "bag"
     bag.mkdir()

@@ -38,11 +38,11 @@ from test_evaluate import gt_csv_text
 from test_import_carmen import flaser
 from test_import_rosbag import ODOM, SCAN, STORE1, STORE2, _odom, _scan, write_ros1, write_ros2
 
+from datmo_cli.base.errors import DatmoError
 from datmo_cli.cli import cli
-from datmo_cli.errors import DatmoError
-from datmo_cli.log import mcapio, types
-from datmo_cli.log.importers import import_log
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.logs import mcapio, types
+from datmo_cli.logs.importers import import_log
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 
 pytestmark = pytest.mark.cli
 

@@ -161,7 +161,8 @@ def test_a_full_disk_in_a_batch_names_the_output_not_the_input(tmp_path, monkeyp
     """`run` put the input's name in front of "OUT: no space left on the device": the input seemed at fault."""
     import errno
 
-    from datmo_cli import outputs, pipeline
+    from datmo_cli.base import outputs
+    from datmo_cli.passes import pipeline
 
     def full(src, out, **kw):
         raise outputs.os_error(OSError(errno.ENOSPC, "No space left on device"), out, "writing it")
@@ -179,7 +180,7 @@ def test_a_full_disk_in_a_batch_names_the_output_not_the_input(tmp_path, monkeyp
 def test_plots_of_paths_that_collide_once_joined_are_not_given_twice(tmp_path):
     """a-b/c.mcap, a/b/c.mcap and b/c.mcap: the first two are both a-b-c once joined with '-', which was
     refused as one file "given twice"."""
-    from datmo_cli.plot_files import plot_paths
+    from datmo_cli.report.plot_files import plot_paths
 
     files = [tmp_path / "a-b" / "c.mcap", tmp_path / "a" / "b" / "c.mcap", tmp_path / "b" / "c.mcap"]
     for f in files:
@@ -187,7 +188,7 @@ def test_plots_of_paths_that_collide_once_joined_are_not_given_twice(tmp_path):
         f.write_bytes(b"")
     paths = plot_paths(tmp_path / "q.png", files)
     assert len(set(paths)) == 3 and all(p.parent == tmp_path and p.suffix == ".png" for p in paths)
-    from datmo_cli.errors import InputError
+    from datmo_cli.base.errors import InputError
 
     with pytest.raises(InputError, match="given twice"):
         plot_paths(tmp_path / "q.png", [files[0], tmp_path / "a-b" / ".." / "a-b" / "c.mcap"])
@@ -196,8 +197,8 @@ def test_plots_of_paths_that_collide_once_joined_are_not_given_twice(tmp_path):
 def _long_parameters(path) -> str:
     import synthetic_logs as syn
 
-    from datmo_cli.log import cdr, mcapio, types
-    from datmo_cli.log.scan import ScanRun
+    from datmo_cli.logs import cdr, mcapio, types
+    from datmo_cli.logs.scan import ScanRun
 
     value = {f"key_{i:03d}": i / 7 for i in range(40)}
     with mcapio.LogWriter(path, provenance=mcapio.Provenance("track", {"features": value})) as w:

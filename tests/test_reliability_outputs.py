@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from datmo_cli import outputs
+from datmo_cli.base import outputs
+from datmo_cli.base.errors import OutputError
 from datmo_cli.cli import clean_error, cli
 from datmo_cli.commands.emulate import make_link, remove_link
-from datmo_cli.errors import OutputError
-from datmo_cli.log import mcapio
-from datmo_cli.log.scan import ScanRun
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.scan import ScanRun
 
 pytestmark = pytest.mark.cli
 
@@ -327,7 +327,7 @@ def test_a_signal_inside_code_exec_runs_from_a_string_is_sent_again_not_raised_t
     import signal
     import sys
 
-    from datmo_cli import outputs
+    from datmo_cli.base import outputs
 
     sent = []
 
@@ -358,7 +358,7 @@ def test_a_signal_inside_llvmlites_callbacks_is_sent_again_not_raised_there(monk
     import signal
     import types
 
-    from datmo_cli import outputs
+    from datmo_cli.base import outputs
 
     sent = []
 

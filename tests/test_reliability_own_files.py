@@ -36,8 +36,8 @@ def dies_mid_write(src, out, **kwargs):
 
     from test_batch import fake_process
 
-    from datmo_cli import outputs
-    from datmo_cli.errors import InputError
+    from datmo_cli.base import outputs
+    from datmo_cli.base.errors import InputError
 
     if Path(src).name != "dies.mcap":
         return fake_process(src, out, **kwargs)
@@ -52,7 +52,7 @@ def dies_mid_write(src, out, **kwargs):
 def batch_of_one_death(tmp_path, monkeypatch):
     from test_batch import CALLS
 
-    from datmo_cli import pipeline
+    from datmo_cli.passes import pipeline
 
     monkeypatch.setattr(pipeline, "process_file", dies_mid_write)
     monkeypatch.setattr(pipeline, "warm_up", lambda: None)

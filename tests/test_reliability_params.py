@@ -1,4 +1,4 @@
-"""Every numeric parameter is checked in one place (datmo_cli/bounds.py, against the Bound its field
+"""Every numeric parameter is checked in one place (datmo_cli/base/bounds.py, against the Bound its field
 declares): NaN, infinities and values outside its range give one line naming the option or TOML key and the
 range, a non-zero exit, no traceback and no output; the defaults and the bounds themselves pass.
 
@@ -20,12 +20,12 @@ from fuzzing import tally
 from hypothesis import given
 from hypothesis import strategies as st
 
-from datmo_cli import bounds
-from datmo_cli.bounds import OPTIONS, Bound, OptionError, check, validate
+from datmo_cli.base import bounds
+from datmo_cli.base.bounds import OPTIONS, Bound, OptionError, check, validate
+from datmo_cli.base.errors import ConfigError
 from datmo_cli.cli import COMMANDS, cli
 from datmo_cli.commands.types import Bounded, option_name
-from datmo_cli.config import BOUNDS, SECTIONS, load
-from datmo_cli.errors import ConfigError
+from datmo_cli.passes.config import BOUNDS, SECTIONS, load
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.params import TrackingParams
 
@@ -162,7 +162,7 @@ def test_a_background_grid_too_big_is_refused_naming_both_and_off_it_allocates_n
 def test_the_background_limit_is_what_the_tracker_allocates():
     import numpy as np
 
-    from datmo_cli.log.scan import ScanGeometry
+    from datmo_cli.logs.scan import ScanGeometry
     from datmo_cli.tracking.tracker import Tracker
 
     t = validate(TrackingParams, {"background_extent": 100.0, "background_cell": 0.1})
@@ -189,7 +189,7 @@ def test_the_background_limit_is_what_the_tracker_allocates():
 )
 def test_features_run_at_the_largest_settings_accepted(values):
     """The kernels allocate and finish at the corners of the accepted ranges (no MemoryError, no hang)."""
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
     from datmo_cli.perception.features import extract_run
 
     p = validate(FeatureParams, {**values, "leg_model": "paper"})

@@ -14,7 +14,7 @@ from click.testing import CliRunner
 from fuzzing import tally
 
 from datmo_cli.cli import cli
-from datmo_cli.log import cdr, mcapio, types
+from datmo_cli.logs import cdr, mcapio, types
 
 pytestmark = pytest.mark.cli
 

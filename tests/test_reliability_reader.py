@@ -18,11 +18,11 @@ from fuzzing import tally
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from datmo_cli.base.errors import DatmoError
 from datmo_cli.cli import cli
-from datmo_cli.errors import DatmoError
-from datmo_cli.log import mcapio, types
-from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun, encode_scans
-from datmo_cli.streaming import LogStream
+from datmo_cli.logs import mcapio, types
+from datmo_cli.logs.scan import Odometry, ScanGeometry, ScanRun, encode_scans
+from datmo_cli.passes.streaming import LogStream
 
 pytestmark = pytest.mark.cli
 

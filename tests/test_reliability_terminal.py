@@ -21,11 +21,11 @@ from click.testing import CliRunner
 from test_reliability_escaping import LINK, as_terminal
 
 from datmo_cli import cli as cli_module
-from datmo_cli import progress
+from datmo_cli.base import progress
+from datmo_cli.base.text import printable
 from datmo_cli.cli import cli
-from datmo_cli.log import cdr, mcap_writer, mcapio, types
-from datmo_cli.log.scan import ScanGeometry, ScanRun
-from datmo_cli.text import printable
+from datmo_cli.logs import cdr, mcap_writer, mcapio, types
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
 
 pytestmark = pytest.mark.cli
 
@@ -63,7 +63,7 @@ def test_every_format_character_is_escaped():
 
 
 def test_markdown_escapes_what_would_render():
-    from datmo_cli.text import markdown
+    from datmo_cli.base.text import markdown
 
     text = markdown("# <b>x</b> ![i](http://e/i.png) [l](u) *a* _b_ `c` | ~d~ &amp; \x1b")
     assert text == (
@@ -72,7 +72,7 @@ def test_markdown_escapes_what_would_render():
 
 
 def test_printable_lines_keeps_a_librarys_lines():
-    from datmo_cli.text import printable_lines
+    from datmo_cli.base.text import printable_lines
 
     assert printable_lines("Port 8787 is in use.\nHosting on 4\x1b[2J\n\n") == [
         "Port 8787 is in use.",
@@ -246,7 +246,7 @@ def test_a_dask_warning_of_several_lines_prints_line_by_line(capsys):
 
 def test_node_rate_limits_what_a_publisher_makes_it_say(monkeypatch):
     """A publisher alternating two scan geometries made the node say "tracking starts over" for every scan."""
-    from datmo_cli import node as node_module
+    from datmo_cli.ros2 import node as node_module
 
     class Publisher:
         """A stand-in for the DDS node: 1,000 restarts whose reason holds a publisher's frame id, then Ctrl-C."""
@@ -273,7 +273,7 @@ def test_node_rate_limits_what_a_publisher_makes_it_say(monkeypatch):
 
     published: list[Publisher] = []
     monkeypatch.setattr(node_module, "Node", Publisher)
-    monkeypatch.setattr("datmo_cli.dds.domain_id", lambda value=None: 0)
+    monkeypatch.setattr("datmo_cli.ros2.dds.domain_id", lambda value=None: 0)
     code, out, err = run_cli("node")
     assert code == 130
     lines = err.splitlines()

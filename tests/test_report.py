@@ -12,7 +12,7 @@ from synthetic_logs import write
 
 from datmo_cli import report
 from datmo_cli.cli import cli
-from datmo_cli.pipeline import read_run_data
+from datmo_cli.passes.pipeline import read_run_data
 
 pytestmark = pytest.mark.cli
 

@@ -11,8 +11,10 @@ from click.testing import CliRunner
 from conftest import ROOT, shared_path
 from synthetic_logs import write
 
-from datmo_cli import pipeline, plot, report
+from datmo_cli import report
 from datmo_cli.cli import cli
+from datmo_cli.passes import pipeline
+from datmo_cli.report import plot
 
 pytestmark = pytest.mark.cli
 

@@ -146,7 +146,7 @@ def test_piped_tables_keep_long_names_whole(tmp_path):
 def test_progress_counts_scans_to_the_total(logs, monkeypatch):
     from contextlib import contextmanager
 
-    from datmo_cli import progress
+    from datmo_cli.base import progress
 
     seen = {}
 

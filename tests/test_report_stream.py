@@ -13,11 +13,12 @@ from click.testing import CliRunner
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datmo_cli import pipeline, report
+from datmo_cli import report
+from datmo_cli.base.errors import GeometryError, MissingChannelError
 from datmo_cli.cli import cli
-from datmo_cli.errors import GeometryError, MissingChannelError
-from datmo_cli.log import cdr, mcapio, types, vocabulary
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.logs import cdr, mcapio, types, vocabulary
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
+from datmo_cli.passes import pipeline
 
 pytestmark = pytest.mark.cli
 

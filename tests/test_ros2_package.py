@@ -16,10 +16,11 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from datmo_cli import __version__, outputs
+from datmo_cli import __version__
+from datmo_cli.base import outputs
 from datmo_cli.cli import cli
-from datmo_cli.log import bagdir, mcapio
-from datmo_cli.log.scan import ScanRun
+from datmo_cli.logs import bagdir, mcapio
+from datmo_cli.logs.scan import ScanRun
 
 pytestmark = pytest.mark.cli
 

@@ -13,9 +13,9 @@ from click.testing import CliRunner
 from fuzzing import tally
 from test_cli_conventions import N_SCANS, write_ros1_bag, write_ros2_bag
 
+from datmo_cli.base.errors import InputError
 from datmo_cli.cli import cli
-from datmo_cli.errors import InputError
-from datmo_cli.log import importers, mcapio
+from datmo_cli.logs import importers, mcapio
 
 pytestmark = pytest.mark.cli
 

@@ -11,9 +11,10 @@ import pytest
 import synthetic_logs
 from click.testing import CliRunner
 
-from datmo_cli import batch, pipeline
+from datmo_cli import batch
+from datmo_cli.base.errors import InputError
 from datmo_cli.cli import cli
-from datmo_cli.errors import InputError
+from datmo_cli.passes import pipeline
 
 pytestmark = pytest.mark.cli
 

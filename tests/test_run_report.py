@@ -13,8 +13,8 @@ from run_cases import sample_logs
 
 from datmo_cli import report as report_module
 from datmo_cli.cli import cli
-from datmo_cli.log import mcapio
-from datmo_cli.log.scan import ScanRun
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.scan import ScanRun
 
 pytestmark = pytest.mark.cli
 
@@ -81,7 +81,7 @@ def test_two_jobs_report_the_same(tmp_path):
 
 
 def test_ego_motion_auto_reads_only_the_first_block(tmp_path, monkeypatch):
-    from datmo_cli import streaming
+    from datmo_cli.passes import streaming
     from datmo_cli.perception.egomotion import EGO_SAMPLE_SCANS
 
     hall = mcapio.read_run(sample_logs()[[p.stem for p in sample_logs()].index("hall")])

@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 from click.testing import CliRunner
 
-from datmo_cli import pipeline
 from datmo_cli.cli import cli
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
+from datmo_cli.passes import pipeline
 
 pytestmark = pytest.mark.cli
 
@@ -112,7 +112,7 @@ def test_first_parallel_run_with_an_empty_numba_cache(tmp_path, hall_log):
 def test_derive_and_the_streamed_stages_take_one_configuration(tmp_path, hall_log):
     """A DatmoConfig reaches every stage in one convention: in memory (derive), streamed (process_file), and
     both record it whole, with the tracks it changes."""
-    from datmo_cli.config import DatmoConfig
+    from datmo_cli.passes.config import DatmoConfig
 
     cfg = DatmoConfig().replace(track={"confirm_hits": 5, "confirm_window": 6})
     run, odometry = mcapio.read_run(hall_log), mcapio.read_odometry(hall_log)

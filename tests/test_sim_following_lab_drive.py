@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from datmo_cli.base.errors import ConfigError
 from datmo_cli.cli import cli
-from datmo_cli.errors import ConfigError
-from datmo_cli.log import mcapio, transforms
-from datmo_cli.log.vocabulary import CLASS_PERSON
+from datmo_cli.logs import mcapio, transforms
+from datmo_cli.logs.vocabulary import CLASS_PERSON
 from datmo_cli.sim.scene import builtin_scenes, load_scene, parse_scene
 from datmo_cli.sim.simulate import Simulation, simulate_scene
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from datmo_cli.errors import ConfigError, InputError
-from datmo_cli.log.vocabulary import CLASS_BENCH, CLASS_CIRCLE_OBJECT, CLASS_COLUMN, CLASS_PERSON, CLASS_WALL_CORNER
+from datmo_cli.base.errors import ConfigError, InputError
+from datmo_cli.logs.vocabulary import CLASS_BENCH, CLASS_CIRCLE_OBJECT, CLASS_COLUMN, CLASS_PERSON, CLASS_WALL_CORNER
 from datmo_cli.sim.scene import builtin_scenes, load_scene, parse_scene
 from datmo_cli.sim.simulate import simulate_scene
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from datmo_cli.base.errors import ConfigError
 from datmo_cli.cli import cli
-from datmo_cli.errors import ConfigError
-from datmo_cli.log import cdr, mcapio, types
-from datmo_cli.log.vocabulary import CLASS_COLUMN, CLASS_PERSON, CLASS_WALL_CORNER
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.logs.vocabulary import CLASS_COLUMN, CLASS_PERSON, CLASS_WALL_CORNER
 from datmo_cli.sim.scene import parse_scene
 from datmo_cli.sim.simulate import START_NS, simulate_scene
 

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datmo_cli.log import cdr, mcapio, types
-from datmo_cli.log.scan import ScanGeometry, encode_scan
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.logs.scan import ScanGeometry, encode_scan
 
 pytestmark = pytest.mark.cli
 
@@ -62,7 +62,7 @@ def one_scan_log(path: Path, tracks: bool = False) -> Path:
 
 
 def _light() -> bool:
-    from datmo_cli.numba_light import light_loading
+    from datmo_cli.base.numba_light import light_loading
 
     return light_loading()
 
@@ -121,7 +121,7 @@ def test_the_field_definitions_read_from_the_msg_files_are_the_type_stores():
 
 
 def test_the_shipped_schema_table_is_the_type_stores():
-    """msg/schemas.json holds what the type store generates (python -m datmo_cli.log.types rewrites it)."""
+    """msg/schemas.json holds what the type store generates (python -m datmo_cli.logs.types rewrites it)."""
     assert types._schema_table() == types.schema_table()
     for msgtype in types.WRITTEN_TYPES:
         assert types.schema_text(msgtype) == types.typestore().generate_msgdef(msgtype, ros_version=2)[0]
@@ -133,7 +133,7 @@ def test_numba_is_prepared_without_scipy_linalg_and_scipy_linalg_still_imports_w
     (tmp_path / "theirs.py").write_text("import numba\n\n@numba.njit(cache=True)\ndef g(x):\n    return x + 1\n")
     code = """
 import sys
-from datmo_cli.numba_runtime import prepare
+from datmo_cli.base.numba_runtime import prepare
 prepare()
 import theirs
 assert theirs.g(1) == 2
@@ -182,7 +182,7 @@ def test_a_kernel_loaded_lightly_still_links_into_a_kernel_compiled_later(tmp_pa
     parses it then, to inline it."""
     code = """
 import numba
-from datmo_cli.numba_runtime import prepare
+from datmo_cli.base.numba_runtime import prepare
 prepare()
 from datmo_cli.perception.segmentation import valid_return
 loaded = valid_return(1.0, 0.0, 8.0)
@@ -220,7 +220,7 @@ print("coverage" in sys.modules, coverage_support.coverage_available)
 def test_the_cache_looks_stale_without_index_files_or_after_an_edit(tmp_path: Path, monkeypatch):
     import os
 
-    from datmo_cli import numba_runtime
+    from datmo_cli.base import numba_runtime
 
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     monkeypatch.delenv("NUMBA_DISABLE_JIT", raising=False)

@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datmo_cli import streaming
-from datmo_cli.log import mcapio
-from datmo_cli.log.scan import ScanGeometry, ScanRun
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
+from datmo_cli.passes import streaming
+from datmo_cli.passes.pipeline import process_file
+from datmo_cli.passes.stage_files import features_file, segment_file, track_file
 from datmo_cli.perception.egomotion import EGO_SAMPLE_SCANS
-from datmo_cli.pipeline import process_file
-from datmo_cli.stage_files import features_file, segment_file, track_file
 
 pytestmark = pytest.mark.cli
 
@@ -132,7 +132,7 @@ def test_a_geometry_change_between_blocks_is_refused(tmp_path: Path) -> None:
     with mcapio.LogWriter(both) as w:
         w.write_scans(run)
         w.write_scans(wide)
-    from datmo_cli.errors import GeometryError
+    from datmo_cli.base.errors import GeometryError
 
     with pytest.raises(GeometryError, match="changes at scan 30"):
         segment_file(both, tmp_path / "out.mcap", block_scans=30)
@@ -173,7 +173,7 @@ def test_markers_only_when_asked_and_nothing_else_changes(tmp_path: Path) -> Non
 
 
 def test_covariance_only_when_asked_and_nothing_else_changes(tmp_path: Path) -> None:
-    from datmo_cli.log import cdr, types
+    from datmo_cli.logs import cdr, types
 
     src = SAMPLES / "corridor.mcap"
     process_file(src, tmp_path / "lean.mcap")

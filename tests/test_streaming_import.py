@@ -27,13 +27,13 @@ from import_cases import (
 from test_import_carmen import flaser, write
 from test_import_rosbag import ODOM, SCAN, _odom, _scan, write_ros1
 
-import datmo_cli.log.importers as importers
-import datmo_cli.log.ordered as ordered
+import datmo_cli.logs.importers as importers
+import datmo_cli.logs.ordered as ordered
 from datmo_cli.cli import cli
-from datmo_cli.log import mcapio
-from datmo_cli.log.importers import open_import, write_import
-from datmo_cli.log.importers.carmen_conventions import StampCheck
-from datmo_cli.log.ordered import OrderedSink
+from datmo_cli.logs import mcapio
+from datmo_cli.logs.importers import open_import, write_import
+from datmo_cli.logs.importers.carmen_conventions import StampCheck
+from datmo_cli.logs.ordered import OrderedSink
 
 pytestmark = pytest.mark.cli
 
@@ -107,7 +107,7 @@ def test_simulate_equals_the_whole_run_simulation(name, tmp_path):
 
 def test_simulate_of_a_moving_sensor_over_several_blocks_equals_the_whole_run(tmp_path):
     """Against the whole-run writer datmo simulate had (simulate_scene, then every channel at once)."""
-    from datmo_cli.log import transforms, types
+    from datmo_cli.logs import transforms, types
     from datmo_cli.sim.scene import load_scene
     from datmo_cli.sim.simulate import CHUNK, simulate_scene
 
@@ -189,7 +189,7 @@ def test_carmen_import_memory_does_not_grow_with_the_log(tmp_path):
 
 
 def test_carmen_parse_spools_every_scan(tmp_path):
-    from datmo_cli.log.importers.carmen_parse import parse_lines
+    from datmo_cli.logs.importers.carmen_parse import parse_lines
 
     lines = [flaser([1.0] * 20, 5.0 + i) for i in range(3000)] + [odom_line(1.0, 5.0 + i) for i in range(50)]
     parse = parse_lines(lines, spool=tmp_path)
@@ -365,7 +365,7 @@ def test_stamp_check_block_by_block_equals_the_whole_run_rule(steps, start, hole
 
 
 def test_a_spool_that_cannot_be_made_is_a_one_line_error(tmp_path):
-    from datmo_cli.errors import DatmoError
+    from datmo_cli.base.errors import DatmoError
 
     src = write(tmp_path, "a.log", [flaser([1.0] * 10, 1.0 + i) for i in range(5)])
     with pytest.raises(DatmoError, match="cannot make a temporary folder for the parsed scans"):

@@ -14,10 +14,10 @@ import pytest
 
 from benchmarks import tracking_scoring as acc
 from datmo_cli import evaluate as ev
-from datmo_cli.log import mcapio, types
-from datmo_cli.log.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON, STATUS_CONFIRMED
+from datmo_cli.logs import mcapio, types
+from datmo_cli.logs.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON, STATUS_CONFIRMED
+from datmo_cli.passes.stages import run_features, track_run
 from datmo_cli.report import decode_channel
-from datmo_cli.stages import run_features, track_run
 
 pytestmark = pytest.mark.unit
 

@@ -11,9 +11,9 @@ from test_tracking_people import legs_as_circles, walker_legs
 
 from benchmarks.synthetic_features import features_from_lists
 from datmo_cli.cli import cli
-from datmo_cli.config import DatmoConfig
-from datmo_cli.log import cdr, mcapio, types
-from datmo_cli.log.scan import Odometry, ScanGeometry, ScanRun
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.logs.scan import Odometry, ScanGeometry, ScanRun
+from datmo_cli.passes.config import DatmoConfig
 from datmo_cli.perception.params import FeatureParams
 
 pytestmark = pytest.mark.cli
@@ -161,8 +161,8 @@ def test_raw_log_is_segmented_and_tracked(tmp_path):
 def test_config_tables_are_read_per_stage(tmp_path):
     """One datmo.toml serves every command: [track] for tracking, [features] ignored by it, and a file with
     no tables at all is read as the stage's own table."""
-    from datmo_cli.config import load
-    from datmo_cli.errors import ConfigError
+    from datmo_cli.base.errors import ConfigError
+    from datmo_cli.passes.config import load
     from datmo_cli.tracking.params import TrackingParams
 
     both = tmp_path / "both.toml"

@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from datmo_cli.cli import cli
-from datmo_cli.log import mcapio
+from datmo_cli.logs import mcapio
 from datmo_cli.perception.egomotion import FRAME_ID, odometry_for, scans_move
 from datmo_cli.sim.simulate import simulate_scene
 

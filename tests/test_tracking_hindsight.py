@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from datmo_cli.log.vocabulary import CLASS_PERSON, CLASS_UNKNOWN, STATUS_CONFIRMED, STATUS_TENTATIVE
+from datmo_cli.logs.vocabulary import CLASS_PERSON, CLASS_UNKNOWN, STATUS_CONFIRMED, STATUS_TENTATIVE
 from datmo_cli.tracking import hindsight as H
 from datmo_cli.tracking.tracker import TRACK_DTYPE, TrackBlock
 from tests import reference_tracking as rt
@@ -178,9 +178,9 @@ def test_a_lag_that_is_not_positive_is_refused():
 
 @pytest.fixture(scope="module")
 def hall(tmp_path_factory):
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
+    from datmo_cli.passes.simulated import write_simulation
     from datmo_cli.sim.simulate import Simulation
-    from datmo_cli.simulated import write_simulation
 
     path = tmp_path_factory.mktemp("hindsight") / "hall.mcap"
     with mcapio.LogWriter(path, force=True) as writer:
@@ -189,24 +189,24 @@ def hall(tmp_path_factory):
 
 
 def decoded(payloads: list[bytes]) -> np.ndarray:
-    from datmo_cli.log import types
+    from datmo_cli.logs import types
     from datmo_cli.report import decode_channel
 
     return decode_channel(types.TRACKS, payloads).items["tracks"]
 
 
 def tracks_of(path):
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     return mcapio.read_messages(path, mcapio.TOPIC_TRACKS)[1]
 
 
 @pytest.mark.slow
 def test_datmo_run_smooths_and_says_so_the_live_stages_stay_causal(tmp_path, hall):
-    from datmo_cli import pipeline
-    from datmo_cli.config import DatmoConfig
     from datmo_cli.live.messages import Stages
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
+    from datmo_cli.passes import pipeline
+    from datmo_cli.passes.config import DatmoConfig
 
     smooth, causal = tmp_path / "smooth.mcap", tmp_path / "causal.mcap"
     pipeline.process_file(hall, smooth)
@@ -231,8 +231,8 @@ def test_datmo_run_smooths_and_says_so_the_live_stages_stay_causal(tmp_path, hal
 
 @pytest.mark.slow
 def test_hindsight_outputs_are_the_same_whatever_the_blocks(tmp_path, hall):
-    from datmo_cli import pipeline
-    from datmo_cli.stage_files import track_file
+    from datmo_cli.passes import pipeline
+    from datmo_cli.passes.stage_files import track_file
 
     pipeline.process_file(hall, tmp_path / "a.mcap", block_scans=1024)
     pipeline.process_file(hall, tmp_path / "b.mcap", block_scans=7)

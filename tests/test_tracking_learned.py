@@ -15,9 +15,9 @@ from test_tracking_people import walker_legs
 
 from benchmarks.synthetic_features import BLOB_DTYPE, CIRCLE_DTYPE, LEG_DTYPE, LINE_DTYPE, features_from_lists
 from datmo_cli.cli import cli
-from datmo_cli.log import cdr, mcapio, types
-from datmo_cli.log.scan import ScanGeometry, ScanRun
-from datmo_cli.log.vocabulary import (
+from datmo_cli.logs import cdr, mcapio, types
+from datmo_cli.logs.scan import ScanGeometry, ScanRun
+from datmo_cli.logs.vocabulary import (
     CLASS_CIRCLE_OBJECT,
     CLASS_PERSON,
     MOBILITY_DYNAMIC,
@@ -420,7 +420,7 @@ def _features_log(path, threshold: float) -> list[ScanFeatures]:
 def test_track_takes_the_leg_threshold_its_features_log_records(tmp_path, threshold):
     """Legs scored 0.6 are legs under a recorded threshold of 0.5 and weak under 0.9 (measured as their circles,
     so the tracks differ): `datmo track` gives what tracking with that threshold gives, and records it."""
-    from datmo_cli.stages import track_run
+    from datmo_cli.passes.stages import track_run
 
     src, out = tmp_path / "in.mcap", tmp_path / "out.mcap"
     feats = _features_log(src, threshold)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from datmo_cli.log import cdr, types
-from datmo_cli.log.markers import CUBE_LIST, DELETEALL, LINE_LIST, SPHERE_LIST, TEXT_VIEW_FACING
+from datmo_cli.logs import cdr, types
+from datmo_cli.logs.markers import CUBE_LIST, DELETEALL, LINE_LIST, SPHERE_LIST, TEXT_VIEW_FACING
 from datmo_cli.tracking.markers import tail_segments, track_markers
 
 pytestmark = pytest.mark.unit

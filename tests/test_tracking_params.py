@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from datmo_cli.bounds import validate
-from datmo_cli.config import DatmoConfig, load
-from datmo_cli.errors import ConfigError, InputError
+from datmo_cli.base.bounds import validate
+from datmo_cli.base.errors import ConfigError, InputError
+from datmo_cli.passes.config import DatmoConfig, load
 from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking.params import TrackingParams
 
@@ -96,7 +96,7 @@ def test_keys_outside_any_table_go_to_the_section_that_declares_them(tmp_path):
 
 
 def test_every_numeric_track_parameter_reaches_the_kernels_in_its_slot():
-    from datmo_cli.config import BOUNDS
+    from datmo_cli.passes.config import BOUNDS
     from datmo_cli.tracking import state
 
     kernel = set(BOUNDS["track"]) - set(TrackingParams.not_in_kernels)

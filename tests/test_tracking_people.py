@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from benchmarks.synthetic_features import features_from_lists
-from datmo_cli.log.vocabulary import CLASS_PERSON, MOBILITY_DYNAMIC
+from datmo_cli.logs.vocabulary import CLASS_PERSON, MOBILITY_DYNAMIC
 from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.tracker import Tracker

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from test_tracking_learned import GEOM, LEG_R, THR, new_tracker, ranges, scan, standing, tracked
 
-from datmo_cli.log.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON
+from datmo_cli.logs.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON
 from datmo_cli.tracking import _association, _kernels, _people, state
 from datmo_cli.tracking._scan_measurements import K_BLOB, K_CIRCLE
 from datmo_cli.tracking.params import TrackingParams

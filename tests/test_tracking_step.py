@@ -15,9 +15,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from benchmarks.synthetic_features import features_from_lists
-from datmo_cli.log import mcapio, types
-from datmo_cli.log.scan import ScanGeometry
-from datmo_cli.stages import iter_run_features, leg_threshold_of, track_run
+from datmo_cli.logs import mcapio, types
+from datmo_cli.logs.scan import ScanGeometry
+from datmo_cli.passes.stages import iter_run_features, leg_threshold_of, track_run
 from datmo_cli.tracking import (
     _association,
     _background,
@@ -54,9 +54,9 @@ EXACT = ("id", "age", "hits", "misses", "classification", "mobility", "status", 
 @cache
 def sample(name: str, leg_model: str) -> tuple:
     """(run, features, odometry, poses) of a sample log as `datmo track` tracks it."""
+    from datmo_cli.passes.pipeline import estimated_odometry
     from datmo_cli.perception.features import extract_run
     from datmo_cli.perception.params import FeatureParams
-    from datmo_cli.pipeline import estimated_odometry
 
     log = mcapio.read_log(SAMPLE_LOGS / name, topics=None)
     run = mcapio.run_from_log(log)

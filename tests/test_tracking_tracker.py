@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from benchmarks.synthetic_features import features_from_lists
-from datmo_cli.log.scan import ScanGeometry
-from datmo_cli.log.vocabulary import STATUS_COASTING, STATUS_CONFIRMED, STATUS_TENTATIVE
+from datmo_cli.logs.scan import ScanGeometry
+from datmo_cli.logs.vocabulary import STATUS_COASTING, STATUS_CONFIRMED, STATUS_TENTATIVE
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.tracker import Tracker
 from tests.reference_tracking import background_update, param_vector
@@ -234,7 +234,7 @@ def test_a_duplicate_yields_to_the_person_whatever_its_hits():
     """Two confirmed leg/person tracks moving alike within merge_distance are one: the one that goes is
     not the person, even when the other (e.g. a track on a bench's pieces uncovered by the person walking
     past) has more hits; between two unknowns, the one with fewer hits goes."""
-    from datmo_cli.log.vocabulary import CLASS_PERSON, CLASS_UNKNOWN, MOBILITY_DYNAMIC, MOBILITY_STATIC
+    from datmo_cli.logs.vocabulary import CLASS_PERSON, CLASS_UNKNOWN, MOBILITY_DYNAMIC, MOBILITY_STATIC
     from datmo_cli.tracking import _life_cycle, state
     from datmo_cli.tracking.measurements import KIND_LEG, KIND_PERSON
 

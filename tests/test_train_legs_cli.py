@@ -87,7 +87,7 @@ def test_writes_a_model_from_synthetic_labelled_files_and_refuses_to_overwrite(t
 
 def test_with_simulated_recordings_always_in_training(tmp_path, monkeypatch):
     """--with-simulated adds simulated LMS200 recordings (exact legs) to every training set, never held out."""
-    from datmo_cli import simulated
+    from datmo_cli.passes import simulated
     from datmo_cli.perception.leg_model import LegModel
 
     monkeypatch.setattr(simulated, "SIMULATED", (("crowd", 21, 3, 0.5, 4.0),))  # a short one, for speed

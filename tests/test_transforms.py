@@ -17,8 +17,8 @@ from conftest import SAMPLE_LOGS, shared_path
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from datmo_cli.cli import cli
-from datmo_cli.log import transforms
-from datmo_cli.log.scan import Odometry
+from datmo_cli.logs import transforms
+from datmo_cli.logs.scan import Odometry
 
 pytestmark = pytest.mark.cli
 
@@ -169,7 +169,7 @@ def test_tf_payloads_are_the_bytes_of_rosbags_serialiser_and_decode_back():
 
 
 def test_odometry_poses_decode_as_rosbags_reads_them():
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     odom = Odometry(
         np.array([10, 2_000_000_001]),
@@ -205,7 +205,7 @@ def test_a_laser_pose_moves_the_base_and_the_chain_gives_the_scanner_back():
 
 
 def test_patrol_run_chains_resolve_and_match_the_ground_truth(tmp_path):
-    from datmo_cli.log import cdr, mcapio, types
+    from datmo_cli.logs import cdr, mcapio, types
 
     datmo("run", SAMPLE_LOGS / "patrol.mcap", "-o", tmp_path / "out", "--markers")
     out = tmp_path / "out" / "patrol.mcap"
@@ -260,7 +260,7 @@ def test_still_scanner_markers_are_in_the_scan_frame(tmp_path):
 
 
 def test_a_laser_pose_on_a_moving_simulation_leaves_the_tracks_where_they_were(tmp_path):
-    from datmo_cli.log import cdr, mcapio, types
+    from datmo_cli.logs import cdr, mcapio, types
 
     for name, extra in (("plain", []), ("mounted", ["--laser-pose", "0.3,0.1,90"])):
         datmo("simulate", "--scene", "patrol", "--duration", "16", "-o", tmp_path / f"{name}.mcap", *extra)
@@ -415,7 +415,7 @@ def test_ros1_bag_without_tf_gets_tf_from_its_odometry(tmp_path):
 
 
 def test_a_ros1_mount_only_on_tf_with_slashed_names_is_taken_to_tf_static(tmp_path):
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     _ros1_bag(tmp_path / "robot.bag", n=20, mount_on="/tf", slash="/")
     out = datmo("import", tmp_path / "robot.bag", "-o", tmp_path / "robot.mcap")
@@ -464,7 +464,7 @@ def test_constant_transforms_and_chains():
 
 @pytest.mark.slow
 def test_an_old_log_with_odometry_but_no_tf_gets_them_in_every_processed_output(tmp_path):
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     old = tmp_path / "old.mcap"
     log = mcapio.read_log(SAMPLE_LOGS / "patrol.mcap", topics=None)

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from datmo_cli.config import DatmoConfig
-from datmo_cli.errors import ConfigError, InputError
+from datmo_cli.base.errors import ConfigError, InputError
+from datmo_cli.passes.config import DatmoConfig
 from datmo_cli.tune import TuneInterrupted, run_tune
 from datmo_cli.tune.objective import higher_is_better, log_metrics, parse_constraint
 from datmo_cli.tune.search import rungs, settings
@@ -193,7 +193,7 @@ def test_a_local_dask_cluster_gives_the_same_trials_and_best(tuned, tmp_path):
 @pytest.mark.slow
 def test_a_detuned_start_is_brought_back_to_the_defaults_mota(tmp_path):
     from datmo_cli.evaluate.files import score_file
-    from datmo_cli.pipeline import process_file
+    from datmo_cli.passes.pipeline import process_file
 
     process_file(HALL, tmp_path / "default.mcap")
     default_mota = score_file(tmp_path / "default.mcap")["scores"]["all"]["mota"]
@@ -210,7 +210,7 @@ def test_a_log_with_its_ground_truth_in_a_csv_beside_it_is_tuned_as_evaluate_gt_
 
     from datmo_cli.cli import cli
     from datmo_cli.evaluate.files import score_file
-    from datmo_cli.log import mcapio
+    from datmo_cli.logs import mcapio
 
     contents = mcapio.read_log(HALL, topics=None)
     log = tmp_path / "hall.mcap"  # the hall without its ground-truth channel
@@ -229,7 +229,7 @@ def test_a_log_with_its_ground_truth_in_a_csv_beside_it_is_tuned_as_evaluate_gt_
     prefix = [result.scores[t.index].per_log["hall.mcap"]["num_objects"] for t in result.trials if t.rung == 0]
     assert prefix and all(abs(n - whole / 3) < 0.05 * whole for n in prefix)  # the CSV cut with the scans
     process_out = tmp_path / "check.mcap"
-    from datmo_cli.pipeline import process_file
+    from datmo_cli.passes.pipeline import process_file
 
     process_file(log, process_out, config=result.best.config)
     mota = score_file(process_out, gt_csv=tmp_path / "hall.gt.csv")["scores"]["all"]["mota"]
@@ -259,7 +259,7 @@ def test_cv_scores_each_folds_best_on_the_log_left_out(tmp_path):
     result = run_tune([HALL, corridor], space(tmp_path, SPACE), tmp_path / "out", trials=3, jobs=2, cv=True)
     assert [f.held_out for f in result.folds] == ["hall.mcap", "corridor.mcap"]
     from datmo_cli.evaluate.files import score_file
-    from datmo_cli.pipeline import process_file
+    from datmo_cli.passes.pipeline import process_file
 
     fold = result.folds[0]  # tuned on the corridor alone, scored on the hall
     best = next(t for t in result.trials if t.index == fold.best)

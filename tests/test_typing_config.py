@@ -34,9 +34,9 @@ def test_the_debt_list_is_short_and_says_why():
             ROOT / Path(*name.split(".")) / "__init__.py"
         ).exists(), f"{name}: no such module"
     spine = {
-        "datmo_cli.pipeline",
-        "datmo_cli.config",
-        "datmo_cli.outputs",
+        "datmo_cli.passes.pipeline",
+        "datmo_cli.passes.config",
+        "datmo_cli.base.outputs",
         "datmo_cli.cli",
         "datmo_cli.tracking.tracker",
     }

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 import datmo_cli
-from datmo_cli.log import types, vocabulary
+from datmo_cli.logs import types, vocabulary
 
 pytestmark = pytest.mark.unit
 

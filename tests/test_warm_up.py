@@ -23,9 +23,9 @@ def _perception_dispatchers() -> int:
 
 
 def test_the_perception_in_python_gives_the_compiled_features_and_is_put_back():
-    from datmo_cli.pipeline import perception_in_python
+    from datmo_cli.passes.pipeline import perception_in_python
+    from datmo_cli.passes.stages import derive_features
     from datmo_cli.sim.simulate import simulate_scene
-    from datmo_cli.stages import derive_features
 
     sim = simulate_scene("hall", duration=2.0)
     _, compiled = derive_features(sim.run, odometry=sim.odometry)
@@ -44,7 +44,8 @@ def test_the_perception_in_python_gives_the_compiled_features_and_is_put_back():
 
 
 def test_no_helper_when_the_kernels_are_cached_or_in_the_helper(monkeypatch):
-    from datmo_cli import numba_runtime, pipeline
+    from datmo_cli.base import numba_runtime
+    from datmo_cli.passes import pipeline
 
     monkeypatch.setattr(numba_runtime, "cache_looks_stale", lambda: False)
     assert pipeline._tracking_helper() is None
@@ -57,7 +58,8 @@ def test_the_helper_compiles_the_tracking_quietly_when_the_kernels_look_uncompil
     import os
     import subprocess
 
-    from datmo_cli import numba_runtime, pipeline
+    from datmo_cli.base import numba_runtime
+    from datmo_cli.passes import pipeline
 
     started = []
     monkeypatch.delenv("DATMO_WARM_HELPER", raising=False)

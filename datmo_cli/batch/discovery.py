@@ -7,7 +7,7 @@ import glob
 import os
 from pathlib import Path
 
-from ..errors import InputError
+from ..base.errors import InputError
 from .locations import fs_of, inside, join, local, remote
 
 LOG_SUFFIXES = (".mcap",)
@@ -33,7 +33,7 @@ def discover(specs: list[str], out_dir: str, bag_dir: bool = False) -> list[tupl
         for src, rel in _expand(spec, out_root):
             name = str(Path(rel).with_suffix(".mcap"))
             if bag_dir:
-                from ..log.bagdir import member_path
+                from ..logs.bagdir import member_path
 
                 name = member_path(name)
             pairs.append((src, join(out_dir, name)))

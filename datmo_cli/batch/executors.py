@@ -122,7 +122,7 @@ def die_with_parent(parent: int) -> None:
     import signal
 
     def gone() -> None:
-        from ..outputs import remove_live
+        from ..base.outputs import remove_live
 
         remove_live()
         os._exit(128 + signal.SIGTERM)

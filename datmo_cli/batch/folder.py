@@ -11,7 +11,7 @@ from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 
-from ..errors import DatmoError, InputError
+from ..base.errors import DatmoError, InputError
 from .locations import local, remote
 
 
@@ -26,7 +26,7 @@ def out_folder(out_dir: str) -> str:
     try:
         d.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        from ..outputs import os_error
+        from ..base.outputs import os_error
 
         raise os_error(exc, d, "making the output folder") from None
     return str(d.resolve())
@@ -44,7 +44,7 @@ def folder_lock(out_dir: str) -> Iterator[str]:
     the file is removed at the end of the block. An fsspec URL is not locked (object stores have no locks)."""
     import fcntl
 
-    from ..errors import OutputError
+    from ..base.errors import OutputError
 
     folder = out_folder(out_dir)
     if remote(folder):
@@ -58,7 +58,7 @@ def folder_lock(out_dir: str) -> Iterator[str]:
         except OSError as exc:
             why = "is a symbolic link" if os.path.islink(path) else None
             if why is None:
-                from ..outputs import os_error
+                from ..base.outputs import os_error
 
                 raise os_error(exc, path, "locking the output folder") from None
             raise OutputError(f"{path}: {why}; datmo run keeps its lock only as a regular file (remove it)") from None

@@ -8,7 +8,7 @@ import hashlib
 import os
 from pathlib import Path
 
-from ..errors import DatmoError, InputError
+from ..base.errors import DatmoError, InputError
 
 
 def remote(url: str) -> bool:
@@ -22,7 +22,7 @@ def local(path: str) -> str:
 
 
 def fs_of(url: str):
-    from ..extras import require
+    from ..base.extras import require
 
     fsspec = require("fsspec", for_=f"{url}: reading a URL")
     try:
@@ -51,7 +51,7 @@ def new_journal() -> str:
     a batch's tasks record the temporary files they make (outputs.journal_to)."""
     import tempfile
 
-    from ..outputs import track
+    from ..base.outputs import track
 
     fd, path = tempfile.mkstemp(prefix="datmo-run-", suffix=".journal")
     os.close(fd)
@@ -121,7 +121,7 @@ def input_stat(path: str) -> tuple[int | None, int | None]:
 
 def input_sha256(path: str) -> str:
     if not remote(path):
-        from ..log.mcapio import sha256_of
+        from ..logs.mcapio import sha256_of
 
         return sha256_of(local(path))
     fs, p = fs_of(path)

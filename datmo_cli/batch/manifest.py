@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
-from ..errors import InputError
+from ..base.errors import InputError
 from .locations import exists, fs_of, inside, join, local, remote
 
 MANIFEST = "manifest.jsonl"
@@ -47,7 +47,7 @@ class Manifest:
     def read(self) -> list[dict]:
         """Every intact line, oldest first (a torn or foreign line, one that is not a JSON object with an
         input and a status, is skipped)."""
-        from ..input_files import MAX_MANIFEST_BYTES
+        from ..base.input_files import MAX_MANIFEST_BYTES
 
         if self._remote:
             fs, p = fs_of(self.path)
@@ -64,7 +64,7 @@ class Manifest:
         if not os.path.lexists(p):
             return []
         self._refuse_link()
-        from ..input_files import open_regular
+        from ..base.input_files import open_regular
 
         with open_regular(p) as f:
             size = os.fstat(f.fileno()).st_size
@@ -89,7 +89,7 @@ class Manifest:
 
     def _refuse_link(self) -> None:
         if not self._remote and os.path.islink(local(self.path)):
-            from ..errors import OutputError
+            from ..base.errors import OutputError
 
             raise OutputError(
                 f"{self.path}: is a symbolic link; datmo reads and writes a batch's manifest only as a "
@@ -112,7 +112,7 @@ class Manifest:
         if not lines and not os.path.lexists(p):
             return
         self._refuse_link()
-        from ..outputs import atomic_output
+        from ..base.outputs import atomic_output
 
         with atomic_output(p, force=True, what="manifest") as f:
             f.write("".join(lines).encode("utf-8"))
@@ -124,7 +124,7 @@ class Manifest:
                 self._lines.append(line)
                 self._put()
                 return
-            from ..outputs import writing
+            from ..base.outputs import writing
 
             with writing(local(self.path)), self._open_for_append() as f:
                 f.write(line.encode("utf-8"))
@@ -136,7 +136,7 @@ class Manifest:
         or a device (opened without blocking, then checked)."""
         import stat
 
-        from ..errors import OutputError
+        from ..base.errors import OutputError
 
         path = local(self.path)
         flags = (
@@ -181,7 +181,7 @@ class Manifest:
 def _lines_of(f, limit: int) -> Iterator[bytes]:
     """The lines of binary file `f`, up to `limit` bytes in all; a line longer than MAX_MANIFEST_LINE_BYTES is
     passed over without being held (it is no manifest line)."""
-    from ..input_files import MAX_MANIFEST_LINE_BYTES
+    from ..base.input_files import MAX_MANIFEST_LINE_BYTES
 
     total = 0
     while total <= limit:

@@ -9,7 +9,7 @@ from datetime import UTC, datetime
 from typing import TYPE_CHECKING
 
 from .. import __version__
-from ..errors import DatmoError
+from ..base.errors import DatmoError
 from .discovery import discover
 from .folder import out_folder
 from .locations import exists, input_sha256, input_stat, local, remote
@@ -17,7 +17,7 @@ from .manifest import DONE, SKIPPED, Manifest
 from .task import RunOptions, Task, params_hash
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 
 @dataclass
@@ -90,7 +90,7 @@ def prepare(
 
 
 def _same_input(src: str, last: dict) -> bool:
-    from ..input_files import is_regular
+    from ..base.input_files import is_regular
 
     size, mtime = input_stat(src)
     if size is None or not (remote(src) or os.path.isdir(local(src)) or is_regular(local(src))):
@@ -123,7 +123,7 @@ def _leftover(dst: str, src: str) -> bool:
     """True when `dst` is a datmo run output of `src` (a batch stopped before recording it)."""
     if remote(dst):
         return False
-    from ..log import mcapio
+    from ..logs import mcapio
 
     try:
         meta = mcapio.summary(local(dst)).metadata

@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
-from ..errors import DatmoError
+from ..base.errors import DatmoError
 from .locations import new_journal, remove_recorded
 from .manifest import CANCELLED, FAILED, manifest_line
 
@@ -74,7 +74,7 @@ def run_many(
         if on_record:
             on_record(rec)
 
-    from ..outputs import Terminated, discard
+    from ..base.outputs import Terminated, discard
 
     journal = new_journal()  # the tasks' temporary files, by name: removed when a task leaves one behind
     for t in batch.tasks:

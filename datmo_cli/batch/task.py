@@ -19,13 +19,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .. import __version__
-from ..errors import DatmoError, InputError, OutputExistsError
+from ..base.errors import DatmoError, InputError, OutputExistsError
 from .discovery import bag_of
 from .locations import fs_of, input_sha256, input_stat, local, remote
 from .manifest import CANCELLED, DONE, FAILED, SUMMARY_KEY, TRACK_CLASSES
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 
 class Cancelled(BaseException):
@@ -55,7 +55,7 @@ def params_hash(config: DatmoConfig | None = None, options: RunOptions | None = 
     the options that change the output (--markers, --covariance, --topic, --odom-topic; a default run hashes
     without them, as it did when it stored markers and covariance: an output of then holds all a lean one
     does)."""
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
     from ..perception.features import leg_model_provenance
 
     config, options = config or DatmoConfig(), options or RunOptions()
@@ -138,7 +138,7 @@ def ensure_warm(progress: Callable[[int, int], None] | None = None) -> None:
     `progress(done, total)` follows its steps."""
     global _WARM
     if not _WARM:
-        from ..pipeline import warm_up
+        from ..passes.pipeline import warm_up
 
         warm_up(progress)
         _WARM = True
@@ -179,7 +179,7 @@ def run_task(
     """
     if hasattr(task, "run"):  # another kind of batch task (datmo tune's evaluations): it runs itself
         return task.run(cancelled=cancelled, scans=scans, raise_unexpected=raise_unexpected)
-    from ..outputs import journal_to
+    from ..base.outputs import journal_to
 
     t0 = time.perf_counter()
     progress = follow(cancelled, scans)
@@ -193,7 +193,7 @@ def run_task(
 
 
 def _run(task: Task, t0: float, progress: Callable[[int, int], None], raise_unexpected: bool) -> dict:
-    from .. import pipeline
+    from ..passes import pipeline
     from ..report import RunAccumulator
 
     try:
@@ -247,11 +247,11 @@ def _run(task: Task, t0: float, progress: Callable[[int, int], None], raise_unex
     except OSError as exc:  # reading the input (a write error is an OutputError naming the output)
         if raise_unexpected:
             raise
-        from ..outputs import os_error
+        from ..base.outputs import os_error
 
         return failed(task, str(os_error(exc)))
     except Exception as exc:
-        from ..outputs import interrupt_in
+        from ..base.outputs import interrupt_in
 
         if (stop := interrupt_in(exc)) is not None:
             raise stop from None  # Ctrl-C or SIGTERM inside a compiled call: the batch stops, no failed line
@@ -266,8 +266,8 @@ def converted(src: str, out: str, task: Task, tell: Callable[[str], None]):
     `out` (beside the bag folder with options.bag_dir), removed when the block ends, on every way out (scan_log). The
     output is checked first, so a refused output costs no conversion. `tell` gets the lines the conversion says
     (they go in the task's record, "notes", which the command prints: a worker does not print)."""
-    from ..inputs import scan_log
-    from ..outputs import temp_path
+    from ..base.outputs import temp_path
+    from ..passes.input_logs import scan_log
 
     options = task.options
     dest = temp_path(Path(out).parent if options.bag_dir else Path(out))
@@ -282,7 +282,7 @@ def _staged_input(path: str) -> Iterator[str]:
         if bag_of(local(path)) == os.path.abspath(local(path)):
             yield local(path)
             return
-        from ..input_files import check
+        from ..base.input_files import check
 
         if stat.S_ISDIR(check(local(path), folder_ok=True, name=path).st_mode):  # a FIFO or device: refused
             raise InputError(f"{path}: is a directory, not an MCAP log")
@@ -304,7 +304,7 @@ def _refuse_links(folder: str) -> None:
     folder = os.path.abspath(folder)
     if os.path.realpath(folder) == folder:
         return
-    from ..errors import OutputError
+    from ..base.errors import OutputError
 
     part = folder
     while part != os.path.dirname(part) and not os.path.islink(part):
@@ -325,7 +325,7 @@ def _staged_output(path: str, force: bool) -> Iterator[str]:
         try:
             os.makedirs(folder, exist_ok=True)
         except OSError as exc:
-            from ..outputs import os_error
+            from ..base.outputs import os_error
 
             raise os_error(exc, folder, "making the output folder") from None
         _refuse_links(folder)
@@ -339,7 +339,7 @@ def _staged_output(path: str, force: bool) -> Iterator[str]:
         yield out
         parent, name = p.rsplit("/", 1) if "/" in p else ("", p)
         part = f"{parent}/.{name}.{os.getpid()}.{time.monotonic_ns()}.tmp" if parent else f".{name}.tmp"
-        from ..outputs import note
+        from ..base.outputs import note
 
         note("+", fs.unstrip_protocol(part))  # removed by the batch if this worker dies before the move
         fs.put_file(out, part)

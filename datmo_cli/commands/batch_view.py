@@ -17,7 +17,7 @@ FINAL_ROWS = 50
 
 def report_options(f: Callable) -> Callable:
     """--format, --top, --sort and --no-report: the report printed at the end of datmo run."""
-    from ..bounds import OPTIONS
+    from ..base.bounds import OPTIONS
     from ..report import FORMATS, SORT_KEYS
     from .types import option
 
@@ -48,8 +48,8 @@ def report_options(f: Callable) -> Callable:
 
 def ran(result: BatchResult) -> None:
     """The batch's table and totals (final_table), then each failure as an error line (even under --quiet)."""
+    from ..base.text import printable
     from ..batch import FAILED
-    from ..text import printable
 
     final_table(result.records, result.seconds, result.where)
     for r in result.records:
@@ -59,7 +59,7 @@ def ran(result: BatchResult) -> None:
 
 def plotted(line: str) -> None:
     """A plot written, said on stderr."""
-    from ..text import printable
+    from ..base.text import printable
 
     click.echo(printable(line), err=True)
 
@@ -67,7 +67,7 @@ def plotted(line: str) -> None:
 def exit_status(result: BatchResult) -> None:
     """Raise what ends the command after failures: DatmoError with the count for several inputs, exit 1 for
     one (its error is printed already); nothing when every input is done or skipped."""
-    from ..errors import DatmoError
+    from ..base.errors import DatmoError
 
     failed, n = len(result.failed), len(result.records)
     if failed == n and failed > 1:
@@ -81,9 +81,9 @@ def exit_status(result: BatchResult) -> None:
 def final_table(records: list[dict], seconds: float, where: str) -> None:
     """The batch's table on stderr (every input up to FINAL_ROWS, then only failures) and its totals line;
     nothing under --quiet (failures are said as errors all the same)."""
+    from ..base.progress import console, quiet
+    from ..base.progress import table as make_table
     from ..batch import DONE, FAILED, SKIPPED
-    from ..progress import console, quiet
-    from ..progress import table as make_table
 
     if quiet():
         return

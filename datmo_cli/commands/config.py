@@ -10,13 +10,13 @@ import click
 from .options import STDOUT, config_options, force_option, output_option, quiet_option
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 
 def sources(cfg: DatmoConfig, config: Path | None) -> dict[str, dict[str, str]]:
     """Where each value of `cfg` comes from ('default' or the config file's name) with its unit, by section
     and key (a parameter written outside its home section, as [track] d_max, counts for its home)."""
-    from ..config import BOUNDS, SECTIONS, STAGES, read_tables, same_as
+    from ..passes.config import BOUNDS, SECTIONS, STAGES, read_tables, same_as
 
     tables = read_tables(config) if config is not None else {}
     given = {s: set(tables.get(s, ())) for s in STAGES}
@@ -49,7 +49,7 @@ def command(cfg: DatmoConfig, config: Path | None, output: Path, force: bool) ->
 
     Example: datmo config --no-config > datmo.toml
     """
-    from ..config import to_toml
+    from ..passes.config import to_toml
 
     header = (
         f"datmo's effective configuration: the defaults, overridden by {config}"
@@ -60,8 +60,8 @@ def command(cfg: DatmoConfig, config: Path | None, output: Path, force: bool) ->
     if str(output) == STDOUT:
         click.echo(text, nl=False)
         return
-    from ..outputs import atomic_output
-    from ..progress import say
+    from ..base.outputs import atomic_output
+    from ..base.progress import say
 
     read = [p for p in (config, cfg.features.leg_model) if p]  # its inputs: refused as outputs, even with --force
     with atomic_output(output, force=force, mode="w", inputs=read, what="config") as f:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS
+from ..base.bounds import OPTIONS
 from .options import force_option, quiet_option
 from .types import option
 
@@ -101,11 +101,11 @@ def command(
 
     Example: datmo emulate --scene hall --fault garbage:0.05,crc:0.01
     """
-    from ..errors import ConfigError
+    from ..base.errors import ConfigError
+    from ..base.progress import quiet
     from ..lms2xx.emulator import Emulator
     from ..lms2xx.faults import Faults
-    from ..progress import quiet
-    from ..simulated import scan_source
+    from ..passes.simulated import scan_source
 
     silent = quiet()  # read here: the emulator's thread, which also says things, has no Click context
 
@@ -118,7 +118,7 @@ def command(
     if angle == "180" and resolution == "0.25":
         raise click.BadParameter("0.25° is available only with --angle 100", param_hint="--resolution")
     if link is not None:
-        from ..outputs import check_output
+        from ..base.outputs import check_output
 
         check_output(link, force=force, what="link")  # before the device starts
     faults = Faults.parse(fault_spec)
@@ -171,7 +171,7 @@ def command(
 def make_link(target: str, link: Path, force: bool) -> tuple[int, int]:
     """Make `link` a symlink to `target` (a symlink made beside it, renamed over it, so an existing symlink or
     regular file is replaced only when outputs.check_output allows it); returns the link's (device, inode)."""
-    from .. import outputs
+    from ..base import outputs
 
     outputs.check_output(link, force=force, what="link")
     with outputs.critical():

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS
+from ..base.bounds import OPTIONS
 from .types import option, quiet_option
 
 COLUMNS = {
@@ -145,9 +145,9 @@ def command(
     Example: datmo evaluate out/hall.mcap --format json --min-mota 0.6 --min-hota 0.4
     """
     from .. import api
-    from ..errors import DatmoError
+    from ..base.errors import DatmoError
+    from ..base.progress import bar, console
     from ..evaluate import require_scoring
-    from ..progress import bar, console
     from ..report import render_markdown, render_rich, to_json
 
     require_scoring()  # before the bar: a missing eval extra is one line

@@ -71,9 +71,9 @@ def command(
     Example: datmo export out/hall.mcap -o hall-tracks.csv
     """
     from .. import export
-    from ..log import mcapio
-    from ..outputs import atomic_output
-    from ..progress import bar, say
+    from ..base.outputs import atomic_output
+    from ..base.progress import bar, say
+    from ..logs import mcapio
 
     fmt = export.format_for(output, fmt)
     if fmt == "parquet":
@@ -121,10 +121,10 @@ def _ground_truth(
 ) -> None:
     """`--ground-truth`: one log's targets as the table evaluate --gt reads."""
     from .. import export
-    from ..errors import ConfigError
-    from ..log import mcapio
-    from ..outputs import atomic_output
-    from ..progress import bar, say
+    from ..base.errors import ConfigError
+    from ..base.outputs import atomic_output
+    from ..base.progress import bar, say
+    from ..logs import mcapio
 
     if not ground_truth:
         raise ConfigError("--include-occluded: only with --ground-truth (the targets no beam hits)")
@@ -177,7 +177,7 @@ def _terminal() -> bool:
     """Whether stdout is a terminal (CSV written there has its text's control characters escaped)."""
     import sys
 
-    from ..progress import is_terminal
+    from ..base.progress import is_terminal
 
     return is_terminal(sys.stdout)
 

@@ -7,8 +7,8 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ..bounds import OPTIONS
-from ..inputs import scan_log
+from ..base.bounds import OPTIONS
+from ..passes.input_logs import scan_log
 from .options import (
     config_options,
     force_option,
@@ -21,7 +21,7 @@ from .options import (
 from .types import option
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 
 @click.command(name="features")
@@ -81,12 +81,12 @@ def command(
 
     Example: datmo features sample_logs/hall.mcap -o hall-features.mcap
     """
+    from ..base.progress import bar, say
     from ..cli import invocation
-    from ..config import provenance_line
+    from ..passes.config import provenance_line
+    from ..passes.stage_files import features_file
+    from ..passes.streaming import LogStream
     from ..perception.threads import set_default
-    from ..progress import bar, say
-    from ..stage_files import features_file
-    from ..streaming import LogStream
 
     set_default(threads)
     with scan_log(input, output, topic, odom_topic, force=force) as src:

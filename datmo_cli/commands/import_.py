@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS
+from ..base.bounds import OPTIONS
 from .options import force_option, output_option, quiet_option
 from .types import laser_pose_option, option
 
@@ -57,12 +57,12 @@ def command(
     \b
     Example: datmo import ../shared/data/carmen/csail-corrected.log.gz -o csail.mcap
     """
+    from ..base.outputs import check_output
+    from ..base.progress import say
+    from ..base.text import printable
     from ..cli import invocation
-    from ..log import mcapio
-    from ..log.importers import open_import, write_import
-    from ..outputs import check_output
-    from ..progress import say
-    from ..text import printable
+    from ..logs import mcapio
+    from ..logs.importers import open_import, write_import
 
     check_output(output, force=force, inputs=[src])  # before reading a big input
     with _progress(src) as progress:
@@ -82,7 +82,7 @@ def command(
         }
         mount = None
         if laser_pose is not None:
-            from ..log.transforms import LaserPose
+            from ..logs.transforms import LaserPose
 
             mount = LaserPose(*laser_pose)
             params["laser_pose"] = {"x_m": mount.x, "y_m": mount.y, "yaw_deg": math.degrees(mount.yaw)}
@@ -101,13 +101,13 @@ def command(
 def _progress(src: Path):
     """A progress callback (done, total) drawing a bar on stderr for inputs over 20 MB, else None. The
     total is the bytes of a text log or the messages of a bag, as the importer counts them."""
-    from ..log.importers import detect_kind
+    from ..logs.importers import detect_kind
 
     size = src.stat().st_size if src.is_file() else 0
     if size < 20_000_000:
         yield None
         return
-    from ..progress import bar
+    from ..base.progress import bar
 
     unit = "messages" if detect_kind(src) in ("ros1", "ros2", "mcap") else "bytes"
     with bar(f"reading {src.name}", None, unit=unit) as progress:

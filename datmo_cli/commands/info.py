@@ -14,7 +14,7 @@ def describe(path: Path) -> dict:
     """A JSON-ready description of a log: channels, scan geometry and rate, provenance metadata."""
     import numpy as np
 
-    from ..log import mcapio
+    from ..logs import mcapio
 
     log = mcapio.read_log(path, topics=[mcapio.TOPIC_SCAN])
     duration = (log.end_ns - log.start_ns) / 1e9
@@ -67,9 +67,9 @@ def describe(path: Path) -> dict:
 
 
 def _print_rich(info: dict) -> None:
-    from ..progress import console as make_console
-    from ..progress import table as make_table
-    from ..text import markup
+    from ..base.progress import console as make_console
+    from ..base.progress import table as make_table
+    from ..base.text import markup
 
     console = make_console()
     console.print(

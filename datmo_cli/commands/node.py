@@ -6,12 +6,12 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ..bounds import OPTIONS
+from ..base.bounds import OPTIONS
 from .options import config_options, quiet_option
 from .types import option
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 
 @click.command(name="node")
@@ -75,9 +75,10 @@ def command(
     """
     import re
 
-    from .. import dds, outputs, ros_graph
-    from ..node import Node
-    from ..progress import Limited, say
+    from ..base import outputs
+    from ..base.progress import Limited, say
+    from ..ros2 import dds, ros_graph
+    from ..ros2.node import Node
 
     domain = dds.domain_id(domain_id)
     # what a publisher's messages make the node say (a scan that does not decode, a restart): escaped, and

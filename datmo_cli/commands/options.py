@@ -34,7 +34,7 @@ def no_stdout(what: str = "an MCAP log", give: str = "a file name") -> Callable:
 
     def callback(ctx: click.Context, param: click.Parameter, value):
         if value is not None and str(value) == STDOUT:
-            from ..errors import OutputError
+            from ..base.errors import OutputError
 
             raise OutputError(f"{param.opts[-1]} -: cannot write {what} to stdout; give {give}")
         return value
@@ -67,7 +67,7 @@ def config_options(help: str, *, path: bool = False) -> Callable:
     def decorate(f: Callable) -> Callable:
         @functools.wraps(f)
         def wrapper(*args, config: Path | None = None, no_config: bool = False, **kwargs):
-            from .. import config as configuration
+            from ..passes import config as configuration
 
             ctx = click.get_current_context()
             file = configuration.effective_path(config, no_config)
@@ -89,7 +89,7 @@ def config_options(help: str, *, path: bool = False) -> Callable:
 
 def _field(key: str):
     """The section and the dataclass field of 'section.key' (e.g. 'track.gate')."""
-    from ..config import SECTIONS
+    from ..passes.config import SECTIONS
 
     section, _, name = key.partition(".")
     by_name = {f.name: f for f in fields(SECTIONS[section])}
@@ -182,7 +182,7 @@ def executor_options(units: str, task: str, tasks: str) -> Callable:
     """`-j/--jobs`, `--scheduler` and `--retries`: where a batch's tasks run (batch.LocalExecutor or
     cluster.DaskExecutor), one declaration for datmo run and datmo tune. `units`: what runs at once ("Inputs
     processed"), `task`: one task ("a task"), `tasks`: what runs on a scheduler ("one task per input")."""
-    from ..bounds import OPTIONS
+    from ..base.bounds import OPTIONS
     from .types import option
 
     def decorate(f: Callable) -> Callable:

@@ -7,12 +7,12 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ..bounds import OPTIONS
+from ..base.bounds import OPTIONS
 from .options import config_options, quiet_option
 from .types import option
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 
 def host_option(*decls: str, help_: str = "Address to serve on (0.0.0.0: every interface).") -> click.decorators.FC:
@@ -69,9 +69,10 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
 
     Example: datmo play sample_logs/hall.mcap --rate 2 --loop
     """
-    from .. import live, outputs
-    from ..progress import say
-    from ..text import printable
+    from .. import live
+    from ..base import outputs
+    from ..base.progress import say
+    from ..base.text import printable
 
     server = live.LiveServer(host, port)  # the package and the port are checked before the log is read
     try:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS
+from ..base.bounds import OPTIONS
 from .options import force_option, output_option, quiet_option
 from .record_view import RecordPanel, Signals, failure, finished
 from .types import laser_pose_option, option

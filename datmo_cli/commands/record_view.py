@@ -28,7 +28,7 @@ class RecordPanel:
     the first report; nothing when stderr is not a terminal or with --quiet."""
 
     def __init__(self, port: str, baud: int) -> None:
-        from ..progress import Panel
+        from ..base.progress import Panel
 
         self.port, self.baud = port, baud
         self.panel = Panel()
@@ -60,7 +60,7 @@ class Signals:
         self.old: dict[int, Any] = {}
 
     def _handler(self, signum, frame) -> None:
-        from .. import outputs
+        from ..base import outputs
 
         if self.stop.is_set():
             outputs.interrupt(signum)
@@ -82,8 +82,8 @@ class Signals:
 def finished(result, output: Path, signum: int | None) -> None:
     """Say what was recorded (the rate and the link's error counts) and end as the recording ended: a
     disconnect is an error (exit 1), a signal exits 128 + its number."""
-    from ..errors import DeviceError
-    from ..progress import say
+    from ..base.errors import DeviceError
+    from ..base.progress import say
 
     s = result.stats
     rate = result.scans / result.seconds if result.seconds > 0 else 0.0

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ..bounds import OPTIONS
+from ..base.bounds import OPTIONS
 from ..report import FORMATS, SORT_KEYS
 from .options import force_option, quiet_option
 from .types import option
@@ -96,7 +96,7 @@ def command(
     Example: datmo report out/hall.mcap --plot out/hall.png
     """
     from .. import api
-    from ..progress import say
+    from ..base.progress import say
 
     result = api.report(files, plot=plot, plot_kind=plot_kind, all_tracks=all_tracks, force=force)
     _print(result.summaries, result.batches, fmt, top=top, sort=sort, tracks=track_table, all_tracks=all_tracks)

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ..bounds import OPTIONS
+from ..base.bounds import OPTIONS
 from . import batch_view
 from .options import (
     config_options,
@@ -21,7 +21,7 @@ from .options import (
 from .types import option
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 
 @click.command(name="run")

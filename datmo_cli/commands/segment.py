@@ -7,11 +7,11 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ..inputs import scan_log
+from ..passes.input_logs import scan_log
 from .options import config_options, force_option, input_options, output_option, param_option, quiet_option
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 
 @click.command(name="segment")
@@ -33,11 +33,11 @@ def command(
 
     Example: datmo segment sample_logs/hall.mcap -o hall-segments.mcap
     """
+    from ..base.progress import bar, say
     from ..cli import invocation
-    from ..config import provenance_line
-    from ..progress import bar, say
-    from ..stage_files import segment_file
-    from ..streaming import LogStream
+    from ..passes.config import provenance_line
+    from ..passes.stage_files import segment_file
+    from ..passes.streaming import LogStream
 
     with scan_log(input, output, topic, odom_topic, force=force) as src:
         stream = LogStream(src)  # a bad input is said before the progress bar starts

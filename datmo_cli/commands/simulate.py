@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from ..bounds import OPTIONS, OptionError
+from ..base.bounds import OPTIONS, OptionError
 from .options import force_option, output_option, quiet_option
 from .types import laser_pose_option, option
 
@@ -117,12 +117,12 @@ def command(
 
     Example: datmo simulate --scene hall --duration 60 -o hall.mcap
     """
+    from ..base.progress import bar, say
     from ..cli import invocation
-    from ..log import mcapio
-    from ..progress import bar, say
+    from ..logs import mcapio
+    from ..passes.simulated import write_simulation, write_simulation_bag
     from ..sim.scene import load_scene
     from ..sim.simulate import Simulation
-    from ..simulated import write_simulation, write_simulation_bag
 
     ctx = click.get_current_context()
     given = [k for k in LMS_OPTIONS if ctx.get_parameter_source(k) != click.core.ParameterSource.DEFAULT]

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ..inputs import scan_log
+from ..passes.input_logs import scan_log
 from .options import (
     config_options,
     force_option,
@@ -19,7 +19,7 @@ from .options import (
 )
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 
 @click.command(name="track")
@@ -96,12 +96,12 @@ def command(
 
     Example: datmo track sample_logs/hall.mcap -o hall-bag --bag-dir && ros2 bag play hall-bag
     """
+    from ..base.progress import bar, say
     from ..cli import invocation
-    from ..config import provenance_line
-    from ..log import bagdir
-    from ..progress import bar, say
-    from ..stage_files import track_file
-    from ..streaming import LogStream
+    from ..logs import bagdir
+    from ..passes.config import provenance_line
+    from ..passes.stage_files import track_file
+    from ..passes.streaming import LogStream
 
     with (
         bagdir.output(output, bag_dir, force=force, inputs=[input]) as out,

@@ -39,7 +39,7 @@ class _ManyFilesCommand(click.Command):
 def _labelled_or_empty(positives: tuple[Path, ...], negatives: tuple[Path, ...]) -> None:
     """InputError when a --negative file is a --positive file too (the same file, a link to it or a copy of
     it): its legs would be taught as both legs and not legs, and the model would find none."""
-    from ..errors import InputError
+    from ..base.errors import InputError
 
     for n in negatives:
         for p in positives:
@@ -55,7 +55,7 @@ def _same_data(a: Path, b: Path) -> bool:
     """Whether two existing paths hold the same data: one file (or folder), or byte-identical copies."""
     import os
 
-    from ..log.mcapio import sha256_of
+    from ..logs.mcapio import sha256_of
 
     try:
         if os.path.samefile(a, b):
@@ -73,7 +73,7 @@ def _fmt(v: float | None, digits: int = 3) -> str:
 
 def print_figures(held_out: list, mean: dict, console) -> None:
     """The held-out figures as a rich table: learned detector beside the paper's circle rule."""
-    from ..progress import table as make_table
+    from ..base.progress import table as make_table
 
     table = make_table(
         console, title="Held-out figures (clusters within 5 m; learned | circle rule)", title_justify="left"
@@ -168,10 +168,10 @@ def command(
     Example: datmo train-legs --positive ../shared/data/legtracker/positive_*.bag \\
         --negative ../shared/data/legtracker/negative_2.bag -o legs.npz
     """
-    from ..errors import InputError
-    from ..outputs import check_output
+    from ..base.errors import InputError
+    from ..base.outputs import check_output
+    from ..base.progress import bar, console, say
     from ..perception import training as TR
-    from ..progress import bar, console, say
 
     check_output(output, force=force, inputs=[*positives, *negatives], what="model")  # before the training
     if not positives:
@@ -192,7 +192,7 @@ def command(
 
         extra = []
         if with_simulated:
-            from ..simulated import simulated_recordings
+            from ..passes.simulated import simulated_recordings
 
             shown.update(0, description="simulating")
             extra = simulated_recordings()

@@ -7,12 +7,12 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ..bounds import OPTIONS
+from ..base.bounds import OPTIONS
 from .options import config_options, executor_options, force_option, no_stdout, output_option, quiet_option
 from .types import option
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 
 @click.command(name="tune")
@@ -96,7 +96,7 @@ def command(
     import time
 
     from .. import api
-    from ..progress import bar, console, quiet
+    from ..base.progress import bar, console, quiet
     from ..report import render_rich
     from ..tune.results import tables
 

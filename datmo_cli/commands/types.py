@@ -11,8 +11,8 @@ from typing import Any
 import click
 from click.decorators import FC
 
-from .. import progress
-from ..bounds import OPTIONS, Bound, OptionError, check
+from ..base import progress
+from ..base.bounds import OPTIONS, Bound, OptionError, check
 
 __all__ = ["Bounded", "LaserPose", "laser_pose_option", "option", "option_name", "pair_option", "quiet_option"]
 

@@ -21,9 +21,9 @@ def command() -> None:
     """
     import time
 
-    from ..numba_runtime import cache_looks_stale, say_compiling
-    from ..pipeline import warm_up
-    from ..progress import bar, say
+    from ..base.numba_runtime import cache_looks_stale, say_compiling
+    from ..base.progress import bar, say
+    from ..passes.pipeline import warm_up
 
     t0 = time.perf_counter()
     compiled = cache_looks_stale()  # before anything is compiled

@@ -19,8 +19,8 @@ def score_file(
     `progress(done, total, stage)` as evaluate.evaluate calls it."""
     import numpy as np
 
-    from ..errors import InputError, MissingChannelError
-    from ..log import mcapio, types
+    from ..base.errors import InputError, MissingChannelError
+    from ..logs import mcapio, types
     from ..report import decode_channel, require
     from . import frames, ground_truth_csv, scoring
 

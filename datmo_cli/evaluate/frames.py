@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..log.vocabulary import CLASS_NAMES, CLASS_UNKNOWN, MOBILITY_STATIC, STATUS_COASTING, STATUS_CONFIRMED
+from ..logs.vocabulary import CLASS_NAMES, CLASS_UNKNOWN, MOBILITY_STATIC, STATUS_COASTING, STATUS_CONFIRMED
 
 MOVER_CLASSES = {code: name for code, name in CLASS_NAMES.items() if code != CLASS_UNKNOWN}
 

@@ -8,8 +8,8 @@ import io
 
 import numpy as np
 
-from ..errors import InputError
-from ..log.vocabulary import CLASS_PERSON
+from ..base.errors import InputError
+from ..logs.vocabulary import CLASS_PERSON
 from .frames import MOVER_CLASSES, Frames
 
 # a ground-truth CSV's class: the name, with underscores or its first word ("circle"), or "people"
@@ -28,7 +28,7 @@ def read_ground_truth_csv(path, name: str | None = None) -> Frames:
     """Ground truth from a CSV file (see parse_ground_truth_csv): UTF-8 text, a leading byte-order mark
     allowed (spreadsheets write one). A binary file, text that is not UTF-8, or a file that cannot be read
     raises InputError naming it."""
-    from ..input_files import MAX_GROUND_TRUTH_BYTES, read_bytes
+    from ..base.input_files import MAX_GROUND_TRUTH_BYTES, read_bytes
 
     name = name or str(path)
     data = read_bytes(path, MAX_GROUND_TRUTH_BYTES, "ground-truth CSV file", name=name)

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..extras import require
+from ..base.extras import require
 from .frames import MOVER_CLASSES, Frames, Regions
 
 METRICS = [

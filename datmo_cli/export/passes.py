@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, MissingChannelError
+from ..base.errors import InputError, MissingChannelError
 from ..evaluate.frames import moved_ids
-from ..log import mcapio, types
+from ..logs import mcapio, types
 from .rows import Batch, decode_messages, feature_batch, ground_truth_batch, track_batch
 from .sinks import ParquetSink, TextSink
 

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..base.errors import InputError
 from ..evaluate.frames import MOVER_CLASSES, target_mask
-from ..log import cdr, mcapio
-from ..log.vocabulary import BLOB_KIND_NAMES, CLASS_NAMES, MOBILITY_NAMES, STATUS_NAMES
+from ..logs import cdr, mcapio
+from ..logs.vocabulary import BLOB_KIND_NAMES, CLASS_NAMES, MOBILITY_NAMES, STATUS_NAMES
 from .schema import columns
 
 

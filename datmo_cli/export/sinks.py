@@ -8,9 +8,9 @@ from typing import IO
 
 import numpy as np
 
-from ..csvsafe import neutralise
-from ..errors import ConfigError
-from ..text import printable
+from ..base.csvsafe import neutralise
+from ..base.errors import ConfigError
+from ..base.text import printable
 from .rows import Batch
 from .schema import columns, parquet_schema, require_pyarrow
 

@@ -11,13 +11,13 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
-from ..log import mcapio, types
-from ..log.scan import Odometry, ScanGeometry, ScanRun
+from ..logs import mcapio, types
+from ..logs.scan import Odometry, ScanGeometry, ScanRun
 from .messages import Message, Stages
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
-    from ..log.scan import Odometry
+    from ..logs.scan import Odometry
+    from ..passes.config import DatmoConfig
 
 
 class LiveFeed:
@@ -138,7 +138,7 @@ class LiveFeed:
 
     def _publish(self, stages: Stages | None, scans: list[tuple[int, np.ndarray, ScanGeometry]]) -> None:
         """Process `scans` (one geometry, stamps increasing) and publish them and what they gave."""
-        from ..log.scan import encode_scan
+        from ..logs.scan import encode_scan
 
         if not scans or stages is None:
             return

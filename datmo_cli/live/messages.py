@@ -10,11 +10,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..log.scan import Odometry, ScanRun
-from ..log.transforms import Transform, encode_tf
+from ..logs.scan import Odometry, ScanRun
+from ..logs.transforms import Transform, encode_tf
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 
 TOPIC_TF = "/tf"
@@ -93,7 +93,7 @@ class Stages:
         has_tf: bool = False,
         scan_frame: str = "laser",
     ) -> None:
-        from ..pipeline import RunStages
+        from ..passes.pipeline import RunStages
 
         self.stages = RunStages(odometry, config, estimated=estimated)
         self.derived = self.stages.derived()
@@ -101,7 +101,7 @@ class Stages:
         self.first = 0
 
     def messages(self, run: ScanRun) -> list[Message]:
-        from ..streaming import Block
+        from ..passes.streaming import Block
 
         out = self.transforms.messages(run.stamps)
         for topic, (msgtype, stamps, payloads) in self.stages(Block(self.first, run)).items():

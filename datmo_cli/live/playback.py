@@ -11,13 +11,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..log import mcapio, types
-from ..log.scan import Odometry
+from ..logs import mcapio, types
+from ..logs.scan import Odometry
 from .control import PlaybackControl
 from .messages import STATIC_EVERY_NS, TOPIC_TF, Message, Stages, Transforms
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
     from .server import LiveServer
 
 
@@ -47,7 +47,7 @@ class DrawnMarkers:
 
     def messages(self, copies: dict[str, tuple[list[int], list[bytes]]]) -> list[Message]:
         """The markers of a block's messages ({topic: (log times, payloads)}, as streaming.Block.copies)."""
-        from ..log import cdr
+        from ..logs import cdr
 
         out: list[Message] = []
         if self.features and mcapio.TOPIC_FEATURES in copies:
@@ -116,8 +116,8 @@ class LogSource:
     markers gets them drawn from its tracks and features (DrawnMarkers)."""
 
     def __init__(self, path: str | Path, config: DatmoConfig | None = None, block_scans: int = 32) -> None:
-        from ..pipeline import open_stages
-        from ..streaming import LogStream
+        from ..passes.pipeline import open_stages
+        from ..passes.streaming import LogStream
 
         self.stream = LogStream(path)
         self.block_scans = block_scans
@@ -141,7 +141,7 @@ class LogSource:
         }
 
     def _drawn(self) -> DrawnMarkers:
-        from ..config import DatmoConfig
+        from ..passes.config import DatmoConfig
 
         return DrawnMarkers(self.stream, self.odometry, (self.config or DatmoConfig()).track.tail_length)
 

@@ -11,9 +11,9 @@ import threading
 from collections.abc import Iterable
 from urllib.parse import quote
 
-from ..errors import ConfigError
-from ..extras import require
-from ..log import mcapio, types
+from ..base.errors import ConfigError
+from ..base.extras import require
+from ..logs import mcapio, types
 from .control import ENDED, PAUSED, PLAYING, PlaybackControl, State
 from .messages import TOPIC_TF_STATIC, Message
 
@@ -60,7 +60,7 @@ class LiveServer:
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, name: str = "datmo", option: str = "--port") -> None:
         foxglove = require_foxglove()
-        from ..progress import Limited, route_logs
+        from ..base.progress import Limited, route_logs
 
         # what the SDK logs about a client (a bad frame names its op, which the client chose): escaped and
         # rate-limited on stderr, until close() (it went to Python's last-resort handler, raw, one line a frame)

@@ -20,8 +20,8 @@ from typing import Any, cast
 
 import numpy as np
 
-from ..errors import DeviceError
-from ..log.scan import ScanGeometry
+from ..base.errors import DeviceError
+from ..logs.scan import ScanGeometry
 from . import protocol as P
 from .frame_parser import FrameParser, ParserStats
 from .serial_port import READ_TIMEOUT_S, open_port

@@ -9,7 +9,7 @@ A pty has no physical baud rate, so bytes are paced in software (baud/10 bytes p
 emulator compares the speed the host set on the terminal (termios) with the baud it is at: host bytes
 sent at the wrong speed are ignored, and the host receives garbage instead of the emulator's output.
 
-Scans come from a `ScanSource` (scan_sources.py: a log, fixed arrays, or a simulated scene: datmo_cli.simulated);
+Scans come from a `ScanSource` (scan_sources.py: a log, fixed arrays, or a simulated scene: datmo_cli.passes.simulated);
 faults (faults.py: garbage, corrupt CRCs, truncated telegrams, dropped bytes, NAKs, a disconnect) can be injected
 into the scan stream.
 """
@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..base.errors import ConfigError
 from . import protocol as P
 from .faults import Faults
 from .frame_parser import FrameParser

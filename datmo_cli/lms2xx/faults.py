@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..base.errors import ConfigError
 from . import protocol as P
 
 GARBAGE_BYTES = np.array([b for b in range(256) if b not in (P.STX, P.ACK, P.NAK)], np.uint8)

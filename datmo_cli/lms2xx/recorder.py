@@ -16,10 +16,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import DatmoError, OutputError
-from ..log import mcapio, transforms
-from ..log.scan import TELEGRAM, encode_telegram
-from ..outputs import Terminated
+from ..base.errors import DatmoError, OutputError
+from ..base.outputs import Terminated
+from ..logs import mcapio, transforms
+from ..logs.scan import TELEGRAM, encode_telegram
 from .driver import DeviceDisconnected
 from .stream_records import DriverStats
 

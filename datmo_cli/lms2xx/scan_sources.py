@@ -1,5 +1,5 @@
 """Where a virtual LMS200's scans come from: complete scans as uint16 values, as the LMS sends them, for the
-variant, units and measuring mode the host set (a log's scans, fixed arrays; datmo_cli.simulated adds a scene)."""
+variant, units and measuring mode the host set (a log's scans, fixed arrays; datmo_cli.passes.simulated adds a scene)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..base.errors import InputError
 from . import protocol as P
 
 
@@ -36,7 +36,7 @@ class LogSource(ScanSource):
     """The scans of a log, repeated; each beam of the variant takes the log's nearest beam (NaN outside)."""
 
     def __init__(self, path: str | Path) -> None:
-        from ..log.channels import read_run
+        from ..logs.channels import read_run
 
         self.run = read_run(path)
         self.path = Path(path)

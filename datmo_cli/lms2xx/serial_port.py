@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..errors import DeviceError
+from ..base.errors import DeviceError
 
 READ_TIMEOUT_S = 0.02  # port timeout: how long one read waits for a first byte
 

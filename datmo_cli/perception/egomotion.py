@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
-from ..log.scan import Odometry, ScanGeometry, ScanRun
+from ..logs.scan import Odometry, ScanGeometry, ScanRun
 
 FRAME_ID = "scan_odom"
 #: retries' starting moves from the previous pose (x, y m, theta rad, in its sensor frame): standing or driving

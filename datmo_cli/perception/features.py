@@ -15,11 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
-from ..errors import InputError
-from ..log import cdr, types
-from ..log.scan import Odometry, ScanRun
+from ..base.errors import InputError
+from ..logs import cdr, types
+from ..logs.scan import Odometry, ScanRun
 from . import scan_extractor as SX
 from . import segmentation
 from .landmark_database import LandmarkDatabase, LandmarkStream
@@ -416,7 +416,7 @@ def leg_model_provenance(spec: str) -> dict:
     SHA-256, decision threshold and what it was trained on (held-out figures included)."""
     from pathlib import Path
 
-    from ..log.mcapio import sha256_of
+    from ..logs.mcapio import sha256_of
     from .leg_model import DEFAULT_MODEL_PATH, load_leg_model
 
     model = load_leg_model(spec)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numba_runtime import key_kernel_cache_on_sources
+from ..base.numba_runtime import key_kernel_cache_on_sources
 
 key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 

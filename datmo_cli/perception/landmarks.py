@@ -16,10 +16,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
-from ..log import cdr, types
-from ..log.vocabulary import (
+from ..base.numba_runtime import key_kernel_cache_on_sources
+from ..logs import cdr, types
+from ..logs.vocabulary import (
     LANDMARK_BENCH,
     LANDMARK_COLUMN,
     LANDMARK_CONCAVE_DEFLECTION,
@@ -27,7 +28,6 @@ from ..log.vocabulary import (
     LANDMARK_CORNER,
     LANDMARK_LINE_END,
 )
-from ..numba_runtime import key_kernel_cache_on_sources
 from .feature_layout import FP_BENCH_MAX_LENGTH, FP_BENCH_MIN_LENGTH
 from .params import FeatureParams
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ..numba_runtime import key_kernel_cache_on_sources
+from ..base.numba_runtime import key_kernel_cache_on_sources
 from .leg_features import F_N, F_WIDTH, block_features
 
 key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..base.errors import InputError
 from .leg_rules import CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, FEATURE_NAMES, GAP_M, GAP_MIN_POINTS
 
 FORMAT_VERSION = 1
@@ -140,7 +140,7 @@ class LegModel:
     def save(self, path: str | Path, *, force: bool = True) -> None:
         """Write the model to one .npz at `path` (exactly that name; via a temporary file renamed, see
         outputs.atomic_output: an existing regular file is replaced only with `force`)."""
-        from ..outputs import atomic_output
+        from ..base.outputs import atomic_output
 
         with atomic_output(path, force=force, what="model") as f:
             self._write(f)
@@ -171,7 +171,7 @@ class LegModel:
         own size, is refused before any memory is spent); then every array must have a model's type and shape
         (integer node indices, finite thresholds and leaf values, a JSON object of provenance)."""
 
-        from ..input_files import check
+        from ..base.input_files import check
 
         most = MAX_MODEL_BYTES
         path = Path(path)

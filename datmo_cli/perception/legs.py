@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
 from .leg_model import LegModel
 from .leg_rules import (  # noqa: F401 (the detector's vocabulary, read from here by its callers)

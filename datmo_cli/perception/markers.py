@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
-from ..log.markers import ADD, ARROW, CUBE_LIST, DELETEALL, LINE_LIST, SPHERE_LIST, MarkerArrayWriter, header
-from ..log.scan import Odometry, ScanRun
+from ..logs.markers import ADD, ARROW, CUBE_LIST, DELETEALL, LINE_LIST, SPHERE_LIST, MarkerArrayWriter, header
+from ..logs.scan import Odometry, ScanRun
 from .features import RunFeatures
 
 NS = "datmo/features"

@@ -19,8 +19,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..bounds import D_MAX, NO_SENSE, SHARE, Section, features_combined, param
-from ..bounds import bound as _b
+from ..base.bounds import D_MAX, NO_SENSE, SHARE, Section, features_combined, param
+from ..base.bounds import bound as _b
 from .feature_layout import FEATURE_PARAMS
 
 _EVERY_SMALL_SEGMENT = (

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numba_runtime import key_kernel_cache_on_sources
+from ..base.numba_runtime import key_kernel_cache_on_sources
 from .icp import EMPTY, MIN_MATCHES, add_to_map, between, compose, icp_align
 from .segmentation import valid_return
 

@@ -8,8 +8,8 @@ import json
 
 import numpy as np
 
-from ..log import cdr, types
-from ..log.vocabulary import LANDMARK_NAMES
+from ..logs import cdr, types
+from ..logs.vocabulary import LANDMARK_NAMES
 from .decode import RunData
 from .summary import RunSummary, class_rows
 from .tracks import TrackStats

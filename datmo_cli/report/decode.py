@@ -9,11 +9,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import MissingChannelError
-from ..log import cdr, mcapio, types
+from ..base.errors import MissingChannelError
+from ..logs import cdr, mcapio, types
 
 if TYPE_CHECKING:
-    from ..log.scan import Odometry, ScanRun
+    from ..logs.scan import Odometry, ScanRun
 
 
 @dataclass

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..csvsafe import neutralise
-from ..text import markdown, printable
+from ..base.csvsafe import neutralise
+from ..base.text import markdown, printable
 from .summary import RunSummary
 from .tables import FILE_COLUMNS, PARAM_WIDTH, SCHEMA, TRACK_CSV_KEYS, Table, file_table, file_tables, total_row
 
@@ -34,7 +34,7 @@ def _cell(v: object) -> str:
 def console():
     """A rich console on stdout: the terminal's width on a terminal, else a plain, unlimited width (no
     wrapping, no colour) so piped names stay whole (progress.console)."""
-    from ..progress import console as make
+    from ..base.progress import console as make
 
     return make()
 
@@ -42,7 +42,7 @@ def console():
 def render_rich(tabs: list[Table], console) -> None:
     """Print tables with rich. On a terminal a text cell longer than PARAM_WIDTH is cut there ("…"); piped or
     redirected, every cell is printed whole."""
-    from ..progress import table as rich_table
+    from ..base.progress import table as rich_table
 
     cut = not getattr(console, "datmo_plain", False)
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from ..log import cdr, mcapio, types
+from ..base.errors import InputError
+from ..logs import cdr, mcapio, types
 from .accumulate import FEATURE_KINDS, RunAccumulator
 from .decode import decode_channel, require
 from .summary import RunSummary

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..log.vocabulary import (
+from ..logs.vocabulary import (
     CLASS_CIRCLE_OBJECT,
     CLASS_NAMES,
     CLASS_PERSON,

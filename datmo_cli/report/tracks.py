@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..log import cdr, types
-from ..log.vocabulary import CLASS_NAMES, MOBILITY_NAMES, STATUS_CONFIRMED
+from ..logs import cdr, types
+from ..logs.vocabulary import CLASS_NAMES, MOBILITY_NAMES, STATUS_CONFIRMED
 from .decode import Decoded
 
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
 
 @dataclass

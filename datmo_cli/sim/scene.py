@@ -48,9 +48,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import toml_text
-from ..bounds import OPTIONS
-from ..errors import ConfigError, InputError
+from ..base import toml_text
+from ..base.bounds import OPTIONS
+from ..base.errors import ConfigError, InputError
 from .paths import PathSpec
 from .scene_fields import PATH_KEYS, SceneValidator
 from .walking import Gait
@@ -183,7 +183,7 @@ def load_scene(scene: str | Path) -> Scene:
     """A built-in scene by name, or a scene file (a Path, or a name ending in .toml or holding a "/")."""
     text_path = str(scene)
     if isinstance(scene, Path) or text_path.endswith(".toml") or "/" in text_path:
-        from ..input_files import check
+        from ..base.input_files import check
 
         path = Path(scene)
         if not path.exists():

@@ -7,8 +7,8 @@ from typing import NoReturn
 
 import numpy as np
 
-from ..bounds import Bound, check
-from ..errors import ConfigError
+from ..base.bounds import Bound, check
+from ..base.errors import ConfigError
 from .paths import PathSpec
 
 PATH_KEYS = {"path", "speed", "pauses", "start_time", "loop"}

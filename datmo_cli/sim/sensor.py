@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..log.scan import ScanGeometry
+from ..logs.scan import ScanGeometry
 
 FIELDS_OF_VIEW = {180: (1.0, 0.5), 100: (1.0, 0.5, 0.25)}  # degrees -> allowed resolutions, degrees
 MAX_RATE_HZ = {1.0: 75.0, 0.5: 37.5, 0.25: 18.75}  # one mirror turn per 1° grid (TL p.19)

@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
-from ..bounds import OPTIONS, check
-from ..errors import ConfigError
-from ..log import cdr, types
-from ..log.scan import Odometry, ScanRun
+from ..base.bounds import OPTIONS, check
+from ..base.errors import ConfigError
+from ..logs import cdr, types
+from ..logs.scan import Odometry, ScanRun
 from .raycast import cast
 from .scene import Scene, load_scene
 from .sensor import Scanner, Sensor

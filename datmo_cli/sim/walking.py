@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
 from .paths import Timeline
 

@@ -7,9 +7,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
-from ..log.vocabulary import (
+from ..logs.vocabulary import (
     CLASS_BENCH,
     CLASS_CIRCLE_OBJECT,
     CLASS_COLUMN,

@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..log.vocabulary import MOBILITY_DYNAMIC
-from ..numba_runtime import key_kernel_cache_on_sources
+from ..base.numba_runtime import key_kernel_cache_on_sources
+from ..logs.vocabulary import MOBILITY_DYNAMIC
 from . import _assign
 from ._scan_measurements import K_LEG, K_PERSON
 from .state import (

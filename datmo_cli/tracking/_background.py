@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numba_runtime import key_kernel_cache_on_sources
+from ..base.numba_runtime import key_kernel_cache_on_sources
 from . import _kernels
 from ._people import owns_returns, sure_person
 from ._scan_measurements import CARRIED_LEG, K_BLOB, K_LEG, NOT_A_LEG, R_COVER, R_W, R_X, R_Y, RAW_COLS, to_sensor

@@ -7,14 +7,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..log.vocabulary import (
+from ..base.numba_runtime import key_kernel_cache_on_sources
+from ..logs.vocabulary import (
     CLASS_CIRCLE_OBJECT,
     CLASS_PERSON,
     CLASS_RECTANGULAR_OBJECT,
     CLASS_UNKNOWN,
     MOBILITY_DYNAMIC,
 )
-from ..numba_runtime import key_kernel_cache_on_sources
 from ._scan_measurements import K_BLOB, K_CIRCLE, K_LEG, K_PERSON, K_RECT
 from .state import (
     BORN,

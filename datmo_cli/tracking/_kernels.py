@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..log.vocabulary import BLOB_KIND_BLOB
-from ..numba_runtime import key_kernel_cache_on_sources
+from ..base.numba_runtime import key_kernel_cache_on_sources
+from ..logs.vocabulary import BLOB_KIND_BLOB
 from .state import (
     P_BACKGROUND_CELL,
     P_BACKGROUND_TIME,

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..log.vocabulary import CLASS_PERSON, MOBILITY_DYNAMIC
-from ..numba_runtime import key_kernel_cache_on_sources
+from ..base.numba_runtime import key_kernel_cache_on_sources
+from ..logs.vocabulary import CLASS_PERSON, MOBILITY_DYNAMIC
 from . import _kernels
 from ._association import restart
 from ._people import fold_evidence, leg_probability

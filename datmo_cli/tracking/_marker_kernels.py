@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..log.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON
-from ..numba_runtime import key_kernel_cache_on_sources
+from ..base.numba_runtime import key_kernel_cache_on_sources
+from ..logs.vocabulary import CLASS_CIRCLE_OBJECT, CLASS_PERSON
 
 key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 

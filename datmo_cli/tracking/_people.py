@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..log.vocabulary import CLASS_PERSON
-from ..numba_runtime import key_kernel_cache_on_sources
+from ..base.numba_runtime import key_kernel_cache_on_sources
+from ..logs.vocabulary import CLASS_PERSON
 from . import _kernels
 from ._scan_measurements import CARRIED_LEG, K_LEG, K_PERSON, NOT_A_LEG, R_COVER, R_P, R_W, R_X, R_Y
 from .state import (

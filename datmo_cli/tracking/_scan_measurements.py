@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numba_runtime import key_kernel_cache_on_sources
+from ..base.numba_runtime import key_kernel_cache_on_sources
 from . import _kernels
 from .state import P_LEG_RADIUS_MAX, P_LEG_THRESHOLD
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..numba_runtime import key_kernel_cache_on_sources
+from ..base.numba_runtime import key_kernel_cache_on_sources
 from ._association import associate, kind_group, merge_reacquired, predict, reacquire, update
 from ._background import background, carried_update, hit_background, off_background
 from ._classify import classify

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
 
 def chains(ids: np.ndarray, t_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -138,7 +138,7 @@ class Hindsight:
             self.poses = poses.copy() if self.poses is None else np.concatenate([self.poses, poses])
         t = np.repeat(stamps, np.diff(block.offsets))
         ids = items["id"].astype(np.int64)
-        from ..log.vocabulary import CLASS_PERSON, STATUS_TENTATIVE
+        from ..logs.vocabulary import CLASS_PERSON, STATUS_TENTATIVE
 
         for book, rows in ((self.confirmed, items["status"] != STATUS_TENTATIVE), (self.person, None)):
             if rows is None:
@@ -179,7 +179,7 @@ class Hindsight:
 
     def _finish(self, items: np.ndarray, m: int) -> None:
         """Smooth and label the first m scans' rows (`items`, a copy of them) in place."""
-        from ..log.vocabulary import CLASS_PERSON, STATUS_COASTING
+        from ..logs.vocabulary import CLASS_PERSON, STATUS_COASTING
 
         all_items, poses = self.items, self.poses
         assert all_items is not None

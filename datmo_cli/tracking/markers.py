@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..log.markers import ADD, ARROW, CUBE_LIST, DELETEALL, LINE_LIST, SPHERE_LIST, MarkerArrayWriter, header
-from ..log.vocabulary import (
+from ..logs.markers import ADD, ARROW, CUBE_LIST, DELETEALL, LINE_LIST, SPHERE_LIST, MarkerArrayWriter, header
+from ..logs.vocabulary import (
     CLASS_CIRCLE_OBJECT,
     CLASS_PERSON,
     CLASS_RECTANGULAR_OBJECT,

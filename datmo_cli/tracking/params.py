@@ -11,8 +11,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..bounds import D_MAX, NO_SENSE, PROBABILITY, SHARE, Section, param, track_combined
-from ..bounds import bound as _b
+from ..base.bounds import D_MAX, NO_SENSE, PROBABILITY, SHARE, Section, param, track_combined
+from ..base.bounds import bound as _b
 from .state import P_TAIL_LENGTH, PARAM_NAMES
 
 _HOUR = "an hour: longer waits are no tracking"

@@ -18,10 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from datmo_cli import libm
+from datmo_cli.base import libm
 
-from ..log import cdr, types
-from ..log.scan import ScanGeometry
+from ..logs import cdr, types
+from ..logs.scan import ScanGeometry
 from . import state
 from .measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, N_KINDS, Measurements, ScanFeatures
 from .params import TrackingParams

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..errors import ConfigError
+from ..base.errors import ConfigError
 
 CLASS_PREFIXES = {"people": "person", "circle": "circle object", "rect": "rectangular object"}
 RATES = {"false_positives_s": (None, "num_false_positives"), "false_people_s": ("person", "num_false_positives")}

@@ -74,7 +74,7 @@ def rows(result: TuneResult) -> dict[str, list]:
 def best_toml(result: TuneResult) -> str:
     """best.toml: the best setting as a config file (the tuned keys, and every key where the start differs from
     the defaults), its objective and evidence in comments."""
-    from ..config import DatmoConfig, to_toml
+    from ..passes.config import DatmoConfig, to_toml
 
     best, score, goal = result.best, result.best_score, result.goal
     defaults = DatmoConfig().to_dict()
@@ -120,7 +120,7 @@ def write_outputs(result: TuneResult, *, plot: bool = False) -> list[Path]:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from ..outputs import atomic_output
+    from ..base.outputs import atomic_output
 
     out = result.out_dir
     buf = io.BytesIO()
@@ -186,7 +186,7 @@ def draw(result: TuneResult, path: Path) -> Path:
     matplotlib Figure on the Agg canvas, constrained layout, light grids, 150 dpi)."""
     from matplotlib.figure import Figure
 
-    from ..outputs import atomic_output
+    from ..base.outputs import atomic_output
 
     dims, goal = result.dims, result.goal
     final = len(result.fractions) - 1

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..errors import ConfigError, DatmoError
+from ..base.errors import ConfigError, DatmoError
 from .objective import Constraint, check_name, higher_is_better, parse_constraint
 from .outcome import Fold, TuneResult
 from .search import Evaluations, Goal, TuneInterrupted, halving, rungs, settings
@@ -106,7 +106,7 @@ def run_tune(
     `.folds` (with `cv`)."""
     import os
 
-    from ..extras import require
+    from ..base.extras import require
     from ..workflows import as_config
 
     goal = Goal(
@@ -136,7 +136,7 @@ def run_tune(
     from ..batch.folder import folder_lock
 
     with folder_lock(str(out)):
-        from ..outputs import atomic_output
+        from ..base.outputs import atomic_output
 
         with atomic_output(out / SPEC, force=True, what="tune record") as f:
             f.write((json.dumps(spec, indent=1) + "\n").encode("utf-8"))
@@ -167,7 +167,7 @@ class _Executor:
     def run(self, tasks, on_record, on_scans=None) -> None:
         if self.executor is None:
             if self.scheduler is not None:
-                from ..cluster import DaskExecutor
+                from ..batch.cluster import DaskExecutor
 
                 self.executor = DaskExecutor(self.scheduler, retries=self.retries)
             else:

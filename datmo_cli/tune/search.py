@@ -18,14 +18,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .. import __version__
+from ..base.errors import ConfigError, DatmoError
 from ..batch.manifest import DONE, FAILED, Manifest, manifest_line
 from ..batch.task import RunOptions
-from ..errors import ConfigError, DatmoError
 from .objective import Constraint, mean
 from .trial import EvalTask, LogInput, prefix_log, prefix_scans
 
 if TYPE_CHECKING:
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
 ETA = 3  # successive halving keeps the best 1/ETA of the settings from one rung to the next
 MIN_PREFIX_S = 15.0  # the shortest prefix a rung scores, seconds of the shortest log

@@ -20,8 +20,8 @@ import math
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from ..bounds import check
-from ..errors import ConfigError
+from ..base.bounds import check
+from ..base.errors import ConfigError
 
 ROUND_DIGITS = 4  # significant digits of a sampled float (readable, and written back exactly in best.toml)
 
@@ -63,7 +63,7 @@ class Dimension:
 def load_space(path: str | Path) -> list[Dimension]:
     """The dimensions of the space file at `path`, in file order; ConfigError in one line naming the file and
     the key (unknown parameter, a range outside its bounds or upside down, an empty list of choices)."""
-    from ..config import read_tables
+    from ..passes.config import read_tables
 
     tables = read_tables(path)  # the tables of a config file: [features], [track] (top-level keys placed)
     dims = [_dimension(str(path), s, k, v) for s, table in tables.items() for k, v in table.items()]
@@ -79,7 +79,7 @@ def load_space(path: str | Path) -> list[Dimension]:
 
 def _dimension(path: str, section: str, key: str, spec: object) -> Dimension:
     """One dimension from space file `path`'s `key = spec` in `section` (messages as bounds.validate's)."""
-    from ..config import SECTIONS
+    from ..passes.config import SECTIONS
 
     cls = SECTIONS[section]
     name = f"{path}: {section}.{key}"
@@ -141,7 +141,7 @@ def _choices(name: str, meta, values: object, key: str) -> tuple:
     if len(set(out)) != len(out):
         raise ConfigError(f"{name}: a choice is given twice in {values!r}")
     if key == "features.leg_model":
-        from ..errors import DatmoError
+        from ..base.errors import DatmoError
         from ..perception.leg_model import load_leg_model
 
         for v in out:

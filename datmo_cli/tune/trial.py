@@ -54,9 +54,9 @@ class EvalTask(Task):
         raise_unexpected: bool = False,
     ) -> dict:
         """The manifest line of this evaluation: done with `metrics`, or failed with the one-line error."""
-        from .. import pipeline
-        from ..errors import DatmoError
+        from ..base.errors import DatmoError
         from ..evaluate.files import score_file
+        from ..passes import pipeline
         from ..perception.threads import set_default
         from .objective import log_metrics
 
@@ -98,8 +98,8 @@ def _remove(path: str) -> None:
 def log_input(path: str | Path) -> LogInput:
     """A log of the tune, checked: it has scans, and ground truth (its /datmo/ground_truth channel, else a CSV
     beside it named NAME.gt.csv); InputError in one line naming the file otherwise."""
-    from ..errors import InputError
-    from ..log import mcapio
+    from ..base.errors import InputError
+    from ..logs import mcapio
 
     path = Path(path)
     contents = mcapio.summary(path)  # InputError for a missing or unreadable file
@@ -136,7 +136,7 @@ def prefix_log(log: LogInput, scans: int, folder: Path) -> tuple[str, str | None
     itself for all its scans."""
     if scans >= log.scans:
         return log.path, log.gt_csv, log.seconds
-    from ..log import mcapio
+    from ..logs import mcapio
 
     stem = f"{Path(log.path).name.removesuffix('.mcap')}-{log.sha256[:12]}-{scans}"
     out = folder / f"{stem}.mcap"
@@ -168,7 +168,7 @@ def prefix_log(log: LogInput, scans: int, folder: Path) -> tuple[str, str | None
 
 def _prefix_csv(src: Path, dst: Path, last: int) -> None:
     """The rows of ground-truth CSV `src` stamped at or before `last` (ns), with its header, into `dst`."""
-    from ..outputs import atomic_output
+    from ..base.outputs import atomic_output
 
     lines = src.read_text(encoding="utf-8-sig").splitlines(keepends=True)
     kept = [

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from typing import TypeAlias
 
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
 
     Config: TypeAlias = DatmoConfig | str | os.PathLike | dict | None
 
@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 def as_config(config: Config) -> DatmoConfig:
     """A DatmoConfig from a DatmoConfig, a TOML file's path (its [features] and [track] tables, as --config),
     a dict of overrides ({"features": {...}, "track": {...}}), or None (the defaults)."""
-    from ..config import DatmoConfig, load
+    from ..passes.config import DatmoConfig, load
 
     if config is None or isinstance(config, DatmoConfig):
         return config or DatmoConfig()

@@ -18,7 +18,7 @@ from . import as_config
 
 if TYPE_CHECKING:
     from ..batch import Batch
-    from ..config import DatmoConfig
+    from ..passes.config import DatmoConfig
     from ..report import RunSummary
     from . import Config
 
@@ -132,7 +132,7 @@ def run_batch(
 
 def _prepare(inputs, out_dir: str, cfg: DatmoConfig, options, force: bool, threads, command_line: str) -> Batch:
     from ..batch import prepare
-    from ..config import provenance_line
+    from ..passes.config import provenance_line
 
     return prepare(
         [os.fsdecode(i) for i in inputs],
@@ -147,8 +147,8 @@ def _prepare(inputs, out_dir: str, cfg: DatmoConfig, options, force: bool, threa
 
 def _plots(batch: Batch, force: bool, bag_dir: bool) -> dict[str, Path]:
     """Each output's plot path (checked: an existing plot needs `force`)."""
-    from ..log import bagdir
-    from ..plot_files import check_plot_outputs
+    from ..logs import bagdir
+    from ..report.plot_files import check_plot_outputs
 
     plot_of = {
         t.output: bagdir.plot_path(t.output) if bag_dir else Path(t.output).with_suffix(".png") for t in batch.tasks
@@ -164,7 +164,7 @@ def _executor(batch: Batch, scheduler: str | None, jobs: int | None, retries: in
     from ..batch import LocalExecutor
 
     if scheduler is not None and batch.tasks:
-        from ..cluster import DaskExecutor
+        from ..batch.cluster import DaskExecutor
 
         return DaskExecutor(scheduler, retries=retries)
     executor = LocalExecutor(jobs)
@@ -192,8 +192,8 @@ def _run(batch: Batch, executor, bar: BatchProgress, on_record, on_scans) -> lis
 
 def check_options(out_dir: str, scheduler: str | None, jobs: int | None, plot: bool, bag_dir: bool) -> None:
     """Options that do not go together are one error, before any input starts."""
+    from ..base.errors import DatmoError
     from ..batch import remote
-    from ..errors import DatmoError
 
     if scheduler is not None and jobs is not None:
         raise DatmoError("--jobs is for local runs; with --scheduler the cluster's workers run the inputs")
@@ -223,7 +223,7 @@ def gather_report(
     `made`: each output's report as its task gathered it while writing it (report.RunSummary), None for an
     output not made by this run (skipped: already in the manifest), which is read in one streaming pass.
     `on_plot(line)` as each plot is written."""
-    from ..pipeline import read_run_data
+    from ..passes.pipeline import read_run_data
     from ..report import summarise, summarise_file
 
     summaries: list[RunSummary] = []
@@ -235,7 +235,7 @@ def gather_report(
             if report:
                 summaries.append(made[i] if made[i] is not None else summarise_file(out))
             continue
-        from ..plot_files import save_plot
+        from ..report.plot_files import save_plot
 
         data = read_run_data(out, keep_scans=True)
         summaries.append(made[i] if made[i] is not None else summarise(data))
@@ -250,9 +250,9 @@ def warm_up() -> None:
     """Load the numba kernels before the clock of any input starts; the first run after an install
     compiles them (minutes, then cached), which is said at once (numba_runtime.say_compiling, terminal or
     not) with a progress bar in a terminal, rather than counted in the inputs' speed."""
+    from ..base.numba_runtime import cache_looks_stale, say_compiling
+    from ..base.progress import bar, say
     from ..batch import ensure_warm
-    from ..numba_runtime import cache_looks_stale, say_compiling
-    from ..progress import bar, say
 
     t0 = time.perf_counter()
     compiled = cache_looks_stale()  # before anything is compiled
@@ -268,7 +268,7 @@ def _scan_count(spec: str) -> int | None:
     """The scans of a local log from its summary (no payloads read), or None (remote, unreadable: the
     task itself says what is wrong)."""
     from ..batch import local, remote
-    from ..log import mcapio
+    from ..logs import mcapio
 
     if remote(spec):
         return None
@@ -285,7 +285,7 @@ class BatchProgress:
     when it starts, and a failed one its scans done."""
 
     def __init__(self, batch: Batch) -> None:
-        from ..progress import bar
+        from ..base.progress import bar
 
         self.t0 = time.perf_counter()
         self.n_inputs = batch.total

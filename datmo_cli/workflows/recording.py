@@ -52,10 +52,10 @@ class Recording:
         on_live: Callable[[str], None] | None = None,
         command_line: str | None = None,
     ) -> None:
-        from ..errors import InputError
+        from ..base.errors import InputError
         from ..lms2xx.driver import LMS2xx
         from ..lms2xx.recorder import write_mount
-        from ..log import mcapio
+        from ..logs import mcapio
 
         baud, angle, resolution = int(baud), int(angle), float(resolution)  # numbers or their text (the options')
         if angle == 180 and resolution == 0.25:
@@ -155,8 +155,8 @@ def record(
 
 def _live_feed(host: str, port: int, on_live: Callable[[str], None] | None):
     """The live view of a recording, its URL said (the port is checked before the scanner starts)."""
+    from ..base.progress import say
     from ..live import LiveFeed, LiveServer
-    from ..progress import say
 
     server = LiveServer(host, port, option="--live-port")
     (on_live or say)(f"datmo record: live view on {server.url}; open {server.app_url}")

@@ -38,10 +38,10 @@ def report_files(
     whose manifest gives the batch's figures. `plot`: also draw each run into this .png/.svg/.pdf (several
     files: PLOT-STEM.png each; needs matplotlib), `plot_kind` auto, top, counts, speeds or all, labelling
     every track with `all_tracks`; an existing plot needs `force`. A progress bar on stderr in a terminal."""
-    from ..pipeline import read_run_data
-    from ..plot_files import check_plot_outputs, plot_paths, save_plot
-    from ..progress import bar
+    from ..base.progress import bar
+    from ..passes.pipeline import read_run_data
     from ..report import summarise, summarise_file
+    from ..report.plot_files import check_plot_outputs, plot_paths, save_plot
 
     files, batches = batch_folders([Path(p) for p in paths])
     plots = plot_paths(Path(plot), files) if plot else []
@@ -68,7 +68,7 @@ def report_files(
 
 def scan_counts(files: list[Path]) -> list[int]:
     """Scans on /scan of each file, from its summary (the progress bar's total)."""
-    from ..log import mcapio
+    from ..logs import mcapio
 
     counts = []
     for f in files:
@@ -80,8 +80,8 @@ def scan_counts(files: list[Path]) -> list[int]:
 def batch_folders(paths: list[Path]) -> tuple[list[Path], list[tuple[Path, list[dict]]]]:
     """Split FILES into files and batch folders (with their manifest lines, batch.read_batch: only outputs
     under the folder, each once); a batch's outputs that are done and present join the files."""
+    from ..base.progress import say
     from ..batch import DONE, SKIPPED, read_batch
-    from ..progress import say
 
     batches: list[tuple[Path, list[dict]]] = []
     for p in paths:

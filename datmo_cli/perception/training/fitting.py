@@ -10,8 +10,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ...errors import InputError
-from ...extras import require
+from ...base.errors import InputError
+from ...base.extras import require
 from .tables import SegmentTable
 
 

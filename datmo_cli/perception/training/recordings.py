@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import InputError
-from ...log.importers.scans_and_poses import read_scans_and_poses
-from ...log.scan import ScanRun
+from ...base.errors import InputError
+from ...logs.importers.scans_and_poses import read_scans_and_poses
+from ...logs.scan import ScanRun
 
 LABEL_WINDOW_NS = 50_000_000  # a scan takes the label message logged nearest to it, within this
 DEFAULT_LABELS_TOPIC = "/leg_cluster_positions"
@@ -76,7 +76,7 @@ def read_labelled(path: str | Path, topic: str | None = None, labels_topic: str 
     each scan from the geometry_msgs/PoseArray messages on `labels_topic` (laser frame, no header stamp:
     matched by log time, see match_labels). ROS 1 bags, ROS 2 bag folders and MCAP files.
     Raises InputError when the labels topic is missing or holds no leg at all."""
-    from ...log.importers.rosbag import LASERSCAN_TYPES, choose_topic
+    from ...logs.importers.rosbag import LASERSCAN_TYPES, choose_topic
 
     path = Path(path)
     chosen: list[str] = []
@@ -105,7 +105,7 @@ def read_labelled(path: str | Path, topic: str | None = None, labels_topic: str 
 
 def read_empty(path: str | Path, topic: str | None = None) -> list[Recording]:
     """Empty recordings (rooms with no people): one per LaserScan topic of the file, or `topic` alone."""
-    from ...log.importers.rosbag import LASERSCAN_TYPES, choose_topic
+    from ...logs.importers.rosbag import LASERSCAN_TYPES, choose_topic
 
     path = Path(path)
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ...log.scan import ScanRun
+from ...logs.scan import ScanRun
 from ..params import FeatureParams
 from .recordings import Recording
 

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from ...errors import InputError
+from ...base.errors import InputError
 from ..params import FeatureParams
 from .cross_validation import (
     EMPTY_FALSE_BUDGET,
@@ -55,7 +55,7 @@ def total_fits(n_lab: int, n_emp: int) -> int:
 
 
 def _sources(recordings: Sequence[Recording]) -> list[dict]:
-    from ...log.mcapio import sha256_of
+    from ...logs.mcapio import sha256_of
 
     out: list[dict] = []
     seen: dict[str, dict[str, Any]] = {}
@@ -93,7 +93,7 @@ def train_leg_model(
     all (see tuned_threshold); the model's provenance holds the data files and their SHA-256, the features,
     the estimator, the threshold and its rule, the held-out figures, scikit-learn's version, the date and the
     clusters the model scores (clusters, default DEFAULT_CLUSTERS; see legs.model_clusters). `extra`
-    labelled recordings (simulated ones: datmo_cli.simulated) are in every training set, never held out or scored."""
+    labelled recordings (simulated ones: datmo_cli.passes.simulated) are in every training set, never held out or scored."""
     sklearn = require_sklearn()
 
     from ... import __version__

@@ -1,0 +1,508 @@
+"""`datmo run`'s stages over a log, and reading processed logs for the plot.
+
+`RunStages` is `datmo run`'s one pass (segmentation, features, tracking) over each block of a streamed log;
+`process_file` runs it over a file, `derive` over a run held in memory. The stage commands' passes (`track_file`,
+`features_file`, `segment_file`) are in stage_files. They all write their channels through
+streaming.write_derived, so `datmo run`'s output holds the same payloads as the three stages run one after
+another, without intermediate files.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ..logs import mcapio
+
+if TYPE_CHECKING:
+    from ..report import RunData
+    from .config import DatmoConfig
+    from .stages import TrackStream
+
+REPORT_TOPICS = (
+    mcapio.TOPIC_SCAN,
+    mcapio.TOPIC_ODOM,
+    mcapio.TOPIC_FEATURES,
+    mcapio.TOPIC_LANDMARKS,
+    mcapio.TOPIC_TRACKS,
+)
+
+
+def read_run_data(path: str | Path, *, keep_scans: bool = False, ground_truth: bool = False) -> RunData:
+    """The channels of a processed log that the plot of `datmo report` and `datmo run` needs, decoded whole
+    (memory grows with the log; the report alone streams: report.summarise_file).
+
+    Raises MissingChannelError naming the command to run first when /scan or /datmo/tracks is missing.
+    """
+    from ..report import RunData  # here, not at the top: the stages need no report module
+
+    topics = REPORT_TOPICS + ((mcapio.TOPIC_GROUND_TRUTH,) if ground_truth else ())
+    return RunData.from_log(mcapio.read_log(path, topics=topics), keep_scans=keep_scans)
+
+
+# ------------------------------------------------------------------------------------------ datmo run
+
+
+def warm_up(progress: Callable[[int, int], None] | None = None) -> None:
+    """Compile every numba kernel of the pipeline in this process (or load it from numba's cache) on short
+    simulated runs of the hall (people, a platform, columns, benches, occlusions) and of the patrol scene
+    (odometry), before any input's clock starts and before worker processes start: they then inherit the
+    compiled kernels (fork) or find the cache complete (spawn), and never compile one kernel at once (a
+    first run after an install would otherwise have every worker writing the same cache files).
+    When the kernels are to be compiled and there is a second core, a helper process compiles the tracking
+    kernels (warm_tracking) while this one compiles the perception's first, then loads the helper's from the
+    cache (compiling itself any the helper has not finished; the helper is stopped at the end).
+    `progress(done, total)` follows its WARM_UP_STEPS steps."""
+    from ..base.numba_runtime import prepare
+    from ..perception.egomotion import odometry_for
+    from ..sim.simulate import simulate_scene
+    from .stages import derive_features
+
+    prepare()
+    helper = _tracking_helper()
+    done = 0
+    if progress:
+        progress(done, WARM_UP_STEPS)
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        if progress:
+            progress(done, WARM_UP_STEPS)
+
+    try:
+        sims = []
+        for scene in ("hall", "patrol"):
+            sims.append(simulate_scene(scene, duration=8.0))
+            step()
+        derive_features(sims[0].run, odometry=sims[0].odometry)  # the perception first (the helper: the tracking)
+        step()
+        odometry_for(sims[1].run, None, "on")  # scan matching, for logs without odometry
+        step()
+        for sim in sims:
+            derive(sim.run, sim.odometry, markers=True)  # the markers' kernels too (--markers, the live view)
+            step()
+    finally:
+        if helper is not None:
+            helper.kill()  # numba writes a cache file whole (a temporary file renamed): none is left half-written
+            helper.wait()
+
+
+WARM_UP_STEPS = 6  # warm_up's steps: each scene simulated; the hall's perception; scan matching; each scene's stages
+
+
+def _tracking_helper():
+    """The process that compiles the tracking kernels beside warm_up (a subprocess.Popen running warm_tracking),
+    when the kernels look uncompiled and this process may use two cores or more; None otherwise (and in the
+    helper itself: DATMO_WARM_HELPER=0)."""
+    import os
+    import subprocess
+    import sys
+
+    from ..base.numba_runtime import cache_looks_stale
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if cores < 2 or os.environ.get("DATMO_WARM_HELPER") == "0" or not cache_looks_stale():
+        return None
+    env = {**os.environ, "DATMO_COMPILE_NOTICE": "0", "DATMO_WARM_HELPER": "0"}
+    code = "from datmo_cli.passes.pipeline import warm_tracking; warm_tracking()"
+    try:
+        return subprocess.Popen(
+            [sys.executable, "-c", code],
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    except OSError:
+        return None
+
+
+def warm_tracking() -> None:
+    """Compile the tracking kernels (and the simulator's) without compiling the perception's: warm_up's runs
+    with every perception kernel run as plain Python (perception_in_python; the hall's 40 scans take seconds),
+    so the tracking is given the features it is given in warm_up and compiles the same kernels."""
+    from ..base.numba_runtime import prepare
+    from ..sim.simulate import simulate_scene
+
+    prepare()
+    with perception_in_python():
+        for scene in ("hall", "patrol"):
+            sim = simulate_scene(scene, duration=8.0)
+            derive(sim.run, sim.odometry, markers=True)
+
+
+@contextmanager
+def perception_in_python() -> Iterator[int]:
+    """In the block, every numba kernel of datmo_cli.perception is its plain Python function, wherever a datmo
+    module holds it (numba's compiled code is not used and nothing of the perception compiles); yields how many
+    names were replaced. Restored after."""
+    import importlib
+    import pkgutil
+    import sys
+
+    from numba.core.registry import CPUDispatcher
+
+    from .. import perception  # noqa: F401  (loaded, so their names are replaced too)
+    from . import feature_channels, stages  # noqa: F401  (loaded, so their names are replaced too)
+
+    for info in pkgutil.iter_modules(perception.__path__):
+        importlib.import_module(f"{perception.__name__}.{info.name}")
+    replaced = []
+    for name, module in list(sys.modules.items()):
+        if module is None or not name.startswith("datmo_cli"):
+            continue
+        for key, value in list(vars(module).items()):
+            if isinstance(value, CPUDispatcher) and value.py_func.__module__.startswith("datmo_cli.perception"):
+                replaced.append((module, key, value))
+                setattr(module, key, value.py_func)
+    try:
+        yield len(replaced)
+    finally:
+        for module, key, value in replaced:
+            setattr(module, key, value)
+
+
+def estimated_odometry(run, odometry, mode: str) -> tuple:
+    """(odometry to track in, {"/odom": channel} when it was estimated from the scans here, else {}): a log
+    without odometry whose scanner moves is tracked in poses from scan matching (see perception.egomotion),
+    written to /odom (frame scan_odom) so the output holds the frame its world positions are in."""
+    from ..logs import types
+    from ..perception.egomotion import odometry_for
+
+    odometry, estimated = odometry_for(run, odometry, mode)
+    if not estimated:
+        return odometry, {}
+    return odometry, {mcapio.TOPIC_ODOM: (types.ODOMETRY, odometry.stamps, mcapio.encode_odometry(odometry))}
+
+
+def odometry_channel(odometry, block) -> tuple:
+    """The /odom channel (msgtype, stamps, payloads) of a block's scans from odometry estimated at every scan."""
+    from ..logs import types
+
+    o, a, b = odometry, block.first, block.first + len(block.run)
+    part = type(o)(o.stamps[a:b], o.x[a:b], o.y[a:b], o.theta[a:b], o.frame_id, o.child_frame_id)
+    return types.ODOMETRY, part.stamps, mcapio.encode_odometry(part)
+
+
+def derived_topics(
+    *, odom: bool = False, segments: bool = False, features: bool = False, tracks: bool = False, markers: bool = False
+) -> dict[str, str]:
+    """{topic: message type} of the channels the stages write, in writing order: /odom (estimated here),
+    /datmo/segments, /datmo/features with /datmo/landmarks (and /datmo/markers/features), /datmo/tracks (and
+    /datmo/markers/tracks)."""
+    from ..logs import types
+
+    out = {mcapio.TOPIC_ODOM: types.ODOMETRY} if odom else {}
+    if segments:
+        out[mcapio.TOPIC_SEGMENTS] = types.SEGMENTS
+    if features:
+        out |= {mcapio.TOPIC_FEATURES: types.FEATURES, mcapio.TOPIC_LANDMARKS: types.LANDMARKS}
+        if markers:
+            out[mcapio.TOPIC_MARKERS_FEATURES] = types.MARKER_ARRAY
+    if tracks:
+        out[mcapio.TOPIC_TRACKS] = types.TRACKS
+        if markers:
+            out[mcapio.TOPIC_MARKERS_TRACKS] = types.MARKER_ARRAY
+    return out
+
+
+def open_stages(
+    stream, config: DatmoConfig | None = None, *, markers: bool = True, covariance: bool = True
+) -> RunStages:
+    """The stages of a streamed log (a streaming.LogStream) in the odometry it is tracked in: the log's own,
+    else (ego-motion mode of config.track) poses estimated from its scans, then written to /odom (see
+    streaming.stream_odometry). Every pass over a log reads its odometry here, once."""
+    from .config import DatmoConfig
+    from .streaming import stream_odometry
+
+    config = config or DatmoConfig()
+    odometry, estimated = stream_odometry(stream, config.track.ego_motion)
+    return RunStages(odometry, config, estimated=estimated, markers=markers, covariance=covariance, hindsight=True)
+
+
+def hindsight_provenance(used: bool, track) -> dict:
+    """What an output's provenance says of hindsight (tracking.hindsight): whether its tracks were smoothed and
+    labelled over a lag, and the lag (s; 0 when not used)."""
+    return {"used": bool(used), "lag_s": float(track.hindsight_lag) if used else 0.0}
+
+
+PERCEIVE_AHEAD = 2  # blocks whose perception may run ahead of the tracking: one block's wait is the next's slack
+
+
+class RunStages:
+    """Segmentation, features and tracking of one log, block by block (the stages of `datmo run`): call it
+    with each Block in order; it returns the block's derived channels. `config`: the DatmoConfig (None: the
+    defaults); `estimated`: the odometry was estimated from the scans, and its poses are written to /odom block
+    by block; `markers`: also make the Foxglove markers; `covariance`: keep the tracks' covariance (else NaN);
+    `report`: a report.RunAccumulator fed each block's scans, features, landmarks and tracks as they are made
+    (the report of the output without reading it; feed_report)."""
+
+    def __init__(
+        self,
+        odometry,
+        config: DatmoConfig | None = None,
+        *,
+        estimated: bool = False,
+        markers: bool = True,
+        covariance: bool = True,
+        report=None,
+        hindsight: bool = False,
+    ) -> None:
+        from .config import DatmoConfig
+        from .feature_channels import FeatureStream
+
+        self.config = config or DatmoConfig()
+        self.odometry = odometry
+        self.estimated = estimated
+        self.markers = markers
+        self.covariance = covariance
+        self.features = FeatureStream(self.config.features, odometry)
+        self.tracking: TrackStream | None = None  # made with the first block, once the scans' geometry is known
+        self.report = report
+        self.hindsight = hindsight and self.config.track.hindsight_lag > 0
+
+    def derived(self) -> dict[str, str]:
+        """{topic: message type} of the channels the stages write, in writing order."""
+        return derived_topics(odom=self.estimated, segments=True, features=True, tracks=True, markers=self.markers)
+
+    def effective(self) -> dict:
+        """The effective parameters, as provenance records them."""
+        from ..perception.features import leg_model_provenance
+
+        features, track = self.config.features, self.config.track
+        return {
+            "features": features.to_dict(),
+            "track": track.to_dict(),
+            "leg_model": leg_model_provenance(features.leg_model),
+            "config": self.config.to_dict(),
+            "hindsight": hindsight_provenance(self.hindsight, track),
+        }
+
+    def __call__(self, block) -> dict[str, tuple]:
+        """The block's channels at once: causal tracks (the live paths: play, record --live, node, the API's
+        LiveTracker). A RunStages with hindsight gives its blocks through `pipelined`."""
+        if self.hindsight:
+            raise ValueError("the stages with hindsight give their blocks through pipelined()")
+        channels, extra, tracks = self._track(block, self.features.block(block.run, markers=self.markers))
+        assert self.tracking is not None  # made by _track
+        out = channels | self.tracking.channels(tracks)
+        if self.report is not None:
+            feed_report(self.report, block.run, extra[0], extra[1], tracks)
+        return out
+
+    def pipelined(self, blocks: Iterable) -> Iterator[tuple[Any, dict[str, tuple]]]:
+        """(block, its derived channels) for each block in order. With hindsight (`datmo run`, `datmo track`), a
+        block is given once the tracks of its scans are final (tracking.hindsight: up to hindsight_lag s of scans
+        later), so the blocks after it are perceived and tracked first; memory holds those. On two threads or more
+        (perception.threads, `--threads`), the perception of the next blocks (up to PERCEIVE_AHEAD) runs on a
+        thread of its own (its kernels on the threads left over) beside the tracking, encoding and writing of this
+        one: the compiled kernels release the GIL. The channels are the same for any count."""
+        tracked = ((b, *self._track(b, made)) for b, made in self._perceived(blocks))
+        for block, channels, extra, tracks in held_until_tracked(tracked, lambda: self.tracking):
+            assert self.tracking is not None  # made by _track
+            out = channels | self.tracking.channels(tracks)
+            if self.report is not None:
+                feed_report(self.report, block.run, extra[0], extra[1], tracks)
+            yield block, out
+
+    def _perceived(self, blocks: Iterable) -> Iterator[tuple[Any, tuple[dict[str, tuple], Any]]]:
+        """(block, its perception's (channels, RunFeatures)) for each block in order (see pipelined)."""
+        from ..perception import threads as TH
+
+        n = TH.resolve(None)
+        if n < 2:
+            for block in blocks:
+                yield block, self.features.block(block.run, markers=self.markers)
+            return
+        from collections import deque
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.features.threads = n - 1
+        with ThreadPoolExecutor(1, thread_name_prefix="datmo-perception") as pool:
+            ahead: deque = deque()  # perceived or queued, in order (one worker: FeatureStream's state is ordered)
+            try:
+                for block in blocks:
+                    ahead.append((block, pool.submit(self.features.block, block.run, markers=self.markers)))
+                    if len(ahead) > PERCEIVE_AHEAD:
+                        done, made = ahead.popleft()
+                        yield done, made.result()
+                while ahead:
+                    done, made = ahead.popleft()
+                    yield done, made.result()
+            finally:  # stopped early (an error, Ctrl-C): the queued blocks are not perceived for nothing
+                for _, made in ahead:
+                    made.cancel()
+
+    def _track(self, block, made: tuple[dict[str, tuple], Any]) -> tuple[dict[str, tuple], tuple, Any]:
+        """(the block's channels but the tracks: odometry, features; (its RunFeatures, landmark payloads) for the
+        report; the TrackedRun of the scans tracking gives now) from its perception's (channels, RunFeatures)."""
+        from .stages import TrackStream, iter_run_features, leg_threshold_of
+
+        run = block.run
+        out = {}
+        if self.estimated:
+            out[mcapio.TOPIC_ODOM] = odometry_channel(self.odometry, block)
+        channels, features = made
+        out |= channels
+        if self.tracking is None:
+            model = self.config.features.leg_model
+            self.tracking = TrackStream(
+                run.geometry,
+                odometry=self.odometry,
+                params=self.config.track,
+                markers=self.markers,
+                learned=model != "paper",
+                leg_threshold=leg_threshold_of(model),
+                covariance=self.covariance,
+                hindsight=self.hindsight,
+            )
+        tracked = self.tracking.block(run, iter_run_features(features))
+        return out, (features, out[mcapio.TOPIC_LANDMARKS][2]), tracked
+
+
+def held_until_tracked(items: Iterable[tuple], tracking: Callable[[], Any]) -> Iterator[tuple]:
+    """Blocks held until their tracks are given: `items` yields (block, channels, extra, TrackedRun of the scans
+    the tracking gave with that block: with hindsight, earlier scans' and not the newest); this yields (block,
+    channels, extra, the TrackedRun of the block's own scans) in order, each as soon as its scans' tracks are
+    all given, and the rest after the last block (`tracking()`: the stages.TrackStream, its `finish` then).
+    Without hindsight each block is given at once with its own TrackedRun."""
+    from collections import deque
+
+    from .stages import split_tracked
+
+    held: deque = deque()
+    ready: list = []  # TrackedRuns given and not yet assigned to a block, in order
+
+    def give():
+        while held and sum(len(t.stamps) for t in ready) >= len(held[0][0].run):
+            block, channels, extra = held.popleft()
+            tracks, ready[:] = split_tracked(ready, len(block.run))
+            yield block, channels, extra, tracks
+
+    for block, channels, extra, tracked in items:
+        held.append((block, channels, extra))
+        ready.append(tracked)
+        yield from give()
+    stream = tracking()
+    if held and stream is not None:
+        ready.append(stream.finish())
+        yield from give()
+    if held:
+        raise RuntimeError(f"tracking gave too few scans' tracks for {len(held)} blocks")
+
+
+def feed_report(report, run, features, landmark_payloads: list[bytes], tracked) -> None:
+    """Add one block's scans, features (their counts), landmarks (the frame of the first message, the
+    database of the block's last) and track states to a report.RunAccumulator, from the arrays the stages
+    made: what report.stream_run would read back from the output's messages."""
+    import numpy as np
+
+    from ..logs import cdr, types
+    from ..report import FEATURE_KINDS
+
+    report.add_scans(run.stamps, run.geometry.n_beams)
+    report.add_features(
+        len(run),
+        {k: np.diff(np.asarray(getattr(features, f"{k[:-1]}_offsets"))).astype(np.int64) for k in FEATURE_KINDS},
+    )
+    if landmark_payloads:
+        frame = cdr.decode(types.LANDMARKS, landmark_payloads[0])["frame_id"] if report.landmark_frame is None else ""
+        report.add_landmarks(frame, cdr.decode(types.LANDMARKS, landmark_payloads[-1])["landmarks"])
+    offsets, items = tracked.all_tracks()
+    if len(items):
+        report.add_tracks(np.repeat(np.asarray(tracked.stamps, np.int64), np.diff(offsets)), items)
+
+
+def derive(
+    run,
+    odometry,
+    config: DatmoConfig | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    *,
+    markers: bool = False,
+    covariance: bool = False,
+) -> tuple[dict[str, tuple], dict]:
+    """Every derived channel of a run held in memory, {topic: (msgtype, stamps, payloads)}, and the effective
+    parameters; `config`: the DatmoConfig (None: the defaults). The same stages as process_file, on one
+    block (`markers`, `covariance` as there)."""
+    from .config import DatmoConfig
+    from .streaming import Block
+
+    config = config or DatmoConfig()
+    odometry, odom_channel = estimated_odometry(run, odometry, config.track.ego_motion)
+    stages = RunStages(
+        odometry, config, estimated=bool(odom_channel), markers=markers, covariance=covariance, hindsight=True
+    )
+    if progress:
+        progress(0, len(run))
+    derived = next(stages.pipelined([Block(0, run)]))[1]
+    if progress:
+        progress(len(run), len(run))
+    return derived, stages.effective()
+
+
+def write_options(
+    force: bool, command_line: str | None, block_scans: int | None, progress: Callable[[int, int], None] | None
+) -> dict:
+    """The keywords of streaming.write_derived that every pass over a file passes on from its caller as they are:
+    `force` (overwrite `out`), `command_line` (for the provenance), `block_scans` (scans per block; None: the
+    default, streaming.BLOCK_SCANS) and `progress(done, total)`."""
+    from .streaming import BLOCK_SCANS
+
+    return {
+        "force": force,
+        "command_line": command_line,
+        "block_scans": block_scans or BLOCK_SCANS,
+        "progress": progress,
+    }
+
+
+def process_file(
+    src: str | Path,
+    out: str | Path,
+    *,
+    force: bool = False,
+    config: DatmoConfig | None = None,
+    command_line: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    markers: bool = False,
+    covariance: bool = False,
+    bag_dir: bool = False,
+    block_scans: int | None = None,
+    input_name: str | None = None,
+    origin: str | Path | None = None,
+    report=None,
+) -> int:
+    """Segment, extract features and track `src` in one streaming pass into `out` (see module docstring and
+    streaming); returns the number of scans. `config`: the DatmoConfig (None: the defaults), recorded whole in
+    the provenance; `progress(done, total)` is called as scans are processed; `markers`: also write the Foxglove
+    markers; `covariance`: store the tracks' covariance (else NaN); `input_name`: what the output's provenance
+    calls the input (default its path); `origin`: the file or bag folder `src` was converted from (`src` a
+    temporary copy of a bag), which provenance hashes and names instead. With `bag_dir`, `out` is the log file
+    of a ROS 2 bag folder (log.bagdir.member_path), and the folder is written whole. `report`: a
+    report.RunAccumulator that gathers the output's report as it is written (RunStages), so the report needs
+    no second pass over the output."""
+    from ..logs import bagdir
+    from .streaming import LogStream, write_derived
+
+    stream = src if isinstance(src, LogStream) else LogStream(src)
+    src = stream.path
+    stages = open_stages(stream, config, markers=markers, covariance=covariance)
+    stages.report = report
+    origin = Path(origin) if origin is not None else src
+    with bagdir.output(Path(out).parent if bag_dir else out, bag_dir, force=force, inputs=[origin]) as dst:
+        return write_derived(
+            stream,
+            dst,
+            command="run",
+            params=stages.effective(),
+            derived=stages.derived(),
+            stage=stages,
+            **write_options(force, command_line, block_scans, progress),
+            input_name=input_name,
+            origin=origin,
+            report=report,
+        )
