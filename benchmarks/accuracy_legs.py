@@ -27,15 +27,15 @@ def shipped_spec():
     """The estimator settings of the packaged model (its provenance), or the defaults without one."""
     import dataclasses
 
-    from datmo_cli.perception import training as T
+    from datmo_cli.perception import training as TR
     from datmo_cli.perception.leg_model import DEFAULT_MODEL_PATH, LegModel
 
     if not DEFAULT_MODEL_PATH.exists():
-        return T.EstimatorSpec(), None
+        return TR.EstimatorSpec(), None
     model = LegModel.load(DEFAULT_MODEL_PATH)
-    names = {f.name for f in dataclasses.fields(T.EstimatorSpec)}
+    names = {f.name for f in dataclasses.fields(TR.EstimatorSpec)}
     given = {k: v for k, v in model.provenance.get("estimator", {}).items() if k in names}
-    return T.EstimatorSpec(**given), model
+    return TR.EstimatorSpec(**given), model
 
 
 def _f(v: float | None, digits: int = 3) -> str:
@@ -43,23 +43,23 @@ def _f(v: float | None, digits: int = 3) -> str:
 
 
 def figure_lines() -> list[str]:
-    from datmo_cli.perception import training as T
+    from datmo_cli.perception import training as TR
 
     positives = sorted(LEGTRACKER.glob("positive_*_extracted.bag"))
     negative = LEGTRACKER / "negative_2.bag"
     spec, model = shipped_spec()
     t0 = time.perf_counter()
-    labelled = [T.read_labelled(p) for p in positives]
-    empty = T.read_empty(negative)
-    clusters = T.DEFAULT_CLUSTERS if model is None else model.provenance.get("clusters", T.SEGMENT_CLUSTERS)
-    lab, emp = T.tables_of(labelled, clusters=clusters), T.tables_of(empty, clusters=clusters)
+    labelled = [TR.read_labelled(p) for p in positives]
+    empty = TR.read_empty(negative)
+    clusters = TR.DEFAULT_CLUSTERS if model is None else model.provenance.get("clusters", TR.SEGMENT_CLUSTERS)
+    lab, emp = TR.tables_of(labelled, clusters=clusters), TR.tables_of(empty, clusters=clusters)
     extra = []
     if model is not None and model.provenance.get("simulated"):  # trained with --with-simulated: so here
         from datmo_cli.passes.simulated import simulated_recordings
 
-        extra = T.tables_of(simulated_recordings(), clusters=clusters)
-    thin = T.tables_of([T.thinned(r, 2) for r in labelled], clusters=clusters)
-    held_out = T.cross_validate(lab, emp, spec, extra=extra, thin=thin)
+        extra = TR.tables_of(simulated_recordings(), clusters=clusters)
+    thin = TR.tables_of([TR.thinned(r, 2) for r in labelled], clusters=clusters)
+    held_out = TR.cross_validate(lab, emp, spec, extra=extra, thin=thin)
     seconds = time.perf_counter() - t0
     how = (
         "datmo's segments"
@@ -68,7 +68,7 @@ def figure_lines() -> list[str]:
     )
     lines = [
         f"estimator {spec.kind}, {spec.n_estimators} trees, depth {spec.max_depth}; clusters: {how}; "
-        f"threshold rule: {T.THRESHOLD_RULE}",
+        f"threshold rule: {TR.THRESHOLD_RULE}",
         f"{'held out':26s} {'empty scanner':27s} thr   | precision     recall        AP            "
         f"false/scan   (learned | circle rule)",
     ]
@@ -79,7 +79,7 @@ def figure_lines() -> list[str]:
             f"{_f(C.precision)}  {_f(L.recall)} | {_f(C.recall)}  {_f(L.ap)} | {_f(C.ap)}  "
             f"{_f(L.false_per_scan, 2)} | {_f(C.false_per_scan, 2)}"
         )
-    m = T.mean_figures(held_out)
+    m = TR.mean_figures(held_out)
     L, C = m["learned"], m["circle"]
     lines.append(
         f"{'mean':54s} {m['threshold']:.2f} | {_f(L['precision'])} | {_f(C['precision'])}  "
@@ -94,7 +94,7 @@ def figure_lines() -> list[str]:
         f"{ratio:.2f}x), <= {TARGETS['false_per_scan']:g} false legs per empty scan "
         f"({'met' if ok[2] else 'NOT met'}: {L['false_per_scan']:.2f})"
     )
-    bins = T.RANGE_BINS_M
+    bins = TR.RANGE_BINS_M
     lines.append(
         "recall at the fold's threshold by range (m) "
         + "  ".join(f"{lo:g}-{hi:g}" for lo, hi in zip(bins[:-1], bins[1:], strict=True))
@@ -120,7 +120,7 @@ def figure_lines() -> list[str]:
             f"shipped model: threshold {model.threshold_p:.2f}, {model.n_trees} trees; its recorded mean "
             f"held-out AP {_f(shipped.get('ap'))} (this rerun: {_f(L['ap'])})"
         )
-    lines.append(f"{len(held_out)} folds, {T.cv_fits(len(lab), len(emp))} fits, {seconds:.0f} s")
+    lines.append(f"{len(held_out)} folds, {TR.cv_fits(len(lab), len(emp))} fits, {seconds:.0f} s")
     return lines
 
 

@@ -40,19 +40,19 @@ def fold_models(folder: Path, quick: bool = False) -> tuple[dict[str, str], dict
     import dataclasses
 
     from datmo_cli.passes.simulated import simulated_recordings
-    from datmo_cli.perception import training as T
+    from datmo_cli.perception import training as TR
 
     positives = sorted(LEGTRACKER.glob("positive_*_extracted.bag"))
-    lab = T.tables_of([T.read_labelled(p) for p in positives])
-    empty = T.read_empty(LEGTRACKER / "negative_2.bag")
-    emp = T.tables_of(empty)
-    extra = T.tables_of(simulated_recordings())
+    lab = TR.tables_of([TR.read_labelled(p) for p in positives])
+    empty = TR.read_empty(LEGTRACKER / "negative_2.bag")
+    emp = TR.tables_of(empty)
+    extra = TR.tables_of(simulated_recordings())
     by_bag, by_topic = {}, {}
-    for i, fold in enumerate(T.leave_one_out_folds(len(lab), len(emp))):
-        spec = T.EstimatorSpec()
+    for i, fold in enumerate(TR.leave_one_out_folds(len(lab), len(emp))):
+        spec = TR.EstimatorSpec()
         if quick:
             spec = dataclasses.replace(spec, n_estimators=max(10, spec.n_estimators // 4))
-        model = T.fold_model(lab, emp, fold, spec, extra=extra, tune=True)
+        model = TR.fold_model(lab, emp, fold, spec, extra=extra, tune=True)
         path = folder / f"fold{i}.npz"
         model.save(path)
         by_bag[positives[fold.test_labelled].name] = str(path)

@@ -127,7 +127,7 @@ def test_manifest_tolerates_a_torn_last_line_and_compacts(tmp_path):
     assert (tmp_path / "manifest.jsonl").read_text() == '{"input": "a", "status": "done"}\n'
 
 
-DEFAULT_PARAMS_HASH = "868fb38292cbd24e"  # the defaults' hash since hindsight and the people round 3 keys [track]
+DEFAULT_PARAMS_HASH = "c92fb8f724b5b478"  # the defaults' hash since circle_check_extent and _radius left [features]
 
 
 def test_params_hash_follows_the_parameters():

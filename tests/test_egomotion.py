@@ -11,7 +11,7 @@ import reference_perception as reference
 
 from datmo_cli.logs.scan import Odometry, ScanGeometry, ScanRun
 from datmo_cli.perception import icp as KI
-from datmo_cli.perception import scan_odometry as K
+from datmo_cli.perception import scan_odometry as KO
 from datmo_cli.perception.egomotion import (
     FRAME_ID,
     IcpParams,
@@ -104,10 +104,10 @@ def room_map(geom: ScanGeometry, ranges: np.ndarray, p: IcpParams = DEFAULTS):
     c, s = np.cos(a), np.sin(a)
     b = geom.n_beams
     px, py, beams = np.zeros(b), np.zeros(b), np.zeros(b, np.int64)
-    m = K.scan_points(ranges, c, s, geom.range_min, geom.range_max, p.map_spacing, b, px, py, beams)
+    m = KO.scan_points(ranges, c, s, geom.range_min, geom.range_max, p.map_spacing, b, px, py, beams)
     nx, ny = np.zeros(b), np.zeros(b)
     scan = (c, s, geom.range_min, geom.range_max)
-    K.scan_normals(ranges, scan, beams, m, (p.normal_radius, p.max_gap, _max_window(geom), p.planarity), nx, ny)
+    KO.scan_normals(ranges, scan, beams, m, (p.normal_radius, p.max_gap, _max_window(geom), p.planarity), nx, ny)
     mx, my, mnx, mny = (np.zeros(b) for _ in range(4))
     nxt = np.full(b, KI.EMPTY, np.int64)
     head = np.full(4096, KI.EMPTY, np.int64)
@@ -119,7 +119,7 @@ def source_points(geom: ScanGeometry, ranges: np.ndarray, p: IcpParams = DEFAULT
     a = geom.angles()
     b = geom.n_beams
     sx, sy, beams = np.zeros(b), np.zeros(b), np.zeros(b, np.int64)
-    n = K.scan_points(
+    n = KO.scan_points(
         ranges, np.cos(a), np.sin(a), geom.range_min, geom.range_max, p.source_spacing, p.max_points, sx, sy, beams
     )
     return sx[:n].copy(), sy[:n].copy()
@@ -139,7 +139,7 @@ def test_scan_points_match_reference(spacing, max_points):
     r[bad[45:]] = G361.range_max  # at range_max: no return
     a = G361.angles()
     x, y, beams = np.zeros(361), np.zeros(361), np.zeros(361, np.int64)
-    n = K.scan_points(r, np.cos(a), np.sin(a), G361.range_min, G361.range_max, spacing, max_points, x, y, beams)
+    n = KO.scan_points(r, np.cos(a), np.sin(a), G361.range_min, G361.range_max, spacing, max_points, x, y, beams)
     ex, ey, eb = reference.scan_points(r, a, G361.range_min, G361.range_max, spacing, max_points)
     assert n == len(ex)
     np.testing.assert_array_equal(beams[:n], eb)
@@ -159,7 +159,7 @@ def test_normals_match_reference(geom):
     valid = np.flatnonzero(np.isfinite(r) & (r > geom.range_min))
     nx, ny = np.zeros(len(valid)), np.zeros(len(valid))
     scan = (np.cos(a), np.sin(a), geom.range_min, geom.range_max)
-    K.scan_normals(r, scan, valid, len(valid), (p.normal_radius, p.max_gap, win, p.planarity), nx, ny)
+    KO.scan_normals(r, scan, valid, len(valid), (p.normal_radius, p.max_gap, win, p.planarity), nx, ny)
     kinds = {"line": 0, "point": 0, "none": 0}
     for i, b in enumerate(valid):
         ex, ey = reference.beam_normal(
@@ -182,7 +182,7 @@ def test_wall_normal_is_perpendicular():
     a = G361.angles()
     with np.errstate(divide="ignore"):
         r = np.where(np.cos(a) > 0.3, 2.0 / np.cos(a), np.inf).astype(np.float32)
-    nx, ny = K.beam_normal(r, np.cos(a), np.sin(a), 0.05, 30.0, 180, 0.1, 0.5, 20, 0.3)
+    nx, ny = KO.beam_normal(r, np.cos(a), np.sin(a), 0.05, 30.0, 180, 0.1, 0.5, 20, 0.3)
     assert abs(nx) == pytest.approx(1.0, abs=1e-9) and ny == pytest.approx(0.0, abs=1e-7)
 
 

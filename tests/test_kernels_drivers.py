@@ -17,6 +17,7 @@ from datmo_cli.perception import landmark_database as LDB
 from datmo_cli.perception import leg_features as LF
 from datmo_cli.perception import scan_extractor as SX
 from datmo_cli.perception import scan_odometry as KO
+from datmo_cli.perception.params import FeatureParams
 from datmo_cli.tracking import _step, state
 from datmo_cli.tracking.tracker import TRACK_DTYPE, Tracker, _flat
 from tests import reference_perception as rp
@@ -289,8 +290,7 @@ def test_benches():
         lines[:, 3],
         lines[:, 4],
         line_offsets,
-        0.6,
-        2.5,
+        FeatureParams(bench_min_length=0.6, bench_max_length=2.5).kernel_vector(),
         out,
     )
     want = rp.benches(circles, lines, 0.6, 2.5, LANDMARK_BENCH)
@@ -327,7 +327,14 @@ def test_accumulate_and_hide_bench_supports():
     n_scans, split = 40, 23
     det = _landmark_scene(rng, n_scans)
     stamps = (np.arange(n_scans) * 100_000_000 + 5 * 10**17).astype(np.int64)
-    match, min_count, drift, column_time, forget, support = 0.3, 3, 0.1, 1e9, 10, 0.13
+    match, min_count, drift, column_time, forget, support = 0.3, 3, 0.1, 1e9, LDB.FORGET_SCANS, 0.13
+    p = FeatureParams(
+        landmark_match=match,
+        landmark_min_count=min_count,
+        column_max_drift=drift,
+        column_min_time=column_time / 1e9,
+        column_radius_min=support,
+    ).kernel_vector()
     cap = len(det) + 1
     db, first_ns, last_ns = np.zeros((cap, LDB.DB_COLUMNS)), np.zeros(cap, np.int64), np.zeros(cap, np.int64)
     live, confirmed, counters = np.zeros(cap, np.int64), np.zeros(cap, np.int64), np.zeros(3, np.int64)
@@ -337,9 +344,8 @@ def test_accumulate_and_hide_bench_supports():
         size = (k1 - k0) * cap
         snap_idx, snap_vals = np.zeros(size, np.int64), np.zeros((size, 6))
         snap_last, snap_count = np.zeros(size, np.int64), np.zeros(k1 - k0, np.int64)
-        rules = (match, min_count, drift, column_time, forget, support)
         state = (db, first_ns, last_ns, live, confirmed, counters)
-        ns = LDB.accumulate(part, stamps[k0:k1], k0, rules, state, (snap_idx, snap_vals, snap_last, snap_count))
+        ns = LDB.accumulate(part, stamps[k0:k1], k0, p, state, (snap_idx, snap_vals, snap_last, snap_count))
         assert ns == snap_count.sum()
         offsets = np.concatenate([[0], np.cumsum(snap_count)])
         for a, b in zip(offsets[:-1], offsets[1:], strict=True):
@@ -347,7 +353,7 @@ def test_accumulate_and_hide_bench_supports():
     rows, want_first, want_snaps = rp.landmark_database(
         det, stamps, match, min_count, drift, column_time, forget, support
     )
-    n = counters[LDB.C_ROWS]
+    n = counters[LDB.COUNT_ROWS]
     assert n == len(rows)
     np.testing.assert_allclose(db[:n], rows, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(first_ns[:n], want_first)
@@ -365,7 +371,7 @@ def test_accumulate_and_hide_bench_supports():
     used = (0, 0, 0)
     for k in range(n_scans):
         for d in det[det[:, 0] == k]:
-            used = LDB._fold(d, k, stamps[k], rules, state1, used)
+            used = LDB._fold(d, k, stamps[k], p, state1, used)
         m, nlive, nconf = used
         u = 0
         while u < nlive:  # as accumulate drops them: the last live row takes the dropped one's place
@@ -456,7 +462,7 @@ def test_extract_scan_scans_and_parallel():
     assert (counts[:, 1:].sum(axis=0) > 0).all()  # lines, circles and blobs
 
     for k in range(N):
-        want_seg = rp.segment(ranges[k], inc, vec[FL.P_C0], 0.05, 8.0, int(vec[FL.P_MIN_POINTS]))
+        want_seg = rp.segment(ranges[k], inc, vec[FL.FP_C0], 0.05, 8.0, int(vec[FL.FP_MIN_POINTS]))
         assert [tuple(s) for s in seg[k * B : k * B + counts[k, 0]].tolist()] == want_seg
         r = np.where(np.isfinite(ranges[k]), ranges[k], 0.0).astype(np.float64)
         x, y = r * cos_a, r * sin_a
@@ -691,12 +697,12 @@ def _mirror_segment(x, y, s: int, e: int, vec: np.ndarray, params, dalpha: float
     decision and the merges left to the reference: (rp.Decision, the candidate rows after the merges, the
     pairs merged, the kept lines before the decision, the r_acc a circle must beat)."""
 
-    rho_res = vec[FL.P_RHO_RES]
+    rho_res = vec[FL.FP_RHO_RESOLUTION]
     cos_t, sin_t, acc, toff, idx, lo = st["cos_t"], st["sin_t"], st["acc"], st["toff"], st["idx"], st["lo"]
     sub_s, sub_e, peaks = st["sub_s"], st["sub_e"], st["peaks"]
     nt = cos_t.shape[0]
     nsub = 0
-    if e - s >= vec[FL.P_LINE_MIN_POINTS]:
+    if e - s >= vec[FL.FP_LINE_MIN_POINTS]:
         HL.normal_cells(x, y, s, e, nt, st["cell"])
         used = nt * HL._bounding_box(x, y, s, e, rho_res, acc.shape[1], st["box"])
         if used > st["zeroed"]:
@@ -711,7 +717,7 @@ def _mirror_segment(x, y, s: int, e: int, vec: np.ndarray, params, dalpha: float
             cos_t,
             sin_t,
             rho_res,
-            int(vec[FL.P_WINDOW] / (np.pi / nt)),
+            int(vec[FL.FP_VOTE_WINDOW] / (np.pi / nt)),
             st["cell"],
             (sub_s, sub_e, peaks),
             st["hist"],
@@ -763,7 +769,7 @@ def _steps_agree(x, y, s: int, e: int, vec, inc: float, d, rows, st: dict, got: 
         kept_at[: len(pre_kept)] = pre_kept
         sub_s[: len(runs)] = [a for a, _ in runs]
         sub_e[: len(runs)] = [b for _, b in runs]
-        m = SX._merge_lines(x, y, len(pre_kept), vec[FL.P_RHO_RES], work)
+        m = SX._merge_lines(x, y, len(pre_kept), vec[FL.FP_RHO_RESOLUTION], work)
         assert kept_at[:m].tolist() == list(kept), d
         for q in kept:
             np.testing.assert_array_equal(cand[q], rows[q], err_msg=str(d))
@@ -808,10 +814,10 @@ def test_extract_scan_decision_equals_the_reference():
         nt = int(round(180.0 / params.theta_resolution))
         theta = np.arange(nt) * (np.pi / nt)
         cos_t, sin_t = np.cos(theta), np.sin(theta)
-        w = int(round(vec[FL.P_CWINDOW] / vec[FL.P_CELL]))
-        width = int(2 * 8.0 / vec[FL.P_RHO_RES]) + 3
+        w = int(round(vec[FL.FP_CIRCLE_WINDOW] / vec[FL.FP_CIRCLE_CELL]))
+        width = int(2 * 8.0 / vec[FL.FP_RHO_RESOLUTION]) + 3
         for k, ranges in enumerate(list(_room_scans(2, angles)) + _feature_scenes(angles)):
-            segs = rp.segment(ranges, inc, vec[FL.P_C0], 0.05, 8.0, 1)  # single points and pairs too
+            segs = rp.segment(ranges, inc, vec[FL.FP_C0], 0.05, 8.0, 1)  # single points and pairs too
             r = np.where(np.isfinite(ranges), ranges, 0.0).astype(np.float64)
             x, y = r * np.cos(angles), r * np.sin(angles)
             # the accumulator as extract_scans leaves it uninitialised: extract_scan zeroes what it uses

@@ -393,7 +393,7 @@ PVEC = FeatureParams().kernel_vector()
 def kernel_circle(x, y, p=PVEC, beat=-1.0) -> np.ndarray:
     x = np.ascontiguousarray(x, np.float64)
     y = np.ascontiguousarray(y, np.float64)
-    w = int(round(p[FL.P_CWINDOW] / p[FL.P_CELL]))
+    w = int(round(p[FL.FP_CIRCLE_WINDOW] / p[FL.FP_CIRCLE_CELL]))
     out = np.zeros(5)
     HC.circle_of_run(
         x, y, 0, len(x), p, np.zeros((2 * w + 1, 2 * w + 1), np.int32), np.empty(len(x), np.int64), out, beat
@@ -438,14 +438,16 @@ def test_circle_votes_equal_the_reference_window(radius, dist, bearing, seed):
     cx, cy = dist * math.cos(bearing), dist * math.sin(bearing)
     x, y = arc_scan(cx, cy, radius, sigma=0.004, seed=seed)
     p = PVEC.copy()
-    p[FL.P_R_MIN] = radius
-    p[FL.P_R_MAX] = radius + 0.001
+    p[FL.FP_CIRCLE_RADIUS_MIN] = radius
+    p[FL.FP_CIRCLE_RADIUS_MAX] = radius + 0.001
     out = kernel_circle(x, y, p)
     if out[4] == 0.0:
         return  # the arc's chord and sagitta rule the radius out: nothing voted
     ca, cb = ref.chord_centre(x[0], y[0], x[-1], y[-1], radius)
-    w = int(round(p[FL.P_CWINDOW] / p[FL.P_CELL]))
-    _, (votes, ia, ib) = ref.htc_window(list(x), list(y), ca, cb, radius, w, p[FL.P_CELL], p[FL.P_CTOL])
+    w = int(round(p[FL.FP_CIRCLE_WINDOW] / p[FL.FP_CIRCLE_CELL]))
+    _, (votes, ia, ib) = ref.htc_window(
+        list(x), list(y), ca, cb, radius, w, p[FL.FP_CIRCLE_CELL], p[FL.FP_CIRCLE_TOLERANCE]
+    )
     assert round(out[4] * len(x)) == votes
 
 

@@ -27,7 +27,7 @@ PVEC = FeatureParams().kernel_vector()
 def kernel_circle(x, y, beat=-1.0) -> np.ndarray:
     x = np.ascontiguousarray(x, np.float64)
     y = np.ascontiguousarray(y, np.float64)
-    w = int(round(PVEC[FL.P_CWINDOW] / PVEC[FL.P_CELL]))
+    w = int(round(PVEC[FL.FP_CIRCLE_WINDOW] / PVEC[FL.FP_CIRCLE_CELL]))
     out = np.zeros(5)
     HC.circle_of_run(
         x, y, 0, len(x), PVEC, np.zeros((2 * w + 1, 2 * w + 1), np.int32), np.empty(len(x), np.int64), out, beat
@@ -37,9 +37,17 @@ def kernel_circle(x, y, beat=-1.0) -> np.ndarray:
 
 def reference_votes(x, y) -> int:
     p = PVEC
-    w = int(round(p[FL.P_CWINDOW] / p[FL.P_CELL]))
+    w = int(round(p[FL.FP_CIRCLE_WINDOW] / p[FL.FP_CIRCLE_CELL]))
     return ref.htc_peak(
-        list(x), list(y), p[FL.P_R_MIN], p[FL.P_R_MAX], p[FL.P_R_STEP], w, p[FL.P_CELL], p[FL.P_CTOL], p[FL.P_MIN_SAG]
+        list(x),
+        list(y),
+        p[FL.FP_CIRCLE_RADIUS_MIN],
+        p[FL.FP_CIRCLE_RADIUS_MAX],
+        p[FL.FP_CIRCLE_RADIUS_STEP],
+        w,
+        p[FL.FP_CIRCLE_CELL],
+        p[FL.FP_CIRCLE_TOLERANCE],
+        p[FL.FP_CIRCLE_MIN_SAGITTA],
     )
 
 

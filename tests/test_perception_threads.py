@@ -14,7 +14,7 @@ from conftest import SAMPLE_LOGS, shared_path
 
 from datmo_cli.cli import cli
 from datmo_cli.logs import mcapio
-from datmo_cli.perception import threads as T
+from datmo_cli.perception import threads as TH
 from datmo_cli.perception.features import extract_run, segment_run
 from datmo_cli.perception.params import FeatureParams
 
@@ -39,7 +39,7 @@ ARRAYS = (
 def default_threads():
     """CLI tests run in this process: give later tests the default back."""
     yield
-    T.set_default(None)
+    TH.set_default(None)
 
 
 def assert_same(a, b) -> None:
@@ -58,7 +58,7 @@ def test_one_and_two_threads_give_the_same_features(log):
     assert_same(one, two)
     # the smallest block that runs on two threads, and the paper's rule too
     p = FeatureParams(leg_model="paper")
-    short = run.slice(0, 2 * T.MIN_SCANS_PER_THREAD + 1)
+    short = run.slice(0, 2 * TH.MIN_SCANS_PER_THREAD + 1)
     assert_same(extract_run(short, p, landmarks=False, threads=1), extract_run(short, p, landmarks=False, threads=2))
 
 
@@ -81,31 +81,31 @@ def test_carmen_logs_on_one_and_two_threads(name):
 
 
 def test_resolve():
-    n = T.available()
-    assert T.resolve(1) == 1
-    assert T.resolve(0) == n and T.resolve(10_000) == n
-    T.set_default(1)
-    assert T.resolve() == 1 and T.resolve(None) == 1
-    T.set_default(None)
-    assert T.resolve() == n
+    n = TH.available()
+    assert TH.resolve(1) == 1
+    assert TH.resolve(0) == n and TH.resolve(10_000) == n
+    TH.set_default(1)
+    assert TH.resolve() == 1 and TH.resolve(None) == 1
+    TH.set_default(None)
+    assert TH.resolve() == n
     with pytest.raises(ValueError):
-        T.resolve(-1)
+        TH.resolve(-1)
     with pytest.raises(ValueError):
-        T.set_default(-2)
+        TH.set_default(-2)
 
 
 def test_a_few_scans_run_on_one_thread():
-    assert T.for_scans(2, 2 * T.MIN_SCANS_PER_THREAD) == 2
-    assert T.for_scans(2, 2 * T.MIN_SCANS_PER_THREAD - 1) == 1
-    assert T.for_scans(4, 0) == 1 and T.for_scans(1, 10_000) == 1
+    assert TH.for_scans(2, 2 * TH.MIN_SCANS_PER_THREAD) == 2
+    assert TH.for_scans(2, 2 * TH.MIN_SCANS_PER_THREAD - 1) == 1
+    assert TH.for_scans(4, 0) == 1 and TH.for_scans(1, 10_000) == 1
 
 
 def test_a_process_forked_after_the_pool_started_runs_one_thread(monkeypatch):
     """GNU OpenMP's pool cannot serve a forked child (numba terminates it): such a child runs one thread."""
-    monkeypatch.setattr(T, "_POOL_PID", os.getpid() + 1)  # as if this process had been forked from it
-    assert T.resolve(2) == 1
-    monkeypatch.setattr(T, "_POOL_PID", os.getpid())
-    assert T.resolve(2) == min(2, T.available())
+    monkeypatch.setattr(TH, "_POOL_PID", os.getpid() + 1)  # as if this process had been forked from it
+    assert TH.resolve(2) == 1
+    monkeypatch.setattr(TH, "_POOL_PID", os.getpid())
+    assert TH.resolve(2) == min(2, TH.available())
 
 
 def test_features_threads_option_changes_nothing_but_speed(tmp_path):

@@ -171,20 +171,20 @@ def command(
     from ..base.errors import InputError
     from ..base.outputs import check_output
     from ..base.progress import bar, console, say
-    from ..perception import training as T
+    from ..perception import training as TR
 
     check_output(output, force=force, inputs=[*positives, *negatives], what="model")  # before the training
     if not positives:
         raise InputError("no labelled file: give at least one with --positive")
     _labelled_or_empty(positives, negatives)
-    T.require_sklearn()
+    TR.require_sklearn()
     with bar("reading", len(positives) + len(negatives), unit="steps") as shown:
         labelled, empty = [], []
         for i, p in enumerate(positives):
-            labelled.append(T.read_labelled(p, topic, labels_topic))
+            labelled.append(TR.read_labelled(p, topic, labels_topic))
             shown.update(i + 1)
         for i, p in enumerate(negatives):
-            empty.extend(T.read_empty(p))
+            empty.extend(TR.read_empty(p))
             shown.update(len(positives) + i + 1)
 
         def progress(stage: str, done: int, total: int) -> None:
@@ -196,7 +196,7 @@ def command(
 
             shown.update(0, description="simulating")
             extra = simulated_recordings()
-        result = T.train_leg_model(labelled, empty, progress=progress, labels_topic=labels_topic, extra=extra)
+        result = TR.train_leg_model(labelled, empty, progress=progress, labels_topic=labels_topic, extra=extra)
     if result.held_out:
         print_figures(result.held_out, result.mean, console())
     else:

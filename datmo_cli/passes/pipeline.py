@@ -310,9 +310,9 @@ class RunStages:
 
     def _perceived(self, blocks: Iterable) -> Iterator[tuple[Any, tuple[dict[str, tuple], Any]]]:
         """(block, its perception's (channels, RunFeatures)) for each block in order (see pipelined)."""
-        from ..perception import threads as T
+        from ..perception import threads as TH
 
-        n = T.resolve(None)
+        n = TH.resolve(None)
         if n < 2:
             for block in blocks:
                 yield block, self.features.block(block.run, markers=self.markers)

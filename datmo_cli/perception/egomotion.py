@@ -131,15 +131,15 @@ def estimate_egomotion(run: ScanRun, **params) -> EgoMotion:
     p = IcpParams(**params)
     if len(run) == 0:
         raise ValueError("no scans")
-    from . import scan_odometry as K
+    from . import scan_odometry as KO
 
     g = run.geometry
     cos_a, sin_a = _beam_trig(g)
     dt = np.zeros(len(run))
     dt[1:] = np.diff(run.stamps) * 1e-9
     poses = np.zeros((len(run), 3))
-    stats = np.zeros((len(run), K.N_STATS))
-    K.odometry_run(
+    stats = np.zeros((len(run), KO.N_STATS))
+    KO.odometry_run(
         run.ranges,
         dt,
         (cos_a, sin_a, float(g.range_min), float(g.range_max)),
@@ -166,17 +166,17 @@ def estimate_egomotion(run: ScanRun, **params) -> EgoMotion:
         frame_id=FRAME_ID,
         child_frame_id=g.frame_id,
     )
-    flags = stats[:, K.S_FLAGS].astype(np.int64)
+    flags = stats[:, KO.S_FLAGS].astype(np.int64)
     return EgoMotion(
         odom,
-        stats[:, K.S_RESIDUAL].copy(),
-        stats[:, K.S_INLIER_SHARE].copy(),
-        stats[:, K.S_MATCHED].astype(np.int64),
-        stats[:, K.S_POINTS].astype(np.int64),
-        (flags & K.FLAG_KEYFRAME) != 0,
-        (flags & K.FLAG_RECOVERED) != 0,
-        (flags & K.FLAG_FAILED) != 0,
-        stats[:, K.S_ITERATIONS].astype(np.int64),
+        stats[:, KO.S_RESIDUAL].copy(),
+        stats[:, KO.S_INLIER_SHARE].copy(),
+        stats[:, KO.S_MATCHED].astype(np.int64),
+        stats[:, KO.S_POINTS].astype(np.int64),
+        (flags & KO.FLAG_KEYFRAME) != 0,
+        (flags & KO.FLAG_RECOVERED) != 0,
+        (flags & KO.FLAG_FAILED) != 0,
+        stats[:, KO.S_ITERATIONS].astype(np.int64),
     )
 
 
@@ -200,7 +200,7 @@ def align_scans(
     ones unused)."""
     p = IcpParams(**params)
     from . import icp
-    from . import scan_odometry as K
+    from . import scan_odometry as KO
 
     g = geometry
     cos_a, sin_a = _beam_trig(g)
@@ -210,16 +210,16 @@ def align_scans(
     if ref.shape != (b,) or cur.shape != (b,):
         raise ValueError(f"scans must have {b} beams, got {ref.shape} and {cur.shape}")
     px, py, beams = np.zeros(b), np.zeros(b), np.zeros(b, np.int64)
-    m = K.scan_points(ref, cos_a, sin_a, lo, hi, p.map_spacing, b, px, py, beams)
+    m = KO.scan_points(ref, cos_a, sin_a, lo, hi, p.map_spacing, b, px, py, beams)
     nx, ny = np.zeros(b), np.zeros(b)
-    K.scan_normals(
+    KO.scan_normals(
         ref, (cos_a, sin_a, lo, hi), beams, m, (p.normal_radius, p.max_gap, _max_window(g), p.planarity), nx, ny
     )
     head = np.full(1 << max(4, int(2 * b - 1).bit_length()), icp.EMPTY, np.int64)
     local_map = (np.zeros(b), np.zeros(b), np.zeros(b), np.zeros(b), p.max_dist, head, np.full(b, icp.EMPTY, np.int64))
     icp.add_to_map((px, py, nx, ny), m, (0.0, 0.0, 0.0), 0.0, local_map, 0)
     sx, sy = np.zeros(b), np.zeros(b)
-    n = K.scan_points(cur, cos_a, sin_a, lo, hi, p.source_spacing, p.max_points, sx, sy, beams)
+    n = KO.scan_points(cur, cos_a, sin_a, lo, hi, p.source_spacing, p.max_points, sx, sy, beams)
     pose = np.zeros(3)
     settings = (p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight)
     matched, residual, inliers, iters = icp.icp_align(

@@ -1,32 +1,79 @@
-"""Layout shared by the feature kernels: positions in the parameter vector (P_*, see
-FeatureParams.kernel_vector) and the columns of line, circle and blob rows and of line and circle candidates.
+"""Layout shared by the perception kernels: the parameter vector (FEATURE_PARAMS, FP_* slots; built by
+FeatureParams.kernel_vector) and the columns of line (L_*), circle (CR_*) and blob (B_*) rows and of line (LC_*)
+and circle (CC_*) candidates.
 """
 
-(
-    P_C0,
-    P_MIN_POINTS,
-    P_THETA_RES,
-    P_RHO_RES,
-    P_WINDOW,
-    P_LINE_MIN_POINTS,
-    P_LINE_MIN_RACC,
-    P_LINE_MIN_LENGTH,
-    P_PERP_TOL,
-    P_R_MIN,
-    P_R_MAX,
-    P_R_STEP,
-    P_CELL,
-    P_CWINDOW,
-    P_CTOL,
-    P_CIRCLE_MIN_POINTS,
-    P_SMALL,
-    P_MIN_SAG,
-    P_LEG_R,
-    P_MIN_COVER,
-    P_RES_RATIO,
-    P_R_MARGIN,
-    P_LINES_RATIO,
-) = range(23)
+# ------------------------------------------------------------------------------------- parameter vector
+# The [features] keys the feature kernels read, in slot order, with the conversion each gets on its way into the
+# vector ("radians": the key is in degrees). FP_<KEY> is the slot of <key>; tests/test_param_slots.py checks that
+# every key has its slot, every slot is read by a kernel, and every [features] key is here or listed as read
+# elsewhere (theta_resolution, say, is not here: features.py turns it into the HTL's cos/sin tables).
+FEATURE_PARAMS: tuple[tuple[str, str], ...] = (
+    ("c0", ""),
+    ("min_points", ""),
+    ("rho_resolution", ""),
+    ("vote_window", "radians"),
+    ("line_min_points", ""),
+    ("line_min_racc", ""),
+    ("line_min_length", ""),
+    ("perpendicular_tolerance", "radians"),
+    ("circle_radius_min", ""),
+    ("circle_radius_max", ""),
+    ("circle_radius_step", ""),
+    ("circle_cell", ""),
+    ("circle_window", ""),
+    ("circle_tolerance", ""),
+    ("circle_min_points", ""),
+    ("circle_min_sagitta", ""),
+    ("circle_min_coverage", ""),
+    ("circle_residual_ratio", ""),
+    ("circle_radius_margin", ""),
+    ("circle_lines_ratio", ""),
+    # landmarks (landmarks._benches, landmark_database.accumulate)
+    ("column_radius_min", ""),
+    ("bench_min_length", ""),
+    ("bench_max_length", ""),
+    ("landmark_match", ""),
+    ("landmark_min_count", ""),
+    ("column_max_drift", ""),
+    ("column_min_time", ""),
+)
+FEATURE_PARAM_NAMES = tuple(key for key, _ in FEATURE_PARAMS)
+N_FEATURE_PARAMS = len(FEATURE_PARAMS)
+
+
+def _slot(key: str) -> int:
+    """The slot of [features] key `key` in the vector (a key not in FEATURE_PARAMS fails the import)."""
+    return FEATURE_PARAM_NAMES.index(key)
+
+
+FP_C0 = _slot("c0")
+FP_MIN_POINTS = _slot("min_points")
+FP_RHO_RESOLUTION = _slot("rho_resolution")
+FP_VOTE_WINDOW = _slot("vote_window")  # radians
+FP_LINE_MIN_POINTS = _slot("line_min_points")
+FP_LINE_MIN_RACC = _slot("line_min_racc")
+FP_LINE_MIN_LENGTH = _slot("line_min_length")
+FP_PERPENDICULAR_TOLERANCE = _slot("perpendicular_tolerance")  # radians
+FP_CIRCLE_RADIUS_MIN = _slot("circle_radius_min")
+FP_CIRCLE_RADIUS_MAX = _slot("circle_radius_max")
+FP_CIRCLE_RADIUS_STEP = _slot("circle_radius_step")
+FP_CIRCLE_CELL = _slot("circle_cell")
+FP_CIRCLE_WINDOW = _slot("circle_window")
+FP_CIRCLE_TOLERANCE = _slot("circle_tolerance")
+FP_CIRCLE_MIN_POINTS = _slot("circle_min_points")
+FP_CIRCLE_MIN_SAGITTA = _slot("circle_min_sagitta")
+FP_CIRCLE_MIN_COVERAGE = _slot("circle_min_coverage")
+FP_CIRCLE_RESIDUAL_RATIO = _slot("circle_residual_ratio")
+FP_CIRCLE_RADIUS_MARGIN = _slot("circle_radius_margin")
+FP_CIRCLE_LINES_RATIO = _slot("circle_lines_ratio")
+FP_COLUMN_RADIUS_MIN = _slot("column_radius_min")
+FP_BENCH_MIN_LENGTH = _slot("bench_min_length")
+FP_BENCH_MAX_LENGTH = _slot("bench_max_length")
+FP_LANDMARK_MATCH = _slot("landmark_match")
+FP_LANDMARK_MIN_COUNT = _slot("landmark_min_count")
+FP_COLUMN_MAX_DRIFT = _slot("column_max_drift")
+FP_COLUMN_MIN_TIME = _slot("column_min_time")  # s
 
 
 # columns of the line rows
@@ -34,7 +81,7 @@ L_SCAN, L_SEG, L_FIRST, L_LAST, L_N, L_X0, L_Y0, L_X1, L_Y1, L_RHO, L_THETA, L_L
 
 
 # columns of circle rows: scan, segment, first, last, n, x, y, radius, r_acc
-C_SCAN, C_SEG, C_FIRST, C_LAST, C_N, C_X, C_Y, C_R, C_RACC = range(9)
+CR_SCAN, CR_SEG, CR_FIRST, CR_LAST, CR_N, CR_X, CR_Y, CR_R, CR_RACC = range(9)
 
 
 # columns of blob rows: scan, segment, first, last, n, x, y, size, kind

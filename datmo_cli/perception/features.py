@@ -20,7 +20,7 @@ from datmo_cli.base import libm
 from ..base.errors import InputError
 from ..logs import cdr, types
 from ..logs.scan import Odometry, ScanRun
-from . import scan_extractor as K
+from . import scan_extractor as SX
 from . import segmentation
 from .landmark_database import LandmarkDatabase, LandmarkStream
 from .landmarks import (
@@ -253,25 +253,25 @@ def _extract_block(
     line rows (L, 13), circle rows (C, 9), blob rows (Cb, 9)) in scan order, column 0 the scan in the block.
     Each scan's rows are written to its own stretch of B rows, so the result is the same for any `threads`.
     `buffers`: _row_buffers of at least n scans to write into (made here when None)."""
-    from . import threads as T
+    from . import threads as TH
 
     n, B = block.shape
     if buffers is None or len(buffers[0]) < n * B:
         buffers = _row_buffers(n, B)
     seg, lines, circles, blobs = (b[: n * B] for b in buffers)
     counts = np.zeros((n, 4), np.int64)
-    threads = T.for_scans(threads, n)
+    threads = TH.for_scans(threads, n)
     if threads > 1:
-        with T.numba_threads(threads):
-            K.extract_parallel(
+        with TH.numba_threads(threads):
+            SX.extract_parallel(
                 block, min(n, 4 * threads), args, (seg, lines, circles, blobs, counts), (given, given_off)
             )
     else:
-        K.extract_scans(block, 0, n, args, (seg, lines, circles, blobs, counts), (given, given_off))
+        SX.extract_scans(block, 0, n, args, (seg, lines, circles, blobs, counts), (given, given_off))
     out = []
     for j, rows in enumerate((seg, lines, circles, blobs)):
         kept = np.empty((int(counts[:, j].sum()), rows.shape[1]), rows.dtype)
-        K.gather_rows(rows, counts, j, B, kept)
+        SX.gather_rows(rows, counts, j, B, kept)
         out.append(kept)
     return out[0], counts[:, 0].copy(), out[1], out[2], out[3]
 
@@ -295,7 +295,7 @@ def extract_run(
     segments it takes for legs. `progress(done, total)` is called after each block of scans. `threads`: how
     many threads the per-scan work runs on (None: the process's default, all cores unless `--threads` set
     it; 0: all cores; see perception.threads); the results are the same for any count."""
-    from . import threads as T
+    from . import threads as TH
     from .leg_model import load_leg_model
 
     p = params or FeatureParams()
@@ -318,7 +318,7 @@ def extract_run(
         _check_segments(g_start, g_end, g_off, B)
         given = np.stack([g_start, g_end], axis=1) if len(g_start) else np.zeros((0, 2), np.int64)
     segs, seg_counts, parts = [], [], {"l": [], "c": [], "b": [], "g": []}
-    n_threads = T.resolve(threads)
+    n_threads = TH.resolve(threads)
     args = (cos_a, sin_a, cos_inc, c1, lo, hi, vec, cos_t, sin_t)
     buffers = _row_buffers(min(N, BLOCK), B) if N and B else None
     for a in range(0, N, BLOCK):

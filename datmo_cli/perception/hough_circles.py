@@ -16,17 +16,17 @@ from .feature_layout import (
     CC_RACC,
     CC_X,
     CC_Y,
-    P_CELL,
-    P_CTOL,
-    P_CWINDOW,
-    P_LINES_RATIO,
-    P_MIN_COVER,
-    P_MIN_SAG,
-    P_R_MARGIN,
-    P_R_MAX,
-    P_R_MIN,
-    P_R_STEP,
-    P_RES_RATIO,
+    FP_CIRCLE_CELL,
+    FP_CIRCLE_LINES_RATIO,
+    FP_CIRCLE_MIN_COVERAGE,
+    FP_CIRCLE_MIN_SAGITTA,
+    FP_CIRCLE_RADIUS_MARGIN,
+    FP_CIRCLE_RADIUS_MAX,
+    FP_CIRCLE_RADIUS_MIN,
+    FP_CIRCLE_RADIUS_STEP,
+    FP_CIRCLE_RESIDUAL_RATIO,
+    FP_CIRCLE_TOLERANCE,
+    FP_CIRCLE_WINDOW,
 )
 from .hough_lines import scatter
 
@@ -113,9 +113,9 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     n = e - s
     if n < 3 or beat >= 1.0:  # r_acc is at most 1: nothing can beat `beat`
         return
-    cell = p[P_CELL]
-    w = int(round(p[P_CWINDOW] / cell))
-    tol = p[P_CTOL]
+    cell = p[FP_CIRCLE_CELL]
+    w = int(round(p[FP_CIRCLE_WINDOW] / cell))
+    tol = p[FP_CIRCLE_TOLERANCE]
     near = s
     for i in range(s, e):
         if x[i] * x[i] + y[i] * y[i] < x[near] * x[near] + y[near] * y[near]:
@@ -135,22 +135,22 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
         nx = -nx
         ny = -ny
     sag = -((x[near] - mx) * nx + (y[near] - my) * ny)  # P_near's bulge towards the scanner
-    if sag < p[P_MIN_SAG]:
+    if sag < p[FP_CIRCLE_MIN_SAGITTA]:
         return  # flat within the noise: a line or a blob, not an arc
     half = 0.5 * chord
-    r_lo = max(p[P_R_MIN], half - tol)
-    r_hi = p[P_R_MAX]
+    r_lo = max(p[FP_CIRCLE_RADIUS_MIN], half - tol)
+    r_hi = p[FP_CIRCLE_RADIUS_MAX]
     if sag > tol:
         r_hi = min(r_hi, ((sag - tol) ** 2 + half * half) / (2.0 * (sag - tol)) + tol)
     s2 = max(sag, 0.0) + tol
     r_lo = max(r_lo, (s2 * s2 + half * half) / (2.0 * s2) - tol)
     if r_lo > r_hi:
         return
-    step = p[P_R_STEP]
-    k0 = int(np.ceil((r_lo - p[P_R_MIN]) / step - 1e-9))
-    k1 = int(np.floor((r_hi - p[P_R_MIN]) / step + 1e-9))
+    step = p[FP_CIRCLE_RADIUS_STEP]
+    k0 = int(np.ceil((r_lo - p[FP_CIRCLE_RADIUS_MIN]) / step - 1e-9))
+    k1 = int(np.floor((r_hi - p[FP_CIRCLE_RADIUS_MIN]) / step + 1e-9))
     if k1 < k0:
-        k0 = k1 = int(round((0.5 * (r_lo + r_hi) - p[P_R_MIN]) / step))
+        k0 = k1 = int(round((0.5 * (r_lo + r_hi) - p[FP_CIRCLE_RADIUS_MIN]) / step))
     size = 2 * w + 1
     best = 0
     bdc = 0
@@ -159,7 +159,7 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     br = -1.0
     reach = w * cell * np.sqrt(2.0) + 1e-9  # window centre to its farthest cell centre (and rounding)
     for k in range(k0, k1 + 1):
-        r = p[P_R_MIN] + k * step
+        r = p[FP_CIRCLE_RADIUS_MIN] + k * step
         h = np.sqrt(max(r * r - half * half, 0.0))
         ca = mx + nx * h
         cb = my + ny * h
@@ -211,7 +211,11 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
     if m >= 3:
         fa, fb, fr, ok = fit_circle(x, y, idx, m, ba, bb, br)
         # keep the fit when it stays a circle of the allowed size near the Hough estimate
-        if ok and p[P_R_MIN] * 0.8 <= fr <= p[P_R_MAX] * 1.2 and np.hypot(fa - ba, fb - bb) <= 2 * p[P_CWINDOW]:
+        if (
+            ok
+            and p[FP_CIRCLE_RADIUS_MIN] * 0.8 <= fr <= p[FP_CIRCLE_RADIUS_MAX] * 1.2
+            and np.hypot(fa - ba, fb - bb) <= 2 * p[FP_CIRCLE_WINDOW]
+        ):
             a, b, r = fa, fb, fr
     out[CC_N] = m
     out[CC_X] = a
@@ -223,26 +227,26 @@ def circle_of_run(x, y, s, e, p, cacc, idx, out, beat=-1.0) -> None:
 @njit(cache=True)
 def circle_posed(x, y, idx, m, a, b, r, p, dalpha, lines_rss=-1.0) -> bool:
     """Whether the circle (a, b, r) fitted to the points idx[:m] is a well-posed arc (each test off at 0):
-    - a radius not pinned at a bound: more than P_R_MARGIN inside [circle_radius_min, circle_radius_max];
-    - enough points for its size: at least P_MIN_COVER of the beams (angle step `dalpha`) that the circle's
+    - a radius not pinned at a bound: more than FP_CIRCLE_RADIUS_MARGIN inside [circle_radius_min, circle_radius_max];
+    - enough points for its size: at least FP_CIRCLE_MIN_COVERAGE of the beams (angle step `dalpha`) that the circle's
       near side spans seen from the scanner, 2 asin(r / |c|) / dalpha;
-    - a fit clearly better than a line's: the circle's residual (root sum of squares) at most P_RES_RATIO
+    - a fit clearly better than a line's: the circle's residual (root sum of squares) at most FP_CIRCLE_RESIDUAL_RATIO
       times that of the total-least-squares line of the same points;
-    - and better than the segment's HTL lines (a corner): at most P_LINES_RATIO times sqrt(`lines_rss`), the
+    - and better than the segment's HTL lines (a corner): at most FP_CIRCLE_LINES_RATIO times sqrt(`lines_rss`), the
       sum of squared distances of the same points to those lines, each to the nearest (< 0: no lines)."""
     if m < 3:
         return False
-    margin = p[P_R_MARGIN]
-    if margin > 0.0 and (r < p[P_R_MIN] + margin or r > p[P_R_MAX] - margin):
+    margin = p[FP_CIRCLE_RADIUS_MARGIN]
+    if margin > 0.0 and (r < p[FP_CIRCLE_RADIUS_MIN] + margin or r > p[FP_CIRCLE_RADIUS_MAX] - margin):
         return False
-    cover = p[P_MIN_COVER]
+    cover = p[FP_CIRCLE_MIN_COVERAGE]
     if cover > 0.0 and dalpha > 0.0:
         d = np.hypot(a, b)
         span = np.pi if r >= d else 2.0 * np.arcsin(r / d)
         if m < cover * span / dalpha:
             return False
-    ratio = p[P_RES_RATIO]
-    by_lines = p[P_LINES_RATIO] > 0.0 and lines_rss >= 0.0
+    ratio = p[FP_CIRCLE_RESIDUAL_RATIO]
+    by_lines = p[FP_CIRCLE_LINES_RATIO] > 0.0 and lines_rss >= 0.0
     rc = 0.0  # the circle's sum of squared residuals, computed once for both tests
     if ratio > 0.0 or by_lines:
         for k in range(m):
@@ -254,6 +258,6 @@ def circle_posed(x, y, idx, m, a, b, r, p, dalpha, lines_rss=-1.0) -> bool:
         if np.sqrt(rc) > ratio * np.sqrt(max(rl, 0.0)):
             return False
     if by_lines:
-        if np.sqrt(rc) > p[P_LINES_RATIO] * np.sqrt(lines_rss):
+        if np.sqrt(rc) > p[FP_CIRCLE_LINES_RATIO] * np.sqrt(lines_rss):
             return False
     return True

@@ -12,6 +12,13 @@ import numpy as np
 from numba import njit
 
 from ..base.numba_runtime import key_kernel_cache_on_sources
+from .feature_layout import (
+    FP_COLUMN_MAX_DRIFT,
+    FP_COLUMN_MIN_TIME,
+    FP_COLUMN_RADIUS_MIN,
+    FP_LANDMARK_MATCH,
+    FP_LANDMARK_MIN_COUNT,
+)
 from .landmarks import DET_SCAN, LANDMARK_DTYPE
 from .params import FeatureParams
 
@@ -22,17 +29,21 @@ key_kernel_cache_on_sources()  # before any kernel is declared: their cache stam
 DB_COLUMNS = 13
 DB_MOVED, DB_CONFIRMED, DB_HIDDEN = 10, 11, 12
 # counters of a database carried from block to block: rows used, live rows, confirmed rows
-C_ROWS, C_LIVE, C_CONFIRMED = 0, 1, 2
+COUNT_ROWS, COUNT_LIVE, COUNT_CONFIRMED = 0, 1, 2
+FORGET_SCANS = 10  # a candidate seen fewer than landmark_min_count times and not for this many scans is forgotten
 
 
 # inlined into accumulate (one compiled function, as before it was cut out)
 @njit(cache=True, inline="always")
-def _fold(d, k, stamp, rules, state, used):
-    """Fold the detection d (DET_*) of scan k, stamped `stamp` ns, into the database (rules and state as
+def _fold(d, k, stamp, p, state, used):
+    """Fold the detection d (DET_*) of scan k, stamped `stamp` ns, into the database (p and state as
     accumulate takes them): it is the nearest live landmark of its type within the gate not already seen in
     scan k (count, last seen, running mean; a bench: its most complete view), or a new row. used = (rows, live
     rows, confirmed rows) before it; returns them after it."""
-    match, min_count, max_drift, column_time, _, _ = rules
+    match = p[FP_LANDMARK_MATCH]
+    min_count = p[FP_LANDMARK_MIN_COUNT]
+    max_drift = p[FP_COLUMN_MAX_DRIFT]
+    column_time = p[FP_COLUMN_MIN_TIME] * 1e9  # ns
     db, first_ns, last_ns, live, confirmed, _ = state
     n, nlive, nconf = used
     t = d[1]
@@ -106,40 +117,41 @@ def _fold(d, k, stamp, rules, state, used):
 
 
 @njit(cache=True)
-def accumulate(det, stamps, k0, rules, state, snap):
+def accumulate(det, stamps, k0, p, state, snap):
     """Fold one block of scans' detections (rows DET_*, sorted by scan; scans k0 .. k0 + len(stamps) - 1,
     stamped `stamps` ns) into the database.
 
-    rules = (match, min_count, max_drift, column_time, forget, column_radius_min); state = (db, first_ns,
+    p: the feature parameter vector (FeatureParams.kernel_vector; FP_LANDMARK_*, FP_COLUMN_*); state = (db, first_ns,
     last_ns, live, confirmed, counters): the database `db` (rows as DB_COLUMNS; first_ns/last_ns: the stamps
-    its row was first and last seen), carrying `live`, `confirmed` and `counters` (C_*) from the blocks
+    its row was first and last seen), carrying `live`, `confirmed` and `counters` (COUNT_*) from the blocks
     before; snap = (snap_idx, snap_vals, snap_last, snap_count). After each scan k, the landmarks in the
     database (confirmed, not moved, not hidden) are appended to snap_idx (row index), snap_vals (x, y,
     orientation, size, count, last scan: their state then) and snap_last (last seen, ns), and their number
-    stored in snap_count[k - k0]. A candidate seen fewer than min_count times and not for `forget` scans is
-    forgotten; a column enters the database only once seen over `column_time` ns (a circle object that stops
-    for a moment is not a column); a column candidate by a confirmed bench's support (its end,
-    column_radius_min in) is hidden. Capacities: db rows >= counters[C_ROWS] + len(det), snapshot entries >=
-    len(stamps) * (counters[C_CONFIRMED] + len(det)). Returns the snapshot entries written."""
-    _, min_count, _, _, forget, column_radius_min = rules
+    stored in snap_count[k - k0]. A candidate seen fewer than landmark_min_count times and not for FORGET_SCANS
+    scans is forgotten; a column enters the database only once seen over column_min_time (a circle object that
+    stops for a moment is not a column); a column candidate by a confirmed bench's support (its end,
+    column_radius_min in) is hidden. Capacities: db rows >= counters[COUNT_ROWS] + len(det), snapshot entries >=
+    len(stamps) * (counters[COUNT_CONFIRMED] + len(det)). Returns the snapshot entries written."""
+    min_count = p[FP_LANDMARK_MIN_COUNT]
+    column_radius_min = p[FP_COLUMN_RADIUS_MIN]
     db, first_ns, last_ns, live, confirmed, counters = state
     snap_idx, snap_vals, snap_last, snap_count = snap
     n_scans = stamps.shape[0]
     nd = det.shape[0]
-    n = counters[C_ROWS]
-    nlive = counters[C_LIVE]
-    nconf = counters[C_CONFIRMED]
+    n = counters[COUNT_ROWS]
+    nlive = counters[COUNT_LIVE]
+    nconf = counters[COUNT_CONFIRMED]
     ns = 0
     j = 0
     for kk in range(n_scans):
         k = k0 + kk
         while j < nd and det[j, 0] == k:
-            n, nlive, nconf = _fold(det[j], k, stamps[kk], rules, state, (n, nlive, nconf))
+            n, nlive, nconf = _fold(det[j], k, stamps[kk], p, state, (n, nlive, nconf))
             j += 1
         u = 0
         while u < nlive:  # forget stale candidates and moved columns
             q = live[u]
-            if (db[q, DB_CONFIRMED] == 0.0 and k - db[q, 7] > forget) or db[q, DB_MOVED] != 0.0:
+            if (db[q, DB_CONFIRMED] == 0.0 and k - db[q, 7] > FORGET_SCANS) or db[q, DB_MOVED] != 0.0:
                 nlive -= 1
                 live[u] = live[nlive]
             else:
@@ -157,9 +169,9 @@ def accumulate(det, stamps, k0, rules, state, snap):
                 ns += 1
                 count += 1
         snap_count[kk] = count
-    counters[C_ROWS] = n
-    counters[C_LIVE] = nlive
-    counters[C_CONFIRMED] = nconf
+    counters[COUNT_ROWS] = n
+    counters[COUNT_LIVE] = nlive
+    counters[COUNT_CONFIRMED] = nconf
     return ns
 
 
@@ -213,6 +225,7 @@ class LandmarkStream:
 
     def __init__(self, p: FeatureParams) -> None:
         self.p = p
+        self.vec = p.kernel_vector()
         self.db = np.zeros((64, DB_COLUMNS))
         self.first_ns = np.zeros(64, np.int64)
         self.last_ns = np.zeros(64, np.int64)
@@ -236,7 +249,7 @@ class LandmarkStream:
     @property
     def rows(self) -> np.ndarray:
         """The database rows used so far (DB_COLUMNS)."""
-        return self.db[: self.counters[C_ROWS]]
+        return self.db[: self.counters[COUNT_ROWS]]
 
     def add(self, detections: np.ndarray, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fold in the detections (rows DET_*, DET_SCAN counted from this block's first scan, world or sensor
@@ -263,23 +276,14 @@ class LandmarkStream:
     def _add(self, det: np.ndarray, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One kernel call: detections `det` (sorted, DET_SCAN counted from the call's first scan) of the next
         len(stamps) scans; (elements, count per scan)."""
-        p = self.p
         nb = len(stamps)
         det[:, DET_SCAN] += self.scans
-        self._reserve(int(self.counters[C_ROWS]) + len(det) + 1)
-        cap = nb * (int(self.counters[C_CONFIRMED]) + len(det)) + 1
+        self._reserve(int(self.counters[COUNT_ROWS]) + len(det) + 1)
+        cap = nb * (int(self.counters[COUNT_CONFIRMED]) + len(det)) + 1
         snap_idx, snap_vals = np.zeros(cap, np.int64), np.zeros((cap, 6))
         snap_last, snap_count = np.zeros(cap, np.int64), np.zeros(nb, np.int64)
-        rules = (
-            p.landmark_match,
-            p.landmark_min_count,
-            p.column_max_drift,
-            p.column_min_time * 1e9,
-            10,
-            p.column_radius_min,
-        )
         state = (self.db, self.first_ns, self.last_ns, self.live, self.confirmed, self.counters)
-        ns = accumulate(det, stamps, self.scans, rules, state, (snap_idx, snap_vals, snap_last, snap_count))
+        ns = accumulate(det, stamps, self.scans, self.vec, state, (snap_idx, snap_vals, snap_last, snap_count))
         self.scans += nb
         return landmark_elements(self.db, self.first_ns, snap_idx[:ns], snap_vals[:ns], snap_last[:ns]), snap_count
 

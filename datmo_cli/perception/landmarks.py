@@ -28,6 +28,7 @@ from ..logs.vocabulary import (
     LANDMARK_CORNER,
     LANDMARK_LINE_END,
 )
+from .feature_layout import FP_BENCH_MAX_LENGTH, FP_BENCH_MIN_LENGTH
 from .params import FeatureParams
 
 key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
@@ -163,8 +164,7 @@ def circle_detections(
         lines["x_end"].astype(np.float64),
         lines["y_end"].astype(np.float64),
         np.asarray(line_offsets, np.int64),
-        p.bench_min_length,
-        p.bench_max_length,
+        p.kernel_vector(),
         benches,
     )
     return np.concatenate([cols, benches[:nb]])
@@ -282,9 +282,12 @@ def seat_detections(
 
 
 @njit(cache=True)
-def _benches(cs, cx, cy, cr, x0, y0, x1, y1, line_offsets, dmin, dmax, out) -> int:
-    """Bench detections (rows DET_*) from support circles sorted by scan cs: pairs of one scan dmin..dmax
-    apart with a line whose middle lies between them within 0.4 m of their axis and that runs along it."""
+def _benches(cs, cx, cy, cr, x0, y0, x1, y1, line_offsets, p, out) -> int:
+    """Bench detections (rows DET_*) from support circles sorted by scan cs: pairs of one scan bench_min_length
+    to bench_max_length apart (p: FeatureParams.kernel_vector) with a line whose middle lies between them within
+    0.4 m of their axis and that runs along it."""
+    dmin = p[FP_BENCH_MIN_LENGTH]
+    dmax = p[FP_BENCH_MAX_LENGTH]
     n = 0
     m = cs.shape[0]
     for u in range(m):

@@ -186,7 +186,7 @@ def leg_probabilities(
     Segments outside candidate_mask get 0."""
     from . import leg_features as LF
     from . import leg_forest
-    from . import threads as T
+    from . import threads as TH
 
     ranges, angles, cos_a, sin_a, start, end, offsets = _scan_inputs(ranges, angles, seg_start, seg_end, seg_offsets)
     lo, hi = _limits(range_min, range_max)
@@ -198,9 +198,9 @@ def leg_probabilities(
         rules = (lo, hi, RADIUS_CLIP, OCCLUSION_MARGIN, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS)
         args = (beams, (start, end, offsets), rules, model._kernel_args(), feats, out)
         N = len(ranges)
-        threads = T.for_scans(threads, N)
+        threads = TH.for_scans(threads, N)
         if threads > 1:
-            with T.numba_threads(threads):
+            with TH.numba_threads(threads):
                 leg_forest.block_probabilities_parallel(ranges, min(N, 4 * threads), *args)
         else:
             leg_forest.block_probabilities(ranges, *args)

@@ -21,6 +21,12 @@ import numpy as np
 
 from ..base.bounds import D_MAX, NO_SENSE, SHARE, Section, features_combined, param
 from ..base.bounds import bound as _b
+from .feature_layout import FEATURE_PARAMS
+
+_EVERY_SMALL_SEGMENT = (
+    "every single-line segment small enough to be a circle gets the HTC and keeps the better fit, whatever its "
+    "extent and radius (docs/method.md §5.2)"
+)
 
 
 @dataclass(frozen=True)
@@ -30,7 +36,9 @@ class FeatureParams(Section):
     name: ClassVar[str] = "features"
     removed: ClassVar[dict[str, str]] = {
         "leg_min_probability": "every cluster the leg detector scores above 0 is listed with its probability, and "
-        "the leg threshold is the leg model's own (threshold_p)"
+        "the leg threshold is the leg model's own (threshold_p)",
+        "circle_check_extent": _EVERY_SMALL_SEGMENT,
+        "circle_check_radius": _EVERY_SMALL_SEGMENT,
     }
     renamed: ClassVar[dict[str, str]] = {
         "leg_radius_max": "column_radius_min (circles larger than it are column candidates; the largest leg is "
@@ -100,12 +108,6 @@ class FeatureParams(Section):
         "A point votes for a centre when | |p - c| - r | is at most this.",
     )
     circle_min_points: int = param(3, _b(1, 10_000, "points", integer=True), "A circle has at least this many points.")
-    circle_check_extent: float = param(
-        0.35, _b(0, 10, "m", open_=True), "A one-line segment shorter than this also gets the HTC (legs) ..."
-    )
-    circle_check_radius: float = param(
-        0.15, _b(0, 5, "m", open_=True), "... and is a circle only with a radius up to this."
-    )
     circle_min_sagitta: float = param(
         0.02, _b(0, 1, "m", open_=True), "An arc bulges this much towards the scanner (P_near against the chord)."
     )
@@ -167,32 +169,12 @@ class FeatureParams(Section):
         features_combined(params, where)
 
     def kernel_vector(self) -> np.ndarray:
-        """The parameters in the order the feature kernels read them, feature_layout.P_* (radians where needed)."""
+        """The parameters as the feature kernels read them: one float64 vector indexed by feature_layout.FP_* (in
+        the order of feature_layout.FEATURE_PARAMS; units as the fields, but radians for the keys in degrees)."""
         return np.array(
             [
-                self.c0,
-                self.min_points,
-                np.radians(self.theta_resolution),
-                self.rho_resolution,
-                np.radians(self.vote_window),
-                self.line_min_points,
-                self.line_min_racc,
-                self.line_min_length,
-                np.radians(self.perpendicular_tolerance),
-                self.circle_radius_min,
-                self.circle_radius_max,
-                self.circle_radius_step,
-                self.circle_cell,
-                self.circle_window,
-                self.circle_tolerance,
-                self.circle_min_points,
-                self.circle_check_extent,
-                self.circle_min_sagitta,
-                self.circle_check_radius,
-                self.circle_min_coverage,
-                self.circle_residual_ratio,
-                self.circle_radius_margin,
-                self.circle_lines_ratio,
+                np.radians(getattr(self, key)) if conversion == "radians" else getattr(self, key)
+                for key, conversion in FEATURE_PARAMS
             ],
             np.float64,
         )

@@ -19,20 +19,33 @@ from .feature_layout import (
     B_SIZE,
     B_X,
     B_Y,
-    C_FIRST,
-    C_LAST,
-    C_N,
-    C_R,
-    C_RACC,
-    C_SCAN,
-    C_SEG,
-    C_X,
-    C_Y,
     CC_N,
     CC_R,
     CC_RACC,
     CC_X,
     CC_Y,
+    CR_FIRST,
+    CR_LAST,
+    CR_N,
+    CR_R,
+    CR_RACC,
+    CR_SCAN,
+    CR_SEG,
+    CR_X,
+    CR_Y,
+    FP_C0,
+    FP_CIRCLE_CELL,
+    FP_CIRCLE_MIN_POINTS,
+    FP_CIRCLE_RADIUS_MAX,
+    FP_CIRCLE_TOLERANCE,
+    FP_CIRCLE_WINDOW,
+    FP_LINE_MIN_LENGTH,
+    FP_LINE_MIN_POINTS,
+    FP_LINE_MIN_RACC,
+    FP_MIN_POINTS,
+    FP_PERPENDICULAR_TOLERANCE,
+    FP_RHO_RESOLUTION,
+    FP_VOTE_WINDOW,
     L_FIRST,
     L_LAST,
     L_LEN,
@@ -59,19 +72,6 @@ from .feature_layout import (
     LC_Y0,
     LC_Y1,
     MAX_SUB,
-    P_C0,
-    P_CELL,
-    P_CIRCLE_MIN_POINTS,
-    P_CTOL,
-    P_CWINDOW,
-    P_LINE_MIN_LENGTH,
-    P_LINE_MIN_POINTS,
-    P_LINE_MIN_RACC,
-    P_MIN_POINTS,
-    P_PERP_TOL,
-    P_R_MAX,
-    P_RHO_RES,
-    P_WINDOW,
 )
 from .hough_circles import circle_of_run, circle_posed
 from .hough_lines import _bounding_box, line_of_run, line_subsegments, normal_cells
@@ -109,7 +109,7 @@ def scan_work(p, nt, B, range_max):
     acc is not zeroed here: extract_scan zeroes the part a segment needs the first time (a few % of it in
     practice; zeroed[0]: how many flat cells of acc are zero)."""
     diag = 2.0 * min(range_max, 100.0)
-    w = int(round(p[P_CWINDOW] / p[P_CELL]))
+    w = int(round(p[FP_CIRCLE_WINDOW] / p[FP_CIRCLE_CELL]))
     return (
         np.empty(12),
         np.empty(nt),
@@ -123,7 +123,7 @@ def scan_work(p, nt, B, range_max):
         np.empty((B, 3), np.int64),
         np.empty(4),
         np.zeros(1, np.int64),
-        np.empty((nt, int(diag / p[P_RHO_RES]) + 3), np.int32),
+        np.empty((nt, int(diag / p[FP_RHO_RESOLUTION]) + 3), np.int32),
         np.zeros((2 * w + 1, 2 * w + 1), np.int32),
         np.empty(B, np.int64),
         np.empty(MAX_SUB, np.int64),
@@ -166,7 +166,7 @@ def _circle_case(x, y, s, e, p, ncand, cand, cidx):
     ext = np.hypot(x[e - 1] - x[s], y[e - 1] - y[s])
     try_circle = False
     leg_only = False
-    if ext <= 2.0 * p[P_R_MAX] + 2.0 * p[P_CTOL]:
+    if ext <= 2.0 * p[FP_CIRCLE_RADIUS_MAX] + 2.0 * p[FP_CIRCLE_TOLERANCE]:
         if ncand == 0:
             try_circle = True
         elif ncand == 1:
@@ -175,13 +175,13 @@ def _circle_case(x, y, s, e, p, ncand, cand, cidx):
             # away, or a column's arc, is a shallow arc that HTL can take for a line with r_acc > 0.5)
             try_circle = True
             leg_only = (
-                cand[cidx[0], LC_PEAK_RACC] >= p[P_LINE_MIN_RACC]
+                cand[cidx[0], LC_PEAK_RACC] >= p[FP_LINE_MIN_RACC]
             )  # not the paper's case: no circle keeps the line
         elif ncand == 2:
             # two non-perpendicular lines: the paper's case; two perpendicular ones may be a box's corner
             # or an arc cut in two halves (a column seen whole): the better fit decides, lines on a tie
             try_circle = True
-            leg_only = _perpendicular(cand[cidx[0], LC_THETA], cand[cidx[1], LC_THETA], p[P_PERP_TOL])
+            leg_only = _perpendicular(cand[cidx[0], LC_THETA], cand[cidx[1], LC_THETA], p[FP_PERPENDICULAR_TOLERANCE])
         else:
             convex = 0
             for q in range(ncand - 1):
@@ -218,8 +218,8 @@ def _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha) -> bool:
     ncand HTL lines (r_acc htl_racc together), holds like a line must (r_acc above line_min_racc) and is a
     well-posed arc (circle_posed; dalpha: the scan's angle step, rad)."""
     _, _, _, _, _, cand, _, cidx, cout, hist, _, _, _, cacc, idx, _, _ = work
-    min_racc = p[P_LINE_MIN_RACC]
-    if e - s >= p[P_CIRCLE_MIN_POINTS]:
+    min_racc = p[FP_LINE_MIN_RACC]
+    if e - s >= p[FP_CIRCLE_MIN_POINTS]:
         circle_of_run(x, y, s, e, p, cacc, idx, cout, max(htl_racc, min_racc))
     else:
         cout[CC_RACC] = 0.0
@@ -230,23 +230,23 @@ def _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha) -> bool:
     # idx[:n] still holds the points circle_of_run fitted
     return (
         cout[CC_RACC] > max(htl_racc, min_racc)
-        and cout[CC_N] >= p[P_CIRCLE_MIN_POINTS]
+        and cout[CC_N] >= p[FP_CIRCLE_MIN_POINTS]
         and circle_posed(x, y, idx, int(cout[CC_N]), cout[CC_X], cout[CC_Y], cout[CC_R], p, dalpha, lines_rss)
     )
 
 
 @njit(cache=True, inline="always")
 def _circle_row(row, scan, g, s, e, cout) -> None:
-    """A circle row (C_*) of segment g ([s, e)) of scan `scan` from the circle candidate cout (CC_*)."""
-    row[C_SCAN] = scan
-    row[C_SEG] = g
-    row[C_FIRST] = s
-    row[C_LAST] = e - 1
-    row[C_N] = cout[CC_N]
-    row[C_X] = cout[CC_X]
-    row[C_Y] = cout[CC_Y]
-    row[C_R] = cout[CC_R]
-    row[C_RACC] = cout[CC_RACC]
+    """A circle row (CR_*) of segment g ([s, e)) of scan `scan` from the circle candidate cout (CC_*)."""
+    row[CR_SCAN] = scan
+    row[CR_SEG] = g
+    row[CR_FIRST] = s
+    row[CR_LAST] = e - 1
+    row[CR_N] = cout[CC_N]
+    row[CR_X] = cout[CC_X]
+    row[CR_Y] = cout[CC_Y]
+    row[CR_R] = cout[CC_R]
+    row[CR_RACC] = cout[CC_RACC]
 
 
 @njit(cache=True, inline="always")
@@ -308,12 +308,12 @@ def extract_scan(x, y, segs, scan, p, trig, work, rows, counts, dalpha=0.0):
     nl, nc, nb = counts
     lo, toff, cell, touched, peaks, cand, kept, cidx, cout, hist, box, zeroed, acc, _, idx, sub_s, sub_e = work
     cos_t, sin_t = trig
-    rho_res = p[P_RHO_RES]
-    min_pts = p[P_LINE_MIN_POINTS]
-    min_racc = p[P_LINE_MIN_RACC]
-    min_len = p[P_LINE_MIN_LENGTH]
+    rho_res = p[FP_RHO_RESOLUTION]
+    min_pts = p[FP_LINE_MIN_POINTS]
+    min_racc = p[FP_LINE_MIN_RACC]
+    min_len = p[FP_LINE_MIN_LENGTH]
     nt = cos_t.shape[0]
-    kwin = int(p[P_WINDOW] / (np.pi / nt))
+    kwin = int(p[FP_VOTE_WINDOW] / (np.pi / nt))
     tstep = np.pi / nt
     for g in range(nseg):
         s = starts[g]
@@ -388,7 +388,7 @@ def extract_scans(ranges, k0, k1, setup, out, given):
     starts = np.empty(B + 1, np.int64)
     ends = np.empty(B + 1, np.int64)
     work = scan_work(p, cos_t.shape[0], B, range_max)
-    min_points = int(p[P_MIN_POINTS])
+    min_points = int(p[FP_MIN_POINTS])
     use_given = given_offsets.shape[0] == N + 1
     dalpha = np.arccos(min(max(cos_inc, -1.0), 1.0))  # the angle step, for circle_posed
     trig = (cos_t, sin_t)
@@ -405,7 +405,7 @@ def extract_scans(ranges, k0, k1, setup, out, given):
                     ends[nseg] = b
                     nseg += 1
         else:
-            nseg = segment_scan(r, cos_inc, p[P_C0], c1, range_min, range_max, min_points, starts, ends)
+            nseg = segment_scan(r, cos_inc, p[FP_C0], c1, range_min, range_max, min_points, starts, ends)
         base = k * B
         for g in range(nseg):
             seg_out[base + g, 0] = starts[g]

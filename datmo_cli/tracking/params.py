@@ -25,8 +25,9 @@ class TrackingParams(Section):
     """The `[track]` table of a config file: parameters of `datmo track`."""
 
     name: ClassVar[str] = "track"
-    # fields the pipeline reads, not the tracking kernels (not in state.PARAM_NAMES)
-    not_in_kernels: ClassVar[tuple[str, ...]] = ("hindsight_lag",)
+    # numeric fields the Python around the tracking kernels reads, not the kernels (not in state.PARAM_NAMES):
+    # hindsight_lag (the pipeline's hold-back), free_space_scans (sizes the tracker's ring of kept scans)
+    not_in_kernels: ClassVar[tuple[str, ...]] = ("hindsight_lag", "free_space_scans")
     removed: ClassVar[dict[str, str]] = {
         "leg_probability": "the leg threshold is the leg model's own (threshold_p, chosen by datmo train-legs)",
         "moving_person_evidence": "a person's class no longer depends on its mobility (see person_evidence)",

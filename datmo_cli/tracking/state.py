@@ -48,64 +48,9 @@ TAIL = 52  # tail point i at columns TAIL + 2 i (x), TAIL + 2 i + 1 (y)
 N_FIXED = TAIL
 
 # ------------------------------------------------------------------------------------- parameter vector
-(
-    P_PROCESS_NOISE,
-    P_PERSON_PROCESS_NOISE,
-    P_MEASUREMENT_NOISE,
-    P_LEG_MEASUREMENT_NOISE,
-    P_INITIAL_SPEED_SIGMA,
-    P_GATE,
-    P_MAX_GATE_DISTANCE,
-    P_CONFIRM_HITS,
-    P_CONFIRM_WINDOW,
-    P_DELETE_AFTER,
-    P_DELETE_AFTER_OCCLUDED,
-    P_DELETE_AFTER_OUT_OF_VIEW,
-    P_REACQUIRE_SPEED,
-    P_REACQUIRE_DISTANCE,
-    P_OCCLUSION_MARGIN,
-    P_TENTATIVE_DELETE_AFTER,
-    P_D_MAX,
-    P_UNDEFINED_WINDOW,
-    P_MOVING_DISTANCE,
-    P_MOVING_SPEED,
-    P_MOVING_TIME,
-    P_STILL_TIME,
-    P_LEG_RADIUS_MAX,
-    P_LEG_BLOB_MAX,
-    P_STRIDE_MAX,
-    P_LEG_REACH,
-    P_LEG_BESIDE,
-    P_SPAWN_CLEARANCE,
-    P_STEP_MIN,
-    P_WALKING_AFTER,
-    P_STEP_MAX,
-    P_MERGE_DISTANCE,
-    P_MERGE_SPEED,
-    P_PERSON_VOTES,
-    P_LEG_EVIDENCE_RATE,
-    P_PERSON_EVIDENCE,
-    P_PERSON_MAINTAIN,
-    P_PERSON_PAIRS,
-    P_PERSON_COAST,
-    P_PERSON_RADIUS,
-    P_PERSON_EVIDENCE_UNFREE,
-    P_FREE_SPACE_SCANS,
-    P_FREE_SPACE_INTERVAL,
-    P_FREE_SPACE_MIN,
-    P_FREE_SPACE_SHARE,
-    P_RESTART_JUMP,
-    P_PERSON_HOLD,
-    P_BACKGROUND_SHIELD,
-    P_CARRIED_TRAVEL,
-    P_CARRIED_RADIUS,
-    P_BACKGROUND_TIME,
-    P_BACKGROUND_CELL,
-    P_BACKGROUND_EXTENT,
-    P_TAIL_LENGTH,
-) = range(54)
-N_PARAMS = 54
-P_LEG_THRESHOLD = N_PARAMS  # the leg model's threshold, appended by TrackingParams.kernel_vector
+# The [track] keys the tracking kernels read, in slot order (TrackingParams.kernel_vector); P_<KEY> is the slot
+# of <key>. tests/test_param_slots.py checks that every key has its slot, every slot is read by a kernel, and every
+# [track] key is here or listed as read elsewhere (TrackingParams.not_in_kernels).
 PARAM_NAMES = (
     "process_noise",
     "person_process_noise",
@@ -148,7 +93,6 @@ PARAM_NAMES = (
     "person_coast",
     "person_radius",
     "person_evidence_unfree",
-    "free_space_scans",
     "free_space_interval",
     "free_space_min",
     "free_space_share",
@@ -162,6 +106,69 @@ PARAM_NAMES = (
     "background_extent",
     "tail_length",
 )
+N_PARAMS = len(PARAM_NAMES)
+
+
+def _slot(key: str) -> int:
+    """The slot of [track] key `key` in the vector (a key not in PARAM_NAMES fails the import)."""
+    return PARAM_NAMES.index(key)
+
+
+P_PROCESS_NOISE = _slot("process_noise")
+P_PERSON_PROCESS_NOISE = _slot("person_process_noise")
+P_MEASUREMENT_NOISE = _slot("measurement_noise")
+P_LEG_MEASUREMENT_NOISE = _slot("leg_measurement_noise")
+P_INITIAL_SPEED_SIGMA = _slot("initial_speed_sigma")
+P_GATE = _slot("gate")
+P_MAX_GATE_DISTANCE = _slot("max_gate_distance")
+P_CONFIRM_HITS = _slot("confirm_hits")
+P_CONFIRM_WINDOW = _slot("confirm_window")
+P_DELETE_AFTER = _slot("delete_after")
+P_DELETE_AFTER_OCCLUDED = _slot("delete_after_occluded")
+P_DELETE_AFTER_OUT_OF_VIEW = _slot("delete_after_out_of_view")
+P_REACQUIRE_SPEED = _slot("reacquire_speed")
+P_REACQUIRE_DISTANCE = _slot("reacquire_distance")
+P_OCCLUSION_MARGIN = _slot("occlusion_margin")
+P_TENTATIVE_DELETE_AFTER = _slot("tentative_delete_after")
+P_D_MAX = _slot("d_max")
+P_UNDEFINED_WINDOW = _slot("undefined_window")
+P_MOVING_DISTANCE = _slot("moving_distance")
+P_MOVING_SPEED = _slot("moving_speed")
+P_MOVING_TIME = _slot("moving_time")
+P_STILL_TIME = _slot("still_time")
+P_LEG_RADIUS_MAX = _slot("leg_radius_max")
+P_LEG_BLOB_MAX = _slot("leg_blob_max")
+P_STRIDE_MAX = _slot("stride_max")
+P_LEG_REACH = _slot("leg_reach")
+P_LEG_BESIDE = _slot("leg_beside")
+P_SPAWN_CLEARANCE = _slot("spawn_clearance")
+P_STEP_MIN = _slot("step_min")
+P_WALKING_AFTER = _slot("walking_after")
+P_STEP_MAX = _slot("step_max")
+P_MERGE_DISTANCE = _slot("merge_distance")
+P_MERGE_SPEED = _slot("merge_speed")
+P_PERSON_VOTES = _slot("person_votes")
+P_LEG_EVIDENCE_RATE = _slot("leg_evidence_rate")
+P_PERSON_EVIDENCE = _slot("person_evidence")
+P_PERSON_MAINTAIN = _slot("person_maintain")
+P_PERSON_PAIRS = _slot("person_pairs")
+P_PERSON_COAST = _slot("person_coast")
+P_PERSON_RADIUS = _slot("person_radius")
+P_PERSON_EVIDENCE_UNFREE = _slot("person_evidence_unfree")
+P_FREE_SPACE_INTERVAL = _slot("free_space_interval")
+P_FREE_SPACE_MIN = _slot("free_space_min")
+P_FREE_SPACE_SHARE = _slot("free_space_share")
+P_RESTART_JUMP = _slot("restart_jump")
+P_PERSON_HOLD = _slot("person_hold")
+P_BACKGROUND_SHIELD = _slot("background_shield")
+P_CARRIED_TRAVEL = _slot("carried_travel")
+P_CARRIED_RADIUS = _slot("carried_radius")
+P_BACKGROUND_TIME = _slot("background_time")
+P_BACKGROUND_CELL = _slot("background_cell")
+P_BACKGROUND_EXTENT = _slot("background_extent")
+P_TAIL_LENGTH = _slot("tail_length")
+P_LEG_THRESHOLD = N_PARAMS  # the leg model's threshold, appended by TrackingParams.kernel_vector
+
 
 # ------------------------------------------------------------------------------------------- context
 (
