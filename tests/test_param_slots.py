@@ -35,9 +35,9 @@ FEATURES_ELSEWHERE = {
 
 # [track] keys that are not in the tracking kernels' vector, and where they are read
 TRACK_ELSEWHERE = {
-    "hindsight_lag": "stages.py",  # how long the tracking stage holds scans back (Python)
+    "hindsight_lag": "passes/stages.py",  # how long the tracking stage holds scans back (Python)
     "free_space_scans": "tracking/tracker.py",  # sizes the ring of kept scans the kernels are given
-    "ego_motion": "pipeline.py",  # a string: which odometry the tracking frame follows
+    "ego_motion": "passes/pipeline.py",  # a string: which odometry the tracking frame follows
 }
 
 # slots after a name table's keys that are no key of its section
