@@ -327,7 +327,7 @@ class LiveTracker:
         if self._stages is None:
             if pose is not None:
                 self._odometry = Odometry(np.zeros(1, np.int64), np.zeros(1), np.zeros(1), np.zeros(1))
-            self._stages = RunStages(self._odometry, self.config, markers=False)
+            self._stages = RunStages(self._odometry, self.geometry, self.config, markers=False)
         if (pose is None) != (self._odometry is None):
             raise InputError(
                 f"{self.name}: scan {self.scans} "

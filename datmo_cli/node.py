@@ -93,9 +93,8 @@ def retune_stages(stages, config: DatmoConfig) -> None:
     run_stages = stages.stages
     run_stages.config = config
     stream = run_stages.tracking
-    if stream is not None:
-        stream.params = stream.tracker.params = config.track
-        stream.tracker._prm = config.track.kernel_vector(stream.tracker.leg_threshold)
+    stream.params = stream.tracker.params = config.track
+    stream.tracker._prm = config.track.kernel_vector(stream.tracker.leg_threshold)
 
 
 @dataclass

@@ -66,7 +66,7 @@ class LiveFeed:
             angle_min=-math.pi / 2, angle_increment=math.pi / 360, n_beams=361, range_min=0.0, range_max=8.0
         )
         run = ScanRun(np.array([0, 100_000_000]), np.full((2, geometry.n_beams), 3.0, np.float32), geometry)
-        Stages(None, self.config).messages(run)
+        Stages(None, geometry, self.config).messages(run)
 
     def scan(self, stamp_ns: int, ranges: np.ndarray, geometry: ScanGeometry) -> None:
         if self.failure is not None:
@@ -124,9 +124,9 @@ class LiveFeed:
                     if stages is None:
                         stages = Stages(
                             cast("Odometry | None", self.odometry),  # a PoseBuffer serves as one: at, frame_id, len
+                            geometry,
                             self.config,
                             has_tf=self.odometry is not None,
-                            scan_frame=geometry.frame_id,
                         )
                     run.append(item)
                     last = (stamp, geometry)
