@@ -23,8 +23,9 @@ TARGETS = {"datmo run": 1.5, "datmo features": 1.6}
 
 def main() -> None:
     from datmo_cli.perception import threads
-    from datmo_cli.pipeline import process_file, warm_up
+    from datmo_cli.pipeline import process_file
     from datmo_cli.stage_files import features_file
+    from datmo_cli.warm import warm_up
 
     src = simulated_hall(N)
     warm_up()

@@ -13,7 +13,7 @@ numpy arrays or pandas DataFrames, run the pipeline on a log, and feed scans one
     LiveTracker(...)        .update(ranges, stamp_ns, pose=None): one scan in, the tracks after it out
     tune(logs, space, dir)  `datmo tune`: the setting of a space of parameters that scores best against ground truth
 
-    segment, extract_features, track, warm_up: `datmo segment`, `features`, `track`, `warm-up` (stage_files, pipeline)
+    segment, extract_features, track, warm_up: `datmo segment`, `features`, `track`, `warm-up` (stage_files, warm)
 
 Each of these is what its command runs: the command is its options, this call, and what it prints.
 
@@ -47,11 +47,11 @@ if TYPE_CHECKING:
     import pandas
 
     from .log.scan import ScanRun
-    from .pipeline import warm_up
     from .stage_files import features_file as extract_features
     from .stage_files import segment_file as segment
     from .stage_files import track_file as track
     from .tune import run_tune as tune
+    from .warm import warm_up
     from .workflows import Config
 
 __all__ = [
@@ -98,7 +98,7 @@ _LAZY = {
     "segment": ("stage_files", "segment_file"),  # datmo segment
     "extract_features": ("stage_files", "features_file"),  # datmo features
     "track": ("stage_files", "track_file"),  # datmo track
-    "warm_up": ("pipeline", "warm_up"),  # datmo warm-up
+    "warm_up": ("warm", "warm_up"),  # datmo warm-up
 }
 
 

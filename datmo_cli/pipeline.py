@@ -10,7 +10,6 @@ another, without intermediate files.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -43,125 +42,6 @@ def read_run_data(path: str | Path, *, keep_scans: bool = False, ground_truth: b
 
 
 # ------------------------------------------------------------------------------------------ datmo run
-
-
-def warm_up(progress: Callable[[int, int], None] | None = None) -> None:
-    """Compile every numba kernel of the pipeline in this process (or load it from numba's cache) on short
-    simulated runs of the hall (people, a platform, columns, benches, occlusions) and of the patrol scene
-    (odometry), before any input's clock starts and before worker processes start: they then inherit the
-    compiled kernels (fork) or find the cache complete (spawn), and never compile one kernel at once (a
-    first run after an install would otherwise have every worker writing the same cache files).
-    When the kernels are to be compiled and there is a second core, a helper process compiles the tracking
-    kernels (warm_tracking) while this one compiles the perception's first, then loads the helper's from the
-    cache (compiling itself any the helper has not finished; the helper is stopped at the end).
-    `progress(done, total)` follows its WARM_UP_STEPS steps."""
-    from .numba_runtime import prepare
-    from .perception.egomotion import odometry_for
-    from .sim.simulate import simulate_scene
-    from .stages import derive_features
-
-    prepare()
-    helper = _tracking_helper()
-    done = 0
-    if progress:
-        progress(done, WARM_UP_STEPS)
-
-    def step() -> None:
-        nonlocal done
-        done += 1
-        if progress:
-            progress(done, WARM_UP_STEPS)
-
-    try:
-        sims = []
-        for scene in ("hall", "patrol"):
-            sims.append(simulate_scene(scene, duration=8.0))
-            step()
-        derive_features(sims[0].run, odometry=sims[0].odometry)  # the perception first (the helper: the tracking)
-        step()
-        odometry_for(sims[1].run, None, "on")  # scan matching, for logs without odometry
-        step()
-        for sim in sims:
-            derive(sim.run, sim.odometry, markers=True)  # the markers' kernels too (--markers, the live view)
-            step()
-    finally:
-        if helper is not None:
-            helper.kill()  # numba writes a cache file whole (a temporary file renamed): none is left half-written
-            helper.wait()
-
-
-WARM_UP_STEPS = 6  # warm_up's steps: each scene simulated; the hall's perception; scan matching; each scene's stages
-
-
-def _tracking_helper():
-    """The process that compiles the tracking kernels beside warm_up (a subprocess.Popen running warm_tracking),
-    when the kernels look uncompiled and this process may use two cores or more; None otherwise (and in the
-    helper itself: DATMO_WARM_HELPER=0)."""
-    import os
-    import subprocess
-    import sys
-
-    from .numba_runtime import cache_looks_stale
-
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if cores < 2 or os.environ.get("DATMO_WARM_HELPER") == "0" or not cache_looks_stale():
-        return None
-    env = {**os.environ, "DATMO_COMPILE_NOTICE": "0", "DATMO_WARM_HELPER": "0"}
-    code = "from datmo_cli.pipeline import warm_tracking; warm_tracking()"
-    try:
-        return subprocess.Popen(
-            [sys.executable, "-c", code],
-            env=env,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-    except OSError:
-        return None
-
-
-def warm_tracking() -> None:
-    """Compile the tracking kernels (and the simulator's) without compiling the perception's: warm_up's runs
-    with every perception kernel run as plain Python (perception_in_python; the hall's 40 scans take seconds),
-    so the tracking is given the features it is given in warm_up and compiles the same kernels."""
-    from .numba_runtime import prepare
-    from .sim.simulate import simulate_scene
-
-    prepare()
-    with perception_in_python():
-        for scene in ("hall", "patrol"):
-            sim = simulate_scene(scene, duration=8.0)
-            derive(sim.run, sim.odometry, markers=True)
-
-
-@contextmanager
-def perception_in_python() -> Iterator[int]:
-    """In the block, every numba kernel of datmo_cli.perception is its plain Python function, wherever a datmo
-    module holds it (numba's compiled code is not used and nothing of the perception compiles); yields how many
-    names were replaced. Restored after."""
-    import importlib
-    import pkgutil
-    import sys
-
-    from numba.core.registry import CPUDispatcher
-
-    from . import feature_channels, perception, stages  # noqa: F401  (loaded, so their names are replaced too)
-
-    for info in pkgutil.iter_modules(perception.__path__):
-        importlib.import_module(f"{perception.__name__}.{info.name}")
-    replaced = []
-    for name, module in list(sys.modules.items()):
-        if module is None or not name.startswith("datmo_cli"):
-            continue
-        for key, value in list(vars(module).items()):
-            if isinstance(value, CPUDispatcher) and value.py_func.__module__.startswith("datmo_cli.perception"):
-                replaced.append((module, key, value))
-                setattr(module, key, value.py_func)
-    try:
-        yield len(replaced)
-    finally:
-        for module, key, value in replaced:
-            setattr(module, key, value)
 
 
 def estimated_odometry(run, odometry, mode: str) -> tuple:

@@ -13,7 +13,7 @@ import pytest
 import synthetic_logs
 from click.testing import CliRunner
 
-from datmo_cli import batch, pipeline
+from datmo_cli import batch, pipeline, warm
 from datmo_cli.cli import cli
 from datmo_cli.errors import InputError
 
@@ -62,7 +62,7 @@ CALLS: list[str] = []
 @pytest.fixture
 def logs(tmp_path, monkeypatch):
     monkeypatch.setattr(pipeline, "process_file", fake_process)
-    monkeypatch.setattr(pipeline, "warm_up", lambda: None)  # the stand-in needs no kernels
+    monkeypatch.setattr(warm, "warm_up", lambda *_a, **_k: None)  # the stand-in needs no kernels
     CALLS.clear()
     d = tmp_path / "logs"
     (d / "site" / "day2").mkdir(parents=True)

@@ -180,13 +180,13 @@ def test_warm_up_says_it_compiled_when_the_cache_was_stale(monkeypatch):
     """The command line's first step says the line; the command still knows it compiled (not 'loaded')."""
     from click.testing import CliRunner
 
-    from datmo_cli import numba_runtime, pipeline
+    from datmo_cli import numba_runtime, warm
     from datmo_cli.cli import cli
 
     steps = []
     monkeypatch.setattr(numba_runtime, "cache_looks_stale", lambda: True)
     monkeypatch.setattr(numba_runtime, "_SAID", False)
-    monkeypatch.setattr(pipeline, "warm_up", lambda progress=None: steps.append(progress))
+    monkeypatch.setattr(warm, "warm_up", lambda progress=None: steps.append(progress))
     result = CliRunner().invoke(cli, ["warm-up"])
     assert result.exit_code == 0, result.output
     assert "compiled the numba kernels in" in result.output and len(steps) == 1
@@ -197,7 +197,7 @@ def test_a_first_run_in_one_process_compiles_only_the_kernels_it_runs(monkeypatc
     scan matching, the markers, the patrol scene) when the cache looks stale: the run compiles what it runs."""
     from click.testing import CliRunner
 
-    from datmo_cli import numba_runtime, pipeline
+    from datmo_cli import numba_runtime, warm
     from datmo_cli.cli import cli
 
     log = tmp_path / "one.mcap"
@@ -205,7 +205,7 @@ def test_a_first_run_in_one_process_compiles_only_the_kernels_it_runs(monkeypatc
     warmed = []
     monkeypatch.setattr(numba_runtime, "cache_looks_stale", lambda: True)
     monkeypatch.setattr(numba_runtime, "_SAID", False)
-    monkeypatch.setattr(pipeline, "warm_up", lambda progress=None: warmed.append(progress))
+    monkeypatch.setattr(warm, "warm_up", lambda progress=None: warmed.append(progress))
     result = CliRunner().invoke(cli, ["run", str(log), "-o", str(tmp_path / "out"), "--no-report"])
     assert result.exit_code == 0, result.output
     assert warmed == [] and (tmp_path / "out" / "one.mcap").is_file()

@@ -21,7 +21,7 @@ from click.testing import CliRunner
 from fuzzing import tally
 from test_batch import CALLS, fake_process
 
-from datmo_cli import batch, pipeline
+from datmo_cli import batch, pipeline, warm
 from datmo_cli.cli import cli
 from datmo_cli.errors import DatmoError, InputError, OutputError
 from datmo_cli.plot_files import plot_paths
@@ -32,7 +32,7 @@ pytestmark = [pytest.mark.cli, pytest.mark.timeout(300)]
 @pytest.fixture
 def logs(tmp_path, monkeypatch):
     monkeypatch.setattr(pipeline, "process_file", fake_process)
-    monkeypatch.setattr(pipeline, "warm_up", lambda *_a, **_k: None)
+    monkeypatch.setattr(warm, "warm_up", lambda *_a, **_k: None)
     CALLS.clear()
     d = tmp_path / "logs"
     (d / "site").mkdir(parents=True)
@@ -282,14 +282,14 @@ def test_jobs_says_the_processes_it_started(logs, tmp_path):
 WORKERS_SCRIPT = """
 import os, sys, time
 sys.path[:0] = [{root!r}, {tests!r}]
-from datmo_cli import batch, pipeline
+from datmo_cli import batch, pipeline, warm
 
 def stuck(src, out, **kw):
     open(os.path.join({pids!r}, str(os.getpid())), "w").close()
     time.sleep(600)
 
 pipeline.process_file = stuck
-pipeline.warm_up = lambda *_a, **_k: None
+warm.warm_up = lambda *_a, **_k: None
 plan = batch.prepare([{a!r}, {b!r}], {out!r})
 batch.run_many(plan, batch.LocalExecutor(2))
 """

@@ -22,8 +22,8 @@ def command() -> None:
     import time
 
     from ..numba_runtime import cache_looks_stale, say_compiling
-    from ..pipeline import warm_up
     from ..progress import bar, say
+    from ..warm import warm_up
 
     t0 = time.perf_counter()
     compiled = cache_looks_stale()  # before anything is compiled
