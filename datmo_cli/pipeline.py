@@ -1,8 +1,9 @@
 """`datmo run`'s stages over a log, and reading processed logs for the plot.
 
-`RunStages` is `datmo run`'s one pass (segmentation, features, tracking) over each block of a streamed log;
-`process_file` runs it over a file, `derive` over a run held in memory. The stage commands' passes (`track_file`,
-`features_file`, `segment_file`) are in stage_files. They all write their channels through
+`RunStages` is `datmo run`'s one pass (segmentation, features, tracking) over each block of a streamed log, a
+block's path read in `RunStages.step`: perceive, track, give (its channels, and the report fed from the same
+arrays); `process_file` runs it over a file, `derive` over a run held in memory. The stage commands' passes
+(`track_file`, `features_file`, `segment_file`) are in stage_files. They all write their channels through
 streaming.write_derived, so `datmo run`'s output holds the same payloads as the three stages run one after
 another, without intermediate files.
 """
