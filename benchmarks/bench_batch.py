@@ -48,8 +48,8 @@ def local_batch(inputs: list[str], tmp: Path) -> tuple[float, int]:
     import sys
 
     code = (
-        "import json, sys; from pathlib import Path; from datmo_cli.batch import LocalExecutor, ensure_warm; "
-        "from benchmarks.bench_batch import time_batch; ensure_warm(); "
+        "import json, sys; from pathlib import Path; from datmo_cli.batch import LocalExecutor; "
+        "from datmo_cli.passes.warm import warm_up; from benchmarks.bench_batch import time_batch; warm_up(); "
         "print(json.dumps(time_batch(sys.argv[1:], LocalExecutor(1), Path(sys.argv[1]).parent)))"
     )
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
@@ -82,10 +82,10 @@ def noop_round_trip(executor, n: int = 50) -> float:
 
 
 def main() -> None:
-    from datmo_cli.batch import ensure_warm
     from datmo_cli.batch.cluster import DaskExecutor
+    from datmo_cli.passes.warm import warm_up
 
-    ensure_warm()
+    warm_up()
     best = {"local": float("inf"), 1: float("inf"), 2: float("inf")}
     started, executors, scans, busy = {}, {}, 0, {}
     with tempfile.TemporaryDirectory() as tmp_name:

@@ -46,8 +46,12 @@ REPEAT = 2  # timed processes of each code and command, interleaved
 TIMED = """
 import sys, time
 from datmo_cli.perception.threads import set_default
-from datmo_cli.passes.pipeline import process_file, warm_up
+from datmo_cli.passes.pipeline import process_file
 from datmo_cli.passes.stage_files import features_file
+try:
+    from datmo_cli.passes.warm import warm_up
+except ImportError:  # a tree from before datmo_cli.passes.warm (BASELINE)
+    from datmo_cli.passes.pipeline import warm_up
 warm_up()
 set_default(1)
 command, src, out = sys.argv[1:4]
@@ -175,8 +179,9 @@ def intel_sizes(tmp: Path) -> list[str]:
 
 
 def main() -> None:
-    from datmo_cli.passes.pipeline import process_file, warm_up
+    from datmo_cli.passes.pipeline import process_file
     from datmo_cli.passes.stage_files import features_file
+    from datmo_cli.passes.warm import warm_up
     from datmo_cli.perception.threads import set_default
 
     n = 20_000

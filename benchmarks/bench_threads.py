@@ -22,8 +22,9 @@ TARGETS = {"datmo run": 1.5, "datmo features": 1.6}
 
 
 def main() -> None:
-    from datmo_cli.passes.pipeline import process_file, warm_up
+    from datmo_cli.passes.pipeline import process_file
     from datmo_cli.passes.stage_files import features_file
+    from datmo_cli.passes.warm import warm_up
     from datmo_cli.perception import threads
 
     src = simulated_hall(N)

@@ -13,7 +13,7 @@ numpy arrays or pandas DataFrames, run the pipeline on a log, and feed scans one
     LiveTracker(...)        .update(ranges, stamp_ns, pose=None): one scan in, the tracks after it out
     tune(logs, space, dir)  `datmo tune`: the setting of a space of parameters that scores best against ground truth
 
-    segment, extract_features, track, warm_up: `datmo segment`, `features`, `track`, `warm-up` (stage_files, pipeline)
+    segment, extract_features, track, warm_up: `datmo segment`, `features`, `track`, `warm-up` (stage_files, warm)
 
 Each of these is what its command runs: the command is its options, this call, and what it prints.
 
@@ -47,10 +47,10 @@ if TYPE_CHECKING:
     import pandas
 
     from .logs.scan import ScanRun
-    from .passes.pipeline import warm_up
     from .passes.stage_files import features_file as extract_features
     from .passes.stage_files import segment_file as segment
     from .passes.stage_files import track_file as track
+    from .passes.warm import warm_up
     from .tune import run_tune as tune
     from .workflows import Config
 
@@ -98,7 +98,7 @@ _LAZY = {
     "segment": ("passes.stage_files", "segment_file"),  # datmo segment
     "extract_features": ("passes.stage_files", "features_file"),  # datmo features
     "track": ("passes.stage_files", "track_file"),  # datmo track
-    "warm_up": ("passes.pipeline", "warm_up"),  # datmo warm-up
+    "warm_up": ("passes.warm", "warm_up"),  # datmo warm-up
 }
 
 
@@ -327,7 +327,7 @@ class LiveTracker:
         if self._stages is None:
             if pose is not None:
                 self._odometry = Odometry(np.zeros(1, np.int64), np.zeros(1), np.zeros(1), np.zeros(1))
-            self._stages = RunStages(self._odometry, self.config, markers=False)
+            self._stages = RunStages(self._odometry, self.geometry, self.config, markers=False)
         if (pose is None) != (self._odometry is None):
             raise InputError(
                 f"{self.name}: scan {self.scans} "

@@ -12,7 +12,7 @@ from hypothesis import settings
 # stale, as it does in a fresh clone while the first tests compile the kernels: not in the tests' outputs
 # (their subprocesses inherit this). tests/test_compiling_notice.py turns it on where it checks it.
 os.environ["DATMO_COMPILE_NOTICE"] = "0"
-os.environ["DATMO_WARM_HELPER"] = "0"  # no second compiling process beside each xdist worker's (pipeline.warm_up)
+os.environ["DATMO_WARM_HELPER"] = "0"  # no second compiling process beside each xdist worker's (warm.warm_up)
 
 # CI reruns the same examples every time (a red build is reproducible); elsewhere hypothesis explores anew.
 settings.register_profile("ci", derandomize=True, print_blob=True)

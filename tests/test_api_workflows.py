@@ -152,7 +152,7 @@ def test_a_recording_stops_when_asked_and_refuses_what_the_command_refuses(tmp_p
 
 
 def test_the_other_commands_calls_are_theirs_not_copies():
-    from datmo_cli.passes import pipeline, stage_files
+    from datmo_cli.passes import stage_files, warm
     from datmo_cli.tune import run_tune
 
     assert api.tune is run_tune
@@ -161,7 +161,7 @@ def test_the_other_commands_calls_are_theirs_not_copies():
         stage_files.features_file,
         stage_files.track_file,
     )
-    assert api.warm_up is pipeline.warm_up
+    assert api.warm_up is warm.warm_up
     assert set(api.__all__) >= {"run_batch", "report", "evaluate", "record", "Recording", "tune", "track"}
     with pytest.raises(AttributeError, match="no attribute 'nothing'"):
         api.nothing  # noqa: B018

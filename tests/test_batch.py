@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from datmo_cli import batch
 from datmo_cli.base.errors import InputError
 from datmo_cli.cli import cli
-from datmo_cli.passes import pipeline
+from datmo_cli.passes import pipeline, warm
 
 pytestmark = pytest.mark.cli
 
@@ -63,7 +63,7 @@ CALLS: list[str] = []
 @pytest.fixture
 def logs(tmp_path, monkeypatch):
     monkeypatch.setattr(pipeline, "process_file", fake_process)
-    monkeypatch.setattr(pipeline, "warm_up", lambda: None)  # the stand-in needs no kernels
+    monkeypatch.setattr(warm, "warm_up", lambda *_a, **_k: None)  # the stand-in needs no kernels
     CALLS.clear()
     d = tmp_path / "logs"
     (d / "site" / "day2").mkdir(parents=True)

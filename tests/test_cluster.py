@@ -95,9 +95,9 @@ class Cluster:
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
-    from datmo_cli.batch import ensure_warm
+    from datmo_cli.passes.warm import warm_up
 
-    ensure_warm()  # the numba cache complete before the workers load it (a fresh clone compiles here, once)
+    warm_up()  # the numba cache complete before the workers load it (a fresh clone compiles here, once)
     c = Cluster(tmp_path_factory.mktemp("dask"))
     try:
         for name in ("w0", "w1"):

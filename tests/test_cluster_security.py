@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from test_batch import CALLS, fake_process
 
 from datmo_cli.cli import cli
-from datmo_cli.passes import pipeline
+from datmo_cli.passes import pipeline, warm
 
 distributed = pytest.importorskip("distributed")
 pytest.importorskip("cryptography")
@@ -138,7 +138,7 @@ def tls_scheduler(tmp_path, monkeypatch):
     from distributed.security import Security
 
     monkeypatch.setattr(pipeline, "process_file", fake_process)
-    monkeypatch.setattr(pipeline, "warm_up", lambda: None)
+    monkeypatch.setattr(warm, "warm_up", lambda *_a, **_k: None)
     CALLS.clear()
     sec = Security.temporary()
     pem = {"ca": sec.tls_ca_file, "cert": sec.tls_client_cert, "key": sec.tls_client_key}

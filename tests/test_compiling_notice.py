@@ -183,12 +183,12 @@ def test_warm_up_says_it_compiled_when_the_cache_was_stale(monkeypatch):
 
     from datmo_cli.base import numba_runtime
     from datmo_cli.cli import cli
-    from datmo_cli.passes import pipeline
+    from datmo_cli.passes import warm
 
     steps = []
     monkeypatch.setattr(numba_runtime, "cache_looks_stale", lambda: True)
     monkeypatch.setattr(numba_runtime, "_SAID", False)
-    monkeypatch.setattr(pipeline, "warm_up", lambda progress=None: steps.append(progress))
+    monkeypatch.setattr(warm, "warm_up", lambda progress=None: steps.append(progress))
     result = CliRunner().invoke(cli, ["warm-up"])
     assert result.exit_code == 0, result.output
     assert "compiled the numba kernels in" in result.output and len(steps) == 1
@@ -201,14 +201,14 @@ def test_a_first_run_in_one_process_compiles_only_the_kernels_it_runs(monkeypatc
 
     from datmo_cli.base import numba_runtime
     from datmo_cli.cli import cli
-    from datmo_cli.passes import pipeline
+    from datmo_cli.passes import warm
 
     log = tmp_path / "one.mcap"
     assert CliRunner().invoke(cli, ["simulate", "--scene", "hall", "--duration", "0.2", "-o", str(log)]).exit_code == 0
     warmed = []
     monkeypatch.setattr(numba_runtime, "cache_looks_stale", lambda: True)
     monkeypatch.setattr(numba_runtime, "_SAID", False)
-    monkeypatch.setattr(pipeline, "warm_up", lambda progress=None: warmed.append(progress))
+    monkeypatch.setattr(warm, "warm_up", lambda progress=None: warmed.append(progress))
     result = CliRunner().invoke(cli, ["run", str(log), "-o", str(tmp_path / "out"), "--no-report"])
     assert result.exit_code == 0, result.output
     assert warmed == [] and (tmp_path / "out" / "one.mcap").is_file()

@@ -42,7 +42,7 @@ SIMD_MATH = {
     "cbrt",
 }
 # modules whose results never reach a datmo output (plots, scoring against ground truth, the training tables)
-NOT_OUTPUTS = ("plot.py", "plot_files.py", "evaluate/", "perception/training/", "report/")
+NOT_OUTPUTS = ("evaluate/", "perception/training/", "report/")
 KERNEL_DECORATORS = {"njit", "jit", "vectorize", "guvectorize", "stencil"}
 # BLAS and LAPACK (numpy's and numba's both call them) choose their code, FMA or not, by the CPU: anywhere
 BLAS = {"dot", "matmul", "inner", "vdot", "einsum", "tensordot", "linalg"}

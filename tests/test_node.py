@@ -418,7 +418,7 @@ def test_dds_types_encode_as_datmo_writes_to_mcap(tmp_path):
     from datmo_cli.ros2.node import published_topics
 
     run = mcapio.read_run(HALL).slice(0, 8)
-    derived = live.Stages(None, None, has_tf=True).messages(run)
+    derived = live.Stages(None, run.geometry, has_tf=True).messages(run)
     topics = published_topics()
     assert {m.topic for m in derived} == set(topics)
     for m in derived:

@@ -24,7 +24,7 @@ def test_a_live_parameter_changes_the_running_tracker():
     run = mcapio.read_run(HALL).slice(0, 160)
 
     def dynamic_after(config: DatmoConfig) -> int:
-        stages = live.Stages(None, DatmoConfig(), has_tf=False)
+        stages = live.Stages(None, run.geometry, DatmoConfig(), has_tf=False)
         count = 0
         for i in range(0, 160, 20):
             if i == 80:

@@ -1,5 +1,5 @@
 """numba keys a cached kernel on its own file only; datmo's kernels also compile in constants and kernels of other
-files (tracking/state.py's indices, logs/vocabulary.s codes from msg/*.msg, other modules' kernels). Their cache
+files (tracking/state.py's indices, logs/vocabulary's codes from msg/*.msg, other modules' kernels). Their cache
 stamp covers every such file (numba_runtime.KERNEL_SOURCES), so an edit to state.py alone recompiles
 tracking/_kernels.py's kernels instead of loading code built on the old indices."""
 
@@ -34,7 +34,7 @@ def test_a_datmo_kernels_cache_stamp_covers_the_files_it_reads():
 
 
 def test_the_stamp_changes_when_a_file_a_kernel_reads_changes(tmp_path):
-    package = Path(numba_runtime.__file__).parent
+    package = Path(numba_runtime.__file__).parent.parent
     copy = tmp_path / "datmo_cli"
     shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__"))
     before = numba_runtime.sources_stamp(str(copy))

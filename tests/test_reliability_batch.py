@@ -24,7 +24,7 @@ from test_batch import CALLS, fake_process
 from datmo_cli import batch
 from datmo_cli.base.errors import DatmoError, InputError, OutputError
 from datmo_cli.cli import cli
-from datmo_cli.passes import pipeline
+from datmo_cli.passes import pipeline, warm
 from datmo_cli.report.plot_files import plot_paths
 
 pytestmark = [pytest.mark.cli, pytest.mark.timeout(300)]
@@ -33,7 +33,7 @@ pytestmark = [pytest.mark.cli, pytest.mark.timeout(300)]
 @pytest.fixture
 def logs(tmp_path, monkeypatch):
     monkeypatch.setattr(pipeline, "process_file", fake_process)
-    monkeypatch.setattr(pipeline, "warm_up", lambda *_a, **_k: None)
+    monkeypatch.setattr(warm, "warm_up", lambda *_a, **_k: None)
     CALLS.clear()
     d = tmp_path / "logs"
     (d / "site").mkdir(parents=True)
@@ -284,14 +284,14 @@ WORKERS_SCRIPT = """
 import os, sys, time
 sys.path[:0] = [{root!r}, {tests!r}]
 from datmo_cli import batch
-from datmo_cli.passes import pipeline
+from datmo_cli.passes import pipeline, warm
 
 def stuck(src, out, **kw):
     open(os.path.join({pids!r}, str(os.getpid())), "w").close()
     time.sleep(600)
 
 pipeline.process_file = stuck
-pipeline.warm_up = lambda *_a, **_k: None
+warm.warm_up = lambda *_a, **_k: None
 plan = batch.prepare([{a!r}, {b!r}], {out!r})
 batch.run_many(plan, batch.LocalExecutor(2))
 """

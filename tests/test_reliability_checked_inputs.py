@@ -22,10 +22,10 @@ pytestmark = pytest.mark.cli
 def fake_batch(tmp_path, monkeypatch):
     from test_batch import CALLS, fake_process
 
-    from datmo_cli.passes import pipeline
+    from datmo_cli.passes import pipeline, warm
 
     monkeypatch.setattr(pipeline, "process_file", fake_process)
-    monkeypatch.setattr(pipeline, "warm_up", lambda: None)
+    monkeypatch.setattr(warm, "warm_up", lambda *_a, **_k: None)
     CALLS.clear()
     logs = tmp_path / "logs"
     logs.mkdir()

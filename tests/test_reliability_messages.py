@@ -162,13 +162,13 @@ def test_a_full_disk_in_a_batch_names_the_output_not_the_input(tmp_path, monkeyp
     import errno
 
     from datmo_cli.base import outputs
-    from datmo_cli.passes import pipeline
+    from datmo_cli.passes import pipeline, warm
 
     def full(src, out, **kw):
         raise outputs.os_error(OSError(errno.ENOSPC, "No space left on device"), out, "writing it")
 
     monkeypatch.setattr(pipeline, "process_file", full)
-    monkeypatch.setattr(pipeline, "warm_up", lambda: None)
+    monkeypatch.setattr(warm, "warm_up", lambda *_a, **_k: None)
     src = tmp_path / "in.mcap"
     src.write_bytes(b"a log")
     code, _, err = run_cli("run", src, "-o", tmp_path / "out", "--jobs", "1", "--no-report")

@@ -52,10 +52,10 @@ def dies_mid_write(src, out, **kwargs):
 def batch_of_one_death(tmp_path, monkeypatch):
     from test_batch import CALLS
 
-    from datmo_cli.passes import pipeline
+    from datmo_cli.passes import pipeline, warm
 
     monkeypatch.setattr(pipeline, "process_file", dies_mid_write)
-    monkeypatch.setattr(pipeline, "warm_up", lambda: None)
+    monkeypatch.setattr(warm, "warm_up", lambda *_a, **_k: None)
     CALLS.clear()
     logs = tmp_path / "logs"
     logs.mkdir()

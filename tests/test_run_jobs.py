@@ -131,9 +131,10 @@ def test_a_stopped_batch_kills_a_worker_that_does_not_end(monkeypatch, tmp_path)
     """Ctrl-C during a --jobs batch: a worker that does not end on SIGTERM (its exit blocked on a lock, or a
     handler that ignores it) is killed after STOP_GRACE; the batch does not hang (pytest-timeout would say so)."""
     from datmo_cli.batch import executors
+    from datmo_cli.passes import warm
 
     monkeypatch.setattr(executors, "STOP_GRACE", 0.5)
-    monkeypatch.setattr(executors, "ensure_warm", lambda: None)
+    monkeypatch.setattr(warm, "warm_up", lambda *_a, **_k: None)
 
     def on_record(line: dict) -> None:
         raise KeyboardInterrupt

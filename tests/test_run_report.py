@@ -107,3 +107,20 @@ def test_ego_motion_auto_reads_only_the_first_block(tmp_path, monkeypatch):
     odometry, estimated = streaming.stream_odometry(stream, "auto")
     assert odometry is None and not estimated  # the hall's scanner stands still
     assert read.count(mcapio.TOPIC_SCAN) <= EGO_SAMPLE_SCANS + 1  # the first block (and the scan after it)
+
+
+def test_the_report_is_fed_from_the_stages_arrays_not_from_decoded_payloads(tmp_path, monkeypatch):
+    """The run's report comes from the arrays the stages made (features, landmarks, tracks): no message is
+    decoded for it, and it equals `datmo report` on the output."""
+    from datmo_cli.logs import cdr
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a payload was decoded for the report")
+
+    log = sample_logs()[0]
+    with monkeypatch.context() as m:
+        m.setattr(cdr, "decode", refuse)
+        m.setattr(cdr, "decode_many", refuse)
+        printed = invoke("run", log, "-o", tmp_path, "--jobs", "1", "--format", "json").stdout
+    assert json.loads(printed)["files"][0]["landmarks"] is not None
+    assert json.loads(printed) == json.loads(invoke("report", tmp_path / log.name, "--format", "json").stdout)

@@ -129,3 +129,23 @@ def test_derive_and_the_streamed_stages_take_one_configuration(tmp_path, hall_lo
     b = mcapio.read_log(tmp_path / "run.mcap", topics=None)
     assert payloads(b.messages, mcapio.TOPIC_TRACKS) == payloads(derived, mcapio.TOPIC_TRACKS)
     assert mcapio.TOPIC_MARKERS_TRACKS not in b.messages
+
+
+def test_the_tracker_is_built_with_the_stages_from_the_logs_geometry(hall_log):
+    """open_stages builds the tracker once the stream's geometry is known (its first scan), before any block;
+    a block's step is its perceive, track and give."""
+    from datmo_cli.passes.stages import TrackStream
+    from datmo_cli.passes.streaming import LogStream
+
+    stream = LogStream(hall_log)
+    stages = pipeline.open_stages(stream, markers=False)
+    assert isinstance(stages.tracking, TrackStream)
+    assert stages.tracking.frame == stream.geometry.frame_id == mcapio.read_run(hall_log).geometry.frame_id
+    assert stream.geometry.same_beams(mcapio.read_run(hall_log).geometry)
+
+    causal = pipeline.RunStages(stages.odometry, stream.geometry, markers=False)
+    block = next(stream.blocks(50))
+    perceived = causal.perceive(block)
+    again = pipeline.RunStages(stages.odometry, stream.geometry, markers=False)
+    one, other = causal.give(block, perceived, causal.track(block, perceived)), again.step(block)
+    assert list(one) == list(other) and [c[2] for c in one.values()] == [c[2] for c in other.values()]

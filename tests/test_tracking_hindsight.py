@@ -219,7 +219,7 @@ def test_datmo_run_smooths_and_says_so_the_live_stages_stay_causal(tmp_path, hal
     assert a != b
     # the live stages (datmo play, record --live, node) give the causal tracks, whatever the lag
     run = mcapio.read_run(hall)
-    live = Stages(None, DatmoConfig())
+    live = Stages(None, run.geometry, DatmoConfig())
     got = []
     for k in range(0, len(run), 16):
         part = type(run)(run.stamps[k : k + 16], run.ranges[k : k + 16], run.geometry)

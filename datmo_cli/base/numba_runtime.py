@@ -188,7 +188,7 @@ def cache_looks_stale() -> bool:
 # ------------------------------------------------------------------------------------ compiling notice
 # Saying that numba is compiling: the first run after an install compiles the kernels (minutes) before a stage's
 # first progress report, which otherwise comes within milliseconds. One process compiling every kernel of
-# pipeline.warm_up with a cold cache, on the project's 2-core VM: 137 s user + 15 s system CPU (the hall's stages
+# warm.warm_up with a cold cache, on the project's 2-core VM: 137 s user + 15 s system CPU (the hall's stages
 # nearly all of it; scan matching 11 s, the simulator 5 s), which is its wall time on an idle core; a VM shared
 # with other jobs takes longer, a desktop less.
 COMPILE_SECONDS = 150

@@ -36,7 +36,7 @@ from .manifest import (
 )
 from .plan import Batch, prepare
 from .running import BatchInterrupted, run_many
-from .task import Cancelled, RunOptions, Task, converted, ensure_warm, failed, headline, params_hash, record, run_task
+from .task import Cancelled, RunOptions, Task, converted, failed, headline, params_hash, record, run_task
 
 __all__ = [
     "CANCELLED",
@@ -61,7 +61,6 @@ __all__ = [
     "converted",
     "die_with_parent",
     "discover",
-    "ensure_warm",
     "exists",
     "failed",
     "folder_lock",

@@ -2,7 +2,7 @@
 
 One task per input (`batch.task.run_task` on a worker; the input and output paths are resolved for a shared
 filesystem or are fsspec URLs). Each worker process loads datmo's numba kernels once (a worker plugin
-calls `batch.task.ensure_warm`), not per task. A task that raises an unexpected error is retried by Dask
+calls `warm.warm_up`), not per task. A task that raises an unexpected error is retried by Dask
 (`retries`); a task whose worker dies is rescheduled on another worker by the scheduler, and resubmitted
 by the client up to `retries` times if the scheduler gives it up (KilledWorker). Ctrl-C sets a cluster-
 wide Event that running tasks poll as their scans go by: they stop, drop their partial output and return.
@@ -25,7 +25,7 @@ from ..base.errors import DatmoError
 from ..base.extras import require
 from .executors import Executor
 from .manifest import CANCELLED
-from .task import Task, ensure_warm, failed, run_task
+from .task import Task, failed, run_task
 
 CANCEL_POLL_S = 0.5
 CANCEL_GRACE_S = 10.0
@@ -100,9 +100,10 @@ def _worker_task(task: Task, cancel_event: str) -> dict:
     """What a worker runs for one input: warm (once per process), then run_task polling the cancel Event."""
     from distributed import Event
 
+    from ..passes.warm import warm_up
     from ..perception.threads import set_default
 
-    ensure_warm()
+    warm_up()
     set_default(task.threads or 1)  # Dask runs one task per worker thread: perception on one thread unless told
     event = Event(cancel_event)
     last: list[Any] = [0.0, False]  # when polled, and what the event said
@@ -132,7 +133,9 @@ class DaskExecutor(Executor):
             if n is not None:
                 import logging
 
-                ensure_warm()  # compile (or load) the kernels here once, so N workers do not compile them at once
+                from ..passes.warm import warm_up
+
+                warm_up()  # compile (or load) the kernels here once, so N workers do not compile them at once
 
                 # the workers' statistical profiler samples every thread's stack 100 times a second: off for a
                 # run's own cluster (pipeline code holds the GIL between kernels); and one numba thread per worker

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from distributed import WorkerPlugin
 
-from .task import ensure_warm
-
 
 class WarmUp(WorkerPlugin):
     """Load datmo's numba kernels once in each worker process, before its first task (and in workers that
@@ -15,7 +13,9 @@ class WarmUp(WorkerPlugin):
     idempotent = True
 
     def setup(self, worker) -> None:
-        ensure_warm()
+        from ..passes.warm import warm_up
+
+        warm_up()
 
 
 class IgnoreInterrupt(WorkerPlugin):

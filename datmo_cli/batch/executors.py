@@ -8,7 +8,7 @@ import threading
 import time
 from collections.abc import Callable
 
-from .task import Task, ensure_warm, failed, run_task
+from .task import Task, failed, run_task
 
 
 class Executor:
@@ -55,7 +55,9 @@ class LocalExecutor(Executor):
         from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
         from concurrent.futures.process import BrokenProcessPool
 
-        ensure_warm()
+        from ..passes.warm import warm_up
+
+        warm_up()
         ctx = multiprocessing.get_context("fork") if hasattr(os, "fork") else multiprocessing.get_context()
         queue = ctx.Queue()  # (task, scans done, scans) from the workers; handed over as they start
         pool = ProcessPoolExecutor(

@@ -130,20 +130,6 @@ def headline(summary) -> dict:
     return {"confirmed": row["tracks"], **{c: row[c] for c in TRACK_CLASSES}, "dynamic": row["dynamic"]}
 
 
-_WARM = False
-
-
-def ensure_warm(progress: Callable[[int, int], None] | None = None) -> None:
-    """warm_up() once per process (a worker's first task, or the worker plugin): numba kernels loaded;
-    `progress(done, total)` follows its steps."""
-    global _WARM
-    if not _WARM:
-        from ..passes.pipeline import warm_up
-
-        warm_up(progress)
-        _WARM = True
-
-
 def follow(
     cancelled: Callable[[], bool] | None, scans: Callable[[int, int], None] | None
 ) -> Callable[[int, int], None]:

@@ -23,7 +23,7 @@ def command() -> None:
 
     from ..base.numba_runtime import cache_looks_stale, say_compiling
     from ..base.progress import bar, say
-    from ..passes.pipeline import warm_up
+    from ..passes.warm import warm_up
 
     t0 = time.perf_counter()
     compiled = cache_looks_stale()  # before anything is compiled

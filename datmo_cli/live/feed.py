@@ -59,15 +59,6 @@ class LiveFeed:
         self._thread = threading.Thread(target=self._run, name="datmo-live", daemon=True)
         self._thread.start()
 
-    def warm_up(self) -> None:
-        """Load the stages' compiled kernels now, on a made-up scan: loading them takes the interpreter for
-        a second or so, which must happen before the scanner streams, not while its bytes arrive."""
-        geometry = ScanGeometry(
-            angle_min=-math.pi / 2, angle_increment=math.pi / 360, n_beams=361, range_min=0.0, range_max=8.0
-        )
-        run = ScanRun(np.array([0, 100_000_000]), np.full((2, geometry.n_beams), 3.0, np.float32), geometry)
-        Stages(None, self.config).messages(run)
-
     def scan(self, stamp_ns: int, ranges: np.ndarray, geometry: ScanGeometry) -> None:
         if self.failure is not None:
             return
@@ -124,9 +115,9 @@ class LiveFeed:
                     if stages is None:
                         stages = Stages(
                             cast("Odometry | None", self.odometry),  # a PoseBuffer serves as one: at, frame_id, len
+                            geometry,
                             self.config,
                             has_tf=self.odometry is not None,
-                            scan_frame=geometry.frame_id,
                         )
                     run.append(item)
                     last = (stamp, geometry)

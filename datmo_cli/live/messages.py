@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..logs.scan import Odometry, ScanRun
+from ..logs.scan import Odometry, ScanGeometry, ScanRun
 from ..logs.transforms import Transform, encode_tf
 
 if TYPE_CHECKING:
@@ -88,16 +88,16 @@ class Stages:
     def __init__(
         self,
         odometry: Odometry | None,
+        geometry: ScanGeometry,
         config: DatmoConfig | None = None,
         estimated: bool = False,
         has_tf: bool = False,
-        scan_frame: str = "laser",
     ) -> None:
         from ..passes.pipeline import RunStages
 
-        self.stages = RunStages(odometry, config, estimated=estimated)
+        self.stages = RunStages(odometry, geometry, config, estimated=estimated)
         self.derived = self.stages.derived()
-        self.transforms = Transforms(odometry, scan_frame, has_tf or TOPIC_TF in self.derived)
+        self.transforms = Transforms(odometry, geometry.frame_id, has_tf or TOPIC_TF in self.derived)
         self.first = 0
 
     def messages(self, run: ScanRun) -> list[Message]:

@@ -162,7 +162,11 @@ class LogSource:
         at a time (the block's messages in time order). From `start`, the log's messages before it are not
         given, and the stages (a log processed on the fly) start there as on a log that started there: tracks
         start over (a processed log's are its own)."""
-        stages = None if self.processed else Stages(self.odometry, self.config, self.estimated, has_tf=True)
+        stages = (
+            None
+            if self.processed
+            else Stages(self.odometry, self.stream.geometry, self.config, self.estimated, has_tf=True)
+        )
         transforms = Transforms(self.transforms.odometry, self.transforms.scan_frame, False)
         drawn = self._drawn() if self.drawn else None
         for block in self.stream.blocks(self.block_scans, copy=set(self.copied)):

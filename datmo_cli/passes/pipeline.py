@@ -1,8 +1,9 @@
 """`datmo run`'s stages over a log, and reading processed logs for the plot.
 
-`RunStages` is `datmo run`'s one pass (segmentation, features, tracking) over each block of a streamed log;
-`process_file` runs it over a file, `derive` over a run held in memory. The stage commands' passes (`track_file`,
-`features_file`, `segment_file`) are in stage_files. They all write their channels through
+`RunStages` is `datmo run`'s one pass (segmentation, features, tracking) over each block of a streamed log, a
+block's path read in `RunStages.step`: perceive, track, give (its channels, and the report fed from the same
+arrays); `process_file` runs it over a file, `derive` over a run held in memory. The stage commands' passes
+(`track_file`, `features_file`, `segment_file`) are in stage_files. They all write their channels through
 streaming.write_derived, so `datmo run`'s output holds the same payloads as the three stages run one after
 another, without intermediate files.
 """
@@ -10,9 +11,8 @@ another, without intermediate files.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from ..logs import mcapio
 
@@ -43,126 +43,6 @@ def read_run_data(path: str | Path, *, keep_scans: bool = False, ground_truth: b
 
 
 # ------------------------------------------------------------------------------------------ datmo run
-
-
-def warm_up(progress: Callable[[int, int], None] | None = None) -> None:
-    """Compile every numba kernel of the pipeline in this process (or load it from numba's cache) on short
-    simulated runs of the hall (people, a platform, columns, benches, occlusions) and of the patrol scene
-    (odometry), before any input's clock starts and before worker processes start: they then inherit the
-    compiled kernels (fork) or find the cache complete (spawn), and never compile one kernel at once (a
-    first run after an install would otherwise have every worker writing the same cache files).
-    When the kernels are to be compiled and there is a second core, a helper process compiles the tracking
-    kernels (warm_tracking) while this one compiles the perception's first, then loads the helper's from the
-    cache (compiling itself any the helper has not finished; the helper is stopped at the end).
-    `progress(done, total)` follows its WARM_UP_STEPS steps."""
-    from ..base.numba_runtime import prepare
-    from ..perception.egomotion import odometry_for
-    from ..sim.simulate import simulate_scene
-    from .stages import derive_features
-
-    prepare()
-    helper = _tracking_helper()
-    done = 0
-    if progress:
-        progress(done, WARM_UP_STEPS)
-
-    def step() -> None:
-        nonlocal done
-        done += 1
-        if progress:
-            progress(done, WARM_UP_STEPS)
-
-    try:
-        sims = []
-        for scene in ("hall", "patrol"):
-            sims.append(simulate_scene(scene, duration=8.0))
-            step()
-        derive_features(sims[0].run, odometry=sims[0].odometry)  # the perception first (the helper: the tracking)
-        step()
-        odometry_for(sims[1].run, None, "on")  # scan matching, for logs without odometry
-        step()
-        for sim in sims:
-            derive(sim.run, sim.odometry, markers=True)  # the markers' kernels too (--markers, the live view)
-            step()
-    finally:
-        if helper is not None:
-            helper.kill()  # numba writes a cache file whole (a temporary file renamed): none is left half-written
-            helper.wait()
-
-
-WARM_UP_STEPS = 6  # warm_up's steps: each scene simulated; the hall's perception; scan matching; each scene's stages
-
-
-def _tracking_helper():
-    """The process that compiles the tracking kernels beside warm_up (a subprocess.Popen running warm_tracking),
-    when the kernels look uncompiled and this process may use two cores or more; None otherwise (and in the
-    helper itself: DATMO_WARM_HELPER=0)."""
-    import os
-    import subprocess
-    import sys
-
-    from ..base.numba_runtime import cache_looks_stale
-
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if cores < 2 or os.environ.get("DATMO_WARM_HELPER") == "0" or not cache_looks_stale():
-        return None
-    env = {**os.environ, "DATMO_COMPILE_NOTICE": "0", "DATMO_WARM_HELPER": "0"}
-    code = "from datmo_cli.passes.pipeline import warm_tracking; warm_tracking()"
-    try:
-        return subprocess.Popen(
-            [sys.executable, "-c", code],
-            env=env,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-    except OSError:
-        return None
-
-
-def warm_tracking() -> None:
-    """Compile the tracking kernels (and the simulator's) without compiling the perception's: warm_up's runs
-    with every perception kernel run as plain Python (perception_in_python; the hall's 40 scans take seconds),
-    so the tracking is given the features it is given in warm_up and compiles the same kernels."""
-    from ..base.numba_runtime import prepare
-    from ..sim.simulate import simulate_scene
-
-    prepare()
-    with perception_in_python():
-        for scene in ("hall", "patrol"):
-            sim = simulate_scene(scene, duration=8.0)
-            derive(sim.run, sim.odometry, markers=True)
-
-
-@contextmanager
-def perception_in_python() -> Iterator[int]:
-    """In the block, every numba kernel of datmo_cli.perception is its plain Python function, wherever a datmo
-    module holds it (numba's compiled code is not used and nothing of the perception compiles); yields how many
-    names were replaced. Restored after."""
-    import importlib
-    import pkgutil
-    import sys
-
-    from numba.core.registry import CPUDispatcher
-
-    from .. import perception
-    from . import feature_channels, stages  # noqa: F401  (loaded, so their names are replaced too)
-
-    for info in pkgutil.iter_modules(perception.__path__):
-        importlib.import_module(f"{perception.__name__}.{info.name}")
-    replaced = []
-    for name, module in list(sys.modules.items()):
-        if module is None or not name.startswith("datmo_cli"):
-            continue
-        for key, value in list(vars(module).items()):
-            if isinstance(value, CPUDispatcher) and value.py_func.__module__.startswith("datmo_cli.perception"):
-                replaced.append((module, key, value))
-                setattr(module, key, value.py_func)
-    try:
-        yield len(replaced)
-    finally:
-        for module, key, value in replaced:
-            setattr(module, key, value)
 
 
 def estimated_odometry(run, odometry, mode: str) -> tuple:
@@ -220,7 +100,15 @@ def open_stages(
 
     config = config or DatmoConfig()
     odometry, estimated = stream_odometry(stream, config.track.ego_motion)
-    return RunStages(odometry, config, estimated=estimated, markers=markers, covariance=covariance, hindsight=True)
+    return RunStages(
+        odometry,
+        stream.geometry,
+        config,
+        estimated=estimated,
+        markers=markers,
+        covariance=covariance,
+        hindsight=True,
+    )
 
 
 def hindsight_provenance(used: bool, track) -> dict:
@@ -232,17 +120,27 @@ def hindsight_provenance(used: bool, track) -> dict:
 PERCEIVE_AHEAD = 2  # blocks whose perception may run ahead of the tracking: one block's wait is the next's slack
 
 
+class Perceived(NamedTuple):
+    """What perceiving a block gave: its channels but the tracks ({topic: (msgtype, stamps, payloads)}: /odom
+    when estimated here, then the perception's) and its perception.features.RunFeatures."""
+
+    channels: dict[str, tuple]
+    features: Any
+
+
 class RunStages:
-    """Segmentation, features and tracking of one log, block by block (the stages of `datmo run`): call it
-    with each Block in order; it returns the block's derived channels. `config`: the DatmoConfig (None: the
+    """Segmentation, features and tracking of one log, block by block (the stages of `datmo run`): `step(block)`
+    gives a block's derived channels at once, `pipelined(blocks)` each block's as its tracks are final. The
+    scans' `geometry` (log.scan.ScanGeometry) builds the tracker here. `config`: the DatmoConfig (None: the
     defaults); `estimated`: the odometry was estimated from the scans, and its poses are written to /odom block
     by block; `markers`: also make the Foxglove markers; `covariance`: keep the tracks' covariance (else NaN);
-    `report`: a report.RunAccumulator fed each block's scans, features, landmarks and tracks as they are made
-    (the report of the output without reading it; feed_report)."""
+    `report`: a report.RunAccumulator fed each block's scans, features, landmarks and tracks from the arrays
+    the stages made (the report of the output without reading it; feed_report)."""
 
     def __init__(
         self,
         odometry,
+        geometry,
         config: DatmoConfig | None = None,
         *,
         estimated: bool = False,
@@ -253,16 +151,27 @@ class RunStages:
     ) -> None:
         from .config import DatmoConfig
         from .feature_channels import FeatureStream
+        from .stages import TrackStream, leg_threshold_of
 
         self.config = config or DatmoConfig()
         self.odometry = odometry
         self.estimated = estimated
         self.markers = markers
         self.covariance = covariance
-        self.features = FeatureStream(self.config.features, odometry)
-        self.tracking: TrackStream | None = None  # made with the first block, once the scans' geometry is known
         self.report = report
         self.hindsight = hindsight and self.config.track.hindsight_lag > 0
+        self.features = FeatureStream(self.config.features, odometry)
+        model = self.config.features.leg_model
+        self.tracking: TrackStream = TrackStream(
+            geometry,
+            odometry=odometry,
+            params=self.config.track,
+            markers=markers,
+            learned=model != "paper",
+            leg_threshold=leg_threshold_of(model),
+            covariance=covariance,
+            hindsight=self.hindsight,
+        )
 
     def derived(self) -> dict[str, str]:
         """{topic: message type} of the channels the stages write, in writing order."""
@@ -281,41 +190,58 @@ class RunStages:
             "hindsight": hindsight_provenance(self.hindsight, track),
         }
 
-    def __call__(self, block) -> dict[str, tuple]:
-        """The block's channels at once: causal tracks (the live paths: play, record --live, node, the API's
-        LiveTracker). A RunStages with hindsight gives its blocks through `pipelined`."""
+    def step(self, block) -> dict[str, tuple]:
+        """One block's path through the stages, its channels at once: causal tracks (the live paths: play,
+        record --live, node, the API's LiveTracker). A RunStages with hindsight gives its blocks through
+        `pipelined`, whose steps are these three, spread over blocks."""
         if self.hindsight:
             raise ValueError("the stages with hindsight give their blocks through pipelined()")
-        channels, extra, tracks = self._track(block, self.features.block(block.run, markers=self.markers))
-        assert self.tracking is not None  # made by _track
-        out = channels | self.tracking.channels(tracks)
-        if self.report is not None:
-            feed_report(self.report, block.run, extra[0], extra[1], tracks)
-        return out
+        perceived = self.perceive(block)
+        tracks = self.track(block, perceived)
+        return self.give(block, perceived, tracks)
+
+    __call__ = step  # a streaming.Stage
 
     def pipelined(self, blocks: Iterable) -> Iterator[tuple[Any, dict[str, tuple]]]:
-        """(block, its derived channels) for each block in order. With hindsight (`datmo run`, `datmo track`), a
-        block is given once the tracks of its scans are final (tracking.hindsight: up to hindsight_lag s of scans
-        later), so the blocks after it are perceived and tracked first; memory holds those. On two threads or more
-        (perception.threads, `--threads`), the perception of the next blocks (up to PERCEIVE_AHEAD) runs on a
-        thread of its own (its kernels on the threads left over) beside the tracking, encoding and writing of this
-        one: the compiled kernels release the GIL. The channels are the same for any count."""
-        tracked = ((b, *self._track(b, made)) for b, made in self._perceived(blocks))
-        for block, channels, extra, tracks in held_until_tracked(tracked, lambda: self.tracking):
-            assert self.tracking is not None  # made by _track
-            out = channels | self.tracking.channels(tracks)
-            if self.report is not None:
-                feed_report(self.report, block.run, extra[0], extra[1], tracks)
-            yield block, out
+        """(block, its derived channels) for each block in order: `step`'s perceive, track and give, with the
+        perception of the next blocks (up to PERCEIVE_AHEAD) on a thread of its own beside this one's tracking,
+        encoding and writing when there are two threads or more (perception.threads, `--threads`; the compiled
+        kernels release the GIL), and, with hindsight (`datmo run`, `datmo track`), a block given once the tracks
+        of its scans are final (tracking.hindsight: up to hindsight_lag s of scans later; memory holds the blocks
+        perceived and tracked meanwhile). The channels are the same for any thread count."""
+        perceived = self._perceived(blocks)
+        tracked = ((block, made, self.track(block, made)) for block, made in perceived)
+        for block, made, tracks in held_until_tracked(tracked, self.tracking):
+            yield block, self.give(block, made, tracks)
 
-    def _perceived(self, blocks: Iterable) -> Iterator[tuple[Any, tuple[dict[str, tuple], Any]]]:
-        """(block, its perception's (channels, RunFeatures)) for each block in order (see pipelined)."""
+    def perceive(self, block) -> Perceived:
+        """Segmentation, features and landmarks of the block's scans (and its /odom channel when estimated)."""
+        channels = {mcapio.TOPIC_ODOM: odometry_channel(self.odometry, block)} if self.estimated else {}
+        made, features = self.features.block(block.run, markers=self.markers)
+        return Perceived(channels | made, features)
+
+    def track(self, block, perceived: Perceived):
+        """The stages.TrackedRun tracking gives now: the block's scans' (causal), or with hindsight those of
+        the scans whose tracks are final (earlier blocks' among them)."""
+        from .stages import iter_run_features
+
+        return self.tracking.block(block.run, iter_run_features(perceived.features))
+
+    def give(self, block, perceived: Perceived, tracks) -> dict[str, tuple]:
+        """The block's channels ({topic: (msgtype, stamps, payloads)}, writing order) from what perceiving it
+        gave and the TrackedRun of its own scans; the report, when kept, is fed from the same arrays."""
+        if self.report is not None:
+            feed_report(self.report, block.run, perceived.features, tracks)
+        return perceived.channels | self.tracking.channels(tracks)
+
+    def _perceived(self, blocks: Iterable) -> Iterator[tuple[Any, Perceived]]:
+        """(block, perceive(block)) for each block in order (see pipelined)."""
         from ..perception import threads as TH
 
         n = TH.resolve(None)
         if n < 2:
             for block in blocks:
-                yield block, self.features.block(block.run, markers=self.markers)
+                yield block, self.perceive(block)
             return
         from collections import deque
         from concurrent.futures import ThreadPoolExecutor
@@ -325,7 +251,7 @@ class RunStages:
             ahead: deque = deque()  # perceived or queued, in order (one worker: FeatureStream's state is ordered)
             try:
                 for block in blocks:
-                    ahead.append((block, pool.submit(self.features.block, block.run, markers=self.markers)))
+                    ahead.append((block, pool.submit(self.perceive, block)))
                     if len(ahead) > PERCEIVE_AHEAD:
                         done, made = ahead.popleft()
                         yield done, made.result()
@@ -336,39 +262,13 @@ class RunStages:
                 for _, made in ahead:
                     made.cancel()
 
-    def _track(self, block, made: tuple[dict[str, tuple], Any]) -> tuple[dict[str, tuple], tuple, Any]:
-        """(the block's channels but the tracks: odometry, features; (its RunFeatures, landmark payloads) for the
-        report; the TrackedRun of the scans tracking gives now) from its perception's (channels, RunFeatures)."""
-        from .stages import TrackStream, iter_run_features, leg_threshold_of
 
-        run = block.run
-        out = {}
-        if self.estimated:
-            out[mcapio.TOPIC_ODOM] = odometry_channel(self.odometry, block)
-        channels, features = made
-        out |= channels
-        if self.tracking is None:
-            model = self.config.features.leg_model
-            self.tracking = TrackStream(
-                run.geometry,
-                odometry=self.odometry,
-                params=self.config.track,
-                markers=self.markers,
-                learned=model != "paper",
-                leg_threshold=leg_threshold_of(model),
-                covariance=self.covariance,
-                hindsight=self.hindsight,
-            )
-        tracked = self.tracking.block(run, iter_run_features(features))
-        return out, (features, out[mcapio.TOPIC_LANDMARKS][2]), tracked
-
-
-def held_until_tracked(items: Iterable[tuple], tracking: Callable[[], Any]) -> Iterator[tuple]:
-    """Blocks held until their tracks are given: `items` yields (block, channels, extra, TrackedRun of the scans
-    the tracking gave with that block: with hindsight, earlier scans' and not the newest); this yields (block,
-    channels, extra, the TrackedRun of the block's own scans) in order, each as soon as its scans' tracks are
-    all given, and the rest after the last block (`tracking()`: the stages.TrackStream, its `finish` then).
-    Without hindsight each block is given at once with its own TrackedRun."""
+def held_until_tracked(items: Iterable[tuple], tracking: TrackStream) -> Iterator[tuple]:
+    """Blocks held until their tracks are given: `items` yields (block, what perceiving it gave, TrackedRun of
+    the scans `tracking` gave with that block: with hindsight, earlier scans' and not the newest); this yields
+    (block, what perceiving it gave, the TrackedRun of the block's own scans) in order, each as soon as its
+    scans' tracks are all given, and the rest after the last block (`tracking.finish()` then). Without
+    hindsight each block is given at once with its own TrackedRun."""
     from collections import deque
 
     from .stages import split_tracked
@@ -378,29 +278,27 @@ def held_until_tracked(items: Iterable[tuple], tracking: Callable[[], Any]) -> I
 
     def give():
         while held and sum(len(t.stamps) for t in ready) >= len(held[0][0].run):
-            block, channels, extra = held.popleft()
+            block, made = held.popleft()
             tracks, ready[:] = split_tracked(ready, len(block.run))
-            yield block, channels, extra, tracks
+            yield block, made, tracks
 
-    for block, channels, extra, tracked in items:
-        held.append((block, channels, extra))
+    for block, made, tracked in items:
+        held.append((block, made))
         ready.append(tracked)
         yield from give()
-    stream = tracking()
-    if held and stream is not None:
-        ready.append(stream.finish())
+    if held:
+        ready.append(tracking.finish())
         yield from give()
     if held:
         raise RuntimeError(f"tracking gave too few scans' tracks for {len(held)} blocks")
 
 
-def feed_report(report, run, features, landmark_payloads: list[bytes], tracked) -> None:
-    """Add one block's scans, features (their counts), landmarks (the frame of the first message, the
-    database of the block's last) and track states to a report.RunAccumulator, from the arrays the stages
-    made: what report.stream_run would read back from the output's messages."""
+def feed_report(report, run, features, tracked) -> None:
+    """Add one block's scans, features (their counts), landmarks (the frame, the database after the block's
+    last scan) and track states to a report.RunAccumulator, from the arrays the stages made (a RunFeatures, a
+    TrackedRun): what report.stream_run reads back from the output's messages."""
     import numpy as np
 
-    from ..logs import cdr, types
     from ..report import FEATURE_KINDS
 
     report.add_scans(run.stamps, run.geometry.n_beams)
@@ -408,9 +306,8 @@ def feed_report(report, run, features, landmark_payloads: list[bytes], tracked) 
         len(run),
         {k: np.diff(np.asarray(getattr(features, f"{k[:-1]}_offsets"))).astype(np.int64) for k in FEATURE_KINDS},
     )
-    if landmark_payloads:
-        frame = cdr.decode(types.LANDMARKS, landmark_payloads[0])["frame_id"] if report.landmark_frame is None else ""
-        report.add_landmarks(frame, cdr.decode(types.LANDMARKS, landmark_payloads[-1])["landmarks"])
+    if len(run):
+        report.add_landmarks(features.landmark_frame, features.landmarks.final())
     offsets, items = tracked.all_tracks()
     if len(items):
         report.add_tracks(np.repeat(np.asarray(tracked.stamps, np.int64), np.diff(offsets)), items)
@@ -434,7 +331,13 @@ def derive(
     config = config or DatmoConfig()
     odometry, odom_channel = estimated_odometry(run, odometry, config.track.ego_motion)
     stages = RunStages(
-        odometry, config, estimated=bool(odom_channel), markers=markers, covariance=covariance, hindsight=True
+        odometry,
+        run.geometry,
+        config,
+        estimated=bool(odom_channel),
+        markers=markers,
+        covariance=covariance,
+        hindsight=True,
     )
     if progress:
         progress(0, len(run))

@@ -25,7 +25,6 @@ from .pipeline import (
 if TYPE_CHECKING:
     from .config import DatmoConfig
     from .pipeline import RunStages
-    from .stages import TrackStream
     from .streaming import LogStream
 
 
@@ -146,37 +145,35 @@ class _TrackFeatures:
     pipeline.RunStages.pipelined) and estimated odometry."""
 
     def __init__(self, stream, odometry, estimated: bool, params, used: str, threshold: float, markers, covariance):
-        self.stream, self.odometry, self.estimated, self.params = stream, odometry, estimated, params
-        self.used, self.threshold, self.markers, self.covariance = used, threshold, markers, covariance
-        self.tracking: TrackStream | None = None  # made with the first block
+        from .stages import TrackStream
+
+        self.stream, self.odometry, self.estimated = stream, odometry, estimated
+        self.tracking = TrackStream(
+            stream.geometry,
+            odometry=odometry,
+            params=params,
+            markers=markers,
+            learned=used != "paper",
+            leg_threshold=threshold,
+            covariance=covariance,
+            hindsight=True,
+        )
 
     def pipelined(self, blocks):
         """(block, its channels) for each block in order, once its tracks are given."""
         made = ((block, *self._track(block)) for block in blocks)
-        for block, channels, _, tracks in held_until_tracked(made, lambda: self.tracking):
-            assert self.tracking is not None  # made by _track
+        for block, channels, tracks in held_until_tracked(made, self.tracking):
             yield block, channels | self.tracking.channels(tracks)
 
-    def _track(self, block) -> tuple[dict, None, object]:
-        from .stages import TrackStream, decode_features
+    def _track(self, block) -> tuple[dict, object]:
+        from .stages import decode_features
 
         run, out = block.run, {}
         if self.estimated:
             out[mcapio.TOPIC_ODOM] = odometry_channel(self.odometry, block)
-        if self.tracking is None:
-            self.tracking = TrackStream(
-                run.geometry,
-                odometry=self.odometry,
-                params=self.params,
-                markers=self.markers,
-                learned=self.used != "paper",
-                leg_threshold=self.threshold,
-                covariance=self.covariance,
-                hindsight=True,
-            )
         with mcapio.decoding(self.stream.path, mcapio.TOPIC_FEATURES):
             features = decode_features(block.aligned[mcapio.TOPIC_FEATURES], block.first)
-        return out, None, self.tracking.block(run, features)
+        return out, self.tracking.block(run, features)
 
 
 @dataclass

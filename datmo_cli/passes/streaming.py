@@ -32,7 +32,7 @@ import numpy as np
 from ..base.errors import InputError
 from ..logs import mcapio, transforms
 from ..logs.poses import sane as sane_poses
-from ..logs.scan import Odometry, ScanRun, stamp_problem
+from ..logs.scan import Odometry, ScanGeometry, ScanRun, stamp_problem
 
 _STAMP = struct.Struct("<iI")  # a CDR header stamp: sec, nanosec
 BLOCK_SCANS = 1024  # scans per block: large enough that per-block costs vanish, small enough to stay flat
@@ -78,12 +78,14 @@ class LogStream:
         order = StampOrder()
         statics: list[bytes] = []
         self.scan_frame = ""
+        self._first_scan = b""
         for topic, stamp, payload in mcapio.iter_messages(
             self.path, [mcapio.TOPIC_ODOM, mcapio.TOPIC_TF_STATIC, scan_topic], self.log
         ):
             if topic == scan_topic:
                 if not order.n:
                     self.scan_frame = _frame(payload)
+                    self._first_scan = payload
                 order.add(payload)
             elif topic == mcapio.TOPIC_ODOM:
                 odom[0].append(stamp)
@@ -97,6 +99,15 @@ class LogStream:
         # the tracker and the landmarks take the scanner's poses: the base's composed with its mount
         self.odometry = transforms.sensor_odometry(mcapio.odometry_from_log(self.log), self.statics, self.scan_frame)
         self.log.messages = {}  # every channel is copied block by block
+        self._geometry: ScanGeometry | None = None
+
+    @property
+    def geometry(self) -> ScanGeometry:
+        """The scans' geometry (beams, range limits, frame), from the first scan: the blocks refuse scans of
+        another (log.channels.decode_scan_block), so it is every block's."""
+        if self._geometry is None:
+            self._geometry = mcapio.decode_scan_block(self.path, [self._first_scan], 0, None, self.scan_topic).geometry
+        return self._geometry
 
     def has(self, topic: str) -> bool:
         return self.log.has(topic)

@@ -93,9 +93,8 @@ def retune_stages(stages, config: DatmoConfig) -> None:
     run_stages = stages.stages
     run_stages.config = config
     stream = run_stages.tracking
-    if stream is not None:
-        stream.params = stream.tracker.params = config.track
-        stream.tracker._prm = config.track.kernel_vector(stream.tracker.leg_threshold)
+    stream.params = stream.tracker.params = config.track
+    stream.tracker._prm = config.track.kernel_vector(stream.tracker.leg_threshold)
 
 
 @dataclass
@@ -153,7 +152,9 @@ class Node:
             scans=False,
             on_restart=lambda why: say(f"datmo node: {why}: tracking starts over"),
         )
-        self.feed.warm_up()  # the compiled stages load now, not while the first scans arrive
+        from ..passes.warm import warm_up
+
+        warm_up()  # the compiled stages load now, not while the first scans arrive
         self.scans = self.participant.reader(self.scan_topic, types.LASERSCAN, depth=SCAN_DEPTH)
         self.poses = self.participant.reader(self.odom_topic, types.ODOMETRY) if self.odom_topic else None
         inputs = [r for r in (self.scans, self.poses) if r is not None]

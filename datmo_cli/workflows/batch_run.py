@@ -168,8 +168,21 @@ def _executor(batch: Batch, scheduler: str | None, jobs: int | None, retries: in
 
         return DaskExecutor(scheduler, retries=retries)
     executor = LocalExecutor(jobs)
-    if batch.tasks and min(executor.workers, len(batch.tasks)) > 1:
-        warm_up()  # a pool: compiled (or loaded) once before the workers fork
+    if batch.tasks and min(executor.workers, len(batch.tasks)) > 1:  # a pool: warmed once before the workers fork
+        from ..base.numba_runtime import cache_looks_stale, say_compiling
+        from ..base.progress import bar, say
+        from ..passes.warm import warm_up
+
+        # the first run after an install compiles the kernels (minutes, then cached): said at once (terminal or
+        # not), with a progress bar in a terminal, rather than counted in the inputs' speed
+        t0 = time.perf_counter()
+        compiled = cache_looks_stale()  # before anything is compiled
+        say_compiling()  # said once a process (the command line's first step has said it)
+        with bar(f"{'compiling' if compiled else 'loading'} the numba kernels", None, unit="steps") as b:
+            warm_up(b.update)
+        seconds = time.perf_counter() - t0
+        if compiled or seconds > 2.0:
+            say(f"compiled the numba kernels in {seconds:.0f} s (first run after an install; cached for the next runs)")
     # else one process compiles or loads just the kernels it runs (the line saying so came first)
     return executor
 
@@ -244,24 +257,6 @@ def gather_report(
         if on_plot is not None:
             on_plot(line)
     return (summaries if report or drawn else None), drawn
-
-
-def warm_up() -> None:
-    """Load the numba kernels before the clock of any input starts; the first run after an install
-    compiles them (minutes, then cached), which is said at once (numba_runtime.say_compiling, terminal or
-    not) with a progress bar in a terminal, rather than counted in the inputs' speed."""
-    from ..base.numba_runtime import cache_looks_stale, say_compiling
-    from ..base.progress import bar, say
-    from ..batch import ensure_warm
-
-    t0 = time.perf_counter()
-    compiled = cache_looks_stale()  # before anything is compiled
-    say_compiling()  # said once a process (the command line's first step has said it)
-    with bar(f"{'compiling' if compiled else 'loading'} the numba kernels", None, unit="steps") as b:
-        ensure_warm(b.update)  # once per process: the --jobs pool forks after it
-    seconds = time.perf_counter() - t0
-    if compiled or seconds > 2.0:
-        say(f"compiled the numba kernels in {seconds:.0f} s (first run after an install; cached for the next runs)")
 
 
 def _scan_count(spec: str) -> int | None:

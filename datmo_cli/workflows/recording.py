@@ -157,9 +157,10 @@ def _live_feed(host: str, port: int, on_live: Callable[[str], None] | None):
     """The live view of a recording, its URL said (the port is checked before the scanner starts)."""
     from ..base.progress import say
     from ..live import LiveFeed, LiveServer
+    from ..passes.warm import warm_up
 
     server = LiveServer(host, port, option="--live-port")
     (on_live or say)(f"datmo record: live view on {server.url}; open {server.app_url}")
     feed = LiveFeed(server)
-    feed.warm_up()
+    warm_up()  # the compiled stages load now, not while the scanner streams
     return feed
