@@ -24,7 +24,12 @@ def test_a_datmo_kernels_cache_stamp_covers_the_files_it_reads():
         own, sources = kernel._cache._impl.locator.get_source_stamp()
         assert sources == numba_runtime.sources_stamp()
         names = {path for path, _, _ in sources}
-        assert {"tracking/state.py", "logs/vocabulary.py", "tracking/_kernels.py", "perception/segmentation.py"} <= names
+        assert {
+            "tracking/state.py",
+            "logs/vocabulary.py",
+            "tracking/_kernels.py",
+            "perception/segmentation.py",
+        } <= names
         assert any(name.startswith("msg/") for name in names)
 
 
