@@ -14,6 +14,15 @@ numpy arrays or pandas DataFrames, run the pipeline on a log, and feed scans one
     tune(logs, space, dir)  `datmo tune`: the setting of a space of parameters that scores best against ground truth
 
     segment, extract_features, track, warm_up: `datmo segment`, `features`, `track`, `warm-up` (stage_files, warm)
+    import_log(src, out)    `datmo import`: a CARMEN log, g2o file, bag or MCAP into a datmo scan log (ImportResult)
+    simulate(out, scene)    `datmo simulate`: a scene into a log with ground truth (SimulateResult)
+    emulate(scene, log)     `datmo emulate`: an Emulation, a virtual LMS200 on a pseudo-terminal (`with`, .serve)
+    play(log) / Player      `datmo play`: a log served to Foxglove (Player: the steps, to print between them)
+    node(scan_topic)        `datmo node`: a LiveNode, a ROS 2 node over DDS (.spin(stop), .close())
+    train_legs(pos, neg, out)  `datmo train-legs`: the learned leg detector trained and written (LegTraining)
+    export(files, out)      `datmo export`: tracks, features or ground truth as CSV, NDJSON or Parquet
+    info(log)               `datmo info --json`: the log's channels, scan geometry, rate and provenance (a dict)
+    config(config, out)     `datmo config`: the effective configuration as TOML, with where each value came from
 
 Each of these is what its command runs: the command is its options, this call, and what it prints.
 
@@ -33,7 +42,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import export
+from . import export as _export
 from .base.errors import InputError
 from .base.extras import require
 from .logs import cdr, mcapio, types
@@ -53,35 +62,60 @@ if TYPE_CHECKING:
     from .passes.warm import warm_up
     from .tune import run_tune as tune
     from .workflows import Config
+    from .workflows.emulating import Emulation, emulate
+    from .workflows.exporting import ExportResult
+    from .workflows.exporting import export_files as export
+    from .workflows.importing import ImportResult, import_log
+    from .workflows.inspecting import config, info
+    from .workflows.playing import Player, play
+    from .workflows.ros_node import LiveNode, node
+    from .workflows.simulating import SimulateResult, simulate
+    from .workflows.training import LegTraining, train_legs
 
 __all__ = [
     "FEATURE_COLUMNS",
     "TRACK_COLUMNS",
     "BatchResult",
+    "Emulation",
+    "ExportResult",
+    "ImportResult",
+    "LegTraining",
+    "LiveNode",
     "LiveTracker",
     "Log",
+    "Player",
     "Recording",
     "ReportResult",
+    "SimulateResult",
+    "config",
+    "emulate",
     "evaluate",
+    "export",
     "extract_features",
+    "import_log",
+    "info",
+    "node",
     "open_log",
+    "play",
     "process",
     "record",
     "report",
     "run_batch",
     "segment",
+    "simulate",
     "track",
+    "train_legs",
     "tune",
     "warm_up",
 ]
 
 # The tables' columns (name -> type): the tracks table is the export's; the features table has the columns that
 # describe features (the export's feature rows without the track-only columns, which are null there).
-TRACK_COLUMNS: dict[str, str] = dict(export.TRACK_COLUMNS)
+TRACK_COLUMNS: dict[str, str] = dict(_export.TRACK_COLUMNS)
 FEATURE_COLUMNS: dict[str, str] = {
-    name: export.TRACK_COLUMNS[name]
+    name: _export.TRACK_COLUMNS[name]
     for name in ("file", "scan", "stamp_ns", "frame_id", "kind", "x_m", "y_m", "size_m")
-} | export.FEATURE_COLUMNS
+} | _export.FEATURE_COLUMNS
 _NUMPY = {
     "string": object,
     "int64": np.int64,
@@ -99,6 +133,22 @@ _LAZY = {
     "extract_features": ("passes.stage_files", "features_file"),  # datmo features
     "track": ("passes.stage_files", "track_file"),  # datmo track
     "warm_up": ("passes.warm", "warm_up"),  # datmo warm-up
+    "import_log": ("workflows.importing", "import_log"),  # datmo import
+    "ImportResult": ("workflows.importing", "ImportResult"),
+    "simulate": ("workflows.simulating", "simulate"),  # datmo simulate
+    "SimulateResult": ("workflows.simulating", "SimulateResult"),
+    "emulate": ("workflows.emulating", "emulate"),  # datmo emulate
+    "Emulation": ("workflows.emulating", "Emulation"),
+    "play": ("workflows.playing", "play"),  # datmo play
+    "Player": ("workflows.playing", "Player"),
+    "node": ("workflows.ros_node", "node"),  # datmo node
+    "LiveNode": ("workflows.ros_node", "LiveNode"),
+    "train_legs": ("workflows.training", "train_legs"),  # datmo train-legs
+    "LegTraining": ("workflows.training", "LegTraining"),
+    "export": ("workflows.exporting", "export_files"),  # datmo export
+    "ExportResult": ("workflows.exporting", "ExportResult"),
+    "info": ("workflows.inspecting", "info"),  # datmo info
+    "config": ("workflows.inspecting", "config"),  # datmo config
 }
 
 
@@ -117,7 +167,7 @@ def dtype(columns: dict[str, str]) -> np.dtype:
     return np.dtype([(name, _NUMPY[t]) for name, t in columns.items()])
 
 
-def _table(batches: Iterator[export.Batch], columns: dict[str, str]) -> np.ndarray:
+def _table(batches: Iterator[_export.Batch], columns: dict[str, str]) -> np.ndarray:
     """The rows of `batches` as one structured array of `columns` (a float absent from a row is NaN)."""
     parts = []
     for b in batches:
@@ -179,9 +229,9 @@ class Log:
             return None
         return stream.odometry.at(self.read_scans().stamps)
 
-    def _rows(self, topic: str) -> Iterator[export.Batch]:
-        export.require_channel(self.contents, topic, export.ROWS[topic][0])
-        for _, batch in export.row_batches(self.path, topic, self.name):
+    def _rows(self, topic: str) -> Iterator[_export.Batch]:
+        _export.require_channel(self.contents, topic, _export.ROWS[topic][0])
+        for _, batch in _export.row_batches(self.path, topic, self.name):
             yield batch
 
     def tracks(self) -> np.ndarray:
@@ -342,4 +392,4 @@ class LiveTracker:
         decoded = cdr.decode(types.TRACKS, payload)
         self.scans += 1
         self._last = stamp
-        return _table(iter([export.track_batch(self.name, self.scans - 1, [decoded])]), TRACK_COLUMNS)
+        return _table(iter([_export.track_batch(self.name, self.scans - 1, [decoded])]), TRACK_COLUMNS)

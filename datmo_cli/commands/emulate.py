@@ -1,8 +1,8 @@
-"""`datmo emulate`: a virtual LMS200 on a pseudo-terminal, to test `datmo record` without hardware."""
+"""`datmo emulate`: a virtual LMS200 on a pseudo-terminal, to test `datmo record` without hardware: the options, the
+signals, one call of datmo_cli.api.emulate (workflows.emulating) and what it says."""
 
 from __future__ import annotations
 
-import os
 import signal
 import threading
 from pathlib import Path
@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 
 from ..base.bounds import OPTIONS
+from ..workflows.emulating import make_link, remove_link  # noqa: F401  (their home was here)
 from .options import force_option, quiet_option
 from .types import option
 
@@ -101,11 +102,9 @@ def command(
 
     Example: datmo emulate --scene hall --fault garbage:0.05,crc:0.01
     """
+    from .. import api
     from ..base.errors import ConfigError
     from ..base.progress import quiet
-    from ..lms2xx.emulator import Emulator
-    from ..lms2xx.faults import Faults
-    from ..passes.simulated import scan_source
 
     silent = quiet()  # read here: the emulator's thread, which also says things, has no Click context
 
@@ -117,21 +116,19 @@ def command(
         raise ConfigError("give --scene or --log, not both")
     if angle == "180" and resolution == "0.25":
         raise click.BadParameter("0.25° is available only with --angle 100", param_hint="--resolution")
-    if link is not None:
-        from ..base.outputs import check_output
-
-        check_output(link, force=force, what="link")  # before the device starts
-    faults = Faults.parse(fault_spec)
-    source = scan_source(log=log_path, scene=scene, seed=seed, duration=duration)
-    emu = Emulator(
-        source,
-        faults=faults,
+    emulation = api.emulate(
+        scene,
+        log_path,
         seed=seed,
-        baud=int(baud),
-        angle_deg=int(angle),
-        resolution_deg=float(resolution),
+        duration=duration,
+        baud=baud,
+        angle=angle,
+        resolution=resolution,
         units=units,
         indices=indices,
+        faults=fault_spec,
+        link=link,
+        force=force,
         on_event=lambda text: say(f"emulate: {text}"),
     )
     done = threading.Event()
@@ -142,55 +139,18 @@ def command(
         done.set()
 
     old = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
-    emu.start()
-    made = None
     try:
-        if link is not None:
-            made = make_link(emu.device_path, link, force)
-        click.echo(emu.device_path)
-        what = f"log {log_path}" if log_path is not None else f"scene {scene or 'hall'}"
-        say(f"emulate: LMS200 on {emu.device_path} at {baud} Bd serving {what}; Ctrl-C to stop")
-        while not done.wait(0.2):
-            if emu.disconnected.is_set():
+        with emulation:
+            click.echo(emulation.device_path)
+            say(f"emulate: LMS200 on {emulation.device_path} at {baud} Bd serving {emulation.serving}; Ctrl-C to stop")
+            if not emulation.serve(done):
                 click.echo("emulate: disconnected (fault)", err=True)
-                break
     finally:
-        emu.stop()
-        if made is not None and link is not None:
-            remove_link(link, made)
         for sig, h in old.items():
             signal.signal(sig, h)
     try:
-        say(f"emulate: sent {len(emu.sent)} scans; faults {dict(emu.stats.faults) or 'none'}")
+        say(f"emulate: {emulation.report}")
     except OSError:  # the terminal hung up (SIGHUP)
         pass
     if stopped_by:  # stopping is how an emulator ends, but the status says how: 130, 143 or 129
         raise click.exceptions.Exit(128 + stopped_by[0])
-
-
-def make_link(target: str, link: Path, force: bool) -> tuple[int, int]:
-    """Make `link` a symlink to `target` (a symlink made beside it, renamed over it, so an existing symlink or
-    regular file is replaced only when outputs.check_output allows it); returns the link's (device, inode)."""
-    from ..base import outputs
-
-    outputs.check_output(link, force=force, what="link")
-    with outputs.critical():
-        tmp = outputs.temp_path(link)
-        try:
-            os.symlink(target, tmp)
-            outputs.track(tmp)
-        except OSError as exc:
-            raise outputs.os_error(exc, link, "making the link") from None
-    outputs.commit(tmp, link, force)
-    st = os.lstat(link)
-    return st.st_dev, st.st_ino
-
-
-def remove_link(link: Path, made: tuple[int, int]) -> None:
-    """Remove `link` if it is still the symlink make_link made (not a file put there since)."""
-    try:
-        st = os.lstat(link)
-        if (st.st_dev, st.st_ino) == made and os.path.islink(link):
-            os.unlink(link)
-    except OSError:
-        pass

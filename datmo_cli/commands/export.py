@@ -1,5 +1,6 @@
 """`datmo export`: every track's state per scan (and optionally every feature), or a simulated log's ground
-truth, as CSV, NDJSON or Parquet."""
+truth, as CSV, NDJSON or Parquet: the options, one call of datmo_cli.api.export (workflows.exporting) and the
+line it says."""
 
 from __future__ import annotations
 
@@ -70,128 +71,25 @@ def command(
 
     Example: datmo export out/hall.mcap -o hall-tracks.csv
     """
-    from .. import export
-    from ..base.outputs import atomic_output
-    from ..base.progress import bar, say
-    from ..logs import mcapio
-
-    fmt = export.format_for(output, fmt)
-    if fmt == "parquet":
-        export.require_pyarrow()
-    stdout = str(output) == "-"
-    stream = export.to_stdout(fmt) if stdout else None
-    if ground_truth or include_occluded:
-        _ground_truth(files, output, fmt, features, ground_truth, include_occluded, force, stream)
-        return
-    p = export.plan(list(files), features)
-    scans = p.total(mcapio.TOPIC_TRACKS)
-    with bar("tracks", scans) as b:
-        shown = {"topic": mcapio.TOPIC_TRACKS}
-
-        def progress(topic: str, n: int) -> None:
-            if topic != shown["topic"]:  # the features pass, after every file's tracks: its own count of scans
-                shown["topic"] = topic
-                b.update(0, p.total(topic), description="features")
-            b.advance(n)
-
-        def write(sink) -> None:
-            export.export(p, sink, features=features, progress=progress)
-
-        if stream is not None:
-            sink = _to_stdout(stream, export.sink_for(stream, fmt, features, terminal=_terminal()), write)
-        else:
-            with atomic_output(output, force=force, inputs=files) as f:
-                sink = export.sink_for(f, fmt, features)
-                _write_file(sink, write)
-    say(
-        f"{'stdout' if stdout else output}: {sink.rows:,} rows ({fmt}) from {scans:,} scans of {len(files)} "
-        f"file{'s' if len(files) != 1 else ''}"
-    )
-
-
-def _ground_truth(
-    files: tuple[Path, ...],
-    output: Path,
-    fmt: str,
-    features: bool,
-    ground_truth: bool,
-    include_occluded: bool,
-    force: bool,
-    stream,
-) -> None:
-    """`--ground-truth`: one log's targets as the table evaluate --gt reads."""
-    from .. import export
-    from ..base.errors import ConfigError
-    from ..base.outputs import atomic_output
-    from ..base.progress import bar, say
-    from ..logs import mcapio
-
-    if not ground_truth:
-        raise ConfigError("--include-occluded: only with --ground-truth (the targets no beam hits)")
-    if features:
-        raise ConfigError(
-            "--ground-truth with --features: the ground truth is a table of its own "
-            "(stamp_ns,id,x,y,class); export it and the tracks with two commands"
-        )
-    if len(files) != 1:
-        raise ConfigError(f"--ground-truth: give one FILE (evaluate --gt scores one log), not {len(files)}")
-    p = export.plan(list(files), ground_truth=True)
-    scans = p.total(mcapio.TOPIC_GROUND_TRUTH)
-    with bar("moving ids", scans) as b:
-        shown = {"stage": "movers"}
-
-        def progress(stage: str, n: int) -> None:
-            if stage != shown["stage"]:  # the second pass: the rows
-                shown["stage"] = stage
-                b.update(0, scans, description="ground truth")
-            b.advance(n)
-
-        def write(sink) -> None:
-            export.export_ground_truth(files[0], sink, include_occluded=include_occluded, progress=progress)
-
-        cols = export.GROUND_TRUTH_COLUMNS
-        if stream is not None:
-            sink = _to_stdout(stream, export.sink_for(stream, fmt, cols=cols, terminal=_terminal()), write)
-        else:
-            with atomic_output(output, force=force, inputs=files) as f:
-                sink = export.sink_for(f, fmt, cols=cols)
-                _write_file(sink, write)
-    say(
-        f"{'stdout' if stream is not None else output}: {sink.rows:,} rows ({fmt}) of ground truth from {scans:,} "
-        f"scans of {files[0]}"
-    )
-
-
-def _write_file(sink, write) -> None:
-    """Write the rows to a file with `write(sink)`; on an error or Ctrl-C the sink is closed at once, while its
-    file is open (ParquetSink.abort), and the error goes on (the unfinished file is removed)."""
-    try:
-        write(sink)
-    except BaseException:
-        sink.abort()
-        raise
-    sink.close()
-
-
-def _terminal() -> bool:
-    """Whether stdout is a terminal (CSV written there has its text's control characters escaped)."""
-    import sys
-
-    from ..base.progress import is_terminal
-
-    return is_terminal(sys.stdout)
-
-
-def _to_stdout(stream, sink, write):
-    """Write the rows to stdout with `write(sink)`; a reader that stops early (| head) ends the command
-    quietly, exit 141 as a shell gives a process killed by SIGPIPE."""
     import os
     import sys
 
+    from .. import api
+    from ..base.progress import say
+
     try:
-        write(sink)
-        sink.close()
-    except BrokenPipeError:
+        result = api.export(
+            files,
+            output,
+            fmt=fmt,
+            features=features,
+            ground_truth=ground_truth,
+            include_occluded=include_occluded,
+            force=force,
+        )
+    except BrokenPipeError:  # a reader that stopped early (| head): quietly, exit 141 as a shell gives for SIGPIPE
+        if str(output) != "-":
+            raise
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error flushing at exit
         raise SystemExit(141) from None
-    return sink
+    say(result.summary)

@@ -1,9 +1,8 @@
-"""`datmo import`: a real log (CARMEN, g2o, ROS 1/2 bag, MCAP) converted to a datmo scan log."""
+"""`datmo import`: a real log (CARMEN, g2o, ROS 1/2 bag, MCAP) converted to a datmo scan log: the options, one call
+of datmo_cli.api.import_log (workflows.importing) and the line it says."""
 
 from __future__ import annotations
 
-import contextlib
-import math
 from pathlib import Path
 
 import click
@@ -57,58 +56,18 @@ def command(
     \b
     Example: datmo import ../shared/data/carmen/csail-corrected.log.gz -o csail.mcap
     """
-    from ..base.outputs import check_output
+    from .. import api
     from ..base.progress import say
-    from ..base.text import printable
     from ..cli import invocation
-    from ..logs import mcapio
-    from ..logs.importers import open_import, write_import
 
-    check_output(output, force=force, inputs=[src])  # before reading a big input
-    with _progress(src) as progress:
-        stream = open_import(
-            src,
-            topic,
-            odom_topic=odom_topic,
-            max_scans=max_scans,
-            progress=progress,
-            spool_dir=output.parent if output.parent.is_dir() else None,
-        )
-        params: dict[str, object] = {
-            "topic": stream.topic,
-            "odom_topic": stream.odom_topic,
-            "max_scans": max_scans,
-            "kind": stream.kind,
-        }
-        mount = None
-        if laser_pose is not None:
-            from ..logs.transforms import LaserPose
-
-            mount = LaserPose(*laser_pose)
-            params["laser_pose"] = {"x_m": mount.x, "y_m": mount.y, "yaw_deg": math.degrees(mount.yaw)}
-        provenance = mcapio.Provenance("import", params, [src] if src.is_file() else [], invocation("import"))
-        try:
-            stats = write_import(stream, output, force=force, provenance=provenance, laser_pose=mount)
-        finally:
-            for w in stream.warnings:
-                click.echo(f"datmo: warning: {printable(w)}", err=True)
-    odom = f", {stats.poses} poses on /odom" if stats.poses else ""
-    geometry = stats.geometry.describe() if stats.geometry is not None else "no geometry"
-    say(f"{output}: {stats.scans} scans of {geometry} from {stream.kind} {stream.topic}{odom}")
-
-
-@contextlib.contextmanager
-def _progress(src: Path):
-    """A progress callback (done, total) drawing a bar on stderr for inputs over 20 MB, else None. The
-    total is the bytes of a text log or the messages of a bag, as the importer counts them."""
-    from ..logs.importers import detect_kind
-
-    size = src.stat().st_size if src.is_file() else 0
-    if size < 20_000_000:
-        yield None
-        return
-    from ..base.progress import bar
-
-    unit = "messages" if detect_kind(src) in ("ros1", "ros2", "mcap") else "bytes"
-    with bar(f"reading {src.name}", None, unit=unit) as progress:
-        yield lambda done, total: progress.update(done, total or None)
+    result = api.import_log(
+        src,
+        output,
+        force=force,
+        topic=topic,
+        odom_topic=odom_topic,
+        max_scans=max_scans,
+        laser_pose=laser_pose,
+        command_line=invocation("import"),
+    )
+    say(result.summary)

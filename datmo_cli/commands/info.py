@@ -1,4 +1,4 @@
-"""`datmo info`: what a log holds."""
+"""`datmo info`: what a log holds: one call of datmo_cli.api.info (workflows.inspecting), printed as tables or JSON."""
 
 from __future__ import annotations
 
@@ -8,62 +8,6 @@ from pathlib import Path
 import click
 
 from .types import quiet_option
-
-
-def describe(path: Path) -> dict:
-    """A JSON-ready description of a log: channels, scan geometry and rate, provenance metadata."""
-    import numpy as np
-
-    from ..logs import mcapio
-
-    log = mcapio.read_log(path, topics=[mcapio.TOPIC_SCAN])
-    duration = (log.end_ns - log.start_ns) / 1e9
-    out: dict = {
-        "file": str(path),
-        "size_bytes": log.size,
-        "profile": log.profile,
-        "library": log.library,
-        "truncated": log.truncated,
-        "corrupt_chunks": log.corrupt_chunks,
-        "corrupt_bytes": log.corrupt_bytes,
-        "start_ns": log.start_ns,
-        "end_ns": log.end_ns,
-        "duration_s": round(duration, 6),
-        "channels": [
-            {"topic": c.topic, "type": c.msgtype, "encoding": c.message_encoding, "messages": c.count}
-            for c in sorted(log.channels.values(), key=lambda c: c.topic)
-        ],
-        "metadata": log.metadata,
-        "scan": None,
-    }
-    several = mcapio.several_channels(log, mcapio.TOPIC_SCAN)
-    if several:  # info still shows the channels; the stage commands refuse the log
-        import warnings
-
-        warnings.warn(several, stacklevel=2)
-    elif log.has(mcapio.TOPIC_SCAN):
-        run = mcapio.run_from_log(log)
-        g = run.geometry
-        dt = np.diff(run.stamps) / 1e9
-        rate = float(1 / np.median(dt)) if len(dt) and np.median(dt) > 0 else None
-        gaps = int(np.sum(dt > 1.5 * np.median(dt))) if len(dt) else 0
-        finite = np.isfinite(run.ranges)
-        out["scan"] = {
-            "scans": len(run),
-            "rate_hz": round(rate, 3) if rate else None,
-            "gaps": gaps,
-            "beams": g.n_beams,
-            "fov_deg": round(float(np.degrees(g.angle_increment * (g.n_beams - 1))), 4),
-            "resolution_deg": round(float(np.degrees(g.angle_increment)), 4),
-            "angle_min_deg": round(float(np.degrees(g.angle_min)), 4),
-            "angle_max_deg": round(float(np.degrees(g.angle_max)), 4),
-            "range_min_m": round(g.range_min, 4),
-            "range_max_m": round(g.range_max, 4),
-            "frame_id": g.frame_id,
-            "intensities": bool(run.intensities.shape[1]),
-            "valid_returns": round(float(finite.mean()), 4) if finite.size else 0.0,
-        }
-    return out
 
 
 def _print_rich(info: dict) -> None:
@@ -129,11 +73,9 @@ def command(log: Path, as_json: bool) -> None:
 
     Example: datmo info sample_logs/hall.mcap --json
     """
-    import warnings
+    from .. import api
 
-    info = describe(log)
-    if not any(c["topic"] == "/scan" and c["messages"] for c in info["channels"]):
-        warnings.warn(f"{log}: no scans on /scan (it holds {len(info['channels'])} other channel(s))", stacklevel=1)
+    info = api.info(log)
     if as_json:
         click.echo(json.dumps(info, indent=2))
     else:

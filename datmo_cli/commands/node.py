@@ -1,4 +1,5 @@
-"""`datmo node`: a live ROS 2 node over DDS (Cyclone DDS, no ROS installation): LaserScans in, tracks out."""
+"""`datmo node`: a live ROS 2 node over DDS (Cyclone DDS, no ROS installation): LaserScans in, tracks out: the
+options, one call of datmo_cli.api.node (workflows.ros_node) and what it prints."""
 
 from __future__ import annotations
 
@@ -73,51 +74,17 @@ def command(
 
     Example: datmo node --domain-id 7 --scan-topic /front/scan --odom-topic /odom
     """
-    import re
-
+    from .. import api
     from ..base import outputs
-    from ..base.progress import Limited, say
-    from ..ros2 import dds, ros_graph
-    from ..ros2.node import Node
+    from ..base.progress import say
 
-    domain = dds.domain_id(domain_id)
-    # what a publisher's messages make the node say (a scan that does not decode, a restart): escaped, and
-    # rate-limited by kind (a publisher alternating two geometries would restart the tracking every scan), on
-    # stderr and on /rosout as warnings
-    nodes: list[Node] = []
-
-    def warn(line: str) -> None:
-        click.echo(line, err=True)
-        for n in nodes:
-            n.log(ros_graph.WARN, line)
-
-    told = Limited("datmo node", sink=warn)
-    node = Node(
-        domain,
-        scan_topic,
-        odom_topic,
-        cfg,
-        say=lambda line: told(line.removeprefix("datmo node: "), re.split(r"[\d(]", line)[0]),
-        name=name,
-        ns=namespace,
-        distro=ros_distro,
-    )
-    nodes.append(node)
+    options = {"domain_id": domain_id, "name": name, "namespace": namespace, "ros_distro": ros_distro}
+    node = api.node(scan_topic, odom_topic, config=cfg, on_warning=lambda line: click.echo(line, err=True), **options)
     try:
-        inputs = node.scan_topic + (f" and {node.odom_topic}" if node.odom_topic else "")
-        started = f"datmo node: ROS 2 domain {domain}: {inputs} in, {', '.join(node.topics)} out"
-        click.echo(started)
-        node.log(ros_graph.INFO, f"{started}; node {node.name}")
+        click.echo(node.started)
         say("  Ctrl-C to stop")
-        while node.feed.failure is None:
-            node.spin()
-        node.log(ros_graph.ERROR, f"datmo node: the stages stopped: {node.feed.failure}")
-        raise RuntimeError(f"the stages stopped: {node.feed.failure}")  # a bug: exit 70, one line
+        node.spin()
     except (KeyboardInterrupt, outputs.Terminated) as exc:
         code = 130 if isinstance(exc, KeyboardInterrupt) else exc.exit_code
-        node.close()
-        told.close()
-        stopped = f"datmo node: stopped ({'Ctrl-C' if code == 130 else exc}); {node.summary()}"
-        node.log(ros_graph.INFO, stopped)
-        say(stopped)
+        say(node.close("Ctrl-C" if code == 130 else str(exc)))
         raise click.exceptions.Exit(code) from None

@@ -1,4 +1,5 @@
-"""`datmo play`: serve a log to Foxglove over its WebSocket protocol at the log's rate (the live view)."""
+"""`datmo play`: serve a log to Foxglove over its WebSocket protocol at the log's rate (the live view): the options,
+datmo_cli.api.Player (workflows.playing) and what it prints."""
 
 from __future__ import annotations
 
@@ -69,31 +70,28 @@ def command(input: Path, host: str, port: int, rate: float, loop: bool, wait: bo
 
     Example: datmo play sample_logs/hall.mcap --rate 2 --loop
     """
-    from .. import live
+    from .. import api
     from ..base import outputs
     from ..base.progress import say
     from ..base.text import printable
 
-    server = live.LiveServer(host, port)  # the package and the port are checked before the log is read
+    player = None
     try:
-        source = live.LogSource(input, cfg)
-        control = live.PlaybackControl(*source.span, rate)
-        server.offer_playback(control)
-        source.declare(server)
-        what = "as it is" if source.processed else "segmented, features and tracks made on the fly"
-        scans = source.stream.n_scans
-        click.echo(f"datmo play: serving {printable(input)} ({scans:,} scans, {what}) on {server.url}")
-        click.echo(f"  open {server.app_url}")
-        click.echo(f"  or in Foxglove desktop: Open connection > Foxglove WebSocket > {server.url}")
+        player = api.Player(input, host=host, port=port, rate=rate, config=cfg)
+        what = "as it is" if player.processed else "segmented, features and tracks made on the fly"
+        click.echo(f"datmo play: serving {printable(input)} ({player.scans:,} scans, {what}) on {player.url}")
+        click.echo(f"  open {player.app_url}")
+        click.echo(f"  or in Foxglove desktop: Open connection > Foxglove WebSocket > {player.url}")
         if wait:
             say("  waiting for a client to subscribe (Ctrl-C to stop)")
-            while not server.subscribed.wait(0.2):
-                pass
-        scans = live.play(source, server, rate=rate, loop=loop, control=control)
+            player.wait_for_client()
+        scans = player.run(loop)
         say(f"datmo play: {scans:,} scans served")
     except (KeyboardInterrupt, outputs.Terminated) as exc:
         code = 130 if isinstance(exc, KeyboardInterrupt) else exc.exit_code
-        say(f"datmo play: stopped ({'Ctrl-C' if code == 130 else exc}); {server.sent:,} messages served")
+        sent = player.sent if player is not None else 0
+        say(f"datmo play: stopped ({'Ctrl-C' if code == 130 else exc}); {sent:,} messages served")
         raise click.exceptions.Exit(code) from None
     finally:
-        server.close()
+        if player is not None:
+            player.close()

@@ -1,14 +1,13 @@
-"""`datmo simulate`: an LMS200 in a scene, written as a log with /scan, ground truth and (moving sensor) /odom."""
+"""`datmo simulate`: an LMS200 in a scene, written as a log with /scan, ground truth and (moving sensor) /odom: the
+options, one call of datmo_cli.api.simulate (workflows.simulating) and the line it says."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
-from typing import Any
 
 import click
 
-from ..base.bounds import OPTIONS, OptionError
+from ..base.bounds import OPTIONS
 from .options import force_option, output_option, quiet_option
 from .types import laser_pose_option, option
 
@@ -117,58 +116,24 @@ def command(
 
     Example: datmo simulate --scene hall --duration 60 -o hall.mcap
     """
-    from ..base.progress import bar, say
+    from .. import api
+    from ..base.progress import say
     from ..cli import invocation
-    from ..logs import mcapio
-    from ..passes.simulated import write_simulation, write_simulation_bag
-    from ..sim.scene import load_scene
-    from ..sim.simulate import Simulation
 
     ctx = click.get_current_context()
-    given = [k for k in LMS_OPTIONS if ctx.get_parameter_source(k) != click.core.ParameterSource.DEFAULT]
-    loaded = load_scene(scene)
-    if loaded.scanner is not None and given:
-        names = ", ".join("--" + k.replace("range_m", "range") for k in given)
-        raise OptionError(
-            f"{loaded.source}: the scene sets its own scanner ([scanner]); {names} "
-            f"appl{'ies' if len(given) == 1 else 'y'} to the LMS200"
-        )
-    if laser_pose is not None and loaded.sensor.mount is not None:
-        raise OptionError(
-            f"{loaded.source}: the scene mounts its scanner ([sensor] laser_pose); --laser-pose would place it twice"
-        )
-    if units is None:
-        units = "cm" if range_m == "80" else "mm"
-    lms: dict[str, Any] = (
-        {}
-        if loaded.scanner is not None
-        else {"fov_deg": int(angle), "resolution_deg": float(resolution), "range_mode_m": int(range_m), "units": units}
+    given = {k for k in LMS_OPTIONS if ctx.get_parameter_source(k) != click.core.ParameterSource.DEFAULT}
+    lms = {"angle": angle, "resolution": resolution, "range_m": range_m, "units": units}
+    result = api.simulate(
+        output,
+        scene,
+        force=force,
+        seed=seed,
+        duration=duration,
+        rate=rate,
+        people=people,
+        noise=noise,
+        laser_pose=laser_pose,
+        command_line=invocation("simulate"),
+        **{k: v if k in given else None for k, v in lms.items()},
     )
-    sim = Simulation(loaded, seed=seed, duration=duration, rate=rate, noise_sigma=noise, people=people, **lms)
-    params = {
-        "scene": scene,
-        "seed": seed,
-        "duration": duration if duration is not None else loaded.duration,
-        "rate": sim.sensor.rate_hz,
-        "people": people,
-    }
-    if loaded.scanner is None:
-        params |= {"angle": int(angle), "resolution": float(resolution), "range": int(range_m), "units": units}
-    else:
-        sc = loaded.scanner
-        params["scanner"] = {"beams": sc.beams, "fov_deg": sc.fov_deg, "range_m": [sc.range_min, sc.range_max]}
-    params["noise"] = noise
-    if laser_pose is not None:
-        params["laser_pose"] = {"x_m": laser_pose[0], "y_m": laser_pose[1], "yaw_deg": math.degrees(laser_pose[2])}
-    user_file = scene.endswith(".toml") or "/" in scene
-    n, n_objects, geometry = len(sim), len(sim.objects), sim.geometry
-    if output.suffix == ".bag":
-        with bar("simulating", len(sim)) as done:
-            write_simulation_bag(output, sim, laser_pose, force=force, progress=done)
-        say(f"{output}: ROS 1 bag, {n} scans of {geometry.describe()}; no ground truth (write an .mcap for it)")
-        return
-    provenance = mcapio.Provenance("simulate", params, [scene] if user_file else [], invocation("simulate"))
-    with mcapio.LogWriter(output, force=force, provenance=provenance) as writer:
-        with bar("simulating", len(sim)) as done:
-            write_simulation(writer, sim, laser_pose, progress=done)
-    say(f"{output}: {n} scans of {geometry.describe()}, {n_objects} ground-truth objects")
+    say(result.summary)

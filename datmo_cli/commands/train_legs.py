@@ -1,4 +1,5 @@
-"""`datmo train-legs`: train the learned leg detector on labelled and empty recordings, with held-out figures."""
+"""`datmo train-legs`: train the learned leg detector on labelled and empty recordings, with held-out figures: the
+options, one call of datmo_cli.api.train_legs (workflows.training) and what it prints."""
 
 from __future__ import annotations
 
@@ -6,9 +7,9 @@ from pathlib import Path
 
 import click
 
+from ..workflows.training import LABELS_TOPIC
 from .options import force_option, no_stdout, output_option, quiet_option
 
-LABELS_TOPIC = "/leg_cluster_positions"
 _MANY = ("--positive", "--negative")
 
 
@@ -34,37 +35,6 @@ class _ManyFilesCommand(click.Command):
         if pending:
             raise click.UsageError(f"{current} needs at least one file", ctx)
         return super().parse_args(ctx, out)
-
-
-def _labelled_or_empty(positives: tuple[Path, ...], negatives: tuple[Path, ...]) -> None:
-    """InputError when a --negative file is a --positive file too (the same file, a link to it or a copy of
-    it): its legs would be taught as both legs and not legs, and the model would find none."""
-    from ..base.errors import InputError
-
-    for n in negatives:
-        for p in positives:
-            if _same_data(n, p):
-                also = "" if str(n) == str(p) else f" (as {p})"
-                raise InputError(
-                    f"{n}: given as --negative and as --positive{also}; a recording is either labelled "
-                    "or empty of people"
-                )
-
-
-def _same_data(a: Path, b: Path) -> bool:
-    """Whether two existing paths hold the same data: one file (or folder), or byte-identical copies."""
-    import os
-
-    from ..logs.mcapio import sha256_of
-
-    try:
-        if os.path.samefile(a, b):
-            return True
-        if a.is_dir() != b.is_dir() or (a.is_file() and a.stat().st_size != b.stat().st_size):
-            return False
-        return sha256_of(a) == sha256_of(b)
-    except OSError:  # a missing or unreadable file: reading it says so
-        return False
 
 
 def _fmt(v: float | None, digits: int = 3) -> str:
@@ -168,46 +138,26 @@ def command(
     Example: datmo train-legs --positive ../shared/data/legtracker/positive_*.bag \\
         --negative ../shared/data/legtracker/negative_2.bag -o legs.npz
     """
-    from ..base.errors import InputError
-    from ..base.outputs import check_output
-    from ..base.progress import bar, console, say
-    from ..perception import training as TR
+    from .. import api
+    from ..base.progress import console, say
 
-    check_output(output, force=force, inputs=[*positives, *negatives], what="model")  # before the training
-    if not positives:
-        raise InputError("no labelled file: give at least one with --positive")
-    _labelled_or_empty(positives, negatives)
-    TR.require_sklearn()
-    with bar("reading", len(positives) + len(negatives), unit="steps") as shown:
-        labelled, empty = [], []
-        for i, p in enumerate(positives):
-            labelled.append(TR.read_labelled(p, topic, labels_topic))
-            shown.update(i + 1)
-        for i, p in enumerate(negatives):
-            empty.extend(TR.read_empty(p))
-            shown.update(len(positives) + i + 1)
+    def figures(result) -> None:
+        if result.held_out:
+            print_figures(result.held_out, result.mean, console())
+        else:
+            say(
+                "datmo: no held-out figures: they need two or more --positive files (one is held out while "
+                "the others train)"
+            )
 
-        def progress(stage: str, done: int, total: int) -> None:
-            shown.update(done, total, description=stage)
-
-        extra = []
-        if with_simulated:
-            from ..passes.simulated import simulated_recordings
-
-            shown.update(0, description="simulating")
-            extra = simulated_recordings()
-        result = TR.train_leg_model(labelled, empty, progress=progress, labels_topic=labels_topic, extra=extra)
-    if result.held_out:
-        print_figures(result.held_out, result.mean, console())
-    else:
-        say(
-            "datmo: no held-out figures: they need two or more --positive files (one is held out while "
-            "the others train)"
-        )
-    result.model.save(output, force=force)  # checked again: it may have appeared while training
-    n_legs = sum(int(t.label.sum()) for t in result.tables)
-    n_seg = sum(len(t) for t in result.tables)
-    say(
-        f"{output}: {result.model.n_trees} trees, threshold {result.threshold:.2f}; trained on {n_seg:,} "
-        f"segments ({n_legs:,} legs) of {len(labelled)} labelled and {len(empty)} empty recordings"
+    trained = api.train_legs(
+        positives,
+        negatives,
+        output,
+        topic=topic,
+        labels_topic=labels_topic,
+        force=force,
+        with_simulated=with_simulated,
+        on_trained=figures,
     )
+    say(trained.summary)
