@@ -79,7 +79,15 @@ def test_ctrl_c_stops_a_tune_that_the_same_command_then_continues(tmp_path):
     out = tmp_path / "out"
     args = [sys.executable, "-m", "datmo_cli", "tune", HALL, "--space", str(tmp_path / "space.toml"), "-o", str(out)]
     args += ["--trials", "4", "-j", "1"]  # in this process: a --jobs pool's Ctrl-C is batch/'s (tests/test_batch.py)
-    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    # Ctrl-C as in a terminal, even where this test runs with SIGINT ignored (a background job of a script):
+    # Python then installs no KeyboardInterrupt handler in the child
+    proc = subprocess.Popen(
+        args,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     manifest = out / "manifest.jsonl"
     deadline = time.monotonic() + 300
     while not (manifest.exists() and manifest.read_text().count("\n") >= 2) and time.monotonic() < deadline:
