@@ -303,3 +303,32 @@ def test_imports_down_and_within_a_layer_pass(tmp_path):
     (root / "passes/stages.py").write_text("from ..tracking import kalman\nfrom ..base import errors\n")
     (root / "cli.py").write_text("def main():\n    from .passes import stages\n")
     assert violations(root) == []
+
+
+MOST_LINES = 500  # a module a reader can hold: split it by what it holds beyond this
+THIN_COMMANDS = {"run": 150, "record": 150}  # the commands that once held their own orchestration
+
+
+def long_modules(root: Path = ROOT) -> dict[str, int]:
+    """{module path: lines} of the modules under `root` over MOST_LINES."""
+    sizes = {
+        p.relative_to(root).as_posix(): len(p.read_text(encoding="utf-8").splitlines()) for p in root.rglob("*.py")
+    }
+    return {path: n for path, n in sorted(sizes.items()) if n > MOST_LINES}
+
+
+def test_no_module_is_over_500_lines():
+    assert not long_modules(), f"modules over {MOST_LINES} lines: {long_modules()}"
+
+
+def test_a_planted_long_module_is_reported(tmp_path):
+    (tmp_path / "ok.py").write_text("x = 1\n" * MOST_LINES)
+    (tmp_path / "long.py").write_text("x = 1\n" * (MOST_LINES + 1))
+    assert long_modules(tmp_path) == {"long.py": MOST_LINES + 1}
+
+
+@pytest.mark.parametrize("command, most", sorted(THIN_COMMANDS.items()))
+def test_the_commands_stay_thin(command, most):
+    """options, one call of datmo_cli.api, what it prints: the work itself is in the pipeline layer."""
+    lines = len((ROOT / "commands" / f"{command}.py").read_text(encoding="utf-8").splitlines())
+    assert lines < most, f"commands/{command}.py: {lines} lines"
