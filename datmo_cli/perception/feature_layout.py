@@ -44,10 +44,18 @@ B_SCAN, B_SEG, B_FIRST, B_LAST, B_N, B_X, B_Y, B_SIZE, B_KIND = range(9)
 # a line candidate (line_of_run's `out`, the rows of extract_scan's `cand`): points, first and last point,
 # end points (x0, y0, x1, y1), rho, theta, length, r_acc, and r_acc of the HTL peak cell alone
 LC_N, LC_FIRST, LC_LAST, LC_X0, LC_Y0, LC_X1, LC_Y1, LC_RHO, LC_THETA, LC_LEN, LC_RACC, LC_PEAK_RACC = range(12)
+LC_WIDTH = LC_PEAK_RACC + 1  # columns of a line candidate
 
 
 # a circle candidate (circle_of_run's `out`): points, centre x, y, radius, r_acc
 CC_N, CC_X, CC_Y, CC_R, CC_RACC = range(5)
+CC_WIDTH = CC_RACC + 1  # columns of a circle candidate
+
+
+# an HTL peak (rows of line_subsegments' `peaks` and `hist`): votes, theta cell, rho cell; and a segment's
+# bounding box (_bounding_box's `box`): xmin, xmax, ymin, ymax
+PEAK_WIDTH = 3
+BOX_WIDTH = 4
 
 
 MAX_SUB = 256  # line candidates per segment
