@@ -440,7 +440,7 @@ def test_extract_scan_scans_and_parallel():
     cos_t, sin_t, vec = np.cos(theta), np.sin(theta), p.kernel_vector()
     cos_a, sin_a = np.cos(angles), np.sin(angles)
     c1 = float(np.sqrt(2.0 * (1.0 - np.cos(inc))))
-    args = SX.ExtractSetup(
+    args = FL.ExtractSetup(
         cos_a=cos_a,
         sin_a=sin_a,
         cos_inc=float(np.cos(inc)),

@@ -1,6 +1,13 @@
 """Layout shared by the feature kernels: positions in the parameter vector (P_*, see
-FeatureParams.kernel_vector) and the columns of line, circle and blob rows and of line and circle candidates.
+FeatureParams.kernel_vector), the columns of line, circle and blob rows and of line and circle candidates, and
+the bundles extract_scans takes and makes (named tuples read by field).
 """
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
 
 (
     P_C0,
@@ -59,3 +66,41 @@ BOX_WIDTH = 4
 
 
 MAX_SUB = 256  # line candidates per segment
+
+
+class ExtractSetup(NamedTuple):
+    """What scan_extractor.extract_scans takes about the scanner and the parameters (features.extract_run makes
+    it)."""
+
+    cos_a: np.ndarray  # (B,) float: cos of each beam's angle (sensor frame)
+    sin_a: np.ndarray  # (B,) float: sin of each beam's angle
+    cos_inc: float  # cos of the angle step between beams
+    c1: float  # segmentation's c1 (segmentation.segment_scan)
+    range_min: float  # m: returns below are invalid
+    range_max: float  # m: returns above are invalid
+    params: np.ndarray  # the parameter vector (FeatureParams.kernel_vector, P_* slots)
+    cos_t: np.ndarray  # (nt,) float: cos of each HTL theta cell
+    sin_t: np.ndarray  # (nt,) float: sin of each HTL theta cell
+
+
+class ScanWork(NamedTuple):
+    """extract_scan's scratch for scans of B beams and nt HTL theta cells (scan_extractor.scan_work makes it, once
+    a call of extract_scans). Each field is written before it is read, segment by segment, but acc (see zeroed)."""
+
+    lo: np.ndarray  # (LC_WIDTH,) float: a line candidate (LC_*), line_of_run's output
+    toff: np.ndarray  # (nt,) float: each theta cell's smallest rho over the segment's bounding box (m)
+    cell: np.ndarray  # (B,) int64: each point's normal theta cell (normal_cells)
+    touched: np.ndarray  # (nt,) bool: theta rows of acc voted in by the segment
+    peaks: np.ndarray  # (MAX_SUB, PEAK_WIDTH) int64: each HTL run's accumulator peak
+    cand: np.ndarray  # (MAX_SUB, LC_WIDTH) float: the segment's line candidates (LC_*)
+    kept: np.ndarray  # (MAX_SUB,) int64: rows of cand kept as lines
+    cidx: np.ndarray  # (MAX_SUB,) int64: rows of cand of more than three points (the decision rule's lines)
+    cout: np.ndarray  # (CC_WIDTH,) float: a circle candidate (CC_*), circle_of_run's output
+    hist: np.ndarray  # (B, PEAK_WIDTH) int64: HTL's peak after each point; then the lines' cos and sin
+    box: np.ndarray  # (BOX_WIDTH,) float: the segment's bounding box (m)
+    zeroed: np.ndarray  # (1,) int64: how many flat cells of acc are zero (from its start)
+    acc: np.ndarray  # (nt, rho cells) int32: HTL's accumulator, zeroed as segments first need it
+    cacc: np.ndarray  # (2 w + 1, 2 w + 1) int32: HTC's accumulator window
+    idx: np.ndarray  # (B,) int64: the points a fit takes
+    sub_s: np.ndarray  # (MAX_SUB,) int64: each HTL run's first point
+    sub_e: np.ndarray  # (MAX_SUB,) int64: each HTL run's end (exclusive)

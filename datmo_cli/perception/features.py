@@ -22,6 +22,7 @@ from ..log import cdr, types
 from ..log.scan import Odometry, ScanRun
 from . import scan_extractor as K
 from . import segmentation
+from .feature_layout import ExtractSetup
 from .landmark_database import LandmarkDatabase, LandmarkStream
 from .landmarks import (
     circle_detections,
@@ -241,7 +242,7 @@ def _row_buffers(n: int, B: int) -> tuple[np.ndarray, ...]:
 
 def _extract_block(
     block: np.ndarray,
-    setup: K.ExtractSetup,
+    setup: ExtractSetup,
     given: np.ndarray,
     given_off: np.ndarray,
     threads: int,
@@ -319,7 +320,7 @@ def extract_run(
         given = np.stack([g_start, g_end], axis=1) if len(g_start) else np.zeros((0, 2), np.int64)
     segs, seg_counts, parts = [], [], {"l": [], "c": [], "b": [], "g": []}
     n_threads = T.resolve(threads)
-    setup = K.ExtractSetup(
+    setup = ExtractSetup(
         cos_a=cos_a,
         sin_a=sin_a,
         cos_inc=cos_inc,

@@ -116,8 +116,10 @@ def add_to_map(points, n, pose, min_spacing, local_map, count) -> int:
     (x, y, theta); local_map: a LocalMap, count points used."""
     px, py, pnx, pny = points
     pose_x, pose_y, pose_t = pose
-    mx = local_map.mx
+    mx = local_map.mx  # each field read once, by name (an array read in the loop would be counted each pass)
     my = local_map.my
+    mnx = local_map.mnx
+    mny = local_map.mny
     cell = local_map.cell
     head = local_map.head
     nxt = local_map.nxt
@@ -134,8 +136,8 @@ def add_to_map(points, n, pose, min_spacing, local_map, count) -> int:
             continue
         mx[count] = wx
         my[count] = wy
-        local_map.mnx[count] = c * pnx[i] - s * pny[i]
-        local_map.mny[count] = s * pnx[i] + c * pny[i]
+        mnx[count] = c * pnx[i] - s * pny[i]
+        mny[count] = s * pnx[i] + c * pny[i]
         grid_insert(wx, wy, count, cell, head, nxt)
         count += 1
     return count
@@ -164,8 +166,13 @@ def icp_step(source, n, pose, local_map, max_dist, scale, redescend, inlier_tol,
     """
     sx, sy = source
     pose_x, pose_y, pose_t = pose
-    mx = local_map.mx
+    mx = local_map.mx  # each field read once, by name
     my = local_map.my
+    mnx = local_map.mnx
+    mny = local_map.mny
+    cell = local_map.cell
+    head = local_map.head
+    nxt = local_map.nxt
     for a in range(3):
         grad[a] = 0.0
         for b in range(3):
@@ -181,14 +188,14 @@ def icp_step(source, n, pose, local_map, max_dist, scale, redescend, inlier_tol,
         ry = s * sx[i] + c * sy[i]
         qx = rx + pose_x
         qy = ry + pose_y
-        j = grid_nearest(qx, qy, mx, my, local_map.cell, local_map.head, local_map.nxt, max_dist)
+        j = grid_nearest(qx, qy, mx, my, cell, head, nxt, max_dist)
         if j == EMPTY:
             continue
         matched += 1
         ex = qx - mx[j]
         ey = qy - my[j]
-        nx = local_map.mnx[j]
-        ny = local_map.mny[j]
+        nx = mnx[j]
+        ny = mny[j]
         if nx != 0.0 or ny != 0.0:
             res = nx * ex + ny * ey
             ares = abs(res)

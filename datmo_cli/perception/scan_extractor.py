@@ -5,8 +5,6 @@ Sensor frame: x forward, y left, metres; angles in radians. Checked against test
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 from numba import njit, prange
 
@@ -78,6 +76,7 @@ from .feature_layout import (
     P_RHO_RES,
     P_WINDOW,
     PEAK_WIDTH,
+    ScanWork,
 )
 from .hough_circles import circle_of_run, circle_posed
 from .hough_lines import _bounding_box, line_of_run, line_subsegments, normal_cells
@@ -100,43 +99,6 @@ def _convex(ax, ay, jx, jy, bx, by) -> bool:
     cj = ex * (jy - ay) - ey * (jx - ax)
     co = ex * (0.0 - ay) - ey * (0.0 - ax)
     return cj * co > 0
-
-
-class ExtractSetup(NamedTuple):
-    """What extract_scans takes about the scanner and the parameters (features.extract_run makes it)."""
-
-    cos_a: np.ndarray  # (B,) float: cos of each beam's angle (sensor frame)
-    sin_a: np.ndarray  # (B,) float: sin of each beam's angle
-    cos_inc: float  # cos of the angle step between beams
-    c1: float  # segmentation's c1 (segmentation.segment_scan)
-    range_min: float  # m: returns below are invalid
-    range_max: float  # m: returns above are invalid
-    params: np.ndarray  # the parameter vector (FeatureParams.kernel_vector, P_* slots)
-    cos_t: np.ndarray  # (nt,) float: cos of each HTL theta cell
-    sin_t: np.ndarray  # (nt,) float: sin of each HTL theta cell
-
-
-class ScanWork(NamedTuple):
-    """extract_scan's scratch for scans of B beams and nt HTL theta cells (scan_work makes it, once a call of
-    extract_scans). Each field is written before it is read, segment by segment, but acc (see zeroed)."""
-
-    lo: np.ndarray  # (LC_WIDTH,) float: a line candidate (LC_*), line_of_run's output
-    toff: np.ndarray  # (nt,) float: each theta cell's smallest rho over the segment's bounding box (m)
-    cell: np.ndarray  # (B,) int64: each point's normal theta cell (normal_cells)
-    touched: np.ndarray  # (nt,) bool: theta rows of acc voted in by the segment
-    peaks: np.ndarray  # (MAX_SUB, PEAK_WIDTH) int64: each HTL run's accumulator peak
-    cand: np.ndarray  # (MAX_SUB, LC_WIDTH) float: the segment's line candidates (LC_*)
-    kept: np.ndarray  # (MAX_SUB,) int64: rows of cand kept as lines
-    cidx: np.ndarray  # (MAX_SUB,) int64: rows of cand of more than three points (the decision rule's lines)
-    cout: np.ndarray  # (CC_WIDTH,) float: a circle candidate (CC_*), circle_of_run's output
-    hist: np.ndarray  # (B, PEAK_WIDTH) int64: HTL's peak after each point; then the lines' cos and sin
-    box: np.ndarray  # (BOX_WIDTH,) float: the segment's bounding box (m)
-    zeroed: np.ndarray  # (1,) int64: how many flat cells of acc are zero (from its start)
-    acc: np.ndarray  # (nt, rho cells) int32: HTL's accumulator, zeroed as segments first need it
-    cacc: np.ndarray  # (2 w + 1, 2 w + 1) int32: HTC's accumulator window
-    idx: np.ndarray  # (B,) int64: the points a fit takes
-    sub_s: np.ndarray  # (MAX_SUB,) int64: each HTL run's first point
-    sub_e: np.ndarray  # (MAX_SUB,) int64: each HTL run's end (exclusive)
 
 
 # extract_scan's steps below are inlined into it, and it into extract_scans (inline="always"): the per-scan loop
@@ -174,8 +136,10 @@ def scan_work(p, nt, B, range_max) -> ScanWork:
 def _merge_lines(x, y, nkept, rho_res, work) -> int:
     """Merge consecutive kept lines (work's kept, rows of cand) that are one line split by noise; returns how
     many kept lines remain."""
+    lo = work.lo  # each field read once, by name (an array read in a loop would be counted each pass)
     cand = work.cand
     kept = work.kept
+    idx = work.idx
     sub_s = work.sub_s
     sub_e = work.sub_e
     m = 1
@@ -191,11 +155,9 @@ def _merge_lines(x, y, nkept, rho_res, work) -> int:
             len_a = sub_e[kept[m - 1]] - sub_s[kept[m - 1]]
             len_b = sub_e[kept[q]] - sub_s[kept[q]]
             merged = a[LC_RACC] * len_a + b[LC_RACC] * len_b
-            s = sub_s[kept[m - 1]]
-            e = sub_e[kept[q]]
-            line_of_run(x, y, s, e, a[LC_THETA], a[LC_RHO], merged, rho_res, work.idx, work.lo)
-            sub_e[kept[m - 1]] = e
-            cand[kept[m - 1], :] = work.lo
+            line_of_run(x, y, sub_s[kept[m - 1]], sub_e[kept[q]], a[LC_THETA], a[LC_RHO], merged, rho_res, idx, lo)
+            sub_e[kept[m - 1]] = sub_e[kept[q]]
+            cand[kept[m - 1], :] = lo
         else:
             kept[m] = kept[q]
             m += 1
@@ -261,20 +223,21 @@ def _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha) -> bool:
     """HTC on the segment [s, e) (its circle in work's cout, CC_*): whether the circle beats the segment's
     ncand HTL lines (r_acc htl_racc together), holds like a line must (r_acc above line_min_racc) and is a
     well-posed arc (circle_posed; dalpha: the scan's angle step, rad)."""
-    cand = work.cand
+    cand = work.cand  # each field read once, by name
     cidx = work.cidx
     cout = work.cout
+    hist = work.hist
+    cacc = work.cacc
     idx = work.idx
     min_racc = p[P_LINE_MIN_RACC]
     if e - s >= p[P_CIRCLE_MIN_POINTS]:
-        circle_of_run(x, y, s, e, p, work.cacc, idx, cout, max(htl_racc, min_racc))
+        circle_of_run(x, y, s, e, p, cacc, idx, cout, max(htl_racc, min_racc))
     else:
         cout[CC_RACC] = 0.0
     lines_rss = -1.0  # the circle's points to the segment's HTL lines (two or more: a corner?)
     if ncand >= 2 and cout[CC_N] >= 3:
         # hist (HTL's scratch, free once the segment's lines are made) holds the lines' cos and sin
-        trig = work.hist.reshape(-1).view(np.float64)
-        lines_rss = _lines_rss(x, y, idx, int(cout[CC_N]), cand, cidx, ncand, trig)
+        lines_rss = _lines_rss(x, y, idx, int(cout[CC_N]), cand, cidx, ncand, hist.reshape(-1).view(np.float64))
     # idx[:n] still holds the points circle_of_run fitted
     return (
         cout[CC_RACC] > max(htl_racc, min_racc)
@@ -349,14 +312,25 @@ def extract_scan(x, y, segs, scan, p, trig, work, rows, counts, dalpha=0.0):
     """Features of one scan's segments (points x, y, m, sensor frame; segs = (starts, ends, nseg): beam
     ranges [start, end)): HTL on every segment, then the decision rule of docs/method.md §5.2, a circle kept
     only when well posed (circle_posed; `dalpha`: the scan's angle step, rad). trig = (cos_t, sin_t) of the
-    theta cells; work: scan_work's ScanWork. Appends rows to rows = (lines, circles, blobs) from counts = (nl,
-    nc, nb); returns the new counts."""
+    theta cells; work: scan_work's ScanWork (feature_layout). Appends rows to rows = (lines, circles, blobs) from
+    counts = (nl, nc, nb); returns the new counts."""
     starts, ends, nseg = segs
     lines, circles, blobs = rows
     nl, nc, nb = counts
-    lo = work.lo
-    cand = work.cand
+    lo = work.lo  # each field read once, by name
+    toff = work.toff
+    cell = work.cell
+    touched = work.touched
     peaks = work.peaks
+    cand = work.cand
+    kept = work.kept
+    cidx = work.cidx
+    cout = work.cout
+    hist = work.hist
+    box = work.box
+    zeroed = work.zeroed
+    acc = work.acc
+    idx = work.idx
     sub_s = work.sub_s
     sub_e = work.sub_e
     cos_t, sin_t = trig
@@ -373,16 +347,14 @@ def extract_scan(x, y, segs, scan, p, trig, work, rows, counts, dalpha=0.0):
         # HTL on the segment: its line candidates to cand (rows LC_*), those of more than three points to cidx,
         # those kept as lines (enough points, r_acc and length) to kept, consecutive kept lines that are one merged
         if e - s >= min_pts:
-            normal_cells(x, y, s, e, nt, work.cell)
+            normal_cells(x, y, s, e, nt, cell)
             # line_subsegments uses the first nt * width cells of acc (flat): zero what was never used before
-            used = nt * _bounding_box(x, y, s, e, rho_res, work.acc.shape[1], work.box)
-            zeroed = work.zeroed
+            used = nt * _bounding_box(x, y, s, e, rho_res, acc.shape[1], box)
             if used > zeroed[0]:
-                work.acc.reshape(-1)[zeroed[0] : used] = 0
+                acc.reshape(-1)[zeroed[0] : used] = 0
                 zeroed[0] = used
             runs = (sub_s, sub_e, peaks)
-            hough = (work.acc, work.toff, work.touched)
-            nsub = line_subsegments(x, y, s, e, hough, cos_t, sin_t, rho_res, kwin, work.cell, runs, work.hist)
+            nsub = line_subsegments(x, y, s, e, (acc, toff, touched), cos_t, sin_t, rho_res, kwin, cell, runs, hist)
         else:
             nsub = 0  # too few points for a line of more than three: no HTL
         nkept = 0
@@ -390,30 +362,30 @@ def extract_scan(x, y, segs, scan, p, trig, work, rows, counts, dalpha=0.0):
         votes = 0.0
         for k in range(nsub):
             t = peaks[k, 1]
-            rho_p = work.toff[t] + (peaks[k, 2] + 0.5) * rho_res
-            line_of_run(x, y, sub_s[k], sub_e[k], t * tstep, rho_p, peaks[k, 0], rho_res, work.idx, lo)
+            rho_p = toff[t] + (peaks[k, 2] + 0.5) * rho_res
+            line_of_run(x, y, sub_s[k], sub_e[k], t * tstep, rho_p, peaks[k, 0], rho_res, idx, lo)
             cand[k, :] = lo
             if lo[LC_N] >= min_pts:  # an HTL line (more than 3 points) for the decision rule
-                work.cidx[ncand] = k
+                cidx[ncand] = k
                 ncand += 1
                 votes += lo[LC_RACC] * (sub_e[k] - sub_s[k])  # the refined line's r_acc, in points
             if lo[LC_N] >= min_pts and lo[LC_RACC] > min_racc and lo[LC_LEN] > min_len:
-                work.kept[nkept] = k
+                kept[nkept] = k
                 nkept += 1
         if nkept > 1:
             nkept = _merge_lines(x, y, nkept, rho_res, work)
         htl_racc = votes / (e - s)
-        try_circle, leg_only = _circle_case(x, y, s, e, p, ncand, cand, work.cidx)
+        try_circle, leg_only = _circle_case(x, y, s, e, p, ncand, cand, cidx)
         if try_circle:
             if _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha):
-                _circle_row(circles[nc], scan, g, s, e, work.cout)
+                _circle_row(circles[nc], scan, g, s, e, cout)
                 nc += 1
                 continue
             if not leg_only:
                 nkept = 0
         if nkept > 0:
             for q in range(nkept):
-                _line_row(lines[nl], scan, g, cand[work.kept[q]])
+                _line_row(lines[nl], scan, g, cand[kept[q]])
                 nl += 1
             continue
         _blob_row(blobs[nb], x, y, scan, g, s, e)
@@ -425,17 +397,22 @@ def extract_scan(x, y, segs, scan, p, trig, work, rows, counts, dalpha=0.0):
 def extract_scans(ranges, k0, k1, setup, out, given):
     """Segment and extract features of scans k0 .. k1 - 1 of a block (ranges (N, B), m).
 
-    setup: an ExtractSetup (the beams, range limits, parameter vector and theta cells). out = (seg_out, lines,
-    circles, blobs, counts): scan k's segments (rows [start, end)), lines, circles and blobs go to rows [k * B,
-    k * B + counts[k, j]) of seg_out, lines, circles and blobs (j = 0, 1, 2, 3), each (N * B, columns) (a scan
-    has at most B of each). given = (rows, offsets): with offsets of
+    setup: a feature_layout.ExtractSetup (the beams, range limits, parameter vector and theta cells). out =
+    (seg_out, lines, circles, blobs, counts): scan k's segments (rows [start, end)), lines, circles and blobs go
+    to rows [k * B, k * B + counts[k, j]) of seg_out, lines, circles and blobs (j = 0, 1, 2, 3), each (N * B,
+    columns) (a scan has at most B of each). given = (rows, offsets): with offsets of
     length N + 1, the segments are not computed but taken from rows ([start, end), scan k's at
     offsets[k]:offsets[k + 1]). Scans are independent: any split of a block into calls gives the same rows, so
     extract_parallel runs disjoint ranges of scans at once."""
-    p = setup.params
-    cos_t = setup.cos_t
+    cos_a = setup.cos_a  # each field read once, by name
+    sin_a = setup.sin_a
+    cos_inc = setup.cos_inc
+    c1 = setup.c1
     range_min = setup.range_min
     range_max = setup.range_max
+    p = setup.params
+    cos_t = setup.cos_t
+    sin_t = setup.sin_t
     seg_out, lines, circles, blobs, counts = out
     given_rows, given_offsets = given
     N, B = ranges.shape
@@ -446,8 +423,8 @@ def extract_scans(ranges, k0, k1, setup, out, given):
     work = scan_work(p, cos_t.shape[0], B, range_max)
     min_points = int(p[P_MIN_POINTS])
     use_given = given_offsets.shape[0] == N + 1
-    dalpha = np.arccos(min(max(setup.cos_inc, -1.0), 1.0))  # the angle step, for circle_posed
-    trig = (cos_t, setup.sin_t)
+    dalpha = np.arccos(min(max(cos_inc, -1.0), 1.0))  # the angle step, for circle_posed
+    trig = (cos_t, sin_t)
     rows = (lines, circles, blobs)
     for k in range(k0, k1):
         r = ranges[k]
@@ -461,7 +438,7 @@ def extract_scans(ranges, k0, k1, setup, out, given):
                     ends[nseg] = b
                     nseg += 1
         else:
-            nseg = segment_scan(r, setup.cos_inc, p[P_C0], setup.c1, range_min, range_max, min_points, starts, ends)
+            nseg = segment_scan(r, cos_inc, p[P_C0], c1, range_min, range_max, min_points, starts, ends)
         base = k * B
         for g in range(nseg):
             seg_out[base + g, 0] = starts[g]
@@ -471,8 +448,8 @@ def extract_scans(ranges, k0, k1, setup, out, given):
             ri = r[i]
             if not valid_return(ri, range_min, range_max):
                 ri = 0.0  # only reachable through given segments: an invalid return is a point at the scanner
-            x[i] = ri * setup.cos_a[i]
-            y[i] = ri * setup.sin_a[i]
+            x[i] = ri * cos_a[i]
+            y[i] = ri * sin_a[i]
         nl, nc, nb = extract_scan(x, y, (starts, ends, nseg), k, p, trig, work, rows, (base, base, base), dalpha)
         counts[k, 1] = nl - base
         counts[k, 2] = nc - base
