@@ -139,6 +139,7 @@ CHECKS: dict[str, str] = {
     "perception.icp.compose": f"{HERE}::test_compose_and_between",
     "perception.icp.between": f"{HERE}::test_compose_and_between",
     "perception.icp.add_to_map": f"{HERE}::test_add_to_map",
+    "perception.icp.new_local_map": f"{HERE}::test_add_to_map",
     "perception.icp.cell_of": f"{HERE}::test_cell_of_and_hash",
     "perception.icp.cell_hash": f"{HERE}::test_cell_of_and_hash",
     "perception.scan_odometry._gather": f"{DRIVERS}::test_gather",

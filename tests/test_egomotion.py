@@ -111,7 +111,8 @@ def room_map(geom: ScanGeometry, ranges: np.ndarray, p: IcpParams = DEFAULTS):
     mx, my, mnx, mny = (np.zeros(b) for _ in range(4))
     nxt = np.full(b, KI.EMPTY, np.int64)
     head = np.full(4096, KI.EMPTY, np.int64)
-    count = KI.add_to_map((px, py, nx, ny), m, (0.0, 0.0, 0.0), 0.0, (mx, my, mnx, mny, p.max_dist, head, nxt), 0)
+    local_map = KI.LocalMap(mx=mx, my=my, mnx=mnx, mny=mny, cell=p.max_dist, head=head, nxt=nxt)
+    count = KI.add_to_map((px, py, nx, ny), m, (0.0, 0.0, 0.0), 0.0, local_map, 0)
     return (mx[:count], my[:count], mnx[:count], mny[:count]), head, nxt
 
 
@@ -197,7 +198,7 @@ def test_icp_step_matches_reference(pose, redescend):
     (mx, my, mnx, mny), head, nxt = room_map(G361, ref)
     sx, sy = source_points(G361, cur)
     hess, grad = np.zeros((3, 3)), np.zeros(3)
-    local_map = (mx, my, mnx, mny, 0.25, head, nxt)
+    local_map = KI.LocalMap(mx=mx, my=my, mnx=mnx, mny=mny, cell=0.25, head=head, nxt=nxt)
     got = KI.icp_step((sx, sy), len(sx), pose, local_map, 0.25, 0.05, redescend, 0.05, hess, grad)
     H, g, matched, abs_sum, inliers = reference.icp_step(
         np.stack([sx, sy], 1), pose, np.stack([mx, my], 1), np.stack([mnx, mny], 1), 0.25, 0.05, redescend, 0.05
@@ -217,7 +218,7 @@ def test_icp_align_matches_reference(init):
     (mx, my, mnx, mny), head, nxt = room_map(G361, ref)
     sx, sy = source_points(G361, cur)
     pose = np.zeros(3)
-    local_map = (mx, my, mnx, mny, 0.25, head, nxt)
+    local_map = KI.LocalMap(mx=mx, my=my, mnx=mnx, mny=mny, cell=0.25, head=head, nxt=nxt)
     got = KI.icp_align((sx, sy), len(sx), init, local_map, (0.5, 0.25, 0.05, 0.05, 30, 1.0), pose)
     want, stats = reference.icp_align(
         np.stack([sx, sy], 1), init, np.stack([mx, my], 1), np.stack([mnx, mny], 1), 0.5, 0.25, 0.05, 0.05, 30, 1.0

@@ -17,15 +17,6 @@ MOST = 6
 
 # sites still unpacking by position, "module:function": each is removed by the branch that names its values
 KNOWN: set[str] = {
-    # perception and ICP kernels
-    "perception/icp.py:add_to_map",
-    "perception/icp.py:icp_step",
-    "perception/leg_forest.py:block_probabilities",
-    "perception/leg_forest.py:block_probabilities_parallel",
-    "perception/scan_extractor.py:_merge_lines",
-    "perception/scan_extractor.py:_circle_wins",
-    "perception/scan_extractor.py:extract_scan",
-    "perception/scan_extractor.py:extract_scans",
     #
     # tracking kernels
     "tracking/_background.py:off_background",

@@ -147,7 +147,8 @@ def test_rebuild_map():
         kf_n[newest], kf_pose[newest] = m, pose
         ring[newest] = (pts, nrm, pose)
         keyframes = (kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose)
-        count = KO.rebuild_map(keyframes, newest, n_kf, 0.2, (mx, my, mnx, mny, cell, head, nxt))
+        local_map = KI.LocalMap(mx=mx, my=my, mnx=mnx, mny=mny, cell=cell, head=head, nxt=nxt)
+        count = KO.rebuild_map(keyframes, newest, n_kf, 0.2, local_map)
         want_xy, want_n = rp.rebuild_map(ring, newest, n_kf, 0.2, cap)
         assert count == len(want_xy)
         np.testing.assert_allclose(np.column_stack([mx, my])[:count], want_xy, atol=1e-12)
@@ -173,7 +174,7 @@ def test_predict_and_match():
         np.testing.assert_allclose(KO._predict(poses, dt, 1), poses[0], atol=0)
     p = IcpParams()
     (mx, my, mnx, mny), head, nxt = room_map(G361, cast(START, G361.angles(), noise=0.005, rng=rng))
-    local_map = (mx, my, mnx, mny, p.max_dist, head, nxt)
+    local_map = KI.LocalMap(mx=mx, my=my, mnx=mnx, mny=mny, cell=p.max_dist, head=head, nxt=nxt)
     map_xy, map_n = np.stack([mx, my], 1), np.stack([mnx, mny], 1)
     icp = (p.max_dist0, p.max_dist, p.robust_scale, p.inlier_tol, p.max_iter, p.prior_weight)
     moves = np.asarray(p.recovery_moves, np.float64).reshape(-1, 3)
@@ -423,7 +424,7 @@ def _extract_scan_rows(x, y, segs: list, k: int, vec, cos_t, sin_t, inc: float, 
     out = [np.zeros((B, c)) for c in (13, 9, 9)]
     work = SX.scan_work(vec, nt, B, 8.0)
     if acc is not None:
-        work = work[:12] + (acc,) + work[13:]
+        work = work._replace(acc=acc)
     segments = (starts, ends, len(segs))
     nl, nc, nb = SX.extract_scan(x, y, segments, k, vec, (cos_t, sin_t), work, tuple(out), (0, 0, 0), inc)
     return [out[0][:nl], out[1][:nc], out[2][:nb]]
@@ -445,7 +446,17 @@ def test_extract_scan_scans_and_parallel():
     cos_t, sin_t, vec = np.cos(theta), np.sin(theta), p.kernel_vector()
     cos_a, sin_a = np.cos(angles), np.sin(angles)
     c1 = float(np.sqrt(2.0 * (1.0 - np.cos(inc))))
-    args = (cos_a, sin_a, float(np.cos(inc)), c1, 0.05, 8.0, vec, cos_t, sin_t)
+    args = FL.ExtractSetup(
+        cos_a=cos_a,
+        sin_a=sin_a,
+        cos_inc=float(np.cos(inc)),
+        c1=c1,
+        range_min=0.05,
+        range_max=8.0,
+        params=vec,
+        cos_t=cos_t,
+        sin_t=sin_t,
+    )
     none_given, none_off = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
 
     def rows() -> list:
@@ -763,7 +774,7 @@ def _steps_agree(x, y, s: int, e: int, vec, inc: float, d, rows, st: dict, got: 
     the row writers write the rows extract_scan wrote (`got`: its line, circle and blob rows of the segment)."""
     pre_rows, runs, pre_kept, htl, htl_racc, kept = st["steps"]
     work = st["work"]
-    _, _, _, _, _, cand, kept_at, cidx, cout, _, _, _, _, _, _, sub_s, sub_e = work
+    cand, kept_at, cidx, cout, sub_s, sub_e = work.cand, work.kept, work.cidx, work.cout, work.sub_s, work.sub_e
     if len(pre_kept) > 1:
         cand[: len(pre_rows)] = pre_rows
         kept_at[: len(pre_kept)] = pre_kept

@@ -748,8 +748,11 @@ def test_compose_and_between():
 def test_add_to_map():
     rng = np.random.default_rng(16)
     cap, cell = 60, 0.25
-    mx, my, mnx, mny = np.zeros(cap), np.zeros(cap), np.zeros(cap), np.zeros(cap)
-    head, nxt = np.full(256, KI.EMPTY, np.int64), np.full(cap, KI.EMPTY, np.int64)
+    local_map = KI.new_local_map(cap, cell)
+    buckets = len(local_map.head)
+    assert buckets >= 2 * cap and buckets & (buckets - 1) == 0 and (local_map.head == KI.EMPTY).all()
+    assert local_map.cell == cell and len(local_map.mx) == len(local_map.nxt) == cap
+    mx, my, mnx, mny = local_map.mx, local_map.my, local_map.mnx, local_map.mny
     ref_xy, ref_n, count = np.zeros((0, 2)), np.zeros((0, 2)), 0
     for scan in range(4):  # the later scans overlap the earlier ones: their points near the map are skipped
         pts = rng.uniform(-2, 2, (50, 2))
@@ -758,7 +761,6 @@ def test_add_to_map():
         nrm[rng.random(50) < 0.2] = np.nan
         pose = rng.uniform(-0.3, 0.3, 3)
         points = (pts[:, 0].copy(), pts[:, 1].copy(), nrm[:, 0].copy(), nrm[:, 1].copy())
-        local_map = (mx, my, mnx, mny, cell, head, nxt)
         count = KI.add_to_map(points, 50, tuple(pose), 0.2 if scan else 0.0, local_map, count)
         ref_xy, ref_n = rp.add_to_map(pts, nrm, pose, 0.2 if scan else 0.0, ref_xy, ref_n, cap)
         assert count == len(ref_xy)
@@ -849,7 +851,8 @@ def test_ensemble_leaf_and_candidates():
     from datmo_cli.perception.legs import CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS
 
     model = load_leg_model("default")
-    nodes, split, roots, kind, base, scale, pf, pt, pv, depth = model._kernel_args()
+    m = model._kernel_args()
+    nodes, split, roots = m.nodes, m.split, m.roots
     rng = np.random.default_rng(13)
     ranges, angles = _scan(14, 3, 60)
     start, end, offsets = rp.gap_clusters(ranges, angles, 0.05, 30.0, 0.13, 1)
@@ -857,9 +860,11 @@ def test_ensemble_leaf_and_candidates():
     X = np.concatenate([X, X * rng.uniform(0.5, 1.5, X.shape)])
     out = np.empty(len(X))
     LFO.ensemble(X, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, *model._kernel_args(), out)
-    assert depth == 5  # the shipped model walks its perfect trees
+    assert m.depth == 5  # the shipped model walks its perfect trees
     by_nodes = np.empty(len(X))
-    LFO.ensemble_nodes(X, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, nodes, split, roots, kind, base, scale, by_nodes)
+    LFO.ensemble_nodes(
+        X, CANDIDATE_MAX_WIDTH, CANDIDATE_MIN_POINTS, nodes, split, roots, m.kind, m.base, m.scale, by_nodes
+    )
     np.testing.assert_array_equal(out, by_nodes)
     for x, got in zip(X, out, strict=True):
         candidate = rp.is_candidate(x)
@@ -911,7 +916,7 @@ def test_perfect_trees_equal_the_reference_walk(max_depth, kind):
     rng = np.random.default_rng(max_depth)
     model = _random_model(rng, 30, max_depth, kind)
     args = model._kernel_args()
-    pf, pt, pv, depth = args[6:]
+    pf, pt, pv, depth = args.perfect_feature, args.perfect_threshold, args.perfect_value, args.depth
     assert depth == (-1 if max_depth > PERFECT_MAX_DEPTH else max_depth)
     X = rng.uniform(-1, 1, (300, 21))
     used = model.feature >= 0

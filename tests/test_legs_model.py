@@ -170,7 +170,7 @@ def test_kind_codes_match_the_kernel():
     X, y = random_features(100, 8)
     forest = from_sklearn(RandomForestClassifier(n_estimators=2, random_state=0).fit(X, y), 0.5, {})
     boost = from_sklearn(GradientBoostingClassifier(n_estimators=2).fit(X, y), 0.5, {})
-    assert (forest._kernel_args()[3], boost._kernel_args()[3]) == (LFO.KIND_FOREST, LFO.KIND_BOOSTING)
+    assert (forest._kernel_args().kind, boost._kernel_args().kind) == (LFO.KIND_FOREST, LFO.KIND_BOOSTING)
 
 
 def test_leg_probabilities_equal_the_model_on_all_features():

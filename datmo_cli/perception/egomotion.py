@@ -215,8 +215,7 @@ def align_scans(
     KO.scan_normals(
         ref, (cos_a, sin_a, lo, hi), beams, m, (p.normal_radius, p.max_gap, _max_window(g), p.planarity), nx, ny
     )
-    head = np.full(1 << max(4, int(2 * b - 1).bit_length()), icp.EMPTY, np.int64)
-    local_map = (np.zeros(b), np.zeros(b), np.zeros(b), np.zeros(b), p.max_dist, head, np.full(b, icp.EMPTY, np.int64))
+    local_map = icp.new_local_map(b, p.max_dist)
     icp.add_to_map((px, py, nx, ny), m, (0.0, 0.0, 0.0), 0.0, local_map, 0)
     sx, sy = np.zeros(b), np.zeros(b)
     n = KO.scan_points(cur, cos_a, sin_a, lo, hi, p.source_spacing, p.max_points, sx, sy, beams)

@@ -22,6 +22,7 @@ from ..logs import cdr, types
 from ..logs.scan import Odometry, ScanRun
 from . import scan_extractor as SX
 from . import segmentation
+from .feature_layout import ExtractSetup
 from .landmark_database import LandmarkDatabase, LandmarkStream
 from .landmarks import (
     circle_detections,
@@ -241,16 +242,16 @@ def _row_buffers(n: int, B: int) -> tuple[np.ndarray, ...]:
 
 def _extract_block(
     block: np.ndarray,
-    args: tuple,
+    setup: ExtractSetup,
     given: np.ndarray,
     given_off: np.ndarray,
     threads: int,
     buffers: tuple[np.ndarray, ...] | None = None,
 ) -> tuple[np.ndarray, ...]:
-    """The perception kernels on one block of scans (ranges (n, B), m; `args` the kernels' geometry and
-    parameters: cos_a, sin_a, cos_inc, c1, range_min, range_max, params vector, cos_t, sin_t) on `threads`
-    threads (a threads.resolve()d count): (segments (S, 2) beam ranges [start, end), segments per scan (n,),
-    line rows (L, 13), circle rows (C, 9), blob rows (Cb, 9)) in scan order, column 0 the scan in the block.
+    """The perception kernels on one block of scans (ranges (n, B), m; `setup` the kernels' geometry and
+    parameters) on `threads` threads (a threads.resolve()d count): (segments (S, 2) beam ranges [start, end),
+    segments per scan (n,), line rows (L, 13), circle rows (C, 9), blob rows (Cb, 9)) in scan order, column 0
+    the scan in the block.
     Each scan's rows are written to its own stretch of B rows, so the result is the same for any `threads`.
     `buffers`: _row_buffers of at least n scans to write into (made here when None)."""
     from . import threads as TH
@@ -264,10 +265,10 @@ def _extract_block(
     if threads > 1:
         with TH.numba_threads(threads):
             SX.extract_parallel(
-                block, min(n, 4 * threads), args, (seg, lines, circles, blobs, counts), (given, given_off)
+                block, min(n, 4 * threads), setup, (seg, lines, circles, blobs, counts), (given, given_off)
             )
     else:
-        SX.extract_scans(block, 0, n, args, (seg, lines, circles, blobs, counts), (given, given_off))
+        SX.extract_scans(block, 0, n, setup, (seg, lines, circles, blobs, counts), (given, given_off))
     out = []
     for j, rows in enumerate((seg, lines, circles, blobs)):
         kept = np.empty((int(counts[:, j].sum()), rows.shape[1]), rows.dtype)
@@ -319,7 +320,17 @@ def extract_run(
         given = np.stack([g_start, g_end], axis=1) if len(g_start) else np.zeros((0, 2), np.int64)
     segs, seg_counts, parts = [], [], {"l": [], "c": [], "b": [], "g": []}
     n_threads = TH.resolve(threads)
-    args = (cos_a, sin_a, cos_inc, c1, lo, hi, vec, cos_t, sin_t)
+    setup = ExtractSetup(
+        cos_a=cos_a,
+        sin_a=sin_a,
+        cos_inc=cos_inc,
+        c1=c1,
+        range_min=lo,
+        range_max=hi,
+        params=vec,
+        cos_t=cos_t,
+        sin_t=sin_t,
+    )
     buffers = _row_buffers(min(N, BLOCK), B) if N and B else None
     for a in range(0, N, BLOCK):
         block = ranges[a : a + BLOCK]
@@ -330,7 +341,7 @@ def extract_run(
         else:
             block_given, block_off = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
         if B:
-            seg, count, lines, circles, blobs = _extract_block(block, args, block_given, block_off, n_threads, buffers)
+            seg, count, lines, circles, blobs = _extract_block(block, setup, block_given, block_off, n_threads, buffers)
         else:
             seg, count = np.zeros((0, 2), np.int64), np.zeros(n, np.int64)
             lines, circles, blobs = np.zeros((0, 13)), np.zeros((0, 9)), np.zeros((0, 9))

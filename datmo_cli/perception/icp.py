@@ -1,8 +1,8 @@
 """numba kernels of scan-matching ego-motion's matcher: a local map in a hashed grid, and point-to-line ICP against it.
 
-A local map is the tuple (mx, my, mnx, mny, cell, head, nxt): its points and their unit line normals (the
-fixed frame, m), the grid's cell size (m), and the grid's bucket heads and per-point next links (EMPTY ends a
-list). Frames: scan points are in the sensor frame (x forward, y left, metres); the map and poses are in the fixed
+A local map is a LocalMap (new_local_map makes one): its points and their unit line normals (the fixed frame,
+m), the grid's cell size (m), and the grid's bucket heads and per-point next links (EMPTY ends a list).
+Frames: scan points are in the sensor frame (x forward, y left, metres); the map and poses are in the fixed
 "scan_odom" frame whose origin is the first scan's sensor pose. A pose is (x, y, theta): the sensor's origin
 in metres and its heading in radians, so a sensor point p maps to R(theta) p + (x, y).
 
@@ -11,6 +11,8 @@ the plain-numpy reference in tests/reference_perception.py.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -30,6 +32,36 @@ CONVERGED_TURN = 5e-5  # rad: ... and in theta ends the iterations once the gate
 
 
 EMPTY = -1
+
+
+class LocalMap(NamedTuple):
+    """ICP's map: up to capacity points in a hashed grid (new_local_map makes it; add_to_map fills it)."""
+
+    mx: np.ndarray  # (capacity,) float: the points' x (fixed frame, m)
+    my: np.ndarray  # (capacity,) float: the points' y (m)
+    mnx: np.ndarray  # (capacity,) float: x of each point's unit line normal (0, 0: none, a corner or post)
+    mny: np.ndarray  # (capacity,) float: y of each point's unit line normal
+    cell: float  # m: the grid's cell size
+    head: np.ndarray  # (buckets,) int64: each bucket's first point, EMPTY for none (buckets a power of two)
+    nxt: np.ndarray  # (capacity,) int64: the next point in each point's bucket, EMPTY at the end
+
+
+@njit(cache=True)
+def new_local_map(capacity, cell) -> LocalMap:
+    """An empty LocalMap for up to capacity points in cells of `cell` m: at least 2 capacity buckets (a power
+    of two, 16 or more), so a bucket holds about half a point."""
+    buckets = 16
+    while buckets < 2 * capacity:
+        buckets *= 2
+    return LocalMap(
+        mx=np.zeros(capacity),
+        my=np.zeros(capacity),
+        mnx=np.zeros(capacity),
+        mny=np.zeros(capacity),
+        cell=float(cell),
+        head=np.full(buckets, EMPTY, np.int64),
+        nxt=np.full(capacity, EMPTY, np.int64),
+    )
 
 
 @njit(cache=True)
@@ -81,10 +113,16 @@ def add_to_map(points, n, pose, min_spacing, local_map, count) -> int:
     """Add sensor-frame points (and normals) seen from pose to the map, skipping those whose normal is NaN
     (see beam_normal) and those within min_spacing (m) of a map point already there. Returns the new map
     size; stops when the map arrays are full. points = (px, py, pnx, pny), sensor frame, [0:n] used; pose =
-    (x, y, theta)."""
+    (x, y, theta); local_map: a LocalMap, count points used."""
     px, py, pnx, pny = points
     pose_x, pose_y, pose_t = pose
-    mx, my, mnx, mny, cell, head, nxt = local_map
+    mx = local_map.mx  # each field read once, by name (an array read in the loop would be counted each pass)
+    my = local_map.my
+    mnx = local_map.mnx
+    mny = local_map.mny
+    cell = local_map.cell
+    head = local_map.head
+    nxt = local_map.nxt
     c = np.cos(pose_t)
     s = np.sin(pose_t)
     for i in range(n):
@@ -118,7 +156,7 @@ def robust_weight(ares, scale, redescend) -> float:
 @njit(cache=True)
 def icp_step(source, n, pose, local_map, max_dist, scale, redescend, inlier_tol, hess, grad):
     """One Gauss-Newton linearisation of the robust point-to-line cost of source points (sx, sy)[0:n] (sensor
-    frame, m) placed at pose against the map.
+    frame, m) placed at pose against the map (a LocalMap).
 
     Each source point is matched with its nearest map point within max_dist (m). With a line normal n there,
     the residual is n . (q - m); without one (corners, posts) it is q - m, two rows. Rows get robust_weight
@@ -128,7 +166,13 @@ def icp_step(source, n, pose, local_map, max_dist, scale, redescend, inlier_tol,
     """
     sx, sy = source
     pose_x, pose_y, pose_t = pose
-    mx, my, mnx, mny, cell, head, nxt = local_map
+    mx = local_map.mx  # each field read once, by name
+    my = local_map.my
+    mnx = local_map.mnx
+    mny = local_map.mny
+    cell = local_map.cell
+    head = local_map.head
+    nxt = local_map.nxt
     for a in range(3):
         grad[a] = 0.0
         for b in range(3):

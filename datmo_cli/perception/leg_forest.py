@@ -195,9 +195,18 @@ def ensemble_nodes(features, max_width, min_points, nodes, split, roots, kind, b
 @njit(cache=True, nogil=True)
 def block_probabilities(ranges, beams, segs, rules, model, features, out) -> None:
     """block_features (candidates only) then ensemble, in one compiled call: the per-scan hot path. beams, segs and
-    rules as block_features takes them; model = (nodes, split, roots, kind, base, scale, pf, pt, pv, depth) as
-    ensemble takes them (LegModel._kernel_args)."""
-    nodes, split, roots, kind, base, scale, pf, pt, pv, depth = model
+    rules as block_features takes them; model: the leg_model.EnsembleArrays that ensemble takes
+    (LegModel._kernel_args)."""
+    nodes = model.nodes  # each field read once, by name
+    split = model.split
+    roots = model.roots
+    kind = model.kind
+    base = model.base
+    scale = model.scale
+    pf = model.perfect_feature
+    pt = model.perfect_threshold
+    pv = model.perfect_value
+    depth = model.depth
     max_width = rules[4]
     min_points = rules[5]
     block_features(ranges, beams, segs, rules, True, features)
@@ -209,7 +218,16 @@ def block_probabilities_parallel(ranges, parts, beams, segs, rules, model, featu
     """block_probabilities on numba's threads: the block's scans split into `parts` ranges of consecutive scans,
     each range's segments (rows seg_offsets[k0]:seg_offsets[k1] of features and out) done at once. Every row's
     features and probability depend on its own scan only: the same out as block_probabilities."""
-    nodes, split, roots, kind, base, scale, pf, pt, pv, depth = model
+    nodes = model.nodes  # each field read once, by name
+    split = model.split
+    roots = model.roots
+    kind = model.kind
+    base = model.base
+    scale = model.scale
+    pf = model.perfect_feature
+    pt = model.perfect_threshold
+    pv = model.perfect_value
+    depth = model.depth
     seg_start, seg_end, seg_offsets = segs
     max_width = rules[4]
     min_points = rules[5]

@@ -13,6 +13,7 @@ import zipfile
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -42,6 +43,21 @@ MEMBERS = (  # the arrays of a leg model file (.npz members NAME.npy)
 MAX_MODEL_MEMBERS = 64  # members of a leg model file read at most (a model has 13): more are refused unopened
 MAX_MODEL_BYTES = 256 << 20  # bytes of a leg model file, of its members uncompressed and of the arrays they
 # declare (the packaged model: about 0.5 MB)
+
+
+class EnsembleArrays(NamedTuple):
+    """What leg_forest's kernels walk of a LegModel (made once, at its construction; LegModel._kernel_args)."""
+
+    nodes: np.ndarray  # (nodes, 3) int64: each node's (feature, left, right), feature -1 at leaves
+    split: np.ndarray  # (nodes,) float: an inner node's threshold, a leaf's value
+    roots: np.ndarray  # (trees,) int64: each tree's root node
+    kind: int  # leg_forest.KIND_FOREST or KIND_BOOSTING
+    base: float  # boosting: the sum's offset
+    scale: float  # boosting: the sum's scale
+    perfect_feature: np.ndarray  # int32: the perfect trees' inner nodes' features (perfect_trees)
+    perfect_threshold: np.ndarray  # float32: their thresholds
+    perfect_value: np.ndarray  # float: their leaves' values
+    depth: int  # the perfect trees' depth, -1 when there are none (walk the node arrays)
 
 
 @dataclass
@@ -90,7 +106,19 @@ class LegModel:
         )
         self._split = np.where(inner, self.threshold, self.value)
         kind = 0 if self.kind == "forest" else 1  # leg_forest.KIND_FOREST / KIND_BOOSTING
-        self._args = (self._nodes, self._split, self.roots, kind, self.base, self.scale, *perfect_trees(self))
+        pf, pt, pv, depth = perfect_trees(self)
+        self._args = EnsembleArrays(
+            nodes=self._nodes,
+            split=self._split,
+            roots=self.roots,
+            kind=kind,
+            base=self.base,
+            scale=self.scale,
+            perfect_feature=pf,
+            perfect_threshold=pt,
+            perfect_value=pv,
+            depth=depth,
+        )
 
     def _problem(self) -> str:
         n = len(self.feature)
@@ -120,9 +148,9 @@ class LegModel:
     def n_trees(self) -> int:
         return len(self.roots)
 
-    def _kernel_args(self) -> tuple:
-        """What the ensemble kernel takes after the features: nodes, split, roots, kind, base, scale, then the
-        perfect trees (perfect_trees: feature, threshold, leaf value, depth)."""
+    def _kernel_args(self) -> EnsembleArrays:
+        """What the ensemble kernel takes after the features, in its order (nodes, split, roots, kind, base,
+        scale, then the perfect trees: feature, threshold, leaf value, depth), by name."""
         return self._args
 
     def probabilities(self, features: np.ndarray) -> np.ndarray:

@@ -19,9 +19,11 @@ from .feature_layout import (
     B_SIZE,
     B_X,
     B_Y,
+    BOX_WIDTH,
     CC_N,
     CC_R,
     CC_RACC,
+    CC_WIDTH,
     CC_X,
     CC_Y,
     CR_FIRST,
@@ -67,11 +69,14 @@ from .feature_layout import (
     LC_RACC,
     LC_RHO,
     LC_THETA,
+    LC_WIDTH,
     LC_X0,
     LC_X1,
     LC_Y0,
     LC_Y1,
     MAX_SUB,
+    PEAK_WIDTH,
+    ScanWork,
 )
 from .hough_circles import circle_of_run, circle_posed
 from .hough_lines import _bounding_box, line_of_run, line_subsegments, normal_cells
@@ -101,33 +106,29 @@ def _convex(ax, ay, jx, jy, bx, by) -> bool:
 
 
 @njit(cache=True)
-def scan_work(p, nt, B, range_max):
-    """Scratch arrays of extract_scan for scans of B beams, nt theta cells, returns up to range_max (m) and the
-    parameter vector p, in this order: lo (a line candidate, LC_*), toff (nt,), cell (B,), touched (nt,),
-    peaks (MAX_SUB, 3), cand (MAX_SUB, LC_*), kept, cidx (MAX_SUB,), cout (a circle candidate, CC_*), hist
-    (B, 3), box (4,), zeroed (1,), acc (nt, rho cells), cacc (HTC window), idx (B,), sub_s, sub_e (MAX_SUB,).
-    acc is not zeroed here: extract_scan zeroes the part a segment needs the first time (a few % of it in
-    practice; zeroed[0]: how many flat cells of acc are zero)."""
+def scan_work(p, nt, B, range_max) -> ScanWork:
+    """ScanWork for scans of B beams, nt theta cells, returns up to range_max (m) and the parameter vector p. acc
+    is not zeroed: extract_scan zeroes the part a segment needs the first time (a few % of it in practice)."""
     diag = 2.0 * min(range_max, 100.0)
     w = int(round(p[FP_CIRCLE_WINDOW] / p[FP_CIRCLE_CELL]))
-    return (
-        np.empty(12),
-        np.empty(nt),
-        np.empty(B, np.int64),
-        np.zeros(nt, np.bool_),
-        np.empty((MAX_SUB, 3), np.int64),
-        np.empty((MAX_SUB, 12)),
-        np.empty(MAX_SUB, np.int64),
-        np.empty(MAX_SUB, np.int64),
-        np.empty(5),
-        np.empty((B, 3), np.int64),
-        np.empty(4),
-        np.zeros(1, np.int64),
-        np.empty((nt, int(diag / p[FP_RHO_RESOLUTION]) + 3), np.int32),
-        np.zeros((2 * w + 1, 2 * w + 1), np.int32),
-        np.empty(B, np.int64),
-        np.empty(MAX_SUB, np.int64),
-        np.empty(MAX_SUB, np.int64),
+    return ScanWork(
+        lo=np.empty(LC_WIDTH),
+        toff=np.empty(nt),
+        cell=np.empty(B, np.int64),
+        touched=np.zeros(nt, np.bool_),
+        peaks=np.empty((MAX_SUB, PEAK_WIDTH), np.int64),
+        cand=np.empty((MAX_SUB, LC_WIDTH)),
+        kept=np.empty(MAX_SUB, np.int64),
+        cidx=np.empty(MAX_SUB, np.int64),
+        cout=np.empty(CC_WIDTH),
+        hist=np.empty((B, PEAK_WIDTH), np.int64),
+        box=np.empty(BOX_WIDTH),
+        zeroed=np.zeros(1, np.int64),
+        acc=np.empty((nt, int(diag / p[FP_RHO_RESOLUTION]) + 3), np.int32),
+        cacc=np.zeros((2 * w + 1, 2 * w + 1), np.int32),
+        idx=np.empty(B, np.int64),
+        sub_s=np.empty(MAX_SUB, np.int64),
+        sub_e=np.empty(MAX_SUB, np.int64),
     )
 
 
@@ -135,7 +136,12 @@ def scan_work(p, nt, B, range_max):
 def _merge_lines(x, y, nkept, rho_res, work) -> int:
     """Merge consecutive kept lines (work's kept, rows of cand) that are one line split by noise; returns how
     many kept lines remain."""
-    lo, _, _, _, _, cand, kept, _, _, _, _, _, _, _, idx, sub_s, sub_e = work
+    lo = work.lo  # each field read once, by name (an array read in a loop would be counted each pass)
+    cand = work.cand
+    kept = work.kept
+    idx = work.idx
+    sub_s = work.sub_s
+    sub_e = work.sub_e
     m = 1
     for q in range(1, nkept):
         a = cand[kept[m - 1]]
@@ -217,7 +223,12 @@ def _circle_wins(x, y, s, e, p, work, ncand, htl_racc, dalpha) -> bool:
     """HTC on the segment [s, e) (its circle in work's cout, CC_*): whether the circle beats the segment's
     ncand HTL lines (r_acc htl_racc together), holds like a line must (r_acc above line_min_racc) and is a
     well-posed arc (circle_posed; dalpha: the scan's angle step, rad)."""
-    _, _, _, _, _, cand, _, cidx, cout, hist, _, _, _, cacc, idx, _, _ = work
+    cand = work.cand  # each field read once, by name
+    cidx = work.cidx
+    cout = work.cout
+    hist = work.hist
+    cacc = work.cacc
+    idx = work.idx
     min_racc = p[FP_LINE_MIN_RACC]
     if e - s >= p[FP_CIRCLE_MIN_POINTS]:
         circle_of_run(x, y, s, e, p, cacc, idx, cout, max(htl_racc, min_racc))
@@ -301,12 +312,27 @@ def extract_scan(x, y, segs, scan, p, trig, work, rows, counts, dalpha=0.0):
     """Features of one scan's segments (points x, y, m, sensor frame; segs = (starts, ends, nseg): beam
     ranges [start, end)): HTL on every segment, then the decision rule of docs/method.md §5.2, a circle kept
     only when well posed (circle_posed; `dalpha`: the scan's angle step, rad). trig = (cos_t, sin_t) of the
-    theta cells; work: scan_work's scratch. Appends rows to rows = (lines, circles, blobs) from counts = (nl,
-    nc, nb); returns the new counts."""
+    theta cells; work: scan_work's ScanWork (feature_layout). Appends rows to rows = (lines, circles, blobs) from
+    counts = (nl, nc, nb); returns the new counts."""
     starts, ends, nseg = segs
     lines, circles, blobs = rows
     nl, nc, nb = counts
-    lo, toff, cell, touched, peaks, cand, kept, cidx, cout, hist, box, zeroed, acc, _, idx, sub_s, sub_e = work
+    lo = work.lo  # each field read once, by name
+    toff = work.toff
+    cell = work.cell
+    touched = work.touched
+    peaks = work.peaks
+    cand = work.cand
+    kept = work.kept
+    cidx = work.cidx
+    cout = work.cout
+    hist = work.hist
+    box = work.box
+    zeroed = work.zeroed
+    acc = work.acc
+    idx = work.idx
+    sub_s = work.sub_s
+    sub_e = work.sub_e
     cos_t, sin_t = trig
     rho_res = p[FP_RHO_RESOLUTION]
     min_pts = p[FP_LINE_MIN_POINTS]
@@ -371,15 +397,22 @@ def extract_scan(x, y, segs, scan, p, trig, work, rows, counts, dalpha=0.0):
 def extract_scans(ranges, k0, k1, setup, out, given):
     """Segment and extract features of scans k0 .. k1 - 1 of a block (ranges (N, B), m).
 
-    setup = (cos_a, sin_a, cos_inc, c1, range_min, range_max, p, cos_t, sin_t): the beams' cos and sin, the
-    cos of the angle step, segmentation's c1, the range limits (m), the parameter vector and the theta cells'
-    cos and sin. out = (seg_out, lines, circles, blobs, counts): scan k's segments (rows [start, end)), lines,
-    circles and blobs go to rows [k * B, k * B + counts[k, j]) of seg_out, lines, circles and blobs (j = 0, 1,
-    2, 3), each (N * B, columns) (a scan has at most B of each). given = (rows, offsets): with offsets of
+    setup: a feature_layout.ExtractSetup (the beams, range limits, parameter vector and theta cells). out =
+    (seg_out, lines, circles, blobs, counts): scan k's segments (rows [start, end)), lines, circles and blobs go
+    to rows [k * B, k * B + counts[k, j]) of seg_out, lines, circles and blobs (j = 0, 1, 2, 3), each (N * B,
+    columns) (a scan has at most B of each). given = (rows, offsets): with offsets of
     length N + 1, the segments are not computed but taken from rows ([start, end), scan k's at
     offsets[k]:offsets[k + 1]). Scans are independent: any split of a block into calls gives the same rows, so
     extract_parallel runs disjoint ranges of scans at once."""
-    cos_a, sin_a, cos_inc, c1, range_min, range_max, p, cos_t, sin_t = setup
+    cos_a = setup.cos_a  # each field read once, by name
+    sin_a = setup.sin_a
+    cos_inc = setup.cos_inc
+    c1 = setup.c1
+    range_min = setup.range_min
+    range_max = setup.range_max
+    p = setup.params
+    cos_t = setup.cos_t
+    sin_t = setup.sin_t
     seg_out, lines, circles, blobs, counts = out
     given_rows, given_offsets = given
     N, B = ranges.shape

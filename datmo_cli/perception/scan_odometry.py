@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit
 
 from ..base.numba_runtime import key_kernel_cache_on_sources
-from .icp import EMPTY, MIN_MATCHES, add_to_map, between, compose, icp_align
+from .icp import EMPTY, MIN_MATCHES, add_to_map, between, compose, icp_align, new_local_map
 from .segmentation import valid_return
 
 key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
@@ -156,12 +156,11 @@ def scan_normals(r, scan, beams, n, normal, nx_out, ny_out) -> None:
 
 @njit(cache=True)
 def rebuild_map(keyframes, newest, n_kf, map_spacing, local_map) -> int:
-    """The map (local_map, see icp.py) from the n_kf keyframes ending at ring slot newest, newest first (its
+    """The map (local_map, an icp.LocalMap) from the n_kf keyframes ending at ring slot newest, newest first (its
     points win where keyframes overlap, so older, more drifted ones only fill in). keyframes = (kf_x, kf_y,
     kf_nx, kf_ny, kf_n, kf_pose): per ring slot, its points, normals, count and pose. Returns the map size."""
     kf_x, kf_y, kf_nx, kf_ny, kf_n, kf_pose = keyframes
-    head = local_map[5]
-    head[:] = EMPTY
+    local_map.head[:] = EMPTY
     count = 0
     k_slots = kf_n.shape[0]
     for a in range(n_kf):
@@ -250,20 +249,7 @@ def odometry_run(ranges, dt, scan, thinning, normal, icp, keyframing, recovery, 
     beams = np.zeros(n_beams, np.int64)
     sx = np.zeros(n_beams)
     sy = np.zeros(n_beams)
-    cap = k_slots * n_beams
-    size = 1
-    while size < 2 * cap:
-        size *= 2
-    # the map's cell is the final correspondence gate
-    local_map = (
-        np.zeros(cap),
-        np.zeros(cap),
-        np.zeros(cap),
-        np.zeros(cap),
-        icp[1],
-        np.full(size, EMPTY, np.int64),
-        np.full(cap, EMPTY, np.int64),
-    )
+    local_map = new_local_map(k_slots * n_beams, icp[1])  # the map's cell is the final correspondence gate
     pose = np.zeros(3)
     trial = np.zeros(3)
     newest = -1
