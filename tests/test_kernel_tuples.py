@@ -26,18 +26,6 @@ KNOWN: set[str] = {
     "perception/scan_extractor.py:_circle_wins",
     "perception/scan_extractor.py:extract_scan",
     "perception/scan_extractor.py:extract_scans",
-    #
-    # tracking kernels
-    "tracking/_background.py:off_background",
-    "tracking/_kernels.py:learned_measurements",
-    "tracking/_kernels.py:leg_stage_measurements",
-    "tracking/_life_cycle.py:spawn",
-    "tracking/_people.py:legs_stage",
-    "tracking/_rts.py:_gain",
-    "tracking/_scan_measurements.py:paper_measurements",
-    "tracking/_scan_measurements.py:learned_measurements",
-    "tracking/_step.py:track_scan",
-    "tracking/_step.py:track_block",
 }
 
 
