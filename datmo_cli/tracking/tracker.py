@@ -89,7 +89,7 @@ def _flat(features: list[ScanFeatures]) -> FeatureBlock:
             chunks.append(a.tobytes())
         return offsets, np.frombuffer(b"".join(chunks), dtype)
 
-    def fields(name: str, dtype: np.dtype, bundle: type) -> tuple:
+    def fields(name: str, dtype: np.dtype, bundle: type[Circles | Blobs | Lines | Legs]) -> tuple:
         """(offsets, the bundle of this kind's fields, named as the message's)."""
         offsets, a = join(name, dtype)
         names = bundle._fields
