@@ -41,6 +41,7 @@ from datmo_cli.logs.vocabulary import (
     STATUS_TENTATIVE,
 )
 from datmo_cli.tracking import _kernels, hindsight
+from datmo_cli.tracking.bundles import Blobs, Circles, Legs, Lines
 from datmo_cli.tracking.measurements import (
     KIND_BLOB,
     KIND_CIRCLE,
@@ -582,9 +583,9 @@ def reference_measurements(
         weak, g = g[~strong], g[strong]
         i8 = np.int64
         x, y, size, kind, legs, prob, covers = _kernels.learned_measurements(
-            (c["first"].astype(i8), c["last"].astype(i8), c["x"].astype(f8), c["y"].astype(f8), c["radius"].astype(f8)),
-            (b["first"].astype(i8), b["last"].astype(i8), b["x"].astype(f8), b["y"].astype(f8), b["size"].astype(f8)),
-            (
+            Circles(*(c[n].astype(i8 if n in ("first", "last") else f8) for n in Circles._fields)),
+            Blobs(*(b[n].astype(i8 if n in ("first", "last", "kind") else f8) for n in Blobs._fields)),
+            Lines(
                 li["segment"].astype(i8),
                 li["first"].astype(i8),
                 li["last"].astype(i8),
@@ -593,7 +594,7 @@ def reference_measurements(
                 li["x_end"].astype(f8),
                 li["y_end"].astype(f8),
             ),
-            (g["first"].astype(i8), g["last"].astype(i8), g["x"].astype(f8), g["y"].astype(f8), g["width"].astype(f8)),
+            Legs(*(g[n].astype(i8 if n in ("first", "last") else f8) for n in Legs._fields)),
             (weak["first"].astype(i8), weak["last"].astype(i8), weak["probability"].astype(f8)),
             params.kernel_vector(leg_threshold),
         )

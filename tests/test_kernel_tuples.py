@@ -15,21 +15,8 @@ pytestmark = pytest.mark.unit
 ROOT = Path(__file__).resolve().parent.parent / "datmo_cli"
 MOST = 6
 
-# sites still unpacking by position, "module:function": each is removed by the branch that names its values
-KNOWN: set[str] = {
-    #
-    # tracking kernels
-    "tracking/_background.py:off_background",
-    "tracking/_kernels.py:learned_measurements",
-    "tracking/_kernels.py:leg_stage_measurements",
-    "tracking/_life_cycle.py:spawn",
-    "tracking/_people.py:legs_stage",
-    "tracking/_rts.py:_gain",
-    "tracking/_scan_measurements.py:paper_measurements",
-    "tracking/_scan_measurements.py:learned_measurements",
-    "tracking/_step.py:track_scan",
-    "tracking/_step.py:track_block",
-}
+# sites still unpacking by position, "module:function", each removed by the change that names its values
+KNOWN: set[str] = set()
 
 
 def _is_kernel(fn: ast.FunctionDef) -> bool:

@@ -11,6 +11,7 @@ import pytest
 
 from datmo_cli.logs.vocabulary import CLASS_PERSON, CLASS_UNKNOWN, STATUS_CONFIRMED, STATUS_TENTATIVE
 from datmo_cli.tracking import hindsight as H
+from datmo_cli.tracking.bundles import RtsWork
 from datmo_cli.tracking.tracker import TRACK_DTYPE, TrackBlock
 from tests import reference_tracking as rt
 
@@ -324,7 +325,8 @@ def test_the_kernels_algebra_is_the_references():
         assert np.array_equal(out, rt.rts_process_noise(np.array([dt]), np.array([2.0]))[0])
     nxt, _ = H.chains(ids, t_ns)
     C, xp, Pp, reset = rt.rts_gains(t_ns, state, cov, q, nxt, 4.0)
-    work, c, x, p = np.zeros((7, 4, 4)), np.zeros((4, 4)), np.zeros(4), np.zeros((4, 4))
+    work = RtsWork(*(np.zeros((4, 4)) for _ in RtsWork._fields))
+    c, x, p = np.zeros((4, 4)), np.zeros(4), np.zeros((4, 4))
     for r in np.flatnonzero(nxt >= 0)[:200]:
         n = nxt[r]
         dt = float(t_ns[n] - t_ns[r]) * 1e-9

@@ -25,6 +25,7 @@ from datmo_cli.logs.vocabulary import (
     STATUS_COASTING,
 )
 from datmo_cli.tracking import _kernels, state
+from datmo_cli.tracking.bundles import Blobs, Circles, Legs, Lines
 from datmo_cli.tracking.measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, ScanFeatures
 from datmo_cli.tracking.params import TrackingParams
 from datmo_cli.tracking.tracker import Tracker
@@ -133,9 +134,16 @@ def test_learned_measurements_match_the_reference():
             return np.array([r[k] for r in rows], t).reshape(-1)
 
         got = _kernels.learned_measurements(
-            (col(circles, 0, i8), col(circles, 1, i8), col(circles, 2), col(circles, 3), col(circles, 4)),
-            (col(blobs, 0, i8), col(blobs, 1, i8), col(blobs, 2), col(blobs, 3), col(blobs, 4)),
-            (
+            Circles(col(circles, 0, i8), col(circles, 1, i8), col(circles, 2), col(circles, 3), col(circles, 4)),
+            Blobs(
+                col(blobs, 0, i8),
+                col(blobs, 1, i8),
+                col(blobs, 2),
+                col(blobs, 3),
+                col(blobs, 4),
+                np.zeros(len(blobs), i8),
+            ),
+            Lines(
                 col(lines, 0, i8),
                 col(lines, 1, i8),
                 col(lines, 2, i8),
@@ -144,7 +152,7 @@ def test_learned_measurements_match_the_reference():
                 col(lines, 5),
                 col(lines, 6),
             ),
-            (col(legs, 0, i8), col(legs, 1, i8), col(legs, 2), col(legs, 3), col(legs, 4)),
+            Legs(col(legs, 0, i8), col(legs, 1, i8), col(legs, 2), col(legs, 3), col(legs, 4), np.zeros(len(legs))),
             (col(weak, 0, i8), col(weak, 1, i8), col(weak, 2)),
             param_vector(stride_max=0.9, d_max=1.5),
         )

@@ -28,6 +28,7 @@ from datmo_cli.tracking import (
     _step,
     state,
 )
+from datmo_cli.tracking.bundles import ScanMeasurements
 from datmo_cli.tracking.markers import track_markers
 from datmo_cli.tracking.measurements import Measurements
 from datmo_cli.tracking.params import TrackingParams
@@ -118,10 +119,10 @@ def same_tracks(ref: ReferenceTracker, t0: int, tab: np.ndarray, n: int, what: s
     np.testing.assert_allclose(tab[:n][:, cols], want[:n][:, cols], rtol=0, atol=1e-9, err_msg=what)
 
 
-def meas_arrays(m: Measurements) -> tuple:
+def meas_arrays(m: Measurements) -> ScanMeasurements:
     """The measurements as the compiled step takes them (leg candidates (L, 5), see with_candidates)."""
     raw = with_candidates(m)[0].raw_legs
-    return (
+    return ScanMeasurements(
         np.ascontiguousarray(m.x, np.float64),
         np.ascontiguousarray(m.y, np.float64),
         np.ascontiguousarray(m.size, np.float64),
@@ -218,11 +219,12 @@ def lockstep(
     same_meas(got, m, "off background")
     same_candidates(got[5], m, "off background")
     np.testing.assert_array_equal(got[6], m.prob)
-    got = _people.legs_stage(tab, n, meas_arrays(m), PRM)
+    got, got_rows0 = _people.legs_stage(tab, n, meas_arrays(m), PRM)
     m, rows0 = ref._legs(t, m)
     same_meas(got, m, "legs")
-    np.testing.assert_array_equal(got[6], rows0)
-    np.testing.assert_array_equal(got[5], m.prob)
+    np.testing.assert_array_equal(got_rows0, rows0)
+    np.testing.assert_array_equal(got.prob, m.prob)
+    same_candidates(got.raw, m, "legs")
     mx, my, msize, mkind, mlegs, raw, mprob = meas_arrays(m)
     compat = _COMPAT_LEARNED if learned else _COMPAT
     rows_c, cols_c = _association.associate(tab, n, mx, my, mkind, mprob, raw, rows0, compat, crow, PRM)
@@ -335,10 +337,10 @@ def _flat_measurements(f, learned: bool) -> tuple:
     """The compiled features-to-measurements of one scan."""
     from datmo_cli.tracking.tracker import _flat
 
-    circles, blobs, lines, legs = (group[1:] for group in _flat([f]))  # without the per-scan offsets
+    block = _flat([f])  # one scan: its offsets are (0, count) and the arrays its own
     if learned:
-        return _scan_measurements.learned_measurements(circles, blobs, lines, legs, PRM)
-    return _scan_measurements.paper_measurements(circles, blobs, lines, PRM)
+        return _scan_measurements.learned_measurements(block.circles, block.blobs, block.lines, block.legs, PRM)
+    return _scan_measurements.paper_measurements(block.circles, block.blobs, block.lines, PRM)
 
 
 # ------------------------------------------------------------------------------------------- whole runs

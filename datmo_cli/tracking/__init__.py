@@ -20,4 +20,5 @@ _rts          numba kernel of hindsight's fixed-lag RTS smoother (hindsight.py; 
               tests/reference_tracking.reference_smooth)
 _assign       numba assignment solver (shortest augmenting paths; scipy's answer) and GNN
 state         the track table (one float64 array, named columns), parameter vector, context
+bundles       the named tuples the compiled step takes and returns (features, measurements, scratch)
 """

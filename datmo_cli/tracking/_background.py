@@ -19,6 +19,7 @@ from ..base.numba_runtime import key_kernel_cache_on_sources
 from . import _kernels
 from ._people import owns_returns, sure_person
 from ._scan_measurements import CARRIED_LEG, K_BLOB, K_LEG, NOT_A_LEG, R_COVER, R_W, R_X, R_Y, RAW_COLS, to_sensor
+from .bundles import ScanMeasurements
 from .state import (
     C_BG_CACHED,
     C_BG_COUNT,
@@ -109,15 +110,15 @@ def off_background(tab, n, meas, bg_score, ctx, frame, sensor, carry, prm):
     (CARRIED_LEG when carried),
     and the other strong legs are paired again; the same arrays when none is. A candidate within leg_reach of a
     person's prediction is that person's leg, background or not (a person standing by a wall keeps their legs), but
-    not when carried. meas: the scan's measurements (mx, my, msize, mkind, mlegs, raw, mprob), tracking frame;
-    frame: the sensor's pose (px, py, cos, sin of its heading). Returns the measurements (the same tuple's
-    arrays)."""
-    mx, my, msize, mkind, mlegs, raw, mprob = meas
+    not when carried. meas: the scan's measurements (bundles.ScanMeasurements), tracking frame; frame: the sensor's
+    pose (px, py, cos, sin of its heading). Returns the measurements (meas itself when none is taken out)."""
+    mx, my, msize, mkind, mprob = meas.x, meas.y, meas.size, meas.kind, meas.prob
+    mlegs, raw = meas.legs, meas.raw
     px, py = frame[0], frame[1]
     ranges, _, has_pose, pose, geo = sensor
     carry_ref, carry_seen, carry_away = carry[0], carry[1], carry[2]
     if len(raw) == 0:
-        return mx, my, msize, mkind, mlegs, raw, mprob
+        return meas
     if ctx[C_BG_READY] != 0:
         nbg = int(np.sqrt(len(bg_score)) + 0.5)
         bg = _kernels.on_background(
@@ -145,7 +146,7 @@ def off_background(tab, n, meas, bg_score, ctx, frame, sensor, carry, prm):
     carried_beams(carried, raw, ranges, carry_ref, carry_seen, carry_away, has_pose, pose, geo, prm)
     bg |= carried
     if not bg.any():
-        return mx, my, msize, mkind, mlegs, raw, mprob
+        return meas
     strong = raw[:, R_COVER] < 0
     keep = strong & ~bg
     lx, ly, ls, kind, legs = _kernels.legs_to_measurements(
@@ -197,15 +198,14 @@ def off_background(tab, n, meas, bg_score, ctx, frame, sensor, carry, prm):
         if c >= 0:
             out[q, R_COVER] = where[c]
         q += 1
-    return x, y, size, knd, lg, out, prob
+    return ScanMeasurements(x, y, size, knd, lg, out, prob)
 
 
 @njit(cache=True)
 def hit_background(tab, n, rows, cols, meas, bg_score, ctx, frame, prm):
-    """Mark (column ON_BG) the tracks that take (rows, cols) a measurement of meas (mx, my, msize, mkind, ...)
-    on the background this scan: their motion does not count (tracker._hit_background). frame: (px, py, cos,
-    sin) of the sensor."""
-    mx, my, msize, mkind = meas[0], meas[1], meas[2], meas[3]
+    """Mark (column ON_BG) the tracks that take (rows, cols) a measurement of meas (bundles.ScanMeasurements) on the
+    background this scan: their motion does not count (tracker._hit_background). frame: (px, py, cos, sin) of the
+    sensor."""
     px, py = frame[0], frame[1]
     for k in range(n):
         tab[k, ON_BG] = 0.0
@@ -213,7 +213,7 @@ def hit_background(tab, n, rows, cols, meas, bg_score, ctx, frame, prm):
         return
     nbg = int(np.sqrt(len(bg_score)) + 0.5)
     grid = (bg_score, ctx[C_BG_X0], ctx[C_BG_Y0], nbg)
-    on_bg = _kernels.tracks_on_background(grid, mx, my, msize, mkind, rows, cols, n, px, py, prm)
+    on_bg = _kernels.tracks_on_background(grid, meas.x, meas.y, meas.size, meas.kind, rows, cols, n, px, py, prm)
     for k in range(n):
         tab[k, ON_BG] = 1.0 if on_bg[k] else 0.0
 

@@ -14,6 +14,7 @@ from numba import njit
 
 from ..base.numba_runtime import key_kernel_cache_on_sources
 from ..logs.vocabulary import BLOB_KIND_BLOB
+from .bundles import LearnedMeasurements, LegMeasurements, LegStage, PaperMeasurements
 from .state import (
     P_BACKGROUND_CELL,
     P_BACKGROUND_TIME,
@@ -111,8 +112,8 @@ def _people_first(lx, ly, ls, prm, n_more):
 @njit(cache=True)
 def measurements(circles, blobs, lines, prm):
     """Measurements of one scan (see measurements.py) from its circles (x, y, radius), blobs (x, y, size, kind)
-    and lines (segment, x_ini, y_ini, x_end, y_end): x, y, size, kind, legs (M, 4), and the leg candidates lx, ly,
-    ls (L,)."""
+    and lines (segment, x_ini, y_ini, x_end, y_end): a bundles.PaperMeasurements (x, y, size, kind, legs (M, 4),
+    and the leg candidates made of, leg_x, leg_y, leg_size (L,))."""
     cx, cy, cr = circles
     bx, by, bsize, bkind = blobs
     lseg, lx0, ly0, lx1, ly1 = lines
@@ -176,7 +177,7 @@ def measurements(circles, blobs, lines, prm):
             x[keep], y[keep], size[keep], kind[keep] = x[i], y[i], size[i], kind[i]
             legs[keep] = legs[i]
             keep += 1
-    return x[:keep], y[:keep], size[:keep], kind[:keep], legs[:keep], lx, ly, ls
+    return PaperMeasurements(x[:keep], y[:keep], size[:keep], kind[:keep], legs[:keep], lx, ly, ls)
 
 
 @njit(cache=True)
@@ -204,15 +205,16 @@ def learned_measurements(circles, blobs, lines, legs, weak, prm):
     (kind 2), the bounding box of a segment's lines (kind 3) or a blob (kind 4), whatever its size up to
     d_max; circles, blobs and lines on a leg's beams are that leg. Beams wfirst..wlast are clusters the
     detector gave a lower leg probability wp: a measurement on them takes it (the largest it covers).
-    Beam ranges are inclusive. The groups: circles (cfirst, clast, cx, cy, cr), blobs (bfirst, blast, bx, by,
-    bsize), lines (lseg, lfirst, llast, lx0, ly0, lx1, ly1), legs (gfirst, glast, gx, gy, gw), weak (wfirst,
-    wlast, wp). Returns x, y, size, kind, legs (M, 4), prob (M,: 0 for the legs, whose probabilities the caller
-    has, and for what the detector gave none) and cover (W,): for each of those weaker clusters the measurement on
-    most of its beams (-1: none), which is that cluster if a track takes it as a leg."""
-    cfirst, clast, cx, cy, cr = circles
-    bfirst, blast, bx, by, bsize = blobs
-    lseg, lfirst, llast, lx0, ly0, lx1, ly1 = lines
-    gfirst, glast, gx, gy, gw = legs
+    Beam ranges are inclusive. The groups: circles, blobs, lines, legs: bundles.Circles, Blobs (its kind unread),
+    Lines, Legs (its probability unread); weak (wfirst, wlast, wp). Returns a bundles.LearnedMeasurements: x, y,
+    size, kind, legs (M, 4), prob (M,: 0 for the legs, whose probabilities the caller has, and for what the
+    detector gave none) and cover (W,): for each of those weaker clusters the measurement on most of its beams
+    (-1: none), which is that cluster if a track takes it as a leg."""
+    cfirst, clast, cx, cy, cr = circles.first, circles.last, circles.x, circles.y, circles.radius
+    bfirst, blast, bx, by, bsize = blobs.first, blobs.last, blobs.x, blobs.y, blobs.size
+    lseg, lfirst, llast = lines.segment, lines.first, lines.last
+    lx0, ly0, lx1, ly1 = lines.x_ini, lines.y_ini, lines.x_end, lines.y_end
+    gfirst, glast, gx, gy, gw = legs.first, legs.last, legs.x, legs.y, legs.width
     wfirst, wlast, wp = weak
     nc, nb, nl, ng = len(cx), len(bx), len(lseg), len(gx)
     d_max = prm[P_D_MAX]
@@ -271,7 +273,7 @@ def learned_measurements(circles, blobs, lines, legs, weak, prm):
     for i in range(nw):
         if cover[i] >= 0:
             cover[i] = where[cover[i]]
-    return x[:keep], y[:keep], size[:keep], kind[:keep], mlegs[:keep], prob[:keep], cover
+    return LearnedMeasurements(x[:keep], y[:keep], size[:keep], kind[:keep], mlegs[:keep], prob[:keep], cover)
 
 
 @njit(cache=True)
@@ -288,8 +290,8 @@ def leg_stage(tx, ty, lx, ly, ls, prm):
     """Leg candidates (lx, ly, ls) to tracks predicted at (tx, ty), nearest pairs first: each leg to at
     most one track, each track at most two legs: the first within leg_reach, the second within stride_max
     of the track and of the first leg (a lagging prediction sits by one leg, a stride from the other).
-    Returns (owner, x, y, size, kind, legs, taken): one measurement per track that took legs (the centre
-    of two legs, kind 0, or one leg, kind 1) with the owner's index, and which legs were taken."""
+    Returns a bundles.LegStage (owner, x, y, size, kind, legs, taken): one measurement per track that took legs
+    (the centre of two legs, kind 0, or one leg, kind 1) with the owner's index, and which legs were taken."""
     reach, stride_max = prm[P_LEG_REACH], prm[P_STRIDE_MAX]
     T, L = len(tx), len(lx)
     d = np.empty((T, L))
@@ -343,7 +345,7 @@ def leg_stage(tx, ty, lx, ly, ls, prm):
         else:
             x[m], y[m], size[m], kind[m] = lx[i], ly[i], ls[i], 1
         m += 1
-    return owner, x, y, size, kind, legs, taken
+    return LegStage(owner, x, y, size, kind, legs, taken)
 
 
 @njit(cache=True)
@@ -378,31 +380,31 @@ def leg_stage_measurements(tx, ty, cand, meas, prm):
     first one per track that took legs (owner gives the track), then the free strong candidates paired
     (legs_to_measurements), then the measurements of other kinds (mkind not 0 or 1) but those a taken weaker
     candidate was measured as
-    (cover[i] >= 0: the measurement on its beams, which is that candidate). Returns (owner, x, y, size, kind,
-    legs, other): `other` the indices (into mx) of the other-kind measurements kept, in their order. meas: the
-    scan's measurements (mx, my, msize, mkind, mlegs)."""
+    (cover[i] >= 0: the measurement on its beams, which is that candidate). Returns a bundles.LegMeasurements
+    (owner, x, y, size, kind, legs, other): `other` the indices (into mx) of the other-kind measurements kept, in
+    their order. meas: the scan's measurements (mx, my, msize, mkind, mlegs)."""
     lx, ly, ls, strong, cover = cand
     mx, my, msize, mkind, mlegs = meas
-    owner, ox, oy, osize, okind, olegs, taken = leg_stage(tx, ty, lx, ly, ls, prm)
-    free = ~taken & strong
+    took = leg_stage(tx, ty, lx, ly, ls, prm)
+    free = ~took.taken & strong
     rx, ry, rsize, rkind, rlegs = legs_to_measurements(lx[free], ly[free], ls[free], prm)
     dropped = np.zeros(len(mx), np.bool_)
     for i in range(len(lx)):
-        if taken[i] and cover[i] >= 0:
+        if took.taken[i] and cover[i] >= 0:
             dropped[cover[i]] = True
     n_other = 0
     for i in range(len(mx)):
         if mkind[i] > 1 and not dropped[i]:
             n_other += 1
-    n = len(ox) + len(rx) + n_other
+    n = len(took.x) + len(rx) + n_other
     x = np.empty(n)
     y = np.empty(n)
     size = np.empty(n)
     kind = np.empty(n, np.int64)
     legs = np.full((n, 4), np.nan)
     other = np.empty(n_other, np.int64)
-    a, b = len(ox), len(ox) + len(rx)
-    x[:a], y[:a], size[:a], kind[:a], legs[:a] = ox, oy, osize, okind, olegs
+    a, b = len(took.x), len(took.x) + len(rx)
+    x[:a], y[:a], size[:a], kind[:a], legs[:a] = took.x, took.y, took.size, took.kind, took.legs
     x[a:b], y[a:b], size[a:b], kind[a:b], legs[a:b] = rx, ry, rsize, rkind, rlegs
     m = b
     for i in range(len(mx)):
@@ -410,7 +412,7 @@ def leg_stage_measurements(tx, ty, cand, meas, prm):
             x[m], y[m], size[m], kind[m] = mx[i], my[i], msize[i], mkind[i]
             other[m - b] = i
             m += 1
-    return owner, x, y, size, kind, legs, other
+    return LegMeasurements(took.owner, x, y, size, kind, legs, other)
 
 
 @njit(cache=True)

@@ -173,9 +173,9 @@ def life_cycle(tab, n, stamp, superseded, learned, prm):
 @njit(cache=True)
 def spawn(tab, n, cols, meas, has_prob, stamp, ctx, prm):
     """Start tentative tracks on measurements no track took, except legs beside a track that took a leg and
-    measurements on top of a track (tracker._spawn). meas: (mx, my, msize, mkind, mlegs, raw, mprob), tracking
-    frame. Returns the table (grown when full) and its row count."""
-    mx, my, msize, mkind, mlegs, raw, mprob = meas
+    measurements on top of a track (tracker._spawn). meas: bundles.ScanMeasurements, tracking frame. Returns the
+    table (grown when full) and its row count."""
+    mx, my, msize, mkind, mprob = meas.x, meas.y, meas.size, meas.kind, meas.prob
     M = len(mx)
     free = np.ones(M, np.bool_)
     for q in range(len(cols)):
@@ -218,7 +218,7 @@ def spawn(tab, n, cols, meas, has_prob, stamp, ctx, prm):
         tab[k, HIT] = 1.0
         tab[k, MOBILITY] = 2.0
         if has_prob and (mkind[j] <= K_LEG or mprob[j] > 0):
-            fold_evidence(tab, k, leg_probability(mx, my, mkind, mlegs, mprob, raw, has_prob, j), prm)
+            fold_evidence(tab, k, leg_probability(mx, my, mkind, meas.legs, mprob, meas.raw, has_prob, j), prm)
     ctx[C_NEXT_ID] += nn
     return tab, n + nn
 

@@ -14,6 +14,7 @@ from ..base.numba_runtime import key_kernel_cache_on_sources
 from ..logs.vocabulary import CLASS_PERSON
 from . import _kernels
 from ._scan_measurements import CARRIED_LEG, K_LEG, K_PERSON, NOT_A_LEG, R_COVER, R_P, R_W, R_X, R_Y
+from .bundles import ScanMeasurements
 from .state import (
     C_KEPT_N,
     C_KEPT_NEXT,
@@ -101,16 +102,16 @@ def leggy_tracks(tab, n, prm):
 @njit(cache=True)
 def legs_stage(tab, n, meas, prm):
     """Tracks of legs or people take up to two leg candidates each, weak ones too when the detector gives them at
-    least person_maintain (below it, no hit keeps a person) (tracker._legs). Returns the measurements (rebuilt when
-    some track took legs: theirs first; mx, my, msize, mkind, mlegs, mprob) and rows0, the tracks owning the first
-    len(rows0). meas: (mx, my, msize, mkind, mlegs, raw, mprob), tracking frame."""
-    mx, my, msize, mkind, mlegs, raw, mprob = meas
+    least person_maintain (below it, no hit keeps a person) (tracker._legs). Returns (the measurements, rows0): the
+    measurements rebuilt when some track took legs (theirs first, the same raw candidates; meas itself when none
+    did) and rows0, the tracks owning the first len(rows0). meas: bundles.ScanMeasurements, tracking frame."""
+    raw = meas.raw
     none = np.zeros(0, np.int64)
     if n == 0 or len(raw) == 0:
-        return mx, my, msize, mkind, mlegs, mprob, none
+        return meas, none
     leggy = leggy_tracks(tab, n, prm)
     if len(leggy) == 0:
-        return mx, my, msize, mkind, mlegs, mprob, none
+        return meas, none
     tx = np.empty(len(leggy))
     ty = np.empty(len(leggy))
     for q in range(len(leggy)):
@@ -118,20 +119,20 @@ def legs_stage(tab, n, meas, prm):
     use = (raw[:, R_COVER] < 0) | (raw[:, R_P] >= prm[P_PERSON_MAINTAIN])
     cand = raw[use]
     strong = cand[:, R_COVER] < 0
-    owner, x, y, size, kind, legs, other = _kernels.leg_stage_measurements(
+    got = _kernels.leg_stage_measurements(
         tx,
         ty,
         (cand[:, R_X].copy(), cand[:, R_Y].copy(), cand[:, R_W].copy(), strong, cand[:, R_COVER].astype(np.int64)),
-        (mx, my, msize, mkind, mlegs),
+        (meas.x, meas.y, meas.size, meas.kind, meas.legs),
         prm,
     )
-    if len(owner) == 0:
-        return mx, my, msize, mkind, mlegs, mprob, none
-    prob = np.zeros(len(x))
-    m = len(x) - len(other)
-    for q in range(len(other)):
-        prob[m + q] = mprob[other[q]]
-    return x, y, size, kind, legs, prob, leggy[owner]
+    if len(got.owner) == 0:
+        return meas, none
+    prob = np.zeros(len(got.x))
+    m = len(got.x) - len(got.other)
+    for q in range(len(got.other)):
+        prob[m + q] = meas.prob[got.other[q]]
+    return ScanMeasurements(got.x, got.y, got.size, got.kind, got.legs, raw, prob), leggy[got.owner]
 
 
 @njit(cache=True)

@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 
 from ..base.numba_runtime import key_kernel_cache_on_sources
+from .bundles import RtsWork
 
 key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
 
@@ -53,8 +54,9 @@ def _gain(dt, dt3, dt4, P, state_r, cov_n, q, q_most, tolerance, C, xp, Pp, work
     state_r, covariance P) to its next row (filtered covariance cov_n) with process noise q: the gain
     C = P F' Pp^-1, the prediction xp and its covariance Pp (into C, xp, Pp); returns whether the next row is a
     reset: its covariance exceeds the prediction's with q_most at least by more than `tolerance` of that one's
-    trace (an update never increases it; see hindsight.smooth). work: (7, 4, 4) scratch."""
-    F, Ft, PFt, FPFt, Q, m, x = work[0], work[1], work[2], work[3], work[4], work[5], work[6]
+    trace (an update never increases it; see hindsight.smooth). work: the scratch, bundles.RtsWork."""
+    F, Ft, PFt, FPFt = work.F, work.Ft, work.PFt, work.FPFt
+    Q, m, x = work.Q, work.m, work.x
     F[:, :] = 0.0
     for i in range(4):
         F[i, i] = 1.0
@@ -134,7 +136,15 @@ def smooth_rows(t_ns, nxt, prv, state, cov, q, rows, lag_ns, covariance, q_most,
     C = np.zeros((n, 4, 4))
     xp = np.zeros((n, 4))
     Pp = np.zeros((n, 4, 4))
-    work = np.zeros((7, 4, 4))
+    work = RtsWork(
+        F=np.zeros((4, 4)),
+        Ft=np.zeros((4, 4)),
+        PFt=np.zeros((4, 4)),
+        FPFt=np.zeros((4, 4)),
+        Q=np.zeros((4, 4)),
+        m=np.zeros((4, 4)),
+        x=np.zeros((4, 4)),
+    )
     reset = np.zeros(n, np.bool_)
     step, dt, dt3, dt4 = -1, 0.0, 0.0, 0.0
     for r in range(n):

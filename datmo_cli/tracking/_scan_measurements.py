@@ -15,6 +15,7 @@ from numba import njit
 
 from ..base.numba_runtime import key_kernel_cache_on_sources
 from . import _kernels
+from .bundles import Legs, ScanMeasurements
 from .state import P_LEG_RADIUS_MAX, P_LEG_THRESHOLD
 
 key_kernel_cache_on_sources()  # before any kernel is declared: their cache stamps cover what they read
@@ -34,20 +35,20 @@ CARRIED_LEG = 2e-6
 @njit(cache=True)
 def paper_measurements(circles, blobs, lines, prm):
     """One scan's measurements by the paper's rule (reference: tests/reference_tracking.reference_measurements,
-    learned=False), sensor frame: x, y, size, kind, legs (M, 4), raw leg candidates (L, RAW_COLS: x, y, size, 0,
-    -1), prob (M,: zeros). circles (first, last, x, y, radius), blobs (first, last, x, y, size, kind), lines
-    (segment, first, last, x_ini, y_ini, x_end, y_end): m, beam indices inclusive (the paper's rule reads no
-    beams)."""
-    _, _, cx, cy, cr = circles
-    _, _, bx, by, bsize, bkind = blobs
-    lseg, _, _, lx0, ly0, lx1, ly1 = lines
-    x, y, size, kind, legs, lx, ly, ls = _kernels.measurements(
-        (cx, cy, cr), (bx, by, bsize, bkind), (lseg, lx0, ly0, lx1, ly1), prm
+    learned=False), sensor frame: a ScanMeasurements whose raw leg candidates are (L, RAW_COLS: x, y, size, 0, -1)
+    and prob zeros. circles, blobs, lines: bundles.Circles, Blobs, Lines (m, beam indices inclusive; the paper's
+    rule reads no beams)."""
+    found = _kernels.measurements(
+        (circles.x, circles.y, circles.radius),
+        (blobs.x, blobs.y, blobs.size, blobs.kind),
+        (lines.segment, lines.x_ini, lines.y_ini, lines.x_end, lines.y_end),
+        prm,
     )
+    lx, ly, ls = found.leg_x, found.leg_y, found.leg_size
     raw = np.zeros((len(lx), RAW_COLS))
     for i in range(len(lx)):
         raw[i, R_X], raw[i, R_Y], raw[i, R_W], raw[i, R_COVER] = lx[i], ly[i], ls[i], -1.0
-    return x, y, size, kind, legs, raw, np.zeros(len(x))
+    return ScanMeasurements(found.x, found.y, found.size, found.kind, found.legs, raw, np.zeros(len(found.x)))
 
 
 @njit(cache=True)
@@ -55,31 +56,32 @@ def learned_measurements(circles, blobs, lines, legs, prm):
     """One scan's measurements with a leg detector's legs (reference_measurements, learned=True): the candidates
     of probability >= the leg threshold (P_LEG_THRESHOLD, the model's) not on the beams of a circle wider than
     leg_radius_max are legs (strong); the others (weak) are measured as what covers their beams, which takes their
-    probability. circles, blobs, lines as paper_measurements'; legs (first, last, x, y, width, probability).
-    Returns x, y, size, kind, legs, raw (L, RAW_COLS: every candidate, strong ones first, each with its
-    probability and, for a weak one, the measurement covering it), prob. The thresholds compare in float32, as
-    numpy compares the features' float32 fields with a Python float."""
-    cfirst, clast, _, _, cr = circles
-    bfirst, blast, bx, by, bsize, _ = blobs
-    gfirst, glast, gx, gy, gw, gp = legs
+    probability. circles, blobs, lines as paper_measurements'; legs: bundles.Legs. Returns a ScanMeasurements
+    whose raw (L, RAW_COLS) holds every candidate, strong ones first, each with its probability and, for a weak
+    one, the measurement covering it. The thresholds compare in float32, as numpy compares the features' float32
+    fields with a Python float."""
+    gfirst, glast, gx, gy, gw, gp = legs.first, legs.last, legs.x, legs.y, legs.width, legs.probability
     thr = np.float32(prm[P_LEG_THRESHOLD])
     rmax = np.float32(prm[P_LEG_RADIUS_MAX])
     strong = np.empty(len(gx), np.bool_)
     for i in range(len(gx)):
         s = np.float32(gp[i]) >= thr
-        for q in range(len(cr)):
-            if np.float32(cr[q]) > rmax and not (glast[i] < cfirst[q] or gfirst[i] > clast[q]):
+        for q in range(len(circles.radius)):
+            if np.float32(circles.radius[q]) > rmax and not (
+                glast[i] < circles.first[q] or gfirst[i] > circles.last[q]
+            ):
                 s = False  # type: ignore[assignment]  # numba: numpy and Python bools are one type
         strong[i] = s
     weak = ~strong
-    x, y, size, kind, mlegs, prob, cover = _kernels.learned_measurements(
+    found = _kernels.learned_measurements(
         circles,
-        (bfirst, blast, bx, by, bsize),
+        blobs,
         lines,
-        (gfirst[strong], glast[strong], gx[strong], gy[strong], gw[strong]),
+        Legs(gfirst[strong], glast[strong], gx[strong], gy[strong], gw[strong], gp[strong]),
         (gfirst[weak], glast[weak], gp[weak]),
         prm,
     )
+    cover = found.cover
     raw = np.empty((len(gx), RAW_COLS))
     q = 0
     for i in range(len(gx)):
@@ -92,7 +94,7 @@ def learned_measurements(circles, blobs, lines, legs, prm):
             raw[q, R_X], raw[q, R_Y], raw[q, R_W], raw[q, R_P], raw[q, R_COVER] = gx[i], gy[i], gw[i], gp[i], cover[w]
             q += 1
             w += 1
-    return x, y, size, kind, mlegs, raw, prob
+    return ScanMeasurements(found.x, found.y, found.size, found.kind, found.legs, raw, found.prob)
 
 
 @njit(cache=True)

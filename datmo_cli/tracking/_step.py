@@ -13,9 +13,10 @@ Frames: measurements arrive in the sensor frame (x forward, y left, m); tracks l
 sensor-frame positions and velocities and, with a pose, world ones. Times: ns since the tracker's first
 scan (int64), seconds for durations. Kinds: measurements.KIND_*; classes and mobility: datmo_msgs/Track's.
 
-What travels together is one tuple:
-    meas       a scan's measurements (x, y, size (M,) m, kind (M,) int64, legs (M, 4) m, raw (L, RAW_COLS) leg
-               candidates, prob (M,) leg probability)
+What travels together is one tuple (the named ones are bundles.py's, read by field):
+    meas       a scan's measurements, bundles.ScanMeasurements (x, y, size (M,) m, kind (M,) int64, legs (M, 4) m,
+               raw (L, RAW_COLS) leg candidates, prob (M,) leg probability)
+    features   a block's features, bundles.FeatureBlock (per kind flat over the scans, with per-scan offsets)
     sensor     (ranges (B,) float32 m, has_ranges, has_pose, pose (x, y m, theta rad), geo: angle_min, increment
                (rad), range_max, has geometry, range_min (m))
     beam_dirs  (cos, sin) of each beam's angle (B,)
@@ -38,6 +39,7 @@ from ._classify import classify
 from ._life_cycle import life_cycle, occlusion, push_tail, spawn
 from ._people import free_legs, keep_scan, leg_evidence, legs_stage
 from ._scan_measurements import learned_measurements, moved, paper_measurements, to_sensor
+from .bundles import Blobs, Circles, Legs, Lines, ScanMeasurements
 from .state import (
     AGE,
     C_HAS_STAMP,
@@ -74,7 +76,6 @@ def track_scan(tab, ctx, prm, stamp, meas, has_prob, sensor, beam_dirs, bg, carr
     """One scan (measurements meas in the sensor frame, stamp in ns since the first scan) through every phase
     (tuples: the module's docstring); returns the table (a new one when it grew). ctx[C_N_TRACKS] holds the
     number of live tracks."""
-    mx, my, msize, mkind, mlegs, raw, mprob = meas
     ranges, has_ranges, has_pose, pose, geo = sensor
     learned, compat, reacq = rules
     n = int(ctx[C_N_TRACKS])
@@ -82,7 +83,8 @@ def track_scan(tab, ctx, prm, stamp, meas, has_prob, sensor, beam_dirs, bg, carr
     ctx[C_HAS_STAMP], ctx[C_STAMP] = 1.0, stamp
     if has_pose:
         px, py, pc, ps = pose[0], pose[1], np.cos(pose[2]), np.sin(pose[2])
-        mx, my, mlegs, raw = moved(mx, my, mlegs, raw, px, py, pc, ps)
+        x, y, legs, raw = moved(meas.x, meas.y, meas.legs, meas.raw, px, py, pc, ps)
+        meas = ScanMeasurements(x, y, meas.size, meas.kind, legs, raw, meas.prob)
     else:
         px, py, pc, ps = 0.0, 0.0, 1.0, 0.0
     frame = (px, py, pc, ps)
@@ -91,16 +93,15 @@ def track_scan(tab, ctx, prm, stamp, meas, has_prob, sensor, beam_dirs, bg, carr
         crow[k] = kind_group(tab, k) if tab[k, CONFIRMED] != 0 else ANY_ROW
     predict(tab, n, dt, prm)
     carried_update(carry[0], carry[1], carry[2], ranges, has_ranges, has_pose, pose, geo, ctx, prm)
-    found = off_background(tab, n, (mx, my, msize, mkind, mlegs, raw, mprob), bg[0], ctx, frame, sensor, carry, prm)
-    mx, my, msize, mkind, mlegs, mprob, rows0 = legs_stage(tab, n, found, prm)
-    raw = found[5]
-    scan = (mx, my, msize, mkind, mlegs, raw, mprob)  # the measurements the tracks take
-    rows, cols = associate(tab, n, mx, my, mkind, mprob, raw, rows0, compat, crow, prm)
+    found = off_background(tab, n, meas, bg[0], ctx, frame, sensor, carry, prm)
+    scan, rows0 = legs_stage(tab, n, found, prm)  # the measurements the tracks take
+    mx, my, mkind, mlegs = scan.x, scan.y, scan.kind, scan.legs
+    rows, cols = associate(tab, n, mx, my, mkind, scan.prob, scan.raw, rows0, compat, crow, prm)
     hit_background(tab, n, rows, cols, scan, bg[0], ctx, frame, prm)
-    update(tab, n, rows, cols, mx, my, mkind, msize, mlegs, prm)
+    update(tab, n, rows, cols, mx, my, mkind, scan.size, mlegs, prm)
     rows2, cols2 = reacquire(tab, n, rows, cols, mx, my, mkind, stamp, reacq, crow, prm)
     rows, cols, superseded = merge_reacquired(rows, cols, rows2, cols2)
-    leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, mprob, raw, has_prob, prm)
+    leg_evidence(tab, rows, cols, mx, my, mkind, mlegs, scan.prob, scan.raw, has_prob, prm)
     free_legs(tab, rows, cols, mx, my, mkind, mlegs, (carry[3], carry[4]), geo, ctx, prm)
     occlusion(tab, n, ranges, has_ranges, geo, has_pose, pose, prm)
     n = life_cycle(tab, n, stamp, superseded, learned, prm)
@@ -130,9 +131,8 @@ def track_block(tab, ctx, prm, scans, features, geo, beam_dirs, bg, carry, rules
     """Track scans 0..len(stamps)-1 of a block of features (flat per kind, with per-scan offsets) in one call.
 
     scans: (stamps (N,) ns since the first scan, ranges (N, B) float32 m, has_ranges, poses (N, 3), has_pose);
-    features: (circles, blobs, lines, legs), each (offsets, fields...): circles (first, last, x, y, radius), blobs
-    (first, last, x, y, size, kind), lines (segment, first, last, x_ini, y_ini, x_end, y_end), legs (first, last,
-    x, y, width, probability); sensor frame, m; beam indices inclusive. geo, beam_dirs, bg, carry, rules: as
+    features: bundles.FeatureBlock (circles, blobs, lines, legs flat over the scans, sensor frame, m, beam indices
+    inclusive; scan i's are items offsets.<kind>[i]:offsets.<kind>[i + 1]). geo, beam_dirs, bg, carry, rules: as
     track_scan's (module docstring). output: (out, tails, out_tail, out_tail_count, offsets). Writes the live
     tracks of scan i to out[offsets[i]:offsets[i + 1]] and, when `tails`, their tails (tracking frame) to out_tail
     and tail counts to out_tail_count (each grown when full). Returns (table, out, out_tail, out_tail_count)."""
@@ -140,17 +140,19 @@ def track_block(tab, ctx, prm, scans, features, geo, beam_dirs, bg, carry, rules
     out, tails, out_tail, out_tail_count, offsets = output
     learned = rules[0]
     T = int(prm[P_TAIL_LENGTH])
-    co, cf, cl, cx, cy, cr = features[0]
-    bo, bf, bl, bx, by, bs, bk = features[1]
-    lo, ls, lf, ll, lx0, ly0, lx1, ly1 = features[2]
-    go, gf, gl, gx, gy, gw, gp = features[3]
+    at, fc, fb, fl, fg = features.offsets, features.circles, features.blobs, features.lines, features.legs
     offsets[0] = 0
     for i in range(len(stamps)):
-        a0, a1, b0, b1, l0, l1, g0, g1 = co[i], co[i + 1], bo[i], bo[i + 1], lo[i], lo[i + 1], go[i], go[i + 1]
-        circles = (cf[a0:a1], cl[a0:a1], cx[a0:a1], cy[a0:a1], cr[a0:a1])
-        blobs = (bf[b0:b1], bl[b0:b1], bx[b0:b1], by[b0:b1], bs[b0:b1], bk[b0:b1])
-        lines = (ls[l0:l1], lf[l0:l1], ll[l0:l1], lx0[l0:l1], ly0[l0:l1], lx1[l0:l1], ly1[l0:l1])
-        legs = (gf[g0:g1], gl[g0:g1], gx[g0:g1], gy[g0:g1], gw[g0:g1], gp[g0:g1])
+        a, b = at.circles[i], at.circles[i + 1]
+        circles = Circles(fc.first[a:b], fc.last[a:b], fc.x[a:b], fc.y[a:b], fc.radius[a:b])
+        a, b = at.blobs[i], at.blobs[i + 1]
+        blobs = Blobs(fb.first[a:b], fb.last[a:b], fb.x[a:b], fb.y[a:b], fb.size[a:b], fb.kind[a:b])
+        a, b = at.lines[i], at.lines[i + 1]
+        lines = Lines(
+            fl.segment[a:b], fl.first[a:b], fl.last[a:b], fl.x_ini[a:b], fl.y_ini[a:b], fl.x_end[a:b], fl.y_end[a:b]
+        )
+        a, b = at.legs[i], at.legs[i + 1]
+        legs = Legs(fg.first[a:b], fg.last[a:b], fg.x[a:b], fg.y[a:b], fg.width[a:b], fg.probability[a:b])
         if learned:
             meas = learned_measurements(circles, blobs, lines, legs, prm)
         else:

@@ -23,6 +23,7 @@ from datmo_cli.base import libm
 from ..logs import cdr, types
 from ..logs.scan import ScanGeometry
 from . import state
+from .bundles import Blobs, Circles, FeatureBlock, FeatureOffsets, Legs, Lines, ScanMeasurements
 from .measurements import KIND_BLOB, KIND_CIRCLE, KIND_LEG, KIND_PERSON, KIND_RECT, N_KINDS, Measurements, ScanFeatures
 from .params import TrackingParams
 
@@ -64,9 +65,9 @@ class TrackBlock:
     tail_count: np.ndarray  # (len(items),) int64
 
 
-def _flat(features: list[ScanFeatures]) -> tuple[tuple, tuple, tuple, tuple]:
+def _flat(features: list[ScanFeatures]) -> FeatureBlock:
     """The compiled block's feature arrays: per kind, per-scan offsets and contiguous fields (float64 for
-    coordinates, int64 for beams and segments)."""
+    coordinates, int64 for beams, segments and kinds), as a bundles.FeatureBlock."""
     f8, i8 = np.float64, np.int64
 
     def join(name: str, dtype: np.dtype) -> tuple[np.ndarray, np.ndarray]:
@@ -88,15 +89,17 @@ def _flat(features: list[ScanFeatures]) -> tuple[tuple, tuple, tuple, tuple]:
             chunks.append(a.tobytes())
         return offsets, np.frombuffer(b"".join(chunks), dtype)
 
-    def fields(name: str, dtype: np.dtype, names: str) -> tuple:
+    def fields(name: str, dtype: np.dtype, bundle: type[Circles | Blobs | Lines | Legs]) -> tuple:
+        """(offsets, the bundle of this kind's fields, named as the message's)."""
         offsets, a = join(name, dtype)
-        return (offsets, *(a[n].astype(i8 if n in ("first", "last", "segment", "kind") else f8) for n in names.split()))
+        names = bundle._fields
+        return offsets, bundle(*(a[n].astype(i8 if n in ("first", "last", "segment", "kind") else f8) for n in names))
 
-    circles = fields("circles", _CIRCLE_DTYPE, "first last x y radius")
-    blobs = fields("blobs", _BLOB_DTYPE, "first last x y size kind")
-    lines = fields("lines", _LINE_DTYPE, "segment first last x_ini y_ini x_end y_end")
-    legs = fields("legs", _LEG_DTYPE, "first last x y width probability")
-    return circles, blobs, lines, legs
+    circle_at, circles = fields("circles", _CIRCLE_DTYPE, Circles)
+    blob_at, blobs = fields("blobs", _BLOB_DTYPE, Blobs)
+    line_at, lines = fields("lines", _LINE_DTYPE, Lines)
+    leg_at, legs = fields("legs", _LEG_DTYPE, Legs)
+    return FeatureBlock(FeatureOffsets(circle_at, blob_at, line_at, leg_at), circles, blobs, lines, legs)
 
 
 _CIRCLE_DTYPE = cdr.element_dtype(types.CIRCLE)
@@ -226,7 +229,7 @@ class Tracker:
         raw5[:, _scan_measurements.R_COVER] = -1.0
         raw5[:, : min(raw.shape[1], _scan_measurements.RAW_COLS)] = raw[:, : _scan_measurements.RAW_COLS]
         c8 = np.ascontiguousarray
-        meas_arrays = (
+        meas_arrays = ScanMeasurements(
             c8(meas.x, np.float64),
             c8(meas.y, np.float64),
             c8(meas.size, np.float64),
